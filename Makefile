@@ -1,0 +1,58 @@
+# splatbench — two commands on a fresh machine: `make demo` and `make test`.
+# Each does whatever set-up is missing (idempotent).
+
+SHELL   := /bin/bash
+PYTHON  ?= python3
+VENV    := .venv
+PY      := $(VENV)/bin/python
+STAMP   := $(VENV)/.splatbench-installed
+PYTEST  := $(PY) -m pytest
+# Default suite stays well under 15 minutes on 2 cores; `slow` checks run in test-slow.
+PYTEST_ARGS ?=
+
+.PHONY: setup llvm demo test test-slow test-all golden reports bench clean help
+
+help:
+	@echo "make demo       set up if needed, then run the main job"
+	@echo "make test       set up if needed, then run the default test suite"
+	@echo "make test-slow  the long checks (marked slow)"
+	@echo "make golden     regenerate tests/golden/ gradient files (explicit)"
+
+setup: llvm $(STAMP)
+
+# Dr.Jit 1.5 needs libLLVM >= 16 on x86 (LLVM 15 aborts the process).
+llvm:
+	@if ! $(PYTHON) splatbench/_llvm.py --check --quiet 2>/dev/null; then \
+	  if [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
+	    echo "splatbench: installing libllvm19 (Dr.Jit needs LLVM >= 16)"; \
+	    DEBIAN_FRONTEND=noninteractive apt-get install -y -q libllvm19 >/dev/null \
+	      || (apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q libllvm19 >/dev/null); \
+	  else \
+	    echo "splatbench: Dr.Jit needs libLLVM >= 16. Run: sudo apt-get install -y libllvm19" >&2; exit 1; \
+	  fi; \
+	  $(PYTHON) splatbench/_llvm.py --check; \
+	fi
+
+$(STAMP): pyproject.toml constraints.txt
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -c constraints.txt -e '.[test]'
+	@touch $(STAMP)
+
+demo: setup
+	$(VENV)/bin/splatbench demo
+
+test: setup
+	$(PYTEST) -m "not slow" $(PYTEST_ARGS)
+
+test-slow: setup
+	$(PYTEST) -m slow $(PYTEST_ARGS)
+
+test-all: setup
+	$(PYTEST) $(PYTEST_ARGS)
+
+golden: setup
+	$(PY) -m tests.golden.regenerate
+
+clean:
+	rm -rf $(VENV) *.egg-info .pytest_cache

@@ -1,0 +1,1 @@
+"""A slow, float64, pure-NumPy reference renderer for 3D Gaussian Splatting."""

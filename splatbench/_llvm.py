@@ -1,0 +1,123 @@
+"""Locate a libLLVM that Dr.Jit's LLVM backend can use, before Dr.Jit loads.
+
+Dr.Jit 1.5 on x86 needs LLVM >= 16: with LLVM 15, float ``dr.minimum`` /
+``dr.maximum`` / ``dr.clip`` abort the whole Python process ("Cannot select:
+fminimum"), and LLVM 14 is rejected. Dr.Jit picks whatever ``libLLVM.so`` the
+dynamic loader finds first unless ``DRJIT_LIBLLVM_PATH`` names one, so we set
+that variable to the newest suitable library before ``import drjit``.
+
+This module imports nothing from splatbench or drjit: ``make setup`` runs it as
+a script (``python splatbench/_llvm.py --check``) with the system Python.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import re
+import sys
+from dataclasses import dataclass
+
+MIN_MAJOR = 16
+ENV_VAR = "DRJIT_LIBLLVM_PATH"
+SEARCH_DIRS = (
+    "/usr/lib/x86_64-linux-gnu",
+    "/usr/lib/aarch64-linux-gnu",
+    "/usr/lib64",
+    "/usr/lib",
+    "/usr/local/lib",
+    "/opt/homebrew/opt/llvm/lib",
+    "/usr/local/opt/llvm/lib",
+)
+FIX = "install LLVM >= 16, e.g. `sudo apt-get install -y libllvm19` (Debian/Ubuntu), or set DRJIT_LIBLLVM_PATH"
+
+
+class LLVMNotFoundError(RuntimeError):
+    """No libLLVM >= 16 is available for Dr.Jit's LLVM backend."""
+
+
+@dataclass(frozen=True)
+class LibLLVM:
+    path: str
+    major: int
+
+
+_VERSION_RE = re.compile(r"libLLVM(?:-|\.so\.)(\d+)")
+
+
+def _major_of(path: str) -> int | None:
+    name = os.path.basename(path)
+    m = _VERSION_RE.search(name)
+    if m:
+        return int(m.group(1))
+    m = re.search(r"llvm[-@]?(\d+)", path)  # e.g. /usr/lib/llvm-19/lib/libLLVM.so
+    return int(m.group(1)) if m else None
+
+
+def candidates(search_dirs: tuple[str, ...] = SEARCH_DIRS) -> list[LibLLVM]:
+    """All libLLVM shared libraries found on the usual paths, newest first."""
+    found: dict[str, LibLLVM] = {}
+    patterns = []
+    for d in search_dirs:
+        patterns += [f"{d}/libLLVM*.so*", f"{d}/libLLVM*.dylib", f"{d}/llvm-*/lib/libLLVM*.so*"]
+    patterns += ["/usr/lib/llvm-*/lib/libLLVM*.so*"]
+    for pattern in patterns:
+        for path in glob.glob(pattern):
+            major = _major_of(path)
+            if major is None or not os.path.isfile(path):
+                continue
+            real = os.path.realpath(path)
+            if real not in found:
+                found[real] = LibLLVM(path=path, major=major)
+    return sorted(found.values(), key=lambda lib: (-lib.major, len(lib.path)))
+
+
+def locate(environ: dict[str, str] | None = None) -> LibLLVM:
+    """The libLLVM Dr.Jit should load: the user's choice if set, else the newest >= 16.
+
+    Raises:
+        LLVMNotFoundError: with one line naming the fix, when only older ones exist.
+    """
+    environ = os.environ if environ is None else environ
+    user = environ.get(ENV_VAR)
+    if user:
+        if not os.path.isfile(user):
+            raise LLVMNotFoundError(f"{ENV_VAR}={user!r} does not exist; {FIX}")
+        major = _major_of(user)
+        if major is not None and major < MIN_MAJOR:
+            raise LLVMNotFoundError(
+                f"{ENV_VAR}={user!r} is LLVM {major}, but Dr.Jit needs LLVM >= {MIN_MAJOR}; {FIX}"
+            )
+        return LibLLVM(path=user, major=major or MIN_MAJOR)
+    found = candidates()
+    usable = [lib for lib in found if lib.major >= MIN_MAJOR]
+    if usable:
+        return usable[0]
+    older = ", ".join(f"LLVM {lib.major} ({lib.path})" for lib in found) or "none"
+    raise LLVMNotFoundError(
+        f"Dr.Jit needs libLLVM >= {MIN_MAJOR} (older ones abort the process); found: {older}; {FIX}"
+    )
+
+
+def configure() -> LibLLVM:
+    """Set ``DRJIT_LIBLLVM_PATH`` (unless the user did) before Dr.Jit is imported."""
+    lib = locate()
+    if "drjit" not in sys.modules:
+        os.environ.setdefault(ENV_VAR, lib.path)
+    return lib
+
+
+def _main(argv: list[str]) -> int:
+    """``--check``: exit 0 and print the library when usable, else print why and exit 1."""
+    try:
+        lib = locate()
+    except LLVMNotFoundError as exc:
+        print(f"splatbench: {exc}", file=sys.stderr)
+        return 1
+    if "--quiet" not in argv:
+        print(f"libLLVM {lib.major}: {lib.path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main(sys.argv[1:]))
