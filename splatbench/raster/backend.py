@@ -1,0 +1,50 @@
+"""Dr.Jit backend selection: LLVM on the CPU, CUDA where a GPU exists.
+
+The same rasterizer code runs on both; a `Backend` carries the array types so no
+module-level state decides where work happens.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from types import ModuleType
+
+import splatbench  # noqa: F401  (configures libLLVM before drjit loads)
+import drjit as dr
+
+from splatbench.errors import InputError
+
+
+@dataclass(frozen=True)
+class Backend:
+    """The Dr.Jit array namespace used for one render (``drjit.llvm.ad`` or ``drjit.cuda.ad``)."""
+
+    name: str  # "llvm" or "cuda"
+    t: ModuleType
+
+    @property
+    def jit_backend(self) -> dr.JitBackend:
+        return dr.JitBackend.CUDA if self.name == "cuda" else dr.JitBackend.LLVM
+
+
+def cuda_available() -> bool:
+    return bool(dr.has_backend(dr.JitBackend.CUDA))
+
+
+@lru_cache(maxsize=None)
+def get_backend(device: str = "auto") -> Backend:
+    """The backend for ``device`` ("cpu", "cuda" or "auto": CUDA when available)."""
+    if device == "auto":
+        device = "cuda" if cuda_available() else "cpu"
+    if device == "cuda":
+        if not cuda_available():
+            raise InputError("device: 'cuda' requested but Dr.Jit finds no CUDA device")
+        import drjit.cuda.ad as t
+        return Backend("cuda", t)
+    if device == "cpu":
+        if not dr.has_backend(dr.JitBackend.LLVM):
+            raise InputError("device: 'cpu' requested but Dr.Jit's LLVM backend is unavailable")
+        import drjit.llvm.ad as t
+        return Backend("llvm", t)
+    raise InputError(f"device: expected 'auto', 'cpu' or 'cuda', got {device!r}")

@@ -1,0 +1,59 @@
+"""Rasterizer options: one typed record, validated at the boundary."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+
+from splatbench.errors import InputError
+
+RADIUS_RULES = ("3sigma", "opacity")
+
+
+@dataclass(frozen=True)
+class RasterOptions:
+    """Options of the tile rasterizer; defaults are graphdeco-inria 3DGS's.
+
+    See docs/conventions.md for the exact meaning of each threshold.
+    """
+
+    tile_size: int = 16            # pixels per tile side; an acceleration only, never changes the image
+    alpha_min: float = 1.0 / 255.0  # contributions with alpha below this are skipped
+    alpha_max: float = 0.99        # alpha is clamped to this (keeps 1 - alpha invertible)
+    transmittance_min: float = 1e-4  # a pixel stops before transmittance would drop below this
+    eps2d: float = 0.3             # added to the 2D covariance's diagonal (pixel^2)
+    near: float | None = None      # near plane; None uses the camera's
+    far: float | None = None       # far plane; None uses the camera's
+    radius: str = "3sigma"         # "3sigma", or "opacity": extent where o*G falls below alpha_min
+    antialiased: bool = False      # Mip-Splatting opacity compensation sqrt(det S2D / det(S2D + eps2d I))
+    device: str = "auto"           # "cpu" (LLVM), "cuda", or "auto" (CUDA when available)
+
+    def __post_init__(self) -> None:
+        ts = self.tile_size
+        if not isinstance(ts, int) or isinstance(ts, bool) or ts < 1 or ts > 64 or ts & (ts - 1):
+            raise InputError(f"tile_size: expected a power of two in [1, 64], got {ts!r}")
+        if not (0.0 < float(self.alpha_max) <= 1.0 - 1e-6):
+            raise InputError(f"alpha_max: expected a value in (0, 1), got {self.alpha_max!r}")
+        if not (0.0 < float(self.alpha_min) < float(self.alpha_max)):
+            raise InputError(f"alpha_min: expected a value in (0, alpha_max), got {self.alpha_min!r}")
+        if not (0.0 <= float(self.transmittance_min) < 1.0):
+            raise InputError(f"transmittance_min: expected a value in [0, 1), got {self.transmittance_min!r}")
+        if not (math.isfinite(float(self.eps2d)) and float(self.eps2d) >= 0.0):
+            raise InputError(f"eps2d: expected a finite value >= 0, got {self.eps2d!r}")
+        if self.near is not None and not (math.isfinite(self.near) and self.near > 0):
+            raise InputError(f"near: expected a finite value > 0, got {self.near!r}")
+        if self.far is not None and not (self.far > 0):
+            raise InputError(f"far: expected a value > 0, got {self.far!r}")
+        if self.radius not in RADIUS_RULES:
+            raise InputError(f"radius: expected one of {RADIUS_RULES}, got {self.radius!r}")
+        if self.device not in ("auto", "cpu", "cuda"):
+            raise InputError(f"device: expected 'auto', 'cpu' or 'cuda', got {self.device!r}")
+
+    @classmethod
+    def from_kwargs(cls, base: RasterOptions | None = None, **kwargs) -> RasterOptions:
+        """Build options from keyword arguments, naming any unknown one."""
+        known = {f.name for f in fields(cls)}
+        for key in kwargs:
+            if key not in known:
+                raise InputError(f"{key}: unknown rasterizer option (known: {', '.join(sorted(known))})")
+        return replace(base or cls(), **kwargs)

@@ -1,0 +1,99 @@
+"""The rasterizer pipeline: project -> SH colour -> bin -> composite -> expected depth."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from splatbench.errors import InputError
+from splatbench.raster.backend import dr
+from splatbench.raster.composite import Composite, CompositeState, composite
+from splatbench.raster.options import RasterOptions
+from splatbench.raster.project import Projection, array_namespace, columns, project
+from splatbench.raster.sh import eval_sh
+
+SH_BASES = {1: 0, 4: 1, 9: 2, 16: 3}
+
+
+class Frame(NamedTuple):
+    """One rendered view as Dr.Jit arrays (row-major pixels, width H*W).
+
+    rgb: Array3f; alpha: Float; depth: Float (expected camera z, 0 where alpha is 0);
+    projection: the per-Gaussian `Projection`; state: binning and backward buffers.
+    """
+
+    rgb: object
+    alpha: object
+    depth: object
+    projection: Projection
+    state: CompositeState
+
+
+def resolve_sh_degree(num_bases: int, sh_degree: int | None) -> int:
+    """The SH degree to evaluate, validated against the K bases that ``sh`` holds."""
+    if num_bases not in SH_BASES:
+        raise InputError(f"sh: expected K in (1, 4, 9, 16) bases, got K={num_bases}")
+    available = SH_BASES[num_bases]
+    if sh_degree is None:
+        return available
+    if isinstance(sh_degree, bool) or not isinstance(sh_degree, (int, np.integer)) or not 0 <= sh_degree <= 3:
+        raise InputError(f"sh_degree: expected an integer in [0, 3], got {sh_degree!r}")
+    if sh_degree > available:
+        raise InputError(f"sh_degree: {sh_degree} needs {(sh_degree + 1) ** 2} SH bases, but sh has K={num_bases}")
+    return int(sh_degree)
+
+
+def check_background(background) -> tuple[float, float, float]:
+    bg = np.asarray(background if background is not None else (0.0, 0.0, 0.0), dtype=np.float64).reshape(-1)
+    if bg.shape != (3,) or not np.isfinite(bg).all():
+        raise InputError(f"background: expected 3 finite values, got {np.asarray(background).tolist()!r}")
+    return tuple(float(c) for c in bg)
+
+
+def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int,
+                 background: tuple[float, float, float], options: RasterOptions,
+                 loop_ad: bool = False) -> Frame:
+    """Render one view from Dr.Jit tensors (AD flows to whichever inputs have it enabled).
+
+    Args:
+        means: [N, 3], log_scales: [N, 3], quats: [N, 4], opacity_logits: [N],
+        sh: [N, K, 3] Dr.Jit tensors (TensorXf). camera: `splatbench.Camera`.
+        sh_degree: validated degree (see `resolve_sh_degree`).
+        loop_ad: test-only; differentiate compositing with Dr.Jit's loop AD.
+    """
+    near = camera.near if options.near is None else options.near
+    far = camera.far if options.far is None else options.far
+    proj = project(means, log_scales, quats, opacity_logits, camera.K, camera.world_to_camera,
+                   camera.width, camera.height, eps2d=options.eps2d, near=near, far=far,
+                   radius=options.radius, alpha_min=options.alpha_min, antialiased=options.antialiased)
+    m = array_namespace(means.array)
+    center = camera.center
+    mx, my, mz = columns(means, 3)
+    d = m.Array3f(mx - float(center[0]), my - float(center[1]), mz - float(center[2]))
+    norm = dr.safe_sqrt(dr.squared_norm(d))
+    dirs = d * (1.0 / dr.select(norm > 0, norm, 1.0))
+    colors = eval_sh(sh, dirs, sh_degree)
+    # One kernel for every per-Gaussian quantity (the compositing loop gathers from
+    # them, which would otherwise evaluate each array in a kernel of its own).
+    # Unpacked: Dr.Jit traverses tuples and dataclasses, but not NamedTuples.
+    dr.eval(*proj, colors)
+    out, state = composite(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq,
+                           proj.visible, camera.width, camera.height, background=background,
+                           alpha_min=options.alpha_min, alpha_max=options.alpha_max,
+                           transmittance_min=options.transmittance_min, tile_size=options.tile_size,
+                           extents=proj.extents, loop_ad=loop_ad)
+    covered = out.alpha > 0
+    depth = dr.select(covered, out.depth_sum / dr.select(covered, out.alpha, 1.0), 0.0)
+    return Frame(out.rgb, out.alpha, depth, proj, state)
+
+
+def frame_to_numpy(frame: Frame, height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rgb [H, W, 3], alpha [H, W], depth [H, W]) as float32 numpy copies."""
+    rgb = np.array(frame.rgb.numpy(), dtype=np.float32).T.reshape(height, width, 3)
+    alpha = np.array(frame.alpha.numpy(), dtype=np.float32).reshape(height, width)
+    depth = np.array(frame.depth.numpy(), dtype=np.float32).reshape(height, width)
+    return rgb, alpha, depth
+
+
+__all__ = ["Frame", "render_frame", "frame_to_numpy", "resolve_sh_degree", "check_background", "Composite"]

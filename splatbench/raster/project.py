@@ -1,0 +1,215 @@
+"""Per-Gaussian preprocessing: activation, 3D covariance, EWA projection, culling.
+
+Plain vectorized Dr.Jit code, differentiated by Dr.Jit's AD. Mirrors
+`reference.project` op by op (docs/conventions.md, "project").
+
+Every division and square root below takes a *safe* operand (selected before the
+operation) so that culled Gaussians never put Inf or NaN into the AD graph: a
+masked-out NaN still poisons gradients (0 * Inf = NaN), so masking afterwards is
+not enough.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from typing import NamedTuple
+
+import numpy as np
+
+from splatbench.raster.backend import dr
+
+LOG_SCALE_CLIP = 20.0        # exp(20)^2 * J^2 stays finite in float32 for any sane camera
+MAX_EXTENT_FACTOR = 1e4      # cull a Gaussian whose 2D std exceeds 1e4 image sizes
+JACOBIAN_CLAMP = 0.3         # graphdeco's guard band (fraction of the half field of view)
+
+
+class Projection(NamedTuple):
+    """Screen-space Gaussians (Dr.Jit arrays, all of width N).
+
+    means2d [N, 2] pixel coordinates (origin at the image's top-left corner);
+    conics [N, 3] (A, B, C) = (xx, xy, yy) of the inverse 2D covariance;
+    depths [N] camera z; opacities [N] (after antialiasing compensation);
+    cutoff_sq [N] R^2 in Mahalanobis units (detached); extents [N, 2] (rx, ry) of
+    the cutoff ellipse's bounding box in pixels (detached); radii [N] int32,
+    0 when culled; visible [N] bool.
+    """
+
+    means2d: object
+    conics: object
+    depths: object
+    opacities: object
+    cutoff_sq: object
+    extents: object
+    radii: object
+    visible: object
+
+
+def array_namespace(x):
+    """The Dr.Jit module (e.g. ``drjit.llvm.ad``) that array ``x`` belongs to."""
+    return sys.modules[type(x).__module__]
+
+
+def columns(tensor, count: int, *, permute: bool = True):
+    """Split a [N, count] Dr.Jit tensor into ``count`` flat arrays (differentiable).
+
+    Each entry is read exactly once, so the gathers are declared a permutation:
+    their reverse-mode derivative is a plain scatter, not an atomic scatter-add.
+    """
+    m = array_namespace(tensor.array)
+    n = tensor.shape[0]
+    idx = dr.arange(m.UInt32, n) * count
+    mode = dr.ReduceMode.Permute if permute else dr.ReduceMode.Auto
+    return [dr.gather(m.Float, tensor.array, idx + c, mode=mode) for c in range(count)]
+
+
+def sigmoid(x):
+    """Logistic function without overflow in the value or its derivative."""
+    e = dr.exp(-dr.abs(x))  # in (0, 1]
+    return dr.select(x >= 0, 1.0 / (1.0 + e), e / (1.0 + e))
+
+
+def quat_to_rotmat(w, x, y, z):
+    """Rotation matrix of the normalised quaternion (w, x, y, z); a zero quaternion gives I.
+
+    Normalised as q / max|q_i| first so that components up to float32's maximum do
+    not overflow when squared.
+    """
+    big = dr.maximum(dr.maximum(dr.abs(w), dr.abs(x)), dr.maximum(dr.abs(y), dr.abs(z)))
+    nonzero = big > 0
+    inv_big = 1.0 / dr.select(nonzero, big, 1.0)
+    w, x, y, z = w * inv_big, x * inv_big, y * inv_big, z * inv_big
+    norm = dr.safe_sqrt(w * w + x * x + y * y + z * z)
+    inv = dr.select(nonzero, 1.0 / dr.select(nonzero, norm, 1.0), 0.0)
+    w, x, y, z = w * inv, x * inv, y * inv, z * inv
+    return (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
+    )
+
+
+def camera_constants(m, K: np.ndarray, world_to_camera: np.ndarray) -> dict:
+    """Camera parameters as opaque Dr.Jit scalars: kernels stay cached across views."""
+    K = np.asarray(K, dtype=np.float64)
+    W = np.asarray(world_to_camera, dtype=np.float64)
+    op = lambda v: dr.opaque(m.Float, float(v))  # noqa: E731
+    return {
+        "fx": op(K[0, 0]), "fy": op(K[1, 1]), "cx": op(K[0, 2]), "cy": op(K[1, 2]),
+        "R": [[op(W[i, j]) for j in range(3)] for i in range(3)],
+        "t": [op(W[i, 3]) for i in range(3)],
+        # camera centre -R^T t, computed in float64 on the host
+        "center": [op(v) for v in -W[:3, :3].T @ W[:3, 3]],
+    }
+
+
+def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width: int, height: int,
+            *, eps2d: float = 0.3, near: float = 0.01, far: float = 1e10, radius: str = "3sigma",
+            alpha_min: float = 1.0 / 255.0, antialiased: bool = False) -> Projection:
+    """Project Gaussians to the screen (mirrors `reference.project`, matched mode).
+
+    Args:
+        means: [N, 3] Dr.Jit tensor, world positions.
+        log_scales: [N, 3] tensor, log of the axis scales.
+        quats: [N, 4] tensor, (w, x, y, z), any length.
+        opacity_logits: [N] tensor or flat array.
+        K: [3, 3] intrinsics (numpy). world_to_camera: [4, 4] (numpy, OpenCV axes).
+        width, height: image size in pixels.
+
+    Returns:
+        `Projection` (see its docstring for shapes).
+    """
+    m = array_namespace(means.array)
+    Float = m.Float
+    mx, my, mz = columns(means, 3)
+    sx, sy, sz = (dr.exp(dr.clip(v, -LOG_SCALE_CLIP, LOG_SCALE_CLIP)) for v in columns(log_scales, 3))
+    R = quat_to_rotmat(*columns(quats, 4))
+    logits = opacity_logits.array if hasattr(opacity_logits, "shape") else opacity_logits
+    cam = camera_constants(m, K, world_to_camera)
+    Rw, tw = cam["R"], cam["t"]
+
+    # Camera-space position.
+    px = Rw[0][0] * mx + Rw[0][1] * my + Rw[0][2] * mz + tw[0]
+    py = Rw[1][0] * mx + Rw[1][1] * my + Rw[1][2] * mz + tw[1]
+    pz = Rw[2][0] * mx + Rw[2][1] * my + Rw[2][2] * mz + tw[2]
+    in_depth = (pz >= near) & (pz <= far) & dr.isfinite(px) & dr.isfinite(py) & dr.isfinite(pz)
+    z = dr.select(in_depth, pz, 1.0)
+    x = dr.select(in_depth, px, 0.0)
+    y = dr.select(in_depth, py, 0.0)
+    inv_z = 1.0 / z
+
+    fx, fy, cx, cy = cam["fx"], cam["fy"], cam["cx"], cam["cy"]
+    mean_u = fx * x * inv_z + cx
+    mean_v = fy * y * inv_z + cy
+
+    # EWA Jacobian, with graphdeco's clamp of the direction to 1.3x the field of view.
+    lim_x_pos = (width - cx) / fx + JACOBIAN_CLAMP * (0.5 * width) / fx
+    lim_x_neg = cx / fx + JACOBIAN_CLAMP * (0.5 * width) / fx
+    lim_y_pos = (height - cy) / fy + JACOBIAN_CLAMP * (0.5 * height) / fy
+    lim_y_neg = cy / fy + JACOBIAN_CLAMP * (0.5 * height) / fy
+    tx = z * dr.clip(x * inv_z, -lim_x_neg, lim_x_pos)
+    ty = z * dr.clip(y * inv_z, -lim_y_neg, lim_y_pos)
+    j00, j02 = fx * inv_z, -fx * tx * inv_z * inv_z
+    j11, j12 = fy * inv_z, -fy * ty * inv_z * inv_z
+
+    # T = J Rw (2x3); A = T R S; Sigma2D = A A^T is PSD by construction.
+    T0 = [j00 * Rw[0][k] + j02 * Rw[2][k] for k in range(3)]
+    T1 = [j11 * Rw[1][k] + j12 * Rw[2][k] for k in range(3)]
+    scales = (sx, sy, sz)
+    A0 = [(T0[0] * R[0][k] + T0[1] * R[1][k] + T0[2] * R[2][k]) * scales[k] for k in range(3)]
+    A1 = [(T1[0] * R[0][k] + T1[1] * R[1][k] + T1[2] * R[2][k]) * scales[k] for k in range(3)]
+    a_raw = A0[0] * A0[0] + A0[1] * A0[1] + A0[2] * A0[2]
+    b_raw = A0[0] * A1[0] + A0[1] * A1[1] + A0[2] * A1[2]
+    c_raw = A1[0] * A1[0] + A1[1] * A1[1] + A1[2] * A1[2]
+    a, b, c = a_raw + eps2d, b_raw, c_raw + eps2d
+
+    max_var = (MAX_EXTENT_FACTOR * max(width, height)) ** 2
+    det_unsafe = a * c - b * b
+    valid = (in_depth & (dr.maximum(a, c) <= max_var) & (det_unsafe > 0)
+             & dr.isfinite(det_unsafe) & dr.isfinite(mean_u) & dr.isfinite(mean_v))
+    a = dr.select(valid, a, 1.0)
+    b = dr.select(valid, b, 0.0)
+    c = dr.select(valid, c, 1.0)
+    det = a * c - b * b
+    inv_det = 1.0 / det
+    conic_a, conic_b, conic_c = c * inv_det, -b * inv_det, a * inv_det
+
+    opacity = sigmoid(logits)
+    if antialiased:
+        det_raw = dr.select(valid, a_raw * c_raw - b_raw * b_raw, 0.0)
+        opacity = opacity * dr.safe_sqrt(dr.maximum(det_raw, 0.0) * inv_det)
+
+    # Cutoff radius (Mahalanobis units) and the bounding box of its ellipse.
+    o_det = dr.detach(opacity)
+    if radius == "3sigma":
+        cutoff_sq = dr.full(Float, 9.0, dr.width(o_det))
+    else:
+        faint = o_det <= alpha_min
+        valid &= ~faint
+        cutoff_sq = dr.select(faint, 0.0, 2.0 * dr.log(dr.select(faint, 1.0, o_det / alpha_min)))
+    rx = dr.sqrt(cutoff_sq * dr.detach(a))
+    ry = dr.sqrt(cutoff_sq * dr.detach(c))
+    u, v = dr.detach(mean_u), dr.detach(mean_v)
+    on_screen = (u + rx >= 0) & (u - rx <= width) & (v + ry >= 0) & (v - ry <= height)
+    visible = valid & on_screen
+    radius_px = dr.ceil(dr.minimum(dr.maximum(rx, ry), 2.0**30))
+    radii = dr.select(visible, m.Int32(radius_px), 0)
+
+    return Projection(
+        means2d=m.Array2f(mean_u, mean_v),
+        conics=m.Array3f(conic_a, conic_b, conic_c),
+        depths=z,
+        opacities=opacity,
+        cutoff_sq=cutoff_sq,
+        extents=m.Array2f(rx, ry),
+        radii=radii,
+        visible=visible,
+    )
+
+
+def is_power_of_two(n: int) -> bool:
+    return n > 0 and (n & (n - 1)) == 0
+
+
+def next_power_of_two(n: int) -> int:
+    return 1 if n <= 1 else 1 << math.ceil(math.log2(n))
