@@ -1,0 +1,144 @@
+"""3DGS ``.ply`` files in graphdeco-inria's layout, read and written with plyfile.
+
+One ``vertex`` element with one float32 property per value, binary little endian::
+
+    x y z  nx ny nz  f_dc_0 f_dc_1 f_dc_2  f_rest_0 .. f_rest_{3(K-1)-1}
+    opacity  scale_0 scale_1 scale_2  rot_0 rot_1 rot_2 rot_3
+
+``f_dc_c`` is ``sh[:, 0, c]``; ``f_rest`` is *channel-major*: ``f_rest_{c·(K-1) + k-1}``
+holds ``sh[:, k, c]`` for k in 1..K-1. ``opacity`` is the logit, ``scale_i`` the log
+scale, ``rot_*`` the quaternion (w, x, y, z). Normals are written as zeros and ignored
+on reading. The SH degree is inferred from the number of ``f_rest_*`` properties.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+
+import numpy as np
+
+from splatbench.errors import InputError
+from splatbench.gaussians import SH_BASES, Gaussians
+
+_BASE_HEAD = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+_BASE_TAIL = ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+_F_REST = re.compile(r"^f_rest_(\d+)$")
+
+
+def property_names(sh_degree: int) -> list[str]:
+    """The vertex property names, in file order, for SH degree 0..3."""
+    n_rest = 3 * (SH_BASES[sh_degree] - 1)
+    return _BASE_HEAD + [f"f_rest_{i}" for i in range(n_rest)] + _BASE_TAIL
+
+
+def to_vertex_array(gaussians: Gaussians) -> np.ndarray:
+    """The structured vertex array [N] (float32 fields) that `write_ply` stores."""
+    names = property_names(gaussians.sh_degree)
+    n, k, _ = gaussians.sh.shape
+    columns = np.empty((n, len(names)), dtype=np.float32)
+    columns[:, 0:3] = gaussians.means
+    columns[:, 3:6] = 0.0
+    columns[:, 6:9] = gaussians.sh[:, 0, :]
+    rest = 9 + 3 * (k - 1)
+    # channel-major: column c·(K-1) + (k-1) holds sh[:, k, c]
+    columns[:, 9:rest] = np.transpose(gaussians.sh[:, 1:, :], (0, 2, 1)).reshape(n, -1)
+    columns[:, rest] = gaussians.opacity_logits
+    columns[:, rest + 1:rest + 4] = gaussians.log_scales
+    columns[:, rest + 4:rest + 8] = gaussians.quats
+    vertex = np.empty(n, dtype=[(name, "<f4") for name in names])
+    for i, name in enumerate(names):
+        vertex[name] = columns[:, i]
+    return vertex
+
+
+def write_ply(gaussians: Gaussians, path: str | os.PathLike) -> None:
+    """Write ``gaussians`` to ``path`` atomically (temporary file, then `os.replace`)."""
+    from plyfile import PlyData, PlyElement
+
+    path = os.fspath(path)
+    element = PlyElement.describe(to_vertex_array(gaussians), "vertex")
+    directory = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".ply", dir=directory)
+    try:
+        with os.fdopen(fd, "wb") as stream:
+            PlyData([element], text=False, byte_order="<").write(stream)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def read_ply(path: str | os.PathLike) -> Gaussians:
+    """Read a graphdeco-inria 3DGS ``.ply``; one-line `InputError` naming the file if malformed."""
+    from plyfile import PlyData, PlyElementParseError, PlyParseError
+
+    path = os.fspath(path)
+    name = path
+    try:
+        with open(path, "rb") as stream:
+            ply = PlyData.read(stream, mmap=False)
+    except FileNotFoundError:
+        raise InputError(f"{name}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{name}: is a directory, not a PLY file") from None
+    except PlyElementParseError as exc:
+        raise InputError(f"{name}: truncated or corrupt data ({_one_line(exc)})") from None
+    except PlyParseError as exc:
+        raise InputError(f"{name}: not a valid PLY file ({_one_line(exc)})") from None
+    except (ValueError, EOFError, UnicodeDecodeError, IndexError, KeyError) as exc:
+        raise InputError(f"{name}: not a valid PLY file ({type(exc).__name__}: {_one_line(exc)})") from None
+
+    elements = [e.name for e in ply.elements]
+    if "vertex" not in elements:
+        raise InputError(f"{name}: missing element 'vertex' (found {elements})")
+    vertex = ply["vertex"]
+    data = vertex.data
+    fields = list(data.dtype.names or ())
+
+    rest_ids = sorted(int(m.group(1)) for f in fields if (m := _F_REST.match(f)))
+    n_rest = (max(rest_ids) + 1) if rest_ids else 0
+    valid = [3 * (k - 1) for k in SH_BASES]
+    if n_rest not in valid:
+        if n_rest > valid[-1]:
+            raise InputError(f"{name}: {n_rest} f_rest_* properties; expected one of {valid} (SH degree 0..3)")
+        n_rest = min(v for v in valid if v > n_rest)  # the nearest complete degree: report what is missing
+    k = n_rest // 3 + 1
+    wanted = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(n_rest)] + _BASE_TAIL
+    missing = [f for f in wanted if f not in fields]
+    if missing:
+        raise InputError(f"{name}: missing vertex properties {missing}")
+    for f in wanted:
+        kind = data.dtype[f].kind
+        if kind not in "fiu" or data.dtype[f].subdtype is not None:
+            raise InputError(f"{name}: vertex property {f!r} has type {data.dtype[f]}, expected float32")
+
+    def cols(names: list[str]) -> np.ndarray:
+        return np.stack([np.asarray(data[f], dtype=np.float32) for f in names], axis=-1)
+
+    n = len(data)
+    sh = np.empty((n, k, 3), dtype=np.float32)
+    sh[:, 0, :] = cols(["f_dc_0", "f_dc_1", "f_dc_2"])
+    if k > 1:
+        rest = cols([f"f_rest_{i}" for i in range(n_rest)]).reshape(n, 3, k - 1)
+        sh[:, 1:, :] = np.transpose(rest, (0, 2, 1))
+    try:
+        return Gaussians(
+            means=cols(["x", "y", "z"]),
+            log_scales=cols(["scale_0", "scale_1", "scale_2"]),
+            quats=cols(["rot_0", "rot_1", "rot_2", "rot_3"]),
+            opacity_logits=np.asarray(data["opacity"], dtype=np.float32),
+            sh=sh,
+        )
+    except InputError as exc:
+        raise InputError(f"{name}: {exc}") from None
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__

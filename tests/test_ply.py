@@ -1,0 +1,211 @@
+"""3DGS PLY I/O: exact round trips, graphdeco-inria's layout, and one-line errors."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from plyfile import PlyData, PlyElement
+
+from splatbench.ply import property_names
+from splatbench.errors import InputError
+from splatbench.gaussians import Gaussians
+
+FIELDS = ("means", "log_scales", "quats", "opacity_logits", "sh")
+
+
+def make(n: int, k: int, seed: int = 0) -> Gaussians:
+    rng = np.random.default_rng(seed)
+    g = Gaussians(rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.normal(size=(n, 4)),
+                  rng.normal(size=n), rng.normal(size=(n, k, 3)))
+    # awkward bit patterns a float round trip through text or float64 might not keep
+    specials = np.array([-0.0, np.finfo(np.float32).smallest_subnormal, np.finfo(np.float32).max,
+                         -np.finfo(np.float32).tiny, 1 / 3], dtype=np.float32)
+    for name in FIELDS:
+        flat = getattr(g, name).reshape(-1)
+        flat[: len(specials)] = specials[: flat.size]
+    return g
+
+
+def one_line_error(fn, *parts: str) -> str:
+    with pytest.raises(InputError) as info:
+        fn()
+    msg = str(info.value)
+    assert "\n" not in msg, msg
+    for part in parts:
+        assert part in msg, (part, msg)
+    return msg
+
+
+# ------------------------------------------------------------------ round trip
+@pytest.mark.parametrize("degree", [0, 1, 2, 3])
+def test_round_trip_is_bit_exact(tmp_path, degree):
+    k = (degree + 1) ** 2
+    g = make(40, k, seed=degree)
+    path = tmp_path / "scene.ply"
+    g.to_ply(path)
+    back = Gaussians.from_ply(path)
+    assert back.sh_degree == degree and len(back) == 40
+    for name in FIELDS:
+        a, b = getattr(g, name), getattr(back, name)
+        assert a.shape == b.shape and a.dtype == b.dtype == np.float32, name
+        assert a.tobytes() == b.tobytes(), name  # bit-exact, including -0.0 and subnormals
+
+
+def test_header_is_graphdeco_layout(tmp_path):
+    path = tmp_path / "scene.ply"
+    make(3, 16).to_ply(path)
+    ply = PlyData.read(str(path))
+    assert ply.byte_order == "<" and not ply.text
+    assert [e.name for e in ply.elements] == ["vertex"]
+    names = [p.name for p in ply["vertex"].properties]
+    expected = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+                + [f"f_rest_{i}" for i in range(45)]
+                + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    assert names == expected == property_names(3)
+    assert all(p.val_dtype in ("f4", "float32") for p in ply["vertex"].properties)
+    with open(path, "rb") as f:
+        assert f.readline() == b"ply\n" and f.readline() == b"format binary_little_endian 1.0\n"
+
+
+@pytest.mark.parametrize("k", [4, 9, 16])
+def test_f_rest_is_channel_major(tmp_path, k):
+    n = 3
+    # sh[n, k, c] = 1000 n + 10 k + c: every value says where it came from
+    idx_n, idx_k, idx_c = np.meshgrid(np.arange(n), np.arange(k), np.arange(3), indexing="ij")
+    sh = (1000 * idx_n + 10 * idx_k + idx_c).astype(np.float32)
+    g = Gaussians(np.zeros((n, 3)), np.zeros((n, 3)), np.ones((n, 4)), np.zeros(n), sh)
+    path = tmp_path / "layout.ply"
+    g.to_ply(path)
+    v = PlyData.read(str(path))["vertex"]
+    for c in range(3):
+        np.testing.assert_array_equal(v[f"f_dc_{c}"], sh[:, 0, c])
+        for kk in range(1, k):
+            np.testing.assert_array_equal(v[f"f_rest_{c * (k - 1) + kk - 1}"], sh[:, kk, c])
+    np.testing.assert_array_equal(v["f_rest_0"], [10, 1010, 2010])  # (k=1, c=0), not (k=1, c=1)
+    np.testing.assert_array_equal(v["f_rest_1"], [20, 1020, 2020])  # (k=2, c=0)
+    np.testing.assert_array_equal(v["nx"], 0)
+
+
+def write_graphdeco_style(path, g: Gaussians, drop=(), extra_element=None, rename=None):
+    """Write a PLY the way graphdeco-inria's ``GaussianModel.save_ply`` does, independently
+    of splatbench.ply: ``f_rest = features_rest.transpose(1, 2).flatten(start_dim=1)``."""
+    n, k, _ = g.sh.shape
+    f_rest = np.transpose(g.sh[:, 1:, :], (0, 2, 1)).reshape(n, -1)
+    columns = [g.means, np.zeros((n, 3), np.float32), g.sh[:, 0, :], f_rest,
+               g.opacity_logits[:, None], g.log_scales, g.quats]
+    names = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+             + [f"f_rest_{i}" for i in range(f_rest.shape[1])]
+             + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    values = np.concatenate(columns, axis=1)
+    keep = [i for i, name in enumerate(names) if name not in drop]
+    dtype = [(names[i] if rename is None else rename.get(names[i], names[i]), "f4") for i in keep]
+    data = np.empty(n, dtype=dtype)
+    data[:] = list(map(tuple, values[:, keep]))
+    elements = [PlyElement.describe(data, "vertex" if extra_element is None else extra_element)]
+    PlyData(elements).write(str(path))
+
+
+@pytest.mark.parametrize("k", [1, 4, 9, 16])
+def test_reads_independently_written_graphdeco_file(tmp_path, k):
+    g = make(7, k, seed=k)
+    path = tmp_path / "graphdeco.ply"
+    write_graphdeco_style(path, g)
+    back = Gaussians.from_ply(path)
+    for name in FIELDS:
+        assert getattr(back, name).tobytes() == getattr(g, name).tobytes(), name
+
+
+# ----------------------------------------------------------------------- errors
+def test_missing_property_named(tmp_path):
+    path = tmp_path / "scene.ply"
+    write_graphdeco_style(path, make(4, 16), drop=("rot_3",))
+    msg = one_line_error(lambda: Gaussians.from_ply(path), "scene.ply", "missing vertex properties ['rot_3']")
+    assert msg.endswith("missing vertex properties ['rot_3']")
+
+
+def test_missing_positions_and_opacity_named(tmp_path):
+    path = tmp_path / "scene.ply"
+    write_graphdeco_style(path, make(4, 1), drop=("x", "opacity"))
+    one_line_error(lambda: Gaussians.from_ply(path), "scene.ply", "['x', 'opacity']")
+
+
+def test_gap_in_f_rest_named(tmp_path):
+    path = tmp_path / "scene.ply"
+    write_graphdeco_style(path, make(4, 9), drop=("f_rest_5",))
+    one_line_error(lambda: Gaussians.from_ply(path), "missing vertex properties ['f_rest_5']")
+
+
+def test_last_f_rest_missing_named(tmp_path):
+    path = tmp_path / "scene.ply"
+    write_graphdeco_style(path, make(4, 16), drop=("f_rest_44",))
+    one_line_error(lambda: Gaussians.from_ply(path), "missing vertex properties ['f_rest_44']")
+
+
+def test_too_many_f_rest_rejected(tmp_path):
+    path = tmp_path / "scene.ply"
+    g = make(2, 16)
+    write_graphdeco_style(path, g, rename={"f_rest_44": "f_rest_47"})  # 48 f_rest slots, a gap
+    one_line_error(lambda: Gaussians.from_ply(path), "scene.ply", "48 f_rest_* properties")
+
+
+def test_wrong_element_named(tmp_path):
+    path = tmp_path / "scene.ply"
+    write_graphdeco_style(path, make(4, 1), extra_element="face")
+    one_line_error(lambda: Gaussians.from_ply(path), "scene.ply", "missing element 'vertex'", "face")
+
+
+@pytest.mark.parametrize("content, expect", [
+    (b"", "not a valid PLY file"),
+    (b"hello, not a ply\n", "not a valid PLY file"),
+    (b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n", "not a valid PLY file"),  # header cut
+])
+def test_not_a_ply(tmp_path, content, expect):
+    path = tmp_path / "scene.ply"
+    path.write_bytes(content)
+    one_line_error(lambda: Gaussians.from_ply(path), "scene.ply", expect)
+
+
+@pytest.mark.parametrize("cut", [1, 4, 123])
+def test_truncated_data(tmp_path, cut):
+    path = tmp_path / "scene.ply"
+    make(20, 16).to_ply(path)
+    data = path.read_bytes()
+    path.write_bytes(data[:-cut])
+    one_line_error(lambda: Gaussians.from_ply(path), "scene.ply", "truncated", "early end-of-file")
+
+
+def test_missing_file(tmp_path):
+    one_line_error(lambda: Gaussians.from_ply(tmp_path / "nope.ply"), "nope.ply", "no such file")
+
+
+def test_non_finite_value_names_file_and_field(tmp_path):
+    path = tmp_path / "scene.ply"
+    write_graphdeco_style(path, make(4, 1))
+    v = PlyData.read(str(path), mmap=False)  # not memory-mapped: we overwrite the same file
+    v["vertex"].data["y"][2] = np.nan
+    v.write(str(path))
+    one_line_error(lambda: Gaussians.from_ply(path), "scene.ply", "means:", "[2, 1]")
+
+
+# ------------------------------------------------------------------ atomic write
+def test_write_replaces_atomically_and_cleans_up(tmp_path, monkeypatch):
+    path = tmp_path / "scene.ply"
+    first, second = make(5, 4, seed=1), make(6, 9, seed=2)
+    first.to_ply(path)
+    before = path.read_bytes()
+
+    def boom(self, stream):
+        stream.write(b"partial")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(PlyData, "write", boom)
+    with pytest.raises(OSError, match="disk full"):
+        second.to_ply(path)
+    assert path.read_bytes() == before  # the old file is untouched
+    assert os.listdir(tmp_path) == ["scene.ply"]  # and no temporary file is left behind
+    monkeypatch.undo()
+    second.to_ply(path)
+    assert Gaussians.from_ply(path).sh.tobytes() == second.sh.tobytes()
+    assert os.listdir(tmp_path) == ["scene.ply"]
