@@ -1,4 +1,13 @@
-"""splatbench: a differentiable-rendering comparison testbed for 3D Gaussian Splatting."""
+"""splatbench: a differentiable-rendering comparison testbed for 3D Gaussian Splatting.
+
+Public API:
+    Gaussians   raw 3DGS parameters (means [N, 3], log_scales [N, 3], quats [N, 4],
+                opacity_logits [N], sh [N, K, 3]); PLY I/O in the graphdeco layout.
+    Camera      pinhole camera, OpenCV axes; Mitsuba / COLMAP / Blender converters.
+    render      numpy in, numpy out: rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N].
+    rasterize   torch in, torch out, differentiable with respect to all five groups.
+    RasterOptions, RenderResult, RasterInfo.
+"""
 
 from splatbench import _llvm
 
@@ -6,4 +15,12 @@ from splatbench import _llvm
 # any submodule imports drjit or mitsuba. Raises LLVMNotFoundError naming the fix.
 _llvm.configure()
 
+from splatbench.cameras import Camera  # noqa: E402
+from splatbench.errors import InputError, SplatbenchError  # noqa: E402
+from splatbench.gaussians import Gaussians  # noqa: E402
+from splatbench.raster import RasterInfo, RasterOptions, RenderResult, rasterize, render  # noqa: E402
+
 __version__ = "0.1.0"
+
+__all__ = ["Gaussians", "Camera", "render", "rasterize", "RasterOptions", "RenderResult", "RasterInfo",
+           "InputError", "SplatbenchError", "__version__"]

@@ -41,7 +41,10 @@ class TileGrid:
 class Bins:
     """Result of binning. ``gaussian_ids [P]``: Gaussian of each sorted pair;
     ``tile_start, tile_end [num_tiles]``: each tile's range in that list (empty
-    tiles have start == end); ``num_pairs`` P; ``max_list_length``: longest range."""
+    tiles have start == end); ``num_pairs`` P; ``max_list_length``: longest range.
+    ``order [P]``: sorted position -> Gaussian-major position (pairs of Gaussian g
+    occupy ``offsets[g] .. offsets[g] + counts[g]`` there), used to reduce per-pair
+    gradients per Gaussian in a fixed order."""
 
     grid: TileGrid
     gaussian_ids: object
@@ -49,6 +52,9 @@ class Bins:
     tile_end: object
     num_pairs: int
     max_list_length: int
+    order: object = None
+    offsets: object = None
+    counts: object = None
 
 
 def bin_gaussians(proj: Projection, grid: TileGrid) -> Bins:
@@ -71,7 +77,7 @@ def bin_gaussians(proj: Projection, grid: TileGrid) -> Bins:
     num_pairs = int(dr.sum(counts)[0]) if dr.width(counts) else 0
     if num_pairs == 0:
         zeros = dr.zeros(UInt32, grid.num_tiles)
-        return Bins(grid, UInt32(), zeros, zeros, 0, 0)
+        return Bins(grid, UInt32(), zeros, zeros, 0, 0, UInt32(), dr.zeros(UInt32, dr.width(counts)), counts)
 
     offsets = dr.prefix_sum(counts)  # exclusive
     n = dr.width(counts)
@@ -103,4 +109,4 @@ def bin_gaussians(proj: Projection, grid: TileGrid) -> Bins:
     dr.scatter(tile_end, idx + 1, sorted_tile, last)
     dr.eval(gaussian_ids, tile_start, tile_end)
     max_len = int(dr.max(tile_end - tile_start)[0])
-    return Bins(grid, gaussian_ids, tile_start, tile_end, num_pairs, max_len)
+    return Bins(grid, gaussian_ids, tile_start, tile_end, num_pairs, max_len, order, offsets, counts)

@@ -126,6 +126,8 @@ def _forward_loop(m, s: Splats, ids, lanes: Lanes, cfg: CompositeSettings, max_i
 
     n = dr.width(px)
     zero = dr.zeros(Float, n)
+    if dr.width(ids) == 0:  # nothing visible: every pixel shows the background
+        return m.Array3f(zero, zero, zero), dr.full(Float, 1.0, n), zero, UInt32(lanes.start)
     state = (UInt32(lanes.start), dr.full(Float, 1.0, n), zero, Float(zero), Float(zero), Float(zero),
              dr.zeros(m.Bool, n))
     kwargs = {} if max_iterations is None else {"max_iterations": max_iterations}
@@ -143,12 +145,42 @@ def _to_image(m, lanes: Lanes, rgb, T, d, bg):
     return Composite(rgb_img, 1.0 - T_img, dr.gather(m.Float, d, idx, mode=mode))
 
 
+GRAD_KEYS = ("mx", "my", "ca", "cb", "cc", "o", "r", "g", "b", "z", "ax", "ay")
+
+
+def _reduce_pairs(m, bins: Bins, pair: dict, n: int) -> dict:
+    """Sum per-pair values per Gaussian, deterministically.
+
+    The pairs are permuted back to Gaussian-major order (a permutation: no
+    conflicts), then each Gaussian lane sums its own run in ascending order, so the
+    result does not depend on thread scheduling.
+    """
+    Float, UInt32 = m.Float, m.UInt32
+    major = {}
+    for k, v in pair.items():
+        major[k] = dr.zeros(Float, bins.num_pairs)
+        dr.scatter(major[k], v, bins.order, mode=dr.ReduceMode.Permute)
+    dr.eval(major)
+    end = bins.offsets + bins.counts
+    zero = dr.zeros(Float, n)
+
+    def cond(j, *acc):
+        return j < end
+
+    def body(j, *acc):
+        return (j + 1, *(a + dr.gather(Float, major[k], j) for a, k in zip(acc, major)))
+
+    out = dr.while_loop((UInt32(bins.offsets), *(Float(zero) for _ in major)), cond, body, mode="symbolic")
+    return dict(zip(major, out[1:]))
+
+
 class _CompositeOp(dr.CustomOp):
     """Forward: `_forward_loop`. Backward: back-to-front walk with scatter-adds."""
 
     def eval(self, means2d, conics, opacities, colors, depths, cutoff_sq, state, cfg):
         m = array_namespace(opacities)
         state.op = self
+        self.want_absgrad = state.want_absgrad
         bins = state.bins
         self.m, self.bins, self.cfg = m, bins, cfg
         self.splats = Splats(means2d, conics, opacities, colors, depths, cutoff_sq)
@@ -169,13 +201,29 @@ class _CompositeOp(dr.CustomOp):
         v_rgb = dr.gather(m.Array3f, v_rgb_img, lanes.image_index, lanes.inside)
         v_alpha_out = dr.gather(Float, v_alpha_img, lanes.image_index, lanes.inside)
         v_d = dr.gather(Float, v_d_img, lanes.image_index, lanes.inside)
+        keys = GRAD_KEYS if self.want_absgrad else GRAD_KEYS[:-2]
         n = dr.width(s.opacities)
-        buf = {k: dr.zeros(Float, n) for k in ("mx", "my", "ca", "cb", "cc", "o", "r", "g", "b", "z", "ax", "ay")}
+        if self.bins.num_pairs == 0:  # nothing was composited: all gradients are zero
+            zero = dr.zeros(Float, n)
+            self.grad_means2d = m.Array2f(zero, zero)
+            self.abs_grad_means2d = m.Array2f(zero, zero) if self.want_absgrad else None
+            return
+        # Per-pair accumulators: slot i belongs to one (tile, Gaussian) pair, so only the
+        # lanes of one tile (one thread, fixed order) ever add into it.
+        pair = {k: dr.zeros(Float, self.bins.num_pairs) for k in keys}
         T_final = self.T_final
         bg = cfg.background
         ids = self.bins.gaussian_ids
         px, py = lanes.px, lanes.py
-        mode = dr.ReduceMode.Local  # lanes of a packet hit the same Gaussian
+        mode = dr.ReduceMode.Local  # the lanes of a packet share one slot: reduce them first
+
+        # Lock-step walk: every lane of a tile starts at the tile's largest stop index,
+        # so a SIMD packet always reads one Gaussian and the scatter-adds below reduce
+        # within the packet to one memory update (lanes past their own stop are idle).
+        tile_pixels = self.bins.grid.tile_size ** 2
+        own_stop = self.stop
+        tile_stop = dr.block_reduce(dr.ReduceOp.Max, own_stop, tile_pixels)
+        start_i = dr.repeat(tile_stop, tile_pixels)
 
         def cond(i, T, ar, ag, ab, ad):
             return i > lanes.start
@@ -183,7 +231,8 @@ class _CompositeOp(dr.CustomOp):
         def body(i, T, ar, ag, ab, ad):
             i = i - 1
             gid = dr.gather(UInt32, ids, i)
-            alpha, on, (dx, dy, conic, opacity, gauss, raw) = _gaussian_alpha(m, s, gid, px, py, cfg, True)
+            alpha, on, (dx, dy, conic, opacity, gauss, raw) = _gaussian_alpha(
+                m, s, gid, px, py, cfg, i < own_stop)
             color = dr.gather(m.Array3f, s.colors, gid, on)
             depth = dr.gather(Float, s.depths, gid, on)
             inv_1ma = 1.0 / (1.0 - alpha)
@@ -201,7 +250,8 @@ class _CompositeOp(dr.CustomOp):
                              ("cb", v_sigma * dx * dy), ("cc", v_sigma * 0.5 * dy * dy),
                              ("o", v_raw * gauss), ("r", v_rgb.x * w), ("g", v_rgb.y * w),
                              ("b", v_rgb.z * w), ("z", v_d * w), ("ax", dr.abs(v_mx)), ("ay", dr.abs(v_my))):
-                dr.scatter_add(buf[key], val, gid, on, mode=mode)
+                if key in pair:
+                    dr.scatter_add(pair[key], val, i, on, mode=mode)
             ar = dr.select(on, ar + w * color.x, ar)
             ag = dr.select(on, ag + w * color.y, ag)
             ab = dr.select(on, ab + w * color.z, ab)
@@ -209,12 +259,14 @@ class _CompositeOp(dr.CustomOp):
             T = dr.select(on, T_i, T)
             return i, T, ar, ag, ab, ad
 
-        state = (UInt32(self.stop), Float(T_final), T_final * bg[0], T_final * bg[1], T_final * bg[2],
+        state = (UInt32(start_i), Float(T_final), T_final * bg[0], T_final * bg[1], T_final * bg[2],
                  dr.zeros(Float, dr.width(T_final)))
         dr.while_loop(state, cond, body, labels=("i", "T", "ar", "ag", "ab", "ad"), mode="symbolic")
-        dr.eval(buf)
+        dr.eval(pair)
+        buf = _reduce_pairs(m, self.bins, pair, n)
         self.grad_means2d = m.Array2f(buf["mx"], buf["my"])
-        self.abs_grad_means2d = m.Array2f(buf["ax"], buf["ay"])
+        if self.want_absgrad:
+            self.abs_grad_means2d = m.Array2f(buf["ax"], buf["ay"])
         self.set_grad_in("means2d", m.Array2f(buf["mx"], buf["my"]))
         self.set_grad_in("conics", m.Array3f(buf["ca"], buf["cb"], buf["cc"]))
         self.set_grad_in("opacities", buf["o"])
@@ -234,17 +286,18 @@ class CompositeState:
     [N, 2] (per-pixel |d loss / d mean2d| summed, for AbsGS) are set.
     """
 
-    __slots__ = ("bins", "op")
+    __slots__ = ("bins", "op", "want_absgrad")
 
-    def __init__(self, bins: Bins) -> None:
+    def __init__(self, bins: Bins, want_absgrad: bool = False) -> None:
         self.bins = bins
         self.op: _CompositeOp | None = None
+        self.want_absgrad = want_absgrad
 
 
 def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, width: int, height: int,
               *, background=(0.0, 0.0, 0.0), alpha_min: float = 1.0 / 255.0, alpha_max: float = 0.99,
               transmittance_min: float = 1e-4, tile_size: int = 16, extents=None,
-              loop_ad: bool = False) -> tuple[Composite, CompositeState]:
+              loop_ad: bool = False, absgrad: bool = False) -> tuple[Composite, CompositeState]:
     """Alpha-composite screen-space Gaussians (mirrors `reference.composite`, matched mode).
 
     Args:
@@ -253,6 +306,7 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
         extents: [N, 2] cutoff bounding-box half sizes (from `project`).
         loop_ad: differentiate the loop with Dr.Jit's AD instead of the
             hand-written backward (test-only: slower, checks the CustomOp).
+        absgrad: also accumulate per-pixel |d loss / d mean2d| (AbsGS) in backward.
 
     Returns:
         (`Composite` in row-major image order, `CompositeState`).
@@ -270,6 +324,6 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
         bound = next_power_of_two(max(bins.max_list_length, 1))
         rgb, T, d, _ = _forward_loop(m, splats, bins.gaussian_ids, lanes, cfg, max_iterations=bound)
         return _to_image(m, lanes, rgb, T, d, cfg.background), CompositeState(bins)
-    state = CompositeState(bins)
+    state = CompositeState(bins, absgrad)
     out = dr.custom(_CompositeOp, means2d, conics, opacities, colors, depths, cutoff_sq, state, cfg)
     return Composite(*out), state

@@ -53,7 +53,7 @@ def check_background(background) -> tuple[float, float, float]:
 
 def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int,
                  background: tuple[float, float, float], options: RasterOptions,
-                 loop_ad: bool = False) -> Frame:
+                 loop_ad: bool = False, absgrad: bool = False) -> Frame:
     """Render one view from Dr.Jit tensors (AD flows to whichever inputs have it enabled).
 
     Args:
@@ -61,6 +61,7 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
         sh: [N, K, 3] Dr.Jit tensors (TensorXf). camera: `splatbench.Camera`.
         sh_degree: validated degree (see `resolve_sh_degree`).
         loop_ad: test-only; differentiate compositing with Dr.Jit's loop AD.
+        absgrad: accumulate the AbsGS screen-space gradient in the backward pass.
     """
     near = camera.near if options.near is None else options.near
     far = camera.far if options.far is None else options.far
@@ -82,7 +83,7 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
                            proj.visible, camera.width, camera.height, background=background,
                            alpha_min=options.alpha_min, alpha_max=options.alpha_max,
                            transmittance_min=options.transmittance_min, tile_size=options.tile_size,
-                           extents=proj.extents, loop_ad=loop_ad)
+                           extents=proj.extents, loop_ad=loop_ad, absgrad=absgrad)
     covered = out.alpha > 0
     depth = dr.select(covered, out.depth_sum / dr.select(covered, out.alpha, 1.0), 0.0)
     return Frame(out.rgb, out.alpha, depth, proj, state)

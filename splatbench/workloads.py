@@ -1,0 +1,112 @@
+"""Rendering workloads: the standard synthetic scene, npz scenes, and the garden SfM view.
+
+A workload is a set of Gaussians and one camera; benchmarks, the stress test and
+the parity tests all draw their scenes from here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from splatbench.cameras import Camera
+from splatbench.errors import InputError
+from splatbench.gaussians import Gaussians
+
+WORKLOAD_KEYS = ("means", "log_scales", "quats", "opacity_logits", "sh", "viewmat", "K", "width", "height")
+SFM_KEYS = ("means3d", "colors", "viewmats", "Ks", "width", "height")
+
+
+@dataclass(frozen=True)
+class Workload:
+    """A named scene: ``gaussians`` (N Gaussians) seen by ``camera``."""
+
+    name: str
+    gaussians: Gaussians
+    camera: Camera
+
+
+def random_unit_quats(rng: np.random.Generator, n: int) -> np.ndarray:
+    """[n, 4] uniformly random rotations (w, x, y, z)."""
+    q = rng.standard_normal((n, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def synthetic(n: int, width: int, height: int, seed: int = 0, *, sh_degree: int = 3,
+              sigma_px: tuple[float, float] = (0.3, 6.0), anisotropy: float = 0.25,
+              depth_range: tuple[float, float] = (2.0, 6.0), margin: float = 0.1) -> Workload:
+    """The standard synthetic workload.
+
+    Camera at the origin looking down +z, fx = fy = W, cx = W/2, cy = H/2. Means
+    uniform in depth on ``depth_range`` and uniform over the image inset by
+    ``margin`` on each side; 1-sigma screen size log-uniform on ``sigma_px`` pixels
+    with ``anisotropy`` log-normal spread per axis; random unit quaternions;
+    opacity logits N(0, 1); SH DC 0.5 N(0, 1), higher bands 0.05 N(0, 1).
+    """
+    if n < 0:
+        raise InputError(f"n: expected a count >= 0, got {n}")
+    rng = np.random.default_rng(seed)
+    f = float(width)
+    z = rng.uniform(*depth_range, n)
+    u = rng.uniform(margin * width, (1 - margin) * width, n)
+    v = rng.uniform(margin * height, (1 - margin) * height, n)
+    means = np.stack([(u - width / 2) * z / f, (v - height / 2) * z / f, z], axis=1)
+    sigma = np.exp(rng.uniform(np.log(sigma_px[0]), np.log(sigma_px[1]), n))
+    log_scales = np.log(sigma * z / f)[:, None] + anisotropy * rng.standard_normal((n, 3))
+    k = (sh_degree + 1) ** 2
+    sh = np.concatenate([0.5 * rng.standard_normal((n, 1, 3)), 0.05 * rng.standard_normal((n, k - 1, 3))], 1)
+    gaussians = Gaussians(means, log_scales, random_unit_quats(rng, n), rng.standard_normal(n), sh)
+    camera = Camera(width, height, f, f, width / 2, height / 2, np.eye(4))
+    return Workload(f"synthetic-{n}-{width}x{height}-s{seed}", gaussians, camera)
+
+
+def save_npz(workload: Workload, path: str | Path) -> None:
+    """Write ``workload`` with the keys of `WORKLOAD_KEYS`."""
+    g, c = workload.gaussians, workload.camera
+    np.savez(path, means=g.means, log_scales=g.log_scales, quats=g.quats, opacity_logits=g.opacity_logits,
+             sh=g.sh, viewmat=c.world_to_camera, K=c.K, width=c.width, height=c.height)
+
+
+def load_npz(path: str | Path, *, view: int = 0) -> Workload:
+    """Read a workload npz: either `WORKLOAD_KEYS`, or an SfM capture with `SFM_KEYS`
+    (points seeded as 3DGS does, camera ``view``)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"workload: no such file {str(path)!r}")
+    try:
+        with np.load(path) as data:
+            arrays = {k: data[k] for k in data.files}
+    except Exception as exc:  # noqa: BLE001 - any unreadable file gets one line
+        raise InputError(f"workload: {path.name}: not a readable npz ({exc})") from None
+    if all(k in arrays for k in SFM_KEYS):
+        return _from_sfm(path.stem, arrays, view)
+    missing = [k for k in WORKLOAD_KEYS if k not in arrays]
+    if missing:
+        raise InputError(f"workload: {path.name}: missing keys {missing}")
+    K = np.asarray(arrays["K"], dtype=np.float64)
+    if K.shape != (3, 3):
+        raise InputError(f"workload: {path.name}: K: expected shape [3, 3], got {list(K.shape)}")
+    gaussians = Gaussians(arrays["means"], arrays["log_scales"], arrays["quats"], arrays["opacity_logits"],
+                          arrays["sh"])
+    camera = Camera(int(arrays["width"]), int(arrays["height"]), K[0, 0], K[1, 1], K[0, 2], K[1, 2],
+                    np.asarray(arrays["viewmat"], dtype=np.float64))
+    return Workload(path.stem, gaussians, camera)
+
+
+def sfm_camera(arrays: dict, view: int) -> Camera:
+    """Camera ``view`` of an SfM capture (viewmats [V, 4, 4] world-to-camera, Ks [V, 3, 3])."""
+    count = len(arrays["viewmats"])
+    if not 0 <= view < count:
+        raise InputError(f"view: expected an index in [0, {count}), got {view}")
+    K = np.asarray(arrays["Ks"][view], dtype=np.float64)
+    return Camera(int(arrays["width"]), int(arrays["height"]), K[0, 0], K[1, 1], K[0, 2], K[1, 2],
+                  np.asarray(arrays["viewmats"][view], dtype=np.float64))
+
+
+def _from_sfm(name: str, arrays: dict, view: int) -> Workload:
+    from splatbench.init import from_points
+
+    gaussians = from_points(arrays["means3d"], arrays["colors"])
+    return Workload(f"{name}-view{view}", gaussians, sfm_camera(arrays, view))
