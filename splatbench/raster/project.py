@@ -50,11 +50,13 @@ def array_namespace(x):
     return sys.modules[type(x).__module__]
 
 
-def columns(tensor, count: int, *, permute: bool = True):
+def columns(tensor, count: int, *, permute: bool = False):
     """Split a [N, count] Dr.Jit tensor into ``count`` flat arrays (differentiable).
 
-    Each entry is read exactly once, so the gathers are declared a permutation:
-    their reverse-mode derivative is a plain scatter, not an atomic scatter-add.
+    ``permute=True`` declares that this is the only read of each entry in the whole
+    AD graph, so the reverse-mode derivative becomes a plain scatter instead of an
+    atomic scatter-add. Only then: a second gather of the same tensor declared a
+    permutation would *overwrite* the first one's gradient instead of adding to it.
     """
     m = array_namespace(tensor.array)
     n = tensor.shape[0]
@@ -121,9 +123,10 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width:
     """
     m = array_namespace(means.array)
     Float = m.Float
-    mx, my, mz = columns(means, 3)
-    sx, sy, sz = (dr.exp(dr.clip(v, -LOG_SCALE_CLIP, LOG_SCALE_CLIP)) for v in columns(log_scales, 3))
-    R = quat_to_rotmat(*columns(quats, 4))
+    mx, my, mz = columns(means, 3)  # also read for the SH view direction: no permute
+    sx, sy, sz = (dr.exp(dr.clip(v, -LOG_SCALE_CLIP, LOG_SCALE_CLIP))
+                  for v in columns(log_scales, 3, permute=True))
+    R = quat_to_rotmat(*columns(quats, 4, permute=True))
     logits = opacity_logits.array if hasattr(opacity_logits, "shape") else opacity_logits
     cam = camera_constants(m, K, world_to_camera)
     Rw, tw = cam["R"], cam["t"]
