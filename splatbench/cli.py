@@ -1,8 +1,54 @@
-"""The `splatbench` command line."""
+"""The `splatbench` command line.
+
+Commands live in their own modules and are imported only when invoked, so
+`splatbench --help` is instant. Every `SplatbenchError` (bad input, missing files)
+is printed as one line and exits with status 2, never as a traceback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
 
 import click
 
+# name -> ("module:attribute", one-line help shown by `splatbench --help`)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("splatbench.commands.demo:demo", "Run the main job and print where its output is."),
+    "render": ("splatbench.commands.render:render", "Render a 3DGS PLY or workload to a PNG."),
+    "stress": ("splatbench.stress.cli:stress", "Stress the rasterizer with degenerate input."),
+    "bench": ("splatbench.bench.cli:bench", "Benchmarks (raster: run time, memory, throughput)."),
+}
 
-@click.group()
+
+class LazyGroup(click.Group):
+    """A click group whose subcommands are imported on first use."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in COMMANDS:
+            return None
+        module, attr = COMMANDS[name][0].split(":")
+        return getattr(importlib.import_module(module), attr)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(name, COMMANDS[name][1]) for name in self.list_commands(ctx)]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+    def invoke(self, ctx: click.Context):
+        from splatbench.errors import SplatbenchError
+
+        try:
+            return super().invoke(ctx)
+        except SplatbenchError as exc:
+            click.echo(f"splatbench: error: {exc}", err=True)
+            sys.exit(2)
+
+
+@click.group(cls=LazyGroup)
+@click.version_option(package_name="splatbench")
 def main() -> None:
     """splatbench: compare and validate 3D Gaussian Splatting rasterizers."""

@@ -15,6 +15,7 @@ from splatbench.cameras import Camera
 from splatbench.errors import InputError
 from splatbench.gaussians import Gaussians
 
+GARDEN_SFM = Path(__file__).parent / "data" / "garden_sfm.npz"  # real SfM data; see data/NOTICE.md
 WORKLOAD_KEYS = ("means", "log_scales", "quats", "opacity_logits", "sh", "viewmat", "K", "width", "height")
 SFM_KEYS = ("means3d", "colors", "viewmats", "Ks", "width", "height")
 

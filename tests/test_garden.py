@@ -6,24 +6,23 @@ pycolmap's own projection, and renders one view with the reference oracle.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import splatbench  # noqa: F401 - sets DRJIT_LIBLLVM_PATH first
+from splatbench.workloads import GARDEN_SFM
 from splatbench.cameras import Camera
 from splatbench.gaussians import SH_C0
 from splatbench.init import from_points
 
-DATA = Path(__file__).parent / "data" / "garden_sfm.npz"
 EPS32 = float(np.finfo(np.float32).eps)
 N_POINTS = 138766
 
 
 @pytest.fixture(scope="module")
 def garden():
-    with np.load(DATA) as d:
+    with np.load(GARDEN_SFM) as d:
         return {k: d[k] for k in d.files}
 
 

@@ -19,20 +19,18 @@ may fall outside the tolerance, and every scene reports how many did.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import reference
 import splatbench
-from splatbench.workloads import load_npz
+from splatbench.workloads import GARDEN_SFM, load_npz
 from tests.compare import EPS32, assert_images_close
 from tests.scenes import parity_scene
 
 ATOL = 2e-5
 BOUNDARY_FRACTION = 1 / 500
-GARDEN = Path(__file__).parent / "data" / "garden_sfm.npz"
 
 
 def reference_render(workload, background, **options):
@@ -91,6 +89,6 @@ def test_tile_size_does_not_change_the_image():
 
 def test_forward_parity_garden_view():
     """Real SfM data at reduced resolution: 138,766 Gaussians seeded as 3DGS does."""
-    workload = load_npz(GARDEN, view=0)
+    workload = load_npz(GARDEN_SFM, view=0)
     small = type(workload)(workload.name, workload.gaussians, workload.camera.scaled(0.25))
     check_parity("garden", small, (0.0, 0.0, 0.0))

@@ -181,6 +181,7 @@ class _CompositeOp(dr.CustomOp):
         m = array_namespace(opacities)
         state.op = self
         self.want_absgrad = state.want_absgrad
+        self.timer = state.timer
         bins = state.bins
         self.m, self.bins, self.cfg = m, bins, cfg
         self.splats = Splats(means2d, conics, opacities, colors, depths, cutoff_sq)
@@ -272,6 +273,8 @@ class _CompositeOp(dr.CustomOp):
         self.set_grad_in("opacities", buf["o"])
         self.set_grad_in("colors", m.Array3f(buf["r"], buf["g"], buf["b"]))
         self.set_grad_in("depths", buf["z"])
+        if self.timer is not None:
+            self.timer.mark("backward_compositing")
 
     def name(self):
         return "splatbench.composite"
@@ -286,18 +289,19 @@ class CompositeState:
     [N, 2] (per-pixel |d loss / d mean2d| summed, for AbsGS) are set.
     """
 
-    __slots__ = ("bins", "op", "want_absgrad")
+    __slots__ = ("bins", "op", "want_absgrad", "timer")
 
-    def __init__(self, bins: Bins, want_absgrad: bool = False) -> None:
+    def __init__(self, bins: Bins, want_absgrad: bool = False, timer=None) -> None:
         self.bins = bins
         self.op: _CompositeOp | None = None
         self.want_absgrad = want_absgrad
+        self.timer = timer
 
 
 def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, width: int, height: int,
               *, background=(0.0, 0.0, 0.0), alpha_min: float = 1.0 / 255.0, alpha_max: float = 0.99,
               transmittance_min: float = 1e-4, tile_size: int = 16, extents=None,
-              loop_ad: bool = False, absgrad: bool = False) -> tuple[Composite, CompositeState]:
+              loop_ad: bool = False, absgrad: bool = False, timer=None) -> tuple[Composite, CompositeState]:
     """Alpha-composite screen-space Gaussians (mirrors `reference.composite`, matched mode).
 
     Args:
@@ -307,6 +311,8 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
         loop_ad: differentiate the loop with Dr.Jit's AD instead of the
             hand-written backward (test-only: slower, checks the CustomOp).
         absgrad: also accumulate per-pixel |d loss / d mean2d| (AbsGS) in backward.
+        timer: optional `StageTimer` (benchmarks): marks "binning" and, in backward,
+            "backward_compositing".
 
     Returns:
         (`Composite` in row-major image order, `CompositeState`).
@@ -314,6 +320,8 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
     m = array_namespace(opacities)
     proj = Projection(means2d, conics, depths, opacities, cutoff_sq, extents, None, visible)
     bins = bin_gaussians(proj, TileGrid(width, height, tile_size))
+    if timer is not None:
+        timer.mark("binning")
     cfg = CompositeSettings(float(alpha_min), float(alpha_max), float(transmittance_min),
                             tuple(float(c) for c in background))
     if loop_ad:
@@ -324,6 +332,6 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
         bound = next_power_of_two(max(bins.max_list_length, 1))
         rgb, T, d, _ = _forward_loop(m, splats, bins.gaussian_ids, lanes, cfg, max_iterations=bound)
         return _to_image(m, lanes, rgb, T, d, cfg.background), CompositeState(bins)
-    state = CompositeState(bins, absgrad)
+    state = CompositeState(bins, absgrad, timer)
     out = dr.custom(_CompositeOp, means2d, conics, opacities, colors, depths, cutoff_sq, state, cfg)
     return Composite(*out), state

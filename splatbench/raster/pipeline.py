@@ -12,6 +12,7 @@ from splatbench.raster.composite import Composite, CompositeState, composite
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.project import Projection, array_namespace, columns, project
 from splatbench.raster.sh import eval_sh
+from splatbench.raster.timing import StageTimer
 
 SH_BASES = {1: 0, 4: 1, 9: 2, 16: 3}
 
@@ -53,7 +54,7 @@ def check_background(background) -> tuple[float, float, float]:
 
 def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int,
                  background: tuple[float, float, float], options: RasterOptions,
-                 loop_ad: bool = False, absgrad: bool = False) -> Frame:
+                 loop_ad: bool = False, absgrad: bool = False, timer: StageTimer | None = None) -> Frame:
     """Render one view from Dr.Jit tensors (AD flows to whichever inputs have it enabled).
 
     Args:
@@ -62,6 +63,7 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
         sh_degree: validated degree (see `resolve_sh_degree`).
         loop_ad: test-only; differentiate compositing with Dr.Jit's loop AD.
         absgrad: accumulate the AbsGS screen-space gradient in the backward pass.
+        timer: benchmarks only; charges wall time to each stage (adds syncs).
     """
     near = camera.near if options.near is None else options.near
     far = camera.far if options.far is None else options.far
@@ -79,13 +81,18 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
     # them, which would otherwise evaluate each array in a kernel of its own).
     # Unpacked: Dr.Jit traverses tuples and dataclasses, but not NamedTuples.
     dr.eval(*proj, colors)
+    if timer is not None:
+        timer.mark("preprocess")
     out, state = composite(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq,
                            proj.visible, camera.width, camera.height, background=background,
                            alpha_min=options.alpha_min, alpha_max=options.alpha_max,
                            transmittance_min=options.transmittance_min, tile_size=options.tile_size,
-                           extents=proj.extents, loop_ad=loop_ad, absgrad=absgrad)
+                           extents=proj.extents, loop_ad=loop_ad, absgrad=absgrad, timer=timer)
     covered = out.alpha > 0
     depth = dr.select(covered, out.depth_sum / dr.select(covered, out.alpha, 1.0), 0.0)
+    if timer is not None:
+        dr.eval(out.rgb, out.alpha, depth)
+        timer.mark("compositing")
     return Frame(out.rgb, out.alpha, depth, proj, state)
 
 

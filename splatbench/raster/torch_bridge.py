@@ -58,7 +58,7 @@ class RasterInfo:
 class _Rasterize(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means, log_scales, quats, opacity_logits, sh, camera, degree, background, options,
-                loop_ad, absgrad, info_box):
+                loop_ad, absgrad, timer, info_box):
         m = get_backend(options.device).t
         inputs = []
         for t in (means, log_scales, quats, opacity_logits, sh):
@@ -68,7 +68,8 @@ class _Rasterize(torch.autograd.Function):
             if needs:
                 dr.enable_grad(x)
         frame = render_frame(*inputs, camera, sh_degree=degree, background=background, options=options,
-                             loop_ad=loop_ad, absgrad=absgrad)
+                             loop_ad=loop_ad, absgrad=absgrad, timer=timer)
+        ctx.timer = timer
         H, W = camera.height, camera.width
         rgb = torch.from_numpy(np.array(frame.rgb.numpy(), dtype=np.float32).T.reshape(H, W, 3).copy())
         alpha = torch.from_numpy(np.array(frame.alpha.numpy(), dtype=np.float32).reshape(H, W))
@@ -82,7 +83,7 @@ class _Rasterize(torch.autograd.Function):
     def backward(ctx, v_rgb, v_alpha, v_depth):
         m, frame, inputs = ctx.m, ctx.frame, ctx.dr_inputs
         if not any(ctx.needs_input_grad[:5]):
-            return (None,) * 12
+            return (None,) * 13
         v_rgb = np.ascontiguousarray(v_rgb.detach().cpu().numpy().reshape(-1, 3).T, dtype=np.float32)
         dr.set_grad(frame.rgb, m.Array3f(v_rgb))
         dr.set_grad(frame.alpha, m.Float(np.ascontiguousarray(v_alpha.detach().cpu().numpy().reshape(-1),
@@ -91,6 +92,9 @@ class _Rasterize(torch.autograd.Function):
                                                                dtype=np.float32)))
         dr.enqueue(dr.ADMode.Backward, frame.rgb, frame.alpha, frame.depth)
         dr.traverse(dr.ADMode.Backward)
+        if ctx.timer is not None:
+            dr.eval([dr.grad(x) for x in inputs])
+            ctx.timer.mark("backward_preprocess")
         grads = []
         for x, needs, like in zip(inputs, ctx.needs_input_grad[:5], ctx.saved_shapes):
             if not needs:
@@ -99,7 +103,7 @@ class _Rasterize(torch.autograd.Function):
             g = np.array(dr.grad(x).numpy(), dtype=np.float32).reshape(like)
             grads.append(torch.from_numpy(g))
         ctx.dr_inputs = None  # release the Dr.Jit graph
-        return (*grads, None, None, None, None, None, None, None)
+        return (*grads, None, None, None, None, None, None, None, None)
 
 
 def _check(name: str, t, spec, sizes) -> torch.Tensor:
@@ -113,7 +117,7 @@ def _check(name: str, t, spec, sizes) -> torch.Tensor:
 
 
 def rasterize(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int | None = None,
-              background=None, absgrad: bool = False, loop_ad: bool = False, **options):
+              background=None, absgrad: bool = False, loop_ad: bool = False, timer=None, **options):
     """Differentiable 3DGS rasterization of torch tensors through the Dr.Jit pipeline.
 
     Args:
@@ -123,6 +127,7 @@ def rasterize(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree
         sh_degree: SH bands to evaluate (default: all in ``sh``); higher bands get zero gradient.
         background: RGB behind the splats (default black).
         absgrad: also accumulate ``info.means2d_absgrad`` (AbsGS) in the backward pass.
+        timer: benchmarks only; a `StageTimer` charged per stage (forward and backward).
         loop_ad: test-only; differentiate compositing with Dr.Jit's loop AD instead of
             the hand-written backward pass.
         **options: `RasterOptions` fields.
@@ -142,7 +147,7 @@ def rasterize(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree
     bg = check_background(background)
     box: list[Frame] = []  # receives the Dr.Jit frame from inside autograd's forward
     rgb, alpha, depth = _Rasterize.apply(means, log_scales, quats, opacity_logits, sh, camera, degree, bg,
-                                         opts, loop_ad, absgrad, box)
+                                         opts, loop_ad, absgrad, timer, box)
     frame = box[0]
     proj = frame.projection
     info = RasterInfo(

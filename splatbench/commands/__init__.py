@@ -1,0 +1,1 @@
+"""Small CLI commands (each module defines one click command)."""

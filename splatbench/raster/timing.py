@@ -1,0 +1,29 @@
+"""Per-stage wall time of the rasterizer, for benchmarks (never used by tests)."""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+
+from splatbench.raster.backend import dr
+
+STAGES = ("preprocess", "binning", "compositing", "backward_compositing", "backward_preprocess")
+
+
+class StageTimer:
+    """Accumulates seconds per stage. ``mark(stage)`` waits for Dr.Jit's queued work
+    to finish, then charges the time since the previous mark to ``stage``."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = defaultdict(float)
+        self._last = time.perf_counter()
+
+    def start(self) -> None:
+        dr.sync_thread()
+        self._last = time.perf_counter()
+
+    def mark(self, stage: str) -> None:
+        dr.sync_thread()
+        now = time.perf_counter()
+        self.seconds[stage] += now - self._last
+        self._last = now
