@@ -1,13 +1,17 @@
 """Front-to-back alpha compositing over tiles, with an analytic backward pass.
 
-Mirrors `reference.composite`. One lane per pixel, lanes ordered tile by tile so
-that a SIMD packet (16 lanes with AVX-512) walks the same tile list; a symbolic
-loop per lane stops early once transmittance would fall below its threshold.
+Mirrors `reference.composite`. Lanes are ordered tile by tile so that a SIMD
+packet (16 lanes with AVX-512) walks one tile's list in lock-step, and each lane
+shades a 2x2 block of pixels: one load of a Gaussian's packed record serves four
+pixels, and in the backward pass the four pixels' gradient contributions are
+summed in registers before one scatter. A symbolic loop per lane stops early
+once every pixel of the block would fall below the transmittance threshold.
 
-The backward pass is a `dr.CustomOp` that walks each pixel's list back to front,
+The backward pass is a `dr.CustomOp` that walks each tile's list back to front,
 recovering transmittance by division (alpha <= alpha_max < 1 keeps it
-invertible) and scatter-adding into per-Gaussian gradient buffers. Dr.Jit's own
-AD through the loop (`composite(..., loop_ad=True)`) is kept as a test-only
+invertible). Gradients are accumulated per (tile, Gaussian) pair, then reduced
+per Gaussian in a fixed order, so results are bit-reproducible. Dr.Jit's own AD
+through the forward loop (`composite(..., loop_ad=True)`) is kept as a test-only
 second backward that checks the hand-written one.
 """
 
@@ -19,6 +23,10 @@ from typing import NamedTuple
 from splatbench.raster.backend import dr
 from splatbench.raster.binning import Bins, TileGrid, bin_gaussians
 from splatbench.raster.project import Projection, array_namespace, next_power_of_two
+
+GEO = 8  # geometry record per Gaussian: u, v, conic A, B, C, opacity, depth, cutoff_sq
+COL = 4  # colour record per Gaussian: r, g, b, (padding: packet loads need a power of two)
+GRAD_KEYS = ("mx", "my", "ca", "cb", "cc", "o", "r", "g", "b", "z", "ax", "ay")
 
 
 @dataclass(frozen=True)
@@ -51,101 +59,162 @@ class Splats:
     cutoff_sq: object  # Float [N], detached
 
 
-class Lanes(NamedTuple):
-    """Pixel lanes in tile order: centre coordinates, tile range, validity."""
+class Records(NamedTuple):
+    """Per-Gaussian data packed for packet loads: ``geo`` [N * GEO], ``col`` [N * COL].
+    One packet gather of a record replaces a scalar gather per field in the loops."""
 
-    px: object
-    py: object
+    geo: object
+    col: object
+
+
+def pack_records(m, s: Splats) -> Records:
+    """Interleave the splat attributes into `Records` (differentiable scatters)."""
+    n = dr.width(s.opacities)
+    idx = dr.arange(m.UInt32, n)
+    geo = dr.zeros(m.Float, GEO * n)
+    col = dr.zeros(m.Float, COL * n)
+    fields = (s.means2d.x, s.means2d.y, s.conics.x, s.conics.y, s.conics.z, s.opacities, s.depths, s.cutoff_sq)
+    for k, value in enumerate(fields):
+        dr.scatter(geo, value, idx * GEO + k, mode=dr.ReduceMode.Permute)
+    for k, value in enumerate((s.colors.x, s.colors.y, s.colors.z)):
+        dr.scatter(col, value, idx * COL + k, mode=dr.ReduceMode.Permute)
+    return Records(geo, col)
+
+
+class Lanes(NamedTuple):
+    """Compositing lanes in tile order; each lane shades K = block^2 pixels.
+
+    px, py, inside, image_index: lists of K arrays (pixel centres, whether the
+    pixel exists, its row-major index); start, end: the lane's tile range.
+    lanes_per_tile: lanes that share one tile list.
+    """
+
+    px: list
+    py: list
+    inside: list
+    image_index: list
     start: object
     end: object
-    inside: object
-    image_index: object  # row-major pixel index of each lane (0 for padding lanes)
-    lane_of_pixel: object  # lane of each row-major pixel
+    lanes_per_tile: int
 
 
-def make_lanes(m, bins: Bins) -> Lanes:
-    g: TileGrid = bins.grid
-    ts = g.tile_size
-    shift = ts.bit_length() - 1
-    lane = dr.arange(m.UInt32, g.num_lanes)
-    tile = lane >> (2 * shift)
-    local = lane & (ts * ts - 1)
-    tx = tile % g.tiles_x
-    ty = tile // g.tiles_x
-    ix = (tx << shift) + (local & (ts - 1))
-    iy = (ty << shift) + (local >> shift)
-    inside = (ix < g.width) & (iy < g.height)
+def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
+    ts = grid.tile_size
+    block = 2 if ts >= 2 else 1
+    side = ts // block                      # lanes per tile side
+    lanes_per_tile = side * side
+    lane = dr.arange(m.UInt32, grid.num_tiles * lanes_per_tile)
+    tile = lane // lanes_per_tile           # powers of two: shifts
+    local = lane % lanes_per_tile
+    x0 = (tile % grid.tiles_x) * ts + (local % side) * block
+    y0 = (tile // grid.tiles_x) * ts + (local // side) * block
+    px, py, inside, image_index = [], [], [], []
+    for ky in range(block):
+        for kx in range(block):
+            x, y = x0 + kx, y0 + ky
+            ok = (x < grid.width) & (y < grid.height)
+            px.append(m.Float(x) + 0.5)
+            py.append(m.Float(y) + 0.5)
+            inside.append(ok)
+            image_index.append(dr.select(ok, y * grid.width + x, 0))
     start = dr.gather(m.UInt32, bins.tile_start, tile)
-    end = dr.select(inside, dr.gather(m.UInt32, bins.tile_end, tile), start)
-    pix = dr.arange(m.UInt32, g.width * g.height)
-    pix_x = pix % g.width
-    pix_y = pix // g.width
-    lane_of_pixel = (((pix_y >> shift) * g.tiles_x + (pix_x >> shift)) << (2 * shift)) \
-        + ((pix_y & (ts - 1)) << shift) + (pix_x & (ts - 1))
-    return Lanes(m.Float(ix) + 0.5, m.Float(iy) + 0.5, start, end, inside,
-                 dr.select(inside, iy * g.width + ix, 0), lane_of_pixel)
+    any_inside = inside[0]
+    for ok in inside[1:]:
+        any_inside |= ok
+    end = dr.select(any_inside, dr.gather(m.UInt32, bins.tile_end, tile), start)
+    return Lanes(px, py, inside, image_index, start, end, lanes_per_tile)
 
 
-def _gaussian_alpha(m, s: Splats, g, px, py, cfg: CompositeSettings, active):
-    """Alpha of Gaussian ``g`` at pixel centre (px, py), and the pieces its gradient needs."""
-    mean = dr.gather(m.Array2f, s.means2d, g, active)
-    conic = dr.gather(m.Array3f, s.conics, g, active)
-    opacity = dr.gather(m.Float, s.opacities, g, active)
-    cutoff = dr.gather(m.Float, s.cutoff_sq, g, active)
-    dx = px - mean.x
-    dy = py - mean.y
-    sigma = 0.5 * (conic.x * dx * dx + conic.z * dy * dy) + conic.y * dx * dy
+def _alpha_at(rec, px, py, cfg: CompositeSettings, active):
+    """Alpha of one Gaussian (geometry record ``rec``) at pixel centre (px, py), and
+    the pieces its gradient needs."""
+    mean_x, mean_y, conic_a, conic_b, conic_c, opacity, depth, cutoff = rec
+    dx = px - mean_x
+    dy = py - mean_y
+    sigma = 0.5 * (conic_a * dx * dx + conic_c * dy * dy) + conic_b * dx * dy
     gauss = dr.exp(-sigma)
     raw = opacity * gauss
     alpha = dr.minimum(raw, cfg.alpha_max)
     contributes = active & (sigma <= 0.5 * cutoff) & (alpha >= cfg.alpha_min)
-    return alpha, contributes, (dx, dy, conic, opacity, gauss, raw)
+    return alpha, contributes, dx, dy, gauss, raw
 
 
-def _forward_loop(m, s: Splats, ids, lanes: Lanes, cfg: CompositeSettings, max_iterations=None):
-    """Composite every lane; returns (rgb, T_final, depth_sum, stop_index) in lane order."""
+def _load(m, rec: Records, gid, active=True):
+    """(geometry fields, colour fields) of Gaussians ``gid`` as lists of Float."""
+    n = dr.width(gid)
+    geo = dr.gather(m.ArrayXf, rec.geo, gid, active, shape=(GEO, n))
+    col = dr.gather(m.ArrayXf, rec.col, gid, active, shape=(COL, n))
+    return [geo[k] for k in range(GEO)], [col[k] for k in range(3)]
+
+
+class _Forward(NamedTuple):
+    """Lane-order results, lists over the K pixels of a lane."""
+
+    rgb: list
+    T: list
+    depth_sum: list
+    stop: list  # exclusive end of each pixel's composited range
+
+
+def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, max_iterations=None) -> _Forward:
     Float, UInt32 = m.Float, m.UInt32
-    px, py = lanes.px, lanes.py
-
-    def cond(i, T, r, g_, b, d, done):
-        return (i < lanes.end) & ~done
-
-    def body(i, T, r, g_, b, d, done):
-        gid = dr.gather(UInt32, ids, i)
-        alpha, contributes, _ = _gaussian_alpha(m, s, gid, px, py, cfg, True)
-        t_next = T * (1.0 - alpha)
-        stop = contributes & (t_next < cfg.transmittance_min)
-        take = contributes & ~stop
-        color = dr.gather(m.Array3f, s.colors, gid)
-        depth = dr.gather(Float, s.depths, gid)
-        w = dr.select(take, T * alpha, 0.0)
-        r, g_, b, d = r + w * color.x, g_ + w * color.y, b + w * color.z, d + w * depth
-        T = dr.select(take, t_next, T)
-        i = dr.select(stop, i, i + 1)
-        return i, T, r, g_, b, d, done | stop
-
-    n = dr.width(px)
+    K = len(lanes.px)
+    n = dr.width(lanes.start)
     zero = dr.zeros(Float, n)
+    one = dr.full(Float, 1.0, n)
     if dr.width(ids) == 0:  # nothing visible: every pixel shows the background
-        return m.Array3f(zero, zero, zero), dr.full(Float, 1.0, n), zero, UInt32(lanes.start)
-    state = (UInt32(lanes.start), dr.full(Float, 1.0, n), zero, Float(zero), Float(zero), Float(zero),
-             dr.zeros(m.Bool, n))
+        return _Forward([m.Array3f(zero, zero, zero)] * K, [one] * K, [zero] * K, [UInt32(lanes.start)] * K)
+
+    # state: i, then per pixel (T, r, g, b, d, stop). A pixel is live while its stop
+    # index still equals the lane's end (pixels outside the image start at `start`).
+    # No Bool in the state on purpose: Dr.Jit 1.5 emits invalid LLVM IR (i8 vs i1)
+    # when reverse-mode AD through the loop has to record a Bool state variable.
+    def unpack(state):
+        return state[0], [state[1 + 6 * k: 7 + 6 * k] for k in range(K)]
+
+    def cond(*state):
+        i, pix = unpack(state)
+        live = pix[0][5] == lanes.end
+        for p in pix[1:]:
+            live = live | (p[5] == lanes.end)
+        return (i < lanes.end) & live
+
+    def body(*state):
+        i, pix = unpack(state)
+        gid = dr.gather(UInt32, ids, i)
+        geo, (cr, cg, cb) = _load(m, rec, gid)
+        out = [i + 1]
+        for k, (T, r, g, b, d, stop) in enumerate(pix):
+            alpha, contributes, _, _, _, _ = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, stop == lanes.end)
+            t_next = T * (1.0 - alpha)
+            stop_now = contributes & (t_next < cfg.transmittance_min)
+            take = contributes & ~stop_now
+            w = dr.select(take, T * alpha, 0.0)
+            out += [dr.select(take, t_next, T), r + w * cr, g + w * cg, b + w * cb, d + w * geo[6],
+                    dr.select(stop_now, i, stop)]
+        return tuple(out)
+
+    state = [UInt32(lanes.start)]
+    for k in range(K):
+        state += [Float(one), Float(zero), Float(zero), Float(zero), Float(zero),
+                  dr.select(lanes.inside[k], lanes.end, lanes.start)]
     kwargs = {} if max_iterations is None else {"max_iterations": max_iterations}
-    i, T, r, g_, b, d, _ = dr.while_loop(state, cond, body, labels=("i", "T", "r", "g", "b", "d", "done"),
-                                         mode="symbolic", **kwargs)
-    return m.Array3f(r, g_, b), T, d, i
+    final = dr.while_loop(tuple(state), cond, body, mode="symbolic", **kwargs)
+    _, pix = unpack(final)
+    return _Forward([m.Array3f(p[1], p[2], p[3]) for p in pix], [p[0] for p in pix], [p[4] for p in pix],
+                    [p[5] for p in pix])
 
 
-def _to_image(m, lanes: Lanes, rgb, T, d, bg):
+def _to_image(m, grid: TileGrid, lanes: Lanes, fwd: _Forward, bg) -> Composite:
     """Lane order -> row-major image order; adds the background behind the splats."""
-    idx = lanes.lane_of_pixel
-    mode = dr.ReduceMode.Permute
-    T_img = dr.gather(m.Float, T, idx, mode=mode)
-    rgb_img = dr.gather(m.Array3f, rgb, idx, mode=mode) + T_img * m.Array3f(*bg)
-    return Composite(rgb_img, 1.0 - T_img, dr.gather(m.Float, d, idx, mode=mode))
-
-
-GRAD_KEYS = ("mx", "my", "ca", "cb", "cc", "o", "r", "g", "b", "z", "ax", "ay")
+    size = grid.width * grid.height
+    rgb, T, d = dr.zeros(m.Array3f, size), dr.zeros(m.Float, size), dr.zeros(m.Float, size)
+    for k in range(len(lanes.px)):
+        idx, ok = lanes.image_index[k], lanes.inside[k]
+        dr.scatter(rgb, fwd.rgb[k], idx, ok, mode=dr.ReduceMode.Permute)
+        dr.scatter(T, fwd.T[k], idx, ok, mode=dr.ReduceMode.Permute)
+        dr.scatter(d, fwd.depth_sum[k], idx, ok, mode=dr.ReduceMode.Permute)
+    return Composite(rgb + T * m.Array3f(*bg), 1.0 - T, d)
 
 
 def _reduce_pairs(m, bins: Bins, pair: dict, n: int) -> dict:
@@ -175,96 +244,106 @@ def _reduce_pairs(m, bins: Bins, pair: dict, n: int) -> dict:
 
 
 class _CompositeOp(dr.CustomOp):
-    """Forward: `_forward_loop`. Backward: back-to-front walk with scatter-adds."""
+    """Forward: `_forward_loop`. Backward: back-to-front walk, per-pair accumulation."""
 
     def eval(self, means2d, conics, opacities, colors, depths, cutoff_sq, state, cfg):
         m = array_namespace(opacities)
         state.op = self
-        self.want_absgrad = state.want_absgrad
-        self.timer = state.timer
-        bins = state.bins
-        self.m, self.bins, self.cfg = m, bins, cfg
-        self.splats = Splats(means2d, conics, opacities, colors, depths, cutoff_sq)
-        self.lanes = make_lanes(m, bins)
-        rgb, T, d, stop = _forward_loop(m, self.splats, bins.gaussian_ids, self.lanes, cfg)
-        dr.eval(rgb, T, d, stop)
-        self.T_final, self.stop = T, stop
+        self.m, self.bins, self.cfg = m, state.bins, cfg
+        self.want_absgrad, self.timer = state.want_absgrad, state.timer
+        self.n = dr.width(opacities)
+        self.records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
+        dr.eval(self.records)
+        self.lanes = make_lanes(m, self.bins.grid, self.bins)
+        fwd = _forward_loop(m, self.records, self.bins.gaussian_ids, self.lanes, cfg)
+        dr.eval(fwd)
+        self.fwd = fwd
         self.grad_means2d = self.abs_grad_means2d = None
         # A plain tuple: Dr.Jit does not traverse NamedTuples, so a `Composite` here
         # would silently disconnect the outputs from the AD graph.
-        return tuple(_to_image(m, self.lanes, rgb, T, d, cfg.background))
+        return tuple(_to_image(m, self.bins.grid, self.lanes, fwd, cfg.background))
 
     def backward(self):
-        m, s, lanes, cfg = self.m, self.splats, self.lanes, self.cfg
+        m, rec, lanes, cfg, bins = self.m, self.records, self.lanes, self.cfg, self.bins
         Float, UInt32 = m.Float, m.UInt32
-        v_rgb_img, v_alpha_img, v_d_img = self.grad_out()
-        # Image order -> lane order (padding lanes get zero cotangents).
-        v_rgb = dr.gather(m.Array3f, v_rgb_img, lanes.image_index, lanes.inside)
-        v_alpha_out = dr.gather(Float, v_alpha_img, lanes.image_index, lanes.inside)
-        v_d = dr.gather(Float, v_d_img, lanes.image_index, lanes.inside)
         keys = GRAD_KEYS if self.want_absgrad else GRAD_KEYS[:-2]
-        n = dr.width(s.opacities)
-        if self.bins.num_pairs == 0:  # nothing was composited: all gradients are zero
-            zero = dr.zeros(Float, n)
+        if bins.num_pairs == 0:  # nothing was composited: all gradients are zero
+            zero = dr.zeros(Float, self.n)
             self.grad_means2d = m.Array2f(zero, zero)
             self.abs_grad_means2d = m.Array2f(zero, zero) if self.want_absgrad else None
             return
-        # Per-pair accumulators: slot i belongs to one (tile, Gaussian) pair, so only the
-        # lanes of one tile (one thread, fixed order) ever add into it.
-        pair = {k: dr.zeros(Float, self.bins.num_pairs) for k in keys}
-        T_final = self.T_final
+        v_rgb_img, v_alpha_img, v_d_img = self.grad_out()
+        K = len(lanes.px)
+        # Image order -> lane order (pixels outside the image get zero cotangents).
+        v_rgb = [dr.gather(m.Array3f, v_rgb_img, lanes.image_index[k], lanes.inside[k]) for k in range(K)]
+        v_alpha = [dr.gather(Float, v_alpha_img, lanes.image_index[k], lanes.inside[k]) for k in range(K)]
+        v_d = [dr.gather(Float, v_d_img, lanes.image_index[k], lanes.inside[k]) for k in range(K)]
+        T_final, stop = self.fwd.T, self.fwd.stop
         bg = cfg.background
-        ids = self.bins.gaussian_ids
-        px, py = lanes.px, lanes.py
-        mode = dr.ReduceMode.Local  # the lanes of a packet share one slot: reduce them first
+        ids = bins.gaussian_ids
+        # Per-pair accumulators: slot i belongs to one (tile, Gaussian) pair, so only the
+        # lanes of one tile ever add into it.
+        pair = {key: dr.zeros(Float, bins.num_pairs) for key in keys}
+        # Expand (LLVM): per-thread copies, non-atomic updates. Still deterministic: a slot
+        # is only written by the lanes of one tile, and a tile never spans two threads.
+        mode = dr.ReduceMode.Expand
+        # Lock-step walk: every lane of a tile starts at the tile's largest stop index, so
+        # a SIMD packet always reads one Gaussian (pixels past their own stop are idle).
+        lane_stop = stop[0]
+        for s in stop[1:]:
+            lane_stop = dr.maximum(lane_stop, s)
+        start_i = dr.repeat(dr.block_reduce(dr.ReduceOp.Max, lane_stop, lanes.lanes_per_tile), lanes.lanes_per_tile)
 
-        # Lock-step walk: every lane of a tile starts at the tile's largest stop index,
-        # so a SIMD packet always reads one Gaussian and the scatter-adds below reduce
-        # within the packet to one memory update (lanes past their own stop are idle).
-        tile_pixels = self.bins.grid.tile_size ** 2
-        own_stop = self.stop
-        tile_stop = dr.block_reduce(dr.ReduceOp.Max, own_stop, tile_pixels)
-        start_i = dr.repeat(tile_stop, tile_pixels)
+        def unpack(state):  # i, then per pixel (T, ar, ag, ab, ad)
+            return state[0], [state[1 + 5 * k: 6 + 5 * k] for k in range(K)]
 
-        def cond(i, T, ar, ag, ab, ad):
-            return i > lanes.start
+        def cond(*state):
+            return state[0] > lanes.start
 
-        def body(i, T, ar, ag, ab, ad):
+        def body(*state):
+            i, pix = unpack(state)
             i = i - 1
             gid = dr.gather(UInt32, ids, i)
-            alpha, on, (dx, dy, conic, opacity, gauss, raw) = _gaussian_alpha(
-                m, s, gid, px, py, cfg, i < own_stop)
-            color = dr.gather(m.Array3f, s.colors, gid, on)
-            depth = dr.gather(Float, s.depths, gid, on)
-            inv_1ma = 1.0 / (1.0 - alpha)
-            T_i = T * inv_1ma  # transmittance in front of this Gaussian
-            w = T_i * alpha
-            v_alpha = (v_rgb.x * (T_i * color.x - ar * inv_1ma) + v_rgb.y * (T_i * color.y - ag * inv_1ma)
-                       + v_rgb.z * (T_i * color.z - ab * inv_1ma) + v_d * (T_i * depth - ad * inv_1ma)
-                       + v_alpha_out * T_final * inv_1ma)
-            unclamped = on & (raw < cfg.alpha_max)
-            v_raw = dr.select(unclamped, v_alpha, 0.0)
-            v_sigma = -v_raw * raw
-            v_mx = v_sigma * -(conic.x * dx + conic.y * dy)
-            v_my = v_sigma * -(conic.y * dx + conic.z * dy)
-            for key, val in (("mx", v_mx), ("my", v_my), ("ca", v_sigma * 0.5 * dx * dx),
-                             ("cb", v_sigma * dx * dy), ("cc", v_sigma * 0.5 * dy * dy),
-                             ("o", v_raw * gauss), ("r", v_rgb.x * w), ("g", v_rgb.y * w),
-                             ("b", v_rgb.z * w), ("z", v_d * w), ("ax", dr.abs(v_mx)), ("ay", dr.abs(v_my))):
-                if key in pair:
-                    dr.scatter_add(pair[key], val, i, on, mode=mode)
-            ar = dr.select(on, ar + w * color.x, ar)
-            ag = dr.select(on, ag + w * color.y, ag)
-            ab = dr.select(on, ab + w * color.z, ab)
-            ad = dr.select(on, ad + w * depth, ad)
-            T = dr.select(on, T_i, T)
-            return i, T, ar, ag, ab, ad
+            geo, (cr, cg, cb) = _load(m, rec, gid)
+            ca, cbk, cc, depth = geo[2], geo[3], geo[4], geo[6]
+            sums = {key: 0.0 for key in keys}
+            out = [i]
+            any_on = None
+            for k, (T, ar, ag, ab, ad) in enumerate(pix):
+                alpha, on, dx, dy, gauss, raw = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, i < stop[k])
+                inv_1ma = 1.0 / (1.0 - alpha)
+                T_i = T * inv_1ma  # transmittance in front of this Gaussian
+                w = T_i * alpha
+                vr, vg, vb = v_rgb[k].x, v_rgb[k].y, v_rgb[k].z
+                v_a = (vr * (T_i * cr - ar * inv_1ma) + vg * (T_i * cg - ag * inv_1ma)
+                       + vb * (T_i * cb - ab * inv_1ma) + v_d[k] * (T_i * depth - ad * inv_1ma)
+                       + v_alpha[k] * T_final[k] * inv_1ma)
+                v_raw = dr.select(on & (raw < cfg.alpha_max), v_a, 0.0)
+                v_sigma = -v_raw * raw
+                v_mx = v_sigma * -(ca * dx + cbk * dy)
+                v_my = v_sigma * -(cbk * dx + cc * dy)
+                w_on = dr.select(on, w, 0.0)
+                terms = {"mx": v_mx, "my": v_my, "ca": v_sigma * 0.5 * dx * dx, "cb": v_sigma * dx * dy,
+                         "cc": v_sigma * 0.5 * dy * dy, "o": v_raw * gauss, "r": vr * w_on, "g": vg * w_on,
+                         "b": vb * w_on, "z": v_d[k] * w_on}
+                if self.want_absgrad:
+                    terms["ax"], terms["ay"] = dr.abs(v_mx), dr.abs(v_my)
+                for key in keys:
+                    sums[key] = sums[key] + terms[key]
+                any_on = on if any_on is None else any_on | on
+                out += [dr.select(on, T_i, T), dr.select(on, ar + w * cr, ar), dr.select(on, ag + w * cg, ag),
+                        dr.select(on, ab + w * cb, ab), dr.select(on, ad + w * depth, ad)]
+            for key in keys:
+                dr.scatter_add(pair[key], sums[key], i, any_on, mode=mode)
+            return tuple(out)
 
-        state = (UInt32(start_i), Float(T_final), T_final * bg[0], T_final * bg[1], T_final * bg[2],
-                 dr.zeros(Float, dr.width(T_final)))
-        dr.while_loop(state, cond, body, labels=("i", "T", "ar", "ag", "ab", "ad"), mode="symbolic")
+        state = [UInt32(start_i)]
+        for k in range(K):
+            T = T_final[k]
+            state += [Float(T), T * bg[0], T * bg[1], T * bg[2], dr.zeros(Float, dr.width(T))]
+        dr.while_loop(tuple(state), cond, body, mode="symbolic")
         dr.eval(pair)
-        buf = _reduce_pairs(m, self.bins, pair, n)
+        buf = _reduce_pairs(m, bins, pair, self.n)
         self.grad_means2d = m.Array2f(buf["mx"], buf["my"])
         if self.want_absgrad:
             self.abs_grad_means2d = m.Array2f(buf["ax"], buf["ay"])
@@ -319,19 +398,20 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
     """
     m = array_namespace(opacities)
     proj = Projection(means2d, conics, depths, opacities, cutoff_sq, extents, None, visible)
-    bins = bin_gaussians(proj, TileGrid(width, height, tile_size))
+    grid = TileGrid(width, height, tile_size)
+    bins = bin_gaussians(proj, grid)
     if timer is not None:
         timer.mark("binning")
     cfg = CompositeSettings(float(alpha_min), float(alpha_max), float(transmittance_min),
                             tuple(float(c) for c in background))
     if loop_ad:
-        splats = Splats(means2d, conics, opacities, colors, depths, cutoff_sq)
-        lanes = make_lanes(m, bins)
+        records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
+        lanes = make_lanes(m, grid, bins)
         # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
         # count (the longest tile list, rounded up to a power of two); -1 is wrong here.
         bound = next_power_of_two(max(bins.max_list_length, 1))
-        rgb, T, d, _ = _forward_loop(m, splats, bins.gaussian_ids, lanes, cfg, max_iterations=bound)
-        return _to_image(m, lanes, rgb, T, d, cfg.background), CompositeState(bins)
+        fwd = _forward_loop(m, records, bins.gaussian_ids, lanes, cfg, max_iterations=bound)
+        return _to_image(m, grid, lanes, fwd, cfg.background), CompositeState(bins)
     state = CompositeState(bins, absgrad, timer)
     out = dr.custom(_CompositeOp, means2d, conics, opacities, colors, depths, cutoff_sq, state, cfg)
     return Composite(*out), state
