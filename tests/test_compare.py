@@ -1,0 +1,41 @@
+"""The comparison helper itself: it must fail on a real mismatch, tolerate only the
+allowed boundary band, and leave the three PNGs where its message says."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import tests.compare as compare
+
+
+def test_mismatch_writes_pngs_and_names_the_folder(tmp_path, monkeypatch):
+    monkeypatch.setattr(compare, "ARTIFACTS", tmp_path)
+    ref = np.zeros((8, 6, 3))
+    fast = ref.copy()
+    fast[2, 3, 1] = 0.5
+    with pytest.raises(AssertionError) as info:
+        compare.assert_images_close("demo", fast, ref, atol=1e-5)
+    message = str(info.value)
+    assert "at (2, 3, 1)" in message and "1 pixels exceed" in message
+    folder = Path(re.search(r"images written to (\S+)", message).group(1))
+    assert {p.name for p in folder.iterdir()} == {"fast.png", "reference.png", "difference.png"}
+
+
+def test_boundary_band_is_bounded():
+    ref = np.zeros((8, 6))
+    fast = ref.copy()
+    fast[0, 0] = fast[1, 1] = 1.0
+    compare.assert_images_close("band", fast, ref, atol=1e-5, max_outliers=2)
+    with pytest.raises(AssertionError):
+        compare.assert_images_close("band", fast, ref, atol=1e-5, max_outliers=1)
+
+
+def test_grad_agreement_detects_scale_and_direction():
+    b = np.array([1.0, -2.0, 3.0])
+    assert compare.grad_agreement(b, b).rel_l2 == 0.0
+    assert compare.grad_agreement(1.1 * b, b).rel_l2 == pytest.approx(0.1)
+    assert compare.grad_agreement(-b, b).cosine == pytest.approx(-1.0)
