@@ -2,9 +2,9 @@
 
 Mirrors `reference.composite`. Lanes are ordered tile by tile so that a SIMD
 packet (16 lanes with AVX-512) walks one tile's list in lock-step, and each lane
-shades a 2x2 block of pixels: one load of a Gaussian's packed record serves four
-pixels, and in the backward pass the four pixels' gradient contributions are
-summed in registers before one scatter. A symbolic loop per lane stops early
+shades a block of PIXEL_BLOCK x PIXEL_BLOCK pixels: one load of a Gaussian's packed
+record serves the whole block, and in the backward pass the block's gradient
+contributions are summed in registers before one scatter. A symbolic loop per lane stops early
 once every pixel of the block would fall below the transmittance threshold.
 
 The backward pass is a `dr.CustomOp` that walks each tile's list back to front,
@@ -26,6 +26,10 @@ from splatbench.raster.project import Projection, array_namespace, next_power_of
 
 GEO = 8  # geometry record per Gaussian: u, v, conic A, B, C, opacity, depth, cutoff_sq
 COL = 4  # colour record per Gaussian: r, g, b, (padding: packet loads need a power of two)
+# Each lane shades a PIXEL_BLOCK x PIXEL_BLOCK block of pixels: one load of a record
+# serves them all, and their gradient terms are summed in registers before a scatter.
+# 4x4 measured best on AVX-512 (one 16-lane packet per 16x16 tile); see docs/benchmarks.md.
+PIXEL_BLOCK = 4
 GRAD_KEYS = ("mx", "my", "ca", "cb", "cc", "o", "r", "g", "b", "z", "ax", "ay")
 
 
@@ -100,7 +104,7 @@ class Lanes(NamedTuple):
 
 def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
     ts = grid.tile_size
-    block = 2 if ts >= 2 else 1
+    block = min(PIXEL_BLOCK, ts)
     side = ts // block                      # lanes per tile side
     lanes_per_tile = side * side
     lane = dr.arange(m.UInt32, grid.num_tiles * lanes_per_tile)
