@@ -221,30 +221,51 @@ def _to_image(m, grid: TileGrid, lanes: Lanes, fwd: _Forward, bg) -> Composite:
     return Composite(rgb + T * m.Array3f(*bg), 1.0 - T, d)
 
 
-def _reduce_pairs(m, bins: Bins, pair: dict, n: int) -> dict:
-    """Sum per-pair values per Gaussian, deterministically.
+# Per-pair gradient accumulators, packed like the records so that the backward loop
+# does one packet scatter-add per group and the reduction one packet load per pair.
+PAIR_GROUPS = {
+    "geo": (8, ("mx", "my", "ca", "cb", "cc", "o", "z", None)),
+    "col": (4, ("r", "g", "b", None)),
+    "abs": (2, ("ax", "ay")),
+}
 
-    The pairs are permuted back to Gaussian-major order (a permutation: no
-    conflicts), then each Gaussian lane sums its own run in ascending order, so the
-    result does not depend on thread scheduling.
+
+def _reduce_pairs(m, bins: Bins, pair: dict, n: int) -> dict:
+    """Sum per-pair gradient records per Gaussian, deterministically.
+
+    The pairs of Gaussian g sit at Gaussian-major positions offsets[g] ..
+    offsets[g] + counts[g], i.e. at sorted positions inverse_order[j]; each Gaussian
+    lane sums its own pairs in ascending order, so the result does not depend on
+    thread scheduling.
     """
     Float, UInt32 = m.Float, m.UInt32
-    major = {}
-    for k, v in pair.items():
-        major[k] = dr.zeros(Float, bins.num_pairs)
-        dr.scatter(major[k], v, bins.order, mode=dr.ReduceMode.Permute)
-    dr.eval(major)
+    inverse = dr.zeros(UInt32, bins.num_pairs)
+    dr.scatter(inverse, dr.arange(UInt32, bins.num_pairs), bins.order, mode=dr.ReduceMode.Permute)
     end = bins.offsets + bins.counts
-    zero = dr.zeros(Float, n)
+    groups = [(name, PAIR_GROUPS[name]) for name in pair]
 
     def cond(j, *acc):
         return j < end
 
     def body(j, *acc):
-        return (j + 1, *(a + dr.gather(Float, major[k], j) for a, k in zip(acc, major)))
+        slot = dr.gather(UInt32, inverse, j)
+        out, pos = [j + 1], 0
+        for name, (width, _) in groups:
+            rec = dr.gather(m.ArrayXf, pair[name], slot, shape=(width, dr.width(j)))
+            out += [acc[pos + k] + rec[k] for k in range(width)]
+            pos += width
+        return tuple(out)
 
-    out = dr.while_loop((UInt32(bins.offsets), *(Float(zero) for _ in major)), cond, body, mode="symbolic")
-    return dict(zip(major, out[1:]))
+    zero = dr.zeros(Float, n)
+    state = [UInt32(bins.offsets)] + [Float(zero) for _, (width, _) in groups for _ in range(width)]
+    final = dr.while_loop(tuple(state), cond, body, mode="symbolic")[1:]
+    sums, pos = {}, 0
+    for _, (width, keys) in groups:
+        for k, key in enumerate(keys):
+            if key is not None:
+                sums[key] = final[pos + k]
+        pos += width
+    return sums
 
 
 class _CompositeOp(dr.CustomOp):
@@ -287,7 +308,8 @@ class _CompositeOp(dr.CustomOp):
         ids = bins.gaussian_ids
         # Per-pair accumulators: slot i belongs to one (tile, Gaussian) pair, so only the
         # lanes of one tile ever add into it.
-        pair = {key: dr.zeros(Float, bins.num_pairs) for key in keys}
+        pair = {name: dr.zeros(Float, width * bins.num_pairs) for name, (width, _) in PAIR_GROUPS.items()
+                if name != "abs" or self.want_absgrad}
         # Expand (LLVM): per-thread copies, non-atomic updates. Still deterministic: a slot
         # is only written by the lanes of one tile, and a tile never spans two threads.
         mode = dr.ReduceMode.Expand
@@ -337,8 +359,9 @@ class _CompositeOp(dr.CustomOp):
                 any_on = on if any_on is None else any_on | on
                 out += [dr.select(on, T_i, T), dr.select(on, ar + w * cr, ar), dr.select(on, ag + w * cg, ag),
                         dr.select(on, ab + w * cb, ab), dr.select(on, ad + w * depth, ad)]
-            for key in keys:
-                dr.scatter_add(pair[key], sums[key], i, any_on, mode=mode)
+            for name, buffer in pair.items():
+                values = [sums[key] if key is not None else 0.0 for key in PAIR_GROUPS[name][1]]
+                dr.scatter_add(buffer, m.ArrayXf(values), i, any_on, mode=mode)
             return tuple(out)
 
         state = [UInt32(start_i)]
