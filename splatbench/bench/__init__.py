@@ -1,0 +1,6 @@
+"""Benchmarks, kept apart from tests (`splatbench bench ...`).
+
+``raster``: run time, per-stage split, throughput and peak memory of the Dr.Jit
+rasterizer on the standard synthetic workloads and real captures. See
+docs/benchmarks.md. Importing this package is cheap: the heavy modules load on use.
+"""

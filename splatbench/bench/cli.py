@@ -1,0 +1,63 @@
+"""`splatbench bench`: benchmarks (see docs/benchmarks.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.group()
+def bench() -> None:
+    """Benchmarks of the rasterizer (run time, memory, throughput)."""
+
+
+@bench.command()
+@click.option("--synthetic", "synthetic", nargs=2, multiple=True, metavar="N WxH",
+              help="A synthetic workload: N Gaussians at WxH pixels (repeatable).")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the synthetic workloads.")
+@click.option("--workload", "workloads", multiple=True, metavar="FILE.npz|garden",
+              help="A workload npz, or 'garden' (bundled SfM capture, view 0) (repeatable).")
+@click.option("--repeats", default=5, show_default=True, type=int, help="Timed runs per measurement (median).")
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("reports/bench"), show_default=True,
+              help="Folder for raster.csv and raster.json.")
+@click.option("--device", default="auto", show_default=True, metavar="cpu|cuda|auto",
+              help="Dr.Jit backend (auto: CUDA when available).")
+@click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
+              help="Rasterizer option (repeatable), e.g. tile_size=8.")
+def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[str, ...], repeats: int, out: Path,
+           device: str, options: tuple[str, ...]) -> None:
+    """Time the rasterizer per workload (times, stages, memory).
+
+    Without --synthetic or --workload, runs the standard suite: synthetic 10000
+    256x256, 100000 512x512, 1000000 800x800, and the garden view. Each workload
+    runs in its own subprocess so its peak RSS is its own.
+    """
+    from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, load_average, machine_info,
+                                         parse_synthetic, parse_workload, run_suite, standard_suite, write_csv,
+                                         write_json)
+    from splatbench.commands.render import parse_options
+
+    settings = BenchSettings(repeats=repeats, device=device, options=parse_options(options))
+    settings.validate()
+    specs = [parse_synthetic(count, size, seed) for count, size in synthetic]
+    specs += [parse_workload(w) for w in workloads]
+    if not specs:
+        specs = standard_suite(seed)
+
+    machine = machine_info(device)
+    csv_path, json_path = out / "raster.csv", out / "raster.json"
+
+    def save(results) -> None:
+        machine.loadavg_end = load_average()
+        write_csv(results, csv_path)
+        write_json(results, machine, settings, json_path)
+
+    click.echo(f"bench raster: {len(specs)} workload(s), {repeats} repeats, device {machine.device}, "
+               f"{machine.cpu_count} CPUs, load average {machine.loadavg_start}", err=True)
+    results = run_suite(specs, settings, progress=lambda line: click.echo(line, err=True), on_result=save)
+    click.echo(format_table(results))
+    for line in leak_warnings(results):
+        click.echo(line)
+    click.echo(f"load average at the end: {machine.loadavg_end}")
+    click.echo(f"wrote {csv_path} and {json_path}")

@@ -1,0 +1,578 @@
+"""Rasterizer benchmark: run time, stage split, throughput and peak memory per workload.
+
+Laid out like pytorch3d's ``tests/benchmarks/bm_rasterize_points.py``: the factories
+`forward_with_init` and `forward_backward_with_init` build everything outside the
+timed part and return a closure; `run_one` warms the closures up and times them on
+one workload; `run_isolated` runs `run_one` in a fresh interpreter
+(``python -m splatbench.bench.raster --one ...``) so that the peak RSS it reports is
+that workload's alone. `run_suite` runs a list of workloads that way.
+
+Units: milliseconds (ms) and megabytes (MB = 10^6 bytes). docs/benchmarks.md
+describes every field of `RasterBenchResult` and how throughput is defined.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import gc
+import io
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field, fields
+from datetime import datetime, timezone
+from importlib import metadata
+from pathlib import Path
+from typing import Callable, NamedTuple
+
+from splatbench.bench.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
+from splatbench.errors import InputError, SplatbenchError
+
+
+class BenchError(SplatbenchError):
+    """A benchmark subprocess failed for a reason other than bad input."""
+
+
+# ----------------------------------------------------------------------------- workloads
+
+@dataclass(frozen=True)
+class Target:
+    """What a standard workload should achieve on the 2-core CPU (Dr.Jit LLVM) machine."""
+
+    fwd_bwd_ms: float                  # median forward+backward time
+    peak_rss_mb: float | None = None   # peak RSS while rendering (see `RasterBenchResult.peak_rss_mb`)
+
+
+#: The standard synthetic workloads (Gaussians, width, height) and their targets (issue 3 §5).
+TARGETS: dict[tuple[int, int, int], Target] = {
+    (10_000, 256, 256): Target(35.0),
+    (100_000, 512, 512): Target(450.0),
+    (1_000_000, 800, 800): Target(2000.0, 1500.0),
+}
+STANDARD_SYNTHETIC: tuple[tuple[int, int, int], ...] = tuple(TARGETS)
+GARDEN = "garden"  # `--workload garden`: the bundled SfM capture, view 0 (648x420, 138,766 Gaussians)
+
+
+@dataclass(frozen=True)
+class WorkloadSpec:
+    """A workload to build inside the benchmark process (cheap to pass between processes).
+
+    ``kind`` "synthetic": `splatbench.workloads.synthetic(n, width, height, seed)`;
+    ``kind`` "npz": `splatbench.workloads.load_npz(path, view=view)`.
+    """
+
+    kind: str
+    n: int = 0           # synthetic: number of Gaussians
+    width: int = 0       # synthetic: image width (pixels)
+    height: int = 0      # synthetic: image height (pixels)
+    seed: int = 0        # synthetic: random seed
+    path: str = ""       # npz: absolute path of the file
+    view: int = 0        # npz: camera index
+    label: str = ""      # name in the results ("" = the workload's own name)
+
+    def build(self):
+        """The `splatbench.workloads.Workload` (Gaussians and camera)."""
+        from splatbench.workloads import load_npz, synthetic
+
+        if self.kind == "synthetic":
+            return synthetic(self.n, self.width, self.height, self.seed)
+        if self.kind == "npz":
+            return load_npz(self.path, view=self.view)
+        raise InputError(f"workload kind: expected 'synthetic' or 'npz', got {self.kind!r}")
+
+    @property
+    def target(self) -> Target | None:
+        """The target of a standard synthetic workload (any seed); None for every other."""
+        if self.kind != "synthetic":
+            return None
+        return TARGETS.get((self.n, self.width, self.height))
+
+
+def parse_size(text: str, flag: str) -> tuple[int, int]:
+    """``"WxH"`` -> (W, H), both >= 1."""
+    parts = text.lower().split("x")
+    try:
+        width, height = (int(p) for p in parts)
+    except ValueError:
+        raise InputError(f"{flag}: expected WxH, got {text!r}") from None
+    if width < 1 or height < 1:
+        raise InputError(f"{flag}: expected WxH with W, H >= 1, got {text!r}")
+    return width, height
+
+
+def parse_synthetic(count: str, size: str, seed: int = 0) -> WorkloadSpec:
+    """``--synthetic N WxH`` -> a synthetic `WorkloadSpec`."""
+    try:
+        n = int(count)
+    except ValueError:
+        raise InputError(f"--synthetic: expected a Gaussian count, got {count!r}") from None
+    if n < 1:
+        raise InputError(f"--synthetic: expected a Gaussian count >= 1, got {count!r}")
+    width, height = parse_size(size, "--synthetic")
+    return WorkloadSpec("synthetic", n=n, width=width, height=height, seed=seed)
+
+
+def parse_workload(arg: str) -> WorkloadSpec:
+    """``--workload FILE.npz|garden`` -> an npz `WorkloadSpec` (the file must exist)."""
+    if arg.lower() == GARDEN:
+        from splatbench.workloads import GARDEN_SFM
+
+        return WorkloadSpec("npz", path=str(GARDEN_SFM), view=0, label="garden-view0")
+    path = Path(arg).expanduser()
+    if not path.is_file():
+        raise InputError(f"--workload: no such file {arg!r}")
+    if path.suffix != ".npz":
+        raise InputError(f"--workload: expected a .npz file or 'garden', got {arg!r}")
+    return WorkloadSpec("npz", path=str(path.resolve()), view=0)
+
+
+def standard_suite(seed: int = 0) -> list[WorkloadSpec]:
+    """The default suite: every standard synthetic workload, then the garden view."""
+    return [WorkloadSpec("synthetic", n=n, width=w, height=h, seed=seed) for n, w, h in STANDARD_SYNTHETIC] \
+        + [parse_workload(GARDEN)]
+
+
+@dataclass(frozen=True)
+class BenchSettings:
+    """How each workload is run."""
+
+    repeats: int = 5                              # timed runs per measurement (the median is reported)
+    device: str = "auto"                          # "cpu" (Dr.Jit LLVM), "cuda", or "auto"
+    options: dict = field(default_factory=dict)   # other `RasterOptions` fields, e.g. {"tile_size": 8}
+
+    def raster_options(self) -> dict:
+        """Keyword arguments for `splatbench.rasterize` (options plus device)."""
+        return {**self.options, "device": self.device}
+
+    def validate(self) -> None:
+        """Raise a one-line `InputError` for a bad repeat count or rasterizer option."""
+        from splatbench.raster.options import RasterOptions
+
+        if self.repeats < 1:
+            raise InputError(f"--repeats: expected a count >= 1, got {self.repeats}")
+        if "device" in self.options:
+            raise InputError("--option device: use --device instead")
+        RasterOptions.from_kwargs(**self.raster_options())
+
+
+# ----------------------------------------------------------------------------- results
+
+@dataclass
+class StageSplit:
+    """Median milliseconds per rasterizer stage, from forward+backward runs with a
+    `StageTimer` (which syncs Dr.Jit after each stage, so ``total_ms`` may exceed the
+    untimed `RasterBenchResult.fwd_bwd_ms`). Each stage is the wall time since the
+    previous mark: ``preprocess_ms`` includes input validation and the torch -> Dr.Jit
+    copies; ``backward_compositing_ms`` starts at the end of the forward pass, so it
+    also holds torch's backward up to the rasterizer and the cotangent copies."""
+
+    preprocess_ms: float            # projection, covariances, SH colours
+    binning_ms: float               # Gaussian-tile pairs: count, expand, sort, tile ranges
+    compositing_ms: float           # forward alpha compositing (+ image-order gather, depth)
+    backward_compositing_ms: float  # hand-written backward of compositing, per-Gaussian reduction
+    backward_preprocess_ms: float   # Dr.Jit AD through SH, projection and activations
+    other_ms: float                 # total minus the five stages (output/gradient copies to torch)
+    total_ms: float                 # median wall time of these timed runs
+
+
+@dataclass
+class RasterBenchResult:
+    """One workload's measurements. Times are medians over ``repeats`` runs after warm-up."""
+
+    name: str                         # workload name
+    n: int                            # Gaussians
+    width: int                        # image width (pixels)
+    height: int                       # image height (pixels)
+    sh_degree: int                    # SH degree evaluated
+    device: str                       # "cpu" (Dr.Jit LLVM) or "cuda"
+    tile_size: int                    # tile side (pixels)
+    repeats: int                      # timed runs per measurement
+    fwd_ms: float                     # forward only (no gradients), median
+    fwd_bwd_ms: float                 # forward + backward of rgb.sum() to all five groups, median
+    stages: StageSplit                # per-stage split (separate runs, with the stage timer)
+    pairs: int                        # Gaussian-tile pairs composited
+    visible: int                      # Gaussians that survived culling
+    evaluations: int                  # pairs * tile_size^2: pixel-Gaussian evaluations (upper bound)
+    mevals_per_s: float               # evaluations / forward compositing seconds / 10^6
+    base_rss_mb: float                # peak RSS after imports (interpreter, torch, Dr.Jit)
+    setup_rss_mb: float               # peak RSS after building the workload and parameters
+    peak_rss_mb: float                # peak RSS over warm-up and timed runs (see `rss_reset`)
+    rss_reset: bool                   # True: the high-water mark was reset after setup (Linux),
+                                      # so peak_rss_mb excludes setup; False: whole-process peak
+    retained_mb_per_run: float        # RSS growth from after warm-up to the end, per timed run
+                                      # (about 0 normally; steady growth means each run leaks)
+    target_fwd_bwd_ms: float | None   # target for fwd_bwd_ms (standard synthetic workloads only)
+    target_peak_rss_mb: float | None  # target for peak_rss_mb (1M workload only)
+    meets_target: bool | None         # every target met; None without targets
+    fwd_runs_ms: list[float] = field(default_factory=list)      # every forward run
+    fwd_bwd_runs_ms: list[float] = field(default_factory=list)  # every forward+backward run
+
+    @classmethod
+    def from_dict(cls, data: dict) -> RasterBenchResult:
+        """Inverse of ``dataclasses.asdict``."""
+        return cls(**{**data, "stages": StageSplit(**data["stages"])})
+
+
+#: CSV columns, in order: the scalar fields of `RasterBenchResult` with `StageSplit` inlined.
+CSV_COLUMNS: tuple[str, ...] = tuple(
+    name for f in fields(RasterBenchResult) if f.name not in ("fwd_runs_ms", "fwd_bwd_runs_ms")
+    for name in ([s.name for s in fields(StageSplit)] if f.name == "stages" else [f.name]))
+
+
+def csv_row(result: RasterBenchResult) -> dict:
+    """One CSV row (None as an empty cell)."""
+    flat = asdict(result)
+    flat.update(flat.pop("stages"))
+    return {k: ("" if flat[k] is None else flat[k]) for k in CSV_COLUMNS}
+
+
+@dataclass
+class MachineInfo:
+    """Where the benchmark ran."""
+
+    cpu_count: int | None
+    cpu_model: str
+    platform: str
+    python: str
+    splatbench: str
+    drjit: str
+    mitsuba: str
+    torch: str
+    device: str                  # the device the rasterizer resolved to: "cpu" or "cuda"
+    loadavg_start: list[float]   # 1, 5, 15 min load averages when the bench started (others' work)
+    loadavg_end: list[float]
+    started: str                 # ISO 8601, UTC
+
+
+def _version(package: str) -> str:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def load_average() -> list[float]:
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return []
+
+
+def resolve_device(device: str) -> str:
+    """"cpu" or "cuda": where the rasterizer runs for ``device`` ("auto" picks CUDA when present)."""
+    from splatbench.raster.backend import get_backend
+
+    return "cuda" if get_backend(device).name == "cuda" else "cpu"
+
+
+def machine_info(device: str) -> MachineInfo:
+    return MachineInfo(os.cpu_count(), _cpu_model(), platform.platform(), platform.python_version(),
+                       _version("splatbench"), _version("drjit"), _version("mitsuba"), _version("torch"),
+                       resolve_device(device), load_average(), load_average(),
+                       datetime.now(timezone.utc).isoformat(timespec="seconds"))
+
+
+# ----------------------------------------------------------------------------- closures
+
+class RunStats(NamedTuple):
+    """What a run reports besides its time (no reference to the Dr.Jit frame, so
+    holding it keeps no rasterizer memory alive)."""
+
+    num_pairs: int
+    visible: object  # [N] bool torch tensor
+    sh_degree: int
+
+
+def torch_params(gaussians) -> tuple:
+    """(means, log_scales, quats, opacity_logits, sh) as float32 torch tensors sharing
+    the Gaussians' memory."""
+    import numpy as np
+    import torch
+
+    return tuple(torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))
+                 for a in (gaussians.means, gaussians.log_scales, gaussians.quats, gaussians.opacity_logits,
+                           gaussians.sh))
+
+
+def forward_with_init(params: tuple, camera, options: dict) -> Callable[[], RunStats]:
+    """Forward only: `splatbench.rasterize` under ``torch.no_grad()`` on inputs that
+    need no gradient (so Dr.Jit records no AD graph, as in `splatbench.render`)."""
+    import torch
+
+    from splatbench.raster.torch_bridge import rasterize
+
+    inputs = tuple(p.detach() for p in params)
+
+    def forward() -> RunStats:
+        with torch.no_grad():
+            _, _, _, info = rasterize(*inputs, camera, **options)
+        return RunStats(info.num_pairs, info.visible, info.sh_degree)
+
+    return forward
+
+
+def forward_backward_with_init(params: tuple, camera, options: dict) -> Callable[..., RunStats]:
+    """Forward and backward: loss = rgb.sum() through `splatbench.rasterize`, all five
+    parameter groups requiring grad. The closure takes an optional `StageTimer`."""
+    from splatbench.raster.torch_bridge import rasterize
+
+    leaves = tuple(p.detach().requires_grad_(True) for p in params)
+
+    def forward_backward(timer=None) -> RunStats:
+        if timer is not None:
+            timer.start()
+        rgb, _, _, info = rasterize(*leaves, camera, timer=timer, **options)
+        if timer is not None:
+            timer.mark("other")  # outputs copied to torch, RasterInfo
+        rgb.sum().backward()
+        if timer is not None:
+            timer.mark("other")  # gradients copied to torch
+        for p in leaves:
+            p.grad = None  # as an optimizer's zero_grad(set_to_none=True) would
+        return RunStats(info.num_pairs, info.visible, info.sh_degree)
+
+    return forward_backward
+
+
+def time_runs(fn: Callable[[], RunStats], repeats: int) -> tuple[list[float], RunStats]:
+    """Wall seconds of ``repeats`` calls of ``fn`` (each ends with a copy to torch, which
+    waits for Dr.Jit), and the last call's stats."""
+    seconds, stats = [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        stats = fn()
+        seconds.append(time.perf_counter() - t0)
+    return seconds, stats
+
+
+def staged_runs(fn: Callable[..., RunStats], repeats: int) -> StageSplit:
+    """``repeats`` calls of ``fn(timer)`` with a fresh `StageTimer` each; median per stage."""
+    from splatbench.raster.timing import STAGES, StageTimer
+
+    totals, per_stage = [], {s: [] for s in STAGES}
+    others = []
+    for _ in range(repeats):
+        timer = StageTimer()
+        t0 = time.perf_counter()
+        fn(timer)
+        total = time.perf_counter() - t0
+        totals.append(total)
+        for s in STAGES:
+            per_stage[s].append(timer.seconds.get(s, 0.0))
+        others.append(total - sum(timer.seconds.get(s, 0.0) for s in STAGES))
+    ms = {f"{s}_ms": _ms(statistics.median(v)) for s, v in per_stage.items()}
+    return StageSplit(**ms, other_ms=_ms(statistics.median(others)), total_ms=_ms(statistics.median(totals)))
+
+
+def _ms(seconds: float) -> float:
+    return round(seconds * 1e3, 3)
+
+
+# ----------------------------------------------------------------------------- running
+
+def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
+    """Benchmark one workload in this process.
+
+    Setup (untimed): build the workload and the parameter tensors. Warm-up (untimed,
+    kernels compile or load from Dr.Jit's cache): one forward+backward, one forward,
+    one forward+backward with the stage timer. Then ``repeats`` forward runs,
+    ``repeats`` forward+backward runs, and ``repeats`` forward+backward runs with the
+    stage timer. The RSS fields describe this process: run it in a fresh one
+    (`run_isolated`) for them to be this workload's.
+    """
+    from splatbench.raster.options import RasterOptions
+
+    options = settings.raster_options()
+    opts = RasterOptions.from_kwargs(**options)
+    device = resolve_device(opts.device)
+    base_rss = peak_rss_mb()
+
+    workload = spec.build()
+    name, camera = spec.label or workload.name, workload.camera
+    params = torch_params(workload.gaussians)
+    n = len(workload.gaussians)
+    del workload
+    gc.collect()
+    setup_rss = peak_rss_mb()
+    rss_reset = reset_peak_rss()
+
+    forward = forward_with_init(params, camera, options)
+    forward_backward = forward_backward_with_init(params, camera, options)
+    forward_backward()
+    forward()
+    staged_runs(forward_backward, 1)
+    gc.collect()
+    rss_warm = current_rss_mb()
+
+    fwd_s, stats = time_runs(forward, settings.repeats)
+    fwd_bwd_s, _ = time_runs(forward_backward, settings.repeats)
+    stages = staged_runs(forward_backward, settings.repeats)
+    peak_rss = peak_rss_mb()
+    gc.collect()
+    retained = (current_rss_mb() - rss_warm) / (3 * settings.repeats)
+
+    evaluations = stats.num_pairs * opts.tile_size ** 2
+    comp_s = stages.compositing_ms / 1e3
+    fwd_bwd_ms = _ms(statistics.median(fwd_bwd_s))
+    target = spec.target
+    meets = None
+    if target is not None:
+        meets = fwd_bwd_ms <= target.fwd_bwd_ms and (target.peak_rss_mb is None or peak_rss <= target.peak_rss_mb)
+    return RasterBenchResult(
+        name=name, n=n, width=camera.width, height=camera.height, sh_degree=stats.sh_degree, device=device,
+        tile_size=opts.tile_size, repeats=settings.repeats, fwd_ms=_ms(statistics.median(fwd_s)),
+        fwd_bwd_ms=fwd_bwd_ms, stages=stages, pairs=stats.num_pairs, visible=int(stats.visible.sum()),
+        evaluations=evaluations, mevals_per_s=round(evaluations / comp_s / 1e6, 3) if comp_s > 0 else 0.0,
+        base_rss_mb=round(base_rss, 1), setup_rss_mb=round(setup_rss, 1), peak_rss_mb=round(peak_rss, 1),
+        rss_reset=rss_reset, retained_mb_per_run=round(retained, 1),
+        target_fwd_bwd_ms=target.fwd_bwd_ms if target else None,
+        target_peak_rss_mb=target.peak_rss_mb if target else None, meets_target=meets,
+        fwd_runs_ms=[_ms(s) for s in fwd_s], fwd_bwd_runs_ms=[_ms(s) for s in fwd_bwd_s])
+
+
+def run_isolated(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
+    """`run_one` in a fresh interpreter (``python -m splatbench.bench.raster --one``), so
+    its RSS figures are this workload's. Bad input there comes back as `InputError`."""
+    job = json.dumps({"spec": asdict(spec), "settings": asdict(settings)})
+    with tempfile.TemporaryDirectory(prefix="splatbench-bench-") as tmp:
+        result_path = Path(tmp) / "result.json"
+        proc = subprocess.run([sys.executable, "-m", "splatbench.bench.raster", "--one", job,
+                               "--result", str(result_path)], capture_output=True, text=True)
+        payload = json.loads(result_path.read_text()) if result_path.is_file() else {}
+    if "error" in payload:
+        error = InputError if payload.get("type") == "InputError" else BenchError
+        raise error(payload["error"])
+    if proc.returncode != 0 or "result" not in payload:
+        lines = [line for line in proc.stderr.splitlines() if line.strip()]
+        tail = lines[-1] if lines else "no output"
+        raise BenchError(f"{spec.label or spec.kind}: benchmark subprocess exited with {proc.returncode}: {tail}")
+    return RasterBenchResult.from_dict(payload["result"])
+
+
+def describe(spec: WorkloadSpec) -> str:
+    if spec.kind == "synthetic":
+        return f"synthetic {spec.n} {spec.width}x{spec.height} (seed {spec.seed})"
+    return spec.label or Path(spec.path).name
+
+
+def run_suite(specs: list[WorkloadSpec], settings: BenchSettings,
+              progress: Callable[[str], None] | None = None,
+              on_result: Callable[[list[RasterBenchResult]], None] | None = None) -> list[RasterBenchResult]:
+    """`run_isolated` for each spec in turn; ``on_result`` sees the results so far after each."""
+    results: list[RasterBenchResult] = []
+    for i, spec in enumerate(specs, 1):
+        if progress:
+            progress(f"[{i}/{len(specs)}] {describe(spec)} ...")
+        t0 = time.perf_counter()
+        results.append(run_isolated(spec, settings))
+        if progress:
+            progress(f"[{i}/{len(specs)}] done in {time.perf_counter() - t0:.1f} s")
+        if on_result:
+            on_result(results)
+    return results
+
+
+# ----------------------------------------------------------------------------- reporting
+
+TABLE_HEADER = ("workload", "N", "WxH", "fwd ms", "fwd+bwd ms", "stages ms pre/bin/comp/bcomp/bpre/other",
+                "pairs", "Mevals/s", "peak RSS MB", "target", "met")
+
+
+def _fmt_ms(x: float) -> str:
+    return f"{x:.1f}" if x < 1000 else f"{x:.0f}"
+
+
+def table_rows(results: list[RasterBenchResult]) -> list[tuple[str, ...]]:
+    rows = []
+    for r in results:
+        s = r.stages
+        split = "/".join(_fmt_ms(v) for v in (s.preprocess_ms, s.binning_ms, s.compositing_ms,
+                                              s.backward_compositing_ms, s.backward_preprocess_ms, s.other_ms))
+        target = "-"
+        if r.target_fwd_bwd_ms is not None:
+            target = f"{r.target_fwd_bwd_ms:.0f} ms"
+            if r.target_peak_rss_mb is not None:
+                target += f", {r.target_peak_rss_mb:.0f} MB"
+        met = "-" if r.meets_target is None else ("yes" if r.meets_target else "NO")
+        rows.append((r.name, f"{r.n:,}", f"{r.width}x{r.height}", _fmt_ms(r.fwd_ms), _fmt_ms(r.fwd_bwd_ms), split,
+                     f"{r.pairs:,}", f"{r.mevals_per_s:.0f}", f"{r.peak_rss_mb:.0f}", target, met))
+    return rows
+
+
+def format_table(results: list[RasterBenchResult]) -> str:
+    """A fixed-width text table, one row per workload."""
+    rows = [TABLE_HEADER, *table_rows(results)]
+    widths = [max(len(row[i]) for row in rows) for i in range(len(TABLE_HEADER))]
+    lines = []
+    for k, row in enumerate(rows):
+        cells = [c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths))]
+        lines.append("  ".join(cells).rstrip())
+        if k == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def leak_warnings(results: list[RasterBenchResult], threshold_mb: float = 1.0) -> list[str]:
+    """One line per workload whose RSS grew by more than ``threshold_mb`` per timed run."""
+    return [f"warning: {r.name}: RSS grew {r.retained_mb_per_run:.1f} MB per run (memory kept alive across runs; "
+            f"peak_rss_mb includes it)" for r in results if r.retained_mb_per_run > threshold_mb]
+
+
+def write_csv(results: list[RasterBenchResult], path: Path) -> Path:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for r in results:
+        writer.writerow(csv_row(r))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(buf.getvalue())
+    return path
+
+
+def write_json(results: list[RasterBenchResult], machine: MachineInfo, settings: BenchSettings,
+               path: Path) -> Path:
+    """``{"machine": MachineInfo, "settings": BenchSettings, "results": [RasterBenchResult]}``."""
+    payload = {"machine": asdict(machine), "settings": asdict(settings), "results": [asdict(r) for r in results]}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(payload, indent=2) + "\n")
+    return path
+
+
+# ----------------------------------------------------------------------------- subprocess entry
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m splatbench.bench.raster --one JOB --result PATH``: run one workload
+    (JOB: JSON with "spec" and "settings") and write ``{"result": ...}`` or
+    ``{"error": ..., "type": ...}`` to PATH. Used by `run_isolated`."""
+    parser = argparse.ArgumentParser(prog="python -m splatbench.bench.raster")
+    parser.add_argument("--one", required=True, help="JSON: {'spec': WorkloadSpec, 'settings': BenchSettings}")
+    parser.add_argument("--result", required=True, type=Path, help="where to write the result JSON")
+    args = parser.parse_args(argv)
+    job = json.loads(args.one)
+    try:
+        result = run_one(WorkloadSpec(**job["spec"]), BenchSettings(**job["settings"]))
+        payload, code = {"result": asdict(result)}, 0
+    except SplatbenchError as exc:
+        payload, code = {"error": str(exc), "type": type(exc).__name__}, 2
+    args.result.write_text(json.dumps(payload))
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

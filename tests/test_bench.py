@@ -1,0 +1,107 @@
+"""`splatbench bench raster`: the harness runs end to end and rejects bad input in one line.
+
+Timings are not checked (the machine is shared); only that the harness measures
+something sane and writes the documented columns.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import fields, replace
+
+import pytest
+from click.testing import CliRunner
+
+from splatbench.bench.raster import (CSV_COLUMNS, STANDARD_SYNTHETIC, MachineInfo, RasterBenchResult, StageSplit,
+                                     format_table, leak_warnings, parse_synthetic, standard_suite)
+from splatbench.cli import main
+
+TINY = ["bench", "raster", "--synthetic", "200", "64x64", "--repeats", "1", "--device", "cpu"]
+
+
+def test_bench_raster_tiny_workload_writes_documented_csv_and_json(tmp_path):
+    result = CliRunner().invoke(main, [*TINY, "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert "synthetic-200-64x64-s0" in result.stdout  # the table
+
+    with open(tmp_path / "raster.csv", newline="") as f:
+        reader = csv.DictReader(f)
+        assert tuple(reader.fieldnames) == CSV_COLUMNS
+        rows = list(reader)
+    assert len(rows) == 1
+    row = rows[0]
+    assert (int(row["n"]), int(row["width"]), int(row["height"])) == (200, 64, 64)
+    assert row["device"] == "cpu" and int(row["tile_size"]) == 16 and int(row["repeats"]) == 1
+    for key in ("fwd_ms", "fwd_bwd_ms", "preprocess_ms", "binning_ms", "compositing_ms",
+                "backward_compositing_ms", "backward_preprocess_ms", "total_ms", "mevals_per_s",
+                "base_rss_mb", "setup_rss_mb", "peak_rss_mb"):
+        assert float(row[key]) > 0, key
+    pairs, visible = int(row["pairs"]), int(row["visible"])
+    assert pairs > 0 and 0 < visible <= 200
+    assert int(row["evaluations"]) == pairs * 16 ** 2
+    assert row["target_fwd_bwd_ms"] == row["meets_target"] == ""  # not a standard workload
+
+    report = json.loads((tmp_path / "raster.json").read_text())
+    assert set(report["machine"]) == {f.name for f in fields(MachineInfo)}
+    assert report["machine"]["cpu_count"] >= 1 and report["machine"]["device"] == "cpu"
+    assert report["settings"] == {"repeats": 1, "device": "cpu", "options": {}}
+    (typed,) = [RasterBenchResult.from_dict(r) for r in report["results"]]
+    assert typed.pairs == pairs and len(typed.fwd_runs_ms) == len(typed.fwd_bwd_runs_ms) == 1
+    assert isinstance(typed.stages, StageSplit) and typed.stages.total_ms > 0
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--synthetic", "10", "12"], "--synthetic: expected WxH, got '12'"),
+    (["--synthetic", "ten", "8x8"], "--synthetic: expected a Gaussian count, got 'ten'"),
+    (["--synthetic", "0", "8x8"], "--synthetic: expected a Gaussian count >= 1, got '0'"),
+    (["--workload", "no/such/scene.npz"], "--workload: no such file 'no/such/scene.npz'"),
+    (["--synthetic", "10", "8x8", "--repeats", "0"], "--repeats: expected a count >= 1, got 0"),
+    (["--synthetic", "10", "8x8", "--option", "tile_size=3"], "tile_size: expected a power of two"),
+    (["--synthetic", "10", "8x8", "--option", "device=cpu"], "--option device: use --device instead"),
+    (["--synthetic", "10", "8x8", "--device", "tpu"], "device: expected 'auto', 'cpu' or 'cuda', got 'tpu'"),
+])
+def test_bad_input_is_one_line_and_writes_nothing(tmp_path, args, message):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["bench", "raster", *args, "--out", str(out)])
+    assert result.exit_code == 2
+    (line,) = result.output.strip().splitlines()
+    assert line.startswith("splatbench: error: ") and message in line, result.output
+    assert not out.exists()
+
+
+def test_bad_npz_reported_from_the_subprocess_in_one_line(tmp_path):
+    bad = tmp_path / "broken.npz"
+    bad.write_bytes(b"not an npz")
+    result = CliRunner().invoke(main, ["bench", "raster", "--workload", str(bad), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    errors = [line for line in result.output.splitlines() if line.startswith("splatbench: error:")]
+    assert len(errors) == 1 and "broken.npz: not a readable npz" in errors[0], result.output
+    assert "Traceback" not in result.output
+
+
+def test_targets_attach_to_the_standard_synthetic_workloads_only():
+    suite = standard_suite(seed=3)
+    assert [(s.n, s.width, s.height) for s in suite[:-1]] == list(STANDARD_SYNTHETIC)
+    assert [s.target.fwd_bwd_ms for s in suite[:-1]] == [35.0, 450.0, 2000.0]
+    assert suite[-2].target.peak_rss_mb == 1500.0 and suite[0].target.peak_rss_mb is None
+    assert suite[-1].label == "garden-view0" and suite[-1].target is None
+    assert parse_synthetic("10000", "256X256", seed=9).target.fwd_bwd_ms == 35.0
+    assert parse_synthetic("10001", "256x256").target is None
+
+
+def test_table_marks_met_and_missed_targets():
+    stages = StageSplit(1.0, 2.0, 3.0, 4.0, 5.0, 0.5, 15.5)
+    base = RasterBenchResult(
+        name="synthetic-10000-256x256-s0", n=10_000, width=256, height=256, sh_degree=3, device="cpu",
+        tile_size=16, repeats=5, fwd_ms=10.0, fwd_bwd_ms=30.0, stages=stages, pairs=1000, visible=900,
+        evaluations=256_000, mevals_per_s=85.3, base_rss_mb=350.0, setup_rss_mb=360.0, peak_rss_mb=400.0,
+        rss_reset=True, retained_mb_per_run=0.0, target_fwd_bwd_ms=35.0, target_peak_rss_mb=None, meets_target=True)
+    lines = format_table([base, replace(base, name="slow", fwd_bwd_ms=50.0, meets_target=False),
+                          replace(base, name="other", target_fwd_bwd_ms=None, meets_target=None)]).splitlines()
+    assert len(lines) == 5  # header, rule, three rows
+    assert lines[2].endswith("35 ms  yes") and lines[3].endswith("35 ms   NO") and lines[4].endswith("-    -")
+    assert "1.0/2.0/3.0/4.0/5.0/0.5" in lines[2]
+    assert leak_warnings([base]) == []
+    (warning,) = leak_warnings([base, replace(base, name="leaky", retained_mb_per_run=40.0)])
+    assert warning.startswith("warning: leaky: RSS grew 40.0 MB per run")
