@@ -42,7 +42,7 @@ def check_finite(name: str, array: np.ndarray) -> None:
     """Raise `InputError` naming the first non-finite entry of ``array``."""
     where = first_nonfinite(array)
     if where is not None:
-        raise InputError(f"{name}: non-finite value {array[where]!r} at index {list(where)}")
+        raise InputError(f"{name}: non-finite value {float(array[where])!r} at index {list(where)}")
 
 
 def as_float_array(name: str, value, spec: Sequence[Dim], sizes: dict[str, int],

@@ -4,9 +4,9 @@ Ops mirror `reference/` by name: `project`, `eval_sh`, `composite`.
 """
 
 from splatbench.raster.api import RenderResult, render
-from splatbench.raster.composite import composite
+from splatbench.raster.compositing import composite
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.project import project
+from splatbench.raster.projection import project
 from splatbench.raster.sh import eval_sh
 from splatbench.raster.torch_bridge import RasterInfo, rasterize
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from splatbench.raster.backend import dr
-from splatbench.raster.project import Projection, array_namespace
+from splatbench.raster.projection import Projection, array_namespace
 
 
 @dataclass(frozen=True)

@@ -8,9 +8,10 @@ import numpy as np
 
 from splatbench.errors import InputError
 from splatbench.raster.backend import dr
-from splatbench.raster.composite import Composite, CompositeState, composite
+from splatbench.raster.binning import Bins, TileGrid
+from splatbench.raster.compositing import Composite, CompositeState, composite
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.project import Projection, array_namespace, columns, project
+from splatbench.raster.projection import Projection, array_namespace, columns, project
 from splatbench.raster.sh import eval_sh
 from splatbench.raster.timing import StageTimer
 
@@ -65,6 +66,8 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
         absgrad: accumulate the AbsGS screen-space gradient in the backward pass.
         timer: benchmarks only; charges wall time to each stage (adds syncs).
     """
+    if means.shape[0] == 0:
+        return _empty_frame(means, camera, background, options)
     near = camera.near if options.near is None else options.near
     far = camera.far if options.far is None else options.far
     proj = project(means, log_scales, quats, opacity_logits, camera.K, camera.world_to_camera,
@@ -94,6 +97,21 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
         dr.eval(out.rgb, out.alpha, depth)
         timer.mark("compositing")
     return Frame(out.rgb, out.alpha, depth, proj, state)
+
+
+def _empty_frame(means, camera, background, options: RasterOptions) -> Frame:
+    """No Gaussians: every pixel shows the background (zero-width arrays trip Dr.Jit's
+    size checks, so the pipeline is not run at all)."""
+    m = array_namespace(means.array)
+    size = camera.width * camera.height
+    zero = dr.zeros(m.Float, size)
+    empty = m.Float()
+    proj = Projection(m.Array2f(empty, empty), m.Array3f(empty, empty, empty), empty, empty, empty,
+                      m.Array2f(empty, empty), m.Int32(), m.Bool())
+    bins = Bins(TileGrid(camera.width, camera.height, options.tile_size), m.UInt32(),
+                dr.zeros(m.UInt32, 1), dr.zeros(m.UInt32, 1), 0, 0)
+    rgb = m.Array3f(*(dr.full(m.Float, c, size) for c in background))
+    return Frame(rgb, m.Float(zero), zero, proj, CompositeState(bins))
 
 
 def frame_to_numpy(frame: Frame, height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

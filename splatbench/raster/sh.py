@@ -7,7 +7,7 @@ so unused bands cost neither time nor gradient work.
 from __future__ import annotations
 
 from splatbench.raster.backend import dr
-from splatbench.raster.project import array_namespace
+from splatbench.raster.projection import array_namespace
 
 C0 = 0.28209479177387814
 C1 = 0.4886025119029199

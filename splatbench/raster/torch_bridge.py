@@ -42,17 +42,13 @@ class RasterInfo:
 
     @property
     def means2d_grad(self) -> torch.Tensor | None:
-        op = self._frame.state.op if self._frame is not None else None
-        if op is None or op.grad_means2d is None:
-            return None
-        return torch.from_numpy(np.array(op.grad_means2d.numpy(), dtype=np.float32).T.copy())
+        grad = self._frame.state.grad_means2d if self._frame is not None else None
+        return None if grad is None else torch.from_numpy(np.array(grad.numpy(), dtype=np.float32).T.copy())
 
     @property
     def means2d_absgrad(self) -> torch.Tensor | None:
-        op = self._frame.state.op if self._frame is not None else None
-        if op is None or op.abs_grad_means2d is None:
-            return None
-        return torch.from_numpy(np.array(op.abs_grad_means2d.numpy(), dtype=np.float32).T.copy())
+        grad = self._frame.state.abs_grad_means2d if self._frame is not None else None
+        return None if grad is None else torch.from_numpy(np.array(grad.numpy(), dtype=np.float32).T.copy())
 
 
 class _Rasterize(torch.autograd.Function):

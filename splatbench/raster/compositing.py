@@ -22,7 +22,7 @@ from typing import NamedTuple
 
 from splatbench.raster.backend import dr
 from splatbench.raster.binning import Bins, TileGrid, bin_gaussians
-from splatbench.raster.project import Projection, array_namespace, next_power_of_two
+from splatbench.raster.projection import Projection, array_namespace, next_power_of_two
 
 GEO = 8  # geometry record per Gaussian: u, v, conic A, B, C, opacity, depth, cutoff_sq
 COL = 4  # colour record per Gaussian: r, g, b, (padding: packet loads need a power of two)
@@ -273,7 +273,10 @@ class _CompositeOp(dr.CustomOp):
 
     def eval(self, means2d, conics, opacities, colors, depths, cutoff_sq, state, cfg):
         m = array_namespace(opacities)
-        state.op = self
+        # The op keeps `state` (to publish its screen-space gradients there), but the
+        # state never references the op: the op's arguments live on Dr.Jit's C++
+        # side, so a cycle through them would never be collected (a leak per call).
+        self.state = state
         self.m, self.bins, self.cfg = m, state.bins, cfg
         self.want_absgrad, self.timer = state.want_absgrad, state.timer
         self.n = dr.width(opacities)
@@ -283,7 +286,6 @@ class _CompositeOp(dr.CustomOp):
         fwd = _forward_loop(m, self.records, self.bins.gaussian_ids, self.lanes, cfg)
         dr.eval(fwd)
         self.fwd = fwd
-        self.grad_means2d = self.abs_grad_means2d = None
         # A plain tuple: Dr.Jit does not traverse NamedTuples, so a `Composite` here
         # would silently disconnect the outputs from the AD graph.
         return tuple(_to_image(m, self.bins.grid, self.lanes, fwd, cfg.background))
@@ -294,8 +296,8 @@ class _CompositeOp(dr.CustomOp):
         keys = GRAD_KEYS if self.want_absgrad else GRAD_KEYS[:-2]
         if bins.num_pairs == 0:  # nothing was composited: all gradients are zero
             zero = dr.zeros(Float, self.n)
-            self.grad_means2d = m.Array2f(zero, zero)
-            self.abs_grad_means2d = m.Array2f(zero, zero) if self.want_absgrad else None
+            self.state.grad_means2d = m.Array2f(zero, zero)
+            self.state.abs_grad_means2d = m.Array2f(zero, zero) if self.want_absgrad else None
             return
         v_rgb_img, v_alpha_img, v_d_img = self.grad_out()
         K = len(lanes.px)
@@ -371,9 +373,9 @@ class _CompositeOp(dr.CustomOp):
         dr.while_loop(tuple(state), cond, body, mode="symbolic")
         dr.eval(pair)
         buf = _reduce_pairs(m, bins, pair, self.n)
-        self.grad_means2d = m.Array2f(buf["mx"], buf["my"])
+        self.state.grad_means2d = m.Array2f(buf["mx"], buf["my"])
         if self.want_absgrad:
-            self.abs_grad_means2d = m.Array2f(buf["ax"], buf["ay"])
+            self.state.abs_grad_means2d = m.Array2f(buf["ax"], buf["ay"])
         self.set_grad_in("means2d", m.Array2f(buf["mx"], buf["my"]))
         self.set_grad_in("conics", m.Array3f(buf["ca"], buf["cb"], buf["cc"]))
         self.set_grad_in("opacities", buf["o"])
@@ -391,17 +393,19 @@ class CompositeState:
 
     A plain class on purpose: Dr.Jit traverses dataclass arguments of `dr.custom`
     as PyTrees (and may copy them); this one must reach the op by reference.
-    After a backward pass, ``op.grad_means2d`` [N, 2] and ``op.abs_grad_means2d``
-    [N, 2] (per-pixel |d loss / d mean2d| summed, for AbsGS) are set.
+    After a backward pass the op sets ``grad_means2d`` [N, 2] and, when asked,
+    ``abs_grad_means2d`` [N, 2] (per-pixel |d loss / d mean2d| summed, for AbsGS).
+    It holds no reference to the op (see `_CompositeOp.eval`).
     """
 
-    __slots__ = ("bins", "op", "want_absgrad", "timer")
+    __slots__ = ("bins", "want_absgrad", "timer", "grad_means2d", "abs_grad_means2d")
 
     def __init__(self, bins: Bins, want_absgrad: bool = False, timer=None) -> None:
         self.bins = bins
-        self.op: _CompositeOp | None = None
         self.want_absgrad = want_absgrad
         self.timer = timer
+        self.grad_means2d = None
+        self.abs_grad_means2d = None
 
 
 def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, width: int, height: int,
