@@ -1,0 +1,68 @@
+"""The densification-strategy interface (after gsplat's `strategy/base.py`).
+
+Every strategy has the *same typed signature*: a dataclass of hyperparameters, an
+explicit state object it creates, and hooks before and after the backward pass.
+Everything a hook may need (step, learning rate, screen-space gradients, scene
+extent) arrives in one `StepContext`, so the trainer never needs to know which
+strategy it holds. Strategies edit parameters and Adam moments together through
+`splatbench.strategies.ops`.
+
+Parameter groups (`Params`, torch leaf tensors with requires_grad):
+    means [N, 3], log_scales [N, 3], quats [N, 4], opacity_logits [N],
+    sh_dc [N, 1, 3], sh_rest [N, K-1, 3]
+`Optimizers` maps each group name to its own `torch.optim.Adam`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import torch
+
+from splatbench.raster.torch_bridge import RasterInfo
+
+PARAM_GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh_dc", "sh_rest")
+Params = dict[str, torch.Tensor]
+Optimizers = dict[str, torch.optim.Optimizer]
+
+
+@dataclass(frozen=True)
+class StepContext:
+    """What a strategy hook may read about the current training step.
+
+    step: iteration index (0-based); info: the rasterizer's `RasterInfo` of this
+    step (``means2d_grad`` / ``means2d_absgrad`` are set only after backward);
+    scene_extent: radius of the training cameras (3DGS's "cameras_extent");
+    means_lr: current learning rate of the means (MCMC scales its noise by it);
+    loss: the scalar training loss of this step (for early stopping).
+    """
+
+    step: int
+    info: RasterInfo
+    scene_extent: float
+    means_lr: float
+    loss: float
+
+
+class Strategy(Protocol):
+    """One densification strategy. Implementations are small frozen dataclasses."""
+
+    name: str
+
+    def initialize_state(self, params: Params) -> object:
+        """A fresh state object for ``params`` (e.g. gradient accumulators)."""
+        ...
+
+    def regularization(self, params: Params, step: int) -> torch.Tensor | float:
+        """Extra loss terms (MCMC's opacity and scale regularisers); 0 for most."""
+        ...
+
+    def pre_backward(self, params: Params, optimizers: Optimizers, state: object, ctx: StepContext) -> None:
+        """Called after the forward pass, before ``loss.backward()``."""
+        ...
+
+    def post_backward(self, params: Params, optimizers: Optimizers, state: object, ctx: StepContext) -> None:
+        """Called after ``loss.backward()`` and ``optimizer.step()``: accumulate
+        statistics and densify / prune / relocate in place."""
+        ...
