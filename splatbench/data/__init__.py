@@ -1,0 +1,11 @@
+"""Datasets and bundled data.
+
+``load_dataset(path, *, layout="auto", test_every=8, images_dir="images", background=(0, 0, 0))``
+reads a COLMAP or Blender (NeRF synthetic / nerfstudio) dataset folder into a typed
+`Dataset` of `Split` s (see ``dataset.py``). The folder also holds package data:
+``garden_sfm.npz`` (see ``NOTICE.md``).
+"""
+
+from splatbench.data.dataset import LAYOUTS, PINHOLE_MODELS, Dataset, PointCloud, Split, load_dataset
+
+__all__ = ["Dataset", "Split", "PointCloud", "load_dataset", "LAYOUTS", "PINHOLE_MODELS"]
