@@ -18,6 +18,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "render": ("splatbench.commands.render:render", "Render a 3DGS PLY or workload to a PNG."),
     "stress": ("splatbench.stress.cli:stress", "Stress the rasterizer with degenerate input."),
     "bench": ("splatbench.bench.cli:bench", "Benchmarks (raster: run time, memory, throughput)."),
+    "scenes": ("splatbench.scenes.cli:scenes", "Mitsuba scene catalog: list scenes, render one into a dataset."),
 }
 
 

@@ -1,0 +1,31 @@
+"""Mitsuba scene catalog and multi-view dataset rendering.
+
+Catalog (``catalog.py``, no Mitsuba import)::
+
+    find_scenes(extra=()) -> dict[str, SceneSpec]     every scene folder found
+    get_scene(name_or_folder, extra=()) -> SceneSpec   one scene (a path when the name has a '/')
+    SceneSpec(name, folder, rig: RigSpec)              .scene_file, .rig_file, .files()
+    RigSpec.cameras(views=None, resolution=None) -> list[Camera];  .test_indices(views=None)
+
+Rendering (``render.py``, Mitsuba variant ``llvm_ad_rgb``)::
+
+    render_dataset(scene, out=None, *, resolution=None, views=None, spp=None, force=False)
+        -> RenderedDataset(path, cached, seconds, train, test, hash)
+    load_mitsuba_scene(scene) -> mi.Scene              .shapes() for surface sampling
+    sample_surface(mi_scene, n, *, seed=0) -> SurfacePoints(xyz, normals, shape_index, shape_ids)
+    render_rgb(mi_scene, camera, *, spp, seed=0) -> [H, W, 3] linear RGB
+    render_depth(mi_scene, camera) -> [H, W] camera z (0 = no hit)
+
+Load a rendered dataset with `splatbench.data.load_dataset`.
+"""
+
+from splatbench.scenes.catalog import (RIG_KINDS, RigSpec, SceneSpec, builtin_scenes_dir, find_scenes, get_scene,
+                                       load_scene_spec, parse_resolution, scene_dirs)
+from splatbench.scenes.render import (RenderedDataset, RenderPlan, SurfacePoints, default_out, linear_to_srgb,
+                                      load_mitsuba_scene, plan_render, points_from_depth, read_manifest,
+                                      render_dataset, render_depth, render_rgb, sample_surface, srgb_to_linear)
+
+__all__ = ["RIG_KINDS", "RigSpec", "SceneSpec", "builtin_scenes_dir", "find_scenes", "get_scene", "load_scene_spec",
+           "parse_resolution", "scene_dirs", "RenderedDataset", "RenderPlan", "SurfacePoints", "default_out",
+           "linear_to_srgb", "load_mitsuba_scene", "plan_render", "points_from_depth", "read_manifest",
+           "render_dataset", "render_depth", "render_rgb", "sample_surface", "srgb_to_linear"]
