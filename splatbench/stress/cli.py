@@ -1,0 +1,64 @@
+"""`splatbench stress`: degenerate and non-finite input through the rasterizer."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from splatbench.stress.cases import CATEGORIES
+
+
+def format_report(report) -> list[str]:
+    """One line per category, then one per failing case."""
+    width = max(len(c.category) for c in report.categories)
+    lines = [f"{'category':<{width}}  {'cases':>6}  {'culled (Gaussians)':>18}  {'rejected':>8}  "
+             f"{'non-finite outputs':>18}  {'non-finite grads':>16}  {'errors':>6}"]
+    for c in report.categories:
+        lines.append(f"{c.category:<{width}}  {c.cases:>6}  {c.culled:>18}  {c.rejected:>8}  "
+                     f"{c.nonfinite_outputs:>18}  {c.nonfinite_grads:>16}  {len(c.errors):>6}")
+    failures = [f for c in report.categories for f in c.failures]
+    for line in failures[:50]:
+        lines.append(f"FAIL {line}")
+    if len(failures) > 50:
+        lines.append(f"... and {len(failures) - 50} more failing cases (see --json)")
+    verdict = "ok" if report.ok else "FAILED"
+    lines.append(f"{verdict}: {report.cases} cases in {report.seconds:.1f} s (seed {report.seed})")
+    return lines
+
+
+@click.command()
+@click.option("--cases", default=200, show_default=True, type=click.IntRange(min=1),
+              help="Cases to run, spread round-robin over the categories.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="Master seed.")
+@click.option("--json", "json_path", type=click.Path(path_type=Path), default=None,
+              help="Also write the full report (every failing case) as JSON here.")
+@click.option("--category", "categories", multiple=True, type=click.Choice(CATEGORIES),
+              help="Only these categories (repeatable; default: all).")
+@click.option("--jobs", default=None, type=click.IntRange(min=1),
+              help="Worker processes (default: the CPU count, at most 4); 1 runs in this process.")
+@click.option("--device", default=None, type=click.Choice(["cpu", "cuda", "auto"]),
+              help="Rasterizer device (default: the rasterizer's, CUDA when available).")
+def stress(cases: int, seed: int, json_path: Path | None, categories: tuple[str, ...], jobs: int | None,
+           device: str | None) -> None:
+    """Render degenerate and non-finite scenes forward and backward; exit 1 on any
+    NaN/Inf output or gradient, or any unexpected error (see docs/stress.md)."""
+    import os
+
+    from tqdm import tqdm
+
+    from splatbench.stress.runner import run
+
+    with tqdm(total=cases, file=sys.stderr, unit="case", desc="stress") as bar:
+        report = run(cases, seed, categories=categories or CATEGORIES, device=device,
+                     jobs=jobs or min(4, os.cpu_count() or 1), on_case=lambda result: bar.update(1))
+    for line in format_report(report):
+        click.echo(line)
+    if json_path is not None:
+        json_path.parent.mkdir(parents=True, exist_ok=True)
+        json_path.write_text(json.dumps(report.to_dict(), indent=2) + "\n")
+        click.echo(f"report: {json_path.resolve()}")
+    if not report.ok:
+        sys.exit(1)
