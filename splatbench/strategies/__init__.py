@@ -1,0 +1,75 @@
+"""Densification strategies, one small frozen dataclass each, all with the
+`splatbench.strategies.base.Strategy` interface.
+
+    strategy = make_strategy("mcmc", cap_max=50_000)
+    state = strategy.initialize_state(params)
+    # per step: rasterize(..., absgrad=strategy.absgrad); strategy.pre_backward(...);
+    # (loss + strategy.regularization(params, step)).backward(); optimizer steps;
+    # strategy.post_backward(params, optimizers, state, ctx)
+
+Names: "none", "default" (3DGS adaptive density control), "absgrad" (the same with
+AbsGS's gradient and threshold 8e-4), "mcmc" (3DGS-MCMC).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from splatbench.errors import InputError
+from splatbench.strategies.base import PARAM_GROUPS, Optimizers, Params, StepContext, Strategy
+from splatbench.strategies.default import DefaultState, DefaultStrategy, RefineStats
+from splatbench.strategies.mcmc import MCMCState, MCMCStats, MCMCStrategy
+from splatbench.strategies.none import NoneStrategy
+
+# name -> (class, preset fields the overrides apply on top of)
+STRATEGIES: dict[str, tuple[type, dict[str, object]]] = {
+    "none": (NoneStrategy, {}),
+    "default": (DefaultStrategy, {}),
+    "absgrad": (DefaultStrategy, {"absgrad": True, "grad_threshold": 8e-4}),
+    "mcmc": (MCMCStrategy, {}),
+}
+
+
+def strategy_fields(name: str) -> tuple[str, ...]:
+    """The field names ``make_strategy(name, ...)`` accepts."""
+    cls, _ = _lookup(name)
+    return tuple(f.name for f in dataclasses.fields(cls))
+
+
+def make_strategy(name: str, **overrides) -> Strategy:
+    """The strategy registered as ``name`` with ``overrides`` applied to its fields.
+
+    Raises:
+        InputError: (one line) for an unknown name, an unknown field, or a bad value.
+    """
+    cls, preset = _lookup(name)
+    known = [f.name for f in dataclasses.fields(cls)]
+    for key in overrides:
+        if key not in known:
+            raise InputError(f"strategy {name!r}: unknown field {key!r} "
+                             f"(known: {', '.join(known) if known else 'none'})")
+    for key, value in overrides.items():
+        _check_type(name, cls, key, value)
+    return cls(**{**preset, **overrides})
+
+
+def _lookup(name: str) -> tuple[type, dict[str, object]]:
+    if name not in STRATEGIES:
+        raise InputError(f"strategy: unknown name {name!r} (expected one of: {', '.join(STRATEGIES)})")
+    return STRATEGIES[name]
+
+
+def _check_type(name: str, cls: type, key: str, value: object) -> None:
+    default = next(f.default for f in dataclasses.fields(cls) if f.name == key)
+    ok = {bool: lambda v: isinstance(v, bool),
+          int: lambda v: isinstance(v, int) and not isinstance(v, bool),
+          float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool)}.get(type(default))
+    if ok is not None and not ok(value):
+        raise InputError(f"strategy {name!r}: field {key!r} expects {type(default).__name__}, got {value!r}")
+
+
+__all__ = [
+    "PARAM_GROUPS", "STRATEGIES", "DefaultState", "DefaultStrategy", "MCMCState", "MCMCStats", "MCMCStrategy",
+    "NoneStrategy", "Optimizers", "Params", "RefineStats", "StepContext", "Strategy", "make_strategy",
+    "strategy_fields",
+]

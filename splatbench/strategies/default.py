@@ -1,0 +1,230 @@
+"""3DGS adaptive density control (Kerbl et al. 2023), and AbsGS (Ye et al. 2024)
+as the same strategy with another gradient.
+
+Schedule (graphdeco-inria semantics, counted in completed iterations
+``it = ctx.step + 1``, since `post_backward` runs after ``optimizer.step()``):
+while ``it < refine_stop`` the screen-space gradient norm of every visible Gaussian
+is accumulated; when ``refine_start < it`` and ``it % refine_every == 0`` the
+Gaussians are cloned, split and pruned and the accumulators are cleared; when
+``it % reset_every == 0`` (and ``it < refine_stop``) opacities are clamped to
+``reset_value``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import torch
+
+from splatbench.errors import InputError
+from splatbench.strategies import ops
+from splatbench.strategies.base import Optimizers, Params, StepContext
+
+
+class RefineStats(NamedTuple):
+    """What one refinement did (counted on the set before it)."""
+
+    step: int     # the ctx.step of the refinement
+    cloned: int   # Gaussians duplicated (small, high gradient)
+    split: int    # Gaussians replaced by two children (large, high gradient)
+    pruned: int   # Gaussians removed after growing (transparent or too large)
+    num_gaussians: int  # N after the refinement
+
+
+@dataclass
+class LossPlateau:
+    """Early stop of densification: the mean training loss over each refine interval
+    must drop by at least ``rel_tol`` (relative) from the previous interval's; after
+    ``patience`` refinements in a row that fail, densification stops for good."""
+
+    rel_tol: float
+    patience: int
+    total: float = 0.0      # loss summed since the last refinement
+    count: int = 0
+    previous: float | None = None  # mean of the previous interval (None after an opacity reset)
+    misses: int = 0
+    stopped_at: int | None = None  # ctx.step at which densification stopped
+
+    def add(self, loss: float) -> None:
+        if math.isfinite(loss):
+            self.total += float(loss)
+            self.count += 1
+
+    def should_stop(self, step: int) -> bool:
+        """Close the current interval; True when densification must stop now."""
+        if self.count == 0:
+            return False
+        mean = self.total / self.count
+        self.total, self.count = 0.0, 0
+        if self.previous is not None:
+            self.misses = self.misses + 1 if self.previous - mean < self.rel_tol * self.previous else 0
+        self.previous = mean
+        if self.misses >= self.patience:
+            self.stopped_at = step
+            return True
+        return False
+
+    def forget(self) -> None:
+        """An opacity reset makes the next interval incomparable with the last."""
+        self.previous = None
+
+
+@dataclass
+class DefaultState:
+    """Running state of `DefaultStrategy` (per-Gaussian tensors have N rows)."""
+
+    grad_accum: torch.Tensor   # [N] summed NDC gradient norms over visible views
+    count: torch.Tensor        # [N] number of views in which each Gaussian was visible
+    max_radii: torch.Tensor    # [N] largest screen radius (px) since the last refinement
+    generator: torch.Generator  # split's children positions
+    plateau: LossPlateau | None  # early-stop bookkeeping (None when early_stop is off)
+    stopped: bool = False      # densification stopped early
+    last: RefineStats | None = None  # the latest refinement
+    history: list[RefineStats] = field(default_factory=list)
+
+
+def _check_fields(obj, positive_ints: tuple[str, ...], nonneg: tuple[str, ...]) -> None:
+    name = type(obj).__name__
+    for f in positive_ints:
+        v = getattr(obj, f)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise InputError(f"{name}.{f}: expected a positive integer, got {v!r}")
+    for f in nonneg:
+        v = getattr(obj, f)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 or not math.isfinite(v):
+            raise InputError(f"{name}.{f}: expected a finite number >= 0, got {v!r}")
+
+
+@dataclass(frozen=True)
+class DefaultStrategy:
+    """3DGS adaptive density control; ``absgrad=True`` is AbsGS (registry name "absgrad").
+
+    Clone where the averaged gradient >= ``grad_threshold`` and max scale <=
+    ``percent_dense`` x scene extent; split (two children, scale / 1.6) where the
+    gradient is as high and the Gaussian larger; then prune opacity < ``prune_opacity``
+    and, after the first opacity reset, Gaussians whose screen radius since the last
+    refinement exceeds ``max_screen_size`` px or whose max scale exceeds
+    ``max_world_size`` x scene extent.
+
+    The trainer must rasterize with ``absgrad=self.absgrad``.
+    """
+
+    refine_start: int = 500       # refine only after this many iterations
+    refine_stop: int = 15_000     # no accumulation, refinement or opacity reset from here on
+    refine_every: int = 100       # iterations between refinements
+    grad_threshold: float = 2e-4  # averaged NDC gradient norm that triggers clone / split (AbsGS: 8e-4)
+    percent_dense: float = 0.01   # clone at max scale <= this x scene extent, split above
+    prune_opacity: float = 0.005  # prune opacity below this
+    max_screen_size: float = 20.0  # prune screen radius (px) above this after the first reset; 0 = off
+    max_world_size: float = 0.1   # prune max scale above this x scene extent after the first reset; 0 = off
+    reset_every: int = 3000       # clamp opacities every this many iterations
+    reset_value: float = 0.01     # ... to at most this opacity
+    absgrad: bool = False         # accumulate AbsGS's |gradient| (info.means2d_absgrad) instead
+    early_stop: bool = False      # stop densifying once the loss stops falling (off in 3DGS)
+    early_stop_rel_tol: float = 0.005  # required relative drop of the mean loss per refine interval
+    early_stop_patience: int = 2  # refinements in a row below that drop before stopping
+    seed: int = 0                 # the split's random children
+
+    def __post_init__(self) -> None:
+        _check_fields(self, ("refine_every", "reset_every", "early_stop_patience"),
+                      ("refine_start", "refine_stop", "grad_threshold", "percent_dense", "prune_opacity",
+                       "max_screen_size", "max_world_size", "early_stop_rel_tol"))
+        if not 0.0 < self.reset_value < 1.0:
+            raise InputError(f"DefaultStrategy.reset_value: expected a number in (0, 1), got {self.reset_value!r}")
+
+    @property
+    def name(self) -> str:
+        return "absgrad" if self.absgrad else "default"
+
+    def initialize_state(self, params: Params) -> DefaultState:
+        n, device = params["means"].shape[0], params["means"].device
+        gen = torch.Generator(device=device)
+        gen.manual_seed(self.seed)
+        zeros = lambda: torch.zeros(n, device=device)  # noqa: E731
+        plateau = LossPlateau(self.early_stop_rel_tol, self.early_stop_patience) if self.early_stop else None
+        return DefaultState(zeros(), zeros(), zeros(), gen, plateau)
+
+    def regularization(self, params: Params, step: int) -> float:
+        return 0.0
+
+    def pre_backward(self, params: Params, optimizers: Optimizers, state: DefaultState, ctx: StepContext) -> None:
+        return None
+
+    def post_backward(self, params: Params, optimizers: Optimizers, state: DefaultState, ctx: StepContext) -> None:
+        it = ctx.step + 1
+        if state.stopped or it >= self.refine_stop:
+            return
+        self._accumulate(params, state, ctx)
+        if state.plateau is not None:
+            state.plateau.add(ctx.loss)
+        if it > self.refine_start and it % self.refine_every == 0:
+            if state.plateau is not None and state.plateau.should_stop(ctx.step):
+                state.stopped = True
+                return
+            self.refine(params, optimizers, state, ctx.step, ctx.scene_extent)
+        if it % self.reset_every == 0:
+            ops.reset_opacity(params, optimizers, self.reset_value)
+            if state.plateau is not None:
+                state.plateau.forget()
+
+    @torch.no_grad()
+    def _accumulate(self, params: Params, state: DefaultState, ctx: StepContext) -> None:
+        info = ctx.info
+        grad = info.means2d_absgrad if self.absgrad else info.means2d_grad
+        if grad is None:
+            what = ("info.means2d_absgrad is None: rasterize with absgrad=True" if self.absgrad else
+                    "info.means2d_grad is None")
+            raise InputError(f"{self.name} strategy: {what} and call post_backward after loss.backward()")
+        n = state.count.shape[0]
+        if tuple(grad.shape) != (n, 2) or params["means"].shape[0] != n:
+            raise InputError(f"{self.name} strategy: screen-space gradient has shape {list(grad.shape)}, state has "
+                             f"N={n}, params have N={params['means'].shape[0]}")
+        device = state.count.device
+        grad = grad.to(device=device, dtype=torch.float32)
+        # pixels -> NDC units, like 3DGS's rasterizer and gsplat (x W/2, y H/2)
+        ndc = grad * torch.tensor([info.width / 2.0, info.height / 2.0], device=device)
+        vis = info.visible.to(device=device, dtype=torch.bool)
+        state.grad_accum[vis] += ndc.norm(dim=-1)[vis]
+        state.count[vis] += 1
+        radii = info.radii.to(device=device, dtype=torch.float32)
+        state.max_radii[vis] = torch.maximum(state.max_radii[vis], radii[vis])
+
+    @torch.no_grad()
+    def refine(self, params: Params, optimizers: Optimizers, state: DefaultState, step: int,
+               scene_extent: float) -> RefineStats:
+        """Clone, split and prune from the accumulated statistics, then clear them.
+        ``step`` is the ctx.step (pruning by size applies once ``step + 1 > reset_every``)."""
+        n = params["means"].shape[0]
+        avg = state.grad_accum / state.count.clamp_min(1)
+        high = avg >= self.grad_threshold
+        max_scale = torch.exp(params["log_scales"].detach()).amax(dim=-1).to(avg.device)
+        small = max_scale <= self.percent_dense * scene_extent
+        clone, grow = high & small, high & ~small
+        size_prune = step + 1 > self.reset_every
+        # too large on screen, known before growing: clones inherit it, split children do not
+        big_screen = (state.max_radii > self.max_screen_size) if size_prune and self.max_screen_size > 0 \
+            else torch.zeros(n, dtype=torch.bool, device=avg.device)
+        # flags that follow the Gaussians through growing: clones copy their parent's
+        # (a clone is never split: clone and split are disjoint), split children get False
+        buffers = {"big_screen": big_screen & ~grow, "split": grow}
+        n_clone = ops.duplicate(params, optimizers, clone, buffers=buffers)
+        split_mask = buffers.pop("split")
+        n_split = ops.split(params, optimizers, split_mask, n=2, generator=state.generator, buffers=buffers)
+        big = buffers["big_screen"]
+        prune = torch.sigmoid(params["opacity_logits"].detach()).to(avg.device) < self.prune_opacity
+        if size_prune:
+            prune |= big
+            if self.max_world_size > 0:
+                prune |= torch.exp(params["log_scales"].detach()).amax(dim=-1).to(avg.device) \
+                    > self.max_world_size * scene_extent
+        n_prune = ops.remove(params, optimizers, prune)
+        m = params["means"].shape[0]
+        state.grad_accum = torch.zeros(m, device=avg.device)
+        state.count = torch.zeros(m, device=avg.device)
+        state.max_radii = torch.zeros(m, device=avg.device)
+        stats = RefineStats(step, n_clone, n_split, n_prune, m)
+        state.last = stats
+        state.history.append(stats)
+        return stats

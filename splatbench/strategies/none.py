@@ -1,0 +1,28 @@
+"""The `none` strategy: a fixed set of Gaussians (no densification, no pruning)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from splatbench.strategies.base import Optimizers, Params, StepContext
+
+
+@dataclass(frozen=True)
+class NoneStrategy:
+    """Leaves the Gaussians alone; every hook is a no-op."""
+
+    name: ClassVar[str] = "none"
+    absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad
+
+    def initialize_state(self, params: Params) -> None:
+        return None
+
+    def regularization(self, params: Params, step: int) -> float:
+        return 0.0
+
+    def pre_backward(self, params: Params, optimizers: Optimizers, state: object, ctx: StepContext) -> None:
+        return None
+
+    def post_backward(self, params: Params, optimizers: Optimizers, state: object, ctx: StepContext) -> None:
+        return None

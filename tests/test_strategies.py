@@ -1,0 +1,589 @@
+"""Densification strategies: bookkeeping of parameters and Adam moments, the counts the
+thresholds select, the split's children, MCMC relocation, noise, determinism, registry."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import pytest
+import torch
+
+from splatbench.errors import InputError
+from splatbench.raster.torch_bridge import RasterInfo
+from splatbench.strategies import (PARAM_GROUPS, DefaultStrategy, MCMCStrategy, StepContext, make_strategy,
+                                   ops, strategy_fields)
+
+K = 4  # SH bases (degree 1)
+
+
+# ---------------------------------------------------------------------------
+# Fixtures and helpers
+
+def make_params(n: int, seed: int = 0, *, log_scale: float = -3.0, opacity: float = 0.5):
+    """Random Gaussians as leaf parameters, one Adam each, after one optimizer step
+    (so every group has exp_avg / exp_avg_sq / step)."""
+    g = torch.Generator().manual_seed(seed)
+    logit = math.log(opacity / (1 - opacity))
+    raw = {
+        "means": torch.randn(n, 3, generator=g),
+        "log_scales": log_scale + 0.1 * torch.randn(n, 3, generator=g),
+        "quats": torch.randn(n, 4, generator=g),
+        "opacity_logits": logit + 0.1 * torch.randn(n, generator=g),
+        "sh_dc": torch.randn(n, 1, 3, generator=g),
+        "sh_rest": torch.randn(n, K - 1, 3, generator=g),
+    }
+    params = {k: torch.nn.Parameter(v) for k, v in raw.items()}
+    optimizers = {k: torch.optim.Adam([p], lr=1e-3, eps=1e-15) for k, p in params.items()}
+    adam_step(params, optimizers, seed)
+    return params, optimizers
+
+
+def adam_step(params, optimizers, seed: int = 0):
+    g = torch.Generator().manual_seed(seed + 1000)
+    loss = sum((p * torch.randn(p.shape, generator=g)).sum() for p in params.values())
+    loss.backward()
+    for opt in optimizers.values():
+        opt.step()
+        opt.zero_grad(set_to_none=True)
+
+
+def assert_consistent(params, optimizers, n: int | None = None):
+    """Every group: a leaf with N rows; its optimizer holds exactly this tensor, with
+    moments of the parameter's shape."""
+    n = params["means"].shape[0] if n is None else n
+    assert set(params) == set(PARAM_GROUPS)
+    for name, p in params.items():
+        assert p.is_leaf and p.requires_grad and p.shape[0] == n, (name, p.shape)
+        opt = optimizers[name]
+        assert len(opt.param_groups) == 1 and len(opt.param_groups[0]["params"]) == 1
+        assert opt.param_groups[0]["params"][0] is p, name
+        assert list(opt.state.keys()) == [p], name
+        st = opt.state[p]
+        assert st["exp_avg"].shape == p.shape and st["exp_avg_sq"].shape == p.shape, name
+        assert st["step"].numel() == 1
+
+
+def moments(optimizers, name):
+    st = next(iter(optimizers[name].state.values()))
+    return st["exp_avg"], st["exp_avg_sq"]
+
+
+def snapshot(params):
+    return {k: v.detach().clone() for k, v in params.items()}
+
+
+@dataclass
+class FakeInfo(RasterInfo):
+    """A `RasterInfo` with the screen-space gradients given directly (pixels)."""
+
+    grad: torch.Tensor | None = None
+    absgrad: torch.Tensor | None = None
+
+    @property
+    def means2d_grad(self):
+        return self.grad
+
+    @property
+    def means2d_absgrad(self):
+        return self.absgrad
+
+
+def fake_info(grad_px, *, absgrad_px=None, visible=None, radii=None, width=64, height=32, n=None):
+    n = grad_px.shape[0] if n is None else n
+    visible = torch.ones(n, dtype=torch.bool) if visible is None else visible
+    radii = torch.where(visible, 3, 0).int() if radii is None else radii
+    return FakeInfo(radii=radii, visible=visible, width=width, height=height, num_pairs=0, sh_degree=1,
+                    grad=grad_px, absgrad=absgrad_px)
+
+
+def ctx(step, info=None, *, extent=1.0, means_lr=1.6e-4, loss=0.1):
+    return StepContext(step=step, info=info, scene_extent=extent, means_lr=means_lr, loss=loss)
+
+
+# ---------------------------------------------------------------------------
+# ops
+
+def test_duplicate_appends_copies_with_zero_moments():
+    params, opts = make_params(10)
+    before = snapshot(params)
+    m_before = {k: moments(opts, k)[0].clone() for k in params}
+    mask = torch.zeros(10, dtype=torch.bool)
+    mask[[1, 4, 7]] = True
+    buf = {"acc": torch.arange(10.0)}
+    assert ops.duplicate(params, opts, mask, buffers=buf) == 3
+    assert_consistent(params, opts, 13)
+    for k in params:
+        torch.testing.assert_close(params[k].detach()[:10], before[k])
+        torch.testing.assert_close(params[k].detach()[10:], before[k][[1, 4, 7]])
+        m, v = moments(opts, k)
+        torch.testing.assert_close(m[:10], m_before[k])
+        assert (m[10:] == 0).all() and (v[10:] == 0).all()
+    torch.testing.assert_close(buf["acc"], torch.tensor([*range(10), 1, 4, 7], dtype=torch.float32))
+    adam_step(params, opts)  # the optimizer still works on the new tensors
+    assert_consistent(params, opts, 13)
+
+
+def test_remove_drops_rows_and_moments():
+    params, opts = make_params(10)
+    before = snapshot(params)
+    m_before = {k: moments(opts, k)[1].clone() for k in params}
+    mask = torch.zeros(10, dtype=torch.bool)
+    mask[[0, 5, 9]] = True
+    keep = [i for i in range(10) if not mask[i]]
+    assert ops.remove(params, opts, mask) == 3
+    assert_consistent(params, opts, 7)
+    for k in params:
+        torch.testing.assert_close(params[k].detach(), before[k][keep])
+        torch.testing.assert_close(moments(opts, k)[1], m_before[k][keep])
+    adam_step(params, opts)
+    assert_consistent(params, opts, 7)
+
+
+def test_split_children_scale_and_placement():
+    params, opts = make_params(8)
+    before = snapshot(params)
+    mask = torch.zeros(8, dtype=torch.bool)
+    mask[[2, 3, 6]] = True
+    rest = [i for i in range(8) if not mask[i]]
+    gen = torch.Generator().manual_seed(0)
+    assert ops.split(params, opts, mask, n=2, generator=gen) == 3
+    assert_consistent(params, opts, 5 + 6)
+    # the others keep their order, the children ([2, M] child-major) follow
+    for k in params:
+        torch.testing.assert_close(params[k].detach()[:5], before[k][rest])
+    parents = torch.tensor([2, 3, 6, 2, 3, 6])
+    torch.testing.assert_close(params["log_scales"].detach()[5:], before["log_scales"][parents] - math.log(1.6))
+    for k in ("quats", "opacity_logits", "sh_dc", "sh_rest"):
+        torch.testing.assert_close(params[k].detach()[5:], before[k][parents])
+    for k in params:
+        m, v = moments(opts, k)
+        assert (m[5:] == 0).all() and (v[5:] == 0).all()
+    # each child lies within a few parent standard deviations of its parent
+    offsets = params["means"].detach()[5:] - before["means"][parents]
+    rot = ops.quat_to_rotmat(before["quats"][parents])
+    local = torch.einsum("mji,mj->mi", rot, offsets) / torch.exp(before["log_scales"][parents])
+    assert (local.abs() < 6).all() and (offsets.abs() > 0).all()
+
+
+def test_split_children_follow_the_parent_gaussian():
+    """Many children of one anisotropic, rotated parent: their mean is the parent's mean
+    and their covariance the parent's covariance R diag(s^2) R^T."""
+    params, opts = make_params(1)
+    with torch.no_grad():
+        params["log_scales"].copy_(torch.log(torch.tensor([[0.5, 0.2, 0.05]])))
+        params["quats"].copy_(torch.tensor([[0.9, 0.3, -0.2, 0.4]]))
+    before = snapshot(params)
+    n = 20_000
+    ops.split(params, opts, torch.ones(1, dtype=torch.bool), n=n, generator=torch.Generator().manual_seed(1))
+    assert_consistent(params, opts, n)
+    x = params["means"].detach().double()
+    torch.testing.assert_close(x.mean(0), before["means"][0].double(), atol=0.02, rtol=0)
+    cov = torch.cov(x.T)
+    want = ops.covariances(before["log_scales"], before["quats"])[0].double()
+    torch.testing.assert_close(cov, want, atol=0.01, rtol=0.05)
+    torch.testing.assert_close(params["log_scales"].detach()[0], before["log_scales"][0] - math.log(0.8 * n))
+
+
+def test_reset_opacity_clamps_and_zeroes_moments():
+    params, opts = make_params(50, opacity=0.3)
+    with torch.no_grad():
+        params["opacity_logits"][:5] = -8.0  # already below 0.01: unchanged
+    before = snapshot(params)
+    step_before = next(iter(opts["opacity_logits"].state.values()))["step"].clone()
+    means_m = moments(opts, "means")[0].clone()
+    ops.reset_opacity(params, opts, 0.01)
+    assert_consistent(params, opts, 50)
+    o = torch.sigmoid(params["opacity_logits"].detach())
+    assert (o <= 0.01 + 1e-6).all()
+    torch.testing.assert_close(params["opacity_logits"].detach()[:5], before["opacity_logits"][:5])
+    m, v = moments(opts, "opacity_logits")
+    assert (m == 0).all() and (v == 0).all()
+    assert next(iter(opts["opacity_logits"].state.values()))["step"] == step_before
+    torch.testing.assert_close(moments(opts, "means")[0], means_m)  # other groups untouched
+    for k in PARAM_GROUPS[:3]:
+        torch.testing.assert_close(params[k].detach(), before[k])
+
+
+def test_ops_on_groups_without_state_or_optimizer():
+    """A frozen group (no optimizer) and an optimizer that has not stepped yet."""
+    params, opts = make_params(6)
+    params["sh_rest"] = torch.nn.Parameter(torch.zeros(6, 0, 3), requires_grad=False)  # degree 0, frozen
+    del opts["sh_rest"]
+    opts["sh_dc"] = torch.optim.Adam([params["sh_dc"]], lr=1e-3)  # no state yet
+    ops.duplicate(params, opts, torch.tensor([1, 0, 0, 0, 0, 1], dtype=torch.bool))
+    assert params["sh_rest"].shape == (8, 0, 3) and not params["sh_rest"].requires_grad
+    assert opts["sh_dc"].param_groups[0]["params"][0] is params["sh_dc"] and not opts["sh_dc"].state
+    ops.remove(params, opts, torch.tensor([1] + [0] * 7, dtype=torch.bool))
+    assert all(p.shape[0] == 7 for p in params.values())
+
+
+def test_ops_reject_bad_masks_and_foreign_optimizers():
+    params, opts = make_params(5)
+    with pytest.raises(InputError, match=r"bool mask of shape \[5\]"):
+        ops.remove(params, opts, torch.zeros(4, dtype=torch.bool))
+    opts["means"] = torch.optim.Adam([torch.nn.Parameter(torch.zeros(5, 3))])
+    with pytest.raises(InputError, match="does not hold"):
+        ops.remove(params, opts, torch.ones(5, dtype=torch.bool))
+
+
+# ---------------------------------------------------------------------------
+# default / absgrad
+
+def grow_setup(n=20, extent=2.0):
+    """Gaussians 0..9 small (max scale 0.005 x extent), 10..19 large (0.05 x extent);
+    high gradient for {0, 1, 2} (small) and {10, 11, 12, 13} (large)."""
+    params, opts = make_params(n, opacity=0.5)
+    with torch.no_grad():
+        params["log_scales"][:10] = math.log(0.005 * extent)
+        params["log_scales"][10:] = math.log(0.05 * extent)
+        params["log_scales"][:, 1:] -= 1.0  # anisotropic; the max is component 0
+    strat = DefaultStrategy(grad_threshold=2e-4)
+    state = strat.initialize_state(params)
+    high = [0, 1, 2, 10, 11, 12, 13]
+    state.count[:] = 4
+    state.grad_accum[:] = 4 * 1e-4
+    state.grad_accum[high] = 4 * 2e-4  # exactly at the threshold (>=)
+    return params, opts, strat, state, extent
+
+
+def test_default_refine_clone_and_split_counts():
+    params, opts, strat, state, extent = grow_setup()
+    before = snapshot(params)
+    stats = strat.refine(params, opts, state, step=599, scene_extent=extent)
+    assert (stats.cloned, stats.split, stats.pruned) == (3, 4, 0)
+    assert params["means"].shape[0] == 20 + 3 + 4 == stats.num_gaussians
+    assert_consistent(params, opts)
+    # survivors: 0..9, 14..19 in order, then the 3 clones, then the 8 children
+    rest = [i for i in range(20) if i not in (10, 11, 12, 13)]
+    torch.testing.assert_close(params["means"].detach()[:16], before["means"][rest])
+    torch.testing.assert_close(params["means"].detach()[16:19], before["means"][[0, 1, 2]])
+    torch.testing.assert_close(params["log_scales"].detach()[19:],
+                               before["log_scales"][[10, 11, 12, 13] * 2] - math.log(1.6))
+    assert state.count.shape == (27,) and (state.count == 0).all() and (state.grad_accum == 0).all()
+
+
+def test_default_prune_counts():
+    params, opts, strat, state, extent = grow_setup()
+    with torch.no_grad():
+        params["opacity_logits"][[5, 6]] = -6.0      # transparent (< 0.005)
+        params["log_scales"][17] = math.log(0.2 * extent)  # too large in the world (> 0.1 x extent)
+    state.max_radii[:] = 5
+    state.max_radii[[8, 12]] = 25  # too large on screen; 12 is split instead, its children kept
+    # before the first opacity reset only opacity prunes (on a copy)
+    p2 = {k: torch.nn.Parameter(v.detach().clone()) for k, v in params.items()}
+    o2 = {k: torch.optim.Adam([p], lr=1e-3) for k, p in p2.items()}
+    s2 = strat.initialize_state(p2)
+    s2.count[:], s2.grad_accum[:], s2.max_radii[:] = state.count, state.grad_accum, state.max_radii
+    early = strat.refine(p2, o2, s2, step=1000, scene_extent=extent)
+    assert (early.cloned, early.split, early.pruned) == (3, 4, 2)
+    # after it: also screen size (8) and world size (17)
+    late = strat.refine(params, opts, state, step=3100, scene_extent=extent)
+    assert (late.cloned, late.split, late.pruned) == (3, 4, 4)
+    assert params["means"].shape[0] == 20 + 3 + 4 - 4
+    assert_consistent(params, opts)
+    # screen-size pruning can be switched off
+    p3 = {k: torch.nn.Parameter(v.detach().clone()) for k, v in grow_setup()[0].items()}
+    o3 = {k: torch.optim.Adam([p]) for k, p in p3.items()}
+    off = DefaultStrategy(max_screen_size=0, max_world_size=0)
+    s3 = off.initialize_state(p3)
+    s3.max_radii[:] = 1000
+    assert off.refine(p3, o3, s3, step=5000, scene_extent=extent).pruned == 0
+
+
+def test_default_accumulates_ndc_gradient_of_visible_views():
+    params, opts = make_params(4)
+    strat = DefaultStrategy(refine_start=0, refine_every=1000)
+    state = strat.initialize_state(params)
+    W, H = 64, 32
+    grad = torch.tensor([[1e-5, 0.0], [0.0, 1e-5], [3e-6, 4e-6], [1.0, 1.0]])
+    visible = torch.tensor([True, True, True, False])
+    strat.post_backward(params, opts, state, ctx(10, fake_info(grad, visible=visible, width=W, height=H)))
+    strat.post_backward(params, opts, state, ctx(11, fake_info(2 * grad, visible=visible, width=W, height=H)))
+    want = torch.tensor([1e-5 * W / 2, 1e-5 * H / 2, math.hypot(3e-6 * W / 2, 4e-6 * H / 2), 0.0]) * 3
+    torch.testing.assert_close(state.grad_accum, want)
+    torch.testing.assert_close(state.count, torch.tensor([2.0, 2.0, 2.0, 0.0]))
+    torch.testing.assert_close(state.max_radii, torch.tensor([3.0, 3.0, 3.0, 0.0]))
+
+
+def test_absgrad_uses_the_absolute_gradient_and_its_threshold():
+    strat = make_strategy("absgrad")
+    assert strat.name == "absgrad" and strat.absgrad and strat.grad_threshold == 8e-4
+    assert make_strategy("default").absgrad is False and make_strategy("mcmc").absgrad is False
+    params, opts = make_params(3)
+    state = strat.initialize_state(params)
+    grad, absgrad = torch.zeros(3, 2), torch.tensor([[1e-4, 0.0], [0.0, 0.0], [0.0, 2e-4]])
+    strat.post_backward(params, opts, state, ctx(0, fake_info(grad, absgrad_px=absgrad, width=100, height=50)))
+    torch.testing.assert_close(state.grad_accum, torch.tensor([5e-3, 0.0, 5e-3]))
+    with pytest.raises(InputError, match="absgrad=True"):
+        strat.post_backward(params, opts, state, ctx(1, fake_info(grad)))
+    with pytest.raises(InputError, match="means2d_grad is None"):
+        make_strategy("default").post_backward(params, opts, state, ctx(1, fake_info(None, n=3)))
+
+
+def test_default_schedule():
+    """Refine at it = step + 1 in (refine_start, refine_stop) with it % refine_every == 0,
+    opacity reset at it % reset_every == 0, nothing from refine_stop on."""
+    params, opts = make_params(30, opacity=0.5)
+    strat = DefaultStrategy(refine_start=4, refine_stop=20, refine_every=4, reset_every=12, grad_threshold=1e9)
+    state = strat.initialize_state(params)
+    resets = []
+    for step in range(30):
+        o_before = torch.sigmoid(params["opacity_logits"].detach()).max().item()
+        n = params["means"].shape[0]
+        strat.post_backward(params, opts, state, ctx(step, fake_info(torch.zeros(n, 2))))
+        if torch.sigmoid(params["opacity_logits"].detach()).max().item() < o_before - 1e-3:
+            resets.append(step)
+            with torch.no_grad():
+                params["opacity_logits"].add_(5.0)
+    assert [s.step for s in state.history] == [7, 11, 15]
+    assert resets == [11]
+
+
+def test_default_early_stop_on_loss_plateau():
+    params, opts = make_params(10)
+    strat = make_strategy("default", refine_start=0, refine_every=5, early_stop=True, early_stop_rel_tol=0.01,
+                          early_stop_patience=2, grad_threshold=1e9)
+    state = strat.initialize_state(params)
+    for step in range(100):
+        loss = 1.0 / (1 + step) if step < 30 else 1.0 / 31  # falls, then flat
+        strat.post_backward(params, opts, state, ctx(step, fake_info(torch.zeros(10, 2)), loss=loss))
+    assert state.stopped and state.plateau.stopped_at == 44
+    # intervals ending at 34 (first flat one, still 9 % lower) and 39 (1st miss) refine; 44 (2nd miss) stops
+    assert [s.step for s in state.history] == [4, 9, 14, 19, 24, 29, 34, 39]
+    # off by default: it never stops
+    plain = make_strategy("default", refine_start=0, refine_every=5, grad_threshold=1e9)
+    s2 = plain.initialize_state(params)
+    for step in range(100):
+        plain.post_backward(params, opts, s2, ctx(step, fake_info(torch.zeros(10, 2)), loss=0.5))
+    assert not s2.stopped and len(s2.history) == 20  # it = 5, 10, ..., 100
+
+
+# ---------------------------------------------------------------------------
+# MCMC
+
+def naive_relocation(o: float, s: float, n: int) -> tuple[float, float]:
+    """The paper's formula, summed literally (float64)."""
+    new_o = 1 - (1 - o) ** (1 / n)
+    denom = sum(math.comb(i - 1, k) * (-1) ** k / math.sqrt(k + 1) * new_o ** (k + 1)
+                for i in range(1, n + 1) for k in range(i))
+    return new_o, o / denom * s
+
+
+def test_compute_relocation_matches_the_formula():
+    g = torch.Generator().manual_seed(0)
+    o = torch.rand(40, generator=g, dtype=torch.float64) * 0.98 + 0.01
+    s = torch.rand(40, 3, generator=g, dtype=torch.float64) + 0.1
+    r = torch.randint(1, 30, (40,), generator=g)
+    new_o, new_s = ops.compute_relocation(o, s, r)
+    for i in range(40):
+        want_o, want_s = naive_relocation(o[i].item(), s[i, 0].item(), int(r[i]))
+        assert new_o[i].item() == pytest.approx(want_o, rel=1e-9)
+        assert new_s[i, 0].item() == pytest.approx(want_s, rel=1e-6)
+    # r copies of opacity new_o composite to the original opacity; r = 1 is the identity
+    torch.testing.assert_close(1 - (1 - new_o) ** r, o)
+    one_o, one_s = ops.compute_relocation(o, s, torch.ones(40, dtype=torch.long))
+    torch.testing.assert_close(one_o, o)
+    torch.testing.assert_close(one_s, s)
+
+
+def test_relocate_keeps_count_and_revives_the_dead():
+    params, opts = make_params(40, opacity=0.5)
+    dead = torch.zeros(40, dtype=torch.bool)
+    dead[[3, 7, 8, 20, 33]] = True
+    with torch.no_grad():
+        params["opacity_logits"][dead] = -10.0
+    before = snapshot(params)
+    gen = torch.Generator().manual_seed(0)
+    assert ops.relocate(params, opts, dead, min_opacity=0.005, generator=gen) == 5
+    assert_consistent(params, opts, 40)
+    after = snapshot(params)
+    assert (torch.sigmoid(after["opacity_logits"]) > 0.005).all()
+    # each relocated row is a copy of a live row (the source, with its corrected opacity and scale)
+    for d in torch.where(dead)[0]:
+        src = [i for i in torch.where(~dead)[0] if torch.equal(after["means"][i], after["means"][d])]
+        assert src, f"row {int(d)} is no copy of a live Gaussian"
+        for k in PARAM_GROUPS:
+            torch.testing.assert_close(after[k][d], after[k][src[0]])
+        for k in PARAM_GROUPS:
+            m, v = moments(opts, k)
+            assert (m[d] == 0).all() and (m[src[0]] == 0).all()
+    # untouched rows are unchanged, sources lost opacity (shared with their copies)
+    changed = (after["opacity_logits"] != before["opacity_logits"]) & ~dead
+    assert changed.any() and (after["opacity_logits"][changed] < before["opacity_logits"][changed]).all()
+    untouched = ~changed & ~dead
+    torch.testing.assert_close(after["means"][untouched], before["means"][untouched])
+
+
+def test_mcmc_refine_adds_five_percent_up_to_the_cap():
+    params, opts = make_params(100)
+    strat = MCMCStrategy(cap_max=1000)
+    state = strat.initialize_state(params)
+    assert strat.refine(params, opts, state, 600).added == 5
+    assert params["means"].shape[0] == 105
+    assert_consistent(params, opts, 105)
+    capped = MCMCStrategy(cap_max=107)
+    assert capped.refine(params, opts, state, 700).added == 2
+    assert capped.refine(params, opts, state, 800).added == 0
+    assert params["means"].shape[0] == 107
+    m, v = moments(opts, "sh_dc")
+    assert (m[100:] == 0).all() and (v[100:] == 0).all()
+    adam_step(params, opts)
+    assert_consistent(params, opts, 107)
+
+
+def test_mcmc_relocates_then_adds_on_schedule():
+    params, opts = make_params(60)
+    with torch.no_grad():
+        params["opacity_logits"][:6] = -9.0
+    strat = make_strategy("mcmc", refine_start=2, refine_every=3, refine_stop=10, cap_max=64)
+    state = strat.initialize_state(params)
+    for step in range(12):
+        strat.post_backward(params, opts, state, ctx(step))
+    assert [(s.step, s.relocated, s.added) for s in state.history] == [(2, 6, 3), (5, 0, 1), (8, 0, 0)]
+    assert params["means"].shape[0] == 64
+    assert_consistent(params, opts, 64)
+
+
+def test_mcmc_early_stop_keeps_the_noise():
+    params, opts = make_params(50)
+    strat = make_strategy("mcmc", refine_start=0, refine_every=5, early_stop=True, early_stop_patience=1,
+                          cap_max=10_000)
+    state = strat.initialize_state(params)
+    for step in range(30):
+        strat.post_backward(params, opts, state, ctx(step, loss=1.0 if step < 5 else 0.5))
+    # intervals ending at 4 (the first), 9 (50 % lower) refine; 14 (flat) stops
+    assert [s.step for s in state.history] == [4, 9] and state.stopped and state.plateau.stopped_at == 14
+    assert (state.last_noise != 0).any()
+
+
+def test_mcmc_noise_is_zero_for_opaque_gaussians():
+    params, opts = make_params(20, opacity=0.5)
+    with torch.no_grad():
+        params["opacity_logits"][:10] = 10.0   # opaque
+        params["opacity_logits"][10:] = -7.0   # nearly transparent (0.0009)
+        params["log_scales"][:] = math.log(0.1)
+    before = params["means"].detach().clone()
+    strat = MCMCStrategy(refine_start=10**9)
+    state = strat.initialize_state(params)
+    strat.post_backward(params, opts, state, ctx(0, means_lr=1e-3))
+    delta = params["means"].detach() - before
+    torch.testing.assert_close(delta, state.last_noise)
+    assert delta[:10].abs().max() < 1e-30
+    # transparent: ~ 0.01 (= s^2) x means_lr x noise_lr x N(0, 1) = 5 x N(0, 1)
+    assert 0.5 < delta[10:].std() < 20
+    # the noise scales with the means' learning rate
+    strat.post_backward(params, opts, state, ctx(1, means_lr=0.0))
+    assert (state.last_noise == 0).all()
+
+
+def test_mcmc_regularization():
+    params, _ = make_params(30)
+    reg = MCMCStrategy(opacity_reg=0.01, scale_reg=0.02).regularization(params, 0)
+    want = 0.01 * torch.sigmoid(params["opacity_logits"]).mean() + 0.02 * torch.exp(params["log_scales"]).mean()
+    torch.testing.assert_close(reg, want)
+    reg.backward()
+    assert params["opacity_logits"].grad is not None and params["log_scales"].grad is not None
+    assert make_strategy("default").regularization(params, 0) == 0.0
+    assert make_strategy("none").regularization(params, 0) == 0.0
+
+
+# ---------------------------------------------------------------------------
+# Determinism, none, registry
+
+def run_strategy(name: str, seed: int, **fields):
+    params, opts = make_params(40, seed=5)
+    strat = make_strategy(name, seed=seed, refine_start=0, refine_every=3, **fields)
+    state = strat.initialize_state(params)
+    g = torch.Generator().manual_seed(9)
+    for step in range(10):
+        n = params["means"].shape[0]
+        info = fake_info(torch.randn(n, 2, generator=g) * 1e-5, absgrad_px=torch.rand(n, 2, generator=g) * 4e-5)
+        strat.post_backward(params, opts, state, ctx(step, info, extent=5.0))
+        adam_step(params, opts, step)
+    return snapshot(params)
+
+
+@pytest.mark.parametrize("name", ["default", "absgrad", "mcmc"])
+def test_same_seed_same_tensors(name):
+    a, b, c = run_strategy(name, 1), run_strategy(name, 1), run_strategy(name, 2)
+    assert a["means"].shape[0] > 40  # something was added
+    for k in PARAM_GROUPS:
+        assert torch.equal(a[k], b[k]), k
+    assert a["means"].shape != c["means"].shape or not torch.equal(a["means"], c["means"])
+
+
+def test_none_is_a_no_op():
+    params, opts = make_params(10)
+    before = snapshot(params)
+    strat = make_strategy("none")
+    state = strat.initialize_state(params)
+    for step in range(5):
+        strat.pre_backward(params, opts, state, ctx(step))
+        strat.post_backward(params, opts, state, ctx(step))
+    for k in PARAM_GROUPS:
+        assert torch.equal(params[k].detach(), before[k])
+    assert strat.name == "none" and strategy_fields("none") == ()
+
+
+@pytest.mark.parametrize("name, overrides, match", [
+    ("nope", {}, "unknown name 'nope'"),
+    ("default", {"grad_thresh": 1e-4}, "unknown field 'grad_thresh'"),
+    ("mcmc", {"absgrad": True}, "unknown field 'absgrad'"),
+    ("none", {"seed": 1}, "unknown field 'seed'"),
+    ("default", {"refine_every": 0}, "refine_every"),
+    ("mcmc", {"cap_max": "many"}, "cap_max"),
+    ("default", {"grad_threshold": -1.0}, "grad_threshold"),
+    ("absgrad", {"reset_value": 1.5}, "reset_value"),
+])
+def test_registry_errors_are_one_line(name, overrides, match):
+    with pytest.raises(InputError, match=match) as exc:
+        make_strategy(name, **overrides)
+    assert "\n" not in str(exc.value)
+
+
+def test_registry_presets_and_overrides():
+    assert make_strategy("default") == DefaultStrategy()
+    assert make_strategy("absgrad", grad_threshold=1e-3) == DefaultStrategy(absgrad=True, grad_threshold=1e-3)
+    assert make_strategy("mcmc", cap_max=5000).cap_max == 5000
+    assert "cap_max" in strategy_fields("mcmc") and "absgrad" in strategy_fields("default")
+
+
+# ---------------------------------------------------------------------------
+# With the rasterizer
+
+@pytest.mark.parametrize("name", ["default", "absgrad", "mcmc"])
+def test_training_steps_through_the_rasterizer(name):
+    """A few real optimisation steps: rasterize, backward, Adam, post_backward, with
+    densification every other step; shapes stay consistent and Adam keeps working."""
+    import splatbench
+    from splatbench.workloads import synthetic
+
+    scene = synthetic(200, 32, 24, seed=2)
+    g = scene.gaussians
+    params = {
+        "means": torch.tensor(g.means), "log_scales": torch.tensor(g.log_scales), "quats": torch.tensor(g.quats),
+        "opacity_logits": torch.tensor(g.opacity_logits), "sh_dc": torch.tensor(g.sh[:, :1]),
+        "sh_rest": torch.tensor(g.sh[:, 1:]),
+    }
+    params = {k: torch.nn.Parameter(v.float().contiguous()) for k, v in params.items()}
+    opts = {k: torch.optim.Adam([p], lr=1e-3, eps=1e-15) for k, p in params.items()}
+    strat = make_strategy(name, refine_start=0, refine_every=2, **({"grad_threshold": 1e-6} if name != "mcmc"
+                                                                     else {"cap_max": 260}))
+    state = strat.initialize_state(params)
+    target = torch.full((24, 32, 3), 0.5)
+    counts = []
+    for step in range(6):
+        sh = torch.cat([params["sh_dc"], params["sh_rest"]], dim=1)
+        rgb, _, _, info = splatbench.rasterize(params["means"], params["log_scales"], params["quats"],
+                                               params["opacity_logits"], sh, scene.camera, absgrad=strat.absgrad)
+        strat.pre_backward(params, opts, state, ctx(step, info))
+        loss = (rgb - target).abs().mean() + strat.regularization(params, step)
+        loss.backward()
+        for opt in opts.values():
+            opt.step()
+            opt.zero_grad(set_to_none=True)
+        strat.post_backward(params, opts, state, ctx(step, info, extent=2.0, means_lr=1e-3, loss=loss.item()))
+        assert_consistent(params, opts)
+        counts.append(params["means"].shape[0])
+    assert counts[-1] > 200, counts
