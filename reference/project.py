@@ -80,20 +80,24 @@ def _sigmoid(x):
 # 3D covariance
 # ----------------------------------------------------------------------------
 
+QUAT_MIN = 1e-20  # conventions.md: smaller quaternions count as zero
+
+
 def quat_to_rotmat(quats):
     """Rotation matrices from quaternions of any length (mirrors splatbench's quaternion activation).
 
     Args:
         quats: [N, 4] (w, x, y, z), finite, any length. Normalised overflow-safely as
-            ``q' = q / max|q_i|`` then ``q' / |q'|``; a zero quaternion gives ``q̂ = 0``,
-            which the formula below maps to the identity.
+            ``q' = q / max|q_i|`` then ``q' / |q'|``; a quaternion with max|q_i| < 1e-20
+            counts as zero, and a zero quaternion gives ``q̂ = 0``, which the formula
+            below maps to the identity.
 
     Returns:
         R: [N, 3, 3] float64.
     """
     q = _as_array("quats", quats, (None, 4), {})
     biggest = np.max(np.abs(q), axis=1, keepdims=True)  # [N, 1]
-    q = np.divide(q, biggest, out=np.zeros_like(q), where=biggest > 0)
+    q = np.divide(q, biggest, out=np.zeros_like(q), where=biggest >= QUAT_MIN)
     length = np.sqrt(np.sum(q * q, axis=1, keepdims=True))  # in [1, 2] unless q == 0
     q = np.divide(q, length, out=np.zeros_like(q), where=length > 0)
     w, x, y, z = q.T

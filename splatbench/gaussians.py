@@ -23,19 +23,23 @@ SH_C0 = 0.28209479177387814
 LOG_SCALE_CLIP = 20.0
 
 
+QUAT_MIN = 1e-20  # docs/conventions.md: smaller quaternions count as zero
+
+
 def normalize_quats(quats: np.ndarray) -> np.ndarray:
     """Unit quaternions [N, 4] by the overflow-safe rule of conventions.md.
 
-    ``q' = q / max|q_i|`` then ``q'/|q'|``, so 1e30 components do not overflow; a zero
-    quaternion gives zeros (which `quat_to_rotmat` maps to the identity). The result
-    has the dtype of ``quats``.
+    ``q' = q / max|q_i|`` then ``q'/|q'|``, so 1e30 components do not overflow; a
+    quaternion with max|q_i| < QUAT_MIN counts as zero, and a zero quaternion gives
+    zeros (which `quat_to_rotmat` maps to the identity). The result has the dtype
+    of ``quats``.
     """
     q = np.asarray(quats)
     peak = np.max(np.abs(q), axis=-1, keepdims=True)
-    safe_peak = np.where(peak > 0, peak, 1)
-    scaled = q / safe_peak
+    keep = peak >= QUAT_MIN
+    scaled = np.where(keep, q / np.where(keep, peak, 1), 0)
     norm = np.sqrt(np.sum(scaled * scaled, axis=-1, keepdims=True))
-    return np.where(peak > 0, scaled / np.where(norm > 0, norm, 1), 0).astype(q.dtype, copy=False)
+    return np.where(keep, scaled / np.where(norm > 0, norm, 1), 0).astype(q.dtype, copy=False)
 
 
 def quat_to_rotmat(unit_quats: np.ndarray) -> np.ndarray:

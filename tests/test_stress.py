@@ -25,17 +25,10 @@ from splatbench import InputError
 from splatbench.cli import main
 from splatbench.stress import CATEGORIES, FIELDS, StressCase, build_case, run, run_case
 from splatbench.stress import runner as stress_runner
+from splatbench.raster.pipeline import SH_ABS_MAX
 from splatbench.stress.cases import nonfinite
 
-# Known rasterizer bugs found by this test. TEMPORARY: each has a strict xfail below
-# that must be removed (and the category put back into the property) once fixed.
-TINY_QUATS_BUG = ("rasterizer bug (docs/stress.md): quaternion normalisation backward overflows "
-                  "(d(1/max|q_i|) = -1/max|q_i|^2) for 0 < max|q_i| < ~5e-20: Inf/NaN quats gradients")
-HUGE_SH_BUG = ("contract gap (docs/stress.md): |sh| ~ 3e38 (finite) gives Inf log_scales gradients; the true "
-               "gradient exceeds float32, so conventions.md needs a domain bound or the boundary a check")
-KNOWN_BUGS = {"tiny_quats": TINY_QUATS_BUG}
-CLEAN_CATEGORIES = tuple(c for c in CATEGORIES if c not in KNOWN_BUGS)
-FINITE_CATEGORIES = tuple(c for c in CLEAN_CATEGORIES if c != "nonfinite")
+FINITE_CATEGORIES = tuple(c for c in CATEGORIES if c != "nonfinite")
 SEED = 20240611
 
 
@@ -50,12 +43,12 @@ def assert_contract(case: StressCase, device: str | None = None) -> stress_runne
 
 # ------------------------------------------------------------- hypothesis
 @settings(max_examples=20, deadline=None)
-@given(category=st.sampled_from(CLEAN_CATEGORIES), seed=st.integers(0, 2**31 - 1))
+@given(category=st.sampled_from(CATEGORIES), seed=st.integers(0, 2**31 - 1))
 def test_random_cases_keep_the_contract(category, seed):
     assert_contract(build_case(category, seed))
 
 
-# Any finite float32, except the two ranges known to fail (see KNOWN_BUGS, HUGE_SH_BUG).
+# Any finite float32 at all, in any field.
 finite32 = st.floats(allow_nan=False, allow_infinity=False, width=32)
 
 
@@ -63,23 +56,18 @@ finite32 = st.floats(allow_nan=False, allow_infinity=False, width=32)
 @given(category=st.sampled_from(FINITE_CATEGORIES), seed=st.integers(0, 2**31 - 1),
        field=st.sampled_from(FIELDS), where=st.integers(0, 2**31 - 1), value=finite32)
 def test_any_finite_entry_keeps_outputs_and_gradients_finite(category, seed, field, where, value):
-    if field == "sh":
-        value = float(np.clip(value, -1e30, 1e30))
-    if field == "quats" and 0 < abs(value) < 1e-19:
-        value = 0.0
     case = build_case(category, seed)
     array = getattr(case, field).copy()
     array.reshape(-1)[where % array.size] = value
-    if field == "quats":  # the whole quaternion must avoid the known bug, not just this entry
-        row = array[(where % array.size) // 4]
-        row[np.abs(row) < 1e-19] = 0.0
-    assert_contract(dataclasses.replace(case, **{field: array}))
+    case = dataclasses.replace(case, **{field: array})
+    if field == "sh" and abs(value) > SH_ABS_MAX:  # outside the input domain: rejected
+        assert_sh_rejected(case)
+    else:
+        assert_contract(case)
 
 
 # ------------------------------------------------------------- per category
-@pytest.mark.parametrize("category", [
-    pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=KNOWN_BUGS[c])) if c in KNOWN_BUGS else c
-    for c in CATEGORIES])
+@pytest.mark.parametrize("category", CATEGORIES)
 def test_category_fixed_seed(category):
     for seed in (SEED, SEED + 1):
         result = assert_contract(build_case(category, seed))
@@ -117,18 +105,42 @@ def test_cases_are_deterministic():
             np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
 
 
-# ------------------------------------------------------------- known bugs (TEMPORARY)
-@pytest.mark.xfail(strict=True, reason=HUGE_SH_BUG)
-def test_huge_sh_gradients_stay_finite():
-    cam = splatbench.Camera(32, 24, 30.0, 30.0, 16.0, 12.0, np.eye(4))
-    params = [torch.tensor(a, requires_grad=True) for a in (
-        np.array([[0.1, 0.05, 3.0]], np.float32), np.array([[-2.0, -3.0, -2.5]], np.float32),
-        np.array([[0.8, 0.4, -0.2, 0.4]], np.float32), np.array([1.0], np.float32),
-        np.full((1, 1, 3), 3e38, np.float32))]
-    rgb, alpha, depth, _ = splatbench.rasterize(*params, cam)
-    v = torch.from_numpy(np.random.default_rng(0).standard_normal((24, 32, 3)).astype(np.float32))
-    ((rgb * v).sum() + alpha.sum() + depth.sum()).backward()
-    assert all(bool(torch.isfinite(p.grad).all()) for p in params)
+# ------------------------------------------------------------- input domain
+def assert_sh_rejected(case: StressCase) -> None:
+    params = [torch.tensor(a, requires_grad=True) for a in case.params]
+    with pytest.raises(InputError, match=r"^sh: \|value\| .* exceeds the supported range") as info:
+        splatbench.rasterize(*params, case.camera)
+    assert "\n" not in str(info.value)
+
+
+def test_huge_sh_is_rejected_naming_the_field():
+    """|sh| ~ 3e38 is finite, but its true gradients exceed float32: outside the input
+    domain (conventions.md), so rejected in one line instead of producing Inf."""
+    case = build_case("needles", SEED)
+    sh = case.sh.copy()
+    sh[0, 0, 1] = 3e38
+    assert_sh_rejected(dataclasses.replace(case, sh=sh))
+    g = dataclasses.replace(case, sh=sh)
+    with pytest.raises(InputError, match=r"^sh: \|value\| 3e\+38 at index \[0, 0, 1\]"):
+        splatbench.render(splatbench.Gaussians(*g.params), g.camera)
+
+
+def test_tiny_quaternions_count_as_zero_with_zero_gradient():
+    """max|q_i| < 1e-20 is treated as the zero quaternion (identity): same image, and a
+    zero (not Inf/NaN) gradient, since the true one, ~1/|q|, would overflow float32."""
+    case = build_case("needles", SEED)
+    tiny = case.quats.copy()
+    tiny[0] = [8e-21, 4e-21, -2e-21, 4e-21]
+    zero = case.quats.copy()
+    zero[0] = 0.0
+    images = []
+    for quats in (tiny, zero):
+        params = [torch.tensor(a, requires_grad=True) for a in dataclasses.replace(case, quats=quats).params]
+        rgb, _, _, _ = splatbench.rasterize(*params, case.camera)
+        rgb.sum().backward()
+        assert torch.isfinite(params[2].grad).all() and (params[2].grad[0] == 0).all()
+        images.append(rgb.detach())
+    torch.testing.assert_close(images[0], images[1], rtol=0, atol=0)
 
 
 # ------------------------------------------------------------- CLI

@@ -8,7 +8,8 @@ import numpy as np
 
 from splatbench.raster.backend import dr, get_backend
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import check_background, frame_to_numpy, render_frame, resolve_sh_degree
+from splatbench.raster.pipeline import (check_background, check_sh_range, frame_to_numpy, render_frame,
+                                       resolve_sh_degree)
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,9 @@ def render(gaussians, camera, *, sh_degree: int | None = None, background=(0.0, 
     """
     opts = RasterOptions.from_kwargs(**options)
     degree = resolve_sh_degree(gaussians.sh.shape[1], sh_degree)
+    if gaussians.sh.size:
+        flat = int(np.argmax(np.abs(gaussians.sh)))
+        check_sh_range(float(np.abs(gaussians.sh).flat[flat]), np.unravel_index(flat, gaussians.sh.shape))
     bg = check_background(background)
     backend = get_backend(opts.device)
     m = backend.t

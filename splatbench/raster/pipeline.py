@@ -16,6 +16,16 @@ from splatbench.raster.sh import eval_sh
 from splatbench.raster.timing import StageTimer
 
 SH_BASES = {1: 0, 4: 1, 9: 2, 16: 3}
+# Input domain (docs/conventions.md): larger SH coefficients make the true gradients
+# exceed float32, so they are rejected at the boundary rather than turned into Inf.
+SH_ABS_MAX = 1e6
+
+
+def check_sh_range(largest: float, where) -> None:
+    """Raise `InputError` when the largest |sh| coefficient exceeds `SH_ABS_MAX`."""
+    if largest > SH_ABS_MAX:
+        raise InputError(f"sh: |value| {largest:.3g} at index {[int(i) for i in where]} exceeds the supported "
+                         f"range {SH_ABS_MAX:g}")
 
 
 class Frame(NamedTuple):

@@ -22,6 +22,7 @@ from splatbench.raster.backend import dr
 LOG_SCALE_CLIP = 20.0        # exp(20)^2 * J^2 stays finite in float32 for any sane camera
 MAX_EXTENT_FACTOR = 1e4      # cull a Gaussian whose 2D std exceeds 1e4 image sizes
 JACOBIAN_CLAMP = 0.3         # graphdeco's guard band (fraction of the half field of view)
+QUAT_MIN = 1e-20             # smaller quaternions count as zero: their gradient ~1/|q| overflows float32
 
 
 class Projection(NamedTuple):
@@ -75,11 +76,14 @@ def quat_to_rotmat(w, x, y, z):
     """Rotation matrix of the normalised quaternion (w, x, y, z); a zero quaternion gives I.
 
     Normalised as q / max|q_i| first so that components up to float32's maximum do
-    not overflow when squared.
+    not overflow when squared. The prescale is detached: q / |q| does not depend on
+    it, and differentiating 1 / max|q_i| would overflow for tiny quaternions. A
+    quaternion with max|q_i| < QUAT_MIN counts as zero (R = I, zero gradient): its
+    true gradient, ~1 / |q|, would not fit in float32 (docs/conventions.md).
     """
     big = dr.maximum(dr.maximum(dr.abs(w), dr.abs(x)), dr.maximum(dr.abs(y), dr.abs(z)))
-    nonzero = big > 0
-    inv_big = 1.0 / dr.select(nonzero, big, 1.0)
+    nonzero = dr.detach(big) >= QUAT_MIN
+    inv_big = dr.detach(1.0 / dr.select(nonzero, big, 1.0))
     w, x, y, z = w * inv_big, x * inv_big, y * inv_big, z * inv_big
     norm = dr.safe_sqrt(w * w + x * x + y * y + z * z)
     inv = dr.select(nonzero, 1.0 / dr.select(nonzero, norm, 1.0), 0.0)

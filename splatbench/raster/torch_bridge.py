@@ -16,7 +16,7 @@ import torch
 from splatbench.errors import InputError
 from splatbench.raster.backend import dr, get_backend
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import Frame, check_background, render_frame, resolve_sh_degree
+from splatbench.raster.pipeline import Frame, check_background, check_sh_range, render_frame, resolve_sh_degree
 from splatbench.validate import check_finite, check_shape
 
 PARAMS = ("means", "log_scales", "quats", "opacity_logits", "sh")
@@ -141,6 +141,9 @@ def rasterize(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree
     _check("sh", sh, ("N", None, 3), sizes)
     opts = RasterOptions.from_kwargs(**options)
     degree = resolve_sh_degree(sh.shape[1], sh_degree)
+    if sh.numel():
+        flat = int(sh.detach().abs().argmax())
+        check_sh_range(float(sh.detach().reshape(-1)[flat].abs()), np.unravel_index(flat, tuple(sh.shape)))
     bg = check_background(background)
     box: list[Frame] = []  # receives the Dr.Jit frame from inside autograd's forward
     rgb, alpha, depth = _Rasterize.apply(means, log_scales, quats, opacity_logits, sh, camera, degree, bg,
