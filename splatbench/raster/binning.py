@@ -98,11 +98,12 @@ def bin_gaussians(proj: Projection, grid: TileGrid) -> Bins:
     sorted_tile = dr.gather(UInt32, tile, order)
 
     # Range of each tile: a pair starts a range where its tile differs from the previous one.
-    idx = dr.arange(UInt32, num_pairs)
+    # P enters the kernel as an opaque value: a literal would compile one kernel per pair count.
+    idx, count = dr.arange(UInt32, num_pairs), dr.opaque(UInt32, num_pairs)
     prev = dr.gather(UInt32, sorted_tile, idx - 1, idx > 0)
-    nxt = dr.gather(UInt32, sorted_tile, idx + 1, idx + 1 < num_pairs)
+    nxt = dr.gather(UInt32, sorted_tile, idx + 1, idx + 1 < count)
     first = (idx == 0) | (prev != sorted_tile)
-    last = (idx + 1 == num_pairs) | (nxt != sorted_tile)
+    last = (idx + 1 == count) | (nxt != sorted_tile)
     tile_start = dr.zeros(UInt32, grid.num_tiles)
     tile_end = dr.zeros(UInt32, grid.num_tiles)
     dr.scatter(tile_start, idx, sorted_tile, first)
