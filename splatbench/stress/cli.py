@@ -10,20 +10,21 @@ import click
 
 from splatbench.stress.cases import CATEGORIES
 
+SHOWN_FAILURES = 5  # failing cases listed per category (all of them go to --json)
+
 
 def format_report(report) -> list[str]:
-    """One line per category, then one per failing case."""
+    """One line per category, then the first failing cases of each."""
     width = max(len(c.category) for c in report.categories)
     lines = [f"{'category':<{width}}  {'cases':>6}  {'culled (Gaussians)':>18}  {'rejected':>8}  "
              f"{'non-finite outputs':>18}  {'non-finite grads':>16}  {'errors':>6}"]
     for c in report.categories:
         lines.append(f"{c.category:<{width}}  {c.cases:>6}  {c.culled:>18}  {c.rejected:>8}  "
                      f"{c.nonfinite_outputs:>18}  {c.nonfinite_grads:>16}  {len(c.errors):>6}")
-    failures = [f for c in report.categories for f in c.failures]
-    for line in failures[:50]:
-        lines.append(f"FAIL {line}")
-    if len(failures) > 50:
-        lines.append(f"... and {len(failures) - 50} more failing cases (see --json)")
+    for c in report.categories:
+        lines += [f"FAIL {line}" for line in c.failures[:SHOWN_FAILURES]]
+        if len(c.failures) > SHOWN_FAILURES:
+            lines.append(f"... and {len(c.failures) - SHOWN_FAILURES} more failing {c.category} cases (see --json)")
     verdict = "ok" if report.ok else "FAILED"
     lines.append(f"{verdict}: {report.cases} cases in {report.seconds:.1f} s (seed {report.seed})")
     return lines
