@@ -11,7 +11,8 @@ Dataset folder (both layouts side by side; see ``scenes/README.md``)::
                                points3D on the true surfaces with their colours
     points3D.ply               the same points (x, y, z float64; red, green, blue uint8)
     split.json                 {"train": [...], "test": [...]} COLMAP image names
-    manifest.json              content hash of scene files + settings + renderer; written last
+    manifest.json              content hash of scene files + settings + renderer (plus the scene
+                               name and folder, view counts, render time); written last
 
 Decisions:
 
@@ -325,7 +326,8 @@ def render_dataset(scene: SceneSpec | str | Path, out: str | Path | None = None,
         t0 = time.perf_counter()
         _render_into(plan, tmp, progress)
         seconds = time.perf_counter() - t0
-        manifest = {"format": DATASET_FORMAT, "hash": digest, **plan.inputs(), "train": n_train, "test": n_test,
+        manifest = {"format": DATASET_FORMAT, "hash": digest, **plan.inputs(), "scene_folder": str(plan.scene.folder),
+                    "train": n_train, "test": n_test,
                     "render_seconds": round(seconds, 3), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         _write_json(tmp / MANIFEST, manifest)
         _move_into_place(tmp, out, digest)
