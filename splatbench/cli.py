@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "stress": ("splatbench.stress.cli:stress", "Stress the rasterizer with degenerate input."),
     "bench": ("splatbench.bench.cli:bench", "Benchmarks (raster: run time, memory, throughput)."),
     "scenes": ("splatbench.scenes.cli:scenes", "Mitsuba scene catalog: list scenes, render one into a dataset."),
+    "run": ("splatbench.experiments.cli:run", "Run an experiment grid (resumable; local or Dask executor)."),
 }
 
 

@@ -1,0 +1,23 @@
+"""Experiments: declarative grids in TOML, resumable parallel runs, a results table.
+
+    spec = load_experiment("experiments/sh_degree.toml")   # ExperimentSpec, fully checked
+    runs = expand(spec)                                      # list[RunSpec], deterministic order
+    summary = run_experiment(spec, workers=2, executor="local", results_dir="results")
+    summary.line()                                           # "done 12, skipped 0, failed 0 of 12"
+    table = read_table("results/sh_degree")                  # pandas DataFrame, one row per run
+
+Modules: `spec` (file format, dotted keys), `grid` (expansion, run ids), `kinds`
+(run-kind registry, the test-only ``dummy``), `store` (atomic per-run files, the
+parquet table), `runner` (local and Dask executors), `cli` (``splatbench run``).
+See docs/experiments.md.
+"""
+
+from splatbench.experiments.grid import RunSpec, canonical_json, expand, make_run_id
+from splatbench.experiments.kinds import RunKind, RunOutput, get_kind, register_kind
+from splatbench.experiments.runner import RunSummary, execute_run, run_experiment
+from splatbench.experiments.spec import ExperimentSpec, RunnerDefaults, load_experiment, parse_experiment
+from splatbench.experiments.store import RunRecord, read_records, read_table
+
+__all__ = ["ExperimentSpec", "RunnerDefaults", "load_experiment", "parse_experiment", "RunSpec", "expand",
+           "make_run_id", "canonical_json", "RunKind", "RunOutput", "get_kind", "register_kind", "RunSummary",
+           "run_experiment", "execute_run", "RunRecord", "read_records", "read_table"]

@@ -1,0 +1,64 @@
+"""`splatbench run EXPERIMENT.toml`: run an experiment's grid (docs/experiments.md)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+
+@click.command()
+@click.argument("experiment", type=click.Path(path_type=Path, dir_okay=False))
+@click.option("--workers", type=int, default=None,
+              help="Parallel runs (default: [runner] workers, else one per CPU).")
+@click.option("--executor", type=click.Choice(["local", "dask"]), default=None,
+              help="local: a process pool; dask: a Dask cluster (default: [runner] executor, else local).")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
+              help="Dask scheduler (with --executor dask; default: a LocalCluster on 127.0.0.1).")
+@click.option("--results", type=click.Path(path_type=Path, file_okay=False), default=None,
+              help="Results folder (default: [runner] results, else ./results).")
+@click.option("--dry-run", is_flag=True, help="List the runs and whether each is done; run nothing.")
+@click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
+def run(experiment: Path, workers: int | None, executor: str | None, scheduler: str | None, results: Path | None,
+        dry_run: bool, progress: bool) -> None:
+    """Run every pending run of EXPERIMENT.toml and print "done D, skipped S, failed F of T".
+
+    Runs whose result says done are skipped, so an interrupted sweep resumes where it
+    stopped; failed runs are tried again. Exits with status 1 when a run failed.
+    """
+    from splatbench.experiments.runner import run_experiment
+    from splatbench.experiments.spec import load_experiment
+
+    spec = load_experiment(experiment)
+    executor = executor or spec.runner.executor or "local"
+    scheduler = scheduler or (spec.runner.scheduler if executor == "dask" else None)
+    results = results or spec.runner.results or Path("results")
+    workers = workers if workers is not None else spec.runner.workers
+    if dry_run:
+        _dry_run(spec, results)
+        return
+    summary = run_experiment(spec, workers=workers, executor=executor, scheduler=scheduler, results_dir=results,
+                             progress=progress)
+    click.echo(summary.line())
+    if summary.failed:
+        sys.exit(1)
+
+
+def _dry_run(spec, results: Path) -> None:
+    from splatbench.experiments.grid import expand
+    from splatbench.experiments.store import experiment_dir, read_records
+
+    runs = expand(spec)
+    records = read_records(experiment_dir(results, spec.name))
+    for r in runs:
+        status = records[r.run_id].status if r.run_id in records else "pending"
+        labels = " ".join(f"{k}={v}" for k, v in r.labels.items())
+        click.echo(f"{r.run_id}  {status:<7}  {r.scene}  seed={r.seed}  {labels}".rstrip())
+    click.echo(f"{len(runs)} runs in {experiment_dir(results, spec.name)}")
+
+
+if __name__ == "__main__":  # python -m splatbench.experiments.cli EXPERIMENT.toml ...
+    from splatbench.cli import main
+
+    main(["run", *sys.argv[1:]], prog_name="splatbench")

@@ -1,0 +1,193 @@
+"""Run kinds: what one run of an experiment is.
+
+A `RunKind` is a small record of callables with one typed signature for every kind
+(training, rasterizer timing, the test-only ``dummy``); the runner never needs to
+know which kind it holds::
+
+    validate(config) -> None                 raise a one-line InputError naming the dotted field
+    resolve(config) -> dict                  optional: the config with every default filled in
+    run(config, workdir) -> RunOutput        one run, in a worker process
+    scenes() -> set[str]                     optional: known scene names (None: any name)
+    prepare(configs) -> None                 optional: once, in the parent, before any run
+
+``config`` is the nested dict of one run: the experiment's base, overridden by its
+axis values, plus ``scene`` and ``seed``. `resolve`'s output is what the run id
+hashes and what `run` receives, so a kind that fills in defaults makes
+``sh_degree = 3`` written out and left to the default the same run, and makes a
+changed default a new run.
+
+Workers find a kind by name in a fresh process, so a kind must be reachable by
+name there: a built-in (`BUILTIN_KINDS`, imported lazily) or ``"package.module:ATTR"``
+naming a module-level `RunKind`. `register_kind` serves the current process only:
+the local executor's workers are spawned, and Dask's live in other processes, so
+neither sees a kind registered at run time.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import os
+import time
+import zlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from splatbench.errors import InputError
+
+#: A table cell: what a metric may be.
+Scalar = bool | int | float | str | None
+
+
+@dataclass(frozen=True)
+class RunOutput:
+    """What a kind's ``run`` returns.
+
+    metrics: flat ``name -> scalar`` (bool, int, float, str or None); each becomes a
+        table column ``metric.<name>``.
+    curves: any JSON-serialisable value (e.g. ``{"step": [...], "psnr": [...]}``), kept
+        whole in the run's file and as one JSON string column ``curves``.
+    """
+
+    metrics: Mapping[str, Scalar]
+    curves: Any = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class RunKind:
+    """One kind of run (see the module doc for each callable's contract)."""
+
+    name: str
+    validate: Callable[[dict[str, Any]], None]
+    run: Callable[[dict[str, Any], Path], RunOutput]
+    resolve: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+    scenes: Callable[[], set[str]] | None = None
+    prepare: Callable[[list[dict[str, Any]]], None] | None = None
+    description: str = ""
+
+
+#: Kinds known by name in every process: name -> "module:ATTR" (imported on first use).
+BUILTIN_KINDS: dict[str, str] = {
+    "dummy": "splatbench.experiments.kinds:DUMMY",
+}
+_REGISTERED: dict[str, RunKind] = {}
+
+
+def register_kind(kind: RunKind) -> RunKind:
+    """Make ``kind`` known by name in this process (not in spawned workers; see module doc)."""
+    _REGISTERED[kind.name] = kind
+    return kind
+
+
+def get_kind(name: str) -> RunKind:
+    """The kind called ``name``: registered here, built in, or ``"module:ATTR"``."""
+    if name in _REGISTERED:
+        return _REGISTERED[name]
+    target = BUILTIN_KINDS.get(name, name if ":" in name else None)
+    if target is None:
+        known = ", ".join(sorted({*BUILTIN_KINDS, *_REGISTERED}))
+        raise InputError(f"kind: unknown run kind {name!r} (known: {known}; or 'package.module:ATTR')")
+    module, _, attr = target.partition(":")
+    try:
+        kind = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise InputError(f"kind: cannot load run kind {name!r} from {target!r} ({exc})") from None
+    if not isinstance(kind, RunKind):
+        raise InputError(f"kind: {target!r} is a {type(kind).__name__}, not a RunKind")
+    return kind
+
+
+def known_kinds() -> list[str]:
+    """Names of the built-in and registered kinds."""
+    return sorted({*BUILTIN_KINDS, *_REGISTERED})
+
+
+# --------------------------------------------------------------------------- dummy
+#: The dummy kind's fields and defaults (test-only).
+DUMMY_DEFAULTS: dict[str, Any] = {
+    "x": 0.0,        # a number folded into the metrics
+    "n": 3,          # curve length (>= 1)
+    "mode": "ok",    # "ok", "fail" (raise) or "crash" (the worker process exits at once)
+    "sleep": 0.0,    # seconds to sleep before computing
+    "opts": {"a": 0, "b": "p"},  # a nested table, for dotted keys
+}
+DUMMY_SCENES = frozenset({"alpha", "beta", "gamma"})
+
+
+def _dummy_validate(config: dict[str, Any]) -> None:
+    from splatbench.experiments.spec import flatten
+
+    known = {**flatten(DUMMY_DEFAULTS), "scene": "", "seed": 0}
+    for key, value in flatten(config).items():
+        if key not in known:
+            raise InputError(f"{key}: unknown config field (known: {', '.join(sorted(known))})")
+        expected = type(known[key])
+        ok = (isinstance(value, (int, float)) and not isinstance(value, bool)) if expected is float \
+            else isinstance(value, expected) and not (expected is int and isinstance(value, bool))
+        if not ok:
+            raise InputError(f"{key}: expected {expected.__name__}, got {value!r}")
+    if config.get("mode", "ok") not in ("ok", "fail", "crash"):
+        raise InputError(f"mode: expected 'ok', 'fail' or 'crash', got {config['mode']!r}")
+    if not (math.isfinite(config.get("sleep", 0.0)) and config.get("sleep", 0.0) >= 0):
+        raise InputError(f"sleep: expected seconds >= 0, got {config['sleep']!r}")
+    if config.get("n", 1) < 1:
+        raise InputError(f"n: expected an int >= 1, got {config['n']!r}")
+
+
+def _dummy_resolve(config: dict[str, Any]) -> dict[str, Any]:
+    from splatbench.experiments.spec import flatten, override, unflatten
+
+    out = unflatten(override(flatten(DUMMY_DEFAULTS), flatten(config)))
+    out["x"] = float(out["x"])
+    out["sleep"] = float(out["sleep"])
+    return out
+
+
+def _dummy_run(config: dict[str, Any], workdir: Path) -> RunOutput:
+    """Deterministic numbers from the config; sleeps, raises or kills its process on demand."""
+    import numpy as np
+
+    time.sleep(config["sleep"])
+    if config["mode"] == "fail":
+        raise RuntimeError(f"dummy run told to fail (scene {config['scene']}, seed {config['seed']})")
+    if config["mode"] == "crash":
+        os._exit(70)
+    tag = zlib.crc32(f"{config['scene']}/{config['opts']['b']}".encode())
+    rng = np.random.default_rng([config["seed"], tag, config["n"]])
+    curve = (config["x"] + rng.random(config["n"])).round(12)
+    (workdir / "note.txt").write_text(f"{config['scene']} {config['seed']}\n")
+    metrics = {"value": float(curve[-1]), "total": float(curve.sum()), "a_plus_seed": config["opts"]["a"] + config["seed"],
+               "scene_tag": f"{config['scene']}-{config['opts']['b']}", "positive": bool(curve[-1] > 0)}
+    return RunOutput(metrics=metrics, curves={"step": list(range(config["n"])), "value": curve.tolist()})
+
+
+def _dummy_scenes() -> set[str]:
+    return set(DUMMY_SCENES)
+
+
+#: Test-only kind: deterministic metrics computed from the config (see `DUMMY_DEFAULTS`).
+DUMMY = RunKind(name="dummy", validate=_dummy_validate, run=_dummy_run, resolve=_dummy_resolve,
+                scenes=_dummy_scenes, description="test-only: deterministic numbers, configurable sleep and failure")
+
+
+def check_output(output: Any, kind: str) -> RunOutput:
+    """``output`` as a `RunOutput` whose metrics are plain Python scalars (NumPy scalars
+    are converted); `TypeError` for anything else."""
+    if not isinstance(output, RunOutput):
+        raise TypeError(f"run kind {kind!r} returned {type(output).__name__}, not RunOutput")
+    metrics: dict[str, Scalar] = {}
+    for key, value in output.metrics.items():
+        if not isinstance(key, str) or not key:
+            raise TypeError(f"run kind {kind!r}: metric name {key!r} is not a non-empty string")
+        if hasattr(value, "item") and getattr(value, "shape", None) == ():
+            value = value.item()  # NumPy / torch scalar
+        if value is not None and not isinstance(value, (bool, int, float, str)):
+            raise TypeError(f"run kind {kind!r}: metric {key!r} is a {type(value).__name__}, not a scalar")
+        metrics[key] = value
+    return RunOutput(metrics=metrics, curves=output.curves)
+
+
+__all__ = ["RunKind", "RunOutput", "Scalar", "BUILTIN_KINDS", "register_kind", "get_kind", "known_kinds",
+           "check_output", "DUMMY", "DUMMY_DEFAULTS", "DUMMY_SCENES"]

@@ -1,0 +1,368 @@
+"""The runner: execute an experiment's pending runs in parallel, resumably.
+
+`run_experiment` expands the grid (every config checked before anything runs),
+skips the runs whose result file already says ``done``, and submits the rest to
+an executor. Failed runs are *not* skipped: they run again on the next
+invocation (delete nothing; a new result replaces the old file).
+
+Both executors share one code path: the parent submits the top-level function
+`execute_run(run, results_dir)`, which runs the kind in a worker process and writes
+that run's result file itself, atomically, before returning its record. A parent
+killed at any point therefore loses nothing that finished, and the next
+invocation resumes from the files. After every finished run the parent rewrites
+the table (``results.parquet``) from the records, so it is in step with the files.
+
+Executors:
+    local  `concurrent.futures.ProcessPoolExecutor` (``spawn``), ``workers`` processes.
+           At most ``workers`` runs are in flight, so when a worker process dies
+           (a crash in native code) the runs it may have held are known: each is
+           retried alone, and the one that kills its worker again is recorded as
+           failed.
+    dask   `dask.distributed`: the client of ``scheduler`` (``tcp://HOST:PORT``), or a
+           `LocalCluster` of ``workers`` single-threaded worker processes bound to
+           127.0.0.1 (no dashboard). With a remote scheduler, ``results_dir`` should be
+           a folder every worker sees (a shared file system); where it is not, the
+           parent writes the returned record itself.
+
+Each worker process gets ``SPLATBENCH_WORKER_THREADS`` = max(1, CPUs // workers) in
+its environment (and torch's intra-op thread count set to it, where torch is
+loaded), so that parallel runs do not oversubscribe the machine.
+"""
+
+from __future__ import annotations
+
+import atexit
+import concurrent.futures as cf
+import logging
+import multiprocessing
+import os
+import sys
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from splatbench.errors import InputError
+from splatbench.experiments.grid import RunSpec, expand
+from splatbench.experiments.kinds import check_output, get_kind
+from splatbench.experiments.spec import EXECUTORS, ExperimentSpec, check_scheduler
+from splatbench.experiments.store import (WORK_DIR, RunRecord, experiment_dir, read_record, read_records,
+                                          remove_stale_temps, result_path, worker_name, write_record, write_table)
+
+THREADS_ENV = "SPLATBENCH_WORKER_THREADS"
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What one invocation did: ``done`` ran and succeeded now, ``skipped`` were
+    already done, ``failed`` ran and failed now; done + skipped + failed == total."""
+
+    done: int
+    skipped: int
+    failed: int
+    total: int
+    folder: Path
+
+    def line(self) -> str:
+        return f"done {self.done}, skipped {self.skipped}, failed {self.failed} of {self.total}"
+
+
+# --------------------------------------------------------------------------- worker side
+def execute_run(run: RunSpec, results_dir: str) -> dict[str, Any]:
+    """Run ``run`` in this process, write its result file atomically, return the record
+    (as a dict). A failing kind gives a ``failed`` record with a one-line error."""
+    started, t0 = datetime.now().astimezone(), time.perf_counter()
+    workdir = experiment_dir(results_dir, run.experiment) / WORK_DIR / run.run_id
+    record = RunRecord(run_id=run.run_id, experiment=run.experiment, kind=run.kind, scene=run.scene, seed=run.seed,
+                       status="done", config=_plain(run.config), labels=dict(run.labels), worker=worker_name(),
+                       started=started.isoformat(timespec="seconds"))
+    try:
+        workdir.mkdir(parents=True, exist_ok=True)
+        kind = get_kind(run.kind)
+        output = check_output(kind.run(_plain(run.config), workdir), run.kind)
+        record.metrics, record.curves = dict(output.metrics), output.curves
+    except Exception as exc:  # noqa: BLE001 - every failure of a run is recorded, not raised
+        record.status, record.error = "failed", one_line(exc)
+        record.traceback = traceback.format_exc()
+    record.seconds = round(time.perf_counter() - t0, 6)
+    record.finished = datetime.now().astimezone().isoformat(timespec="seconds")
+    write_record(results_dir, record)
+    return record.to_dict()
+
+
+def one_line(exc: BaseException) -> str:
+    """``ExcType: first line of the message`` (an InputError is already one line)."""
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _init_worker(threads: int) -> None:
+    """Pool initializer: bound the worker's threads (module doc), and make it leave
+    with `os._exit` once the pool shuts it down: its results are on disk already, and
+    the interpreter's teardown of torch and Dr.Jit costs seconds per worker."""
+    os.environ[THREADS_ENV] = str(threads)
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(threads)
+    atexit.register(_fast_exit)  # registered last, so it runs first
+
+
+def _fast_exit() -> None:
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
+
+
+# --------------------------------------------------------------------------- executors
+class _LocalExecutor:
+    """A spawn process pool with at most ``workers`` runs in flight."""
+
+    name = "local"
+
+    def __init__(self, workers: int, threads: int):
+        self.workers, self.threads = workers, threads
+        self.pool = self._new_pool()
+
+    def _new_pool(self) -> cf.ProcessPoolExecutor:
+        return cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                      initializer=_init_worker, initargs=(self.threads,))
+
+    @property
+    def capacity(self) -> int:
+        return self.workers
+
+    def submit(self, run: RunSpec, results_dir: str):
+        return self.pool.submit(execute_run, run, results_dir)
+
+    def wait(self, futures) -> set:
+        done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
+        return done
+
+    @staticmethod
+    def broken(exc: BaseException) -> bool:
+        from concurrent.futures.process import BrokenProcessPool
+
+        return isinstance(exc, BrokenProcessPool)
+
+    def restart(self) -> None:
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        self.pool = self._new_pool()
+
+    def close(self, cancel: bool = False) -> None:
+        self.pool.shutdown(wait=not cancel, cancel_futures=cancel)
+
+
+class _DaskExecutor:
+    """A `distributed.Client` on ``scheduler``, or on a loopback `LocalCluster`."""
+
+    name = "dask"
+
+    def __init__(self, workers: int, threads: int, scheduler: str | None):
+        from distributed import Client, LocalCluster
+
+        self.cluster = None
+        if scheduler is None:
+            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                        dashboard_address=None, silence_logs=logging.ERROR,
+                                        env={THREADS_ENV: str(threads)})
+            self.client = Client(self.cluster)
+        else:
+            self.client = Client(scheduler)
+        self.workers = workers
+
+    @property
+    def capacity(self) -> int:
+        return sys.maxsize  # the scheduler queues; a dying worker costs only its own task
+
+    def submit(self, run: RunSpec, results_dir: str):
+        return self.client.submit(execute_run, run, results_dir, key=f"run-{run.run_id}-{os.urandom(4).hex()}",
+                                  pure=False)
+
+    def wait(self, futures) -> set:
+        from distributed import wait
+
+        done, _ = wait(list(futures), return_when="FIRST_COMPLETED")
+        return set(done)
+
+    @staticmethod
+    def broken(exc: BaseException) -> bool:
+        return False
+
+    def restart(self) -> None:  # pragma: no cover - never broken
+        pass
+
+    def close(self, cancel: bool = False) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+# --------------------------------------------------------------------------- parent side
+def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor: str = "local",
+                   scheduler: str | None = None, results_dir: str | Path, progress: bool = True,
+                   known_scenes: Callable[[], set[str]] | None = None) -> RunSummary:
+    """Run every pending run of ``spec``; return the counts.
+
+    workers: parallel runs (None: one per CPU); executor: "local" or "dask";
+    scheduler: Dask scheduler address (dask only; None: a loopback LocalCluster);
+    results_dir: folder holding ``<experiment>/``; progress: a tqdm bar on stderr.
+    The grid is expanded and checked before any executor starts (`InputError`).
+    """
+    if executor not in EXECUTORS:
+        raise InputError(f"executor: expected one of {', '.join(EXECUTORS)}, got {executor!r}")
+    if scheduler is not None:
+        if executor != "dask":
+            raise InputError(f"scheduler: only with executor 'dask', got executor {executor!r}")
+        check_scheduler(scheduler)
+    cpus = os.cpu_count() or 1
+    workers = cpus if workers is None else workers
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise InputError(f"workers: expected an int >= 1, got {workers!r}")
+
+    runs = expand(spec, known_scenes=known_scenes)
+    results_dir = Path(results_dir).absolute()  # workers may run elsewhere (another cwd, a Dask host)
+    folder = experiment_dir(results_dir, spec.name)
+    folder.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(folder)
+    ids = {r.run_id for r in runs}
+    records = {rid: rec for rid, rec in read_records(folder).items() if rid in ids}
+    pending = [r for r in runs if r.run_id not in records or records[r.run_id].status != "done"]
+    skipped = len(runs) - len(pending)
+
+    def save_table() -> None:
+        write_table(folder, [records[r.run_id] for r in runs if r.run_id in records])
+
+    save_table()
+    log = _logger(progress)
+    log(f"{spec.name}: {len(runs)} runs, {skipped} already done, {len(pending)} to run "
+        f"({executor}, {workers} worker{'s' * (workers != 1)}); results in {folder}")
+    if not pending:
+        return RunSummary(done=0, skipped=skipped, failed=0, total=len(runs), folder=folder)
+
+    kind = get_kind(spec.kind)
+    if kind.prepare is not None:
+        kind.prepare([_plain(r.config) for r in pending])
+
+    threads = max(1, cpus // workers)
+    done = failed = 0
+    bar = _progress_bar(len(pending), spec.name, progress)
+
+    def finish(record: RunRecord) -> None:
+        nonlocal done, failed
+        on_disk = read_record(result_path(results_dir, spec.name, record.run_id))
+        if on_disk is None or on_disk.to_dict() != record.to_dict():
+            # a failure the parent recorded, or a remote worker without a shared results folder
+            write_record(results_dir, record)
+        records[record.run_id] = record
+        save_table()
+        if record.status == "done":
+            done += 1
+        else:
+            failed += 1
+            if bar is not None:
+                bar.write(f"{spec.name}: run {record.run_id} ({record.scene}, seed {record.seed}) failed: "
+                          f"{record.error}")
+        if bar is not None:
+            bar.set_postfix(failed=failed, refresh=False)
+            bar.update(1)
+
+    pool = _LocalExecutor(workers, threads) if executor == "local" else _DaskExecutor(workers, threads, scheduler)
+    try:
+        _drive(pool, pending, str(results_dir), finish)
+    except BaseException:
+        pool.close(cancel=True)
+        raise
+    else:
+        pool.close()
+    finally:
+        if bar is not None:
+            bar.close()
+    summary = RunSummary(done=done, skipped=skipped, failed=failed, total=len(runs), folder=folder)
+    return summary
+
+
+def _drive(pool, pending: list[RunSpec], results_dir: str, finish: Callable[[RunRecord], None]) -> None:
+    """Submit runs (at most ``pool.capacity`` in flight), collect them, recover from a
+    broken local pool: suspects (runs in flight when a worker died) are retried one at
+    a time; a suspect that breaks the pool alone is recorded as failed."""
+    queue: deque[RunSpec] = deque(pending)
+    suspects: deque[RunSpec] = deque()
+    inflight: dict[Any, RunSpec] = {}
+    isolating = False
+    while queue or suspects or inflight:
+        if not inflight:
+            isolating = bool(suspects)
+        if isolating:
+            if not inflight and suspects:
+                run = suspects.popleft()
+                inflight[pool.submit(run, results_dir)] = run
+        else:
+            while queue and len(inflight) < pool.capacity:
+                run = queue.popleft()
+                inflight[pool.submit(run, results_dir)] = run
+        broke = False
+        for fut in pool.wait(inflight):
+            run = inflight.pop(fut)
+            exc = fut.exception()
+            if exc is None:
+                finish(RunRecord.from_dict(fut.result()))
+            elif pool.broken(exc):
+                broke = True
+                if isolating:
+                    finish(_failed(run, "worker process died while running it (a crash, or killed)"))
+                else:
+                    suspects.append(run)
+            else:
+                finish(_failed(run, one_line(exc)))
+        if broke:
+            suspects.extend(inflight.values())  # empty when isolating
+            inflight.clear()
+            pool.restart()
+            _collect_written(suspects, results_dir, finish)
+
+
+def _collect_written(suspects: deque[RunSpec], results_dir: str, finish) -> None:
+    """Suspects whose ``done`` result file was written before the pool broke are finished
+    (a pending run had no ``done`` file when the invocation started)."""
+    for run in list(suspects):
+        record = read_record(result_path(results_dir, run.experiment, run.run_id))
+        if record is not None and record.status == "done":
+            suspects.remove(run)
+            finish(record)
+
+
+def _failed(run: RunSpec, error: str) -> RunRecord:
+    now = datetime.now().astimezone().isoformat(timespec="seconds")
+    return RunRecord(run_id=run.run_id, experiment=run.experiment, kind=run.kind, scene=run.scene, seed=run.seed,
+                     status="failed", config=_plain(run.config), labels=dict(run.labels), error=error,
+                     started=now, finished=now, worker="")
+
+
+def _progress_bar(total: int, name: str, enabled: bool):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=name, unit="run", file=sys.stderr, dynamic_ncols=True)
+
+
+def _logger(enabled: bool) -> Callable[[str], None]:
+    def log(line: str) -> None:
+        if enabled:
+            print(line, file=sys.stderr, flush=True)
+
+    return log
+
+
+__all__ = ["RunSummary", "run_experiment", "execute_run", "one_line", "THREADS_ENV"]

@@ -1,0 +1,368 @@
+"""`ExperimentSpec`: an experiment file (TOML) parsed and checked.
+
+An experiment names a run kind, scenes, seeds, a base config and the axes that
+sweep it (docs/experiments.md has the full format)::
+
+    name = "densification"            # results/<name>/ (default: the file's stem)
+    kind = "train"                    # a registered run kind (splatbench.experiments.kinds)
+    scenes = ["diffuse", "glossy"]
+    seeds = [0, 1, 2]
+    grid = "product"                  # or "one-at-a-time"
+
+    [base]                            # config fields shared by every run
+    iterations = 2000
+
+    [axes]                            # field -> values; the grid is their cartesian product
+    ssim_lambda = [0.0, 0.2]
+
+    [variants.densify]                # one axis whose values set several fields together
+    none = { strategy = "none" }
+    mcmc = { strategy = "mcmc", strategy_options.cap_max = 50000 }   # dotted: a nested field
+
+    [runner]                          # defaults of `splatbench run` (the command line wins)
+    workers = 2
+
+Dotted keys: a config is held *flat*, as ``dotted.path -> value``. A TOML sub-table
+(``[base.raster]``), a TOML dotted key (``raster.tile_size = 8``) and a quoted key
+with dots (``"raster.tile_size" = 8``) all name the same field ``raster.tile_size``;
+the kind receives the nested form (``{"raster": {"tile_size": 8}}``). A value set by
+an axis or a variant replaces the base value at its path. An axis value that is a
+table (``opts = [{a = 1}, {a = 2, b = 3}]``) replaces the whole sub-table: no key of
+the base's sub-table survives. Inside a variant, a nested table is read as dotted
+keys: each leaf is set on its own and the base's other keys stay.
+
+Parsing checks the file's structure (`parse_experiment`); `load_experiment` also
+checks the kind, the scenes and every run's config against the kind, so that a bad
+file fails with one `InputError` line before anything runs.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from datetime import date, datetime, time
+from pathlib import Path
+from typing import Any
+
+from splatbench.errors import InputError
+
+#: Fields an experiment file may hold at its top level.
+TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "base", "axes", "variants", "runner")
+#: Fields of its ``[runner]`` table.
+RUNNER_FIELDS = ("workers", "executor", "scheduler", "results")
+#: How axes combine: every combination, or each value alone against the base.
+GRID_MODES = ("product", "one-at-a-time")
+EXECUTORS = ("local", "dask")
+#: Config keys the runner sets itself from ``scenes`` and ``seeds``.
+RESERVED_KEYS = ("scene", "seed")
+
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+_KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
+_SCHEDULER = re.compile(r"^(tcp|tls|ucx|inproc)://\S+$")
+
+
+@dataclass(frozen=True)
+class RunnerDefaults:
+    """The ``[runner]`` table: defaults of `splatbench run`, overridden by its options.
+
+    workers: parallel runs (None: one per CPU); executor: "local" or "dask";
+    scheduler: a Dask scheduler address ``tcp://HOST:PORT`` (dask only);
+    results: results folder (relative paths resolve against the experiment file).
+    """
+
+    workers: int | None = None
+    executor: str | None = None
+    scheduler: str | None = None
+    results: Path | None = None
+
+
+@dataclass(frozen=True)
+class ExperimentSpec:
+    """One experiment. Configs are flat (``dotted.path -> value``, see the module doc).
+
+    name: results folder name; kind: run-kind name; scenes, seeds: the outer axes;
+    base: fields shared by every run; axes: path -> values swept (file order);
+    variants: axis name -> label -> fields set together; grid: "product" or
+    "one-at-a-time"; source: the file it came from (for messages), if any.
+    """
+
+    name: str
+    kind: str
+    scenes: tuple[str, ...]
+    seeds: tuple[int, ...] = (0,)
+    base: Mapping[str, Any] = field(default_factory=dict)
+    axes: Mapping[str, tuple[Any, ...]] = field(default_factory=dict)
+    variants: Mapping[str, Mapping[str, Mapping[str, Any]]] = field(default_factory=dict)
+    grid: str = "product"
+    description: str = ""
+    runner: RunnerDefaults = field(default_factory=RunnerDefaults)
+    source: str = "experiment"
+
+    @property
+    def dimensions(self) -> list[str]:
+        """Axis names in grid order: plain axes (their dotted paths), then variants."""
+        return [*self.axes, *self.variants]
+
+
+# --------------------------------------------------------------------------- dotted keys
+def flatten(table: Mapping[str, Any], prefix: str = "", *, where: str = "config") -> dict[str, Any]:
+    """A nested table -> ``{dotted.path: leaf}``. Keys holding dots are split; an empty
+    table is a leaf (``{}``); a path set twice is an `InputError` naming ``where``."""
+    flat: dict[str, Any] = {}
+    for key, value in table.items():
+        parts = str(key).split(".")
+        if not all(_KEY.match(p) for p in parts):
+            raise InputError(f"{where}: bad field name {key!r} (letters, digits, '_' and '-', dotted for nesting)")
+        path = ".".join([prefix, *parts] if prefix else parts)
+        items = flatten(value, path, where=where).items() if isinstance(value, Mapping) and value else [(path, value)]
+        for sub, leaf in items:
+            _set_path(flat, sub, leaf, where=where)
+    return flat
+
+
+def unflatten(flat: Mapping[str, Any]) -> dict[str, Any]:
+    """``{dotted.path: leaf}`` -> a nested dict (the form a run kind receives)."""
+    nested: dict[str, Any] = {}
+    for path, value in flat.items():
+        node = nested
+        *parents, last = path.split(".")
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[last] = _copy(value)
+    return nested
+
+
+def override(flat: Mapping[str, Any], settings: Mapping[str, Any]) -> dict[str, Any]:
+    """``flat`` with ``settings`` applied: each set path replaces the base value at that
+    path, everything under it and any leaf above it."""
+    out = dict(flat)
+    for path in settings:
+        for key in list(out):
+            if key == path or key.startswith(path + ".") or path.startswith(key + "."):
+                del out[key]
+    out.update(settings)
+    return out
+
+
+def _set_path(flat: dict[str, Any], path: str, value: Any, *, where: str) -> None:
+    for key in flat:
+        if key == path or key.startswith(path + ".") or path.startswith(key + "."):
+            raise InputError(f"{where}.{path}: set twice (also as {key!r})")
+    flat[path] = value
+
+
+def _copy(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {k: _copy(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_copy(v) for v in value]
+    return value
+
+
+def _check_value(value: Any, where: str) -> None:
+    """Config values must survive canonical JSON: no dates, no NaN or infinity."""
+    if isinstance(value, (datetime, date, time)):
+        raise InputError(f"{where}: dates and times are not config values, got {value!r}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise InputError(f"{where}: non-finite value {value!r}")
+    if isinstance(value, Mapping):
+        for k, v in value.items():
+            _check_value(v, f"{where}.{k}")
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_value(v, f"{where}[{i}]")
+
+
+# --------------------------------------------------------------------------- parsing
+def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
+                     default_name: str | None = None, base_dir: Path | None = None) -> ExperimentSpec:
+    """An `ExperimentSpec` from a parsed TOML table; structure only (the kind, scenes
+    and configs are checked by `check_experiment`). Errors are one `InputError` line
+    ``SOURCE: FIELD: problem``."""
+
+    def fail(where: str, problem: str) -> InputError:
+        return InputError(f"{source}: {where}: {problem}")
+
+    for key in data:
+        if key not in TOP_LEVEL_FIELDS:
+            raise fail(key, f"unknown field (expected one of: {', '.join(TOP_LEVEL_FIELDS)})")
+
+    name = data.get("name", default_name)
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise fail("name", f"expected a folder-safe name (letters, digits, '_', '-', '.'), got {name!r}")
+    kind = data.get("kind")
+    if not isinstance(kind, str) or not kind:
+        raise fail("kind", f"expected the name of a run kind, got {kind!r}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise fail("description", f"expected a string, got {description!r}")
+    grid = data.get("grid", "product")
+    if grid not in GRID_MODES:
+        raise fail("grid", f"expected one of {', '.join(map(repr, GRID_MODES))}, got {grid!r}")
+
+    scenes = data.get("scenes")
+    if not isinstance(scenes, list) or not scenes:
+        raise fail("scenes", f"expected a non-empty list of scene names, got {scenes!r}")
+    for s in scenes:
+        if not isinstance(s, str) or not s:
+            raise fail("scenes", f"expected scene names (strings), got {s!r}")
+    _no_duplicates(scenes, "scenes", fail)
+    seeds = data.get("seeds", [0])
+    if not isinstance(seeds, list) or not seeds:
+        raise fail("seeds", f"expected a non-empty list of ints, got {seeds!r}")
+    for s in seeds:
+        if not isinstance(s, int) or isinstance(s, bool):
+            raise fail("seeds", f"expected ints, got {s!r}")
+    _no_duplicates(seeds, "seeds", fail)
+
+    base_table = data.get("base", {})
+    if not isinstance(base_table, Mapping):
+        raise fail("base", f"expected a table of config fields, got {base_table!r}")
+    base = flatten(base_table, where=f"{source}: base")
+    for path, value in base.items():
+        _check_value(value, f"{source}: base.{path}")
+
+    axes_table = data.get("axes", {})
+    if not isinstance(axes_table, Mapping):
+        raise fail("axes", f"expected a table of field = [values], got {axes_table!r}")
+    axes: dict[str, tuple[Any, ...]] = {}
+    for path, values in _flatten_axes(axes_table, "", fail).items():
+        if not values:
+            raise fail(f"axes.{path}", "empty axis (an axis needs at least one value)")
+        for i, v in enumerate(values):
+            _check_value(v, f"{source}: axes.{path}[{i}]")
+        _no_duplicates(values, f"axes.{path}", fail)
+        axes[path] = tuple(values)
+
+    variants_table = data.get("variants", {})
+    if not isinstance(variants_table, Mapping):
+        raise fail("variants", f"expected [variants.NAME] tables, got {variants_table!r}")
+    variants: dict[str, dict[str, dict[str, Any]]] = {}
+    for vname, labels in variants_table.items():
+        where = f"variants.{vname}"
+        if not isinstance(labels, Mapping):
+            raise fail(where, f"expected a table of label = {{ field = value, ... }}, got {labels!r}")
+        if not labels:
+            raise fail(where, "empty axis (a variant axis needs at least one label)")
+        if vname in axes:
+            raise fail(where, f"name clashes with the axis {vname!r}")
+        variants[vname] = {}
+        for label, settings in labels.items():
+            if not isinstance(settings, Mapping):
+                raise fail(f"{where}.{label}", f"expected a table of config fields, got {settings!r}")
+            flat = flatten(settings, where=f"{source}: {where}.{label}") if settings else {}
+            for path, value in flat.items():
+                _check_value(value, f"{source}: {where}.{label}.{path}")
+                for axis in axes:
+                    if path == axis or path.startswith(axis + ".") or axis.startswith(path + "."):
+                        raise fail(f"{where}.{label}.{path}", f"also swept by axes.{axis}")
+            variants[vname][str(label)] = flat
+
+    for where, paths in [("base", base), *((f"axes.{p}", [p]) for p in axes),
+                         *((f"variants.{v}.{lab}", s) for v, labs in variants.items() for lab, s in labs.items())]:
+        for path in paths:
+            if path.split(".")[0] in RESERVED_KEYS:
+                raise fail(where, f"{path!r} is set by the top-level 'scenes' / 'seeds', not here")
+
+    runner = _parse_runner(data.get("runner", {}), fail, source, base_dir)
+    return ExperimentSpec(name=name, kind=kind, scenes=tuple(scenes), seeds=tuple(seeds), base=base, axes=axes,
+                          variants=variants, grid=grid, description=description, runner=runner, source=source)
+
+
+def _flatten_axes(table: Mapping[str, Any], prefix: str, fail) -> dict[str, list]:
+    """``[axes]`` -> ``{dotted.path: [values]}``; a sub-table nests, a list is an axis."""
+    out: dict[str, list] = {}
+    for key, value in table.items():
+        parts = str(key).split(".")
+        if not all(_KEY.match(p) for p in parts):
+            raise fail(f"axes.{key}", "bad field name (letters, digits, '_' and '-', dotted for nesting)")
+        path = ".".join([prefix, *parts] if prefix else parts)
+        if isinstance(value, list):
+            items = {path: value}
+        elif isinstance(value, Mapping) and value:
+            items = _flatten_axes(value, path, fail)
+        else:
+            raise fail(f"axes.{path}", f"expected a list of values, got {value!r}")
+        for sub, values in items.items():
+            for other in out:
+                if other == sub or other.startswith(sub + ".") or sub.startswith(other + "."):
+                    raise fail(f"axes.{sub}", f"overlaps axes.{other}")
+            out[sub] = values
+    return out
+
+
+def _parse_runner(table: Any, fail, source: str, base_dir: Path | None) -> RunnerDefaults:
+    if not isinstance(table, Mapping):
+        raise fail("runner", f"expected a table, got {table!r}")
+    for key in table:
+        if key not in RUNNER_FIELDS:
+            raise fail(f"runner.{key}", f"unknown field (expected one of: {', '.join(RUNNER_FIELDS)})")
+    workers = table.get("workers")
+    if workers is not None and (not isinstance(workers, int) or isinstance(workers, bool) or workers < 1):
+        raise fail("runner.workers", f"expected an int >= 1, got {workers!r}")
+    executor = table.get("executor")
+    if executor is not None and executor not in EXECUTORS:
+        raise fail("runner.executor", f"expected one of {', '.join(map(repr, EXECUTORS))}, got {executor!r}")
+    scheduler = table.get("scheduler")
+    if scheduler is not None:
+        check_scheduler(scheduler, where=f"{source}: runner.scheduler")
+    results = table.get("results")
+    if results is not None:
+        if not isinstance(results, str) or not results:
+            raise fail("runner.results", f"expected a folder path, got {results!r}")
+        results = Path(results)
+        if base_dir is not None and not results.is_absolute():
+            results = base_dir / results
+    return RunnerDefaults(workers=workers, executor=executor, scheduler=scheduler, results=results)
+
+
+def check_scheduler(address: Any, *, where: str = "scheduler") -> str:
+    """A Dask scheduler address ``tcp://HOST:PORT`` (also tls://, ucx://, inproc://)."""
+    if not isinstance(address, str) or not _SCHEDULER.match(address):
+        raise InputError(f"{where}: expected an address like tcp://HOST:PORT, got {address!r}")
+    return address
+
+
+def _no_duplicates(values: list, where: str, fail) -> None:
+    from splatbench.experiments.grid import canonical_json
+
+    seen: set[str] = set()
+    for v in values:
+        key = canonical_json(v)
+        if key in seen:
+            raise fail(where, f"duplicate value {v!r}")
+        seen.add(key)
+
+
+# --------------------------------------------------------------------------- loading
+def load_experiment(path: str | Path, *, known_scenes: Callable[[], set[str]] | None = None) -> ExperimentSpec:
+    """Read, parse and fully check an experiment file (see `check_experiment`)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"experiment: cannot read {str(p)!r} ({exc.strerror})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{p}: invalid TOML ({exc})") from None
+    spec = parse_experiment(data, source=str(p), default_name=p.stem, base_dir=p.parent)
+    check_experiment(spec, known_scenes=known_scenes)
+    return spec
+
+
+def check_experiment(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None = None) -> None:
+    """Check the kind exists, every scene is known (``known_scenes``, else the kind's
+    ``scenes``; neither: any name) and every run's config passes the kind's
+    ``validate``, by expanding the grid. Raises one `InputError` line; runs nothing."""
+    from splatbench.experiments.grid import expand
+
+    expand(spec, known_scenes=known_scenes)
+
+
+__all__ = ["ExperimentSpec", "RunnerDefaults", "TOP_LEVEL_FIELDS", "RUNNER_FIELDS", "GRID_MODES", "EXECUTORS",
+           "RESERVED_KEYS", "flatten", "unflatten", "override", "parse_experiment", "load_experiment",
+           "check_experiment", "check_scheduler"]

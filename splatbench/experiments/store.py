@@ -1,0 +1,243 @@
+"""The result store: one JSON file per run and a consolidated parquet table.
+
+Layout, under a results folder::
+
+    <experiment>/<run_id>.json      one `RunRecord` per run (done or failed)
+    <experiment>/results.parquet    the table: one row per run of the grid, grid order
+    <experiment>/work/<run_id>/     the run's own working folder (kinds' artifacts)
+
+Every file is written atomically: a temporary file ``.<name>.<pid>.<random>.tmp`` in
+the same folder, flushed and fsync'd, then `os.replace`d onto its name (and the
+folder fsync'd). A reader lists only names ``<16 hex>.json``, so it never sees a
+temporary file, and a ``<run_id>.json`` is always whole: a process killed
+mid-write leaves at most a stray temporary file (removed by the next run when
+its process is gone), never a half-written result.
+
+Table columns: ``run_id, experiment, kind, scene, seed, status, error`` (the
+deterministic core), ``seconds, started, finished, worker`` (`VOLATILE_COLUMNS`:
+when and where it ran), then ``axis.<name>`` (the run's axis labels),
+``config.<dotted.path>`` (every resolved config field but scene and seed),
+``metric.<name>`` and ``curves`` (JSON text). A column whose values mix types
+(``sh_degree`` 0..3 and ``"auto"``) holds their JSON text; lists and tables too.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import secrets
+import socket
+from collections.abc import Iterable, Mapping
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from splatbench.experiments.spec import flatten
+
+#: Version of the per-run file layout.
+RECORD_FORMAT = 1
+TABLE_NAME = "results.parquet"
+WORK_DIR = "work"
+STATUSES = ("done", "failed")
+CORE_COLUMNS = ("run_id", "experiment", "kind", "scene", "seed", "status", "error")
+VOLATILE_COLUMNS = ("seconds", "started", "finished", "worker")
+
+_RESULT_NAME = re.compile(r"^[0-9a-f]{16}\.json$")
+_TEMP_NAME = re.compile(r"^\..+\.(\d+)\.[0-9a-f]+\.tmp$")
+
+
+@dataclass
+class RunRecord:
+    """The result of one run, as stored in ``<run_id>.json``.
+
+    status: "done" or "failed"; error: one line (``ExcType: message``) when failed;
+    traceback: the full traceback of a failure (file only, not in the table);
+    config: the resolved nested config; labels: axis name -> label;
+    metrics: name -> scalar; curves: JSON value; seconds: run time in the worker;
+    started, finished: ISO-8601 local times; worker: ``host:pid``.
+    """
+
+    run_id: str
+    experiment: str
+    kind: str
+    scene: str
+    seed: int
+    status: str
+    config: dict[str, Any]
+    labels: dict[str, Any] = field(default_factory=dict)
+    metrics: dict[str, Any] = field(default_factory=dict)
+    curves: Any = None
+    error: str | None = None
+    traceback: str | None = None
+    seconds: float = 0.0
+    started: str = ""
+    finished: str = ""
+    worker: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": RECORD_FORMAT, **asdict(self)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> RunRecord:
+        values = {k: v for k, v in data.items() if k != "format"}
+        return cls(**values)
+
+    def row(self) -> dict[str, Any]:
+        """This record as one table row (see the module doc for the columns)."""
+        row: dict[str, Any] = {c: getattr(self, c) for c in (*CORE_COLUMNS, *VOLATILE_COLUMNS)}
+        row.update({f"axis.{k}": v for k, v in self.labels.items()})
+        row.update({f"config.{k}": v for k, v in flatten(self.config).items() if k not in ("scene", "seed")}
+                   if self.config else {})
+        row.update({f"metric.{k}": v for k, v in self.metrics.items()})
+        row["curves"] = None if self.curves is None else json.dumps(self.curves, sort_keys=True)
+        return row
+
+
+def worker_name() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+# --------------------------------------------------------------------------- files
+def experiment_dir(results_dir: str | Path, experiment: str) -> Path:
+    return Path(results_dir) / experiment
+
+
+def result_path(results_dir: str | Path, experiment: str, run_id: str) -> Path:
+    return experiment_dir(results_dir, experiment) / f"{run_id}.json"
+
+
+def atomic_write(path: str | Path, write) -> Path:
+    """Call ``write(temp_path)``, fsync the temporary file, rename it onto ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    try:
+        write(temp)
+        fd = os.open(temp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(temp, path)
+    except BaseException:
+        temp.unlink(missing_ok=True)
+        raise
+    _fsync_dir(path.parent)
+    return path
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:  # pragma: no cover - platforms without directory fds
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # pragma: no cover
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_record(results_dir: str | Path, record: RunRecord) -> Path:
+    """Write ``record`` to ``<results>/<experiment>/<run_id>.json`` atomically."""
+    text = json.dumps(record.to_dict(), indent=1, sort_keys=True)
+    path = result_path(results_dir, record.experiment, record.run_id)
+    return atomic_write(path, lambda temp: temp.write_text(text, encoding="utf-8"))
+
+
+def read_record(path: str | Path) -> RunRecord | None:
+    """The record in ``path``, or None when it is missing or not a valid record."""
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+        record = RunRecord.from_dict(data)
+    except (OSError, ValueError, TypeError):
+        return None
+    if record.status not in STATUSES or f"{record.run_id}.json" != Path(path).name:
+        return None
+    return record
+
+
+def read_records(folder: str | Path) -> dict[str, RunRecord]:
+    """Every record in an experiment folder, by run id; temporary files are never read."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return {}
+    records = {}
+    for entry in sorted(os.scandir(folder), key=lambda e: e.name):
+        if _RESULT_NAME.match(entry.name) and entry.is_file():
+            record = read_record(entry.path)
+            if record is not None:
+                records[record.run_id] = record
+    return records
+
+
+def remove_stale_temps(folder: str | Path) -> int:
+    """Delete temporary files left by processes of this host that no longer exist."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return 0
+    removed = 0
+    for entry in os.scandir(folder):
+        m = _TEMP_NAME.match(entry.name)
+        if m and not _pid_alive(int(m.group(1))):
+            Path(entry.path).unlink(missing_ok=True)
+            removed += 1
+    return removed
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+# --------------------------------------------------------------------------- table
+def build_table(records: Iterable[RunRecord]) -> pd.DataFrame:
+    """One row per record, in the given order (module doc: columns)."""
+    rows = [r.row() for r in records]
+    fixed = [*CORE_COLUMNS, *VOLATILE_COLUMNS]
+    extra = sorted({k for row in rows for k in row} - set(fixed) - {"curves"},
+                   key=lambda c: (("axis.", "config.", "metric.").index(c[:c.index(".") + 1]), c))
+    columns = [*fixed, *extra, "curves"]
+    frame = pd.DataFrame({c: _column([row.get(c) for row in rows]) for c in columns}, columns=columns)
+    return frame
+
+
+def _column(values: list[Any]) -> pd.Series:
+    """A column parquet can hold: one scalar type (ints, floats, bools or strings),
+    else every non-null value as JSON text."""
+    present = [v for v in values if v is not None]
+    kinds = {bool if isinstance(v, bool) else (float if isinstance(v, (int, float)) else type(v)) for v in present}
+    if kinds <= {bool}:
+        return pd.Series(values, dtype="boolean" if present else object)
+    if kinds == {float}:
+        if all(isinstance(v, int) for v in present):
+            return pd.Series(values, dtype="Int64")
+        return pd.Series([float("nan") if v is None else float(v) for v in values], dtype="float64")
+    if kinds == {str}:
+        return pd.Series(values, dtype=object)
+    return pd.Series([None if v is None else json.dumps(v, sort_keys=True) for v in values], dtype=object)
+
+
+def write_table(folder: str | Path, records: Iterable[RunRecord]) -> Path:
+    """Build the table of ``records`` and write ``<folder>/results.parquet`` atomically."""
+    frame = build_table(records)
+    return atomic_write(Path(folder) / TABLE_NAME, lambda temp: frame.to_parquet(temp, index=False))
+
+
+def read_table(folder: str | Path) -> pd.DataFrame:
+    """``<folder>/results.parquet`` as a DataFrame."""
+    return pd.read_parquet(Path(folder) / TABLE_NAME)
+
+
+__all__ = ["RunRecord", "RECORD_FORMAT", "TABLE_NAME", "WORK_DIR", "STATUSES", "CORE_COLUMNS", "VOLATILE_COLUMNS",
+           "experiment_dir", "result_path", "atomic_write", "write_record", "read_record", "read_records",
+           "remove_stale_temps", "build_table", "write_table", "read_table", "worker_name"]

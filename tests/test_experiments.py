@@ -1,0 +1,398 @@
+"""Experiment runner: grid expansion and run ids, validation before anything runs,
+resume, failure recording, the results table, SIGKILL-and-resume, and Dask on loopback.
+
+Everything runs the test-only ``dummy`` kind (deterministic numbers from the config,
+a configurable sleep, told to fail or crash on demand), so no rendering is involved.
+Network: the Dask test binds to 127.0.0.1 only.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import re
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from splatbench.errors import InputError
+from splatbench.experiments import expand, load_experiment, parse_experiment, run_experiment
+from splatbench.experiments.grid import make_run_id
+from splatbench.experiments.store import (CORE_COLUMNS, TABLE_NAME, RunRecord, build_table, read_records, read_table,
+                                          remove_stale_temps, result_path, write_record)
+
+REPO = Path(__file__).resolve().parents[1]
+
+SWEEP = """
+name = "sweep"
+kind = "dummy"
+scenes = ["alpha", "beta"]
+seeds = [0, 1, 2]
+[base]
+sleep = {sleep}
+opts.b = "q"
+[axes]
+x = [0.0, 1.5]
+"""
+
+
+def spec_of(text: str, source: str = "test.toml"):
+    return parse_experiment(tomllib.loads(text), source=source, default_name="test")
+
+
+def write(tmp_path: Path, text: str, name: str = "exp.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def deterministic(frame: pd.DataFrame) -> pd.DataFrame:
+    """The columns that do not depend on when or where a run ran, sorted by run id."""
+    keep = [c for c in frame.columns if c in CORE_COLUMNS or c.split(".")[0] in ("axis", "config", "metric")
+            or c == "curves"]
+    return frame[keep].sort_values("run_id").reset_index(drop=True)
+
+
+def assert_table_matches_files(folder: Path, expected_ids: set[str]) -> None:
+    """The parquet table holds exactly the per-run files, field by field."""
+    table = read_table(folder)
+    records = read_records(folder)
+    assert set(table["run_id"]) == set(records) == expected_ids
+    assert len(table) == len(records)
+    for row in table.to_dict("records"):
+        row = {k: None if _missing(v) else v for k, v in row.items()}
+        rec = records[row["run_id"]]
+        assert (row["status"], row["scene"], row["seed"], row["error"]) == (rec.status, rec.scene, rec.seed,
+                                                                              rec.error)
+        assert row["config.x"] == rec.config["x"] and row["config.opts.b"] == rec.config["opts"]["b"]
+        for name, value in rec.metrics.items():
+            assert row[f"metric.{name}"] == value, name
+        for name, label in rec.labels.items():
+            assert row[f"axis.{name}"] == label, name
+        assert (row["curves"] is None) == (rec.curves is None)
+        if rec.curves is not None:
+            assert json.loads(row["curves"]) == rec.curves
+
+
+def _missing(value) -> bool:
+    """A missing cell as parquet gives it back (None, NaN or pd.NA)."""
+    return value is None or (not isinstance(value, (list, dict, str)) and bool(pd.isna(value)))
+
+
+# --------------------------------------------------------------------------- grid and run ids
+GRID = """
+name = "grid"
+kind = "dummy"
+scenes = ["alpha", "beta"]
+seeds = [0, 1]
+[base]
+n = 2
+opts.b = "q"
+[axes]
+x = [0.0, 1.5]
+"opts.a" = [1, 2]
+[variants.mode]
+good = {}
+bad = { mode = "fail", sleep = 0.5 }
+"""
+
+
+def test_grid_expands_in_documented_order_with_labels():
+    runs = expand(spec_of(GRID))
+    assert len(runs) == 2 * 2 * 2 * 2 * 2
+    assert [r.scene for r in runs[:16]] == ["alpha"] * 16  # scenes outermost
+    assert [r.seed for r in runs[:4]] == [0, 1, 0, 1]  # seeds innermost
+    first, last = runs[0], runs[-1]
+    assert first.labels == {"x": 0.0, "opts.a": 1, "mode": "good"}
+    assert last.labels == {"x": 1.5, "opts.a": 2, "mode": "bad"}
+    assert last.config == {"x": 1.5, "n": 2, "mode": "fail", "sleep": 0.5, "opts": {"a": 2, "b": "q"},
+                           "scene": "beta", "seed": 1}
+    assert first.config["mode"] == "ok" and first.config["sleep"] == 0.0  # the kind's defaults, resolved
+    assert len({r.run_id for r in runs}) == len(runs)
+    assert all(re.fullmatch(r"[0-9a-f]{16}", r.run_id) for r in runs)
+    assert [r.run_id for r in expand(spec_of(GRID))] == [r.run_id for r in runs]  # deterministic
+
+
+def test_run_id_is_the_hash_of_the_full_resolved_config():
+    run = expand(spec_of(GRID))[0]
+    assert run.run_id == make_run_id("dummy", run.config)
+    # Defaults written out, dotted keys in any of their forms, key order: the same run.
+    same = spec_of("""
+        name = "other-name"
+        kind = "dummy"
+        scenes = ["alpha"]
+        seeds = [0]
+        [base.opts]
+        b = "q"
+        a = 1
+        [base]
+        mode = "ok"
+        x = 0
+        n = 2
+        sleep = 0.0
+        """)
+    assert expand(same)[0].run_id == run.run_id
+    # Changing any single field (or scene, seed, kind) changes it.
+    changes = {"x": 0.25, "n": 3, "sleep": 0.1, "mode": "fail", "opts": {"a": 5, "b": "q"},
+               "opts.b": None, "scene": "beta", "seed": 7}
+    ids = {run.run_id}
+    for key, value in changes.items():
+        config = json.loads(json.dumps(run.config))
+        if key == "opts.b":
+            config["opts"]["b"] = "z"
+        else:
+            config[key] = value
+        ids.add(make_run_id("dummy", config))
+    ids.add(make_run_id("other-kind", run.config))
+    assert len(ids) == len(changes) + 2
+
+
+def test_adding_an_axis_value_adds_only_new_run_ids():
+    before = {r.run_id for r in expand(spec_of(GRID))}
+    after = {r.run_id for r in expand(spec_of(GRID.replace("x = [0.0, 1.5]", "x = [0.0, 1.5, 3.0]")))}
+    assert before < after and len(after - before) == 2 * 2 * 2 * 2
+    more_seeds = {r.run_id for r in expand(spec_of(GRID.replace("seeds = [0, 1]", "seeds = [0, 1, 2]")))}
+    assert before < more_seeds
+
+
+def test_one_at_a_time_grid_and_table_valued_axis():
+    spec = spec_of("""
+        kind = "dummy"
+        scenes = ["alpha"]
+        grid = "one-at-a-time"
+        [base]
+        x = 1.0
+        opts = { a = 3, b = "base" }
+        [axes]
+        x = [1.0, 2.0]                       # 1.0 equals the base: the same run, listed once
+        opts = [{ a = 4 }]                   # a table replaces the whole sub-table
+        """)
+    runs = expand(spec)
+    assert [r.labels["x"] for r in runs] == [1.0, 2.0, 1.0]
+    assert runs[2].config["opts"] == {"a": 4, "b": "p"}  # b back to the kind's default, not the base's
+    assert runs[0].labels["opts"] == '{"a":3,"b":"base"}'
+
+
+# --------------------------------------------------------------------------- malformed files
+MALFORMED = {
+    "unknown top-level field": ('kind = "dummy"\nscenes = ["alpha"]\nsceens = ["beta"]\n', r"sceens: unknown field"),
+    "empty axis": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nx = []\n', r"axes\.x: empty axis"),
+    "empty variant": ('kind = "dummy"\nscenes = ["alpha"]\n[variants.v]\n', r"variants\.v: empty axis"),
+    "unknown scene": ('kind = "dummy"\nscenes = ["alpha", "delta"]\n', r"scenes: unknown scene 'delta'"),
+    "unknown config key in base": ('kind = "dummy"\nscenes = ["alpha"]\n[base]\nopts.c = 1\n',
+                                   r"base: opts\.c: unknown config field"),
+    "unknown config key in an axis": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nxx = [1, 2]\n',
+                                      r"axes\.xx = 1: xx: unknown config field"),
+    "bad value in a variant": ('kind = "dummy"\nscenes = ["alpha"]\n[variants.v]\nok = {}\nno = { mode = "x" }\n',
+                               r"variants\.v\.no: mode: expected 'ok', 'fail' or 'crash'"),
+    "unknown kind": ('kind = "nope"\nscenes = ["alpha"]\n', r"kind: unknown run kind 'nope'"),
+    "axis not a list": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nx = 3\n', r"axes\.x: expected a list"),
+    "reserved key": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nseed = [1, 2]\n', r"axes\.seed: 'seed' is set by"),
+    "duplicate seed": ('kind = "dummy"\nscenes = ["alpha"]\nseeds = [1, 1]\n', r"seeds: duplicate value 1"),
+    "unknown runner field": ('kind = "dummy"\nscenes = ["alpha"]\n[runner]\nthreads = 2\n',
+                             r"runner\.threads: unknown field"),
+    "bad scheduler": ('kind = "dummy"\nscenes = ["alpha"]\n[runner]\nscheduler = "127.0.0.1"\n',
+                      r"runner\.scheduler: expected an address like tcp://HOST:PORT"),
+    "invalid TOML": ('kind = "dummy"\nscenes = [\n', r"invalid TOML"),
+}
+
+
+@pytest.mark.parametrize("case", MALFORMED, ids=list(MALFORMED))
+def test_malformed_experiment_is_one_line_error_before_anything_runs(tmp_path, case):
+    text, pattern = MALFORMED[case]
+    path = write(tmp_path, text)
+    with pytest.raises(InputError) as err:
+        load_experiment(path)
+    message = str(err.value)
+    assert "\n" not in message and message.startswith(str(path)), message
+    assert re.search(pattern, message), message
+
+    results = tmp_path / "results"
+    out = CliRunner().invoke(_main(), ["run", str(path), "--results", str(results), "--no-progress"])
+    assert out.exit_code == 2, out.output
+    assert out.stderr.strip().count("\n") == 0 and "splatbench: error: " in out.stderr and "Traceback" not in out.stderr
+    assert not results.exists()  # nothing ran, nothing was written
+
+
+def test_known_scenes_callback_overrides_the_kinds(tmp_path):
+    path = write(tmp_path, 'kind = "dummy"\nscenes = ["mine"]\n')
+    assert load_experiment(path, known_scenes=lambda: {"mine"}).scenes == ("mine",)
+    with pytest.raises(InputError, match="scenes: unknown scene 'mine'"):
+        load_experiment(path)
+
+
+def _main():
+    from splatbench.cli import main
+
+    return main
+
+
+# --------------------------------------------------------------------------- store
+def test_store_reads_only_whole_result_files(tmp_path):
+    folder = tmp_path / "exp"
+    rec = RunRecord(run_id="0123456789abcdef", experiment="exp", kind="dummy", scene="alpha", seed=0, status="done",
+                    config={"x": 1.0, "scene": "alpha", "seed": 0}, metrics={"value": 2.5})
+    write_record(tmp_path, rec)
+    # A valid-looking record under a temporary name, a foreign file, a torn file: none is a result.
+    fake = {**rec.to_dict(), "run_id": "fedcba9876543210"}
+    (folder / ".fedcba9876543210.json.99999999.abcd.tmp").write_text(json.dumps(fake))
+    (folder / "notes.json").write_text("{}")
+    (folder / "aaaaaaaaaaaaaaaa.json").write_text('{"run_id": "aaaaaaaaaaaaaaaa", "status": "do')
+    assert list(read_records(folder)) == [rec.run_id]
+    assert read_records(folder)[rec.run_id] == rec
+    assert remove_stale_temps(folder) == 1  # pid 99999999 cannot exist
+    assert not list(folder.glob("*.tmp")) and not list(folder.glob(".*.tmp"))
+
+
+def test_table_columns_hold_mixed_types():
+    recs = [RunRecord(run_id=f"{i:016x}", experiment="e", kind="k", scene="s", seed=i, status="done",
+                      config={"sh_degree": deg, "bg": [0, 0, 0]}, labels={"sh_degree": deg},
+                      metrics={"psnr": 20.0 + i, "n": 10 * i, "ok": True}, curves={"step": [1, 2]})
+               for i, deg in enumerate([0, 3, "auto"])]
+    frame = build_table(recs)
+    assert list(frame["config.sh_degree"]) == ["0", "3", '"auto"']  # mixed: JSON text
+    assert list(frame["config.bg"]) == ["[0, 0, 0]"] * 3
+    assert frame["metric.psnr"].dtype == "float64" and str(frame["metric.n"].dtype) == "Int64"
+    assert list(frame.columns[:len(CORE_COLUMNS)]) == list(CORE_COLUMNS)
+
+
+# --------------------------------------------------------------------------- runner
+def test_failed_runs_are_recorded_the_rest_complete_and_resume_skips_done(tmp_path):
+    text = """
+        name = "mixed"
+        kind = "dummy"
+        scenes = ["alpha"]
+        seeds = [0, 1]
+        [variants.mode]
+        good = {}
+        bad = { mode = "fail" }
+        """
+    results = tmp_path / "results"
+    spec = spec_of(text)
+    first = run_experiment(spec, workers=2, results_dir=results, progress=False)
+    assert (first.done, first.skipped, first.failed, first.total) == (2, 0, 2, 4)
+    folder = results / "mixed"
+    records = read_records(folder)
+    failed = [r for r in records.values() if r.status == "failed"]
+    assert len(failed) == 2 and all(r.labels["mode"] == "bad" for r in failed)
+    for r in failed:
+        assert r.error.startswith("RuntimeError: dummy run told to fail") and "\n" not in r.error
+        assert "Traceback" in r.traceback
+    assert_table_matches_files(folder, {r.run_id for r in expand(spec)})
+    done_files = {rid: result_path(results, "mixed", rid).stat().st_mtime_ns for rid, r in records.items()
+                  if r.status == "done"}
+
+    # Again with one more seed: done runs are skipped, failed ones retried, new cells run.
+    spec2 = spec_of(text.replace("seeds = [0, 1]", "seeds = [0, 1, 2]"))
+    second = run_experiment(spec2, workers=2, results_dir=results, progress=False)
+    assert (second.done, second.skipped, second.failed, second.total) == (1, 2, 3, 6)
+    assert {rid: result_path(results, "mixed", rid).stat().st_mtime_ns for rid in done_files} == done_files
+    assert_table_matches_files(folder, {r.run_id for r in expand(spec2)})
+
+
+def test_a_run_that_kills_its_worker_is_recorded_and_the_rest_complete(tmp_path):
+    spec = spec_of("""
+        name = "crashy"
+        kind = "dummy"
+        scenes = ["alpha"]
+        [variants.mode]
+        good = {}
+        other = { x = 1.0 }
+        crash = { mode = "crash" }
+        """)
+    # One worker, the crash last: two pools (the one it breaks, the one it breaks alone).
+    summary = run_experiment(spec, workers=1, results_dir=tmp_path, progress=False)
+    assert (summary.done, summary.failed) == (2, 1)
+    records = read_records(tmp_path / "crashy")
+    for r in records.values():
+        assert r.status == ("failed" if r.labels["mode"] == "crash" else "done")
+        if r.status == "failed":
+            assert r.error == "worker process died while running it (a crash, or killed)"
+
+
+# --------------------------------------------------------------------------- kill and resume
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """The 12-run sweep run once, without interruption, on the local executor."""
+    results = tmp_path_factory.mktemp("uninterrupted")
+    spec = spec_of(SWEEP.format(sleep=0.2))
+    summary = run_experiment(spec, workers=2, results_dir=results, progress=False)
+    assert (summary.done, summary.failed, summary.total) == (12, 0, 12)
+    return spec, read_table(results / "sweep")
+
+
+def _result_files(folder: Path) -> list[Path]:
+    return [p for p in folder.glob("*.json") if re.fullmatch(r"[0-9a-f]{16}\.json", p.name)] if folder.is_dir() else []
+
+
+def _start_cli(path: Path, results: Path, log: Path) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "splatbench.experiments.cli", str(path), "--workers", "2",
+           "--results", str(results), "--no-progress"]
+    return subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=open(log, "ab"), start_new_session=True)
+
+
+def test_sigkill_at_random_points_then_resume_loses_and_duplicates_nothing(tmp_path, uninterrupted):
+    spec, expected = uninterrupted
+    path = write(tmp_path, SWEEP.format(sleep=0.2))
+    results, log = tmp_path / "results", tmp_path / "runner.log"
+    folder = results / "sweep"
+    rng = random.Random(6)
+    for _ in range(3):
+        target = min(len(_result_files(folder)) + rng.randint(1, 4), 11)
+        proc = _start_cli(path, results, log)
+        deadline = time.monotonic() + 90
+        while len(_result_files(folder)) < target and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(rng.uniform(0.0, 0.25))  # anywhere: mid-run, mid-write, between runs
+        os.killpg(proc.pid, signal.SIGKILL)  # the runner and its pool workers
+        proc.wait(timeout=30)
+        for p in _result_files(folder):  # a result file is always whole
+            assert json.loads(p.read_text())["status"] == "done", p
+    finished_before = {p.name for p in _result_files(folder)}
+    assert 0 < len(finished_before) < 12, "the kills should land mid-sweep"
+
+    proc = _start_cli(path, results, log)
+    out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 0, log.read_text()[-3000:]
+    assert out.decode().strip().splitlines()[-1] == f"done {12 - len(finished_before)}, " \
+                                                    f"skipped {len(finished_before)}, failed 0 of 12"
+
+    files = _result_files(folder)
+    ids = {r.run_id for r in expand(spec)}
+    assert sorted(p.stem for p in files) == sorted(ids)  # each run exactly once
+    assert all(json.loads(p.read_text())["status"] == "done" for p in files)
+    assert not [p for p in folder.iterdir() if p.name.endswith(".tmp")]  # stale temporaries cleaned
+    assert_table_matches_files(folder, ids)
+    pd.testing.assert_frame_equal(deterministic(read_table(folder)), deterministic(expected))
+
+
+# --------------------------------------------------------------------------- dask
+def test_dask_local_cluster_on_loopback_gives_the_local_results(tmp_path, uninterrupted, monkeypatch):
+    pytest.importorskip("distributed")
+    import distributed
+
+    spec, expected = uninterrupted
+    addresses = []
+
+    class Recording(distributed.LocalCluster):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            addresses.append(self.scheduler_address)
+            addresses.extend(self.scheduler_info.get("workers", {}))  # worker addresses
+
+    monkeypatch.setattr(distributed, "LocalCluster", Recording)
+    summary = run_experiment(spec, workers=2, executor="dask", results_dir=tmp_path, progress=False)
+    assert (summary.done, summary.failed, summary.total) == (12, 0, 12)
+    assert addresses and all(a.startswith("tcp://127.0.0.1:") for a in addresses), addresses
+    folder = tmp_path / "sweep"
+    assert_table_matches_files(folder, {r.run_id for r in expand(spec)})
+    pd.testing.assert_frame_equal(deterministic(read_table(folder)), deterministic(expected))
+    assert (folder / TABLE_NAME).is_file()
