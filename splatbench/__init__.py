@@ -18,9 +18,21 @@ _llvm.configure()
 from splatbench.cameras import Camera  # noqa: E402
 from splatbench.errors import InputError, SplatbenchError  # noqa: E402
 from splatbench.gaussians import Gaussians  # noqa: E402
-from splatbench.raster import RasterInfo, RasterOptions, RenderResult, rasterize, render  # noqa: E402
 
 __version__ = "0.1.0"
+
+# The rasterizer (Dr.Jit, and torch for `rasterize`) loads on first use, so that
+# `import splatbench`, the CLI and experiment workers start without paying for it.
+_LAZY = {name: "splatbench.raster" for name in ("render", "rasterize", "RasterOptions", "RenderResult",
+                                                  "RasterInfo")}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'splatbench' has no attribute {name!r}")
 
 __all__ = ["Gaussians", "Camera", "render", "rasterize", "RasterOptions", "RenderResult", "RasterInfo",
            "InputError", "SplatbenchError", "__version__"]

@@ -8,6 +8,15 @@ from splatbench.raster.compositing import composite
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.projection import project
 from splatbench.raster.sh import eval_sh
-from splatbench.raster.torch_bridge import RasterInfo, rasterize
+
+
+def __getattr__(name: str):
+    """`rasterize` and `RasterInfo` need torch: import it only when they are used."""
+    if name in ("rasterize", "RasterInfo"):
+        from splatbench.raster import torch_bridge
+
+        return getattr(torch_bridge, name)
+    raise AttributeError(f"module 'splatbench.raster' has no attribute {name!r}")
+
 
 __all__ = ["render", "RenderResult", "rasterize", "RasterInfo", "RasterOptions", "project", "eval_sh", "composite"]
