@@ -19,6 +19,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "stress": ("splatbench.stress.cli:stress", "Stress the rasterizer with degenerate input."),
     "bench": ("splatbench.bench.cli:bench", "Benchmarks (raster: run time, memory, throughput)."),
     "scenes": ("splatbench.scenes.cli:scenes", "Mitsuba scene catalog: list scenes, render one into a dataset."),
+    "sfm": ("splatbench.commands.sfm:sfm", "Structure from motion (pycolmap) on a dataset's training views."),
+    "validate": ("splatbench.validate.cli:validate", "Cross-check the rasterizer (mitsuba: ray-traced Gaussians)."),
     "run": ("splatbench.experiments.cli:run", "Run an experiment grid (resumable; local or Dask executor)."),
 }
 

@@ -1,4 +1,13 @@
-"""Boundary checks for arrays: shape, dtype and finiteness, reported in one line."""
+"""Validation: boundary checks for arrays here; cross-renderer checks in submodules.
+
+This module holds the boundary checks (shape, dtype and finiteness, reported in
+one line) that every public function uses; importing it loads nothing heavy.
+
+Submodules, imported on demand:
+
+* `splatbench.validate.mitsuba` -- the rasterizer against Gaussians ray-traced by
+  Mitsuba's ``volprim_rf_basic`` (``splatbench validate mitsuba``; docs/validation.md).
+"""
 
 from __future__ import annotations
 
