@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.validate import as_float_array
+from splatbench.checks import as_float_array
 
 #: Largest accepted ``max |RᵀR - I|`` of the rotation part of ``world_to_camera``.
 ORTHONORMAL_TOL = 1e-5

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.validate import as_float_array
+from splatbench.checks import as_float_array
 
 #: Valid numbers of SH bases per channel, indexed by SH degree.
 SH_BASES = (1, 4, 9, 16)

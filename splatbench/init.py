@@ -30,7 +30,7 @@ import numpy as np
 
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES, SH_C0, Gaussians
-from splatbench.validate import as_float_array, check_shape
+from splatbench.checks import as_float_array, check_shape
 
 #: Lower bound on the mean squared neighbour distance (graphdeco's ``clamp_min(dist2, 1e-7)``).
 MIN_DIST2 = 1e-7

@@ -17,7 +17,7 @@ from splatbench.errors import InputError
 from splatbench.raster.backend import dr, get_backend
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.pipeline import Frame, check_background, check_sh_range, render_frame, resolve_sh_degree
-from splatbench.validate import check_finite, check_shape
+from splatbench.checks import check_finite, check_shape
 
 PARAMS = ("means", "log_scales", "quats", "opacity_logits", "sh")
 
