@@ -171,6 +171,10 @@ def sample_surface(mi_scene, n: int, *, seed: int = 0, include_emitters: bool = 
     if not (isinstance(n, int) and n >= 0):
         raise InputError(f"n: expected an int >= 0, got {n!r}")
     shapes = [s for s in mi_scene.shapes() if include_emitters or not s.is_emitter()]
+    # Mitsuba loads plugins in parallel, so shapes() comes back in a different order on
+    # each load: sort by id and bounding box so that a seed gives the same points.
+    shapes.sort(key=lambda s: (s.id(), *np.asarray(s.bbox().min, dtype=np.float64).ravel(),
+                               *np.asarray(s.bbox().max, dtype=np.float64).ravel()))
     if not shapes:
         raise InputError("scene: has no shapes to sample")
     areas = np.array([float(np.asarray(s.surface_area()).reshape(-1)[0]) for s in shapes])
@@ -183,7 +187,8 @@ def sample_surface(mi_scene, n: int, *, seed: int = 0, include_emitters: bool = 
         u = rng.random((2, m), dtype=np.float32)
         ps = shape.sample_position(0.0, mi.Point2f(u[0], u[1]))
         xyz.append(np.asarray(ps.p, dtype=np.float64).reshape(3, -1).T)
-        normals.append(np.asarray(ps.n, dtype=np.float64).reshape(3, -1).T)
+        # planar shapes return one constant normal (width 1): broadcast it to m rows
+        normals.append(np.broadcast_to(np.asarray(ps.n, dtype=np.float64).reshape(3, -1).T, (m, 3)))
         index.append(np.full(m, k, dtype=np.int64))
     cat = (lambda a, w: np.concatenate(a) if a else np.zeros((0, w)))
     return SurfacePoints(cat(xyz, 3), cat(normals, 3), np.concatenate(index) if index else np.zeros(0, np.int64),
