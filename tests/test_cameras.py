@@ -14,7 +14,7 @@ import pytest
 
 import splatbench  # noqa: F401 - sets DRJIT_LIBLLVM_PATH before mitsuba/drjit load
 from splatbench.cameras import Camera
-from splatbench.errors import InputError
+from tests.assertions import one_line_error
 
 EPS32 = float(np.finfo(np.float32).eps)
 
@@ -56,15 +56,6 @@ def assert_same_pixels(a: Camera, b: Camera, pts: np.ndarray, tol: float) -> Non
     assert err <= tol, f"max reprojection difference {err:.3g} px > {tol:.3g} px"
     np.testing.assert_allclose(z_a, z_b, rtol=0, atol=tol * 1e-2)
 
-
-def one_line_error(fn, *parts: str) -> str:
-    with pytest.raises(InputError) as info:
-        fn()
-    msg = str(info.value)
-    assert "\n" not in msg, msg
-    for part in parts:
-        assert part in msg, (part, msg)
-    return msg
 
 
 # ------------------------------------------------------------------- validation

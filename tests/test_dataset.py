@@ -8,26 +8,16 @@ import json
 import math
 
 import numpy as np
-import pytest
 from PIL import Image
 
 import splatbench  # noqa: F401 - sets DRJIT_LIBLLVM_PATH before pycolmap/drjit load
 from splatbench.cameras import Camera
 from splatbench.data import Dataset, PointCloud, load_dataset
-from splatbench.errors import InputError
+from tests.assertions import one_line_error
 
 W, H = 24, 16
 TOL = 1e-9  # float64 all the way (COLMAP binary, JSON repr): agreement to ~1e-15
 
-
-def one_line_error(fn, *parts: str) -> str:
-    with pytest.raises(InputError) as info:
-        fn()
-    msg = str(info.value)
-    assert "\n" not in msg, msg
-    for part in parts:
-        assert part in msg, (part, msg)
-    return msg
 
 
 def orbit_cameras(n: int, width: int = W, height: int = H) -> list[Camera]:

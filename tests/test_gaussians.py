@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from splatbench.errors import InputError
 from splatbench.gaussians import SH_C0, Gaussians, normalize_quats, quat_to_rotmat
+from tests.assertions import one_line_error
 
 EPS64 = np.finfo(np.float64).eps
 EPS32 = float(np.finfo(np.float32).eps)
@@ -29,15 +29,6 @@ def make(n: int = 5, k: int = 16, seed: int = 0, **override) -> Gaussians:
     fields.update(override)
     return Gaussians(**fields)
 
-
-def one_line_error(fn, *fields: str) -> str:
-    with pytest.raises(InputError) as info:
-        fn()
-    msg = str(info.value)
-    assert "\n" not in msg, msg
-    for field in fields:
-        assert field in msg, (field, msg)
-    return msg
 
 
 # ------------------------------------------------------------------ validation

@@ -9,8 +9,8 @@ import pytest
 from plyfile import PlyData, PlyElement
 
 from splatbench.ply import property_names
-from splatbench.errors import InputError
 from splatbench.gaussians import Gaussians
+from tests.assertions import one_line_error
 
 FIELDS = ("means", "log_scales", "quats", "opacity_logits", "sh")
 
@@ -27,15 +27,6 @@ def make(n: int, k: int, seed: int = 0) -> Gaussians:
         flat[: len(specials)] = specials[: flat.size]
     return g
 
-
-def one_line_error(fn, *parts: str) -> str:
-    with pytest.raises(InputError) as info:
-        fn()
-    msg = str(info.value)
-    assert "\n" not in msg, msg
-    for part in parts:
-        assert part in msg, (part, msg)
-    return msg
 
 
 # ------------------------------------------------------------------ round trip

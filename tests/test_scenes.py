@@ -16,11 +16,11 @@ import pytest
 import splatbench  # noqa: F401 - sets DRJIT_LIBLLVM_PATH before mitsuba/drjit load
 from splatbench.cameras import Camera
 from splatbench.data import load_dataset
-from splatbench.errors import InputError
 from splatbench.scenes import (RigSpec, builtin_scenes_dir, find_scenes, get_scene, linear_to_srgb,
                                load_mitsuba_scene, plan_render, read_manifest, render_dataset, render_depth,
                                sample_surface, srgb_to_linear)
 from splatbench.scenes import render as render_module
+from tests.assertions import one_line_error
 
 BUILTIN = ("diffuse", "glossy", "textured", "thin", "occlusion", "far")
 # Layout agreement: both layouts store float64 (COLMAP: quaternion + translation;
@@ -28,15 +28,6 @@ BUILTIN = ("diffuse", "glossy", "textured", "thin", "occlusion", "far")
 POSE_TOL = 1e-6
 TINY_RIG = {"resolution": [32, 32], "train_views": 6, "test_views": 2, "spp": 4, "points": 400}
 
-
-def one_line_error(fn, *parts: str) -> str:
-    with pytest.raises(InputError) as info:
-        fn()
-    msg = str(info.value)
-    assert "\n" not in msg, msg
-    for part in parts:
-        assert part in msg, (part, msg)
-    return msg
 
 
 def write_rig(path, **fields) -> None:
