@@ -59,3 +59,18 @@ def as_float_array(name: str, value, spec: Sequence[Dim], sizes: dict[str, int],
     if finite:
         check_finite(name, array)
     return array
+
+
+def check_sh_degree(name: str, value) -> int:
+    """An SH degree: an integer in 0..3 (bools rejected), else one-line `InputError`."""
+    import operator
+
+    if isinstance(value, bool):
+        raise InputError(f"{name}: expected an int in 0..3, got {value!r}")
+    try:
+        degree = operator.index(value)
+    except TypeError:
+        raise InputError(f"{name}: expected an int in 0..3, got {value!r}") from None
+    if not 0 <= degree <= 3:
+        raise InputError(f"{name}: expected an int in 0..3, got {degree}")
+    return degree

@@ -6,14 +6,13 @@ SH degree d in 0..3). Activations follow ``docs/conventions.md``.
 
 from __future__ import annotations
 
-import operator
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.checks import as_float_array
+from splatbench.checks import as_float_array, check_sh_degree
 
 #: Valid numbers of SH bases per channel, indexed by SH degree.
 SH_BASES = (1, 4, 9, 16)
@@ -151,12 +150,7 @@ class Gaussians:
     # ---------------------------------------------------------------- editing
     def with_sh_degree(self, degree: int) -> Gaussians:
         """A copy with SH truncated to ``degree`` bands or zero-padded up to it."""
-        try:
-            d = operator.index(degree)
-        except TypeError:
-            raise InputError(f"degree: expected an int in 0..3, got {degree!r}") from None
-        if not 0 <= d <= 3:
-            raise InputError(f"degree: expected an int in 0..3, got {d}")
+        d = check_sh_degree("degree", degree)
         k = SH_BASES[d]
         n, k_now, _ = self.sh.shape
         if k <= k_now:

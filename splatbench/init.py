@@ -20,7 +20,6 @@ seed)``                                   scene: a dense initialisation standing
 from __future__ import annotations
 
 import math
-import operator
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +29,7 @@ import numpy as np
 
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES, SH_C0, Gaussians
-from splatbench.checks import as_float_array, check_shape
+from splatbench.checks import as_float_array, check_sh_degree, check_shape
 
 #: Lower bound on the mean squared neighbour distance (graphdeco's ``clamp_min(dist2, 1e-7)``).
 MIN_DIST2 = 1e-7
@@ -86,12 +85,7 @@ def from_points(points: Any, colors: Any, *, sh_degree: int = 3, opacity: float 
                              f"at index {[int(i) for i in where]}")
     else:
         raise InputError(f"colors: expected uint8 or float in [0, 1], got dtype {col.dtype}")
-    try:
-        degree = operator.index(sh_degree)
-    except TypeError:
-        raise InputError(f"sh_degree: expected an int in 0..3, got {sh_degree!r}") from None
-    if not 0 <= degree <= 3:
-        raise InputError(f"sh_degree: expected an int in 0..3, got {degree}")
+    degree = check_sh_degree("sh_degree", sh_degree)
     o = float(opacity) if isinstance(opacity, (int, float, np.floating, np.integer)) else math.nan
     if not 0 < o < 1:
         raise InputError(f"opacity: expected a number in (0, 1), got {opacity!r}")

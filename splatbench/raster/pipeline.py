@@ -6,6 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.raster.backend import dr
 from splatbench.raster.binning import Bins, TileGrid
@@ -49,8 +50,7 @@ def resolve_sh_degree(num_bases: int, sh_degree: int | None) -> int:
     available = SH_BASES[num_bases]
     if sh_degree is None:
         return available
-    if isinstance(sh_degree, bool) or not isinstance(sh_degree, (int, np.integer)) or not 0 <= sh_degree <= 3:
-        raise InputError(f"sh_degree: expected an integer in [0, 3], got {sh_degree!r}")
+    sh_degree = check_sh_degree("sh_degree", sh_degree)
     if sh_degree > available:
         raise InputError(f"sh_degree: {sh_degree} needs {(sh_degree + 1) ** 2} SH bases, but sh has K={num_bases}")
     return int(sh_degree)
