@@ -1,0 +1,73 @@
+"""`splatbench train DATASET [--config FILE] [--set key=value ...] [--json] [--quiet] [--out DIR]`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command()
+@click.argument("dataset", type=click.Path(path_type=Path))
+@click.option("--config", "config_file", type=click.Path(path_type=Path), default=None,
+              help="TOML config (fields of TrainConfig; see docs/training.md).")
+@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
+              help="Override a config field (repeatable), e.g. --set iterations=2000 --set sh_degree=auto "
+                   "--set strategy_options.cap_max=50000.")
+@click.option("--out", "out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default: the config's `out`, runs/train).")
+@click.option("--json", "as_json", is_flag=True, help="Print the TrainResult as one JSON line at the end.")
+@click.option("--quiet", is_flag=True, help="No progress bar (for sweeps).")
+def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], out: Path | None, as_json: bool,
+          quiet: bool) -> None:
+    """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender folder).
+
+    Prints the test PSNR / SSIM, Gaussian count, SH degree and the PLY path; writes
+    config.toml, point_cloud.ply and result.json under the output folder.
+    """
+    from splatbench.train.config import TrainConfig, apply_overrides, load_config
+
+    config = load_config(config_file) if config_file is not None else TrainConfig()
+    config = apply_overrides(config, [f"dataset={_toml_str(str(dataset))}", *overrides]
+                             + ([f"out={_toml_str(str(out))}"] if out is not None else []))
+    config.validate()
+
+    from splatbench.train.loop import train as run
+
+    bar = None
+    if not quiet:
+        from tqdm import tqdm
+
+        bar = tqdm(total=config.iterations, desc="train", unit="it", dynamic_ncols=True, leave=True)
+
+    def progress(status) -> None:
+        bar.update(1)
+        if status.step % 10 == 0 or status.step + 1 == config.iterations:
+            bar.set_postfix(loss=f"{status.loss:.4f}", psnr=f"{status.psnr:.2f}", n=status.num_gaussians,
+                            sh=status.sh_degree, refresh=False)
+
+    try:
+        result = run(config, progress=progress if bar is not None else None)
+    finally:
+        if bar is not None:
+            bar.close()
+    if as_json:
+        click.echo(result.to_json())
+        return
+    fmt = (lambda x, spec: "n/a" if x is None else format(x, spec))
+    click.echo(f"test PSNR {fmt(result.test_psnr, '.2f')} dB, SSIM {fmt(result.test_ssim, '.4f')}, "
+               f"LPIPS {fmt(result.test_lpips, '.4f')} ({result.test_views} test views)")
+    click.echo(f"{result.num_gaussians} Gaussians, SH degree {result.sh_degree} ({result.sh_degree_reason})")
+    click.echo(f"{result.iterations} iterations in {result.train_seconds:.1f} s "
+               f"({result.iterations / max(result.train_seconds, 1e-9):.2f} it/s), render "
+               f"{fmt(result.render_ms_per_view, '.1f')} ms/view, peak RSS {result.peak_rss_mb:.0f} MB")
+    for note in result.notes:
+        click.echo(f"note: {note}")
+    click.echo(f"wrote {result.ply_path}")
+
+
+def _toml_str(text: str) -> str:
+    """A TOML basic string literal of ``text`` (for the override parser)."""
+    import json
+
+    return json.dumps(text)

@@ -1,0 +1,296 @@
+"""`TrainConfig`: every knob of a training run, with graphdeco-inria 3DGS defaults.
+
+The config is a flat dataclass (one comment per field) that reads and writes TOML
+(`tomllib` / `tomli_w`, never ``eval``). Command-line overrides are ``key=value``
+strings whose value is parsed as a TOML literal (``3e-4``, ``true``, ``[1, 1, 1]``,
+``"auto"``) and falls back to a bare string (``strategy=mcmc``); a dotted key edits
+the strategy options (``strategy_options.cap_max=50000``). Every mistake -- unknown
+key, wrong type, negative learning rate, zero iterations, unknown strategy or
+initialisation -- is a one-line `InputError` naming the field, raised by
+`TrainConfig.validate` before any data is read or rendered.
+
+Example::
+
+    cfg = TrainConfig(dataset="data/scenes/diffuse-128", iterations=2000)
+    cfg = apply_overrides(cfg, ["sh_degree=auto", "strategy=none"])
+    cfg.validate()
+    save_config(cfg, "run/config.toml"); load_config("run/config.toml") == cfg   # True
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from splatbench.errors import InputError
+
+#: Learning-rate fields (Adam, one optimizer per parameter group); 0 freezes a group.
+LR_FIELDS = ("lr_means", "lr_means_final", "lr_log_scales", "lr_quats", "lr_opacity_logits", "lr_sh_dc",
+             "lr_sh_rest")
+
+
+@dataclass
+class TrainConfig:
+    """One training run. Defaults follow graphdeco-inria's 3DGS (``arguments/__init__.py``)."""
+
+    # --- data and output
+    dataset: str = ""                 # dataset folder (COLMAP or Blender layout, see splatbench.data)
+    out: str = "runs/train"           # output folder: point_cloud.ply, checkpoints/, config.toml, result.json
+    layout: str = "auto"              # dataset layout: "auto", "colmap" or "blender"
+    test_every: int = 8               # hold out every n-th view when the dataset gives no split
+    seed: int = 0                     # seeds torch, numpy, the view order and random backgrounds
+    # --- initialisation
+    init: str = "sfm"                 # "sfm" (dataset points), "random" (uniform in the camera bounds), "surface"
+    init_random_points: int = 100_000  # number of points of init="random" (3DGS's Blender default)
+    init_opacity: float = 0.1         # initial opacity of every Gaussian (3DGS: 0.1)
+    # --- schedule
+    iterations: int = 30_000          # optimisation steps, one training view each
+    sh_degree: int | str = 3          # maximum SH degree 0..3, or "auto" (measure each band, keep what helps)
+    sh_interval: int = 1000           # raise the active SH degree by one every this many steps
+    sh_auto_min_gain_db: float = 0.1  # auto: a band must raise training PSNR by this much (dB) to be kept
+    sh_auto_probe_views: int = 8      # auto: training views rendered to measure a band's gain (0 = all)
+    # --- learning rates (Adam, eps below); lr 0 freezes a group: no gradient is computed for it
+    lr_means: float = 1.6e-4          # positions at step 0, times the scene extent
+    lr_means_final: float = 1.6e-6    # positions at the last step, times the scene extent (exponential decay)
+    lr_log_scales: float = 5e-3       # log scales
+    lr_quats: float = 1e-3            # rotations (quaternions)
+    lr_opacity_logits: float = 2.5e-2  # opacity logits
+    lr_sh_dc: float = 2.5e-3          # SH band 0 (base colour)
+    lr_sh_rest: float = 1.25e-4       # SH bands 1..3 (= lr_sh_dc / 20)
+    adam_eps: float = 1e-15           # Adam epsilon (3DGS: 1e-15)
+    # --- loss
+    ssim_lambda: float = 0.2          # loss = (1 - lambda) L1 + lambda (1 - SSIM)
+    ssim_window: int = 11             # SSIM Gaussian window side (pixels, odd)
+    background: list[float] | str = "auto"  # RGB in [0, 1] behind the splats, or "auto": the mean colour of
+                                      # the training pixels the dataset marks as empty (alpha 0, else depth 0 =
+                                      # nothing hit, e.g. a constant sky), black when it marks none (3DGS)
+    random_background: bool = False   # a uniformly random background colour per training step
+    # --- densification (splatbench.strategies)
+    strategy: str = "default"         # "none", "default" (3DGS), "absgrad" (AbsGS), "mcmc" (3DGS-MCMC)
+    strategy_options: dict[str, Any] = field(default_factory=dict)  # fields of the strategy's dataclass
+    # --- evaluation, logging, checkpoints
+    eval_every: int = 0               # evaluate on the test views every this many steps (0 = only at the end)
+    log_every: int = 100              # record (step, loss, PSNR, N) in the history every this many steps
+    checkpoint_every: int = 0         # write checkpoints/iteration_<step>.ply every this many steps (0 = off)
+    device: str = "auto"              # rasterizer backend: "cpu" (Dr.Jit LLVM), "cuda" or "auto"
+    torch_threads: int = 1            # torch intra-op threads during the run (0 = torch's default); the
+                                      # rasterizer has its own thread pool, and small torch ops (loss, Adam)
+                                      # are fastest without oversubscribing the cores
+
+    # ------------------------------------------------------------------ checks
+    def validate(self) -> TrainConfig:
+        """Check every field; raise a one-line `InputError` naming the first bad one.
+
+        Also resolves ``strategy`` with ``strategy_options`` through
+        `splatbench.strategies.make_strategy` (cheap: no data is touched). Returns self.
+        """
+        for f in dataclasses.fields(self):
+            _check_type(f.name, getattr(self, f.name), _field_types()[f.name])
+        if self.iterations < 1:
+            raise InputError(f"iterations: expected an int >= 1, got {self.iterations}")
+        for name in LR_FIELDS:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise InputError(f"{name}: expected a learning rate >= 0, got {value!r}")
+        if (self.lr_means_final > 0) != (self.lr_means > 0):
+            raise InputError(f"lr_means_final: expected a rate > 0 when lr_means > 0 and 0 when lr_means is 0 "
+                             f"(means frozen), got {self.lr_means_final!r} with lr_means {self.lr_means!r}")
+        if not (math.isfinite(self.adam_eps) and self.adam_eps > 0):
+            raise InputError(f"adam_eps: expected a number > 0, got {self.adam_eps!r}")
+        from splatbench.train.initializers import INITIALIZERS
+
+        if self.init not in INITIALIZERS:
+            raise InputError(f"init: unknown initialisation {self.init!r} (expected one of: {', '.join(INITIALIZERS)})")
+        if self.layout not in ("auto", "colmap", "blender"):
+            raise InputError(f"layout: expected 'auto', 'colmap' or 'blender', got {self.layout!r}")
+        if isinstance(self.sh_degree, str):
+            if self.sh_degree != "auto":
+                raise InputError(f"sh_degree: expected an int in 0..3 or 'auto', got {self.sh_degree!r}")
+        elif not 0 <= self.sh_degree <= 3:
+            raise InputError(f"sh_degree: expected an int in 0..3 or 'auto', got {self.sh_degree}")
+        positive = ("sh_interval", "log_every", "init_random_points", "ssim_window")
+        for name in positive:
+            if getattr(self, name) < 1:
+                raise InputError(f"{name}: expected an int >= 1, got {getattr(self, name)}")
+        if self.ssim_window % 2 == 0:
+            raise InputError(f"ssim_window: expected an odd window side, got {self.ssim_window}")
+        for name in ("test_every", "eval_every", "checkpoint_every", "sh_auto_probe_views", "torch_threads"):
+            if getattr(self, name) < 0:
+                raise InputError(f"{name}: expected an int >= 0, got {getattr(self, name)}")
+        if not 0 < self.init_opacity < 1:
+            raise InputError(f"init_opacity: expected a number in (0, 1), got {self.init_opacity!r}")
+        if not 0 <= self.ssim_lambda <= 1:
+            raise InputError(f"ssim_lambda: expected a number in [0, 1], got {self.ssim_lambda!r}")
+        if not (math.isfinite(self.sh_auto_min_gain_db) and self.sh_auto_min_gain_db >= 0):
+            raise InputError(f"sh_auto_min_gain_db: expected a number >= 0, got {self.sh_auto_min_gain_db!r}")
+        if isinstance(self.background, str):
+            if self.background != "auto":
+                raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
+        elif len(self.background) != 3 or not all(0 <= c <= 1 for c in self.background):
+            raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
+        if self.device not in ("auto", "cpu", "cuda"):
+            raise InputError(f"device: expected 'auto', 'cpu' or 'cuda', got {self.device!r}")
+        self.make_strategy()
+        return self
+
+    def make_strategy(self):
+        """The densification strategy this config names (`InputError` if unknown)."""
+        from splatbench.strategies import make_strategy
+
+        return make_strategy(self.strategy, **self.strategy_options)
+
+    @property
+    def max_sh_degree(self) -> int:
+        """The highest SH degree the run may use (3 under ``"auto"``)."""
+        return 3 if self.sh_degree == "auto" else int(self.sh_degree)
+
+    # ------------------------------------------------------------------ TOML
+    def to_dict(self) -> dict[str, Any]:
+        """Plain TOML-ready values (lists and dicts copied)."""
+        return {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+    def to_toml(self) -> str:
+        import tomli_w
+
+        return tomli_w.dumps(self.to_dict())
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], *, source: str = "config") -> TrainConfig:
+        """A config from a mapping; unknown keys and wrong types are `InputError`."""
+        if not isinstance(data, dict):
+            raise InputError(f"{source}: expected a table of fields, got {type(data).__name__}")
+        known = {f.name for f in dataclasses.fields(cls)}
+        for key in data:
+            if key not in known:
+                raise InputError(f"{source}: unknown key {key!r}{_suggest(key, known)}")
+        types = _field_types()
+        values = {k: _coerce(k, v, types[k]) for k, v in data.items()}
+        return cls(**values)
+
+    @classmethod
+    def from_toml(cls, text: str, *, source: str = "config") -> TrainConfig:
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"{source}: invalid TOML ({exc})") from None
+        return cls.from_dict(data, source=source)
+
+
+def load_config(path: str | Path) -> TrainConfig:
+    """Read a TOML config file (`InputError` if missing or invalid)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"config: cannot read {str(p)!r} ({exc.strerror})") from None
+    return TrainConfig.from_toml(text, source=str(p))
+
+
+def save_config(config: TrainConfig, path: str | Path) -> Path:
+    """Write ``config`` as TOML (creating the folder)."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(config.to_toml(), encoding="utf-8")
+    return p
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """``"key=value"`` -> (key, value). The value is a TOML literal when it parses as
+    one (``1e-3``, ``true``, ``[0, 0, 0]``, ``"auto"``), else the bare string."""
+    if "=" not in text:
+        raise InputError(f"--set: expected key=value, got {text!r}")
+    key, raw = (s.strip() for s in text.split("=", 1))
+    if not key:
+        raise InputError(f"--set: empty key in {text!r}")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key, value
+
+
+def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...]) -> TrainConfig:
+    """A copy of ``config`` with ``key=value`` overrides applied (types coerced)."""
+    data = config.to_dict()
+    for item in overrides:
+        key, value = parse_override(item)
+        if key.startswith("strategy_options."):
+            sub = key.split(".", 1)[1]
+            if not sub:
+                raise InputError(f"--set: empty strategy option in {item!r}")
+            data["strategy_options"] = {**data["strategy_options"], sub: value}
+        else:
+            data[key] = value
+    return TrainConfig.from_dict(data, source="--set")
+
+
+# ---------------------------------------------------------------------- helpers
+def _field_types() -> dict[str, Any]:
+    return typing.get_type_hints(TrainConfig)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, list):
+        return list(value)
+    if isinstance(value, dict):
+        return dict(value)
+    return value
+
+
+def _suggest(key: str, known: set[str]) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(key, sorted(known), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _coerce(name: str, value: Any, tp: Any) -> Any:
+    """``value`` as the field's type: ints widen to float, a lone number to nothing else."""
+    if tp is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if tp in (list[float], list[float] | str) and isinstance(value, list):
+        return [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value]
+    if tp == (int | str) and isinstance(value, float) and value.is_integer():
+        return value  # rejected by _check_type: a degree is an int
+    _check_type(name, value, tp)
+    return value
+
+
+def _check_type(name: str, value: Any, tp: Any) -> None:
+    ok: bool
+    if tp is bool:
+        ok = isinstance(value, bool)
+    elif tp is int:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif tp is float:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    elif tp is str:
+        ok = isinstance(value, str)
+    elif tp == (int | str):
+        ok = isinstance(value, str) or (isinstance(value, int) and not isinstance(value, bool))
+    elif tp == list[float]:
+        ok = isinstance(value, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                             and math.isfinite(v) for v in value)
+    elif tp == (list[float] | str):
+        ok = isinstance(value, str) or (isinstance(value, list) and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))
+    elif tp == dict[str, Any]:
+        ok = isinstance(value, dict)
+    else:  # pragma: no cover - a new field type must be added above
+        raise TypeError(f"TrainConfig.{name}: unsupported field type {tp}")
+    if not ok:
+        raise InputError(f"{name}: expected {_type_name(tp)}, got {value!r}")
+
+
+def _type_name(tp: Any) -> str:
+    return {bool: "true or false", int: "an int", float: "a finite number", str: "a string",
+            list[float]: "a list of numbers", dict[str, Any]: "a table",
+            list[float] | str: "a list of numbers or 'auto'"}.get(tp, "an int or 'auto'")
+
+
+__all__ = ["TrainConfig", "LR_FIELDS", "load_config", "save_config", "parse_override", "apply_overrides"]

@@ -1,0 +1,365 @@
+"""The training loop: `train(config) -> TrainResult`, built on `Trainer`.
+
+One step (graphdeco-inria's order, with gsplat's strategy hooks):
+
+1. SH schedule and position learning rate for this step; next view of a seeded
+   permutation (a fresh one every epoch); background (fixed or random).
+2. ``splatbench.rasterize`` of the current parameters (SH sliced to the active
+   degree; frozen groups carry no gradient), ``absgrad`` only if the strategy uses it.
+3. Loss ``(1 - λ) L1 + λ (1 - SSIM)`` plus the strategy's regularisation;
+   ``strategy.pre_backward``; backward -- split in two (loss, then the rasterizer) so
+   that benchmarks can time each; one Adam step per group; ``strategy.post_backward``
+   (densify / prune / relocate).
+
+Everything random is seeded from ``config.seed`` (torch's global generator, a
+dedicated `torch.Generator` for view order and backgrounds, numpy for random init),
+and the rasterizer is bit-deterministic, so a seed and a config give the same PLY
+bytes on the same machine.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import torch
+
+from splatbench.errors import InputError
+from splatbench.raster.torch_bridge import rasterize
+from splatbench.strategies.base import StepContext
+from splatbench.train.config import TrainConfig, save_config
+from splatbench.train.initializers import InitSettings, initialize
+from splatbench.train.losses import photometric_loss
+from splatbench.train.metrics import lpips_metric, psnr, ssim_metric
+from splatbench.train.params import (ExponentialLR, gaussians_from_params, make_optimizers, params_from_gaussians,
+                                     refreeze, scene_extent, set_lr)
+from splatbench.train.result import EvalPoint, HistoryPoint, TrainResult
+from splatbench.train.sh_schedule import BandMeasure, ShSchedule
+
+
+class StepStatus(NamedTuple):
+    """What one step reports to a progress callback."""
+
+    step: int            # 0-based index of the step just run
+    loss: float          # its training loss
+    psnr: float          # PSNR (dB) of its training view
+    num_gaussians: int   # N after the step
+    sh_degree: int       # active SH degree
+
+
+@dataclass
+class StepTimes:
+    """Seconds spent per phase, summed over steps (read by ``splatbench bench train``)."""
+
+    raster_forward: float = 0.0   # splatbench.rasterize (Dr.Jit forward, copies to torch)
+    loss: float = 0.0             # loss forward and its backward down to the rendered image
+    raster_backward: float = 0.0  # the rasterizer's backward (image cotangent -> parameter gradients)
+    optimizer: float = 0.0        # zero_grad and one Adam step per group
+    strategy: float = 0.0         # strategy hooks (pre/post backward, regularisation)
+    other: float = 0.0            # schedules, view choice, bookkeeping
+    steps: int = 0                # steps timed
+
+    def total(self) -> float:
+        return self.raster_forward + self.loss + self.raster_backward + self.optimizer + self.strategy + self.other
+
+
+@dataclass
+class Evaluation:
+    """Test-split metrics of the current model."""
+
+    psnr: float | None
+    ssim: float | None
+    lpips: float | None
+    render_ms_per_view: float | None
+    views: int
+    per_view_psnr: list[float] = field(default_factory=list)
+
+
+def resolve_background(background: list[float] | str, split) -> tuple[torch.Tensor, str]:
+    """The render background [3] and how it was chosen.
+
+    ``"auto"``: the mean ground-truth colour of the pixels the split marks as empty --
+    alpha 0 when it has alphas, else depth 0 (nothing hit: a constant environment
+    shows there) -- or black when it marks none (3DGS's default)."""
+    if not isinstance(background, str):
+        return torch.tensor(background, dtype=torch.float32), f"background {list(background)} (config)"
+    empty = None
+    if split.alphas is not None:
+        empty, how = split.alphas == 0, "alpha 0"
+    elif split.depths is not None:
+        empty, how = split.depths == 0, "depth 0 (nothing hit)"
+    if empty is None or not empty.any():
+        return torch.zeros(3), "background auto: black (the dataset marks no empty pixels)"
+    colour = split.images[empty].astype(np.float64).mean(axis=0)
+    rgb = [round(float(c), 4) for c in colour]
+    return torch.tensor(rgb, dtype=torch.float32), \
+        f"background auto: {rgb}, the mean of {int(empty.sum())} training pixels with {how}"
+
+
+def lr_groups(config: TrainConfig) -> dict[str, float]:
+    """Initial learning rate per parameter group (means before extent scaling)."""
+    return {"means": config.lr_means, "log_scales": config.lr_log_scales, "quats": config.lr_quats,
+            "opacity_logits": config.lr_opacity_logits, "sh_dc": config.lr_sh_dc, "sh_rest": config.lr_sh_rest}
+
+
+class Trainer:
+    """A training run in progress. ``Trainer(config)`` validates everything and sets up
+    (no rendering); `step` runs one iteration; `evaluate` measures the test split."""
+
+    def __init__(self, config: TrainConfig, *, dataset=None) -> None:
+        config.validate()
+        self.config = config
+        self.strategy = config.make_strategy()
+        if dataset is None:
+            if not config.dataset:
+                raise InputError("dataset: no dataset folder given")
+            from splatbench.data.dataset import load_dataset
+
+            dataset = load_dataset(config.dataset, layout=config.layout, test_every=config.test_every,
+                                   background=self._gt_background(config))
+        self.dataset = dataset
+        train = dataset.train
+        if len(train) == 0:
+            raise InputError(f"dataset: {str(dataset.root)!r} has no training views")
+        if config.random_background and train.alphas is None:
+            raise InputError("random_background: the dataset's images have no alpha channel, so a random "
+                             "background cannot be composited under the ground truth")
+        torch.manual_seed(config.seed)
+        np.random.seed(config.seed % 2**32)
+        gaussians = initialize(config.init, dataset, InitSettings(config.max_sh_degree, config.init_opacity,
+                                                                  config.init_random_points, config.seed))
+        self.extent = scene_extent(train.cameras)
+        self.lrs = lr_groups(config)
+        self.params = params_from_gaussians(gaussians, self.lrs)
+        self.optimizers = make_optimizers(self.params, self.lrs, config.adam_eps)
+        self.means_lr = ExponentialLR(config.lr_means, config.lr_means_final, config.iterations, self.extent)
+        self.state = self.strategy.initialize_state(self.params)
+        self.absgrad = bool(getattr(self.strategy, "absgrad", False))
+        self.sh = ShSchedule(config.sh_degree, config.sh_interval, min_gain_db=config.sh_auto_min_gain_db)
+        self.images = torch.from_numpy(np.ascontiguousarray(train.images, dtype=np.float32))
+        self.alphas = None if train.alphas is None else torch.from_numpy(np.asarray(train.alphas, np.float32))
+        # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
+        self.gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
+        self.background, self.background_note = resolve_background(config.background, train)
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self._order: list[int] = []
+        self.step_index = 0
+        self.times = StepTimes()
+        self.raster_options = {"device": config.device}
+
+    @staticmethod
+    def _gt_background(config: TrainConfig) -> list[float]:
+        return [0.0, 0.0, 0.0] if isinstance(config.background, str) else list(config.background)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def num_gaussians(self) -> int:
+        return int(self.params["means"].shape[0])
+
+    def gaussians(self):
+        """The current model as `splatbench.Gaussians`, SH truncated to the active degree."""
+        return gaussians_from_params(self.params, self.sh.degree)
+
+    def save_ply(self, path: str | Path) -> Path:
+        """Write the current model as a graphdeco 3DGS PLY (atomically: temp file + rename)."""
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        self.gaussians().to_ply(p)
+        return p
+
+    def _sh(self, degree: int) -> torch.Tensor:
+        k = (degree + 1) ** 2
+        return torch.cat([self.params["sh_dc"], self.params["sh_rest"][:, : k - 1]], dim=1)
+
+    def _render(self, camera, degree: int, background) -> tuple:
+        p = self.params
+        return rasterize(p["means"], p["log_scales"], p["quats"], p["opacity_logits"], self._sh(degree), camera,
+                         sh_degree=degree, background=background, absgrad=self.absgrad, **self.raster_options)
+
+    def _next_view(self) -> int:
+        if not self._order:
+            self._order = torch.randperm(len(self.images), generator=self.generator).tolist()
+        return self._order.pop()
+
+    # ------------------------------------------------------------------ one step
+    def step(self) -> StepStatus:
+        """Run one optimisation step and return its status."""
+        cfg, t = self.config, self.times
+        t0 = time.perf_counter()
+        step = self.step_index
+        degree = self.sh.update(step, self._probe)
+        lr = self.means_lr(step)
+        set_lr(self.optimizers["means"], lr)
+        view = self._next_view()
+        camera = self.dataset.train.cameras[view]
+        target = self.images[view]
+        if cfg.random_background:
+            bg = torch.rand(3, generator=self.generator)
+        else:
+            bg = self.background
+        if self.alphas is not None and bool((bg != self.gt_background).any()):
+            target = target + (bg - self.gt_background) * (1 - self.alphas[view])[..., None]
+        for opt in self.optimizers.values():
+            opt.zero_grad(set_to_none=True)
+        t1 = time.perf_counter()
+        rgb, _, _, info = self._render(camera, degree, bg.tolist())
+        t2 = time.perf_counter()
+        image = rgb.detach().requires_grad_(rgb.requires_grad)
+        loss = photometric_loss(image, target, cfg.ssim_lambda, cfg.ssim_window)
+        t3 = time.perf_counter()
+        reg = self.strategy.regularization(self.params, step)
+        ctx = StepContext(step=step, info=info, scene_extent=self.extent, means_lr=lr, loss=float(loss.detach()))
+        self.strategy.pre_backward(self.params, self.optimizers, self.state, ctx)
+        t4 = time.perf_counter()
+        if rgb.requires_grad:
+            loss.backward()
+        if isinstance(reg, torch.Tensor) and reg.requires_grad:
+            reg.backward()
+        t5 = time.perf_counter()
+        if rgb.requires_grad:
+            rgb.backward(image.grad)
+        t6 = time.perf_counter()
+        for opt in self.optimizers.values():
+            opt.step()
+        t7 = time.perf_counter()
+        self.strategy.post_backward(self.params, self.optimizers, self.state, ctx)
+        refreeze(self.params, self.lrs)
+        t8 = time.perf_counter()
+        self.step_index += 1
+        t.raster_forward += t2 - t1
+        t.loss += (t3 - t2) + (t5 - t4)
+        t.raster_backward += t6 - t5
+        t.optimizer += t7 - t6
+        t.strategy += (t4 - t3) + (t8 - t7)
+        t.other += t1 - t0
+        t.steps += 1
+        total = float(loss.detach()) + float(reg.detach() if isinstance(reg, torch.Tensor) else reg)
+        return StepStatus(step, total, psnr(rgb.detach(), target), self.num_gaussians, degree)
+
+    # ------------------------------------------------------------------ SH probe
+    @torch.no_grad()
+    def _probe(self, band: int) -> BandMeasure:
+        """Training-view PSNR gain of SH band ``band`` and its relative coefficient energy."""
+        cams = self.dataset.train.cameras
+        k = self.config.sh_auto_probe_views
+        idx = list(range(len(cams))) if k == 0 or k >= len(cams) else \
+            sorted({int(i) for i in np.linspace(0, len(cams) - 1, k).round()})
+        gains, visible = [], torch.zeros(self.num_gaussians)
+        for i in idx:
+            with_band, _, _, info = self._render(cams[i], band, self.background.tolist())
+            without, _, _, _ = self._render(cams[i], band - 1, self.background.tolist())
+            gains.append(psnr(with_band, self.images[i]) - psnr(without, self.images[i]))
+            visible += info.visible.float()
+        w = torch.sigmoid(self.params["opacity_logits"]) * visible
+        lo, hi = band ** 2 - 1, (band + 1) ** 2 - 1  # band's rows in sh_rest
+        e_band = (w[:, None, None] * self.params["sh_rest"][:, lo:hi] ** 2).sum()
+        e_dc = (w[:, None, None] * self.params["sh_dc"] ** 2).sum()
+        ratio = float(torch.sqrt(e_band / e_dc)) if float(e_dc) > 0 else 0.0
+        return BandMeasure(float(np.mean(gains)), ratio, len(idx))
+
+    # ------------------------------------------------------------------ evaluation
+    @torch.no_grad()
+    def evaluate(self, lpips_fn=None) -> Evaluation:
+        """PSNR, SSIM (and LPIPS if ``lpips_fn``) of the current model on the test views."""
+        test = self.dataset.test
+        if len(test) == 0:
+            return Evaluation(None, None, None, None, 0)
+        psnrs, ssims, lps, seconds = [], [], [], 0.0
+        for i, camera in enumerate(test.cameras):
+            t0 = time.perf_counter()
+            rgb, _, _, _ = self._render(camera, self.sh.degree, self.background.tolist())
+            seconds += time.perf_counter() - t0
+            gt = torch.from_numpy(np.ascontiguousarray(test.images[i], dtype=np.float32))
+            psnrs.append(psnr(rgb, gt))
+            ssims.append(ssim_metric(rgb, gt, self.config.ssim_window))
+            if lpips_fn is not None:
+                lps.append(lpips_fn(rgb, gt))
+        return Evaluation(float(np.mean(psnrs)), float(np.mean(ssims)), float(np.mean(lps)) if lps else None,
+                          1e3 * seconds / len(test), len(test), psnrs)
+
+
+def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None = None,
+          dataset=None) -> TrainResult:
+    """Train 3DGS on ``config.dataset`` and return the measured `TrainResult`.
+
+    Every input problem (config field, dataset, initialisation) is a one-line
+    `InputError` raised before the first render. Writes under ``config.out``:
+    ``config.toml`` (the resolved config), ``checkpoints/iteration_<step>.ply`` every
+    ``checkpoint_every`` steps, ``point_cloud.ply`` (the final model) and
+    ``result.json``. ``progress`` is called after every step; ``dataset`` (a loaded
+    `splatbench.data.Dataset`) replaces reading ``config.dataset``.
+
+    Example::
+
+        result = train(TrainConfig(dataset="data/scenes/diffuse-128", iterations=2000))
+        result.test_psnr, result.num_gaussians, result.ply_path
+    """
+    with torch_threads(config.torch_threads):
+        return _train(config, progress, dataset)
+
+
+@contextmanager
+def torch_threads(n: int):
+    """Run with ``n`` torch intra-op threads (0: leave torch's setting), then restore it."""
+    before = torch.get_num_threads()
+    if n:
+        torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def _train(config: TrainConfig, progress, dataset) -> TrainResult:
+    from splatbench.bench.memory import peak_rss_mb
+
+    trainer = Trainer(config, dataset=dataset)
+    out = Path(config.out)
+    save_config(config, out / "config.toml")
+    lpips_fn, lpips_note = lpips_metric()
+    history: list[HistoryPoint] = []
+    evaluations: list[EvalPoint] = []
+    loop_seconds = 0.0
+    status = None
+    for _ in range(config.iterations):
+        t0 = time.perf_counter()
+        status = trainer.step()
+        loop_seconds += time.perf_counter() - t0
+        done = trainer.step_index
+        if status.step % config.log_every == 0 or done == config.iterations:
+            history.append(HistoryPoint(status.step, status.loss, status.psnr, status.num_gaussians))
+        if progress is not None:
+            progress(status)
+        if config.eval_every and done % config.eval_every == 0 and done < config.iterations:
+            ev = trainer.evaluate()
+            if ev.psnr is not None:
+                evaluations.append(EvalPoint(done, ev.psnr, ev.ssim))
+        if config.checkpoint_every and done % config.checkpoint_every == 0:
+            trainer.save_ply(out / "checkpoints" / f"iteration_{done}.ply")
+    t0 = time.perf_counter()
+    trainer.sh.finish(trainer.step_index, trainer._probe)
+    loop_seconds += time.perf_counter() - t0
+    ply = trainer.save_ply(out / "point_cloud.ply")
+    ev = trainer.evaluate(lpips_fn)
+    notes = [trainer.background_note] + ([] if lpips_fn is not None else [lpips_note])
+    if ev.views == 0:
+        notes.append("no test views: test metrics are None")
+    else:
+        evaluations.append(EvalPoint(trainer.step_index, ev.psnr, ev.ssim))
+    result = TrainResult(
+        test_psnr=ev.psnr, test_ssim=ev.ssim, test_lpips=ev.lpips, num_gaussians=trainer.num_gaussians,
+        train_seconds=round(loop_seconds, 3), iterations=trainer.step_index, sh_degree=trainer.sh.degree,
+        sh_degree_reason=trainer.sh.reason, ply_path=str(ply), render_ms_per_view=ev.render_ms_per_view,
+        peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,
+        test_views=ev.views, history=history, evaluations=evaluations,
+        sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes)
+    (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
+    return result
+
+
+__all__ = ["train", "torch_threads", "resolve_background", "Trainer", "StepStatus", "StepTimes", "Evaluation", "lr_groups"]

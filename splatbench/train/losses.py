@@ -1,0 +1,38 @@
+"""The 3DGS photometric loss: ``(1 - λ) · L1 + λ · (1 − SSIM)`` (λ = 0.2, window 11).
+
+SSIM is kornia's (``kornia.metrics.ssim``: Gaussian window, σ = 1.5, "same"
+padding), averaged over pixels and channels. Images are [H, W, 3] in [0, 1].
+"""
+
+from __future__ import annotations
+
+import torch
+
+
+def to_bchw(image: torch.Tensor) -> torch.Tensor:
+    """[H, W, 3] -> [1, 3, H, W] (a view)."""
+    return image.permute(2, 0, 1).unsqueeze(0)
+
+
+def ssim(pred: torch.Tensor, target: torch.Tensor, window: int = 11) -> torch.Tensor:
+    """Mean SSIM of two [H, W, 3] images (kornia), a differentiable scalar."""
+    import kornia
+
+    return kornia.metrics.ssim(to_bchw(pred), to_bchw(target), window, max_val=1.0).mean()
+
+
+def photometric_loss(pred: torch.Tensor, target: torch.Tensor, ssim_lambda: float = 0.2,
+                     window: int = 11) -> torch.Tensor:
+    """``(1 - ssim_lambda) · mean|pred − target| + ssim_lambda · (1 − SSIM(pred, target))``.
+
+    Args:
+        pred: [H, W, 3] rendered image (differentiable).
+        target: [H, W, 3] ground truth.
+    """
+    l1 = (pred - target).abs().mean()
+    if ssim_lambda == 0:
+        return l1
+    return (1 - ssim_lambda) * l1 + ssim_lambda * (1 - ssim(pred, target, window))
+
+
+__all__ = ["photometric_loss", "ssim", "to_bchw"]

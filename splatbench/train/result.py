@@ -1,0 +1,78 @@
+"""`TrainResult`: what a training run measured, as a typed record and as JSON."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from typing import NamedTuple
+
+
+class HistoryPoint(NamedTuple):
+    """Training progress at one logged step."""
+
+    step: int            # 0-based step index
+    loss: float          # training loss of that step
+    psnr: float          # PSNR (dB) of that step's training view
+    num_gaussians: int   # N after that step
+
+
+class EvalPoint(NamedTuple):
+    """Test-split metrics at one step (``eval_every``, and the final evaluation)."""
+
+    step: int            # steps completed when evaluated
+    psnr: float          # mean test PSNR (dB)
+    ssim: float          # mean test SSIM
+
+
+@dataclass
+class TrainResult:
+    """One run. Metrics are means over the test views; None where there are no test views."""
+
+    test_psnr: float | None             # mean PSNR (dB) of the final model on the test views
+    test_ssim: float | None             # mean SSIM (kornia, window 11)
+    test_lpips: float | None            # mean LPIPS-Alex; None when unavailable (see `notes`)
+    num_gaussians: int                  # N at the end
+    train_seconds: float                # wall time of the optimisation loop (no evaluation, no I/O)
+    iterations: int                     # steps run
+    sh_degree: int                      # SH degree in use at the end (the PLY holds this many bands)
+    sh_degree_reason: str               # why (fixed schedule, or the automatic schedule's measurement)
+    ply_path: str                       # the final 3DGS PLY
+    render_ms_per_view: float | None    # mean forward render time of a test view (ms)
+    peak_rss_mb: float                  # peak resident memory of the process (MB, 10^6 bytes)
+    strategy: str = ""                  # densification strategy used
+    scene_extent: float = 0.0           # 1.1 x camera-centre radius (scales the position learning rate)
+    test_views: int = 0                 # views evaluated
+    history: list[HistoryPoint] = field(default_factory=list)      # every `log_every` steps, and the last
+    evaluations: list[EvalPoint] = field(default_factory=list)     # every `eval_every` steps, and the end
+    sh_decisions: list[dict] = field(default_factory=list)         # auto SH: each band measured (ShDecision)
+    notes: list[str] = field(default_factory=list)                 # e.g. why LPIPS was skipped
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict; NaN / inf become None; history rows become objects."""
+        data = asdict(self)
+        data["history"] = [p._asdict() for p in self.history]
+        data["evaluations"] = [p._asdict() for p in self.evaluations]
+        return _finite(data)
+
+    def to_json(self, *, indent: int | None = None) -> str:
+        """One line by default (``splatbench train --json``)."""
+        return json.dumps(self.to_dict(), indent=indent, allow_nan=False)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> TrainResult:
+        return cls(**{**data, "history": [HistoryPoint(**p) for p in data.get("history", [])],
+                      "evaluations": [EvalPoint(**p) for p in data.get("evaluations", [])]})
+
+
+def _finite(value):
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
+
+
+__all__ = ["TrainResult", "HistoryPoint", "EvalPoint"]
