@@ -1,0 +1,371 @@
+"""Training (issue 5 §1, §3-§5): config round trip and overrides, bad input before any
+work, a short run that learns and writes a valid PLY, determinism, frozen groups,
+the SH schedule (fixed and automatic) and the command line.
+
+Datasets: ``tiny_diffuse`` is the `diffuse` scene rendered by Mitsuba at 32² (8 views,
+4 spp), with its surface points (a few hundred at 32², thinned to at most 1500);
+`synthetic_dataset` renders random Gaussians with splatbench itself (exactly
+view-independent with SH degree 0, or with strong band-1 colour).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+
+import splatbench
+from splatbench.cameras import Camera
+from splatbench.data.dataset import Dataset, PointCloud, Split, load_dataset
+from splatbench.errors import InputError
+from splatbench.gaussians import Gaussians
+from splatbench.train import TrainConfig, TrainResult, apply_overrides, load_config, save_config, train
+from splatbench.train.config import parse_override
+from splatbench.train.loop import Trainer, torch_threads
+from splatbench.train.params import ExponentialLR, scene_extent
+from splatbench.train.sh_schedule import BandMeasure, ShSchedule
+
+THIN_POINTS = 1500
+
+
+# ----------------------------------------------------------------------------- datasets
+@pytest.fixture(scope="module")
+def tiny_diffuse_dir(tmp_path_factory) -> Path:
+    """The `diffuse` scene as a dataset folder: 32x32, 8 views (7 train + 1 test), 4 spp."""
+    from splatbench.scenes.render import render_dataset
+
+    out = tmp_path_factory.mktemp("scenes") / "diffuse-32"
+    render_dataset("diffuse", out, resolution=32, views=8, spp=4, progress=False)
+    return out
+
+
+def thinned(dataset: Dataset, n: int = THIN_POINTS) -> Dataset:
+    if len(dataset.points) <= n:
+        return dataset
+    idx = np.random.default_rng(0).choice(len(dataset.points), n, replace=False)
+    idx.sort()
+    return dataclasses.replace(dataset, points=PointCloud(dataset.points.xyz[idx], dataset.points.rgb[idx]))
+
+
+@pytest.fixture(scope="module")
+def tiny_diffuse(tiny_diffuse_dir) -> Dataset:
+    return thinned(load_dataset(tiny_diffuse_dir))
+
+
+def orbit_cameras(n: int, size: int = 32) -> list[Camera]:
+    cams = []
+    for i in range(n):
+        a = 2 * np.pi * i / n
+        eye = [3.0 * np.cos(a), -1.2 + 0.4 * (i % 3), 3.0 * np.sin(a)]
+        cams.append(Camera.look_at(eye=eye, target=[0, 0, 0], up=[0, -1, 0], width=size, height=size,
+                                   fov_x_deg=45))
+    return cams
+
+
+def synthetic_dataset(root: Path, *, view_dependent: bool, views: int = 12, n: int = 400, seed: int = 0) -> Dataset:
+    """Random Gaussians in a unit ball rendered by splatbench from an orbit: exactly
+    view-independent (SH degree 0) or with strong degree-1 colour."""
+    rng = np.random.default_rng(seed)
+    means = rng.normal(size=(n, 3)) * 0.5
+    sh = np.zeros((n, 4, 3))
+    sh[:, 0] = rng.normal(size=(n, 3)) * 0.8
+    if view_dependent:
+        sh[:, 1:] = rng.normal(size=(n, 3, 3)) * 0.8
+    truth = Gaussians(means=means, log_scales=np.full((n, 3), np.log(0.08)),
+                      quats=np.tile([1.0, 0, 0, 0], (n, 1)), opacity_logits=np.full(n, 2.0), sh=sh)
+    cams = orbit_cameras(views)
+    images = np.stack([np.clip(splatbench.render(truth, c).rgb, 0, 1) for c in cams]).astype(np.float32)
+    test = [i for i in range(views) if i % 4 == 0]
+    train_ids = [i for i in range(views) if i % 4]
+
+    def split(ids):
+        return Split(images[ids], [cams[i] for i in ids], None, [f"v{i}.png" for i in ids])
+
+    colours = np.clip(0.5 + 0.28209479177387814 * sh[:, 0], 0, 1)
+    ds = Dataset("synthetic", split(train_ids), split(test), PointCloud(means, (colours * 255).astype(np.uint8)),
+                 root, "blender")
+    object.__setattr__(ds, "truth", truth)  # for the "truth" initializer of the SH tests
+    return ds
+
+
+def config(tmp_path: Path, **fields) -> TrainConfig:
+    base = dict(dataset="", out=str(tmp_path / "run"), iterations=20, strategy="none", log_every=5)
+    return TrainConfig(**{**base, **fields})
+
+
+class CountingRasterize:
+    """Stands in for `splatbench.rasterize` inside the trainer and counts calls."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+        self.requires_grad: list[tuple[bool, ...]] = []
+
+    def __call__(self, *args, **kwargs):
+        from splatbench.raster.torch_bridge import rasterize
+
+        self.calls += 1
+        self.requires_grad.append(tuple(bool(t.requires_grad) for t in args[:5]))
+        return rasterize(*args, **kwargs)
+
+
+@pytest.fixture
+def counting(monkeypatch) -> CountingRasterize:
+    spy = CountingRasterize()
+    monkeypatch.setattr("splatbench.train.loop.rasterize", spy)
+    return spy
+
+
+# ----------------------------------------------------------------------------- config
+def test_config_toml_round_trip_and_overrides(tmp_path):
+    cfg = TrainConfig(dataset="data/x", iterations=123, sh_degree="auto", background=[0.5, 0.25, 1.0],
+                      strategy="mcmc", strategy_options={"cap_max": 5000, "noise_lr": 5e5})
+    path = save_config(cfg, tmp_path / "c.toml")
+    assert load_config(path) == cfg
+    import tomllib
+
+    assert tomllib.loads(path.read_text())["sh_degree"] == "auto"             # plain TOML, no code
+    assert TrainConfig.from_toml(TrainConfig().to_toml()) == TrainConfig()
+
+    out = apply_overrides(cfg, ["iterations=7", "lr_means=1", "sh_degree=2", "strategy=default",
+                                "background=[0, 0, 1]", "random_background=true",
+                                "strategy_options.cap_max=100", "dataset=some/where"])
+    assert (out.iterations, out.sh_degree, out.strategy, out.random_background, out.dataset) == \
+        (7, 2, "default", True, "some/where")
+    assert out.lr_means == 1.0 and isinstance(out.lr_means, float)           # int widened to float
+    assert out.background == [0.0, 0.0, 1.0]
+    assert out.strategy_options == {"cap_max": 100, "noise_lr": 5e5}
+    assert apply_overrides(cfg, ["sh_degree=auto"]).sh_degree == "auto"        # bare string
+    assert parse_override("init = random") == ("init", "random")
+    assert cfg.iterations == 123                                               # the original is untouched
+
+
+BAD_CONFIGS = [
+    (["colour=1"], "colour"),                       # unknown key
+    (["iterations=0"], "iterations"),
+    (["iterations=ten"], "iterations"),             # bad value
+    (["iterations=1.5"], "iterations"),
+    (["lr_means=-1e-4"], "lr_means"),
+    (["lr_sh_rest=-1"], "lr_sh_rest"),
+    (["strategy=densest"], "strategy"),
+    (["strategy_options.no_such_field=1"], "no_such_field"),
+    (["init=poisson"], "init"),
+    (["sh_degree=4"], "sh_degree"),
+    (["sh_degree=high"], "sh_degree"),
+    (["background=[2, 0, 0]"], "background"),
+    (["ssim_window=10"], "ssim_window"),
+]
+
+
+@pytest.mark.parametrize("overrides,field", BAD_CONFIGS, ids=[o[0] for o, _ in BAD_CONFIGS])
+def test_bad_config_is_one_line_error_before_any_work(tmp_path, tiny_diffuse_dir, counting, overrides, field):
+    with pytest.raises(InputError) as err:
+        cfg = apply_overrides(config(tmp_path, dataset=str(tiny_diffuse_dir)), overrides)
+        train(cfg)
+    msg = str(err.value)
+    assert "\n" not in msg and field in msg, msg
+    assert counting.calls == 0
+    assert not (tmp_path / "run").exists()
+
+
+def _resized_copy(src: Path, dst: Path) -> Path:
+    from PIL import Image
+
+    shutil.copytree(src, dst)
+    first = sorted((dst / "images").iterdir())[1]
+    with Image.open(first) as im:
+        im.resize((im.width // 2, im.height // 2)).save(first)
+    return dst
+
+
+def test_bad_dataset_is_one_line_error_before_any_work(tmp_path, tiny_diffuse_dir, counting):
+    cases = [(tmp_path / "nowhere", "nowhere"),
+             (_resized_copy(tiny_diffuse_dir, tmp_path / "resized"), "image size")]
+    for path, needle in cases:
+        with pytest.raises(InputError) as err:
+            train(config(tmp_path, dataset=str(path)))
+        assert "\n" not in str(err.value) and needle in str(err.value), str(err.value)
+    with pytest.raises(InputError, match="dataset: no dataset folder"):
+        train(config(tmp_path))
+    no_points = dataclasses.replace(load_dataset(tiny_diffuse_dir), points=None)
+    for init in ("sfm", "surface"):
+        with pytest.raises(InputError, match=f"init: '{init}' needs the dataset's points"):
+            train(config(tmp_path, init=init), dataset=no_points)
+    with pytest.raises(InputError, match="random_background"):
+        train(config(tmp_path, random_background=True), dataset=no_points)
+    assert counting.calls == 0
+
+
+# ----------------------------------------------------------------------------- training
+# 40 steps are few for 3DGS's rates: opacity and colour learn 4x faster in the short runs.
+FAST = dict(lr_opacity_logits=0.1, lr_sh_dc=0.01)
+
+
+def test_short_run_lowers_loss_and_writes_a_valid_ply(tmp_path):
+    ds = synthetic_dataset(tmp_path, view_dependent=False)
+    losses = []
+    cfg = config(tmp_path, iterations=40, checkpoint_every=20, **FAST)
+    result = train(cfg, dataset=ds, progress=lambda s: losses.append(s.loss))
+    assert len(losses) == 40
+    first, last = np.array(losses[:9]), np.array(losses[-9:])    # one epoch is 9 views
+    assert first.mean() - last.mean() > 2 * first.std()           # a drop well beyond the spread over views
+    assert isinstance(result, TrainResult) and result.iterations == 40
+    assert result.test_psnr is not None and result.test_psnr > 15
+    assert 0 < result.test_ssim <= 1 and result.test_views == 3
+    assert result.num_gaussians == len(ds.points) and result.sh_degree == 0
+    assert result.render_ms_per_view > 0 and result.peak_rss_mb > 0 and result.train_seconds > 0
+    assert [p.step for p in result.history] == [0, 5, 10, 15, 20, 25, 30, 35, 39]
+    ply = Path(result.ply_path)
+    g = Gaussians.from_ply(ply)
+    assert len(g) == len(ds.points) and g.sh_degree == 0
+    assert sorted(p.name for p in (tmp_path / "run" / "checkpoints").iterdir()) == \
+        ["iteration_20.ply", "iteration_40.ply"]
+    assert Gaussians.from_ply(tmp_path / "run" / "checkpoints" / "iteration_40.ply").means.tobytes() == \
+        g.means.tobytes()
+    saved = json.loads((tmp_path / "run" / "result.json").read_text())
+    assert TrainResult.from_dict(saved).history == result.history
+    assert load_config(tmp_path / "run" / "config.toml") == cfg
+    if result.test_lpips is None:
+        assert any("LPIPS skipped" in n for n in result.notes)
+
+
+def test_same_seed_and_config_give_the_same_ply_bytes(tmp_path, tiny_diffuse):
+    # the default strategy refining every 5 steps: densification is covered too
+    opts = {"refine_start": 4, "refine_every": 5, "grad_threshold": 1e-5}
+    plys = []
+    for run in ("a", "b"):
+        cfg = config(tmp_path, out=str(tmp_path / run), iterations=20, strategy="default", strategy_options=opts)
+        plys.append(Path(train(cfg, dataset=tiny_diffuse).ply_path).read_bytes())
+    assert plys[0] == plys[1]
+    assert len(Gaussians.from_ply(tmp_path / "a" / "point_cloud.ply")) != len(tiny_diffuse.points)  # densified
+
+
+def test_frozen_groups_get_no_gradient_work(tmp_path, tiny_diffuse, counting):
+    cfg = config(tmp_path, lr_quats=0.0, lr_means=0.0, lr_means_final=0.0, lr_sh_rest=0.0, sh_interval=1)
+    with torch_threads(1):
+        trainer = Trainer(cfg, dataset=tiny_diffuse)
+        before = {k: v.detach().clone() for k, v in trainer.params.items()}
+        for _ in range(3):
+            trainer.step()
+    # means, log_scales, quats, opacity_logits, sh (sh_dc trains, so the SH input needs grad)
+    assert counting.requires_grad == [(False, True, False, True, True)] * 3
+    for name in ("quats", "means", "sh_rest"):
+        assert not trainer.params[name].requires_grad and trainer.params[name].grad is None
+        assert torch.equal(trainer.params[name], before[name])
+    for name in ("log_scales", "opacity_logits", "sh_dc"):
+        assert not torch.equal(trainer.params[name], before[name])
+
+
+def test_position_lr_decays_exponentially_times_the_extent():
+    sched = ExponentialLR(1.6e-4, 1.6e-6, 1000, scale=5.0)
+    assert sched(0) == pytest.approx(8e-4) and sched(1000) == pytest.approx(8e-6)
+    assert sched(500) == pytest.approx(8e-5)                      # geometric midpoint
+    assert ExponentialLR(0.0, 0.0, 10)(3) == 0.0
+    cams = orbit_cameras(8)
+    centres = np.stack([c.center for c in cams])
+    assert scene_extent(cams) == pytest.approx(1.1 * np.linalg.norm(centres - centres.mean(0), axis=1).max())
+
+
+# ----------------------------------------------------------------------------- SH schedule
+def test_fixed_sh_schedule_raises_the_degree_every_interval():
+    sched = ShSchedule(3, 1000)
+    got = {s: sched.update(s) for s in (0, 999, 1000, 1999, 2000, 2999, 3000, 29999)}
+    assert got == {0: 0, 999: 0, 1000: 1, 1999: 1, 2000: 2, 2999: 2, 3000: 3, 29999: 3}
+    capped = ShSchedule(1, 10)
+    assert [capped.update(s) for s in (0, 10, 20, 30)] == [0, 1, 1, 1]
+
+
+def test_trainer_follows_the_sh_schedule(tmp_path, tiny_diffuse, counting):
+    degrees = []
+    cfg = config(tmp_path, iterations=9, sh_interval=3, sh_degree=2)
+    result = train(cfg, dataset=tiny_diffuse, progress=lambda s: degrees.append(s.sh_degree))
+    assert degrees == [0, 0, 0, 1, 1, 1, 2, 2, 2]
+    assert result.sh_degree == 2 and Gaussians.from_ply(result.ply_path).sh_degree == 2
+
+
+def test_auto_sh_schedule_keeps_bands_that_gain_and_drops_the_first_that_does_not():
+    gains = {1: 2.0, 2: 0.01}
+    probe = lambda band: BandMeasure(gains[band], 0.5, 4)  # noqa: E731
+    sched = ShSchedule("auto", 10, min_gain_db=0.1)
+    degrees = [sched.update(s, probe) for s in range(40)]
+    assert degrees[:10] == [0] * 10 and degrees[10:20] == [1] * 10 and degrees[20:30] == [2] * 10
+    assert degrees[30:] == [1] * 10                     # band 2 dropped at step 30, settled
+    assert [(d.band, d.kept) for d in sched.decisions] == [(1, True), (2, False)]
+    assert "band 2 gained 0.010 dB < 0.1 dB" in sched.reason
+    assert sched.finish(40, probe) == 1
+    ended = ShSchedule("auto", 10)
+    [ended.update(s, probe) for s in range(5)]
+    assert ended.finish(5, probe) == 0 and "before band 1" in ended.reason
+
+
+AUTO = dict(iterations=30, sh_degree="auto", sh_interval=15, lr_sh_rest=2e-2, sh_auto_probe_views=0)
+
+
+@pytest.fixture
+def truth_init(monkeypatch):
+    """init="truth": the true Gaussians with their SH cut to degree 0 (a plug-in initializer),
+    so that only the view dependence is left to learn."""
+    from splatbench.train.initializers import INITIALIZERS
+
+    def truth(dataset, settings):
+        return dataset.truth.with_sh_degree(0).with_sh_degree(settings.sh_degree)
+
+    monkeypatch.setitem(INITIALIZERS, "truth", truth)
+
+
+def test_auto_sh_picks_0_for_a_view_independent_scene(tmp_path, truth_init):
+    result = train(config(tmp_path, init="truth", **AUTO), dataset=synthetic_dataset(tmp_path, view_dependent=False))
+    assert result.sh_degree == 0, result.sh_degree_reason
+    assert [(d["band"], d["kept"]) for d in result.sh_decisions] == [(1, False)]
+    assert "band 1 gained" in result.sh_degree_reason and Gaussians.from_ply(result.ply_path).sh_degree == 0
+
+
+def test_auto_sh_keeps_band_1_for_a_view_dependent_scene(tmp_path, truth_init):
+    result = train(config(tmp_path, init="truth", **AUTO), dataset=synthetic_dataset(tmp_path, view_dependent=True))
+    assert result.sh_degree == 1, result.sh_degree_reason
+    assert [(d["band"], d["kept"]) for d in result.sh_decisions] == [(1, True)]
+    assert result.sh_decisions[0]["gain_db"] >= 0.1
+
+
+# ----------------------------------------------------------------------------- command line
+def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir):
+    from splatbench.cli import main
+
+    cfg = tmp_path / "c.toml"
+    save_config(TrainConfig(iterations=2, strategy="none", init="random", init_random_points=300), cfg)
+    runner = CliRunner()
+    res = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                               "--json", "--quiet", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    lines = [line for line in res.stdout.splitlines() if line.strip()]
+    assert len(lines) == 1
+    data = json.loads(lines[0])
+    assert data["iterations"] == 3 and data["num_gaussians"] == 300 and Path(data["ply_path"]).is_file()
+    bad = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "lr_quats=-1", "--quiet"])
+    assert bad.exit_code == 2
+    assert bad.stderr.strip().splitlines() == [bad.stderr.strip()] and "lr_quats" in bad.stderr
+
+
+# ----------------------------------------------------------------------------- benchmark harness
+def test_bench_train_reports_throughput_and_a_time_split_that_adds_up(tmp_path):
+    from splatbench.bench.raster import machine_info
+    from splatbench.bench.train import TrainBenchSettings, format_table, run_size, write_csv, write_json
+
+    settings = TrainBenchSettings(sizes=(16,), gaussians=60, views=3, iterations=3, warmup=1)
+    settings.validate()
+    r = run_size(16, settings)
+    assert (r.width, r.n, r.iterations, len(r.step_runs_ms)) == (16, 60, 3, 3)
+    assert r.it_per_s == pytest.approx(3 / r.seconds, rel=1e-2)
+    shares = r.raster_forward_pct + r.raster_backward_pct + r.loss_pct + r.optimizer_pct + r.other_pct
+    assert shares == pytest.approx(100, abs=0.5)
+    assert "16x16" in format_table([r])
+    write_csv([r], tmp_path / "train.csv")
+    write_json([r], machine_info("cpu"), settings, tmp_path / "train.json")
+    assert json.loads((tmp_path / "train.json").read_text())["results"][0]["n"] == 60
+    with pytest.raises(InputError, match="--iterations"):
+        TrainBenchSettings(iterations=0).validate()
