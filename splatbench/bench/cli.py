@@ -61,3 +61,40 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
         click.echo(line)
     click.echo(f"load average at the end: {machine.loadavg_end}")
     click.echo(f"wrote {csv_path} and {json_path}")
+
+
+@bench.command("train")
+@click.option("--size", "sizes", multiple=True, type=int, metavar="PIXELS",
+              help="Square image side (repeatable). Default: 128 and 256.")
+@click.option("--gaussians", default=20_000, show_default=True, type=int, help="Gaussians trained.")
+@click.option("--iterations", default=30, show_default=True, type=int, help="Timed training steps per size.")
+@click.option("--warmup", default=5, show_default=True, type=int, help="Untimed steps first (kernel compilation).")
+@click.option("--seed", default=0, show_default=True, type=int, help="Scene and training seed.")
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("reports/bench"), show_default=True,
+              help="Folder for train.csv and train.json.")
+@click.option("--device", default="auto", show_default=True, metavar="cpu|cuda|auto",
+              help="Dr.Jit backend (auto: CUDA when available).")
+def train(sizes: tuple[int, ...], gaussians: int, iterations: int, warmup: int, seed: int, out: Path,
+          device: str) -> None:
+    """Training throughput: iterations/s and the share of rasterizer forward, backward,
+    loss and optimizer in a step (see splatbench/bench/train.py)."""
+    from splatbench.bench.raster import load_average, machine_info
+    from splatbench.bench.train import (STANDARD_SIZES, TrainBenchSettings, format_table, run_size, write_csv,
+                                        write_json)
+
+    settings = TrainBenchSettings(sizes=tuple(sizes) or STANDARD_SIZES, gaussians=gaussians, iterations=iterations,
+                                  warmup=warmup, seed=seed, device=device)
+    settings.validate()
+    machine = machine_info(device)
+    click.echo(f"bench train: sizes {list(settings.sizes)}, {gaussians} Gaussians, {warmup} + {iterations} steps, "
+               f"device {machine.device}, {machine.cpu_count} CPUs, load average {machine.loadavg_start}", err=True)
+    results = []
+    for size in settings.sizes:
+        results.append(run_size(size, settings))
+        click.echo(f"  {size}x{size}: {results[-1].it_per_s:.2f} it/s", err=True)
+        machine.loadavg_end = load_average()
+        write_csv(results, out / "train.csv")
+        write_json(results, machine, settings, out / "train.json")
+    click.echo(format_table(results))
+    click.echo(f"load average at the end: {machine.loadavg_end}")
+    click.echo(f"wrote {out / 'train.csv'} and {out / 'train.json'}")
