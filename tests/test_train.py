@@ -105,12 +105,14 @@ class CountingRasterize:
     def __init__(self) -> None:
         self.calls = 0
         self.requires_grad: list[tuple[bool, ...]] = []
+        self.cameras: list[Camera] = []
 
     def __call__(self, *args, **kwargs):
         from splatbench.raster.torch_bridge import rasterize
 
         self.calls += 1
         self.requires_grad.append(tuple(bool(t.requires_grad) for t in args[:5]))
+        self.cameras.append(args[5])
         return rasterize(*args, **kwargs)
 
 
@@ -330,6 +332,24 @@ def test_auto_sh_keeps_band_1_for_a_view_dependent_scene(tmp_path, truth_init):
     assert result.sh_degree == 1, result.sh_degree_reason
     assert [(d["band"], d["kept"]) for d in result.sh_decisions] == [(1, True)]
     assert result.sh_decisions[0]["gain_db"] >= 0.1
+
+
+def test_auto_sh_holds_views_out_of_training_until_the_degree_settles(tmp_path, truth_init, counting):
+    ds = synthetic_dataset(tmp_path, view_dependent=False)
+    cfg = config(tmp_path, init="truth", **{**AUTO, "sh_auto_holdout_every": 4})
+    with torch_threads(1):
+        trainer = Trainer(cfg, dataset=ds)
+        assert trainer.holdout == [2, 6]                          # i % 4 == 2 of 9 training views
+        held = {id(ds.train.cameras[i]) for i in trainer.holdout}
+        for _ in range(cfg.iterations):
+            trainer.step()
+        assert not held & {id(c) for c in counting.cameras}      # never trained on while undecided
+        trainer.sh.finish(trainer.step_index, trainer._probe)    # measured on the held-out views
+        assert trainer.sh.settled and "held-out training views" in trainer.sh.reason
+        seen = len(counting.cameras)
+        for _ in range(2 * len(ds.train)):                        # two epochs after settling
+            trainer.step()
+        assert held <= {id(c) for c in counting.cameras[seen:]}
 
 
 # ----------------------------------------------------------------------------- command line

@@ -54,6 +54,8 @@ class TrainConfig:
     sh_interval: int = 1000           # raise the active SH degree by one every this many steps
     sh_auto_min_gain_db: float = 0.1  # auto: a band must raise training PSNR by this much (dB) to be kept
     sh_auto_probe_views: int = 8      # auto: training views rendered to measure a band's gain (0 = all)
+    sh_auto_holdout_every: int = 8    # auto: hold every n-th training view out of training until the degree
+                                      # settles and measure bands on those views instead (0 = off)
     # --- learning rates (Adam, eps below); lr 0 freezes a group: no gradient is computed for it
     lr_means: float = 1.6e-4          # positions at step 0, times the scene extent
     lr_means_final: float = 1.6e-6    # positions at the last step, times the scene extent (exponential decay)
@@ -119,7 +121,8 @@ class TrainConfig:
                 raise InputError(f"{name}: expected an int >= 1, got {getattr(self, name)}")
         if self.ssim_window % 2 == 0:
             raise InputError(f"ssim_window: expected an odd window side, got {self.ssim_window}")
-        for name in ("test_every", "eval_every", "checkpoint_every", "sh_auto_probe_views", "torch_threads"):
+        for name in ("test_every", "eval_every", "checkpoint_every", "sh_auto_probe_views", "sh_auto_holdout_every",
+                     "torch_threads"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name}: expected an int >= 0, got {getattr(self, name)}")
         if not 0 < self.init_opacity < 1:

@@ -148,6 +148,9 @@ class Trainer:
         self.background, self.background_note = resolve_background(config.background, train)
         self.generator = torch.Generator().manual_seed(config.seed)
         self._order: list[int] = []
+        k = config.sh_auto_holdout_every if self.sh.auto else 0
+        # auto SH with a holdout: these training views are kept out of training until the degree settles
+        self.holdout = [i for i in range(len(train)) if i % k == k // 2] if k and len(train) >= 2 * k else []
         self.step_index = 0
         self.times = StepTimes()
         self.raster_options = {"device": config.device}
@@ -183,7 +186,10 @@ class Trainer:
 
     def _next_view(self) -> int:
         if not self._order:
-            self._order = torch.randperm(len(self.images), generator=self.generator).tolist()
+            views = torch.randperm(len(self.images), generator=self.generator).tolist()
+            if self.holdout and not self.sh.settled:
+                views = [v for v in views if v not in self.holdout]
+            self._order = views
         return self._order.pop()
 
     # ------------------------------------------------------------------ one step
@@ -247,8 +253,12 @@ class Trainer:
         """Training-view PSNR gain of SH band ``band`` and its relative coefficient energy."""
         cams = self.dataset.train.cameras
         k = self.config.sh_auto_probe_views
-        idx = list(range(len(cams))) if k == 0 or k >= len(cams) else \
-            sorted({int(i) for i in np.linspace(0, len(cams) - 1, k).round()})
+        if self.holdout:
+            idx = self.holdout
+        elif k == 0 or k >= len(cams):
+            idx = list(range(len(cams)))
+        else:
+            idx = sorted({int(i) for i in np.linspace(0, len(cams) - 1, k).round()})
         gains, visible = [], torch.zeros(self.num_gaussians)
         for i in idx:
             with_band, _, _, info = self._render(cams[i], band, self.background.tolist())
@@ -260,7 +270,7 @@ class Trainer:
         e_band = (w[:, None, None] * self.params["sh_rest"][:, lo:hi] ** 2).sum()
         e_dc = (w[:, None, None] * self.params["sh_dc"] ** 2).sum()
         ratio = float(torch.sqrt(e_band / e_dc)) if float(e_dc) > 0 else 0.0
-        return BandMeasure(float(np.mean(gains)), ratio, len(idx))
+        return BandMeasure(float(np.mean(gains)), ratio, len(idx), bool(self.holdout))
 
     # ------------------------------------------------------------------ evaluation
     @torch.no_grad()

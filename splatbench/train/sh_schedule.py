@@ -27,6 +27,7 @@ class BandMeasure(NamedTuple):
     gain_db: float       # mean training-view PSNR with degree d minus with degree d - 1
     energy_ratio: float  # sqrt(sum_i w_i |c_i,band|^2 / sum_i w_i |c_i,DC|^2), w = opacity x visible views
     views: int           # probe views rendered
+    held_out: bool = False  # True: the views were held out of training (an unbiased gain)
 
 
 class ShDecision(NamedTuple):
@@ -57,6 +58,12 @@ class ShSchedule:
         self._last_raise = 0
         self.reason = ("auto: not yet measured" if self.auto else
                        f"fixed: sh_degree={self.max_degree}, raised by one every {interval} steps")
+
+    @property
+    def settled(self) -> bool:
+        """True once the degree will not change any more (always True for a fixed schedule
+        once it reached its maximum; under "auto", after a band was dropped or all kept)."""
+        return self._settled or (not self.auto and self.degree == self.max_degree)
 
     def target(self, step: int) -> int:
         """The fixed schedule's degree at ``step``: ``min(max_degree, step // interval)``."""
@@ -104,8 +111,9 @@ class ShSchedule:
         self.decisions.append(ShDecision(step, band, m.gain_db, m.energy_ratio, kept))
         if not kept:
             self.degree = band - 1
+            where = "held-out training views" if m.held_out else "training views"
             self._settle(f"auto: band {band} gained {m.gain_db:.3f} dB < {self.min_gain_db} dB on {m.views} "
-                         f"training views (relative energy {m.energy_ratio:.3f}) after {step - self._last_raise} "
+                         f"{where} (relative energy {m.energy_ratio:.3f}) after {step - self._last_raise} "
                          f"steps; settled at degree {self.degree}")
         return kept
 
