@@ -142,10 +142,14 @@ class TrainConfig:
         return self
 
     def make_strategy(self):
-        """The densification strategy this config names (`InputError` if unknown)."""
-        from splatbench.strategies import make_strategy
+        """The densification strategy this config names (`InputError` if unknown). A
+        strategy with a ``seed`` field gets the run's ``seed`` unless the options set one."""
+        from splatbench.strategies import make_strategy, strategy_fields
 
-        return make_strategy(self.strategy, **self.strategy_options)
+        options = dict(self.strategy_options)
+        if "seed" in strategy_fields(self.strategy) and "seed" not in options:
+            options["seed"] = self.seed
+        return make_strategy(self.strategy, **options)
 
     @property
     def max_sh_degree(self) -> int:
