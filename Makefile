@@ -54,5 +54,14 @@ test-all: setup
 golden: setup
 	$(PY) -m tests.golden.regenerate
 
+# Run the shipped experiments (resumable: finished runs are skipped) and write
+# reports/<name>/; a failed run is listed in its report and makes the target fail.
+REPORTS ?= raster_speed_vs_error sh_degree loss_weighting densification
+reports: setup
+	@status=0; for e in $(REPORTS); do \
+	  $(VENV)/bin/splatbench run experiments/$$e.toml || status=1; \
+	  $(VENV)/bin/splatbench report experiments/$$e.toml || status=1; \
+	done; exit $$status
+
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache

@@ -22,6 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sfm": ("splatbench.commands.sfm:sfm", "Structure from motion (pycolmap) on a dataset's training views."),
     "validate": ("splatbench.validate.cli:validate", "Cross-check the rasterizer (mitsuba: ray-traced Gaussians)."),
     "run": ("splatbench.experiments.cli:run", "Run an experiment grid (resumable; local or Dask executor)."),
+    "report": ("splatbench.reports.cli:report", "Write an experiment's report: tables, findings, figures."),
     "train": ("splatbench.train.cli:train", "Train 3DGS on a dataset (L1 + D-SSIM, SH schedule, densification)."),
 }
 

@@ -71,6 +71,8 @@ class RunKind:
 #: Kinds known by name in every process: name -> "module:ATTR" (imported on first use).
 BUILTIN_KINDS: dict[str, str] = {
     "dummy": "splatbench.experiments.kinds:DUMMY",
+    "train": "splatbench.experiments.train_kind:TRAIN",
+    "raster": "splatbench.experiments.raster_kind:RASTER",
 }
 _REGISTERED: dict[str, RunKind] = {}
 

@@ -1,0 +1,297 @@
+"""The ``raster`` run kind: time the rasterizer under a set of options and measure the
+error those options trade in against the float64 reference.
+
+Scene names are workloads (`parse_workload_name`)::
+
+    synthetic-N-S        `splatbench.workloads.synthetic(N, S, S, seed)` (seed = the run's seed)
+    synthetic-N-WxH      the same at W x H
+    garden               the bundled Mip-NeRF 360 garden SfM capture, view 0 (648x420,
+    garden-vK              138,766 Gaussians), or view K; the run's seed changes nothing
+
+Config (flat; defaults in `DEFAULTS`): the rasterizer options ``tile_size``,
+``alpha_min``, ``alpha_max``, ``transmittance_min``, ``eps2d``, ``radius``,
+``antialiased``, ``sh_degree`` (0..3, the bands evaluated) and ``device``; and how
+to measure: ``repeats`` (timed runs; medians are reported) and ``error_scale`` (the
+resolution factor of the error measurement, so that the pixel-at-a-time reference
+stays affordable).
+
+One run:
+
+1. Timing, at the workload's full resolution: `splatbench.bench.raster`'s closures
+   (forward under ``no_grad``; forward + backward of ``rgb.sum()`` to all five
+   groups), one warm-up each, then ``repeats`` timed calls of each. SH is sliced to
+   the evaluated degree, as the trainer does.
+2. Error, at ``error_scale`` times the resolution: the Dr.Jit render with the run's
+   options against two float64 renders of `reference.render` (``mode="matched"``):
+
+   * ``error_*``: against the **default** options with every SH band -- the ground
+     truth; this is the error an option trades for its speed (a tile size changes
+     nothing, a higher ``alpha_min`` drops faint contributions, ``sh_degree = 0`` drops
+     view dependence).
+   * ``parity_max_abs``: against the reference with the **same** options -- the
+     implementation's own float32 error (about 1e-6 when the rasterizer is right).
+
+   The default-option reference depends only on the workload and the scale, so it is
+   computed once (in `prepare`, in the parent) and cached by content hash under
+   ``$SPLATBENCH_CACHE/reference`` (default ``~/.cache/splatbench/reference``).
+
+Metrics: `METRICS`. Curves: every timed run (``fwd_runs_ms``, ``fwd_bwd_runs_ms``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import re
+import statistics
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from splatbench.errors import InputError
+from splatbench.experiments.kinds import RunKind, RunOutput
+
+#: Config fields and defaults: the rasterizer's own defaults (graphdeco-inria 3DGS), then measurement.
+DEFAULTS: dict[str, Any] = {
+    "tile_size": 16,             # pixels per tile side (power of two, 1..64); never changes the image
+    "alpha_min": 1.0 / 255.0,    # contributions with alpha below this are skipped
+    "alpha_max": 0.99,           # alpha clamp
+    "transmittance_min": 1e-4,   # a pixel stops before transmittance would drop below this
+    "eps2d": 0.3,                # 2D covariance dilation (pixel^2)
+    "radius": "3sigma",          # "3sigma" or "opacity" (extent where o*G falls below alpha_min)
+    "antialiased": False,        # Mip-Splatting opacity compensation
+    "sh_degree": 3,              # SH bands evaluated (the workloads hold degree 3)
+    "device": "auto",            # "cpu" (Dr.Jit LLVM), "cuda" or "auto"
+    "repeats": 5,                # timed runs of forward and of forward+backward (medians reported)
+    "error_scale": 0.5,          # resolution factor of the error measurement (0 < s <= 1)
+}
+#: Fields passed to the rasterizer as `RasterOptions` (sh_degree goes separately).
+OPTION_FIELDS = ("tile_size", "alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius", "antialiased",
+                 "device")
+#: Options with no counterpart in the reference (accelerations and placement only).
+FAST_ONLY = ("tile_size", "device")
+CACHE_ENV = "SPLATBENCH_CACHE"
+
+#: Metric name -> meaning.
+METRICS: dict[str, str] = {
+    "fwd_ms": "median forward time at full resolution (ms)",
+    "fwd_bwd_ms": "median forward + backward time at full resolution (ms)",
+    "error_psnr": "PSNR (dB) of the render against the float64 reference with default options "
+                  "(ground truth; capped at 200)",
+    "error_max_abs": "largest |render - ground truth| over pixels and channels",
+    "error_mean_abs": "mean |render - ground truth|",
+    "parity_max_abs": "largest |render - float64 reference with the same options| (implementation error)",
+    "pairs": "Gaussian-tile pairs composited (full resolution)",
+    "visible": "Gaussians that survived culling (full resolution)",
+    "n": "Gaussians in the workload",
+    "width": "image width (pixels)", "height": "image height (pixels)",
+    "error_width": "width of the error measurement (pixels)", "error_height": "its height",
+    "device": "where the rasterizer ran ('cpu' or 'cuda')",
+}
+
+_SYNTHETIC = re.compile(r"^synthetic-(\d+)-(\d+)(?:x(\d+))?$")
+_GARDEN = re.compile(r"^garden(?:-v(\d+))?$")
+
+
+# --------------------------------------------------------------------------- workloads
+def parse_workload_name(name: str) -> tuple[str, dict[str, int]]:
+    """``"synthetic-20000-256"`` -> ("synthetic", {n, width, height}); ``"garden-v2"`` ->
+    ("garden", {view}); one-line `InputError` otherwise."""
+    m = _SYNTHETIC.match(name)
+    if m:
+        n, w = int(m.group(1)), int(m.group(2))
+        h = int(m.group(3)) if m.group(3) else w
+        if n < 1 or w < 1 or h < 1 or w * h > 4096 * 4096:
+            raise InputError(f"scene: {name!r}: expected N >= 1 Gaussians and a size up to 4096x4096")
+        return "synthetic", {"n": n, "width": w, "height": h}
+    m = _GARDEN.match(name)
+    if m:
+        return "garden", {"view": int(m.group(1) or 0)}
+    raise InputError(f"scene: unknown workload {name!r} (expected 'synthetic-N-S', 'synthetic-N-WxH', 'garden' "
+                     f"or 'garden-vK')")
+
+
+def build_workload(name: str, seed: int):
+    """The `splatbench.workloads.Workload` a scene name and seed stand for."""
+    from splatbench.workloads import GARDEN_SFM, load_npz, synthetic
+
+    kind, args = parse_workload_name(name)
+    if kind == "synthetic":
+        return synthetic(args["n"], args["width"], args["height"], seed)
+    return load_npz(GARDEN_SFM, view=args["view"])
+
+
+# --------------------------------------------------------------------------- config
+def validate(config: dict[str, Any]) -> None:
+    """One-line `InputError` naming the first bad field."""
+    import difflib
+
+    from splatbench.raster.options import RasterOptions
+
+    known = sorted({*DEFAULTS, "scene", "seed"})
+    for key, value in config.items():
+        if key not in known:
+            close = difflib.get_close_matches(key, known, n=1)
+            raise InputError(f"{key}: unknown key {key!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+        if isinstance(value, dict):
+            raise InputError(f"{key}: expected a value, got a table")
+    parse_workload_name(str(config.get("scene", "")))
+    merged = {**DEFAULTS, **config}
+    for key in ("tile_size", "sh_degree", "repeats"):
+        v = merged[key]
+        if not isinstance(v, int) or isinstance(v, bool):
+            raise InputError(f"{key}: expected an int, got {v!r}")
+    for key in ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "error_scale"):
+        v = merged[key]
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+            raise InputError(f"{key}: expected a finite number, got {v!r}")
+    if not isinstance(merged["antialiased"], bool):
+        raise InputError(f"antialiased: expected true or false, got {merged['antialiased']!r}")
+    if not 0 <= merged["sh_degree"] <= 3:
+        raise InputError(f"sh_degree: expected an int in 0..3, got {merged['sh_degree']}")
+    if merged["repeats"] < 1:
+        raise InputError(f"repeats: expected an int >= 1, got {merged['repeats']}")
+    if not 0 < merged["error_scale"] <= 1:
+        raise InputError(f"error_scale: expected a factor in (0, 1], got {merged['error_scale']!r}")
+    RasterOptions.from_kwargs(**{k: merged[k] for k in OPTION_FIELDS})  # names the bad option
+
+
+def resolve(config: dict[str, Any]) -> dict[str, Any]:
+    """Every field filled in; numbers normalised (``alpha_min = 1`` and ``1.0`` are one run)."""
+    out = {**DEFAULTS, **config}
+    for key in ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "error_scale"):
+        out[key] = float(out[key])
+    return out
+
+
+def options_of(config: dict[str, Any]) -> dict[str, Any]:
+    """The `RasterOptions` keyword arguments of a resolved config."""
+    return {k: config[k] for k in OPTION_FIELDS}
+
+
+# --------------------------------------------------------------------------- reference
+def cache_dir() -> Path:
+    """``$SPLATBENCH_CACHE/reference``, else ``~/.cache/splatbench/reference``."""
+    root = os.environ.get(CACHE_ENV)
+    return (Path(root) if root else Path.home() / ".cache" / "splatbench") / "reference"
+
+
+def _reference_sources() -> str:
+    import reference
+
+    folder = Path(reference.__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(folder.glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
+
+
+def reference_render(workload, scale: float, *, sh_degree: int | None = None, **options) -> np.ndarray:
+    """[H', W', 3] float64 `reference.render` (mode "matched") of ``workload`` at ``scale``
+    times its resolution, with ``options`` (reference names; the camera's near/far)."""
+    import reference
+
+    g = workload.gaussians
+    cam = workload.camera if scale == 1 else workload.camera.scaled(scale)
+    sh = g.sh if sh_degree is None else g.sh[:, : (sh_degree + 1) ** 2]
+    opts = {k: v for k, v in options.items() if k not in FAST_ONLY}
+    out = reference.render(g.means, g.log_scales, g.quats, g.opacity_logits, sh, cam.K, cam.world_to_camera,
+                           cam.width, cam.height, mode="matched", near=cam.near, far=cam.far, **opts)
+    return np.asarray(out.rgb, dtype=np.float64)
+
+
+def ground_truth(scene: str, seed: int, scale: float) -> np.ndarray:
+    """The default-option, all-bands float64 render of a workload at ``scale``, cached by
+    content (workload, seed, scale, reference sources); computed on a miss."""
+    kind, _ = parse_workload_name(scene)
+    key = {"scene": scene, "seed": seed if kind == "synthetic" else 0, "scale": scale,
+           "defaults": {k: DEFAULTS[k] for k in OPTION_FIELDS if k not in FAST_ONLY},
+           "reference": _reference_sources()}
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:24]
+    path = cache_dir() / f"{scene}-s{key['seed']}-{digest}.npy"
+    if path.is_file():
+        try:
+            return np.load(path)
+        except (OSError, ValueError):
+            pass  # a damaged file: compute again
+    rgb = reference_render(build_workload(scene, seed), scale,
+                           **{k: DEFAULTS[k] for k in OPTION_FIELDS if k not in FAST_ONLY})
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temp = path.parent / f".{path.name}.{os.getpid()}.tmp"
+    with open(temp, "wb") as fh:
+        np.save(fh, rgb)
+    os.replace(temp, path)
+    return rgb
+
+
+def prepare(configs: list[dict[str, Any]]) -> None:
+    """Compute (or find cached) every ground truth the pending runs need, once, in the parent."""
+    seen: set[tuple] = set()
+    for config in configs:
+        kind, _ = parse_workload_name(config["scene"])
+        key = (config["scene"], config["seed"] if kind == "synthetic" else 0, config["error_scale"])
+        if key not in seen:
+            seen.add(key)
+            ground_truth(*key)
+    if seen:
+        print(f"reference: {len(seen)} ground-truth render(s) ready in {cache_dir()}", file=sys.stderr, flush=True)
+
+
+# --------------------------------------------------------------------------- run
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR (dB) of ``a`` against ``b`` on [0, 1] images (inf when equal)."""
+    mse = float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
+    return math.inf if mse == 0 else -10.0 * math.log10(mse)
+
+
+def run(config: dict[str, Any], workdir: Path) -> RunOutput:
+    """Time the rasterizer on the workload with the run's options; measure its error."""
+    import torch
+
+    import splatbench
+    from splatbench.bench.raster import (forward_backward_with_init, forward_with_init, resolve_device, time_runs,
+                                         torch_params)
+    from splatbench.experiments.train_kind import limit_threads
+
+    limit_threads()
+    workload = build_workload(config["scene"], config["seed"])
+    degree = config["sh_degree"]
+    options = options_of(config)
+    params = list(torch_params(workload.gaussians))
+    params[4] = params[4][:, : (degree + 1) ** 2].contiguous()
+    forward = forward_with_init(tuple(params), workload.camera, {**options, "sh_degree": degree})
+    forward_backward = forward_backward_with_init(tuple(params), workload.camera, {**options, "sh_degree": degree})
+    forward_backward()
+    stats = forward()  # warm-up: kernels compile or load from Dr.Jit's cache
+    fwd_s, stats = time_runs(forward, config["repeats"])
+    fwd_bwd_s, _ = time_runs(forward_backward, config["repeats"])
+
+    scale = config["error_scale"]
+    small = workload.camera if scale == 1 else workload.camera.scaled(scale)
+    fast = splatbench.render(workload.gaussians, small, sh_degree=degree, **options).rgb.astype(np.float64)
+    truth = ground_truth(config["scene"], config["seed"], scale)
+    matched = reference_render(workload, scale, sh_degree=degree, **options)
+    err = np.abs(fast - truth)
+    metrics = {
+        "fwd_ms": round(1e3 * statistics.median(fwd_s), 3), "fwd_bwd_ms": round(1e3 * statistics.median(fwd_bwd_s), 3),
+        "error_psnr": round(min(psnr(fast, truth), 200.0), 4), "error_max_abs": float(err.max()),
+        "error_mean_abs": float(err.mean()), "parity_max_abs": float(np.abs(fast - matched).max()),
+        "pairs": int(stats.num_pairs), "visible": int(torch.as_tensor(stats.visible).sum()),
+        "n": len(workload.gaussians), "width": workload.camera.width, "height": workload.camera.height,
+        "error_width": small.width, "error_height": small.height, "device": resolve_device(options["device"]),
+    }
+    curves = {"fwd_runs_ms": [round(1e3 * s, 3) for s in fwd_s],
+              "fwd_bwd_runs_ms": [round(1e3 * s, 3) for s in fwd_bwd_s]}
+    return RunOutput(metrics=metrics, curves=curves)
+
+
+#: The ``raster`` kind (``kind = "raster"``).
+RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, prepare=prepare,
+                 description="time the rasterizer under options; error against the float64 reference")
+
+__all__ = ["RASTER", "DEFAULTS", "METRICS", "OPTION_FIELDS", "parse_workload_name", "build_workload",
+           "reference_render", "ground_truth", "cache_dir", "psnr"]

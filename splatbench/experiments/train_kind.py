@@ -1,0 +1,244 @@
+"""The ``train`` run kind: one `splatbench.train.train` run on a rendered catalog scene.
+
+Config (the nested dict an experiment gives one run)::
+
+    scene, seed          from the experiment's ``scenes`` / ``seeds`` (``seed`` is TrainConfig.seed)
+    data.resolution      dataset image width in pixels (default: the scene rig's)
+    data.views           views rendered, every 8th held out for testing (default: the rig's total)
+    data.spp             Mitsuba samples per pixel (default: the rig's)
+    <any TrainConfig field> but ``dataset`` and ``out``, which are machine-specific:
+                         the kind sets them (the dataset folder, the run's work folder)
+
+`resolve` fills every default in -- TrainConfig's, the rig's for ``data``, and the
+strategy's own fields for ``strategy_options`` -- so a field written at its default
+is the same run as one left out, and a changed default makes new runs.
+
+Datasets are rendered once, in the parent, by `prepare` (Mitsuba, cached by content
+hash) into ``$SPLATBENCH_DATASETS`` (default ``./data/scenes``, made absolute and
+exported to the workers) as ``<scene>-<W>-v<views>-s<spp>``. A worker calls
+`splatbench.scenes.render_dataset` again, which finds the cache (or renders, on a
+remote Dask worker that has no copy).
+
+Metrics (`METRICS`) and curves (`CURVE_KEYS`) are documented beside their names.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from splatbench.errors import InputError
+from splatbench.experiments.kinds import RunKind, RunOutput
+
+#: Environment variable naming the folder of rendered datasets.
+DATASETS_ENV = "SPLATBENCH_DATASETS"
+#: TrainConfig fields the kind owns (machine-specific paths; never in a config).
+OWNED_FIELDS = ("dataset", "out")
+#: The ``data`` table: how the scene is rendered into a dataset.
+DATA_FIELDS = ("resolution", "views", "spp")
+
+#: Metric name -> meaning (every one comes from `splatbench.train.TrainResult`).
+METRICS: dict[str, str] = {
+    "test_psnr": "mean PSNR (dB) of the final model on the test views",
+    "test_ssim": "mean SSIM on the test views",
+    "num_gaussians": "Gaussians at the end",
+    "train_seconds": "wall time of the optimisation loop (s; no evaluation, no I/O)",
+    "render_ms_per_view": "mean forward render time of a test view (ms)",
+    "sh_degree": "SH degree in use at the end (what 'auto' chose)",
+    "peak_rss_mb": "peak resident memory of the worker process (MB)",
+    "iterations": "steps run",
+    "test_views": "views evaluated",
+    "dataset_hash": "content hash of the rendered dataset (scene files, settings, renderer)",
+}
+#: Keys of the curves: the training history (every ``log_every`` steps) and the test evaluations.
+CURVE_KEYS = ("step", "loss", "psnr", "num_gaussians", "eval_step", "eval_psnr", "eval_ssim")
+
+
+# --------------------------------------------------------------------------- config
+def _train_fields() -> tuple[str, ...]:
+    from splatbench.train.config import TrainConfig
+
+    return tuple(f.name for f in dataclasses.fields(TrainConfig))
+
+
+def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]:
+    """(scene, the ``data`` table, the TrainConfig fields) of a nested run config; one-line
+    `InputError` naming the field for anything unknown."""
+    import difflib
+
+    fields = _train_fields()
+    known = sorted({*fields, "scene", "data"} - set(OWNED_FIELDS))
+    for key in config:
+        if key in OWNED_FIELDS:
+            what = "the rendered scene" if key == "dataset" else "the run's folder"
+            raise InputError(f"{key}: set by the train kind ({what}); choose the scene with 'scenes' and its "
+                             f"rendering with data.resolution / data.views / data.spp")
+        if key not in known:
+            close = difflib.get_close_matches(key, known, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise InputError(f"{key}: unknown key {key!r}{hint}")
+    scene = config.get("scene")
+    if not isinstance(scene, str) or not scene:
+        raise InputError(f"scene: expected a scene name, got {scene!r}")
+    data = config.get("data", {})
+    if not isinstance(data, dict):
+        raise InputError(f"data: expected a table of {', '.join(DATA_FIELDS)}, got {data!r}")
+    for key, value in data.items():
+        if key not in DATA_FIELDS:
+            raise InputError(f"data.{key}: unknown key (known: {', '.join(DATA_FIELDS)})")
+        if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
+            raise InputError(f"data.{key}: expected an int >= 1, got {value!r}")
+    if data.get("views") is not None and data["views"] < 2:
+        raise InputError(f"data.views: expected at least 2 views (one is held out), got {data['views']}")
+    train = {k: v for k, v in config.items() if k not in ("scene", "data")}
+    return scene, data, train
+
+
+def _train_config(train: dict[str, Any]):
+    from splatbench.train.config import TrainConfig
+
+    return TrainConfig.from_dict(dict(train), source="config").validate()
+
+
+def validate(config: dict[str, Any]) -> None:
+    """Raise a one-line `InputError` naming the first bad field (no data is touched)."""
+    _, _, train = _split(config)
+    _train_config(train)
+
+
+def _strategy_options(cfg) -> dict[str, Any]:
+    """Every field of the configured strategy (preset and overrides applied), JSON values."""
+    strategy = cfg.make_strategy()
+    return {f.name: _json(getattr(strategy, f.name)) for f in dataclasses.fields(strategy)}
+
+
+def _json(value: Any) -> Any:
+    if isinstance(value, tuple):
+        return [_json(v) for v in value]
+    return value
+
+
+def resolve(config: dict[str, Any]) -> dict[str, Any]:
+    """The config with every default filled in (module doc); what the run id hashes."""
+    from splatbench.scenes.catalog import get_scene
+
+    scene, data, train = _split(config)
+    cfg = _train_config(train)
+    rig = get_scene(scene).rig
+    out = {k: v for k, v in cfg.to_dict().items() if k not in OWNED_FIELDS}
+    out["strategy_options"] = _strategy_options(cfg)
+    out["scene"] = scene
+    out["data"] = {
+        "resolution": data.get("resolution") or int(rig.resolution[0]),
+        "views": data.get("views") or int(rig.train_views + rig.test_views),
+        "spp": data.get("spp") or int(rig.spp),
+    }
+    return out
+
+
+def scenes() -> set[str]:
+    """Every scene of the catalog (`splatbench.scenes.find_scenes`)."""
+    from splatbench.scenes.catalog import find_scenes
+
+    return set(find_scenes())
+
+
+# --------------------------------------------------------------------------- datasets
+def datasets_dir() -> Path:
+    """``$SPLATBENCH_DATASETS``, else ``./data/scenes`` (absolute)."""
+    return Path(os.environ.get(DATASETS_ENV) or Path("data") / "scenes").absolute()
+
+
+def dataset_folder(scene: str, data: dict[str, Any]) -> Path:
+    """Where the dataset of ``scene`` rendered with ``data`` lives."""
+    return datasets_dir() / f"{scene}-{data['resolution']}-v{data['views']}-s{data['spp']}"
+
+
+def ensure_dataset(scene: str, data: dict[str, Any], *, progress: bool = False):
+    """Render (or find in the cache) the dataset of one run; `RenderedDataset`."""
+    from splatbench.scenes.render import render_dataset
+
+    return render_dataset(scene, dataset_folder(scene, data), resolution=data["resolution"], views=data["views"],
+                          spp=data["spp"], progress=progress)
+
+
+def prepare(configs: list[dict[str, Any]]) -> None:
+    """Render every dataset the pending runs need, once, in the parent (cached), and
+    export the datasets folder to the workers."""
+    os.environ[DATASETS_ENV] = str(datasets_dir())
+    seen: set[tuple] = set()
+    for config in configs:
+        key = (config["scene"], tuple(sorted(config["data"].items())))
+        if key in seen:
+            continue
+        seen.add(key)
+        data = config["data"]
+        result = ensure_dataset(config["scene"], data, progress=sys.stderr.isatty())
+        how = "cached" if result.cached else f"rendered in {result.seconds:.1f} s"
+        print(f"dataset {config['scene']} {data['resolution']}px, {data['views']} views, {data['spp']} spp: "
+              f"{how} ({result.path})", file=sys.stderr, flush=True)
+
+
+# --------------------------------------------------------------------------- run
+def worker_threads() -> int | None:
+    """The runner's per-worker thread budget (``SPLATBENCH_WORKER_THREADS``), if set."""
+    from splatbench.experiments.runner import THREADS_ENV
+
+    value = os.environ.get(THREADS_ENV)
+    return int(value) if value and value.isdigit() and int(value) > 0 else None
+
+
+def limit_threads() -> None:
+    """Give Dr.Jit's thread pool the worker's budget, so parallel runs share the cores."""
+    threads = worker_threads()
+    if threads is not None:
+        import drjit as dr
+
+        dr.set_thread_count(threads)
+
+
+def run(config: dict[str, Any], workdir: Path) -> RunOutput:
+    """Train on the run's dataset, writing the run's files into ``workdir``."""
+    from splatbench.train import TrainConfig, train
+
+    limit_threads()
+    scene, data, fields = _split(config)
+    dataset = ensure_dataset(scene, data)
+    cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="config")
+    result = train(cfg.validate())
+    metrics = {
+        "test_psnr": result.test_psnr, "test_ssim": result.test_ssim, "num_gaussians": result.num_gaussians,
+        "train_seconds": result.train_seconds, "render_ms_per_view": result.render_ms_per_view,
+        "sh_degree": result.sh_degree, "peak_rss_mb": result.peak_rss_mb, "iterations": result.iterations,
+        "test_views": result.test_views, "dataset_hash": dataset.hash[:16],
+    }
+    curves = {
+        "step": [p.step for p in result.history], "loss": [p.loss for p in result.history],
+        "psnr": [p.psnr for p in result.history], "num_gaussians": [p.num_gaussians for p in result.history],
+        "eval_step": [p.step for p in result.evaluations], "eval_psnr": [p.psnr for p in result.evaluations],
+        "eval_ssim": [p.ssim for p in result.evaluations],
+    }
+    return RunOutput(metrics=metrics, curves=_finite(curves))
+
+
+def _finite(value: Any) -> Any:
+    import math
+
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
+    return value
+
+
+#: The ``train`` kind (``kind = "train"``).
+TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scenes=scenes, prepare=prepare,
+                description="train 3DGS on a rendered catalog scene (splatbench.train)")
+
+__all__ = ["TRAIN", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "datasets_dir", "dataset_folder",
+           "ensure_dataset", "limit_threads", "worker_threads"]

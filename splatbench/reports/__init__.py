@@ -1,0 +1,17 @@
+"""Reports: an experiment's results as markdown tables, findings and figures.
+
+    spec = load_experiment("experiments/sh_degree.toml")
+    report = build_report(spec, "results")            # tables, findings, the run table
+    write_report(report, "reports/sh_degree")          # report.md, figures/*.png, results.parquet
+
+Modules: `tables` (axis rows, mean ± std, metric specs per kind), `findings` (claims
+computed from the tables, rendered as text), `figures` (training curves, time against
+error with the Pareto front), `report` (assembly, markdown), `cli`
+(``splatbench report``). See docs/reports.md.
+"""
+
+from splatbench.reports.findings import Claim, Finding
+from splatbench.reports.report import Report, build_report, write_report
+from splatbench.reports.tables import AxisTable, MetricSpec, Stat
+
+__all__ = ["Report", "build_report", "write_report", "AxisTable", "MetricSpec", "Stat", "Claim", "Finding"]

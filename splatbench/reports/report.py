@@ -1,0 +1,248 @@
+"""`build_report` / `write_report`: an experiment's results as ``report.md`` with figures.
+
+    spec = load_experiment("experiments/sh_degree.toml")
+    report = build_report(spec, "results")            # Report: tables, findings, the run table
+    path = write_report(report, "reports/sh_degree")   # report.md, figures/*.png, results.parquet
+
+The report describes the grid *as the file now writes it*: the runs are the file's
+expansion (`splatbench.experiments.expand`), read from their per-run result files,
+so a report is never built from a stale table. What is written, under ``out``:
+
+* ``report.md``: a header (runs done / failed / not run, shared settings, run time),
+  one section per axis (a table of mean ± std over the runs of each axis value, per
+  scene; the findings; the training curves), run time against quality with the Pareto
+  front, the metrics' meanings, and any failed runs.
+* ``figures/curves_<axis>.png``, ``figures/time_vs_error.png`` (train kind) or
+  ``figures/speed_vs_error.png`` (raster kind).
+* ``results.parquet``: the run table the report was built from (the engine's columns:
+  ``run_id, scene, seed, status, ..., axis.*, config.*, metric.*, curves``).
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+
+import pandas as pd
+
+from splatbench.experiments.grid import expand
+from splatbench.experiments.spec import ExperimentSpec
+from splatbench.experiments.store import TABLE_NAME, atomic_write, build_table, experiment_dir, read_records
+from splatbench.reports.figures import cell_means, curves_figure, pareto_figure
+from splatbench.reports.findings import Finding, axis_finding, parity_finding
+from splatbench.reports.tables import AxisTable, MetricSpec, axis_table, cell_labels, display, metric_specs
+
+REPORT_NAME = "report.md"
+FIGURES = "figures"
+
+#: Per kind: (time metric, quality metric, figure file stem, title) of the time-against-error figure.
+TIME_QUALITY: dict[str, tuple[str, str, str, str]] = {
+    "train": ("train_seconds", "test_psnr", "time_vs_error",
+              "Training time against test PSNR per cell (mean over seeds)"),
+    "raster": ("fwd_bwd_ms", "error_psnr", "speed_vs_error",
+               "Rasterizer speed against error to the float64 ground truth (mean over seeds)"),
+}
+
+
+@dataclass
+class Report:
+    """An experiment's report before it is written.
+
+    spec: the experiment; table: one row per run of the grid that has a result (grid
+    order; `splatbench.experiments.store` columns); total: runs in the grid;
+    metrics: the metrics shown; axes: one `AxisTable` per axis; findings: axis name (or
+    "parity") -> `Finding`; fronts: scene -> Pareto-optimal cell labels (filled when
+    written).
+    """
+
+    spec: ExperimentSpec
+    table: pd.DataFrame
+    total: int
+    metrics: tuple[MetricSpec, ...]
+    axes: list[AxisTable]
+    findings: dict[str, Finding]
+    fronts: dict[str, list[str]] = field(default_factory=dict)
+
+    @property
+    def done(self) -> int:
+        return int((self.table.status == "done").sum()) if len(self.table) else 0
+
+    @property
+    def failed(self) -> int:
+        return int((self.table.status == "failed").sum()) if len(self.table) else 0
+
+
+def grid_table(spec: ExperimentSpec, results_dir: str | Path) -> tuple[pd.DataFrame, int]:
+    """(The table of the grid's runs that have a result file, in grid order; runs in the grid)."""
+    runs = expand(spec)
+    records = read_records(experiment_dir(results_dir, spec.name))
+    return build_table([records[r.run_id] for r in runs if r.run_id in records]), len(runs)
+
+
+def build_report(spec: ExperimentSpec, results_dir: str | Path) -> Report:
+    """Tables and findings of ``spec``'s results under ``results_dir`` (nothing written)."""
+    table, total = grid_table(spec, results_dir)
+    metrics = metric_specs(spec.kind, table)
+    axes = [axis_table(spec, axis, table, metrics) for axis in spec.dimensions]
+    findings: dict[str, Finding] = {}
+    for t in axes:
+        f = axis_finding(t, spec.kind, table)
+        if f is not None:
+            findings[t.axis] = f
+    if spec.kind == "raster":
+        f = parity_finding(table)
+        if f is not None:
+            findings["parity"] = f
+    return Report(spec, table, total, metrics, axes, findings)
+
+
+def write_report(report: Report, out: str | Path) -> Path:
+    """Write ``report.md``, ``figures/*.png`` and ``results.parquet`` under ``out``; the
+    report's path. Figures of an earlier report in ``out/figures`` are removed first."""
+    out = Path(out)
+    figures = out / FIGURES
+    if figures.is_dir():
+        shutil.rmtree(figures)
+    figures.mkdir(parents=True, exist_ok=True)
+    table = report.table
+    atomic_write(out / TABLE_NAME, lambda temp: table.to_parquet(temp, index=False))
+
+    curve_paths: dict[str, Path] = {}
+    for t in report.axes:
+        path = curves_figure(t, table, figures / f"curves_{_slug(t.axis)}.png")
+        if path is not None:
+            curve_paths[t.axis] = path
+    pareto_path = None
+    tq = TIME_QUALITY.get(report.spec.kind)
+    specs = {m.name: m for m in report.metrics}
+    if tq is not None and tq[0] in specs and tq[1] in specs and report.done:
+        means = cell_means(table, cell_labels(report.spec, table), tq[0], tq[1])
+        pareto_path = figures / f"{tq[2]}.png"
+        report.fronts = pareto_figure(means, list(report.spec.scenes), specs[tq[0]], specs[tq[1]], pareto_path,
+                                      tq[3])
+    text = render_markdown(report, curve_paths, pareto_path, out)
+    atomic_write(out / REPORT_NAME, lambda temp: temp.write_text(text, encoding="utf-8"))
+    return out / REPORT_NAME
+
+
+# --------------------------------------------------------------------------- markdown
+def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: Path | None, out: Path) -> str:
+    spec, table = report.spec, report.table
+    missing = report.total - len(table)
+    dims = ", ".join(f"`{d}`" for d in spec.dimensions) or "no axes"
+    lines = [f"# {spec.name}", ""]
+    if spec.description:
+        lines += [f"> {spec.description}", ""]
+    lines += [
+        f"Generated by `splatbench report {source_path(spec)}`: {report.total} runs of kind `{spec.kind}` "
+        f"({report.done} done, {report.failed} failed, {missing} not run); scenes "
+        f"{', '.join(spec.scenes)}; seeds {', '.join(map(str, spec.seeds))}; grid `{spec.grid}` over {dims}. "
+        f"Every number below is computed from `{TABLE_NAME}` beside this file (one row per run: `axis.*`, "
+        f"`config.*` and `metric.*` columns, `curves` as JSON).",
+        "",
+    ]
+    if spec.base:
+        lines += ["Shared settings: " + ", ".join(f"`{k} = {display(v)}`" for k, v in spec.base.items()) + ".", ""]
+    timing = run_time(table)
+    if timing:
+        lines += [timing, ""]
+    if missing:
+        lines += [f"**Incomplete:** {missing} run(s) have no result yet; run `splatbench run {source_path(spec)}` "
+                  f"(it resumes) and report again.", ""]
+
+    for t in report.axes:
+        how = ("each value pools every run with that value (all other axes' values, all seeds)"
+               if spec.grid == "product" else "each value alone on top of the base")
+        lines += [f"## {t.axis}", "", f"Mean ± standard deviation over runs; {how}.", "", t.markdown(), ""]
+        if t.axis in report.findings:
+            lines += ["**Findings** (computed from the table):", "", report.findings[t.axis].markdown(), ""]
+        if t.axis in curve_paths:
+            rel = curve_paths[t.axis].relative_to(out).as_posix()
+            lines += [f"![training curves by {t.axis}]({rel})", ""]
+
+    if "parity" in report.findings:
+        lines += ["## Parity", "", report.findings["parity"].markdown(), ""]
+
+    if pareto_path is not None:
+        tq = TIME_QUALITY[spec.kind]
+        specs = {m.name: m for m in report.metrics}
+        lines += [f"## {specs[tq[0]].label} against {specs[tq[1]].label}", "",
+                  f"{tq[3]}; ringed points are Pareto-optimal (no other cell is both faster and better).", "",
+                  f"![{tq[2]}]({pareto_path.relative_to(out).as_posix()})", ""]
+        for scene, front in report.fronts.items():
+            if front:
+                lines.append(f"- Pareto front on {scene}, fastest first: " + " → ".join(f"`{c}`" for c in front))
+        lines.append("")
+
+    meanings = metric_meanings(spec.kind)
+    if meanings:
+        lines += ["## Metrics", ""]
+        lines += [f"- `{m.label}` (`metric.{m.name}`): {meanings.get(m.name, '')}" for m in report.metrics]
+        lines.append("")
+
+    failed = table[table.status == "failed"] if len(table) else table
+    if len(failed):
+        lines += ["## Failed runs", "", "| run | scene | seed | error |", "|---|---|---|---|"]
+        for _, r in failed.iterrows():
+            lines.append(f"| `{r.run_id}` | {r.scene} | {r.seed} | {str(r.error).replace('|', '/')} |")
+        lines.append("")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def source_path(spec: ExperimentSpec) -> str:
+    """The experiment file as written in the report: relative to the current folder
+    when it lies below it (no machine-specific absolute paths in committed reports)."""
+    try:
+        return Path(spec.source).resolve().relative_to(Path.cwd().resolve()).as_posix()
+    except (ValueError, OSError):
+        return spec.source
+
+
+def metric_meanings(kind: str) -> dict[str, str]:
+    """The kind's metric documentation (name -> meaning), if it publishes one."""
+    if kind == "train":
+        from splatbench.experiments.train_kind import METRICS
+    elif kind == "raster":
+        from splatbench.experiments.raster_kind import METRICS
+    else:
+        return {}
+    return dict(METRICS)
+
+
+def run_time(table: pd.DataFrame) -> str:
+    """"Run time: ..." from the done runs' worker seconds and start / finish times."""
+    done = table[table.status == "done"] if len(table) else table
+    if not len(done):
+        return ""
+    worker = float(pd.to_numeric(done.seconds, errors="coerce").sum())
+    try:
+        start = min(datetime.fromisoformat(s) for s in done.started if s)
+        end = max(datetime.fromisoformat(s) for s in done.finished if s)
+        span = f"; {duration((end - start).total_seconds())} from the first start to the last finish"
+    except ValueError:
+        span = ""
+    return (f"Run time: {duration(worker)} of worker time over {len(done)} runs "
+            f"(mean {duration(worker / len(done))} per run){span}.")
+
+
+def duration(seconds: float) -> str:
+    """``"42 s"``, ``"12 min 5 s"``, ``"3 h 20 min"``."""
+    if not math.isfinite(seconds):
+        return "n/a"
+    s = int(round(seconds))
+    if s < 60:
+        return f"{s} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60} s"
+    return f"{s // 3600} h {(s % 3600) // 60} min"
+
+
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in text)
+
+
+__all__ = ["Report", "build_report", "write_report", "grid_table", "render_markdown", "run_time", "duration",
+           "REPORT_NAME", "FIGURES", "TIME_QUALITY"]

@@ -1,0 +1,267 @@
+"""Report tables: which runs make up each axis value, and mean ± std over them.
+
+An experiment's runs are grouped per **axis** (a plain axis or a variant axis):
+
+* ``grid = "product"``: the row of axis value ``v`` holds every run whose cell has
+  ``v`` on that axis (all values of the other axes, all seeds), per scene;
+* ``grid = "one-at-a-time"``: the rows are the base cell and each value of that axis
+  alone on top of the base (a value equal to the base is the base row).
+
+Membership comes from the experiment file itself (`axis_rows` expands a one-value
+copy of the grid per row and keeps the run ids), so a report always describes the
+grid as written, never a stale one. Statistics are over the *done* runs of a row:
+mean, sample standard deviation (ddof = 1; empty with one run) and count.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import pandas as pd
+
+from splatbench.experiments.grid import expand
+from splatbench.experiments.spec import ExperimentSpec, flatten, unflatten
+
+
+@dataclass(frozen=True)
+class MetricSpec:
+    """How a report shows one metric (``metric.<name>`` in the table)."""
+
+    name: str          # metric name, without the "metric." prefix
+    label: str         # column heading
+    fmt: str           # format spec of one value, e.g. ".2f"
+    unit: str = ""     # unit written after differences ("dB", "ms"; "" for none)
+    better: str = ""   # "higher", "lower" or "" (no preferred direction)
+
+
+#: The metrics each kind's tables show, in column order.
+KIND_METRICS: dict[str, tuple[MetricSpec, ...]] = {
+    "train": (
+        MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher"),
+        MetricSpec("test_ssim", "SSIM", ".4f", "", "higher"),
+        MetricSpec("num_gaussians", "Gaussians", ".0f", "", ""),
+        MetricSpec("train_seconds", "train time (s)", ".1f", "s", "lower"),
+        MetricSpec("render_ms_per_view", "render (ms/view)", ".1f", "ms", "lower"),
+    ),
+    "raster": (
+        MetricSpec("fwd_ms", "forward (ms)", ".2f", "ms", "lower"),
+        MetricSpec("fwd_bwd_ms", "fwd+bwd (ms)", ".2f", "ms", "lower"),
+        MetricSpec("error_psnr", "PSNR to ground truth (dB)", ".2f", "dB", "higher"),
+        MetricSpec("error_max_abs", "max abs error", ".2e", "", "lower"),
+        MetricSpec("parity_max_abs", "parity max abs", ".1e", "", "lower"),
+        MetricSpec("pairs", "pairs", ".0f", "", ""),
+    ),
+}
+
+
+def metric_specs(kind: str, table: pd.DataFrame) -> tuple[MetricSpec, ...]:
+    """The kind's metrics present in ``table``; for another kind, every numeric metric."""
+    present = {c[len("metric."):] for c in table.columns if c.startswith("metric.")}
+    if kind in KIND_METRICS:
+        return tuple(m for m in KIND_METRICS[kind] if m.name in present)
+    numeric = [c for c in table.columns if c.startswith("metric.") and pd.api.types.is_numeric_dtype(table[c])
+               and not pd.api.types.is_bool_dtype(table[c])]
+    return tuple(MetricSpec(c[len("metric."):], c[len("metric."):], ".4g") for c in numeric)
+
+
+# --------------------------------------------------------------------------- rows
+@dataclass(frozen=True)
+class Row:
+    """One row of an axis table: a label and the run ids it pools (every scene and seed)."""
+
+    label: str                 # display label: "3", "auto", "mcmc", "16 (base)", "base"
+    value: Any                 # the axis value or variant label (None for a one-at-a-time base)
+    run_ids: frozenset[str]
+    is_base: bool = False      # the one-at-a-time base cell
+
+
+def display(value: Any) -> str:
+    """An axis value as the report writes it (``0.1``, ``auto``, ``true``, a table as JSON)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (dict, list)):
+        return json.dumps(value, sort_keys=True, separators=(", ", " = ")) if isinstance(value, list) else \
+            "{" + ", ".join(f"{k} = {display(v)}" for k, v in sorted(value.items())) + "}"
+    return str(value)
+
+
+def _ids(spec: ExperimentSpec, **changes) -> frozenset[str]:
+    return frozenset(r.run_id for r in expand(dataclasses.replace(spec, **changes)))
+
+
+def axis_rows(spec: ExperimentSpec, axis: str) -> list[Row]:
+    """The rows of ``axis`` in file order (module doc), with the run ids of each."""
+    if axis in spec.axes:
+        choices = [(v, {"axes": {**spec.axes, axis: (v,)}}) for v in spec.axes[axis]]
+        only = [(v, {"grid": "product", "axes": {axis: (v,)}, "variants": {}}) for v in spec.axes[axis]]
+    else:
+        labels = spec.variants[axis]
+        choices = [(lab, {"variants": {**spec.variants, axis: {lab: labels[lab]}}}) for lab in labels]
+        only = [(lab, {"grid": "product", "axes": {}, "variants": {axis: {lab: labels[lab]}}}) for lab in labels]
+    if spec.grid == "product":
+        return [Row(display(v), v, _ids(spec, **changes)) for v, changes in choices]
+    base_ids = _ids(spec, axes={}, variants={})
+    rows: list[Row] = []
+    base_value = _base_value(spec, axis)
+    base_seen = False
+    for v, changes in only:
+        ids = _ids(spec, **changes)
+        if ids == base_ids:
+            rows.append(Row(f"{display(v)} (base)", v, ids, True))
+            base_seen = True
+        else:
+            rows.append(Row(display(v), v, ids))
+    if not base_seen:
+        label = "base" if base_value is None else f"{display(base_value)} (base)"
+        rows.insert(0, Row(label, base_value, base_ids, True))
+    return rows
+
+
+def _base_value(spec: ExperimentSpec, axis: str) -> Any:
+    """The base cell's value of a plain axis (resolved: the kind's default when unset);
+    None for a variant axis."""
+    if axis not in spec.axes:
+        return None
+    return _base_labels(spec).get(axis)
+
+
+def _base_labels(spec: ExperimentSpec) -> dict[str, Any]:
+    """The base cell's label on every axis: a plain axis's resolved value, None for variants."""
+    runs = expand(dataclasses.replace(spec, axes={}, variants={}))
+    if not runs:
+        return {}
+    resolved = flatten(runs[0].config)
+    out: dict[str, Any] = {}
+    for axis in spec.axes:
+        if axis in resolved:
+            out[axis] = resolved[axis]
+        else:
+            sub = {k[len(axis) + 1:]: v for k, v in resolved.items() if k.startswith(axis + ".")}
+            out[axis] = unflatten(sub) if sub else None
+    return out
+
+
+# --------------------------------------------------------------------------- statistics
+@dataclass(frozen=True)
+class Stat:
+    """mean, std (ddof 1; NaN with fewer than two values) and count of one metric."""
+
+    mean: float
+    std: float
+    n: int
+
+    def text(self, fmt: str) -> str:
+        if self.n == 0 or math.isnan(self.mean):
+            return "–"
+        if self.n < 2 or math.isnan(self.std):
+            return format(self.mean, fmt)
+        return f"{format(self.mean, fmt)} ± {format(self.std, fmt)}"
+
+
+def stat(values: pd.Series) -> Stat:
+    """`Stat` of the finite values of ``values``."""
+    v = pd.to_numeric(values, errors="coerce").astype("float64")
+    v = v[v.map(math.isfinite)]
+    if len(v) == 0:
+        return Stat(math.nan, math.nan, 0)
+    return Stat(float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else math.nan, int(len(v)))
+
+
+@dataclass
+class AxisTable:
+    """mean ± std per (scene, row) of each metric.
+
+    frame: one row per (scene, row label) in grid order, columns ``scene``, ``label``,
+    ``runs`` (done runs pooled), then ``<metric>.mean``, ``<metric>.std``, ``<metric>.n``.
+    """
+
+    axis: str
+    rows: list[Row]
+    metrics: tuple[MetricSpec, ...]
+    frame: pd.DataFrame
+
+    def stat(self, scene: str, label: str, metric: str) -> Stat:
+        row = self.frame[(self.frame.scene == scene) & (self.frame.label == label)].iloc[0]
+        return Stat(float(row[f"{metric}.mean"]), float(row[f"{metric}.std"]), int(row[f"{metric}.n"]))
+
+    def markdown(self) -> str:
+        heads = ["scene", self.axis, "runs", *(m.label for m in self.metrics)]
+        lines = ["| " + " | ".join(heads) + " |", "|" + "|".join(["---"] * 3 + ["---:"] * len(self.metrics)) + "|"]
+        for _, r in self.frame.iterrows():
+            cells = [r.scene, f"`{r.label}`", str(int(r.runs))]
+            cells += [Stat(r[f"{m.name}.mean"], r[f"{m.name}.std"], int(r[f"{m.name}.n"])).text(m.fmt)
+                      for m in self.metrics]
+            lines.append("| " + " | ".join(cells) + " |")
+        return "\n".join(lines)
+
+
+def done_runs(table: pd.DataFrame) -> pd.DataFrame:
+    return table[table.status == "done"]
+
+
+def axis_table(spec: ExperimentSpec, axis: str, table: pd.DataFrame, metrics: Sequence[MetricSpec]) -> AxisTable:
+    """The `AxisTable` of ``axis`` over the done runs of ``table``."""
+    rows = axis_rows(spec, axis)
+    done = done_runs(table)
+    records = []
+    for scene in spec.scenes:
+        at_scene = done[done.scene == scene]
+        for row in rows:
+            runs = at_scene[at_scene.run_id.isin(row.run_ids)]
+            rec: dict[str, Any] = {"scene": scene, "label": row.label, "runs": len(runs)}
+            for m in metrics:
+                s = stat(runs[f"metric.{m.name}"])
+                rec.update({f"{m.name}.mean": s.mean, f"{m.name}.std": s.std, f"{m.name}.n": s.n})
+            records.append(rec)
+    return AxisTable(axis, rows, tuple(metrics), pd.DataFrame.from_records(records))
+
+
+# --------------------------------------------------------------------------- cells
+def cell_labels(spec: ExperimentSpec, table: pd.DataFrame) -> pd.Series:
+    """A display label per run of ``table`` naming its grid cell (``sh_degree=3``;
+    ``densify=mcmc, ssim_lambda=0.2``; ``base`` for a one-at-a-time base)."""
+    dims = spec.dimensions
+    if not dims:
+        return pd.Series(["all"] * len(table), index=table.index)
+    cols = [f"axis.{d}" for d in dims]
+    if spec.grid == "one-at-a-time":
+        base = {d: _json(v) for d, v in _base_labels(spec).items()}
+
+        def label(row) -> str:
+            diff = [f"{d}={display(_decode(row[c]))}" for d, c in zip(dims, cols)
+                    if _json(_decode(row[c])) != base.get(d, _json(None))]
+            return ", ".join(diff) or "base"
+    else:
+        def label(row) -> str:
+            return ", ".join(f"{d}={display(_decode(row[c]))}" for d, c in zip(dims, cols))
+    return table.apply(label, axis=1) if len(table) else pd.Series([], dtype=object)
+
+
+def _decode(value: Any) -> Any:
+    """A table cell back to a value: JSON text of a mixed column is decoded, NaN is None."""
+    if value is None or (isinstance(value, float) and math.isnan(value)) or value is pd.NA:
+        return None
+    if hasattr(value, "item"):
+        value = value.item()
+    if isinstance(value, str):
+        try:
+            decoded = json.loads(value)
+        except ValueError:
+            return value
+        return decoded if not isinstance(decoded, (int, float)) or value.strip() == json.dumps(decoded) else value
+    return value
+
+
+def _json(value: Any) -> str:
+    return json.dumps(value, sort_keys=True)
+
+
+__all__ = ["MetricSpec", "KIND_METRICS", "metric_specs", "Row", "axis_rows", "display", "Stat", "stat", "AxisTable",
+           "axis_table", "cell_labels", "done_runs"]

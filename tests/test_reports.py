@@ -1,0 +1,269 @@
+"""Reports (issue 6 §3) and the train / raster run kinds.
+
+The report tests build a results folder by hand: the real grid of a ``train``
+experiment (its run ids from `expand`) with made-up, seeded metrics and curves written
+as the engine writes them (`write_record`, `write_table`), so they run in seconds.
+They check that every table cell and every number of the findings can be recomputed
+from the ``results.parquet`` written beside ``report.md``, and that the figures exist.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from splatbench.errors import InputError
+from splatbench.experiments import RunRecord, expand, parse_experiment
+from splatbench.experiments.store import write_record, write_table
+from splatbench.reports import build_report, write_report
+from splatbench.reports.figures import pareto_front
+from splatbench.reports.findings import compare, fmt_number
+from splatbench.reports.tables import KIND_METRICS, Stat
+
+SCENES = ["diffuse", "glossy"]
+SH_VALUES = [0, 1, 3, "auto"]
+
+
+def sh_spec(seeds=(0, 1, 2)):
+    return parse_experiment({"name": "shfake", "kind": "train", "scenes": SCENES, "seeds": list(seeds),
+                             "base": {"iterations": 100, "data": {"resolution": 32, "views": 8, "spp": 2}},
+                             "axes": {"sh_degree": SH_VALUES}}, source="shfake.toml")
+
+
+def fake_metrics(scene: str, degree, seed: int) -> tuple[dict, dict]:
+    """Seeded numbers with a real pattern: SH helps on glossy only; auto picks 0 / 2."""
+    rng = np.random.default_rng([SCENES.index(scene), SH_VALUES.index(degree), seed])
+    d = {"auto": 0 if scene == "diffuse" else 2}.get(degree, degree)
+    psnr = 26.0 + (1.5 * d if scene == "glossy" else 0.0) + rng.normal(0, 0.1)
+    steps = [0, 50, 100]
+    metrics = {"test_psnr": psnr, "test_ssim": 0.8 + 0.01 * d + rng.normal(0, 0.002),
+               "num_gaussians": int(1000 + 100 * d + rng.integers(0, 20)), "train_seconds": 10.0 + 2 * d + rng.random(),
+               "render_ms_per_view": 5.0 + d + rng.random(), "sh_degree": d, "peak_rss_mb": 500.0,
+               "iterations": 100, "test_views": 1, "dataset_hash": "0" * 16}
+    curves = {"step": steps, "psnr": [psnr - 6, psnr - 2, psnr], "loss": [0.3, 0.2, 0.1],
+              "num_gaussians": [1000] * 3, "eval_step": [50, 100], "eval_psnr": [psnr - 1, psnr],
+              "eval_ssim": [0.7, 0.8]}
+    return metrics, curves
+
+
+@pytest.fixture(scope="module")
+def sh_results(tmp_path_factory):
+    """A results folder for `sh_spec`: every run done but one failed and one missing."""
+    root = tmp_path_factory.mktemp("results")
+    spec = sh_spec()
+    runs = expand(spec)
+    records = []
+    for i, run in enumerate(runs):
+        if i == 5:
+            continue  # never ran
+        metrics, curves = fake_metrics(run.scene, run.labels["sh_degree"], run.seed)
+        status = "failed" if i == 7 else "done"
+        rec = RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
+                        status=status, config=dict(run.config), labels=dict(run.labels),
+                        metrics=metrics if status == "done" else {}, curves=curves if status == "done" else None,
+                        error="RuntimeError: boom" if status == "failed" else None, seconds=12.5,
+                        started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:13+00:00", worker="h:1")
+        write_record(root, rec)
+        records.append(rec)
+    write_table(root / spec.name, records)
+    return spec, root, runs
+
+
+@pytest.fixture(scope="module")
+def sh_report(sh_results, tmp_path_factory):
+    spec, root, runs = sh_results
+    out = tmp_path_factory.mktemp("reports") / spec.name
+    report = build_report(spec, root)
+    path = write_report(report, out)
+    return report, path, runs
+
+
+def recompute(table: pd.DataFrame) -> dict:
+    """(scene, label) -> metric -> Stat, straight from the parquet (labels as the report writes them)."""
+    done = table[table.status == "done"]
+    out = {}
+    for (scene, label), group in done.groupby(["scene", "axis.sh_degree"]):
+        label = json.loads(label) if isinstance(label, str) else label
+        out[(scene, str(label))] = {m.name: Stat(float(group[f"metric.{m.name}"].mean()),
+                                                 float(group[f"metric.{m.name}"].std(ddof=1)), len(group))
+                                    for m in KIND_METRICS["train"]}
+    return out
+
+
+def test_report_files(sh_report):
+    report, path, runs = sh_report
+    folder = path.parent
+    assert path.name == "report.md" and path.is_file()
+    figures = sorted(p.name for p in (folder / "figures").glob("*.png"))
+    assert figures == ["curves_sh_degree.png", "time_vs_error.png"]
+    for name in figures:
+        assert (folder / "figures" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    text = path.read_text()
+    assert "](figures/curves_sh_degree.png)" in text and "](figures/time_vs_error.png)" in text
+    assert f"{len(runs)} runs of kind `train` ({len(runs) - 2} done, 1 failed, 1 not run)" in text
+    assert "## Failed runs" in text and "RuntimeError: boom" in text
+
+
+def test_report_tables_match_parquet(sh_report):
+    report, path, runs = sh_report
+    table = pd.read_parquet(path.parent / "results.parquet")
+    assert len(table) == len(runs) - 1 and set(table.run_id) <= {r.run_id for r in runs}
+    expected = recompute(table)
+    text = path.read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| diffuse") or line.startswith("| glossy")]
+    assert len(rows) == len(SCENES) * len(SH_VALUES)
+    specs = KIND_METRICS["train"]
+    for line in rows:
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        scene, label, count = cells[0], cells[1].strip("`"), int(cells[2])
+        stats = expected[(scene, label)]
+        assert count == stats["test_psnr"].n
+        for spec, cell in zip(specs, cells[3:]):
+            assert cell == stats[spec.name].text(spec.fmt), (scene, label, spec.name)
+
+
+def test_findings_numbers_match_parquet(sh_report):
+    report, path, _ = sh_report
+    table = pd.read_parquet(path.parent / "results.parquet")
+    expected = recompute(table)
+    text = path.read_text()
+    claims = report.findings["sh_degree"].claims
+    kinds = {c.kind for c in claims}
+    assert kinds == {"best", "vs", "noise", "auto"}
+    specs = {m.name: m for m in KIND_METRICS["train"]}
+    for c in claims:
+        if c.kind == "best":
+            assert c.value == pytest.approx(expected[(c.scene, c.label)][c.metric].mean, abs=1e-12)
+            others = [v[c.metric].mean for (s, _), v in expected.items() if s == c.scene]
+            assert c.value == pytest.approx(max(others))
+        elif c.kind == "vs":
+            a = expected[(c.scene, c.reference)][c.metric].mean
+            b = expected[(c.scene, c.label)][c.metric].mean
+            assert c.value == pytest.approx(compare(a, b, c.how), abs=1e-12)
+            assert c.text == fmt_number(c.value, c.how, specs[c.metric])
+        elif c.kind == "noise":
+            assert c.value == pytest.approx(max(v["test_psnr"].std for v in expected.values()))
+        elif c.kind == "auto":
+            done = table[(table.status == "done") & (table.scene == c.scene)]
+            auto = done[done["axis.sh_degree"] == json.dumps("auto")]
+            assert c.value == pytest.approx(auto["metric.sh_degree"].mean())
+        assert c.text in text
+    # The pattern the numbers were made with is what the findings say.
+    best = {c.scene: c.label for c in claims if c.kind == "best"}
+    assert best["glossy"] == "3"
+    auto = {c.scene: c.text for c in claims if c.kind == "auto"}
+    assert auto == {"diffuse": "0", "glossy": "2"}
+    gain = next(c for c in claims if c.kind == "vs" and c.scene == "glossy" and c.label == "3"
+                and c.metric == "test_psnr")
+    assert 4.0 < gain.value < 5.0 and re.search(r"`3`: test PSNR \S+ dB / " + re.escape(gain.text), text)
+
+
+def test_one_at_a_time_rows_and_generic_kind(tmp_path):
+    """Dummy kind (no kind-specific metrics): one-at-a-time rows are the base and each
+    value alone; every numeric metric gets a column; a cell equal to the base is the base."""
+    from splatbench.experiments.runner import run_experiment
+
+    spec = parse_experiment({"name": "oat", "kind": "dummy", "scenes": ["alpha"], "seeds": [0, 1],
+                             "grid": "one-at-a-time", "base": {"x": 1.0},
+                             "axes": {"x": [1.0, 2.0], "n": [5]}}, source="oat.toml")
+    run_experiment(spec, workers=1, results_dir=tmp_path, progress=False)
+    report = build_report(spec, tmp_path)
+    path = write_report(report, tmp_path / "report")
+    x_table = next(t for t in report.axes if t.axis == "x")
+    assert [r.label for r in x_table.rows] == ["1 (base)", "2"]
+    n_table = next(t for t in report.axes if t.axis == "n")
+    assert [r.label for r in n_table.rows] == ["3 (base)", "5"]
+    assert all(len(r.run_ids) == 2 for r in n_table.rows)
+    assert {m.name for m in report.metrics} == {"value", "total", "a_plus_seed"}
+    table = pd.read_parquet(path.parent / "results.parquet")
+    base = table[(table["axis.x"] == 1.0) & (table["axis.n"] == 3)]
+    assert x_table.stat("alpha", "1 (base)", "value").mean == pytest.approx(base["metric.value"].mean())
+    assert "## x" in path.read_text() and "## n" in path.read_text()
+
+
+def test_pareto_front():
+    # time, quality: (1, 1) and (2, 3) and (4, 4) are optimal; (3, 2) is beaten by (2, 3).
+    assert pareto_front([2, 1, 3, 4, float("nan")], [3, 1, 2, 4, 9]) == [1, 0, 3]
+    assert pareto_front([1, 1], [2, 2]) == [0, 1]  # equal points dominate neither
+
+
+# --------------------------------------------------------------------------- kinds
+def test_train_kind_config_errors_and_defaults():
+    from splatbench.experiments.kinds import get_kind
+    from splatbench.experiments.grid import make_run_id
+
+    kind = get_kind("train")
+    base = {"scene": "diffuse", "seed": 0}
+    with pytest.raises(InputError, match=r"^iteration: unknown key 'iteration' \(did you mean 'iterations'\?\)$"):
+        kind.validate({**base, "iteration": 5})
+    with pytest.raises(InputError, match=r"^dataset: set by the train kind"):
+        kind.validate({**base, "dataset": "/tmp/x"})
+    with pytest.raises(InputError, match=r"^data\.spp: expected an int >= 1, got 0$"):
+        kind.validate({**base, "data": {"spp": 0}})
+    with pytest.raises(InputError, match=r"^data\.width: unknown key"):
+        kind.validate({**base, "data": {"width": 3}})
+    resolved = kind.resolve({**base, "iterations": 10})
+    assert "dataset" not in resolved and "out" not in resolved
+    assert resolved["data"] == {"resolution": 256, "views": 32, "spp": 64}  # the diffuse rig's
+    assert resolved["strategy_options"]["grad_threshold"] == 2e-4  # the strategy's own defaults
+    explicit = kind.resolve({**base, "iterations": 10, "ssim_lambda": 0.2, "data": {"resolution": 256},
+                             "strategy_options": {"refine_every": 100}})
+    assert make_run_id("train", explicit) == make_run_id("train", resolved)
+    assert kind.resolve({**base, "iterations": 10, "ssim_lambda": 1})["ssim_lambda"] == 1.0
+    assert {"diffuse", "glossy", "textured"} <= kind.scenes()
+
+
+def test_raster_kind_config_errors():
+    from splatbench.experiments.kinds import get_kind
+
+    kind = get_kind("raster")
+    base = {"scene": "synthetic-100-32", "seed": 0}
+    kind.validate(base)
+    with pytest.raises(InputError, match=r"^scene: unknown workload 'synth-1'"):
+        kind.validate({**base, "scene": "synth-1"})
+    with pytest.raises(InputError, match=r"^tile_size: expected a power of two"):
+        kind.validate({**base, "tile_size": 12})
+    with pytest.raises(InputError, match=r"^sh_degree: expected an int in 0\.\.3, got 4$"):
+        kind.validate({**base, "sh_degree": 4})
+    with pytest.raises(InputError, match=r"^tile_siz: unknown key 'tile_siz' \(did you mean 'tile_size'\?\)$"):
+        kind.validate({**base, "tile_siz": 8})
+    assert kind.resolve({**base, "alpha_min": 1})["alpha_min"] == 1.0
+
+
+def test_raster_kind_run(tmp_path, monkeypatch):
+    """One tiny run: timings, parity with the matched reference, and the error an option trades in."""
+    from splatbench.experiments.raster_kind import RASTER
+
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    base = RASTER.resolve({"scene": "synthetic-300-32", "seed": 1, "repeats": 1, "error_scale": 0.5})
+    exact = RASTER.run(base, tmp_path).metrics
+    assert exact["fwd_ms"] > 0 and exact["fwd_bwd_ms"] > 0 and exact["n"] == 300
+    assert (exact["error_width"], exact["error_height"]) == (16, 16)
+    assert exact["parity_max_abs"] < 1e-4 and exact["error_max_abs"] == exact["parity_max_abs"]
+    assert list((tmp_path / "cache" / "reference").glob("*.npy"))  # the ground truth is cached
+    tiles = RASTER.run({**base, "tile_size": 4}, tmp_path).metrics
+    assert tiles["error_max_abs"] == pytest.approx(exact["error_max_abs"], abs=1e-6)  # tiles never change the image
+    coarse = RASTER.run({**base, "sh_degree": 0}, tmp_path).metrics
+    assert coarse["parity_max_abs"] < 1e-4 and coarse["error_max_abs"] > 100 * exact["error_max_abs"]
+    assert math.isfinite(coarse["error_psnr"]) and coarse["error_psnr"] < exact["error_psnr"]
+
+
+def test_train_kind_run(tmp_path, monkeypatch):
+    """A 3-step run on a 32-pixel dataset: the metrics and curves the reports read."""
+    from splatbench.experiments.train_kind import CURVE_KEYS, METRICS, TRAIN, dataset_folder
+
+    monkeypatch.setenv("SPLATBENCH_DATASETS", str(tmp_path / "data"))
+    config = TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 3, "log_every": 1, "sh_degree": 0,
+                            "strategy": "none", "data": {"resolution": 32, "views": 8, "spp": 2}})
+    TRAIN.prepare([config])
+    assert (dataset_folder("diffuse", config["data"]) / "manifest.json").is_file()
+    output = TRAIN.run(config, tmp_path / "work")
+    assert set(output.metrics) == set(METRICS)
+    assert output.metrics["iterations"] == 3 and output.metrics["test_views"] == 1
+    assert set(output.curves) == set(CURVE_KEYS) and output.curves["step"] == [0, 1, 2]
+    assert (tmp_path / "work" / "point_cloud.ply").is_file()
