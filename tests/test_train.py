@@ -238,7 +238,7 @@ def test_short_run_lowers_loss_and_writes_a_valid_ply(tmp_path):
 
 def test_same_seed_and_config_give_the_same_ply_bytes(tmp_path, tiny_diffuse):
     # the default strategy refining every 5 steps: densification is covered too
-    opts = {"refine_start": 4, "refine_every": 5, "grad_threshold": 1e-5}
+    opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 11, "grad_threshold": 1e-5}  # two refinements
     plys = []
     for run in ("a", "b"):
         cfg = config(tmp_path, out=str(tmp_path / run), iterations=20, strategy="default", strategy_options=opts)
@@ -344,7 +344,7 @@ def test_auto_sh_holds_views_out_of_training_until_the_degree_settles(tmp_path, 
         for _ in range(cfg.iterations):
             trainer.step()
         assert not held & {id(c) for c in counting.cameras}      # never trained on while undecided
-        trainer.sh.finish(trainer.step_index, trainer._probe)    # measured on the held-out views
+        trainer.sh.finish(trainer.step_index, trainer.probe_band)    # measured on the held-out views
         assert trainer.sh.settled and "held-out training views" in trainer.sh.reason
         seen = len(counting.cameras)
         for _ in range(2 * len(ds.train)):                        # two epochs after settling

@@ -198,7 +198,7 @@ class Trainer:
         cfg, t = self.config, self.times
         t0 = time.perf_counter()
         step = self.step_index
-        degree = self.sh.update(step, self._probe)
+        degree = self.sh.update(step, self.probe_band)
         lr = self.means_lr(step)
         set_lr(self.optimizers["means"], lr)
         view = self._next_view()
@@ -249,7 +249,7 @@ class Trainer:
 
     # ------------------------------------------------------------------ SH probe
     @torch.no_grad()
-    def _probe(self, band: int) -> BandMeasure:
+    def probe_band(self, band: int) -> BandMeasure:
         """Training-view PSNR gain of SH band ``band`` and its relative coefficient energy."""
         cams = self.dataset.train.cameras
         k = self.config.sh_auto_probe_views
@@ -352,7 +352,7 @@ def _train(config: TrainConfig, progress, dataset) -> TrainResult:
         if config.checkpoint_every and done % config.checkpoint_every == 0:
             trainer.save_ply(out / "checkpoints" / f"iteration_{done}.ply")
     t0 = time.perf_counter()
-    trainer.sh.finish(trainer.step_index, trainer._probe)
+    trainer.sh.finish(trainer.step_index, trainer.probe_band)
     loop_seconds += time.perf_counter() - t0
     ply = trainer.save_ply(out / "point_cloud.ply")
     ev = trainer.evaluate(lpips_fn)
