@@ -242,7 +242,7 @@ def test_raster_kind_run(tmp_path, monkeypatch):
     monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
     base = RASTER.resolve({"scene": "synthetic-300-32", "seed": 1, "repeats": 1, "error_scale": 0.5})
     exact = RASTER.run(base, tmp_path).metrics
-    assert exact["fwd_ms"] > 0 and exact["fwd_bwd_ms"] > 0 and exact["n"] == 300
+    assert exact["fwd_ms"] > 0 and exact["fwd_bwd_ms"] > 0 and exact["fwd_bwd_rel"] > 0 and exact["n"] == 300
     assert (exact["error_width"], exact["error_height"]) == (16, 16)
     assert exact["parity_max_abs"] < 1e-4 and exact["error_max_abs"] == exact["parity_max_abs"]
     assert list((tmp_path / "cache" / "reference").glob("*.npy"))  # the ground truth is cached

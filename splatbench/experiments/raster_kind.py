@@ -19,8 +19,12 @@ One run:
 
 1. Timing, at the workload's full resolution: `splatbench.bench.raster`'s closures
    (forward under ``no_grad``; forward + backward of ``rgb.sum()`` to all five
-   groups), one warm-up each, then ``repeats`` timed calls of each. SH is sliced to
-   the evaluated degree, as the trainer does.
+   groups), one warm-up each, then ``repeats`` rounds, each timing one forward and one
+   forward + backward with the run's options *and* with the default options, in
+   alternation. SH is sliced to the evaluated degree, as the trainer does. The ratios
+   ``fwd_rel`` / ``fwd_bwd_rel`` (median with the options over median with the
+   defaults) compare the two under the same load: on a shared machine they are far
+   steadier than absolute times from runs made minutes apart.
 2. Error, at ``error_scale`` times the resolution: the Dr.Jit render with the run's
    options against two float64 renders of `reference.render` (``mode="matched"``):
 
@@ -35,7 +39,8 @@ One run:
    computed once (in `prepare`, in the parent) and cached by content hash under
    ``$SPLATBENCH_CACHE/reference`` (default ``~/.cache/splatbench/reference``).
 
-Metrics: `METRICS`. Curves: every timed run (``fwd_runs_ms``, ``fwd_bwd_runs_ms``).
+Metrics: `METRICS`. Curves: every timed call (``fwd_runs_ms``, ``fwd_bwd_runs_ms``,
+``default_fwd_runs_ms``, ``default_fwd_bwd_runs_ms``).
 """
 
 from __future__ import annotations
@@ -80,6 +85,10 @@ CACHE_ENV = "SPLATBENCH_CACHE"
 METRICS: dict[str, str] = {
     "fwd_ms": "median forward time at full resolution (ms)",
     "fwd_bwd_ms": "median forward + backward time at full resolution (ms)",
+    "fwd_rel": "forward time relative to the default options, timed alternately in the same run (< 1: faster)",
+    "fwd_bwd_rel": "forward + backward time relative to the default options, same run (< 1: faster)",
+    "default_fwd_ms": "median forward time with the default options, in the same run (ms)",
+    "default_fwd_bwd_ms": "median forward + backward time with the default options, in the same run (ms)",
     "error_psnr": "PSNR (dB) of the render against the float64 reference with default options "
                   "(ground truth; capped at 200)",
     "error_max_abs": "largest |render - ground truth| over pixels and channels",
@@ -261,14 +270,25 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     workload = build_workload(config["scene"], config["seed"])
     degree = config["sh_degree"]
     options = options_of(config)
-    params = list(torch_params(workload.gaussians))
-    params[4] = params[4][:, : (degree + 1) ** 2].contiguous()
-    forward = forward_with_init(tuple(params), workload.camera, {**options, "sh_degree": degree})
-    forward_backward = forward_backward_with_init(tuple(params), workload.camera, {**options, "sh_degree": degree})
-    forward_backward()
-    stats = forward()  # warm-up: kernels compile or load from Dr.Jit's cache
-    fwd_s, stats = time_runs(forward, config["repeats"])
-    fwd_bwd_s, _ = time_runs(forward_backward, config["repeats"])
+    defaults = {**{k: DEFAULTS[k] for k in OPTION_FIELDS}, "device": options["device"]}
+    full = torch_params(workload.gaussians)
+    params = (*full[:4], full[4][:, : (degree + 1) ** 2].contiguous())
+    closures = {}
+    for name, p, opts in (("run", params, {**options, "sh_degree": degree}),
+                          ("default", full, {**defaults, "sh_degree": DEFAULTS["sh_degree"]})):
+        closures[name] = (forward_with_init(p, workload.camera, opts),
+                          forward_backward_with_init(p, workload.camera, opts))
+        closures[name][1]()
+        closures[name][0]()  # warm-up: kernels compile or load from Dr.Jit's cache
+    times: dict[str, list[float]] = {k: [] for k in ("fwd", "fwd_bwd", "default_fwd", "default_fwd_bwd")}
+    stats = None
+    for _ in range(config["repeats"]):  # alternate, so that both see the same load
+        for name, prefix in (("run", ""), ("default", "default_")):
+            s, st = time_runs(closures[name][0], 1)
+            times[prefix + "fwd"] += s
+            stats = st if name == "run" else stats
+            times[prefix + "fwd_bwd"] += time_runs(closures[name][1], 1)[0]
+    med = {k: statistics.median(v) for k, v in times.items()}
 
     scale = config["error_scale"]
     small = workload.camera if scale == 1 else workload.camera.scaled(scale)
@@ -277,15 +297,18 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     matched = reference_render(workload, scale, sh_degree=degree, **options)
     err = np.abs(fast - truth)
     metrics = {
-        "fwd_ms": round(1e3 * statistics.median(fwd_s), 3), "fwd_bwd_ms": round(1e3 * statistics.median(fwd_bwd_s), 3),
+        "fwd_ms": round(1e3 * med["fwd"], 3), "fwd_bwd_ms": round(1e3 * med["fwd_bwd"], 3),
+        "fwd_rel": round(med["fwd"] / med["default_fwd"], 4),
+        "fwd_bwd_rel": round(med["fwd_bwd"] / med["default_fwd_bwd"], 4),
+        "default_fwd_ms": round(1e3 * med["default_fwd"], 3),
+        "default_fwd_bwd_ms": round(1e3 * med["default_fwd_bwd"], 3),
         "error_psnr": round(min(psnr(fast, truth), 200.0), 4), "error_max_abs": float(err.max()),
         "error_mean_abs": float(err.mean()), "parity_max_abs": float(np.abs(fast - matched).max()),
         "pairs": int(stats.num_pairs), "visible": int(torch.as_tensor(stats.visible).sum()),
         "n": len(workload.gaussians), "width": workload.camera.width, "height": workload.camera.height,
         "error_width": small.width, "error_height": small.height, "device": resolve_device(options["device"]),
     }
-    curves = {"fwd_runs_ms": [round(1e3 * s, 3) for s in fwd_s],
-              "fwd_bwd_runs_ms": [round(1e3 * s, 3) for s in fwd_bwd_s]}
+    curves = {f"{k}_runs_ms": [round(1e3 * s, 3) for s in v] for k, v in times.items()}
     return RunOutput(metrics=metrics, curves=curves)
 
 

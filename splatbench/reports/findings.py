@@ -42,7 +42,7 @@ class FindingRules:
 KIND_RULES: dict[str, FindingRules] = {
     "train": FindingRules("test_psnr", (Comparison("test_psnr", "diff"), Comparison("train_seconds", "ratio"),
                                         Comparison("num_gaussians", "ratio"))),
-    "raster": FindingRules("fwd_bwd_ms", (Comparison("fwd_bwd_ms", "percent"), Comparison("error_psnr", "mean"))),
+    "raster": FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean"), Comparison("error_psnr", "mean"))),
 }
 
 

@@ -42,7 +42,7 @@ FIGURES = "figures"
 TIME_QUALITY: dict[str, tuple[str, str, str, str]] = {
     "train": ("train_seconds", "test_psnr", "time_vs_error",
               "Training time against test PSNR per cell (mean over seeds)"),
-    "raster": ("fwd_bwd_ms", "error_psnr", "speed_vs_error",
+    "raster": ("fwd_bwd_rel", "error_psnr", "speed_vs_error",
                "Rasterizer speed against error to the float64 ground truth (mean over seeds)"),
 }
 

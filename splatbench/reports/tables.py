@@ -49,8 +49,9 @@ KIND_METRICS: dict[str, tuple[MetricSpec, ...]] = {
         MetricSpec("render_ms_per_view", "render (ms/view)", ".1f", "ms", "lower"),
     ),
     "raster": (
-        MetricSpec("fwd_ms", "forward (ms)", ".2f", "ms", "lower"),
-        MetricSpec("fwd_bwd_ms", "fwd+bwd (ms)", ".2f", "ms", "lower"),
+        MetricSpec("fwd_ms", "forward (ms)", ".1f", "ms", "lower"),
+        MetricSpec("fwd_bwd_ms", "fwd+bwd (ms)", ".1f", "ms", "lower"),
+        MetricSpec("fwd_bwd_rel", "fwd+bwd / default (same run)", ".3f", "", "lower"),
         MetricSpec("error_psnr", "PSNR to ground truth (dB)", ".2f", "dB", "higher"),
         MetricSpec("error_max_abs", "max abs error", ".2e", "", "lower"),
         MetricSpec("parity_max_abs", "parity max abs", ".1e", "", "lower"),
