@@ -26,7 +26,6 @@ Example::
 
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
 import time
@@ -39,6 +38,7 @@ import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
+from splatbench.fsutil import replace_dir
 
 #: Folder under the dataset that receives the model (``sfm/0/*.bin``) and the database.
 SFM_DIR = "sfm"
@@ -245,7 +245,7 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
         xyz = np.array([p.xyz for p in points], np.float64).reshape(-1, 3)
         rgb = np.array([p.color for p in points], np.uint8).reshape(-1, 3)
         seconds = time.perf_counter() - t0
-        _replace_dir(tmp, out_dir)
+        replace_dir(tmp, out_dir)
     finally:
         pycolmap.logging.minloglevel = log_level
         if tmp.exists():
@@ -254,14 +254,3 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
                   len(models), names, seconds)
 
 
-def _replace_dir(tmp: Path, out: Path) -> None:
-    """Rename ``tmp`` to ``out``, replacing an older ``out``."""
-    old = None
-    if out.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-        os.replace(out, old / out.name)
-    try:
-        os.rename(tmp, out)
-    finally:
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)

@@ -45,7 +45,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 import re
 import shutil
 import tempfile
@@ -60,6 +59,7 @@ import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
+from splatbench.fsutil import replace_dir
 from splatbench.scenes.catalog import SceneSpec, get_scene, parse_resolution
 
 MITSUBA_VARIANT = "llvm_ad_rgb"
@@ -335,7 +335,8 @@ def render_dataset(scene: SceneSpec | str | Path, out: str | Path | None = None,
                     "train": n_train, "test": n_test,
                     "render_seconds": round(seconds, 3), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         _write_json(tmp / MANIFEST, manifest)
-        _move_into_place(tmp, out, digest)
+        # keep a folder someone else finished meanwhile if it is the same render
+        replace_dir(tmp, out, accept_existing=lambda path: (read_manifest(path) or {}).get("hash") == digest)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
@@ -439,26 +440,6 @@ def _write_json(path: Path, data: Any) -> None:
     text = json.dumps(data, indent=1)
     text = _NUMBER_LIST.sub(lambda m: "[" + ", ".join(x.strip() for x in m.group(1).split(",")) + "]", text)
     path.write_text(text + "\n", encoding="utf-8")
-
-
-def _move_into_place(tmp: Path, out: Path, digest: str) -> None:
-    """Rename the finished ``tmp`` to ``out``, replacing an older dataset there."""
-    trash = None
-    if out.exists():
-        trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-        os.replace(out, trash / out.name)
-    try:
-        os.rename(tmp, out)
-    except OSError:
-        # someone else finished the same folder meanwhile: keep theirs if it is the same render
-        theirs = read_manifest(out)
-        if theirs is None or theirs.get("hash") != digest:
-            if trash is not None and not out.exists():
-                os.replace(trash / out.name, out)  # put the old dataset back
-            raise
-    finally:
-        if trash is not None:
-            shutil.rmtree(trash, ignore_errors=True)
 
 
 def _sha256(data: bytes) -> str:
