@@ -35,19 +35,20 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     from splatbench.train.loop import train as run
 
     bar = None
-    if not quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(total=config.iterations, desc="train", unit="it", dynamic_ncols=True, leave=True)
 
     def progress(status) -> None:
+        nonlocal bar
+        if bar is None:  # created at the first step: set-up errors print without a bar
+            from tqdm import tqdm
+
+            bar = tqdm(total=config.iterations, desc="train", unit="it", dynamic_ncols=True, leave=True)
         bar.update(1)
         if status.step % 10 == 0 or status.step + 1 == config.iterations:
             bar.set_postfix(loss=f"{status.loss:.4f}", psnr=f"{status.psnr:.2f}", n=status.num_gaussians,
                             sh=status.sh_degree, refresh=False)
 
     try:
-        result = run(config, progress=progress if bar is not None else None)
+        result = run(config, progress=None if quiet else progress)
     finally:
         if bar is not None:
             bar.close()
