@@ -11,7 +11,7 @@ error with the Pareto front), `report` (assembly, markdown), `cli`
 """
 
 from splatbench.reports.findings import Claim, Finding
-from splatbench.reports.report import Report, build_report, write_report
+from splatbench.reports.report import Report, build_report, report_from_table, write_report
 from splatbench.reports.tables import AxisTable, MetricSpec, Stat
 
-__all__ = ["Report", "build_report", "write_report", "AxisTable", "MetricSpec", "Stat", "Claim", "Finding"]
+__all__ = ["Report", "build_report", "report_from_table", "write_report", "AxisTable", "MetricSpec", "Stat", "Claim", "Finding"]

@@ -85,6 +85,12 @@ def grid_table(spec: ExperimentSpec, results_dir: str | Path) -> tuple[pd.DataFr
 def build_report(spec: ExperimentSpec, results_dir: str | Path) -> Report:
     """Tables and findings of ``spec``'s results under ``results_dir`` (nothing written)."""
     table, total = grid_table(spec, results_dir)
+    return report_from_table(spec, table, total)
+
+
+def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int) -> Report:
+    """Tables and findings of a run table (`grid_table`'s, or a report's ``results.parquet``
+    read back) of ``spec``'s grid of ``total`` runs."""
     metrics = metric_specs(spec.kind, table)
     axes = [axis_table(spec, axis, table, metrics) for axis in spec.dimensions]
     findings: dict[str, Finding] = {}
