@@ -14,9 +14,7 @@ describes every field of `RasterBenchResult` and how throughput is defined.
 from __future__ import annotations
 
 import argparse
-import csv
 import gc
-import io
 import json
 import os
 import platform
@@ -31,6 +29,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Callable, NamedTuple
 
+from splatbench.bench.files import write_csv_rows, write_results_json
 from splatbench.bench.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
 from splatbench.errors import InputError, SplatbenchError
 
@@ -535,23 +534,13 @@ def leak_warnings(results: list[RasterBenchResult], threshold_mb: float = 1.0) -
 
 
 def write_csv(results: list[RasterBenchResult], path: Path) -> Path:
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    for r in results:
-        writer.writerow(csv_row(r))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(buf.getvalue())
-    return path
+    return write_csv_rows((csv_row(r) for r in results), CSV_COLUMNS, path)
 
 
 def write_json(results: list[RasterBenchResult], machine: MachineInfo, settings: BenchSettings,
                path: Path) -> Path:
     """``{"machine": MachineInfo, "settings": BenchSettings, "results": [RasterBenchResult]}``."""
-    payload = {"machine": asdict(machine), "settings": asdict(settings), "results": [asdict(r) for r in results]}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(payload, indent=2) + "\n")
-    return path
+    return write_results_json(results, machine, settings, path)
 
 
 # ----------------------------------------------------------------------------- subprocess entry

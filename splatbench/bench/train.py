@@ -21,15 +21,13 @@ Units: milliseconds per step (ms), shares in percent of the timed steps' wall ti
 
 from __future__ import annotations
 
-import csv
-import io
-import json
 import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 
+from splatbench.bench.files import write_csv_rows, write_results_json
 from splatbench.errors import InputError
 
 #: The standard sizes (square images, pixels) reported by ``splatbench bench train``.
@@ -164,22 +162,12 @@ def format_table(results: list[TrainBenchResult]) -> str:
 
 
 def write_csv(results: list[TrainBenchResult], path: Path) -> Path:
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n", extrasaction="ignore")
-    writer.writeheader()
-    for r in results:
-        writer.writerow(asdict(r))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(buf.getvalue())
-    return path
+    return write_csv_rows((asdict(r) for r in results), CSV_COLUMNS, path)
 
 
 def write_json(results: list[TrainBenchResult], machine, settings: TrainBenchSettings, path: Path) -> Path:
     """``{"machine": MachineInfo, "settings": TrainBenchSettings, "results": [TrainBenchResult]}``."""
-    payload = {"machine": asdict(machine), "settings": asdict(settings), "results": [asdict(r) for r in results]}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(payload, indent=2) + "\n")
-    return path
+    return write_results_json(results, machine, settings, path)
 
 
 __all__ = ["TrainBenchSettings", "TrainBenchResult", "STANDARD_SIZES", "synthetic_scene", "run_size",
