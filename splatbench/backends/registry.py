@@ -1,0 +1,86 @@
+"""Find a backend by name: built-ins, installed entry points, or ``module:function``.
+
+    get_backend("drjit")                # a built-in
+    get_backend("mypkg")                # an entry point in group "splatbench.backends"
+    get_backend("mypkg.rast:render")    # user code: a Backend, or a callable
+    as_backend(my_function)             # wrap a callable (graphdeco conventions, nothing declared)
+
+A callable may carry its metadata as an attribute ``backend_info`` (a `BackendInfo`).
+"""
+
+from __future__ import annotations
+
+import importlib
+from importlib import metadata
+
+from splatbench.backends.base import Backend, BackendInfo
+from splatbench.errors import InputError
+
+ENTRY_POINT_GROUP = "splatbench.backends"
+
+# name -> "module:attribute" of a zero-argument factory returning a Backend (loaded lazily,
+# so that listing backends imports neither torch, Dr.Jit, gsplat nor Mitsuba).
+BUILTINS: dict[str, str] = {}
+
+
+def register_builtin(name: str, target: str) -> None:
+    BUILTINS[name] = target
+
+
+def available() -> list[str]:
+    """Names of the built-in and installed (entry point) backends."""
+    names = set(BUILTINS)
+    names.update(ep.name for ep in metadata.entry_points(group=ENTRY_POINT_GROUP))
+    return sorted(names)
+
+
+def as_backend(obj, name: str | None = None) -> Backend:
+    """A `Backend` from a Backend, a factory's result, or a plain callable."""
+    if isinstance(obj, Backend):
+        return obj
+    if not callable(obj):
+        raise InputError(f"backend: {name or obj!r} is not callable (expected a Backend or a function)")
+    info = getattr(obj, "backend_info", None)
+    if info is None:
+        label = name or getattr(obj, "__qualname__", None) or repr(obj)
+        info = BackendInfo(name=label, description="user callable; graphdeco conventions, nothing declared")
+    elif not isinstance(info, BackendInfo):
+        raise InputError(f"backend: {name or obj!r}.backend_info must be a splatbench.backends.BackendInfo")
+    return Backend(obj, info)
+
+
+def _load(target: str, label: str):
+    module_name, _, attr = target.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise InputError(f"backend: cannot import module {module_name!r} for {label!r} ({exc})") from None
+    obj = module
+    for part in attr.split("."):
+        try:
+            obj = getattr(obj, part)
+        except AttributeError:
+            raise InputError(f"backend: module {module_name!r} has no attribute {attr!r}") from None
+    return obj
+
+
+def get_backend(spec) -> Backend:
+    """Resolve ``spec`` (a name, ``module:function``, a Backend or a callable) to a `Backend`."""
+    if not isinstance(spec, str):
+        return as_backend(spec)
+    if spec in BUILTINS:
+        factory = _load(BUILTINS[spec], spec)
+        return factory()
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name == spec:
+            obj = ep.load()
+            return as_backend(obj() if _is_factory(obj) else obj, spec)
+    if ":" in spec:
+        return as_backend(_load(spec, spec), spec)
+    raise InputError(f"backend: unknown backend {spec!r} (known: {', '.join(available())}; "
+                     f"or give user code as module:function)")
+
+
+def _is_factory(obj) -> bool:
+    """An entry point may name a zero-argument factory (marked ``splatbench_backend_factory``)."""
+    return bool(getattr(obj, "splatbench_backend_factory", False))
