@@ -338,6 +338,9 @@ def test_default_schedule():
                 params["opacity_logits"].add_(5.0)
     assert [s.step for s in state.history] == [7, 11, 15]
     assert resets == [11]
+    # what the config's final-10 % check reads: the last event of the run, and of a shorter one
+    assert strat.last_topology_change(30).step == max(resets + [s.step for s in state.history]) == 15
+    assert strat.last_topology_change(12).step == 11 and strat.last_topology_change(7) is None
 
 
 def test_default_early_stop_on_loss_plateau():
@@ -441,6 +444,7 @@ def test_mcmc_relocates_then_adds_on_schedule():
     for step in range(12):
         strat.post_backward(params, opts, state, ctx(step))
     assert [(s.step, s.relocated, s.added) for s in state.history] == [(2, 6, 3), (5, 0, 1), (8, 0, 0)]
+    assert strat.last_topology_change(12).step == state.history[-1].step
     assert params["means"].shape[0] == 64
     assert_consistent(params, opts, 64)
 

@@ -95,7 +95,9 @@ def synthetic_dataset(root: Path, *, view_dependent: bool, views: int = 12, n: i
 
 
 def config(tmp_path: Path, **fields) -> TrainConfig:
-    base = dict(dataset="", out=str(tmp_path / "run"), iterations=20, strategy="none", log_every=5)
+    # the tests write their schedules in steps of their short runs
+    base = dict(dataset="", out=str(tmp_path / "run"), iterations=20, strategy="none", log_every=5,
+                schedule="absolute")
     return TrainConfig(**{**base, **fields})
 
 
@@ -369,6 +371,23 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     bad = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "lr_quats=-1", "--quiet"])
     assert bad.exit_code == 2
     assert bad.stderr.strip().splitlines() == [bad.stderr.strip()] and "lr_quats" in bad.stderr
+
+
+def test_cli_rejects_graphdecos_absolute_schedule_on_a_short_run_before_reading_data(tmp_path, tiny_diffuse_dir):
+    from splatbench.cli import main
+
+    runner = CliRunner()
+    # no dataset exists at this path: the schedule is rejected before any data is read
+    bad = runner.invoke(main, ["train", str(tmp_path / "missing"), "--set", "iterations=600", "--set",
+                               "schedule=absolute", "--quiet"])
+    assert bad.exit_code == 2
+    line = bad.stderr.strip()
+    assert line.splitlines() == [line] and "refine window 500..15000" in line and "final 10 %" in line
+    # the scaled default (refine 0..10, opacity reset every 2 of 20 steps) trains
+    ok = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "iterations=20", "--set", "init=random",
+                              "--set", "init_random_points=300", "--json", "--quiet", "--out", str(tmp_path / "o")])
+    assert ok.exit_code == 0, ok.output
+    assert json.loads(ok.stdout.strip().splitlines()[-1])["iterations"] == 20
 
 
 # ----------------------------------------------------------------------------- benchmark harness

@@ -127,7 +127,7 @@ def run_size(size: int, settings: TrainBenchSettings) -> TrainBenchResult:
 
     dataset, _ = synthetic_scene(size, settings.gaussians, settings.views, settings.seed)
     cfg = TrainConfig(dataset="", out="", iterations=settings.warmup + settings.iterations, strategy="none",
-                      sh_degree=3, sh_interval=1, seed=settings.seed, device=settings.device,
+                      sh_degree=3, sh_interval=1, schedule="absolute", seed=settings.seed, device=settings.device,
                       torch_threads=settings.torch_threads)
     with torch_threads(settings.torch_threads):
         trainer = Trainer(cfg, dataset=dataset)

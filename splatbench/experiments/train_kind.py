@@ -110,8 +110,9 @@ def validate(config: dict[str, Any]) -> None:
 
 
 def _strategy_options(cfg) -> dict[str, Any]:
-    """Every field of the configured strategy (preset and overrides applied), JSON values."""
-    strategy = cfg.make_strategy()
+    """Every field of the configured strategy (preset and overrides applied, schedule
+    fields as written, not scaled), JSON values."""
+    strategy = cfg.make_strategy(scaled=False)
     return {f.name: _json(getattr(strategy, f.name)) for f in dataclasses.fields(strategy)}
 
 

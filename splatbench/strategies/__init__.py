@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 
 from splatbench.errors import InputError
-from splatbench.strategies.base import PARAM_GROUPS, Optimizers, Params, StepContext, Strategy
+from splatbench.strategies.base import PARAM_GROUPS, Optimizers, Params, StepContext, Strategy, TopologyChange
 from splatbench.strategies.default import DefaultState, DefaultStrategy, RefineStats
 from splatbench.strategies.mcmc import MCMCState, MCMCStats, MCMCStrategy
 from splatbench.strategies.none import NoneStrategy
@@ -70,6 +70,6 @@ def _check_type(name: str, cls: type, key: str, value: object) -> None:
 
 __all__ = [
     "PARAM_GROUPS", "STRATEGIES", "DefaultState", "DefaultStrategy", "MCMCState", "MCMCStats", "MCMCStrategy",
-    "NoneStrategy", "Optimizers", "Params", "RefineStats", "StepContext", "Strategy", "make_strategy",
+    "NoneStrategy", "Optimizers", "Params", "RefineStats", "StepContext", "Strategy", "TopologyChange", "make_strategy",
     "strategy_fields",
 ]

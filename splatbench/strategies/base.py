@@ -16,7 +16,7 @@ Parameter groups (`Params`, torch leaf tensors with requires_grad):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import ClassVar, NamedTuple, Protocol
 
 import torch
 
@@ -45,10 +45,35 @@ class StepContext:
     loss: float
 
 
+class TopologyChange(NamedTuple):
+    """The last step at which a strategy may change the set of Gaussians or reset them."""
+
+    step: int   # 0-based step (the ``ctx.step`` of the hook that makes it)
+    what: str   # what happens there and which settings put it there, e.g.
+                # "refinement (refine window 500..15000, every 100)"
+
+
+def last_multiple(period: int, lo: int, hi: int) -> int | None:
+    """The largest multiple of ``period`` in ``(lo, hi]`` (None if there is none)."""
+    if hi <= lo or period < 1:
+        return None
+    m = (hi // period) * period
+    return m if m > lo else None
+
+
 class Strategy(Protocol):
     """One densification strategy. Implementations are small frozen dataclasses."""
 
     name: str
+    #: Step-valued fields that `TrainConfig.schedule = "scaled"` multiplies by
+    #: iterations / 30,000 (name -> True for a period, kept >= 1); see splatbench.train.schedule.
+    schedule_fields: ClassVar[dict[str, bool]]
+
+    def last_topology_change(self, iterations: int) -> TopologyChange | None:
+        """The last step of a run of ``iterations`` steps at which this strategy may
+        densify, prune, reset opacities or relocate (None: never). Read by the config's
+        check that no change falls in the final 10 % of the run."""
+        ...
 
     def initialize_state(self, params: Params) -> object:
         """A fresh state object for ``params`` (e.g. gradient accumulators)."""

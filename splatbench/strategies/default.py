@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import torch
 
 from splatbench.errors import InputError
 from splatbench.strategies import ops
-from splatbench.strategies.base import Optimizers, Params, StepContext
+from splatbench.strategies.base import Optimizers, Params, StepContext, TopologyChange, last_multiple
 
 
 class RefineStats(NamedTuple):
@@ -111,6 +111,10 @@ class DefaultStrategy:
     The trainer must rasterize with ``absgrad=self.absgrad``.
     """
 
+    #: Scaled by ``TrainConfig.schedule = "scaled"`` (True: a period); refine_every is a
+    #: sample size (views per gradient average) and stays as written.
+    schedule_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False, "reset_every": True}
+
     refine_start: int = 500       # refine only after this many iterations
     refine_stop: int = 15_000     # no accumulation, refinement or opacity reset from here on
     refine_every: int = 100       # iterations between refinements
@@ -137,6 +141,18 @@ class DefaultStrategy:
     @property
     def name(self) -> str:
         return "absgrad" if self.absgrad else "default"
+
+    def last_topology_change(self, iterations: int) -> TopologyChange | None:
+        """The last refinement or opacity reset of a run (an early stop only ends it sooner)."""
+        hi = min(iterations, self.refine_stop - 1)  # completed iterations it = step + 1 < refine_stop
+        refine = last_multiple(self.refine_every, self.refine_start, hi)
+        reset = last_multiple(self.reset_every, 0, hi)
+        window = f"refine window {self.refine_start}..{self.refine_stop}, every {self.refine_every}"
+        if refine is not None and (reset is None or refine >= reset):
+            return TopologyChange(refine - 1, f"a refinement ({window})")
+        if reset is not None:
+            return TopologyChange(reset - 1, f"an opacity reset (every {self.reset_every}; {window})")
+        return None
 
     def initialize_state(self, params: Params) -> DefaultState:
         n, device = params["means"].shape[0], params["means"].device

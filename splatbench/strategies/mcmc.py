@@ -23,7 +23,7 @@ import torch
 
 from splatbench.errors import InputError
 from splatbench.strategies import ops
-from splatbench.strategies.base import Optimizers, Params, StepContext
+from splatbench.strategies.base import Optimizers, Params, StepContext, TopologyChange, last_multiple
 from splatbench.strategies.default import LossPlateau, _check_fields
 
 
@@ -54,6 +54,8 @@ class MCMCStrategy:
 
     name: ClassVar[str] = "mcmc"
     absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad
+    #: Scaled by ``TrainConfig.schedule = "scaled"``; refine_every stays as written.
+    schedule_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False}
 
     cap_max: int = 1_000_000      # most Gaussians ever (no addition beyond it)
     noise_lr: float = 5e5         # position noise = means_lr x noise_lr x gate(opacity) x covariance
@@ -77,6 +79,14 @@ class MCMCStrategy:
             raise InputError(f"MCMCStrategy.cap_max: expected an integer, got {self.cap_max!r}")
         if not 0.0 < self.min_opacity < 1.0:
             raise InputError(f"MCMCStrategy.min_opacity: expected a number in (0, 1), got {self.min_opacity!r}")
+
+    def last_topology_change(self, iterations: int) -> TopologyChange | None:
+        """The last relocation / addition of a run (the position noise moves, never adds)."""
+        it = last_multiple(self.refine_every, self.refine_start, min(iterations, self.refine_stop - 1))
+        if it is None:
+            return None
+        return TopologyChange(it - 1, f"a relocation (refine window {self.refine_start}..{self.refine_stop}, "
+                                      f"every {self.refine_every})")
 
     def initialize_state(self, params: Params) -> MCMCState:
         gen = torch.Generator(device=params["means"].device)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from splatbench.strategies.base import Optimizers, Params, StepContext
+from splatbench.strategies.base import Optimizers, Params, StepContext, TopologyChange
 
 
 @dataclass(frozen=True)
@@ -14,6 +14,10 @@ class NoneStrategy:
 
     name: ClassVar[str] = "none"
     absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad
+    schedule_fields: ClassVar[dict[str, bool]] = {}
+
+    def last_topology_change(self, iterations: int) -> TopologyChange | None:
+        return None
 
     def initialize_state(self, params: Params) -> None:
         return None

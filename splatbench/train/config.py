@@ -6,8 +6,14 @@ strings whose value is parsed as a TOML literal (``3e-4``, ``true``, ``[1, 1, 1]
 ``"auto"``) and falls back to a bare string (``strategy=mcmc``); a dotted key edits
 the strategy options (``strategy_options.cap_max=50000``). Every mistake -- unknown
 key, wrong type, negative learning rate, zero iterations, unknown strategy or
-initialisation -- is a one-line `InputError` naming the field, raised by
+initialisation, a densification schedule whose last topology change falls in the
+final 10 % of the run -- is a one-line `InputError` naming the field, raised by
 `TrainConfig.validate` before any data is read or rendered.
+
+Schedules (refinement window, opacity reset, SH steps) are written in graphdeco's
+30,000-iteration steps and scaled to ``iterations`` by default (``schedule =
+"scaled"``); ``schedule = "absolute"`` takes them as written
+(`splatbench.train.schedule`).
 
 Example::
 
@@ -50,8 +56,13 @@ class TrainConfig:
     init_opacity: float = 0.1         # initial opacity of every Gaussian (3DGS: 0.1)
     # --- schedule
     iterations: int = 30_000          # optimisation steps, one training view each
+    schedule: str = "scaled"          # how the step fields below and in strategy_options (refine_start,
+                                      # refine_stop, reset_every, sh_interval) are read: "scaled" = in steps
+                                      # of graphdeco's 30,000-iteration run, times iterations / 30,000
+                                      # (graphdeco's proportions at any length); "absolute" = steps as
+                                      # written (splatbench.train.schedule)
     sh_degree: int | str = 3          # maximum SH degree 0..3, or "auto" (measure each band, keep what helps)
-    sh_interval: int = 1000           # raise the active SH degree by one every this many steps
+    sh_interval: int = 1000           # raise the active SH degree by one every this many steps (scaled)
     sh_auto_min_gain_db: float = 0.1  # auto: a band must raise training PSNR by this much (dB) to be kept
     sh_auto_probe_views: int = 8      # auto: training views rendered to measure a band's gain (0 = all)
     sh_auto_holdout_every: int = 8    # auto: hold every n-th training view out of training until the degree
@@ -138,18 +149,32 @@ class TrainConfig:
             raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
         if self.device not in ("auto", "cpu", "cuda"):
             raise InputError(f"device: expected 'auto', 'cpu' or 'cuda', got {self.device!r}")
-        self.make_strategy()
+        from splatbench.train.schedule import SCHEDULES, check_final_window
+
+        if self.schedule not in SCHEDULES:
+            raise InputError(f"schedule: expected one of {', '.join(map(repr, SCHEDULES))}, got {self.schedule!r}")
+        check_final_window(self.make_strategy(), self.iterations, self.schedule)
         return self
 
-    def make_strategy(self):
+    def make_strategy(self, *, scaled: bool = True):
         """The densification strategy this config names (`InputError` if unknown). A
-        strategy with a ``seed`` field gets the run's ``seed`` unless the options set one."""
+        strategy with a ``seed`` field gets the run's ``seed`` unless the options set one.
+        ``scaled``: its schedule fields in this run's steps (``schedule``); False: as written."""
         from splatbench.strategies import make_strategy, strategy_fields
+        from splatbench.train.schedule import scaled_strategy
 
         options = dict(self.strategy_options)
         if "seed" in strategy_fields(self.strategy) and "seed" not in options:
             options["seed"] = self.seed
-        return make_strategy(self.strategy, **options)
+        strategy = make_strategy(self.strategy, **options)
+        return scaled_strategy(strategy, self.iterations, self.schedule) if scaled else strategy
+
+    @property
+    def sh_steps(self) -> int:
+        """``sh_interval`` in this run's steps (scaled under ``schedule = "scaled"``)."""
+        from splatbench.train.schedule import scale_step
+
+        return scale_step(self.sh_interval, self.iterations, self.schedule, interval=True)
 
     @property
     def max_sh_degree(self) -> int:
