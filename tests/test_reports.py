@@ -22,7 +22,8 @@ from splatbench.experiments import RunRecord, expand, parse_experiment
 from splatbench.experiments.store import write_record, write_table
 from splatbench.reports import build_report, write_report
 from splatbench.reports.figures import pareto_front
-from splatbench.reports.findings import compare, fmt_number
+from splatbench.reports.findings import fmt_interval
+from splatbench.reports.stats import paired_difference, paired_ratio
 from splatbench.reports.tables import KIND_METRICS, Stat
 
 SCENES = ["diffuse", "glossy"]
@@ -127,6 +128,13 @@ def test_report_tables_match_parquet(sh_report):
             assert cell == stats[spec.name].text(spec.fmt), (scene, label, spec.name)
 
 
+def per_seed(table: pd.DataFrame, scene: str, label: str, metric: str) -> dict[int, float]:
+    """Seed -> metric of the done run of (scene, SH degree label), straight from the parquet."""
+    done = table[(table.status == "done") & (table.scene == scene)]
+    sel = done[done["axis.sh_degree"].map(lambda v: str(json.loads(v) if isinstance(v, str) else v)) == label]
+    return {int(s): float(v) for s, v in zip(sel.seed, sel[f"metric.{metric}"])}
+
+
 def test_findings_numbers_match_parquet(sh_report):
     report, path, _ = sh_report
     table = pd.read_parquet(path.parent / "results.parquet")
@@ -134,7 +142,7 @@ def test_findings_numbers_match_parquet(sh_report):
     text = path.read_text()
     claims = report.findings["sh_degree"].claims
     kinds = {c.kind for c in claims}
-    assert kinds == {"best", "vs", "noise", "auto"}
+    assert kinds == {"best", "vs", "count", "auto"}
     specs = {m.name: m for m in KIND_METRICS["train"]}
     for c in claims:
         if c.kind == "best":
@@ -142,12 +150,18 @@ def test_findings_numbers_match_parquet(sh_report):
             others = [v[c.metric].mean for (s, _), v in expected.items() if s == c.scene]
             assert c.value == pytest.approx(max(others))
         elif c.kind == "vs":
-            a = expected[(c.scene, c.reference)][c.metric].mean
-            b = expected[(c.scene, c.label)][c.metric].mean
-            assert c.value == pytest.approx(compare(a, b, c.how), abs=1e-12)
-            assert c.text == fmt_number(c.value, c.how, specs[c.metric])
-        elif c.kind == "noise":
-            assert c.value == pytest.approx(max(v["test_psnr"].std for v in expected.values()))
+            # paired over the seeds both rows have (one run missing, one failed: fewer pairs there)
+            a = per_seed(table, c.scene, c.reference, c.metric)
+            b = per_seed(table, c.scene, c.label, c.metric)
+            iv = (paired_difference if c.how == "diff" else paired_ratio)(a, b)
+            assert (c.value, c.low, c.high, c.n) == pytest.approx((iv.estimate, iv.low, iv.high, iv.n), nan_ok=True)
+            null = 0.0 if c.how == "diff" else 1.0
+            assert c.significant == iv.excludes(null)
+            assert c.text == fmt_interval(iv, c.how, specs[c.metric], null)
+            assert ("no significant difference" in c.text) == (iv.defined and not c.significant)
+        elif c.kind == "count":
+            assert c.value == sum(1 for x in claims if x.kind == "vs") == 3 * len(SCENES) * 3
+            assert f"This table makes {int(c.value)} comparisons" in text
         elif c.kind == "auto":
             done = table[(table.status == "done") & (table.scene == c.scene)]
             auto = done[done["axis.sh_degree"] == json.dumps("auto")]
@@ -160,7 +174,23 @@ def test_findings_numbers_match_parquet(sh_report):
     assert auto == {"diffuse": "0", "glossy": "2"}
     gain = next(c for c in claims if c.kind == "vs" and c.scene == "glossy" and c.label == "3"
                 and c.metric == "test_psnr")
-    assert 4.0 < gain.value < 5.0 and re.search(r"`3`: test PSNR \S+ dB / " + re.escape(gain.text), text)
+    # +4.5 dB made, seed noise 0.1 dB: a significant gain over 3 paired seeds
+    assert 4.0 < gain.value < 5.0 and gain.n == 3 and gain.significant and 4.0 < gain.low < gain.high < 5.0
+    assert re.search(r"`3`: test PSNR \S+ dB \[95 % CI [^]]+\](, no significant difference)? / " + re.escape(gain.text),
+                     text)
+    assert "95 % Student's t interval over seeds" in text
+
+
+def test_one_seed_report_says_no_interval(sh_results, tmp_path):
+    """With one seed the report is written, every comparison says it has no interval,
+    and nothing is called significant."""
+    spec, root, _ = sh_results
+    one = sh_spec(seeds=(0,))
+    report = build_report(one, root)
+    text = write_report(report, tmp_path / "one").read_text()
+    vs = [c for c in report.findings["sh_degree"].claims if c.kind == "vs"]
+    assert vs and all(c.n == 1 and not c.significant and "(1 seed: no interval)" in c.text for c in vs)
+    assert "no interval can be computed (n = 1)" in text and "±" not in text
 
 
 def test_one_at_a_time_rows_and_generic_kind(tmp_path):

@@ -4,8 +4,9 @@
     report = build_report(spec, "results")            # tables, findings, the run table
     write_report(report, "reports/sh_degree")          # report.md, figures/*.png, results.parquet
 
-Modules: `tables` (axis rows, mean ± std, metric specs per kind), `findings` (claims
-computed from the tables, rendered as text), `figures` (training curves, time against
+Modules: `stats` (t intervals over seeds, paired differences, bootstrap median ratio),
+`tables` (axis rows, mean ± 95 % interval, metric specs per kind), `findings` (claims
+computed from the tables: paired differences with intervals), `figures` (training curves, time against
 error with the Pareto front), `report` (assembly, markdown), `cli`
 (``splatbench report``). See docs/reports.md.
 """

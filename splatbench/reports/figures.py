@@ -3,9 +3,11 @@
 * `curves_figure`: one panel per scene, one line per axis row: the mean over the
   row's runs of the test PSNR at each evaluation (``eval_step`` / ``eval_psnr`` in the
   curves) when runs evaluated at least twice, else of the training-view PSNR.
-* `pareto_figure`: one panel per scene, one point per grid cell (mean over seeds): a
-  time metric across, a quality metric up; the Pareto-optimal cells (no other cell is
-  both faster and better) are ringed and joined by a step line. `pareto_front` is the
+* `pareto_figure`: one panel per scene, one point per grid cell (mean over seeds, with
+  95 % t-interval bars over seeds in both directions when a cell has two seeds or
+  more): a time metric across, a quality metric up; the Pareto-optimal cells (no
+  other cell is both faster and better, on the means) are ringed and joined by a
+  step line. `pareto_front` is the
   computation, shared with the report text.
 """
 
@@ -19,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from splatbench.reports.stats import t_interval
 from splatbench.reports.tables import AxisTable, MetricSpec, done_runs
 
 
@@ -105,13 +108,21 @@ def pareto_front(times: Sequence[float], quality: Sequence[float]) -> list[int]:
 
 
 def cell_means(runs: pd.DataFrame, labels: pd.Series, time: str, quality: str) -> pd.DataFrame:
-    """Mean time and quality per (scene, cell label) over the done runs."""
+    """Mean time and quality per (scene, cell label) over the done runs (one run per seed
+    in a cell), with the half-widths of their 95 % t intervals (``time_half``,
+    ``quality_half``; NaN with one seed)."""
     done = done_runs(runs)
     frame = pd.DataFrame({"scene": done.scene, "cell": labels.loc[done.index],
                           "time": pd.to_numeric(done[f"metric.{time}"], errors="coerce"),
                           "quality": pd.to_numeric(done[f"metric.{quality}"], errors="coerce")})
     order = list(dict.fromkeys(frame.cell))
-    out = frame.groupby(["scene", "cell"], sort=False)[["time", "quality"]].mean().reset_index()
+    records = []
+    for (scene, cell), group in frame.groupby(["scene", "cell"], sort=False):
+        t, q = t_interval(list(group.time)), t_interval(list(group.quality))
+        records.append({"scene": scene, "cell": cell, "time": t.estimate, "quality": q.estimate,
+                        "time_half": t.half_width, "quality_half": q.half_width})
+    out = pd.DataFrame.from_records(records, columns=["scene", "cell", "time", "quality", "time_half",
+                                                      "quality_half"])
     out["order"] = out.cell.map(order.index)
     return out.sort_values(["order"], kind="stable").drop(columns="order").reset_index(drop=True)
 
@@ -127,6 +138,9 @@ def pareto_figure(means: pd.DataFrame, scenes: Sequence[str], time: MetricSpec, 
         idx = pareto_front(list(sub.time), list(sub.quality))
         fronts[scene] = [sub.cell[i] for i in idx]
         ax.scatter(sub.time, sub.quality, s=18, color="tab:blue", zorder=3)
+        if "time_half" in sub.columns:
+            ax.errorbar(sub.time, sub.quality, xerr=sub.time_half.fillna(0.0), yerr=sub.quality_half.fillna(0.0),
+                        fmt="none", ecolor="tab:blue", elinewidth=0.8, capsize=2, alpha=0.7, zorder=2)
         for _, r in sub.iterrows():
             if math.isfinite(r.time) and math.isfinite(r.quality):
                 ax.annotate(r.cell, (r.time, r.quality), fontsize=6, xytext=(3, 3), textcoords="offset points")

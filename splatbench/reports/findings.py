@@ -1,16 +1,25 @@
 """Findings: short statements written from an axis table's numbers, never by hand.
 
-Each finding is a list of `Claim` records (a number, where it comes from and how it
-is written); the text is rendered from the claims, so a test can recompute every
-number from ``results.parquet`` and find its text in the report. Per axis:
+Each finding is a list of `Claim` records (a number, its 95 % interval, where it comes
+from and how it is written); the text is rendered from the claims, so a test can
+recompute every number from ``results.parquet`` and find its text in the report. Per
+axis:
 
 * **best**: per scene, the row with the best mean of the kind's primary metric;
 * **vs**: every other row against the reference row (the one-at-a-time base, else the
-  axis's first value), per scene, for each of the kind's comparisons
-  (``diff``: b - a; ``ratio``: b / a; ``percent``: 100 (b / a - 1); ``mean``: b itself);
-* **noise**: the largest seed-to-seed standard deviation of the primary metric in
-  the table (differences smaller than it are within noise);
+  axis's first value), per scene, for each of the kind's comparisons, **paired over
+  seeds** (`splatbench.reports.stats`): ``diff`` is the mean of ``b_s - a_s`` with
+  its t interval, ``ratio`` the geometric mean of ``b_s / a_s`` with its interval;
+  ``mean`` is the row's own mean (for a metric that is already relative to the base,
+  like the raster kind's time ratio) with its t interval. When the interval contains
+  the null value (0 for a difference, 1 for a ratio or a relative metric) the text
+  says "no significant difference"; with one seed it says no interval can be computed;
+* **count**: how many such comparisons the table makes (each at 95 %, no correction
+  for multiplicity);
 * **auto** (train kind, SH degree axis): the degree ``auto`` ended at, per seed.
+
+Runs whose ``metric.loaded`` is 1 (the raster kind: timed while the load average
+exceeded half the cores) are left out of every finding (not of the tables).
 """
 
 from __future__ import annotations
@@ -20,15 +29,21 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-from splatbench.reports.tables import AxisTable, MetricSpec, Row, display, done_runs
+from splatbench.reports.stats import Interval, paired_difference, paired_ratio, t_interval
+from splatbench.reports.tables import AxisTable, MetricSpec, Row, display, done_runs, seed_values
 
 
 @dataclass(frozen=True)
 class Comparison:
-    """How one metric of a row is set against the reference row."""
+    """How one metric of a row is set against the reference row.
+
+    how: "diff", "ratio" or "mean" (module doc); null: the value that means "no
+    difference" for a "mean" comparison (None: no significance statement).
+    """
 
     metric: str
-    how: str  # "diff", "ratio", "percent" or "mean" (module doc)
+    how: str
+    null: float | None = None
 
 
 @dataclass(frozen=True)
@@ -42,7 +57,8 @@ class FindingRules:
 KIND_RULES: dict[str, FindingRules] = {
     "train": FindingRules("test_psnr", (Comparison("test_psnr", "diff"), Comparison("train_seconds", "ratio"),
                                         Comparison("num_gaussians", "ratio"))),
-    "raster": FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean"), Comparison("error_psnr", "mean"))),
+    "raster": FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean", 1.0),
+                                           Comparison("exact_psnr", "diff"), Comparison("pairs", "ratio"))),
 }
 
 
@@ -63,9 +79,11 @@ def rules_for(kind: str, metrics: tuple[MetricSpec, ...]) -> FindingRules | None
 class Claim:
     """One number of a finding.
 
-    kind: "best", "vs", "noise", "auto" or "parity"; scene ("" for all); label: the
+    kind: "best", "vs", "count", "auto" or "parity"; scene ("" for all); label: the
     row; reference: the row compared against ("vs"); metric; how: "mean", "diff",
-    "ratio", "percent", "std" or "max"; value: the number; text: how it is written.
+    "ratio", "count" or "max"; value: the number; low / high: its 95 % interval (NaN
+    when none); n: seeds (pairs) it comes from; significant: the interval excludes the
+    null value (False when there is no interval); text: how it is written.
     """
 
     kind: str
@@ -76,6 +94,10 @@ class Claim:
     value: float
     text: str
     reference: str = ""
+    low: float = math.nan
+    high: float = math.nan
+    n: int = 0
+    significant: bool = False
 
 
 @dataclass
@@ -91,7 +113,7 @@ class Finding:
 
 
 def fmt_number(value: float, how: str, spec: MetricSpec) -> str:
-    """A claim's number as written: ``+0.42 dB``, ``×1.31``, ``-12%``, ``27.50 dB``."""
+    """A claim's number as written: ``+0.42 dB``, ``×1.31``, ``27.50 dB``."""
     if value is None or not math.isfinite(value):
         return "n/a"
     unit = f" {spec.unit}" if spec.unit else ""
@@ -99,25 +121,49 @@ def fmt_number(value: float, how: str, spec: MetricSpec) -> str:
         return f"{value:+{spec.fmt}}{unit}"
     if how == "ratio":
         return f"×{value:.2f}"
-    if how == "percent":
-        return f"{value:+.0f}%"
     return f"{format(value, spec.fmt)}{unit}"
 
 
-def compare(a: float, b: float, how: str) -> float:
-    """Row ``b`` against reference ``a`` (module doc)."""
+def _bound(value: float, how: str, spec: MetricSpec) -> str:
     if how == "diff":
-        return b - a
+        return f"{value:+{spec.fmt}}"
     if how == "ratio":
-        return b / a if a else math.nan
-    if how == "percent":
-        return 100.0 * (b / a - 1.0) if a else math.nan
-    return b
+        return f"×{value:.2f}"
+    return format(value, spec.fmt)
+
+
+def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None) -> str:
+    """``+0.42 dB [95 % CI +0.10, +0.74]``, with ", no significant difference" when the
+    interval contains ``null``, or ``(1 seed: no interval)``."""
+    text = fmt_number(iv.estimate, how, spec)
+    if not iv.defined:
+        return f"{text} ({iv.n} seed{'s' if iv.n != 1 else ''}: no interval)"
+    text += f" [95 % CI {_bound(iv.low, how, spec)}, {_bound(iv.high, how, spec)}]"
+    if null is not None and not iv.excludes(null):
+        text += ", no significant difference"
+    return text
+
+
+def paired(a: dict[int, float], b: dict[int, float], comp: Comparison) -> tuple[Interval, float | None]:
+    """The interval of row ``b`` against reference ``a`` (per-seed values) and its null value."""
+    if comp.how == "diff":
+        return paired_difference(a, b), 0.0
+    if comp.how == "ratio":
+        return paired_ratio(a, b), 1.0
+    return t_interval(list(b.values())), comp.null
 
 
 def reference_row(table: AxisTable) -> Row:
     """The one-at-a-time base row, else the first row."""
     return next((r for r in table.rows if r.is_base), table.rows[0])
+
+
+def usable_runs(runs: pd.DataFrame) -> pd.DataFrame:
+    """The done runs findings may use: not those marked ``metric.loaded`` (module doc)."""
+    done = done_runs(runs)
+    if "metric.loaded" in done.columns:
+        done = done[pd.to_numeric(done["metric.loaded"], errors="coerce").fillna(0) == 0]
+    return done
 
 
 def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame) -> Finding | None:
@@ -128,58 +174,69 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame) -> Finding | N
     specs = {m.name: m for m in table.metrics}
     primary = specs[rules.primary]
     sign = -1.0 if primary.better == "lower" else 1.0
-    frame = table.frame
-    scenes = list(dict.fromkeys(frame.scene))
+    scenes = list(dict.fromkeys(table.frame.scene))
+    usable = usable_runs(runs)
+    excluded = len(done_runs(runs)) - len(usable)
+
+    def values(scene: str, row: Row, metric: str) -> dict[int, float]:
+        sel = usable[(usable.scene == scene) & usable.run_id.isin(row.run_ids)]
+        return seed_values(sel, metric) if len(sel) else {}
+
     claims: list[Claim] = []
     lines: list[str] = []
-
     best_parts = []
     for scene in scenes:
-        sub = frame[(frame.scene == scene) & (frame[f"{primary.name}.n"] > 0)]
-        if sub.empty:
+        means = [(t_interval(list(values(scene, row, primary.name).values())), row) for row in table.rows]
+        means = [(iv, row) for iv, row in means if iv.n > 0]
+        if not means:
             continue
-        best = sub.loc[(sign * sub[f"{primary.name}.mean"]).idxmax()]
-        value = float(best[f"{primary.name}.mean"])
-        text = fmt_number(value, "mean", primary)
-        claims.append(Claim("best", scene, best.label, primary.name, "mean", value, text))
-        best_parts.append(f"{scene} `{best.label}` ({text})")
+        iv, row = max(means, key=lambda m: sign * m[0].estimate)
+        text = fmt_number(iv.estimate, "mean", primary)
+        claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, text, n=iv.n))
+        best_parts.append(f"{scene} `{row.label}` ({text})")
     if not best_parts:
         return None
     word = "best" if primary.better != "lower" else "lowest"
-    lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene: " + ", ".join(best_parts) + ".")
+    lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds): "
+                 + ", ".join(best_parts) + ".")
 
     ref = reference_row(table)
     others = [r for r in table.rows if r.label != ref.label]
+    count = 0
     if others and rules.comparisons:
-        lines.append(f"- **Against `{ref.label}`** ({' / '.join(scenes)}):")
+        lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
         for row in others:
             parts = []
             for comp in rules.comparisons:
                 spec = specs[comp.metric]
                 texts = []
                 for scene in scenes:
-                    a = table.stat(scene, ref.label, comp.metric)
-                    b = table.stat(scene, row.label, comp.metric)
-                    if a.n == 0 or b.n == 0:
+                    a, b = values(scene, ref, comp.metric), values(scene, row, comp.metric)
+                    iv, null = paired(a, b, comp)
+                    if iv.n == 0:
                         texts.append("–")
                         continue
-                    value = compare(a.mean, b.mean, comp.how)
-                    text = fmt_number(value, comp.how, spec)
-                    claims.append(Claim("vs", scene, row.label, comp.metric, comp.how, value, text, ref.label))
+                    text = fmt_interval(iv, comp.how, spec, null)
+                    significant = null is not None and iv.excludes(null)
+                    claims.append(Claim("vs", scene, row.label, comp.metric, comp.how, iv.estimate, text, ref.label,
+                                        iv.low, iv.high, iv.n, significant))
                     texts.append(text)
+                    count += 1
                 parts.append(f"{_name(spec)} {' / '.join(texts)}")
             lines.append(f"  - `{row.label}`: " + "; ".join(parts))
-
-    stds = frame[f"{primary.name}.std"].dropna()
-    if len(stds):
-        worst = float(stds.max())
-        text = format(worst, primary.fmt) + (f" {primary.unit}" if primary.unit else "")
-        claims.append(Claim("noise", "", "", primary.name, "std", worst, text))
-        lines.append(f"- Seed-to-seed standard deviation of {_name(primary)} is up to {text} in this table; "
-                     f"smaller differences are within noise.")
-
-    elif int(frame[f"{primary.name}.n"].max()) == 1:
-        lines.append("- One run per row: there is no seed-to-seed spread to judge these differences by.")
+    if count:
+        claims.append(Claim("count", "", "", "", "count", float(count), str(count)))
+        seeds = max((c.n for c in claims if c.kind == "vs"), default=0)
+        if seeds >= 2:
+            lines.append(f"- This table makes {count} comparisons, each with its own 95 % interval (Student's t "
+                         f"over seeds; no correction for multiple comparisons, so about 1 in 20 intervals misses "
+                         f"by chance).")
+        else:
+            lines.append(f"- This table makes {count} comparisons, but with one seed per cell no interval can be "
+                         f"computed (n = 1): none of them is a significant difference; add seeds to the grid.")
+    if excluded:
+        lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
+                     f"these findings (marked in the table's `loaded` column).")
 
     if kind == "train" and table.axis == "sh_degree" and "metric.sh_degree" in runs.columns:
         auto = [r for r in table.rows if r.value == "auto"]
@@ -220,10 +277,10 @@ def parity_finding(runs: pd.DataFrame) -> Finding | None:
     text = f"{worst:.1e}"
     claim = Claim("parity", "", "", "parity_max_abs", "max", worst, text)
     return Finding("parity", [f"- Against the float64 reference with the *same* options, the largest difference "
-                              f"over all {len(done)} runs is {text} (float32 rounding; the error columns above "
-                              f"are what each option trades in against the default-option ground truth)."],
+                              f"over all {len(done)} runs is {text} (float32 rounding; the exact-error columns "
+                              f"above are what each option trades in against the exact Gaussian mixture)."],
                    [claim])
 
 
 __all__ = ["Comparison", "FindingRules", "KIND_RULES", "Claim", "Finding", "axis_finding", "parity_finding",
-           "fmt_number", "compare", "reference_row", "display"]
+           "fmt_number", "fmt_interval", "paired", "reference_row", "usable_runs", "display"]

@@ -42,9 +42,18 @@ FIGURES = "figures"
 TIME_QUALITY: dict[str, tuple[str, str, str, str]] = {
     "train": ("train_seconds", "test_psnr", "time_vs_error",
               "Training time against test PSNR per cell (mean over seeds)"),
-    "raster": ("fwd_bwd_rel", "error_psnr", "speed_vs_error",
-               "Rasterizer speed against error to the float64 ground truth (mean over seeds)"),
+    "raster": ("fwd_bwd_rel", "exact_psnr", "speed_vs_error",
+               "Rasterizer speed against error to the exact Gaussian mixture (mean over seeds)"),
 }
+
+
+def interval_note(max_seeds: int) -> str:
+    """How a table's cells are written, for the number of seeds its cells have."""
+    if max_seeds < 2:
+        return ("Mean over seeds; one seed per cell, so no interval can be computed (n = 1): differences between "
+                "rows cannot be told from seed-to-seed noise")
+    return ("Mean ± half-width of the 95 % Student's t interval over seeds (n − 1 degrees of freedom; a seed's "
+            "runs are averaged first); a cell with one seed shows its mean alone")
 
 
 @dataclass
@@ -162,7 +171,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
     for t in report.axes:
         how = ("each value pools every run with that value (all other axes' values, all seeds)"
                if spec.grid == "product" else "each value alone on top of the base")
-        lines += [f"## {t.axis}", "", f"Mean ± standard deviation over runs; {how}.", "", t.markdown(), ""]
+        lines += [f"## {t.axis}", "", f"{interval_note(t.max_seeds)}; {how}.", "", t.markdown(), ""]
         if t.axis in report.findings:
             lines += ["**Findings** (computed from the table):", "", report.findings[t.axis].markdown(), ""]
         if t.axis in curve_paths:
@@ -176,7 +185,8 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
         tq = TIME_QUALITY[spec.kind]
         specs = {m.name: m for m in report.metrics}
         lines += [f"## {specs[tq[0]].label} against {specs[tq[1]].label}", "",
-                  f"{tq[3]}; ringed points are Pareto-optimal (no other cell is both faster and better).", "",
+                  f"{tq[3]}; bars are 95 % t intervals over seeds (none with one seed); ringed points are "
+                  f"Pareto-optimal on the means (no other cell is both faster and better).", "",
                   f"![{tq[2]}]({pareto_path.relative_to(out).as_posix()})", ""]
         for scene, front in report.fronts.items():
             if front:

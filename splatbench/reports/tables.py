@@ -1,4 +1,4 @@
-"""Report tables: which runs make up each axis value, and mean ± std over them.
+"""Report tables: which runs make up each axis value, and mean ± 95 % interval over seeds.
 
 An experiment's runs are grouped per **axis** (a plain axis or a variant axis):
 
@@ -9,8 +9,11 @@ An experiment's runs are grouped per **axis** (a plain axis or a variant axis):
 
 Membership comes from the experiment file itself (`axis_rows` expands a one-value
 copy of the grid per row and keeps the run ids), so a report always describes the
-grid as written, never a stale one. Statistics are over the *done* runs of a row:
-mean, sample standard deviation (ddof = 1; empty with one run) and count.
+grid as written, never a stale one. Statistics are over the *done* runs of a row,
+**seed by seed**: a row's runs of one seed are averaged first (in a product grid they
+are that seed's runs of every other axis value), then the mean over seeds is given
+with the half-width of its 95 % Student's t interval (`splatbench.reports.stats`; the
+seed is the unit of replication). With one seed there is no interval: the mean alone.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import pandas as pd
 
 from splatbench.experiments.grid import expand
 from splatbench.experiments.spec import ExperimentSpec, flatten, unflatten
+from splatbench.reports.stats import t_quantile
 
 
 @dataclass(frozen=True)
@@ -152,23 +156,42 @@ def _base_labels(spec: ExperimentSpec) -> dict[str, Any]:
 # --------------------------------------------------------------------------- statistics
 @dataclass(frozen=True)
 class Stat:
-    """mean, std (ddof 1; NaN with fewer than two values) and count of one metric."""
+    """Mean over seeds, sample std of the per-seed values (ddof 1; NaN with fewer than
+    two) and the number of seeds n, of one metric."""
 
     mean: float
     std: float
     n: int
 
+    @property
+    def half_width(self) -> float:
+        """Half-width of the 95 % t interval of the mean, ``t_{0.975, n-1} std / sqrt(n)``
+        (NaN with fewer than two seeds)."""
+        if self.n < 2 or math.isnan(self.std):
+            return math.nan
+        return t_quantile(self.n) * self.std / math.sqrt(self.n)
+
     def text(self, fmt: str) -> str:
+        """``"27.31 ± 0.42"`` (mean ± 95 % half-width), the mean alone for one seed, "–" for none."""
         if self.n == 0 or math.isnan(self.mean):
             return "–"
         if self.n < 2 or math.isnan(self.std):
             return format(self.mean, fmt)
-        return f"{format(self.mean, fmt)} ± {format(self.std, fmt)}"
+        return f"{format(self.mean, fmt)} ± {format(self.half_width, fmt)}"
 
 
-def stat(values: pd.Series) -> Stat:
-    """`Stat` of the finite values of ``values``."""
-    v = pd.to_numeric(values, errors="coerce").astype("float64")
+def seed_values(runs: pd.DataFrame, metric: str) -> dict[int, float]:
+    """Seed -> the mean of ``metric`` over ``runs`` of that seed (finite values only)."""
+    v = pd.to_numeric(runs[f"metric.{metric}"], errors="coerce").astype("float64")
+    frame = pd.DataFrame({"seed": runs.seed.astype(int), "v": v})
+    frame = frame[frame.v.map(math.isfinite)]
+    return {int(k): float(x) for k, x in frame.groupby("seed", sort=True).v.mean().items()}
+
+
+def stat(values: pd.Series | dict[int, float]) -> Stat:
+    """`Stat` of the finite values (a per-seed mapping, or a series of one value per seed)."""
+    raw = list(values.values()) if isinstance(values, dict) else list(values)
+    v = pd.to_numeric(pd.Series(raw, dtype=object), errors="coerce").astype("float64")
     v = v[v.map(math.isfinite)]
     if len(v) == 0:
         return Stat(math.nan, math.nan, 0)
@@ -177,16 +200,25 @@ def stat(values: pd.Series) -> Stat:
 
 @dataclass
 class AxisTable:
-    """mean ± std per (scene, row) of each metric.
+    """mean ± 95 % interval over seeds per (scene, row) of each metric.
 
     frame: one row per (scene, row label) in grid order, columns ``scene``, ``label``,
-    ``runs`` (done runs pooled), then ``<metric>.mean``, ``<metric>.std``, ``<metric>.n``.
+    ``runs`` (done runs pooled), then ``<metric>.mean``, ``<metric>.std``, ``<metric>.n``
+    (statistics of the per-seed values, module doc). per_seed: (scene, label, metric)
+    -> seed -> value, what the findings pair.
     """
 
     axis: str
     rows: list[Row]
     metrics: tuple[MetricSpec, ...]
     frame: pd.DataFrame
+    per_seed: dict[tuple[str, str, str], dict[int, float]] = dataclasses.field(default_factory=dict)
+
+    @property
+    def max_seeds(self) -> int:
+        """The most seeds any cell of the table has (1: no interval anywhere)."""
+        cols = [f"{m.name}.n" for m in self.metrics]
+        return int(self.frame[cols].max().max()) if cols and len(self.frame) else 0
 
     def stat(self, scene: str, label: str, metric: str) -> Stat:
         row = self.frame[(self.frame.scene == scene) & (self.frame.label == label)].iloc[0]
@@ -212,16 +244,19 @@ def axis_table(spec: ExperimentSpec, axis: str, table: pd.DataFrame, metrics: Se
     rows = axis_rows(spec, axis)
     done = done_runs(table)
     records = []
+    per_seed: dict[tuple[str, str, str], dict[int, float]] = {}
     for scene in spec.scenes:
         at_scene = done[done.scene == scene]
         for row in rows:
             runs = at_scene[at_scene.run_id.isin(row.run_ids)]
             rec: dict[str, Any] = {"scene": scene, "label": row.label, "runs": len(runs)}
             for m in metrics:
-                s = stat(runs[f"metric.{m.name}"])
+                values = seed_values(runs, m.name)
+                per_seed[(scene, row.label, m.name)] = values
+                s = stat(values)
                 rec.update({f"{m.name}.mean": s.mean, f"{m.name}.std": s.std, f"{m.name}.n": s.n})
             records.append(rec)
-    return AxisTable(axis, rows, tuple(metrics), pd.DataFrame.from_records(records))
+    return AxisTable(axis, rows, tuple(metrics), pd.DataFrame.from_records(records), per_seed)
 
 
 # --------------------------------------------------------------------------- cells
@@ -264,5 +299,5 @@ def _json(value: Any) -> str:
     return json.dumps(value, sort_keys=True)
 
 
-__all__ = ["MetricSpec", "KIND_METRICS", "metric_specs", "Row", "axis_rows", "display", "Stat", "stat", "AxisTable",
+__all__ = ["MetricSpec", "KIND_METRICS", "metric_specs", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
            "axis_table", "cell_labels", "done_runs"]
