@@ -266,21 +266,40 @@ def test_raster_kind_config_errors():
 
 
 def test_raster_kind_run(tmp_path, monkeypatch):
-    """One tiny run: timings, parity with the matched reference, and the error an option trades in."""
+    """Tiny runs: paired timings with a bootstrap interval, the load recorded, work done,
+    parity with the matched reference, and the error against the exact mixture."""
     from splatbench.experiments.raster_kind import RASTER
 
     monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
-    base = RASTER.resolve({"scene": "synthetic-300-32", "seed": 1, "repeats": 1, "error_scale": 0.5})
-    exact = RASTER.run(base, tmp_path).metrics
-    assert exact["fwd_ms"] > 0 and exact["fwd_bwd_ms"] > 0 and exact["fwd_bwd_rel"] > 0 and exact["n"] == 300
-    assert (exact["error_width"], exact["error_height"]) == (16, 16)
-    assert exact["parity_max_abs"] < 1e-4 and exact["error_max_abs"] == exact["parity_max_abs"]
-    assert list((tmp_path / "cache" / "reference").glob("*.npy"))  # the ground truth is cached
+    base = RASTER.resolve({"scene": "synthetic-300-32", "seed": 1, "error_scale": 0.5})
+    assert base["repeats"] == 7
+    out = RASTER.run(base, tmp_path)
+    m = out.metrics
+    assert m["fwd_ms"] > 0 and m["fwd_bwd_ms"] > 0 and m["n"] == 300 and m["timed_pairs"] == 7
+    assert all(len(out.curves[k]) == 7 for k in ("fwd_runs_ms", "default_fwd_bwd_runs_ms"))
+    # the median of the 7 per-pair ratios, inside its bootstrap interval (the ends are pair ratios)
+    ratios = [a / b for a, b in zip(out.curves["fwd_bwd_runs_ms"], out.curves["default_fwd_bwd_runs_ms"])]
+    assert m["fwd_bwd_rel"] == pytest.approx(sorted(ratios)[3], rel=1e-3)
+    assert m["fwd_bwd_rel_low"] <= m["fwd_bwd_rel"] <= m["fwd_bwd_rel_high"]
+    assert m["loaded"] in (0, 1) and m["load_before"] >= 0 and m["cores"] >= 1
+    assert m["loaded"] == int(m["load_other"] > m["cores"] / 2)
+    assert m["pairs"] > 0 and m["evaluations"] == m["pairs"] * 16 ** 2
+    assert (m["error_width"], m["error_height"]) == (16, 16)
+    assert m["parity_max_abs"] < 1e-4            # float32 against float64 with the same options
+    assert list((tmp_path / "cache" / "reference").glob("*exact*.npy"))  # the exact model is cached
+    # the defaults cut faint tails: farther from the exact mixture than from their own reference
+    assert m["exact_max_abs"] > 10 * m["parity_max_abs"]
     tiles = RASTER.run({**base, "tile_size": 4}, tmp_path).metrics
-    assert tiles["error_max_abs"] == pytest.approx(exact["error_max_abs"], abs=1e-6)  # tiles never change the image
+    assert tiles["exact_max_abs"] == pytest.approx(m["exact_max_abs"], abs=1e-6)  # tiles never change the image
+    assert tiles["evaluations"] == tiles["pairs"] * 4 ** 2
+    # a lower alpha_min keeps more of each Gaussian: closer to the exact model, not "error"
+    closer = RASTER.run({**base, "alpha_min": 1e-4}, tmp_path).metrics
+    assert closer["exact_mean_abs"] < m["exact_mean_abs"] and closer["exact_psnr"] > m["exact_psnr"]
     coarse = RASTER.run({**base, "sh_degree": 0}, tmp_path).metrics
-    assert coarse["parity_max_abs"] < 1e-4 and coarse["error_max_abs"] > 100 * exact["error_max_abs"]
-    assert math.isfinite(coarse["error_psnr"]) and coarse["error_psnr"] < exact["error_psnr"]
+    assert coarse["parity_max_abs"] < 1e-4 and math.isfinite(coarse["exact_psnr"])
+    assert coarse["exact_psnr"] < m["exact_psnr"]   # dropping view dependence moves away from the model
+    with pytest.raises(InputError, match=r"^repeats: expected at least 7 timed pairs"):
+        RASTER.validate({"scene": "synthetic-300-32", "seed": 0, "repeats": 3})
 
 
 def test_train_kind_run(tmp_path, monkeypatch):
@@ -297,3 +316,43 @@ def test_train_kind_run(tmp_path, monkeypatch):
     assert output.metrics["iterations"] == 3 and output.metrics["test_views"] == 1
     assert set(output.curves) == set(CURVE_KEYS) and output.curves["step"] == [0, 1, 2]
     assert (tmp_path / "work" / "point_cloud.ply").is_file()
+
+
+def test_raster_report_leaves_loaded_runs_out_of_findings(tmp_path):
+    """A raster grid with made-up metrics: one run timed under load is kept in the table
+    (its `loaded` column) but left out of every finding, and the defaults' self-ratio
+    (the noise floor) is stated."""
+    spec = parse_experiment({"name": "rfake", "kind": "raster", "scenes": ["synthetic-300-32"], "seeds": [0, 1, 2],
+                             "grid": "one-at-a-time", "axes": {"alpha_min": [0.002], "tile_size": [8]}},
+                            source="rfake.toml")
+    runs = expand(spec)
+    records = []
+    for i, run in enumerate(runs):
+        alpha = run.config["alpha_min"]
+        rel = 1.0 + 0.01 * (run.seed - 1) if alpha > 0.003 and run.config["tile_size"] == 16 else 0.8 + 0.01 * run.seed
+        loaded = int(run.labels.get("tile_size") == 8 and run.seed == 2)
+        metrics = {"fwd_ms": 10.0, "fwd_bwd_ms": 30.0 * rel, "fwd_bwd_rel": rel, "fwd_bwd_rel_low": rel - 0.05,
+                   "fwd_bwd_rel_high": rel + 0.05, "exact_psnr": 40.0 + (5.0 if alpha < 0.003 else 0.0) + run.seed,
+                   "exact_max_abs": 0.01, "parity_max_abs": 1e-6, "pairs": 1000, "evaluations": 256000,
+                   "loaded": loaded}
+        records.append(RunRecord(run_id=run.run_id, experiment=spec.name, kind="raster", scene=run.scene,
+                                 seed=run.seed, status="done", config=dict(run.config), labels=dict(run.labels),
+                                 metrics=metrics, curves=None, error=None, seconds=1.0,
+                                 started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00",
+                                 worker="h:1"))
+        write_record(tmp_path, records[-1])
+    write_table(tmp_path / spec.name, records)
+    report = build_report(spec, tmp_path)
+    text = write_report(report, tmp_path / "report").read_text()
+    tile = report.findings["tile_size"].claims
+    vs = [c for c in tile if c.kind == "vs" and c.label == "8"]
+    assert vs and all(c.n == 2 for c in vs)             # seed 2 of tile 8 was loaded: 2 pairs left
+    rel = next(c for c in vs if c.metric == "fwd_bwd_rel")
+    assert rel.value == pytest.approx(0.805) and rel.significant          # 0.80, 0.81: below 1
+    psnr = next(c for c in report.findings["alpha_min"].claims if c.kind == "vs" and c.metric == "exact_psnr")
+    assert psnr.value == pytest.approx(5.0) and psnr.n == 3               # exact differences of 5 dB per seed
+    base = next(c for c in tile if c.kind == "self")
+    assert base.value == pytest.approx(1.0) and not base.significant      # 0.99, 1.00, 1.01 holds 1
+    assert "1 run(s) timed while the load average exceeded half the cores are left out" in text
+    row = next(line for line in text.splitlines() if line.startswith("| synthetic-300-32 | `8` |"))
+    assert row.rstrip(" |").endswith("0.33")                              # the loaded column: 1 of 3 runs

@@ -1,5 +1,6 @@
-"""The ``raster`` run kind: time the rasterizer under a set of options and measure the
-error those options trade in against the float64 reference.
+"""The ``raster`` run kind: time the rasterizer under a set of options against the
+default options, and measure the error those options trade in against the exact
+Gaussian mixture.
 
 Scene names are workloads (`parse_workload_name`)::
 
@@ -11,40 +12,53 @@ Scene names are workloads (`parse_workload_name`)::
 Config (flat; defaults in `DEFAULTS`): the rasterizer options ``tile_size``,
 ``alpha_min``, ``alpha_max``, ``transmittance_min``, ``eps2d``, ``radius``,
 ``antialiased``, ``sh_degree`` (0..3, the bands evaluated) and ``device``; and how
-to measure: ``repeats`` (timed runs; medians are reported) and ``error_scale`` (the
-resolution factor of the error measurement, so that the pixel-at-a-time reference
-stays affordable).
+to measure: ``repeats`` (timed pairs, at least 7) and ``error_scale`` (the
+resolution factor of the error measurement, so that the float64 reference stays
+affordable).
 
 One run:
 
 1. Timing, at the workload's full resolution: `splatbench.bench.raster`'s closures
    (forward under ``no_grad``; forward + backward of ``rgb.sum()`` to all five
-   groups), one warm-up each, then ``repeats`` rounds, each timing one forward and one
-   forward + backward with the run's options *and* with the default options, in
-   alternation. SH is sliced to the evaluated degree, as the trainer does. The ratios
-   ``fwd_rel`` / ``fwd_bwd_rel`` (median with the options over median with the
-   defaults) compare the two under the same load: on a shared machine they are far
-   steadier than absolute times from runs made minutes apart.
-2. Error, at ``error_scale`` times the resolution: the Dr.Jit render with the run's
-   options against two float64 renders of `reference.render` (``mode="matched"``):
+   groups) with the run's options and with the default options, each warmed up first
+   (kernels compile or load from Dr.Jit's cache outside the timed part). Then
+   ``repeats`` **pairs** in one process, alternating A B A B ...: each pair times one
+   call with the run's options and one with the defaults, back to back, so both see
+   the same load. Per pair, the ratio option / default; ``fwd_rel`` and
+   ``fwd_bwd_rel`` are the **median ratio** over pairs with a 95 % percentile-bootstrap
+   interval (``*_low``, ``*_high``; `splatbench.reports.stats.bootstrap_median_ratio`).
+   SH is sliced to the evaluated degree, as the trainer does.
+2. Load: the 1-minute load average is read before and after the timed pairs, and the
+   process's own CPU use over them (CPU seconds / wall seconds, in cores) is
+   subtracted: ``load_other`` estimates the load of *other* processes. ``loaded`` is
+   1 when it exceeded half the usable cores (``cores``): such a run is marked in the
+   table and left out of the findings (docs/reports.md: how to get quiet numbers).
+3. Work done: ``pairs`` (Gaussian-tile pairs) and ``evaluations`` = pairs x
+   tile_size^2, the pixel-Gaussian evaluations a view costs when no pixel of a tile
+   stops early (the rasterizer exposes no finer count), so an option's effect on work
+   stands beside its effect on time.
+4. Error, at ``error_scale`` times the resolution, of the Dr.Jit render with the
+   run's options against two float64 renders of `reference.render`:
 
-   * ``error_*``: against the **default** options with every SH band -- the ground
-     truth; this is the error an option trades for its speed (a tile size changes
-     nothing, a higher ``alpha_min`` drops faint contributions, ``sh_degree = 0`` drops
-     view dependence).
-   * ``parity_max_abs``: against the reference with the **same** options -- the
-     implementation's own float32 error (about 1e-6 when the rasterizer is right).
-
-   The default-option reference depends only on the workload and the scale, so it is
-   computed once (in `prepare`, in the parent) and cached by content hash under
-   ``$SPLATBENCH_CACHE/reference`` (default ``~/.cache/splatbench/reference``).
+   * ``exact_*``: against the **exact** model (``mode="exact"``: every Gaussian in
+     front of the camera on every pixel, every SH band of the workload; no
+     ``alpha_min``, no clamp, no radius cut-off, no early stop). This is the error an
+     option trades for its speed; an option that brings the render closer to the
+     Gaussian mixture (a lower ``alpha_min``) lowers it. It depends only on the
+     workload and the scale, so it is computed once (in `prepare`, in the parent) and
+     cached by content hash under ``$SPLATBENCH_CACHE/reference`` (default
+     ``~/.cache/splatbench/reference``).
+   * ``parity_max_abs``: against the reference with the **same** options
+     (``mode="matched"``) -- the implementation's own float32 error (about 1e-6 when
+     the rasterizer is right).
 
 Metrics: `METRICS`. Curves: every timed call (``fwd_runs_ms``, ``fwd_bwd_runs_ms``,
-``default_fwd_runs_ms``, ``default_fwd_bwd_runs_ms``).
+``default_fwd_runs_ms``, ``default_fwd_bwd_runs_ms``, pair i at index i).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -52,6 +66,8 @@ import os
 import re
 import statistics
 import sys
+import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -71,7 +87,7 @@ DEFAULTS: dict[str, Any] = {
     "antialiased": False,        # Mip-Splatting opacity compensation
     "sh_degree": 3,              # SH bands evaluated (the workloads hold degree 3)
     "device": "auto",            # "cpu" (Dr.Jit LLVM), "cuda" or "auto"
-    "repeats": 5,                # timed runs of forward and of forward+backward (medians reported)
+    "repeats": 7,                # timed A B pairs (run's options, defaults), at least MIN_PAIRS
     "error_scale": 0.5,          # resolution factor of the error measurement (0 < s <= 1)
 }
 #: Fields passed to the rasterizer as `RasterOptions` (sh_degree goes separately).
@@ -80,21 +96,36 @@ OPTION_FIELDS = ("tile_size", "alpha_min", "alpha_max", "transmittance_min", "ep
 #: Options with no counterpart in the reference (accelerations and placement only).
 FAST_ONLY = ("tile_size", "device")
 CACHE_ENV = "SPLATBENCH_CACHE"
+#: Fewest timed pairs a run may use (a bootstrap interval of a median needs several).
+MIN_PAIRS = 7
 
 #: Metric name -> meaning.
 METRICS: dict[str, str] = {
     "fwd_ms": "median forward time at full resolution (ms)",
     "fwd_bwd_ms": "median forward + backward time at full resolution (ms)",
-    "fwd_rel": "forward time relative to the default options, timed alternately in the same run (< 1: faster)",
-    "fwd_bwd_rel": "forward + backward time relative to the default options, same run (< 1: faster)",
+    "fwd_rel": "median over timed pairs of forward time / the default options' (same process, alternately; "
+               "< 1: faster)",
+    "fwd_rel_low": "low end of the 95 % bootstrap interval of fwd_rel",
+    "fwd_rel_high": "high end of the 95 % bootstrap interval of fwd_rel",
+    "fwd_bwd_rel": "median over timed pairs of forward + backward time / the default options' (< 1: faster)",
+    "fwd_bwd_rel_low": "low end of the 95 % bootstrap interval of fwd_bwd_rel",
+    "fwd_bwd_rel_high": "high end of the 95 % bootstrap interval of fwd_bwd_rel",
+    "timed_pairs": "timed A B pairs (the run's options, then the defaults)",
     "default_fwd_ms": "median forward time with the default options, in the same run (ms)",
     "default_fwd_bwd_ms": "median forward + backward time with the default options, in the same run (ms)",
-    "error_psnr": "PSNR (dB) of the render against the float64 reference with default options "
-                  "(ground truth; capped at 200)",
-    "error_max_abs": "largest |render - ground truth| over pixels and channels",
-    "error_mean_abs": "mean |render - ground truth|",
+    "load_before": "1-minute load average before the timed pairs",
+    "load_after": "1-minute load average after them",
+    "own_cpu": "this process's CPU use during the timed pairs (CPU seconds / wall seconds, in cores)",
+    "load_other": "estimated load of other processes: max(load_before, load_after) - own_cpu",
+    "cores": "CPU cores this process may use",
+    "loaded": "1 when load_other exceeded cores / 2: timings not trusted, left out of the findings",
+    "exact_psnr": "PSNR (dB) of the render against the exact Gaussian mixture (reference mode 'exact', every "
+                  "SH band; capped at 200)",
+    "exact_max_abs": "largest |render - exact| over pixels and channels",
+    "exact_mean_abs": "mean |render - exact|",
     "parity_max_abs": "largest |render - float64 reference with the same options| (implementation error)",
     "pairs": "Gaussian-tile pairs composited (full resolution)",
+    "evaluations": "pixel-Gaussian evaluations per view: pairs x tile_size^2 (no early stop; full resolution)",
     "visible": "Gaussians that survived culling (full resolution)",
     "n": "Gaussians in the workload",
     "width": "image width (pixels)", "height": "image height (pixels)",
@@ -162,8 +193,9 @@ def validate(config: dict[str, Any]) -> None:
         raise InputError(f"antialiased: expected true or false, got {merged['antialiased']!r}")
     if not 0 <= merged["sh_degree"] <= 3:
         raise InputError(f"sh_degree: expected an int in 0..3, got {merged['sh_degree']}")
-    if merged["repeats"] < 1:
-        raise InputError(f"repeats: expected an int >= 1, got {merged['repeats']}")
+    if merged["repeats"] < MIN_PAIRS:
+        raise InputError(f"repeats: expected at least {MIN_PAIRS} timed pairs (a bootstrap interval of the median "
+                         f"ratio needs several), got {merged['repeats']}")
     if not 0 < merged["error_scale"] <= 1:
         raise InputError(f"error_scale: expected a factor in (0, 1], got {merged['error_scale']!r}")
     RasterOptions.from_kwargs(**{k: merged[k] for k in OPTION_FIELDS})  # names the bad option
@@ -213,22 +245,27 @@ def reference_render(workload, scale: float, *, sh_degree: int | None = None, **
     return np.asarray(out.rgb, dtype=np.float64)
 
 
-def ground_truth(scene: str, seed: int, scale: float) -> np.ndarray:
-    """The default-option, all-bands float64 render of a workload at ``scale``, cached by
-    content (workload, seed, scale, reference sources); computed on a miss."""
+def exact_model(scene: str, seed: int, scale: float) -> np.ndarray:
+    """[H', W', 3] float64 render of the exact Gaussian mixture (`reference.render` with
+    ``mode="exact"``, every SH band) of a workload at ``scale``, cached by content
+    (workload, seed, scale, reference sources); computed on a miss."""
+    import reference
+
     kind, _ = parse_workload_name(scene)
-    key = {"scene": scene, "seed": seed if kind == "synthetic" else 0, "scale": scale,
-           "defaults": {k: DEFAULTS[k] for k in OPTION_FIELDS if k not in FAST_ONLY},
+    key = {"scene": scene, "seed": seed if kind == "synthetic" else 0, "scale": scale, "mode": "exact",
            "reference": _reference_sources()}
     digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:24]
-    path = cache_dir() / f"{scene}-s{key['seed']}-{digest}.npy"
+    path = cache_dir() / f"{scene}-s{key['seed']}-exact-{digest}.npy"
     if path.is_file():
         try:
             return np.load(path)
         except (OSError, ValueError):
             pass  # a damaged file: compute again
-    rgb = reference_render(build_workload(scene, seed), scale,
-                           **{k: DEFAULTS[k] for k in OPTION_FIELDS if k not in FAST_ONLY})
+    w = build_workload(scene, seed)
+    g, cam = w.gaussians, (w.camera if scale == 1 else w.camera.scaled(scale))
+    out = reference.render(g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, cam.K, cam.world_to_camera,
+                           cam.width, cam.height, mode="exact")
+    rgb = np.asarray(out.rgb, dtype=np.float64)
     path.parent.mkdir(parents=True, exist_ok=True)
     temp = path.parent / f".{path.name}.{os.getpid()}.tmp"
     with open(temp, "wb") as fh:
@@ -238,16 +275,16 @@ def ground_truth(scene: str, seed: int, scale: float) -> np.ndarray:
 
 
 def prepare(configs: list[dict[str, Any]]) -> None:
-    """Compute (or find cached) every ground truth the pending runs need, once, in the parent."""
+    """Compute (or find cached) every exact-model render the pending runs need, once, in the parent."""
     seen: set[tuple] = set()
     for config in configs:
         kind, _ = parse_workload_name(config["scene"])
         key = (config["scene"], config["seed"] if kind == "synthetic" else 0, config["error_scale"])
         if key not in seen:
             seen.add(key)
-            ground_truth(*key)
+            exact_model(*key)
     if seen:
-        print(f"reference: {len(seen)} ground-truth render(s) ready in {cache_dir()}", file=sys.stderr, flush=True)
+        print(f"reference: {len(seen)} exact-model render(s) ready in {cache_dir()}", file=sys.stderr, flush=True)
 
 
 # --------------------------------------------------------------------------- run
@@ -265,6 +302,7 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     from splatbench.bench.raster import (forward_backward_with_init, forward_with_init, resolve_device, time_runs,
                                          torch_params)
     from splatbench.experiments.train_kind import limit_threads
+    from splatbench.reports.stats import bootstrap_median_ratio
 
     limit_threads()
     workload = build_workload(config["scene"], config["seed"])
@@ -282,29 +320,36 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
         closures[name][0]()  # warm-up: kernels compile or load from Dr.Jit's cache
     times: dict[str, list[float]] = {k: [] for k in ("fwd", "fwd_bwd", "default_fwd", "default_fwd_bwd")}
     stats = None
-    for _ in range(config["repeats"]):  # alternate, so that both see the same load
+    load = Load.start()
+    for _ in range(config["repeats"]):  # A B A B ...: both sides of a pair see the same load
         for name, prefix in (("run", ""), ("default", "default_")):
             s, st = time_runs(closures[name][0], 1)
             times[prefix + "fwd"] += s
             stats = st if name == "run" else stats
             times[prefix + "fwd_bwd"] += time_runs(closures[name][1], 1)[0]
+    load = load.stop()
     med = {k: statistics.median(v) for k, v in times.items()}
+    fwd_rel = bootstrap_median_ratio(times["fwd"], times["default_fwd"])
+    fwd_bwd_rel = bootstrap_median_ratio(times["fwd_bwd"], times["default_fwd_bwd"])
 
     scale = config["error_scale"]
     small = workload.camera if scale == 1 else workload.camera.scaled(scale)
     fast = splatbench.render(workload.gaussians, small, sh_degree=degree, **options).rgb.astype(np.float64)
-    truth = ground_truth(config["scene"], config["seed"], scale)
+    exact = exact_model(config["scene"], config["seed"], scale)
     matched = reference_render(workload, scale, sh_degree=degree, **options)
-    err = np.abs(fast - truth)
+    err = np.abs(fast - exact)
     metrics = {
         "fwd_ms": round(1e3 * med["fwd"], 3), "fwd_bwd_ms": round(1e3 * med["fwd_bwd"], 3),
-        "fwd_rel": round(med["fwd"] / med["default_fwd"], 4),
-        "fwd_bwd_rel": round(med["fwd_bwd"] / med["default_fwd_bwd"], 4),
+        "fwd_rel": round(fwd_rel.estimate, 4), "fwd_rel_low": _r4(fwd_rel.low), "fwd_rel_high": _r4(fwd_rel.high),
+        "fwd_bwd_rel": round(fwd_bwd_rel.estimate, 4), "fwd_bwd_rel_low": _r4(fwd_bwd_rel.low),
+        "fwd_bwd_rel_high": _r4(fwd_bwd_rel.high), "timed_pairs": config["repeats"],
         "default_fwd_ms": round(1e3 * med["default_fwd"], 3),
         "default_fwd_bwd_ms": round(1e3 * med["default_fwd_bwd"], 3),
-        "error_psnr": round(min(psnr(fast, truth), 200.0), 4), "error_max_abs": float(err.max()),
-        "error_mean_abs": float(err.mean()), "parity_max_abs": float(np.abs(fast - matched).max()),
-        "pairs": int(stats.num_pairs), "visible": int(torch.as_tensor(stats.visible).sum()),
+        **load.metrics(),
+        "exact_psnr": round(min(psnr(fast, exact), 200.0), 4), "exact_max_abs": float(err.max()),
+        "exact_mean_abs": float(err.mean()), "parity_max_abs": float(np.abs(fast - matched).max()),
+        "pairs": int(stats.num_pairs), "evaluations": int(stats.num_pairs) * int(config["tile_size"]) ** 2,
+        "visible": int(torch.as_tensor(stats.visible).sum()),
         "n": len(workload.gaussians), "width": workload.camera.width, "height": workload.camera.height,
         "error_width": small.width, "error_height": small.height, "device": resolve_device(options["device"]),
     }
@@ -312,9 +357,44 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     return RunOutput(metrics=metrics, curves=curves)
 
 
+def _r4(x: float) -> float:
+    return round(x, 4) if math.isfinite(x) else math.nan
+
+
+@dataclass(frozen=True)
+class Load:
+    """The machine's load around a timed section (module doc, step 2)."""
+
+    before: float        # 1-minute load average at the start
+    cpu0: float          # this process's CPU seconds at the start
+    wall0: float         # wall clock at the start
+    after: float = math.nan
+    own_cpu: float = math.nan  # cores this process kept busy during the section
+
+    @classmethod
+    def start(cls) -> Load:
+        return cls(os.getloadavg()[0], _cpu_seconds(), time.perf_counter())
+
+    def stop(self) -> Load:
+        wall = max(time.perf_counter() - self.wall0, 1e-9)
+        return dataclasses.replace(self, after=os.getloadavg()[0], own_cpu=(_cpu_seconds() - self.cpu0) / wall)
+
+    def metrics(self) -> dict[str, float | int]:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        other = max(0.0, max(self.before, self.after) - self.own_cpu)
+        return {"load_before": round(self.before, 2), "load_after": round(self.after, 2),
+                "own_cpu": round(self.own_cpu, 2), "load_other": round(other, 2), "cores": cores,
+                "loaded": int(other > cores / 2)}
+
+
+def _cpu_seconds() -> float:
+    t = os.times()
+    return t.user + t.system
+
+
 #: The ``raster`` kind (``kind = "raster"``).
 RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, prepare=prepare,
-                 description="time the rasterizer under options; error against the float64 reference")
+                 description="time the rasterizer under options against the defaults; error against the exact model")
 
 __all__ = ["RASTER", "DEFAULTS", "METRICS", "OPTION_FIELDS", "parse_workload_name", "build_workload",
-           "reference_render", "ground_truth", "cache_dir", "psnr"]
+           "reference_render", "exact_model", "cache_dir", "psnr", "Load", "MIN_PAIRS"]

@@ -79,7 +79,8 @@ def rules_for(kind: str, metrics: tuple[MetricSpec, ...]) -> FindingRules | None
 class Claim:
     """One number of a finding.
 
-    kind: "best", "vs", "count", "auto" or "parity"; scene ("" for all); label: the
+    kind: "best", "vs", "self" (the reference row's own relative metric), "count", "auto" or
+    "parity"; scene ("" for all); label: the
     row; reference: the row compared against ("vs"); metric; how: "mean", "diff",
     "ratio", "count" or "max"; value: the number; low / high: its 95 % interval (NaN
     when none); n: seeds (pairs) it comes from; significant: the interval excludes the
@@ -224,6 +225,20 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame) -> Finding | N
                     count += 1
                 parts.append(f"{_name(spec)} {' / '.join(texts)}")
             lines.append(f"  - `{row.label}`: " + "; ".join(parts))
+    self_parts = []
+    for comp in rules.comparisons:
+        if comp.how != "mean" or comp.null is None:
+            continue
+        for scene in scenes:  # the reference row's own value: the defaults timed against themselves
+            iv = t_interval(list(values(scene, ref, comp.metric).values()))
+            if iv.n:
+                text = fmt_interval(iv, "mean", specs[comp.metric], comp.null)
+                claims.append(Claim("self", scene, ref.label, comp.metric, "mean", iv.estimate, text, ref.label,
+                                    iv.low, iv.high, iv.n, iv.excludes(comp.null)))
+                self_parts.append(f"{scene} {text}")
+    if self_parts:
+        lines.append(f"- `{ref.label}` against itself (the same options timed as both sides of each pair; the "
+                     f"noise floor of the ratio): " + "; ".join(self_parts) + ".")
     if count:
         claims.append(Claim("count", "", "", "", "count", float(count), str(count)))
         seeds = max((c.n for c in claims if c.kind == "vs"), default=0)
