@@ -6,6 +6,11 @@ committed ``results.parquet`` gives.
 Rebuilding from the parquet (`report_from_table`) and comparing text checks the
 committed numbers, not the code: a report edited by hand, or left behind when a grid
 or its results changed, fails here.
+
+A report left behind on purpose, until its grid is rerun, says so: a ``STALE.md``
+beside it (why, and the command that refreshes it) and a banner at the top of its
+``report.md``. Such a report is checked to be stale -- its runs are *not* the grid's --
+so the marker cannot outlive a rerun, and its experiment file must still expand.
 """
 
 from __future__ import annotations
@@ -35,10 +40,17 @@ def test_committed_report_matches_its_parquet(name):
     spec = load_experiment(ROOT / "experiments" / f"{name}.toml")
     table = pd.read_parquet(folder / "results.parquet")
     runs = expand(spec)
+    text = (folder / "report.md").read_text(encoding="utf-8")
+    banner = text.split("\n")[2] if text.count("\n") > 2 else ""
+    if (folder / "STALE.md").is_file():
+        assert banner.startswith("> **Stale:**") and "(STALE.md)" in banner, f"reports/{name}: no stale banner"
+        assert list(table.run_id) != [r.run_id for r in runs], \
+            f"reports/{name} covers its grid now: delete reports/{name}/STALE.md and the banner"
+        return
+    assert "**Stale:**" not in banner, f"reports/{name}: a stale banner without STALE.md"
     # The report is of the grid as the file writes it now, and every run finished.
     assert list(table.run_id) == [r.run_id for r in runs]
     assert set(table.status) == {"done"}
-    text = (folder / "report.md").read_text(encoding="utf-8")
     report = report_from_table(spec, table, len(runs))
     assert f"({len(runs)} done, 0 failed, 0 not run)" in text
     for axis in report.axes:

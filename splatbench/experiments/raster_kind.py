@@ -96,6 +96,10 @@ OPTION_FIELDS = ("tile_size", "alpha_min", "alpha_max", "transmittance_min", "ep
 #: Options with no counterpart in the reference (accelerations and placement only).
 FAST_ONLY = ("tile_size", "device")
 CACHE_ENV = "SPLATBENCH_CACHE"
+#: What a run measures, in the resolved config (so in the run id): 2 = error against the
+#: exact model and the median of per-pair time ratios (1, unnamed: error against the
+#: default-option reference, ratio of medians). Results measured otherwise are never reused.
+PROTOCOL = 2
 #: Fewest timed pairs a run may use (a bootstrap interval of a median needs several).
 MIN_PAIRS = 7
 
@@ -202,8 +206,9 @@ def validate(config: dict[str, Any]) -> None:
 
 
 def resolve(config: dict[str, Any]) -> dict[str, Any]:
-    """Every field filled in; numbers normalised (``alpha_min = 1`` and ``1.0`` are one run)."""
-    out = {**DEFAULTS, **config}
+    """Every field filled in; numbers normalised (``alpha_min = 1`` and ``1.0`` are one run);
+    ``protocol`` (`PROTOCOL`) added."""
+    out = {**DEFAULTS, **config, "protocol": PROTOCOL}
     for key in ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "error_scale"):
         out[key] = float(out[key])
     return out
@@ -397,4 +402,4 @@ RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, pre
                  description="time the rasterizer under options against the defaults; error against the exact model")
 
 __all__ = ["RASTER", "DEFAULTS", "METRICS", "OPTION_FIELDS", "parse_workload_name", "build_workload",
-           "reference_render", "exact_model", "cache_dir", "psnr", "Load", "MIN_PAIRS"]
+           "reference_render", "exact_model", "cache_dir", "psnr", "Load", "MIN_PAIRS", "PROTOCOL"]
