@@ -114,14 +114,14 @@ class Finding:
 
 
 def fmt_number(value: float, how: str, spec: MetricSpec) -> str:
-    """A claim's number as written: ``+0.42 dB``, ``×1.31``, ``27.50 dB``."""
+    """A claim's number as written: ``+0.42 dB``, ``×1.312``, ``27.50 dB``."""
     if value is None or not math.isfinite(value):
         return "n/a"
     unit = f" {spec.unit}" if spec.unit else ""
     if how == "diff":
         return f"{value:+{spec.fmt}}{unit}"
     if how == "ratio":
-        return f"×{value:.2f}"
+        return f"×{value:.3f}"
     return f"{format(value, spec.fmt)}{unit}"
 
 
@@ -129,7 +129,7 @@ def _bound(value: float, how: str, spec: MetricSpec) -> str:
     if how == "diff":
         return f"{value:+{spec.fmt}}"
     if how == "ratio":
-        return f"×{value:.2f}"
+        return f"×{value:.3f}"
     return format(value, spec.fmt)
 
 

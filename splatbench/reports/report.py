@@ -9,7 +9,7 @@ expansion (`splatbench.experiments.expand`), read from their per-run result file
 so a report is never built from a stale table. What is written, under ``out``:
 
 * ``report.md``: a header (runs done / failed / not run, shared settings, run time),
-  one section per axis (a table of mean ± std over the runs of each axis value, per
+  one section per axis (a table of mean ± 95 % t interval over seeds of each axis value, per
   scene; the findings; the training curves), run time against quality with the Pareto
   front, the metrics' meanings, and any failed runs.
 * ``figures/curves_<axis>.png``, ``figures/time_vs_error.png`` (train kind) or
