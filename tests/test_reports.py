@@ -356,3 +356,30 @@ def test_raster_report_leaves_loaded_runs_out_of_findings(tmp_path):
     assert "1 run(s) timed while the load average exceeded half the cores are left out" in text
     row = next(line for line in text.splitlines() if line.startswith("| synthetic-300-32 | `8` |"))
     assert row.rstrip(" |").endswith("0.33")                              # the loaded column: 1 of 3 runs
+
+
+def test_product_grid_rows_average_each_seed_first(tmp_path):
+    """In a product grid a row pools the other axis's values: the interval is over seeds
+    (each seed's runs averaged first), not over runs, so n is the number of seeds."""
+    from splatbench.experiments.runner import run_experiment
+    from splatbench.reports.stats import t_interval
+
+    spec = parse_experiment({"name": "prod", "kind": "dummy", "scenes": ["alpha"], "seeds": [0, 1, 2],
+                             "axes": {"x": [1.0, 2.0], "n": [3, 5]}}, source="prod.toml")
+    run_experiment(spec, workers=1, results_dir=tmp_path, progress=False)
+    report = build_report(spec, tmp_path)
+    table = report.table
+    x_table = next(t for t in report.axes if t.axis == "x")
+    done = table[table["axis.x"] == 2.0]
+    assert len(done) == 6                                   # 2 values of n x 3 seeds
+    per_seed = done.groupby("seed")["metric.value"].mean()
+    st = x_table.stat("alpha", "2", "value")
+    iv = t_interval(list(per_seed))
+    assert st.n == 3 and st.mean == pytest.approx(iv.estimate) and st.half_width == pytest.approx(iv.half_width)
+    # the findings pair the same per-seed means; the generic kind compares its first metric,
+    # a_plus_seed = a + seed, which x never changes: a difference of exactly 0 in every
+    # pair, whose degenerate interval [0, 0] holds 0 -- no significant difference
+    vs = next(c for c in report.findings["x"].claims if c.kind == "vs")
+    assert vs.metric == "a_plus_seed" and vs.n == 3
+    assert (vs.value, vs.low, vs.high) == (0.0, 0.0, 0.0) and not vs.significant
+    assert "no significant difference" in vs.text
