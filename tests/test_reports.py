@@ -9,6 +9,7 @@ from the ``results.parquet`` written beside ``report.md``, and that the figures 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -356,6 +357,13 @@ def test_raster_report_leaves_loaded_runs_out_of_findings(tmp_path):
     assert "1 run(s) timed while the load average exceeded half the cores are left out" in text
     row = next(line for line in text.splitlines() if line.startswith("| synthetic-300-32 | `8` |"))
     assert row.rstrip(" |").endswith("0.33")                              # the loaded column: 1 of 3 runs
+    # every run loaded: no finding is drawn, and the report says why
+    for rec in records:
+        write_record(tmp_path, dataclasses.replace(rec, metrics={**rec.metrics, "loaded": 1}))
+    loaded = build_report(spec, tmp_path)
+    assert {"alpha_min", "tile_size"} <= set(loaded.findings)
+    assert all(f.claims == [] and f"No findings: all {len(records)} done run(s)" in f.markdown()
+               for name, f in loaded.findings.items() if name != "parity")
 
 
 def test_product_grid_rows_average_each_seed_first(tmp_path):

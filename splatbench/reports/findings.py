@@ -196,6 +196,10 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame) -> Finding | N
         claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, text, n=iv.n))
         best_parts.append(f"{scene} `{row.label}` ({text})")
     if not best_parts:
+        if excluded:
+            return Finding(table.axis, [f"- No findings: all {excluded} done run(s) were timed while the load average "
+                                        f"exceeded half the cores (the table's `loaded` column); rerun them on a "
+                                        f"quiet machine (docs/reports.md, \"Quiet numbers\")."], [])
         return None
     word = "best" if primary.better != "lower" else "lowest"
     lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds): "
