@@ -63,3 +63,19 @@ def test_committed_report_matches_its_parquet(name):
         if line.startswith("![") and "](" in line:
             figure = folder / line.split("](", 1)[1].rstrip(")")
             assert figure.is_file() and figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", figure
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_grids_follow_the_report_protocol(name):
+    """Issue 11: every grid has >= 3 seeds; training grids (but the demo, which must fit
+    `make demo`) run >= 2000 iterations at >= 128 px with the scaled schedule; raster
+    grids time >= 7 alternated pairs."""
+    spec = load_experiment(ROOT / "experiments" / f"{name}.toml")
+    assert len(spec.seeds) >= 3, f"experiments/{name}.toml: {len(spec.seeds)} seed(s)"
+    for run in expand(spec):
+        if spec.kind == "train":
+            assert run.config["schedule"] == "scaled"
+            if name != "demo":
+                assert run.config["iterations"] >= 2000 and run.config["data"]["resolution"] >= 128, run.labels
+        elif spec.kind == "raster":
+            assert run.config["repeats"] >= 7
