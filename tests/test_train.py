@@ -238,6 +238,21 @@ def test_short_run_lowers_loss_and_writes_a_valid_ply(tmp_path):
         assert any("LPIPS skipped" in n for n in result.notes)
 
 
+def test_trained_sh0_model_saves_graphdecos_62_properties_and_reads_back_as_degree_0(tmp_path):
+    from plyfile import PlyData
+
+    from tests.test_ply import GRAPHDECO_62
+
+    ds = synthetic_dataset(tmp_path, view_dependent=False, views=8, n=60)
+    result = train(config(tmp_path, iterations=4, sh_degree=0), dataset=ds)
+    assert result.sh_degree == 0
+    ply = PlyData.read(result.ply_path)
+    assert [p.name for p in ply["vertex"].properties] == GRAPHDECO_62  # graphdeco's order, 45 f_rest
+    assert not any(np.asarray(ply["vertex"][f"f_rest_{i}"]).any() for i in range(45))
+    back = Gaussians.from_ply(result.ply_path)
+    assert back.sh_degree == 0 and back.sh.shape == (60, 1, 3)
+
+
 def test_same_seed_and_config_give_the_same_ply_bytes(tmp_path, tiny_diffuse):
     # the default strategy refining every 5 steps: densification is covered too
     opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 11, "grad_threshold": 1e-5}  # two refinements
