@@ -253,6 +253,19 @@ def test_trained_sh0_model_saves_graphdecos_62_properties_and_reads_back_as_degr
     assert back.sh_degree == 0 and back.sh.shape == (60, 1, 3)
 
 
+def test_auto_initial_opacity_is_the_strategys_reference_value(tmp_path, tiny_diffuse):
+    """graphdeco's create_from_pcd starts at 0.1, 3DGS-MCMC's at 0.5; a number overrides both."""
+    assert config(tmp_path).initial_opacity == 0.1
+    assert config(tmp_path, strategy="mcmc").initial_opacity == 0.5
+    assert config(tmp_path, strategy="mcmc", init_opacity=0.2).initial_opacity == 0.2
+    trainer = Trainer(config(tmp_path, strategy="mcmc"), dataset=tiny_diffuse)
+    # logit(0.5) = 0 exactly, so every opacity is 0.5 to float32 rounding of sigmoid(0)
+    assert torch.equal(torch.sigmoid(trainer.params["opacity_logits"].detach()),
+                       torch.full((len(tiny_diffuse.points),), 0.5))
+    with pytest.raises(InputError, match="init_opacity: expected a number in \\(0, 1\\) or 'auto'"):
+        config(tmp_path, init_opacity="half").validate()
+
+
 def test_same_seed_and_config_give_the_same_ply_bytes(tmp_path, tiny_diffuse):
     # the default strategy refining every 5 steps: densification is covered too
     opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 11, "grad_threshold": 1e-5}  # two refinements

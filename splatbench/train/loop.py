@@ -131,7 +131,7 @@ class Trainer:
                              "background cannot be composited under the ground truth")
         torch.manual_seed(config.seed)
         np.random.seed(config.seed % 2**32)
-        gaussians = initialize(config.init, dataset, InitSettings(config.max_sh_degree, config.init_opacity,
+        gaussians = initialize(config.init, dataset, InitSettings(config.max_sh_degree, config.initial_opacity,
                                                                   config.init_random_points, config.seed))
         self.extent = scene_extent(train.cameras)
         self.lrs = lr_groups(config)
