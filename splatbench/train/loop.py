@@ -131,8 +131,9 @@ class Trainer:
                              "background cannot be composited under the ground truth")
         torch.manual_seed(config.seed)
         np.random.seed(config.seed % 2**32)
-        gaussians = initialize(config.init, dataset, InitSettings(config.max_sh_degree, config.initial_opacity,
-                                                                  config.init_random_points, config.seed))
+        init = initialize(config.init, dataset, InitSettings(config.max_sh_degree, config.initial_opacity,
+                                                             config.init_random_points, config.seed))
+        gaussians, self.init_summary, self.init_note = init.gaussians, init.summary, init.note
         self.extent = scene_extent(train.cameras)
         self.lrs = lr_groups(config)
         self.params = params_from_gaussians(gaussians, self.lrs)
@@ -356,7 +357,8 @@ def _train(config: TrainConfig, progress, dataset) -> TrainResult:
     loop_seconds += time.perf_counter() - t0
     ply = trainer.save_ply(out / "point_cloud.ply")
     ev = trainer.evaluate(lpips_fn)
-    notes = [trainer.background_note] + ([] if lpips_fn is not None else [lpips_note])
+    notes = ([trainer.init_note] if trainer.init_note else []) + [trainer.background_note] \
+        + ([] if lpips_fn is not None else [lpips_note])
     if ev.views == 0:
         notes.append("no test views: test metrics are None")
     else:
@@ -367,7 +369,7 @@ def _train(config: TrainConfig, progress, dataset) -> TrainResult:
         sh_degree_reason=trainer.sh.reason, ply_path=str(ply), render_ms_per_view=ev.render_ms_per_view,
         peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,
         test_views=ev.views, history=history, evaluations=evaluations,
-        sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes)
+        sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary)
     (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
     return result
 
