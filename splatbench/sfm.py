@@ -162,7 +162,7 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
         single_thread: one thread everywhere (deterministic); False uses all cores.
         known_intrinsics: give COLMAP the true PINHOLE intrinsics, fixed (see module doc).
         out: output folder; default ``<dataset>/sfm``. Replaced atomically.
-        verbose: keep COLMAP's INFO log on stderr (default: errors only).
+        verbose: keep COLMAP's INFO log on stderr (default: fatal messages only; a failure is an InputError).
 
     Returns:
         `SfmRun` (the model is written to ``<out>/0``).
@@ -189,7 +189,7 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
     log_level = pycolmap.logging.minloglevel
     if not verbose:
-        pycolmap.logging.minloglevel = 2  # errors only
+        pycolmap.logging.minloglevel = 3  # fatal only: a failure is our one-line InputError
     try:
         database = tmp / "database.db"
         pycolmap.set_random_seed(seed)
