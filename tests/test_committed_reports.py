@@ -49,7 +49,9 @@ def test_a_pending_report_is_not_there_yet_and_its_grid_expands(name):
 def test_committed_report_matches_its_parquet(name):
     folder = ROOT / "reports" / name
     if not (folder / "report.md").is_file():
-        pytest.skip(f"reports/{name} not committed (reported by the test above)")
+        pending = (folder / "PENDING.md").is_file()
+        pytest.skip(f"reports/{name} " + ("pending (PENDING.md)" if pending else
+                                           "not committed (reported by the test above)"))
     spec = load_experiment(ROOT / "experiments" / f"{name}.toml")
     table = pd.read_parquet(folder / "results.parquet")
     runs = expand(spec)
