@@ -421,6 +421,20 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     bad = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "lr_quats=-1", "--quiet"])
     assert bad.exit_code == 2
     assert bad.stderr.strip().splitlines() == [bad.stderr.strip()] and "lr_quats" in bad.stderr
+    # --resume reaches train(): the run's own checkpoint resumes to the same result; a
+    # missing one is one line
+    res = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                               "--set", "checkpoint_every=2", "--json", "--quiet", "--out", str(tmp_path / "c")])
+    assert res.exit_code == 0, res.output
+    again = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                 "--resume", str(tmp_path / "c" / "checkpoints" / "iteration_2.pt"), "--json",
+                                 "--quiet", "--out", str(tmp_path / "r")])
+    assert again.exit_code == 0, again.output
+    assert (tmp_path / "r" / "point_cloud.ply").read_bytes() == (tmp_path / "c" / "point_cloud.ply").read_bytes()
+    gone = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                "--resume", str(tmp_path / "none.pt"), "--quiet", "--out", str(tmp_path / "g")])
+    assert gone.exit_code == 2 and gone.stderr.strip() == \
+        f"splatbench: error: resume: no such checkpoint {str(tmp_path / 'none.pt')!r}"
 
 
 def test_cli_rejects_graphdecos_absolute_schedule_on_a_short_run_before_reading_data(tmp_path, tiny_diffuse_dir):
