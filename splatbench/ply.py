@@ -1,14 +1,22 @@
 """3DGS ``.ply`` files in graphdeco-inria's layout, read and written with plyfile.
 
-One ``vertex`` element with one float32 property per value, binary little endian::
+One ``vertex`` element with one float32 property per value, binary little endian --
+always graphdeco's 62 properties of SH degree 3 (``GaussianModel.construct_list_of_attributes``
+with ``max_sh_degree = 3``, the default of its ``--sh_degree``), so graphdeco's
+``load_ply`` and common viewers open every file::
 
-    x y z  nx ny nz  f_dc_0 f_dc_1 f_dc_2  f_rest_0 .. f_rest_{3(K-1)-1}
+    x y z  nx ny nz  f_dc_0 f_dc_1 f_dc_2  f_rest_0 .. f_rest_44
     opacity  scale_0 scale_1 scale_2  rot_0 rot_1 rot_2 rot_3
 
-``f_dc_c`` is ``sh[:, 0, c]``; ``f_rest`` is *channel-major*: ``f_rest_{c·(K-1) + k-1}``
-holds ``sh[:, k, c]`` for k in 1..K-1. ``opacity`` is the logit, ``scale_i`` the log
-scale, ``rot_*`` the quaternion (w, x, y, z). Normals are written as zeros and ignored
-on reading. The SH degree is inferred from the number of ``f_rest_*`` properties.
+``f_dc_c`` is ``sh[:, 0, c]``; ``f_rest`` is *channel-major* over graphdeco's 15 rest
+coefficients: ``f_rest_{15·c + k-1}`` holds ``sh[:, k, c]`` for k in 1..15. A model of a
+lower degree writes zeros in the bands above it and records its degree in a header
+comment (``comment splatbench sh_degree D``); reading such a file gives back degree D
+(the zeros dropped), so the round trip is bit-exact. ``opacity`` is the logit,
+``scale_i`` the log scale, ``rot_*`` the quaternion (w, x, y, z). Normals are written
+as zeros and ignored on reading. Files from other writers with fewer ``f_rest_*``
+(``3·((D+1)² − 1)``, channel-major over their own ``(D+1)² − 1``) are read too; without
+the comment the degree is the one the ``f_rest_*`` count gives.
 """
 
 from __future__ import annotations
@@ -27,23 +35,33 @@ _BASE_TAIL = ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot
 _F_REST = re.compile(r"^f_rest_(\d+)$")
 
 
-def property_names(sh_degree: int) -> list[str]:
-    """The vertex property names, in file order, for SH degree 0..3."""
+#: The SH degree every written file has the properties of (graphdeco's default).
+WRITE_DEGREE = 3
+#: Header comment prefix recording the degree of the model a file holds.
+_DEGREE_COMMENT = "splatbench sh_degree "
+
+
+def property_names(sh_degree: int = WRITE_DEGREE) -> list[str]:
+    """The vertex property names, in file order, for SH degree 0..3 (`write_ply` uses 3: 62 names)."""
     n_rest = 3 * (SH_BASES[sh_degree] - 1)
     return _BASE_HEAD + [f"f_rest_{i}" for i in range(n_rest)] + _BASE_TAIL
 
 
 def to_vertex_array(gaussians: Gaussians) -> np.ndarray:
-    """The structured vertex array [N] (float32 fields) that `write_ply` stores."""
-    names = property_names(gaussians.sh_degree)
+    """The structured vertex array [N] (62 float32 fields) that `write_ply` stores; SH bands
+    above ``gaussians.sh_degree`` are zero."""
+    names = property_names(WRITE_DEGREE)
     n, k, _ = gaussians.sh.shape
+    k_full = SH_BASES[WRITE_DEGREE]
+    sh = np.zeros((n, k_full, 3), dtype=np.float32)
+    sh[:, :k] = gaussians.sh
     columns = np.empty((n, len(names)), dtype=np.float32)
     columns[:, 0:3] = gaussians.means
     columns[:, 3:6] = 0.0
-    columns[:, 6:9] = gaussians.sh[:, 0, :]
-    rest = 9 + 3 * (k - 1)
-    # channel-major: column c·(K-1) + (k-1) holds sh[:, k, c]
-    columns[:, 9:rest] = np.transpose(gaussians.sh[:, 1:, :], (0, 2, 1)).reshape(n, -1)
+    columns[:, 6:9] = sh[:, 0, :]
+    rest = 9 + 3 * (k_full - 1)
+    # channel-major: column 15·c + (k-1) holds sh[:, k, c]
+    columns[:, 9:rest] = np.transpose(sh[:, 1:, :], (0, 2, 1)).reshape(n, -1)
     columns[:, rest] = gaussians.opacity_logits
     columns[:, rest + 1:rest + 4] = gaussians.log_scales
     columns[:, rest + 4:rest + 8] = gaussians.quats
@@ -63,7 +81,8 @@ def write_ply(gaussians: Gaussians, path: str | os.PathLike) -> None:
     fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".ply", dir=directory)
     try:
         with os.fdopen(fd, "wb") as stream:
-            PlyData([element], text=False, byte_order="<").write(stream)
+            PlyData([element], text=False, byte_order="<",
+                    comments=[f"{_DEGREE_COMMENT}{gaussians.sh_degree}"]).write(stream)
             stream.flush()
             os.fsync(stream.fileno())
         os.replace(tmp, path)
@@ -128,6 +147,9 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
     if k > 1:
         rest = cols([f"f_rest_{i}" for i in range(n_rest)]).reshape(n, 3, k - 1)
         sh[:, 1:, :] = np.transpose(rest, (0, 2, 1))
+    degree = _recorded_degree(ply.comments)
+    if degree is not None and SH_BASES[degree] < k and not sh[:, SH_BASES[degree]:].any():
+        sh = np.ascontiguousarray(sh[:, : SH_BASES[degree]])  # the written model's degree; the rest is padding
     try:
         return Gaussians(
             means=cols(["x", "y", "z"]),
@@ -138,6 +160,14 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
         )
     except InputError as exc:
         raise InputError(f"{name}: {exc}") from None
+
+
+def _recorded_degree(comments: list[str]) -> int | None:
+    """The degree a ``comment splatbench sh_degree D`` header line records, if any."""
+    for line in comments:
+        if line.startswith(_DEGREE_COMMENT) and line[len(_DEGREE_COMMENT):].strip() in ("0", "1", "2", "3"):
+            return int(line[len(_DEGREE_COMMENT):])
+    return None
 
 
 def _one_line(exc: BaseException) -> str:

@@ -162,7 +162,7 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
         single_thread: one thread everywhere (deterministic); False uses all cores.
         known_intrinsics: give COLMAP the true PINHOLE intrinsics, fixed (see module doc).
         out: output folder; default ``<dataset>/sfm``. Replaced atomically.
-        verbose: keep COLMAP's INFO log on stderr (default: errors only).
+        verbose: keep COLMAP's INFO log on stderr (default: fatal messages only; a failure is an InputError).
 
     Returns:
         `SfmRun` (the model is written to ``<out>/0``).
@@ -189,7 +189,7 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
     log_level = pycolmap.logging.minloglevel
     if not verbose:
-        pycolmap.logging.minloglevel = 2  # errors only
+        pycolmap.logging.minloglevel = 3  # fatal only: a failure is our one-line InputError
     try:
         database = tmp / "database.db"
         pycolmap.set_random_seed(seed)
@@ -254,3 +254,95 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
                   len(models), names, seconds)
 
 
+
+
+# ------------------------------------------------------------------- content cache
+#: Bump when `run_sfm`'s output changes for the same inputs (invalidates cached models).
+SFM_CACHE_VERSION = 1
+#: The cached run's points beside the model (its numbers are in the folder's manifest.json).
+SFM_POINTS = "points.npz"
+
+
+def sfm_inputs(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True) -> dict[str, Any]:
+    """What a cached SfM run depends on: every training image's bytes (sha256) and true
+    camera (the alignment target; the intrinsics COLMAP is given), the options, and the
+    versions of pycolmap and of this code. Test views are not inputs."""
+    import hashlib
+    import json
+    from importlib import metadata
+
+    from splatbench.data import Dataset, load_dataset
+
+    ds = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
+    root = Path(ds.root)
+    views = {}
+    for name, cam in zip(ds.train.names, ds.train.cameras):
+        try:
+            digest = hashlib.sha256((root / name).read_bytes()).hexdigest()
+        except OSError as exc:
+            raise InputError(f"{root / name}: cannot read the training image for SfM ({exc.strerror})") from None
+        views[name] = {"sha256": digest, "camera": [cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy,
+                                                    *np.asarray(cam.world_to_camera, np.float64).ravel().tolist()]}
+    try:
+        pycolmap_version = metadata.version("pycolmap")
+    except metadata.PackageNotFoundError:
+        pycolmap_version = "unknown"
+    inputs = {"format": SFM_CACHE_VERSION, "seed": seed, "known_intrinsics": known_intrinsics,
+              "single_thread": True, "pycolmap": pycolmap_version, "views": views}
+    inputs["hash"] = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
+    return inputs
+
+
+def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True) -> tuple[SfmRun, bool]:
+    """`run_sfm` (single-threaded, deterministic) on the training views, reused while its inputs are unchanged.
+
+    The model, its points and a manifest (the `sfm_inputs` hash and the run's numbers)
+    live in ``<dataset>/sfm``. When the manifest's hash matches, the run is read back
+    (no pycolmap); otherwise SfM runs into a temporary sibling folder that replaces
+    ``<dataset>/sfm`` atomically (`splatbench.fsutil.replace_dir`), as the scene renders
+    are cached. Returns ``(run, cached)``; ``run.seconds`` is that of the original run.
+
+    Raises:
+        InputError: the dataset cannot be read, or SfM registers no usable model.
+    """
+    import json
+
+    from splatbench.data import Dataset, load_dataset
+    from splatbench.scenes.render import MANIFEST, read_manifest
+
+    ds = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
+    root = Path(ds.root)
+    out = root / SFM_DIR
+    inputs = sfm_inputs(ds, seed=seed, known_intrinsics=known_intrinsics)
+    manifest = read_manifest(out)
+    if manifest is not None and manifest.get("hash") == inputs["hash"] and (out / SFM_POINTS).is_file():
+        return _read_cached(out, manifest), True
+    tmp = Path(tempfile.mkdtemp(prefix=f".{SFM_DIR}.run-", dir=root))
+    try:
+        run = run_sfm(ds, seed=seed, single_thread=True, known_intrinsics=known_intrinsics, out=tmp / SFM_DIR)
+        np.savez(tmp / SFM_DIR / SFM_POINTS, xyz=run.xyz, rgb=run.rgb)
+        record = {"hash": inputs["hash"], "inputs": {k: v for k, v in inputs.items() if k != "hash"},
+                  "registered": run.registered, "total": run.total, "center_rmse": run.center_rmse,
+                  "rig_radius": run.rig_radius, "models": run.models, "registered_names": run.registered_names,
+                  "seconds": run.seconds, "scale": run.alignment.scale,
+                  "rotation": run.alignment.rotation.tolist(), "translation": run.alignment.translation.tolist()}
+        (tmp / SFM_DIR / MANIFEST).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+        replace_dir(tmp / SFM_DIR, out,
+                    accept_existing=lambda path: (read_manifest(path) or {}).get("hash") == inputs["hash"])
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return _read_cached(out, read_manifest(out) or {}), False
+
+
+def _read_cached(folder: Path, manifest: dict[str, Any]) -> SfmRun:
+    try:
+        with np.load(folder / SFM_POINTS) as points:
+            xyz, rgb = points["xyz"].astype(np.float64), points["rgb"].astype(np.uint8)
+        m = manifest
+        return SfmRun(int(m["registered"]), int(m["total"]), float(m["center_rmse"]), float(m["rig_radius"]),
+                      xyz, rgb, Similarity(float(m["scale"]), np.asarray(m["rotation"], np.float64),
+                                           np.asarray(m["translation"], np.float64)),
+                      folder / "0", int(m["models"]), list(m["registered_names"]), float(m["seconds"]))
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise InputError(f"{folder}: unreadable cached SfM model ({type(exc).__name__}: {exc}); delete the "
+                         f"folder to rerun SfM") from None

@@ -60,7 +60,7 @@ def test_header_is_graphdeco_layout(tmp_path):
         assert f.readline() == b"ply\n" and f.readline() == b"format binary_little_endian 1.0\n"
 
 
-@pytest.mark.parametrize("k", [4, 9, 16])
+@pytest.mark.parametrize("k", [1, 4, 9, 16])
 def test_f_rest_is_channel_major(tmp_path, k):
     n = 3
     # sh[n, k, c] = 1000 n + 10 k + c: every value says where it came from
@@ -70,13 +70,50 @@ def test_f_rest_is_channel_major(tmp_path, k):
     path = tmp_path / "layout.ply"
     g.to_ply(path)
     v = PlyData.read(str(path))["vertex"]
+    # graphdeco's features_rest is [N, 15, 3] at degree 3 (zeros above the model's degree),
+    # saved as features_rest.transpose(1, 2).flatten(): f_rest_{15 c + k - 1} = sh[:, k, c]
     for c in range(3):
         np.testing.assert_array_equal(v[f"f_dc_{c}"], sh[:, 0, c])
-        for kk in range(1, k):
-            np.testing.assert_array_equal(v[f"f_rest_{c * (k - 1) + kk - 1}"], sh[:, kk, c])
-    np.testing.assert_array_equal(v["f_rest_0"], [10, 1010, 2010])  # (k=1, c=0), not (k=1, c=1)
-    np.testing.assert_array_equal(v["f_rest_1"], [20, 1020, 2020])  # (k=2, c=0)
+        for kk in range(1, 16):
+            np.testing.assert_array_equal(v[f"f_rest_{15 * c + kk - 1}"], sh[:, kk, c] if kk < k else 0)
+    if k > 2:
+        np.testing.assert_array_equal(v["f_rest_0"], [10, 1010, 2010])  # (k=1, c=0), not (k=1, c=1)
+        np.testing.assert_array_equal(v["f_rest_1"], [20, 1020, 2020])  # (k=2, c=0)
+        np.testing.assert_array_equal(v["f_rest_15"], [11, 1011, 2011])  # (k=1, c=1)
     np.testing.assert_array_equal(v["nx"], 0)
+
+
+GRAPHDECO_62 = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+                + [f"f_rest_{i}" for i in range(45)]
+                + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 3])
+def test_every_degree_writes_graphdecos_62_properties(tmp_path, degree):
+    """graphdeco's load_ply asserts len(f_rest) == 3 (max_sh_degree + 1)^2 - 3 = 45 for its
+    default degree 3, so every file carries all 62 properties, higher bands zero."""
+    path = tmp_path / "scene.ply"
+    g = make(5, (degree + 1) ** 2, seed=degree)
+    g.to_ply(path)
+    ply = PlyData.read(str(path))
+    assert [p.name for p in ply["vertex"].properties] == GRAPHDECO_62 and len(GRAPHDECO_62) == 62
+    for i in range((degree + 1) ** 2 - 1, 15):  # rest coefficients above the degree: zero
+        for c in range(3):
+            assert not np.asarray(ply["vertex"][f"f_rest_{15 * c + i}"]).any()
+    assert f"splatbench sh_degree {degree}" in ply.comments
+
+
+def test_padded_file_without_our_comment_reads_as_degree_3_with_zero_bands(tmp_path):
+    """A 45-f_rest file from another writer keeps degree 3; its zero bands render exactly
+    as the degree-0 model (0 * basis adds exact zeros)."""
+    g0 = make(6, 1, seed=5)
+    padded = np.zeros((6, 16, 3), np.float32)
+    padded[:, :1] = g0.sh
+    g3 = Gaussians(g0.means, g0.log_scales, g0.quats, g0.opacity_logits, padded)
+    path = tmp_path / "graphdeco.ply"
+    write_graphdeco_style(path, g3)
+    back = Gaussians.from_ply(path)
+    assert back.sh_degree == 3 and back.sh.tobytes() == padded.tobytes()
 
 
 def write_graphdeco_style(path, g: Gaussians, drop=(), extra_element=None, rename=None):

@@ -238,7 +238,7 @@ def grow_setup(n=20, extent=2.0):
         params["log_scales"][:10] = math.log(0.005 * extent)
         params["log_scales"][10:] = math.log(0.05 * extent)
         params["log_scales"][:, 1:] -= 1.0  # anisotropic; the max is component 0
-    strat = DefaultStrategy(grad_threshold=2e-4)
+    strat = DefaultStrategy(grad_threshold=2e-4, max_screen_size=20.0)  # graphdeco's 20 px, switched on
     state = strat.initialize_state(params)
     high = [0, 1, 2, 10, 11, 12, 13]
     state.count[:] = 4
@@ -289,6 +289,26 @@ def test_default_prune_counts():
     s3 = off.initialize_state(p3)
     s3.max_radii[:] = 1000
     assert off.refine(p3, o3, s3, step=5000, scene_extent=extent).pruned == 0
+
+
+def test_default_strategy_has_screen_size_pruning_off_as_graphdeco_and_gsplat_do():
+    """graphdeco clears max_radii2D while densifying, before its 20-px test reads it, and
+    gsplat's default refine_scale2d_stop is 0: neither prunes by screen size. The same
+    set-up as above with the default strategy prunes only by opacity (5, 6) and world
+    size (17), not the Gaussian 25 px wide on screen (8)."""
+    assert DefaultStrategy().max_screen_size == 0
+    params, opts, _, state, extent = grow_setup()
+    with torch.no_grad():
+        params["opacity_logits"][[5, 6]] = -6.0
+        params["log_scales"][17] = math.log(0.2 * extent)
+    default = DefaultStrategy(grad_threshold=2e-4)
+    s = default.initialize_state(params)
+    s.count[:], s.grad_accum[:], s.max_radii[:] = state.count, state.grad_accum, 5
+    s.max_radii[[8, 12]] = 25
+    kept = params["means"].detach()[8].clone()
+    stats = default.refine(params, opts, s, step=3100, scene_extent=extent)
+    assert (stats.cloned, stats.split, stats.pruned) == (3, 4, 3)
+    assert (params["means"].detach() == kept).all(dim=1).any()  # Gaussian 8 survived
 
 
 def test_default_accumulates_ndc_gradient_of_visible_views():

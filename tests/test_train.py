@@ -197,9 +197,8 @@ def test_bad_dataset_is_one_line_error_before_any_work(tmp_path, tiny_diffuse_di
     with pytest.raises(InputError, match="dataset: no dataset folder"):
         train(config(tmp_path))
     no_points = dataclasses.replace(load_dataset(tiny_diffuse_dir), points=None)
-    for init in ("sfm", "surface"):
-        with pytest.raises(InputError, match=f"init: '{init}' needs the dataset's points"):
-            train(config(tmp_path, init=init), dataset=no_points)
+    with pytest.raises(InputError, match="init: 'surface' needs the dataset's points"):
+        train(config(tmp_path, init="surface"), dataset=no_points)
     with pytest.raises(InputError, match="random_background"):
         train(config(tmp_path, random_background=True), dataset=no_points)
     assert counting.calls == 0
@@ -228,7 +227,7 @@ def test_short_run_lowers_loss_and_writes_a_valid_ply(tmp_path):
     g = Gaussians.from_ply(ply)
     assert len(g) == len(ds.points) and g.sh_degree == 0
     assert sorted(p.name for p in (tmp_path / "run" / "checkpoints").iterdir()) == \
-        ["iteration_20.ply", "iteration_40.ply"]
+        ["iteration_20.ply", "iteration_20.pt", "iteration_40.ply", "iteration_40.pt"]
     assert Gaussians.from_ply(tmp_path / "run" / "checkpoints" / "iteration_40.ply").means.tobytes() == \
         g.means.tobytes()
     saved = json.loads((tmp_path / "run" / "result.json").read_text())
@@ -236,6 +235,34 @@ def test_short_run_lowers_loss_and_writes_a_valid_ply(tmp_path):
     assert load_config(tmp_path / "run" / "config.toml") == cfg
     if result.test_lpips is None:
         assert any("LPIPS skipped" in n for n in result.notes)
+
+
+def test_trained_sh0_model_saves_graphdecos_62_properties_and_reads_back_as_degree_0(tmp_path):
+    from plyfile import PlyData
+
+    from tests.test_ply import GRAPHDECO_62
+
+    ds = synthetic_dataset(tmp_path, view_dependent=False, views=8, n=60)
+    result = train(config(tmp_path, iterations=4, sh_degree=0), dataset=ds)
+    assert result.sh_degree == 0
+    ply = PlyData.read(result.ply_path)
+    assert [p.name for p in ply["vertex"].properties] == GRAPHDECO_62  # graphdeco's order, 45 f_rest
+    assert not any(np.asarray(ply["vertex"][f"f_rest_{i}"]).any() for i in range(45))
+    back = Gaussians.from_ply(result.ply_path)
+    assert back.sh_degree == 0 and back.sh.shape == (60, 1, 3)
+
+
+def test_auto_initial_opacity_is_the_strategys_reference_value(tmp_path, tiny_diffuse):
+    """graphdeco's create_from_pcd starts at 0.1, 3DGS-MCMC's at 0.5; a number overrides both."""
+    assert config(tmp_path).initial_opacity == 0.1
+    assert config(tmp_path, strategy="mcmc").initial_opacity == 0.5
+    assert config(tmp_path, strategy="mcmc", init_opacity=0.2).initial_opacity == 0.2
+    trainer = Trainer(config(tmp_path, strategy="mcmc"), dataset=tiny_diffuse)
+    # logit(0.5) = 0 exactly, so every opacity is 0.5 to float32 rounding of sigmoid(0)
+    assert torch.equal(torch.sigmoid(trainer.params["opacity_logits"].detach()),
+                       torch.full((len(tiny_diffuse.points),), 0.5))
+    with pytest.raises(InputError, match="init_opacity: expected a number in \\(0, 1\\) or 'auto'"):
+        config(tmp_path, init_opacity="half").validate()
 
 
 def test_same_seed_and_config_give_the_same_ply_bytes(tmp_path, tiny_diffuse):
@@ -247,6 +274,29 @@ def test_same_seed_and_config_give_the_same_ply_bytes(tmp_path, tiny_diffuse):
         plys.append(Path(train(cfg, dataset=tiny_diffuse).ply_path).read_bytes())
     assert plys[0] == plys[1]
     assert len(Gaussians.from_ply(tmp_path / "a" / "point_cloud.ply")) != len(tiny_diffuse.points)  # densified
+
+
+def test_checkpoint_resumes_training_exactly(tmp_path, tiny_diffuse):
+    """20 steps straight against 10, a checkpoint, and 10 more in a fresh trainer: the same
+    parameters bit for bit, with refinements on both sides of the checkpoint (the
+    strategy's accumulators and generator, Adam's moments and the view order resume)."""
+    opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "grad_threshold": 1e-5}
+    base = dict(iterations=20, strategy="default", strategy_options=opts, sh_degree=1, sh_interval=8)
+    straight = train(config(tmp_path, out=str(tmp_path / "straight"), **base), dataset=tiny_diffuse)
+    first = train(config(tmp_path, out=str(tmp_path / "first"), checkpoint_every=10, **base), dataset=tiny_diffuse)
+    assert Path(first.ply_path).read_bytes() == Path(straight.ply_path).read_bytes()
+    checkpoint = tmp_path / "first" / "checkpoints" / "iteration_10.pt"
+    resumed = train(config(tmp_path, out=str(tmp_path / "resumed"), **base), dataset=tiny_diffuse, resume=checkpoint)
+    a, b = Gaussians.from_ply(straight.ply_path), Gaussians.from_ply(resumed.ply_path)
+    assert len(a) != len(tiny_diffuse.points)  # densified
+    for name in ("means", "log_scales", "quats", "opacity_logits", "sh"):
+        assert getattr(a, name).tobytes() == getattr(b, name).tobytes(), name
+    assert resumed.history == straight.history and resumed.iterations == 20
+    # a different config is refused before any step, naming the field
+    with pytest.raises(InputError, match="resume: .* was written with seed=0, this run has seed=1"):
+        train(config(tmp_path, out=str(tmp_path / "other"), seed=1, **base), dataset=tiny_diffuse, resume=checkpoint)
+    with pytest.raises(InputError, match="resume: no such checkpoint"):
+        train(config(tmp_path, out=str(tmp_path / "other"), **base), dataset=tiny_diffuse, resume=tmp_path / "missing.pt")
 
 
 def test_frozen_groups_get_no_gradient_work(tmp_path, tiny_diffuse, counting):
@@ -371,6 +421,20 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     bad = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "lr_quats=-1", "--quiet"])
     assert bad.exit_code == 2
     assert bad.stderr.strip().splitlines() == [bad.stderr.strip()] and "lr_quats" in bad.stderr
+    # --resume reaches train(): the run's own checkpoint resumes to the same result; a
+    # missing one is one line
+    res = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                               "--set", "checkpoint_every=2", "--json", "--quiet", "--out", str(tmp_path / "c")])
+    assert res.exit_code == 0, res.output
+    again = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                 "--resume", str(tmp_path / "c" / "checkpoints" / "iteration_2.pt"), "--json",
+                                 "--quiet", "--out", str(tmp_path / "r")])
+    assert again.exit_code == 0, again.output
+    assert (tmp_path / "r" / "point_cloud.ply").read_bytes() == (tmp_path / "c" / "point_cloud.ply").read_bytes()
+    gone = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                "--resume", str(tmp_path / "none.pt"), "--quiet", "--out", str(tmp_path / "g")])
+    assert gone.exit_code == 2 and gone.stderr.strip() == \
+        f"splatbench: error: resume: no such checkpoint {str(tmp_path / 'none.pt')!r}"
 
 
 def test_cli_rejects_graphdecos_absolute_schedule_on_a_short_run_before_reading_data(tmp_path, tiny_diffuse_dir):

@@ -181,6 +181,23 @@ def prepare(configs: list[dict[str, Any]]) -> None:
         how = "cached" if result.cached else f"rendered in {result.seconds:.1f} s"
         print(f"dataset {config['scene']} {data['resolution']}px, {data['views']} views, {data['spp']} spp: "
               f"{how} ({result.path})", file=sys.stderr, flush=True)
+        if any(c.get("init") == "sfm" and c["scene"] == config["scene"] and c["data"] == data for c in configs):
+            _prepare_sfm(result.path)
+
+
+def _prepare_sfm(path: Path) -> None:
+    """Run (or find cached) the SfM of a dataset that init="sfm" runs need, once, before
+    the workers start (so two workers never run it at once). A failure is printed; each
+    such run then fails with the same one line."""
+    from splatbench.sfm import cached_sfm
+
+    try:
+        run, cached = cached_sfm(path)
+    except InputError as exc:
+        print(f"SfM of {path}: {exc}", file=sys.stderr, flush=True)
+        return
+    print(f"SfM of {path}: {len(run.xyz)} points, {run.registered}/{run.total} training views registered "
+          f"({'cached' if cached else f'ran in {run.seconds:.1f} s'})", file=sys.stderr, flush=True)
 
 
 # --------------------------------------------------------------------------- run

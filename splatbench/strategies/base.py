@@ -68,6 +68,8 @@ class Strategy(Protocol):
     #: Step-valued fields that `TrainConfig.schedule = "scaled"` multiplies by
     #: iterations / 30,000 (name -> True for a period, kept >= 1); see splatbench.train.schedule.
     schedule_fields: ClassVar[dict[str, bool]]
+    #: The initial opacity of the reference implementation (`TrainConfig.init_opacity = "auto"`).
+    initial_opacity: ClassVar[float]
 
     def last_topology_change(self, iterations: int) -> TopologyChange | None:
         """The last step of a run of ``iterations`` steps at which this strategy may

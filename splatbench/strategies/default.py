@@ -104,9 +104,10 @@ class DefaultStrategy:
     Clone where the averaged gradient >= ``grad_threshold`` and max scale <=
     ``percent_dense`` x scene extent; split (two children, scale / 1.6) where the
     gradient is as high and the Gaussian larger; then prune opacity < ``prune_opacity``
-    and, after the first opacity reset, Gaussians whose screen radius since the last
-    refinement exceeds ``max_screen_size`` px or whose max scale exceeds
-    ``max_world_size`` x scene extent.
+    and, after the first opacity reset, Gaussians whose max scale exceeds
+    ``max_world_size`` x scene extent or (when ``max_screen_size`` > 0; off by
+    default, as in effect in graphdeco and gsplat: docs/training.md) whose screen
+    radius since the last refinement exceeds ``max_screen_size`` px.
 
     The trainer must rasterize with ``absgrad=self.absgrad``.
     """
@@ -114,6 +115,8 @@ class DefaultStrategy:
     #: Scaled by ``TrainConfig.schedule = "scaled"`` (True: a period); refine_every is a
     #: sample size (views per gradient average) and stays as written.
     schedule_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False, "reset_every": True}
+    #: TrainConfig.init_opacity='auto' (graphdeco create_from_pcd: inverse_sigmoid(0.1))
+    initial_opacity: ClassVar[float] = 0.1
 
     refine_start: int = 500       # refine only after this many iterations
     refine_stop: int = 15_000     # no accumulation, refinement or opacity reset from here on
@@ -121,7 +124,9 @@ class DefaultStrategy:
     grad_threshold: float = 2e-4  # averaged NDC gradient norm that triggers clone / split (AbsGS: 8e-4)
     percent_dense: float = 0.01   # clone at max scale <= this x scene extent, split above
     prune_opacity: float = 0.005  # prune opacity below this
-    max_screen_size: float = 20.0  # prune screen radius (px) above this after the first reset; 0 = off
+    max_screen_size: float = 0.0  # prune screen radius (px) above this after the first reset; 0 = off
+                                  # (graphdeco passes 20 but clears max_radii2D in densification_postfix
+                                  # before pruning reads it, so its rule never fires; gsplat: refine_scale2d_stop=0)
     max_world_size: float = 0.1   # prune max scale above this x scene extent after the first reset; 0 = off
     reset_every: int = 3000       # clamp opacities every this many iterations
     reset_value: float = 0.01     # ... to at most this opacity

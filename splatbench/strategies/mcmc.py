@@ -9,8 +9,9 @@ onto live ones sampled proportionally to opacity, then 5 % more are added the sa
 way, up to ``cap_max``. The loss gets ``opacity_reg`` x mean(opacity) +
 ``scale_reg`` x mean(scale).
 
-Initialisation is the trainer's: the paper and gsplat start from opacity 0.5 and
-scales 0.1 x the nearest-neighbour distance.
+Initialisation is the trainer's: with ``init_opacity = "auto"`` it starts from this
+strategy's ``initial_opacity`` 0.5, as 3DGS-MCMC's ``create_from_pcd`` does; its scales
+(0.1 x the nearest-neighbour distance there) stay graphdeco's (docs/training.md).
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ class MCMCStrategy:
 
     name: ClassVar[str] = "mcmc"
     absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad
+    initial_opacity: ClassVar[float] = 0.5  # init_opacity="auto" (ubc-vision/3dgs-mcmc create_from_pcd)
     #: Scaled by ``TrainConfig.schedule = "scaled"``; refine_every stays as written.
     schedule_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False}
 

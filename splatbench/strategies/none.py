@@ -14,6 +14,7 @@ class NoneStrategy:
 
     name: ClassVar[str] = "none"
     absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad
+    initial_opacity: ClassVar[float] = 0.1  # init_opacity="auto" (graphdeco create_from_pcd)
     schedule_fields: ClassVar[dict[str, bool]] = {}
 
     def last_topology_change(self, iterations: int) -> TopologyChange | None:

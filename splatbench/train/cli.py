@@ -16,10 +16,12 @@ import click
                    "--set strategy_options.cap_max=50000.")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default: the config's `out`, runs/train).")
+@click.option("--resume", type=click.Path(path_type=Path), default=None,
+              help="Continue exactly from a checkpoint (checkpoints/iteration_<step>.pt) of a run with this config.")
 @click.option("--json", "as_json", is_flag=True, help="Print the TrainResult as one JSON line at the end.")
 @click.option("--quiet", is_flag=True, help="No progress bar (for sweeps).")
-def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], out: Path | None, as_json: bool,
-          quiet: bool) -> None:
+def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], out: Path | None,
+          resume: Path | None, as_json: bool, quiet: bool) -> None:
     """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender folder).
 
     Prints the test PSNR / SSIM, Gaussian count, SH degree and the PLY path; writes
@@ -48,7 +50,7 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
                             sh=status.sh_degree, refresh=False)
 
     try:
-        result = run(config, progress=None if quiet else progress)
+        result = run(config, progress=None if quiet else progress, resume=resume)
     finally:
         if bar is not None:
             bar.close()

@@ -51,9 +51,14 @@ class TrainConfig:
     test_every: int = 8               # hold out every n-th view when the dataset gives no split
     seed: int = 0                     # seeds torch, numpy, the view order and random backgrounds
     # --- initialisation
-    init: str = "sfm"                 # "sfm" (dataset points), "random" (uniform in the camera bounds), "surface"
+    init: str = "surface"             # "surface" (the dataset's own points: true-surface samples of a rendered
+                                      # scene, points3D of a COLMAP folder), "sfm" (pycolmap SfM on the
+                                      # training views, cached in <dataset>/sfm), "random" (uniform in the
+                                      # camera bounds); splatbench.train.initializers
     init_random_points: int = 100_000  # number of points of init="random" (3DGS's Blender default)
-    init_opacity: float = 0.1         # initial opacity of every Gaussian (3DGS: 0.1)
+    init_opacity: float | str = "auto"  # initial opacity of every Gaussian in (0, 1), or "auto": the
+                                      # strategy's reference value (default/none 0.1 as graphdeco, mcmc 0.5
+                                      # as 3DGS-MCMC); docs/training.md#defaults-and-their-sources
     # --- schedule
     iterations: int = 30_000          # optimisation steps, one training view each
     schedule: str = "scaled"          # how the step fields below and in strategy_options (refine_start,
@@ -136,8 +141,11 @@ class TrainConfig:
                      "torch_threads"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name}: expected an int >= 0, got {getattr(self, name)}")
-        if not 0 < self.init_opacity < 1:
-            raise InputError(f"init_opacity: expected a number in (0, 1), got {self.init_opacity!r}")
+        if isinstance(self.init_opacity, str):
+            if self.init_opacity != "auto":
+                raise InputError(f"init_opacity: expected a number in (0, 1) or 'auto', got {self.init_opacity!r}")
+        elif not 0 < self.init_opacity < 1:
+            raise InputError(f"init_opacity: expected a number in (0, 1) or 'auto', got {self.init_opacity!r}")
         if not 0 <= self.ssim_lambda <= 1:
             raise InputError(f"ssim_lambda: expected a number in [0, 1], got {self.ssim_lambda!r}")
         if not (math.isfinite(self.sh_auto_min_gain_db) and self.sh_auto_min_gain_db >= 0):
@@ -168,6 +176,13 @@ class TrainConfig:
             options["seed"] = self.seed
         strategy = make_strategy(self.strategy, **options)
         return scaled_strategy(strategy, self.iterations, self.schedule) if scaled else strategy
+
+    @property
+    def initial_opacity(self) -> float:
+        """``init_opacity``, with ``"auto"`` resolved to the strategy's ``initial_opacity``."""
+        if isinstance(self.init_opacity, str):
+            return float(self.make_strategy(scaled=False).initial_opacity)
+        return float(self.init_opacity)
 
     @property
     def sh_steps(self) -> int:
@@ -287,6 +302,8 @@ def _coerce(name: str, value: Any, tp: Any) -> Any:
         return float(value)
     if tp in (list[float], list[float] | str) and isinstance(value, list):
         return [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value]
+    if tp == (float | str) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
     if tp == (int | str) and isinstance(value, float) and value.is_integer():
         return value  # rejected by _check_type: a degree is an int
     _check_type(name, value, tp)
@@ -305,6 +322,9 @@ def _check_type(name: str, value: Any, tp: Any) -> None:
         ok = isinstance(value, str)
     elif tp == (int | str):
         ok = isinstance(value, str) or (isinstance(value, int) and not isinstance(value, bool))
+    elif tp == (float | str):
+        ok = isinstance(value, str) or (isinstance(value, (int, float)) and not isinstance(value, bool)
+                                        and math.isfinite(value))
     elif tp == list[float]:
         ok = isinstance(value, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                              and math.isfinite(v) for v in value)
@@ -322,7 +342,7 @@ def _check_type(name: str, value: Any, tp: Any) -> None:
 def _type_name(tp: Any) -> str:
     return {bool: "true or false", int: "an int", float: "a finite number", str: "a string",
             list[float]: "a list of numbers", dict[str, Any]: "a table",
-            list[float] | str: "a list of numbers or 'auto'"}.get(tp, "an int or 'auto'")
+            list[float] | str: "a list of numbers or 'auto'", float | str: "a number or 'auto'"}.get(tp, "an int or 'auto'")
 
 
 __all__ = ["TrainConfig", "LR_FIELDS", "load_config", "save_config", "parse_override", "apply_overrides"]

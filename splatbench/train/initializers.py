@@ -1,17 +1,26 @@
 """Initial Gaussians for training, by name (`TrainConfig.init`).
 
-`INITIALIZERS` maps a name to a function ``(dataset, settings) -> Gaussians``; a new
-method (for example SfM by pycolmap) plugs in with `register_init`::
+`INITIALIZERS` maps a name to a function ``(dataset, settings) -> Gaussians`` (or an
+`Initialization`, to report how the points were made); a new method plugs in with
+`register_init`::
 
-    @register_init("colmap_sfm")
-    def colmap_sfm(dataset, settings): ...
+    @register_init("mast3r")
+    def mast3r(dataset, settings): ...
 
-Built in:
+Built in (every one seeded by `splatbench.init.from_points`: 3-NN scales, opacity
+``settings.opacity``, DC colour from the point colour):
 
-* ``sfm`` -- the dataset's sparse points (COLMAP ``points3D`` / ``ply_file_path``),
-  seeded by `splatbench.init.from_points` (3-NN scales, opacity ``settings.opacity``).
-* ``surface`` -- the dataset's dense surface points, seeded the same way (today the
-  datasets ship one point cloud, so ``sfm`` and ``surface`` read the same points).
+* ``sfm`` -- pycolmap SfM on the **training** views only (SIFT, exhaustive matching,
+  incremental mapping; `splatbench.sfm.run_sfm`), aligned to the dataset's frame by a
+  similarity on the camera centres, starting from its sparse points and their colours
+  as 3DGS does on a real capture. The model is cached by content in ``<dataset>/sfm``
+  (`splatbench.sfm.cached_sfm`): the same training images, cameras and seed reuse it.
+  SfM's seed is ``settings.sfm_seed`` (0: one model per dataset, as a capture has one
+  COLMAP model; the run's seed varies training only). A dataset SfM cannot register
+  is one `InputError` line.
+* ``surface`` -- the dataset's own point cloud (`Dataset.points`): samples of the true
+  surfaces for a scene rendered by ``splatbench scenes``, ``points3D`` for a COLMAP
+  folder, ``ply_file_path`` for the Blender layout.
 * ``random`` -- ``settings.random_points`` points uniform in the axis-aligned box of
   the training camera centres (3DGS's Blender default: 100k points in a cube), with
   uniform random colours.
@@ -20,7 +29,8 @@ Built in:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -37,9 +47,23 @@ class InitSettings:
     opacity: float        # initial opacity in (0, 1)
     random_points: int    # init="random": number of points
     seed: int             # init="random": numpy seed
+    sfm_seed: int = 0     # init="sfm": pycolmap's seed
 
 
-Initializer = Callable[..., Gaussians]  # (dataset: Dataset, settings: InitSettings) -> Gaussians
+@dataclass(frozen=True)
+class Initialization:
+    """What `initialize` returns: the Gaussians and how they were made.
+
+    ``summary``: JSON-ready numbers (``method``, ``points``; for SfM ``registered``,
+    ``total``, ``center_rmse_rel``, ``cached``); ``note``: one line for the train log
+    (None when there is nothing to say)."""
+
+    gaussians: Gaussians
+    summary: dict[str, Any] = field(default_factory=dict)
+    note: str | None = None
+
+
+Initializer = Callable[..., "Gaussians | Initialization"]  # (dataset, settings: InitSettings) -> ...
 INITIALIZERS: dict[str, Initializer] = {}
 
 
@@ -53,11 +77,14 @@ def register_init(name: str) -> Callable[[Initializer], Initializer]:
     return deco
 
 
-def initialize(name: str, dataset, settings: InitSettings) -> Gaussians:
-    """The initial Gaussians of method ``name`` (`InputError` if unknown)."""
+def initialize(name: str, dataset, settings: InitSettings) -> Initialization:
+    """The initial Gaussians of method ``name`` and their summary (`InputError` if unknown)."""
     if name not in INITIALIZERS:
         raise InputError(f"init: unknown initialisation {name!r} (expected one of: {', '.join(INITIALIZERS)})")
-    return INITIALIZERS[name](dataset, settings)
+    made = INITIALIZERS[name](dataset, settings)
+    init = made if isinstance(made, Initialization) else Initialization(made)
+    return Initialization(init.gaussians, {"method": name, "points": len(init.gaussians), **init.summary},
+                          init.note)
 
 
 def _dataset_points(dataset, settings: InitSettings, method: str) -> Gaussians:
@@ -70,14 +97,30 @@ def _dataset_points(dataset, settings: InitSettings, method: str) -> Gaussians:
 
 
 @register_init("sfm")
-def sfm(dataset, settings: InitSettings) -> Gaussians:
-    """The dataset's sparse (SfM) points."""
-    return _dataset_points(dataset, settings, "sfm")
+def sfm(dataset, settings: InitSettings) -> Initialization:
+    """pycolmap SfM on the training views (cached by content), aligned to the dataset's frame."""
+    from splatbench.sfm import cached_sfm
+
+    root = str(dataset.root)
+    try:
+        run, cached = cached_sfm(dataset, seed=settings.sfm_seed)
+    except InputError as exc:
+        raise InputError(f"init: 'sfm' failed on {root!r}: {exc} (use init=surface or init=random)") from None
+    if len(run.xyz) < 2:
+        raise InputError(f"init: 'sfm' on {root!r} triangulated {len(run.xyz)} point(s), need 2 (use init=surface "
+                         f"or init=random)")
+    gaussians = from_points(run.xyz, run.rgb, sh_degree=settings.sh_degree, opacity=settings.opacity)
+    summary = {"registered": run.registered, "total": run.total, "center_rmse_rel": run.center_rmse_rel,
+               "sfm_seconds": round(run.seconds, 3), "cached": cached, "model": str(run.model_path)}
+    note = (f"SfM: {len(run.xyz)} points, {run.registered}/{run.total} training views registered (camera-centre "
+            f"RMSE {run.center_rmse_rel:.2%} of the rig radius; {'cached' if cached else 'ran'} in "
+            f"{run.model_path.parent})")
+    return Initialization(gaussians, summary, note)
 
 
 @register_init("surface")
 def surface(dataset, settings: InitSettings) -> Gaussians:
-    """The dataset's dense surface points."""
+    """The dataset's own points (true-surface samples of a rendered scene; a COLMAP folder's points3D)."""
     return _dataset_points(dataset, settings, "surface")
 
 
@@ -92,4 +135,4 @@ def random(dataset, settings: InitSettings) -> Gaussians:
     return from_points(xyz, rgb, sh_degree=settings.sh_degree, opacity=settings.opacity)
 
 
-__all__ = ["INITIALIZERS", "InitSettings", "initialize", "register_init"]
+__all__ = ["INITIALIZERS", "InitSettings", "Initialization", "initialize", "register_init"]

@@ -131,8 +131,9 @@ class Trainer:
                              "background cannot be composited under the ground truth")
         torch.manual_seed(config.seed)
         np.random.seed(config.seed % 2**32)
-        gaussians = initialize(config.init, dataset, InitSettings(config.max_sh_degree, config.init_opacity,
-                                                                  config.init_random_points, config.seed))
+        init = initialize(config.init, dataset, InitSettings(config.max_sh_degree, config.initial_opacity,
+                                                             config.init_random_points, config.seed))
+        gaussians, self.init_summary, self.init_note = init.gaussians, init.summary, init.note
         self.extent = scene_extent(train.cameras)
         self.lrs = lr_groups(config)
         self.params = params_from_gaussians(gaussians, self.lrs)
@@ -294,15 +295,17 @@ class Trainer:
 
 
 def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None = None,
-          dataset=None) -> TrainResult:
+          dataset=None, resume: str | Path | None = None) -> TrainResult:
     """Train 3DGS on ``config.dataset`` and return the measured `TrainResult`.
 
     Every input problem (config field, dataset, initialisation) is a one-line
     `InputError` raised before the first render. Writes under ``config.out``:
     ``config.toml`` (the resolved config), ``checkpoints/iteration_<step>.ply`` every
-    ``checkpoint_every`` steps, ``point_cloud.ply`` (the final model) and
+    ``checkpoint_every`` steps with the full state beside it (``iteration_<step>.pt``,
+    `splatbench.train.checkpoint`), ``point_cloud.ply`` (the final model) and
     ``result.json``. ``progress`` is called after every step; ``dataset`` (a loaded
-    `splatbench.data.Dataset`) replaces reading ``config.dataset``.
+    `splatbench.data.Dataset`) replaces reading ``config.dataset``; ``resume`` (a
+    ``.pt`` checkpoint of a run with the same config) continues that run exactly.
 
     Example::
 
@@ -310,7 +313,7 @@ def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None 
         result.test_psnr, result.num_gaussians, result.ply_path
     """
     with torch_threads(config.torch_threads):
-        return _train(config, progress, dataset)
+        return _train(config, progress, dataset, resume)
 
 
 @contextmanager
@@ -325,18 +328,23 @@ def torch_threads(n: int):
         torch.set_num_threads(before)
 
 
-def _train(config: TrainConfig, progress, dataset) -> TrainResult:
+def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
     from splatbench.bench.memory import peak_rss_mb
+    from splatbench.train.checkpoint import load_checkpoint, save_checkpoint
 
     trainer = Trainer(config, dataset=dataset)
-    out = Path(config.out)
-    save_config(config, out / "config.toml")
-    lpips_fn, lpips_note = lpips_metric()
     history: list[HistoryPoint] = []
     evaluations: list[EvalPoint] = []
     loop_seconds = 0.0
+    if resume is not None:
+        extra = load_checkpoint(trainer, resume)
+        history, evaluations = list(extra.get("history", [])), list(extra.get("evaluations", []))
+        loop_seconds = float(extra.get("loop_seconds", 0.0))
+    out = Path(config.out)
+    save_config(config, out / "config.toml")
+    lpips_fn, lpips_note = lpips_metric()
     status = None
-    for _ in range(config.iterations):
+    for _ in range(config.iterations - trainer.step_index):
         t0 = time.perf_counter()
         status = trainer.step()
         loop_seconds += time.perf_counter() - t0
@@ -351,12 +359,15 @@ def _train(config: TrainConfig, progress, dataset) -> TrainResult:
                 evaluations.append(EvalPoint(done, ev.psnr, ev.ssim))
         if config.checkpoint_every and done % config.checkpoint_every == 0:
             trainer.save_ply(out / "checkpoints" / f"iteration_{done}.ply")
+            save_checkpoint(trainer, out / "checkpoints" / f"iteration_{done}.pt",
+                            extra={"history": history, "evaluations": evaluations, "loop_seconds": loop_seconds})
     t0 = time.perf_counter()
     trainer.sh.finish(trainer.step_index, trainer.probe_band)
     loop_seconds += time.perf_counter() - t0
     ply = trainer.save_ply(out / "point_cloud.ply")
     ev = trainer.evaluate(lpips_fn)
-    notes = [trainer.background_note] + ([] if lpips_fn is not None else [lpips_note])
+    notes = ([trainer.init_note] if trainer.init_note else []) + [trainer.background_note] \
+        + ([] if lpips_fn is not None else [lpips_note])
     if ev.views == 0:
         notes.append("no test views: test metrics are None")
     else:
@@ -367,7 +378,7 @@ def _train(config: TrainConfig, progress, dataset) -> TrainResult:
         sh_degree_reason=trainer.sh.reason, ply_path=str(ply), render_ms_per_view=ev.render_ms_per_view,
         peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,
         test_views=ev.views, history=history, evaluations=evaluations,
-        sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes)
+        sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary)
     (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
     return result
 

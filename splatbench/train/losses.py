@@ -1,7 +1,9 @@
 """The 3DGS photometric loss: ``(1 - λ) · L1 + λ · (1 − SSIM)`` (λ = 0.2, window 11).
 
 SSIM is kornia's (``kornia.metrics.ssim``: Gaussian window, σ = 1.5, "same"
-padding), averaged over pixels and channels. Images are [H, W, 3] in [0, 1].
+padding), averaged over pixels and channels. Images are [H, W, 3] in [0, 1]. The
+loss's D-SSIM term is `splatbench.train.dssim.dssim`, the same value with its gradient
+formed in one fused pass (tested against kornia's); `ssim` (the metric) is kornia's.
 """
 
 from __future__ import annotations
@@ -32,7 +34,9 @@ def photometric_loss(pred: torch.Tensor, target: torch.Tensor, ssim_lambda: floa
     l1 = (pred - target).abs().mean()
     if ssim_lambda == 0:
         return l1
-    return (1 - ssim_lambda) * l1 + ssim_lambda * (1 - ssim(pred, target, window))
+    from splatbench.train.dssim import dssim
+
+    return (1 - ssim_lambda) * l1 + ssim_lambda * dssim(to_bchw(pred), to_bchw(target), window)
 
 
 __all__ = ["photometric_loss", "ssim", "to_bchw"]

@@ -47,6 +47,8 @@ class TrainResult:
     evaluations: list[EvalPoint] = field(default_factory=list)     # every `eval_every` steps, and the end
     sh_decisions: list[dict] = field(default_factory=list)         # auto SH: each band measured (ShDecision)
     notes: list[str] = field(default_factory=list)                 # e.g. why LPIPS was skipped
+    init: dict = field(default_factory=dict)   # how the initial Gaussians were made: method, points (and for
+                                               # init="sfm": registered, total, center_rmse_rel, cached, ...)
 
     def to_dict(self) -> dict:
         """JSON-ready dict; NaN / inf become None; history rows become objects."""

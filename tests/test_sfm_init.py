@@ -1,0 +1,111 @@
+"""init = "sfm" (issue 12 §2): pycolmap SfM on the training views only, aligned to the
+dataset's frame, cached by content in ``<dataset>/sfm``, and one line when SfM cannot
+register the dataset. The tiny `textured` capture (12 training views, 160 px) is the
+one of tests/test_init.py: SfM solves it in a few seconds on one core."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import splatbench  # noqa: F401 - configures libLLVM before drjit loads
+from splatbench.data import load_dataset
+from splatbench.errors import InputError
+from splatbench.scenes.render import read_manifest
+from splatbench.sfm import SFM_DIR, cached_sfm, sfm_inputs
+from splatbench.train import TrainConfig, train
+from splatbench.train.initializers import InitSettings, initialize
+from tests.test_init import tiny  # noqa: F401 - the module-scoped tiny capture fixture
+
+SETTINGS = InitSettings(sh_degree=0, opacity=0.1, random_points=10, seed=0)
+
+
+@pytest.fixture
+def capture(tiny, tmp_path):  # noqa: F811
+    """A private copy of the tiny capture (the cache writes into the dataset folder)."""
+    path, _ = tiny
+    return shutil.copytree(path, tmp_path / "tiny", ignore=shutil.ignore_patterns(SFM_DIR))
+
+
+def test_sfm_init_sees_training_views_only_and_starts_from_the_aligned_points(capture):
+    ds = load_dataset(capture)
+    assert len(ds.test) >= 1
+    init = initialize("sfm", ds, SETTINGS)
+    s = init.summary
+    assert s["method"] == "sfm" and s["cached"] is False
+    assert s["total"] == len(ds.train) == 12 and s["registered"] >= 0.9 * s["total"]
+    # the alignment is good to 1 % of the rig radius (the bound of test_from_sfm_registers...)
+    assert s["center_rmse_rel"] <= 0.01
+    manifest = read_manifest(capture / SFM_DIR)
+    assert sorted(manifest["inputs"]["views"]) == sorted(ds.train.names)        # the inputs: training views
+    assert not set(manifest["registered_names"]) & set(ds.test.names)          # no test view was seen
+    with np.load(capture / SFM_DIR / "points.npz") as pts:
+        assert s["points"] == len(init.gaussians) == len(pts["xyz"]) >= 2
+        np.testing.assert_array_equal(init.gaussians.means, pts["xyz"].astype(np.float32))
+        # SH DC from the SfM colours: C0 sh0 + 0.5 = rgb / 255 (float32 rounding of the DC)
+        rgb = 0.28209479177387814 * init.gaussians.sh[:, 0].astype(np.float64) + 0.5
+        np.testing.assert_allclose(rgb, pts["rgb"] / 255.0, atol=1e-6)
+    assert init.note.startswith(f"SfM: {s['points']} points, {s['registered']}/12 training views registered")
+
+
+def test_sfm_is_reused_while_the_training_views_are_unchanged_and_rerun_when_one_changes(capture, monkeypatch):
+    ds = load_dataset(capture)
+    first, cached = cached_sfm(ds)
+    assert not cached
+    before = sfm_inputs(ds)["hash"]
+    calls = []
+    import splatbench.sfm as sfm_module
+
+    real = sfm_module.run_sfm
+    monkeypatch.setattr(sfm_module, "run_sfm", lambda *a, **k: calls.append(1) or real(*a, **k))
+    again, cached = cached_sfm(ds)
+    assert cached and calls == []
+    assert again.xyz.tobytes() == first.xyz.tobytes() and again.registered == first.registered
+    # a test view is not an input: editing it keeps the cache
+    test_image = capture / ds.test.names[0]
+    Image.new("RGB", Image.open(test_image).size, (7, 7, 7)).save(test_image)
+    assert cached_sfm(load_dataset(capture))[1] and calls == []
+    # a training view is: editing one reruns SfM (deterministic: the same model when restored)
+    train_image = capture / ds.train.names[0]
+    original = train_image.read_bytes()
+    img = np.array(Image.open(train_image))
+    img[0, 0, 0] ^= 1
+    Image.fromarray(img).save(train_image)
+    assert sfm_inputs(load_dataset(capture))["hash"] != before
+    _, cached = cached_sfm(load_dataset(capture))
+    assert not cached and calls == [1]
+    train_image.write_bytes(original)
+    restored, cached = cached_sfm(load_dataset(capture))
+    assert not cached and restored.xyz.tobytes() == first.xyz.tobytes()
+
+
+def test_train_with_sfm_init_logs_points_and_registered_views(capture, tmp_path):
+    cfg = TrainConfig(dataset=str(capture), out=str(tmp_path / "run"), iterations=2, init="sfm", strategy="none",
+                      sh_degree=0, schedule="absolute")
+    result = train(cfg)
+    assert result.init["method"] == "sfm" and result.init["points"] == result.num_gaussians
+    note = next(n for n in result.notes if n.startswith("SfM: "))
+    assert f"{result.init['points']} points, {result.init['registered']}/12 training views registered" in note
+    saved = json.loads((tmp_path / "run" / "result.json").read_text())
+    assert saved["init"]["registered"] == result.init["registered"] and note in saved["notes"]
+
+
+def test_a_dataset_sfm_cannot_register_is_one_line(capture, tmp_path, capfd):
+    """Flat grey training views give SIFT no features: no model, one line naming the way out."""
+    ds = load_dataset(capture)
+    for name in ds.train.names:
+        Image.new("RGB", Image.open(capture / name).size, (128, 128, 128)).save(capture / name)
+    cfg = TrainConfig(dataset=str(capture), out=str(tmp_path / "run"), iterations=2, init="sfm", strategy="none",
+                      schedule="absolute")
+    with pytest.raises(InputError) as err:
+        train(cfg)
+    text = str(err.value)
+    assert "\n" not in text and text.startswith("init: 'sfm' failed on") and "init=surface or init=random" in text
+    assert not (capture / SFM_DIR).exists() and not list(capture.glob(".sfm.run-*"))  # nothing half-written
+    # and COLMAP's own error log (glog lines such as "E20261123 ... sfm.cc:310] ...") stays quiet
+    assert not re.search(r"^[EWF]\d{8} ", capfd.readouterr().err, re.M)
