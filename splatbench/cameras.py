@@ -333,7 +333,9 @@ class Camera:
 
     def to_colmap(self) -> tuple[Any, Any]:
         """``(pycolmap.Camera PINHOLE, pycolmap.Rigid3d cam_from_world)``."""
-        import pycolmap
+        from splatbench.interrupt import import_pycolmap
+
+        pycolmap = import_pycolmap()
 
         camera = pycolmap.Camera(model="PINHOLE", width=self.width, height=self.height,
                                  params=[self.fx, self.fy, self.cx, self.cy])

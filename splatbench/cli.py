@@ -2,12 +2,15 @@
 
 Commands live in their own modules and are imported only when invoked, so
 `splatbench --help` is instant. Every `SplatbenchError` (bad input, missing files)
-is printed as one line and exits with status 2, never as a traceback.
+is printed as one line and exits with status 2, never as a traceback. SIGTERM and
+SIGINT stop a command cleanly (`splatbench.interrupt`): one line naming what was
+kept, exit status 128 + the signal number.
 """
 
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 
 import click
@@ -46,12 +49,21 @@ class LazyGroup(click.Group):
 
     def invoke(self, ctx: click.Context):
         from splatbench.errors import SplatbenchError
+        from splatbench.interrupt import Interrupted, stop_on_signals
 
         try:
-            return super().invoke(ctx)
+            with stop_on_signals():
+                return super().invoke(ctx)
         except SplatbenchError as exc:
             click.echo(f"splatbench: error: {exc}", err=True)
             sys.exit(2)
+        except Interrupted as exc:
+            click.echo(f"splatbench: {exc.line()}", err=True)
+            # what was kept is on disk and closed; skip the interpreter's teardown of torch
+            # and Dr.Jit (seconds), so that a batch system's grace period is not spent on it
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(exc.exit_status)
 
 
 @click.group(cls=LazyGroup)

@@ -20,6 +20,7 @@ import tempfile
 import numpy as np
 
 from splatbench.errors import InputError
+from splatbench.fsutil import replace_file
 from splatbench.gaussians import SH_BASES, Gaussians
 
 _BASE_HEAD = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
@@ -66,7 +67,7 @@ def write_ply(gaussians: Gaussians, path: str | os.PathLike) -> None:
             PlyData([element], text=False, byte_order="<").write(stream)
             stream.flush()
             os.fsync(stream.fileno())
-        os.replace(tmp, path)
+        replace_file(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)

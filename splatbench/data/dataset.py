@@ -145,7 +145,9 @@ def _colmap_folder(root: Path) -> Path | None:
 
 
 def _load_colmap(root: Path, test_every: int, images_dir: str, bg: np.ndarray) -> Dataset:
-    import pycolmap
+    from splatbench.interrupt import import_pycolmap
+
+    pycolmap = import_pycolmap()
 
     sparse = _colmap_folder(root)
     if sparse is None:

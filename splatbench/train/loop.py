@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 from splatbench.errors import InputError
+from splatbench.interrupt import Interrupted, deferred
 from splatbench.raster.torch_bridge import rasterize
 from splatbench.strategies.base import StepContext
 from splatbench.train.config import TrainConfig, save_config
@@ -300,7 +301,8 @@ def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None 
     Every input problem (config field, dataset, initialisation) is a one-line
     `InputError` raised before the first render. Writes under ``config.out``:
     ``config.toml`` (the resolved config), ``checkpoints/iteration_<step>.ply`` every
-    ``checkpoint_every`` steps, ``point_cloud.ply`` (the final model) and
+    ``checkpoint_every`` steps and when a stop signal ends training early (then
+    `splatbench.interrupt.Interrupted` is raised, naming that checkpoint), ``point_cloud.ply`` (the final model) and
     ``result.json``. ``progress`` is called after every step; ``dataset`` (a loaded
     `splatbench.data.Dataset`) replaces reading ``config.dataset``.
 
@@ -325,6 +327,22 @@ def torch_threads(n: int):
         torch.set_num_threads(before)
 
 
+def checkpoint_path(out: str | Path, step: int) -> Path:
+    """``<out>/checkpoints/iteration_<step>.ply``: the model after ``step`` steps."""
+    return Path(out) / "checkpoints" / f"iteration_{step}.ply"
+
+
+def _save_on_interrupt(trainer: Trainer, out: Path) -> str:
+    """Write the model of the last finished step as a checkpoint (signals held while
+    it is written); return the line naming it."""
+    step, total = trainer.step_index, trainer.config.iterations
+    path = checkpoint_path(out, step)
+    with deferred():
+        if not path.is_file():  # written already when the signal came right after a checkpoint
+            trainer.save_ply(path)
+    return f"kept the last checkpoint {path} (the model after step {step} of {total})"
+
+
 def _train(config: TrainConfig, progress, dataset) -> TrainResult:
     from splatbench.bench.memory import peak_rss_mb
 
@@ -336,26 +354,35 @@ def _train(config: TrainConfig, progress, dataset) -> TrainResult:
     evaluations: list[EvalPoint] = []
     loop_seconds = 0.0
     status = None
-    for _ in range(config.iterations):
+    try:
+        for _ in range(config.iterations):
+            with deferred():  # a stop signal ends the run between steps, never inside one
+                t0 = time.perf_counter()
+                status = trainer.step()
+                loop_seconds += time.perf_counter() - t0
+            done = trainer.step_index
+            if status.step % config.log_every == 0 or done == config.iterations:
+                history.append(HistoryPoint(status.step, status.loss, status.psnr, status.num_gaussians))
+            if progress is not None:
+                progress(status)
+            if config.eval_every and done % config.eval_every == 0 and done < config.iterations:
+                ev = trainer.evaluate()
+                if ev.psnr is not None:
+                    evaluations.append(EvalPoint(done, ev.psnr, ev.ssim))
+            if config.checkpoint_every and done % config.checkpoint_every == 0:
+                with deferred():
+                    trainer.save_ply(checkpoint_path(out, done))
         t0 = time.perf_counter()
-        status = trainer.step()
+        trainer.sh.finish(trainer.step_index, trainer.probe_band)
         loop_seconds += time.perf_counter() - t0
-        done = trainer.step_index
-        if status.step % config.log_every == 0 or done == config.iterations:
-            history.append(HistoryPoint(status.step, status.loss, status.psnr, status.num_gaussians))
-        if progress is not None:
-            progress(status)
-        if config.eval_every and done % config.eval_every == 0 and done < config.iterations:
-            ev = trainer.evaluate()
-            if ev.psnr is not None:
-                evaluations.append(EvalPoint(done, ev.psnr, ev.ssim))
-        if config.checkpoint_every and done % config.checkpoint_every == 0:
-            trainer.save_ply(out / "checkpoints" / f"iteration_{done}.ply")
-    t0 = time.perf_counter()
-    trainer.sh.finish(trainer.step_index, trainer.probe_band)
-    loop_seconds += time.perf_counter() - t0
-    ply = trainer.save_ply(out / "point_cloud.ply")
-    ev = trainer.evaluate(lpips_fn)
+        with deferred():
+            ply = trainer.save_ply(out / "point_cloud.ply")
+    except Interrupted as exc:
+        raise Interrupted(exc.signum, _save_on_interrupt(trainer, out)) from None
+    try:
+        ev = trainer.evaluate(lpips_fn)
+    except Interrupted as exc:
+        raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
     notes = [trainer.background_note] + ([] if lpips_fn is not None else [lpips_note])
     if ev.views == 0:
         notes.append("no test views: test metrics are None")
