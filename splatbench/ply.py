@@ -44,7 +44,7 @@ def to_vertex_array(gaussians: Gaussians) -> np.ndarray:
     columns[:, 6:9] = gaussians.sh[:, 0, :]
     rest = 9 + 3 * (k - 1)
     # channel-major: column c·(K-1) + (k-1) holds sh[:, k, c]
-    columns[:, 9:rest] = np.transpose(gaussians.sh[:, 1:, :], (0, 2, 1)).reshape(n, -1)
+    columns[:, 9:rest] = np.transpose(gaussians.sh[:, 1:, :], (0, 2, 1)).reshape(n, 3 * (k - 1))  # n may be 0
     columns[:, rest] = gaussians.opacity_logits
     columns[:, rest + 1:rest + 4] = gaussians.log_scales
     columns[:, rest + 4:rest + 8] = gaussians.quats

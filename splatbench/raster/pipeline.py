@@ -57,10 +57,25 @@ def resolve_sh_degree(num_bases: int, sh_degree: int | None) -> int:
 
 
 def check_background(background) -> tuple[float, float, float]:
-    bg = np.asarray(background if background is not None else (0.0, 0.0, 0.0), dtype=np.float64).reshape(-1)
-    if bg.shape != (3,) or not np.isfinite(bg).all():
-        raise InputError(f"background: expected 3 finite values, got {np.asarray(background).tolist()!r}")
+    """An RGB background: 3 values in [0, 1] (colours are not clamped, so a value
+    outside would shine through every translucent splat)."""
+    try:
+        bg = np.asarray(background if background is not None else (0.0, 0.0, 0.0), dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputError(f"background: expected 3 values in [0, 1], got {background!r}") from None
+    if bg.shape != (3,) or not np.isfinite(bg).all() or (bg < 0).any() or (bg > 1).any():
+        raise InputError(f"background: expected 3 values in [0, 1], got {np.asarray(background).tolist()!r}")
     return tuple(float(c) for c in bg)
+
+
+def check_clip_planes(camera, options: RasterOptions) -> None:
+    """The near and far planes in effect (the options', else the camera's) must have
+    0 < near < far; otherwise every Gaussian is culled and the image is blank."""
+    near = camera.near if options.near is None else options.near
+    far = camera.far if options.far is None else options.far
+    if not near < far:
+        raise InputError(f"near, far: expected near < far, got near={near!r}, far={far!r} "
+                         f"(options, else the camera's)")
 
 
 def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int,
@@ -132,4 +147,5 @@ def frame_to_numpy(frame: Frame, height: int, width: int) -> tuple[np.ndarray, n
     return rgb, alpha, depth
 
 
-__all__ = ["Frame", "render_frame", "frame_to_numpy", "resolve_sh_degree", "check_background", "Composite"]
+__all__ = ["Frame", "render_frame", "frame_to_numpy", "resolve_sh_degree", "check_background", "check_clip_planes",
+           "Composite"]

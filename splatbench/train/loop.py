@@ -346,8 +346,10 @@ def _save_on_interrupt(trainer: Trainer, out: Path) -> str:
 def _train(config: TrainConfig, progress, dataset) -> TrainResult:
     from splatbench.bench.memory import peak_rss_mb
 
-    trainer = Trainer(config, dataset=dataset)
     out = Path(config.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"out: {str(out)!r} is a file, not a folder; choose another output folder")
+    trainer = Trainer(config, dataset=dataset)
     save_config(config, out / "config.toml")
     lpips_fn, lpips_note = lpips_metric()
     history: list[HistoryPoint] = []
