@@ -33,7 +33,7 @@ class TrainResult:
     test_ssim: float | None             # mean SSIM (kornia, window 11)
     test_lpips: float | None            # mean LPIPS-Alex; None when unavailable (see `notes`)
     num_gaussians: int                  # N at the end
-    train_seconds: float                # wall time of the optimisation loop (no evaluation, no I/O)
+    train_seconds: float                # wall time of the optimisation loop (no evaluation, no I/O, no compilation)
     iterations: int                     # steps run
     sh_degree: int                      # SH degree in use at the end (the PLY holds this many bands)
     sh_degree_reason: str               # why (fixed schedule, or the automatic schedule's measurement)
@@ -47,6 +47,7 @@ class TrainResult:
     evaluations: list[EvalPoint] = field(default_factory=list)     # every `eval_every` steps, and the end
     sh_decisions: list[dict] = field(default_factory=list)         # auto SH: each band measured (ShDecision)
     notes: list[str] = field(default_factory=list)                 # e.g. why LPIPS was skipped
+    warmup_seconds: float = 0.0         # kernel compilation / cache loading before the loop (not in train_seconds)
 
     def to_dict(self) -> dict:
         """JSON-ready dict; NaN / inf become None; history rows become objects."""
