@@ -347,25 +347,42 @@ def _drive(pool, pending: list[RunSpec], results_dir: str, finish: Callable[[Run
     a worker died) are retried one at a time; a suspect that breaks the pool alone is
     recorded as failed. ``heartbeat`` is called at least every `HEARTBEAT_EVERY` s."""
     queue: deque[RunSpec] = deque(pending)
+    ready: deque[RunSpec] = deque()  # admitted, not yet submitted (the pool broke at submission)
     suspects: deque[RunSpec] = deque()
     inflight: dict[Any, RunSpec] = {}
     isolating = False
-    while queue or suspects or inflight:
+
+    def submit(run: RunSpec, back: deque[RunSpec]) -> bool:
+        try:
+            inflight[pool.submit(run, results_dir)] = run
+            return True
+        except Exception as exc:  # a worker died since the last wait: the pool refuses new work
+            if not pool.broken(exc):
+                raise
+            back.appendleft(run)
+            return False
+
+    while queue or ready or suspects or inflight:
         if not inflight:
             isolating = bool(suspects)
+        broke = False
         if isolating:
             if not inflight and suspects:
-                run = suspects.popleft()
-                inflight[pool.submit(run, results_dir)] = run
+                broke = not submit(suspects.popleft(), suspects)
         else:
-            while queue and len(inflight) < pool.capacity:
-                run = queue.popleft()
-                if admit(run):
-                    inflight[pool.submit(run, results_dir)] = run
+            while (ready or queue) and len(inflight) < pool.capacity and not broke:
+                if ready:
+                    broke = not submit(ready.popleft(), ready)
+                else:
+                    run = queue.popleft()
+                    if admit(run):
+                        broke = not submit(run, ready)
+        if broke and not inflight:
+            pool.restart()
+            continue
         if not inflight:
             continue
         heartbeat()
-        broke = False
         for fut in pool.wait(inflight, timeout=HEARTBEAT_EVERY):
             run = inflight.pop(fut)
             exc = fut.exception()
