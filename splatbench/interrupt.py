@@ -50,7 +50,7 @@ class Interrupted(BaseException):
 
     def line(self) -> str:
         """One line for the CLI: ``interrupted by SIGTERM; kept ...``."""
-        return f"interrupted by {self.name}" + (f"; {self.kept}" if self.kept else "; nothing kept")
+        return f"interrupted by {self.name}; {self.kept or 'nothing kept'}"
 
 
 class _State(threading.local):

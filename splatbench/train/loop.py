@@ -366,7 +366,11 @@ def _train(config: TrainConfig, progress, dataset) -> TrainResult:
     out = Path(config.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"out: {str(out)!r} is a file, not a folder; choose another output folder")
-    trainer = Trainer(config, dataset=dataset)
+    try:
+        trainer = Trainer(config, dataset=dataset)
+    except Interrupted as exc:
+        raise Interrupted(exc.signum, "nothing kept: training had not started (loading the dataset, "
+                                      "initialising)") from None
     save_config(config, out / "config.toml")
     lpips_fn, lpips_note = lpips_metric()
     history: list[HistoryPoint] = []
