@@ -101,6 +101,29 @@ def test_timeout_sigterm_20_of_20(tmp_path, colmap_dataset):
     assert ok == 20
 
 
+def test_sigterm_stops_bench_and_its_workload_process(tmp_path):
+    """`bench raster` times each workload in a child process: SIGTERM ends both."""
+    import psutil
+
+    cmd = [*SPLATBENCH, "bench", "raster", "--synthetic", "20000", "256x256", "--repeats", "50",
+           "--out", str(tmp_path / "b")]
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline, children = time.monotonic() + 120, []
+    while not children and proc.poll() is None and time.monotonic() < deadline:
+        children = psutil.Process(proc.pid).children()
+        time.sleep(0.05)
+    assert children, proc.communicate()[1].decode()[-2000:]
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert time.monotonic() - sent < EXIT_WITHIN
+    assert proc.returncode == 128 + signal.SIGTERM
+    assert err.decode().strip().splitlines()[-1] == "splatbench: interrupted by SIGTERM; nothing kept"
+    assert "Traceback" not in err.decode()
+    time.sleep(0.5)
+    assert not [c for c in children if c.is_running() and c.status() != psutil.STATUS_ZOMBIE]
+
+
 # --------------------------------------------------------------------------- pycolmap
 _KILL_SELF = "import os, signal; {imp}; os.kill(os.getpid(), signal.SIGTERM); import time; time.sleep(30)"
 
