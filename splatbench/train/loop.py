@@ -319,9 +319,10 @@ def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None 
     `InputError` raised before the first render. Writes under ``config.out``:
     ``config.toml`` (the resolved config), ``checkpoints/iteration_<step>.ply`` every
     ``checkpoint_every`` steps and when a stop signal ends training early (then
-    `splatbench.interrupt.Interrupted` is raised, naming that checkpoint), ``point_cloud.ply`` (the final model) and
-    ``result.json``. ``progress`` is called after every step; ``dataset`` (a loaded
-    `splatbench.data.Dataset`) replaces reading ``config.dataset``.
+    `splatbench.interrupt.Interrupted` is raised, naming that checkpoint),
+    ``point_cloud.ply`` (the final model) and ``result.json``. ``progress`` is called
+    after every step; ``dataset`` (a loaded `splatbench.data.Dataset`) replaces
+    reading ``config.dataset``.
 
     Example::
 
