@@ -99,9 +99,11 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
                    camera.width, camera.height, eps2d=options.eps2d, near=near, far=far,
                    radius=options.radius, alpha_min=options.alpha_min, antialiased=options.antialiased)
     m = array_namespace(means.array)
-    center = camera.center
+    # the camera centre enters as opaque values, like the projection's camera constants:
+    # as literals, every view compiled SH kernels of its own (degree >= 1)
+    cx, cy, cz = (dr.opaque(m.Float, float(c)) for c in camera.center)
     mx, my, mz = columns(means, 3)
-    d = m.Array3f(mx - float(center[0]), my - float(center[1]), mz - float(center[2]))
+    d = m.Array3f(mx - cx, my - cy, mz - cz)
     norm = dr.safe_sqrt(dr.squared_norm(d))
     dirs = d * (1.0 / dr.select(norm > 0, norm, 1.0))
     colors = eval_sh(sh, dirs, sh_degree)
