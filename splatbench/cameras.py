@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.checks import as_float_array
+from splatbench.checks import as_float_array, check_image_size
 
 #: Largest accepted ``max |RᵀR - I|`` of the rotation part of ``world_to_camera``.
 ORTHONORMAL_TOL = 1e-5
@@ -146,6 +146,7 @@ class Camera:
         set_ = object.__setattr__
         set_(self, "width", _positive_int("width", self.width))
         set_(self, "height", _positive_int("height", self.height))
+        check_image_size(self.width, self.height, field="width, height", memory=False)  # Dr.Jit's bound
         set_(self, "fx", _finite_float("fx", self.fx, positive=True))
         set_(self, "fy", _finite_float("fy", self.fy, positive=True))
         set_(self, "cx", _finite_float("cx", self.cx))
@@ -333,7 +334,9 @@ class Camera:
 
     def to_colmap(self) -> tuple[Any, Any]:
         """``(pycolmap.Camera PINHOLE, pycolmap.Rigid3d cam_from_world)``."""
-        import pycolmap
+        from splatbench.interrupt import import_pycolmap
+
+        pycolmap = import_pycolmap()
 
         camera = pycolmap.Camera(model="PINHOLE", width=self.width, height=self.height,
                                  params=[self.fx, self.fy, self.cx, self.cy])

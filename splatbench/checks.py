@@ -74,3 +74,49 @@ def check_sh_degree(name: str, value) -> int:
     if not 0 <= degree <= 3:
         raise InputError(f"{name}: expected an int in 0..3, got {degree}")
     return degree
+
+
+# --------------------------------------------------------------------------- image size
+#: Dr.Jit arrays hold at most 2**32 - 1 entries (32-bit sizes and indices).
+DRJIT_MAX_ENTRIES = 2**32 - 1
+#: Entries per pixel of the largest per-pixel array of the pipeline: the RGB image, [H*W*3].
+LARGEST_BUFFER_CHANNELS = 3
+#: Bytes per pixel the rasterizer's pipeline keeps alive at once (an upper estimate):
+#: forward state (3 colour accumulators, depth, transmittance, last contributor,
+#: contributor count, pixel index and tile id: 10 x 4 B), its outputs (rgb, alpha,
+#: depth: 5 x 4 B), their numpy float32 copies (20 B) and PNG bytes (3 B) come to
+#: 83 B; the backward pass keeps the forward state and its cotangents again (x 2),
+#: rounded up to 256 B for temporaries.
+PIXEL_BYTES = 256
+
+
+def image_size_problem(width: int, height: int, *, memory: bool = True) -> str | None:
+    """Why a ``width`` x ``height`` image cannot be rendered here, or None when it can.
+
+    Two bounds, checked before anything is allocated:
+    - Dr.Jit's: an array holds at most 2**32 - 1 entries, and the largest per-pixel
+      array is the RGB image with 3 entries per pixel, so W * H <= (2**32 - 1) // 3
+      (about 1.43e9 pixels, e.g. 37837 x 37837);
+    - memory's (``memory=True``): W * H * `PIXEL_BYTES` must fit in the memory
+      available now (psutil's ``available``).
+    """
+    pixels = int(width) * int(height)
+    max_pixels = DRJIT_MAX_ENTRIES // LARGEST_BUFFER_CHANNELS
+    if pixels > max_pixels:
+        return (f"{width}x{height} is {pixels:.3g} pixels, above Dr.Jit's limit of {max_pixels:.3g} "
+                f"(2^32 - 1 array entries / {LARGEST_BUFFER_CHANNELS} colour channels)")
+    if memory:
+        import psutil
+
+        need, free = pixels * PIXEL_BYTES, psutil.virtual_memory().available
+        if need > free:
+            return (f"{width}x{height} needs about {need / 2**30:.1f} GiB ({PIXEL_BYTES} B per pixel), "
+                    f"more than the {free / 2**30:.1f} GiB of memory available")
+    return None
+
+
+def check_image_size(width: int, height: int, *, field: str = "size", memory: bool = True) -> None:
+    """Raise a one-line `InputError` naming ``field`` when `image_size_problem` finds one."""
+    problem = image_size_problem(width, height, memory=memory)
+    if problem is not None:
+        raise InputError(f"{field}: {problem}; choose a smaller image")

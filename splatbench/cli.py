@@ -2,12 +2,16 @@
 
 Commands live in their own modules and are imported only when invoked, so
 `splatbench --help` is instant. Every `SplatbenchError` (bad input, missing files)
-is printed as one line and exits with status 2, never as a traceback.
+is printed as one line and exits with status 2, never as a traceback. SIGTERM and
+SIGINT stop a command cleanly (`splatbench.interrupt`): one line naming what was
+kept, exit status 128 + the signal number.
 """
 
 from __future__ import annotations
 
+import errno
 import importlib
+import os
 import sys
 
 import click
@@ -46,12 +50,45 @@ class LazyGroup(click.Group):
 
     def invoke(self, ctx: click.Context):
         from splatbench.errors import SplatbenchError
+        from splatbench.interrupt import Interrupted, stop_on_signals
 
         try:
-            return super().invoke(ctx)
+            with stop_on_signals():
+                return super().invoke(ctx)
         except SplatbenchError as exc:
             click.echo(f"splatbench: error: {exc}", err=True)
             sys.exit(2)
+        except OSError as exc:  # a file-system fault: a read-only folder, a full disk, a path of the wrong type
+            click.echo(f"splatbench: error: {os_error_line(exc)}", err=True)
+            sys.exit(2)
+        except Interrupted as exc:
+            click.echo(f"splatbench: {exc.line()}", err=True)
+            # what was kept is on disk and closed; skip the interpreter's teardown of torch
+            # and Dr.Jit (seconds), so that a batch system's grace period is not spent on it
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(exc.exit_status)
+
+
+_OS_FIXES = {
+    errno.EACCES: "make it writable (or readable) or choose another path",
+    errno.EPERM: "make it writable (or readable) or choose another path",
+    errno.EROFS: "the file system is read-only; choose another path",
+    errno.ENOSPC: "no space left; free some or choose another path",
+    errno.EDQUOT: "disk quota exceeded; free some or choose another path",
+    errno.EISDIR: "it is a folder; give a file path",
+    errno.ENOTDIR: "a part of the path is a file, not a folder; choose another path",
+    errno.EEXIST: "it exists; remove it or choose another path",
+    errno.ENOENT: "it does not exist; check the path",
+}
+
+
+def os_error_line(exc: OSError) -> str:
+    """``PATH: what went wrong; the fix`` for a file-system error, in one line."""
+    where = exc.filename if exc.filename is not None else "file system"
+    what = (exc.strerror or str(exc)).strip().splitlines()[0] if (exc.strerror or str(exc)).strip() else "I/O error"
+    fix = _OS_FIXES.get(exc.errno or -1)
+    return f"{where}: {what}" + (f" ({fix})" if fix else "")
 
 
 @click.group(cls=LazyGroup)

@@ -1,4 +1,11 @@
-"""Filesystem helpers: put finished folders in place atomically."""
+"""Filesystem helpers: put finished files and folders in place atomically, with the
+permissions an ordinary ``open`` / ``mkdir`` would have given them.
+
+`tempfile.mkstemp` and `tempfile.mkdtemp` create 0600 files and 0700 folders
+whatever the umask; renamed into place as they are, a result would be unreadable to
+the rest of a group. `replace_file` and `replace_dir` first give the temporary its
+umask mode (0644 / 0755 under umask 022).
+"""
 
 from __future__ import annotations
 
@@ -9,6 +16,32 @@ from collections.abc import Callable
 from pathlib import Path
 
 
+def current_umask() -> int:
+    """The process's umask, read without changing it (Linux: /proc/self/status)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)  # elsewhere: set and restore (not thread-safe, hence the fallback only)
+    os.umask(mask)
+    return mask
+
+
+def umask_mode(path: str | os.PathLike) -> None:
+    """Give ``path`` the mode a new file (0666) or folder (0777) gets under the umask."""
+    base = 0o777 if os.path.isdir(path) else 0o666
+    os.chmod(path, base & ~current_umask())
+
+
+def replace_file(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
+    """`os.replace` the finished temporary file ``tmp`` onto ``path``, with the umask mode."""
+    umask_mode(tmp)
+    os.replace(tmp, path)
+
+
 def replace_dir(tmp: Path, out: Path, *, accept_existing: Callable[[Path], bool] = lambda path: False) -> None:
     """Rename the finished folder ``tmp`` to ``out``, replacing an older ``out``.
 
@@ -17,6 +50,7 @@ def replace_dir(tmp: Path, out: Path, *, accept_existing: Callable[[Path], bool]
     meanwhile is kept when ``accept_existing(out)`` says it is equivalent; otherwise
     the older folder is restored and the error re-raised, so no result is lost.
     """
+    umask_mode(tmp)
     trash = None
     if out.exists():
         trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))

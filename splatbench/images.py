@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from splatbench.fsutil import replace_file
+
 
 def to_uint8(rgb: np.ndarray) -> np.ndarray:
     """[H, W, 3] or [H, W] floats in [0, 1] -> uint8 (clipped; NaN becomes 0)."""
@@ -24,7 +26,7 @@ def save_png(image: np.ndarray, path: str | Path) -> Path:
     os.close(fd)
     try:
         Image.fromarray(to_uint8(image)).save(tmp, format="PNG")
-        os.replace(tmp, path)
+        replace_file(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -28,6 +28,7 @@ import tempfile
 import numpy as np
 
 from splatbench.errors import InputError
+from splatbench.fsutil import replace_file
 from splatbench.gaussians import SH_BASES, Gaussians
 
 _BASE_HEAD = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
@@ -61,7 +62,7 @@ def to_vertex_array(gaussians: Gaussians) -> np.ndarray:
     columns[:, 6:9] = sh[:, 0, :]
     rest = 9 + 3 * (k_full - 1)
     # channel-major: column 15·c + (k-1) holds sh[:, k, c]
-    columns[:, 9:rest] = np.transpose(sh[:, 1:, :], (0, 2, 1)).reshape(n, -1)
+    columns[:, 9:rest] = np.transpose(sh[:, 1:, :], (0, 2, 1)).reshape(n, 3 * (k_full - 1))  # n may be 0
     columns[:, rest] = gaussians.opacity_logits
     columns[:, rest + 1:rest + 4] = gaussians.log_scales
     columns[:, rest + 4:rest + 8] = gaussians.quats
@@ -85,7 +86,7 @@ def write_ply(gaussians: Gaussians, path: str | os.PathLike) -> None:
                     comments=[f"{_DEGREE_COMMENT}{gaussians.sh_degree}"]).write(stream)
             stream.flush()
             os.fsync(stream.fileno())
-        os.replace(tmp, path)
+        replace_file(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)

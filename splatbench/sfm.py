@@ -59,7 +59,9 @@ class Similarity:
 
     def to_pycolmap(self) -> Any:
         """The same transform as a ``pycolmap.Sim3d`` (new_from_old_world)."""
-        import pycolmap
+        from splatbench.interrupt import import_pycolmap
+
+        pycolmap = import_pycolmap()
 
         return pycolmap.Sim3d(self.scale, pycolmap.Rotation3d(self.rotation), self.translation.reshape(3, 1))
 
@@ -170,7 +172,9 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
     Raises:
         InputError: fewer than 3 training views, or no model with 3 registered views.
     """
-    import pycolmap
+    from splatbench.interrupt import import_pycolmap
+
+    pycolmap = import_pycolmap()
 
     from splatbench.data import Dataset, load_dataset
 

@@ -363,7 +363,7 @@ def test_sigkill_at_random_points_then_resume_loses_and_duplicates_nothing(tmp_p
     out, _ = proc.communicate(timeout=120)
     assert proc.returncode == 0, log.read_text()[-3000:]
     assert out.decode().strip().splitlines()[-1] == f"done {12 - len(finished_before)}, " \
-                                                    f"skipped {len(finished_before)}, failed 0 of 12"
+        f"skipped {len(finished_before)} (finished), 0 claimed by another runner, failed 0 of 12"
 
     files = _result_files(folder)
     ids = {r.run_id for r in expand(spec)}

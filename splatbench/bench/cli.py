@@ -36,11 +36,14 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
     from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, load_average, machine_info,
                                          parse_synthetic, parse_workload, run_suite, standard_suite, write_csv,
                                          write_json)
+    from splatbench.checks import check_image_size
     from splatbench.commands.render import parse_options
 
     settings = BenchSettings(repeats=repeats, device=device, options=parse_options(options))
     settings.validate()
     specs = [parse_synthetic(count, size, seed) for count, size in synthetic]
+    for spec in specs:  # before any workload runs (Dr.Jit's array limit, this machine's memory)
+        check_image_size(spec.width, spec.height, field="--synthetic")
     specs += [parse_workload(w) for w in workloads]
     if not specs:
         specs = standard_suite(seed)

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from splatbench.checks import check_image_size
 from splatbench.errors import InputError
 
 
@@ -33,14 +34,23 @@ def parse_options(pairs: tuple[str, ...]) -> dict:
 
 
 def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0):
-    """A look-at camera that frames the central 98 % of the Gaussians from -z."""
+    """A look-at camera that frames the central 98 % of the Gaussians from -z.
+
+    The framed radius is at least 3 standard deviations of the largest of those
+    Gaussians (so one Gaussian, or several at one point, fill the view rather than
+    vanish), and the near plane is 1 % of the camera's distance (so a small scene is
+    not clipped by the default near plane)."""
     from splatbench import Camera
 
+    if len(gaussians) == 0:
+        raise InputError("gaussians: 0 Gaussians, nothing to frame or render")
     lo, hi = np.percentile(gaussians.means, [1, 99], axis=0)
-    center, radius = (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
+    center = (lo + hi) / 2
+    sigma = float(np.percentile(np.exp(np.clip(gaussians.log_scales, -20, 20)).max(axis=1), 99))
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 3 * sigma, 1e-6)
     distance = radius / np.tan(np.radians(fov_x_deg) / 2) * 1.2
     return Camera.look_at(center - np.array([0.0, 0.0, distance]), center, np.array([0.0, -1.0, 0.0]),
-                          width, height, fov_x_deg)
+                          width, height, fov_x_deg, near=min(0.01, distance / 100))
 
 
 @click.command()
@@ -56,12 +66,18 @@ def render(source: Path, out: Path | None, view: int, size: str, sh_degree: int 
     from splatbench.images import save_png
     from splatbench.workloads import load_npz
 
+    out = out or source.with_suffix(".png")
+    if out.is_dir():
+        raise InputError(f"--out: {str(out)!r} is a folder; give the path of the PNG to write")
     if source.suffix == ".ply":
-        gaussians = splatbench.Gaussians.from_ply(source)
         try:
             width, height = (int(v) for v in size.lower().split("x"))
         except ValueError:
             raise InputError(f"--size: expected WxH, got {size!r}") from None
+        check_image_size(width, height, field="--size")
+        gaussians = splatbench.Gaussians.from_ply(source)
+        if len(gaussians) == 0:
+            raise InputError(f"source: {str(source)!r} holds 0 Gaussians (an empty vertex element); nothing to render")
         camera = framing_camera(gaussians, width, height)
     elif source.suffix == ".npz":
         workload = load_npz(source, view=view)
@@ -69,5 +85,5 @@ def render(source: Path, out: Path | None, view: int, size: str, sh_degree: int 
     else:
         raise InputError(f"source: expected a .ply or .npz file, got {str(source)!r}")
     result = splatbench.render(gaussians, camera, sh_degree=sh_degree, **parse_options(options))
-    path = save_png(result.rgb, out or source.with_suffix(".png"))
+    path = save_png(result.rgb, out)
     click.echo(f"rendered {len(gaussians)} Gaussians at {camera.width}x{camera.height}: {path.resolve()}")

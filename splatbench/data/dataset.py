@@ -145,7 +145,9 @@ def _colmap_folder(root: Path) -> Path | None:
 
 
 def _load_colmap(root: Path, test_every: int, images_dir: str, bg: np.ndarray) -> Dataset:
-    import pycolmap
+    from splatbench.interrupt import import_pycolmap
+
+    pycolmap = import_pycolmap()
 
     sparse = _colmap_folder(root)
     if sparse is None:
@@ -168,7 +170,11 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, bg: np.ndarray) -
         raise InputError(f"{rel_sparse}/images.{ext}: no registered images")
     views = []
     for im in images:
-        camera = Camera.from_colmap(rec.cameras[im.camera_id], im)
+        try:
+            camera = Camera.from_colmap(rec.cameras[im.camera_id], im)
+        except InputError as exc:  # e.g. a truncated cameras.bin read as zero focal lengths
+            raise InputError(f"{sparse / f'cameras.{ext}'}: camera {im.camera_id} of image {im.name!r}: {exc} "
+                             f"(a damaged model? export it from COLMAP again)") from None
         rel = f"{images_dir}/{im.name}"
         rgb, alpha = _read_image(root, rel, bg, f"named by {rel_sparse}/images.{ext}")
         camera = _fit_camera(camera, rgb, rel, scale_ok=images_dir != "images")

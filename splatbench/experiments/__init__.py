@@ -3,12 +3,14 @@
     spec = load_experiment("experiments/sh_degree.toml")   # ExperimentSpec, fully checked
     runs = expand(spec)                                      # list[RunSpec], deterministic order
     summary = run_experiment(spec, workers=2, executor="local", results_dir="results")
-    summary.line()                                           # "done 12, skipped 0, failed 0 of 12"
+    summary.line()        # "done 12, skipped 0 (finished), 0 claimed by another runner, failed 0 of 12"
     table = read_table("results/sh_degree")                  # pandas DataFrame, one row per run
 
 Modules: `spec` (file format, dotted keys), `grid` (expansion, run ids), `kinds`
 (run-kind registry, the test-only ``dummy``), `store` (atomic per-run files, the
-parquet table), `runner` (local and Dask executors), `cli` (``splatbench run``).
+parquet table), `runner` (local and Dask executors), `claims` (per-run claims shared
+by concurrent runners), `workers` (worker processes that die with their runner),
+`cli` (``splatbench run``).
 See docs/experiments.md.
 """
 

@@ -22,10 +22,12 @@ import click
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
 def run(experiment: Path, workers: int | None, executor: str | None, scheduler: str | None, results: Path | None,
         dry_run: bool, progress: bool) -> None:
-    """Run every pending run of EXPERIMENT.toml and print "done D, skipped S, failed F of T".
+    """Run every pending run of EXPERIMENT.toml and print "done D, skipped S (finished),
+    C claimed by another runner, failed F of T".
 
     Runs whose result says done are skipped, so an interrupted sweep resumes where it
-    stopped; failed runs are tried again. Exits with status 1 when a run failed.
+    stopped; failed runs are tried again; runs another live runner holds are left to
+    it. Exits with status 1 when a run failed.
     """
     from splatbench.experiments.runner import run_experiment
     from splatbench.experiments.spec import load_experiment

@@ -12,6 +12,14 @@ killed at any point therefore loses nothing that finished, and the next
 invocation resumes from the files. After every finished run the parent rewrites
 the table (``results.parquet``) from the records, so it is in step with the files.
 
+Runners sharing an experiment (two ``splatbench run`` at once, on one host or on
+hosts sharing the results folder) split its grid: each run is claimed before it is
+submitted (`splatbench.experiments.claims`) and the table is rewritten from the
+files on disk (`store.save_table`), so every run is done once and the table holds
+one row per run. Workers die with their runner (`splatbench.experiments.workers`);
+a runner stopped by SIGTERM / SIGINT stops its workers and releases its claims
+before it raises `splatbench.interrupt.Interrupted`.
+
 Executors:
     local  `concurrent.futures.ProcessPoolExecutor` (``spawn``), ``workers`` processes.
            At most ``workers`` runs are in flight, so when a worker process dies
@@ -31,8 +39,8 @@ loaded), so that parallel runs do not oversubscribe the machine.
 
 from __future__ import annotations
 
-import atexit
 import concurrent.futures as cf
+import gc
 import logging
 import multiprocessing
 import os
@@ -47,34 +55,41 @@ from pathlib import Path
 from typing import Any
 
 from splatbench.errors import InputError
+from splatbench.experiments.claims import HEARTBEAT_EVERY, Claim, remove_stale_claim_temps, try_claim
 from splatbench.experiments.grid import RunSpec, expand
 from splatbench.experiments.kinds import check_output, get_kind
 from splatbench.experiments.spec import EXECUTORS, ExperimentSpec, check_scheduler
 from splatbench.experiments.store import (WORK_DIR, RunRecord, experiment_dir, read_record, read_records,
-                                          remove_stale_temps, result_path, worker_name, write_record, write_table)
+                                          remove_stale_temps, result_path, save_table, worker_name, write_record)
+from splatbench.experiments.workers import RUNNER_ENV, THREADS_ENV, die_with_runner, init_worker, runner_id
+from splatbench.interrupt import Interrupted, deferred
 
-THREADS_ENV = "SPLATBENCH_WORKER_THREADS"
 
 
 @dataclass(frozen=True)
 class RunSummary:
     """What one invocation did: ``done`` ran and succeeded now, ``skipped`` were
-    already done, ``failed`` ran and failed now; done + skipped + failed == total."""
+    already done (by an earlier invocation or, meanwhile, by another runner),
+    ``failed`` ran and failed now, ``claimed`` were held by another live runner
+    (see `splatbench.experiments.claims`); the four add up to ``total``."""
 
     done: int
     skipped: int
     failed: int
     total: int
     folder: Path
+    claimed: int = 0
 
     def line(self) -> str:
-        return f"done {self.done}, skipped {self.skipped}, failed {self.failed} of {self.total}"
+        return (f"done {self.done}, skipped {self.skipped} (finished), {self.claimed} claimed by another runner, "
+                f"failed {self.failed} of {self.total}")
 
 
 # --------------------------------------------------------------------------- worker side
 def execute_run(run: RunSpec, results_dir: str) -> dict[str, Any]:
     """Run ``run`` in this process, write its result file atomically, return the record
     (as a dict). A failing kind gives a ``failed`` record with a one-line error."""
+    die_with_runner(os.environ.get(RUNNER_ENV, ""))
     started, t0 = datetime.now().astimezone(), time.perf_counter()
     workdir = experiment_dir(results_dir, run.experiment) / WORK_DIR / run.run_id
     record = RunRecord(run_id=run.run_id, experiment=run.experiment, kind=run.kind, scene=run.scene, seed=run.seed,
@@ -108,22 +123,6 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _init_worker(threads: int) -> None:
-    """Pool initializer: bound the worker's threads (module doc), and make it leave
-    with `os._exit` once the pool shuts it down: its results are on disk already, and
-    the interpreter's teardown of torch and Dr.Jit costs seconds per worker."""
-    os.environ[THREADS_ENV] = str(threads)
-    if "torch" in sys.modules:
-        sys.modules["torch"].set_num_threads(threads)
-    atexit.register(_fast_exit)  # registered last, so it runs first
-
-
-def _fast_exit() -> None:
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(0)
-
-
 # --------------------------------------------------------------------------- executors
 class _LocalExecutor:
     """A spawn process pool with at most ``workers`` runs in flight."""
@@ -136,7 +135,7 @@ class _LocalExecutor:
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
         return cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                      initializer=_init_worker, initargs=(self.threads,))
+                                      initializer=init_worker, initargs=(self.threads, runner_id()))
 
     @property
     def capacity(self) -> int:
@@ -145,8 +144,8 @@ class _LocalExecutor:
     def submit(self, run: RunSpec, results_dir: str):
         return self.pool.submit(execute_run, run, results_dir)
 
-    def wait(self, futures) -> set:
-        done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
+    def wait(self, futures, timeout: float | None = None) -> set:
+        done, _ = cf.wait(futures, timeout=timeout, return_when=cf.FIRST_COMPLETED)
         return done
 
     @staticmethod
@@ -160,7 +159,22 @@ class _LocalExecutor:
         self.pool = self._new_pool()
 
     def close(self, cancel: bool = False) -> None:
+        """Shut the pool down; with ``cancel``, stop the running workers too (SIGTERM,
+        then SIGKILL after 5 s), so that none outlives an interrupted runner."""
+        processes = list((getattr(self.pool, "_processes", None) or {}).values()) if cancel else []
+        for proc in processes:
+            proc.terminate()
         self.pool.shutdown(wait=not cancel, cancel_futures=cancel)
+        deadline = time.monotonic() + 5.0
+        for proc in processes:
+            proc.join(max(0.0, deadline - time.monotonic()))
+            if proc.is_alive():
+                proc.kill()
+                proc.join(1.0)
+        if cancel:  # the workers are gone: let the pool's manager thread end and free its semaphores
+            self.pool.shutdown(wait=True)
+            self.pool = None
+            gc.collect()
 
 
 class _DaskExecutor:
@@ -175,7 +189,7 @@ class _DaskExecutor:
         if scheduler is None:
             self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                         dashboard_address=None, silence_logs=logging.ERROR,
-                                        env={THREADS_ENV: str(threads)})
+                                        env={THREADS_ENV: str(threads), RUNNER_ENV: runner_id()})
             self.client = Client(self.cluster)
         else:
             self.client = Client(scheduler)
@@ -189,10 +203,13 @@ class _DaskExecutor:
         return self.client.submit(execute_run, run, results_dir, key=f"run-{run.run_id}-{os.urandom(4).hex()}",
                                   pure=False)
 
-    def wait(self, futures) -> set:
+    def wait(self, futures, timeout: float | None = None) -> set:
         from distributed import wait
 
-        done, _ = wait(list(futures), return_when="FIRST_COMPLETED")
+        try:
+            done, _ = wait(list(futures), timeout=timeout, return_when="FIRST_COMPLETED")
+        except TimeoutError:  # asyncio's, the builtin since Python 3.11
+            return set()
         return set(done)
 
     @staticmethod
@@ -235,16 +252,14 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     folder = experiment_dir(results_dir, spec.name)
     folder.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(folder)
-    ids = {r.run_id for r in runs}
-    records = {rid: rec for rid, rec in read_records(folder).items() if rid in ids}
+    remove_stale_claim_temps(folder)
+    ids = [r.run_id for r in runs]
+    records = {rid: rec for rid, rec in read_records(folder).items() if rid in set(ids)}
     pending = [r for r in runs if r.run_id not in records or records[r.run_id].status != "done"]
     skipped = len(runs) - len(pending)
 
-    def save_table() -> None:
-        write_table(folder, [records[r.run_id] for r in runs if r.run_id in records])
-
-    save_table()
     log = _logger(progress)
+    save_table(folder, ids)
     log(f"{spec.name}: {len(runs)} runs, {skipped} already done, {len(pending)} to run "
         f"({executor}, {workers} worker{'s' * (workers != 1)}); results in {folder}")
     if not pending:
@@ -255,17 +270,43 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
         kind.prepare([_plain(r.config) for r in pending])
 
     threads = max(1, cpus // workers)
-    done = failed = 0
+    done = failed = claimed = 0
+    claims: dict[str, Claim] = {}
     bar = _progress_bar(len(pending), spec.name, progress)
+
+    def admit(run: RunSpec) -> bool:
+        """Claim ``run`` before it is submitted; False when another runner holds it or
+        finished it meanwhile."""
+        nonlocal skipped, claimed
+        claim = try_claim(folder, run.run_id)
+        if claim is None:
+            claimed += 1
+        else:
+            record = read_record(result_path(results_dir, spec.name, run.run_id))
+            if record is None or record.status != "done":
+                claims[run.run_id] = claim
+                return True
+            claim.release()
+            skipped += 1
+        if bar is not None:
+            bar.update(1)
+        return False
+
+    def heartbeat() -> None:
+        for claim in list(claims.values()):
+            claim.touch()
 
     def finish(record: RunRecord) -> None:
         nonlocal done, failed
-        on_disk = read_record(result_path(results_dir, spec.name, record.run_id))
-        if on_disk is None or on_disk.to_dict() != record.to_dict():
-            # a failure the parent recorded, or a remote worker without a shared results folder
-            write_record(results_dir, record)
-        records[record.run_id] = record
-        save_table()
+        with deferred():  # a record and its claim change together
+            on_disk = read_record(result_path(results_dir, spec.name, record.run_id))
+            if on_disk is None or on_disk.to_dict() != record.to_dict():
+                # a failure the parent recorded, or a remote worker without a shared results folder
+                write_record(results_dir, record)
+            claim = claims.pop(record.run_id, None)
+            if claim is not None:
+                claim.release()
+            save_table(folder, ids)
         if record.status == "done":
             done += 1
         else:
@@ -279,40 +320,70 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
 
     pool = _LocalExecutor(workers, threads) if executor == "local" else _DaskExecutor(workers, threads, scheduler)
     try:
-        _drive(pool, pending, str(results_dir), finish)
-    except BaseException:
-        pool.close(cancel=True)
+        _drive(pool, pending, str(results_dir), finish, admit=admit, heartbeat=heartbeat)
+    except BaseException as exc:
+        with deferred():
+            pool.close(cancel=True)
+            stopped = len(claims)
+            for claim in claims.values():
+                claim.release()
+            claims.clear()
+        if isinstance(exc, Interrupted):
+            raise Interrupted(exc.signum, f"kept {done} runs finished now in {folder}; {stopped} in flight "
+                                          f"stopped (they run again next time)") from None
         raise
     else:
         pool.close()
     finally:
         if bar is not None:
             bar.close()
-    summary = RunSummary(done=done, skipped=skipped, failed=failed, total=len(runs), folder=folder)
-    return summary
+    return RunSummary(done=done, skipped=skipped, failed=failed, total=len(runs), folder=folder, claimed=claimed)
 
 
-def _drive(pool, pending: list[RunSpec], results_dir: str, finish: Callable[[RunRecord], None]) -> None:
-    """Submit runs (at most ``pool.capacity`` in flight), collect them, recover from a
-    broken local pool: suspects (runs in flight when a worker died) are retried one at
-    a time; a suspect that breaks the pool alone is recorded as failed."""
+def _drive(pool, pending: list[RunSpec], results_dir: str, finish: Callable[[RunRecord], None], *,
+           admit: Callable[[RunSpec], bool] = lambda run: True, heartbeat: Callable[[], None] = lambda: None) -> None:
+    """Submit runs (at most ``pool.capacity`` in flight, each only once ``admit`` says
+    so), collect them, recover from a broken local pool: suspects (runs in flight when
+    a worker died) are retried one at a time; a suspect that breaks the pool alone is
+    recorded as failed. ``heartbeat`` is called at least every `HEARTBEAT_EVERY` s."""
     queue: deque[RunSpec] = deque(pending)
+    ready: deque[RunSpec] = deque()  # admitted, not yet submitted (the pool broke at submission)
     suspects: deque[RunSpec] = deque()
     inflight: dict[Any, RunSpec] = {}
     isolating = False
-    while queue or suspects or inflight:
+
+    def submit(run: RunSpec, back: deque[RunSpec]) -> bool:
+        try:
+            inflight[pool.submit(run, results_dir)] = run
+            return True
+        except Exception as exc:  # a worker died since the last wait: the pool refuses new work
+            if not pool.broken(exc):
+                raise
+            back.appendleft(run)
+            return False
+
+    while queue or ready or suspects or inflight:
         if not inflight:
             isolating = bool(suspects)
+        broke = False
         if isolating:
             if not inflight and suspects:
-                run = suspects.popleft()
-                inflight[pool.submit(run, results_dir)] = run
+                broke = not submit(suspects.popleft(), suspects)
         else:
-            while queue and len(inflight) < pool.capacity:
-                run = queue.popleft()
-                inflight[pool.submit(run, results_dir)] = run
-        broke = False
-        for fut in pool.wait(inflight):
+            while (ready or queue) and len(inflight) < pool.capacity and not broke:
+                if ready:
+                    broke = not submit(ready.popleft(), ready)
+                else:
+                    run = queue.popleft()
+                    if admit(run):
+                        broke = not submit(run, ready)
+        if broke and not inflight:
+            pool.restart()
+            continue
+        if not inflight:
+            continue
+        heartbeat()
+        for fut in pool.wait(inflight, timeout=HEARTBEAT_EVERY):
             run = inflight.pop(fut)
             exc = fut.exception()
             if exc is None:
@@ -365,4 +436,4 @@ def _logger(enabled: bool) -> Callable[[str], None]:
     return log
 
 
-__all__ = ["RunSummary", "run_experiment", "execute_run", "one_line", "THREADS_ENV"]
+__all__ = ["RunSummary", "run_experiment", "execute_run", "one_line", "THREADS_ENV", "RUNNER_ENV"]

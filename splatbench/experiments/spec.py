@@ -345,6 +345,8 @@ def load_experiment(path: str | Path, *, known_scenes: Callable[[], set[str]] | 
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise InputError(f"experiment: cannot read {str(p)!r} ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"experiment: {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

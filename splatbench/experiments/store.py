@@ -23,6 +23,7 @@ when and where it ran), then ``axis.<name>`` (the run's axis labels),
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import re
@@ -233,6 +234,18 @@ def write_table(folder: str | Path, records: Iterable[RunRecord]) -> Path:
     return atomic_write(Path(folder) / TABLE_NAME, lambda temp: frame.to_parquet(temp, index=False))
 
 
+def save_table(folder: str | Path, ids: list[str]) -> Path:
+    """Rewrite ``results.parquet`` from the result files on disk: one row per run of the
+    grid ``ids`` that has a record, in grid order. Runners sharing the experiment
+    serialise this on ``.table.lock`` (flock), so the last table written holds every
+    record written before it."""
+    folder = Path(folder)
+    with open(folder / ".table.lock", "a+b") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        records = read_records(folder)
+        return write_table(folder, [records[i] for i in ids if i in records])
+
+
 def read_table(folder: str | Path) -> pd.DataFrame:
     """``<folder>/results.parquet`` as a DataFrame."""
     return pd.read_parquet(Path(folder) / TABLE_NAME)
@@ -240,4 +253,4 @@ def read_table(folder: str | Path) -> pd.DataFrame:
 
 __all__ = ["RunRecord", "RECORD_FORMAT", "TABLE_NAME", "WORK_DIR", "STATUSES", "CORE_COLUMNS", "VOLATILE_COLUMNS",
            "experiment_dir", "result_path", "atomic_write", "write_record", "read_record", "read_records",
-           "remove_stale_temps", "build_table", "write_table", "read_table", "worker_name"]
+           "remove_stale_temps", "build_table", "write_table", "save_table", "read_table", "worker_name"]

@@ -30,6 +30,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from splatbench.checks import check_image_size
 from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
 
@@ -91,6 +92,8 @@ def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]
             raise InputError(f"data.{key}: unknown key (known: {', '.join(DATA_FIELDS)})")
         if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
             raise InputError(f"data.{key}: expected an int >= 1, got {value!r}")
+    if data.get("resolution") is not None:  # the width; checked as a square image (the rigs are square)
+        check_image_size(data["resolution"], data["resolution"], field="data.resolution", memory=False)
     if data.get("views") is not None and data["views"] < 2:
         raise InputError(f"data.views: expected at least 2 views (one is held out), got {data['views']}")
     train = {k: v for k, v in config.items() if k not in ("scene", "data")}

@@ -57,10 +57,25 @@ def resolve_sh_degree(num_bases: int, sh_degree: int | None) -> int:
 
 
 def check_background(background) -> tuple[float, float, float]:
-    bg = np.asarray(background if background is not None else (0.0, 0.0, 0.0), dtype=np.float64).reshape(-1)
-    if bg.shape != (3,) or not np.isfinite(bg).all():
-        raise InputError(f"background: expected 3 finite values, got {np.asarray(background).tolist()!r}")
+    """An RGB background: 3 values in [0, 1] (colours are not clamped, so a value
+    outside would shine through every translucent splat)."""
+    try:
+        bg = np.asarray(background if background is not None else (0.0, 0.0, 0.0), dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputError(f"background: expected 3 values in [0, 1], got {background!r}") from None
+    if bg.shape != (3,) or not np.isfinite(bg).all() or (bg < 0).any() or (bg > 1).any():
+        raise InputError(f"background: expected 3 values in [0, 1], got {np.asarray(background).tolist()!r}")
     return tuple(float(c) for c in bg)
+
+
+def check_clip_planes(camera, options: RasterOptions) -> None:
+    """The near and far planes in effect (the options', else the camera's) must have
+    0 < near < far; otherwise every Gaussian is culled and the image is blank."""
+    near = camera.near if options.near is None else options.near
+    far = camera.far if options.far is None else options.far
+    if not near < far:
+        raise InputError(f"near, far: expected near < far, got near={near!r}, far={far!r} "
+                         f"(options, else the camera's)")
 
 
 def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int,
@@ -84,9 +99,11 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
                    camera.width, camera.height, eps2d=options.eps2d, near=near, far=far,
                    radius=options.radius, alpha_min=options.alpha_min, antialiased=options.antialiased)
     m = array_namespace(means.array)
-    center = camera.center
+    # the camera centre enters as opaque values, like the projection's camera constants:
+    # as literals, every view compiled SH kernels of its own (degree >= 1)
+    cx, cy, cz = (dr.opaque(m.Float, float(c)) for c in camera.center)
     mx, my, mz = columns(means, 3)
-    d = m.Array3f(mx - float(center[0]), my - float(center[1]), mz - float(center[2]))
+    d = m.Array3f(mx - cx, my - cy, mz - cz)
     norm = dr.safe_sqrt(dr.squared_norm(d))
     dirs = d * (1.0 / dr.select(norm > 0, norm, 1.0))
     colors = eval_sh(sh, dirs, sh_degree)
@@ -132,4 +149,5 @@ def frame_to_numpy(frame: Frame, height: int, width: int) -> tuple[np.ndarray, n
     return rgb, alpha, depth
 
 
-__all__ = ["Frame", "render_frame", "frame_to_numpy", "resolve_sh_degree", "check_background", "Composite"]
+__all__ = ["Frame", "render_frame", "frame_to_numpy", "resolve_sh_degree", "check_background", "check_clip_planes",
+           "Composite"]

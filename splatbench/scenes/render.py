@@ -387,7 +387,9 @@ def _save_png_u8(rgb: np.ndarray, path: Path) -> None:
 
 def _write_colmap(folder: Path, plan: RenderPlan, xyz: np.ndarray, colors: np.ndarray, view: np.ndarray,
                   pixel: np.ndarray) -> None:
-    import pycolmap
+    from splatbench.interrupt import import_pycolmap
+
+    pycolmap = import_pycolmap()
 
     folder.mkdir(parents=True)
     rec = pycolmap.Reconstruction()

@@ -235,6 +235,8 @@ def load_config(path: str | Path) -> TrainConfig:
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise InputError(f"config: cannot read {str(p)!r} ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"config: {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
     return TrainConfig.from_toml(text, source=str(p))
 
 

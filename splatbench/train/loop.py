@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 from splatbench.errors import InputError
+from splatbench.interrupt import Interrupted, deferred
 from splatbench.raster.torch_bridge import rasterize
 from splatbench.strategies.base import StepContext
 from splatbench.train.config import TrainConfig, save_config
@@ -248,6 +249,23 @@ class Trainer:
         total = float(loss.detach()) + float(reg.detach() if isinstance(reg, torch.Tensor) else reg)
         return StepStatus(step, total, psnr(rgb.detach(), target), self.num_gaussians, degree)
 
+    # ------------------------------------------------------------------ warm-up
+    def warm_up(self) -> None:
+        """Compile (or load from Dr.Jit's cache) every rasterizer kernel training and
+        evaluation will use -- forward and backward at each SH degree the schedule can
+        reach, and the forward without gradients -- so that no timed section pays for
+        compilation. Changes no parameter, optimizer state or random stream: the
+        gradients it leaves are cleared by the next step's ``zero_grad``."""
+        camera = self.dataset.train.cameras[0]
+        for degree in range(self.config.max_sh_degree + 1):
+            rgb, _, _, _ = self._render(camera, degree, self.background.tolist())
+            if rgb.requires_grad:
+                rgb.sum().backward()
+            with torch.no_grad():
+                self._render(camera, degree, self.background.tolist())
+        for opt in self.optimizers.values():
+            opt.zero_grad(set_to_none=True)
+
     # ------------------------------------------------------------------ SH probe
     @torch.no_grad()
     def probe_band(self, band: int) -> BandMeasure:
@@ -301,11 +319,13 @@ def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None 
     Every input problem (config field, dataset, initialisation) is a one-line
     `InputError` raised before the first render. Writes under ``config.out``:
     ``config.toml`` (the resolved config), ``checkpoints/iteration_<step>.ply`` every
-    ``checkpoint_every`` steps with the full state beside it (``iteration_<step>.pt``,
-    `splatbench.train.checkpoint`), ``point_cloud.ply`` (the final model) and
-    ``result.json``. ``progress`` is called after every step; ``dataset`` (a loaded
-    `splatbench.data.Dataset`) replaces reading ``config.dataset``; ``resume`` (a
-    ``.pt`` checkpoint of a run with the same config) continues that run exactly.
+    ``checkpoint_every`` steps and when a stop signal ends training early (then
+    `splatbench.interrupt.Interrupted` is raised, naming that checkpoint), each with the
+    full state beside it (``iteration_<step>.pt``, `splatbench.train.checkpoint`),
+    ``point_cloud.ply`` (the final model) and ``result.json``. ``progress`` is called
+    after every step; ``dataset`` (a loaded `splatbench.data.Dataset`) replaces reading
+    ``config.dataset``; ``resume`` (a ``.pt`` checkpoint of a run with the same config)
+    continues that run exactly.
 
     Example::
 
@@ -328,11 +348,37 @@ def torch_threads(n: int):
         torch.set_num_threads(before)
 
 
+def checkpoint_path(out: str | Path, step: int) -> Path:
+    """``<out>/checkpoints/iteration_<step>.ply``: the model after ``step`` steps (its full
+    state, for ``resume``, is the ``.pt`` file beside it)."""
+    return Path(out) / "checkpoints" / f"iteration_{step}.ply"
+
+
+def _save_checkpoint(trainer: Trainer, out: Path, extra: dict) -> Path:
+    """Write the model after the last finished step (PLY) and its full state (``.pt``),
+    with stop signals held while they are written; return the PLY's path."""
+    from splatbench.train.checkpoint import save_checkpoint
+
+    path = checkpoint_path(out, trainer.step_index)
+    with deferred():
+        if not path.is_file():  # written already when the signal came right after a checkpoint
+            trainer.save_ply(path)
+            save_checkpoint(trainer, path.with_suffix(".pt"), extra=extra)
+    return path
+
+
 def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
     from splatbench.bench.memory import peak_rss_mb
-    from splatbench.train.checkpoint import load_checkpoint, save_checkpoint
+    from splatbench.train.checkpoint import load_checkpoint
 
-    trainer = Trainer(config, dataset=dataset)
+    out = Path(config.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"out: {str(out)!r} is a file, not a folder; choose another output folder")
+    try:
+        trainer = Trainer(config, dataset=dataset)
+    except Interrupted as exc:
+        raise Interrupted(exc.signum, "nothing kept: training had not started (loading the dataset, "
+                                      "initialising)") from None
     history: list[HistoryPoint] = []
     evaluations: list[EvalPoint] = []
     loop_seconds = 0.0
@@ -340,32 +386,47 @@ def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
         extra = load_checkpoint(trainer, resume)
         history, evaluations = list(extra.get("history", [])), list(extra.get("evaluations", []))
         loop_seconds = float(extra.get("loop_seconds", 0.0))
-    out = Path(config.out)
     save_config(config, out / "config.toml")
     lpips_fn, lpips_note = lpips_metric()
+
+    def state() -> dict:
+        return {"history": history, "evaluations": evaluations, "loop_seconds": loop_seconds}
+
     status = None
-    for _ in range(config.iterations - trainer.step_index):
+    try:
         t0 = time.perf_counter()
-        status = trainer.step()
+        trainer.warm_up()  # outside every timed section (TrainResult.warmup_seconds); touches no state
+        warmup_seconds = time.perf_counter() - t0
+        for _ in range(config.iterations - trainer.step_index):
+            with deferred():  # a stop signal ends the run between steps, never inside one
+                t0 = time.perf_counter()
+                status = trainer.step()
+                loop_seconds += time.perf_counter() - t0
+            done = trainer.step_index
+            if status.step % config.log_every == 0 or done == config.iterations:
+                history.append(HistoryPoint(status.step, status.loss, status.psnr, status.num_gaussians))
+            if progress is not None:
+                progress(status)
+            if config.eval_every and done % config.eval_every == 0 and done < config.iterations:
+                ev = trainer.evaluate()
+                if ev.psnr is not None:
+                    evaluations.append(EvalPoint(done, ev.psnr, ev.ssim))
+            if config.checkpoint_every and done % config.checkpoint_every == 0:
+                _save_checkpoint(trainer, out, state())
+        t0 = time.perf_counter()
+        trainer.sh.finish(trainer.step_index, trainer.probe_band)
         loop_seconds += time.perf_counter() - t0
-        done = trainer.step_index
-        if status.step % config.log_every == 0 or done == config.iterations:
-            history.append(HistoryPoint(status.step, status.loss, status.psnr, status.num_gaussians))
-        if progress is not None:
-            progress(status)
-        if config.eval_every and done % config.eval_every == 0 and done < config.iterations:
-            ev = trainer.evaluate()
-            if ev.psnr is not None:
-                evaluations.append(EvalPoint(done, ev.psnr, ev.ssim))
-        if config.checkpoint_every and done % config.checkpoint_every == 0:
-            trainer.save_ply(out / "checkpoints" / f"iteration_{done}.ply")
-            save_checkpoint(trainer, out / "checkpoints" / f"iteration_{done}.pt",
-                            extra={"history": history, "evaluations": evaluations, "loop_seconds": loop_seconds})
-    t0 = time.perf_counter()
-    trainer.sh.finish(trainer.step_index, trainer.probe_band)
-    loop_seconds += time.perf_counter() - t0
-    ply = trainer.save_ply(out / "point_cloud.ply")
-    ev = trainer.evaluate(lpips_fn)
+        with deferred():
+            ply = trainer.save_ply(out / "point_cloud.ply")
+    except Interrupted as exc:
+        path = _save_checkpoint(trainer, out, state())
+        raise Interrupted(exc.signum, f"kept the last checkpoint {path} (the model after step "
+                                      f"{trainer.step_index} of {config.iterations}; resume with "
+                                      f"--resume {path.with_suffix('.pt')})") from None
+    try:
+        ev = trainer.evaluate(lpips_fn)
+    except Interrupted as exc:
+        raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
     notes = ([trainer.init_note] if trainer.init_note else []) + [trainer.background_note] \
         + ([] if lpips_fn is not None else [lpips_note])
     if ev.views == 0:
@@ -378,7 +439,8 @@ def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
         sh_degree_reason=trainer.sh.reason, ply_path=str(ply), render_ms_per_view=ev.render_ms_per_view,
         peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,
         test_views=ev.views, history=history, evaluations=evaluations,
-        sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary)
+        sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary,
+        warmup_seconds=round(warmup_seconds, 3))
     (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
     return result
 

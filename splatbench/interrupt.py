@@ -1,0 +1,127 @@
+"""Stopping cleanly on SIGTERM and SIGINT (docs/robustness.md).
+
+Batch systems stop a job with SIGTERM (``timeout``, SLURM, ``docker stop``,
+``kill``) and a person with Ctrl-C (SIGINT). The CLI installs `stop_on_signals`
+around every command: either signal raises `Interrupted` in the main thread, which
+unwinds through ``finally`` blocks (so the training loop writes its last checkpoint,
+the runner stops its workers) and is printed by the CLI as one line naming what
+was kept, with exit status 128 + the signal number (143 for SIGTERM, 130 for SIGINT).
+
+A section that must not be cut in half (one training step, writing a checkpoint)
+runs inside `deferred`: a signal that arrives there is remembered and raised when
+the section ends.
+
+pycolmap installs glog's failure handler for SIGTERM when imported; that handler
+prints a native stack and can deadlock (it runs inside ``free``). `import_pycolmap`
+is the one way splatbench imports pycolmap: it puts Python's handlers back.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import ModuleType
+
+#: The signals that stop a command.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT)
+
+
+class Interrupted(BaseException):
+    """A stop signal arrived. ``kept`` names what survived (a checkpoint, a folder).
+
+    A `BaseException` (like `KeyboardInterrupt`), so that ``except Exception``
+    blocks -- a run recorded as failed, a fallback path -- never swallow it.
+    """
+
+    def __init__(self, signum: int, kept: str = "") -> None:
+        super().__init__(signum, kept)
+        self.signum = int(signum)
+        self.kept = kept
+
+    @property
+    def name(self) -> str:
+        return signal.Signals(self.signum).name
+
+    @property
+    def exit_status(self) -> int:
+        return 128 + self.signum
+
+    def line(self) -> str:
+        """One line for the CLI: ``interrupted by SIGTERM; kept ...``."""
+        return f"interrupted by {self.name}; {self.kept or 'nothing kept'}"
+
+
+class _State(threading.local):
+    def __init__(self) -> None:
+        self.depth = 0                  # nesting of `deferred`
+        self.pending: int | None = None  # a signal that arrived inside `deferred`
+
+
+_state = _State()
+
+
+def _handler(signum: int, frame) -> None:
+    if _state.depth > 0:
+        if _state.pending is None:
+            _state.pending = signum
+        return
+    raise Interrupted(signum)
+
+
+@contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """Raise `Interrupted` on SIGTERM / SIGINT while the block runs (main thread only;
+    elsewhere a no-op), then restore the previous handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    for s in STOP_SIGNALS:
+        signal.signal(s, _handler)
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """Hold a stop signal that arrives inside the block; raise it when the block ends."""
+    _state.depth += 1
+    try:
+        yield
+    finally:
+        _state.depth -= 1
+    if _state.depth == 0 and _state.pending is not None:
+        signum, _state.pending = _state.pending, None
+        raise Interrupted(signum)
+
+
+def pending() -> int | None:
+    """The signal held by an enclosing `deferred` block, if one arrived."""
+    return _state.pending
+
+
+def restore_python_handlers() -> None:
+    """Reinstall, at the C level, the handlers Python believes are set for the stop
+    signals (a native library may have replaced them behind Python's back)."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for s in STOP_SIGNALS:
+        handler = signal.getsignal(s)
+        signal.signal(s, handler if handler is not None else signal.SIG_DFL)
+
+
+def import_pycolmap() -> ModuleType:
+    """``import pycolmap`` without glog's SIGTERM/SIGINT handlers (module doc)."""
+    import pycolmap
+
+    restore_python_handlers()
+    return pycolmap
+
+
+__all__ = ["Interrupted", "STOP_SIGNALS", "stop_on_signals", "deferred", "pending", "restore_python_handlers",
+           "import_pycolmap"]
