@@ -440,7 +440,7 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
     m = array_namespace(opacities)
     proj = Projection(means2d, conics, depths, opacities, cutoff_sq, extents, None, visible)
     grid = TileGrid(width, height, tile_size)
-    bins = bin_gaussians(proj, grid)
+    bins = bin_gaussians(proj, grid, float(alpha_min))
     if timer is not None:
         timer.mark("binning")
     cfg = CompositeSettings(float(alpha_min), float(alpha_max), float(transmittance_min),

@@ -63,6 +63,15 @@ def check_background(background) -> tuple[float, float, float]:
     return tuple(float(c) for c in bg)
 
 
+def project_view(means, log_scales, quats, opacity_logits, camera, options: RasterOptions) -> Projection:
+    """`project` with the camera's planes unless ``options`` override them (tensors as in `render_frame`)."""
+    near = camera.near if options.near is None else options.near
+    far = camera.far if options.far is None else options.far
+    return project(means, log_scales, quats, opacity_logits, camera.K, camera.world_to_camera,
+                   camera.width, camera.height, eps2d=options.eps2d, near=near, far=far,
+                   radius=options.radius, alpha_min=options.alpha_min, antialiased=options.antialiased)
+
+
 def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int,
                  background: tuple[float, float, float], options: RasterOptions,
                  loop_ad: bool = False, absgrad: bool = False, timer: StageTimer | None = None) -> Frame:
@@ -78,11 +87,7 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
     """
     if means.shape[0] == 0:
         return _empty_frame(means, camera, background, options)
-    near = camera.near if options.near is None else options.near
-    far = camera.far if options.far is None else options.far
-    proj = project(means, log_scales, quats, opacity_logits, camera.K, camera.world_to_camera,
-                   camera.width, camera.height, eps2d=options.eps2d, near=near, far=far,
-                   radius=options.radius, alpha_min=options.alpha_min, antialiased=options.antialiased)
+    proj = project_view(means, log_scales, quats, opacity_logits, camera, options)
     m = array_namespace(means.array)
     center = camera.center
     mx, my, mz = columns(means, 3)
@@ -132,4 +137,4 @@ def frame_to_numpy(frame: Frame, height: int, width: int) -> tuple[np.ndarray, n
     return rgb, alpha, depth
 
 
-__all__ = ["Frame", "render_frame", "frame_to_numpy", "resolve_sh_degree", "check_background", "Composite"]
+__all__ = ["Frame", "render_frame", "project_view", "frame_to_numpy", "resolve_sh_degree", "check_background", "Composite"]
