@@ -35,7 +35,7 @@ def test_bench_raster_tiny_workload_writes_documented_csv_and_json(tmp_path):
     assert row["device"] == "cpu" and int(row["tile_size"]) == 16 and int(row["repeats"]) == 1
     for key in ("fwd_ms", "fwd_bwd_ms", "preprocess_ms", "binning_ms", "compositing_ms",
                 "backward_compositing_ms", "backward_preprocess_ms", "total_ms", "mevals_per_s",
-                "base_rss_mb", "setup_rss_mb", "peak_rss_mb"):
+                "base_rss_mb", "setup_rss_mb", "peak_rss_mb", "first_run_peak_rss_mb"):
         assert float(row[key]) > 0, key
     pairs, visible = int(row["pairs"]), int(row["visible"])
     assert pairs > 0 and 0 < visible <= 200
@@ -44,6 +44,7 @@ def test_bench_raster_tiny_workload_writes_documented_csv_and_json(tmp_path):
     useful, inside = int(row["useful_evaluations"]), int(row["inside_cutoff_evaluations"])
     assert 0 < useful <= inside <= int(row["block_evaluations"]) <= pairs * 16 ** 2
     assert int(row["box_pairs"]) >= pairs
+    assert float(row["first_run_peak_rss_mb"]) >= float(row["setup_rss_mb"])  # the whole process so far
     assert float(row["useful_share"]) == pytest.approx(useful / (pairs * 16 ** 2), abs=1e-4)  # rounded to 4 places
     assert float(row["peak_gflops"]) > 0 and 0 < float(row["share_of_peak"])
     assert row["target_fwd_bwd_ms"] == row["meets_target"] == ""  # not a standard workload
@@ -104,6 +105,7 @@ def test_table_marks_met_and_missed_targets():
         evaluations=256_000, mevals_per_s=85.3, box_pairs=1200, block_evaluations=120_000,
         inside_cutoff_evaluations=70_000, useful_evaluations=64_000, useful_share=0.25, peak_gflops=80.0,
         share_of_peak=0.048, base_rss_mb=350.0, setup_rss_mb=360.0, peak_rss_mb=400.0,
+        first_run_peak_rss_mb=380.0,
         rss_reset=True, retained_mb_per_run=0.0, target_fwd_bwd_ms=35.0, target_peak_rss_mb=None, meets_target=True)
     lines = format_table([base, replace(base, name="slow", fwd_bwd_ms=50.0, meets_target=False),
                           replace(base, name="other", target_fwd_bwd_ms=None, meets_target=None)]).splitlines()

@@ -52,7 +52,8 @@ class Target:
     """What a standard workload should achieve on the 2-core CPU (Dr.Jit LLVM) machine."""
 
     fwd_bwd_ms: float                  # median forward+backward time
-    peak_rss_mb: float | None = None   # peak RSS while rendering (see `RasterBenchResult.peak_rss_mb`)
+    peak_rss_mb: float | None = None   # peak RSS of build + one forward+backward
+                                       # (see `RasterBenchResult.first_run_peak_rss_mb`)
 
 
 #: The standard synthetic workloads (Gaussians, width, height) and their targets (issue 3 §5).
@@ -216,12 +217,14 @@ class RasterBenchResult:
     base_rss_mb: float                # peak RSS after imports (interpreter, torch, Dr.Jit)
     setup_rss_mb: float               # peak RSS after building the workload and parameters
     peak_rss_mb: float                # peak RSS over warm-up and timed runs (see `rss_reset`)
+    first_run_peak_rss_mb: float      # whole-process peak RSS of building the workload and the first
+                                      # forward+backward (max of setup and that run's peak)
     rss_reset: bool                   # True: the high-water mark was reset after setup (Linux),
                                       # so peak_rss_mb excludes setup; False: whole-process peak
     retained_mb_per_run: float        # RSS growth from after warm-up to the end, per timed run
                                       # (about 0 normally; steady growth means each run leaks)
     target_fwd_bwd_ms: float | None   # target for fwd_bwd_ms (standard synthetic workloads only)
-    target_peak_rss_mb: float | None  # target for peak_rss_mb (1M workload only)
+    target_peak_rss_mb: float | None  # target for first_run_peak_rss_mb (1M workload only)
     meets_target: bool | None         # every target met; None without targets
     fwd_runs_ms: list[float] = field(default_factory=list)      # every forward run
     fwd_bwd_runs_ms: list[float] = field(default_factory=list)  # every forward+backward run
@@ -431,6 +434,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     forward = forward_with_init(params, camera, options)
     forward_backward = forward_backward_with_init(params, camera, options)
     forward_backward()
+    first_run_peak = max(setup_rss, peak_rss_mb())
     forward()
     staged_runs(forward_backward, 1)
     gc.collect()
@@ -452,7 +456,8 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     target = spec.target
     meets = None
     if target is not None:
-        meets = fwd_bwd_ms <= target.fwd_bwd_ms and (target.peak_rss_mb is None or peak_rss <= target.peak_rss_mb)
+        meets = fwd_bwd_ms <= target.fwd_bwd_ms and (target.peak_rss_mb is None
+                                                     or first_run_peak <= target.peak_rss_mb)
     return RasterBenchResult(
         name=name, n=n, width=camera.width, height=camera.height, sh_degree=stats.sh_degree, device=device,
         tile_size=opts.tile_size, repeats=settings.repeats, fwd_ms=_ms(statistics.median(fwd_s)),
@@ -462,6 +467,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
         useful_evaluations=work.useful, useful_share=round(work.useful_share, 4), peak_gflops=peak.gflops,
         share_of_peak=round(mevals * 1e6 * FLOPS_PER_EVALUATION / (peak.gflops * 1e9), 4),
         base_rss_mb=round(base_rss, 1), setup_rss_mb=round(setup_rss, 1), peak_rss_mb=round(peak_rss, 1),
+        first_run_peak_rss_mb=round(first_run_peak, 1),
         rss_reset=rss_reset, retained_mb_per_run=round(retained, 1),
         target_fwd_bwd_ms=target.fwd_bwd_ms if target else None,
         target_peak_rss_mb=target.peak_rss_mb if target else None, meets_target=meets,
@@ -513,7 +519,7 @@ def run_suite(specs: list[WorkloadSpec], settings: BenchSettings,
 # ----------------------------------------------------------------------------- reporting
 
 TABLE_HEADER = ("workload", "N", "WxH", "fwd ms", "fwd+bwd ms", "stages ms pre/bin/comp/bcomp/bpre/other",
-                "pairs", "Mevals performed/useful", "Mevals/s", "% of peak", "peak RSS MB", "target", "met")
+                "pairs", "Mevals performed/useful", "Mevals/s", "% of peak", "peak RSS MB 1st/all", "target", "met")
 
 
 def _fmt_ms(x: float) -> str:
@@ -535,7 +541,7 @@ def table_rows(results: list[RasterBenchResult]) -> list[tuple[str, ...]]:
         rows.append((r.name, f"{r.n:,}", f"{r.width}x{r.height}", _fmt_ms(r.fwd_ms), _fmt_ms(r.fwd_bwd_ms), split,
                      f"{r.pairs:,}", f"{r.evaluations / 1e6:.1f}/{r.useful_evaluations / 1e6:.1f}",
                      f"{r.mevals_per_s:.0f}", f"{100 * r.share_of_peak:.1f} of {r.peak_gflops:.0f} GFLOP/s",
-                     f"{r.peak_rss_mb:.0f}", target, met))
+                     f"{r.first_run_peak_rss_mb:.0f}/{r.peak_rss_mb:.0f}", target, met))
     return rows
 
 
