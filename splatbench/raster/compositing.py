@@ -10,7 +10,11 @@ once every pixel of the block would fall below the transmittance threshold.
 The backward pass is a `dr.CustomOp` that walks each tile's list back to front,
 recovering transmittance by division (alpha <= alpha_max < 1 keeps it
 invertible). Gradients are accumulated per (tile, Gaussian) pair, then reduced
-per Gaussian in a fixed order, so results are bit-reproducible. Dr.Jit's own AD
+per Gaussian in a fixed order, so results are bit-reproducible. On LLVM the lanes of
+a tile add into one slot per pair (`ReduceMode.Expand`: per-thread copies, and a
+tile never spans two threads); that mode exists only on LLVM, so elsewhere (CUDA)
+each lane writes a slot of its own and the reduction sums a pair's lane slots in
+lane order: no atomics, the same result every run (see `lane_slots`). Dr.Jit's own AD
 through the forward loop (`composite(..., loop_ad=True)`) is kept as a test-only
 second backward that checks the hand-written one.
 """
@@ -239,8 +243,18 @@ def _bucket(n: int) -> int:
     return -(-n // p) * p
 
 
-def _reduce_pairs(m, bins: Bins, pair: dict, n: int) -> dict:
+def lane_slots(m) -> bool:
+    """Whether each lane of a tile accumulates into a slot of its own (True except on
+    LLVM, whose Expand mode makes the shared slot deterministic). Per-lane slots cost
+    lanes_per_tile (16 at the default sizes) times the per-pair buffer memory."""
+    return not m.__name__.startswith("drjit.llvm")
+
+
+def _reduce_pairs(m, bins: Bins, pair: dict, n: int, slots_per_pair: int = 1) -> dict:
     """Sum per-pair gradient records per Gaussian, deterministically.
+
+    With ``slots_per_pair`` L > 1 (per-lane slots), pair p's records sit at slots
+    p * L .. p * L + L - 1 and are summed in that order.
 
     The pairs of Gaussian g sit at Gaussian-major positions offsets[g] ..
     offsets[g] + counts[g], i.e. at sorted positions inverse_order[j]; each Gaussian
@@ -257,11 +271,14 @@ def _reduce_pairs(m, bins: Bins, pair: dict, n: int) -> dict:
         return j < end
 
     def body(j, *acc):
-        slot = dr.gather(UInt32, inverse, j)
+        slot = dr.gather(UInt32, inverse, j) * slots_per_pair
         out, pos = [j + 1], 0
         for name, (width, _) in groups:
-            rec = dr.gather(m.ArrayXf, pair[name], slot, shape=(width, dr.width(j)))
-            out += [acc[pos + k] + rec[k] for k in range(width)]
+            total = list(acc[pos: pos + width])
+            for sub in range(slots_per_pair):
+                rec = dr.gather(m.ArrayXf, pair[name], slot + sub, shape=(width, dr.width(j)))
+                total = [total[k] + rec[k] for k in range(width)]
+            out += total
             pos += width
         return tuple(out)
 
@@ -320,11 +337,14 @@ class _CompositeOp(dr.CustomOp):
         # Per-pair accumulators: slot i belongs to one (tile, Gaussian) pair, so only the
         # lanes of one tile ever add into it.
         cap = _bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
-        pair = {name: dr.zeros(Float, width * cap) for name, (width, _) in PAIR_GROUPS.items()
+        per_lane = lane_slots(m)
+        L = lanes.lanes_per_tile if per_lane else 1
+        pair = {name: dr.zeros(Float, width * cap * L) for name, (width, _) in PAIR_GROUPS.items()
                 if name != "abs" or self.want_absgrad}
         # Expand (LLVM): per-thread copies, non-atomic updates. Still deterministic: a slot
         # is only written by the lanes of one tile, and a tile never spans two threads.
-        mode = dr.ReduceMode.Expand
+        # Per-lane slots (CUDA): each slot is written once, by one lane, without atomics.
+        sub_slot = dr.arange(UInt32, dr.width(lanes.start)) % L if per_lane else None
         # Lock-step walk: every lane of a tile starts at the tile's largest stop index, so
         # a SIMD packet always reads one Gaussian (pixels past their own stop are idle).
         lane_stop = stop[0]
@@ -372,8 +392,11 @@ class _CompositeOp(dr.CustomOp):
                 out += [dr.select(on, T_i, T), dr.select(on, ar + w * cr, ar), dr.select(on, ag + w * cg, ag),
                         dr.select(on, ab + w * cb, ab), dr.select(on, ad + w * depth, ad)]
             for name, buffer in pair.items():
-                values = [sums[key] if key is not None else 0.0 for key in PAIR_GROUPS[name][1]]
-                dr.scatter_add(buffer, m.ArrayXf(values), i, any_on, mode=mode)
+                values = m.ArrayXf([sums[key] if key is not None else 0.0 for key in PAIR_GROUPS[name][1]])
+                if per_lane:
+                    dr.scatter(buffer, values, i * L + sub_slot, any_on)
+                else:
+                    dr.scatter_add(buffer, values, i, any_on, mode=dr.ReduceMode.Expand)
             return tuple(out)
 
         state = [UInt32(start_i)]
@@ -382,7 +405,7 @@ class _CompositeOp(dr.CustomOp):
             state += [Float(T), T * bg[0], T * bg[1], T * bg[2], dr.zeros(Float, dr.width(T))]
         dr.while_loop(tuple(state), cond, body, mode="symbolic")
         dr.eval(pair)
-        buf = _reduce_pairs(m, bins, pair, self.n)
+        buf = _reduce_pairs(m, bins, pair, self.n, L)
         self.state.grad_means2d = m.Array2f(buf["mx"], buf["my"])
         if self.want_absgrad:
             self.state.abs_grad_means2d = m.Array2f(buf["ax"], buf["ay"])

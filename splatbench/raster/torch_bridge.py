@@ -95,11 +95,14 @@ class _Rasterize(torch.autograd.Function):
                              loop_ad=loop_ad, absgrad=absgrad, timer=timer)
         ctx.timer = timer
         H, W = camera.height, camera.width
-        rgb = to_torch(frame.rgb).T.reshape(H, W, 3).contiguous()  # Array3f views as [3, H*W]
-        alpha = to_torch(frame.alpha).reshape(H, W)
-        depth = to_torch(frame.depth).reshape(H, W)
+        # Outputs live where the parameters do (a no-op when Dr.Jit runs on that device).
+        out = means.device
+        rgb = to_torch(frame.rgb).T.reshape(H, W, 3).contiguous().to(out)  # Array3f views as [3, H*W]
+        alpha = to_torch(frame.alpha).reshape(H, W).to(out)
+        depth = to_torch(frame.depth).reshape(H, W).to(out)
         ctx.dr_inputs, ctx.frame, ctx.m, ctx.device = inputs, frame, m, options.device
         ctx.saved_shapes = [tuple(t.shape) for t in (means, log_scales, quats, opacity_logits, sh)]
+        ctx.saved_devices = [t.device for t in (means, log_scales, quats, opacity_logits, sh)]
         info_box.append(frame)
         return rgb, alpha, depth
 
@@ -108,15 +111,15 @@ class _Rasterize(torch.autograd.Function):
         m, frame, inputs = ctx.m, ctx.frame, ctx.dr_inputs
         if not any(ctx.needs_input_grad[:5]):
             return (None,) * 13
-        ctx.saved_tensors  # raises if a parameter was changed in place since the forward pass
+        _ = ctx.saved_tensors  # raises if a parameter was changed in place since the forward pass
         backend = get_backend(ctx.device)
 
         def cotangent(v, shape):
             return to_drjit(backend, v.reshape(shape)).array
 
         v_rgb = cotangent(v_rgb, (-1, 3))  # [H*W * 3], pixel-major
-        dr.set_grad(frame.rgb, m.Array3f(*(dr.gather(m.Float, v_rgb, dr.arange(m.UInt32, dr.width(frame.alpha)) * 3 + c)
-                                          for c in range(3))))
+        pixel = dr.arange(m.UInt32, dr.width(frame.alpha)) * 3
+        dr.set_grad(frame.rgb, m.Array3f(*(dr.gather(m.Float, v_rgb, pixel + c) for c in range(3))))
         dr.set_grad(frame.alpha, cotangent(v_alpha, (-1,)))
         dr.set_grad(frame.depth, cotangent(v_depth, (-1,)))
         dr.enqueue(dr.ADMode.Backward, frame.rgb, frame.alpha, frame.depth)
@@ -125,11 +128,11 @@ class _Rasterize(torch.autograd.Function):
             dr.eval([dr.grad(x) for x in inputs])
             ctx.timer.mark("backward_preprocess")
         grads = []
-        for x, needs, like in zip(inputs, ctx.needs_input_grad[:5], ctx.saved_shapes):
+        for x, needs, like, where in zip(inputs, ctx.needs_input_grad[:5], ctx.saved_shapes, ctx.saved_devices):
             if not needs:
                 grads.append(None)
                 continue
-            grads.append(to_torch(dr.grad(x)).reshape(like))
+            grads.append(to_torch(dr.grad(x)).reshape(like).to(where))
         ctx.dr_inputs = None  # release the Dr.Jit graph
         return (*grads, None, None, None, None, None, None, None, None)
 
