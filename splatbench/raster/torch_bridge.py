@@ -69,12 +69,17 @@ def to_drjit(backend, t: torch.Tensor):
     """A Dr.Jit tensor viewing ``t`` (moved to the backend's device and made contiguous
     float32 first only where it is not already: then the copy is what is viewed)."""
     t = t.detach().to(device=torch_device(backend), dtype=torch.float32).contiguous()
+    if t.is_cuda:  # torch and Dr.Jit use different CUDA streams: finish torch's writes first
+        torch.cuda.synchronize(t.device)
     return backend.t.TensorXf(t)
 
 
 def to_torch(x) -> torch.Tensor:
-    """A torch tensor viewing the Dr.Jit array or tensor ``x`` (evaluated first)."""
+    """A torch tensor viewing the Dr.Jit array or tensor ``x`` (evaluated first, and on
+    CUDA finished: torch reads it on another stream)."""
     dr.eval(x)
+    if dr.backend_v(x) == dr.JitBackend.CUDA:
+        dr.sync_thread()
     return torch.from_dlpack(x)
 
 

@@ -14,9 +14,10 @@ import numpy as np
 
 from splatbench.raster.api import to_tensor
 from splatbench.raster.backend import dr, get_backend
-from splatbench.raster.binning import bin_gaussians, ellipse_meets_rect, support_radius_sq
-from splatbench.raster.compositing import CompositeSettings, _alpha_at, _load, make_lanes, pack_records, Splats
-from splatbench.raster.binning import TileGrid
+from splatbench.raster.binning import TileGrid, bin_gaussians, ellipse_meets_rect, support_radius_sq
+# The compositing loop's own per-pixel test and record loads, so that the counts are
+# of exactly the decisions it makes.
+from splatbench.raster.compositing import CompositeSettings, Splats, _alpha_at, _load, make_lanes, pack_records
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.pipeline import project_view
 
