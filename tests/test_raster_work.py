@@ -57,10 +57,10 @@ def dense_useful(gaussians, camera, opts: RasterOptions) -> int:
 
 
 @pytest.mark.parametrize("tile_size", [4, 16])
-@pytest.mark.parametrize("radius", ["3sigma", "opacity"])
-def test_tile_test_keeps_every_accepted_pixel(tile_size, radius):
+@pytest.mark.parametrize("radius, antialiased", [("3sigma", False), ("opacity", False), ("3sigma", True)])
+def test_tile_test_keeps_every_accepted_pixel(tile_size, radius, antialiased):
     g, cam = elongated_scene(400, seed=tile_size)
-    opts = dict(device="cpu", tile_size=tile_size, radius=radius)
+    opts = dict(device="cpu", tile_size=tile_size, radius=radius, antialiased=antialiased)
     stats = work_stats(g, cam, **opts)
     assert stats.useful == dense_useful(g, cam, RasterOptions.from_kwargs(**opts))
     # The test does drop pairs here (thin diagonal ellipses in square boxes) ...
@@ -82,3 +82,28 @@ def test_work_stats_of_nothing_is_zero():
     cam = Camera(16, 12, 16.0, 16.0, 8.0, 6.0, np.eye(4))
     g = Gaussians(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 4)), np.zeros(0), np.zeros((0, 1, 3)))
     assert work_stats(g, cam, device="cpu").performed == 0
+
+
+def test_dropped_pairs_change_no_output_or_gradient(monkeypatch):
+    """Box-only binning (every tile of the bounding box) against the ellipse-tile test:
+    the images are bit-identical and so are the gradients (a dropped pair only ever
+    contributed exact zeros to its Gaussian's sums)."""
+    import torch
+
+    from splatbench.raster import binning
+
+    g, cam = elongated_scene(300, seed=1)
+    names = ("means", "log_scales", "quats", "opacity_logits", "sh")
+
+    def run():
+        leaves = [torch.tensor(getattr(g, k), requires_grad=True) for k in names]
+        rgb, alpha, depth, info = splatbench.rasterize(*leaves, cam, device="cpu", background=(0.1, 0.2, 0.3))
+        (rgb.square().sum() + alpha.sum() + 0.1 * depth.sum()).backward()
+        return [rgb.detach(), alpha.detach(), depth.detach()] + [p.grad for p in leaves], info.num_pairs
+
+    tested, pairs = run()
+    monkeypatch.setattr(binning, "ellipse_meets_rect", lambda dx0, *rest: dx0 == dx0)  # keep every tile
+    boxed, box_pairs = run()
+    assert pairs < box_pairs
+    for a, b in zip(tested, boxed):
+        assert torch.equal(a, b)
