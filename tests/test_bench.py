@@ -39,13 +39,13 @@ def test_bench_raster_tiny_workload_writes_documented_csv_and_json(tmp_path):
         assert float(row[key]) > 0, key
     pairs, visible = int(row["pairs"]), int(row["visible"])
     assert pairs > 0 and 0 < visible <= 200
-    assert int(row["evaluations"]) == pairs * 16 ** 2
+    assert 0 < int(row["evaluations"]) <= pairs * 16 ** 2  # lanes walk lists no longer than their tile's
     # the work counts (splatbench.raster.work_stats) are ordered, and the peak was measured
     useful, inside = int(row["useful_evaluations"]), int(row["inside_cutoff_evaluations"])
-    assert 0 < useful <= inside <= int(row["block_evaluations"]) <= pairs * 16 ** 2
+    assert 0 < useful <= inside <= int(row["block_evaluations"]) <= int(row["evaluations"])
     assert int(row["box_pairs"]) >= pairs
     assert float(row["first_run_peak_rss_mb"]) >= float(row["setup_rss_mb"])  # the whole process so far
-    assert float(row["useful_share"]) == pytest.approx(useful / (pairs * 16 ** 2), abs=1e-4)  # rounded to 4 places
+    assert float(row["useful_share"]) == pytest.approx(useful / int(row["evaluations"]), abs=1e-4)  # 4 places
     assert float(row["peak_gflops"]) > 0 and 0 < float(row["share_of_peak"])
     assert row["target_fwd_bwd_ms"] == row["meets_target"] == ""  # not a standard workload
 

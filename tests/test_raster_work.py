@@ -56,18 +56,23 @@ def dense_useful(gaussians, camera, opts: RasterOptions) -> int:
         return int(dr.count(contributes)[0])
 
 
-@pytest.mark.parametrize("tile_size", [4, 16])
+@pytest.mark.parametrize("tile_size", [4, 16, 32])
 @pytest.mark.parametrize("radius, antialiased", [("3sigma", False), ("opacity", False), ("3sigma", True)])
 def test_tile_test_keeps_every_accepted_pixel(tile_size, radius, antialiased):
     g, cam = elongated_scene(400, seed=tile_size)
     opts = dict(device="cpu", tile_size=tile_size, radius=radius, antialiased=antialiased)
     stats = work_stats(g, cam, **opts)
     assert stats.useful == dense_useful(g, cam, RasterOptions.from_kwargs(**opts))
-    # The test does drop pairs here (thin diagonal ellipses in square boxes) ...
-    assert stats.pairs < 0.8 * stats.box_pairs
+    # The tests do drop work here (thin diagonal ellipses in square boxes): pairs at
+    # the tile level (32-pixel tiles are too coarse for much of it) ...
+    if tile_size <= 16:
+        assert stats.pairs < 0.8 * stats.box_pairs
+    # ... and list entries at the block level (a 4-pixel tile is one block).
+    if tile_size > 4:
+        assert stats.performed < 0.5 * stats.tile_evaluations
     # ... and the counts are consistent with each other.
     assert stats.useful <= stats.inside_cutoff <= stats.block_evaluations <= stats.performed
-    assert stats.performed == stats.pairs * tile_size ** 2
+    assert stats.performed <= stats.tile_evaluations == stats.pairs * tile_size ** 2
     assert splatbench.render(g, cam, **opts).num_pairs == stats.pairs
 
 

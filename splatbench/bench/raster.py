@@ -205,7 +205,7 @@ class RasterBenchResult:
     stages: StageSplit                # per-stage split (separate runs, with the stage timer)
     pairs: int                        # Gaussian-tile pairs composited
     visible: int                      # Gaussians that survived culling
-    evaluations: int                  # pairs * tile_size^2: pixel-Gaussian evaluations performed per pass
+    evaluations: int                  # pixel-Gaussian evaluations compositing performs per pass (work_stats)
     mevals_per_s: float               # evaluations / forward compositing seconds / 10^6
     box_pairs: int                    # pairs of the cutoff bounding boxes, before the ellipse-tile test
     block_evaluations: int            # 16 x (4x4 block, Gaussian) pairs whose block meets the support
@@ -447,9 +447,9 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     gc.collect()
     retained = (current_rss_mb() - rss_warm) / (3 * settings.repeats)
 
-    evaluations = stats.num_pairs * opts.tile_size ** 2
-    comp_s = stages.compositing_ms / 1e3
     work = work_stats(Gaussians(*(p.numpy() for p in params)), camera, **options)
+    evaluations = work.performed
+    comp_s = stages.compositing_ms / 1e3
     peak = fp32_peak(device)
     mevals = round(evaluations / comp_s / 1e6, 3) if comp_s > 0 else 0.0
     fwd_bwd_ms = _ms(statistics.median(fwd_bwd_s))

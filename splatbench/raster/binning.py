@@ -69,6 +69,7 @@ class Bins:
     offsets: object = None
     counts: object = None
     box_pairs: int = 0  # pairs of the bounding boxes alone, before the ellipse-tile test
+    tiles: object = None  # [P] the tile of each sorted pair
 
 
 def support_radius_sq(cutoff_sq, opacities, alpha_min: float):
@@ -167,6 +168,8 @@ def bin_gaussians(proj: Projection, grid: TileGrid, alpha_min: float = 1.0 / 255
         return empty
     gid = dr.gather(UInt32, gid, kept)
     tile = dr.gather(UInt32, ty, kept) * grid.tiles_x + dr.gather(UInt32, tx, kept)
+    dr.eval(gid, tile)
+    del kept, meets, tx, ty, row, w, local, box_offsets  # box-sized buffers: free them before the sort
     counts = dr.zeros(UInt32, n)
     dr.scatter_add(counts, dr.full(UInt32, 1, num_pairs), gid)  # integer adds: order-free
     offsets = dr.prefix_sum(counts)
@@ -193,4 +196,5 @@ def bin_gaussians(proj: Projection, grid: TileGrid, alpha_min: float = 1.0 / 255
     dr.scatter(tile_end, idx + 1, sorted_tile, last)
     dr.eval(gaussian_ids, tile_start, tile_end)
     max_len = int(dr.max(tile_end - tile_start)[0])
-    return Bins(grid, gaussian_ids, tile_start, tile_end, num_pairs, max_len, order, offsets, counts, box_pairs)
+    return Bins(grid, gaussian_ids, tile_start, tile_end, num_pairs, max_len, order, offsets, counts, box_pairs,
+                sorted_tile)

@@ -1,13 +1,15 @@
 """Front-to-back alpha compositing over tiles, with an analytic backward pass.
 
-Mirrors `reference.composite`. Lanes are ordered tile by tile so that a SIMD
-packet (16 lanes with AVX-512) walks one tile's list in lock-step, and each lane
-shades a block of PIXEL_BLOCK x PIXEL_BLOCK pixels: one load of a Gaussian's packed
+Mirrors `reference.composite`. Lanes are ordered tile by tile (a SIMD packet of
+16 lanes with AVX-512 holds one 16x16 tile), and each lane shades a block of
+PIXEL_BLOCK x PIXEL_BLOCK pixels, walking its own list: the pairs of its tile whose
+support meets the block (`blocks.block_lists`). One load of a Gaussian's packed
 record serves the whole block, and in the backward pass the block's gradient
-contributions are summed in registers before one scatter. A symbolic loop per lane stops early
-once every pixel of the block would fall below the transmittance threshold.
+contributions are summed in registers before one scatter. A symbolic loop per lane
+stops early once every pixel of the block would fall below the transmittance
+threshold.
 
-The backward pass is a `dr.CustomOp` that walks each tile's list back to front,
+The backward pass is a `dr.CustomOp` that walks each lane's list back to front,
 recovering transmittance by division (alpha <= alpha_max < 1 keeps it
 invertible). Gradients are accumulated per (tile, Gaussian) pair, then reduced
 per Gaussian in a fixed order, so results are bit-reproducible. On LLVM the lanes of
@@ -93,8 +95,10 @@ class Lanes(NamedTuple):
     """Compositing lanes in tile order; each lane shades K = block^2 pixels.
 
     px, py, inside, image_index: lists of K arrays (pixel centres, whether the
-    pixel exists, its row-major index); start, end: the lane's tile range.
-    lanes_per_tile: lanes that share one tile list.
+    pixel exists, its row-major index); start, end: the lane's range in its list.
+    lanes_per_tile: lanes that share one tile. pairs: None when each lane walks its
+    tile's range of the sorted pairs; else the lanes' own lists (`blocks.block_lists`),
+    each entry a sorted pair position.
     """
 
     px: list
@@ -104,6 +108,12 @@ class Lanes(NamedTuple):
     start: object
     end: object
     lanes_per_tile: int
+    pairs: object = None
+
+
+def pair_at(m, lanes: Lanes, i):
+    """Sorted pair position of entry ``i`` of each lane's list."""
+    return i if lanes.pairs is None else dr.gather(m.UInt32, lanes.pairs, i)
 
 
 def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
@@ -131,6 +141,16 @@ def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
         any_inside |= ok
     end = dr.select(any_inside, dr.gather(m.UInt32, bins.tile_end, tile), start)
     return Lanes(px, py, inside, image_index, start, end, lanes_per_tile)
+
+
+def lanes_for(m, rec: Records, bins: Bins, cfg: CompositeSettings) -> Lanes:
+    """The compositing lanes with their per-block lists (`blocks.block_lists`)."""
+    from splatbench.raster.blocks import block_lists
+
+    lanes = make_lanes(m, bins.grid, bins)
+    if bins.num_pairs == 0:
+        return lanes
+    return block_lists(m, rec, bins, lanes, cfg.alpha_min, lambda r, gid: _load(m, r, gid))
 
 
 def _alpha_at(rec, px, py, cfg: CompositeSettings, active):
@@ -189,7 +209,7 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
 
     def body(*state):
         i, pix = unpack(state)
-        gid = dr.gather(UInt32, ids, i)
+        gid = dr.gather(UInt32, ids, pair_at(m, lanes, i))
         geo, (cr, cg, cb) = _load(m, rec, gid)
         out = [i + 1]
         for k, (T, r, g, b, d, stop) in enumerate(pix):
@@ -308,7 +328,7 @@ class _CompositeOp(dr.CustomOp):
         self.n = dr.width(opacities)
         self.records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
         dr.eval(self.records)
-        self.lanes = make_lanes(m, self.bins.grid, self.bins)
+        self.lanes = lanes_for(m, self.records, self.bins, cfg)
         fwd = _forward_loop(m, self.records, self.bins.gaussian_ids, self.lanes, cfg)
         dr.eval(fwd)
         self.fwd = fwd
@@ -334,7 +354,7 @@ class _CompositeOp(dr.CustomOp):
         T_final, stop = self.fwd.T, self.fwd.stop
         bg = cfg.background
         ids = bins.gaussian_ids
-        # Per-pair accumulators: slot i belongs to one (tile, Gaussian) pair, so only the
+        # Per-pair accumulators: slot p belongs to one (tile, Gaussian) pair, so only the
         # lanes of one tile ever add into it.
         cap = _bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
         per_lane = lane_slots(m)
@@ -345,12 +365,10 @@ class _CompositeOp(dr.CustomOp):
         # is only written by the lanes of one tile, and a tile never spans two threads.
         # Per-lane slots (CUDA): each slot is written once, by one lane, without atomics.
         sub_slot = dr.arange(UInt32, dr.width(lanes.start)) % L if per_lane else None
-        # Lock-step walk: every lane of a tile starts at the tile's largest stop index, so
-        # a SIMD packet always reads one Gaussian (pixels past their own stop are idle).
-        lane_stop = stop[0]
+        # Each lane walks its own list back from the largest stop index of its pixels.
+        start_i = stop[0]
         for s in stop[1:]:
-            lane_stop = dr.maximum(lane_stop, s)
-        start_i = dr.repeat(dr.block_reduce(dr.ReduceOp.Max, lane_stop, lanes.lanes_per_tile), lanes.lanes_per_tile)
+            start_i = dr.maximum(start_i, s)
 
         def unpack(state):  # i, then per pixel (T, ar, ag, ab, ad)
             return state[0], [state[1 + 5 * k: 6 + 5 * k] for k in range(K)]
@@ -361,7 +379,8 @@ class _CompositeOp(dr.CustomOp):
         def body(*state):
             i, pix = unpack(state)
             i = i - 1
-            gid = dr.gather(UInt32, ids, i)
+            p = pair_at(m, lanes, i)
+            gid = dr.gather(UInt32, ids, p)
             geo, (cr, cg, cb) = _load(m, rec, gid)
             ca, cbk, cc, depth = geo[2], geo[3], geo[4], geo[6]
             sums = {key: 0.0 for key in keys}
@@ -394,9 +413,9 @@ class _CompositeOp(dr.CustomOp):
             for name, buffer in pair.items():
                 values = m.ArrayXf([sums[key] if key is not None else 0.0 for key in PAIR_GROUPS[name][1]])
                 if per_lane:
-                    dr.scatter(buffer, values, i * L + sub_slot, any_on)
+                    dr.scatter(buffer, values, p * L + sub_slot, any_on)
                 else:
-                    dr.scatter_add(buffer, values, i, any_on, mode=dr.ReduceMode.Expand)
+                    dr.scatter_add(buffer, values, p, any_on, mode=dr.ReduceMode.Expand)
             return tuple(out)
 
         state = [UInt32(start_i)]
@@ -405,6 +424,10 @@ class _CompositeOp(dr.CustomOp):
             state += [Float(T), T * bg[0], T * bg[1], T * bg[2], dr.zeros(Float, dr.width(T))]
         dr.while_loop(tuple(state), cond, body, mode="symbolic")
         dr.eval(pair)
+        # The walk was the last reader of the records, lane lists and forward state:
+        # release them before the reduction allocates (the op runs its backward once).
+        del state, v_rgb, v_alpha, v_d, T_final, stop, start_i, rec, lanes
+        self.records = self.lanes = self.fwd = None
         buf = _reduce_pairs(m, bins, pair, self.n, L)
         self.state.grad_means2d = m.Array2f(buf["mx"], buf["my"])
         if self.want_absgrad:
@@ -470,7 +493,7 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
                             tuple(float(c) for c in background))
     if loop_ad:
         records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
-        lanes = make_lanes(m, grid, bins)
+        lanes = lanes_for(m, records, bins, cfg)
         # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
         # count (the longest tile list, rounded up to a power of two); -1 is wrong here.
         bound = next_power_of_two(max(bins.max_list_length, 1))
