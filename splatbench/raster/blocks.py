@@ -4,9 +4,9 @@ support ellipse meets the lane's PIXEL_BLOCK x PIXEL_BLOCK block of pixels.
 A tile's list holds every Gaussian whose ellipse meets some pixel of the tile, but a
 small ellipse meets only a few of the tile's blocks. `block_lists` tests every
 (pair, block) once with `binning.ellipse_meets_rect` (conservative: a dropped entry
-is one every pixel of the block would skip) into a bit mask per pair, then lays the
-lanes' lists out with one prefix sum per block, keeping depth order, so images and
-gradients are unchanged. Lane lists hold positions in the tile-sorted pair list
+is one every pixel of the block would skip) into a bit mask per pair; each lane then
+walks its tile's range twice, counting and then writing the pairs with its bit set,
+in depth order, so images and gradients are unchanged. Lane lists hold positions in the tile-sorted pair list
 (``Lanes.pairs``): the Gaussian is ``gaussian_ids[p]`` and the backward pass
 accumulates into pair slot ``p`` as before.
 """
@@ -49,32 +49,36 @@ def block_lists(m, rec, bins: Bins, lanes, alpha_min: float, load):
     block = bins.grid.tile_size // int(round(L ** 0.5))
     words = block_masks(m, rec, bins, block, alpha_min, load)
     dr.eval(words)
-    n_tiles, P = bins.grid.num_tiles, bins.num_pairs
-    tile = dr.arange(UInt32, n_tiles)
-    pos = dr.arange(UInt32, P)
+    # Which bit of which word each lane reads (lane = tile * L + b).
+    b = dr.arange(UInt32, dr.width(lanes.start)) % L
+    word_of, shift = b // 32, b % 32
 
-    def before(incl, j):  # entries with the bit among positions < j (incl: inclusive prefix sum)
-        return dr.gather(UInt32, incl, j - 1, j > 0)
+    def hit(i):
+        word = dr.gather(UInt32, words[0], i)
+        for k in range(1, len(words)):
+            word = dr.select(word_of == k, dr.gather(UInt32, words[k], i), word)
+        return ((word >> shift) & 1) == 1
 
-    # Pass 1: each lane's length (lane = tile * L + b).
-    counts = dr.zeros(UInt32, n_tiles * L)
-    for b in range(L):
-        incl = dr.cumsum((words[b // 32] >> (b % 32)) & 1)
-        dr.scatter(counts, before(incl, bins.tile_end) - before(incl, bins.tile_start), tile * L + b)
-        dr.eval(counts)
+    # Pass 1: each lane walks its tile's range and counts its entries (lanes with no
+    # pixel in the image have an empty range, make_lanes' rule, so they count none).
+    def count_body(i, n):
+        return i + 1, n + dr.select(hit(i), 1, 0)
+
+    zero = dr.zeros(UInt32, dr.width(lanes.start))
+    _, counts = dr.while_loop((UInt32(lanes.start), zero), lambda i, n: i < lanes.end, count_body,
+                              mode="symbolic")
+    dr.eval(counts)
     starts = dr.prefix_sum(counts)  # exclusive
     total = int(dr.sum(counts)[0])
     pairs = dr.zeros(UInt32, max(total, 1))
-    # Pass 2: each entry's place: its lane's start plus its rank among the lane's entries.
-    pair_tile = bins.tiles
-    for b in range(L):
-        bit = (words[b // 32] >> (b % 32)) & 1
-        incl = dr.cumsum(bit)
-        rank = (incl - bit) - before(incl, dr.gather(UInt32, bins.tile_start, pair_tile))
-        lane = pair_tile * L + b
-        dr.scatter(pairs, pos, dr.gather(UInt32, starts, lane) + rank, bit == 1)
-        dr.eval(pairs)
-    # Lanes with no pixel in the image keep an empty range (make_lanes' rule).
-    end = dr.select(lanes.end > lanes.start, starts + counts, starts)
-    dr.eval(end)
+
+    # Pass 2: the same walk writes each entry in depth order.
+    def fill_body(i, pos):
+        h = hit(i)
+        dr.scatter(pairs, i, pos, h)
+        return i + 1, pos + dr.select(h, 1, 0)
+
+    dr.while_loop((UInt32(lanes.start), UInt32(starts)), lambda i, pos: i < lanes.end, fill_body, mode="symbolic")
+    end = starts + counts
+    dr.eval(pairs, end)
     return lanes._replace(start=starts, end=end, pairs=pairs)
