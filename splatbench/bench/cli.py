@@ -66,6 +66,45 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
     click.echo(f"wrote {csv_path} and {json_path}")
 
 
+@bench.command("ab")
+@click.option("--against", required=True, metavar="COMMIT", help="The old commit to time against (e.g. c11f838).")
+@click.option("--synthetic", "synthetic", nargs=2, multiple=True, metavar="N WxH",
+              help="A synthetic workload (repeatable). Default: 10000 256x256, 100000 512x512, 1000000 800x800.")
+@click.option("--repeats", default=5, show_default=True, type=int, help="Timed runs per side (median; >= 5).")
+@click.option("--warmup", default=2, show_default=True, type=int, help="Untimed runs per side first.")
+@click.option("--threads", default=2, show_default=True, type=int, help="Dr.Jit and torch threads per side.")
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("reports/bench"), show_default=True,
+              help="Folder for ab.json.")
+def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmup: int, threads: int,
+       out: Path) -> None:
+    """Forward+backward of this checkout against COMMIT, timed in alternation (CPU).
+
+    The old commit is checked out into a temporary git worktree; each side runs in
+    its own process. The ratio old/new of the medians is printed only when the
+    1-minute load average stayed <= 1 throughout (see docs/benchmarks.md).
+    """
+    import json
+    from dataclasses import asdict
+
+    from splatbench.bench.ab import run_ab
+    from splatbench.bench.raster import STANDARD_SYNTHETIC, machine_info, parse_synthetic
+
+    specs = [parse_synthetic(count, size) for count, size in synthetic]
+    workloads = [(s.n, s.width, s.height) for s in specs] or list(STANDARD_SYNTHETIC)
+    machine = machine_info("cpu")
+    click.echo(f"bench ab: against {against}, {len(workloads)} workload(s), {repeats} runs per side, "
+               f"{threads} threads, load average {machine.loadavg_start}", err=True)
+    results = run_ab(Path(__file__).resolve().parents[2], against, workloads, repeats=repeats, warmup=warmup,
+                     threads=threads, progress=lambda line: click.echo(line, err=True))
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "ab.json").write_text(json.dumps({"machine": asdict(machine), "results": [asdict(r) for r in results]},
+                                            indent=2))
+    from splatbench.bench.ab import format_result
+    for r in results:
+        click.echo(format_result(r))
+    click.echo(f"wrote {out / 'ab.json'}")
+
+
 @bench.command("train")
 @click.option("--size", "sizes", multiple=True, type=int, metavar="PIXELS",
               help="Square image side (repeatable). Default: 128 and 256.")

@@ -34,6 +34,13 @@ from splatbench.bench.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
 from splatbench.errors import InputError, SplatbenchError
 
 
+#: FP32 operations per pixel-Gaussian evaluation of the forward compositing loop, counted
+#: from `splatbench.raster.compositing._forward_loop` (an FMA counts 2, a compare or
+#: select 1, Dr.Jit's exp about 15): dx, dy 2; sigma 9; exp 15; alpha 2; cutoff and
+#: alpha_min tests 3; transmittance 3; weight 1; r, g, b, depth 8; selects 2.
+FLOPS_PER_EVALUATION = 45
+
+
 class BenchError(SplatbenchError):
     """A benchmark subprocess failed for a reason other than bad input."""
 
@@ -45,7 +52,8 @@ class Target:
     """What a standard workload should achieve on the 2-core CPU (Dr.Jit LLVM) machine."""
 
     fwd_bwd_ms: float                  # median forward+backward time
-    peak_rss_mb: float | None = None   # peak RSS while rendering (see `RasterBenchResult.peak_rss_mb`)
+    peak_rss_mb: float | None = None   # peak RSS of build + one forward+backward
+                                       # (see `RasterBenchResult.first_run_peak_rss_mb`)
 
 
 #: The standard synthetic workloads (Gaussians, width, height) and their targets (issue 3 §5).
@@ -197,17 +205,26 @@ class RasterBenchResult:
     stages: StageSplit                # per-stage split (separate runs, with the stage timer)
     pairs: int                        # Gaussian-tile pairs composited
     visible: int                      # Gaussians that survived culling
-    evaluations: int                  # pairs * tile_size^2: pixel-Gaussian evaluations (upper bound)
+    evaluations: int                  # pixel-Gaussian evaluations compositing performs per pass (work_stats)
     mevals_per_s: float               # evaluations / forward compositing seconds / 10^6
+    box_pairs: int                    # pairs of the cutoff bounding boxes, before the ellipse-tile test
+    block_evaluations: int            # 16 x (4x4 block, Gaussian) pairs whose block meets the support
+    inside_cutoff_evaluations: int    # (pixel, Gaussian) with the pixel centre inside the cutoff ellipse
+    useful_evaluations: int           # ... that also pass alpha >= alpha_min: inside the support
+    useful_share: float               # useful_evaluations / evaluations
+    peak_gflops: float                # measured FP32 FMA peak of the device (splatbench.bench.peak)
+    share_of_peak: float              # mevals_per_s * FLOPS_PER_EVALUATION / peak (see docs/benchmarks.md)
     base_rss_mb: float                # peak RSS after imports (interpreter, torch, Dr.Jit)
     setup_rss_mb: float               # peak RSS after building the workload and parameters
     peak_rss_mb: float                # peak RSS over warm-up and timed runs (see `rss_reset`)
+    first_run_peak_rss_mb: float      # whole-process peak RSS of building the workload and the first
+                                      # forward+backward (max of setup and that run's peak)
     rss_reset: bool                   # True: the high-water mark was reset after setup (Linux),
                                       # so peak_rss_mb excludes setup; False: whole-process peak
     retained_mb_per_run: float        # RSS growth from after warm-up to the end, per timed run
                                       # (about 0 normally; steady growth means each run leaks)
     target_fwd_bwd_ms: float | None   # target for fwd_bwd_ms (standard synthetic workloads only)
-    target_peak_rss_mb: float | None  # target for peak_rss_mb (1M workload only)
+    target_peak_rss_mb: float | None  # target for first_run_peak_rss_mb (1M workload only)
     meets_target: bool | None         # every target met; None without targets
     fwd_runs_ms: list[float] = field(default_factory=list)      # every forward run
     fwd_bwd_runs_ms: list[float] = field(default_factory=list)  # every forward+backward run
@@ -395,7 +412,10 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     stage timer. The RSS fields describe this process: run it in a fresh one
     (`run_isolated`) for them to be this workload's.
     """
+    from splatbench import Gaussians
+    from splatbench.bench.peak import fp32_peak
     from splatbench.raster.options import RasterOptions
+    from splatbench.raster.work import work_stats
 
     options = settings.raster_options()
     opts = RasterOptions.from_kwargs(**options)
@@ -414,6 +434,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     forward = forward_with_init(params, camera, options)
     forward_backward = forward_backward_with_init(params, camera, options)
     forward_backward()
+    first_run_peak = max(setup_rss, peak_rss_mb())
     forward()
     staged_runs(forward_backward, 1)
     gc.collect()
@@ -426,19 +447,27 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     gc.collect()
     retained = (current_rss_mb() - rss_warm) / (3 * settings.repeats)
 
-    evaluations = stats.num_pairs * opts.tile_size ** 2
+    work = work_stats(Gaussians(*(p.numpy() for p in params)), camera, **options)
+    evaluations = work.performed
     comp_s = stages.compositing_ms / 1e3
+    peak = fp32_peak(device)
+    mevals = round(evaluations / comp_s / 1e6, 3) if comp_s > 0 else 0.0
     fwd_bwd_ms = _ms(statistics.median(fwd_bwd_s))
     target = spec.target
     meets = None
     if target is not None:
-        meets = fwd_bwd_ms <= target.fwd_bwd_ms and (target.peak_rss_mb is None or peak_rss <= target.peak_rss_mb)
+        meets = fwd_bwd_ms <= target.fwd_bwd_ms and (target.peak_rss_mb is None
+                                                     or first_run_peak <= target.peak_rss_mb)
     return RasterBenchResult(
         name=name, n=n, width=camera.width, height=camera.height, sh_degree=stats.sh_degree, device=device,
         tile_size=opts.tile_size, repeats=settings.repeats, fwd_ms=_ms(statistics.median(fwd_s)),
         fwd_bwd_ms=fwd_bwd_ms, stages=stages, pairs=stats.num_pairs, visible=int(stats.visible.sum()),
-        evaluations=evaluations, mevals_per_s=round(evaluations / comp_s / 1e6, 3) if comp_s > 0 else 0.0,
+        evaluations=evaluations, mevals_per_s=mevals, box_pairs=work.box_pairs,
+        block_evaluations=work.block_evaluations, inside_cutoff_evaluations=work.inside_cutoff,
+        useful_evaluations=work.useful, useful_share=round(work.useful_share, 4), peak_gflops=peak.gflops,
+        share_of_peak=round(mevals * 1e6 * FLOPS_PER_EVALUATION / (peak.gflops * 1e9), 4),
         base_rss_mb=round(base_rss, 1), setup_rss_mb=round(setup_rss, 1), peak_rss_mb=round(peak_rss, 1),
+        first_run_peak_rss_mb=round(first_run_peak, 1),
         rss_reset=rss_reset, retained_mb_per_run=round(retained, 1),
         target_fwd_bwd_ms=target.fwd_bwd_ms if target else None,
         target_peak_rss_mb=target.peak_rss_mb if target else None, meets_target=meets,
@@ -490,7 +519,7 @@ def run_suite(specs: list[WorkloadSpec], settings: BenchSettings,
 # ----------------------------------------------------------------------------- reporting
 
 TABLE_HEADER = ("workload", "N", "WxH", "fwd ms", "fwd+bwd ms", "stages ms pre/bin/comp/bcomp/bpre/other",
-                "pairs", "Mevals/s", "peak RSS MB", "target", "met")
+                "pairs", "Mevals performed/useful", "Mevals/s", "% of peak", "peak RSS MB 1st/all", "target", "met")
 
 
 def _fmt_ms(x: float) -> str:
@@ -510,7 +539,9 @@ def table_rows(results: list[RasterBenchResult]) -> list[tuple[str, ...]]:
                 target += f", {r.target_peak_rss_mb:.0f} MB"
         met = "-" if r.meets_target is None else ("yes" if r.meets_target else "NO")
         rows.append((r.name, f"{r.n:,}", f"{r.width}x{r.height}", _fmt_ms(r.fwd_ms), _fmt_ms(r.fwd_bwd_ms), split,
-                     f"{r.pairs:,}", f"{r.mevals_per_s:.0f}", f"{r.peak_rss_mb:.0f}", target, met))
+                     f"{r.pairs:,}", f"{r.evaluations / 1e6:.1f}/{r.useful_evaluations / 1e6:.1f}",
+                     f"{r.mevals_per_s:.0f}", f"{100 * r.share_of_peak:.1f} of {r.peak_gflops:.0f} GFLOP/s",
+                     f"{r.first_run_peak_rss_mb:.0f}/{r.peak_rss_mb:.0f}", target, met))
     return rows
 
 

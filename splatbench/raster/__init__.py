@@ -8,6 +8,7 @@ from splatbench.raster.compositing import composite
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.projection import project
 from splatbench.raster.sh import eval_sh
+from splatbench.raster.work import WorkStats, work_stats
 
 
 def __getattr__(name: str):
@@ -19,4 +20,5 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'splatbench.raster' has no attribute {name!r}")
 
 
-__all__ = ["render", "RenderResult", "rasterize", "RasterInfo", "RasterOptions", "project", "eval_sh", "composite"]
+__all__ = ["render", "RenderResult", "rasterize", "RasterInfo", "RasterOptions", "project", "eval_sh", "composite",
+           "work_stats", "WorkStats"]

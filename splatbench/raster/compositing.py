@@ -1,16 +1,22 @@
 """Front-to-back alpha compositing over tiles, with an analytic backward pass.
 
-Mirrors `reference.composite`. Lanes are ordered tile by tile so that a SIMD
-packet (16 lanes with AVX-512) walks one tile's list in lock-step, and each lane
-shades a block of PIXEL_BLOCK x PIXEL_BLOCK pixels: one load of a Gaussian's packed
+Mirrors `reference.composite`. Lanes are ordered tile by tile (a SIMD packet of
+16 lanes with AVX-512 holds one 16x16 tile), and each lane shades a block of
+PIXEL_BLOCK x PIXEL_BLOCK pixels, walking its own list: the pairs of its tile whose
+support meets the block (`blocks.block_lists`). One load of a Gaussian's packed
 record serves the whole block, and in the backward pass the block's gradient
-contributions are summed in registers before one scatter. A symbolic loop per lane stops early
-once every pixel of the block would fall below the transmittance threshold.
+contributions are summed in registers before one scatter. A symbolic loop per lane
+stops early once every pixel of the block would fall below the transmittance
+threshold.
 
-The backward pass is a `dr.CustomOp` that walks each tile's list back to front,
+The backward pass is a `dr.CustomOp` that walks each lane's list back to front,
 recovering transmittance by division (alpha <= alpha_max < 1 keeps it
 invertible). Gradients are accumulated per (tile, Gaussian) pair, then reduced
-per Gaussian in a fixed order, so results are bit-reproducible. Dr.Jit's own AD
+per Gaussian in a fixed order, so results are bit-reproducible. On LLVM the lanes of
+a tile add into one slot per pair (`ReduceMode.Expand`: per-thread copies, and a
+tile never spans two threads); that mode exists only on LLVM, so elsewhere (CUDA)
+each lane writes a slot of its own and the reduction sums a pair's lane slots in
+lane order: no atomics, the same result every run (see `lane_slots`). Dr.Jit's own AD
 through the forward loop (`composite(..., loop_ad=True)`) is kept as a test-only
 second backward that checks the hand-written one.
 """
@@ -23,6 +29,7 @@ from typing import NamedTuple
 from splatbench.raster.backend import dr
 from splatbench.raster.binning import Bins, TileGrid, bin_gaussians
 from splatbench.raster.projection import Projection, array_namespace, next_power_of_two
+from splatbench.raster.reduction import PAIR_GROUPS, bucket, reduce_pairs, lane_slots
 
 GEO = 8  # geometry record per Gaussian: u, v, conic A, B, C, opacity, depth, cutoff_sq
 COL = 4  # colour record per Gaussian: r, g, b, (padding: packet loads need a power of two)
@@ -89,8 +96,10 @@ class Lanes(NamedTuple):
     """Compositing lanes in tile order; each lane shades K = block^2 pixels.
 
     px, py, inside, image_index: lists of K arrays (pixel centres, whether the
-    pixel exists, its row-major index); start, end: the lane's tile range.
-    lanes_per_tile: lanes that share one tile list.
+    pixel exists, its row-major index); start, end: the lane's range in its list.
+    lanes_per_tile: lanes that share one tile. pairs: None when each lane walks its
+    tile's range of the sorted pairs; else the lanes' own lists (`blocks.block_lists`),
+    each entry a sorted pair position.
     """
 
     px: list
@@ -100,6 +109,12 @@ class Lanes(NamedTuple):
     start: object
     end: object
     lanes_per_tile: int
+    pairs: object = None
+
+
+def pair_at(m, lanes: Lanes, i):
+    """Sorted pair position of entry ``i`` of each lane's list."""
+    return i if lanes.pairs is None else dr.gather(m.UInt32, lanes.pairs, i)
 
 
 def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
@@ -127,6 +142,16 @@ def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
         any_inside |= ok
     end = dr.select(any_inside, dr.gather(m.UInt32, bins.tile_end, tile), start)
     return Lanes(px, py, inside, image_index, start, end, lanes_per_tile)
+
+
+def lanes_for(m, rec: Records, bins: Bins, cfg: CompositeSettings) -> Lanes:
+    """The compositing lanes with their per-block lists (`blocks.block_lists`)."""
+    from splatbench.raster.blocks import block_lists
+
+    lanes = make_lanes(m, bins.grid, bins)
+    if bins.num_pairs == 0:
+        return lanes
+    return block_lists(m, rec, bins, lanes, cfg.alpha_min, lambda r, gid: _load(m, r, gid))
 
 
 def _alpha_at(rec, px, py, cfg: CompositeSettings, active):
@@ -185,7 +210,7 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
 
     def body(*state):
         i, pix = unpack(state)
-        gid = dr.gather(UInt32, ids, i)
+        gid = dr.gather(UInt32, ids, pair_at(m, lanes, i))
         geo, (cr, cg, cb) = _load(m, rec, gid)
         out = [i + 1]
         for k, (T, r, g, b, d, stop) in enumerate(pix):
@@ -221,62 +246,6 @@ def _to_image(m, grid: TileGrid, lanes: Lanes, fwd: _Forward, bg) -> Composite:
     return Composite(rgb + T * m.Array3f(*bg), 1.0 - T, d)
 
 
-# Per-pair gradient accumulators, packed like the records so that the backward loop
-# does one packet scatter-add per group and the reduction one packet load per pair.
-PAIR_GROUPS = {
-    "geo": (8, ("mx", "my", "ca", "cb", "cc", "o", "z", None)),
-    "col": (4, ("r", "g", "b", None)),
-    "abs": (2, ("ax", "ay")),
-}
-
-
-def _bucket(n: int) -> int:
-    """``n`` rounded up to 8 steps per power of two (<= 12.5% more). The Expand-mode
-    scatter bakes its target's size into the kernel, so sizing the per-pair buffers by
-    the exact pair count compiled a new backward kernel (seconds) for almost every
-    training step; bucketed sizes reuse a few cached kernels."""
-    p = 1 << max(int(n).bit_length() - 4, 0)
-    return -(-n // p) * p
-
-
-def _reduce_pairs(m, bins: Bins, pair: dict, n: int) -> dict:
-    """Sum per-pair gradient records per Gaussian, deterministically.
-
-    The pairs of Gaussian g sit at Gaussian-major positions offsets[g] ..
-    offsets[g] + counts[g], i.e. at sorted positions inverse_order[j]; each Gaussian
-    lane sums its own pairs in ascending order, so the result does not depend on
-    thread scheduling.
-    """
-    Float, UInt32 = m.Float, m.UInt32
-    inverse = dr.zeros(UInt32, bins.num_pairs)
-    dr.scatter(inverse, dr.arange(UInt32, bins.num_pairs), bins.order, mode=dr.ReduceMode.Permute)
-    end = bins.offsets + bins.counts
-    groups = [(name, PAIR_GROUPS[name]) for name in pair]
-
-    def cond(j, *acc):
-        return j < end
-
-    def body(j, *acc):
-        slot = dr.gather(UInt32, inverse, j)
-        out, pos = [j + 1], 0
-        for name, (width, _) in groups:
-            rec = dr.gather(m.ArrayXf, pair[name], slot, shape=(width, dr.width(j)))
-            out += [acc[pos + k] + rec[k] for k in range(width)]
-            pos += width
-        return tuple(out)
-
-    zero = dr.zeros(Float, n)
-    state = [UInt32(bins.offsets)] + [Float(zero) for _, (width, _) in groups for _ in range(width)]
-    final = dr.while_loop(tuple(state), cond, body, mode="symbolic")[1:]
-    sums, pos = {}, 0
-    for _, (width, keys) in groups:
-        for k, key in enumerate(keys):
-            if key is not None:
-                sums[key] = final[pos + k]
-        pos += width
-    return sums
-
-
 class _CompositeOp(dr.CustomOp):
     """Forward: `_forward_loop`. Backward: back-to-front walk, per-pair accumulation."""
 
@@ -291,7 +260,7 @@ class _CompositeOp(dr.CustomOp):
         self.n = dr.width(opacities)
         self.records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
         dr.eval(self.records)
-        self.lanes = make_lanes(m, self.bins.grid, self.bins)
+        self.lanes = lanes_for(m, self.records, self.bins, cfg)
         fwd = _forward_loop(m, self.records, self.bins.gaussian_ids, self.lanes, cfg)
         dr.eval(fwd)
         self.fwd = fwd
@@ -317,20 +286,21 @@ class _CompositeOp(dr.CustomOp):
         T_final, stop = self.fwd.T, self.fwd.stop
         bg = cfg.background
         ids = bins.gaussian_ids
-        # Per-pair accumulators: slot i belongs to one (tile, Gaussian) pair, so only the
+        # Per-pair accumulators: slot p belongs to one (tile, Gaussian) pair, so only the
         # lanes of one tile ever add into it.
-        cap = _bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
-        pair = {name: dr.zeros(Float, width * cap) for name, (width, _) in PAIR_GROUPS.items()
+        cap = bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
+        per_lane = lane_slots(m)
+        L = lanes.lanes_per_tile if per_lane else 1
+        pair = {name: dr.zeros(Float, width * cap * L) for name, (width, _) in PAIR_GROUPS.items()
                 if name != "abs" or self.want_absgrad}
         # Expand (LLVM): per-thread copies, non-atomic updates. Still deterministic: a slot
         # is only written by the lanes of one tile, and a tile never spans two threads.
-        mode = dr.ReduceMode.Expand
-        # Lock-step walk: every lane of a tile starts at the tile's largest stop index, so
-        # a SIMD packet always reads one Gaussian (pixels past their own stop are idle).
-        lane_stop = stop[0]
+        # Per-lane slots (CUDA): each slot is written once, by one lane, without atomics.
+        sub_slot = dr.arange(UInt32, dr.width(lanes.start)) % L if per_lane else None
+        # Each lane walks its own list back from the largest stop index of its pixels.
+        start_i = stop[0]
         for s in stop[1:]:
-            lane_stop = dr.maximum(lane_stop, s)
-        start_i = dr.repeat(dr.block_reduce(dr.ReduceOp.Max, lane_stop, lanes.lanes_per_tile), lanes.lanes_per_tile)
+            start_i = dr.maximum(start_i, s)
 
         def unpack(state):  # i, then per pixel (T, ar, ag, ab, ad)
             return state[0], [state[1 + 5 * k: 6 + 5 * k] for k in range(K)]
@@ -341,7 +311,8 @@ class _CompositeOp(dr.CustomOp):
         def body(*state):
             i, pix = unpack(state)
             i = i - 1
-            gid = dr.gather(UInt32, ids, i)
+            p = pair_at(m, lanes, i)
+            gid = dr.gather(UInt32, ids, p)
             geo, (cr, cg, cb) = _load(m, rec, gid)
             ca, cbk, cc, depth = geo[2], geo[3], geo[4], geo[6]
             sums = {key: 0.0 for key in keys}
@@ -372,8 +343,11 @@ class _CompositeOp(dr.CustomOp):
                 out += [dr.select(on, T_i, T), dr.select(on, ar + w * cr, ar), dr.select(on, ag + w * cg, ag),
                         dr.select(on, ab + w * cb, ab), dr.select(on, ad + w * depth, ad)]
             for name, buffer in pair.items():
-                values = [sums[key] if key is not None else 0.0 for key in PAIR_GROUPS[name][1]]
-                dr.scatter_add(buffer, m.ArrayXf(values), i, any_on, mode=mode)
+                values = m.ArrayXf([sums[key] if key is not None else 0.0 for key in PAIR_GROUPS[name][1]])
+                if per_lane:
+                    dr.scatter(buffer, values, p * L + sub_slot, any_on)
+                else:
+                    dr.scatter_add(buffer, values, p, any_on, mode=dr.ReduceMode.Expand)
             return tuple(out)
 
         state = [UInt32(start_i)]
@@ -382,7 +356,11 @@ class _CompositeOp(dr.CustomOp):
             state += [Float(T), T * bg[0], T * bg[1], T * bg[2], dr.zeros(Float, dr.width(T))]
         dr.while_loop(tuple(state), cond, body, mode="symbolic")
         dr.eval(pair)
-        buf = _reduce_pairs(m, bins, pair, self.n)
+        # The walk was the last reader of the records, lane lists and forward state:
+        # release them before the reduction allocates (the op runs its backward once).
+        del state, v_rgb, v_alpha, v_d, T_final, stop, start_i, rec, lanes
+        self.records = self.lanes = self.fwd = None
+        buf = reduce_pairs(m, bins, pair, self.n, L)
         self.state.grad_means2d = m.Array2f(buf["mx"], buf["my"])
         if self.want_absgrad:
             self.state.abs_grad_means2d = m.Array2f(buf["ax"], buf["ay"])
@@ -440,14 +418,14 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
     m = array_namespace(opacities)
     proj = Projection(means2d, conics, depths, opacities, cutoff_sq, extents, None, visible)
     grid = TileGrid(width, height, tile_size)
-    bins = bin_gaussians(proj, grid)
+    bins = bin_gaussians(proj, grid, float(alpha_min))
     if timer is not None:
         timer.mark("binning")
     cfg = CompositeSettings(float(alpha_min), float(alpha_max), float(transmittance_min),
                             tuple(float(c) for c in background))
     if loop_ad:
         records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
-        lanes = make_lanes(m, grid, bins)
+        lanes = lanes_for(m, records, bins, cfg)
         # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
         # count (the longest tile list, rounded up to a power of two); -1 is wrong here.
         bound = next_power_of_two(max(bins.max_list_length, 1))

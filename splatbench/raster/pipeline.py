@@ -68,14 +68,28 @@ def check_background(background) -> tuple[float, float, float]:
     return tuple(float(c) for c in bg)
 
 
-def check_clip_planes(camera, options: RasterOptions) -> None:
-    """The near and far planes in effect (the options', else the camera's) must have
-    0 < near < far; otherwise every Gaussian is culled and the image is blank."""
+def clip_planes(camera, options: RasterOptions) -> tuple[float, float]:
+    """The near and far planes in effect: the options', else the camera's."""
     near = camera.near if options.near is None else options.near
     far = camera.far if options.far is None else options.far
+    return near, far
+
+
+def check_clip_planes(camera, options: RasterOptions) -> None:
+    """The planes in effect must have 0 < near < far; otherwise every Gaussian is culled
+    and the image is blank."""
+    near, far = clip_planes(camera, options)
     if not near < far:
         raise InputError(f"near, far: expected near < far, got near={near!r}, far={far!r} "
                          f"(options, else the camera's)")
+
+
+def project_view(means, log_scales, quats, opacity_logits, camera, options: RasterOptions) -> Projection:
+    """`project` with the camera's planes unless ``options`` override them (tensors as in `render_frame`)."""
+    near, far = clip_planes(camera, options)
+    return project(means, log_scales, quats, opacity_logits, camera.K, camera.world_to_camera,
+                   camera.width, camera.height, eps2d=options.eps2d, near=near, far=far,
+                   radius=options.radius, alpha_min=options.alpha_min, antialiased=options.antialiased)
 
 
 def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int,
@@ -93,11 +107,7 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
     """
     if means.shape[0] == 0:
         return _empty_frame(means, camera, background, options)
-    near = camera.near if options.near is None else options.near
-    far = camera.far if options.far is None else options.far
-    proj = project(means, log_scales, quats, opacity_logits, camera.K, camera.world_to_camera,
-                   camera.width, camera.height, eps2d=options.eps2d, near=near, far=far,
-                   radius=options.radius, alpha_min=options.alpha_min, antialiased=options.antialiased)
+    proj = project_view(means, log_scales, quats, opacity_logits, camera, options)
     m = array_namespace(means.array)
     # the camera centre enters as opaque values, like the projection's camera constants:
     # as literals, every view compiled SH kernels of its own (degree >= 1)
@@ -149,5 +159,5 @@ def frame_to_numpy(frame: Frame, height: int, width: int) -> tuple[np.ndarray, n
     return rgb, alpha, depth
 
 
-__all__ = ["Frame", "render_frame", "frame_to_numpy", "resolve_sh_degree", "check_background", "check_clip_planes",
-           "Composite"]
+__all__ = ["Frame", "render_frame", "project_view", "frame_to_numpy", "resolve_sh_degree", "check_background",
+           "check_clip_planes", "Composite"]

@@ -1,0 +1,194 @@
+"""Forward+backward of this checkout against an older commit, timed in alternation.
+
+`run_ab` checks the old commit out into a temporary `git worktree`, starts one
+worker process per side (the same interpreter; ``PYTHONPATH`` selects the tree),
+builds the workload in each, warms both up (kernels compile or load from
+``~/.drjit``), then asks them for one timed forward+backward at a time, old and new
+in turn, so that both sides see the same machine over the same minutes. Each
+worker runs Dr.Jit and torch on ``threads`` threads. The ratio old/new of the
+medians is reported only when the 1-minute load average stayed at or below
+`QUIET_LOAD` at every sample; otherwise it is withheld (`AbResult.ratio` is None)
+and `AbResult.note` says why. docs/benchmarks.md shows the command.
+
+The worker is a script that uses only `splatbench.workloads.synthetic` and
+`splatbench.rasterize`, which both trees provide: it must not import this module,
+which the old tree may not have.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from splatbench.errors import InputError, SplatbenchError
+
+#: A ratio is reported only while the 1-minute load average stays at or below this.
+QUIET_LOAD = 1.0
+
+WORKER = r"""
+import json, sys, time
+spec = json.loads(sys.argv[1])
+import drjit as dr, torch
+import splatbench
+from splatbench.workloads import synthetic
+dr.set_thread_count(spec["threads"]); torch.set_num_threads(spec["threads"])
+w = synthetic(spec["n"], spec["width"], spec["height"], spec["seed"])
+g = w.gaussians
+leaves = [torch.tensor(getattr(g, k)).requires_grad_(True)
+          for k in ("means", "log_scales", "quats", "opacity_logits", "sh")]
+
+def run():
+    t0 = time.perf_counter()
+    rgb, _, _, _ = splatbench.rasterize(*leaves, w.camera, device="cpu")
+    rgb.sum().backward()
+    for p in leaves:
+        p.grad = None
+    return time.perf_counter() - t0
+
+for _ in range(spec["warmup"]):
+    run()
+print(json.dumps({"ready": splatbench.__file__}), flush=True)
+for line in sys.stdin:
+    if line.strip() != "run":
+        break
+    print(json.dumps({"seconds": run()}), flush=True)
+"""
+
+
+class AbError(SplatbenchError):
+    """The old tree could not be checked out, or a worker failed."""
+
+
+@dataclass(frozen=True)
+class AbResult:
+    """One workload timed old vs new. Seconds per forward+backward, in run order."""
+
+    workload: str               # "N WxH"
+    against: str                # the old commit, as given
+    old_seconds: list[float]
+    new_seconds: list[float]
+    old_median: float
+    new_median: float
+    loads: list[float] = field(default_factory=list)  # 1-minute load average before each pair of runs
+    ratio: float | None = None  # old_median / new_median; None when the machine was not quiet
+    note: str = ""              # why the ratio is withheld ("" when it is reported)
+
+
+def load1() -> float:
+    return round(os.getloadavg()[0], 2)
+
+
+@contextmanager
+def old_tree(repo: Path, commit: str):
+    """A detached temporary worktree of ``commit`` (removed afterwards)."""
+    probe = subprocess.run(["git", "-C", str(repo), "rev-parse", "--verify", "--quiet", f"{commit}^{{commit}}"],
+                           capture_output=True, text=True)
+    if probe.returncode != 0:
+        raise InputError(f"--against: {commit!r} is not a commit of {repo}")
+    parent = Path(tempfile.mkdtemp(prefix="splatbench-ab-"))
+    tmp = parent / "tree"
+    add = subprocess.run(["git", "-C", str(repo), "worktree", "add", "--detach", str(tmp), commit],
+                         capture_output=True, text=True)
+    if add.returncode != 0:
+        raise AbError(f"git worktree add {commit} failed: {add.stderr.strip().splitlines()[-1:]}")
+    try:
+        yield tmp
+    finally:
+        subprocess.run(["git", "-C", str(repo), "worktree", "remove", "--force", str(tmp)], capture_output=True)
+        shutil.rmtree(parent, ignore_errors=True)
+
+
+class Worker:
+    """One persistent worker process rendering with the splatbench of ``tree``."""
+
+    def __init__(self, tree: Path, spec: dict) -> None:
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+        self.tree = tree
+        self.stderr = tempfile.TemporaryFile(mode="w+")  # a file, not a pipe: a full pipe would block the worker
+        self.proc = subprocess.Popen([sys.executable, "-c", WORKER, json.dumps(spec)], cwd=str(tree), env=env,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.stderr, text=True)
+        ready = self._read()
+        if not str(ready.get("ready", "")).startswith(str(tree)):
+            self.close()
+            raise AbError(f"worker for {tree} imported splatbench from {ready.get('ready')!r}, not from that tree")
+
+    def _read(self) -> dict:
+        line = self.proc.stdout.readline()
+        if not line:
+            code = self.proc.wait()
+            self.stderr.seek(0)
+            err = self.stderr.read().strip().splitlines()
+            raise AbError(f"worker for {self.tree} exited with {code}: {err[-1] if err else 'no output'}")
+        return json.loads(line)
+
+    def run(self) -> float:
+        self.proc.stdin.write("run\n")
+        self.proc.stdin.flush()
+        return float(self._read()["seconds"])
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.stdin.close()
+            self.proc.wait(timeout=60)
+        self.stderr.close()
+
+
+def run_ab(repo: Path, against: str, workloads: list[tuple[int, int, int]], *, repeats: int = 5,
+           warmup: int = 2, threads: int = 2, seed: int = 0, progress=None) -> list[AbResult]:
+    """Time each synthetic workload (n, width, height) old vs new, alternating.
+
+    Args:
+        repo: a checkout of this repository (the new side is the tree this module
+            was imported from). against: the old commit. repeats: timed runs per
+            side (>= 5 for a reported median). warmup: untimed runs per side first.
+    """
+    if repeats < 5:
+        raise InputError(f"--repeats: expected >= 5 timed runs per side, got {repeats}")
+    new_tree = Path(__file__).resolve().parents[2]
+    results = []
+    with old_tree(repo, against) as old:
+        for n, width, height in workloads:
+            spec = {"n": n, "width": width, "height": height, "seed": seed, "threads": threads, "warmup": warmup}
+            label = f"{n} {width}x{height}"
+            if progress:
+                progress(f"{label}: building and warming up both sides ...")
+            sides = []
+            try:
+                sides.append(Worker(old, spec))
+                sides.append(Worker(new_tree, spec))
+                old_s, new_s, loads = [], [], []
+                for k in range(repeats):
+                    loads.append(load1())
+                    order = (0, 1) if k % 2 == 0 else (1, 0)  # neither side always goes first
+                    for side in order:
+                        (old_s if side == 0 else new_s).append(sides[side].run())
+                loads.append(load1())
+            finally:
+                for w in sides:
+                    w.close()
+            results.append(summarize(label, against, old_s, new_s, loads))
+    return results
+
+
+def summarize(label: str, against: str, old_s: list[float], new_s: list[float], loads: list[float]) -> AbResult:
+    """Medians, and the ratio old/new unless a load sample exceeded `QUIET_LOAD`."""
+    old_med, new_med = statistics.median(old_s), statistics.median(new_s)
+    busy = max(loads)
+    note = "" if busy <= QUIET_LOAD else (f"ratio withheld: 1-minute load average reached {busy} > "
+                                          f"{QUIET_LOAD} (not a quiet machine)")
+    return AbResult(label, against, old_s, new_s, old_med, new_med, loads,
+                    None if note else round(old_med / new_med, 3), note)
+
+
+def format_result(r: AbResult) -> str:
+    ratio = f"{r.ratio:.2f}x" if r.ratio is not None else r.note
+    return (f"{r.workload}: old {r.against} median {r.old_median * 1e3:.1f} ms, new median "
+            f"{r.new_median * 1e3:.1f} ms over {len(r.new_seconds)} alternating runs each; load {r.loads}; {ratio}")

@@ -1,0 +1,75 @@
+"""Per-pair gradient buffers of the compositing backward pass and their
+deterministic reduction per Gaussian (used by `compositing._CompositeOp`)."""
+
+from __future__ import annotations
+
+from splatbench.raster.backend import dr
+from splatbench.raster.binning import Bins
+
+# Per-pair gradient accumulators, packed like the records so that the backward loop
+# does one packet scatter-add per group and the reduction one packet load per pair.
+PAIR_GROUPS = {
+    "geo": (8, ("mx", "my", "ca", "cb", "cc", "o", "z", None)),
+    "col": (4, ("r", "g", "b", None)),
+    "abs": (2, ("ax", "ay")),
+}
+
+
+def bucket(n: int) -> int:
+    """``n`` rounded up to 8 steps per power of two (<= 12.5% more). The Expand-mode
+    scatter bakes its target's size into the kernel, so sizing the per-pair buffers by
+    the exact pair count compiled a new backward kernel (seconds) for almost every
+    training step; bucketed sizes reuse a few cached kernels."""
+    p = 1 << max(int(n).bit_length() - 4, 0)
+    return -(-n // p) * p
+
+
+def lane_slots(m) -> bool:
+    """Whether each lane of a tile accumulates into a slot of its own (True except on
+    LLVM, whose Expand mode makes the shared slot deterministic). Per-lane slots cost
+    lanes_per_tile (16 at the default sizes) times the per-pair buffer memory."""
+    return not m.__name__.startswith("drjit.llvm")
+
+
+def reduce_pairs(m, bins: Bins, pair: dict, n: int, slots_per_pair: int = 1) -> dict:
+    """Sum per-pair gradient records per Gaussian, deterministically.
+
+    With ``slots_per_pair`` L > 1 (per-lane slots), pair p's records sit at slots
+    p * L .. p * L + L - 1 and are summed in that order.
+
+    The pairs of Gaussian g sit at Gaussian-major positions offsets[g] ..
+    offsets[g] + counts[g], i.e. at sorted positions inverse_order[j]; each Gaussian
+    lane sums its own pairs in ascending order, so the result does not depend on
+    thread scheduling.
+    """
+    Float, UInt32 = m.Float, m.UInt32
+    inverse = dr.zeros(UInt32, bins.num_pairs)
+    dr.scatter(inverse, dr.arange(UInt32, bins.num_pairs), bins.order, mode=dr.ReduceMode.Permute)
+    end = bins.offsets + bins.counts
+    groups = [(name, PAIR_GROUPS[name]) for name in pair]
+
+    def cond(j, *acc):
+        return j < end
+
+    def body(j, *acc):
+        slot = dr.gather(UInt32, inverse, j) * slots_per_pair
+        out, pos = [j + 1], 0
+        for name, (width, _) in groups:
+            total = list(acc[pos: pos + width])
+            for sub in range(slots_per_pair):
+                rec = dr.gather(m.ArrayXf, pair[name], slot + sub, shape=(width, dr.width(j)))
+                total = [total[k] + rec[k] for k in range(width)]
+            out += total
+            pos += width
+        return tuple(out)
+
+    zero = dr.zeros(Float, n)
+    state = [UInt32(bins.offsets)] + [Float(zero) for _, (width, _) in groups for _ in range(width)]
+    final = dr.while_loop(tuple(state), cond, body, mode="symbolic")[1:]
+    sums, pos = {}, 0
+    for _, (width, keys) in groups:
+        for k, key in enumerate(keys):
+            if key is not None:
+                sums[key] = final[pos + k]
+        pos += width
+    return sums

@@ -1,0 +1,111 @@
+"""How much work compositing does, and how much of it can change a pixel.
+
+`work_stats` counts, for one view, the pixel-Gaussian evaluations of one
+compositing pass and the ones inside each Gaussian's support. The counts are
+deterministic (no timing), so they are evidence on any machine; docs/benchmarks.md
+explains how `splatbench bench raster` turns them into a share of the FP32 peak.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from splatbench.raster.api import to_tensor
+from splatbench.raster.backend import dr, get_backend
+from splatbench.raster.binning import TileGrid, bin_gaussians
+# The compositing loop's own lanes, lists, per-pixel test and record loads, so that
+# the counts are of exactly the decisions it makes.
+from splatbench.raster.compositing import (CompositeSettings, Splats, _alpha_at, _load, lanes_for, pack_records,
+                                           pair_at)
+from splatbench.raster.options import RasterOptions
+from splatbench.raster.pipeline import project_view
+
+
+@dataclass(frozen=True)
+class WorkStats:
+    """Work of one compositing pass over one view (counts; early termination ignored).
+
+    box_pairs: Gaussian-tile pairs of the cutoff bounding boxes (binning before its
+    ellipse-tile test); pairs: the Gaussian-tile pairs kept; tile_evaluations:
+    pairs x tile_size^2, what compositing would evaluate if every lane walked its whole
+    tile list; block_evaluations: the sum over lanes of PIXEL_BLOCK^2 x the length of
+    the lane's own list (`blocks.block_lists`), i.e. (block, Gaussian) pairs whose block
+    meets the support, x 16; performed: pixel-Gaussian evaluations compositing does,
+    per tile lanes x PIXEL_BLOCK^2 x the longest of its lanes' lists (the lanes of a tile
+    share a SIMD packet, which runs until its longest list ends); inside_cutoff:
+    (pixel, Gaussian) evaluations with the pixel centre inside the cutoff ellipse,
+    q = 2 sigma <= R^2; useful: those that also pass alpha >= alpha_min, i.e. the
+    Gaussian's support, where it can change the pixel.
+    """
+
+    box_pairs: int
+    pairs: int
+    tile_evaluations: int
+    block_evaluations: int
+    performed: int
+    inside_cutoff: int
+    useful: int
+
+    @property
+    def useful_share(self) -> float:
+        """useful / performed (0 when nothing is performed)."""
+        return self.useful / self.performed if self.performed else 0.0
+
+
+def work_stats(gaussians, camera, **options) -> WorkStats:
+    """Count the compositing work of rendering ``gaussians`` from ``camera``.
+
+    Args:
+        gaussians: `splatbench.Gaussians` [N]. camera: `splatbench.Camera` (W x H).
+        **options: `RasterOptions` fields, as for `splatbench.render`.
+
+    Returns:
+        `WorkStats` (integers).
+    """
+    opts = RasterOptions.from_kwargs(**options)
+    m = get_backend(opts.device).t
+    if len(gaussians) == 0:
+        return WorkStats(0, 0, 0, 0, 0, 0, 0)
+    with dr.suspend_grad():
+        proj = project_view(to_tensor(m, gaussians.means), to_tensor(m, gaussians.log_scales),
+                            to_tensor(m, gaussians.quats), to_tensor(m, gaussians.opacity_logits), camera, opts)
+        grid = TileGrid(camera.width, camera.height, opts.tile_size)
+        bins = bin_gaussians(proj, grid, opts.alpha_min)
+        if bins.num_pairs == 0:
+            return WorkStats(bins.box_pairs, 0, 0, 0, 0, 0, 0)
+        zero = dr.zeros(m.Array3f, dr.width(proj.depths))
+        records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, zero, proj.depths,
+                                         proj.cutoff_sq))
+        counts = _count(m, records, bins, CompositeSettings(opts.alpha_min, opts.alpha_max,
+                                                             opts.transmittance_min, (0.0, 0.0, 0.0)))
+    return WorkStats(bins.box_pairs, bins.num_pairs, bins.num_pairs * opts.tile_size ** 2, *counts)
+
+
+def _count(m, records, bins, cfg: CompositeSettings) -> tuple[int, int, int, int]:
+    """(block_evaluations, performed, inside_cutoff, useful), walking the lanes' own lists."""
+    UInt32 = m.UInt32
+    lanes = lanes_for(m, records, bins, cfg)
+    K = len(lanes.px)
+
+    def body(i, inside, useful):
+        geo, _ = _load(m, records, dr.gather(UInt32, bins.gaussian_ids, pair_at(m, lanes, i)))
+        ca, cb, cc, cutoff = geo[2], geo[3], geo[4], geo[7]
+        for k in range(K):
+            _, contributes, dx, dy, _, _ = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, lanes.inside[k])
+            sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy
+            inside = inside + dr.select(lanes.inside[k] & (sigma <= 0.5 * cutoff), 1, 0)
+            useful = useful + dr.select(contributes, 1, 0)
+        return i + 1, inside, useful
+
+    zero = dr.zeros(UInt32, dr.width(lanes.start))
+    _, inside, useful = dr.while_loop((UInt32(lanes.start), zero, UInt32(zero)), lambda i, *_: i < lanes.end, body,
+                                      mode="symbolic")
+    length = lanes.end - lanes.start
+    longest = dr.block_reduce(dr.ReduceOp.Max, length, lanes.lanes_per_tile)  # per tile
+
+    def total(x, scale: int) -> int:
+        return int(np.sum(x.numpy(), dtype=np.int64)) * scale
+
+    return (total(length, K), total(longest, lanes.lanes_per_tile * K), total(inside, 1), total(useful, 1))
