@@ -25,6 +25,8 @@ BUILTINS: dict[str, str] = {
     "drjit": _B + "drjit_backend:make_drjit_backend",
     "reference": _B + "reference_backend:make_reference_backend",
     "reference-exact": _B + "reference_backend:make_reference_exact_backend",
+    "torch": _B + "torch_backend:make_torch_backend",
+    "torch64": _B + "torch_backend:make_torch64_backend",
 }
 
 
