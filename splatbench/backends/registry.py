@@ -27,6 +27,7 @@ BUILTINS: dict[str, str] = {
     "reference-exact": _B + "reference_backend:make_reference_exact_backend",
     "torch": _B + "torch_backend:make_torch_backend",
     "torch64": _B + "torch_backend:make_torch64_backend",
+    "gsplat": _B + "gsplat_backend:make_gsplat_backend",
 }
 
 

@@ -7,7 +7,7 @@ rasterizer, and differentiated by torch autograd. ``torch`` computes in float32,
 Compositing is dense per block of BLOCK x BLOCK pixels: every visible Gaussian whose
 screen box touches the block is tested at every pixel of it, in depth order, with the
 per-pixel rules of conventions.md (3-sigma cutoff, alpha_min skip, alpha_max clamp,
-early stop). The blocks only bound memory (pixels x candidates); the per-pixel test
+early stop; radius "opacity" on request). The blocks only bound memory (pixels x candidates); the per-pixel test
 decides, so the declared conventions are graphdeco's.
 """
 
@@ -36,6 +36,7 @@ class Settings(NamedTuple):
     alpha_max: float = 0.99
     transmittance_min: float = 1e-4
     eps2d: float = 0.3
+    radius: str = "3sigma"  # or "opacity": R² = 2 ln(o / alpha_min), culling o <= alpha_min
 
 
 class Projected(NamedTuple):
@@ -46,7 +47,8 @@ class Projected(NamedTuple):
     conics: object   # [M, 3] (A, B, C) of inverse(Σ2D)
     opacity: object  # [M]
     depth: object    # [M] camera z
-    extent: object   # [M, 2] (rx, ry) half sizes of the 3-sigma box
+    extent: object   # [M, 2] (rx, ry) half sizes of the box of the ellipse d² <= R²
+    cutoff_sq: object  # [M] R², the Mahalanobis cutoff
 
 
 def _unit_rows(v, smallest: float):
@@ -83,11 +85,12 @@ class Screen(NamedTuple):
     conics: object   # [N, 3] (A, B, C) of inverse(Σ2D)
     opacity: object  # [N]
     depth: object    # [N] camera z
-    extent: object   # [N, 2] (rx, ry) half sizes of the 3-sigma box
+    extent: object   # [N, 2] (rx, ry) half sizes of the box of the ellipse d² <= R²
+    cutoff_sq: object  # [N] R²
 
 
 def screen(means, log_scales, quats, opacity_logits, camera, s: Settings) -> Screen:
-    """conventions.md "project", steps 1-10 with radius "3sigma" (culled entries may hold garbage)."""
+    """conventions.md "project", steps 1-10 (culled entries may hold garbage)."""
     import torch
 
     dt = means.dtype
@@ -115,11 +118,17 @@ def screen(means, log_scales, quats, opacity_logits, camera, s: Settings) -> Scr
     keep = keep & (torch.maximum(xx, yy) <= (BIG_FACTOR * max(w_img, h_img)) ** 2)
     conics = torch.stack([yy / det, -xy / det, xx / det], 1)                 # 6. conic
     opacity = torch.sigmoid(opacity_logits)                                  # 7. opacity
-    rx, ry = 3.0 * xx.abs().sqrt(), 3.0 * yy.abs().sqrt()                    # 8-9. R = 3, screen box
+    if s.radius == "3sigma":                                                 # 8. cutoff R²
+        cutoff_sq = torch.full_like(opacity, 9.0)
+    else:
+        keep = keep & (opacity > s.alpha_min)
+        cutoff_sq = 2.0 * torch.log(opacity / s.alpha_min)
+    R = cutoff_sq.clamp_min(0).sqrt()
+    rx, ry = R * xx.abs().sqrt(), R * yy.abs().sqrt()                        # 9. screen box
     u, v = means2d[:, 0], means2d[:, 1]
     keep = keep & (u + rx >= 0) & (u - rx <= w_img) & (v + ry >= 0) & (v - ry <= h_img)
     keep = keep & torch.isfinite(conics).all(1)
-    return Screen(keep, means2d, conics, opacity, z, torch.stack([rx, ry], 1))
+    return Screen(keep, means2d, conics, opacity, z, torch.stack([rx, ry], 1), cutoff_sq)
 
 
 def project(means, log_scales, quats, opacity_logits, camera, s: Settings) -> Projected:
@@ -134,7 +143,7 @@ def project(means, log_scales, quats, opacity_logits, camera, s: Settings) -> Pr
     q = screen(means[index], log_scales[index], quats[index], opacity_logits[index], camera, s)
     order = torch.sort(q.depth.detach(), stable=True).indices                # by depth, ties by index
     return Projected(index[order], q.means2d[order], q.conics[order], q.opacity[order], q.depth[order],
-                     q.extent[order].detach())
+                     q.extent[order].detach(), q.cutoff_sq[order].detach())
 
 
 def eval_sh(sh, means, camera, degree: int):
@@ -171,7 +180,7 @@ def composite_block(pix, p: Projected, colors, s: Settings, background):
     sigma = 0.5 * (A * d[..., 0] ** 2 + C * d[..., 1] ** 2) + B * d[..., 0] * d[..., 1]
     alpha = (p.opacity * torch.exp(-sigma)).clamp(max=s.alpha_max)
     with torch.no_grad():  # the discrete decisions: cutoff, skip, then the early stop
-        used = (sigma <= 4.5) & (alpha >= s.alpha_min)
+        used = (sigma <= 0.5 * p.cutoff_sq) & (alpha >= s.alpha_min)
         T_next = torch.cumprod(1 - torch.where(used, alpha, torch.zeros_like(alpha)), dim=1)
         used &= T_next >= s.transmittance_min
     a = torch.where(used, alpha, torch.zeros_like(alpha))
@@ -223,7 +232,8 @@ def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: i
 
 def make_torch_backend(dtype: str = "float32", **settings) -> Backend:
     """``torch`` (dtype "float32") or ``torch64`` ("float64"); ``settings``: alpha_min, alpha_max,
-    transmittance_min, eps2d (graphdeco's by default). Outputs are in ``dtype``; gradients flow
+    transmittance_min, eps2d, radius (graphdeco's by default; other values reproduce another
+    backend's conventions, e.g. gsplat's, for gradient comparisons). Outputs are in ``dtype``; gradients flow
     back to the inputs in their own dtype."""
     import torch
 
@@ -235,6 +245,8 @@ def make_torch_backend(dtype: str = "float32", **settings) -> Backend:
     if unknown:
         raise InputError(f"{unknown[0]}: not a torch backend setting (known: {', '.join(Settings._fields)})")
     s = Settings(**settings)
+    if s.radius not in ("3sigma", "opacity"):
+        raise InputError(f"radius: expected '3sigma' or 'opacity', got {s.radius!r}")
     compute = getattr(torch, dtype)
 
     def fn(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
@@ -245,13 +257,24 @@ def make_torch_backend(dtype: str = "float32", **settings) -> Backend:
 
     info = BackendInfo(name=DTYPES[dtype], version=torch.__version__, dtype=dtype, tile_size=0,
                        alpha_min=s.alpha_min, alpha_max=s.alpha_max, transmittance_min=s.transmittance_min,
-                       eps2d=s.eps2d, radius="3sigma", antialiased=False,
+                       eps2d=s.eps2d, radius=s.radius, antialiased=False,
                        description=f"pure-PyTorch 3DGS in {dtype} (splatbench/backends/builtins/torch_backend.py), "
                                    f"written from docs/conventions.md; dense compositing per {BLOCK}x{BLOCK}-pixel "
-                                   f"block with the per-pixel 3-sigma test; torch autograd backward")
+                                   f"block with the per-pixel radius test; torch autograd backward")
     return Backend(fn, info)
 
 
 def make_torch64_backend() -> Backend:
     """``torch64``: the float64 variant, the gradient oracle for scenes too large for finite differences."""
     return make_torch_backend("float64")
+
+
+def make_torch_matching(info: BackendInfo, dtype: str = "float64") -> Backend:
+    """A ``torch``/``torch64`` backend following another backend's declared conventions
+    (alpha_min, alpha_max, transmittance_min, eps2d, radius): the gradient oracle for it."""
+    if info.convention("antialiased"):
+        raise InputError(f"backend: the torch backend has no antialiased mode to match {info.name!r}")
+    radius = info.convention("radius")
+    if radius not in ("3sigma", "opacity"):
+        raise InputError(f"backend: the torch backend cannot match radius {radius!r} of {info.name!r}")
+    return make_torch_backend(dtype, **{k: info.convention(k) for k in Settings._fields})
