@@ -28,6 +28,7 @@ BUILTINS: dict[str, str] = {
     "torch": _B + "torch_backend:make_torch_backend",
     "torch64": _B + "torch_backend:make_torch64_backend",
     "gsplat": _B + "gsplat_backend:make_gsplat_backend",
+    "mitsuba": _B + "mitsuba_backend:make_mitsuba_backend",
 }
 
 
