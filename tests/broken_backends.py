@@ -191,3 +191,7 @@ def dense(bug: str | None = None) -> Backend:
 
     return Backend(fn, BackendInfo(name=f"dense[{bug or 'correct'}]",
                                    description=BUGS[bug][1] if bug else "dense, every convention, no approximation"))
+
+
+# One broken backend as a module attribute, for `splatbench conform tests.broken_backends:dense_sort_strided`.
+dense_sort_strided = dense("sort_strided")
