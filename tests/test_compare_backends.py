@@ -21,7 +21,7 @@ import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench.backends import Backend, BackendInfo, get_backend
 from splatbench.backends.compare import (BOUNDARY_FRACTION, GRAD_TERM_OPS, GROUPS, U32, CompareSettings,
                                          auto_scale, gradient_bound, run_compare)
-from splatbench.backends.compare_report import findings, result_table, write_compare
+from splatbench.backends.compare_report import findings, result_table, rewrite_report, write_compare
 from splatbench.workloads import synthetic
 
 WIDTH, HEIGHT = 32, 24
@@ -132,6 +132,12 @@ def test_report_and_findings_come_from_the_numbers(run):
     speed = next(line for line in lines if "fastest forward+backward" in line)
     assert f"**{fastest.backend}**" in speed
     assert f"{second.backend} ×{second.fwd_bwd_ms_median / fastest.fwd_bwd_ms_median:.1f} slower" in speed
+
+
+def test_report_is_rebuilt_from_its_files(run):
+    _, report, out = run
+    text = report.read_text()
+    assert rewrite_report(out).read_text() == text
 
 
 def test_torch64_gradient_oracle_agrees_with_finite_differences():

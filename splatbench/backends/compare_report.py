@@ -2,7 +2,8 @@
 
     result_table(result) -> DataFrame     one row per backend x workload (columns below)
     findings(table) -> list[str]          statements computed from the table's numbers only
-    write_compare(result, out) -> Path    DIR/results.parquet, DIR/report.md, DIR/time_vs_error*.png
+    write_compare(result, out) -> Path    DIR/results.parquet, DIR/run.json, DIR/report.md, DIR/time_vs_error*.png
+    rewrite_report(out) -> Path           report.md and figures again from results.parquet and run.json
 
 Columns: backend, version, workload, n, width, height, error_width, error_height,
 device, status ("ok" or "error"), error; verdict_mode, forward_verdict, band;
@@ -17,8 +18,10 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import asdict
 from datetime import datetime, timezone
 from pathlib import Path
+from types import SimpleNamespace
 
 import pandas as pd
 
@@ -29,7 +32,7 @@ from splatbench.backends.compare_measure import spread
 
 MODES = ("matched", "exact")
 STATS = ("max_abs", "psnr", "frac_off", "outliers")
-TIME_STATS = ("median", "q1", "q3", "min", "max")
+RUN_RECORD = "run.json"
 
 
 def _row(row: CompareRow, cpu_count: int) -> dict:
@@ -202,19 +205,28 @@ def _spread_cell(r, stage: str) -> str:
             f"({r[f'{stage}_ms_min']:.1f}–{r[f'{stage}_ms_max']:.1f})")
 
 
-def render_markdown(result: CompareResult, table: pd.DataFrame, figures: list[Path], out: Path) -> str:
-    m = result.machine
-    s = result.settings
+def run_record(result: CompareResult) -> dict:
+    """What the report needs besides the table (``run.json``): command, when, how long,
+    machine, settings and the per-workload notes."""
+    return {"command": result.command or "run_compare(...)", "seconds": result.seconds,
+            "written": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "machine": asdict(result.machine), "settings": asdict(result.settings), "notes": list(result.notes)}
+
+
+def render_markdown(record: dict, table: pd.DataFrame, figures: list[Path], out: Path) -> str:
+    """``report.md`` from the table and the run record (`run_record`)."""
+    m = SimpleNamespace(**record["machine"])
+    s = SimpleNamespace(**record["settings"])
     pixels = int(table.error_width.iloc[0] * table.error_height.iloc[0]) if len(table) else 0
     text = [
         "# splatbench compare: rasterizers against the float64 oracle", "",
-        f"Command: `{result.command or 'run_compare(...)'}`  ",
-        f"Written {datetime.now(timezone.utc).isoformat(timespec='seconds')} in {result.seconds:.0f} s; "
+        f"Command: `{record['command']}`  ",
+        f"Written {record['written']} in {record['seconds']:.0f} s; "
         f"{m.cpu_count} CPUs ({m.cpu_model}), device {s.device}, torch {m.torch}, drjit {m.drjit}.  ",
         f"Load average (1, 5, 15 min) at the start {m.loadavg_start}, at the end {m.loadavg_end}; "
         + ("**loaded** (1-min load above half the cores): absolute times are inflated by others' work."
            if table.loaded.any() else "not loaded."),
-        "", "## Workloads", "", *[f"- {n}" for n in result.notes], "",
+        "", "## Workloads", "", *[f"- {n}" for n in record["notes"]], "",
         "## Findings", "", "Computed from `results.parquet` by `splatbench.backends.compare_report.findings`.", "",
         *[f"- {line}" for line in findings(table)], "",
         "## Forward error", "",
@@ -269,13 +281,26 @@ _outlier_cell(r), r.forward_verdict] for _, r in table.iterrows()]), "",
 
 
 def write_compare(result: CompareResult, out: str | Path) -> Path:
-    """Write ``out``/results.parquet, the figures and ``out``/report.md; returns report.md's path."""
+    """Write ``out``/results.parquet, ``out``/run.json, the figures and ``out``/report.md;
+    returns report.md's path."""
     from splatbench.experiments.store import atomic_write
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     table = result_table(result)
     atomic_write(out / "results.parquet", lambda temp: table.to_parquet(temp, index=False))
+    text = json.dumps(run_record(result), indent=1) + "\n"
+    atomic_write(out / RUN_RECORD, lambda temp: temp.write_text(text, encoding="utf-8"))
+    return rewrite_report(out)
+
+
+def rewrite_report(out: str | Path) -> Path:
+    """(Re)write ``out``/report.md and its figures from ``out``/results.parquet and run.json."""
+    from splatbench.experiments.store import atomic_write
+
+    out = Path(out)
+    table = pd.read_parquet(out / "results.parquet")
+    record = json.loads((out / RUN_RECORD).read_text(encoding="utf-8"))
     figures = time_figures(table, out)
-    text = render_markdown(result, table, figures, out)
+    text = render_markdown(record, table, figures, out)
     return atomic_write(out / "report.md", lambda temp: temp.write_text(text, encoding="utf-8"))
