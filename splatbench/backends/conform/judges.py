@@ -38,12 +38,15 @@ def _pixel_diff(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> n
 
 
 def _worst(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
-    """Where the largest difference is, in words."""
+    """Where the largest difference (as `_pixel_diff` measures it) is, in words."""
     best = (-1.0, "")
+    z_max = max(1.0, float(np.abs(ref[..., 4]).max()))
     for name, sl in OUTPUT_CHANNELS.items():
         if name not in outputs:
             continue
         d = np.abs(got[..., sl] - ref[..., sl])
+        if name == "depth":
+            d = np.abs(got[..., 4:5] * got[..., 3:4] - ref[..., 4:5] * ref[..., 3:4]) / z_max
         i, j, c = np.unravel_index(int(np.argmax(d)), d.shape)
         if d[i, j, c] > best[0]:
             label = f"{name}[{'rgb'[c]}]" if name == "rgb" else name
