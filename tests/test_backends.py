@@ -47,7 +47,7 @@ ATOL64 = 1e-12
 REL_L2, COSINE = 1e-4, 1 - 1e-8          # float32 vs float64 (tests/test_raster_grads.py)
 REL_L2_FD, COSINE_FD = 1e-6, 1 - 1e-10   # float64 vs float64 finite differences
 FORWARD_SEEDS = (0, 1, 3, 4, 7)          # standard, overlap, tiny, large, needles
-GRAD_SEEDS = (0, 1, 4, 6)                # standard, overlap, large, overlap
+GRAD_SEEDS = (0, 1, 4, 9)                # standard, overlap, large (SH degree 0), large (degree 1)
 
 HAS_GSPLAT = importlib.util.find_spec("gsplat") is not None
 needs_gsplat = pytest.mark.skipif(not HAS_GSPLAT, reason="gsplat not installed (pip install -e '.[gsplat]')")
@@ -85,6 +85,19 @@ def test_forward_matches_reference_under_declared_conventions(name, seed):
     assert_images_close(f"{tag}-alpha", alpha, ref.alpha, atol, max_outliers=band)
     z_max = max(1.0, float(np.abs(ref.depth).max()))  # depth compared as depth * alpha (see test_raster_parity)
     assert_images_close(f"{tag}-depth", depth * alpha, ref.depth * ref.alpha, atol * z_max, max_outliers=band)
+
+
+def test_drjit_backend_declares_the_options_it_was_made_with():
+    from splatbench.backends.builtins.drjit_backend import make_drjit_backend
+
+    backend = make_drjit_backend(radius="opacity", alpha_min=0.05, transmittance_min=0.05, tile_size=8)
+    assert (backend.info.radius, backend.info.alpha_min, backend.info.tile_size) == ("opacity", 0.05, 8)
+    workload, background = parity_scene(6)
+    with torch.no_grad():
+        rgb = backend(*tensors(workload), workload.camera, background=background)[0].double().numpy()
+    ref = reference_render(backend.info, *tensors(workload), workload.camera, background=background)
+    band = max(1, int(BOUNDARY_FRACTION * rgb.shape[0] * rgb.shape[1]))
+    assert_images_close("backend-drjit-options", rgb, ref.rgb, ATOL, max_outliers=band)
 
 
 def test_declared_conventions_matter():
