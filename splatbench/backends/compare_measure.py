@@ -275,6 +275,22 @@ def _ms(fn: Callable[[], None]) -> float:
     return round((time.perf_counter() - t0) * 1e3, 3)
 
 
+def _release_caches() -> None:
+    """Hand cached free memory back to the OS (Dr.Jit's allocator cache, glibc's free lists),
+    so that the RSS before a call is what is live and the rise is what the call needs."""
+    import ctypes
+    import sys
+
+    if "drjit" in sys.modules:
+        flush = getattr(sys.modules["drjit"], "flush_malloc_cache", None)
+        if flush is not None:
+            flush()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
 def peak_rise(fn: Callable[[], None], device: str) -> tuple[float, str]:
     """(MB, what it is) of the memory one call of ``fn`` needs above what is held before it."""
     from splatbench.bench.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
@@ -288,11 +304,12 @@ def peak_rise(fn: Callable[[], None], device: str) -> tuple[float, str]:
         fn()
         return (torch.cuda.max_memory_allocated() - before) / 1e6, \
             "torch CUDA allocator peak rise (Dr.Jit's own CUDA memory not seen)"
+    _release_caches()
     before = current_rss_mb()
     if not reset_peak_rss():
         return math.nan, "not measured (no /proc/self/clear_refs to reset the peak RSS)"
     fn()
-    return max(0.0, peak_rss_mb() - before), "peak RSS rise over the RSS before the call"
+    return max(0.0, peak_rss_mb() - before), "peak RSS rise over the RSS before the call (allocator caches flushed first)"
 
 
 def time_backends(backends: Sequence[Backend], params: tuple, camera, device: str, repeats: int, *,
