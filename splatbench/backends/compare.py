@@ -16,13 +16,15 @@ Per backend x workload (one `CompareRow`):
 2. **Gradients**: the VJP of sum(v . outputs) with random cotangents v over every
    declared output (v_depth kept only where the oracle's alpha > 0.05, for the same
    1 / alpha reason), per parameter group, as relative L2 error and cosine against
-   the gradient oracle: a float64 backend (``torch64``) with the same conventions, or
-   central differences of the oracle on a sample of entries (`GradOracle`).
+   the gradient oracle: ``torch64`` (float64 autograd) built with the backend's
+   conventions, or central differences of the oracle on a sample of entries
+   (`splatbench.backends.compare_measure.GradOracle`).
 3. **Time** at the workload's full resolution: one warm-up forward and forward+backward
    per backend (Dr.Jit compiles then), then ``repeats`` rounds in which the backends
    take turns (ABCABC...); median, quartiles, min and max; load average around it.
-   **Peak memory**: one more forward+backward per backend with the peak RSS reset
-   first (Linux ``clear_refs``): the rise over the RSS before the call.
+   **Peak memory**: one more forward+backward per backend with allocator caches
+   flushed and the peak RSS reset first (Linux ``clear_refs``): the rise over the RSS
+   before the call (on CUDA: torch's allocator peak).
 
 A backend that raises gets the one-line error in its row; the others go on.
 """
@@ -34,9 +36,9 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from splatbench.backends.builtins.reference_backend import GROUPS
 from splatbench.errors import InputError
 
-GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
 U32 = 2.0 ** -24  # float32 unit roundoff
 
 # Forward bound, derived in tests/test_raster_parity.py: a pixel sums L <= ~150 terms
