@@ -18,8 +18,9 @@ primitives are composited in the order the ray enters their shells; SH is evalua
 in the ray's direction; a ray stops once its throughput is <= 0.01. The integrator is
 ``volprim_rf_dedup`` (`splatbench.validate._volprim_dedup`): the shipped
 ``volprim_rf_basic`` and its backward pass, less the float32 re-hit that composites a
-small distant ellipsoid twice. Mitsuba's ray-ellipsoid test also misjudges ellipsoids that are small in absolute world units
-(sigma ~0.01). Gradients are those of Mitsuba's AD: they ignore the discontinuity at
+small distant ellipsoid twice. Mitsuba's ray-ellipsoid test also misjudges ellipsoids
+that are small in absolute world units (sigma ~0.01), and its perspective sensor needs
+square pixels (fx = fy; other cameras are a one-line error). Gradients are those of Mitsuba's AD: they ignore the discontinuity at
 the 3-sigma shell and the re-ordering of primitives, so they are not the derivative of
 the forward where those matter.
 """
@@ -27,7 +28,6 @@ the forward where those matter.
 from __future__ import annotations
 
 from splatbench.backends.base import Backend, BackendInfo
-from splatbench.errors import InputError
 
 SH_C0 = 0.28209479177387814
 ALPHA_MAX = 0.9999   # volprim_rf_basic: 1 - min(opacity * density, 0.9999)
@@ -58,7 +58,6 @@ def _scene_inputs(means, log_scales, quats, opacity_logits, sh, camera):
 def make_mitsuba_backend() -> Backend:
     """``mitsuba``: ray-traced Gaussians with Mitsuba AD gradients (LLVM variant ``llvm_ad_rgb``)."""
     import drjit as dr
-    import numpy as np
     import torch
 
     import mitsuba as mi_module
@@ -109,5 +108,4 @@ def make_mitsuba_backend() -> Backend:
                      "pixel's ray; no EWA, no eps2d; 3-sigma ellipsoid shells; alpha clamp 0.9999, no alpha_min; "
                      "order of shell entry per ray; SH in the ray direction; stop at throughput <= 0.01); "
                      "gradients by Mitsuba AD (no boundary terms at the shells)"))
-    del np
     return Backend(fn, info)

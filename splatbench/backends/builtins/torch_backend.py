@@ -7,8 +7,10 @@ rasterizer, and differentiated by torch autograd. ``torch`` computes in float32,
 Compositing is dense per block of BLOCK x BLOCK pixels: every visible Gaussian whose
 screen box touches the block is tested at every pixel of it, in depth order, with the
 per-pixel rules of conventions.md (3-sigma cutoff, alpha_min skip, alpha_max clamp,
-early stop; radius "opacity" on request). The blocks only bound memory (pixels x candidates); the per-pixel test
-decides, so the declared conventions are graphdeco's.
+early stop; radius "opacity" on request). The blocks only bound memory (pixels x
+candidates); the per-pixel test decides, so the declared conventions are graphdeco's.
+Under autograd each block is checkpointed (recomputed in the backward pass), so memory
+stays one block's worth.
 """
 
 from __future__ import annotations
@@ -199,6 +201,7 @@ def composite_block(pix, p: Projected, colors, s: Settings, background):
 def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int, background, s: Settings):
     """Validated inputs (any float dtype; computes in that dtype) -> rgb [H, W, 3], alpha [H, W], depth [H, W]."""
     import torch
+    from torch.utils.checkpoint import checkpoint
 
     dt = means.dtype
     H, W = camera.height, camera.width
@@ -219,7 +222,10 @@ def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: i
             k = torch.nonzero(sel).squeeze(1)
             cand = Projected(*(f[k] for f in p))
             pix = torch.stack(torch.meshgrid(xs, ys, indexing="xy"), -1).reshape(-1, 2)
-            rgb, alpha, depth = composite_block(pix, cand, colors[k], s, bg)
+            if torch.is_grad_enabled():  # keep only the block's inputs; recompute it in backward
+                rgb, alpha, depth = checkpoint(composite_block, pix, cand, colors[k], s, bg, use_reentrant=False)
+            else:
+                rgb, alpha, depth = composite_block(pix, cand, colors[k], s, bg)
             shape = (len(ys), len(xs))
             row_rgb.append(rgb.reshape(*shape, 3))
             row_alpha.append(alpha.reshape(shape))
