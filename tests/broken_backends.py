@@ -101,8 +101,13 @@ def _clamp_alpha(raw, bug):
     return value + (raw - raw.detach()) * (raw.detach() <= bwd)
 
 
-def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None, bug=None):
-    """rgb [H, W, 3], alpha [H, W], depth [H, W] of the dense renderer with ``bug`` switched on."""
+def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None, bug=None,
+           tile_box=False):
+    """rgb [H, W, 3], alpha [H, W], depth [H, W] of the dense renderer with ``bug`` switched on.
+
+    ``tile_box``: graphdeco's own footprint rule instead of none: a Gaussian reaches the 16x16
+    tiles its box of half side ceil(3 sqrt(largest eigenvalue of Σ2D)) touches, with no per-pixel
+    cutoff (a declared approximation, not a bug)."""
     dt = means.dtype
     Wm = torch.as_tensor(camera.world_to_camera, dtype=dt)
     Wr, Wt = Wm[:3, :3], Wm[:3, 3]
@@ -151,6 +156,15 @@ def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=No
     alpha = alpha * (alpha.detach() >= (0.0 if bug == "no_alpha_min" else 1 / 255))
     if bug == "cutoff_2sigma":
         alpha = alpha * (sigma.detach() <= 2.0)
+    if tile_box:
+        with torch.no_grad():
+            half_tr, det_ = (xx + yy) / 2, xx * yy - xy * xy
+            r = torch.ceil(3 * torch.sqrt(half_tr + torch.sqrt((half_tr * half_tr - det_).clamp_min(0.1))))
+            lo = ((mean2d - r[:, None]) / 16).floor().clamp_min(0)
+            hi = ((mean2d + r[:, None] + 15) / 16).floor()
+            tx_, ty_ = (xs.reshape(-1, 1) / 16).floor(), (ys.reshape(-1, 1) / 16).floor()
+            inside = (tx_ >= lo[:, 0]) & (tx_ < hi[:, 0]) & (ty_ >= lo[:, 1]) & (ty_ < hi[:, 1])
+        alpha = alpha * inside
     if bug == "tile_centre_only":
         tile = lambda u, v: (u // 16) * 1000 + v // 16  # noqa: E731
         alpha = alpha * (tile(xs.reshape(-1, 1).floor(), ys.reshape(-1, 1).floor())
@@ -180,16 +194,17 @@ def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=No
     return rgb.reshape(H, W, 3), a.reshape(H, W), depth.reshape(H, W)
 
 
-def dense(bug: str | None = None) -> Backend:
+def dense(bug: str | None = None, *, tile_box: bool = False) -> Backend:
     """The dense renderer as a `Backend` (declares nothing: graphdeco's conventions are assumed)."""
     if bug is not None and bug not in BUGS:
         raise KeyError(f"unknown bug {bug!r}")
 
     def fn(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
         return render(means, log_scales, quats, opacity_logits, sh, camera, sh_degree=sh_degree,
-                      background=background, bug=bug)
+                      background=background, bug=bug, tile_box=tile_box)
 
-    return Backend(fn, BackendInfo(name=f"dense[{bug or 'correct'}]",
+    label = bug or ("tile_box" if tile_box else "correct")
+    return Backend(fn, BackendInfo(name=f"dense[{label}]",
                                    description=BUGS[bug][1] if bug else "dense, every convention, no approximation"))
 
 

@@ -115,6 +115,16 @@ def test_a_dense_renderer_following_every_convention_passes_with_warnings_only()
     assert "radius=opacity" in warned["radius"].detail
 
 
+def test_graphdecos_tile_granular_footprint_is_a_warning():
+    """A Gaussian reaching the tiles its 3-sigma box touches, with no per-pixel cutoff (graphdeco's
+    rule): beyond 3 sigma it draws in the touched tiles, not in the others; radius warns, nothing fails."""
+    report = conform(dense(tile_box=True))
+    assert report.passed
+    radius = next(r for r in report.results if r.name == "radius")
+    assert radius.status == "warn" and "match radius=opacity" in radius.detail
+    assert {r.name for r in report.results if r.status == "warn"} == {"early_stop", "radius"}
+
+
 @pytest.mark.parametrize("bug", sorted(BUGS))
 def test_each_broken_backend_fails_on_its_probe(bug):
     probe, what = BUGS[bug]
@@ -218,6 +228,8 @@ def test_cli_table_exit_codes_and_bad_specs():
                           ("no-such-backend", "unknown backend 'no-such-backend'")):
         bad = runner.invoke(main, ["conform", spec])
         assert bad.exit_code == 2 and message in bad.output, bad.output
+    gpu = runner.invoke(main, ["conform", "torch", "--device", "tpu"])
+    assert gpu.exit_code == 2 and "device: backend 'torch' runs on cpu, not 'tpu'" in gpu.output
     unknown = runner.invoke(main, ["conform", "torch", "--probe", "nope"])
     assert unknown.exit_code == 2 and "probes: unknown probe 'nope'" in unknown.output
     listed = runner.invoke(main, ["conform", "drjit", "--list"])

@@ -31,9 +31,10 @@ def _pixel_diff(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> n
         parts.append(np.abs(got[..., :3] - ref[..., :3]).max(-1))
     if "alpha" in outputs:
         parts.append(np.abs(got[..., 3] - ref[..., 3]))
-    if "depth" in outputs:
+    if "depth" in outputs:  # weighted by the backend's alpha, or the oracle's when it has none
         z_max = max(1.0, float(np.abs(ref[..., 4]).max()))
-        parts.append(np.abs(got[..., 4] * got[..., 3] - ref[..., 4] * ref[..., 3]) / z_max)
+        a = got[..., 3] if "alpha" in outputs else ref[..., 3]
+        parts.append(np.abs(got[..., 4] * a - ref[..., 4] * ref[..., 3]) / z_max)
     return np.max(parts, axis=0)
 
 
@@ -46,7 +47,8 @@ def _worst(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
             continue
         d = np.abs(got[..., sl] - ref[..., sl])
         if name == "depth":
-            d = np.abs(got[..., 4:5] * got[..., 3:4] - ref[..., 4:5] * ref[..., 3:4]) / z_max
+            a = got[..., 3:4] if "alpha" in outputs else ref[..., 3:4]
+            d = np.abs(got[..., 4:5] * a - ref[..., 4:5] * ref[..., 3:4]) / z_max
         i, j, c = np.unravel_index(int(np.argmax(d)), d.shape)
         if d[i, j, c] > best[0]:
             label = f"{name}[{'rgb'[c]}]" if name == "rgb" else name
