@@ -303,3 +303,17 @@ def test_mitsuba_gradients_match_its_finite_differences():
             fd.append((values[0] - values[1]) / (2 * h))
         assert_grads_agree(f"mitsuba {group}", grads[group].reshape(-1)[picked], np.array(fd), rel_l2=1e-2,
                            cosine=1 - 1e-4)
+
+
+@needs_gsplat
+def test_gsplat_cpu_pieces_are_installed_only_during_a_call():
+    """The CPU stand-ins for gsplat's CUDA indexer and nerfacc are put back after each call."""
+    from gsplat.cuda import _wrapper
+
+    original = _wrapper.rasterize_to_indices_in_range
+    had_nerfacc = "nerfacc" in sys.modules
+    workload, _ = parity_scene(0)
+    with torch.no_grad():
+        get_backend("gsplat")(*tensors(workload), workload.camera)
+    assert _wrapper.rasterize_to_indices_in_range is original
+    assert ("nerfacc" in sys.modules) == had_nerfacc
