@@ -1,13 +1,9 @@
 """The oracle side of `splatbench conform`: float64 renders, finite differences and derived tolerances.
 
-    report = conform(get_backend("drjit"))      # or any Backend / module:function spec
-    report.failed                               # names of the failing probes
-    report.to_dict()                            # {"backend", "passed", "summary", "probes": [...]}
-
-Each probe is rendered by the backend (float32 torch inputs) and by the float64 oracle
-(`reference_render`, matched to the conventions the backend declares in its `BackendInfo`),
-and gets a status: pass, fail, warn (a declared approximation not followed, but one of its
-listed alternatives is) or skip (the backend lacks the output or gradients the probe needs).
+The oracle is `reference_render` (float64 `reference.render`, matched to the conventions a
+backend declares); its gradients are central differences, kept per entry as difference images
+so that the tolerance of each entry can be computed from its per-pixel terms. Results are
+cached per (scene, conventions): the broken-backend tests share them.
 
 Tolerances, derived (u = 2^-24, float32 unit roundoff; every number below is computed per probe):
 
@@ -26,13 +22,13 @@ Tolerances, derived (u = 2^-24, float32 unit roundoff; every number below is com
   For opacity_logits, sigmoid' = o (1 - o) where 1 - o carries an absolute float32 error u: a
   further relative u / (1 - o). The oracle is central differences of the float64 oracle with half
   step h = 1e-6: truncation ~h^2 = 1e-12 relative, rounding ~u64 sum_p |v_p out_p| / h. The
-  per-entry bound is 3 (P + 2 L + 20 + 6 kappa) u S_i (+ 3 u / (1 - o) S_i) plus the rounding term, with S_i = sum_p |t_pi| measured from the difference images; the
-  tolerance on the group's relative L2 error is the L2 norm of those bounds over |g_oracle|.
+  per-entry bound is 3 (P + 2 L + 20 + 6 kappa) u S_i (+ 3 u / (1 - o) S_i) plus the rounding
+  term, with S_i = sum_p |t_pi| measured from the difference images; the tolerance on the
+  group's relative L2 error is the L2 norm of those bounds over |g_oracle|.
 
 Every probe scene keeps its pixels away from discrete decisions (cutoff, alpha_min, clamp, early
 stop), so float32 and float64 never decide a pixel differently (tests/test_conform.py checks this).
 """
-
 
 from __future__ import annotations
 
