@@ -116,6 +116,8 @@ def _speed_findings(table: pd.DataFrame) -> list[str]:
                       for _, r in timed.iloc[1:].iterrows()]
             lines.append(f"On {workload}, **{best.backend}** is the fastest {label} ({best[col]:.1f} ms median)"
                          + (f"; {', '.join(others)}." if others else "."))
+        for _, r in rows[rows.fwd_ms_median.isna() & rows.timing_note.str.startswith("not timed")].iterrows():
+            lines.append(f"On {workload}, {r.backend} was {r.timing_note}.")
     return lines
 
 
