@@ -17,7 +17,7 @@ import torch
 from click.testing import CliRunner
 
 import reference
-from splatbench.backends import Backend, BackendInfo, get_backend
+from splatbench.backends import Backend, BackendInfo
 from splatbench.backends.conform import PROBES, conform
 from splatbench.backends.conform.oracle import conventions_of
 from splatbench.cli import main

@@ -47,11 +47,14 @@ class Probe:
     conic_term: int | None = None
     alternatives: tuple[dict, ...] = field(default=())
 
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"kind: expected one of {list(KINDS)}, got {self.kind!r}")
+
 
 # ----------------------------------------------------------------------------
 # The probes, in the order they run
 # ----------------------------------------------------------------------------
-
 
 PROBES: tuple[Probe, ...] = (
     Probe("depth_order", "overlapping Gaussians listed far to near, in an order that a sort on index, on world z "
