@@ -36,6 +36,8 @@ BUGS: dict[str, tuple[str, str]] = {
     "sh2_order": ("sh_degree2", "swaps two degree-2 bases"),
     "sh3_sign": ("sh_degree3", "flips the sign of one degree-3 basis"),
     "sh_degree_ignored": ("sh_degree_arg", "evaluates every SH band, ignoring sh_degree"),
+    "no_colour_clamp": ("colour_clamp", "does not clamp SH colours at 0"),
+    "colour_clamp_1": ("colour_clamp", "clamps SH colours to [0, 1]"),
     "background_unblended": ("background", "adds the background without the final transmittance"),
     "depth_unnormalised": ("expected_depth", "returns sum T a z, not normalised by alpha"),
     "depth_distance": ("expected_depth", "uses the distance to the camera as depth"),
@@ -69,7 +71,8 @@ def _sh_colour(sh, dirs, degree: int, bug: str | None):
             b3[4] = -b3[4]
         basis += b3
     k = len(basis)
-    return ((torch.stack(basis, 1)[:, :, None] * sh[:, :k, :]).sum(1) + 0.5).clamp_min(0.0)
+    colour = (torch.stack(basis, 1)[:, :, None] * sh[:, :k, :]).sum(1) + 0.5
+    return colour if bug == "no_colour_clamp" else colour.clamp(0.0, 1.0 if bug == "colour_clamp_1" else None)
 
 
 def _rotation(q, bug):

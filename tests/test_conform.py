@@ -67,7 +67,8 @@ def test_untested_approximations_cannot_matter(name):
 def test_no_pixel_sits_near_a_discrete_decision(name):
     """float32 and float64 must decide every pixel alike: raw alpha is at least 1e-4 (relative) from
     alpha_min and from the alpha_max clamps in use (0.99 graphdeco, 0.999 gsplat), d^2 at least 1e-3
-    from the 3-sigma cutoff (9) where that decides, transmittance at least 10 % from 1e-4. float32
+    from the 3-sigma cutoff (9) where that decides, transmittance at least 10 % from 1e-4, colours
+    at least 0.05 from the clamp at 0. float32
     perturbs alpha by at most (20 + 6 kappa) u ~ 2e-6 relative (kappa <= 10 here) and d^2 by ~1e-5,
     so the margins are 50 to 100 times that; the finite differences' step (1e-6) moves them less."""
     s = SCENES[name]()
@@ -79,6 +80,13 @@ def test_no_pixel_sits_near_a_discrete_decision(name):
     alpha = np.minimum(raw, 0.99) * (raw >= 1 / 255)
     T_next = np.cumprod(1 - alpha, axis=1)
     assert np.abs(T_next / 1e-4 - 1).min() > 0.1, name
+    # The colour clamp max(SH + 0.5, 0): every channel at least 0.05 from its kink.
+    dirs = s.means - reference.camera_centre(s.camera.world_to_camera)
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    degree = {1: 0, 4: 1, 9: 2, 16: 3}[s.sh.shape[1]] if s.sh_degree is None else s.sh_degree
+    basis = reference.sh_basis(dirs, degree)
+    colour = np.einsum("nk,nkc->nc", basis, s.sh[:, :basis.shape[1]]) + 0.5
+    assert np.abs(colour).min() > 0.05, name
 
 
 def test_the_depth_probe_defeats_the_classic_wrong_sort_keys():

@@ -16,7 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
-from splatbench.backends.conform.scenes import (GROUPS, ProbeScene, alpha_max, alpha_min, background, conic,
+from splatbench.backends.conform.scenes import (GROUPS, ProbeScene, alpha_max, alpha_min, background,
+                                                colour_clamp, conic,
                                                 depth_order, early_stop, eps2d, expected_depth, gradients,
                                                 intrinsics, jacobian_clamp, near_plane, opacity_activation,
                                                 pixel_centre, quat_norm, quat_order, radius, scale_activation,
@@ -105,6 +106,9 @@ PROBES: tuple[Probe, ...] = (
     Probe("sh_viewdir_grad", "strong degree-1 SH on wide Gaussians: d/dmeans through the view direction",
           "gradient", "the SH view direction is detached from the means, so d/dmeans misses the colour term",
           sh_viewdir_grad, groups=("means",)),
+    Probe("colour_clamp", "SH colours below 0 and above 1 in some channels: colour = max(SH + 0.5, 0)", "forward",
+          "the SH colour is not max(SH + 0.5, 0): the clamp at 0 is missing, or colours are also clamped at 1",
+          colour_clamp, outputs=("rgb",)),
     Probe("background", "translucent Gaussians over the background (0.2, 0.5, 0.9)", "forward",
           "the background is not blended by the final transmittance (rgb + T_final * background)", background,
           outputs=("rgb", "alpha")),

@@ -273,8 +273,18 @@ def sh_viewdir_grad() -> ProbeScene:
     z = np.array([3.0, 3.6, 4.2])
     means = np.array([at(cam, 7.0, 7.5, 3.0), at(cam, 9.5, 8.0, 3.6), at(cam, 8.0, 9.5, 4.2)])
     sh = np.zeros((3, 4, 3))
+    sh[:, 0, :] = (0.9 - 0.5) / C0  # colours stay in (0.1, 1.7): the clamp at 0 never cuts the SH path
     sh[:, 1:, :] = np.random.default_rng(16).choice([-1.0, 1.0], size=(3, 3, 3)) * 0.9
     return scene(cam, means, [7.0, 6.5, 7.5], [0.45, 0.4, 0.5], sh, z=z, seed=16)
+
+
+@functools.cache
+def colour_clamp() -> ProbeScene:
+    cam = camera()
+    # SH colours below 0 (clamped to 0) and above 1 (not clamped) in some channels.
+    z = np.array([4.0, 4.5])
+    means = np.array([at(cam, 6.5, 7.0, 4.0), at(cam, 10.0, 9.5, 4.5)])
+    return scene(cam, means, [2.5, 3.0], [0.33, 0.3], dc([(-0.4, 0.6, 1.3), (1.4, -0.3, 0.5)]), z=z, seed=25)
 
 
 @functools.cache
