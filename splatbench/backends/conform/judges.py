@@ -71,7 +71,7 @@ def _judge_forward(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
     diff = _pixel_diff(got, ref, outputs)
     dev = float(diff.max())
     ok = dev <= atol
-    detail = (f"{outputs} within tolerance" if ok else
+    detail = (f"{', '.join(outputs)} within tolerance" if ok else
               f"{int((diff > atol).sum())} of {diff.size} pixels differ; largest: {_worst(got, ref, outputs)}")
     return ProbeResult(probe.name, probe.kind, "pass" if ok else "fail", probe.checks, dev, atol, source, detail,
                        None if ok else probe.cause)
