@@ -57,6 +57,14 @@ def _worst(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
     return best[1]
 
 
+def _psnr(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
+    """", rgb PSNR x dB against the oracle" (peak 1), or "" when rgb is not compared."""
+    if "rgb" not in outputs:
+        return ""
+    mse = float(np.mean((got[..., :3] - ref[..., :3]) ** 2))
+    return f", rgb PSNR {-10 * np.log10(mse):.1f} dB against the oracle" if mse > 0 else ""
+
+
 def _compared(probe: Probe, ctx: Context) -> tuple[str, ...]:
     return tuple(o for o in probe.outputs if o in ctx.backend.info.outputs)
 
@@ -72,7 +80,8 @@ def _judge_forward(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
     dev = float(diff.max())
     ok = dev <= atol
     detail = (f"{', '.join(outputs)} within tolerance" if ok else
-              f"{int((diff > atol).sum())} of {diff.size} pixels differ; largest: {_worst(got, ref, outputs)}")
+              f"{int((diff > atol).sum())} of {diff.size} pixels differ{_psnr(got, ref, outputs)}; "
+              f"largest: {_worst(got, ref, outputs)}")
     return ProbeResult(probe.name, probe.kind, "pass" if ok else "fail", probe.checks, dev, atol, source, detail,
                        None if ok else probe.cause)
 
