@@ -137,13 +137,15 @@ def backend_vjp(backend: Backend, params: tuple, camera, v: Cotangents) -> dict[
 
 
 def grad_error(a: np.ndarray, b: np.ndarray) -> GradError:
+    """`GradError` of gradient ``a`` against the oracle's ``b`` (any shapes with the same size)."""
     a, b = np.ravel(a).astype(np.float64), np.ravel(b).astype(np.float64)
-    na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
     if not np.isfinite(a).all():
-        return GradError(math.inf, math.nan)
+        return GradError(math.inf, math.nan, math.inf, float(np.linalg.norm(b)))
+    na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
     if nb == 0.0:
-        return GradError(0.0 if na == 0.0 else math.inf, 1.0 if na == 0.0 else 0.0)
-    return GradError(float(np.linalg.norm(a - b)) / nb, float(a @ b) / (na * nb) if na > 0 else 0.0)
+        return GradError(0.0, 1.0, na, nb) if na == 0.0 else GradError(math.nan, math.nan, na, nb)
+    cosine = float(a @ b) / (na * nb) if na > 0 else 0.0
+    return GradError(float(np.linalg.norm(a - b)) / nb, cosine, na, nb)
 
 
 # ----------------------------------------------------------------------------- gradient oracle

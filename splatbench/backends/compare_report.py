@@ -8,7 +8,7 @@
 Columns: backend, version, workload, n, width, height, error_width, error_height,
 device, status ("ok" or "error"), error; verdict_mode, forward_verdict, band;
 ``{matched,exact}_{rgb,alpha,depth}_{max_abs,psnr,frac_off,outliers}``; grad_oracle,
-grad_bound, grad_verdict, ``grad_{group}_{rel_l2,cosine}``;
+grad_bound, grad_verdict, ``grad_{group}_{rel_l2,cosine,norm,oracle_norm}``;
 ``{fwd,fwd_bwd}_ms_{median,q1,q3,min,max}``, fwd_runs_ms / fwd_bwd_runs_ms (JSON
 lists), timing_note, peak_mb, memory_kind; loadavg_start / loadavg_end (JSON [1, 5,
 15 min]), cpu_count, loaded (the larger 1-min load average above cpu_count / 2).
@@ -49,8 +49,8 @@ def _row(row: CompareRow, cpu_count: int) -> dict:
     flat.update(grad_oracle=row.grad_oracle, grad_bound=row.grad_bound, grad_verdict=row.grad_verdict)
     for group in GROUPS:
         g = row.grads.get(group)
-        flat[f"grad_{group}_rel_l2"] = math.nan if g is None else g.rel_l2
-        flat[f"grad_{group}_cosine"] = math.nan if g is None else g.cosine
+        for stat in ("rel_l2", "cosine", "norm", "oracle_norm"):
+            flat[f"grad_{group}_{stat}"] = math.nan if g is None else getattr(g, stat)
     t = row.timing
     for name, runs in (("fwd", t.fwd_ms), ("fwd_bwd", t.fwd_bwd_ms)):
         for stat, value in spread(runs).items():
@@ -95,11 +95,15 @@ def _accuracy_findings(table: pd.DataFrame) -> list[str]:
                          f"{int(r.band)} allowed.")
         grads = rows[rows.grad_verdict != "n/a"]
         for _, r in grads.iterrows():
-            worst = max(GROUPS, key=lambda g: r[f"grad_{g}_rel_l2"])
+            judged = [g for g in GROUPS if not math.isnan(r[f"grad_{g}_rel_l2"])]
+            worst = max(judged, key=lambda g: r[f"grad_{g}_rel_l2"])
             verdict = "within" if r.grad_verdict == "within bound" else "OUTSIDE"
+            zero = [f"{g} (L2 norm {r[f'grad_{g}_norm']:.1e} where the oracle's is exactly 0)" for g in GROUPS
+                    if g not in judged and not math.isnan(r[f"grad_{g}_norm"])]
             lines.append(f"**{backend}** gradients on {r.workload} are {verdict} the bound: worst relative L2 "
                          f"{r[f'grad_{worst}_rel_l2']:.1e} ({worst}; bound {r.grad_bound:.1e}, oracle "
-                         f"{r.grad_oracle.split(' (')[0]}).")
+                         f"{r.grad_oracle.split(' (')[0]})"
+                         + (f"; no relative error for {', '.join(zero)}." if zero else "."))
     return lines
 
 
@@ -194,6 +198,12 @@ def _error_cells(r, mode: str) -> list[str]:
             f"{_num(100 * r[f'{mode}_{o}_frac_off'], '.1f')}%" for o in OUTPUTS]
 
 
+def _grad_cell(r, group: str) -> str:
+    if math.isnan(r[f"grad_{group}_rel_l2"]) and r[f"grad_{group}_oracle_norm"] == 0:
+        return f"oracle 0; norm {r[f'grad_{group}_norm']:.0e}"
+    return f"{_num(r[f'grad_{group}_rel_l2'], '.1e')} / {_num(1 - r[f'grad_{group}_cosine'], '.0e')}"
+
+
 def _outlier_cell(r) -> str:
     counts = [r[f"{r.verdict_mode}_{o}_outliers"] for o in OUTPUTS]
     counts = [int(c) for c in counts if not math.isnan(c)]
@@ -219,7 +229,6 @@ def render_markdown(record: dict, table: pd.DataFrame, figures: list[Path], out:
     """``report.md`` from the table and the run record (`run_record`)."""
     m = SimpleNamespace(**record["machine"])
     s = SimpleNamespace(**record["settings"])
-    pixels = int(table.error_width.iloc[0] * table.error_height.iloc[0]) if len(table) else 0
     text = [
         "# splatbench compare: rasterizers against the float64 oracle", "",
         f"Command: `{record['command']}`  ",
@@ -257,13 +266,15 @@ _outlier_cell(r), r.forward_verdict] for _, r in table.iterrows()]), "",
         f"**Bound**: one gradient entry sums a term per pixel, each ~{GRAD_TERM_OPS} float32 operations (relative "
         f"error {GRAD_TERM_OPS}u); cancellation under random cotangents amplifies that by at most sqrt(P) "
         f"(`tests/test_raster_grads.py`): {GRAD_TERM_OPS}·u·sqrt(P)"
-        + (f" = {GRAD_TERM_OPS * 2.0 ** -24 * math.sqrt(pixels):.1e} at P = {pixels} pixels" if pixels else "")
+        + "".join(f"; {GRAD_TERM_OPS * 2.0 ** -24 * math.sqrt(w * h):.1e} at {w}x{h} ({name})" for name, w, h in
+                  table[["workload", "error_width", "error_height"]].drop_duplicates().itertuples(index=False))
         + "; plus sqrt(b / P) for the b boundary pixels the backend's forward showed (at most the band), each "
-        "changing its terms by a whole contribution.", "",
+        "changing its terms by a whole contribution. A group whose oracle gradient is exactly 0 (the quaternions of "
+        "isotropic Gaussians, which a rotation does not change) has no relative error: the cell shows the "
+        "backend's L2 norm, and the group is left out of the verdict.", "",
         _table(["workload", "backend", "oracle", *GROUPS, "bound", "verdict"],
                [[r.workload, r.backend, r.grad_oracle or "–",
-                 *[f"{_num(r[f'grad_{g}_rel_l2'], '.1e')} / {_num(1 - r[f'grad_{g}_cosine'], '.0e')}"
-                   for g in GROUPS], _num(r.grad_bound, ".1e"), r.grad_verdict] for _, r in table.iterrows()]), "",
+                 *[_grad_cell(r, g) for g in GROUPS], _num(r.grad_bound, ".1e"), r.grad_verdict] for _, r in table.iterrows()]), "",
         "## Time and memory", "",
         f"At each workload's full resolution, {s.repeats} rounds after one untimed warm-up per backend; within a "
         "round the backends take turns (ABC ABC ...), forward runs first, then forward+backward runs. Cells: median "
