@@ -278,6 +278,7 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
                 band=max(1, int(BOUNDARY_FRACTION * err_camera.width * err_camera.height)),
                 grad_oracle=m["grad_oracle"], grads=m["grads"], grad_bound=m["grad_bound"], timing=timing,
                 loadavg_start=load_start, loadavg_end=load_end))
+    machine.loadavg_end = load_average()
     return CompareResult(tuple(rows), settings, machine, command, round(time.perf_counter() - t_start, 1),
                          tuple(notes))
 
