@@ -82,9 +82,11 @@ def _accuracy_findings(table: pd.DataFrame) -> list[str]:
             continue
         outside = judged[judged.forward_verdict == "outside bound"]
         if outside.empty:
-            worst = max(((r[f"{r.verdict_mode}_{o}_max_abs"], o, r.workload) for _, r in judged.iterrows()
+            worst = max(((r[f"{r.verdict_mode}_{o}_max_abs"], o, r.workload, r[f"{r.verdict_mode}_{o}_outliers"],
+                          r.band) for _, r in judged.iterrows()
                          for o in OUTPUTS if math.isfinite(r[f"{r.verdict_mode}_{o}_max_abs"])), default=None)
-            tail = f" (largest difference {worst[0]:.1e}, {worst[1]} on {worst[2]})" if worst else ""
+            tail = (f" (largest difference {worst[0]:.1e}, {worst[1]} on {worst[2]}, where {int(worst[3])} pixels "
+                    f"exceed {FORWARD_ATOL:.0e} of the {int(worst[4])} the band allows)") if worst else ""
             lines.append(f"**{backend}** matches the float64 oracle within the float32 bound on every output of "
                          f"{len(judged)} workload(s){tail}.")
         for _, r in outside.iterrows():
