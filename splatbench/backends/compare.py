@@ -234,6 +234,11 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
     oracle_spec = settings.grad_oracle
     if oracle_spec == "auto":
         oracle_spec = FLOAT64_ORACLE if FLOAT64_ORACLE in available() else "fd"
+    elif oracle_spec not in ("fd", "none"):
+        try:
+            get_backend(oracle_spec)
+        except InputError as exc:
+            raise InputError(f"--grad-oracle: {exc} (or 'auto', 'fd', 'none')") from None
     machine = machine_info(settings.device)
     t_start = time.perf_counter()
     rows: list[CompareRow] = []
