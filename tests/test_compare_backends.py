@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -21,10 +22,12 @@ import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench.backends import Backend, BackendInfo, get_backend
 from splatbench.backends.compare import (BOUNDARY_FRACTION, GRAD_TERM_OPS, GROUPS, U32, CompareSettings,
                                          auto_scale, gradient_bound, run_compare)
-from splatbench.backends.compare_report import findings, result_table, rewrite_report, write_compare
+from splatbench.backends.compare_report import (RUN_RECORD, findings, render_markdown, result_table, rewrite_report,
+                                                write_compare)
 from splatbench.workloads import synthetic
 
 WIDTH, HEIGHT = 32, 24
+COMMITTED = Path(__file__).resolve().parents[1] / "reports" / "compare"
 
 
 def _drjit():
@@ -148,6 +151,20 @@ def test_torch64_gradient_oracle_agrees_with_finite_differences():
     assert row.grad_oracle.startswith("torch64") and row.grad_verdict == "within bound", row
 
 
+def test_a_zero_oracle_gradient_has_no_relative_error():
+    from splatbench.backends.compare import CompareRow, GradError
+    from splatbench.backends.compare_measure import grad_error
+
+    # isotropic Gaussians: the true quaternion gradient is exactly 0, float32 leaves roundoff
+    zero = grad_error(np.full(8, 1e-12), np.zeros(8))
+    assert math.isnan(zero.rel_l2) and zero.oracle_norm == 0 and zero.norm == pytest.approx(np.sqrt(8) * 1e-12)
+    assert grad_error(np.zeros(8), np.zeros(8)).rel_l2 == 0
+    assert grad_error(np.array([1.0, np.nan]), np.ones(2)).rel_l2 == math.inf
+    row = CompareRow("b", "1", "w", 1, 2, 2, 2, 2, "cpu", "", "matched", grad_bound=1e-4,
+                     grads={"quats": zero, "means": grad_error(np.ones(3), np.ones(3) * (1 + 1e-6))})
+    assert row.grad_verdict == "within bound"  # the zero group is left out, the other judged
+
+
 def test_settings_and_scales():
     assert auto_scale(128, 128) == 1.0
     assert auto_scale(648, 420) == 0.25  # the garden view at quarter resolution, as `splatbench demo`
@@ -161,6 +178,8 @@ def test_settings_and_scales():
     (["--backend", "drjit", "--backend", "drjit"], ["--backend:", "'drjit' given twice"]),
     (["--backend", "drjit", "--repeats", "0"], ["--repeats:", "0"]),
     (["--backend", "drjit", "--workload", "missing.npz"], ["--workload:", "missing.npz"]),
+    (["--backend", "drjit", "--grad-oracle", "torch65"], ["--grad-oracle:", "torch65", "'fd'"]),
+    (["--backend", "drjit", "--error-scale", "2"], ["--error-scale:", "(0, 1]", "2"]),
 ])
 def test_cli_bad_input_is_one_line(args, parts, tmp_path):
     from splatbench.cli import main
@@ -170,3 +189,22 @@ def test_cli_bad_input_is_one_line(args, parts, tmp_path):
     lines = [line for line in out.output.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("splatbench: error: "), out.output
     assert all(p in lines[0] for p in parts), lines[0]
+
+
+def test_committed_report_is_its_numbers():
+    """reports/compare (the issue's must-show command): report.md is what results.parquet and
+    run.json give, and drjit, torch and gsplat agree with the oracle within the bounds."""
+    table = pd.read_parquet(COMMITTED / "results.parquet")
+    record = json.loads((COMMITTED / RUN_RECORD).read_text())
+    text = (COMMITTED / "report.md").read_text()
+    figures = [COMMITTED / name for name in ("time_vs_error.png", "time_vs_error_fwd_bwd.png")]
+    assert all(f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in figures)
+    assert render_markdown(record, table, figures, COMMITTED) == text
+    assert set(table.workload) == {"synthetic-2000-128x128-s0", "garden-view0"}
+    rows = table.set_index(["backend", "workload"])
+    for backend in ("drjit", "torch", "gsplat"):
+        for workload in set(table.workload):
+            row = rows.loc[(backend, workload)]
+            assert row.status == "ok", row.error
+            assert row.forward_verdict == "within bound" and row.grad_verdict == "within bound", (backend, workload)
+    assert rows.loc[("reference", "garden-view0"), "forward_verdict"] == "within bound"
