@@ -280,7 +280,9 @@ _outlier_cell(r), r.forward_verdict] for _, r in table.iterrows()]), "",
         "## Time and memory", "",
         f"At each workload's full resolution, {s.repeats} rounds after one untimed warm-up per backend; within a "
         "round the backends take turns (ABC ABC ...), forward runs first, then forward+backward runs. Cells: median "
-        "[quartiles] (min–max), ms. Memory: " + "; ".join(sorted({k for k in table.memory_kind if k})) + ".", "",
+        "[quartiles] (min–max), ms. Peak MB: " + "; ".join(sorted({k.removesuffix(", forward only")
+                                                              for k in table.memory_kind if k}))
+        + " (one forward+backward; one forward for a backend with finite-difference gradients).", "",
         _table(["workload", "backend", "forward ms", "forward+backward ms", "peak MB", "load avg before → after",
                 "note"],
                [[r.workload, r.backend, _spread_cell(r, "fwd"), _spread_cell(r, "fwd_bwd"), _num(r.peak_mb, ".0f"),
