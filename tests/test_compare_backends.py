@@ -152,7 +152,7 @@ def test_torch64_gradient_oracle_agrees_with_finite_differences():
 
 
 def test_a_zero_oracle_gradient_has_no_relative_error():
-    from splatbench.backends.compare import CompareRow, GradError
+    from splatbench.backends.compare import CompareRow
     from splatbench.backends.compare_measure import grad_error
 
     # isotropic Gaussians: the true quaternion gradient is exactly 0, float32 leaves roundoff

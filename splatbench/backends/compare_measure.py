@@ -311,7 +311,8 @@ def peak_rise(fn: Callable[[], None], device: str) -> tuple[float, str]:
     if not reset_peak_rss():
         return math.nan, "not measured (no /proc/self/clear_refs to reset the peak RSS)"
     fn()
-    return max(0.0, peak_rss_mb() - before), "peak RSS rise over the RSS before the call (allocator caches flushed first)"
+    rise = max(0.0, peak_rss_mb() - before)
+    return rise, "peak RSS rise over the RSS before the call (allocator caches flushed first)"
 
 
 def time_backends(backends: Sequence[Backend], params: tuple, camera, device: str, repeats: int, *,

@@ -279,7 +279,8 @@ _outlier_cell(r), r.forward_verdict] for _, r in table.iterrows()]), "",
         "backend's L2 norm, and the group is left out of the verdict.", "",
         _table(["workload", "backend", "oracle", *GROUPS, "bound", "verdict"],
                [[r.workload, r.backend, r.grad_oracle or "–",
-                 *[_grad_cell(r, g) for g in GROUPS], _num(r.grad_bound, ".1e"), r.grad_verdict] for _, r in table.iterrows()]), "",
+                 *[_grad_cell(r, g) for g in GROUPS], _num(r.grad_bound, ".1e"), r.grad_verdict]
+                for _, r in table.iterrows()]), "",
         "## Time and memory", "",
         f"At each workload's full resolution, {s.repeats} rounds after one untimed warm-up per backend; within a "
         "round the backends take turns (ABC ABC ...), forward runs first, then forward+backward runs. Cells: median "
