@@ -261,8 +261,8 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
         grads = None if oracle_spec == "none" else GradOracle(oracle_spec, images, params, seed=settings.seed,
                                                                entries=settings.fd_entries)
         measured = {b.name: _accuracy(b, images, params, grads, settings, scale, say, label) for b in resolved}
-        timeable = [b for b in resolved if not measured[b.name]["error"]
-                    and measured[b.name]["predicted_s"] <= settings.max_call_s]
+        timeable = [b for b in resolved if not measured[b.name].error
+                    and measured[b.name].predicted_s <= settings.max_call_s]
         load_start = tuple(load_average())
         say(f"{label}: timing {', '.join(b.name for b in timeable) or 'nothing'} ({settings.repeats} rounds)")
         timings = time_backends(timeable, params, camera, settings.device, settings.repeats, seed=settings.seed,
@@ -270,8 +270,8 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
         load_end = tuple(load_average())
         for b in resolved:
             m = measured[b.name]
-            timing = timings.get(b.name, Timing(note=m["untimed"]))
-            errors = [m["error"]] if m["error"] else []
+            timing = timings.get(b.name, Timing(note=m.untimed))
+            errors = [m.error] if m.error else []
             if isinstance(timing, str):
                 errors.append(timing)
                 timing = Timing()
@@ -279,31 +279,45 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
                 backend=b.name, version=b.info.version, workload=label, n=len(workload.gaussians),
                 width=camera.width, height=camera.height, error_width=err_camera.width,
                 error_height=err_camera.height, device=settings.device, error="; ".join(errors),
-                verdict_mode="exact" if b.info.exact else "matched", matched=m["matched"], exact=m["exact"],
+                verdict_mode="exact" if b.info.exact else "matched", matched=m.matched, exact=m.exact,
                 band=max(1, int(BOUNDARY_FRACTION * err_camera.width * err_camera.height)),
-                grad_oracle=m["grad_oracle"], grads=m["grads"], grad_bound=m["grad_bound"], timing=timing,
+                grad_oracle=m.grad_oracle, grads=m.grads, grad_bound=m.grad_bound, timing=timing,
                 loadavg_start=load_start, loadavg_end=load_end))
     machine.loadavg_end = load_average()
     return CompareResult(tuple(rows), settings, machine, command, round(time.perf_counter() - t_start, 1),
                          tuple(notes))
 
 
-def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: float, say, label: str) -> dict:
+@dataclass
+class _Accuracy:
+    """What `_accuracy` measured of one backend on one workload (filled in step by step)."""
+
+    error: str = ""
+    matched: dict = field(default_factory=dict)
+    exact: dict = field(default_factory=dict)
+    grads: dict = field(default_factory=dict)
+    grad_oracle: str = ""
+    grad_bound: float = math.nan
+    predicted_s: float = math.inf   # predicted seconds of one forward at full resolution
+    untimed: str = ""               # why it is not timed ("" = it is)
+
+
+def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: float, say,
+              label: str) -> _Accuracy:
     """Forward errors, gradient errors and the predicted full-resolution forward time of one backend."""
     import torch
 
     from splatbench.backends.compare_measure import backend_vjp, compare_grads, image_errors, sync
 
     info, camera = backend.info, images.camera
-    m = {"error": "", "matched": {}, "exact": {}, "grads": {}, "grad_oracle": "", "grad_bound": math.nan,
-         "predicted_s": math.inf, "untimed": ""}
+    m = _Accuracy()
     if settings.device not in info.devices:
-        m["error"] = f"device: {backend.name} runs on {', '.join(info.devices)} only (--device {settings.device})"
+        m.error = f"device: {backend.name} runs on {', '.join(info.devices)} only (--device {settings.device})"
         return m
     try:
         oracle_matched = images.matched(info)
     except Exception as exc:  # noqa: BLE001 - conventions the oracle cannot reproduce
-        m["error"] = f"oracle: {one_line(exc)}"
+        m.error = f"oracle: {one_line(exc)}"
         return m
     try:
         seconds = math.inf
@@ -315,35 +329,35 @@ def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: 
             seconds = min(seconds, time.perf_counter() - t0)
             if seconds / scale ** 2 <= settings.max_call_s:
                 break
-        m["matched"] = image_errors(out, oracle_matched, info.outputs)
-        m["exact"] = image_errors(out, images.exact, info.outputs)
+        m.matched = image_errors(out, oracle_matched, info.outputs)
+        m.exact = image_errors(out, images.exact, info.outputs)
     except Exception as exc:  # noqa: BLE001 - one backend's failure never stops the others
-        m["error"] = f"forward: {one_line(exc)}"
+        m.error = f"forward: {one_line(exc)}"
         return m
-    m["predicted_s"] = seconds / scale ** 2
-    if m["predicted_s"] > settings.max_call_s:
-        m["untimed"] = (f"not timed: one forward would take ~{m['predicted_s']:.0f} s (measured {seconds:.1f} s at "
-                        f"scale {scale:g}; limit {settings.max_call_s:g} s)")
+    m.predicted_s = seconds / scale ** 2
+    if m.predicted_s > settings.max_call_s:
+        m.untimed = (f"not timed: one forward would take ~{m.predicted_s:.0f} s (measured {seconds:.1f} s at "
+                     f"scale {scale:g}; limit {settings.max_call_s:g} s)")
     say(f"{label}: {backend.name} forward compared")
     if not info.gradients or info.slow_gradients:
-        m["grad_oracle"] = "not compared: " + ("no gradients" if not info.gradients
-                                               else "slow gradients (finite differences)")
+        m.grad_oracle = "not compared: " + ("no gradients" if not info.gradients
+                                            else "slow gradients (finite differences)")
         return m
     if grads is None:
-        m["grad_oracle"] = "not compared: --grad-oracle none"
+        m.grad_oracle = "not compared: --grad-oracle none"
         return m
     try:
-        m["grad_oracle"], v, ref = grads.reference(info)
+        m.grad_oracle, v, ref = grads.reference(info)
     except Exception as exc:  # noqa: BLE001
-        m["grad_oracle"] = f"not compared: gradient oracle failed ({one_line(exc)})"
+        m.grad_oracle = f"not compared: gradient oracle failed ({one_line(exc)})"
         return m
     try:
-        m["grads"] = compare_grads(backend_vjp(backend, params, camera, v), ref)
+        m.grads = compare_grads(backend_vjp(backend, params, camera, v), ref)
     except Exception as exc:  # noqa: BLE001
-        m["error"] = f"gradient: {one_line(exc)}"
+        m.error = f"gradient: {one_line(exc)}"
         return m
-    verdict = m["exact"] if info.exact else m["matched"]
+    verdict = m.exact if info.exact else m.matched
     band = max(1, int(BOUNDARY_FRACTION * camera.width * camera.height))
-    m["grad_bound"] = gradient_bound(camera.width * camera.height, min(band, max(e.outliers for e in verdict.values())))
-    say(f"{label}: {backend.name} gradients compared ({m['grad_oracle'].split(' (')[0]})")
+    m.grad_bound = gradient_bound(camera.width * camera.height, min(band, max(e.outliers for e in verdict.values())))
+    say(f"{label}: {backend.name} gradients compared ({m.grad_oracle.split(' (')[0]})")
     return m
