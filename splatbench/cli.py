@@ -24,6 +24,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("splatbench.bench.cli:bench", "Benchmarks (raster: run time, memory, throughput)."),
     "scenes": ("splatbench.scenes.cli:scenes", "Mitsuba scene catalog: list scenes, render one into a dataset."),
     "sfm": ("splatbench.commands.sfm:sfm", "Structure from motion (pycolmap) on a dataset's training views."),
+    "compare": ("splatbench.commands.compare:compare", "Compare rasterizers against the float64 oracle."),
+    "conform": ("splatbench.commands.conform:conform", "Check a rasterizer against 3DGS conventions (probe scenes)."),
     "validate": ("splatbench.validate.cli:validate", "Cross-check the rasterizer (mitsuba: ray-traced Gaussians)."),
     "run": ("splatbench.experiments.cli:run", "Run an experiment grid (resumable; local or Dask executor)."),
     "report": ("splatbench.reports.cli:report", "Write an experiment's report: tables, findings, figures."),

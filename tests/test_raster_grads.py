@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
-import reference
+from splatbench.backends import get_backend, reference_render
 from tests.compare import assert_grads_agree
 from tests.gradcheck import GROUPS, Cotangents, fast_vjp
 from tests.scenes import parity_scene, smooth_scene
@@ -44,12 +45,12 @@ def test_custom_backward_matches_loop_ad(seed, device):
         assert_grads_agree(f"{workload.name} {k}", custom.grads[k], loop.grads[k], rel_l2=REL_L2, cosine=COSINE)
 
 
-def reference_fd(workload, v: Cotangents, wrt: str) -> np.ndarray:
-    g, c = workload.gaussians, workload.camera
-    params = [getattr(g, k).astype(np.float64) for k in GROUPS]
-    return reference.finite_difference_grad(
-        lambda out: v.loss(out.rgb, out.alpha, out.depth), *params, wrt=wrt, mode="exact",
-        K=c.K, world_to_camera=c.world_to_camera, width=c.width, height=c.height)
+def reference_fd(workload, v: Cotangents) -> dict[str, np.ndarray]:
+    """Every group's VJP by central differences of the exact reference (the reference-exact backend)."""
+    g = workload.gaussians
+    params = [torch.tensor(getattr(g, k), dtype=torch.float64, requires_grad=True) for k in GROUPS]
+    v.loss(*get_backend("reference-exact")(*params, workload.camera)).backward()
+    return {k: p.grad.numpy() for k, p in zip(GROUPS, params)}
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -57,17 +58,16 @@ def test_gradients_match_finite_differences(seed):
     workload = smooth_scene(seed)
     g, c = workload.gaussians, workload.camera
     v = Cotangents.random(100 + seed, c.height, c.width)
-    exact = reference.render(g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, c.K, c.world_to_camera,
-                             c.width, c.height, mode="exact")
+    exact = reference_render(None, g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, c, mode="exact")
     # depth = sum / alpha: where alpha is tiny the fast path (which drops alpha < 1e-9)
     # and the exact function legitimately differ, so depth is only weighted where
     # splats actually cover the pixel.
     v = Cotangents(v.rgb, v.alpha, v.depth * (exact.alpha > 0.05))
     fast = fast_vjp(workload, v, **SMOOTH)
     np.testing.assert_allclose(fast.rgb, exact.rgb, atol=1e-5)  # the same smooth function
+    fd = reference_fd(workload, v)
     for k in GROUPS:
-        assert_grads_agree(f"{workload.name} {k}", fast.grads[k], reference_fd(workload, v, k),
-                           rel_l2=REL_L2, cosine=COSINE)
+        assert_grads_agree(f"{workload.name} {k}", fast.grads[k], fd[k], rel_l2=REL_L2, cosine=COSINE)
 
 
 def test_frozen_groups_get_no_gradient():

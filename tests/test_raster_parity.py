@@ -23,8 +23,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import reference
 import splatbench
+from splatbench.backends import reference_render
 from splatbench.workloads import GARDEN_SFM, load_npz
 from tests.compare import EPS32, assert_images_close
 from tests.scenes import parity_scene
@@ -33,18 +33,11 @@ ATOL = 2e-5
 BOUNDARY_FRACTION = 1 / 500
 
 
-def reference_render(workload, background, **options):
-    g, c = workload.gaussians, workload.camera
-    return reference.render(g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, c.K, c.world_to_camera,
-                            c.width, c.height, mode="matched", background=background, **options)
-
-
-FAST_ONLY = ("tile_size", "device")  # accelerations with no counterpart in the reference
-
-
 def check_parity(tag: str, workload, background, device: str = "cpu", **options) -> None:
     fast = splatbench.render(workload.gaussians, workload.camera, background=background, device=device, **options)
-    ref = reference_render(workload, background, **{k: v for k, v in options.items() if k not in FAST_ONLY})
+    g = workload.gaussians  # the reference follows the same options (tile_size and device have no counterpart)
+    ref = reference_render(options, g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, workload.camera,
+                           background=background)
     H, W = ref.alpha.shape
     band = max(1, int(BOUNDARY_FRACTION * H * W))
     assert_images_close(f"{tag}-rgb", fast.rgb, ref.rgb, ATOL, max_outliers=band)

@@ -20,7 +20,16 @@ ENTRY_POINT_GROUP = "splatbench.backends"
 
 # name -> "module:attribute" of a zero-argument factory returning a Backend (loaded lazily,
 # so that listing backends imports neither torch, Dr.Jit, gsplat nor Mitsuba).
-BUILTINS: dict[str, str] = {}
+_B = "splatbench.backends.builtins."
+BUILTINS: dict[str, str] = {
+    "drjit": _B + "drjit_backend:make_drjit_backend",
+    "reference": _B + "reference_backend:make_reference_backend",
+    "reference-exact": _B + "reference_backend:make_reference_exact_backend",
+    "torch": _B + "torch_backend:make_torch_backend",
+    "torch64": _B + "torch_backend:make_torch64_backend",
+    "gsplat": _B + "gsplat_backend:make_gsplat_backend",
+    "mitsuba": _B + "mitsuba_backend:make_mitsuba_backend",
+}
 
 
 def register_builtin(name: str, target: str) -> None:

@@ -27,8 +27,8 @@ DEMO_EXPERIMENT = Path(__file__).resolve().parents[2] / "experiments" / "demo.to
 
 def garden_check(out: Path, scale: float) -> None:
     """Render the garden capture with the rasterizer and (at ``scale``) the reference."""
-    import reference
     import splatbench
+    from splatbench.backends import reference_render
     from splatbench.images import save_png
     from splatbench.workloads import GARDEN_SFM, load_npz
 
@@ -43,8 +43,7 @@ def garden_check(out: Path, scale: float) -> None:
 
     small = camera.scaled(scale)
     fast = splatbench.render(g, small)
-    ref = reference.render(g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, small.K,
-                           small.world_to_camera, small.width, small.height, mode="matched")
+    ref = reference_render(None, g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, small)
     err = np.abs(fast.rgb - ref.rgb)
     save_png(np.clip(err / max(float(err.max()), 1e-12), 0, 1), out / "garden_difference.png")
     click.echo(f"reference check at {small.width}x{small.height}: max |fast - reference| = {err.max():.2e} "

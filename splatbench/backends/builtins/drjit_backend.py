@@ -1,0 +1,36 @@
+"""The ``drjit`` backend: splatbench's own tile rasterizer behind the `Backend` interface."""
+
+from __future__ import annotations
+
+from splatbench.backends.base import Backend, BackendInfo
+
+DESCRIPTION = ("splatbench's Dr.Jit tile rasterizer (LLVM on the CPU, CUDA where Dr.Jit finds a GPU) with "
+               "its analytic backward pass; graphdeco-inria 3DGS conventions (docs/conventions.md)")
+
+
+def make_drjit_backend(**options) -> Backend:
+    """The ``drjit`` backend; ``options`` are `splatbench.RasterOptions` fields (graphdeco defaults).
+
+    The declared approximations are the options actually used, so a backend made with
+    ``radius="opacity"`` is compared against the reference with that rule.
+    """
+    import splatbench
+    from splatbench.raster.backend import cuda_available
+    from splatbench.raster.options import RasterOptions
+
+    opts = RasterOptions.from_kwargs(**options)
+    info = BackendInfo(
+        name="drjit", version=splatbench.__version__,
+        devices=("cpu", "cuda") if cuda_available() else ("cpu",),
+        alpha_min=opts.alpha_min, alpha_max=opts.alpha_max, transmittance_min=opts.transmittance_min,
+        eps2d=opts.eps2d, radius=opts.radius, tile_size=opts.tile_size, antialiased=opts.antialiased,
+        description=DESCRIPTION)
+    kwargs = {f: getattr(opts, f) for f in ("tile_size", "alpha_min", "alpha_max", "transmittance_min", "eps2d",
+                                            "near", "far", "radius", "antialiased", "device")}
+
+    def drjit(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
+        rgb, alpha, depth, _ = splatbench.rasterize(means, log_scales, quats, opacity_logits, sh, camera,
+                                                    sh_degree=sh_degree, background=background, **kwargs)
+        return rgb, alpha, depth
+
+    return Backend(drjit, info)

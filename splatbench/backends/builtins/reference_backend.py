@@ -1,0 +1,183 @@
+"""The ``reference`` backends, and `reference_render`: THE adapter from splatbench inputs to the oracle.
+
+    reference_render(conventions, means, ..., sh, camera, *, mode=...)   float64 numpy render
+    make_reference_backend(mode="matched", **conventions)                  a `Backend` (torch in/out)
+
+``reference`` renders in ``mode="matched"`` with graphdeco's approximations (or the ones
+given); ``reference-exact`` renders the exact Gaussian mixture (``mode="exact"``: no
+cutoff, no clamp, no skip, no early stop). Both differentiate by central finite
+differences of the oracle (`reference.finite_difference_grad`): two renders per
+parameter entry, so only for tiny scenes (``slow_gradients=True``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from splatbench.backends.base import GRAPHDECO, Backend, BackendInfo
+from splatbench.errors import InputError
+
+GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
+MODES = ("matched", "exact")
+#: `reference.render` keywords a conventions mapping may set (near/far default to the camera's).
+REFERENCE_OPTIONS = ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius", "antialiased", "near", "far")
+#: Rasterizer options with no counterpart in the reference (accelerations and placement only).
+FAST_ONLY = ("tile_size", "device")
+#: Central-difference half step. In float64 the truncation error is O(eps^2) ~ 1e-12 and the
+#: rounding error ~ 1e-16 / eps ~ 1e-10 relative, both far below float32 roundoff.
+FD_EPS = 1e-6
+
+
+def _as_numpy(value) -> np.ndarray:
+    if hasattr(value, "detach"):  # a torch tensor
+        value = value.detach().cpu().double().numpy()
+    return np.asarray(value, dtype=np.float64)
+
+
+def _options(conventions, camera) -> dict:
+    """`reference.render` keywords from a BackendInfo, a Backend, a mapping or None (graphdeco)."""
+    if conventions is None:
+        opts = {k: GRAPHDECO[k] for k in ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius",
+                                          "antialiased")}
+    elif isinstance(conventions, Backend):
+        opts = conventions.info.reference_options()
+    elif isinstance(conventions, BackendInfo):
+        opts = conventions.reference_options()
+    elif isinstance(conventions, Mapping):
+        opts = {}
+        for key, value in conventions.items():
+            if key in FAST_ONLY:
+                continue
+            if key not in REFERENCE_OPTIONS:
+                raise InputError(f"conventions: {key!r} has no counterpart in the reference "
+                                 f"(known: {', '.join(REFERENCE_OPTIONS + FAST_ONLY)})")
+            if value is not None:  # RasterOptions' near/far None means "the camera's"
+                opts[key] = value
+    else:
+        raise InputError(f"conventions: expected a BackendInfo, a Backend, a mapping or None, "
+                         f"got {type(conventions).__name__}")
+    opts.setdefault("near", camera.near)
+    opts.setdefault("far", camera.far)
+    return opts
+
+
+def reference_render(conventions, means, log_scales, quats, opacity_logits, sh, camera, *, mode="matched",
+                     sh_degree=None, background=None):
+    """Render with the float64 oracle, following ``conventions`` (in ``mode="matched"``).
+
+    Args:
+        conventions: whose approximations to reproduce: a `BackendInfo` or `Backend`
+            (its declared ones, graphdeco's where undeclared), a mapping of
+            `reference.render` keywords (alpha_min, alpha_max, transmittance_min, eps2d,
+            radius, antialiased, near, far; `RasterOptions`' tile_size and device are
+            ignored, a None near/far means the camera's), or None (graphdeco's).
+            Ignored in ``mode="exact"`` except near/far.
+        means [N, 3], log_scales [N, 3], quats [N, 4] (w, x, y, z), opacity_logits [N],
+            sh [N, K, 3]: numpy arrays or torch tensors (cast to float64).
+        camera: `splatbench.Camera` (intrinsics, pose, size; near/far unless given).
+        mode: "matched" (the conventions above) or "exact" (the exact Gaussian mixture).
+        sh_degree: bands evaluated (None = all in ``sh``). background: RGB (None = black).
+
+    Returns:
+        `reference.RenderOutput` (rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N],
+        visible [N]), float64 numpy.
+    """
+    import reference
+
+    kwargs = _render_kwargs(conventions, camera, mode, sh_degree, background)
+    arrays = [_as_numpy(x) for x in (means, log_scales, quats, opacity_logits, sh)]
+    try:
+        return reference.render(*arrays, **kwargs)
+    except ValueError as exc:  # the oracle's own one-line messages name the field
+        raise InputError(str(exc)) from None
+
+
+def _render_kwargs(conventions, camera, mode, sh_degree, background) -> dict:
+    """Every keyword of `reference.render` but the five parameter groups."""
+    if mode not in MODES:
+        raise InputError(f"mode: expected one of {list(MODES)}, got {mode!r}")
+    opts = _options(conventions, camera)
+    if mode == "exact":
+        opts = {k: opts[k] for k in ("near", "far")}
+    bg = (0.0, 0.0, 0.0) if background is None else tuple(float(b) for b in _as_numpy(background).reshape(3))
+    return dict(K=camera.K, world_to_camera=camera.world_to_camera, width=camera.width, height=camera.height,
+                mode=mode, background=bg, sh_degree=sh_degree, **opts)
+
+
+def _fd_vjp(params: dict, grad_outputs, which, render_kwargs: dict) -> list:
+    """sum(v . outputs) differentiated by central differences, for the groups in ``which``."""
+    import reference
+
+    v_rgb, v_alpha, v_depth = (np.zeros(()) if g is None else _as_numpy(g) for g in grad_outputs)
+
+    def loss(out):
+        return float((out.rgb * v_rgb).sum() + (out.alpha * v_alpha).sum() + (out.depth * v_depth).sum())
+
+    return [reference.finite_difference_grad(loss, *params.values(), wrt=k, eps=FD_EPS, **render_kwargs)
+            if k in which else None for k in GROUPS]
+
+
+def _render_fn(mode: str, conventions: dict):
+    import torch
+
+    class _ReferenceRender(torch.autograd.Function):
+        @staticmethod
+        def forward(ctx, means, log_scales, quats, opacity_logits, sh, camera, sh_degree, background):
+            out = reference_render(conventions, means, log_scales, quats, opacity_logits, sh, camera, mode=mode,
+                                   sh_degree=sh_degree, background=background)
+            inputs = (means, log_scales, quats, opacity_logits, sh)
+            ctx.params = {k: _as_numpy(x) for k, x in zip(GROUPS, inputs)}
+            ctx.dtypes = [getattr(x, "dtype", torch.float32) for x in inputs]
+            ctx.camera, ctx.sh_degree, ctx.background = camera, sh_degree, background
+            return tuple(torch.from_numpy(np.ascontiguousarray(x)) for x in (out.rgb, out.alpha, out.depth))
+
+        @staticmethod
+        def backward(ctx, v_rgb, v_alpha, v_depth):
+            which = {k for k, need in zip(GROUPS, ctx.needs_input_grad[:5]) if need}
+            kwargs = _render_kwargs(conventions, ctx.camera, mode, ctx.sh_degree, ctx.background)
+            grads = _fd_vjp(ctx.params, (v_rgb, v_alpha, v_depth), which, kwargs)
+            return (*(None if g is None else torch.from_numpy(g).to(dtype) for g, dtype in zip(grads, ctx.dtypes)),
+                    None, None, None)
+
+    def fn(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
+        return _ReferenceRender.apply(means, log_scales, quats, opacity_logits, sh, camera, sh_degree, background)
+
+    return fn
+
+
+def make_reference_backend(mode: str = "matched", **conventions) -> Backend:
+    """The float64 oracle as a backend: ``reference`` (matched) or ``reference-exact``.
+
+    ``conventions``: `reference.render` keywords (see `reference_render`) overriding
+    graphdeco's in matched mode. Outputs are float64 torch tensors; gradients (in the
+    inputs' dtype) are central differences of the oracle, two renders per entry.
+    """
+    if mode not in MODES:
+        raise InputError(f"mode: expected one of {list(MODES)}, got {mode!r}")
+    import reference  # noqa: F401  (fails early if the package is missing)
+    import splatbench
+
+    unknown = sorted(set(conventions) - set(REFERENCE_OPTIONS))
+    if unknown:
+        raise InputError(f"{unknown[0]}: not a reference option (known: {', '.join(REFERENCE_OPTIONS)})")
+    if mode == "exact":
+        info = BackendInfo(name="reference-exact", version=splatbench.__version__, dtype="float64",
+                           slow_gradients=True, alpha_min=0.0, alpha_max=1.0, transmittance_min=0.0, eps2d=0.3,
+                           radius="none", tile_size=0, antialiased=False, exact=True,
+                           description="float64 NumPy oracle, exact Gaussian mixture (eps2d 0.3 low-pass kept; "
+                                       "no cutoff, clamp, skip or early stop); gradients by finite differences")
+    else:
+        merged = {k: conventions.get(k, GRAPHDECO[k]) for k in ("alpha_min", "alpha_max", "transmittance_min",
+                                                                "eps2d", "radius", "antialiased")}
+        info = BackendInfo(name="reference", version=splatbench.__version__, dtype="float64",
+                           slow_gradients=True, tile_size=0, **merged,
+                           description="float64 NumPy oracle (reference/), matched to graphdeco's conventions, "
+                                       "one pixel at a time; gradients by central finite differences")
+    return Backend(_render_fn(mode, dict(conventions)), info)
+
+
+def make_reference_exact_backend() -> Backend:
+    """``reference-exact``: the oracle in ``mode="exact"``."""
+    return make_reference_backend("exact")

@@ -1,0 +1,363 @@
+"""Any rasterizers side by side against the float64 oracle (`splatbench compare`).
+
+    run_compare(backends, workloads, settings=CompareSettings(), progress=None) -> CompareResult
+    write_compare(result, out) -> report.md        (`splatbench.backends.compare_report`)
+
+Per backend x workload (one `CompareRow`):
+
+1. **Forward error** at the error camera (the workload's camera scaled by
+   ``error_scale``: the oracle is float64 NumPy, so large images are measured at a
+   reduced resolution, as ``splatbench demo`` does): rgb, alpha and depth against
+   `reference_render` in mode "matched" with the backend's declared conventions, and
+   in mode "exact" (the exact Gaussian mixture). Each oracle image is rendered once per
+   workload (per distinct conventions) and reused across backends. Depth is compared
+   as depth * alpha / z_max (the composited sum; depth = sum / alpha amplifies alpha's
+   error by 1 / alpha), z_max = max(1, largest oracle depth).
+2. **Gradients**: the VJP of sum(v . outputs) with random cotangents v over every
+   declared output (v_depth kept only where the oracle's alpha > 0.05, for the same
+   1 / alpha reason), per parameter group, as relative L2 error and cosine against
+   the gradient oracle: ``torch64`` (float64 autograd) built with the backend's
+   conventions, or central differences of the oracle on a sample of entries
+   (`splatbench.backends.compare_measure.GradOracle`).
+3. **Time** at the workload's full resolution: one warm-up forward and forward+backward
+   per backend (Dr.Jit compiles then), then ``repeats`` rounds in which the backends
+   take turns (ABCABC...); median, quartiles, min and max; load average around it.
+   **Peak memory**: one more forward+backward per backend with allocator caches
+   flushed and the peak RSS reset first (Linux ``clear_refs``): the rise over the RSS
+   before the call (on CUDA: torch's allocator peak).
+
+A backend that raises gets the one-line error in its row; the others go on.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from splatbench.backends.builtins.reference_backend import GROUPS
+from splatbench.errors import InputError
+
+U32 = 2.0 ** -24  # float32 unit roundoff
+
+# Forward bound, derived in tests/test_raster_parity.py: a pixel sums L <= ~150 terms
+# T_i a_i c_i, T_i a product of i factors (relative error <= i u) and a_i c_i ~20 float32
+# operations, so |error| <= (2 L + 20) u max|c| ~ 4e-5 for |c| <= 2, and 2e-5 for the
+# random-walk sum. A pixel where float32 and float64 take a discrete decision (3-sigma
+# cutoff, alpha_min, early stop, depth tie) differently differs by a whole contribution:
+# at most 1 pixel in 500 may exceed the tolerance (the boundary band).
+FORWARD_ATOL = 2e-5
+BOUNDARY_FRACTION = 1 / 500
+OFF_THRESHOLD = 1e-4        # "share of pixels off by more than 1e-4" (per pixel, max over channels)
+DEPTH_ALPHA_MIN = 0.05      # v_depth is kept where the oracle's alpha exceeds this
+GRAD_TERM_OPS = 20          # float32 operations per gradient term (forward + backward)
+MAX_ORACLE_PIXELS = 20_000  # automatic error scale: the largest 1/2^k with W' H' <= this
+
+
+def gradient_bound(pixels: int, outliers: int) -> float:
+    """Relative L2 bound of a float32 gradient against a float64 one with the same conventions.
+
+    One gradient entry sums a term per pixel, each with ~20 float32 operations (relative
+    error 20 u); random cotangents make the terms cancel, which amplifies the relative
+    error of the sum by at most sqrt(P) (tests/test_raster_grads.py): 20 u sqrt(P). A
+    boundary pixel (see `FORWARD_ATOL`) changes its terms by a whole contribution; with
+    ``outliers`` such pixels among P of comparable terms that adds sqrt(outliers / P).
+    """
+    return GRAD_TERM_OPS * U32 * math.sqrt(pixels) + math.sqrt(outliers / pixels)
+
+
+@dataclass(frozen=True)
+class CompareSettings:
+    """How `run_compare` measures.
+
+    repeats: timed rounds; device: "cpu" or "cuda" (where the input tensors live);
+    seed: of the random cotangents and the finite-difference sample; error_scale:
+    resolution factor of the error measurement (None: `auto_scale`); grad_oracle:
+    "auto" (``torch64`` when registered, else "fd"), "fd", "none" or a backend name;
+    fd_entries: entries per group differentiated by central differences; max_call_s:
+    a backend whose forward at full resolution is predicted to take longer is not timed.
+    """
+
+    repeats: int = 5
+    device: str = "cpu"
+    seed: int = 0
+    error_scale: float | None = None
+    grad_oracle: str = "auto"
+    fd_entries: int = 12
+    max_call_s: float = 60.0
+
+    def validate(self) -> None:
+        if self.repeats < 1:
+            raise InputError(f"--repeats: expected a count >= 1, got {self.repeats}")
+        if self.device not in ("cpu", "cuda"):
+            raise InputError(f"--device: expected 'cpu' or 'cuda', got {self.device!r}")
+        if self.error_scale is not None and not 0 < self.error_scale <= 1:
+            raise InputError(f"--error-scale: expected a factor in (0, 1], got {self.error_scale}")
+        if self.fd_entries < 1:
+            raise InputError(f"--fd-entries: expected a count >= 1, got {self.fd_entries}")
+        if self.device == "cuda":
+            import torch
+
+            if not torch.cuda.is_available():
+                raise InputError("--device: 'cuda' asked for, but torch finds no CUDA device (use --device cpu)")
+
+
+@dataclass(frozen=True)
+class ImageError:
+    """One output against one oracle image: max |diff|, PSNR (peak 1), share of pixels off
+    by more than 1e-4, and pixels over `FORWARD_ATOL` (the bound's outliers)."""
+
+    max_abs: float
+    psnr: float
+    frac_off: float
+    outliers: int
+
+
+@dataclass(frozen=True)
+class GradError:
+    """One parameter group: relative L2 error |a - b| / |b|, cosine a.b / (|a| |b|), and the
+    norms |a| (backend) and |b| (oracle). Where |b| = 0 (e.g. the quaternions of isotropic
+    Gaussians, which a rotation does not change) and |a| > 0 there is no relative error:
+    rel_l2 and cosine are NaN and the group is left out of the verdict."""
+
+    rel_l2: float
+    cosine: float
+    norm: float = math.nan
+    oracle_norm: float = math.nan
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Milliseconds of every timed forward and forward+backward run (empty: not timed),
+    why not, and the peak memory rise of one forward+backward (MB, 10^6 bytes)."""
+
+    fwd_ms: tuple[float, ...] = ()
+    fwd_bwd_ms: tuple[float, ...] = ()
+    note: str = ""
+    peak_mb: float = math.nan
+    memory_kind: str = ""
+
+
+@dataclass(frozen=True)
+class CompareRow:
+    """One backend on one workload (see the module doc). ``error``: "" or one line."""
+
+    backend: str
+    version: str
+    workload: str
+    n: int
+    width: int
+    height: int
+    error_width: int
+    error_height: int
+    device: str
+    error: str
+    verdict_mode: str                         # "matched", or "exact" for a backend declaring exact
+    matched: dict[str, ImageError] = field(default_factory=dict)
+    exact: dict[str, ImageError] = field(default_factory=dict)
+    band: int = 0                             # outliers allowed per output
+    grad_oracle: str = ""
+    grads: dict[str, GradError] = field(default_factory=dict)
+    grad_bound: float = math.nan
+    timing: Timing = Timing()
+    loadavg_start: tuple[float, ...] = ()
+    loadavg_end: tuple[float, ...] = ()
+
+    @property
+    def forward_verdict(self) -> str:
+        errors = self.exact if self.verdict_mode == "exact" else self.matched
+        if not errors:
+            return "n/a"
+        return "within bound" if all(e.outliers <= self.band for e in errors.values()) else "outside bound"
+
+    @property
+    def grad_verdict(self) -> str:
+        judged = [g.rel_l2 for g in self.grads.values() if not math.isnan(g.rel_l2)]
+        if not judged:
+            return "n/a"
+        return "within bound" if all(e <= self.grad_bound for e in judged) else "outside bound"
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    rows: tuple[CompareRow, ...]
+    settings: CompareSettings
+    machine: object               # `splatbench.bench.raster.MachineInfo`
+    command: str
+    seconds: float
+    notes: tuple[str, ...] = ()   # per workload: resolution of the error measurement, oracles
+
+
+def auto_scale(width: int, height: int) -> float:
+    """The largest 1/2^k (k <= 4) with (W H) / 4^k <= `MAX_ORACLE_PIXELS`."""
+    scale = 1.0
+    while width * height * scale * scale > MAX_ORACLE_PIXELS and scale > 1 / 16:
+        scale /= 2
+    return scale
+
+
+def one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}"[:300]
+
+
+def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettings = CompareSettings(), *,
+                progress: Callable[[str], None] | None = None, command: str = "") -> CompareResult:
+    """Compare ``backends`` on ``workloads`` (module doc).
+
+    Args:
+        backends: names, ``module:function`` strings, `Backend`s or callables (`get_backend`).
+        workloads: `splatbench.workloads.Workload`s, or `splatbench.bench.raster.WorkloadSpec`s.
+        settings: `CompareSettings`. progress: called with one line per step.
+        command: the command line, for the report.
+
+    Returns:
+        `CompareResult`: one `CompareRow` per backend x workload, workload by workload.
+    """
+    from splatbench.backends.compare_measure import FLOAT64_ORACLE, GradOracle, OracleImages, time_backends, \
+        torch_inputs
+    from splatbench.backends.registry import available, get_backend
+    from splatbench.bench.raster import load_average, machine_info
+
+    settings.validate()
+    resolved = [get_backend(b) for b in backends]
+    if not resolved:
+        raise InputError("--backend: give at least one backend")
+    names = [b.name for b in resolved]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise InputError(f"--backend: {twice[0]!r} given twice (each backend is compared once)")
+    if not workloads:
+        raise InputError("workloads: give at least one (--synthetic N WxH, --workload, --scene)")
+    say = progress or (lambda line: None)
+    oracle_spec = settings.grad_oracle
+    if oracle_spec == "auto":
+        oracle_spec = FLOAT64_ORACLE if FLOAT64_ORACLE in available() else "fd"
+    elif oracle_spec not in ("fd", "none"):
+        try:
+            get_backend(oracle_spec)
+        except InputError as exc:
+            raise InputError(f"--grad-oracle: {exc} (or 'auto', 'fd', 'none')") from None
+    machine = machine_info(settings.device)
+    t_start = time.perf_counter()
+    rows: list[CompareRow] = []
+    notes: list[str] = []
+    for spec in workloads:
+        workload = spec.build() if hasattr(spec, "build") else spec
+        label = getattr(spec, "label", "") or workload.name
+        camera = workload.camera
+        scale = settings.error_scale or auto_scale(camera.width, camera.height)
+        err_camera = camera if scale == 1 else camera.scaled(scale)
+        images = OracleImages(workload, err_camera)
+        t0 = time.perf_counter()
+        images.exact  # noqa: B018 - render the exact-mixture oracle once, up front
+        say(f"{label}: float64 oracle (exact mixture) at {err_camera.width}x{err_camera.height} in "
+            f"{time.perf_counter() - t0:.1f} s")
+        notes.append(f"{label}: {len(workload.gaussians):,} Gaussians at {camera.width}x{camera.height}; errors and "
+                     f"gradients at {err_camera.width}x{err_camera.height} (scale {scale:g}), times at full "
+                     f"resolution")
+        params = torch_inputs(workload, settings.device)
+        grads = None if oracle_spec == "none" else GradOracle(oracle_spec, images, params, seed=settings.seed,
+                                                               entries=settings.fd_entries)
+        measured = {b.name: _accuracy(b, images, params, grads, settings, scale, say, label) for b in resolved}
+        timeable = [b for b in resolved if not measured[b.name].error
+                    and measured[b.name].predicted_s <= settings.max_call_s]
+        load_start = tuple(load_average())
+        say(f"{label}: timing {', '.join(b.name for b in timeable) or 'nothing'} ({settings.repeats} rounds)")
+        timings = time_backends(timeable, params, camera, settings.device, settings.repeats, seed=settings.seed,
+                                progress=lambda line: say(f"{label}: {line}"))
+        load_end = tuple(load_average())
+        for b in resolved:
+            m = measured[b.name]
+            timing = timings.get(b.name, Timing(note=m.untimed))
+            errors = [m.error] if m.error else []
+            if isinstance(timing, str):
+                errors.append(timing)
+                timing = Timing()
+            rows.append(CompareRow(
+                backend=b.name, version=b.info.version, workload=label, n=len(workload.gaussians),
+                width=camera.width, height=camera.height, error_width=err_camera.width,
+                error_height=err_camera.height, device=settings.device, error="; ".join(errors),
+                verdict_mode="exact" if b.info.exact else "matched", matched=m.matched, exact=m.exact,
+                band=max(1, int(BOUNDARY_FRACTION * err_camera.width * err_camera.height)),
+                grad_oracle=m.grad_oracle, grads=m.grads, grad_bound=m.grad_bound, timing=timing,
+                loadavg_start=load_start, loadavg_end=load_end))
+    machine.loadavg_end = load_average()
+    return CompareResult(tuple(rows), settings, machine, command, round(time.perf_counter() - t_start, 1),
+                         tuple(notes))
+
+
+@dataclass
+class _Accuracy:
+    """What `_accuracy` measured of one backend on one workload (filled in step by step)."""
+
+    error: str = ""
+    matched: dict = field(default_factory=dict)
+    exact: dict = field(default_factory=dict)
+    grads: dict = field(default_factory=dict)
+    grad_oracle: str = ""
+    grad_bound: float = math.nan
+    predicted_s: float = math.inf   # predicted seconds of one forward at full resolution
+    untimed: str = ""               # why it is not timed ("" = it is)
+
+
+def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: float, say,
+              label: str) -> _Accuracy:
+    """Forward errors, gradient errors and the predicted full-resolution forward time of one backend."""
+    import torch
+
+    from splatbench.backends.compare_measure import backend_vjp, compare_grads, image_errors, sync
+
+    info, camera = backend.info, images.camera
+    m = _Accuracy()
+    if settings.device not in info.devices:
+        m.error = f"device: {backend.name} runs on {', '.join(info.devices)} only (--device {settings.device})"
+        return m
+    try:
+        oracle_matched = images.matched(info)
+    except Exception as exc:  # noqa: BLE001 - conventions the oracle cannot reproduce
+        m.error = f"oracle: {one_line(exc)}"
+        return m
+    try:
+        seconds = math.inf
+        for _ in range(2):  # a second call only when the first (compiling, maybe) predicts too slow a backend
+            t0 = time.perf_counter()
+            with torch.no_grad():
+                out = backend(*params, camera)
+            sync(settings.device)
+            seconds = min(seconds, time.perf_counter() - t0)
+            if seconds / scale ** 2 <= settings.max_call_s:
+                break
+        m.matched = image_errors(out, oracle_matched, info.outputs)
+        m.exact = image_errors(out, images.exact, info.outputs)
+    except Exception as exc:  # noqa: BLE001 - one backend's failure never stops the others
+        m.error = f"forward: {one_line(exc)}"
+        return m
+    m.predicted_s = seconds / scale ** 2
+    if m.predicted_s > settings.max_call_s:
+        m.untimed = (f"not timed: one forward would take ~{m.predicted_s:.0f} s (measured {seconds:.1f} s at "
+                     f"scale {scale:g}; limit {settings.max_call_s:g} s)")
+    say(f"{label}: {backend.name} forward compared")
+    if not info.gradients or info.slow_gradients:
+        m.grad_oracle = "not compared: " + ("no gradients" if not info.gradients
+                                            else "slow gradients (finite differences)")
+        return m
+    if grads is None:
+        m.grad_oracle = "not compared: --grad-oracle none"
+        return m
+    try:
+        m.grad_oracle, v, ref = grads.reference(info)
+    except Exception as exc:  # noqa: BLE001
+        m.grad_oracle = f"not compared: gradient oracle failed ({one_line(exc)})"
+        return m
+    try:
+        m.grads = compare_grads(backend_vjp(backend, params, camera, v), ref)
+    except Exception as exc:  # noqa: BLE001
+        m.error = f"gradient: {one_line(exc)}"
+        return m
+    verdict = m.exact if info.exact else m.matched
+    band = max(1, int(BOUNDARY_FRACTION * camera.width * camera.height))
+    m.grad_bound = gradient_bound(camera.width * camera.height, min(band, max(e.outliers for e in verdict.values())))
+    say(f"{label}: {backend.name} gradients compared ({m.grad_oracle.split(' (')[0]})")
+    return m

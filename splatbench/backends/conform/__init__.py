@@ -1,0 +1,68 @@
+"""`splatbench conform`: a conformance suite of small probe scenes for any rasterizer.
+
+    from splatbench.backends.conform import conform
+    report = conform("drjit")                   # a Backend, a callable, or a get_backend spec
+    report.passed, report.failed                # True / names of the failing probes
+    report.to_dict()                            # {"backend", "passed", "summary", "probes": [...]}
+
+Each probe (`probes.PROBES`) renders a tiny scene (`scenes`) with the backend (float32
+torch inputs) and with the float64 oracle (`reference_render`, matched to the conventions
+the backend declares in its `BackendInfo`), and gets a status: pass, fail, warn (a declared
+approximation not followed, but one of its listed alternatives is) or skip (the backend
+lacks the output or gradients the probe needs). Modules:
+
+    scenes    the probe scenes            probes    what each probe checks, and the likely cause
+    oracle    float64 renders, finite differences, derived tolerances (derivation in its docstring)
+    calls     calling the backend         judges    pass / fail / warn per kind of probe
+    results   ProbeResult, ConformReport
+"""
+
+from __future__ import annotations
+
+from splatbench.backends.base import Backend
+from splatbench.backends.conform.calls import Fault
+from splatbench.backends.conform.judges import JUDGES, Context
+from splatbench.backends.conform.oracle import conventions_of
+from splatbench.backends.conform.probes import PROBES, Probe, probe_names
+from splatbench.backends.conform.results import STATUSES, ConformReport, ProbeResult
+from splatbench.errors import InputError
+
+__all__ = ["conform", "ConformReport", "ProbeResult", "PROBES", "Probe", "STATUSES", "probe_names"]
+
+
+def conform(backend, *, device: str | None = None, probes: tuple[str, ...] | None = None) -> ConformReport:
+    """Run the conformance probes on ``backend`` and judge each.
+
+    Args:
+        backend: a `Backend`, a callable, or a spec for `get_backend` ("drjit", "mypkg.rast:render", ...).
+        device: where the inputs live ("cpu", "cuda"); default "cpu" when the backend runs there.
+        probes: names of the probes to run (default: all, in `PROBES` order).
+
+    Returns:
+        `ConformReport` (``.passed``, ``.failed``, ``.results``, ``.to_dict()``).
+    """
+    from splatbench.backends.registry import get_backend
+
+    backend = get_backend(backend) if not isinstance(backend, Backend) else backend
+    devices = backend.info.devices
+    device = device or ("cpu" if "cpu" in devices else devices[0])
+    if device not in devices:
+        raise InputError(f"device: backend {backend.name!r} runs on {', '.join(devices)}, not {device!r}")
+    selected = PROBES
+    if probes:
+        known = {p.name: p for p in PROBES}
+        unknown = [n for n in probes if n not in known]
+        if unknown:
+            raise InputError(f"probes: unknown probe {unknown[0]!r} (known: {', '.join(known)})")
+        selected = tuple(known[n] for n in probes)
+    ctx = Context(backend, conventions_of(backend), device, {})
+    results = []
+    for probe in selected:
+        s = probe.build()
+        try:
+            results.append(JUDGES[probe.kind](probe, s, ctx))
+        except Fault as fault:
+            results.append(ProbeResult(probe.name, probe.kind, "fail", probe.checks, None, None, "", str(fault),
+                                       probe.cause))
+    declared = {k: getattr(backend.info, k) for k in backend.info.declared}
+    return ConformReport(backend.name, backend.info.description, device, declared, tuple(results))

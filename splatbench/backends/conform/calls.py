@@ -1,0 +1,92 @@
+"""The backend side of `splatbench conform`: render a probe scene, take a VJP, report faults in one line."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from splatbench.backends.base import Backend
+from splatbench.backends.conform.oracle import stack
+from splatbench.backends.conform.scenes import GROUPS, ProbeScene
+
+COTANGENT_SEED = 1234
+OUTPUT_CHANNELS = {"rgb": slice(0, 3), "alpha": slice(3, 4), "depth": slice(4, 5)}
+
+
+class Fault(Exception):
+    """The backend misbehaved (raised, wrong shape, NaN): the probe fails with this one line."""
+
+
+def _tensors(s: ProbeScene, device: str, grad: bool) -> list:
+    import torch
+
+    return [torch.tensor(getattr(s, k), dtype=torch.float32, device=device, requires_grad=grad) for k in GROUPS]
+
+
+def _render(backend: Backend, s: ProbeScene, params: list):
+    """The backend's (rgb, alpha, depth) as given, after checks of shape and values."""
+    try:
+        out = backend(*params, s.camera, sh_degree=s.sh_degree, background=s.background)
+    except Exception as exc:  # noqa: BLE001 - any failure of user code is a probe failure, reported in one line
+        first = (str(exc).strip().splitlines() or [""])[0]
+        raise Fault(f"backend raised {type(exc).__name__}: {first}") from None
+    if not isinstance(out, (tuple, list)) or len(out) != 3:
+        raise Fault(f"backend returned {type(out).__name__}, expected a tuple (rgb, alpha, depth)")
+    H, W = s.camera.height, s.camera.width
+    for name, x, shape in zip(("rgb", "alpha", "depth"), out, ((H, W, 3), (H, W), (H, W))):
+        got = tuple(getattr(x, "shape", ()))
+        if got != shape:
+            raise Fault(f"{name}: shape {list(got)}, expected {list(shape)} (H={H}, W={W})")
+    return out
+
+
+def _numpy(x) -> np.ndarray:
+    if hasattr(x, "detach"):
+        x = x.detach().cpu().double().numpy()
+    return np.asarray(x, dtype=np.float64)
+
+
+def outputs(backend: Backend, s: ProbeScene, device: str) -> np.ndarray:
+    import torch
+
+    with torch.no_grad():
+        out = stack([_numpy(x) for x in _render(backend, s, _tensors(s, device, False))])
+    bad = ~np.isfinite(out)
+    if bad.any():
+        i, j, c = (int(k) for k in np.argwhere(bad)[0])
+        raise Fault(f"non-finite {_channel_name(c)} at pixel (row {i}, col {j})")
+    return out
+
+
+def _channel_name(c: int) -> str:
+    return ("rgb", "rgb", "rgb", "alpha", "depth")[c]
+
+
+def cotangents(s: ProbeScene, outputs: tuple[str, ...]) -> np.ndarray:
+    """Seeded normal cotangents [H, W, 5]; zero for outputs the backend does not produce."""
+    v = np.random.default_rng(COTANGENT_SEED).standard_normal((s.camera.height, s.camera.width, 5))
+    for name, sl in OUTPUT_CHANNELS.items():
+        if name not in outputs:
+            v[..., sl] = 0.0
+    return v
+
+
+def vjp(backend: Backend, s: ProbeScene, v: np.ndarray, device: str) -> dict[str, np.ndarray]:
+    import torch
+
+    params = _tensors(s, device, True)
+    out = _render(backend, s, params)
+    if not all(isinstance(x, torch.Tensor) for x in out) or not any(x.requires_grad for x in out):
+        raise Fault("outputs carry no autograd graph (declare gradients=False if the backend has none)")
+    loss = sum((x.double() * torch.as_tensor(v[..., sl].reshape(x.shape), device=x.device)).sum()
+               for x, sl in zip(out, OUTPUT_CHANNELS.values()) if x.requires_grad)
+    try:
+        loss.backward()
+    except Exception as exc:  # noqa: BLE001
+        raise Fault(f"backward raised {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}") from None
+    grads = {k: np.zeros(p.shape) if p.grad is None else _numpy(p.grad) for k, p in zip(GROUPS, params)}
+    for k, g in grads.items():
+        if not np.isfinite(g).all():
+            raise Fault(f"non-finite gradient of {k}")
+    return grads
+
+

@@ -1,0 +1,210 @@
+"""`splatbench compare`: backends side by side against the float64 oracle.
+
+One small run (a 40-Gaussian 32x24 scene) with four backends: the Dr.Jit rasterizer
+(right), one whose forward is wrong (means moved by 1 cm), one whose forward is right
+but whose gradients are 1% too large, and one that raises. Checked: the parquet rows
+and error column, the verdicts, that the report, findings and figures come from the
+numbers, and that bad CLI input is one line with exit status 2.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+import splatbench  # noqa: F401 - configures libLLVM before drjit loads
+from splatbench.backends import Backend, BackendInfo, get_backend
+from splatbench.backends.compare import (BOUNDARY_FRACTION, GRAD_TERM_OPS, GROUPS, U32, CompareSettings,
+                                         auto_scale, gradient_bound, run_compare)
+from splatbench.backends.compare_report import (RUN_RECORD, findings, render_markdown, result_table, rewrite_report,
+                                                write_compare)
+from splatbench.workloads import synthetic
+
+WIDTH, HEIGHT = 32, 24
+COMMITTED = Path(__file__).resolve().parents[1] / "reports" / "compare"
+
+
+def _drjit():
+    return get_backend("drjit")
+
+
+def shifted_means(means, *args, **kwargs):
+    """Wrong forward: every Gaussian 1 cm off (a few pixels at depth 2-6 with f = 32)."""
+    return _drjit()(means + 0.01, *args, **kwargs)
+
+
+def inflated_gradients(*args, **kwargs):
+    """Right forward, gradients 1% too large: y = x + 0.01 (x - stop_grad(x))."""
+    return tuple(x + 0.01 * (x - x.detach()) for x in _drjit()(*args, **kwargs))
+
+
+def broken(*args, **kwargs):
+    raise RuntimeError("out of cheese\nsecond line of the message")
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    backends = ["drjit", Backend(shifted_means, BackendInfo("shifted")),
+                Backend(inflated_gradients, BackendInfo("inflated")), Backend(broken, BackendInfo("broken"))]
+    settings = CompareSettings(repeats=2, grad_oracle="fd", fd_entries=6)
+    result = run_compare(backends, [synthetic(40, WIDTH, HEIGHT, seed=3)], settings)
+    out = tmp_path_factory.mktemp("compare")
+    return result, write_compare(result, out), out
+
+
+def test_rows_and_error_column(run):
+    result, _, out = run
+    table = pd.read_parquet(out / "results.parquet")
+    assert list(table.backend) == ["drjit", "shifted", "inflated", "broken"]
+    assert set(table.workload) == {"synthetic-40-32x24-s3"}
+    assert list(table.status) == ["ok", "ok", "ok", "error"]
+    broken_row = table.set_index("backend").loc["broken"]
+    # one line, naming the stage and the exception; the others still ran
+    assert broken_row.error == "forward: RuntimeError: out of cheese"
+    assert math.isnan(broken_row.matched_rgb_max_abs) and math.isnan(broken_row.fwd_ms_median)
+    # the parquet is the table the report is computed from
+    pd.testing.assert_frame_equal(table, result_table(result), check_dtype=False)
+
+
+def test_verdicts(run):
+    _, _, out = run
+    t = pd.read_parquet(out / "results.parquet").set_index("backend")
+    band = max(1, int(BOUNDARY_FRACTION * WIDTH * HEIGHT))
+    assert (t.band == band).all()
+    # The Dr.Jit rasterizer agrees with the float64 oracle to float32 roundoff everywhere.
+    assert t.loc["drjit", "forward_verdict"] == "within bound"
+    assert max(t.loc["drjit", f"matched_{o}_max_abs"] for o in ("rgb", "alpha", "depth")) < 1e-5
+    assert t.loc["drjit", "grad_verdict"] == "within bound"
+    # no boundary pixels in this scene, so the bound is the roundoff term alone
+    assert t.loc["drjit", "grad_bound"] == pytest.approx(GRAD_TERM_OPS * U32 * math.sqrt(WIDTH * HEIGHT))
+    # A wrong forward is flagged, by far more pixels than the band.
+    assert t.loc["shifted", "forward_verdict"] == "outside bound"
+    assert t.loc["shifted", "matched_rgb_outliers"] > 10 * band
+    # Gradients 1% off with a right forward: forward within bound, gradients outside,
+    # with the relative L2 error the factor implies (1% of every group, to FD accuracy).
+    assert t.loc["inflated", "forward_verdict"] == "within bound"
+    assert t.loc["inflated", "grad_verdict"] == "outside bound"
+    for g in GROUPS:
+        assert t.loc["inflated", f"grad_{g}_rel_l2"] == pytest.approx(0.01, abs=1e-4)
+    assert t.loc["broken", "forward_verdict"] == "n/a" and t.loc["broken", "grad_verdict"] == "n/a"
+    assert t.loc["drjit", "grad_oracle"].startswith("fd (float64 reference")
+
+
+def test_exact_mixture_error_is_the_approximations(run):
+    _, _, out = run
+    t = pd.read_parquet(out / "results.parquet").set_index("backend")
+    # graphdeco's approximations (alpha_min, clamp, cutoff) are visible against the exact
+    # mixture, far above float32 roundoff; the matched error is not.
+    assert t.loc["drjit", "exact_rgb_max_abs"] > 100 * t.loc["drjit", "matched_rgb_max_abs"]
+
+
+def test_timing_columns(run):
+    _, _, out = run
+    t = pd.read_parquet(out / "results.parquet").set_index("backend")
+    for b in ("drjit", "shifted", "inflated"):
+        runs = json.loads(t.loc[b, "fwd_bwd_runs_ms"])
+        assert len(runs) == 2 and all(r > 0 for r in runs)
+        assert t.loc[b, "fwd_bwd_ms_median"] == pytest.approx(float(np.median(runs)))
+        assert t.loc[b, "fwd_ms_min"] <= t.loc[b, "fwd_ms_median"] <= t.loc[b, "fwd_ms_max"]
+    load = json.loads(t.loc["drjit", "loadavg_start"])
+    assert len(load) == 3
+    assert bool(t.loc["drjit", "loaded"]) == (max(load[0], json.loads(t.loc["drjit", "loadavg_end"])[0])
+                                              > t.loc["drjit", "cpu_count"] / 2)
+
+
+def test_report_and_findings_come_from_the_numbers(run):
+    result, report, out = run
+    text = report.read_text()
+    assert (out / "time_vs_error.png").stat().st_size > 0 and (out / "time_vs_error_fwd_bwd.png").stat().st_size > 0
+    table = pd.read_parquet(out / "results.parquet")
+    lines = findings(table)
+    for line in lines:
+        assert line in text
+    assert any(line.startswith("**shifted** is OUTSIDE the bound") for line in lines)
+    assert any(line.startswith("**inflated** gradients") and "OUTSIDE" in line for line in lines)
+    assert "**broken** failed on synthetic-40-32x24-s3: forward: RuntimeError: out of cheese" in lines
+    # the speed finding's ratio is the ratio of the medians in the table
+    ok = table[table.status == "ok"].sort_values("fwd_bwd_ms_median")
+    fastest, second = ok.iloc[0], ok.iloc[1]
+    speed = next(line for line in lines if "fastest forward+backward" in line)
+    assert f"**{fastest.backend}**" in speed
+    assert f"{second.backend} ×{second.fwd_bwd_ms_median / fastest.fwd_bwd_ms_median:.1f} slower" in speed
+
+
+def test_report_is_rebuilt_from_its_files(run):
+    _, report, out = run
+    text = report.read_text()
+    assert rewrite_report(out).read_text() == text
+
+
+def test_torch64_gradient_oracle_agrees_with_finite_differences():
+    pytest.importorskip("torch")
+    result = run_compare(["drjit"], [synthetic(40, WIDTH, HEIGHT, seed=3)],
+                         CompareSettings(repeats=1, grad_oracle="torch64"))
+    row = result.rows[0]
+    assert row.grad_oracle.startswith("torch64") and row.grad_verdict == "within bound", row
+
+
+def test_a_zero_oracle_gradient_has_no_relative_error():
+    from splatbench.backends.compare import CompareRow
+    from splatbench.backends.compare_measure import grad_error
+
+    # isotropic Gaussians: the true quaternion gradient is exactly 0, float32 leaves roundoff
+    zero = grad_error(np.full(8, 1e-12), np.zeros(8))
+    assert math.isnan(zero.rel_l2) and zero.oracle_norm == 0 and zero.norm == pytest.approx(np.sqrt(8) * 1e-12)
+    assert grad_error(np.zeros(8), np.zeros(8)).rel_l2 == 0
+    assert grad_error(np.array([1.0, np.nan]), np.ones(2)).rel_l2 == math.inf
+    row = CompareRow("b", "1", "w", 1, 2, 2, 2, 2, "cpu", "", "matched", grad_bound=1e-4,
+                     grads={"quats": zero, "means": grad_error(np.ones(3), np.ones(3) * (1 + 1e-6))})
+    assert row.grad_verdict == "within bound"  # the zero group is left out, the other judged
+
+
+def test_settings_and_scales():
+    assert auto_scale(128, 128) == 1.0
+    assert auto_scale(648, 420) == 0.25  # the garden view at quarter resolution, as `splatbench demo`
+    assert gradient_bound(10_000, 0) == pytest.approx(20 * 2.0 ** -24 * 100)
+    assert gradient_bound(10_000, 4) == pytest.approx(20 * 2.0 ** -24 * 100 + 0.02)
+
+
+@pytest.mark.parametrize("args, parts", [
+    (["--backend", "no-such-backend"], ["backend:", "no-such-backend", "known:"]),
+    (["--backend", "drjit", "--synthetic", "10", "12y"], ["--synthetic:", "WxH", "12y"]),
+    (["--backend", "drjit", "--backend", "drjit"], ["--backend:", "'drjit' given twice"]),
+    (["--backend", "drjit", "--repeats", "0"], ["--repeats:", "0"]),
+    (["--backend", "drjit", "--workload", "missing.npz"], ["--workload:", "missing.npz"]),
+    (["--backend", "drjit", "--grad-oracle", "torch65"], ["--grad-oracle:", "torch65", "'fd'"]),
+    (["--backend", "drjit", "--error-scale", "2"], ["--error-scale:", "(0, 1]", "2"]),
+])
+def test_cli_bad_input_is_one_line(args, parts, tmp_path):
+    from splatbench.cli import main
+
+    out = CliRunner().invoke(main, ["compare", *args, "--out", str(tmp_path / "c")])
+    assert out.exit_code == 2, out.output
+    lines = [line for line in out.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("splatbench: error: "), out.output
+    assert all(p in lines[0] for p in parts), lines[0]
+
+
+def test_committed_report_is_its_numbers():
+    """reports/compare (the issue's must-show command): report.md is what results.parquet and
+    run.json give, and drjit, torch and gsplat agree with the oracle within the bounds."""
+    table = pd.read_parquet(COMMITTED / "results.parquet")
+    record = json.loads((COMMITTED / RUN_RECORD).read_text())
+    text = (COMMITTED / "report.md").read_text()
+    figures = [COMMITTED / name for name in ("time_vs_error.png", "time_vs_error_fwd_bwd.png")]
+    assert all(f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in figures)
+    assert render_markdown(record, table, figures, COMMITTED) == text
+    assert set(table.workload) == {"synthetic-2000-128x128-s0", "garden-view0"}
+    rows = table.set_index(["backend", "workload"])
+    for backend in ("drjit", "torch", "gsplat"):
+        for workload in set(table.workload):
+            row = rows.loc[(backend, workload)]
+            assert row.status == "ok", row.error
+            assert row.forward_verdict == "within bound" and row.grad_verdict == "within bound", (backend, workload)
+    assert rows.loc[("reference", "garden-view0"), "forward_verdict"] == "within bound"
