@@ -317,3 +317,12 @@ def test_gsplat_cpu_pieces_are_installed_only_during_a_call():
         get_backend("gsplat")(*tensors(workload), workload.camera)
     assert _wrapper.rasterize_to_indices_in_range is original
     assert ("nerfacc" in sys.modules) == had_nerfacc
+
+
+def test_user_module_that_fails_on_import_gives_one_line(tmp_path, monkeypatch):
+    (tmp_path / "broken_syntax_rast.py").write_text("def render(:\n", encoding="utf-8")
+    (tmp_path / "raising_rast.py").write_text("raise RuntimeError('no licence server')\n", encoding="utf-8")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    one_line_error(lambda: get_backend("broken_syntax_rast:render"), "broken_syntax_rast", "SyntaxError",
+                   "broken_syntax_rast.py:1")
+    one_line_error(lambda: get_backend("raising_rast:render"), "raising_rast", "RuntimeError", "no licence server")

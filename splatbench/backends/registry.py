@@ -64,6 +64,12 @@ def _load(target: str, label: str):
         module = importlib.import_module(module_name)
     except ImportError as exc:
         raise InputError(f"backend: cannot import module {module_name!r} for {label!r} ({exc})") from None
+    except Exception as exc:  # noqa: BLE001 - user code failing on import is bad input, named in one line
+        where = ""
+        if isinstance(exc, SyntaxError) and exc.filename:
+            where = f" at {exc.filename}:{exc.lineno}"
+        raise InputError(f"backend: importing module {module_name!r} for {label!r} failed{where}: "
+                         f"{type(exc).__name__}: {exc}") from None
     obj = module
     for part in attr.split("."):
         try:
