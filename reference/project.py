@@ -160,8 +160,9 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width,
         world_to_camera: [4, 4] OpenCV camera (x right, y down, z forward).
         width, height: image size in pixels.
         mode: "matched" follows conventions.md steps 1-10; "exact" is the smooth function
-            for finite differences: culls only z <= 0, no Jacobian clamp, no log-scale
-            clip, no radius cutoff (cutoff_sq = inf), no big or off-screen cull. Radii are
+            for finite differences: culls only outside the clip planes (near <= z <= far),
+            no Jacobian clamp, no log-scale clip, no radius cutoff (cutoff_sq = inf), no big
+            or off-screen cull. Radii are
             then the 3-sigma extent, for information only.
         eps2d: added to the diagonal of Σ2D (low-pass filter).
         near, far: matched-mode depth culling planes.
@@ -199,8 +200,10 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width,
         Wr = W[:3, :3]
         t = means @ Wr.T + W[:3, 3]  # [N, 3]
         z = t[:, 2]
-        # 2. Depth cull.
-        keep = z > 0 if exact else (z >= near) & (z <= far)
+        # 2. Depth cull: the camera's clip planes bound the scene in both modes (in exact mode
+        #    too: a Gaussian a hair in front of the eye is not part of what the camera sees, and
+        #    without the plane its projection, ~1/z, would cover the image).
+        keep = (z >= near) & (z <= far)
 
         # 3. EWA Jacobian, with graphdeco's clamp of x/z and y/z in matched mode.
         tx, ty = t[:, 0], t[:, 1]

@@ -326,3 +326,10 @@ def test_user_module_that_fails_on_import_gives_one_line(tmp_path, monkeypatch):
     one_line_error(lambda: get_backend("broken_syntax_rast:render"), "broken_syntax_rast", "SyntaxError",
                    "broken_syntax_rast.py:1")
     one_line_error(lambda: get_backend("raising_rast:render"), "raising_rast", "RuntimeError", "no licence server")
+
+
+def test_no_cutoff_is_matched_by_the_opacity_rule():
+    """radius="none" (a dense renderer) is rendered by the oracle with the "opacity" rule, which cuts
+    exactly where the alpha_min skip drops a contribution anyway; the reference has no "none"."""
+    assert BackendInfo(name="dense", radius="none").reference_options()["radius"] == "opacity"
+    assert BackendInfo(name="plain").reference_options()["radius"] == "3sigma"

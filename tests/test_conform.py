@@ -18,9 +18,10 @@ from click.testing import CliRunner
 
 import reference
 from splatbench.backends import Backend, BackendInfo
-from splatbench.backends.conform import PROBES, conform
+from splatbench.backends.conform import FAULT_CAUSE, PROBES, conform
 from splatbench.backends.conform.oracle import conventions_of
 from splatbench.cli import main
+from tests.assertions import one_line_error
 from tests.broken_backends import BUGS, dense
 
 REPO = Path(__file__).resolve().parents[1]
@@ -174,11 +175,27 @@ def test_faults_fail_the_probe_in_one_line():
         rgb, alpha, depth = dense()(*args, **kwargs)
         return rgb * torch.nan, alpha, depth
 
+    def two_outputs(*args, **kwargs):
+        return dense()(*args, **kwargs)[:2]
+
+    # A backend that cannot render a plain scene is stopped before the probes, in one line
+    # (not 33 failures each blamed on its probe's convention).
     expect = {raises: "backend raised RuntimeError: kernel launch failed", wrong_shape: "rgb: shape [24, 16, 3]",
-              nan: "non-finite rgb at pixel (row 0, col 0)"}
+              nan: "non-finite rgb at pixel (row 0, col 0)",
+              two_outputs: "backend returned a tuple of 2, expected the 3 outputs (rgb, alpha, depth)"}
     for fn, message in expect.items():
-        (result,) = conform(_wrap(fn), probes=("intrinsics",)).results
-        assert result.status == "fail" and result.detail.startswith(message), result.detail
+        msg = one_line_error(lambda: conform(_wrap(fn), probes=("intrinsics",)), "cannot be checked", message)
+        assert "docs/backends.md" in msg
+
+    # One that fails only on some probe's scene fails that probe, with the fault as its cause.
+    def raises_on_six(means, *args, **kwargs):
+        if means.shape[0] >= 6:  # the SH probes; the first probe (depth_order) has 4
+            raise RuntimeError("too many Gaussians")
+        return dense()(means, *args, **kwargs)
+
+    report = conform(_wrap(raises_on_six))
+    faulted = [r for r in report.results if r.detail.startswith("backend raised RuntimeError: too many Gaussians")]
+    assert faulted and all(r.status == "fail" and r.cause == FAULT_CAUSE for r in faulted)
 
 
 def test_probes_a_backend_cannot_run_are_skipped():

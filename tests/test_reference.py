@@ -331,9 +331,9 @@ def test_jacobian_clamp(mode):
 def test_culling():
     positions = [
         [0, 0, 2.0],      # 0 visible
-        [0, 0, 0.005],    # 1 closer than near = 0.01 (exact mode keeps it: z > 0)
+        [0, 0, 0.005],    # 1 closer than near = 0.01 (culled in both modes: the planes are the camera's)
         [0, 0, -1.0],     # 2 behind the camera (culled in both modes)
-        [0, 0, 200.0],    # 3 beyond far = 100
+        [0, 0, 200.0],    # 3 beyond far = 100 (culled in both modes)
         [-6.0, 0, 2.0],   # 4 u = -103.5, box about [-103.5 ± 7]: off-screen
         [-0.5, 0, 2.0],   # 5 u = 6.5: on screen
         [-0.92, 0, 2.0],  # 6 u = -1.9, centre off-screen but box about [-8.7, 4.9] overlaps
@@ -346,7 +346,7 @@ def test_culling():
     assert np.all((matched.radii == 0) == ~matched.visible)
     assert matched.radii.dtype == np.int32
     exact = project(*params, CAM_K, EYE, WIDTH, HEIGHT, far=100.0, mode="exact")
-    assert exact.visible.tolist() == [True, True, False, True, True, True, True, True]
+    assert exact.visible.tolist() == [True, False, False, False, True, True, True, True]
     assert np.all(np.isinf(exact.cutoff_sq))
 
 

@@ -80,9 +80,14 @@ class BackendInfo:
 
     def reference_options(self) -> dict:
         """Keyword arguments of `reference.render(mode="matched")` that reproduce these conventions."""
+        radius = self.convention("radius")
+        if radius == "none":
+            # No cutoff renders as the "opacity" rule: it cuts exactly where o·exp(-sigma) falls
+            # below alpha_min, where the alpha_min skip drops the contribution anyway.
+            radius = "opacity"
         return {"alpha_min": self.convention("alpha_min"), "alpha_max": self.convention("alpha_max"),
                 "transmittance_min": self.convention("transmittance_min"), "eps2d": self.convention("eps2d"),
-                "radius": self.convention("radius"), "antialiased": self.convention("antialiased")}
+                "radius": radius, "antialiased": self.convention("antialiased")}
 
 
 @dataclass(frozen=True)

@@ -112,6 +112,12 @@ def _accuracy_findings(table: pd.DataFrame) -> list[str]:
 def _speed_findings(table: pd.DataFrame) -> list[str]:
     lines = []
     for workload, rows in _ok(table).groupby("workload", sort=False):
+        # Only backends that render correctly are ranked: a fast wrong answer is no speed.
+        wrong = rows[rows.forward_verdict == "outside bound"]
+        if not wrong.empty:
+            lines.append(f"On {workload}, not ranked by speed (forward outside the bound): "
+                         f"{', '.join(wrong.backend)}.")
+        rows = rows[rows.forward_verdict != "outside bound"]
         for stage, label in (("fwd_bwd", "forward+backward"), ("fwd", "forward")):
             col = f"{stage}_ms_median"
             timed = rows[rows[col].notna()].sort_values(col, kind="stable")

@@ -27,7 +27,29 @@ from splatbench.backends.conform.probes import PROBES, Probe, probe_names
 from splatbench.backends.conform.results import STATUSES, ConformReport, ProbeResult
 from splatbench.errors import InputError
 
-__all__ = ["conform", "ConformReport", "ProbeResult", "PROBES", "Probe", "STATUSES", "probe_names"]
+#: The cause given when the backend fails on a probe's scene (raises, bad shape, NaN), where the
+#: probe's own convention cannot be judged.
+FAULT_CAUSE = "the backend failed on this probe's scene (see measured), so the convention could not be judged"
+
+
+class BackendFault(InputError):
+    """The backend cannot be run at all (it raises, or returns the wrong outputs, on a plain scene)."""
+
+
+def _preflight(backend: Backend, scene, device: str) -> None:
+    """Call the backend once on a plain probe scene; a backend that cannot render it is one line
+    (exit 2), not a fault repeated under every probe's cause."""
+    from splatbench.backends.conform.calls import outputs
+
+    try:
+        outputs(backend, scene, device)
+    except Fault as fault:
+        raise BackendFault(f"backend {backend.name!r} cannot be checked: {fault} (conform calls "
+                           f"fn(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree, background) "
+                           f"-> (rgb [H, W, 3], alpha [H, W], depth [H, W]); see docs/backends.md)") from None
+
+
+__all__ = ["conform", "BackendFault", "ConformReport", "ProbeResult", "PROBES", "Probe", "STATUSES", "probe_names"]
 
 
 def conform(backend, *, device: str | None = None, probes: tuple[str, ...] | None = None) -> ConformReport:
@@ -56,6 +78,7 @@ def conform(backend, *, device: str | None = None, probes: tuple[str, ...] | Non
             raise InputError(f"probes: unknown probe {unknown[0]!r} (known: {', '.join(known)})")
         selected = tuple(known[n] for n in probes)
     ctx = Context(backend, conventions_of(backend), device, {})
+    _preflight(backend, selected[0].build(), device)
     results = []
     for probe in selected:
         s = probe.build()
@@ -63,6 +86,6 @@ def conform(backend, *, device: str | None = None, probes: tuple[str, ...] | Non
             results.append(JUDGES[probe.kind](probe, s, ctx))
         except Fault as fault:
             results.append(ProbeResult(probe.name, probe.kind, "fail", probe.checks, None, None, "", str(fault),
-                                       probe.cause))
+                                       FAULT_CAUSE))
     declared = {k: getattr(backend.info, k) for k in backend.info.declared}
     return ConformReport(backend.name, backend.info.description, device, declared, tuple(results))

@@ -30,7 +30,8 @@ def _render(backend: Backend, s: ProbeScene, params: list):
         first = (str(exc).strip().splitlines() or [""])[0]
         raise Fault(f"backend raised {type(exc).__name__}: {first}") from None
     if not isinstance(out, (tuple, list)) or len(out) != 3:
-        raise Fault(f"backend returned {type(out).__name__}, expected a tuple (rgb, alpha, depth)")
+        what = f"{type(out).__name__} of {len(out)}" if isinstance(out, (tuple, list)) else type(out).__name__
+        raise Fault(f"backend returned a {what}, expected the 3 outputs (rgb, alpha, depth)")
     H, W = s.camera.height, s.camera.width
     for name, x, shape in zip(("rgb", "alpha", "depth"), out, ((H, W, 3), (H, W), (H, W))):
         got = tuple(getattr(x, "shape", ()))

@@ -44,12 +44,8 @@ MARGIN = 3.0
 
 
 def conventions_of(backend: Backend) -> dict:
-    """`reference_render` keywords for the backend's declared conventions. radius "none" (no cutoff)
-    renders as "opacity": that rule cuts exactly where alpha falls below alpha_min, which is skipped anyway."""
-    conv = backend.info.reference_options()
-    if conv["radius"] == "none":
-        conv["radius"] = "opacity"
-    return conv
+    """`reference_render` keywords for the backend's declared conventions (`BackendInfo.reference_options`)."""
+    return backend.info.reference_options()
 
 
 _CACHE: dict = {}
