@@ -100,6 +100,18 @@ def test_from_surface_albedo_on_a_known_scene():
     np.testing.assert_array_equal(from_surface(scene, 3000, seed=1, sh_degree=0).means, g.means)
 
 
+def test_from_surface_points_are_the_scene_samplers_points():
+    """One surface sampler: `from_surface` and `splatbench.scenes.sample_surface` give the
+    same points for a seed, also from separate loads (Mitsuba's shape order varies)."""
+    from splatbench.scenes import get_scene, load_mitsuba_scene, sample_surface
+
+    g = from_surface("textured", 1500, seed=4, sh_degree=0)
+    pts = sample_surface(load_mitsuba_scene(get_scene("textured")), 1500, seed=4, albedo=True)
+    np.testing.assert_array_equal(g.means, pts.xyz)
+    # the colours are the same samples' albedo, sRGB-encoded (float32 SH round trip: 1e-5)
+    np.testing.assert_allclose(_dc_colour(g), linear_to_srgb(pts.albedo), atol=1e-5)
+
+
 def test_from_surface_of_a_dataset_takes_colours_from_the_views(tiny):
     from splatbench.data import load_dataset
     from splatbench.scenes import load_mitsuba_scene
