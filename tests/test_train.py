@@ -472,3 +472,14 @@ def test_bench_train_reports_throughput_and_a_time_split_that_adds_up(tmp_path):
     assert json.loads((tmp_path / "train.json").read_text())["results"][0]["n"] == 60
     with pytest.raises(InputError, match="--iterations"):
         TrainBenchSettings(iterations=0).validate()
+
+
+def test_psnr_is_one_function_for_tensors_and_float64_arrays():
+    """`train.metrics.psnr` is the only PSNR (the raster run kind calls it with clamp=False)."""
+    from splatbench.train.metrics import psnr
+
+    a = np.full((4, 4, 3), 1.5)          # above 1: only the clamp can bring it to the target
+    b = np.full((4, 4, 3), 0.9)
+    assert psnr(a, b) == pytest.approx(-10 * np.log10(0.01))            # clamped to 1: MSE 0.1²
+    assert psnr(a, b, clamp=False) == pytest.approx(-10 * np.log10(0.36))  # MSE 0.6²
+    assert psnr(torch.as_tensor(b, dtype=torch.float32), torch.as_tensor(b, dtype=torch.float32)) == np.inf

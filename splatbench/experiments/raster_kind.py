@@ -293,12 +293,6 @@ def prepare(configs: list[dict[str, Any]]) -> None:
 
 
 # --------------------------------------------------------------------------- run
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    """PSNR (dB) of ``a`` against ``b`` on [0, 1] images (inf when equal)."""
-    mse = float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
-    return math.inf if mse == 0 else -10.0 * math.log10(mse)
-
-
 def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     """Time the rasterizer on the workload with the run's options; measure its error."""
     import torch
@@ -308,6 +302,7 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
                                          torch_params)
     from splatbench.experiments.train_kind import limit_threads
     from splatbench.reports.stats import bootstrap_median_ratio
+    from splatbench.train.metrics import psnr
 
     limit_threads()
     workload = build_workload(config["scene"], config["seed"])
@@ -351,7 +346,7 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
         "default_fwd_ms": round(1e3 * med["default_fwd"], 3),
         "default_fwd_bwd_ms": round(1e3 * med["default_fwd_bwd"], 3),
         **load.metrics(),
-        "exact_psnr": round(min(psnr(fast, exact), 200.0), 4), "exact_max_abs": float(err.max()),
+        "exact_psnr": round(min(psnr(fast, exact, clamp=False), 200.0), 4), "exact_max_abs": float(err.max()),
         "exact_mean_abs": float(err.mean()), "parity_max_abs": float(np.abs(fast - matched).max()),
         "pairs": int(stats.num_pairs), "evaluations": int(stats.num_pairs) * int(config["tile_size"]) ** 2,
         "visible": int(torch.as_tensor(stats.visible).sum()),
@@ -402,4 +397,4 @@ RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, pre
                  description="time the rasterizer under options against the defaults; error against the exact model")
 
 __all__ = ["RASTER", "DEFAULTS", "METRICS", "OPTION_FIELDS", "parse_workload_name", "build_workload",
-           "reference_render", "exact_model", "cache_dir", "psnr", "Load", "MIN_PAIRS", "PROTOCOL"]
+           "reference_render", "exact_model", "cache_dir", "Load", "MIN_PAIRS", "PROTOCOL"]
