@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from splatbench.errors import InputError
+from splatbench.overrides import parse_override
 
 #: Learning-rate fields (Adam, one optimizer per parameter group); 0 freezes a group.
 LR_FIELDS = ("lr_means", "lr_means_final", "lr_log_scales", "lr_quats", "lr_opacity_logits", "lr_sh_dc",
@@ -246,21 +247,6 @@ def save_config(config: TrainConfig, path: str | Path) -> Path:
     p.parent.mkdir(parents=True, exist_ok=True)
     p.write_text(config.to_toml(), encoding="utf-8")
     return p
-
-
-def parse_override(text: str) -> tuple[str, Any]:
-    """``"key=value"`` -> (key, value). The value is a TOML literal when it parses as
-    one (``1e-3``, ``true``, ``[0, 0, 0]``, ``"auto"``), else the bare string."""
-    if "=" not in text:
-        raise InputError(f"--set: expected key=value, got {text!r}")
-    key, raw = (s.strip() for s in text.split("=", 1))
-    if not key:
-        raise InputError(f"--set: empty key in {text!r}")
-    try:
-        value = tomllib.loads(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = raw
-    return key, value
 
 
 def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...]) -> TrainConfig:
