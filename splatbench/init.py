@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.gaussians import SH_BASES, SH_C0, Gaussians
+from splatbench.gaussians import SH_BASES_OF_DEGREE, SH_C0, Gaussians
 from splatbench.checks import as_float_array, check_sh_degree, check_shape
 
 #: Lower bound on the mean squared neighbour distance (graphdeco's ``clamp_min(dist2, 1e-7)``).
@@ -93,7 +93,7 @@ def from_points(points: Any, colors: Any, *, sh_degree: int = 3, opacity: float 
     m = len(pts)
     dist2 = np.maximum(knn_mean_sq_dist(pts), MIN_DIST2)
     log_scales = np.repeat(np.log(np.sqrt(dist2))[:, None], 3, axis=1)
-    sh = np.zeros((m, SH_BASES[degree], 3), dtype=np.float64)
+    sh = np.zeros((m, SH_BASES_OF_DEGREE[degree], 3), dtype=np.float64)
     sh[:, 0, :] = (rgb - 0.5) / SH_C0
     quats = np.zeros((m, 4))
     quats[:, 0] = 1.0

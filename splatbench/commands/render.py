@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from splatbench.checks import check_image_size
+from splatbench.checks import check_image_size, check_sh_degree
 from splatbench.errors import InputError
 from splatbench.overrides import parse_overrides
 
@@ -50,6 +50,8 @@ def render(source: Path, out: Path | None, view: int, size: str, sh_degree: int 
     from splatbench.images import save_png
     from splatbench.workloads import load_npz
 
+    if sh_degree is not None:
+        check_sh_degree("--sh-degree", sh_degree)
     out = out or source.with_suffix(".png")
     if out.is_dir():
         raise InputError(f"--out: {str(out)!r} is a folder; give the path of the PNG to write")

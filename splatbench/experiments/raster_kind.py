@@ -73,26 +73,22 @@ from typing import Any
 
 import numpy as np
 
+from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
+from splatbench.raster.options import RasterOptions
 
-#: Config fields and defaults: the rasterizer's own defaults (graphdeco-inria 3DGS), then measurement.
-DEFAULTS: dict[str, Any] = {
-    "tile_size": 16,             # pixels per tile side (power of two, 1..64); never changes the image
-    "alpha_min": 1.0 / 255.0,    # contributions with alpha below this are skipped
-    "alpha_max": 0.99,           # alpha clamp
-    "transmittance_min": 1e-4,   # a pixel stops before transmittance would drop below this
-    "eps2d": 0.3,                # 2D covariance dilation (pixel^2)
-    "radius": "3sigma",          # "3sigma" or "opacity" (extent where o*G falls below alpha_min)
-    "antialiased": False,        # Mip-Splatting opacity compensation
-    "sh_degree": 3,              # SH bands evaluated (the workloads hold degree 3)
-    "device": "auto",            # "cpu" (Dr.Jit LLVM), "cuda" or "auto"
-    "repeats": 7,                # timed A B pairs (run's options, defaults), at least MIN_PAIRS
-    "error_scale": 0.5,          # resolution factor of the error measurement (0 < s <= 1)
-}
 #: Fields passed to the rasterizer as `RasterOptions` (sh_degree goes separately).
 OPTION_FIELDS = ("tile_size", "alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius", "antialiased",
                  "device")
+#: Config fields and defaults: the rasterizer's own (`RasterOptions`' field defaults, graphdeco-inria
+#: 3DGS's; see its field comments), then the measurement's.
+DEFAULTS: dict[str, Any] = {
+    **{f.name: f.default for f in dataclasses.fields(RasterOptions) if f.name in OPTION_FIELDS},
+    "sh_degree": 3,              # SH bands evaluated (the workloads hold degree 3)
+    "repeats": 7,                # timed A B pairs (run's options, defaults), at least MIN_PAIRS
+    "error_scale": 0.5,          # resolution factor of the error measurement (0 < s <= 1)
+}
 #: Options with no counterpart in the reference (accelerations and placement only).
 FAST_ONLY = ("tile_size", "device")
 CACHE_ENV = "SPLATBENCH_CACHE"
@@ -174,8 +170,6 @@ def validate(config: dict[str, Any]) -> None:
     """One-line `InputError` naming the first bad field."""
     import difflib
 
-    from splatbench.raster.options import RasterOptions
-
     known = sorted({*DEFAULTS, "scene", "seed"})
     for key, value in config.items():
         if key not in known:
@@ -185,18 +179,11 @@ def validate(config: dict[str, Any]) -> None:
             raise InputError(f"{key}: expected a value, got a table")
     parse_workload_name(str(config.get("scene", "")))
     merged = {**DEFAULTS, **config}
-    for key in ("tile_size", "sh_degree", "repeats"):
-        v = merged[key]
-        if not isinstance(v, int) or isinstance(v, bool):
-            raise InputError(f"{key}: expected an int, got {v!r}")
-    for key in ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "error_scale"):
-        v = merged[key]
-        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
-            raise InputError(f"{key}: expected a finite number, got {v!r}")
-    if not isinstance(merged["antialiased"], bool):
-        raise InputError(f"antialiased: expected true or false, got {merged['antialiased']!r}")
-    if not 0 <= merged["sh_degree"] <= 3:
-        raise InputError(f"sh_degree: expected an int in 0..3, got {merged['sh_degree']}")
+    for key in OPTION_FIELDS:  # the value's type, from RasterOptions' annotation; its ranges: RasterOptions
+        _check_type(key, merged[key], _OPTION_TYPES[key])
+    _check_type("repeats", merged["repeats"], "int")
+    _check_type("error_scale", merged["error_scale"], "float")
+    check_sh_degree("sh_degree", merged["sh_degree"])
     if merged["repeats"] < MIN_PAIRS:
         raise InputError(f"repeats: expected at least {MIN_PAIRS} timed pairs (a bootstrap interval of the median "
                          f"ratio needs several), got {merged['repeats']}")
@@ -205,11 +192,28 @@ def validate(config: dict[str, Any]) -> None:
     RasterOptions.from_kwargs(**{k: merged[k] for k in OPTION_FIELDS})  # names the bad option
 
 
+#: Option field -> its annotation in `RasterOptions` ("int", "float", "str", "bool").
+_OPTION_TYPES = {f.name: f.type for f in dataclasses.fields(RasterOptions) if f.name in OPTION_FIELDS}
+
+
+def _check_type(key: str, value: Any, kind: str) -> None:
+    """One-line `InputError` unless ``value`` is a ``kind`` ("int", "float": finite, "bool", "str")."""
+    if kind == "int" and (not isinstance(value, int) or isinstance(value, bool)):
+        raise InputError(f"{key}: expected an int, got {value!r}")
+    if kind == "float" and (not isinstance(value, (int, float)) or isinstance(value, bool)
+                            or not math.isfinite(value)):
+        raise InputError(f"{key}: expected a finite number, got {value!r}")
+    if kind == "bool" and not isinstance(value, bool):
+        raise InputError(f"{key}: expected true or false, got {value!r}")
+    if kind == "str" and not isinstance(value, str):
+        raise InputError(f"{key}: expected a string, got {value!r}")
+
+
 def resolve(config: dict[str, Any]) -> dict[str, Any]:
     """Every field filled in; numbers normalised (``alpha_min = 1`` and ``1.0`` are one run);
     ``protocol`` (`PROTOCOL`) added."""
     out = {**DEFAULTS, **config, "protocol": PROTOCOL}
-    for key in ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "error_scale"):
+    for key in (*(k for k, t in _OPTION_TYPES.items() if t == "float"), "error_scale"):
         out[key] = float(out[key])
     return out
 

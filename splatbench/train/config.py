@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.overrides import parse_override
 
@@ -127,11 +128,7 @@ class TrainConfig:
             raise InputError(f"init: unknown initialisation {self.init!r} (expected one of: {', '.join(INITIALIZERS)})")
         if self.layout not in ("auto", "colmap", "blender"):
             raise InputError(f"layout: expected 'auto', 'colmap' or 'blender', got {self.layout!r}")
-        if isinstance(self.sh_degree, str):
-            if self.sh_degree != "auto":
-                raise InputError(f"sh_degree: expected an int in 0..3 or 'auto', got {self.sh_degree!r}")
-        elif not 0 <= self.sh_degree <= 3:
-            raise InputError(f"sh_degree: expected an int in 0..3 or 'auto', got {self.sh_degree}")
+        check_sh_degree("sh_degree", self.sh_degree, allow_auto=True)
         positive = ("sh_interval", "log_every", "init_random_points", "ssim_window")
         for name in positive:
             if getattr(self, name) < 1:
