@@ -70,6 +70,9 @@ class Strategy(Protocol):
     schedule_fields: ClassVar[dict[str, bool]]
     #: The initial opacity of the reference implementation (`TrainConfig.init_opacity = "auto"`).
     initial_opacity: ClassVar[float]
+    #: Whether `post_backward` reads ``info.means2d_absgrad`` (AbsGS): the trainer
+    #: rasterizes with ``absgrad=strategy.absgrad`` (the extra accumulation costs time).
+    absgrad: bool
 
     def last_topology_change(self, iterations: int) -> TopologyChange | None:
         """The last step of a run of ``iterations`` steps at which this strategy may

@@ -141,7 +141,7 @@ class Trainer:
         self.optimizers = make_optimizers(self.params, self.lrs, config.adam_eps)
         self.means_lr = ExponentialLR(config.lr_means, config.lr_means_final, config.iterations, self.extent)
         self.state = self.strategy.initialize_state(self.params)
-        self.absgrad = bool(getattr(self.strategy, "absgrad", False))
+        self.absgrad = bool(self.strategy.absgrad)  # declared by the Strategy protocol
         self.sh = ShSchedule(config.sh_degree, config.sh_steps, min_gain_db=config.sh_auto_min_gain_db)
         self.images = torch.from_numpy(np.ascontiguousarray(train.images, dtype=np.float32))
         self.alphas = None if train.alphas is None else torch.from_numpy(np.asarray(train.alphas, np.float32))
