@@ -76,6 +76,7 @@ import numpy as np
 from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
+from splatbench.experiments.workers import limit_threads
 from splatbench.raster.options import RasterOptions
 
 #: Fields passed to the rasterizer as `RasterOptions` (sh_degree goes separately).
@@ -304,7 +305,6 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     import splatbench
     from splatbench.bench.raster import (forward_backward_with_init, forward_with_init, resolve_device, time_runs,
                                          torch_params)
-    from splatbench.experiments.train_kind import limit_threads
     from splatbench.reports.stats import bootstrap_median_ratio
     from splatbench.train.metrics import psnr
 

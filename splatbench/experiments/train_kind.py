@@ -33,6 +33,7 @@ from typing import Any
 from splatbench.checks import check_image_size
 from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
+from splatbench.experiments.workers import limit_threads
 
 #: Environment variable naming the folder of rendered datasets.
 DATASETS_ENV = "SPLATBENCH_DATASETS"
@@ -204,23 +205,6 @@ def _prepare_sfm(path: Path) -> None:
 
 
 # --------------------------------------------------------------------------- run
-def worker_threads() -> int | None:
-    """The runner's per-worker thread budget (``SPLATBENCH_WORKER_THREADS``), if set."""
-    from splatbench.experiments.runner import THREADS_ENV
-
-    value = os.environ.get(THREADS_ENV)
-    return int(value) if value and value.isdigit() and int(value) > 0 else None
-
-
-def limit_threads() -> None:
-    """Give Dr.Jit's thread pool the worker's budget, so parallel runs share the cores."""
-    threads = worker_threads()
-    if threads is not None:
-        import drjit as dr
-
-        dr.set_thread_count(threads)
-
-
 def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     """Train on the run's dataset, writing the run's files into ``workdir``."""
     from splatbench.train import TrainConfig, train
@@ -262,4 +246,4 @@ TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scene
                 description="train 3DGS on a rendered catalog scene (splatbench.train)")
 
 __all__ = ["TRAIN", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "datasets_dir", "dataset_folder",
-           "ensure_dataset", "limit_threads", "worker_threads"]
+           "ensure_dataset"]

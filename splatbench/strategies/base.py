@@ -15,11 +15,13 @@ Parameter groups (`Params`, torch leaf tensors with requires_grad):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar, NamedTuple, Protocol
 
 import torch
 
+from splatbench.errors import InputError
 from splatbench.raster.torch_bridge import RasterInfo
 
 PARAM_GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh_dc", "sh_rest")
@@ -59,6 +61,20 @@ def last_multiple(period: int, lo: int, hi: int) -> int | None:
         return None
     m = (hi // period) * period
     return m if m > lo else None
+
+
+def check_fields(obj, positive_ints: tuple[str, ...], nonneg: tuple[str, ...]) -> None:
+    """One-line `InputError` naming ``Class.field`` unless each ``positive_ints`` field is an
+    int >= 1 and each ``nonneg`` field a finite number >= 0 (strategies' ``__post_init__``)."""
+    name = type(obj).__name__
+    for f in positive_ints:
+        v = getattr(obj, f)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise InputError(f"{name}.{f}: expected a positive integer, got {v!r}")
+    for f in nonneg:
+        v = getattr(obj, f)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 or not math.isfinite(v):
+            raise InputError(f"{name}.{f}: expected a finite number >= 0, got {v!r}")
 
 
 class Strategy(Protocol):
