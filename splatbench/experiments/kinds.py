@@ -101,11 +101,6 @@ def get_kind(name: str) -> RunKind:
     return kind
 
 
-def known_kinds() -> list[str]:
-    """Names of the built-in and registered kinds."""
-    return sorted({*BUILTIN_KINDS, *_REGISTERED})
-
-
 # --------------------------------------------------------------------------- dummy
 #: The dummy kind's fields and defaults (test-only).
 DUMMY_DEFAULTS: dict[str, Any] = {
@@ -191,5 +186,5 @@ def check_output(output: Any, kind: str) -> RunOutput:
     return RunOutput(metrics=metrics, curves=output.curves)
 
 
-__all__ = ["RunKind", "RunOutput", "Scalar", "BUILTIN_KINDS", "register_kind", "get_kind", "known_kinds",
+__all__ = ["RunKind", "RunOutput", "Scalar", "BUILTIN_KINDS", "register_kind", "get_kind",
            "check_output", "DUMMY", "DUMMY_DEFAULTS", "DUMMY_SCENES"]

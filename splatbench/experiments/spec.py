@@ -38,6 +38,7 @@ file fails with one `InputError` line before anything runs.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import tomllib
@@ -326,9 +327,15 @@ def check_scheduler(address: Any, *, where: str = "scheduler") -> str:
     return address
 
 
-def _no_duplicates(values: list, where: str, fail) -> None:
-    from splatbench.experiments.grid import canonical_json
+def canonical_json(value: Any) -> str:
+    """Sorted keys, no spaces, ASCII, no NaN: the same value always gives the same text."""
+    try:
+        return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"config: not a canonical JSON value ({exc})") from None
 
+
+def _no_duplicates(values: list, where: str, fail) -> None:
     seen: set[str] = set()
     for v in values:
         key = canonical_json(v)
@@ -367,4 +374,4 @@ def check_experiment(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str
 
 __all__ = ["ExperimentSpec", "RunnerDefaults", "TOP_LEVEL_FIELDS", "RUNNER_FIELDS", "GRID_MODES", "EXECUTORS",
            "RESERVED_KEYS", "flatten", "unflatten", "override", "parse_experiment", "load_experiment",
-           "check_experiment", "check_scheduler"]
+           "check_experiment", "check_scheduler", "canonical_json"]
