@@ -66,6 +66,9 @@ class RunKind:
     scenes: Callable[[], set[str]] | None = None
     prepare: Callable[[list[dict[str, Any]]], None] | None = None
     description: str = ""
+    #: What its reports show: a `splatbench.reports.kind_report.KindReport` (None: every
+    #: numeric metric, the first one compared).
+    report: Any = None
 
 
 #: Kinds known by name in every process: name -> "module:ATTR" (imported on first use).

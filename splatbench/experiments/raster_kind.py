@@ -78,6 +78,8 @@ from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.experiments.workers import limit_threads
 from splatbench.raster.options import RasterOptions
+from splatbench.reports.findings import parity_finding
+from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, TimeQuality
 
 #: Fields passed to the rasterizer as `RasterOptions` (sh_degree goes separately).
 OPTION_FIELDS = ("tile_size", "alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius", "antialiased",
@@ -397,8 +399,36 @@ def _cpu_seconds() -> float:
 
 
 #: The ``raster`` kind (``kind = "raster"``).
-RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, prepare=prepare,
-                 description="time the rasterizer under options against the defaults; error against the exact model")
+#: What the reports of raster runs show (`splatbench.reports.kind_report`).
+REPORT = KindReport(
+    metrics=(
 
-__all__ = ["RASTER", "DEFAULTS", "METRICS", "OPTION_FIELDS", "parse_workload_name", "build_workload",
+        MetricSpec("fwd_ms", "forward (ms)", ".1f", "ms", "lower"),
+        MetricSpec("fwd_bwd_ms", "fwd+bwd (ms)", ".1f", "ms", "lower"),
+        MetricSpec("fwd_bwd_rel", "fwd+bwd / default (median of pairs)", ".3f", "", "lower"),
+        MetricSpec("fwd_bwd_rel_low", "bootstrap low", ".3f", "", "", False),
+        MetricSpec("fwd_bwd_rel_high", "bootstrap high", ".3f", "", "", False),
+        MetricSpec("exact_psnr", "PSNR to exact (dB)", ".2f", "dB", "higher"),
+        MetricSpec("exact_max_abs", "max abs error to exact", ".2e", "", "lower"),
+        MetricSpec("parity_max_abs", "parity max abs", ".1e", "", "lower"),
+        MetricSpec("pairs", "pairs", ".0f", "", ""),
+        MetricSpec("evaluations", "pixel-Gaussian evaluations", ".3g", "", ""),
+        MetricSpec("loaded", "loaded (fraction of runs)", ".2f", "", "", False),
+        # the first baseline's names (ground truth = the reference with default options), for its parquet
+        MetricSpec("error_psnr", "PSNR to default-option reference (dB)", ".2f", "dB", "higher"),
+        MetricSpec("error_max_abs", "max abs error to default-option reference", ".2e", "", "lower"),
+    ),
+    rules=FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean", 1.0), Comparison("exact_psnr", "diff"),
+                                       Comparison("pairs", "ratio"))),
+    time_quality=TimeQuality("fwd_bwd_rel", "exact_psnr", "speed_vs_error",
+                             "Rasterizer speed against error to the exact Gaussian mixture (mean over seeds)"),
+    meanings=METRICS,
+    run_findings=(("parity", parity_finding),),
+)
+
+RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, prepare=prepare,
+                 description="time the rasterizer under options against the defaults; error against the exact model",
+                 report=REPORT)
+
+__all__ = ["RASTER", "REPORT", "DEFAULTS", "METRICS", "OPTION_FIELDS", "parse_workload_name", "build_workload",
            "reference_render", "exact_model", "cache_dir", "Load", "MIN_PAIRS", "PROTOCOL"]

@@ -34,6 +34,8 @@ from splatbench.checks import check_image_size
 from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.experiments.workers import limit_threads
+from splatbench.reports.findings import auto_sh_degree_note
+from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, TimeQuality
 
 #: Environment variable naming the folder of rendered datasets.
 DATASETS_ENV = "SPLATBENCH_DATASETS"
@@ -242,8 +244,26 @@ def _finite(value: Any) -> Any:
 
 
 #: The ``train`` kind (``kind = "train"``).
-TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scenes=scenes, prepare=prepare,
-                description="train 3DGS on a rendered catalog scene (splatbench.train)")
+#: What the reports of train runs show (`splatbench.reports.kind_report`).
+REPORT = KindReport(
+    metrics=(
 
-__all__ = ["TRAIN", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "datasets_dir", "dataset_folder",
+        MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher"),
+        MetricSpec("test_ssim", "SSIM", ".4f", "", "higher"),
+        MetricSpec("num_gaussians", "Gaussians", ".0f", "", ""),
+        MetricSpec("train_seconds", "train time (s)", ".1f", "s", "lower"),
+        MetricSpec("render_ms_per_view", "render (ms/view)", ".1f", "ms", "lower"),
+    ),
+    rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff"), Comparison("train_seconds", "ratio"),
+                                     Comparison("num_gaussians", "ratio"))),
+    time_quality=TimeQuality("train_seconds", "test_psnr", "time_vs_error",
+                             "Training time against test PSNR per cell (mean over seeds)"),
+    meanings=METRICS,
+    axis_notes=(auto_sh_degree_note,),
+)
+
+TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scenes=scenes, prepare=prepare,
+                description="train 3DGS on a rendered catalog scene (splatbench.train)", report=REPORT)
+
+__all__ = ["TRAIN", "REPORT", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "datasets_dir", "dataset_folder",
            "ensure_dataset"]
