@@ -136,17 +136,22 @@ def test_config_toml_round_trip_and_overrides(tmp_path):
     assert tomllib.loads(path.read_text())["sh_degree"] == "auto"             # plain TOML, no code
     assert TrainConfig.from_toml(TrainConfig().to_toml()) == TrainConfig()
 
-    out = apply_overrides(cfg, ["iterations=7", "lr_means=1", "sh_degree=2", "strategy=default",
+    out = apply_overrides(cfg, ["iterations=7000", "lr_means=1", "sh_degree=2",
                                 "background=[0, 0, 1]", "random_background=true",
                                 "strategy_options.cap_max=100", "dataset=some/where"])
     assert (out.iterations, out.sh_degree, out.strategy, out.random_background, out.dataset) == \
-        (7, 2, "default", True, "some/where")
+        (7000, 2, "mcmc", True, "some/where")
     assert out.lr_means == 1.0 and isinstance(out.lr_means, float)           # int widened to float
     assert out.background == [0.0, 0.0, 1.0]
     assert out.strategy_options == {"cap_max": 100, "noise_lr": 5e5}
     assert apply_overrides(cfg, ["sh_degree=auto"]).sh_degree == "auto"        # bare string
     assert parse_override("init = random") == ("init", "random")
     assert cfg.iterations == 123                                               # the original is untouched
+    # the config is validated on construction: MCMC's options under another strategy fail at once
+    with pytest.raises(InputError, match=r"^strategy 'default': unknown field 'cap_max'"):
+        apply_overrides(cfg, ["strategy=default"])
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cfg.iterations = 5  # frozen: change a copy with dataclasses.replace / apply_overrides
 
 
 BAD_CONFIGS = [

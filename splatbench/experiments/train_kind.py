@@ -215,7 +215,7 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     scene, data, fields = _split(config)
     dataset = ensure_dataset(scene, data)
     cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="config")
-    result = train(cfg.validate())
+    result = train(cfg)  # validated on construction
     metrics = {
         "test_psnr": result.test_psnr, "test_ssim": result.test_ssim, "num_gaussians": result.num_gaussians,
         "train_seconds": result.train_seconds, "render_ms_per_view": result.render_ms_per_view,

@@ -8,7 +8,8 @@ the strategy options (``strategy_options.cap_max=50000``). Every mistake -- unkn
 key, wrong type, negative learning rate, zero iterations, unknown strategy or
 initialisation, a densification schedule whose last topology change falls in the
 final 10 % of the run -- is a one-line `InputError` naming the field, raised by
-`TrainConfig.validate` before any data is read or rendered.
+`TrainConfig.validate` when the (frozen) config is constructed, before any data is
+read or rendered; ``dataclasses.replace`` or `apply_overrides` make a changed copy.
 
 Schedules (refinement window, opacity reset, SH steps) are written in graphdeco's
 30,000-iteration steps and scaled to ``iterations`` by default (``schedule =
@@ -18,8 +19,7 @@ Schedules (refinement window, opacity reset, SH steps) are written in graphdeco'
 Example::
 
     cfg = TrainConfig(dataset="data/scenes/diffuse-128", iterations=2000)
-    cfg = apply_overrides(cfg, ["sh_degree=auto", "strategy=none"])
-    cfg.validate()
+    cfg = apply_overrides(cfg, ["sh_degree=auto", "strategy=none"])   # a new, validated config
     save_config(cfg, "run/config.toml"); load_config("run/config.toml") == cfg   # True
 """
 
@@ -42,7 +42,7 @@ LR_FIELDS = ("lr_means", "lr_means_final", "lr_log_scales", "lr_quats", "lr_opac
              "lr_sh_rest")
 
 
-@dataclass
+@dataclass(frozen=True)
 class TrainConfig:
     """One training run. Defaults follow graphdeco-inria's 3DGS (``arguments/__init__.py``)."""
 
@@ -103,8 +103,12 @@ class TrainConfig:
                                       # are fastest without oversubscribing the cores
 
     # ------------------------------------------------------------------ checks
+    def __post_init__(self) -> None:
+        self.validate()  # a TrainConfig that exists is valid; change one with dataclasses.replace
+
     def validate(self) -> TrainConfig:
         """Check every field; raise a one-line `InputError` naming the first bad one.
+        Called on construction (``__post_init__``), so callers never need to.
 
         Also resolves ``strategy`` with ``strategy_options`` through
         `splatbench.strategies.make_strategy` (cheap: no data is touched). Returns self.

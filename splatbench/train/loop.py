@@ -113,8 +113,7 @@ class Trainer:
     (no rendering); `step` runs one iteration; `evaluate` measures the test split."""
 
     def __init__(self, config: TrainConfig, *, dataset=None) -> None:
-        config.validate()
-        self.config = config
+        self.config = config  # validated on construction
         self.strategy = config.make_strategy()
         if dataset is None:
             if not config.dataset:
