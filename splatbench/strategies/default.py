@@ -19,7 +19,7 @@ from typing import ClassVar, NamedTuple
 import torch
 
 from splatbench.errors import InputError
-from splatbench.strategies import ops
+import splatbench.strategies.ops as ops
 from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, check_fields,
                                        last_multiple)
 
