@@ -52,8 +52,13 @@ One run:
      (``mode="matched"``) -- the implementation's own float32 error (about 1e-6 when
      the rasterizer is right).
 
-Metrics: `METRICS`. Curves: every timed call (``fwd_runs_ms``, ``fwd_bwd_runs_ms``,
-``default_fwd_runs_ms``, ``default_fwd_bwd_runs_ms``, pair i at index i).
+Metrics: `METRICS`; how reports show them: `REPORT`. Curves: every timed call
+(``fwd_runs_ms``, ``fwd_bwd_runs_ms``, ``default_fwd_runs_ms``,
+``default_fwd_bwd_runs_ms``, pair i at index i).
+
+Length: a little over 400 lines because a kind keeps its whole contract (config,
+workloads, reference cache, run, metrics and their report) in one file, so that
+adding or changing a kind touches one file (`splatbench.experiments.kinds`).
 """
 
 from __future__ import annotations
