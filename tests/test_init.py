@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench import InputError
-from splatbench.gaussians import SH_C0
+from splatbench.gaussians import SH_C0, quat_to_rotmat
 from splatbench.init import from_points, from_random, from_sfm, from_surface, knn_mean_sq_dist
 from splatbench.scenes import builtin_scenes_dir, linear_to_srgb, render_dataset
 from splatbench.sfm import Similarity, rig_radius, umeyama
@@ -166,11 +166,7 @@ def test_from_surface_refuses_a_dataset_whose_scene_changed(tiny, tmp_path):
 def _random_similarity(rng) -> Similarity:
     q = rng.normal(size=4)
     q /= np.linalg.norm(q)
-    w, x, y, z = q
-    rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                    [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                    [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-    return Similarity(float(np.exp(rng.uniform(-2, 2))), rot, rng.uniform(-10, 10, 3))
+    return Similarity(float(np.exp(rng.uniform(-2, 2))), quat_to_rotmat(q), rng.uniform(-10, 10, 3))
 
 
 @pytest.mark.parametrize("seed", range(5))
