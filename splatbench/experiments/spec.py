@@ -49,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 from splatbench.errors import InputError
+from splatbench.fsutil import read_text
 
 #: Fields an experiment file may hold at its top level.
 TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "base", "axes", "variants", "runner")
@@ -348,12 +349,7 @@ def _no_duplicates(values: list, where: str, fail) -> None:
 def load_experiment(path: str | Path, *, known_scenes: Callable[[], set[str]] | None = None) -> ExperimentSpec:
     """Read, parse and fully check an experiment file (see `check_experiment`)."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"experiment: cannot read {str(p)!r} ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise InputError(f"experiment: {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
+    text = read_text(p, "experiment")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

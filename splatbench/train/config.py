@@ -35,6 +35,7 @@ from typing import Any
 
 from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
+from splatbench.fsutil import read_text
 from splatbench.overrides import parse_override
 
 #: Learning-rate fields (Adam, one optimizer per parameter group); 0 freezes a group.
@@ -233,12 +234,7 @@ class TrainConfig:
 def load_config(path: str | Path) -> TrainConfig:
     """Read a TOML config file (`InputError` if missing or invalid)."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"config: cannot read {str(p)!r} ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise InputError(f"config: {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
+    text = read_text(p, "config")
     return TrainConfig.from_toml(text, source=str(p))
 
 
