@@ -61,18 +61,22 @@ def as_float_array(name: str, value, spec: Sequence[Dim], sizes: dict[str, int],
     return array
 
 
-def check_sh_degree(name: str, value) -> int:
-    """An SH degree: an integer in 0..3 (bools rejected), else one-line `InputError`."""
+def check_sh_degree(name: str, value, *, allow_auto: bool = False) -> int | str:
+    """An SH degree: an integer in 0..3 (bools rejected), or ``"auto"`` when ``allow_auto``;
+    else one-line `InputError`. The one SH-degree check outside ``raster/``."""
     import operator
 
+    expected = "an int in 0..3 or 'auto'" if allow_auto else "an int in 0..3"
+    if allow_auto and value == "auto":
+        return "auto"
     if isinstance(value, bool):
-        raise InputError(f"{name}: expected an int in 0..3, got {value!r}")
+        raise InputError(f"{name}: expected {expected}, got {value!r}")
     try:
         degree = operator.index(value)
     except TypeError:
-        raise InputError(f"{name}: expected an int in 0..3, got {value!r}") from None
+        raise InputError(f"{name}: expected {expected}, got {value!r}") from None
     if not 0 <= degree <= 3:
-        raise InputError(f"{name}: expected an int in 0..3, got {degree}")
+        raise InputError(f"{name}: expected {expected}, got {degree}")
     return degree
 
 

@@ -65,3 +65,17 @@ def replace_dir(tmp: Path, out: Path, *, accept_existing: Callable[[Path], bool]
     finally:
         if trash is not None:
             shutil.rmtree(trash, ignore_errors=True)
+
+
+def read_text(path: str | os.PathLike, what: str) -> str:
+    """The UTF-8 text of ``path``; a one-line `InputError` starting ``what:`` when it
+    cannot be read or is not UTF-8."""
+    from splatbench.errors import InputError
+
+    p = Path(path)
+    try:
+        return p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"{what}: cannot read {str(p)!r} ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{what}: {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None

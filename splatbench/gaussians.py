@@ -15,7 +15,7 @@ from splatbench.errors import InputError
 from splatbench.checks import as_float_array, check_sh_degree
 
 #: Valid numbers of SH bases per channel, indexed by SH degree.
-SH_BASES = (1, 4, 9, 16)
+SH_BASES_OF_DEGREE = (1, 4, 9, 16)
 #: The degree-0 SH constant, ``1 / (2·sqrt(pi))``.
 SH_C0 = 0.28209479177387814
 #: ``scales = exp(clip(log_scales, -LOG_SCALE_CLIP, LOG_SCALE_CLIP))`` (conventions.md).
@@ -52,13 +52,6 @@ def quat_to_rotmat(unit_quats: np.ndarray) -> np.ndarray:
         np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
         np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
     ], -2)
-
-
-def sh_degree_of(num_bases: int) -> int:
-    """SH degree d for K = (d+1)² bases; `InputError` when K is not a valid count."""
-    if num_bases not in SH_BASES:
-        raise InputError(f"sh: K={num_bases} is not one of {SH_BASES}")
-    return SH_BASES.index(num_bases)
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,9 +94,9 @@ class Gaussians:
         set_(self, "quats", as_float_array("quats", self.quats, ("N", 4), sizes))
         set_(self, "opacity_logits", as_float_array("opacity_logits", self.opacity_logits, ("N",), sizes))
         sh_shape = np.shape(self.sh)
-        if len(sh_shape) != 3 or sh_shape[1] not in SH_BASES or sh_shape[2] != 3:
+        if len(sh_shape) != 3 or sh_shape[1] not in SH_BASES_OF_DEGREE or sh_shape[2] != 3:
             raise InputError(
-                f"sh: expected shape [N, K, 3] with K in {SH_BASES}, got {list(sh_shape)}")
+                f"sh: expected shape [N, K, 3] with K in {SH_BASES_OF_DEGREE}, got {list(sh_shape)}")
         set_(self, "sh", as_float_array("sh", self.sh, ("N", None, 3), sizes))
 
     # ------------------------------------------------------------------ basics
@@ -116,7 +109,7 @@ class Gaussians:
     @property
     def sh_degree(self) -> int:
         """SH degree d (0..3), from K = (d+1)²."""
-        return SH_BASES.index(self.sh.shape[1])
+        return SH_BASES_OF_DEGREE.index(self.sh.shape[1])
 
     # ------------------------------------------------------------- activations
     @property
@@ -151,7 +144,7 @@ class Gaussians:
     def with_sh_degree(self, degree: int) -> Gaussians:
         """A copy with SH truncated to ``degree`` bands or zero-padded up to it."""
         d = check_sh_degree("degree", degree)
-        k = SH_BASES[d]
+        k = SH_BASES_OF_DEGREE[d]
         n, k_now, _ = self.sh.shape
         if k <= k_now:
             sh = self.sh[:, :k].copy()

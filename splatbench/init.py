@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.gaussians import SH_BASES, SH_C0, Gaussians
+from splatbench.gaussians import SH_BASES_OF_DEGREE, SH_C0, Gaussians
 from splatbench.checks import as_float_array, check_sh_degree, check_shape
 
 #: Lower bound on the mean squared neighbour distance (graphdeco's ``clamp_min(dist2, 1e-7)``).
@@ -93,7 +93,7 @@ def from_points(points: Any, colors: Any, *, sh_degree: int = 3, opacity: float 
     m = len(pts)
     dist2 = np.maximum(knn_mean_sq_dist(pts), MIN_DIST2)
     log_scales = np.repeat(np.log(np.sqrt(dist2))[:, None], 3, axis=1)
-    sh = np.zeros((m, SH_BASES[degree], 3), dtype=np.float64)
+    sh = np.zeros((m, SH_BASES_OF_DEGREE[degree], 3), dtype=np.float64)
     sh[:, 0, :] = (rgb - 0.5) / SH_C0
     quats = np.zeros((m, 4))
     quats[:, 0] = 1.0
@@ -157,10 +157,9 @@ def from_surface(scene_or_dataset: Any, n: int, *, seed: int, sh_degree: int = 3
     A dense initialisation from exact geometry, standing in for the dense point maps
     (MASt3R and the like) that are the usual alternative to sparse SfM. Each
     non-emitter shape of ``mi.Scene.shapes()`` gets a multinomial share of ``n`` by
-    area, then ``shape.sample_position`` with seeded uniform samples. Shapes are taken
-    in a canonical order (`_shape_key`): Mitsuba loads plugins in parallel, so
-    ``shapes()`` comes back in a different order from one load to the next, and the
-    same seed must give the same points.
+    area, then ``shape.sample_position`` with seeded uniform samples: the points of
+    `splatbench.scenes.sample_surface` for the same seed (the one implementation, which
+    takes the shapes in a load-order-independent order).
 
     Args:
         scene_or_dataset: a loaded ``mi.Scene``; a catalog scene name or folder; or a
@@ -229,49 +228,12 @@ def _resolve_scene(obj: Any, extra_dirs: tuple) -> tuple[Any, Any]:
     return load_mitsuba_scene(spec), dataset
 
 
-def _shape_key(shape) -> tuple:
-    """A load-order-independent sort key: XML id, plugin class, area, bounding box."""
-    bbox = shape.bbox()
-    corners = tuple(round(float(v), 9) for v in (*np.asarray(bbox.min).ravel(), *np.asarray(bbox.max).ravel()))
-    return (shape.id(), shape.class_name(), round(float(np.asarray(shape.surface_area()).reshape(-1)[0]), 9), corners)
-
-
 def _surface_samples(mi_scene, n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(xyz [n, 3], normals [n, 3], albedo [n, 3] sRGB-encoded)``, area-weighted over the shapes.
+    """``(xyz [n, 3], normals [n, 3], albedo [n, 3] sRGB-encoded)`` from `splatbench.scenes.sample_surface`."""
+    from splatbench.scenes import linear_to_srgb, sample_surface
 
-    The albedo is ``shape.bsdf().eval_diffuse_reflectance`` at each sample's surface
-    interaction, seen from its normal side, clipped to [0, 1] and sRGB-encoded.
-    """
-    from splatbench.scenes import linear_to_srgb
-    from splatbench.scenes.render import mitsuba
-
-    mi = mitsuba()
-    shapes = sorted((sh for sh in mi_scene.shapes() if not sh.is_emitter()), key=_shape_key)
-    if not shapes:
-        raise InputError("scene: has no shapes to sample")
-    areas = np.array([float(np.asarray(sh.surface_area()).reshape(-1)[0]) for sh in shapes])
-    rng = np.random.default_rng(seed)
-    counts = rng.multinomial(n, areas / areas.sum())
-
-    def columns(value, m: int, dims: int) -> np.ndarray:  # Dr.Jit [dims, m] or [dims, 1] -> [m, dims]
-        arr = np.asarray(value, dtype=np.float64).reshape(dims, -1)
-        return np.broadcast_to(arr, (dims, m)).T.copy()
-
-    xyz, normals, albedo = [], [], []
-    for shape, m in zip(shapes, counts):
-        if m == 0:
-            continue
-        u = rng.random((2, m), dtype=np.float32)
-        ps = shape.sample_position(0.0, mi.Point2f(u[0], u[1]))
-        si = mi.SurfaceInteraction3f(ps, mi.Color0f())
-        si.wi = mi.Vector3f(0.0, 0.0, 1.0)
-        xyz.append(columns(ps.p, m, 3))
-        normals.append(columns(ps.n, m, 3))
-        bsdf = shape.bsdf()
-        albedo.append(columns(bsdf.eval_diffuse_reflectance(si), m, 3) if bsdf is not None else np.full((m, 3), 0.5))
-    rgb = np.concatenate(albedo)
-    rgb[~np.isfinite(rgb).all(axis=1)] = 0.5
-    return np.concatenate(xyz), np.concatenate(normals), linear_to_srgb(np.clip(rgb, 0.0, 1.0))
+    pts = sample_surface(mi_scene, n, seed=seed, albedo=True)
+    return pts.xyz, pts.normals, linear_to_srgb(pts.albedo)
 
 
 def _image_colors(split, xyz: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -29,7 +29,7 @@ import numpy as np
 
 from splatbench.errors import InputError
 from splatbench.fsutil import replace_file
-from splatbench.gaussians import SH_BASES, Gaussians
+from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians
 
 _BASE_HEAD = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
 _BASE_TAIL = ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
@@ -44,7 +44,7 @@ _DEGREE_COMMENT = "splatbench sh_degree "
 
 def property_names(sh_degree: int = WRITE_DEGREE) -> list[str]:
     """The vertex property names, in file order, for SH degree 0..3 (`write_ply` uses 3: 62 names)."""
-    n_rest = 3 * (SH_BASES[sh_degree] - 1)
+    n_rest = 3 * (SH_BASES_OF_DEGREE[sh_degree] - 1)
     return _BASE_HEAD + [f"f_rest_{i}" for i in range(n_rest)] + _BASE_TAIL
 
 
@@ -53,7 +53,7 @@ def to_vertex_array(gaussians: Gaussians) -> np.ndarray:
     above ``gaussians.sh_degree`` are zero."""
     names = property_names(WRITE_DEGREE)
     n, k, _ = gaussians.sh.shape
-    k_full = SH_BASES[WRITE_DEGREE]
+    k_full = SH_BASES_OF_DEGREE[WRITE_DEGREE]
     sh = np.zeros((n, k_full, 3), dtype=np.float32)
     sh[:, :k] = gaussians.sh
     columns = np.empty((n, len(names)), dtype=np.float32)
@@ -124,7 +124,7 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
 
     rest_ids = sorted(int(m.group(1)) for f in fields if (m := _F_REST.match(f)))
     n_rest = (max(rest_ids) + 1) if rest_ids else 0
-    valid = [3 * (k - 1) for k in SH_BASES]
+    valid = [3 * (k - 1) for k in SH_BASES_OF_DEGREE]
     if n_rest not in valid:
         if n_rest > valid[-1]:
             raise InputError(f"{name}: {n_rest} f_rest_* properties; expected one of {valid} (SH degree 0..3)")
@@ -149,8 +149,9 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
         rest = cols([f"f_rest_{i}" for i in range(n_rest)]).reshape(n, 3, k - 1)
         sh[:, 1:, :] = np.transpose(rest, (0, 2, 1))
     degree = _recorded_degree(ply.comments)
-    if degree is not None and SH_BASES[degree] < k and not sh[:, SH_BASES[degree]:].any():
-        sh = np.ascontiguousarray(sh[:, : SH_BASES[degree]])  # the written model's degree; the rest is padding
+    k_recorded = SH_BASES_OF_DEGREE[degree] if degree is not None else k
+    if k_recorded < k and not sh[:, k_recorded:].any():
+        sh = np.ascontiguousarray(sh[:, :k_recorded])  # the written model's degree; the rest is padding
     try:
         return Gaussians(
             means=cols(["x", "y", "z"]),

@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
+from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
-from splatbench.gaussians import Gaussians
+from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians
 
 GARDEN_SFM = Path(__file__).parent / "data" / "garden_sfm.npz"  # real SfM data; see data/NOTICE.md
 WORKLOAD_KEYS = ("means", "log_scales", "quats", "opacity_logits", "sh", "viewmat", "K", "width", "height")
@@ -48,6 +49,7 @@ def synthetic(n: int, width: int, height: int, seed: int = 0, *, sh_degree: int 
     """
     if n < 0:
         raise InputError(f"n: expected a count >= 0, got {n}")
+    k = SH_BASES_OF_DEGREE[check_sh_degree("sh_degree", sh_degree)]
     rng = np.random.default_rng(seed)
     f = float(width)
     z = rng.uniform(*depth_range, n)
@@ -56,7 +58,6 @@ def synthetic(n: int, width: int, height: int, seed: int = 0, *, sh_degree: int 
     means = np.stack([(u - width / 2) * z / f, (v - height / 2) * z / f, z], axis=1)
     sigma = np.exp(rng.uniform(np.log(sigma_px[0]), np.log(sigma_px[1]), n))
     log_scales = np.log(sigma * z / f)[:, None] + anisotropy * rng.standard_normal((n, 3))
-    k = (sh_degree + 1) ** 2
     sh = np.concatenate([0.5 * rng.standard_normal((n, 1, 3)), 0.05 * rng.standard_normal((n, k - 1, 3))], 1)
     gaussians = Gaussians(means, log_scales, random_unit_quats(rng, n), rng.standard_normal(n), sh)
     camera = Camera(width, height, f, f, width / 2, height / 2, np.eye(4))

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from splatbench import Camera, Gaussians
+from splatbench.gaussians import quat_to_rotmat
 from splatbench.workloads import Workload, random_unit_quats
 
 KINDS = ("standard", "overlap", "needles", "tiny", "large")
@@ -17,12 +18,8 @@ KINDS = ("standard", "overlap", "needles", "tiny", "large")
 
 def random_pose(rng: np.random.Generator) -> np.ndarray:
     """A random world_to_camera [4, 4] (rotation from a random unit quaternion)."""
-    w, x, y, z = random_unit_quats(rng, 1)[0]
-    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                  [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                  [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
     M = np.eye(4)
-    M[:3, :3] = R
+    M[:3, :3] = quat_to_rotmat(random_unit_quats(rng, 1)[0])
     M[:3, 3] = rng.uniform(-3, 3, 3)
     return M
 

@@ -16,6 +16,7 @@ from click.testing import CliRunner
 from splatbench.bench.raster import (CSV_COLUMNS, STANDARD_SYNTHETIC, MachineInfo, RasterBenchResult, StageSplit,
                                      format_table, leak_warnings, parse_synthetic, standard_suite)
 from splatbench.cli import main
+from splatbench.errors import InputError
 
 TINY = ["bench", "raster", "--synthetic", "200", "64x64", "--repeats", "1", "--device", "cpu"]
 
@@ -116,3 +117,15 @@ def test_table_marks_met_and_missed_targets():
     assert leak_warnings([base]) == []
     (warning,) = leak_warnings([base, replace(base, name="leaky", retained_mb_per_run=40.0)])
     assert warning.startswith("warning: leaky: RSS grew 40.0 MB per run")
+
+
+def test_option_and_set_share_one_key_value_grammar():
+    """`render --option`, `bench raster --option` and `train --set` parse values the same way."""
+    from splatbench.commands.render import parse_options
+    from splatbench.overrides import parse_override
+
+    pairs = ("tile_size=8", "alpha_min=1e-3", "antialiased=true", "radius=opacity", "background=[0, 0, 1]")
+    assert parse_options(pairs) == dict(parse_override(p) for p in pairs) == {
+        "tile_size": 8, "alpha_min": 1e-3, "antialiased": True, "radius": "opacity", "background": [0, 0, 1]}
+    with pytest.raises(InputError, match=r"^--option: expected key=value, got 'tile_size'$"):
+        parse_options(("tile_size",))

@@ -396,3 +396,29 @@ def test_dask_local_cluster_on_loopback_gives_the_local_results(tmp_path, uninte
     assert_table_matches_files(folder, {r.run_id for r in expand(spec)})
     pd.testing.assert_frame_equal(deterministic(read_table(folder)), deterministic(expected))
     assert (folder / TABLE_NAME).is_file()
+
+
+def test_dask_existing_scheduler_on_loopback_via_the_cli(tmp_path, uninterrupted):
+    """`splatbench run --executor dask --scheduler tcp://...` hands the runs to a scheduler
+    that was already running (here a loopback cluster started by the test) and gets the
+    local executor's results."""
+    distributed = pytest.importorskip("distributed")
+    from click.testing import CliRunner
+
+    from splatbench.cli import main
+
+    spec, expected = uninterrupted
+    path = write(tmp_path, SWEEP.format(sleep=0.2), "sweep.toml")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        address = cluster.scheduler_address
+        assert address.startswith("tcp://127.0.0.1:")
+        result = CliRunner().invoke(main, ["run", str(path), "--executor", "dask", "--scheduler", address,
+                                           "--results", str(tmp_path / "results")])
+        assert result.exit_code == 0, result.output
+        # the runs went through this scheduler: it counted one finished task per run
+        done = {name: sum(p.state_counts.values()) for name, p in cluster.scheduler.task_prefixes.items()}
+        assert sum(done.values()) >= 12, done
+    folder = tmp_path / "results" / "sweep"
+    assert_table_matches_files(folder, {r.run_id for r in expand(spec)})
+    pd.testing.assert_frame_equal(deterministic(read_table(folder)), deterministic(expected))

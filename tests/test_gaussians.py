@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from splatbench.errors import InputError
 from splatbench.gaussians import SH_C0, Gaussians, normalize_quats, quat_to_rotmat
 from tests.assertions import one_line_error
 
@@ -242,3 +244,28 @@ def test_subset_mask_and_index():
 def test_dc_constant():
     # C0 = 1 / (2 sqrt(pi)), the degree-0 real SH basis
     assert SH_C0 == pytest.approx(1 / (2 * math.sqrt(math.pi)), rel=EPS64)
+
+
+@pytest.mark.parametrize("value", [4, -1, True, 1.5, "2"])
+def test_sh_degree_is_checked_by_one_function_everywhere(value):
+    """`checks.check_sh_degree` is the SH-degree check of init, workloads, with_sh_degree,
+    TrainConfig and the raster run kind: the same one-line message from each."""
+    from splatbench.checks import check_sh_degree
+    from splatbench.experiments.raster_kind import validate as validate_raster_config
+    from splatbench.init import from_points
+    from splatbench.train import TrainConfig
+    from splatbench.workloads import synthetic
+
+    with pytest.raises(InputError) as first:
+        check_sh_degree("sh_degree", value)
+    message = str(first.value)
+    assert message.startswith("sh_degree: expected an int in 0..3, got ")
+    for call in (lambda: from_points(np.zeros((2, 3)), np.zeros((2, 3)), sh_degree=value),
+                 lambda: synthetic(4, 8, 8, sh_degree=value),
+                 lambda: validate_raster_config({"scene": "synthetic-10-8x8", "sh_degree": value})):
+        with pytest.raises(InputError, match="^" + re.escape(message) + "$"):
+            call()
+    if type(value) is int:  # TrainConfig's field types are checked before its ranges
+        with pytest.raises(InputError, match=r"^sh_degree: expected an int in 0\.\.3 or 'auto', got "):
+            TrainConfig(dataset="x", sh_degree=value).validate()
+    assert check_sh_degree("d", "auto", allow_auto=True) == "auto"

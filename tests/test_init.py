@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench import InputError
-from splatbench.gaussians import SH_C0
+from splatbench.gaussians import SH_C0, quat_to_rotmat
 from splatbench.init import from_points, from_random, from_sfm, from_surface, knn_mean_sq_dist
 from splatbench.scenes import builtin_scenes_dir, linear_to_srgb, render_dataset
 from splatbench.sfm import Similarity, rig_radius, umeyama
@@ -100,6 +100,18 @@ def test_from_surface_albedo_on_a_known_scene():
     np.testing.assert_array_equal(from_surface(scene, 3000, seed=1, sh_degree=0).means, g.means)
 
 
+def test_from_surface_points_are_the_scene_samplers_points():
+    """One surface sampler: `from_surface` and `splatbench.scenes.sample_surface` give the
+    same points for a seed, also from separate loads (Mitsuba's shape order varies)."""
+    from splatbench.scenes import get_scene, load_mitsuba_scene, sample_surface
+
+    g = from_surface("textured", 1500, seed=4, sh_degree=0)
+    pts = sample_surface(load_mitsuba_scene(get_scene("textured")), 1500, seed=4, albedo=True)
+    np.testing.assert_array_equal(g.means, pts.xyz)
+    # the colours are the same samples' albedo, sRGB-encoded (float32 SH round trip: 1e-5)
+    np.testing.assert_allclose(_dc_colour(g), linear_to_srgb(pts.albedo), atol=1e-5)
+
+
 def test_from_surface_of_a_dataset_takes_colours_from_the_views(tiny):
     from splatbench.data import load_dataset
     from splatbench.scenes import load_mitsuba_scene
@@ -154,11 +166,7 @@ def test_from_surface_refuses_a_dataset_whose_scene_changed(tiny, tmp_path):
 def _random_similarity(rng) -> Similarity:
     q = rng.normal(size=4)
     q /= np.linalg.norm(q)
-    w, x, y, z = q
-    rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                    [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                    [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-    return Similarity(float(np.exp(rng.uniform(-2, 2))), rot, rng.uniform(-10, 10, 3))
+    return Similarity(float(np.exp(rng.uniform(-2, 2))), quat_to_rotmat(q), rng.uniform(-10, 10, 3))
 
 
 @pytest.mark.parametrize("seed", range(5))

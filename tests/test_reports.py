@@ -25,7 +25,8 @@ from splatbench.reports import build_report, write_report
 from splatbench.reports.figures import pareto_front
 from splatbench.reports.findings import fmt_interval
 from splatbench.reports.stats import paired_difference, paired_ratio
-from splatbench.reports.tables import KIND_METRICS, Stat
+from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
+from splatbench.reports.tables import Stat
 
 SCENES = ["diffuse", "glossy"]
 SH_VALUES = [0, 1, 3, "auto"]
@@ -93,7 +94,7 @@ def recompute(table: pd.DataFrame) -> dict:
         label = json.loads(label) if isinstance(label, str) else label
         out[(scene, str(label))] = {m.name: Stat(float(group[f"metric.{m.name}"].mean()),
                                                  float(group[f"metric.{m.name}"].std(ddof=1)), len(group))
-                                    for m in KIND_METRICS["train"]}
+                                    for m in TRAIN_REPORT.metrics}
     return out
 
 
@@ -119,7 +120,7 @@ def test_report_tables_match_parquet(sh_report):
     text = path.read_text()
     rows = [line for line in text.splitlines() if line.startswith("| diffuse") or line.startswith("| glossy")]
     assert len(rows) == len(SCENES) * len(SH_VALUES)
-    specs = KIND_METRICS["train"]
+    specs = TRAIN_REPORT.metrics
     for line in rows:
         cells = [c.strip() for c in line.strip("|").split("|")]
         scene, label, count = cells[0], cells[1].strip("`"), int(cells[2])
@@ -144,7 +145,7 @@ def test_findings_numbers_match_parquet(sh_report):
     claims = report.findings["sh_degree"].claims
     kinds = {c.kind for c in claims}
     assert kinds == {"best", "vs", "count", "auto"}
-    specs = {m.name: m for m in KIND_METRICS["train"]}
+    specs = {m.name: m for m in TRAIN_REPORT.metrics}
     for c in claims:
         if c.kind == "best":
             assert c.value == pytest.approx(expected[(c.scene, c.label)][c.metric].mean, abs=1e-12)
@@ -391,3 +392,22 @@ def test_product_grid_rows_average_each_seed_first(tmp_path):
     assert vs.metric == "a_plus_seed" and vs.n == 3
     assert (vs.value, vs.low, vs.high) == (0.0, 0.0, 0.0) and not vs.significant
     assert "no significant difference" in vs.text
+
+
+def test_a_new_kind_declares_its_report_in_one_place():
+    """A kind's metrics, findings rules and extra findings come from its own `KindReport`
+    (passed to its `RunKind`): the report code names no kind."""
+    from splatbench.experiments.kinds import RunKind, RunOutput, register_kind
+    from splatbench.reports.findings import rules_for
+    from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, kind_report
+    from splatbench.reports.tables import metric_specs
+
+    declared = KindReport(metrics=(MetricSpec("loss", "loss", ".3f", "", "lower"),),
+                          rules=FindingRules("loss", (Comparison("loss", "diff"),)))
+    register_kind(RunKind(name="toy-report-kind", validate=lambda config: None,
+                          run=lambda config, workdir: RunOutput({"loss": 0.0}), report=declared))
+    assert kind_report("toy-report-kind") is declared and kind_report("no-such-kind") is None
+    table = pd.DataFrame({"metric.loss": [0.5], "metric.other": [1.0]})
+    assert metric_specs("toy-report-kind", table) == declared.metrics      # its own metrics only
+    assert rules_for("toy-report-kind", declared.metrics) == declared.rules
+    assert [m.name for m in metric_specs("no-such-kind", table)] == ["loss", "other"]  # undeclared: every one

@@ -611,3 +611,16 @@ def test_training_steps_through_the_rasterizer(name):
         assert_consistent(params, opts)
         counts.append(params["means"].shape[0])
     assert counts[-1] > 200, counts
+
+
+@pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc"])
+def test_every_strategy_states_the_whole_protocol(name):
+    """The trainer reads ``absgrad``, ``schedule_fields`` and ``initial_opacity`` directly
+    (no getattr probing): each registered strategy must declare them with the right types."""
+    from splatbench.strategies import STRATEGIES
+
+    strategy = make_strategy(name)
+    assert type(strategy) is STRATEGIES[name][0]
+    assert isinstance(strategy.absgrad, bool) and strategy.absgrad == (name == "absgrad")
+    assert isinstance(strategy.schedule_fields, dict) and isinstance(strategy.initial_opacity, float)
+    assert all(hasattr(strategy, field) for field in strategy.schedule_fields)

@@ -136,17 +136,22 @@ def test_config_toml_round_trip_and_overrides(tmp_path):
     assert tomllib.loads(path.read_text())["sh_degree"] == "auto"             # plain TOML, no code
     assert TrainConfig.from_toml(TrainConfig().to_toml()) == TrainConfig()
 
-    out = apply_overrides(cfg, ["iterations=7", "lr_means=1", "sh_degree=2", "strategy=default",
+    out = apply_overrides(cfg, ["iterations=7000", "lr_means=1", "sh_degree=2",
                                 "background=[0, 0, 1]", "random_background=true",
                                 "strategy_options.cap_max=100", "dataset=some/where"])
     assert (out.iterations, out.sh_degree, out.strategy, out.random_background, out.dataset) == \
-        (7, 2, "default", True, "some/where")
+        (7000, 2, "mcmc", True, "some/where")
     assert out.lr_means == 1.0 and isinstance(out.lr_means, float)           # int widened to float
     assert out.background == [0.0, 0.0, 1.0]
     assert out.strategy_options == {"cap_max": 100, "noise_lr": 5e5}
     assert apply_overrides(cfg, ["sh_degree=auto"]).sh_degree == "auto"        # bare string
     assert parse_override("init = random") == ("init", "random")
     assert cfg.iterations == 123                                               # the original is untouched
+    # the config is validated on construction: MCMC's options under another strategy fail at once
+    with pytest.raises(InputError, match=r"^strategy 'default': unknown field 'cap_max'"):
+        apply_overrides(cfg, ["strategy=default"])
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cfg.iterations = 5  # frozen: change a copy with dataclasses.replace / apply_overrides
 
 
 BAD_CONFIGS = [
@@ -472,3 +477,14 @@ def test_bench_train_reports_throughput_and_a_time_split_that_adds_up(tmp_path):
     assert json.loads((tmp_path / "train.json").read_text())["results"][0]["n"] == 60
     with pytest.raises(InputError, match="--iterations"):
         TrainBenchSettings(iterations=0).validate()
+
+
+def test_psnr_is_one_function_for_tensors_and_float64_arrays():
+    """`train.metrics.psnr` is the only PSNR (the raster run kind calls it with clamp=False)."""
+    from splatbench.train.metrics import psnr
+
+    a = np.full((4, 4, 3), 1.5)          # above 1: only the clamp can bring it to the target
+    b = np.full((4, 4, 3), 0.9)
+    assert psnr(a, b) == pytest.approx(-10 * np.log10(0.01))            # clamped to 1: MSE 0.1²
+    assert psnr(a, b, clamp=False) == pytest.approx(-10 * np.log10(0.36))  # MSE 0.6²
+    assert psnr(torch.as_tensor(b, dtype=torch.float32), torch.as_tensor(b, dtype=torch.float32)) == np.inf

@@ -7,30 +7,14 @@ from pathlib import Path
 import click
 import numpy as np
 
-from splatbench.checks import check_image_size
+from splatbench.checks import check_image_size, check_sh_degree
 from splatbench.errors import InputError
+from splatbench.overrides import parse_overrides
 
 
 def parse_options(pairs: tuple[str, ...]) -> dict:
-    """``key=value`` strings -> rasterizer options (numbers and booleans parsed)."""
-    options = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep:
-            raise InputError(f"--option: expected key=value, got {pair!r}")
-        low = value.lower()
-        if low in ("true", "false"):
-            options[key] = low == "true"
-            continue
-        for cast in (int, float):
-            try:
-                options[key] = cast(value)
-                break
-            except ValueError:
-                continue
-        else:
-            options[key] = value
-    return options
+    """``--option key=value`` strings -> rasterizer options (`splatbench.overrides` grammar)."""
+    return parse_overrides(pairs, "--option")
 
 
 def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0):
@@ -66,6 +50,8 @@ def render(source: Path, out: Path | None, view: int, size: str, sh_degree: int 
     from splatbench.images import save_png
     from splatbench.workloads import load_npz
 
+    if sh_degree is not None:
+        check_sh_degree("--sh-degree", sh_degree)
     out = out or source.with_suffix(".png")
     if out.is_dir():
         raise InputError(f"--out: {str(out)!r} is a folder; give the path of the PNG to write")

@@ -18,13 +18,12 @@ from __future__ import annotations
 
 import hashlib
 import itertools
-import json
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from splatbench.errors import InputError
-from splatbench.experiments.spec import ExperimentSpec, flatten, override, unflatten
+from splatbench.experiments.spec import ExperimentSpec, canonical_json, flatten, override, unflatten
 
 
 @dataclass(frozen=True)
@@ -45,14 +44,6 @@ class RunSpec:
     config: Mapping[str, Any]
     run_id: str
     labels: Mapping[str, Any]
-
-
-def canonical_json(value: Any) -> str:
-    """Sorted keys, no spaces, ASCII, no NaN: the same value always gives the same text."""
-    try:
-        return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"config: not a canonical JSON value ({exc})") from None
 
 
 def make_run_id(kind: str, config: Mapping[str, Any]) -> str:

@@ -66,6 +66,9 @@ class RunKind:
     scenes: Callable[[], set[str]] | None = None
     prepare: Callable[[list[dict[str, Any]]], None] | None = None
     description: str = ""
+    #: What its reports show: a `splatbench.reports.kind_report.KindReport` (None: every
+    #: numeric metric, the first one compared).
+    report: Any = None
 
 
 #: Kinds known by name in every process: name -> "module:ATTR" (imported on first use).
@@ -99,11 +102,6 @@ def get_kind(name: str) -> RunKind:
     if not isinstance(kind, RunKind):
         raise InputError(f"kind: {target!r} is a {type(kind).__name__}, not a RunKind")
     return kind
-
-
-def known_kinds() -> list[str]:
-    """Names of the built-in and registered kinds."""
-    return sorted({*BUILTIN_KINDS, *_REGISTERED})
 
 
 # --------------------------------------------------------------------------- dummy
@@ -191,5 +189,5 @@ def check_output(output: Any, kind: str) -> RunOutput:
     return RunOutput(metrics=metrics, curves=output.curves)
 
 
-__all__ = ["RunKind", "RunOutput", "Scalar", "BUILTIN_KINDS", "register_kind", "get_kind", "known_kinds",
+__all__ = ["RunKind", "RunOutput", "Scalar", "BUILTIN_KINDS", "register_kind", "get_kind",
            "check_output", "DUMMY", "DUMMY_DEFAULTS", "DUMMY_SCENES"]

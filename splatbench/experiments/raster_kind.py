@@ -52,8 +52,13 @@ One run:
      (``mode="matched"``) -- the implementation's own float32 error (about 1e-6 when
      the rasterizer is right).
 
-Metrics: `METRICS`. Curves: every timed call (``fwd_runs_ms``, ``fwd_bwd_runs_ms``,
-``default_fwd_runs_ms``, ``default_fwd_bwd_runs_ms``, pair i at index i).
+Metrics: `METRICS`; how reports show them: `REPORT`. Curves: every timed call
+(``fwd_runs_ms``, ``fwd_bwd_runs_ms``, ``default_fwd_runs_ms``,
+``default_fwd_bwd_runs_ms``, pair i at index i).
+
+Length: a little over 400 lines because a kind keeps its whole contract (config,
+workloads, reference cache, run, metrics and their report) in one file, so that
+adding or changing a kind touches one file (`splatbench.experiments.kinds`).
 """
 
 from __future__ import annotations
@@ -73,26 +78,25 @@ from typing import Any
 
 import numpy as np
 
+from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
+from splatbench.experiments.workers import limit_threads
+from splatbench.raster.options import RasterOptions
+from splatbench.reports.findings import parity_finding
+from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, TimeQuality
 
-#: Config fields and defaults: the rasterizer's own defaults (graphdeco-inria 3DGS), then measurement.
-DEFAULTS: dict[str, Any] = {
-    "tile_size": 16,             # pixels per tile side (power of two, 1..64); never changes the image
-    "alpha_min": 1.0 / 255.0,    # contributions with alpha below this are skipped
-    "alpha_max": 0.99,           # alpha clamp
-    "transmittance_min": 1e-4,   # a pixel stops before transmittance would drop below this
-    "eps2d": 0.3,                # 2D covariance dilation (pixel^2)
-    "radius": "3sigma",          # "3sigma" or "opacity" (extent where o*G falls below alpha_min)
-    "antialiased": False,        # Mip-Splatting opacity compensation
-    "sh_degree": 3,              # SH bands evaluated (the workloads hold degree 3)
-    "device": "auto",            # "cpu" (Dr.Jit LLVM), "cuda" or "auto"
-    "repeats": 7,                # timed A B pairs (run's options, defaults), at least MIN_PAIRS
-    "error_scale": 0.5,          # resolution factor of the error measurement (0 < s <= 1)
-}
 #: Fields passed to the rasterizer as `RasterOptions` (sh_degree goes separately).
 OPTION_FIELDS = ("tile_size", "alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius", "antialiased",
                  "device")
+#: Config fields and defaults: the rasterizer's own (`RasterOptions`' field defaults, graphdeco-inria
+#: 3DGS's; see its field comments), then the measurement's.
+DEFAULTS: dict[str, Any] = {
+    **{f.name: f.default for f in dataclasses.fields(RasterOptions) if f.name in OPTION_FIELDS},
+    "sh_degree": 3,              # SH bands evaluated (the workloads hold degree 3)
+    "repeats": 7,                # timed A B pairs (run's options, defaults), at least MIN_PAIRS
+    "error_scale": 0.5,          # resolution factor of the error measurement (0 < s <= 1)
+}
 #: Options with no counterpart in the reference (accelerations and placement only).
 FAST_ONLY = ("tile_size", "device")
 CACHE_ENV = "SPLATBENCH_CACHE"
@@ -174,8 +178,6 @@ def validate(config: dict[str, Any]) -> None:
     """One-line `InputError` naming the first bad field."""
     import difflib
 
-    from splatbench.raster.options import RasterOptions
-
     known = sorted({*DEFAULTS, "scene", "seed"})
     for key, value in config.items():
         if key not in known:
@@ -185,18 +187,11 @@ def validate(config: dict[str, Any]) -> None:
             raise InputError(f"{key}: expected a value, got a table")
     parse_workload_name(str(config.get("scene", "")))
     merged = {**DEFAULTS, **config}
-    for key in ("tile_size", "sh_degree", "repeats"):
-        v = merged[key]
-        if not isinstance(v, int) or isinstance(v, bool):
-            raise InputError(f"{key}: expected an int, got {v!r}")
-    for key in ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "error_scale"):
-        v = merged[key]
-        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
-            raise InputError(f"{key}: expected a finite number, got {v!r}")
-    if not isinstance(merged["antialiased"], bool):
-        raise InputError(f"antialiased: expected true or false, got {merged['antialiased']!r}")
-    if not 0 <= merged["sh_degree"] <= 3:
-        raise InputError(f"sh_degree: expected an int in 0..3, got {merged['sh_degree']}")
+    for key in OPTION_FIELDS:  # the value's type, from RasterOptions' annotation; its ranges: RasterOptions
+        _check_type(key, merged[key], _OPTION_TYPES[key])
+    _check_type("repeats", merged["repeats"], "int")
+    _check_type("error_scale", merged["error_scale"], "float")
+    check_sh_degree("sh_degree", merged["sh_degree"])
     if merged["repeats"] < MIN_PAIRS:
         raise InputError(f"repeats: expected at least {MIN_PAIRS} timed pairs (a bootstrap interval of the median "
                          f"ratio needs several), got {merged['repeats']}")
@@ -205,11 +200,28 @@ def validate(config: dict[str, Any]) -> None:
     RasterOptions.from_kwargs(**{k: merged[k] for k in OPTION_FIELDS})  # names the bad option
 
 
+#: Option field -> its annotation in `RasterOptions` ("int", "float", "str", "bool").
+_OPTION_TYPES = {f.name: f.type for f in dataclasses.fields(RasterOptions) if f.name in OPTION_FIELDS}
+
+
+def _check_type(key: str, value: Any, kind: str) -> None:
+    """One-line `InputError` unless ``value`` is a ``kind`` ("int", "float": finite, "bool", "str")."""
+    if kind == "int" and (not isinstance(value, int) or isinstance(value, bool)):
+        raise InputError(f"{key}: expected an int, got {value!r}")
+    if kind == "float" and (not isinstance(value, (int, float)) or isinstance(value, bool)
+                            or not math.isfinite(value)):
+        raise InputError(f"{key}: expected a finite number, got {value!r}")
+    if kind == "bool" and not isinstance(value, bool):
+        raise InputError(f"{key}: expected true or false, got {value!r}")
+    if kind == "str" and not isinstance(value, str):
+        raise InputError(f"{key}: expected a string, got {value!r}")
+
+
 def resolve(config: dict[str, Any]) -> dict[str, Any]:
     """Every field filled in; numbers normalised (``alpha_min = 1`` and ``1.0`` are one run);
     ``protocol`` (`PROTOCOL`) added."""
     out = {**DEFAULTS, **config, "protocol": PROTOCOL}
-    for key in ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "error_scale"):
+    for key in (*(k for k, t in _OPTION_TYPES.items() if t == "float"), "error_scale"):
         out[key] = float(out[key])
     return out
 
@@ -290,12 +302,6 @@ def prepare(configs: list[dict[str, Any]]) -> None:
 
 
 # --------------------------------------------------------------------------- run
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    """PSNR (dB) of ``a`` against ``b`` on [0, 1] images (inf when equal)."""
-    mse = float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
-    return math.inf if mse == 0 else -10.0 * math.log10(mse)
-
-
 def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     """Time the rasterizer on the workload with the run's options; measure its error."""
     import torch
@@ -303,8 +309,8 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     import splatbench
     from splatbench.bench.raster import (forward_backward_with_init, forward_with_init, resolve_device, time_runs,
                                          torch_params)
-    from splatbench.experiments.train_kind import limit_threads
     from splatbench.reports.stats import bootstrap_median_ratio
+    from splatbench.train.metrics import psnr
 
     limit_threads()
     workload = build_workload(config["scene"], config["seed"])
@@ -348,7 +354,7 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
         "default_fwd_ms": round(1e3 * med["default_fwd"], 3),
         "default_fwd_bwd_ms": round(1e3 * med["default_fwd_bwd"], 3),
         **load.metrics(),
-        "exact_psnr": round(min(psnr(fast, exact), 200.0), 4), "exact_max_abs": float(err.max()),
+        "exact_psnr": round(min(psnr(fast, exact, clamp=False), 200.0), 4), "exact_max_abs": float(err.max()),
         "exact_mean_abs": float(err.mean()), "parity_max_abs": float(np.abs(fast - matched).max()),
         "pairs": int(stats.num_pairs), "evaluations": int(stats.num_pairs) * int(config["tile_size"]) ** 2,
         "visible": int(torch.as_tensor(stats.visible).sum()),
@@ -395,8 +401,36 @@ def _cpu_seconds() -> float:
 
 
 #: The ``raster`` kind (``kind = "raster"``).
-RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, prepare=prepare,
-                 description="time the rasterizer under options against the defaults; error against the exact model")
+#: What the reports of raster runs show (`splatbench.reports.kind_report`).
+REPORT = KindReport(
+    metrics=(
 
-__all__ = ["RASTER", "DEFAULTS", "METRICS", "OPTION_FIELDS", "parse_workload_name", "build_workload",
-           "reference_render", "exact_model", "cache_dir", "psnr", "Load", "MIN_PAIRS", "PROTOCOL"]
+        MetricSpec("fwd_ms", "forward (ms)", ".1f", "ms", "lower"),
+        MetricSpec("fwd_bwd_ms", "fwd+bwd (ms)", ".1f", "ms", "lower"),
+        MetricSpec("fwd_bwd_rel", "fwd+bwd / default (median of pairs)", ".3f", "", "lower"),
+        MetricSpec("fwd_bwd_rel_low", "bootstrap low", ".3f", "", "", False),
+        MetricSpec("fwd_bwd_rel_high", "bootstrap high", ".3f", "", "", False),
+        MetricSpec("exact_psnr", "PSNR to exact (dB)", ".2f", "dB", "higher"),
+        MetricSpec("exact_max_abs", "max abs error to exact", ".2e", "", "lower"),
+        MetricSpec("parity_max_abs", "parity max abs", ".1e", "", "lower"),
+        MetricSpec("pairs", "pairs", ".0f", "", ""),
+        MetricSpec("evaluations", "pixel-Gaussian evaluations", ".3g", "", ""),
+        MetricSpec("loaded", "loaded (fraction of runs)", ".2f", "", "", False),
+        # the first baseline's names (ground truth = the reference with default options), for its parquet
+        MetricSpec("error_psnr", "PSNR to default-option reference (dB)", ".2f", "dB", "higher"),
+        MetricSpec("error_max_abs", "max abs error to default-option reference", ".2e", "", "lower"),
+    ),
+    rules=FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean", 1.0), Comparison("exact_psnr", "diff"),
+                                       Comparison("pairs", "ratio"))),
+    time_quality=TimeQuality("fwd_bwd_rel", "exact_psnr", "speed_vs_error",
+                             "Rasterizer speed against error to the exact Gaussian mixture (mean over seeds)"),
+    meanings=METRICS,
+    run_findings=(("parity", parity_finding),),
+)
+
+RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, prepare=prepare,
+                 description="time the rasterizer under options against the defaults; error against the exact model",
+                 report=REPORT)
+
+__all__ = ["RASTER", "REPORT", "DEFAULTS", "METRICS", "OPTION_FIELDS", "parse_workload_name", "build_workload",
+           "reference_render", "exact_model", "cache_dir", "Load", "MIN_PAIRS", "PROTOCOL"]

@@ -38,6 +38,7 @@ file fails with one `InputError` line before anything runs.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import tomllib
@@ -48,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 from splatbench.errors import InputError
+from splatbench.fsutil import read_text
 
 #: Fields an experiment file may hold at its top level.
 TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "base", "axes", "variants", "runner")
@@ -326,9 +328,15 @@ def check_scheduler(address: Any, *, where: str = "scheduler") -> str:
     return address
 
 
-def _no_duplicates(values: list, where: str, fail) -> None:
-    from splatbench.experiments.grid import canonical_json
+def canonical_json(value: Any) -> str:
+    """Sorted keys, no spaces, ASCII, no NaN: the same value always gives the same text."""
+    try:
+        return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"config: not a canonical JSON value ({exc})") from None
 
+
+def _no_duplicates(values: list, where: str, fail) -> None:
     seen: set[str] = set()
     for v in values:
         key = canonical_json(v)
@@ -341,12 +349,7 @@ def _no_duplicates(values: list, where: str, fail) -> None:
 def load_experiment(path: str | Path, *, known_scenes: Callable[[], set[str]] | None = None) -> ExperimentSpec:
     """Read, parse and fully check an experiment file (see `check_experiment`)."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"experiment: cannot read {str(p)!r} ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise InputError(f"experiment: {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
+    text = read_text(p, "experiment")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -367,4 +370,4 @@ def check_experiment(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str
 
 __all__ = ["ExperimentSpec", "RunnerDefaults", "TOP_LEVEL_FIELDS", "RUNNER_FIELDS", "GRID_MODES", "EXECUTORS",
            "RESERVED_KEYS", "flatten", "unflatten", "override", "parse_experiment", "load_experiment",
-           "check_experiment", "check_scheduler"]
+           "check_experiment", "check_scheduler", "canonical_json"]

@@ -36,6 +36,7 @@ from typing import Any
 
 import pandas as pd
 
+from splatbench.experiments.claims import pid_alive
 from splatbench.experiments.spec import flatten
 
 #: Version of the per-run file layout.
@@ -184,20 +185,10 @@ def remove_stale_temps(folder: str | Path) -> int:
     removed = 0
     for entry in os.scandir(folder):
         m = _TEMP_NAME.match(entry.name)
-        if m and not _pid_alive(int(m.group(1))):
+        if m and not pid_alive(int(m.group(1))):
             Path(entry.path).unlink(missing_ok=True)
             removed += 1
     return removed
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 # --------------------------------------------------------------------------- table

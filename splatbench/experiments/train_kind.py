@@ -33,6 +33,9 @@ from typing import Any
 from splatbench.checks import check_image_size
 from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
+from splatbench.experiments.workers import limit_threads
+from splatbench.reports.findings import auto_sh_degree_note
+from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, TimeQuality
 
 #: Environment variable naming the folder of rendered datasets.
 DATASETS_ENV = "SPLATBENCH_DATASETS"
@@ -204,23 +207,6 @@ def _prepare_sfm(path: Path) -> None:
 
 
 # --------------------------------------------------------------------------- run
-def worker_threads() -> int | None:
-    """The runner's per-worker thread budget (``SPLATBENCH_WORKER_THREADS``), if set."""
-    from splatbench.experiments.runner import THREADS_ENV
-
-    value = os.environ.get(THREADS_ENV)
-    return int(value) if value and value.isdigit() and int(value) > 0 else None
-
-
-def limit_threads() -> None:
-    """Give Dr.Jit's thread pool the worker's budget, so parallel runs share the cores."""
-    threads = worker_threads()
-    if threads is not None:
-        import drjit as dr
-
-        dr.set_thread_count(threads)
-
-
 def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     """Train on the run's dataset, writing the run's files into ``workdir``."""
     from splatbench.train import TrainConfig, train
@@ -229,7 +215,7 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     scene, data, fields = _split(config)
     dataset = ensure_dataset(scene, data)
     cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="config")
-    result = train(cfg.validate())
+    result = train(cfg)  # validated on construction
     metrics = {
         "test_psnr": result.test_psnr, "test_ssim": result.test_ssim, "num_gaussians": result.num_gaussians,
         "train_seconds": result.train_seconds, "render_ms_per_view": result.render_ms_per_view,
@@ -258,8 +244,26 @@ def _finite(value: Any) -> Any:
 
 
 #: The ``train`` kind (``kind = "train"``).
-TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scenes=scenes, prepare=prepare,
-                description="train 3DGS on a rendered catalog scene (splatbench.train)")
+#: What the reports of train runs show (`splatbench.reports.kind_report`).
+REPORT = KindReport(
+    metrics=(
 
-__all__ = ["TRAIN", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "datasets_dir", "dataset_folder",
-           "ensure_dataset", "limit_threads", "worker_threads"]
+        MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher"),
+        MetricSpec("test_ssim", "SSIM", ".4f", "", "higher"),
+        MetricSpec("num_gaussians", "Gaussians", ".0f", "", ""),
+        MetricSpec("train_seconds", "train time (s)", ".1f", "s", "lower"),
+        MetricSpec("render_ms_per_view", "render (ms/view)", ".1f", "ms", "lower"),
+    ),
+    rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff"), Comparison("train_seconds", "ratio"),
+                                     Comparison("num_gaussians", "ratio"))),
+    time_quality=TimeQuality("train_seconds", "test_psnr", "time_vs_error",
+                             "Training time against test PSNR per cell (mean over seeds)"),
+    meanings=METRICS,
+    axis_notes=(auto_sh_degree_note,),
+)
+
+TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scenes=scenes, prepare=prepare,
+                description="train 3DGS on a rendered catalog scene (splatbench.train)", report=REPORT)
+
+__all__ = ["TRAIN", "REPORT", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "datasets_dir", "dataset_folder",
+           "ensure_dataset"]

@@ -81,4 +81,20 @@ def fast_exit() -> None:
     os._exit(0)
 
 
-__all__ = ["THREADS_ENV", "RUNNER_ENV", "init_worker", "die_with_runner", "runner_id", "fast_exit"]
+def worker_threads() -> int | None:
+    """The runner's per-worker thread budget (``SPLATBENCH_WORKER_THREADS``), if set."""
+    value = os.environ.get(THREADS_ENV)
+    return int(value) if value and value.isdigit() and int(value) > 0 else None
+
+
+def limit_threads() -> None:
+    """Give Dr.Jit's thread pool the worker's budget, so parallel runs share the cores."""
+    threads = worker_threads()
+    if threads is not None:
+        import drjit as dr
+
+        dr.set_thread_count(threads)
+
+
+__all__ = ["THREADS_ENV", "RUNNER_ENV", "init_worker", "die_with_runner", "runner_id", "fast_exit", "worker_threads",
+           "limit_threads"]

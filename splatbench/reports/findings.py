@@ -29,44 +29,19 @@ from dataclasses import dataclass
 
 import pandas as pd
 
+from splatbench.reports.kind_report import Comparison, FindingRules, kind_report
 from splatbench.reports.stats import Interval, paired_difference, paired_ratio, t_interval
 from splatbench.reports.tables import AxisTable, MetricSpec, Row, display, done_runs, seed_values
-
-
-@dataclass(frozen=True)
-class Comparison:
-    """How one metric of a row is set against the reference row.
-
-    how: "diff", "ratio" or "mean" (module doc); null: the value that means "no
-    difference" for a "mean" comparison (None: no significance statement).
-    """
-
-    metric: str
-    how: str
-    null: float | None = None
-
-
-@dataclass(frozen=True)
-class FindingRules:
-    """A kind's primary metric (best-of) and its comparisons."""
-
-    primary: str
-    comparisons: tuple[Comparison, ...]
-
-
-KIND_RULES: dict[str, FindingRules] = {
-    "train": FindingRules("test_psnr", (Comparison("test_psnr", "diff"), Comparison("train_seconds", "ratio"),
-                                        Comparison("num_gaussians", "ratio"))),
-    "raster": FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean", 1.0),
-                                           Comparison("exact_psnr", "diff"), Comparison("pairs", "ratio"))),
-}
 
 
 def rules_for(kind: str, metrics: tuple[MetricSpec, ...]) -> FindingRules | None:
     """The kind's rules, restricted to metrics present; another kind compares its first metric."""
     names = {m.name for m in metrics}
-    if kind in KIND_RULES:
-        r = KIND_RULES[kind]
+    declared = kind_report(kind)
+    if declared is not None:
+        r = declared.rules
+        if r is None:
+            return None
         if r.primary not in names:
             return None
         return FindingRules(r.primary, tuple(c for c in r.comparisons if c.metric in names))
@@ -257,33 +232,46 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame) -> Finding | N
         lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
                      f"these findings (marked in the table's `loaded` column).")
 
-    if kind == "train" and table.axis == "sh_degree" and "metric.sh_degree" in runs.columns:
-        auto = [r for r in table.rows if r.value == "auto"]
-        if auto:
-            parts = []
-            done = done_runs(runs)
-            for scene in scenes:
-                sel = done[(done.scene == scene) & done.run_id.isin(auto[0].run_ids)]
-                degrees = [int(d) for d in pd.to_numeric(sel["metric.sh_degree"], errors="coerce").dropna()]
-                if not degrees:
-                    continue
-                mean = sum(degrees) / len(degrees)
-                if len(set(degrees)) == 1:
-                    text = f"{degrees[0]}"
-                    where = "every seed" if len(degrees) > 1 else "one seed"
-                else:
-                    text = f"{min(degrees)}–{max(degrees)}"
-                    where = "per seed: " + ", ".join(map(str, degrees))
-                claims.append(Claim("auto", scene, auto[0].label, "sh_degree", "mean", mean, text))
-                parts.append(f"{text} on {scene} ({where})")
-            if parts:
-                lines.append("- `auto` ended at SH degree " + ", ".join(parts) + ".")
+    declared = kind_report(kind)
+    for note in declared.axis_notes if declared is not None else ():
+        more_lines, more_claims = note(table, runs, scenes)
+        lines += more_lines
+        claims += more_claims
     return Finding(table.axis, lines, claims)
 
 
 def _name(spec: MetricSpec) -> str:
     """A metric's label without its unit: "test PSNR (dB)" -> "test PSNR"."""
     return spec.label.split(" (")[0]
+
+
+def auto_sh_degree_note(table: AxisTable, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
+    """Train kind, ``sh_degree`` axis: the degree the ``auto`` rows ended at, per scene."""
+    lines: list[str] = []
+    claims: list[Claim] = []
+    if table.axis != "sh_degree" or "metric.sh_degree" not in runs.columns:
+        return lines, claims
+    auto = [r for r in table.rows if r.value == "auto"]
+    if auto:
+        parts = []
+        done = done_runs(runs)
+        for scene in scenes:
+            sel = done[(done.scene == scene) & done.run_id.isin(auto[0].run_ids)]
+            degrees = [int(d) for d in pd.to_numeric(sel["metric.sh_degree"], errors="coerce").dropna()]
+            if not degrees:
+                continue
+            mean = sum(degrees) / len(degrees)
+            if len(set(degrees)) == 1:
+                text = f"{degrees[0]}"
+                where = "every seed" if len(degrees) > 1 else "one seed"
+            else:
+                text = f"{min(degrees)}–{max(degrees)}"
+                where = "per seed: " + ", ".join(map(str, degrees))
+            claims.append(Claim("auto", scene, auto[0].label, "sh_degree", "mean", mean, text))
+            parts.append(f"{text} on {scene} ({where})")
+        if parts:
+            lines.append("- `auto` ended at SH degree " + ", ".join(parts) + ".")
+    return lines, claims
 
 
 def parity_finding(runs: pd.DataFrame) -> Finding | None:
@@ -301,5 +289,5 @@ def parity_finding(runs: pd.DataFrame) -> Finding | None:
                    [claim])
 
 
-__all__ = ["Comparison", "FindingRules", "KIND_RULES", "Claim", "Finding", "axis_finding", "parity_finding",
+__all__ = ["Comparison", "FindingRules", "Claim", "Finding", "axis_finding", "parity_finding", "auto_sh_degree_note",
            "fmt_number", "fmt_interval", "paired", "reference_row", "usable_runs", "display"]

@@ -32,20 +32,12 @@ from splatbench.experiments.grid import expand
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.experiments.store import TABLE_NAME, atomic_write, build_table, experiment_dir, read_records
 from splatbench.reports.figures import cell_means, curves_figure, pareto_figure
-from splatbench.reports.findings import Finding, axis_finding, parity_finding
+from splatbench.reports.findings import Finding, axis_finding
+from splatbench.reports.kind_report import kind_report
 from splatbench.reports.tables import AxisTable, MetricSpec, axis_table, cell_labels, display, metric_specs
 
 REPORT_NAME = "report.md"
 FIGURES = "figures"
-
-#: Per kind: (time metric, quality metric, figure file stem, title) of the time-against-error figure.
-TIME_QUALITY: dict[str, tuple[str, str, str, str]] = {
-    "train": ("train_seconds", "test_psnr", "time_vs_error",
-              "Training time against test PSNR per cell (mean over seeds)"),
-    "raster": ("fwd_bwd_rel", "exact_psnr", "speed_vs_error",
-               "Rasterizer speed against error to the exact Gaussian mixture (mean over seeds)"),
-}
-
 
 def interval_note(max_seeds: int) -> str:
     """How a table's cells are written, for the number of seeds its cells have."""
@@ -107,10 +99,11 @@ def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int) -> 
         f = axis_finding(t, spec.kind, table)
         if f is not None:
             findings[t.axis] = f
-    if spec.kind == "raster":
-        f = parity_finding(table)
+    declared = kind_report(spec.kind)
+    for name, make in declared.run_findings if declared is not None else ():
+        f = make(table)
         if f is not None:
-            findings["parity"] = f
+            findings[name] = f
     return Report(spec, table, total, metrics, axes, findings)
 
 
@@ -131,13 +124,14 @@ def write_report(report: Report, out: str | Path) -> Path:
         if path is not None:
             curve_paths[t.axis] = path
     pareto_path = None
-    tq = TIME_QUALITY.get(report.spec.kind)
+    declared = kind_report(report.spec.kind)
+    tq = declared.time_quality if declared is not None else None
     specs = {m.name: m for m in report.metrics}
-    if tq is not None and tq[0] in specs and tq[1] in specs and report.done:
-        means = cell_means(table, cell_labels(report.spec, table), tq[0], tq[1])
-        pareto_path = figures / f"{tq[2]}.png"
-        report.fronts = pareto_figure(means, list(report.spec.scenes), specs[tq[0]], specs[tq[1]], pareto_path,
-                                      tq[3])
+    if tq is not None and tq.time in specs and tq.quality in specs and report.done:
+        means = cell_means(table, cell_labels(report.spec, table), tq.time, tq.quality)
+        pareto_path = figures / f"{tq.stem}.png"
+        report.fronts = pareto_figure(means, list(report.spec.scenes), specs[tq.time], specs[tq.quality],
+                                      pareto_path, tq.title)
     text = render_markdown(report, curve_paths, pareto_path, out)
     atomic_write(out / REPORT_NAME, lambda temp: temp.write_text(text, encoding="utf-8"))
     return out / REPORT_NAME
@@ -182,12 +176,12 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
         lines += ["## Parity", "", report.findings["parity"].markdown(), ""]
 
     if pareto_path is not None:
-        tq = TIME_QUALITY[spec.kind]
+        tq = kind_report(spec.kind).time_quality
         specs = {m.name: m for m in report.metrics}
-        lines += [f"## {specs[tq[0]].label} against {specs[tq[1]].label}", "",
-                  f"{tq[3]}; bars are 95 % t intervals over seeds (none with one seed); ringed points are "
+        lines += [f"## {specs[tq.time].label} against {specs[tq.quality].label}", "",
+                  f"{tq.title}; bars are 95 % t intervals over seeds (none with one seed); ringed points are "
                   f"Pareto-optimal on the means (no other cell is both faster and better).", "",
-                  f"![{tq[2]}]({pareto_path.relative_to(out).as_posix()})", ""]
+                  f"![{tq.stem}]({pareto_path.relative_to(out).as_posix()})", ""]
         for scene, front in report.fronts.items():
             if front:
                 lines.append(f"- Pareto front on {scene}, fastest first: " + " → ".join(f"`{c}`" for c in front))
@@ -219,13 +213,8 @@ def source_path(spec: ExperimentSpec) -> str:
 
 def metric_meanings(kind: str) -> dict[str, str]:
     """The kind's metric documentation (name -> meaning), if it publishes one."""
-    if kind == "train":
-        from splatbench.experiments.train_kind import METRICS
-    elif kind == "raster":
-        from splatbench.experiments.raster_kind import METRICS
-    else:
-        return {}
-    return dict(METRICS)
+    declared = kind_report(kind)
+    return dict(declared.meanings) if declared is not None else {}
 
 
 def run_time(table: pd.DataFrame) -> str:
@@ -261,4 +250,4 @@ def _slug(text: str) -> str:
 
 
 __all__ = ["Report", "build_report", "write_report", "grid_table", "render_markdown", "run_time", "duration",
-           "REPORT_NAME", "FIGURES", "TIME_QUALITY"]
+           "REPORT_NAME", "FIGURES"]

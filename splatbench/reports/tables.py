@@ -29,54 +29,16 @@ import pandas as pd
 
 from splatbench.experiments.grid import expand
 from splatbench.experiments.spec import ExperimentSpec, flatten, unflatten
+from splatbench.reports.kind_report import MetricSpec, kind_report
 from splatbench.reports.stats import t_quantile
-
-
-@dataclass(frozen=True)
-class MetricSpec:
-    """How a report shows one metric (``metric.<name>`` in the table)."""
-
-    name: str          # metric name, without the "metric." prefix
-    label: str         # column heading
-    fmt: str           # format spec of one value, e.g. ".2f"
-    unit: str = ""     # unit written after differences ("dB", "ms"; "" for none)
-    better: str = ""   # "higher", "lower" or "" (no preferred direction)
-    interval: bool = True  # False: the table shows the mean alone (a fraction, a count of its own)
-
-
-#: The metrics each kind's tables show, in column order.
-KIND_METRICS: dict[str, tuple[MetricSpec, ...]] = {
-    "train": (
-        MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher"),
-        MetricSpec("test_ssim", "SSIM", ".4f", "", "higher"),
-        MetricSpec("num_gaussians", "Gaussians", ".0f", "", ""),
-        MetricSpec("train_seconds", "train time (s)", ".1f", "s", "lower"),
-        MetricSpec("render_ms_per_view", "render (ms/view)", ".1f", "ms", "lower"),
-    ),
-    "raster": (
-        MetricSpec("fwd_ms", "forward (ms)", ".1f", "ms", "lower"),
-        MetricSpec("fwd_bwd_ms", "fwd+bwd (ms)", ".1f", "ms", "lower"),
-        MetricSpec("fwd_bwd_rel", "fwd+bwd / default (median of pairs)", ".3f", "", "lower"),
-        MetricSpec("fwd_bwd_rel_low", "bootstrap low", ".3f", "", "", False),
-        MetricSpec("fwd_bwd_rel_high", "bootstrap high", ".3f", "", "", False),
-        MetricSpec("exact_psnr", "PSNR to exact (dB)", ".2f", "dB", "higher"),
-        MetricSpec("exact_max_abs", "max abs error to exact", ".2e", "", "lower"),
-        MetricSpec("parity_max_abs", "parity max abs", ".1e", "", "lower"),
-        MetricSpec("pairs", "pairs", ".0f", "", ""),
-        MetricSpec("evaluations", "pixel-Gaussian evaluations", ".3g", "", ""),
-        MetricSpec("loaded", "loaded (fraction of runs)", ".2f", "", "", False),
-        # the first baseline's names (ground truth = the reference with default options), for its parquet
-        MetricSpec("error_psnr", "PSNR to default-option reference (dB)", ".2f", "dB", "higher"),
-        MetricSpec("error_max_abs", "max abs error to default-option reference", ".2e", "", "lower"),
-    ),
-}
 
 
 def metric_specs(kind: str, table: pd.DataFrame) -> tuple[MetricSpec, ...]:
     """The kind's metrics present in ``table``; for another kind, every numeric metric."""
     present = {c[len("metric."):] for c in table.columns if c.startswith("metric.")}
-    if kind in KIND_METRICS:
-        return tuple(m for m in KIND_METRICS[kind] if m.name in present)
+    declared = kind_report(kind)
+    if declared is not None:
+        return tuple(m for m in declared.metrics if m.name in present)
     numeric = [c for c in table.columns if c.startswith("metric.") and pd.api.types.is_numeric_dtype(table[c])
                and not pd.api.types.is_bool_dtype(table[c])]
     return tuple(MetricSpec(c[len("metric."):], c[len("metric."):], ".4g") for c in numeric)
@@ -307,5 +269,5 @@ def _json(value: Any) -> str:
     return json.dumps(value, sort_keys=True)
 
 
-__all__ = ["MetricSpec", "KIND_METRICS", "metric_specs", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
+__all__ = ["MetricSpec", "metric_specs", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
            "axis_table", "cell_labels", "done_runs"]

@@ -12,20 +12,25 @@ Rendering (``render.py``, Mitsuba variant ``llvm_ad_rgb``)::
     render_dataset(scene, out=None, *, resolution=None, views=None, spp=None, force=False)
         -> RenderedDataset(path, cached, seconds, train, test, hash)
     load_mitsuba_scene(scene) -> mi.Scene              .shapes() for surface sampling
-    sample_surface(mi_scene, n, *, seed=0) -> SurfacePoints(xyz, normals, shape_index, shape_ids)
     render_rgb(mi_scene, camera, *, spp, seed=0) -> [H, W, 3] linear RGB
     render_depth(mi_scene, camera) -> [H, W] camera z (0 = no hit)
+
+Surface sampling (``surface.py``, the one implementation; `splatbench.init.from_surface` uses it)::
+
+    sample_surface(mi_scene, n, *, seed=0, albedo=False)
+        -> SurfacePoints(xyz, normals, shape_index, shape_ids, albedo)
 
 Load a rendered dataset with `splatbench.data.load_dataset`.
 """
 
 from splatbench.scenes.catalog import (RIG_KINDS, RigSpec, SceneSpec, builtin_scenes_dir, find_scenes, get_scene,
                                        load_scene_spec, parse_resolution, scene_dirs)
-from splatbench.scenes.render import (RenderedDataset, RenderPlan, SurfacePoints, default_out, linear_to_srgb,
-                                      load_mitsuba_scene, plan_render, points_from_depth, read_manifest,
-                                      render_dataset, render_depth, render_rgb, sample_surface, srgb_to_linear)
+from splatbench.scenes.render import (RenderedDataset, RenderPlan, default_out, linear_to_srgb, load_mitsuba_scene,
+                                      plan_render, points_from_depth, read_manifest, render_dataset, render_depth,
+                                      render_rgb, srgb_to_linear)
+from splatbench.scenes.surface import SurfacePoints, sample_surface, shape_order_key
 
 __all__ = ["RIG_KINDS", "RigSpec", "SceneSpec", "builtin_scenes_dir", "find_scenes", "get_scene", "load_scene_spec",
            "parse_resolution", "scene_dirs", "RenderedDataset", "RenderPlan", "SurfacePoints", "default_out",
            "linear_to_srgb", "load_mitsuba_scene", "plan_render", "points_from_depth", "read_manifest",
-           "render_dataset", "render_depth", "render_rgb", "sample_surface", "srgb_to_linear"]
+           "render_dataset", "render_depth", "render_rgb", "sample_surface", "shape_order_key", "srgb_to_linear"]

@@ -145,56 +145,7 @@ def render_depth(mi_scene, camera: Camera) -> np.ndarray:
     return np.where(t > 0, t * cos + camera.near, 0.0).astype(np.float32)
 
 
-# --------------------------------------------------------------------------- surfaces
-@dataclass(frozen=True)
-class SurfacePoints:
-    """Points sampled uniformly by area on a scene's shapes.
-
-    ``xyz`` [M, 3] float64 world positions; ``normals`` [M, 3] float64 unit shading-frame
-    normals (the side the shape's normal points to); ``shape_index`` [M] int64 index into
-    ``shape_ids`` (the shapes' XML ids, in ``mi.Scene.shapes()`` order).
-    """
-
-    xyz: np.ndarray
-    normals: np.ndarray
-    shape_index: np.ndarray
-    shape_ids: list[str]
-
-
-def sample_surface(mi_scene, n: int, *, seed: int = 0, include_emitters: bool = False) -> SurfacePoints:
-    """``n`` points uniform by area over ``mi_scene.shapes()`` (area lights left out unless asked).
-
-    Each shape gets a multinomial share of ``n`` proportional to its area, then
-    ``shape.sample_position`` with seeded uniform samples. Deterministic for a seed.
-    """
-    mi = mitsuba()
-    if not (isinstance(n, int) and n >= 0):
-        raise InputError(f"n: expected an int >= 0, got {n!r}")
-    shapes = [s for s in mi_scene.shapes() if include_emitters or not s.is_emitter()]
-    # Mitsuba loads plugins in parallel, so shapes() comes back in a different order on
-    # each load: sort by id and bounding box so that a seed gives the same points.
-    shapes.sort(key=lambda s: (s.id(), *np.asarray(s.bbox().min, dtype=np.float64).ravel(),
-                               *np.asarray(s.bbox().max, dtype=np.float64).ravel()))
-    if not shapes:
-        raise InputError("scene: has no shapes to sample")
-    areas = np.array([float(np.asarray(s.surface_area()).reshape(-1)[0]) for s in shapes])
-    rng = np.random.default_rng(seed)
-    counts = rng.multinomial(n, areas / areas.sum())
-    xyz, normals, index = [], [], []
-    for k, (shape, m) in enumerate(zip(shapes, counts)):
-        if m == 0:
-            continue
-        u = rng.random((2, m), dtype=np.float32)
-        ps = shape.sample_position(0.0, mi.Point2f(u[0], u[1]))
-        xyz.append(np.asarray(ps.p, dtype=np.float64).reshape(3, -1).T)
-        # planar shapes return one constant normal (width 1): broadcast it to m rows
-        normals.append(np.broadcast_to(np.asarray(ps.n, dtype=np.float64).reshape(3, -1).T, (m, 3)))
-        index.append(np.full(m, k, dtype=np.int64))
-    cat = (lambda a, w: np.concatenate(a) if a else np.zeros((0, w)))
-    return SurfacePoints(cat(xyz, 3), cat(normals, 3), np.concatenate(index) if index else np.zeros(0, np.int64),
-                         [s.id() for s in shapes])
-
-
+# --------------------------------------------------------------------------- points
 def points_from_depth(cameras: Sequence[Camera], depths: np.ndarray, images: np.ndarray, n: int, *,
                       seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Unproject a seeded random subset of ``n`` interior pixels of the given views.

@@ -15,11 +15,13 @@ Parameter groups (`Params`, torch leaf tensors with requires_grad):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar, NamedTuple, Protocol
 
 import torch
 
+from splatbench.errors import InputError
 from splatbench.raster.torch_bridge import RasterInfo
 
 PARAM_GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh_dc", "sh_rest")
@@ -61,6 +63,20 @@ def last_multiple(period: int, lo: int, hi: int) -> int | None:
     return m if m > lo else None
 
 
+def check_fields(obj, positive_ints: tuple[str, ...], nonneg: tuple[str, ...]) -> None:
+    """One-line `InputError` naming ``Class.field`` unless each ``positive_ints`` field is an
+    int >= 1 and each ``nonneg`` field a finite number >= 0 (strategies' ``__post_init__``)."""
+    name = type(obj).__name__
+    for f in positive_ints:
+        v = getattr(obj, f)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise InputError(f"{name}.{f}: expected a positive integer, got {v!r}")
+    for f in nonneg:
+        v = getattr(obj, f)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 or not math.isfinite(v):
+            raise InputError(f"{name}.{f}: expected a finite number >= 0, got {v!r}")
+
+
 class Strategy(Protocol):
     """One densification strategy. Implementations are small frozen dataclasses."""
 
@@ -70,6 +86,9 @@ class Strategy(Protocol):
     schedule_fields: ClassVar[dict[str, bool]]
     #: The initial opacity of the reference implementation (`TrainConfig.init_opacity = "auto"`).
     initial_opacity: ClassVar[float]
+    #: Whether `post_backward` reads ``info.means2d_absgrad`` (AbsGS): the trainer
+    #: rasterizes with ``absgrad=strategy.absgrad`` (the extra accumulation costs time).
+    absgrad: bool
 
     def last_topology_change(self, iterations: int) -> TopologyChange | None:
         """The last step of a run of ``iterations`` steps at which this strategy may

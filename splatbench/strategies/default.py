@@ -19,8 +19,9 @@ from typing import ClassVar, NamedTuple
 import torch
 
 from splatbench.errors import InputError
-from splatbench.strategies import ops
-from splatbench.strategies.base import Optimizers, Params, StepContext, TopologyChange, last_multiple
+import splatbench.strategies.ops as ops
+from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, check_fields,
+                                       last_multiple)
 
 
 class RefineStats(NamedTuple):
@@ -85,18 +86,6 @@ class DefaultState:
     history: list[RefineStats] = field(default_factory=list)
 
 
-def _check_fields(obj, positive_ints: tuple[str, ...], nonneg: tuple[str, ...]) -> None:
-    name = type(obj).__name__
-    for f in positive_ints:
-        v = getattr(obj, f)
-        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-            raise InputError(f"{name}.{f}: expected a positive integer, got {v!r}")
-    for f in nonneg:
-        v = getattr(obj, f)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 or not math.isfinite(v):
-            raise InputError(f"{name}.{f}: expected a finite number >= 0, got {v!r}")
-
-
 @dataclass(frozen=True)
 class DefaultStrategy:
     """3DGS adaptive density control; ``absgrad=True`` is AbsGS (registry name "absgrad").
@@ -137,7 +126,7 @@ class DefaultStrategy:
     seed: int = 0                 # the split's random children
 
     def __post_init__(self) -> None:
-        _check_fields(self, ("refine_every", "reset_every", "early_stop_patience"),
+        check_fields(self, ("refine_every", "reset_every", "early_stop_patience"),
                       ("refine_start", "refine_stop", "grad_threshold", "percent_dense", "prune_opacity",
                        "max_screen_size", "max_world_size", "early_stop_rel_tol"))
         if not 0.0 < self.reset_value < 1.0:

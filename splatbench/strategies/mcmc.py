@@ -23,9 +23,10 @@ from typing import ClassVar, NamedTuple
 import torch
 
 from splatbench.errors import InputError
-from splatbench.strategies import ops
-from splatbench.strategies.base import Optimizers, Params, StepContext, TopologyChange, last_multiple
-from splatbench.strategies.default import LossPlateau, _check_fields
+import splatbench.strategies.ops as ops
+from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, check_fields,
+                                       last_multiple)
+from splatbench.strategies.default import LossPlateau
 
 
 class MCMCStats(NamedTuple):
@@ -74,7 +75,7 @@ class MCMCStrategy:
     seed: int = 0                 # sampling and noise
 
     def __post_init__(self) -> None:
-        _check_fields(self, ("refine_every", "early_stop_patience"),
+        check_fields(self, ("refine_every", "early_stop_patience"),
                       ("cap_max", "noise_lr", "refine_start", "refine_stop", "growth", "opacity_reg", "scale_reg",
                        "early_stop_rel_tol"))
         if isinstance(self.cap_max, bool) or not isinstance(self.cap_max, int):

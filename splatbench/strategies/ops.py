@@ -32,9 +32,8 @@ import torch
 import torch.nn.functional as F
 
 from splatbench.errors import InputError
+from splatbench.strategies.base import Optimizers, Params
 
-Params = dict[str, torch.Tensor]
-Optimizers = dict[str, torch.optim.Optimizer]
 Buffers = dict[str, torch.Tensor]
 
 # gsplat's `compute_relocation` clamps the number of copies of one Gaussian to this.

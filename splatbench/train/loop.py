@@ -113,8 +113,7 @@ class Trainer:
     (no rendering); `step` runs one iteration; `evaluate` measures the test split."""
 
     def __init__(self, config: TrainConfig, *, dataset=None) -> None:
-        config.validate()
-        self.config = config
+        self.config = config  # validated on construction
         self.strategy = config.make_strategy()
         if dataset is None:
             if not config.dataset:
@@ -141,7 +140,7 @@ class Trainer:
         self.optimizers = make_optimizers(self.params, self.lrs, config.adam_eps)
         self.means_lr = ExponentialLR(config.lr_means, config.lr_means_final, config.iterations, self.extent)
         self.state = self.strategy.initialize_state(self.params)
-        self.absgrad = bool(getattr(self.strategy, "absgrad", False))
+        self.absgrad = bool(self.strategy.absgrad)  # declared by the Strategy protocol
         self.sh = ShSchedule(config.sh_degree, config.sh_steps, min_gain_db=config.sh_auto_min_gain_db)
         self.images = torch.from_numpy(np.ascontiguousarray(train.images, dtype=np.float32))
         self.alphas = None if train.alphas is None else torch.from_numpy(np.asarray(train.alphas, np.float32))

@@ -11,6 +11,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from splatbench.train.losses import ssim, to_bchw
@@ -19,9 +20,15 @@ from splatbench.train.losses import ssim, to_bchw
 ALEXNET_CHECKPOINT = "alexnet-owt-7be5be79.pth"
 
 
-def psnr(pred: torch.Tensor, target: torch.Tensor) -> float:
-    """PSNR in dB of [H, W, 3] images in [0, 1] (``pred`` clamped to [0, 1]); inf if equal."""
-    mse = float(((pred.clamp(0, 1) - target) ** 2).mean())
+def psnr(pred: torch.Tensor | np.ndarray, target: torch.Tensor | np.ndarray, *, clamp: bool = True) -> float:
+    """PSNR in dB (peak 1) of [H, W, 3] images; inf if equal. The one PSNR of splatbench.
+
+    Tensors or arrays (arrays are computed in their own dtype, e.g. float64). ``pred`` is
+    clamped to [0, 1] (an evaluation of a trained model's display image) unless
+    ``clamp=False`` (the raster run kind compares unclipped radiance with the exact model).
+    """
+    pred, target = torch.as_tensor(pred), torch.as_tensor(target)
+    mse = float((((pred.clamp(0, 1) if clamp else pred) - target) ** 2).mean())
     return math.inf if mse == 0 else -10.0 * math.log10(mse)
 
 

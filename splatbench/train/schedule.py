@@ -67,7 +67,7 @@ def scale_step(value: int, iterations: int, schedule: str, *, interval: bool = F
 def scaled_strategy(strategy, iterations: int, schedule: str):
     """A copy of ``strategy`` with its ``schedule_fields`` (name -> is-an-interval) in
     the steps of a run of ``iterations`` under ``schedule`` (unchanged when "absolute")."""
-    fields: dict[str, bool] = dict(getattr(strategy, "schedule_fields", {}))
+    fields: dict[str, bool] = dict(strategy.schedule_fields)  # declared by the Strategy protocol
     if schedule == "absolute" or not fields:
         scale_step(0, iterations, schedule)  # validates the name
         return strategy

@@ -1,0 +1,68 @@
+"""The `render`, `report` and `bench train` commands end to end (small and fast)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from PIL import Image
+
+from splatbench.cli import main
+from splatbench.gaussians import SH_C0, Gaussians
+
+
+def invoke(*args) -> tuple[int, str]:
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    return res.exit_code, res.output
+
+
+def test_render_a_ply_frames_its_gaussian(tmp_path):
+    """One red Gaussian: the framing camera puts it in the middle of a WxH PNG on black."""
+    red = np.array([[[0.9, 0.05, 0.05]]])
+    g = Gaussians(means=np.array([[1.0, 2.0, 3.0]]), log_scales=np.full((1, 3), -1.0),
+                  quats=np.array([[1.0, 0, 0, 0]]), opacity_logits=np.array([4.0]), sh=(red - 0.5) / SH_C0)
+    g.to_ply(tmp_path / "one.ply")
+    code, out = invoke("render", tmp_path / "one.ply", "--size", "40x30", "--out", tmp_path / "one.png")
+    assert code == 0, out
+    assert out.strip() == f"rendered 1 Gaussians at 40x30: {(tmp_path / 'one.png').resolve()}"
+    img = np.asarray(Image.open(tmp_path / "one.png").convert("RGB"))
+    assert img.shape == (30, 40, 3)
+    centre, corner = img[15, 20].astype(int), img[0, 0].astype(int)
+    assert centre[0] > 100 and centre[0] > 4 * max(centre[1], centre[2], 1)  # red where the Gaussian is
+    assert corner.max() == 0                                                 # black background far from it
+    code, out = invoke("render", tmp_path / "one.ply", "--sh-degree", "4")
+    assert code == 2 and out.strip() == "splatbench: error: --sh-degree: expected an int in 0..3, got 4"
+
+
+def test_report_of_a_finished_dummy_grid(tmp_path):
+    exp = tmp_path / "sweep.toml"
+    exp.write_text('name = "sweep"\nkind = "dummy"\nscenes = ["alpha"]\nseeds = [0, 1]\n[axes]\nx = [0.0, 2.0]\n')
+    code, out = invoke("run", exp, "--results", tmp_path / "results", "--workers", "1", "--no-progress")
+    assert code == 0, out
+    code, out = invoke("report", exp, "--results", tmp_path / "results", "--out", tmp_path / "report")
+    assert code == 0, out
+    lines = out.strip().splitlines()
+    assert lines == ["sweep: 4 done, 0 failed, 0 not run of 4", str(tmp_path / "report" / "report.md")]
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "sweep" in text and (tmp_path / "report" / "results.parquet").is_file()
+
+
+def test_bench_train_writes_one_row_per_size(tmp_path):
+    code, out = invoke("bench", "train", "--size", "16", "--gaussians", "64", "--iterations", "2", "--warmup", "1",
+                       "--device", "cpu", "--out", tmp_path)
+    assert code == 0, out
+    rows = list(csv.DictReader((tmp_path / "train.csv").open()))
+    assert [(r["width"], r["height"], r["n"], r["iterations"], r["device"]) for r in rows] == [
+        ("16", "16", "64", "2", "cpu")]
+    row = rows[0]
+    assert float(row["it_per_s"]) > 0
+    # the step's parts are shares of the timed steps: they add up to 100 % up to per-part rounding (0.05 each)
+    parts = ("raster_forward", "raster_backward", "loss", "optimizer", "other")
+    assert sum(float(row[f"{p}_pct"]) for p in parts) == pytest.approx(100.0, abs=0.05 * len(parts))
+    data = json.loads((tmp_path / "train.json").read_text())
+    assert isinstance(data, dict) and out.rstrip().endswith(f"wrote {Path(tmp_path) / 'train.csv'} and "
+                                                            f"{Path(tmp_path) / 'train.json'}")
