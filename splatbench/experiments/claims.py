@@ -36,21 +36,32 @@ HEARTBEAT_EVERY = 30.0     # seconds between touches of a live runner's claims
 HEARTBEAT_TIMEOUT = 600.0  # seconds without a touch after which another host's claim is stale
 
 
-def process_start(pid: int) -> str | None:
-    """The start time of process ``pid`` (clock ticks since boot, from /proc), None
-    when no such process exists or /proc is not there."""
+def _proc_stat(pid: int) -> list[str] | None:
+    """The fields of /proc/<pid>/stat after the command name (state first), None when there
+    is no such process or no /proc."""
     try:
         with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as fh:
             stat = fh.read()
     except OSError:
         return None
-    return stat[stat.rindex(")") + 2:].split()[19]  # field 22, counted after the command name
+    return stat[stat.rindex(")") + 2:].split()
+
+
+def process_start(pid: int) -> str | None:
+    """The start time of process ``pid`` (clock ticks since boot, from /proc), None
+    when no such process exists or /proc is not there."""
+    fields = _proc_stat(pid)
+    return None if fields is None else fields[19]  # field 22, counted after the command name
 
 
 def pid_alive(pid: int, start: str | None = None) -> bool:
-    """Whether process ``pid`` exists (and, given ``start``, started then)."""
-    if start is not None and os.path.isdir("/proc"):
-        return process_start(pid) == start
+    """Whether process ``pid`` exists (and, given ``start``, started then). A zombie (exited,
+    not yet reaped: an orphaned worker whose reaper is slow) is not alive: it writes nothing more."""
+    if os.path.isdir("/proc"):
+        fields = _proc_stat(pid)
+        if fields is None or fields[0] in ("Z", "X"):
+            return False
+        return start is None or fields[19] == start
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

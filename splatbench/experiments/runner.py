@@ -154,8 +154,18 @@ class _LocalExecutor:
 
         return isinstance(exc, BrokenProcessPool)
 
+    def _shutdown(self, **kwargs) -> None:
+        """``pool.shutdown``; a pool broken by a killed worker may have closed its wake-up pipe
+        already ("handle is closed"): then there is nothing left to wake, and the error (which the
+        CLI would print as a file-system fault instead of the signal that stopped the runner) is
+        dropped. Workers are still terminated and joined by `close`."""
+        try:
+            self.pool.shutdown(**kwargs)
+        except OSError:
+            pass
+
     def restart(self) -> None:
-        self.pool.shutdown(wait=False, cancel_futures=True)
+        self._shutdown(wait=False, cancel_futures=True)
         self.pool = self._new_pool()
 
     def close(self, cancel: bool = False) -> None:
@@ -164,7 +174,7 @@ class _LocalExecutor:
         processes = list((getattr(self.pool, "_processes", None) or {}).values()) if cancel else []
         for proc in processes:
             proc.terminate()
-        self.pool.shutdown(wait=not cancel, cancel_futures=cancel)
+        self._shutdown(wait=not cancel, cancel_futures=cancel)
         deadline = time.monotonic() + 5.0
         for proc in processes:
             proc.join(max(0.0, deadline - time.monotonic()))
@@ -172,7 +182,7 @@ class _LocalExecutor:
                 proc.kill()
                 proc.join(1.0)
         if cancel:  # the workers are gone: let the pool's manager thread end and free its semaphores
-            self.pool.shutdown(wait=True)
+            self._shutdown(wait=True)
             self.pool = None
             gc.collect()
 
