@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.backends.base import OUTPUTS, Backend
+from splatbench.train.metrics import psnr
 from splatbench.backends.compare import (DEPTH_ALPHA_MIN, FORWARD_ATOL, GROUPS, OFF_THRESHOLD, GradError,
                                          ImageError, Timing, one_line)
 from splatbench.errors import InputError
@@ -87,9 +88,8 @@ def image_errors(out, oracle, outputs: Sequence[str]) -> dict[str, ImageError]:
         err = np.abs(mine[name] - ref[name])
         err[~np.isfinite(err)] = np.inf  # a NaN pixel is off by everything
         per_pixel = err.reshape(err.shape[0], err.shape[1], -1).max(-1)
-        mse = float(np.mean(err ** 2))
-        psnr = math.inf if mse == 0 else -10.0 * math.log10(mse)
-        errors[name] = ImageError(float(err.max()), psnr, float(np.mean(per_pixel > OFF_THRESHOLD)),
+        value = psnr(err, np.zeros_like(err), clamp=False)  # -inf when a pixel is non-finite
+        errors[name] = ImageError(float(err.max()), value, float(np.mean(per_pixel > OFF_THRESHOLD)),
                                   int((per_pixel > FORWARD_ATOL).sum()))
     return errors
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,8 +63,10 @@ def _psnr(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
     """", rgb PSNR x dB against the oracle" (peak 1), or "" when rgb is not compared."""
     if "rgb" not in outputs:
         return ""
-    mse = float(np.mean((got[..., :3] - ref[..., :3]) ** 2))
-    return f", rgb PSNR {-10 * np.log10(mse):.1f} dB against the oracle" if mse > 0 else ""
+    from splatbench.train.metrics import psnr
+
+    value = psnr(got[..., :3], ref[..., :3], clamp=False)
+    return f", rgb PSNR {value:.1f} dB against the oracle" if math.isfinite(value) else ""
 
 
 def _compared(probe: Probe, ctx: Context) -> tuple[str, ...]:
