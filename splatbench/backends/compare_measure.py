@@ -216,11 +216,11 @@ class GradOracle:
 
     def _finite_differences(self, info, v: Cotangents, visible: np.ndarray) -> dict:
         import reference
-        from splatbench.backends.builtins.reference_backend import FD_EPS, _render_kwargs
+        from splatbench.backends.builtins.reference_backend import FD_EPS, reference_kwargs
 
         g = self.images.workload.gaussians
         arrays = [np.asarray(getattr(g, k), dtype=np.float64) for k in GROUPS]
-        kwargs = _render_kwargs(info, self.images.camera, "exact" if info.exact else "matched", None, None)
+        kwargs = reference_kwargs(info, self.images.camera, "exact" if info.exact else "matched", None, None)
         drawn = np.flatnonzero(visible) if np.any(visible) else np.arange(len(g))
         rng = np.random.default_rng(self.seed)
         out = {}

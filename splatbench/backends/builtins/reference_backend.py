@@ -86,7 +86,7 @@ def reference_render(conventions, means, log_scales, quats, opacity_logits, sh, 
     """
     import reference
 
-    kwargs = _render_kwargs(conventions, camera, mode, sh_degree, background)
+    kwargs = reference_kwargs(conventions, camera, mode, sh_degree, background)
     arrays = [_as_numpy(x) for x in (means, log_scales, quats, opacity_logits, sh)]
     try:
         return reference.render(*arrays, **kwargs)
@@ -94,8 +94,9 @@ def reference_render(conventions, means, log_scales, quats, opacity_logits, sh, 
         raise InputError(str(exc)) from None
 
 
-def _render_kwargs(conventions, camera, mode, sh_degree, background) -> dict:
-    """Every keyword of `reference.render` but the five parameter groups."""
+def reference_kwargs(conventions, camera, mode, sh_degree, background) -> dict:
+    """Every keyword of `reference.render` but the five parameter groups (used by `reference_render`,
+    the FD backward and compare's sampled finite differences)."""
     if mode not in MODES:
         raise InputError(f"mode: expected one of {list(MODES)}, got {mode!r}")
     opts = _options(conventions, camera)
@@ -136,7 +137,7 @@ def _render_fn(mode: str, conventions: dict):
         @staticmethod
         def backward(ctx, v_rgb, v_alpha, v_depth):
             which = {k for k, need in zip(GROUPS, ctx.needs_input_grad[:5]) if need}
-            kwargs = _render_kwargs(conventions, ctx.camera, mode, ctx.sh_degree, ctx.background)
+            kwargs = reference_kwargs(conventions, ctx.camera, mode, ctx.sh_degree, ctx.background)
             grads = _fd_vjp(ctx.params, (v_rgb, v_alpha, v_depth), which, kwargs)
             return (*(None if g is None else torch.from_numpy(g).to(dtype) for g, dtype in zip(grads, ctx.dtypes)),
                     None, None, None)
