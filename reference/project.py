@@ -161,8 +161,8 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width,
         width, height: image size in pixels.
         mode: "matched" follows conventions.md steps 1-10; "exact" is the smooth function
             for finite differences: culls only outside the clip planes (near <= z <= far),
-            no Jacobian clamp, no log-scale clip, no radius cutoff (cutoff_sq = inf), no big
-            or off-screen cull. Radii are
+            no log-scale clip, no radius cutoff (cutoff_sq = inf), no big or off-screen
+            cull; the Jacobian clamp stays (it belongs to the projection model). Radii are
             then the 3-sigma extent, for information only.
         eps2d: added to the diagonal of Σ2D (low-pass filter).
         near, far: matched-mode depth culling planes.
@@ -205,15 +205,18 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width,
         #    without the plane its projection, ~1/z, would cover the image).
         keep = (z >= near) & (z <= far)
 
-        # 3. EWA Jacobian, with graphdeco's clamp of x/z and y/z in matched mode.
+        # 3. EWA Jacobian, with graphdeco's clamp of x/z and y/z, in both modes: the clamp is part
+        #    of the projection model (where the EWA linearisation is taken), not of the rasterizer's
+        #    shortcuts. Unclamped, a Gaussian far outside the view (x/z ~ 100 near the eye) gets a
+        #    footprint stretched by ~x/z that smears across the image: on garden that alone put the
+        #    exact render 17 dB from every rasterizer (46.5 dB with the clamp; docs/conventions.md).
         tx, ty = t[:, 0], t[:, 1]
-        if not exact:
-            lim_x_pos = (width - cx) / fx + JACOBIAN_GUARD * (width / 2) / fx
-            lim_x_neg = cx / fx + JACOBIAN_GUARD * (width / 2) / fx
-            lim_y_pos = (height - cy) / fy + JACOBIAN_GUARD * (height / 2) / fy
-            lim_y_neg = cy / fy + JACOBIAN_GUARD * (height / 2) / fy
-            tx = z * np.clip(t[:, 0] / z, -lim_x_neg, lim_x_pos)
-            ty = z * np.clip(t[:, 1] / z, -lim_y_neg, lim_y_pos)
+        lim_x_pos = (width - cx) / fx + JACOBIAN_GUARD * (width / 2) / fx
+        lim_x_neg = cx / fx + JACOBIAN_GUARD * (width / 2) / fx
+        lim_y_pos = (height - cy) / fy + JACOBIAN_GUARD * (height / 2) / fy
+        lim_y_neg = cy / fy + JACOBIAN_GUARD * (height / 2) / fy
+        tx = z * np.clip(t[:, 0] / z, -lim_x_neg, lim_x_pos)
+        ty = z * np.clip(t[:, 1] / z, -lim_y_neg, lim_y_pos)
         J = np.zeros((n, 2, 3))
         J[:, 0, 0] = fx / z
         J[:, 0, 2] = -fx * tx / z**2

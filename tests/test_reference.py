@@ -320,12 +320,27 @@ def test_jacobian_clamp(mode):
     s, z = 0.5, 1.0
     proj = project(*gaussians([1.5 * z, 0, z], [s], [OPACITY], [COLOUR])[:4], CAM_K, EYE, WIDTH, HEIGHT, mode=mode)
     lim = (WIDTH - CX) / F + 0.3 * (WIDTH / 2) / F
-    slope = lim if mode == "matched" else 1.5
+    slope = lim  # the clamp is part of the projection model: exact mode keeps it too
     xx = (F * s / z) ** 2 * (1 + slope**2) + 0.3
     yy = (F * s / z) ** 2 + 0.3
     assert proj.visible[0]
     np.testing.assert_allclose(proj.conics[0], [1 / xx, 0, 1 / yy], rtol=RTOL, atol=ATOL)
     assert proj.means2d[0, 0] == pytest.approx(F * 1.5 + CX, rel=RTOL)  # unclamped mean
+
+
+def test_exact_mode_keeps_the_jacobian_clamp_so_far_off_screen_gaussians_do_not_smear():
+    # A small Gaussian beside the eye: x/z = 50, mean2d x = 40·50 + 16.5 = 2016.5 px, far right
+    # of the 32-px image. Unclamped, Σ2D_xx = (fx·s/z)²·(1 + 50²) = 16²·2501 (std 800 px) and its
+    # tail would put alpha = 0.7·exp(-(2016.5 - 31.5)²/(2·Σ2D_xx)) ≈ 0.03 on the right edge;
+    # with the clamp (slope 0.5075) std is 18 px and nothing reaches the image (exp(-6000)).
+    s, z, x = 0.02, 0.05, 2.5
+    params = gaussians([x, 0, z], [s], [OPACITY], [COLOUR])
+    lim = (WIDTH - CX) / F + 0.3 * (WIDTH / 2) / F
+    unclamped = OPACITY * np.exp(-((F * x / z + CX - 31.5) ** 2) / (2 * ((F * s / z) ** 2 * (1 + (x / z) ** 2) + 0.3)))
+    clamped = OPACITY * np.exp(-((F * x / z + CX - 31.5) ** 2) / (2 * ((F * s / z) ** 2 * (1 + lim**2) + 0.3)))
+    assert unclamped > 0.02 and clamped == 0.0  # the closed forms the test tells apart
+    out = draw(params, mode="exact")
+    assert out.alpha.max() == 0.0  # exp underflows to exactly 0 in float64
 
 
 def test_culling():

@@ -265,8 +265,8 @@ def render_markdown(record: dict, table: pd.DataFrame, figures: list[Path], out:
 _outlier_cell(r), r.forward_verdict] for _, r in table.iterrows()]), "",
         "### Against the exact Gaussian mixture", "",
         "`reference` in mode \"exact\" (docs/conventions.md): no alpha_min skip, alpha clamp, radius cutoff or "
-        "early stop, and also no Jacobian clamp, log-scale clip or culling but the camera's clip planes, so "
-        "Gaussians far off-screen count in full.", "",
+        "early stop, and also no log-scale clip or culling but the camera's clip planes, so Gaussians off-screen "
+        "count in full; graphdeco's Jacobian clamp stays, as part of the projection model.", "",
         _table(["workload", "backend", "rgb", "alpha", "depth"],
                [[r.workload, r.backend, *_error_cells(r, "exact")] for _, r in table.iterrows()]), "",
         "## Gradients", "",

@@ -42,7 +42,8 @@ One run:
 
    * ``exact_*``: against the **exact** model (``mode="exact"``: every Gaussian in
      front of the camera on every pixel, every SH band of the workload; no
-     ``alpha_min``, no clamp, no radius cut-off, no early stop). This is the error an
+     ``alpha_min``, no alpha clamp, no radius cut-off, no early stop; the Jacobian clamp,
+     part of the projection model, stays). This is the error an
      option trades for its speed; an option that brings the render closer to the
      Gaussian mixture (a lower ``alpha_min``) lowers it. It depends only on the
      workload and the scale, so it is computed once (in `prepare`, in the parent) and

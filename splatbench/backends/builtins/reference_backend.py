@@ -5,7 +5,7 @@
 
 ``reference`` renders in ``mode="matched"`` with graphdeco's approximations (or the ones
 given); ``reference-exact`` renders the exact Gaussian mixture (``mode="exact"``: no
-cutoff, no clamp, no skip, no early stop). Both differentiate by central finite
+cutoff, no alpha clamp, no skip, no early stop; the Jacobian clamp stays). Both differentiate by central finite
 differences of the oracle (`reference.finite_difference_grad`): two renders per
 parameter entry, so only for tiny scenes (``slow_gradients=True``).
 """
