@@ -60,9 +60,9 @@ import numpy as np
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
 from splatbench.fsutil import replace_dir
+from splatbench.mitsuba_loader import MITSUBA_VARIANT, mitsuba
 from splatbench.scenes.catalog import SceneSpec, get_scene, parse_resolution
 
-MITSUBA_VARIANT = "llvm_ad_rgb"
 #: Bump when the renderer's output changes for the same inputs (invalidates caches).
 RENDERER_VERSION = 1
 MANIFEST = "manifest.json"
@@ -71,16 +71,6 @@ DATASET_FORMAT = "splatbench-dataset/1"
 MAX_SAMPLES_PER_PASS = 1 << 22
 #: Relative depth jump to a 4-neighbour that marks a pixel as a silhouette edge (no point there).
 EDGE_REL_DEPTH = 0.02
-
-
-def mitsuba():
-    """The ``mitsuba`` module with the variant set to `MITSUBA_VARIANT` (``llvm_ad_rgb``)."""
-    import splatbench  # noqa: F401 - sets DRJIT_LIBLLVM_PATH before drjit loads
-    import mitsuba as mi
-
-    if mi.variant() != MITSUBA_VARIANT:
-        mi.set_variant(MITSUBA_VARIANT)
-    return mi
 
 
 def load_mitsuba_scene(scene: SceneSpec | str | Path, extra_dirs: Iterable[str | Path] = ()):
