@@ -123,7 +123,7 @@ class Cotangents:
 
 def torch_inputs(workload, device: str) -> tuple:
     """The five parameter groups as float32 torch tensors on ``device``."""
-    from splatbench.bench.raster import torch_params
+    from splatbench.bench.timing import torch_params
 
     return tuple(p.to(device) for p in torch_params(workload.gaussians))
 
