@@ -17,10 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.backends.base import OUTPUTS, Backend
-from splatbench.train.metrics import psnr
-from splatbench.backends.compare import (DEPTH_ALPHA_MIN, FORWARD_ATOL, GROUPS, OFF_THRESHOLD, GradError,
-                                         ImageError, Timing, one_line)
+from splatbench.backends.builtins.reference_backend import GROUPS
+from splatbench.backends.compare_types import (DEPTH_ALPHA_MIN, FORWARD_ATOL, OFF_THRESHOLD, GradError, ImageError,
+                                               Timing, one_line)
 from splatbench.errors import InputError
+from splatbench.train.metrics import psnr
 
 
 def as_numpy(x) -> np.ndarray:
