@@ -37,8 +37,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from splatbench.backends.compare_types import (BOUNDARY_FRACTION, MAX_ORACLE_PIXELS, GradError, ImageError, Timing,
-                                               gradient_bound, one_line)
-from splatbench.errors import InputError
+                                               gradient_bound)
+from splatbench.errors import InputError, one_line
 
 @dataclass(frozen=True)
 class CompareSettings:

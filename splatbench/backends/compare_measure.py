@@ -19,8 +19,8 @@ import numpy as np
 from splatbench.backends.base import OUTPUTS, Backend
 from splatbench.backends.builtins.reference_backend import GROUPS
 from splatbench.backends.compare_types import (DEPTH_ALPHA_MIN, FORWARD_ATOL, OFF_THRESHOLD, GradError, ImageError,
-                                               Timing, one_line)
-from splatbench.errors import InputError
+                                               Timing)
+from splatbench.errors import InputError, one_line
 from splatbench.train.metrics import psnr
 
 

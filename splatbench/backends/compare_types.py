@@ -73,9 +73,3 @@ class Timing:
     note: str = ""
     peak_mb: float = math.nan
     memory_kind: str = ""
-
-
-def one_line(exc: BaseException) -> str:
-    """``"TypeName: first line of the message"``, at most 300 characters (a row's error cell)."""
-    text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0] if text else ''}"[:300]
