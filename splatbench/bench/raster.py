@@ -9,6 +9,11 @@ that workload's alone. `run_suite` runs a list of workloads that way.
 
 Units: milliseconds (ms) and megabytes (MB = 10^6 bytes). docs/benchmarks.md
 describes every field of `RasterBenchResult` and how throughput is defined.
+
+Size (~430 lines, over the ~400 guideline on purpose): this is one benchmark from
+command-line workload to table -- workloads, settings, the result row, `run_one` and
+its subprocess entry, and the table and files; the timing closures and the machine
+description already live apart (`bench.timing`, `bench.machine`).
 """
 
 from __future__ import annotations
