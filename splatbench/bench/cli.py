@@ -37,9 +37,9 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
     from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, parse_synthetic, parse_workload,
                                          run_suite, standard_suite, write_csv, write_json)
     from splatbench.checks import check_image_size
-    from splatbench.commands.render import parse_options
+    from splatbench.overrides import parse_overrides
 
-    settings = BenchSettings(repeats=repeats, device=device, options=parse_options(options))
+    settings = BenchSettings(repeats=repeats, device=device, options=parse_overrides(options, "--option"))
     settings.validate()
     specs = [parse_synthetic(count, size, seed) for count, size in synthetic]
     for spec in specs:  # before any workload runs (Dr.Jit's array limit, this machine's memory)
