@@ -45,7 +45,7 @@ def unflatten(flat: Mapping[str, Any]) -> dict[str, Any]:
         *parents, last = path.split(".")
         for part in parents:
             node = node.setdefault(part, {})
-        node[last] = _copy(value)
+        node[last] = plain(value)
     return nested
 
 
@@ -68,11 +68,13 @@ def _set_path(flat: dict[str, Any], path: str, value: Any, *, where: str) -> Non
     flat[path] = value
 
 
-def _copy(value: Any) -> Any:
+def plain(value: Any) -> Any:
+    """A deep copy of a config value as plain JSON types: mappings as dicts, tuples and lists
+    as lists (what a run kind, a record and `canonical_json` receive)."""
     if isinstance(value, Mapping):
-        return {k: _copy(v) for k, v in value.items()}
+        return {k: plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_copy(v) for v in value]
+        return [plain(v) for v in value]
     return value
 
 

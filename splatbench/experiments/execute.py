@@ -14,6 +14,7 @@ from datetime import datetime
 from typing import Any
 
 from splatbench.errors import one_line
+from splatbench.experiments.configs import plain
 from splatbench.experiments.grid import RunSpec
 from splatbench.experiments.kinds import check_output, get_kind
 from splatbench.experiments.store import WORK_DIR, RunRecord, experiment_dir, worker_name, write_record
@@ -27,12 +28,12 @@ def execute_run(run: RunSpec, results_dir: str) -> dict[str, Any]:
     started, t0 = datetime.now().astimezone(), time.perf_counter()
     workdir = experiment_dir(results_dir, run.experiment) / WORK_DIR / run.run_id
     record = RunRecord(run_id=run.run_id, experiment=run.experiment, kind=run.kind, scene=run.scene, seed=run.seed,
-                       status="done", config=plain_config(run.config), labels=dict(run.labels), worker=worker_name(),
+                       status="done", config=plain(run.config), labels=dict(run.labels), worker=worker_name(),
                        started=started.isoformat(timespec="seconds"))
     try:
         workdir.mkdir(parents=True, exist_ok=True)
         kind = get_kind(run.kind)
-        output = check_output(kind.run(plain_config(run.config), workdir), run.kind)
+        output = check_output(kind.run(plain(run.config), workdir), run.kind)
         record.metrics, record.curves = dict(output.metrics), output.curves
     except Exception as exc:  # noqa: BLE001 - every failure of a run is recorded, not raised
         record.status, record.error = "failed", one_line(exc)
@@ -41,12 +42,3 @@ def execute_run(run: RunSpec, results_dir: str) -> dict[str, Any]:
     record.finished = datetime.now().astimezone().isoformat(timespec="seconds")
     write_record(results_dir, record)
     return record.to_dict()
-
-
-def plain_config(value: Any) -> Any:
-    """``value`` with tuples as lists, dicts copied: what a run kind and a record receive."""
-    if isinstance(value, dict):
-        return {k: plain_config(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [plain_config(v) for v in value]
-    return value

@@ -51,7 +51,7 @@ from typing import Any
 
 from splatbench.errors import InputError, one_line
 from splatbench.experiments.claims import HEARTBEAT_EVERY, Claim, remove_stale_claim_temps, try_claim
-from splatbench.experiments.execute import plain_config
+from splatbench.experiments.configs import plain
 from splatbench.experiments.executors import DaskExecutor, LocalExecutor
 from splatbench.experiments.grid import RunSpec, expand
 from splatbench.experiments.kinds import get_kind
@@ -123,7 +123,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
 
     kind = get_kind(spec.kind)
     if kind.prepare is not None:
-        kind.prepare([plain_config(r.config) for r in pending])
+        kind.prepare([plain(r.config) for r in pending])
 
     threads = max(1, cpus // workers)
     done = failed = claimed = 0
@@ -272,7 +272,7 @@ def _collect_written(suspects: deque[RunSpec], results_dir: str, finish) -> None
 def _failed(run: RunSpec, error: str) -> RunRecord:
     now = datetime.now().astimezone().isoformat(timespec="seconds")
     return RunRecord(run_id=run.run_id, experiment=run.experiment, kind=run.kind, scene=run.scene, seed=run.seed,
-                     status="failed", config=plain_config(run.config), labels=dict(run.labels), error=error,
+                     status="failed", config=plain(run.config), labels=dict(run.labels), error=error,
                      started=now, finished=now, worker="")
 
 

@@ -80,13 +80,15 @@ def _gaussians(means, sigmas, colours, *, quats=None, sh_rest=None) -> Gaussians
 
 
 def _grid(camera: Camera, rng: np.random.Generator, count: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """``count`` x ``count`` pixel positions (spacing W/count) and distinct depths near the target."""
+    """``count`` x ``count`` world points at pixel positions spaced W/count, at distinct camera
+    depths near the target, in no particular screen order: (means [count², 3], depths [count²])."""
     w = camera.width
     offsets = (np.arange(count) - (count - 1) / 2) * (w / count)
     uu, vv = np.meshgrid(camera.cx + offsets, camera.cy + offsets)
     depths = _DISTANCE * (1.0 + np.linspace(-0.075, 0.075, count * count))
     rng.shuffle(depths)  # depth-separated, in no particular screen order
-    return np.stack([uu.ravel(), vv.ravel()], axis=1), depths
+    means = np.stack([_point_at(camera, u, v, z) for u, v, z in zip(uu.ravel(), vv.ravel(), depths)])
+    return means, depths
 
 
 def _random_quats(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -106,8 +108,7 @@ def size_cases(width: int = 128, sizes_px: Sequence[float] | None = None, *, see
     out = []
     for s in sizes:
         rng = np.random.default_rng(seed)
-        uv, depths = _grid(cam, rng)
-        means = np.stack([_point_at(cam, u, v, z) for (u, v), z in zip(uv, depths)])
+        means, depths = _grid(cam, rng)
         sig = s * depths / cam.fx
         out.append(Case("size", "sigma_px", float(s), _gaussians(means, np.repeat(sig[:, None], 3, 1),
                                                                  _colours(len(means), rng)), cam, options))
@@ -120,8 +121,7 @@ def anisotropy_cases(width: int = 128, ratios: Sequence[float] = (1, 2, 4, 8, 16
     out = []
     for ratio in ratios:
         rng = np.random.default_rng(seed)
-        uv, depths = _grid(cam, rng)
-        means = np.stack([_point_at(cam, u, v, z) for (u, v), z in zip(uv, depths)])
+        means, depths = _grid(cam, rng)
         s = (width / 32) * depths / cam.fx
         sig = np.stack([s, s, s / ratio], axis=1)
         out.append(Case("anisotropy", "ratio", float(ratio),
@@ -182,8 +182,7 @@ def sh_cases(width: int = 128, degrees: Sequence[int] = (0, 1, 2, 3), *, seed: i
     out = []
     for degree in degrees:
         rng = np.random.default_rng(seed)
-        uv, depths = _grid(cam, rng)
-        means = np.stack([_point_at(cam, u, v, z) for (u, v), z in zip(uv, depths)])
+        means, depths = _grid(cam, rng)
         sig = (width / 32) * depths / cam.fx
         colours = _colours(len(means), rng)
         rest = rng.normal(0.0, 0.2, size=(len(means), 15, 3))[:, : (degree + 1) ** 2 - 1]
