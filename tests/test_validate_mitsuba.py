@@ -109,3 +109,12 @@ def test_cli_writes_table_and_plot(tmp_path):
     assert "PASS  error grows with size" in result.output
     header = (tmp_path / "table.csv").read_text().splitlines()[0]
     assert header.startswith("sweep,parameter,value,options,gaussians,psnr,max_error")
+
+
+def test_cli_lists_the_package_sweeps_and_default_folder():
+    """The CLI keeps its own copy of the sweep names and the default folder (so that `splatbench
+    validate --help` does not load Dr.Jit and Mitsuba): they must be the package's."""
+    from splatbench.validate import cli
+
+    assert cli._SWEEP_NAMES == tuple(vm.SWEEPS)
+    assert cli.mitsuba.params[0].name == "out" and cli.mitsuba.params[0].default == vm.DEFAULT_OUT
