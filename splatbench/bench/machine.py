@@ -6,8 +6,9 @@ import os
 import platform
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from importlib import metadata
 from pathlib import Path
+
+from splatbench.versions import package_version
 
 
 @dataclass
@@ -27,12 +28,6 @@ class MachineInfo:
     loadavg_end: list[float]
     started: str                 # ISO 8601, UTC
 
-
-def _version(package: str) -> str:
-    try:
-        return metadata.version(package)
-    except metadata.PackageNotFoundError:
-        return "not installed"
 
 
 def _cpu_model() -> str:
@@ -62,7 +57,7 @@ def resolve_device(device: str) -> str:
 
 def machine_info(device: str) -> MachineInfo:
     """The `MachineInfo` of this machine now, with ``device`` resolved (`resolve_device`)."""
-    return MachineInfo(os.cpu_count(), _cpu_model(), platform.platform(), platform.python_version(),
-                       _version("splatbench"), _version("drjit"), _version("mitsuba"), _version("torch"),
+    versions = [package_version(p) for p in ("splatbench", "drjit", "mitsuba", "torch")]
+    return MachineInfo(os.cpu_count(), _cpu_model(), platform.platform(), platform.python_version(), *versions,
                        resolve_device(device), load_average(), load_average(),
                        datetime.now(timezone.utc).isoformat(timespec="seconds"))

@@ -51,7 +51,6 @@ import tempfile
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +61,7 @@ from splatbench.errors import InputError
 from splatbench.fsutil import replace_dir
 from splatbench.mitsuba_loader import MITSUBA_VARIANT, mitsuba
 from splatbench.scenes.catalog import SceneSpec, get_scene, parse_resolution
+from splatbench.versions import package_version
 
 #: Bump when the renderer's output changes for the same inputs (invalidates caches).
 RENDERER_VERSION = 1
@@ -190,7 +190,7 @@ class RenderPlan:
         """What the cache hashes: scene files (sha256), settings and renderer identity."""
         files = {p.relative_to(self.scene.folder).as_posix(): _sha256(p.read_bytes()) for p in self.scene.files()}
         renderer = {"renderer_version": RENDERER_VERSION, "variant": MITSUBA_VARIANT,
-                    "splatbench": _version("splatbench"), "mitsuba": _version("mitsuba")}
+                    "splatbench": package_version("splatbench"), "mitsuba": package_version("mitsuba")}
         return {"scene": self.scene.name, "files": files, "settings": self.settings(), "renderer": renderer}
 
     def hash(self) -> str:
@@ -387,10 +387,3 @@ def _write_json(path: Path, data: Any) -> None:
 
 def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
-
-
-def _version(package: str) -> str:
-    try:
-        return metadata.version(package)
-    except metadata.PackageNotFoundError:
-        return "unknown"
