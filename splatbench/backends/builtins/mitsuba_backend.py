@@ -60,7 +60,6 @@ def make_mitsuba_backend() -> Backend:
     import drjit as dr
     import torch
 
-    import mitsuba as mi_module
     from splatbench.backends.builtins.inputs import check_inputs
     from splatbench.gaussians import Gaussians
     from splatbench.validate.mitsuba import mitsuba_scene, mitsuba_volprim
@@ -101,7 +100,7 @@ def make_mitsuba_backend() -> Backend:
         return rgb[..., :3] + (1 - alpha)[..., None] * bg, alpha, depth
 
     info = BackendInfo(
-        name="mitsuba", version=mi_module.__version__, dtype="float32", slow_gradients=True,
+        name="mitsuba", version=mi.__version__, dtype="float32", slow_gradients=True,
         alpha_min=0.0, alpha_max=ALPHA_MAX, transmittance_min=T_STOP, eps2d=0.0, radius="3sigma", tile_size=0,
         antialiased=False,
         description=("Mitsuba 3 volprim_rf_basic (dedup): Gaussians ray-traced (peak of the 3D Gaussian along each "
