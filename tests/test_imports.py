@@ -1,4 +1,4 @@
-"""No import cycle between splatbench modules (issue #14).
+"""No import cycle between splatbench modules (issue #14); reference/ imports no splatbench.
 
 Every ``import`` statement of every module under ``splatbench/`` counts, wherever it
 is written: at the top, inside a function (a late import written to dodge a cycle is
@@ -145,6 +145,18 @@ def test_no_import_cycle_between_splatbench_modules():
     found = cycles(graph)
     assert not found, "import cycles (move the shared thing to a module both import):\n" + "\n".join(
         f"  {_example(c, graph)}   [component: {', '.join(c)}]" for c in found)
+
+
+def test_reference_imports_nothing_from_splatbench():
+    """The float64 oracle is written from docs/conventions.md alone (reference/__init__.py):
+    no statement in it, at any level, imports splatbench."""
+    offenders = []
+    for path in sorted((ROOT.parent / "reference").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else []
+            offenders += [f"{path.name}:{node.lineno} {n}" for n in names if n.split(".")[0] == PACKAGE]
+    assert not offenders, f"reference/ imports splatbench: {offenders}"
 
 
 if __name__ == "__main__":  # `python tests/test_imports.py` lists the cycles
