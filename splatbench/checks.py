@@ -61,6 +61,10 @@ def as_float_array(name: str, value, spec: Sequence[Dim], sizes: dict[str, int],
     return array
 
 
+#: Numbers of SH bases per colour channel, indexed by SH degree 0..3 (K = (d+1)²).
+SH_BASES_OF_DEGREE = (1, 4, 9, 16)
+
+
 def check_sh_degree(name: str, value, *, allow_auto: bool = False) -> int | str:
     """An SH degree: an integer in 0..3 (bools rejected), or ``"auto"`` when ``allow_auto``;
     else one-line `InputError`. The one SH-degree check outside ``raster/``."""

@@ -11,11 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from splatbench.checks import SH_BASES_OF_DEGREE, as_float_array, check_sh_degree
 from splatbench.errors import InputError
-from splatbench.checks import as_float_array, check_sh_degree
+from splatbench.ply import read_ply, write_ply
 
-#: Valid numbers of SH bases per channel, indexed by SH degree.
-SH_BASES_OF_DEGREE = (1, 4, 9, 16)
 #: The degree-0 SH constant, ``1 / (2·sqrt(pi))``.
 SH_C0 = 0.28209479177387814
 #: ``scales = exp(clip(log_scales, -LOG_SCALE_CLIP, LOG_SCALE_CLIP))`` (conventions.md).
@@ -172,13 +171,14 @@ class Gaussians:
     # --------------------------------------------------------------------- I/O
     @classmethod
     def from_ply(cls, path: str | os.PathLike) -> Gaussians:
-        """Read a graphdeco-inria 3DGS ``.ply`` (see `splatbench.ply.read_ply`)."""
-        from splatbench.ply import read_ply
-
-        return read_ply(path)
+        """Read a graphdeco-inria 3DGS ``.ply`` (see `splatbench.ply.read_ply`); a bad value
+        is one `InputError` line naming the file."""
+        arrays = read_ply(path)
+        try:
+            return cls(*arrays)
+        except InputError as exc:
+            raise InputError(f"{os.fspath(path)}: {exc}") from None
 
     def to_ply(self, path: str | os.PathLike) -> None:
         """Write a graphdeco-inria 3DGS ``.ply`` atomically (see `splatbench.ply.write_ply`)."""
-        from splatbench.ply import write_ply
-
         write_ply(self, path)

@@ -24,12 +24,13 @@ from __future__ import annotations
 import os
 import re
 import tempfile
+from typing import NamedTuple
 
 import numpy as np
 
+from splatbench.checks import SH_BASES_OF_DEGREE
 from splatbench.errors import InputError
 from splatbench.fsutil import replace_file
-from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians
 
 _BASE_HEAD = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
 _BASE_TAIL = ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
@@ -48,9 +49,24 @@ def property_names(sh_degree: int = WRITE_DEGREE) -> list[str]:
     return _BASE_HEAD + [f"f_rest_{i}" for i in range(n_rest)] + _BASE_TAIL
 
 
-def to_vertex_array(gaussians: Gaussians) -> np.ndarray:
+class PlyArrays(NamedTuple):
+    """The five raw parameter groups a 3DGS ``.ply`` holds (float32), in `Gaussians`' order.
+
+    means [N, 3], log_scales [N, 3], quats [N, 4] (w, x, y, z), opacity_logits [N],
+    sh [N, K, 3]. `splatbench.Gaussians.from_ply` checks them and builds the Gaussians
+    (this module does not import `splatbench.gaussians`, which imports it).
+    """
+
+    means: np.ndarray
+    log_scales: np.ndarray
+    quats: np.ndarray
+    opacity_logits: np.ndarray
+    sh: np.ndarray
+
+
+def to_vertex_array(gaussians: PlyArrays) -> np.ndarray:
     """The structured vertex array [N] (62 float32 fields) that `write_ply` stores; SH bands
-    above ``gaussians.sh_degree`` are zero."""
+    above the model's degree are zero. ``gaussians``: `PlyArrays` or a `Gaussians`."""
     names = property_names(WRITE_DEGREE)
     n, k, _ = gaussians.sh.shape
     k_full = SH_BASES_OF_DEGREE[WRITE_DEGREE]
@@ -72,8 +88,9 @@ def to_vertex_array(gaussians: Gaussians) -> np.ndarray:
     return vertex
 
 
-def write_ply(gaussians: Gaussians, path: str | os.PathLike) -> None:
-    """Write ``gaussians`` to ``path`` atomically (temporary file, then `os.replace`)."""
+def write_ply(gaussians: PlyArrays, path: str | os.PathLike) -> None:
+    """Write ``gaussians`` (`PlyArrays` or a `Gaussians`) to ``path`` atomically (temporary
+    file, then `os.replace`); the header records its SH degree."""
     from plyfile import PlyData, PlyElement
 
     path = os.fspath(path)
@@ -83,7 +100,7 @@ def write_ply(gaussians: Gaussians, path: str | os.PathLike) -> None:
     try:
         with os.fdopen(fd, "wb") as stream:
             PlyData([element], text=False, byte_order="<",
-                    comments=[f"{_DEGREE_COMMENT}{gaussians.sh_degree}"]).write(stream)
+                    comments=[f"{_DEGREE_COMMENT}{SH_BASES_OF_DEGREE.index(gaussians.sh.shape[1])}"]).write(stream)
             stream.flush()
             os.fsync(stream.fileno())
         replace_file(tmp, path)
@@ -95,8 +112,9 @@ def write_ply(gaussians: Gaussians, path: str | os.PathLike) -> None:
         raise
 
 
-def read_ply(path: str | os.PathLike) -> Gaussians:
-    """Read a graphdeco-inria 3DGS ``.ply``; one-line `InputError` naming the file if malformed."""
+def read_ply(path: str | os.PathLike) -> PlyArrays:
+    """The arrays of a graphdeco-inria 3DGS ``.ply``; one-line `InputError` naming the file if
+    malformed. `splatbench.Gaussians.from_ply` is the public entry point (it checks the values)."""
     from plyfile import PlyData, PlyElementParseError, PlyParseError
 
     path = os.fspath(path)
@@ -152,16 +170,13 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
     k_recorded = SH_BASES_OF_DEGREE[degree] if degree is not None else k
     if k_recorded < k and not sh[:, k_recorded:].any():
         sh = np.ascontiguousarray(sh[:, :k_recorded])  # the written model's degree; the rest is padding
-    try:
-        return Gaussians(
-            means=cols(["x", "y", "z"]),
-            log_scales=cols(["scale_0", "scale_1", "scale_2"]),
-            quats=cols(["rot_0", "rot_1", "rot_2", "rot_3"]),
-            opacity_logits=np.asarray(data["opacity"], dtype=np.float32),
-            sh=sh,
-        )
-    except InputError as exc:
-        raise InputError(f"{name}: {exc}") from None
+    return PlyArrays(
+        means=cols(["x", "y", "z"]),
+        log_scales=cols(["scale_0", "scale_1", "scale_2"]),
+        quats=cols(["rot_0", "rot_1", "rot_2", "rot_3"]),
+        opacity_logits=np.asarray(data["opacity"], dtype=np.float32),
+        sh=sh,
+    )
 
 
 def _recorded_degree(comments: list[str]) -> int | None:

@@ -13,8 +13,10 @@ from dataclasses import fields, replace
 import pytest
 from click.testing import CliRunner
 
-from splatbench.bench.raster import (CSV_COLUMNS, STANDARD_SYNTHETIC, MachineInfo, RasterBenchResult, StageSplit,
-                                     format_table, leak_warnings, parse_synthetic, standard_suite)
+from splatbench.bench.machine import MachineInfo
+from splatbench.bench.raster import (CSV_COLUMNS, STANDARD_SYNTHETIC, RasterBenchResult, format_table, leak_warnings,
+                                     parse_synthetic, standard_suite)
+from splatbench.bench.timing import StageSplit
 from splatbench.cli import main
 from splatbench.errors import InputError
 
@@ -121,11 +123,10 @@ def test_table_marks_met_and_missed_targets():
 
 def test_option_and_set_share_one_key_value_grammar():
     """`render --option`, `bench raster --option` and `train --set` parse values the same way."""
-    from splatbench.commands.render import parse_options
-    from splatbench.overrides import parse_override
+    from splatbench.overrides import parse_override, parse_overrides
 
     pairs = ("tile_size=8", "alpha_min=1e-3", "antialiased=true", "radius=opacity", "background=[0, 0, 1]")
-    assert parse_options(pairs) == dict(parse_override(p) for p in pairs) == {
+    assert parse_overrides(pairs, "--option") == dict(parse_override(p) for p in pairs) == {
         "tile_size": 8, "alpha_min": 1e-3, "antialiased": True, "radius": "opacity", "background": [0, 0, 1]}
     with pytest.raises(InputError, match=r"^--option: expected key=value, got 'tile_size'$"):
-        parse_options(("tile_size",))
+        parse_overrides(("tile_size",), "--option")

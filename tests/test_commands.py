@@ -1,4 +1,4 @@
-"""The `render`, `report` and `bench train` commands end to end (small and fast)."""
+"""The `demo`, `render`, `report` and `bench train` commands end to end (small and fast)."""
 
 from __future__ import annotations
 
@@ -66,3 +66,30 @@ def test_bench_train_writes_one_row_per_size(tmp_path):
     data = json.loads((tmp_path / "train.json").read_text())
     assert isinstance(data, dict) and out.rstrip().endswith(f"wrote {Path(tmp_path) / 'train.csv'} and "
                                                             f"{Path(tmp_path) / 'train.json'}")
+
+
+def test_demo_checks_garden_runs_the_grid_and_writes_its_report(tmp_path):
+    """`splatbench demo` pointed at a tiny grid (the dummy kind) and a 1/20-scale reference check:
+    every step prints its line, writes its files, and a second invocation resumes (runs nothing)."""
+    exp = tmp_path / "tiny.toml"
+    exp.write_text('name = "tinydemo"\nkind = "dummy"\nscenes = ["alpha"]\nseeds = [0]\n[axes]\nx = [0.0, 2.0]\n')
+    common = ["--experiment", exp, "--results", tmp_path / "results", "--report-dir", tmp_path / "report",
+              "--workers", "1"]
+    code, out = invoke("demo", *common, "--out", tmp_path / "out", "--scale", "0.05")
+    assert code == 0, out
+    lines = out.strip().splitlines()
+    # 1. the garden check: the full capture at full size, the reference at 1/20 (32x21)
+    assert lines[0].startswith("Dr.Jit rasterizer: 138766 Gaussians at 648x420 in ")
+    assert lines[1].startswith("reference check at 32x21: max |fast - reference| = ")
+    assert np.isfinite(float(lines[1].split("= ")[1].split()[0]))
+    assert Image.open(tmp_path / "out" / "garden.png").size == (648, 420)
+    assert Image.open(tmp_path / "out" / "garden_difference.png").size == (32, 21)
+    # 2. the grid ran, 3. its report was written and its path is the last line
+    assert "tinydemo: done 2, skipped 0 (finished), 0 claimed by another runner, failed 0 of 2 in " in out
+    report = tmp_path / "report" / "report.md"
+    assert lines[-1] == f"report: {report.resolve()}"
+    assert "| alpha | `2` |" in report.read_text() and (tmp_path / "report" / "results.parquet").is_file()
+    # resumable: nothing left to run
+    code, out = invoke("demo", *common, "--no-garden")
+    assert code == 0, out
+    assert "tinydemo: done 0, skipped 2 (finished)" in out and "Dr.Jit rasterizer" not in out

@@ -20,8 +20,9 @@ from click.testing import CliRunner
 
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench.backends import Backend, BackendInfo, get_backend
-from splatbench.backends.compare import (BOUNDARY_FRACTION, GRAD_TERM_OPS, GROUPS, U32, CompareSettings,
-                                         auto_scale, gradient_bound, run_compare)
+from splatbench.backends.builtins.reference_backend import GROUPS
+from splatbench.backends.compare import CompareSettings, auto_scale, run_compare
+from splatbench.backends.compare_types import BOUNDARY_FRACTION, GRAD_TERM_OPS, U32, gradient_bound
 from splatbench.backends.compare_report import (RUN_RECORD, findings, render_markdown, result_table, rewrite_report,
                                                 write_compare)
 from splatbench.workloads import synthetic

@@ -74,7 +74,7 @@ def test_from_random_errors(args, match):
 # ---------------------------------------------------------------------- from_surface
 def test_from_surface_albedo_on_a_known_scene():
     """Two diffuse quads of known reflectance: points on them, area-weighted, sRGB albedo colours."""
-    from splatbench.scenes.render import mitsuba
+    from splatbench.mitsuba_loader import mitsuba
 
     mi = mitsuba()
     scene = mi.load_dict({

@@ -16,6 +16,7 @@ import pytest
 import splatbench  # noqa: F401 - sets DRJIT_LIBLLVM_PATH before mitsuba/drjit load
 from splatbench.cameras import Camera
 from splatbench.data import load_dataset
+from splatbench.mitsuba_loader import mitsuba
 from splatbench.scenes import (RigSpec, builtin_scenes_dir, find_scenes, get_scene, linear_to_srgb,
                                load_mitsuba_scene, plan_render, read_manifest, render_dataset, render_depth,
                                sample_surface, srgb_to_linear)
@@ -175,7 +176,7 @@ def test_depth_is_camera_z_of_a_tilted_plane():
     """Mitsuba's depth AOV is a distance from the near plane along the ray; `render_depth`
     must return camera z at each pixel centre. A tilted plane n·X = n·p0 (camera frame)
     has z = (n·p0) / (n·((u-cx)/fx, (v-cy)/fy, 1)) exactly."""
-    mi = render_module.mitsuba()
+    mi = mitsuba()
     w, h = 40, 30
     w2c = np.eye(4)
     w2c[:3, :3] = Camera.look_at([0, 0, 0], [0.3, -0.2, 1.0], [0, -1, 0], 4, 4, 60).rotation  # a non-trivial pose
@@ -203,7 +204,7 @@ def test_depth_is_camera_z_of_a_tilted_plane():
 
 
 def test_sample_surface_is_on_the_shapes_and_area_weighted():
-    mi = render_module.mitsuba()
+    mi = mitsuba()
     scene = mi.load_dict({"type": "scene",
                           "ball": {"type": "sphere", "center": [1.0, 2.0, 3.0], "radius": 0.5},
                           "panel": {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale([2.0, 1.0, 1.0])}})

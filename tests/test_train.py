@@ -461,7 +461,7 @@ def test_cli_rejects_graphdecos_absolute_schedule_on_a_short_run_before_reading_
 
 # ----------------------------------------------------------------------------- benchmark harness
 def test_bench_train_reports_throughput_and_a_time_split_that_adds_up(tmp_path):
-    from splatbench.bench.raster import machine_info
+    from splatbench.bench.machine import machine_info
     from splatbench.bench.train import TrainBenchSettings, format_table, run_size, write_csv, write_json
 
     settings = TrainBenchSettings(sizes=(16,), gaussians=60, views=3, iterations=3, warmup=1)

@@ -17,6 +17,7 @@ from click.testing import CliRunner
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench import Camera, InputError
 from splatbench.validate import mitsuba as vm
+from splatbench.validate.mitsuba import cases
 
 WIDTH = 64  # every scene here is 64x64 (or smaller): the suite shares 2 cores
 
@@ -27,7 +28,7 @@ def test_sh_basis_is_graphdeco_s():
 
     from reference.sh import sh_basis
 
-    mi = vm.mitsuba()
+    mi = vm.mitsuba_volprim()
     rng = np.random.default_rng(3)
     d = rng.normal(size=(64, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
@@ -49,11 +50,11 @@ def _image_orientation(img: np.ndarray) -> float:
 
 def test_rotation_convention_matches():
     """A needle rotated about the view axis points the same way in both images (quaternion order)."""
-    cam = vm._camera(WIDTH)
-    s = 6.0 * vm._DISTANCE / cam.fx  # 6 px long axis
+    cam = cases._camera(WIDTH)
+    s = 6.0 * cases._DISTANCE / cam.fx  # 6 px long axis
     half = math.radians(35.0) / 2
     quat = np.array([[math.cos(half), 0.0, 0.0, math.sin(half)]])  # 35 degrees about world z (= view axis)
-    g = vm._gaussians(np.zeros((1, 3)), np.array([[s, s / 8, s / 8]]), np.full((1, 3), 0.9), quats=quat)
+    g = cases._gaussians(np.zeros((1, 3)), np.array([[s, s / 8, s / 8]]), np.full((1, 3), 0.9), quats=quat)
     c = vm.compare(g, cam)
     a_splat, a_traced = _image_orientation(c.splat), _image_orientation(c.traced)
     assert abs(a_splat - a_traced) < 0.5, (a_splat, a_traced)
@@ -64,7 +65,7 @@ def test_dedup_changes_nothing_without_rehits():
     """volprim_rf_dedup equals the shipped integrator bit for bit where no primitive is re-entered."""
     cam = Camera.look_at(eye=[0, 0, -4], target=[0, 0, 0], up=[0, -1, 0], width=32, height=32, fov_x_deg=50)
     rng = np.random.default_rng(0)
-    g = vm._gaussians(rng.uniform(-0.8, 0.8, (6, 3)), np.full((6, 3), 0.3), rng.uniform(0.2, 0.9, (6, 3)))
+    g = cases._gaussians(rng.uniform(-0.8, 0.8, (6, 3)), np.full((6, 3), 0.3), rng.uniform(0.2, 0.9, (6, 3)))
     shipped = vm.render_traced(g, cam, shipped=True)
     dedup = vm.render_traced(g, cam)
     np.testing.assert_array_equal(dedup, shipped)
@@ -108,3 +109,12 @@ def test_cli_writes_table_and_plot(tmp_path):
     assert "PASS  error grows with size" in result.output
     header = (tmp_path / "table.csv").read_text().splitlines()[0]
     assert header.startswith("sweep,parameter,value,options,gaussians,psnr,max_error")
+
+
+def test_cli_lists_the_package_sweeps_and_default_folder():
+    """The CLI keeps its own copy of the sweep names and the default folder (so that `splatbench
+    validate --help` does not load Dr.Jit and Mitsuba): they must be the package's."""
+    from splatbench.validate import cli
+
+    assert cli._SWEEP_NAMES == tuple(vm.SWEEPS)
+    assert cli.mitsuba.params[0].name == "out" and cli.mitsuba.params[0].default == vm.DEFAULT_OUT

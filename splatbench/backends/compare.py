@@ -36,36 +36,9 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from splatbench.backends.builtins.reference_backend import GROUPS
-from splatbench.errors import InputError
-
-U32 = 2.0 ** -24  # float32 unit roundoff
-
-# Forward bound, derived in tests/test_raster_parity.py: a pixel sums L <= ~150 terms
-# T_i a_i c_i, T_i a product of i factors (relative error <= i u) and a_i c_i ~20 float32
-# operations, so |error| <= (2 L + 20) u max|c| ~ 4e-5 for |c| <= 2, and 2e-5 for the
-# random-walk sum. A pixel where float32 and float64 take a discrete decision (3-sigma
-# cutoff, alpha_min, early stop, depth tie) differently differs by a whole contribution:
-# at most 1 pixel in 500 may exceed the tolerance (the boundary band).
-FORWARD_ATOL = 2e-5
-BOUNDARY_FRACTION = 1 / 500
-OFF_THRESHOLD = 1e-4        # "share of pixels off by more than 1e-4" (per pixel, max over channels)
-DEPTH_ALPHA_MIN = 0.05      # v_depth is kept where the oracle's alpha exceeds this
-GRAD_TERM_OPS = 20          # float32 operations per gradient term (forward + backward)
-MAX_ORACLE_PIXELS = 20_000  # automatic error scale: the largest 1/2^k with W' H' <= this
-
-
-def gradient_bound(pixels: int, outliers: int) -> float:
-    """Relative L2 bound of a float32 gradient against a float64 one with the same conventions.
-
-    One gradient entry sums a term per pixel, each with ~20 float32 operations (relative
-    error 20 u); random cotangents make the terms cancel, which amplifies the relative
-    error of the sum by at most sqrt(P) (tests/test_raster_grads.py): 20 u sqrt(P). A
-    boundary pixel (see `FORWARD_ATOL`) changes its terms by a whole contribution; with
-    ``outliers`` such pixels among P of comparable terms that adds sqrt(outliers / P).
-    """
-    return GRAD_TERM_OPS * U32 * math.sqrt(pixels) + math.sqrt(outliers / pixels)
-
+from splatbench.backends.compare_types import (BOUNDARY_FRACTION, MAX_ORACLE_PIXELS, GradError, ImageError, Timing,
+                                               gradient_bound)
+from splatbench.errors import InputError, one_line
 
 @dataclass(frozen=True)
 class CompareSettings:
@@ -101,42 +74,6 @@ class CompareSettings:
 
             if not torch.cuda.is_available():
                 raise InputError("--device: 'cuda' asked for, but torch finds no CUDA device (use --device cpu)")
-
-
-@dataclass(frozen=True)
-class ImageError:
-    """One output against one oracle image: max |diff|, PSNR (peak 1), share of pixels off
-    by more than 1e-4, and pixels over `FORWARD_ATOL` (the bound's outliers)."""
-
-    max_abs: float
-    psnr: float
-    frac_off: float
-    outliers: int
-
-
-@dataclass(frozen=True)
-class GradError:
-    """One parameter group: relative L2 error |a - b| / |b|, cosine a.b / (|a| |b|), and the
-    norms |a| (backend) and |b| (oracle). Where |b| = 0 (e.g. the quaternions of isotropic
-    Gaussians, which a rotation does not change) and |a| > 0 there is no relative error:
-    rel_l2 and cosine are NaN and the group is left out of the verdict."""
-
-    rel_l2: float
-    cosine: float
-    norm: float = math.nan
-    oracle_norm: float = math.nan
-
-
-@dataclass(frozen=True)
-class Timing:
-    """Milliseconds of every timed forward and forward+backward run (empty: not timed),
-    why not, and the peak memory rise of one forward+backward (MB, 10^6 bytes)."""
-
-    fwd_ms: tuple[float, ...] = ()
-    fwd_bwd_ms: tuple[float, ...] = ()
-    note: str = ""
-    peak_mb: float = math.nan
-    memory_kind: str = ""
 
 
 @dataclass(frozen=True)
@@ -183,7 +120,7 @@ class CompareRow:
 class CompareResult:
     rows: tuple[CompareRow, ...]
     settings: CompareSettings
-    machine: object               # `splatbench.bench.raster.MachineInfo`
+    machine: object               # `splatbench.bench.machine.MachineInfo`
     command: str
     seconds: float
     notes: tuple[str, ...] = ()   # per workload: resolution of the error measurement, oracles
@@ -195,11 +132,6 @@ def auto_scale(width: int, height: int) -> float:
     while width * height * scale * scale > MAX_ORACLE_PIXELS and scale > 1 / 16:
         scale /= 2
     return scale
-
-
-def one_line(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0] if text else ''}"[:300]
 
 
 def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettings = CompareSettings(), *,
@@ -218,7 +150,7 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
     from splatbench.backends.compare_measure import FLOAT64_ORACLE, GradOracle, OracleImages, time_backends, \
         torch_inputs
     from splatbench.backends.registry import available, get_backend
-    from splatbench.bench.raster import load_average, machine_info
+    from splatbench.bench.machine import load_average, machine_info
 
     settings.validate()
     resolved = [get_backend(b) for b in backends]

@@ -17,10 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.backends.base import OUTPUTS, Backend
+from splatbench.backends.builtins.reference_backend import GROUPS
+from splatbench.backends.compare_types import (DEPTH_ALPHA_MIN, FORWARD_ATOL, OFF_THRESHOLD, GradError, ImageError,
+                                               Timing)
+from splatbench.errors import InputError, one_line
 from splatbench.train.metrics import psnr
-from splatbench.backends.compare import (DEPTH_ALPHA_MIN, FORWARD_ATOL, GROUPS, OFF_THRESHOLD, GradError,
-                                         ImageError, Timing, one_line)
-from splatbench.errors import InputError
 
 
 def as_numpy(x) -> np.ndarray:
@@ -123,7 +124,7 @@ class Cotangents:
 
 def torch_inputs(workload, device: str) -> tuple:
     """The five parameter groups as float32 torch tensors on ``device``."""
-    from splatbench.bench.raster import torch_params
+    from splatbench.bench.timing import torch_params
 
     return tuple(p.to(device) for p in torch_params(workload.gaussians))
 

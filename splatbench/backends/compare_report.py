@@ -26,8 +26,9 @@ from types import SimpleNamespace
 import pandas as pd
 
 from splatbench.backends.base import OUTPUTS
-from splatbench.backends.compare import (BOUNDARY_FRACTION, FORWARD_ATOL, GRAD_TERM_OPS, GROUPS, OFF_THRESHOLD,
-                                         CompareResult, CompareRow)
+from splatbench.backends.builtins.reference_backend import GROUPS
+from splatbench.backends.compare import CompareResult, CompareRow
+from splatbench.backends.compare_types import BOUNDARY_FRACTION, FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD
 from splatbench.backends.compare_measure import spread
 
 MODES = ("matched", "exact")

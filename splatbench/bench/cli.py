@@ -33,13 +33,13 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
     256x256, 100000 512x512, 1000000 800x800, and the garden view. Each workload
     runs in its own subprocess so its peak RSS is its own.
     """
-    from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, load_average, machine_info,
-                                         parse_synthetic, parse_workload, run_suite, standard_suite, write_csv,
-                                         write_json)
+    from splatbench.bench.machine import load_average, machine_info
+    from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, parse_synthetic, parse_workload,
+                                         run_suite, standard_suite, write_csv, write_json)
     from splatbench.checks import check_image_size
-    from splatbench.commands.render import parse_options
+    from splatbench.overrides import parse_overrides
 
-    settings = BenchSettings(repeats=repeats, device=device, options=parse_options(options))
+    settings = BenchSettings(repeats=repeats, device=device, options=parse_overrides(options, "--option"))
     settings.validate()
     specs = [parse_synthetic(count, size, seed) for count, size in synthetic]
     for spec in specs:  # before any workload runs (Dr.Jit's array limit, this machine's memory)
@@ -87,7 +87,8 @@ def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmu
     from dataclasses import asdict
 
     from splatbench.bench.ab import run_ab
-    from splatbench.bench.raster import STANDARD_SYNTHETIC, machine_info, parse_synthetic
+    from splatbench.bench.machine import machine_info
+    from splatbench.bench.raster import STANDARD_SYNTHETIC, parse_synthetic
 
     specs = [parse_synthetic(count, size) for count, size in synthetic]
     workloads = [(s.n, s.width, s.height) for s in specs] or list(STANDARD_SYNTHETIC)
@@ -120,7 +121,7 @@ def train(sizes: tuple[int, ...], gaussians: int, iterations: int, warmup: int, 
           device: str) -> None:
     """Training throughput: iterations/s and the share of rasterizer forward, backward,
     loss and optimizer in a step (see splatbench/bench/train.py)."""
-    from splatbench.bench.raster import load_average, machine_info
+    from splatbench.bench.machine import load_average, machine_info
     from splatbench.bench.train import (STANDARD_SIZES, TrainBenchSettings, format_table, run_size, write_csv,
                                         write_json)
 

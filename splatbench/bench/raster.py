@@ -1,14 +1,19 @@
 """Rasterizer benchmark: run time, stage split, throughput and peak memory per workload.
 
-Laid out like pytorch3d's ``tests/benchmarks/bm_rasterize_points.py``: the factories
-`forward_with_init` and `forward_backward_with_init` build everything outside the
-timed part and return a closure; `run_one` warms the closures up and times them on
+Laid out like pytorch3d's ``tests/benchmarks/bm_rasterize_points.py``: the timing
+closures live in `splatbench.bench.timing`, the machine description in
+`splatbench.bench.machine`; `run_one` warms the closures up and times them on
 one workload; `run_isolated` runs `run_one` in a fresh interpreter
 (``python -m splatbench.bench.raster --one ...``) so that the peak RSS it reports is
 that workload's alone. `run_suite` runs a list of workloads that way.
 
 Units: milliseconds (ms) and megabytes (MB = 10^6 bytes). docs/benchmarks.md
 describes every field of `RasterBenchResult` and how throughput is defined.
+
+Size (~430 lines, over the ~400 guideline on purpose): this is one benchmark from
+command-line workload to table -- workloads, settings, the result row, `run_one` and
+its subprocess entry, and the table and files; the timing closures and the machine
+description already live apart (`bench.timing`, `bench.machine`).
 """
 
 from __future__ import annotations
@@ -16,21 +21,20 @@ from __future__ import annotations
 import argparse
 import gc
 import json
-import os
-import platform
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field, fields
-from datetime import datetime, timezone
-from importlib import metadata
 from pathlib import Path
-from typing import Callable, NamedTuple
+from typing import Callable
 
 from splatbench.bench.files import write_csv_rows, write_results_json
+from splatbench.bench.machine import MachineInfo, resolve_device
 from splatbench.bench.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
+from splatbench.bench.timing import (StageSplit, forward_backward_with_init, forward_with_init, milliseconds,
+                                     staged_runs, time_runs, torch_params)
 from splatbench.errors import InputError, SplatbenchError
 
 
@@ -171,24 +175,6 @@ class BenchSettings:
 # ----------------------------------------------------------------------------- results
 
 @dataclass
-class StageSplit:
-    """Median milliseconds per rasterizer stage, from forward+backward runs with a
-    `StageTimer` (which syncs Dr.Jit after each stage, so ``total_ms`` may exceed the
-    untimed `RasterBenchResult.fwd_bwd_ms`). Each stage is the wall time since the
-    previous mark: ``preprocess_ms`` includes input validation and the torch -> Dr.Jit
-    copies; ``backward_compositing_ms`` starts at the end of the forward pass, so it
-    also holds torch's backward up to the rasterizer and the cotangent copies."""
-
-    preprocess_ms: float            # projection, covariances, SH colours
-    binning_ms: float               # Gaussian-tile pairs: count, expand, sort, tile ranges
-    compositing_ms: float           # forward alpha compositing (+ image-order gather, depth)
-    backward_compositing_ms: float  # hand-written backward of compositing, per-Gaussian reduction
-    backward_preprocess_ms: float   # Dr.Jit AD through SH, projection and activations
-    other_ms: float                 # total minus the five stages (output/gradient copies to torch)
-    total_ms: float                 # median wall time of these timed runs
-
-
-@dataclass
 class RasterBenchResult:
     """One workload's measurements. Times are medians over ``repeats`` runs after warm-up."""
 
@@ -248,158 +234,6 @@ def csv_row(result: RasterBenchResult) -> dict:
     return {k: ("" if flat[k] is None else flat[k]) for k in CSV_COLUMNS}
 
 
-@dataclass
-class MachineInfo:
-    """Where the benchmark ran."""
-
-    cpu_count: int | None
-    cpu_model: str
-    platform: str
-    python: str
-    splatbench: str
-    drjit: str
-    mitsuba: str
-    torch: str
-    device: str                  # the device the rasterizer resolved to: "cpu" or "cuda"
-    loadavg_start: list[float]   # 1, 5, 15 min load averages when the bench started (others' work)
-    loadavg_end: list[float]
-    started: str                 # ISO 8601, UTC
-
-
-def _version(package: str) -> str:
-    try:
-        return metadata.version(package)
-    except metadata.PackageNotFoundError:
-        return "not installed"
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def load_average() -> list[float]:
-    try:
-        return [round(x, 2) for x in os.getloadavg()]
-    except OSError:
-        return []
-
-
-def resolve_device(device: str) -> str:
-    """"cpu" or "cuda": where the rasterizer runs for ``device`` ("auto" picks CUDA when present)."""
-    from splatbench.raster.backend import get_backend
-
-    return "cuda" if get_backend(device).name == "cuda" else "cpu"
-
-
-def machine_info(device: str) -> MachineInfo:
-    return MachineInfo(os.cpu_count(), _cpu_model(), platform.platform(), platform.python_version(),
-                       _version("splatbench"), _version("drjit"), _version("mitsuba"), _version("torch"),
-                       resolve_device(device), load_average(), load_average(),
-                       datetime.now(timezone.utc).isoformat(timespec="seconds"))
-
-
-# ----------------------------------------------------------------------------- closures
-
-class RunStats(NamedTuple):
-    """What a run reports besides its time (no reference to the Dr.Jit frame, so
-    holding it keeps no rasterizer memory alive)."""
-
-    num_pairs: int
-    visible: object  # [N] bool torch tensor
-    sh_degree: int
-
-
-def torch_params(gaussians) -> tuple:
-    """(means, log_scales, quats, opacity_logits, sh) as float32 torch tensors sharing
-    the Gaussians' memory."""
-    import numpy as np
-    import torch
-
-    return tuple(torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))
-                 for a in (gaussians.means, gaussians.log_scales, gaussians.quats, gaussians.opacity_logits,
-                           gaussians.sh))
-
-
-def forward_with_init(params: tuple, camera, options: dict) -> Callable[[], RunStats]:
-    """Forward only: `splatbench.rasterize` under ``torch.no_grad()`` on inputs that
-    need no gradient (so Dr.Jit records no AD graph, as in `splatbench.render`)."""
-    import torch
-
-    from splatbench.raster.torch_bridge import rasterize
-
-    inputs = tuple(p.detach() for p in params)
-
-    def forward() -> RunStats:
-        with torch.no_grad():
-            _, _, _, info = rasterize(*inputs, camera, **options)
-        return RunStats(info.num_pairs, info.visible, info.sh_degree)
-
-    return forward
-
-
-def forward_backward_with_init(params: tuple, camera, options: dict) -> Callable[..., RunStats]:
-    """Forward and backward: loss = rgb.sum() through `splatbench.rasterize`, all five
-    parameter groups requiring grad. The closure takes an optional `StageTimer`."""
-    from splatbench.raster.torch_bridge import rasterize
-
-    leaves = tuple(p.detach().requires_grad_(True) for p in params)
-
-    def forward_backward(timer=None) -> RunStats:
-        if timer is not None:
-            timer.start()
-        rgb, _, _, info = rasterize(*leaves, camera, timer=timer, **options)
-        if timer is not None:
-            timer.mark("other")  # outputs copied to torch, RasterInfo
-        rgb.sum().backward()
-        if timer is not None:
-            timer.mark("other")  # gradients copied to torch
-        for p in leaves:
-            p.grad = None  # as an optimizer's zero_grad(set_to_none=True) would
-        return RunStats(info.num_pairs, info.visible, info.sh_degree)
-
-    return forward_backward
-
-
-def time_runs(fn: Callable[[], RunStats], repeats: int) -> tuple[list[float], RunStats]:
-    """Wall seconds of ``repeats`` calls of ``fn`` (each ends with a copy to torch, which
-    waits for Dr.Jit), and the last call's stats."""
-    seconds, stats = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        stats = fn()
-        seconds.append(time.perf_counter() - t0)
-    return seconds, stats
-
-
-def staged_runs(fn: Callable[..., RunStats], repeats: int) -> StageSplit:
-    """``repeats`` calls of ``fn(timer)`` with a fresh `StageTimer` each; median per stage."""
-    from splatbench.raster.timing import STAGES, StageTimer
-
-    totals, per_stage = [], {s: [] for s in STAGES}
-    others = []
-    for _ in range(repeats):
-        timer = StageTimer()
-        t0 = time.perf_counter()
-        fn(timer)
-        total = time.perf_counter() - t0
-        totals.append(total)
-        for s in STAGES:
-            per_stage[s].append(timer.seconds.get(s, 0.0))
-        others.append(total - sum(timer.seconds.get(s, 0.0) for s in STAGES))
-    ms = {f"{s}_ms": _ms(statistics.median(v)) for s, v in per_stage.items()}
-    return StageSplit(**ms, other_ms=_ms(statistics.median(others)), total_ms=_ms(statistics.median(totals)))
-
-
-def _ms(seconds: float) -> float:
-    return round(seconds * 1e3, 3)
-
-
 # ----------------------------------------------------------------------------- running
 
 def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
@@ -452,7 +286,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     comp_s = stages.compositing_ms / 1e3
     peak = fp32_peak(device)
     mevals = round(evaluations / comp_s / 1e6, 3) if comp_s > 0 else 0.0
-    fwd_bwd_ms = _ms(statistics.median(fwd_bwd_s))
+    fwd_bwd_ms = milliseconds(statistics.median(fwd_bwd_s))
     target = spec.target
     meets = None
     if target is not None:
@@ -460,7 +294,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
                                                      or first_run_peak <= target.peak_rss_mb)
     return RasterBenchResult(
         name=name, n=n, width=camera.width, height=camera.height, sh_degree=stats.sh_degree, device=device,
-        tile_size=opts.tile_size, repeats=settings.repeats, fwd_ms=_ms(statistics.median(fwd_s)),
+        tile_size=opts.tile_size, repeats=settings.repeats, fwd_ms=milliseconds(statistics.median(fwd_s)),
         fwd_bwd_ms=fwd_bwd_ms, stages=stages, pairs=stats.num_pairs, visible=int(stats.visible.sum()),
         evaluations=evaluations, mevals_per_s=mevals, box_pairs=work.box_pairs,
         block_evaluations=work.block_evaluations, inside_cutoff_evaluations=work.inside_cutoff,
@@ -471,7 +305,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
         rss_reset=rss_reset, retained_mb_per_run=round(retained, 1),
         target_fwd_bwd_ms=target.fwd_bwd_ms if target else None,
         target_peak_rss_mb=target.peak_rss_mb if target else None, meets_target=meets,
-        fwd_runs_ms=[_ms(s) for s in fwd_s], fwd_bwd_runs_ms=[_ms(s) for s in fwd_bwd_s])
+        fwd_runs_ms=[milliseconds(s) for s in fwd_s], fwd_bwd_runs_ms=[milliseconds(s) for s in fwd_bwd_s])
 
 
 def run_isolated(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:

@@ -66,7 +66,7 @@ def demo(experiment: Path | None, results: Path, report_dir: Path | None, worker
          scale: float, garden: bool) -> None:
     """Check the rasterizer on real data, run the demo experiment, write its report."""
     from splatbench.experiments.runner import run_experiment
-    from splatbench.experiments.spec import load_experiment
+    from splatbench.experiments.grid import load_experiment
     from splatbench.reports.report import build_report, write_report
 
     t_start = time.perf_counter()

@@ -12,11 +12,6 @@ from splatbench.errors import InputError
 from splatbench.overrides import parse_overrides
 
 
-def parse_options(pairs: tuple[str, ...]) -> dict:
-    """``--option key=value`` strings -> rasterizer options (`splatbench.overrides` grammar)."""
-    return parse_overrides(pairs, "--option")
-
-
 def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0):
     """A look-at camera that frames the central 98 % of the Gaussians from -z.
 
@@ -70,6 +65,6 @@ def render(source: Path, out: Path | None, view: int, size: str, sh_degree: int 
         gaussians, camera = workload.gaussians, workload.camera
     else:
         raise InputError(f"source: expected a .ply or .npz file, got {str(source)!r}")
-    result = splatbench.render(gaussians, camera, sh_degree=sh_degree, **parse_options(options))
+    result = splatbench.render(gaussians, camera, sh_degree=sh_degree, **parse_overrides(options, "--option"))
     path = save_png(result.rgb, out)
     click.echo(f"rendered {len(gaussians)} Gaussians at {camera.width}x{camera.height}: {path.resolve()}")

@@ -6,18 +6,22 @@
     summary.line()        # "done 12, skipped 0 (finished), 0 claimed by another runner, failed 0 of 12"
     table = read_table("results/sh_degree")                  # pandas DataFrame, one row per run
 
-Modules: `spec` (file format, dotted keys), `grid` (expansion, run ids), `kinds`
+Modules: `configs` (dotted keys, canonical JSON), `spec` (file format), `grid`
+(expansion, run ids, `load_experiment`), `kinds`
 (run-kind registry, the test-only ``dummy``), `store` (atomic per-run files, the
-parquet table), `runner` (local and Dask executors), `claims` (per-run claims shared
+parquet table), `runner` (drives the runs), `execute` (one run, worker side), `executors`
+(local and Dask), `claims` (per-run claims shared
 by concurrent runners), `workers` (worker processes that die with their runner),
 `cli` (``splatbench run``).
 See docs/experiments.md.
 """
 
-from splatbench.experiments.grid import RunSpec, canonical_json, expand, make_run_id
+from splatbench.experiments.configs import canonical_json
+from splatbench.experiments.execute import execute_run
+from splatbench.experiments.grid import RunSpec, expand, load_experiment, make_run_id
 from splatbench.experiments.kinds import RunKind, RunOutput, get_kind, register_kind
-from splatbench.experiments.runner import RunSummary, execute_run, run_experiment
-from splatbench.experiments.spec import ExperimentSpec, RunnerDefaults, load_experiment, parse_experiment
+from splatbench.experiments.runner import RunSummary, run_experiment
+from splatbench.experiments.spec import ExperimentSpec, RunnerDefaults, parse_experiment
 from splatbench.experiments.store import RunRecord, read_records, read_table
 
 __all__ = ["ExperimentSpec", "RunnerDefaults", "load_experiment", "parse_experiment", "RunSpec", "expand",

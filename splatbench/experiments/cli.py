@@ -30,7 +30,7 @@ def run(experiment: Path, workers: int | None, executor: str | None, scheduler: 
     it. Exits with status 1 when a run failed.
     """
     from splatbench.experiments.runner import run_experiment
-    from splatbench.experiments.spec import load_experiment
+    from splatbench.experiments.grid import load_experiment
 
     spec = load_experiment(experiment)
     executor = executor or spec.runner.executor or "local"

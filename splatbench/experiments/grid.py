@@ -12,18 +12,26 @@ no spaces, ASCII) of ``{"kind": KIND, "config": CONFIG}``, where CONFIG is the f
 resolved nested config of the run, ``scene`` and ``seed`` included. It does not
 depend on the experiment's name, on the order of keys or axes, or on which axis
 set a value: the same config is the same run, and changing any field changes it.
+
+`load_experiment` reads a file, parses it (`splatbench.experiments.spec`) and checks it
+by expanding the grid here (`check_experiment`), so a bad file fails before anything runs.
 """
 
 from __future__ import annotations
 
 import hashlib
 import itertools
+import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from splatbench.errors import InputError
-from splatbench.experiments.spec import ExperimentSpec, canonical_json, flatten, override, unflatten
+from splatbench.experiments.configs import canonical_json, flatten, override, unflatten
+from splatbench.experiments.kinds import get_kind
+from splatbench.experiments.spec import ExperimentSpec, parse_experiment
+from splatbench.fsutil import read_text
 
 
 @dataclass(frozen=True)
@@ -83,8 +91,6 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
     unknown scene (``known_scenes`` or the kind's ``scenes``; neither: any name) or a
     config the kind rejects; nothing runs.
     """
-    from splatbench.experiments.kinds import get_kind
-
     try:
         kind = get_kind(spec.kind)
     except InputError as exc:
@@ -163,4 +169,25 @@ def _culprit(spec: ExperimentSpec, cell, scene: str, seed: int, check) -> str:
     return "combination " + ", ".join(where for *_, where in cell)
 
 
-__all__ = ["RunSpec", "expand", "make_run_id", "canonical_json"]
+# --------------------------------------------------------------------------- loading
+def load_experiment(path: str | Path, *, known_scenes: Callable[[], set[str]] | None = None) -> ExperimentSpec:
+    """Read, parse and fully check an experiment file (see `check_experiment`)."""
+    p = Path(path)
+    text = read_text(p, "experiment")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{p}: invalid TOML ({exc})") from None
+    spec = parse_experiment(data, source=str(p), default_name=p.stem, base_dir=p.parent)
+    check_experiment(spec, known_scenes=known_scenes)
+    return spec
+
+
+def check_experiment(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None = None) -> None:
+    """Check the kind exists, every scene is known (``known_scenes``, else the kind's
+    ``scenes``; neither: any name) and every run's config passes the kind's
+    ``validate``, by expanding the grid. Raises one `InputError` line; runs nothing."""
+    expand(spec, known_scenes=known_scenes)
+
+
+__all__ = ["RunSpec", "expand", "make_run_id", "load_experiment", "check_experiment"]

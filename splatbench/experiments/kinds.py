@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from splatbench.errors import InputError
+from splatbench.experiments.configs import flatten, override, unflatten
 
 #: A table cell: what a metric may be.
 Scalar = bool | int | float | str | None
@@ -117,8 +118,6 @@ DUMMY_SCENES = frozenset({"alpha", "beta", "gamma"})
 
 
 def _dummy_validate(config: dict[str, Any]) -> None:
-    from splatbench.experiments.spec import flatten
-
     known = {**flatten(DUMMY_DEFAULTS), "scene": "", "seed": 0}
     for key, value in flatten(config).items():
         if key not in known:
@@ -137,8 +136,6 @@ def _dummy_validate(config: dict[str, Any]) -> None:
 
 
 def _dummy_resolve(config: dict[str, Any]) -> dict[str, Any]:
-    from splatbench.experiments.spec import flatten, override, unflatten
-
     out = unflatten(override(flatten(DUMMY_DEFAULTS), flatten(config)))
     out["x"] = float(out["x"])
     out["sleep"] = float(out["sleep"])

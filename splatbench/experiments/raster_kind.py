@@ -18,7 +18,7 @@ affordable).
 
 One run:
 
-1. Timing, at the workload's full resolution: `splatbench.bench.raster`'s closures
+1. Timing, at the workload's full resolution: `splatbench.bench.timing`'s closures
    (forward under ``no_grad``; forward + backward of ``rgb.sum()`` to all five
    groups) with the run's options and with the default options, each warmed up first
    (kernels compile or load from Dr.Jit's cache outside the timed part). Then
@@ -312,8 +312,8 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     import torch
 
     import splatbench
-    from splatbench.bench.raster import (forward_backward_with_init, forward_with_init, resolve_device, time_runs,
-                                         torch_params)
+    from splatbench.bench.machine import resolve_device
+    from splatbench.bench.timing import forward_backward_with_init, forward_with_init, time_runs, torch_params
     from splatbench.reports.stats import bootstrap_median_ratio
     from splatbench.train.metrics import psnr
 

@@ -39,14 +39,9 @@ loaded), so that parallel runs do not oversubscribe the machine.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
-import gc
-import logging
-import multiprocessing
 import os
 import sys
 import time
-import traceback
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -54,14 +49,15 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from splatbench.errors import InputError
+from splatbench.errors import InputError, one_line
 from splatbench.experiments.claims import HEARTBEAT_EVERY, Claim, remove_stale_claim_temps, try_claim
+from splatbench.experiments.configs import plain
+from splatbench.experiments.executors import DaskExecutor, LocalExecutor
 from splatbench.experiments.grid import RunSpec, expand
-from splatbench.experiments.kinds import check_output, get_kind
+from splatbench.experiments.kinds import get_kind
 from splatbench.experiments.spec import EXECUTORS, ExperimentSpec, check_scheduler
-from splatbench.experiments.store import (WORK_DIR, RunRecord, experiment_dir, read_record, read_records,
-                                          remove_stale_temps, result_path, save_table, worker_name, write_record)
-from splatbench.experiments.workers import RUNNER_ENV, THREADS_ENV, die_with_runner, init_worker, runner_id
+from splatbench.experiments.store import (RunRecord, experiment_dir, read_record, read_records, remove_stale_temps,
+                                          result_path, save_table, write_record)
 from splatbench.interrupt import Interrupted, deferred
 
 
@@ -83,156 +79,6 @@ class RunSummary:
     def line(self) -> str:
         return (f"done {self.done}, skipped {self.skipped} (finished), {self.claimed} claimed by another runner, "
                 f"failed {self.failed} of {self.total}")
-
-
-# --------------------------------------------------------------------------- worker side
-def execute_run(run: RunSpec, results_dir: str) -> dict[str, Any]:
-    """Run ``run`` in this process, write its result file atomically, return the record
-    (as a dict). A failing kind gives a ``failed`` record with a one-line error."""
-    die_with_runner(os.environ.get(RUNNER_ENV, ""))
-    started, t0 = datetime.now().astimezone(), time.perf_counter()
-    workdir = experiment_dir(results_dir, run.experiment) / WORK_DIR / run.run_id
-    record = RunRecord(run_id=run.run_id, experiment=run.experiment, kind=run.kind, scene=run.scene, seed=run.seed,
-                       status="done", config=_plain(run.config), labels=dict(run.labels), worker=worker_name(),
-                       started=started.isoformat(timespec="seconds"))
-    try:
-        workdir.mkdir(parents=True, exist_ok=True)
-        kind = get_kind(run.kind)
-        output = check_output(kind.run(_plain(run.config), workdir), run.kind)
-        record.metrics, record.curves = dict(output.metrics), output.curves
-    except Exception as exc:  # noqa: BLE001 - every failure of a run is recorded, not raised
-        record.status, record.error = "failed", one_line(exc)
-        record.traceback = traceback.format_exc()
-    record.seconds = round(time.perf_counter() - t0, 6)
-    record.finished = datetime.now().astimezone().isoformat(timespec="seconds")
-    write_record(results_dir, record)
-    return record.to_dict()
-
-
-def one_line(exc: BaseException) -> str:
-    """``ExcType: first line of the message`` (an InputError is already one line)."""
-    text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    return value
-
-
-# --------------------------------------------------------------------------- executors
-class _LocalExecutor:
-    """A spawn process pool with at most ``workers`` runs in flight."""
-
-    name = "local"
-
-    def __init__(self, workers: int, threads: int):
-        self.workers, self.threads = workers, threads
-        self.pool = self._new_pool()
-
-    def _new_pool(self) -> cf.ProcessPoolExecutor:
-        return cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                      initializer=init_worker, initargs=(self.threads, runner_id()))
-
-    @property
-    def capacity(self) -> int:
-        return self.workers
-
-    def submit(self, run: RunSpec, results_dir: str):
-        return self.pool.submit(execute_run, run, results_dir)
-
-    def wait(self, futures, timeout: float | None = None) -> set:
-        done, _ = cf.wait(futures, timeout=timeout, return_when=cf.FIRST_COMPLETED)
-        return done
-
-    @staticmethod
-    def broken(exc: BaseException) -> bool:
-        from concurrent.futures.process import BrokenProcessPool
-
-        return isinstance(exc, BrokenProcessPool)
-
-    def _shutdown(self, **kwargs) -> None:
-        """``pool.shutdown``; a pool broken by a killed worker may have closed its wake-up pipe
-        already ("handle is closed"): then there is nothing left to wake, and the error (which the
-        CLI would print as a file-system fault instead of the signal that stopped the runner) is
-        dropped. Workers are still terminated and joined by `close`."""
-        try:
-            self.pool.shutdown(**kwargs)
-        except OSError:
-            pass
-
-    def restart(self) -> None:
-        self._shutdown(wait=False, cancel_futures=True)
-        self.pool = self._new_pool()
-
-    def close(self, cancel: bool = False) -> None:
-        """Shut the pool down; with ``cancel``, stop the running workers too (SIGTERM,
-        then SIGKILL after 5 s), so that none outlives an interrupted runner."""
-        processes = list((getattr(self.pool, "_processes", None) or {}).values()) if cancel else []
-        for proc in processes:
-            proc.terminate()
-        self._shutdown(wait=not cancel, cancel_futures=cancel)
-        deadline = time.monotonic() + 5.0
-        for proc in processes:
-            proc.join(max(0.0, deadline - time.monotonic()))
-            if proc.is_alive():
-                proc.kill()
-                proc.join(1.0)
-        if cancel:  # the workers are gone: let the pool's manager thread end and free its semaphores
-            self._shutdown(wait=True)
-            self.pool = None
-            gc.collect()
-
-
-class _DaskExecutor:
-    """A `distributed.Client` on ``scheduler``, or on a loopback `LocalCluster`."""
-
-    name = "dask"
-
-    def __init__(self, workers: int, threads: int, scheduler: str | None):
-        from distributed import Client, LocalCluster
-
-        self.cluster = None
-        if scheduler is None:
-            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                        dashboard_address=None, silence_logs=logging.ERROR,
-                                        env={THREADS_ENV: str(threads), RUNNER_ENV: runner_id()})
-            self.client = Client(self.cluster)
-        else:
-            self.client = Client(scheduler)
-        self.workers = workers
-
-    @property
-    def capacity(self) -> int:
-        return sys.maxsize  # the scheduler queues; a dying worker costs only its own task
-
-    def submit(self, run: RunSpec, results_dir: str):
-        return self.client.submit(execute_run, run, results_dir, key=f"run-{run.run_id}-{os.urandom(4).hex()}",
-                                  pure=False)
-
-    def wait(self, futures, timeout: float | None = None) -> set:
-        from distributed import wait
-
-        try:
-            done, _ = wait(list(futures), timeout=timeout, return_when="FIRST_COMPLETED")
-        except TimeoutError:  # asyncio's, the builtin since Python 3.11
-            return set()
-        return set(done)
-
-    @staticmethod
-    def broken(exc: BaseException) -> bool:
-        return False
-
-    def restart(self) -> None:  # pragma: no cover - never broken
-        pass
-
-    def close(self, cancel: bool = False) -> None:
-        self.client.close()
-        if self.cluster is not None:
-            self.cluster.close()
 
 
 # --------------------------------------------------------------------------- parent side
@@ -277,7 +123,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
 
     kind = get_kind(spec.kind)
     if kind.prepare is not None:
-        kind.prepare([_plain(r.config) for r in pending])
+        kind.prepare([plain(r.config) for r in pending])
 
     threads = max(1, cpus // workers)
     done = failed = claimed = 0
@@ -328,7 +174,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
             bar.set_postfix(failed=failed, refresh=False)
             bar.update(1)
 
-    pool = _LocalExecutor(workers, threads) if executor == "local" else _DaskExecutor(workers, threads, scheduler)
+    pool = LocalExecutor(workers, threads) if executor == "local" else DaskExecutor(workers, threads, scheduler)
     try:
         _drive(pool, pending, str(results_dir), finish, admit=admit, heartbeat=heartbeat)
     except BaseException as exc:
@@ -426,7 +272,7 @@ def _collect_written(suspects: deque[RunSpec], results_dir: str, finish) -> None
 def _failed(run: RunSpec, error: str) -> RunRecord:
     now = datetime.now().astimezone().isoformat(timespec="seconds")
     return RunRecord(run_id=run.run_id, experiment=run.experiment, kind=run.kind, scene=run.scene, seed=run.seed,
-                     status="failed", config=_plain(run.config), labels=dict(run.labels), error=error,
+                     status="failed", config=plain(run.config), labels=dict(run.labels), error=error,
                      started=now, finished=now, worker="")
 
 
@@ -446,4 +292,4 @@ def _logger(enabled: bool) -> Callable[[str], None]:
     return log
 
 
-__all__ = ["RunSummary", "run_experiment", "execute_run", "one_line", "THREADS_ENV", "RUNNER_ENV"]
+__all__ = ["RunSummary", "run_experiment"]

@@ -31,25 +31,23 @@ table (``opts = [{a = 1}, {a = 2, b = 3}]``) replaces the whole sub-table: no ke
 the base's sub-table survives. Inside a variant, a nested table is read as dotted
 keys: each leaf is set on its own and the base's other keys stay.
 
-Parsing checks the file's structure (`parse_experiment`); `load_experiment` also
-checks the kind, the scenes and every run's config against the kind, so that a bad
-file fails with one `InputError` line before anything runs.
+Parsing checks the file's structure (`parse_experiment`); `grid.load_experiment` also
+checks the kind, the scenes and every run's config against the kind (by expanding
+the grid), so that a bad file fails with one `InputError` line before anything runs.
+The dotted-key helpers (`flatten`, `unflatten`, `override`) and `canonical_json` live
+in `splatbench.experiments.configs`, shared by this module, the grid and the kinds.
 """
 
 from __future__ import annotations
 
-import json
-import math
 import re
-import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from datetime import date, datetime, time
 from pathlib import Path
 from typing import Any
 
 from splatbench.errors import InputError
-from splatbench.fsutil import read_text
+from splatbench.experiments.configs import FIELD_KEY, canonical_json, check_value, flatten
 
 #: Fields an experiment file may hold at its top level.
 TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "base", "axes", "variants", "runner")
@@ -62,7 +60,6 @@ EXECUTORS = ("local", "dask")
 RESERVED_KEYS = ("scene", "seed")
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-_KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
 _SCHEDULER = re.compile(r"^(tcp|tls|ucx|inproc)://\S+$")
 
 
@@ -107,75 +104,6 @@ class ExperimentSpec:
     def dimensions(self) -> list[str]:
         """Axis names in grid order: plain axes (their dotted paths), then variants."""
         return [*self.axes, *self.variants]
-
-
-# --------------------------------------------------------------------------- dotted keys
-def flatten(table: Mapping[str, Any], prefix: str = "", *, where: str = "config") -> dict[str, Any]:
-    """A nested table -> ``{dotted.path: leaf}``. Keys holding dots are split; an empty
-    table is a leaf (``{}``); a path set twice is an `InputError` naming ``where``."""
-    flat: dict[str, Any] = {}
-    for key, value in table.items():
-        parts = str(key).split(".")
-        if not all(_KEY.match(p) for p in parts):
-            raise InputError(f"{where}: bad field name {key!r} (letters, digits, '_' and '-', dotted for nesting)")
-        path = ".".join([prefix, *parts] if prefix else parts)
-        items = flatten(value, path, where=where).items() if isinstance(value, Mapping) and value else [(path, value)]
-        for sub, leaf in items:
-            _set_path(flat, sub, leaf, where=where)
-    return flat
-
-
-def unflatten(flat: Mapping[str, Any]) -> dict[str, Any]:
-    """``{dotted.path: leaf}`` -> a nested dict (the form a run kind receives)."""
-    nested: dict[str, Any] = {}
-    for path, value in flat.items():
-        node = nested
-        *parents, last = path.split(".")
-        for part in parents:
-            node = node.setdefault(part, {})
-        node[last] = _copy(value)
-    return nested
-
-
-def override(flat: Mapping[str, Any], settings: Mapping[str, Any]) -> dict[str, Any]:
-    """``flat`` with ``settings`` applied: each set path replaces the base value at that
-    path, everything under it and any leaf above it."""
-    out = dict(flat)
-    for path in settings:
-        for key in list(out):
-            if key == path or key.startswith(path + ".") or path.startswith(key + "."):
-                del out[key]
-    out.update(settings)
-    return out
-
-
-def _set_path(flat: dict[str, Any], path: str, value: Any, *, where: str) -> None:
-    for key in flat:
-        if key == path or key.startswith(path + ".") or path.startswith(key + "."):
-            raise InputError(f"{where}.{path}: set twice (also as {key!r})")
-    flat[path] = value
-
-
-def _copy(value: Any) -> Any:
-    if isinstance(value, Mapping):
-        return {k: _copy(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_copy(v) for v in value]
-    return value
-
-
-def _check_value(value: Any, where: str) -> None:
-    """Config values must survive canonical JSON: no dates, no NaN or infinity."""
-    if isinstance(value, (datetime, date, time)):
-        raise InputError(f"{where}: dates and times are not config values, got {value!r}")
-    if isinstance(value, float) and not math.isfinite(value):
-        raise InputError(f"{where}: non-finite value {value!r}")
-    if isinstance(value, Mapping):
-        for k, v in value.items():
-            _check_value(v, f"{where}.{k}")
-    elif isinstance(value, list):
-        for i, v in enumerate(value):
-            _check_value(v, f"{where}[{i}]")
 
 
 # --------------------------------------------------------------------------- parsing
@@ -225,7 +153,7 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
         raise fail("base", f"expected a table of config fields, got {base_table!r}")
     base = flatten(base_table, where=f"{source}: base")
     for path, value in base.items():
-        _check_value(value, f"{source}: base.{path}")
+        check_value(value, f"{source}: base.{path}")
 
     axes_table = data.get("axes", {})
     if not isinstance(axes_table, Mapping):
@@ -235,7 +163,7 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
         if not values:
             raise fail(f"axes.{path}", "empty axis (an axis needs at least one value)")
         for i, v in enumerate(values):
-            _check_value(v, f"{source}: axes.{path}[{i}]")
+            check_value(v, f"{source}: axes.{path}[{i}]")
         _no_duplicates(values, f"axes.{path}", fail)
         axes[path] = tuple(values)
 
@@ -257,7 +185,7 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
                 raise fail(f"{where}.{label}", f"expected a table of config fields, got {settings!r}")
             flat = flatten(settings, where=f"{source}: {where}.{label}") if settings else {}
             for path, value in flat.items():
-                _check_value(value, f"{source}: {where}.{label}.{path}")
+                check_value(value, f"{source}: {where}.{label}.{path}")
                 for axis in axes:
                     if path == axis or path.startswith(axis + ".") or axis.startswith(path + "."):
                         raise fail(f"{where}.{label}.{path}", f"also swept by axes.{axis}")
@@ -279,7 +207,7 @@ def _flatten_axes(table: Mapping[str, Any], prefix: str, fail) -> dict[str, list
     out: dict[str, list] = {}
     for key, value in table.items():
         parts = str(key).split(".")
-        if not all(_KEY.match(p) for p in parts):
+        if not all(FIELD_KEY.match(p) for p in parts):
             raise fail(f"axes.{key}", "bad field name (letters, digits, '_' and '-', dotted for nesting)")
         path = ".".join([prefix, *parts] if prefix else parts)
         if isinstance(value, list):
@@ -328,14 +256,6 @@ def check_scheduler(address: Any, *, where: str = "scheduler") -> str:
     return address
 
 
-def canonical_json(value: Any) -> str:
-    """Sorted keys, no spaces, ASCII, no NaN: the same value always gives the same text."""
-    try:
-        return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"config: not a canonical JSON value ({exc})") from None
-
-
 def _no_duplicates(values: list, where: str, fail) -> None:
     seen: set[str] = set()
     for v in values:
@@ -345,29 +265,5 @@ def _no_duplicates(values: list, where: str, fail) -> None:
         seen.add(key)
 
 
-# --------------------------------------------------------------------------- loading
-def load_experiment(path: str | Path, *, known_scenes: Callable[[], set[str]] | None = None) -> ExperimentSpec:
-    """Read, parse and fully check an experiment file (see `check_experiment`)."""
-    p = Path(path)
-    text = read_text(p, "experiment")
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{p}: invalid TOML ({exc})") from None
-    spec = parse_experiment(data, source=str(p), default_name=p.stem, base_dir=p.parent)
-    check_experiment(spec, known_scenes=known_scenes)
-    return spec
-
-
-def check_experiment(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None = None) -> None:
-    """Check the kind exists, every scene is known (``known_scenes``, else the kind's
-    ``scenes``; neither: any name) and every run's config passes the kind's
-    ``validate``, by expanding the grid. Raises one `InputError` line; runs nothing."""
-    from splatbench.experiments.grid import expand
-
-    expand(spec, known_scenes=known_scenes)
-
-
 __all__ = ["ExperimentSpec", "RunnerDefaults", "TOP_LEVEL_FIELDS", "RUNNER_FIELDS", "GRID_MODES", "EXECUTORS",
-           "RESERVED_KEYS", "flatten", "unflatten", "override", "parse_experiment", "load_experiment",
-           "check_experiment", "check_scheduler", "canonical_json"]
+           "RESERVED_KEYS", "parse_experiment", "check_scheduler"]

@@ -37,7 +37,7 @@ from typing import Any
 import pandas as pd
 
 from splatbench.experiments.claims import pid_alive
-from splatbench.experiments.spec import flatten
+from splatbench.experiments.configs import flatten
 
 #: Version of the per-run file layout.
 RECORD_FORMAT = 1

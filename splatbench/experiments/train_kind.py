@@ -222,25 +222,15 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
         "sh_degree": result.sh_degree, "peak_rss_mb": result.peak_rss_mb, "iterations": result.iterations,
         "test_views": result.test_views, "dataset_hash": dataset.hash[:16],
     }
+    rows = result.to_dict()  # NaN / inf already None there (the one JSON-safety rule of a result)
+    history, evaluations = rows["history"], rows["evaluations"]
     curves = {
-        "step": [p.step for p in result.history], "loss": [p.loss for p in result.history],
-        "psnr": [p.psnr for p in result.history], "num_gaussians": [p.num_gaussians for p in result.history],
-        "eval_step": [p.step for p in result.evaluations], "eval_psnr": [p.psnr for p in result.evaluations],
-        "eval_ssim": [p.ssim for p in result.evaluations],
+        "step": [p["step"] for p in history], "loss": [p["loss"] for p in history],
+        "psnr": [p["psnr"] for p in history], "num_gaussians": [p["num_gaussians"] for p in history],
+        "eval_step": [p["step"] for p in evaluations], "eval_psnr": [p["psnr"] for p in evaluations],
+        "eval_ssim": [p["ssim"] for p in evaluations],
     }
-    return RunOutput(metrics=metrics, curves=_finite(curves))
-
-
-def _finite(value: Any) -> Any:
-    import math
-
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_finite(v) for v in value]
-    return value
+    return RunOutput(metrics=metrics, curves=curves)
 
 
 #: The ``train`` kind (``kind = "train"``).

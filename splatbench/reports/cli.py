@@ -20,7 +20,7 @@ def report(experiment: Path, results: Path | None, out: Path | None) -> None:
     Runs nothing: run the grid first with `splatbench run EXPERIMENT.toml`. Runs without
     a result are counted as "not run" in the report.
     """
-    from splatbench.experiments.spec import load_experiment
+    from splatbench.experiments.grid import load_experiment
     from splatbench.reports.report import build_report, write_report
 
     spec = load_experiment(experiment)

@@ -28,7 +28,8 @@ from typing import Any
 import pandas as pd
 
 from splatbench.experiments.grid import expand
-from splatbench.experiments.spec import ExperimentSpec, flatten, unflatten
+from splatbench.experiments.configs import flatten, unflatten
+from splatbench.experiments.spec import ExperimentSpec
 from splatbench.reports.kind_report import MetricSpec, kind_report
 from splatbench.reports.stats import t_quantile
 

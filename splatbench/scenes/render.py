@@ -51,7 +51,6 @@ import tempfile
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -60,9 +59,10 @@ import numpy as np
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
 from splatbench.fsutil import replace_dir
+from splatbench.mitsuba_loader import MITSUBA_VARIANT, mitsuba
 from splatbench.scenes.catalog import SceneSpec, get_scene, parse_resolution
+from splatbench.versions import package_version
 
-MITSUBA_VARIANT = "llvm_ad_rgb"
 #: Bump when the renderer's output changes for the same inputs (invalidates caches).
 RENDERER_VERSION = 1
 MANIFEST = "manifest.json"
@@ -71,16 +71,6 @@ DATASET_FORMAT = "splatbench-dataset/1"
 MAX_SAMPLES_PER_PASS = 1 << 22
 #: Relative depth jump to a 4-neighbour that marks a pixel as a silhouette edge (no point there).
 EDGE_REL_DEPTH = 0.02
-
-
-def mitsuba():
-    """The ``mitsuba`` module with the variant set to `MITSUBA_VARIANT` (``llvm_ad_rgb``)."""
-    import splatbench  # noqa: F401 - sets DRJIT_LIBLLVM_PATH before drjit loads
-    import mitsuba as mi
-
-    if mi.variant() != MITSUBA_VARIANT:
-        mi.set_variant(MITSUBA_VARIANT)
-    return mi
 
 
 def load_mitsuba_scene(scene: SceneSpec | str | Path, extra_dirs: Iterable[str | Path] = ()):
@@ -200,7 +190,7 @@ class RenderPlan:
         """What the cache hashes: scene files (sha256), settings and renderer identity."""
         files = {p.relative_to(self.scene.folder).as_posix(): _sha256(p.read_bytes()) for p in self.scene.files()}
         renderer = {"renderer_version": RENDERER_VERSION, "variant": MITSUBA_VARIANT,
-                    "splatbench": _version("splatbench"), "mitsuba": _version("mitsuba")}
+                    "splatbench": package_version("splatbench"), "mitsuba": package_version("mitsuba")}
         return {"scene": self.scene.name, "files": files, "settings": self.settings(), "renderer": renderer}
 
     def hash(self) -> str:
@@ -397,10 +387,3 @@ def _write_json(path: Path, data: Any) -> None:
 
 def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
-
-
-def _version(package: str) -> str:
-    try:
-        return metadata.version(package)
-    except metadata.PackageNotFoundError:
-        return "unknown"

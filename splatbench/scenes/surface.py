@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.errors import InputError
+from splatbench.mitsuba_loader import mitsuba
 
 
 @dataclass(frozen=True)
@@ -60,8 +61,6 @@ def sample_surface(mi_scene, n: int, *, seed: int = 0, include_emitters: bool = 
     ``shape.bsdf().eval_diffuse_reflectance`` seen from its normal side, clipped to
     [0, 1] (0.5 where a shape has no BSDF or the value is not finite).
     """
-    from splatbench.scenes.render import mitsuba
-
     mi = mitsuba()
     if not (isinstance(n, int) and n >= 0):
         raise InputError(f"n: expected an int >= 0, got {n!r}")

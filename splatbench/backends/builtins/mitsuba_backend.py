@@ -16,7 +16,7 @@ evaluated at its maximum along each pixel's ray (no EWA linearisation, no eps2d)
 cut at the 3-sigma ellipsoid; alpha is clamped at 0.9999 with no alpha_min skip;
 primitives are composited in the order the ray enters their shells; SH is evaluated
 in the ray's direction; a ray stops once its throughput is <= 0.01. The integrator is
-``volprim_rf_dedup`` (`splatbench.validate._volprim_dedup`): the shipped
+``volprim_rf_dedup`` (`splatbench.validate.mitsuba._volprim_dedup`): the shipped
 ``volprim_rf_basic`` and its backward pass, less the float32 re-hit that composites a
 small distant ellipsoid twice. Mitsuba's ray-ellipsoid test also misjudges ellipsoids
 that are small in absolute world units (sigma ~0.01), and its perspective sensor needs
@@ -60,12 +60,11 @@ def make_mitsuba_backend() -> Backend:
     import drjit as dr
     import torch
 
-    import mitsuba as mi_module
     from splatbench.backends.builtins.inputs import check_inputs
     from splatbench.gaussians import Gaussians
-    from splatbench.validate.mitsuba import mitsuba, mitsuba_scene
+    from splatbench.validate.mitsuba import mitsuba_scene, mitsuba_volprim
 
-    mi = mitsuba()
+    mi = mitsuba_volprim()
 
     def render(data, opacities, sh_coeffs, aux, gaussians, camera):
         scenes = [mitsuba_scene(gaussians, camera) for _ in range(2)]
@@ -101,7 +100,7 @@ def make_mitsuba_backend() -> Backend:
         return rgb[..., :3] + (1 - alpha)[..., None] * bg, alpha, depth
 
     info = BackendInfo(
-        name="mitsuba", version=mi_module.__version__, dtype="float32", slow_gradients=True,
+        name="mitsuba", version=mi.__version__, dtype="float32", slow_gradients=True,
         alpha_min=0.0, alpha_max=ALPHA_MAX, transmittance_min=T_STOP, eps2d=0.0, radius="3sigma", tile_size=0,
         antialiased=False,
         description=("Mitsuba 3 volprim_rf_basic (dedup): Gaussians ray-traced (peak of the 3D Gaussian along each "

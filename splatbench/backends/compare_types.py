@@ -1,0 +1,75 @@
+"""What `splatbench compare` measures: its derived tolerances and typed measurements.
+
+The bounds (`FORWARD_ATOL`, `gradient_bound`, ...) are derived in the comments below;
+`ImageError`, `GradError` and `Timing` are one measurement each. Shared by
+`splatbench.backends.compare` (which runs a comparison), `compare_measure` (which
+measures) and `compare_report` (which writes it); imports none of them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+U32 = 2.0 ** -24  # float32 unit roundoff
+
+# Forward bound, derived in tests/test_raster_parity.py: a pixel sums L <= ~150 terms
+# T_i a_i c_i, T_i a product of i factors (relative error <= i u) and a_i c_i ~20 float32
+# operations, so |error| <= (2 L + 20) u max|c| ~ 4e-5 for |c| <= 2, and 2e-5 for the
+# random-walk sum. A pixel where float32 and float64 take a discrete decision (3-sigma
+# cutoff, alpha_min, early stop, depth tie) differently differs by a whole contribution:
+# at most 1 pixel in 500 may exceed the tolerance (the boundary band).
+FORWARD_ATOL = 2e-5
+BOUNDARY_FRACTION = 1 / 500
+OFF_THRESHOLD = 1e-4        # "share of pixels off by more than 1e-4" (per pixel, max over channels)
+DEPTH_ALPHA_MIN = 0.05      # v_depth is kept where the oracle's alpha exceeds this
+GRAD_TERM_OPS = 20          # float32 operations per gradient term (forward + backward)
+MAX_ORACLE_PIXELS = 20_000  # automatic error scale: the largest 1/2^k with W' H' <= this
+
+
+def gradient_bound(pixels: int, outliers: int) -> float:
+    """Relative L2 bound of a float32 gradient against a float64 one with the same conventions.
+
+    One gradient entry sums a term per pixel, each with ~20 float32 operations (relative
+    error 20 u); random cotangents make the terms cancel, which amplifies the relative
+    error of the sum by at most sqrt(P) (tests/test_raster_grads.py): 20 u sqrt(P). A
+    boundary pixel (see `FORWARD_ATOL`) changes its terms by a whole contribution; with
+    ``outliers`` such pixels among P of comparable terms that adds sqrt(outliers / P).
+    """
+    return GRAD_TERM_OPS * U32 * math.sqrt(pixels) + math.sqrt(outliers / pixels)
+
+
+@dataclass(frozen=True)
+class ImageError:
+    """One output against one oracle image: max |diff|, PSNR (peak 1), share of pixels off
+    by more than 1e-4, and pixels over `FORWARD_ATOL` (the bound's outliers)."""
+
+    max_abs: float
+    psnr: float
+    frac_off: float
+    outliers: int
+
+
+@dataclass(frozen=True)
+class GradError:
+    """One parameter group: relative L2 error |a - b| / |b|, cosine a.b / (|a| |b|), and the
+    norms |a| (backend) and |b| (oracle). Where |b| = 0 (e.g. the quaternions of isotropic
+    Gaussians, which a rotation does not change) and |a| > 0 there is no relative error:
+    rel_l2 and cosine are NaN and the group is left out of the verdict."""
+
+    rel_l2: float
+    cosine: float
+    norm: float = math.nan
+    oracle_norm: float = math.nan
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Milliseconds of every timed forward and forward+backward run (empty: not timed),
+    why not, and the peak memory rise of one forward+backward (MB, 10^6 bytes)."""
+
+    fwd_ms: tuple[float, ...] = ()
+    fwd_bwd_ms: tuple[float, ...] = ()
+    note: str = ""
+    peak_mb: float = math.nan
+    memory_kind: str = ""

@@ -1,0 +1,132 @@
+"""The runner's executors: a local spawn process pool and a Dask client, one interface.
+
+Both submit `splatbench.experiments.execute.execute_run` and expose ``capacity``
+(runs in flight at most), ``submit``, ``wait``, ``broken``, ``restart`` and
+``close``; `splatbench.experiments.runner` drives them (the module docstring there
+says how each behaves when a worker dies).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import gc
+import logging
+import multiprocessing
+import os
+import sys
+import time
+
+from splatbench.experiments.execute import execute_run
+from splatbench.experiments.grid import RunSpec
+from splatbench.experiments.workers import RUNNER_ENV, THREADS_ENV, init_worker, runner_id
+
+
+class LocalExecutor:
+    """A spawn process pool with at most ``workers`` runs in flight."""
+
+    name = "local"
+
+    def __init__(self, workers: int, threads: int):
+        self.workers, self.threads = workers, threads
+        self.pool = self._new_pool()
+
+    def _new_pool(self) -> cf.ProcessPoolExecutor:
+        return cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                      initializer=init_worker, initargs=(self.threads, runner_id()))
+
+    @property
+    def capacity(self) -> int:
+        return self.workers
+
+    def submit(self, run: RunSpec, results_dir: str):
+        return self.pool.submit(execute_run, run, results_dir)
+
+    def wait(self, futures, timeout: float | None = None) -> set:
+        done, _ = cf.wait(futures, timeout=timeout, return_when=cf.FIRST_COMPLETED)
+        return done
+
+    @staticmethod
+    def broken(exc: BaseException) -> bool:
+        from concurrent.futures.process import BrokenProcessPool
+
+        return isinstance(exc, BrokenProcessPool)
+
+    def _shutdown(self, **kwargs) -> None:
+        """``pool.shutdown``; a pool broken by a killed worker may have closed its wake-up pipe
+        already ("handle is closed"): then there is nothing left to wake, and the error (which the
+        CLI would print as a file-system fault instead of the signal that stopped the runner) is
+        dropped. Workers are still terminated and joined by `close`."""
+        try:
+            self.pool.shutdown(**kwargs)
+        except OSError:
+            pass
+
+    def restart(self) -> None:
+        self._shutdown(wait=False, cancel_futures=True)
+        self.pool = self._new_pool()
+
+    def close(self, cancel: bool = False) -> None:
+        """Shut the pool down; with ``cancel``, stop the running workers too (SIGTERM,
+        then SIGKILL after 5 s), so that none outlives an interrupted runner."""
+        processes = list((getattr(self.pool, "_processes", None) or {}).values()) if cancel else []
+        for proc in processes:
+            proc.terminate()
+        self._shutdown(wait=not cancel, cancel_futures=cancel)
+        deadline = time.monotonic() + 5.0
+        for proc in processes:
+            proc.join(max(0.0, deadline - time.monotonic()))
+            if proc.is_alive():
+                proc.kill()
+                proc.join(1.0)
+        if cancel:  # the workers are gone: let the pool's manager thread end and free its semaphores
+            self._shutdown(wait=True)
+            self.pool = None
+            gc.collect()
+
+
+class DaskExecutor:
+    """A `distributed.Client` on ``scheduler``, or on a loopback `LocalCluster`."""
+
+    name = "dask"
+
+    def __init__(self, workers: int, threads: int, scheduler: str | None):
+        from distributed import Client, LocalCluster
+
+        self.cluster = None
+        if scheduler is None:
+            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                        dashboard_address=None, silence_logs=logging.ERROR,
+                                        env={THREADS_ENV: str(threads), RUNNER_ENV: runner_id()})
+            self.client = Client(self.cluster)
+        else:
+            self.client = Client(scheduler)
+        self.workers = workers
+
+    @property
+    def capacity(self) -> int:
+        return sys.maxsize  # the scheduler queues; a dying worker costs only its own task
+
+    def submit(self, run: RunSpec, results_dir: str):
+        return self.client.submit(execute_run, run, results_dir, key=f"run-{run.run_id}-{os.urandom(4).hex()}",
+                                  pure=False)
+
+    def wait(self, futures, timeout: float | None = None) -> set:
+        from distributed import wait
+
+        try:
+            done, _ = wait(list(futures), timeout=timeout, return_when="FIRST_COMPLETED")
+        except TimeoutError:  # asyncio's, the builtin since Python 3.11
+            return set()
+        return set(done)
+
+    @staticmethod
+    def broken(exc: BaseException) -> bool:
+        return False
+
+    def restart(self) -> None:  # pragma: no cover - never broken
+        pass
+
+    def close(self, cancel: bool = False) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
