@@ -31,6 +31,8 @@ def test_both_sides_train_the_same_run_in_alternation_and_clean_up(monkeypatch):
     # from block to block (the steps really ran). Fails in a tree whose training code is edited
     # but not committed -- the two sides then differ, which is what this checks.
     assert r.old_losses == r.new_losses and len(set(r.new_losses)) == 5
+    assert len(r.old_cpu_seconds) == len(r.new_cpu_seconds) == 5 and min(r.old_cpu_seconds + r.new_cpu_seconds) > 0
+    assert r.cpu_ratio > 0
     assert "24x24" in format_train_result(r) and "withheld" in format_train_result(r)
     trees = subprocess.run(["git", "-C", str(REPO), "worktree", "list"], capture_output=True, text=True).stdout
     assert "splatbench-ab-" not in trees

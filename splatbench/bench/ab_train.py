@@ -12,7 +12,10 @@ the two sides in turn (old, new, new, old, ...) for one block of ``block`` steps
 at a time, ``pairs`` blocks each, sampling the 1-minute load average between pairs.
 Medians, the quiet-machine rule and the withheld ratio come from `ab.summarize`
 (one rule for both harnesses); the ratio old/new of the median block times is the
-speed-up in iterations per second. docs/training.md ("Throughput") shows the command.
+speed-up in iterations per second. Each block's CPU time (the worker process, all
+threads) is recorded too: its ratio is reported always, as an indication only -- on a
+busy machine it is less disturbed than wall time, but it counts spinning threads and
+is not what the target measures. docs/training.md ("Throughput") shows the command.
 
 The worker script uses only `synthetic_scene`, `TrainConfig`, `Trainer` and
 `torch_threads`, which c11f838 and this tree both have; it passes
@@ -22,6 +25,7 @@ since the field exists; before, steps were always taken as written).
 
 from __future__ import annotations
 
+import statistics
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,12 +55,11 @@ with torch_threads(1):
     for line in sys.stdin:
         if line.strip() != "run":
             break
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for _ in range(spec["block"]):
             status = trainer.step()
-        seconds = time.perf_counter() - t0
-        print(json.dumps({"seconds": seconds, "loss": status.loss, "n": status.num_gaussians,
-                          "sh_degree": status.sh_degree}), flush=True)
+        seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+        print(json.dumps({"seconds": seconds, "cpu_seconds": cpu, "loss": status.loss}), flush=True)
 """
 
 
@@ -98,6 +101,9 @@ class AbTrainResult:
     old_losses: list[float]    # training loss of the last step of each block, in run order
     new_losses: list[float]
     timing: AbResult           # block seconds, loads, ratio old/new (None when withheld) and note
+    old_cpu_seconds: list[float]  # CPU time of each block's process (all its threads), in run order
+    new_cpu_seconds: list[float]
+    cpu_ratio: float           # median old / median new CPU time: an indication on a busy machine only
 
 
 def _spec(settings: AbTrainSettings, size: int) -> dict:
@@ -147,10 +153,13 @@ def run_ab_train(repo: Path, against: str, settings: AbTrainSettings = AbTrainSe
                     w.close()
             timing = summarize(label, against, [r["seconds"] for r in runs[0]], [r["seconds"] for r in runs[1]],
                                loads)
+            old_cpu, new_cpu = ([r["cpu_seconds"] for r in side] for side in runs)
             results.append(AbTrainResult(size, settings.gaussians, settings.block,
                                          round(settings.block / timing.old_median, 3),
                                          round(settings.block / timing.new_median, 3),
-                                         [r["loss"] for r in runs[0]], [r["loss"] for r in runs[1]], timing))
+                                         [r["loss"] for r in runs[0]], [r["loss"] for r in runs[1]], timing,
+                                         old_cpu, new_cpu,
+                                         round(statistics.median(old_cpu) / statistics.median(new_cpu), 3)))
     return results
 
 
@@ -159,7 +168,8 @@ def format_train_result(r: AbTrainResult) -> str:
     ratio = f"{t.ratio:.2f}x" if t.ratio is not None else t.note
     return (f"train {r.gaussians} @ {r.size}x{r.size}: old {t.against} {r.old_it_per_s:.2f} it/s (median "
             f"{t.old_median * 1e3 / r.block:.1f} ms/step), new {r.new_it_per_s:.2f} it/s ({t.new_median * 1e3 / r.block:.1f} "
-            f"ms/step) over {len(t.new_seconds)} alternating blocks of {r.block} steps each; load {t.loads}; {ratio}")
+            f"ms/step) over {len(t.new_seconds)} alternating blocks of {r.block} steps each; load {t.loads}; {ratio} "
+            f"(CPU time old/new {r.cpu_ratio:.2f}x)")
 
 
 __all__ = ["AbTrainSettings", "AbTrainResult", "run_ab_train", "format_train_result", "TRAIN_WORKER"]
