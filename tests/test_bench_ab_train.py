@@ -5,12 +5,13 @@ quiet-machine rule of `bench ab`, clean-up) and the one-line errors."""
 from __future__ import annotations
 
 import subprocess
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
 
-from splatbench.bench import ab
+from splatbench.bench import ab, ab_train
 from splatbench.bench.ab_train import AbTrainSettings, format_train_result, run_ab_train
 from splatbench.cli import main
 from splatbench.errors import InputError
@@ -20,6 +21,16 @@ REPO = Path(__file__).resolve().parents[1]
 
 def test_both_sides_train_the_same_run_in_alternation_and_clean_up(monkeypatch):
     monkeypatch.setattr(ab, "QUIET_LOAD", -1.0)  # never quiet enough: the shared rule must withhold the ratio
+    trees_made = []
+
+    @contextmanager
+    def recording_old_tree(repo, commit):
+        with ab.old_tree(repo, commit) as tree:
+            trees_made.append(tree)
+            yield tree
+
+    # record this run's temporary worktree (other runs may hold theirs in the same repository meanwhile)
+    monkeypatch.setattr(ab_train, "old_tree", recording_old_tree)
     settings = AbTrainSettings(sizes=(24,), gaussians=60, views=2, block=2, pairs=5, warmup=1)
     (r,) = run_ab_train(REPO, "HEAD", settings)
     t = r.timing
@@ -34,8 +45,9 @@ def test_both_sides_train_the_same_run_in_alternation_and_clean_up(monkeypatch):
     assert len(r.old_cpu_seconds) == len(r.new_cpu_seconds) == 5 and min(r.old_cpu_seconds + r.new_cpu_seconds) > 0
     assert r.cpu_ratio > 0
     assert "24x24" in format_train_result(r) and "withheld" in format_train_result(r)
+    (tree,) = trees_made
     trees = subprocess.run(["git", "-C", str(REPO), "worktree", "list"], capture_output=True, text=True).stdout
-    assert "splatbench-ab-" not in trees
+    assert str(tree) not in trees and not tree.exists()  # the temporary worktree is gone
 
 
 def test_fewer_than_five_pairs_is_refused():
