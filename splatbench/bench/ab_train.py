@@ -164,11 +164,13 @@ def run_ab_train(repo: Path, against: str, settings: AbTrainSettings = AbTrainSe
 
 
 def format_train_result(r: AbTrainResult) -> str:
+    """One line: both sides' it/s and ms per step, the loads, the ratio (or why withheld)."""
     t = r.timing
     ratio = f"{t.ratio:.2f}x" if t.ratio is not None else t.note
+    old_ms, new_ms = (1e3 * m / r.block for m in (t.old_median, t.new_median))
     return (f"train {r.gaussians} @ {r.size}x{r.size}: old {t.against} {r.old_it_per_s:.2f} it/s (median "
-            f"{t.old_median * 1e3 / r.block:.1f} ms/step), new {r.new_it_per_s:.2f} it/s ({t.new_median * 1e3 / r.block:.1f} "
-            f"ms/step) over {len(t.new_seconds)} alternating blocks of {r.block} steps each; load {t.loads}; {ratio} "
+            f"{old_ms:.1f} ms/step), new {r.new_it_per_s:.2f} it/s ({new_ms:.1f} ms/step) over "
+            f"{len(t.new_seconds)} alternating blocks of {r.block} steps each; load {t.loads}; {ratio} "
             f"(CPU time old/new {r.cpu_ratio:.2f}x)")
 
 
