@@ -591,7 +591,10 @@ def test_training_steps_through_the_rasterizer(name):
         "sh_rest": torch.tensor(g.sh[:, 1:]),
     }
     params = {k: torch.nn.Parameter(v.float().contiguous()) for k, v in params.items()}
-    opts = {k: torch.optim.Adam([p], lr=1e-3, eps=1e-15) for k, p in params.items()}
+    # the trainer's optimizers (fused Adam): densification must carry their state as well
+    from splatbench.train.params import make_optimizers
+
+    opts = make_optimizers(params, {k: 1e-3 for k in params}, 1e-15)
     strat = make_strategy(name, refine_start=0, refine_every=2, **({"grad_threshold": 1e-6} if name != "mcmc"
                                                                      else {"cap_max": 260}))
     state = strat.initialize_state(params)

@@ -481,6 +481,34 @@ def test_bench_train_reports_throughput_and_a_time_split_that_adds_up(tmp_path):
         TrainBenchSettings(iterations=0).validate()
 
 
+def test_a_step_after_warm_up_compiles_no_kernel_for_a_new_view():
+    """Issue #12: no per-step kernel recompilation. After `Trainer.warm_up` and two steps,
+    a step on a view not seen yet (another camera, learning rate, background) runs only
+    kernels Dr.Jit finds in its in-memory cache: nothing per step is baked into a kernel."""
+    import drjit as dr
+
+    from splatbench.bench.train import synthetic_scene
+
+    dataset, _ = synthetic_scene(24, 60, 4, 0)
+    cfg = TrainConfig(dataset="", out="", iterations=10, strategy="none", sh_degree=3, sh_interval=1,
+                      schedule="absolute", seed=0, device="cpu")
+    trainer = Trainer(cfg, dataset=dataset)
+    trainer.warm_up()
+    trainer.step()
+    trainer.step()  # views are drawn without replacement per epoch: the next step's view is new
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()  # clears it
+        trainer.step()
+        history = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    jit = [k for k in history if k["type"] == dr.KernelType.JIT]
+    # cache_hit is also set for a kernel loaded from ~/.drjit; cache_disk marks those loads
+    assert jit and all(k.get("cache_hit") and not k.get("cache_disk") for k in jit), \
+        [(k.get("cache_hit"), k.get("cache_disk"), k.get("size")) for k in jit]
+
+
 def test_psnr_is_one_function_for_tensors_and_float64_arrays():
     """`train.metrics.psnr` is the only PSNR (the raster run kind calls it with clamp=False)."""
     from splatbench.train.metrics import psnr

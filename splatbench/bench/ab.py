@@ -107,13 +107,15 @@ def old_tree(repo: Path, commit: str):
 
 
 class Worker:
-    """One persistent worker process rendering with the splatbench of ``tree``."""
+    """One persistent worker process running ``script`` (default `WORKER`) with the
+    splatbench of ``tree``. The script prints ``{"ready": splatbench.__file__}``, then
+    answers each ``run`` line on stdin with ``{"seconds": ...}``."""
 
-    def __init__(self, tree: Path, spec: dict) -> None:
+    def __init__(self, tree: Path, spec: dict, script: str = WORKER) -> None:
         env = {**os.environ, "PYTHONPATH": str(tree)}
         self.tree = tree
         self.stderr = tempfile.TemporaryFile(mode="w+")  # a file, not a pipe: a full pipe would block the worker
-        self.proc = subprocess.Popen([sys.executable, "-c", WORKER, json.dumps(spec)], cwd=str(tree), env=env,
+        self.proc = subprocess.Popen([sys.executable, "-c", script, json.dumps(spec)], cwd=str(tree), env=env,
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.stderr, text=True)
         ready = self._read()
         if not str(ready.get("ready", "")).startswith(str(tree)):

@@ -106,6 +106,47 @@ def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmu
     click.echo(f"wrote {out / 'ab.json'}")
 
 
+@bench.command("ab-train")
+@click.option("--against", required=True, metavar="COMMIT", help="The old commit to time against (e.g. c11f838).")
+@click.option("--size", "sizes", multiple=True, type=int, metavar="PIXELS",
+              help="Square image side (repeatable). Default: 128 and 256, as bench train.")
+@click.option("--gaussians", default=20_000, show_default=True, type=int, help="Gaussians trained.")
+@click.option("--block", default=10, show_default=True, type=int, help="Training steps per timed block.")
+@click.option("--pairs", default=5, show_default=True, type=int, help="Timed blocks per side (median; >= 5).")
+@click.option("--warmup", default=5, show_default=True, type=int, help="Untimed steps per side first.")
+@click.option("--threads", default=2, show_default=True, type=int, help="Dr.Jit threads per side.")
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("reports/bench"), show_default=True,
+              help="Folder for ab_train.json.")
+def ab_train(against: str, sizes: tuple[int, ...], gaussians: int, block: int, pairs: int, warmup: int,
+             threads: int, out: Path) -> None:
+    """Training it/s of this checkout against COMMIT, blocks of steps timed in alternation (CPU).
+
+    Both sides train bench train's synthetic scene; the ratio is printed only when the
+    1-minute load average stayed <= 1 (as bench ab; see docs/training.md).
+    """
+    import json
+    from dataclasses import asdict
+
+    from splatbench.bench.ab_train import AbTrainSettings, format_train_result, run_ab_train
+    from splatbench.bench.train import STANDARD_SIZES
+    from splatbench.bench.raster import machine_info
+
+    settings = AbTrainSettings(sizes=tuple(sizes) or STANDARD_SIZES, gaussians=gaussians, block=block, pairs=pairs,
+                               warmup=warmup, threads=threads)
+    machine = machine_info("cpu")
+    click.echo(f"bench ab-train: against {against}, sizes {list(settings.sizes)}, {gaussians} Gaussians, "
+               f"{pairs} blocks of {block} steps per side, {threads} threads, load average "
+               f"{machine.loadavg_start}", err=True)
+    results = run_ab_train(Path(__file__).resolve().parents[2], against, settings,
+                           progress=lambda line: click.echo(line, err=True))
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "ab_train.json").write_text(json.dumps({"machine": asdict(machine), "settings": asdict(settings),
+                                                   "results": [asdict(r) for r in results]}, indent=2))
+    for r in results:
+        click.echo(format_train_result(r))
+    click.echo(f"wrote {out / 'ab_train.json'}")
+
+
 @bench.command("train")
 @click.option("--size", "sizes", multiple=True, type=int, metavar="PIXELS",
               help="Square image side (repeatable). Default: 128 and 256.")

@@ -28,6 +28,8 @@ Speed against kornia is not measured yet.
 
 from __future__ import annotations
 
+import functools
+
 import torch
 import torch.nn.functional as F
 
@@ -42,10 +44,14 @@ def gaussian_window(window: int, *, dtype: torch.dtype = torch.float32) -> torch
     return g / g.sum()
 
 
-def _reflect_index(size: int, pad: int, device) -> torch.Tensor:
-    """Source index of every position of a reflect-padded axis (edge not repeated)."""
-    j = torch.arange(-pad, size + pad, device=device)
-    return torch.where(j < 0, -j, torch.where(j > size - 1, 2 * (size - 1) - j, j))
+def _fold_reflect(t: torch.Tensor, dim: int, pad: int) -> torch.Tensor:
+    """Adjoint of reflect padding along ``dim``: [.., n + 2 pad, ..] -> [.., n, ..], each
+    padded position added onto the source it copied (edge not repeated)."""
+    n = t.shape[dim] - 2 * pad
+    out = t.narrow(dim, pad, n).clone()
+    out.narrow(dim, 1, pad).add_(t.narrow(dim, 0, pad).flip(dim))            # left: position -j copied j
+    out.narrow(dim, n - 1 - pad, pad).add_(t.narrow(dim, n + pad, pad).flip(dim))  # right: n-1+j copied n-1-j
+    return out
 
 
 class _Blur:
@@ -62,22 +68,22 @@ class _Blur:
         self.channels = channels
         self.kh = g.view(1, 1, 1, window).repeat(channels, 1, 1, 1)  # along W
         self.kv = g.view(1, 1, window, 1).repeat(channels, 1, 1, 1)  # along H
-        self.rows = _reflect_index(height, self.pad, device)
-        self.cols = _reflect_index(width, self.pad, device)
-        self.height, self.width = height, width
 
     def __call__(self, t: torch.Tensor) -> torch.Tensor:
-        padded = t.index_select(2, self.rows).index_select(3, self.cols)
+        p = self.pad
+        padded = F.pad(t, (p, p, p, p), mode="reflect")
         return F.conv2d(F.conv2d(padded, self.kh, groups=self.channels), self.kv, groups=self.channels)
 
     def adjoint(self, g: torch.Tensor) -> torch.Tensor:
         padded = F.conv_transpose2d(F.conv_transpose2d(g, self.kv, groups=self.channels), self.kh,
                                     groups=self.channels)
-        shape = list(padded.shape)
-        shape[3] = self.width
-        cols = padded.new_zeros(shape).index_add_(3, self.cols, padded)
-        shape[2] = self.height
-        return cols.new_zeros(shape).index_add_(2, self.rows, cols)
+        return _fold_reflect(_fold_reflect(padded, 3, self.pad), 2, self.pad)
+
+
+@functools.lru_cache(maxsize=16)
+def _blur(window: int, channels: int, height: int, width: int, dtype, device) -> _Blur:
+    """One `_Blur` per shape, built once (training calls the loss with one shape every step)."""
+    return _Blur(window, channels, height, width, dtype, device)
 
 
 class _FusedDssim(torch.autograd.Function):
@@ -85,7 +91,7 @@ class _FusedDssim(torch.autograd.Function):
     def forward(ctx, pred: torch.Tensor, target: torch.Tensor, window: int) -> torch.Tensor:
         x, y = pred.detach(), target.detach()
         c = x.shape[1]
-        blur = _Blur(window, 5 * c, x.shape[2], x.shape[3], x.dtype, x.device)
+        blur = _blur(window, 5 * c, x.shape[2], x.shape[3], x.dtype, x.device)
         mu_x, mu_y, e_xx, e_yy, e_xy = blur(torch.cat([x, y, x * x, y * y, x * y], dim=1)).split(c, dim=1)
         a1 = 2 * mu_x * mu_y + C1
         a2 = 2 * (e_xy - mu_x * mu_y) + C2
@@ -97,7 +103,7 @@ class _FusedDssim(torch.autograd.Function):
             d_mu = (2 * mu_y * (a2 - a1) - 2 * mu_x * s * (b2 - b1)) / d
             d_exx = -s * b1 / d
             d_exy = 2 * a1 / d
-            adj = _Blur(window, 3 * c, x.shape[2], x.shape[3], x.dtype, x.device)
+            adj = _blur(window, 3 * c, x.shape[2], x.shape[3], x.dtype, x.device)
             g_mu, g_xx, g_xy = adj.adjoint(torch.cat([d_mu, d_exx, d_exy], dim=1)).split(c, dim=1)
             # d(1 - mean S)/dx
             ctx.save_for_backward(-(g_mu + 2 * x * g_xx + y * g_xy) / s.numel())

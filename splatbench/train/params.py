@@ -46,10 +46,13 @@ def make_optimizers(params: Params, lrs: dict[str, float], eps: float) -> Optimi
     """One ``torch.optim.Adam`` per group (3DGS: eps 1e-15), holding exactly ``params[name]``.
 
     Frozen groups get an optimizer too (strategies edit every group's moments
-    together); it never steps their tensor, which never has a gradient.
+    together); it never steps their tensor, which never has a gradient. The update
+    is torch's fused Adam (one pass over each tensor; on the CPU about 4x faster than
+    the default per-tensor update at 20,000 Gaussians, docs/training.md "Throughput"),
+    the same formula, equal to the default's to float32 rounding and as deterministic.
     """
     return {name: torch.optim.Adam([{"params": [params[name]], "lr": lrs[name], "name": name}], lr=lrs[name],
-                                   eps=eps)
+                                   eps=eps, fused=True)
             for name in PARAM_GROUPS}
 
 
