@@ -20,6 +20,7 @@ which the old tree may not have.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -36,7 +37,7 @@ from splatbench.bench.load import Load, usable_cores
 from splatbench.errors import InputError, SplatbenchError
 
 WORKER = r"""
-import json, os, sys, time
+import json, sys, time
 spec = json.loads(sys.argv[1])
 import drjit as dr, torch
 import splatbench
@@ -58,8 +59,7 @@ def run():
 for _ in range(spec["warmup"]):
     run()
 def cpu():
-    t = os.times()
-    return t.user + t.system
+    return time.process_time()  # all threads, ns resolution (os.times counts 10 ms ticks)
 
 print(json.dumps({"ready": splatbench.__file__, "cpu": cpu()}), flush=True)
 for line in sys.stdin:
@@ -90,6 +90,10 @@ class AbResult:
     cores: int = 0              # usable cores
     ratio: float | None = None  # old_median / new_median; None when the machine was not quiet
     note: str = ""              # why the ratio is withheld ("" when it is reported)
+    # Median CPU seconds per run (all threads of a worker, from its os.times). Indicative only, but less
+    # sensitive to neighbours than wall time with --threads 1 (with more, idle Dr.Jit workers spin and count).
+    old_cpu_median: float = 0.0
+    new_cpu_median: float = 0.0
 
 
 @contextmanager
@@ -119,6 +123,7 @@ class Worker:
         env = {**os.environ, "PYTHONPATH": str(tree)}
         self.tree = tree
         self.cpu = 0.0  # the worker's CPU seconds at its last reply
+        self.cpu_runs: list[float] = []  # CPU seconds of each timed run (all the worker's threads)
         self.stderr = tempfile.TemporaryFile(mode="w+")  # a file, not a pipe: a full pipe would block the worker
         self.proc = subprocess.Popen([sys.executable, "-c", WORKER, json.dumps(spec)], cwd=str(tree), env=env,
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.stderr, text=True)
@@ -141,7 +146,10 @@ class Worker:
     def run(self) -> float:
         self.proc.stdin.write("run\n")
         self.proc.stdin.flush()
-        return float(self._read()["seconds"])
+        before = self.cpu
+        seconds = float(self._read()["seconds"])
+        self.cpu_runs.append(self.cpu - before)
+        return seconds
 
     def close(self) -> None:
         if self.proc.poll() is None:
@@ -184,7 +192,9 @@ def run_ab(repo: Path, against: str, workloads: list[tuple[int, int, int]], *, r
             finally:
                 for w in sides:
                     w.close()
-            results.append(summarize(label, against, old_s, new_s, load))
+            result = summarize(label, against, old_s, new_s, load)
+            results.append(dataclasses.replace(result, old_cpu_median=statistics.median(sides[0].cpu_runs),
+                                               new_cpu_median=statistics.median(sides[1].cpu_runs)))
     return results
 
 
@@ -206,4 +216,5 @@ def format_result(r: AbResult) -> str:
     ratio = f"{r.ratio:.2f}x" if r.ratio is not None else r.note
     return (f"{r.workload}: old {r.against} median {r.old_median * 1e3:.1f} ms, new median "
             f"{r.new_median * 1e3:.1f} ms over {len(r.new_seconds)} alternating runs each; load {r.loads}, own "
-            f"{r.own_cpu:.2f} cores, others {r.load_other:.2f}; {ratio}")
+            f"{r.own_cpu:.2f} cores, others {r.load_other:.2f}; CPU per run old {r.old_cpu_median * 1e3:.1f} ms, new "
+            f"{r.new_cpu_median * 1e3:.1f} ms; {ratio}")

@@ -45,9 +45,8 @@ def usable_cores() -> int:
 
 
 def process_cpu_seconds() -> float:
-    """User + system CPU seconds of this process so far."""
-    t = os.times()
-    return t.user + t.system
+    """User + system CPU seconds of this process so far (all its threads)."""
+    return time.process_time()
 
 
 def load1() -> float:
