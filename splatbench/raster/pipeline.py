@@ -146,7 +146,7 @@ def _empty_frame(means, camera, background, options: RasterOptions) -> Frame:
     proj = Projection(m.Array2f(empty, empty), m.Array3f(empty, empty, empty), empty, empty, empty,
                       m.Array2f(empty, empty), m.Int32(), m.Bool())
     bins = Bins(TileGrid(camera.width, camera.height, options.tile_size), m.UInt32(),
-                dr.zeros(m.UInt32, 1), dr.zeros(m.UInt32, 1), 0, 0)
+                dr.zeros(m.UInt32, 1), dr.zeros(m.UInt32, 1), 0)
     rgb = m.Array3f(*(dr.full(m.Float, c, size) for c in background))
     return Frame(rgb, m.Float(zero), zero, proj, CompositeState(bins))
 
