@@ -38,6 +38,23 @@ COL = 4  # colour record per Gaussian: r, g, b, (padding: packet loads need a po
 # 4x4 measured best on AVX-512 (one 16-lane packet per 16x16 tile); see docs/benchmarks.md.
 PIXEL_BLOCK = 4
 GRAD_KEYS = ("mx", "my", "ca", "cb", "cc", "o", "r", "g", "b", "z", "ax", "ay")
+#: The per-pair gradient terms each differentiable input of the op receives.
+INPUT_KEYS = {"means2d": ("mx", "my"), "conics": ("ca", "cb", "cc"), "opacities": ("o",),
+              "colors": ("r", "g", "b"), "depths": ("z",)}
+
+
+def needed_keys(inputs: dict, absgrad: bool) -> tuple[str, ...]:
+    """The `GRAD_KEYS` the compositing backward must accumulate: those of the inputs
+    (``INPUT_KEYS`` name -> Dr.Jit array) with gradients enabled, plus the screen-space
+    mean and its absolute value when AbsGS asks for them. Dr.Jit enables a screen-space
+    quantity's gradient exactly when a trainable parameter reaches it (means2d and depths:
+    the means; conics: means, log_scales, quats; opacities: opacity_logits, and with
+    antialiasing the means, log_scales, quats; colors: sh and, through the view direction,
+    the means), so a frozen group costs no per-pixel work here."""
+    keys = {key for name, group in INPUT_KEYS.items() if dr.grad_enabled(inputs[name]) for key in group}
+    if absgrad:
+        keys |= {"mx", "my", "ax", "ay"}
+    return tuple(key for key in GRAD_KEYS if key in keys)
 
 
 @dataclass(frozen=True)
@@ -271,12 +288,20 @@ class _CompositeOp(dr.CustomOp):
     def backward(self):
         m, rec, lanes, cfg, bins = self.m, self.records, self.lanes, self.cfg, self.bins
         Float, UInt32 = m.Float, m.UInt32
-        keys = GRAD_KEYS if self.want_absgrad else GRAD_KEYS[:-2]
-        if bins.num_pairs == 0:  # nothing was composited: all gradients are zero
+        keys = self.state.grad_keys  # only what a trainable input needs (`needed_keys`)
+        want_means2d = "mx" in keys
+        if bins.num_pairs == 0 or not keys:  # nothing composited, or nothing to differentiate
             zero = dr.zeros(Float, self.n)
-            self.state.grad_means2d = m.Array2f(zero, zero)
+            self.state.grad_means2d = m.Array2f(zero, zero) if want_means2d else None
             self.state.abs_grad_means2d = m.Array2f(zero, zero) if self.want_absgrad else None
+            self.records = self.lanes = self.fwd = None
             return
+        # What the walk computes: alpha's cotangent (and the colour accumulators behind it)
+        # only for the geometry and opacity; the weight T alpha only for colours and depth.
+        want_sigma = any(k in keys for k in ("mx", "my", "ca", "cb", "cc"))
+        want_va = want_sigma or "o" in keys
+        want_w = any(k in keys for k in ("r", "g", "b", "z"))
+        width = 5 if want_va else 1  # per pixel state: T (ar, ag, ab, ad)
         v_rgb_img, v_alpha_img, v_d_img = self.grad_out()
         K = len(lanes.px)
         # Image order -> lane order (pixels outside the image get zero cotangents).
@@ -291,8 +316,8 @@ class _CompositeOp(dr.CustomOp):
         cap = bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
         per_lane = lane_slots(m)
         L = lanes.lanes_per_tile if per_lane else 1
-        pair = {name: dr.zeros(Float, width * cap * L) for name, (width, _) in PAIR_GROUPS.items()
-                if name != "abs" or self.want_absgrad}
+        pair = {name: dr.zeros(Float, size * cap * L) for name, (size, group) in PAIR_GROUPS.items()
+                if any(key in keys for key in group)}
         # Expand (LLVM): per-thread copies, non-atomic updates. Still deterministic: a slot
         # is only written by the lanes of one tile, and a tile never spans two threads.
         # Per-lane slots (CUDA): each slot is written once, by one lane, without atomics.
@@ -302,8 +327,8 @@ class _CompositeOp(dr.CustomOp):
         for s in stop[1:]:
             start_i = dr.maximum(start_i, s)
 
-        def unpack(state):  # i, then per pixel (T, ar, ag, ab, ad)
-            return state[0], [state[1 + 5 * k: 6 + 5 * k] for k in range(K)]
+        def unpack(state):  # i, then per pixel (T, ar, ag, ab, ad) or (T,)
+            return state[0], [state[1 + width * k: 1 + width * (k + 1)] for k in range(K)]
 
         def cond(*state):
             return state[0] > lanes.start
@@ -318,32 +343,39 @@ class _CompositeOp(dr.CustomOp):
             sums = {key: 0.0 for key in keys}
             out = [i]
             any_on = None
-            for k, (T, ar, ag, ab, ad) in enumerate(pix):
+            for k, px_state in enumerate(pix):
+                T = px_state[0]
                 alpha, on, dx, dy, gauss, raw = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, i < stop[k])
                 inv_1ma = 1.0 / (1.0 - alpha)
                 T_i = T * inv_1ma  # transmittance in front of this Gaussian
                 w = T_i * alpha
                 vr, vg, vb = v_rgb[k].x, v_rgb[k].y, v_rgb[k].z
-                v_a = (vr * (T_i * cr - ar * inv_1ma) + vg * (T_i * cg - ag * inv_1ma)
-                       + vb * (T_i * cb - ab * inv_1ma) + v_d[k] * (T_i * depth - ad * inv_1ma)
-                       + v_alpha[k] * T_final[k] * inv_1ma)
-                v_raw = dr.select(on & (raw < cfg.alpha_max), v_a, 0.0)
-                v_sigma = -v_raw * raw
-                v_mx = v_sigma * -(ca * dx + cbk * dy)
-                v_my = v_sigma * -(cbk * dx + cc * dy)
-                w_on = dr.select(on, w, 0.0)
-                terms = {"mx": v_mx, "my": v_my, "ca": v_sigma * 0.5 * dx * dx, "cb": v_sigma * dx * dy,
-                         "cc": v_sigma * 0.5 * dy * dy, "o": v_raw * gauss, "r": vr * w_on, "g": vg * w_on,
-                         "b": vb * w_on, "z": v_d[k] * w_on}
-                if self.want_absgrad:
-                    terms["ax"], terms["ay"] = dr.abs(v_mx), dr.abs(v_my)
+                terms = {}
+                if want_va:
+                    _, ar, ag, ab, ad = px_state
+                    v_a = (vr * (T_i * cr - ar * inv_1ma) + vg * (T_i * cg - ag * inv_1ma)
+                           + vb * (T_i * cb - ab * inv_1ma) + v_d[k] * (T_i * depth - ad * inv_1ma)
+                           + v_alpha[k] * T_final[k] * inv_1ma)
+                    v_raw = dr.select(on & (raw < cfg.alpha_max), v_a, 0.0)
+                    terms["o"] = v_raw * gauss
+                if want_sigma:
+                    v_sigma = -v_raw * raw
+                    v_mx = v_sigma * -(ca * dx + cbk * dy)
+                    v_my = v_sigma * -(cbk * dx + cc * dy)
+                    terms.update({"mx": v_mx, "my": v_my, "ca": v_sigma * 0.5 * dx * dx, "cb": v_sigma * dx * dy,
+                                  "cc": v_sigma * 0.5 * dy * dy, "ax": dr.abs(v_mx), "ay": dr.abs(v_my)})
+                if want_w:
+                    w_on = dr.select(on, w, 0.0)
+                    terms.update({"r": vr * w_on, "g": vg * w_on, "b": vb * w_on, "z": v_d[k] * w_on})
                 for key in keys:
                     sums[key] = sums[key] + terms[key]
                 any_on = on if any_on is None else any_on | on
-                out += [dr.select(on, T_i, T), dr.select(on, ar + w * cr, ar), dr.select(on, ag + w * cg, ag),
-                        dr.select(on, ab + w * cb, ab), dr.select(on, ad + w * depth, ad)]
+                out.append(dr.select(on, T_i, T))
+                if want_va:
+                    out += [dr.select(on, ar + w * cr, ar), dr.select(on, ag + w * cg, ag),
+                            dr.select(on, ab + w * cb, ab), dr.select(on, ad + w * depth, ad)]
             for name, buffer in pair.items():
-                values = m.ArrayXf([sums[key] if key is not None else 0.0 for key in PAIR_GROUPS[name][1]])
+                values = m.ArrayXf([sums[key] if key in keys else 0.0 for key in PAIR_GROUPS[name][1]])
                 if per_lane:
                     dr.scatter(buffer, values, p * L + sub_slot, any_on)
                 else:
@@ -353,7 +385,7 @@ class _CompositeOp(dr.CustomOp):
         state = [UInt32(start_i)]
         for k in range(K):
             T = T_final[k]
-            state += [Float(T), T * bg[0], T * bg[1], T * bg[2], dr.zeros(Float, dr.width(T))]
+            state += [Float(T), T * bg[0], T * bg[1], T * bg[2], dr.zeros(Float, dr.width(T))][:width]
         dr.while_loop(tuple(state), cond, body, mode="symbolic")
         dr.eval(pair)
         # The walk was the last reader of the records, lane lists and forward state:
@@ -361,14 +393,14 @@ class _CompositeOp(dr.CustomOp):
         del state, v_rgb, v_alpha, v_d, T_final, stop, start_i, rec, lanes
         self.records = self.lanes = self.fwd = None
         buf = reduce_pairs(m, bins, pair, self.n, L)
-        self.state.grad_means2d = m.Array2f(buf["mx"], buf["my"])
+        if want_means2d:
+            self.state.grad_means2d = m.Array2f(buf["mx"], buf["my"])
         if self.want_absgrad:
             self.state.abs_grad_means2d = m.Array2f(buf["ax"], buf["ay"])
-        self.set_grad_in("means2d", m.Array2f(buf["mx"], buf["my"]))
-        self.set_grad_in("conics", m.Array3f(buf["ca"], buf["cb"], buf["cc"]))
-        self.set_grad_in("opacities", buf["o"])
-        self.set_grad_in("colors", m.Array3f(buf["r"], buf["g"], buf["b"]))
-        self.set_grad_in("depths", buf["z"])
+        for name, group in INPUT_KEYS.items():
+            if group[0] in keys:  # a group is computed whole or not at all (`needed_keys`)
+                values = [buf[key] for key in group]
+                self.set_grad_in(name, values[0] if len(values) == 1 else getattr(m, f"Array{len(values)}f")(*values))
         if self.timer is not None:
             self.timer.mark("backward_compositing")
 
@@ -381,17 +413,21 @@ class CompositeState:
 
     A plain class on purpose: Dr.Jit traverses dataclass arguments of `dr.custom`
     as PyTrees (and may copy them); this one must reach the op by reference.
-    After a backward pass the op sets ``grad_means2d`` [N, 2] and, when asked,
+    After a backward pass the op sets ``grad_means2d`` [N, 2] (None when the means are
+    frozen and AbsGS is off: then it is not computed) and, when asked,
     ``abs_grad_means2d`` [N, 2] (per-pixel |d loss / d mean2d| summed, for AbsGS).
+    ``grad_keys``: the per-pair gradient terms the backward pass accumulates
+    (`needed_keys`; a frozen group's are left out, and with them their per-pixel work).
     It holds no reference to the op (see `_CompositeOp.eval`).
     """
 
-    __slots__ = ("bins", "want_absgrad", "timer", "grad_means2d", "abs_grad_means2d")
+    __slots__ = ("bins", "want_absgrad", "timer", "grad_means2d", "abs_grad_means2d", "grad_keys")
 
-    def __init__(self, bins: Bins, want_absgrad: bool = False, timer=None) -> None:
+    def __init__(self, bins: Bins, want_absgrad: bool = False, timer=None, grad_keys: tuple[str, ...] = ()) -> None:
         self.bins = bins
         self.want_absgrad = want_absgrad
         self.timer = timer
+        self.grad_keys = grad_keys  # the `GRAD_KEYS` the backward pass accumulates (`needed_keys`)
         self.grad_means2d = None
         self.abs_grad_means2d = None
 
@@ -431,6 +467,8 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
         bound = next_power_of_two(max(bins.max_list_length, 1))
         fwd = _forward_loop(m, records, bins.gaussian_ids, lanes, cfg, max_iterations=bound)
         return _to_image(m, grid, lanes, fwd, cfg.background), CompositeState(bins)
-    state = CompositeState(bins, absgrad, timer)
+    keys = needed_keys({"means2d": means2d, "conics": conics, "opacities": opacities, "colors": colors,
+                        "depths": depths}, absgrad)
+    state = CompositeState(bins, absgrad, timer, keys)
     out = dr.custom(_CompositeOp, means2d, conics, opacities, colors, depths, cutoff_sq, state, cfg)
     return Composite(*out), state
