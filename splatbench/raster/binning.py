@@ -45,10 +45,6 @@ class TileGrid:
     def num_tiles(self) -> int:
         return self.tiles_x * self.tiles_y
 
-    @property
-    def num_lanes(self) -> int:
-        return self.num_tiles * self.tile_size * self.tile_size
-
 
 @dataclass
 class Bins:

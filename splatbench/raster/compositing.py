@@ -171,13 +171,19 @@ def lanes_for(m, rec: Records, bins: Bins, cfg: CompositeSettings) -> Lanes:
     return block_lists(m, rec, bins, lanes, cfg.alpha_min, lambda r, gid: _load(m, r, gid))
 
 
+def _half_mahalanobis(conic_a, conic_b, conic_c, dx, dy):
+    """sigma = d^2 / 2 = 0.5 (A dx^2 + C dy^2) + B dx dy: the oracle's function of the same
+    name (reference/composite.py), the same expression in the same order."""
+    return 0.5 * (conic_a * dx * dx + conic_c * dy * dy) + conic_b * dx * dy
+
+
 def _alpha_at(rec, px, py, cfg: CompositeSettings, active):
     """Alpha of one Gaussian (geometry record ``rec``) at pixel centre (px, py), and
     the pieces its gradient needs."""
     mean_x, mean_y, conic_a, conic_b, conic_c, opacity, depth, cutoff = rec
     dx = px - mean_x
     dy = py - mean_y
-    sigma = 0.5 * (conic_a * dx * dx + conic_c * dy * dy) + conic_b * dx * dy
+    sigma = _half_mahalanobis(conic_a, conic_b, conic_c, dx, dy)
     gauss = dr.exp(-sigma)
     raw = opacity * gauss
     alpha = dr.minimum(raw, cfg.alpha_max)
@@ -211,7 +217,8 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
     if dr.width(ids) == 0:  # nothing visible: every pixel shows the background
         return _Forward([m.Array3f(zero, zero, zero)] * K, [one] * K, [zero] * K, [UInt32(lanes.start)] * K)
 
-    # state: i, then per pixel (T, r, g, b, d, stop). A pixel is live while its stop
+    # state: i, then per pixel (T, r, g, b, depth_sum, stop); depth_sum = sum of T alpha z, the
+    # oracle's D (reference/composite.py). A pixel is live while its stop
     # index still equals the lane's end (pixels outside the image start at `start`).
     # No Bool in the state on purpose: Dr.Jit 1.5 emits invalid LLVM IR (i8 vs i1)
     # when reverse-mode AD through the loop has to record a Bool state variable.
@@ -230,13 +237,13 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
         gid = dr.gather(UInt32, ids, pair_at(m, lanes, i))
         geo, (cr, cg, cb) = _load(m, rec, gid)
         out = [i + 1]
-        for k, (T, r, g, b, d, stop) in enumerate(pix):
+        for k, (T, r, g, b, depth_sum, stop) in enumerate(pix):
             alpha, contributes, _, _, _, _ = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, stop == lanes.end)
             t_next = T * (1.0 - alpha)
             stop_now = contributes & (t_next < cfg.transmittance_min)
             take = contributes & ~stop_now
             w = dr.select(take, T * alpha, 0.0)
-            out += [dr.select(take, t_next, T), r + w * cr, g + w * cg, b + w * cb, d + w * geo[6],
+            out += [dr.select(take, t_next, T), r + w * cr, g + w * cg, b + w * cb, depth_sum + w * geo[6],
                     dr.select(stop_now, i, stop)]
         return tuple(out)
 
@@ -254,13 +261,13 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
 def _to_image(m, grid: TileGrid, lanes: Lanes, fwd: _Forward, bg) -> Composite:
     """Lane order -> row-major image order; adds the background behind the splats."""
     size = grid.width * grid.height
-    rgb, T, d = dr.zeros(m.Array3f, size), dr.zeros(m.Float, size), dr.zeros(m.Float, size)
+    rgb, T, depth_sum = dr.zeros(m.Array3f, size), dr.zeros(m.Float, size), dr.zeros(m.Float, size)
     for k in range(len(lanes.px)):
         idx, ok = lanes.image_index[k], lanes.inside[k]
         dr.scatter(rgb, fwd.rgb[k], idx, ok, mode=dr.ReduceMode.Permute)
         dr.scatter(T, fwd.T[k], idx, ok, mode=dr.ReduceMode.Permute)
-        dr.scatter(d, fwd.depth_sum[k], idx, ok, mode=dr.ReduceMode.Permute)
-    return Composite(rgb + T * m.Array3f(*bg), 1.0 - T, d)
+        dr.scatter(depth_sum, fwd.depth_sum[k], idx, ok, mode=dr.ReduceMode.Permute)
+    return Composite(rgb + T * m.Array3f(*bg), 1.0 - T, depth_sum)
 
 
 class _CompositeOp(dr.CustomOp):
