@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import subprocess
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from click.testing import CliRunner
@@ -63,9 +64,20 @@ def test_bad_commit_is_one_line(tmp_path):
 
 def test_alternating_runs_against_head_and_clean_up(monkeypatch):
     monkeypatch.setattr(load_rule, "QUIET_SHARE", -1.0)  # this machine is never quiet enough: the ratio is withheld
+
+    made = []  # this run's temporary tree (others may run `bench ab` on this repository meanwhile)
+    real_old_tree = ab.old_tree
+
+    @contextmanager
+    def recording_old_tree(repo, commit):
+        with real_old_tree(repo, commit) as tree:
+            made.append(str(tree))
+            yield tree
+
+    monkeypatch.setattr(ab, "old_tree", recording_old_tree)
     (r,) = ab.run_ab(REPO, "HEAD", [(50, 16, 16)], repeats=5, warmup=1)
     assert len(r.old_seconds) == len(r.new_seconds) == 5 and min(r.old_seconds + r.new_seconds) > 0
     # before the workers, before each of the 5 pairs, after the last; the workers reported their CPU time
     assert len(r.loads) == 7 and r.own_cpu > 0 and r.ratio is None and "withheld" in r.note
     trees = subprocess.run(["git", "-C", str(REPO), "worktree", "list"], capture_output=True, text=True).stdout
-    assert "splatbench-ab-" not in trees  # the temporary worktree is gone
+    assert len(made) == 1 and "splatbench-ab-" in made[0] and made[0] not in trees  # it is gone
