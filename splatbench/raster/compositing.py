@@ -308,7 +308,11 @@ class _CompositeOp(dr.CustomOp):
         want_sigma = any(k in keys for k in ("mx", "my", "ca", "cb", "cc"))
         want_va = want_sigma or "o" in keys
         want_w = any(k in keys for k in ("r", "g", "b", "z"))
-        width = 5 if want_va else 1  # per pixel state: T (ar, ag, ab, ad)
+        # Per pixel state: T and, for alpha's cotangent, S = v . (what lies behind): the
+        # cotangent-weighted colour and depth composited behind this Gaussian (background
+        # included), v_rgb . rgb_behind + v_depth . depth_behind. One scalar instead of the
+        # four channels: the walk is bound by the values it keeps live, not by arithmetic.
+        width = 2 if want_va else 1
         v_rgb_img, v_alpha_img, v_d_img = self.grad_out()
         K = len(lanes.px)
         # Image order -> lane order (pixels outside the image get zero cotangents).
@@ -334,7 +338,7 @@ class _CompositeOp(dr.CustomOp):
         for s in stop[1:]:
             start_i = dr.maximum(start_i, s)
 
-        def unpack(state):  # i, then per pixel (T, ar, ag, ab, ad) or (T,)
+        def unpack(state):  # i, then per pixel (T, S) or (T,)
             return state[0], [state[1 + width * k: 1 + width * (k + 1)] for k in range(K)]
 
         def cond(*state):
@@ -359,10 +363,9 @@ class _CompositeOp(dr.CustomOp):
                 vr, vg, vb = v_rgb[k].x, v_rgb[k].y, v_rgb[k].z
                 terms = {}
                 if want_va:
-                    _, ar, ag, ab, ad = px_state
-                    v_a = (vr * (T_i * cr - ar * inv_1ma) + vg * (T_i * cg - ag * inv_1ma)
-                           + vb * (T_i * cb - ab * inv_1ma) + v_d[k] * (T_i * depth - ad * inv_1ma)
-                           + v_alpha[k] * T_final[k] * inv_1ma)
+                    behind = px_state[1]
+                    v_here = vr * cr + vg * cg + vb * cb + v_d[k] * depth  # v . (colour, depth) of this one
+                    v_a = T_i * v_here - behind * inv_1ma + v_alpha[k] * T_final[k] * inv_1ma
                     v_raw = dr.select(on & (raw < cfg.alpha_max), v_a, 0.0)
                     terms["o"] = v_raw * gauss
                 if want_sigma:
@@ -379,8 +382,7 @@ class _CompositeOp(dr.CustomOp):
                 any_on = on if any_on is None else any_on | on
                 out.append(dr.select(on, T_i, T))
                 if want_va:
-                    out += [dr.select(on, ar + w * cr, ar), dr.select(on, ag + w * cg, ag),
-                            dr.select(on, ab + w * cb, ab), dr.select(on, ad + w * depth, ad)]
+                    out.append(dr.select(on, behind + w * v_here, behind))
             for name, buffer in pair.items():
                 values = m.ArrayXf([sums[key] if key in keys else 0.0 for key in PAIR_GROUPS[name][1]])
                 if per_lane:
@@ -392,7 +394,8 @@ class _CompositeOp(dr.CustomOp):
         state = [UInt32(start_i)]
         for k in range(K):
             T = T_final[k]
-            state += [Float(T), T * bg[0], T * bg[1], T * bg[2], dr.zeros(Float, dr.width(T))][:width]
+            v = v_rgb[k]
+            state += [Float(T), T * (v.x * bg[0] + v.y * bg[1] + v.z * bg[2])][:width]
         dr.while_loop(tuple(state), cond, body, mode="symbolic")
         dr.eval(pair)
         # The walk was the last reader of the records, lane lists and forward state:
