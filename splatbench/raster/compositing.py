@@ -303,7 +303,7 @@ class _CompositeOp(dr.CustomOp):
             self.state.abs_grad_means2d = m.Array2f(zero, zero) if self.want_absgrad else None
             self.records = self.lanes = self.fwd = None
             return
-        # What the walk computes: alpha's cotangent (and the colour accumulators behind it)
+        # What the walk computes: alpha's cotangent (and the sum S of what lies behind it)
         # only for the geometry and opacity; the weight T alpha only for colours and depth.
         want_sigma = any(k in keys for k in ("mx", "my", "ca", "cb", "cc"))
         want_va = want_sigma or "o" in keys
