@@ -6,9 +6,12 @@ builds the workload in each, warms both up (kernels compile or load from
 ``~/.drjit``), then asks them for one timed forward+backward at a time, old and new
 in turn, so that both sides see the same machine over the same minutes. Each
 worker runs Dr.Jit and torch on ``threads`` threads. The ratio old/new of the
-medians is reported only when the 1-minute load average stayed at or below
-`QUIET_LOAD` at every sample; otherwise it is withheld (`AbResult.ratio` is None)
-and `AbResult.note` says why. docs/benchmarks.md shows the command.
+medians is reported only when the load of *other* processes stayed low: the
+1-minute load average is sampled before the workers start, between the pairs of
+runs and at the end, and the workers' own share of it (from the CPU seconds they
+report) is subtracted by `splatbench.bench.load.Load`, the rule the ``raster`` run
+kind uses too. Otherwise the ratio is withheld (`AbResult.ratio` is None) and
+`AbResult.note` says why. docs/benchmarks.md shows the command.
 
 The worker is a script that uses only `splatbench.workloads.synthetic` and
 `splatbench.rasterize`, which both trees provide: it must not import this module,
@@ -17,6 +20,7 @@ which the old tree may not have.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -28,10 +32,9 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from splatbench.bench import load as load_rule
+from splatbench.bench.load import Load, usable_cores
 from splatbench.errors import InputError, SplatbenchError
-
-#: A ratio is reported only while the 1-minute load average stays at or below this.
-QUIET_LOAD = 1.0
 
 WORKER = r"""
 import json, sys, time
@@ -55,11 +58,14 @@ def run():
 
 for _ in range(spec["warmup"]):
     run()
-print(json.dumps({"ready": splatbench.__file__}), flush=True)
+def cpu():
+    return time.process_time()  # all threads, ns resolution (os.times counts 10 ms ticks)
+
+print(json.dumps({"ready": splatbench.__file__, "cpu": cpu()}), flush=True)
 for line in sys.stdin:
     if line.strip() != "run":
         break
-    print(json.dumps({"seconds": run()}), flush=True)
+    print(json.dumps({"seconds": run(), "cpu": cpu()}), flush=True)
 """
 
 
@@ -77,13 +83,17 @@ class AbResult:
     new_seconds: list[float]
     old_median: float
     new_median: float
-    loads: list[float] = field(default_factory=list)  # 1-minute load average before each pair of runs
+    loads: list[float] = field(default_factory=list)  # 1-minute load average: before the workers start,
+    #                                                   before each pair of runs, after the last
+    own_cpu: float = 0.0        # cores the two workers kept busy, from their start to the last run
+    load_other: float = 0.0     # estimated load of other processes (`splatbench.bench.load.Load.other`)
+    cores: int = 0              # usable cores
     ratio: float | None = None  # old_median / new_median; None when the machine was not quiet
     note: str = ""              # why the ratio is withheld ("" when it is reported)
-
-
-def load1() -> float:
-    return round(os.getloadavg()[0], 2)
+    # Median CPU seconds per run (all threads of a worker, from its os.times). Indicative only, but less
+    # sensitive to neighbours than wall time with --threads 1 (with more, idle Dr.Jit workers spin and count).
+    old_cpu_median: float = 0.0
+    new_cpu_median: float = 0.0
 
 
 @contextmanager
@@ -114,6 +124,8 @@ class Worker:
     def __init__(self, tree: Path, spec: dict, script: str = WORKER) -> None:
         env = {**os.environ, "PYTHONPATH": str(tree)}
         self.tree = tree
+        self.cpu = 0.0  # the worker's CPU seconds at its last reply
+        self.cpu_runs: list[float] = []  # CPU seconds of each timed run (all the worker's threads)
         self.stderr = tempfile.TemporaryFile(mode="w+")  # a file, not a pipe: a full pipe would block the worker
         self.proc = subprocess.Popen([sys.executable, "-c", script, json.dumps(spec)], cwd=str(tree), env=env,
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.stderr, text=True)
@@ -129,12 +141,17 @@ class Worker:
             self.stderr.seek(0)
             err = self.stderr.read().strip().splitlines()
             raise AbError(f"worker for {self.tree} exited with {code}: {err[-1] if err else 'no output'}")
-        return json.loads(line)
+        reply = json.loads(line)
+        self.cpu = float(reply.get("cpu", self.cpu))
+        return reply
 
     def run(self) -> float:
         self.proc.stdin.write("run\n")
         self.proc.stdin.flush()
-        return float(self._read()["seconds"])
+        before = self.cpu
+        seconds = float(self._read()["seconds"])
+        self.cpu_runs.append(self.cpu - before)
+        return seconds
 
     def close(self) -> None:
         if self.proc.poll() is None:
@@ -163,34 +180,43 @@ def run_ab(repo: Path, against: str, workloads: list[tuple[int, int, int]], *, r
             if progress:
                 progress(f"{label}: building and warming up both sides ...")
             sides = []
+            load = Load.start(cpu=0.0)  # before the workers exist: all their CPU time is the benchmark's own
             try:
                 sides.append(Worker(old, spec))
                 sides.append(Worker(new_tree, spec))
-                old_s, new_s, loads = [], [], []
+                old_s, new_s = [], []
                 for k in range(repeats):
-                    loads.append(load1())
+                    load = load.sample()
                     order = (0, 1) if k % 2 == 0 else (1, 0)  # neither side always goes first
                     for side in order:
                         (old_s if side == 0 else new_s).append(sides[side].run())
-                loads.append(load1())
+                load = load.stop(cpu=sum(w.cpu for w in sides))
             finally:
                 for w in sides:
                     w.close()
-            results.append(summarize(label, against, old_s, new_s, loads))
+            result = summarize(label, against, old_s, new_s, load)
+            results.append(dataclasses.replace(result, old_cpu_median=statistics.median(sides[0].cpu_runs),
+                                               new_cpu_median=statistics.median(sides[1].cpu_runs)))
     return results
 
 
-def summarize(label: str, against: str, old_s: list[float], new_s: list[float], loads: list[float]) -> AbResult:
-    """Medians, and the ratio old/new unless a load sample exceeded `QUIET_LOAD`."""
+def summarize(label: str, against: str, old_s: list[float], new_s: list[float], load: Load,
+              cores: int | None = None) -> AbResult:
+    """Medians, and the ratio old/new unless the others' load was too high (`Load.loaded`)."""
+    cores = usable_cores() if cores is None else cores
     old_med, new_med = statistics.median(old_s), statistics.median(new_s)
-    busy = max(loads)
-    note = "" if busy <= QUIET_LOAD else (f"ratio withheld: 1-minute load average reached {busy} > "
-                                          f"{QUIET_LOAD} (not a quiet machine)")
-    return AbResult(label, against, old_s, new_s, old_med, new_med, loads,
-                    None if note else round(old_med / new_med, 3), note)
+    other = round(load.other, 2)
+    note = "" if not load.loaded(cores) else (
+        f"ratio withheld: load of other processes reached {other} > {load_rule.QUIET_SHARE} x {cores} cores "
+        f"(1-minute load average up to {max(load.loads)}, the workers' own {load.own_cpu:.2f} cores discounted; "
+        f"not a quiet machine)")
+    return AbResult(label, against, old_s, new_s, old_med, new_med, load.loads, round(load.own_cpu, 2), other,
+                    cores, None if note else round(old_med / new_med, 3), note)
 
 
 def format_result(r: AbResult) -> str:
     ratio = f"{r.ratio:.2f}x" if r.ratio is not None else r.note
     return (f"{r.workload}: old {r.against} median {r.old_median * 1e3:.1f} ms, new median "
-            f"{r.new_median * 1e3:.1f} ms over {len(r.new_seconds)} alternating runs each; load {r.loads}; {ratio}")
+            f"{r.new_median * 1e3:.1f} ms over {len(r.new_seconds)} alternating runs each; load {r.loads}, own "
+            f"{r.own_cpu:.2f} cores, others {r.load_other:.2f}; CPU per run old {r.old_cpu_median * 1e3:.1f} ms, new "
+            f"{r.new_cpu_median * 1e3:.1f} ms; {ratio}")

@@ -29,7 +29,8 @@ import statistics
 from dataclasses import dataclass
 from pathlib import Path
 
-from splatbench.bench.ab import AbResult, Worker, load1, old_tree, summarize
+from splatbench.bench.ab import AbResult, Worker, old_tree, summarize
+from splatbench.bench.load import Load
 from splatbench.bench.train import STANDARD_SIZES
 from splatbench.errors import InputError
 
@@ -51,7 +52,7 @@ with torch_threads(1):
     trainer = Trainer(TrainConfig(**kwargs), dataset=dataset)
     for _ in range(spec["warmup"]):
         trainer.step()
-    print(json.dumps({"ready": splatbench.__file__}), flush=True)
+    print(json.dumps({"ready": splatbench.__file__, "cpu": time.process_time()}), flush=True)
     for line in sys.stdin:
         if line.strip() != "run":
             break
@@ -59,7 +60,8 @@ with torch_threads(1):
         for _ in range(spec["block"]):
             status = trainer.step()
         seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
-        print(json.dumps({"seconds": seconds, "cpu_seconds": cpu, "loss": status.loss}), flush=True)
+        print(json.dumps({"seconds": seconds, "cpu_seconds": cpu, "loss": status.loss, "cpu": time.process_time()}),
+              flush=True)
 """
 
 
@@ -139,20 +141,20 @@ def run_ab_train(repo: Path, against: str, settings: AbTrainSettings = AbTrainSe
                 progress(f"{label}: building the scene and warming up both sides ...")
             sides: list[_TrainWorker] = []
             runs: tuple[list[dict], list[dict]] = ([], [])
-            loads = []
+            load = Load.start(cpu=0.0)  # before the workers exist: all their CPU time is the benchmark's own
             try:
                 sides.append(_TrainWorker(old, spec, TRAIN_WORKER))
                 sides.append(_TrainWorker(new_tree, spec, TRAIN_WORKER))
                 for k in range(settings.pairs):
-                    loads.append(load1())
+                    load = load.sample()
                     for side in ((0, 1) if k % 2 == 0 else (1, 0)):  # neither side always goes first
                         runs[side].append(sides[side].block())
-                loads.append(load1())
+                load = load.stop(cpu=sum(w.cpu for w in sides))
             finally:
                 for w in sides:
                     w.close()
             timing = summarize(label, against, [r["seconds"] for r in runs[0]], [r["seconds"] for r in runs[1]],
-                               loads)
+                               load)
             old_cpu, new_cpu = ([r["cpu_seconds"] for r in side] for side in runs)
             results.append(AbTrainResult(size, settings.gaussians, settings.block,
                                          round(settings.block / timing.old_median, 3),

@@ -80,8 +80,9 @@ def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmu
     """Forward+backward of this checkout against COMMIT, timed in alternation (CPU).
 
     The old commit is checked out into a temporary git worktree; each side runs in
-    its own process. The ratio old/new of the medians is printed only when the
-    1-minute load average stayed <= 1 throughout (see docs/benchmarks.md).
+    its own process. The ratio old/new of the medians is printed only when the load
+    of other processes (the load average minus the workers' own share) stayed at or
+    below half the cores (see docs/benchmarks.md).
     """
     import json
     from dataclasses import asdict
@@ -129,7 +130,7 @@ def ab_train(against: str, sizes: tuple[int, ...], gaussians: int, block: int, p
 
     from splatbench.bench.ab_train import AbTrainSettings, format_train_result, run_ab_train
     from splatbench.bench.train import STANDARD_SIZES
-    from splatbench.bench.raster import machine_info
+    from splatbench.bench.machine import machine_info
 
     settings = AbTrainSettings(sizes=tuple(sizes) or STANDARD_SIZES, gaussians=gaussians, block=block, pairs=pairs,
                                warmup=warmup, threads=threads)

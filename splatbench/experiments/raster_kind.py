@@ -29,10 +29,12 @@ One run:
    interval (``*_low``, ``*_high``; `splatbench.reports.stats.bootstrap_median_ratio`).
    SH is sliced to the evaluated degree, as the trainer does.
 2. Load: the 1-minute load average is read before and after the timed pairs, and the
-   process's own CPU use over them (CPU seconds / wall seconds, in cores) is
-   subtracted: ``load_other`` estimates the load of *other* processes. ``loaded`` is
-   1 when it exceeded half the usable cores (``cores``): such a run is marked in the
-   table and left out of the findings (docs/reports.md: how to get quiet numbers).
+   process's own share of it (its CPU use over them, CPU seconds / wall seconds, in
+   cores, damped as the load average damps it) is subtracted: ``load_other`` estimates
+   the load of *other* processes (`splatbench.bench.load`, the rule ``splatbench bench
+   ab`` uses too). ``loaded`` is 1 when it exceeded half the usable cores (``cores``):
+   such a run is marked in the table and left out of the findings (docs/reports.md: how
+   to get quiet numbers).
 3. Work done: ``pairs`` (Gaussian-tile pairs), ``evaluations`` (the pixel-Gaussian
    evaluations compositing performs per view, early stop ignored) and
    ``useful_evaluations`` (those inside the support), from
@@ -73,13 +75,12 @@ import os
 import re
 import statistics
 import sys
-import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from splatbench.bench.load import Load, own_share
 from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
@@ -126,7 +127,10 @@ METRICS: dict[str, str] = {
     "load_before": "1-minute load average before the timed pairs",
     "load_after": "1-minute load average after them",
     "own_cpu": "this process's CPU use during the timed pairs (CPU seconds / wall seconds, in cores)",
-    "load_other": "estimated load of other processes: max(load_before, load_after) - own_cpu",
+    "load_other": "estimated load of other processes: the largest of load(t) - own_before * exp(-t / 60 s) - own_cpu "
+                  "* (1 - exp(-t / 60 s)) over the section's samples (splatbench.bench.load)",
+    "own_before": "this process's own share of the load average when the timed pairs started (its earlier CPU "
+                  "use: warm-up, the previous run's error renders), an exponential moving average",
     "cores": "CPU cores this process may use",
     "loaded": "1 when load_other exceeded cores / 2: timings not trusted, left out of the findings",
     "exact_psnr": "PSNR (dB) of the render against the exact Gaussian mixture (reference mode 'exact', every "
@@ -318,6 +322,7 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     from splatbench.train.metrics import psnr
 
     limit_threads()
+    own_share()  # a checkpoint of the own-load tracker: what ran before this run, then the warm-up
     workload = build_workload(config["scene"], config["seed"])
     degree = config["sh_degree"]
     options = options_of(config)
@@ -373,37 +378,6 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
 
 def _r4(x: float) -> float:
     return round(x, 4) if math.isfinite(x) else math.nan
-
-
-@dataclass(frozen=True)
-class Load:
-    """The machine's load around a timed section (module doc, step 2)."""
-
-    before: float        # 1-minute load average at the start
-    cpu0: float          # this process's CPU seconds at the start
-    wall0: float         # wall clock at the start
-    after: float = math.nan
-    own_cpu: float = math.nan  # cores this process kept busy during the section
-
-    @classmethod
-    def start(cls) -> Load:
-        return cls(os.getloadavg()[0], _cpu_seconds(), time.perf_counter())
-
-    def stop(self) -> Load:
-        wall = max(time.perf_counter() - self.wall0, 1e-9)
-        return dataclasses.replace(self, after=os.getloadavg()[0], own_cpu=(_cpu_seconds() - self.cpu0) / wall)
-
-    def metrics(self) -> dict[str, float | int]:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-        other = max(0.0, max(self.before, self.after) - self.own_cpu)
-        return {"load_before": round(self.before, 2), "load_after": round(self.after, 2),
-                "own_cpu": round(self.own_cpu, 2), "load_other": round(other, 2), "cores": cores,
-                "loaded": int(other > cores / 2)}
-
-
-def _cpu_seconds() -> float:
-    t = os.times()
-    return t.user + t.system
 
 
 #: The ``raster`` kind (``kind = "raster"``).

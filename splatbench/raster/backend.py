@@ -23,10 +23,6 @@ class Backend:
     name: str  # "llvm" or "cuda"
     t: ModuleType
 
-    @property
-    def jit_backend(self) -> dr.JitBackend:
-        return dr.JitBackend.CUDA if self.name == "cuda" else dr.JitBackend.LLVM
-
 
 def cuda_available() -> bool:
     return bool(dr.has_backend(dr.JitBackend.CUDA))

@@ -38,6 +38,23 @@ COL = 4  # colour record per Gaussian: r, g, b, (padding: packet loads need a po
 # 4x4 measured best on AVX-512 (one 16-lane packet per 16x16 tile); see docs/benchmarks.md.
 PIXEL_BLOCK = 4
 GRAD_KEYS = ("mx", "my", "ca", "cb", "cc", "o", "r", "g", "b", "z", "ax", "ay")
+#: The per-pair gradient terms each differentiable input of the op receives.
+INPUT_KEYS = {"means2d": ("mx", "my"), "conics": ("ca", "cb", "cc"), "opacities": ("o",),
+              "colors": ("r", "g", "b"), "depths": ("z",)}
+
+
+def needed_keys(inputs: dict, absgrad: bool) -> tuple[str, ...]:
+    """The `GRAD_KEYS` the compositing backward must accumulate: those of the inputs
+    (``INPUT_KEYS`` name -> Dr.Jit array) with gradients enabled, plus the screen-space
+    mean and its absolute value when AbsGS asks for them. Dr.Jit enables a screen-space
+    quantity's gradient exactly when a trainable parameter reaches it (means2d and depths:
+    the means; conics: means, log_scales, quats; opacities: opacity_logits, and with
+    antialiasing the means, log_scales, quats; colors: sh and, through the view direction,
+    the means), so a frozen group costs no per-pixel work here."""
+    keys = {key for name, group in INPUT_KEYS.items() if dr.grad_enabled(inputs[name]) for key in group}
+    if absgrad:
+        keys |= {"mx", "my", "ax", "ay"}
+    return tuple(key for key in GRAD_KEYS if key in keys)
 
 
 @dataclass(frozen=True)
@@ -154,13 +171,19 @@ def lanes_for(m, rec: Records, bins: Bins, cfg: CompositeSettings) -> Lanes:
     return block_lists(m, rec, bins, lanes, cfg.alpha_min, lambda r, gid: _load(m, r, gid))
 
 
+def _half_mahalanobis(conic_a, conic_b, conic_c, dx, dy):
+    """sigma = d^2 / 2 = 0.5 (A dx^2 + C dy^2) + B dx dy: the oracle's function of the same
+    name (reference/composite.py), the same expression in the same order."""
+    return 0.5 * (conic_a * dx * dx + conic_c * dy * dy) + conic_b * dx * dy
+
+
 def _alpha_at(rec, px, py, cfg: CompositeSettings, active):
     """Alpha of one Gaussian (geometry record ``rec``) at pixel centre (px, py), and
     the pieces its gradient needs."""
     mean_x, mean_y, conic_a, conic_b, conic_c, opacity, depth, cutoff = rec
     dx = px - mean_x
     dy = py - mean_y
-    sigma = 0.5 * (conic_a * dx * dx + conic_c * dy * dy) + conic_b * dx * dy
+    sigma = _half_mahalanobis(conic_a, conic_b, conic_c, dx, dy)
     gauss = dr.exp(-sigma)
     raw = opacity * gauss
     alpha = dr.minimum(raw, cfg.alpha_max)
@@ -194,7 +217,8 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
     if dr.width(ids) == 0:  # nothing visible: every pixel shows the background
         return _Forward([m.Array3f(zero, zero, zero)] * K, [one] * K, [zero] * K, [UInt32(lanes.start)] * K)
 
-    # state: i, then per pixel (T, r, g, b, d, stop). A pixel is live while its stop
+    # state: i, then per pixel (T, r, g, b, depth_sum, stop); depth_sum = sum of T alpha z, the
+    # oracle's D (reference/composite.py). A pixel is live while its stop
     # index still equals the lane's end (pixels outside the image start at `start`).
     # No Bool in the state on purpose: Dr.Jit 1.5 emits invalid LLVM IR (i8 vs i1)
     # when reverse-mode AD through the loop has to record a Bool state variable.
@@ -213,13 +237,13 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
         gid = dr.gather(UInt32, ids, pair_at(m, lanes, i))
         geo, (cr, cg, cb) = _load(m, rec, gid)
         out = [i + 1]
-        for k, (T, r, g, b, d, stop) in enumerate(pix):
+        for k, (T, r, g, b, depth_sum, stop) in enumerate(pix):
             alpha, contributes, _, _, _, _ = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, stop == lanes.end)
             t_next = T * (1.0 - alpha)
             stop_now = contributes & (t_next < cfg.transmittance_min)
             take = contributes & ~stop_now
             w = dr.select(take, T * alpha, 0.0)
-            out += [dr.select(take, t_next, T), r + w * cr, g + w * cg, b + w * cb, d + w * geo[6],
+            out += [dr.select(take, t_next, T), r + w * cr, g + w * cg, b + w * cb, depth_sum + w * geo[6],
                     dr.select(stop_now, i, stop)]
         return tuple(out)
 
@@ -237,13 +261,13 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
 def _to_image(m, grid: TileGrid, lanes: Lanes, fwd: _Forward, bg) -> Composite:
     """Lane order -> row-major image order; adds the background behind the splats."""
     size = grid.width * grid.height
-    rgb, T, d = dr.zeros(m.Array3f, size), dr.zeros(m.Float, size), dr.zeros(m.Float, size)
+    rgb, T, depth_sum = dr.zeros(m.Array3f, size), dr.zeros(m.Float, size), dr.zeros(m.Float, size)
     for k in range(len(lanes.px)):
         idx, ok = lanes.image_index[k], lanes.inside[k]
         dr.scatter(rgb, fwd.rgb[k], idx, ok, mode=dr.ReduceMode.Permute)
         dr.scatter(T, fwd.T[k], idx, ok, mode=dr.ReduceMode.Permute)
-        dr.scatter(d, fwd.depth_sum[k], idx, ok, mode=dr.ReduceMode.Permute)
-    return Composite(rgb + T * m.Array3f(*bg), 1.0 - T, d)
+        dr.scatter(depth_sum, fwd.depth_sum[k], idx, ok, mode=dr.ReduceMode.Permute)
+    return Composite(rgb + T * m.Array3f(*bg), 1.0 - T, depth_sum)
 
 
 class _CompositeOp(dr.CustomOp):
@@ -271,12 +295,24 @@ class _CompositeOp(dr.CustomOp):
     def backward(self):
         m, rec, lanes, cfg, bins = self.m, self.records, self.lanes, self.cfg, self.bins
         Float, UInt32 = m.Float, m.UInt32
-        keys = GRAD_KEYS if self.want_absgrad else GRAD_KEYS[:-2]
-        if bins.num_pairs == 0:  # nothing was composited: all gradients are zero
+        keys = self.state.grad_keys  # only what a trainable input needs (`needed_keys`)
+        want_means2d = "mx" in keys
+        if bins.num_pairs == 0 or not keys:  # nothing composited, or nothing to differentiate
             zero = dr.zeros(Float, self.n)
-            self.state.grad_means2d = m.Array2f(zero, zero)
+            self.state.grad_means2d = m.Array2f(zero, zero) if want_means2d else None
             self.state.abs_grad_means2d = m.Array2f(zero, zero) if self.want_absgrad else None
+            self.records = self.lanes = self.fwd = None
             return
+        # What the walk computes: alpha's cotangent (and the sum S of what lies behind it)
+        # only for the geometry and opacity; the weight T alpha only for colours and depth.
+        want_sigma = any(k in keys for k in ("mx", "my", "ca", "cb", "cc"))
+        want_va = want_sigma or "o" in keys
+        want_w = any(k in keys for k in ("r", "g", "b", "z"))
+        # Per pixel state: T and, for alpha's cotangent, S = v . (what lies behind): the
+        # cotangent-weighted colour and depth composited behind this Gaussian (background
+        # included), v_rgb . rgb_behind + v_depth . depth_behind. One scalar instead of the
+        # four channels: the walk is bound by the values it keeps live, not by arithmetic.
+        width = 2 if want_va else 1
         v_rgb_img, v_alpha_img, v_d_img = self.grad_out()
         K = len(lanes.px)
         # Image order -> lane order (pixels outside the image get zero cotangents).
@@ -291,8 +327,8 @@ class _CompositeOp(dr.CustomOp):
         cap = bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
         per_lane = lane_slots(m)
         L = lanes.lanes_per_tile if per_lane else 1
-        pair = {name: dr.zeros(Float, width * cap * L) for name, (width, _) in PAIR_GROUPS.items()
-                if name != "abs" or self.want_absgrad}
+        pair = {name: dr.zeros(Float, size * cap * L) for name, (size, group) in PAIR_GROUPS.items()
+                if any(key in keys for key in group)}
         # Expand (LLVM): per-thread copies, non-atomic updates. Still deterministic: a slot
         # is only written by the lanes of one tile, and a tile never spans two threads.
         # Per-lane slots (CUDA): each slot is written once, by one lane, without atomics.
@@ -302,8 +338,8 @@ class _CompositeOp(dr.CustomOp):
         for s in stop[1:]:
             start_i = dr.maximum(start_i, s)
 
-        def unpack(state):  # i, then per pixel (T, ar, ag, ab, ad)
-            return state[0], [state[1 + 5 * k: 6 + 5 * k] for k in range(K)]
+        def unpack(state):  # i, then per pixel (T, S) or (T,)
+            return state[0], [state[1 + width * k: 1 + width * (k + 1)] for k in range(K)]
 
         def cond(*state):
             return state[0] > lanes.start
@@ -318,32 +354,37 @@ class _CompositeOp(dr.CustomOp):
             sums = {key: 0.0 for key in keys}
             out = [i]
             any_on = None
-            for k, (T, ar, ag, ab, ad) in enumerate(pix):
+            for k, px_state in enumerate(pix):
+                T = px_state[0]
                 alpha, on, dx, dy, gauss, raw = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, i < stop[k])
                 inv_1ma = 1.0 / (1.0 - alpha)
                 T_i = T * inv_1ma  # transmittance in front of this Gaussian
                 w = T_i * alpha
                 vr, vg, vb = v_rgb[k].x, v_rgb[k].y, v_rgb[k].z
-                v_a = (vr * (T_i * cr - ar * inv_1ma) + vg * (T_i * cg - ag * inv_1ma)
-                       + vb * (T_i * cb - ab * inv_1ma) + v_d[k] * (T_i * depth - ad * inv_1ma)
-                       + v_alpha[k] * T_final[k] * inv_1ma)
-                v_raw = dr.select(on & (raw < cfg.alpha_max), v_a, 0.0)
-                v_sigma = -v_raw * raw
-                v_mx = v_sigma * -(ca * dx + cbk * dy)
-                v_my = v_sigma * -(cbk * dx + cc * dy)
-                w_on = dr.select(on, w, 0.0)
-                terms = {"mx": v_mx, "my": v_my, "ca": v_sigma * 0.5 * dx * dx, "cb": v_sigma * dx * dy,
-                         "cc": v_sigma * 0.5 * dy * dy, "o": v_raw * gauss, "r": vr * w_on, "g": vg * w_on,
-                         "b": vb * w_on, "z": v_d[k] * w_on}
-                if self.want_absgrad:
-                    terms["ax"], terms["ay"] = dr.abs(v_mx), dr.abs(v_my)
+                terms = {}
+                if want_va:
+                    behind = px_state[1]
+                    v_here = vr * cr + vg * cg + vb * cb + v_d[k] * depth  # v . (colour, depth) of this one
+                    v_a = T_i * v_here - behind * inv_1ma + v_alpha[k] * T_final[k] * inv_1ma
+                    v_raw = dr.select(on & (raw < cfg.alpha_max), v_a, 0.0)
+                    terms["o"] = v_raw * gauss
+                if want_sigma:
+                    v_sigma = -v_raw * raw
+                    v_mx = v_sigma * -(ca * dx + cbk * dy)
+                    v_my = v_sigma * -(cbk * dx + cc * dy)
+                    terms.update({"mx": v_mx, "my": v_my, "ca": v_sigma * 0.5 * dx * dx, "cb": v_sigma * dx * dy,
+                                  "cc": v_sigma * 0.5 * dy * dy, "ax": dr.abs(v_mx), "ay": dr.abs(v_my)})
+                if want_w:
+                    w_on = dr.select(on, w, 0.0)
+                    terms.update({"r": vr * w_on, "g": vg * w_on, "b": vb * w_on, "z": v_d[k] * w_on})
                 for key in keys:
                     sums[key] = sums[key] + terms[key]
                 any_on = on if any_on is None else any_on | on
-                out += [dr.select(on, T_i, T), dr.select(on, ar + w * cr, ar), dr.select(on, ag + w * cg, ag),
-                        dr.select(on, ab + w * cb, ab), dr.select(on, ad + w * depth, ad)]
+                out.append(dr.select(on, T_i, T))
+                if want_va:
+                    out.append(dr.select(on, behind + w * v_here, behind))
             for name, buffer in pair.items():
-                values = m.ArrayXf([sums[key] if key is not None else 0.0 for key in PAIR_GROUPS[name][1]])
+                values = m.ArrayXf([sums[key] if key in keys else 0.0 for key in PAIR_GROUPS[name][1]])
                 if per_lane:
                     dr.scatter(buffer, values, p * L + sub_slot, any_on)
                 else:
@@ -353,7 +394,8 @@ class _CompositeOp(dr.CustomOp):
         state = [UInt32(start_i)]
         for k in range(K):
             T = T_final[k]
-            state += [Float(T), T * bg[0], T * bg[1], T * bg[2], dr.zeros(Float, dr.width(T))]
+            v = v_rgb[k]
+            state += [Float(T), T * (v.x * bg[0] + v.y * bg[1] + v.z * bg[2])][:width]
         dr.while_loop(tuple(state), cond, body, mode="symbolic")
         dr.eval(pair)
         # The walk was the last reader of the records, lane lists and forward state:
@@ -361,14 +403,14 @@ class _CompositeOp(dr.CustomOp):
         del state, v_rgb, v_alpha, v_d, T_final, stop, start_i, rec, lanes
         self.records = self.lanes = self.fwd = None
         buf = reduce_pairs(m, bins, pair, self.n, L)
-        self.state.grad_means2d = m.Array2f(buf["mx"], buf["my"])
+        if want_means2d:
+            self.state.grad_means2d = m.Array2f(buf["mx"], buf["my"])
         if self.want_absgrad:
             self.state.abs_grad_means2d = m.Array2f(buf["ax"], buf["ay"])
-        self.set_grad_in("means2d", m.Array2f(buf["mx"], buf["my"]))
-        self.set_grad_in("conics", m.Array3f(buf["ca"], buf["cb"], buf["cc"]))
-        self.set_grad_in("opacities", buf["o"])
-        self.set_grad_in("colors", m.Array3f(buf["r"], buf["g"], buf["b"]))
-        self.set_grad_in("depths", buf["z"])
+        for name, group in INPUT_KEYS.items():
+            if group[0] in keys:  # a group is computed whole or not at all (`needed_keys`)
+                values = [buf[key] for key in group]
+                self.set_grad_in(name, values[0] if len(values) == 1 else getattr(m, f"Array{len(values)}f")(*values))
         if self.timer is not None:
             self.timer.mark("backward_compositing")
 
@@ -381,17 +423,21 @@ class CompositeState:
 
     A plain class on purpose: Dr.Jit traverses dataclass arguments of `dr.custom`
     as PyTrees (and may copy them); this one must reach the op by reference.
-    After a backward pass the op sets ``grad_means2d`` [N, 2] and, when asked,
+    After a backward pass the op sets ``grad_means2d`` [N, 2] (None when the means are
+    frozen and AbsGS is off: then it is not computed) and, when asked,
     ``abs_grad_means2d`` [N, 2] (per-pixel |d loss / d mean2d| summed, for AbsGS).
+    ``grad_keys``: the per-pair gradient terms the backward pass accumulates
+    (`needed_keys`; a frozen group's are left out, and with them their per-pixel work).
     It holds no reference to the op (see `_CompositeOp.eval`).
     """
 
-    __slots__ = ("bins", "want_absgrad", "timer", "grad_means2d", "abs_grad_means2d")
+    __slots__ = ("bins", "want_absgrad", "timer", "grad_means2d", "abs_grad_means2d", "grad_keys")
 
-    def __init__(self, bins: Bins, want_absgrad: bool = False, timer=None) -> None:
+    def __init__(self, bins: Bins, want_absgrad: bool = False, timer=None, grad_keys: tuple[str, ...] = ()) -> None:
         self.bins = bins
         self.want_absgrad = want_absgrad
         self.timer = timer
+        self.grad_keys = grad_keys  # the `GRAD_KEYS` the backward pass accumulates (`needed_keys`)
         self.grad_means2d = None
         self.abs_grad_means2d = None
 
@@ -431,6 +477,8 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
         bound = next_power_of_two(max(bins.max_list_length, 1))
         fwd = _forward_loop(m, records, bins.gaussian_ids, lanes, cfg, max_iterations=bound)
         return _to_image(m, grid, lanes, fwd, cfg.background), CompositeState(bins)
-    state = CompositeState(bins, absgrad, timer)
+    keys = needed_keys({"means2d": means2d, "conics": conics, "opacities": opacities, "colors": colors,
+                        "depths": depths}, absgrad)
+    state = CompositeState(bins, absgrad, timer, keys)
     out = dr.custom(_CompositeOp, means2d, conics, opacities, colors, depths, cutoff_sq, state, cfg)
     return Composite(*out), state

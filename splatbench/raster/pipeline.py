@@ -8,15 +8,15 @@ import numpy as np
 
 from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
+from splatbench.gaussians import SH_BASES_OF_DEGREE
 from splatbench.raster.backend import dr
 from splatbench.raster.binning import Bins, TileGrid
 from splatbench.raster.compositing import Composite, CompositeState, composite
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.projection import Projection, array_namespace, columns, project
+from splatbench.raster.projection import Projection, array_namespace, columns, normalize, project
 from splatbench.raster.sh import eval_sh
 from splatbench.raster.timing import StageTimer
 
-SH_BASES = {1: 0, 4: 1, 9: 2, 16: 3}
 # Input domain (docs/conventions.md): larger SH coefficients make the true gradients
 # exceed float32, so they are rejected at the boundary rather than turned into Inf.
 SH_ABS_MAX = 1e6
@@ -45,9 +45,9 @@ class Frame(NamedTuple):
 
 def resolve_sh_degree(num_bases: int, sh_degree: int | None) -> int:
     """The SH degree to evaluate, validated against the K bases that ``sh`` holds."""
-    if num_bases not in SH_BASES:
-        raise InputError(f"sh: expected K in (1, 4, 9, 16) bases, got K={num_bases}")
-    available = SH_BASES[num_bases]
+    if num_bases not in SH_BASES_OF_DEGREE:
+        raise InputError(f"sh: expected K in {SH_BASES_OF_DEGREE} bases, got K={num_bases}")
+    available = SH_BASES_OF_DEGREE.index(num_bases)
     if sh_degree is None:
         return available
     sh_degree = check_sh_degree("sh_degree", sh_degree)
@@ -113,9 +113,7 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
     # as literals, every view compiled SH kernels of its own (degree >= 1)
     cx, cy, cz = (dr.opaque(m.Float, float(c)) for c in camera.center)
     mx, my, mz = columns(means, 3)
-    d = m.Array3f(mx - cx, my - cy, mz - cz)
-    norm = dr.safe_sqrt(dr.squared_norm(d))
-    dirs = d * (1.0 / dr.select(norm > 0, norm, 1.0))
+    dirs = m.Array3f(*normalize(mx - cx, my - cy, mz - cz))  # overflow-safe, like the oracle's
     colors = eval_sh(sh, dirs, sh_degree)
     # One kernel for every per-Gaussian quantity (the compositing loop gathers from
     # them, which would otherwise evaluate each array in a kernel of its own).
@@ -146,7 +144,7 @@ def _empty_frame(means, camera, background, options: RasterOptions) -> Frame:
     proj = Projection(m.Array2f(empty, empty), m.Array3f(empty, empty, empty), empty, empty, empty,
                       m.Array2f(empty, empty), m.Int32(), m.Bool())
     bins = Bins(TileGrid(camera.width, camera.height, options.tile_size), m.UInt32(),
-                dr.zeros(m.UInt32, 1), dr.zeros(m.UInt32, 1), 0, 0)
+                dr.zeros(m.UInt32, 1), dr.zeros(m.UInt32, 1), 0)
     rgb = m.Array3f(*(dr.full(m.Float, c, size) for c in background))
     return Frame(rgb, m.Float(zero), zero, proj, CompositeState(bins))
 

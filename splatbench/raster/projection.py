@@ -1,7 +1,8 @@
 """Per-Gaussian preprocessing: activation, 3D covariance, EWA projection, culling.
 
 Plain vectorized Dr.Jit code, differentiated by Dr.Jit's AD. Mirrors
-`reference.project` op by op (docs/conventions.md, "project").
+`reference.project` op by op (docs/conventions.md, "project"): the same constant names
+and the same numbered steps 1-10 as reference/project.py.
 
 Every division and square root below takes a *safe* operand (selected before the
 operation) so that culled Gaussians never put Inf or NaN into the AD graph: a
@@ -19,9 +20,10 @@ import numpy as np
 
 from splatbench.raster.backend import dr
 
+# The oracle's names (reference/project.py), same values.
 LOG_SCALE_CLIP = 20.0        # exp(20)^2 * J^2 stays finite in float32 for any sane camera
-MAX_EXTENT_FACTOR = 1e4      # cull a Gaussian whose 2D std exceeds 1e4 image sizes
-JACOBIAN_CLAMP = 0.3         # graphdeco's guard band (fraction of the half field of view)
+BIG_FACTOR = 1e4             # cull a Gaussian whose 2D std exceeds 1e4 image sizes
+JACOBIAN_GUARD = 0.3         # graphdeco's guard band (fraction of the half field of view)
 QUAT_MIN = 1e-20             # smaller quaternions count as zero: their gradient ~1/|q| overflows float32
 
 
@@ -97,6 +99,20 @@ def quat_to_rotmat(w, x, y, z):
     )
 
 
+def normalize(x, y, z):
+    """Unit vectors along (x, y, z) (Dr.Jit arrays [N]); zero vectors stay zero. Mirrors the
+    oracle's ``_normalize`` (reference/render.py): scaled by 1 / max|component| first, so
+    that components up to float32's maximum do not overflow when squared. The prescale is
+    detached: the unit vector does not depend on it (as in `quat_to_rotmat`)."""
+    big = dr.maximum(dr.maximum(dr.abs(x), dr.abs(y)), dr.abs(z))
+    nonzero = dr.detach(big) > 0
+    inv_big = dr.detach(1.0 / dr.select(nonzero, big, 1.0))
+    x, y, z = x * inv_big, y * inv_big, z * inv_big
+    length = dr.safe_sqrt(x * x + y * y + z * z)  # in [1, sqrt(3)] unless zero
+    inv = dr.select(nonzero, 1.0 / dr.select(nonzero, length, 1.0), 0.0)
+    return x * inv, y * inv, z * inv
+
+
 def camera_constants(m, K: np.ndarray, world_to_camera: np.ndarray) -> dict:
     """Camera parameters as opaque Dr.Jit scalars: kernels stay cached across views."""
     K = np.asarray(K, dtype=np.float64)
@@ -137,10 +153,11 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width:
     cam = camera_constants(m, K, world_to_camera)
     Rw, tw = cam["R"], cam["t"]
 
-    # Camera-space position.
+    # 1. Camera space.
     px = Rw[0][0] * mx + Rw[0][1] * my + Rw[0][2] * mz + tw[0]
     py = Rw[1][0] * mx + Rw[1][1] * my + Rw[1][2] * mz + tw[1]
     pz = Rw[2][0] * mx + Rw[2][1] * my + Rw[2][2] * mz + tw[2]
+    # 2. Depth cull (and non-finite camera points); culled Gaussians get safe operands below.
     in_depth = (pz >= near) & (pz <= far) & dr.isfinite(px) & dr.isfinite(py) & dr.isfinite(pz)
     z = dr.select(in_depth, pz, 1.0)
     x = dr.select(in_depth, px, 0.0)
@@ -148,20 +165,22 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width:
     inv_z = 1.0 / z
 
     fx, fy, cx, cy = cam["fx"], cam["fy"], cam["cx"], cam["cy"]
+
+    # 3. EWA Jacobian, with graphdeco's clamp of x/z and y/z to 1.3x the field of view.
+    #    The 2D mean uses the unclamped camera point.
     mean_u = fx * x * inv_z + cx
     mean_v = fy * y * inv_z + cy
-
-    # EWA Jacobian, with graphdeco's clamp of the direction to 1.3x the field of view.
-    lim_x_pos = (width - cx) / fx + JACOBIAN_CLAMP * (0.5 * width) / fx
-    lim_x_neg = cx / fx + JACOBIAN_CLAMP * (0.5 * width) / fx
-    lim_y_pos = (height - cy) / fy + JACOBIAN_CLAMP * (0.5 * height) / fy
-    lim_y_neg = cy / fy + JACOBIAN_CLAMP * (0.5 * height) / fy
+    lim_x_pos = (width - cx) / fx + JACOBIAN_GUARD * (0.5 * width) / fx
+    lim_x_neg = cx / fx + JACOBIAN_GUARD * (0.5 * width) / fx
+    lim_y_pos = (height - cy) / fy + JACOBIAN_GUARD * (0.5 * height) / fy
+    lim_y_neg = cy / fy + JACOBIAN_GUARD * (0.5 * height) / fy
     tx = z * dr.clip(x * inv_z, -lim_x_neg, lim_x_pos)
     ty = z * dr.clip(y * inv_z, -lim_y_neg, lim_y_pos)
     j00, j02 = fx * inv_z, -fx * tx * inv_z * inv_z
     j11, j12 = fy * inv_z, -fy * ty * inv_z * inv_z
 
-    # T = J Rw (2x3); A = T R S; Sigma2D = A A^T is PSD by construction.
+    # 4. Sigma2D = J Rw Sigma Rw^T J^T + eps2d I, as T = J Rw (2x3), A = T R S, Sigma2D = A A^T
+    #    (PSD by construction).
     T0 = [j00 * Rw[0][k] + j02 * Rw[2][k] for k in range(3)]
     T1 = [j11 * Rw[1][k] + j12 * Rw[2][k] for k in range(3)]
     scales = (sx, sy, sz)
@@ -172,23 +191,26 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width:
     c_raw = A1[0] * A1[0] + A1[1] * A1[1] + A1[2] * A1[2]
     a, b, c = a_raw + eps2d, b_raw, c_raw + eps2d
 
-    max_var = (MAX_EXTENT_FACTOR * max(width, height)) ** 2
+    # 5. Cull degenerate or non-finite Sigma2D, and huge ones.
+    max_var = (BIG_FACTOR * max(width, height)) ** 2
     det_unsafe = a * c - b * b
     valid = (in_depth & (dr.maximum(a, c) <= max_var) & (det_unsafe > 0)
              & dr.isfinite(det_unsafe) & dr.isfinite(mean_u) & dr.isfinite(mean_v))
     a = dr.select(valid, a, 1.0)
     b = dr.select(valid, b, 0.0)
     c = dr.select(valid, c, 1.0)
+    # 6. Conic = inverse(Sigma2D) as (A, B, C).
     det = a * c - b * b
     inv_det = 1.0 / det
     conic_a, conic_b, conic_c = c * inv_det, -b * inv_det, a * inv_det
 
+    # 7. Opacity, with the Mip-Splatting compensation.
     opacity = sigmoid(logits)
     if antialiased:
         det_raw = dr.select(valid, a_raw * c_raw - b_raw * b_raw, 0.0)
         opacity = opacity * dr.safe_sqrt(dr.maximum(det_raw, 0.0) * inv_det)
 
-    # Cutoff radius (Mahalanobis units) and the bounding box of its ellipse.
+    # 8. Cutoff radius (Mahalanobis units), R^2.
     o_det = dr.detach(opacity)
     if radius == "3sigma":
         cutoff_sq = dr.full(Float, 9.0, dr.width(o_det))
@@ -196,11 +218,13 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width:
         faint = o_det <= alpha_min
         valid &= ~faint
         cutoff_sq = dr.select(faint, 0.0, 2.0 * dr.log(dr.select(faint, 1.0, o_det / alpha_min)))
+    # 9. Screen extent (the bounding box of the ellipse d^2 <= R^2) and off-screen cull.
     rx = dr.sqrt(cutoff_sq * dr.detach(a))
     ry = dr.sqrt(cutoff_sq * dr.detach(c))
     u, v = dr.detach(mean_u), dr.detach(mean_v)
     on_screen = (u + rx >= 0) & (u - rx <= width) & (v + ry >= 0) & (v - ry <= height)
     visible = valid & on_screen
+    # 10. Integer radii; 0 when culled.
     radius_px = dr.ceil(dr.minimum(dr.maximum(rx, ry), 2.0**30))
     radii = dr.select(visible, m.Int32(radius_px), 0)
 
@@ -214,10 +238,6 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width:
         radii=radii,
         visible=visible,
     )
-
-
-def is_power_of_two(n: int) -> bool:
-    return n > 0 and (n & (n - 1)) == 0
 
 
 def next_power_of_two(n: int) -> int:

@@ -72,4 +72,8 @@ def reduce_pairs(m, bins: Bins, pair: dict, n: int, slots_per_pair: int = 1) -> 
             if key is not None:
                 sums[key] = final[pos + k]
         pos += width
+    # A kernel of its own: fused with the preprocess's AD backward that reads the sums, the
+    # loop carried that code's loop-invariant inputs through every iteration (measured 7.7 ms
+    # for the fused kernel against 0.5 + 2.2 ms split, 10k Gaussians at 256^2, one thread).
+    dr.eval(sums)
     return sums

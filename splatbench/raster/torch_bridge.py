@@ -38,7 +38,9 @@ class RasterInfo:
     radii [N] int32 (0 = culled); visible [N] bool; width, height; num_pairs;
     sh_degree. After ``loss.backward()``: ``means2d_grad`` [N, 2], the gradient of the
     loss with respect to the screen-space means (pixels), and ``means2d_absgrad``
-    [N, 2], the per-pixel absolute values summed (AbsGS). Both are None before.
+    [N, 2], the per-pixel absolute values summed (AbsGS). Both are None before, and
+    ``means2d_grad`` stays None when ``means`` does not require grad and ``absgrad`` is
+    off (a frozen group costs no work in the compositing backward).
     """
 
     radii: torch.Tensor

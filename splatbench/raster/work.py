@@ -17,8 +17,8 @@ from splatbench.raster.backend import dr, get_backend
 from splatbench.raster.binning import TileGrid, bin_gaussians
 # The compositing loop's own lanes, lists, per-pixel test and record loads, so that
 # the counts are of exactly the decisions it makes.
-from splatbench.raster.compositing import (CompositeSettings, Splats, _alpha_at, _load, lanes_for, pack_records,
-                                           pair_at)
+from splatbench.raster.compositing import (CompositeSettings, Splats, _alpha_at, _half_mahalanobis, _load,
+                                           lanes_for, pack_records, pair_at)
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.pipeline import project_view
 
@@ -94,7 +94,7 @@ def _count(m, records, bins, cfg: CompositeSettings) -> tuple[int, int, int, int
         ca, cb, cc, cutoff = geo[2], geo[3], geo[4], geo[7]
         for k in range(K):
             _, contributes, dx, dy, _, _ = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, lanes.inside[k])
-            sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy
+            sigma = _half_mahalanobis(ca, cb, cc, dx, dy)
             inside = inside + dr.select(lanes.inside[k] & (sigma <= 0.5 * cutoff), 1, 0)
             useful = useful + dr.select(contributes, 1, 0)
         return i + 1, inside, useful
