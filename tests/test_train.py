@@ -518,3 +518,13 @@ def test_psnr_is_one_function_for_tensors_and_float64_arrays():
     assert psnr(a, b) == pytest.approx(-10 * np.log10(0.01))            # clamped to 1: MSE 0.1²
     assert psnr(a, b, clamp=False) == pytest.approx(-10 * np.log10(0.36))  # MSE 0.6²
     assert psnr(torch.as_tensor(b, dtype=torch.float32), torch.as_tensor(b, dtype=torch.float32)) == np.inf
+
+
+def test_frozen_means_with_a_gradient_densifier_is_one_line():
+    # the rasterizer's backward skips the screen-space mean gradient of frozen means
+    # (tests/test_raster_frozen.py), which the default strategy densifies from
+    from splatbench.train import TrainConfig
+
+    with pytest.raises(InputError, match="lr_means: 0 freezes the means, but strategy 'default' densifies"):
+        TrainConfig(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0)
+    TrainConfig(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0, strategy="mcmc")  # no screen gradient used

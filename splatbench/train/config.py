@@ -164,7 +164,15 @@ class TrainConfig:
 
         if self.schedule not in SCHEDULES:
             raise InputError(f"schedule: expected one of {', '.join(map(repr, SCHEDULES))}, got {self.schedule!r}")
-        check_final_window(self.make_strategy(), self.iterations, self.schedule)
+        strategy = self.make_strategy()
+        check_final_window(strategy, self.iterations, self.schedule)
+        from splatbench.strategies.default import DefaultStrategy
+
+        if self.lr_means == 0 and isinstance(strategy, DefaultStrategy):
+            # frozen means have no screen-space gradient (the rasterizer's backward skips it), and the
+            # default/absgrad strategies densify from it
+            raise InputError(f"lr_means: 0 freezes the means, but strategy {self.strategy!r} densifies from their "
+                             "screen-space gradients (use a positive lr_means, or strategy=none or mcmc)")
         return self
 
     def make_strategy(self, *, scaled: bool = True):
