@@ -115,7 +115,7 @@ def test_table_marks_met_and_missed_targets():
     assert len(lines) == 5  # header, rule, three rows
     assert lines[2].endswith("35 ms  yes") and lines[3].endswith("35 ms   NO") and lines[4].endswith("-    -")
     assert "1.0/2.0/3.0/4.0/5.0/0.5" in lines[2]
-    assert "0.3/0.1" in lines[2] and "4.8 of 80 GFLOP/s" in lines[2]  # Mevals performed/useful, % of peak
+    assert "0.3/0.1" in lines[2] and "4.8 % of 80.0 GFLOP/s" in lines[2]  # Mevals performed/useful, % of peak
     assert leak_warnings([base]) == []
     (warning,) = leak_warnings([base, replace(base, name="leaky", retained_mb_per_run=40.0)])
     assert warning.startswith("warning: leaky: RSS grew 40.0 MB per run")

@@ -1,7 +1,7 @@
 """`splatbench compare`: any rasterizers side by side against the float64 oracle.
 
 Writes ``DIR/report.md``, ``DIR/results.parquet`` and ``DIR/time_vs_error*.png``
-(default ``reports/compare``); see `splatbench.backends.compare` for what is measured
+(default ``out/compare``; ``--out reports/compare`` refreshes the committed baseline); see `splatbench.backends.compare` for what is measured
 and docs/backends.md ("compare") for how to read it.
 """
 
@@ -30,7 +30,7 @@ import click
 @click.option("--device", default="cpu", show_default=True, type=click.Choice(["cpu", "cuda"]),
               help="Where the input tensors live and the backends run.")
 @click.option("--repeats", default=5, show_default=True, type=int, help="Timed rounds (median and spread).")
-@click.option("--out", "out", type=click.Path(path_type=Path, file_okay=False), default=Path("reports/compare"),
+@click.option("--out", "out", type=click.Path(path_type=Path, file_okay=False), default=Path("out/compare"),
               show_default=True, help="Folder for report.md, results.parquet and the figures.")
 @click.option("--error-scale", "error_scale", type=float, default=None,
               help="Resolution factor of the error and gradient measurement [default: the largest 1/2^k with "

@@ -19,7 +19,7 @@ def bench() -> None:
 @click.option("--workload", "workloads", multiple=True, metavar="FILE.npz|garden",
               help="A workload npz, or 'garden' (bundled SfM capture, view 0) (repeatable).")
 @click.option("--repeats", default=5, show_default=True, type=int, help="Timed runs per measurement (median).")
-@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("reports/bench"), show_default=True,
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("out/bench"), show_default=True,
               help="Folder for raster.csv and raster.json.")
 @click.option("--device", default="auto", show_default=True, metavar="cpu|cuda|auto",
               help="Dr.Jit backend (auto: CUDA when available).")
@@ -63,6 +63,11 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
     for line in leak_warnings(results):
         click.echo(line)
     click.echo(f"load average at the end: {machine.loadavg_end}")
+    busy = machine.loadavg_start[0]  # before the benchmark: others' load (at the end its own threads count too)
+    if busy > machine.cpu_count / 2:
+        click.echo(f"warning: the 1-minute load average was {busy} on {machine.cpu_count} CPUs before the benchmark "
+                   "started: the times, and 'met', are not evidence; run on a quiet machine (docs/benchmarks.md) or "
+                   "compare alternately with `splatbench bench ab`")
     click.echo(f"wrote {csv_path} and {json_path}")
 
 
@@ -73,7 +78,7 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
 @click.option("--repeats", default=5, show_default=True, type=int, help="Timed runs per side (median; >= 5).")
 @click.option("--warmup", default=2, show_default=True, type=int, help="Untimed runs per side first.")
 @click.option("--threads", default=2, show_default=True, type=int, help="Dr.Jit and torch threads per side.")
-@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("reports/bench"), show_default=True,
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("out/bench"), show_default=True,
               help="Folder for ab.json.")
 def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmup: int, threads: int,
        out: Path) -> None:
@@ -116,7 +121,7 @@ def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmu
 @click.option("--pairs", default=5, show_default=True, type=int, help="Timed blocks per side (median; >= 5).")
 @click.option("--warmup", default=5, show_default=True, type=int, help="Untimed steps per side first.")
 @click.option("--threads", default=2, show_default=True, type=int, help="Dr.Jit threads per side.")
-@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("reports/bench"), show_default=True,
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("out/bench"), show_default=True,
               help="Folder for ab_train.json.")
 def ab_train(against: str, sizes: tuple[int, ...], gaussians: int, block: int, pairs: int, warmup: int,
              threads: int, out: Path) -> None:
@@ -155,7 +160,7 @@ def ab_train(against: str, sizes: tuple[int, ...], gaussians: int, block: int, p
 @click.option("--iterations", default=30, show_default=True, type=int, help="Timed training steps per size.")
 @click.option("--warmup", default=5, show_default=True, type=int, help="Untimed steps first (kernel compilation).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Scene and training seed.")
-@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("reports/bench"), show_default=True,
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("out/bench"), show_default=True,
               help="Folder for train.csv and train.json.")
 @click.option("--device", default="auto", show_default=True, metavar="cpu|cuda|auto",
               help="Dr.Jit backend (auto: CUDA when available).")

@@ -353,7 +353,7 @@ def run_suite(specs: list[WorkloadSpec], settings: BenchSettings,
 # ----------------------------------------------------------------------------- reporting
 
 TABLE_HEADER = ("workload", "N", "WxH", "fwd ms", "fwd+bwd ms", "stages ms pre/bin/comp/bcomp/bpre/other",
-                "pairs", "Mevals performed/useful", "Mevals/s", "% of peak", "peak RSS MB 1st/all", "target", "met")
+                "pairs", "Mevals performed/useful", "Mevals/s", "share of FP32 peak", "peak RSS MB 1st/all", "target", "met")
 
 
 def _fmt_ms(x: float) -> str:
@@ -374,7 +374,7 @@ def table_rows(results: list[RasterBenchResult]) -> list[tuple[str, ...]]:
         met = "-" if r.meets_target is None else ("yes" if r.meets_target else "NO")
         rows.append((r.name, f"{r.n:,}", f"{r.width}x{r.height}", _fmt_ms(r.fwd_ms), _fmt_ms(r.fwd_bwd_ms), split,
                      f"{r.pairs:,}", f"{r.evaluations / 1e6:.1f}/{r.useful_evaluations / 1e6:.1f}",
-                     f"{r.mevals_per_s:.0f}", f"{100 * r.share_of_peak:.1f} of {r.peak_gflops:.0f} GFLOP/s",
+                     f"{r.mevals_per_s:.0f}", f"{100 * r.share_of_peak:.1f} % of {r.peak_gflops:.1f} GFLOP/s",
                      f"{r.first_run_peak_rss_mb:.0f}/{r.peak_rss_mb:.0f}", target, met))
     return rows
 

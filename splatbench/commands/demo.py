@@ -70,11 +70,11 @@ def demo(experiment: Path | None, results: Path, report_dir: Path | None, worker
     from splatbench.reports.report import build_report, write_report
 
     t_start = time.perf_counter()
+    path = experiment or (DEMO_EXPERIMENT if DEMO_EXPERIMENT.is_file() else Path("experiments") / "demo.toml")
+    spec = load_experiment(path)  # a bad experiment file is one line before any work
     if garden:
         garden_check(out, scale)
 
-    path = experiment or (DEMO_EXPERIMENT if DEMO_EXPERIMENT.is_file() else Path("experiments") / "demo.toml")
-    spec = load_experiment(path)
     t0 = time.perf_counter()  # the runner renders the pending runs' scenes first (cached), then runs them
     summary = run_experiment(spec, workers=workers if workers is not None else spec.runner.workers,
                              executor="local", results_dir=results, progress=True)

@@ -115,7 +115,8 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
     """
     root = Path(path)
     if not root.is_dir():
-        raise InputError(f"path: {str(root)!r} is not a dataset folder (it does not exist or is a file)")
+        raise InputError(f"dataset: {str(root)!r} is not a dataset folder (it does not exist or is a file); give a "
+                         "COLMAP or Blender folder, or render one with `splatbench scenes render NAME`")
     if layout not in LAYOUTS:
         raise InputError(f"layout: expected one of {', '.join(LAYOUTS)}, got {layout!r}")
     if not (isinstance(test_every, int) and not isinstance(test_every, bool) and test_every >= 0):

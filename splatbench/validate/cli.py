@@ -16,7 +16,7 @@ def validate() -> None:
 
 
 @validate.command("mitsuba")
-@click.option("--out", type=click.Path(path_type=Path), default=Path("reports") / "validate_mitsuba",
+@click.option("--out", type=click.Path(path_type=Path), default=Path("out") / "validate_mitsuba",
               show_default=True, help="Folder for table.csv, table.md, plot.png and intersection.csv.")
 @click.option("--resolution", type=click.IntRange(min=16), default=128, show_default=True,
               help="Image width and height of every sweep scene.")
