@@ -53,6 +53,17 @@ def test_empty_scene_renders_background():
     assert (res.alpha == 0).all() and (res.depth == 0).all()
 
 
+def test_empty_model_backward_gives_empty_gradients():
+    # a training run whose every Gaussian was pruned (reports/initialization: far from 29 SfM
+    # points) still steps: its gradients are empty tensors of the parameters' shapes
+    cam = Camera(16, 12, 16.0, 16.0, 8.0, 6.0, np.eye(4))
+    shapes = ((0, 3), (0, 3), (0, 4), (0,), (0, 16, 3))
+    leaves = [torch.zeros(s, requires_grad=True) for s in shapes]
+    rgb, alpha, depth, _ = splatbench.rasterize(*leaves, cam, background=(0.2, 0.4, 0.6))
+    (rgb.sum() + alpha.sum() + depth.sum()).backward()
+    assert [tuple(p.grad.shape) for p in leaves] == list(shapes)
+
+
 def test_everything_behind_the_camera_gives_zero_gradients(scene):
     g = scene.gaussians
     flipped = [torch.tensor(g.means * np.array([1, 1, -1], np.float32), requires_grad=True)]

@@ -413,3 +413,26 @@ def test_a_new_kind_declares_its_report_in_one_place():
     assert metric_specs("toy-report-kind", table) == declared.metrics      # its own metrics only
     assert rules_for("toy-report-kind", declared.metrics) == declared.rules
     assert [m.name for m in metric_specs("no-such-kind", table)] == ["loss", "other"]  # undeclared: every one
+
+
+def test_a_cell_whose_runs_all_failed_reports_a_dash(tmp_path):
+    # reports/initialization: every `far` run of init=sfm failed; the report must still be
+    # written, with "–" for that cell and the runs under "Failed runs"
+    spec = sh_spec()
+    runs = expand(spec)
+    dead = runs[0].labels["sh_degree"]
+    records = []
+    for run in runs:
+        failed = run.labels["sh_degree"] == dead and run.scene == runs[0].scene
+        metrics, curves = fake_metrics(run.scene, run.labels["sh_degree"], run.seed)
+        rec = RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
+                        status="failed" if failed else "done", config=dict(run.config), labels=dict(run.labels),
+                        metrics={} if failed else metrics, curves=None if failed else curves,
+                        error="RuntimeError: boom" if failed else None, seconds=1.0,
+                        started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00", worker="h:1")
+        write_record(tmp_path, rec)
+        records.append(rec)
+    write_table(tmp_path / spec.name, records)
+    text = write_report(build_report(spec, tmp_path), tmp_path / "out" / spec.name).read_text()
+    row = next(line for line in text.splitlines() if line.startswith(f"| {runs[0].scene} | `{dead}` |"))
+    assert "| 0 | – |" in row and "## Failed runs" in text

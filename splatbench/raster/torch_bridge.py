@@ -14,9 +14,8 @@ forward and the backward pass an error instead of a silently wrong gradient.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -138,6 +137,9 @@ class _Rasterize(torch.autograd.Function):
         for x, needs, like, where in zip(inputs, ctx.needs_input_grad[:5], ctx.saved_shapes, ctx.saved_devices):
             if not needs:
                 grads.append(None)
+                continue
+            if math.prod(like) == 0:  # no Gaussians (all pruned): Dr.Jit's grad of an empty array is a scalar
+                grads.append(torch.zeros(like, device=where))
                 continue
             grads.append(to_torch(dr.grad(x)).reshape(like).to(where))
         ctx.dr_inputs = None  # release the Dr.Jit graph

@@ -155,7 +155,7 @@ def seed_values(runs: pd.DataFrame, metric: str) -> dict[int, float]:
     """Seed -> the mean of ``metric`` over ``runs`` of that seed (finite values only)."""
     v = pd.to_numeric(runs[f"metric.{metric}"], errors="coerce").astype("float64")
     frame = pd.DataFrame({"seed": runs.seed.astype(int), "v": v})
-    frame = frame[frame.v.map(math.isfinite)]
+    frame = frame[frame.v.map(math.isfinite).astype(bool)]  # bool: an empty object mask would select columns
     return {int(k): float(x) for k, x in frame.groupby("seed", sort=True).v.mean().items()}
 
 

@@ -14,7 +14,7 @@ from splatbench.validate.mitsuba.probe import ProbeRow
 from splatbench.validate.mitsuba.scene import MATCHED_OPTIONS
 
 #: Default output folder of `write_report`, relative to the current folder.
-DEFAULT_OUT = Path("reports") / "validate_mitsuba"
+DEFAULT_OUT = Path("out") / "validate_mitsuba"  # the committed baseline: --out reports/validate_mitsuba
 
 
 @dataclass(frozen=True)
