@@ -193,8 +193,8 @@ def test_nerfstudio_transforms_json_with_shared_intrinsics_and_points(tmp_path):
 
 # ------------------------------------------------------------------------- errors
 def test_missing_files_are_one_line_errors(tmp_path):
-    one_line_error(lambda: load_dataset(tmp_path / "nowhere"), "path:", "nowhere")
-    one_line_error(lambda: load_dataset(tmp_path), "path:", "neither a COLMAP model")
+    one_line_error(lambda: load_dataset(tmp_path / "nowhere"), "dataset:", "nowhere")
+    one_line_error(lambda: load_dataset(tmp_path), "dataset:", "neither a COLMAP model")
     cams = orbit_cameras(4)
     names = [f"{i:04d}.png" for i in range(4)]
     write_colmap(tmp_path / "c", cams, names)

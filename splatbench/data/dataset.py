@@ -130,7 +130,7 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
         elif any((root / f).is_file() for f in ("transforms_train.json", "transforms.json")):
             layout = "blender"
         else:
-            raise InputError(f"path: {str(root)!r} holds neither a COLMAP model (sparse/0/) "
+            raise InputError(f"dataset: {str(root)!r} holds neither a COLMAP model (sparse/0/) "
                              f"nor Blender transforms (transforms_train.json or transforms.json)")
     if layout == "colmap":
         return _load_colmap(root, test_every, images_dir, bg)
