@@ -59,9 +59,11 @@ def test_empty_model_backward_gives_empty_gradients():
     cam = Camera(16, 12, 16.0, 16.0, 8.0, 6.0, np.eye(4))
     shapes = ((0, 3), (0, 3), (0, 4), (0,), (0, 16, 3))
     leaves = [torch.zeros(s, requires_grad=True) for s in shapes]
-    rgb, alpha, depth, _ = splatbench.rasterize(*leaves, cam, background=(0.2, 0.4, 0.6))
+    rgb, alpha, depth, info = splatbench.rasterize(*leaves, cam, background=(0.2, 0.4, 0.6), absgrad=True)
     (rgb.sum() + alpha.sum() + depth.sum()).backward()
     assert [tuple(p.grad.shape) for p in leaves] == list(shapes)
+    # and densification reads empty screen-space gradients, not None
+    assert tuple(info.means2d_grad.shape) == (0, 2) and tuple(info.means2d_absgrad.shape) == (0, 2)
 
 
 def test_everything_behind_the_camera_gives_zero_gradients(scene):

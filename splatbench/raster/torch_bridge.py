@@ -99,7 +99,7 @@ class _Rasterize(torch.autograd.Function):
                 dr.enable_grad(x)
         frame = render_frame(*inputs, camera, sh_degree=degree, background=background, options=options,
                              loop_ad=loop_ad, absgrad=absgrad, timer=timer)
-        ctx.timer = timer
+        ctx.timer, ctx.absgrad = timer, absgrad
         H, W = camera.height, camera.width
         # Outputs live where the parameters do (a no-op when Dr.Jit runs on that device).
         out = means.device
@@ -133,6 +133,13 @@ class _Rasterize(torch.autograd.Function):
         if ctx.timer is not None:
             dr.eval([dr.grad(x) for x in inputs])
             ctx.timer.mark("backward_preprocess")
+        state = frame.state
+        if ctx.saved_shapes[0][0] == 0:  # no Gaussians: the compositing op had nothing to differentiate
+            empty = m.Array2f(m.Float(), m.Float())
+            if ctx.needs_input_grad[0] and state.grad_means2d is None:
+                state.grad_means2d = empty
+            if ctx.absgrad and state.abs_grad_means2d is None:
+                state.abs_grad_means2d = empty
         grads = []
         for x, needs, like, where in zip(inputs, ctx.needs_input_grad[:5], ctx.saved_shapes, ctx.saved_devices):
             if not needs:
