@@ -21,9 +21,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol
 
-# graphdeco-inria 3DGS's approximations, the defaults a backend with no metadata follows.
-GRAPHDECO = {"alpha_min": 1.0 / 255.0, "alpha_max": 0.99, "transmittance_min": 1e-4, "eps2d": 0.3,
-             "radius": "3sigma", "tile_size": 16, "antialiased": False}
+from splatbench.raster.options import RasterOptions
+
+# graphdeco-inria 3DGS's approximations, the defaults a backend with no metadata follows: the
+# rasterizer's own defaults (`RasterOptions`, whose field comments give graphdeco's sources).
+GRAPHDECO = {name: getattr(RasterOptions(), name) for name in ("alpha_min", "alpha_max", "transmittance_min",
+                                                               "eps2d", "radius", "tile_size", "antialiased")}
 OUTPUTS = ("rgb", "alpha", "depth")
 
 

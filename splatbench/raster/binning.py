@@ -144,7 +144,7 @@ def argsort_bits(key, bits: int, radix_bits: int = 11):
     return index
 
 
-def bin_gaussians(proj: Projection, grid: TileGrid, alpha_min: float = 1.0 / 255.0) -> Bins:
+def bin_gaussians(proj: Projection, grid: TileGrid, alpha_min: float) -> Bins:
     """Assign each visible Gaussian to the tiles of its cutoff box that its support
     ellipse (`support_radius_sq`) meets, sorted by (tile, depth)."""
     m = array_namespace(proj.depths)

@@ -19,6 +19,10 @@ from typing import NamedTuple
 import numpy as np
 
 from splatbench.raster.backend import dr
+from splatbench.raster.options import RasterOptions
+
+#: The rasterizer's defaults: one source, `RasterOptions` (graphdeco's values).
+DEFAULTS = RasterOptions()
 
 # The oracle's names (reference/project.py), same values.
 LOG_SCALE_CLIP = 20.0        # exp(20)^2 * J^2 stays finite in float32 for any sane camera
@@ -128,8 +132,8 @@ def camera_constants(m, K: np.ndarray, world_to_camera: np.ndarray) -> dict:
 
 
 def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width: int, height: int,
-            *, eps2d: float = 0.3, near: float = 0.01, far: float = 1e10, radius: str = "3sigma",
-            alpha_min: float = 1.0 / 255.0, antialiased: bool = False) -> Projection:
+            *, eps2d: float = DEFAULTS.eps2d, near: float = 0.01, far: float = 1e10, radius: str = DEFAULTS.radius,
+            alpha_min: float = DEFAULTS.alpha_min, antialiased: bool = DEFAULTS.antialiased) -> Projection:
     """Project Gaussians to the screen (mirrors `reference.project`, matched mode).
 
     Args:
