@@ -397,9 +397,6 @@ REPORT = KindReport(
         MetricSpec("evaluations", "evaluations performed", ".3g", "", ""),
         MetricSpec("useful_evaluations", "evaluations useful", ".3g", "", ""),
         MetricSpec("loaded", "loaded (fraction of runs)", ".2f", "", "", False),
-        # the first baseline's names (ground truth = the reference with default options), for its parquet
-        MetricSpec("error_psnr", "PSNR to default-option reference (dB)", ".2f", "dB", "higher"),
-        MetricSpec("error_max_abs", "max abs error to default-option reference", ".2e", "", "lower"),
     ),
     rules=FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean", 1.0), Comparison("exact_psnr", "diff"),
                                        Comparison("pairs", "ratio"))),
