@@ -528,3 +528,15 @@ def test_frozen_means_with_a_gradient_densifier_is_one_line():
     with pytest.raises(InputError, match="lr_means: 0 freezes the means, but strategy 'default' densifies"):
         TrainConfig(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0)
     TrainConfig(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0, strategy="mcmc")  # no screen gradient used
+
+
+def test_a_model_pruned_to_nothing_trains_on_and_says_so(tmp_path, tiny_diffuse):
+    # every Gaussian starts below the prune threshold (opacity 0.001 < 0.005), so the first
+    # refinement (step 4) removes them all; the run must go on (an empty model steps: empty
+    # gradients) and its result must say that the model is empty and from when
+    opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 8}
+    r = train(config(tmp_path, iterations=12, strategy="default", strategy_options=opts, init_opacity=0.001,
+                     log_every=1), dataset=tiny_diffuse)
+    assert r.num_gaussians == 0 and r.iterations == 12
+    warning = [n for n in r.notes if n.startswith("warning: the model is empty")]
+    assert len(warning) == 1 and "none left from step 4 on" in warning[0]

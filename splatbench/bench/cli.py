@@ -128,7 +128,8 @@ def ab_train(against: str, sizes: tuple[int, ...], gaussians: int, block: int, p
     """Training it/s of this checkout against COMMIT, blocks of steps timed in alternation (CPU).
 
     Both sides train bench train's synthetic scene; the ratio is printed only when the
-    1-minute load average stayed <= 1 (as bench ab; see docs/training.md).
+    load of other processes (the load average minus the workers' own share) stayed at
+    or below half the cores, the rule of bench ab (docs/benchmarks.md, docs/training.md).
     """
     import json
     from dataclasses import asdict

@@ -64,7 +64,7 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
                f"({result.iterations / max(result.train_seconds, 1e-9):.2f} it/s), render "
                f"{fmt(result.render_ms_per_view, '.1f')} ms/view, peak RSS {result.peak_rss_mb:.0f} MB")
     for note in result.notes:
-        click.echo(f"note: {note}")
+        click.echo(note if note.startswith("warning: ") else f"note: {note}", err=note.startswith("warning: "))
     click.echo(f"wrote {result.ply_path}")
 
 

@@ -433,6 +433,11 @@ def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
         raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
     notes = ([trainer.init_note] if trainer.init_note else []) + [trainer.background_note] \
         + ([] if lpips_fn is not None else [lpips_note])
+    if trainer.num_gaussians == 0:
+        gone = next((h.step for h in history if h.num_gaussians == 0), trainer.step_index)
+        notes.append(f"warning: the model is empty: every Gaussian was pruned (none left from step {gone} on), so it "
+                     f"renders the background only; start from more points (init=surface or random, or SfM with "
+                     f"more registered views)")
     if ev.views == 0:
         notes.append("no test views: test metrics are None")
     else:
