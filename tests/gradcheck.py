@@ -8,30 +8,9 @@ import numpy as np
 import torch
 
 import splatbench
+from splatbench.backends.compare_measure import Cotangents  # the one random-cotangent helper
 
 GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
-
-
-@dataclass(frozen=True)
-class Cotangents:
-    """v_rgb [H, W, 3], v_alpha [H, W], v_depth [H, W] (float64)."""
-
-    rgb: np.ndarray
-    alpha: np.ndarray
-    depth: np.ndarray
-
-    @classmethod
-    def random(cls, seed: int, height: int, width: int) -> Cotangents:
-        rng = np.random.default_rng(seed)
-        return cls(rng.standard_normal((height, width, 3)), rng.standard_normal((height, width)),
-                   rng.standard_normal((height, width)))
-
-    def loss(self, rgb, alpha, depth):
-        """sum(v . output) for numpy or torch outputs."""
-        if isinstance(rgb, torch.Tensor):
-            t = lambda a: torch.as_tensor(a, dtype=rgb.dtype)  # noqa: E731
-            return (rgb * t(self.rgb)).sum() + (alpha * t(self.alpha)).sum() + (depth * t(self.depth)).sum()
-        return float((rgb * self.rgb).sum() + (alpha * self.alpha).sum() + (depth * self.depth).sum())
 
 
 @dataclass(frozen=True)

@@ -141,7 +141,7 @@ def test_reference_render_takes_raster_options():
 def test_torch64_gradients_match_finite_differences():
     workload = smooth_scene(0)
     c = workload.camera
-    v = Cotangents.random(100, c.height, c.width)
+    v = Cotangents.standard_normal(100, c.height, c.width)
     # depth = sum / alpha: where alpha is tiny the dropped tails (alpha < 1e-9) are amplified by
     # 1 / alpha, so depth is weighted only where splats cover the pixel (as in test_raster_grads).
     exact = reference_render(None, *tensors(workload, torch.float64), c, mode="exact")
@@ -161,7 +161,7 @@ def test_gradients_match_torch64(name, seed):
     oracle = make_torch_matching(backend.info, "float64")
     workload, background = parity_scene(seed)
     c = workload.camera
-    v = Cotangents.random(seed, c.height, c.width)
+    v = Cotangents.standard_normal(seed, c.height, c.width)
     _, grads = vjp(backend, workload, v, background)
     _, exact = vjp(oracle, workload, v, background, dtype=torch.float64)
     for k in GROUPS:
@@ -287,7 +287,7 @@ def test_mitsuba_gradients_match_its_finite_differences():
     case = vm.overlap_cases(32)[2]
     c = case.camera
     backend = get_backend("mitsuba")
-    v = Cotangents.random(0, c.height, c.width)
+    v = Cotangents.standard_normal(0, c.height, c.width)
     _, grads = vjp(backend, case, v)
     rng = np.random.default_rng(0)
     for group, h in (("sh", 0.05), ("opacity_logits", 0.01)):

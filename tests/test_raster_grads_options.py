@@ -49,7 +49,7 @@ def matched_fd(workload: Workload, v: Cotangents, **options) -> dict[str, np.nda
 
 def _check(workload: Workload, seed: int, **options) -> tuple:
     c = workload.camera
-    v = Cotangents.random(seed, c.height, c.width)
+    v = Cotangents.standard_normal(seed, c.height, c.width)
     backend = make_reference_backend("matched", **options)
     g = workload.gaussians
     ref = [t.detach().numpy() for t in backend(*(torch.tensor(getattr(g, k), dtype=torch.float64) for k in GROUPS),
@@ -70,7 +70,7 @@ def test_antialiased_gradients_match_finite_differences():
     options = {**SMOOTH, "antialiased": True}
     fast, _ = _check(workload, 300, **options)
     # the compensation is active: without it the image is not the same
-    plain = fast_vjp(workload, Cotangents.random(300, workload.camera.height, workload.camera.width), **SMOOTH)
+    plain = fast_vjp(workload, Cotangents.standard_normal(300, workload.camera.height, workload.camera.width), **SMOOTH)
     assert np.abs(plain.rgb - fast.rgb).max() > 100 * FORWARD_ATOL
 
 

@@ -104,11 +104,18 @@ class Cotangents:
     depth: np.ndarray
 
     @classmethod
-    def random(cls, seed: int, oracle_alpha: np.ndarray, outputs: Sequence[str]) -> Cotangents:
+    def standard_normal(cls, seed: int, height: int, width: int) -> Cotangents:
+        """Every entry standard normal, drawn rgb, alpha, depth from one seeded generator."""
         rng = np.random.default_rng(seed)
-        h, w = oracle_alpha.shape
-        v = {"rgb": rng.standard_normal((h, w, 3)), "alpha": rng.standard_normal((h, w)),
-             "depth": rng.standard_normal((h, w)) * (oracle_alpha > DEPTH_ALPHA_MIN)}
+        return cls(rng.standard_normal((height, width, 3)), rng.standard_normal((height, width)),
+                   rng.standard_normal((height, width)))
+
+    @classmethod
+    def random(cls, seed: int, oracle_alpha: np.ndarray, outputs: Sequence[str]) -> Cotangents:
+        """`standard_normal`, with depth weighted only where the oracle is opaque enough to define
+        it and undeclared outputs zeroed."""
+        n = cls.standard_normal(seed, *oracle_alpha.shape)
+        v = {"rgb": n.rgb, "alpha": n.alpha, "depth": n.depth * (oracle_alpha > DEPTH_ALPHA_MIN)}
         return cls(*(v[k] if k in outputs else np.zeros_like(v[k]) for k in OUTPUTS))
 
     def loss(self, rgb, alpha, depth):

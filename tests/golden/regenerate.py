@@ -24,7 +24,7 @@ def golden_path(seed: int) -> Path:
 def compute(seed: int):
     workload, background = parity_scene(seed)
     c = workload.camera
-    return fast_vjp(workload, Cotangents.random(500 + seed, c.height, c.width), background=background)
+    return fast_vjp(workload, Cotangents.standard_normal(500 + seed, c.height, c.width), background=background)
 
 
 def main() -> None:
