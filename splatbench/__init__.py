@@ -12,7 +12,8 @@ Public API:
 from splatbench import _llvm
 
 # Dr.Jit must load a libLLVM >= 16 (older ones abort the process): pick it before
-# any submodule imports drjit or mitsuba. Raises LLVMNotFoundError naming the fix.
+# any submodule imports drjit or mitsuba. With none, the LLVM backend is switched off and
+# the CPU device (and Mitsuba's LLVM variant) raise the reason when asked for; CUDA works.
 _llvm.configure()
 
 from splatbench.cameras import Camera  # noqa: E402

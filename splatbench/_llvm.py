@@ -99,12 +99,48 @@ def locate(environ: dict[str, str] | None = None) -> LibLLVM:
     )
 
 
-def configure() -> LibLLVM:
-    """Set ``DRJIT_LIBLLVM_PATH`` (unless the user did) before Dr.Jit is imported."""
-    lib = locate()
+#: What ``DRJIT_LIBLLVM_PATH`` is set to when no usable libLLVM exists: a path that does not exist,
+#: so Dr.Jit loads no older libLLVM (which would abort on float min/max) and its LLVM backend stays off.
+DISABLED_PATH = f"/nonexistent/splatbench-found-no-libLLVM-{MIN_MAJOR}-or-newer"
+
+_missing: LLVMNotFoundError | None = None
+
+
+def configure() -> LibLLVM | None:
+    """Set ``DRJIT_LIBLLVM_PATH`` (unless the user did) before Dr.Jit is imported.
+
+    Returns the library, or None when no libLLVM >= 16 exists: then Dr.Jit's LLVM backend is
+    switched off (`DISABLED_PATH`) rather than importing splatbench failing, so a machine with
+    a GPU and no suitable LLVM still renders on CUDA; `require()` raises the reason when the CPU
+    backend is asked for. A ``DRJIT_LIBLLVM_PATH`` the user set that is unusable still raises.
+
+    Raises:
+        LLVMNotFoundError: the user's ``DRJIT_LIBLLVM_PATH`` is missing or older than LLVM 16.
+    """
+    global _missing
+    try:
+        lib = locate()
+    except LLVMNotFoundError as exc:
+        if os.environ.get(ENV_VAR):
+            raise
+        _missing = exc
+        if "drjit" not in sys.modules:
+            os.environ[ENV_VAR] = DISABLED_PATH
+        return None
+    _missing = None
     if "drjit" not in sys.modules:
         os.environ.setdefault(ENV_VAR, lib.path)
     return lib
+
+
+def require() -> None:
+    """Raise why Dr.Jit's LLVM (CPU) backend is off, if `configure()` found no usable libLLVM.
+
+    Raises:
+        LLVMNotFoundError: one line naming the fix.
+    """
+    if _missing is not None:
+        raise _missing
 
 
 def _main(argv: list[str]) -> int:

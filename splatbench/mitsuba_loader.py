@@ -19,6 +19,9 @@ from __future__ import annotations
 
 from types import ModuleType
 
+from splatbench import _llvm
+from splatbench.errors import InputError
+
 #: The variant splatbench renders with (Dr.Jit LLVM backend, AD, RGB).
 MITSUBA_VARIANT = "llvm_ad_rgb"
 #: The variant set when the caller asks to keep the current one and none is set yet.
@@ -29,6 +32,11 @@ def mitsuba(variant: str | None = MITSUBA_VARIANT) -> ModuleType:
     """The ``mitsuba`` module with its variant set (see the module docstring for the rule)."""
     import mitsuba as mi  # splatbench/__init__ (run before any splatbench module) picked libLLVM
 
+    if variant is not None and variant.startswith("llvm_"):
+        try:
+            _llvm.require()
+        except _llvm.LLVMNotFoundError as exc:
+            raise InputError(f"Mitsuba variant {variant}: {exc}") from None
     if variant is None:
         if mi.variant() is None:
             mi.set_variant(FALLBACK_VARIANT)

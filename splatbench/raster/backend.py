@@ -13,6 +13,7 @@ from types import ModuleType
 import splatbench  # noqa: F401  (configures libLLVM before drjit loads)
 import drjit as dr
 
+from splatbench import _llvm
 from splatbench.errors import InputError
 
 
@@ -39,6 +40,10 @@ def get_backend(device: str = "auto") -> Backend:
         import drjit.cuda.ad as t
         return Backend("cuda", t)
     if device == "cpu":
+        try:
+            _llvm.require()
+        except _llvm.LLVMNotFoundError as exc:
+            raise InputError(f"device: 'cpu' needs Dr.Jit's LLVM backend: {exc}") from None
         if not dr.has_backend(dr.JitBackend.LLVM):
             raise InputError("device: 'cpu' requested but Dr.Jit's LLVM backend is unavailable")
         import drjit.llvm.ad as t
