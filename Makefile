@@ -10,13 +10,14 @@ PYTEST  := $(PY) -m pytest
 # Default suite stays well under 15 minutes on 2 cores; `slow` checks run in test-slow.
 PYTEST_ARGS ?=
 
-.PHONY: setup llvm demo test test-slow test-all golden reports bench clean help
+.PHONY: setup llvm demo test test-slow test-all golden reports bench cuda-check clean help
 
 help:
 	@echo "make demo       set up if needed, then run the main job"
 	@echo "make test       set up if needed, then run the default test suite"
 	@echo "make test-slow  the long checks (marked slow)"
 	@echo "make golden     regenerate tests/golden/ gradient files (explicit)"
+	@echo "make cuda-check on a machine with an NVIDIA GPU: CUDA tests and benchmarks into out/cuda"
 
 setup: llvm $(STAMP)
 
@@ -62,6 +63,11 @@ reports: setup
 	  $(VENV)/bin/splatbench run experiments/$$e.toml || status=1; \
 	  $(VENV)/bin/splatbench report experiments/$$e.toml || status=1; \
 	done; exit $$status
+
+# On a machine with an NVIDIA GPU: the rasterizer's CUDA tests, benchmarks, a diffuse training
+# run and gsplat's CUDA kernels beside ours (tools/cuda_check.sh; docs/benchmarks.md "CUDA").
+cuda-check: setup
+	PYTHON=$(PY) tools/cuda_check.sh out/cuda
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache
