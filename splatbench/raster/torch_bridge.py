@@ -84,11 +84,23 @@ def to_torch(x) -> torch.Tensor:
     return torch.from_dlpack(x)
 
 
+def _new_scope(device: str) -> None:
+    """Start a new Dr.Jit scope (basic block) on the backend of ``device``.
+
+    PyTorch runs the backward of CUDA tensors on its own per-device thread, so Dr.Jit
+    variables made there and on the caller's thread meet in later calls; Dr.Jit needs a
+    new scope at each such hand-over (`drjit.detail.new_scope`), as its own torch
+    wrapper (`drjit.interop`) does at both ends of forward and backward."""
+    backend = get_backend(device)
+    dr.detail.new_scope(dr.JitBackend.CUDA if backend.name == "cuda" else dr.JitBackend.LLVM)
+
+
 class _Rasterize(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means, log_scales, quats, opacity_logits, sh, camera, degree, background, options,
                 loop_ad, absgrad, timer, info_box):
         backend = get_backend(options.device)
+        _new_scope(options.device)
         m = backend.t
         params = (means, log_scales, quats, opacity_logits, sh)
         inputs = [to_drjit(backend, t) for t in params]
@@ -110,6 +122,7 @@ class _Rasterize(torch.autograd.Function):
         ctx.saved_shapes = [tuple(t.shape) for t in (means, log_scales, quats, opacity_logits, sh)]
         ctx.saved_devices = [t.device for t in (means, log_scales, quats, opacity_logits, sh)]
         info_box.append(frame)
+        _new_scope(options.device)
         return rgb, alpha, depth
 
     @staticmethod
@@ -119,6 +132,7 @@ class _Rasterize(torch.autograd.Function):
             return (None,) * 13
         _ = ctx.saved_tensors  # raises if a parameter was changed in place since the forward pass
         backend = get_backend(ctx.device)
+        _new_scope(ctx.device)  # this may be torch's autograd thread, not the forward's
 
         def cotangent(v, shape):
             return to_drjit(backend, v.reshape(shape)).array
@@ -150,6 +164,7 @@ class _Rasterize(torch.autograd.Function):
                 continue
             grads.append(to_torch(dr.grad(x)).reshape(like).to(where))
         ctx.dr_inputs = None  # release the Dr.Jit graph
+        _new_scope(ctx.device)
         return (*grads, None, None, None, None, None, None, None, None)
 
 
