@@ -250,6 +250,33 @@ def test_train_kind_config_errors_and_defaults():
     assert {"diffuse", "glossy", "textured"} <= kind.scenes()
 
 
+def test_train_kind_test_spp(tmp_path, monkeypatch):
+    """data.test_spp: validated at the boundary; at its default (data.spp) the run and its
+    dataset folder are the ones made before the field existed; otherwise the test views
+    of the run's dataset are rendered with it."""
+    from splatbench.experiments.grid import make_run_id
+    from splatbench.experiments.train_kind import TRAIN, dataset_folder
+    from splatbench.scenes import read_manifest
+
+    base = {"scene": "diffuse", "seed": 0, "iterations": 10}
+    with pytest.raises(InputError, match=r"^data\.test_spp: expected an int >= 1, got 0$"):
+        TRAIN.validate({**base, "data": {"test_spp": 0}})
+    with pytest.raises(InputError, match=r"^data\.test_spp: expected an int >= 1, got 'many'$"):
+        TRAIN.validate({**base, "data": {"test_spp": "many"}})
+    monkeypatch.setenv("SPLATBENCH_DATASETS", str(tmp_path / "data"))
+    plain = TRAIN.resolve({**base, "data": {"spp": 2}})
+    same = TRAIN.resolve({**base, "data": {"spp": 2, "test_spp": 2}})
+    assert plain["data"] == same["data"] == {"resolution": 256, "views": 32, "spp": 2}
+    assert make_run_id("train", plain) == make_run_id("train", same)
+    assert dataset_folder("diffuse", plain["data"]).name == "diffuse-256-v32-s2"
+    clean = TRAIN.resolve({**base, "data": {"resolution": 16, "views": 8, "spp": 2, "test_spp": 16}})
+    assert clean["data"]["test_spp"] == 16 and make_run_id("train", clean) != make_run_id("train", plain)
+    folder = dataset_folder("diffuse", clean["data"])
+    assert folder.name == "diffuse-16-v8-s2-t16"
+    TRAIN.prepare([clean])
+    assert read_manifest(folder)["settings"]["test_spp"] == 16
+
+
 def test_raster_kind_config_errors():
     from splatbench.experiments.kinds import get_kind
 

@@ -19,7 +19,7 @@ from splatbench.data import load_dataset
 from splatbench.mitsuba_loader import mitsuba
 from splatbench.scenes import (RigSpec, builtin_scenes_dir, find_scenes, get_scene, linear_to_srgb,
                                load_mitsuba_scene, plan_render, read_manifest, render_dataset, render_depth,
-                               sample_surface, srgb_to_linear)
+                               render_rgb, sample_surface, srgb_to_linear)
 from splatbench.scenes import render as render_module
 from tests.assertions import one_line_error
 
@@ -294,6 +294,48 @@ def test_cache_skips_the_same_render_and_redoes_a_changed_one(rendered):
     assert render_dataset("mini", result.path, views=8, spp=2, extra_dirs=[scenes_dir], progress=False).cached
 
 
+def test_test_spp_renders_cleaner_test_views_and_leaves_training_views_alone(rendered, tmp_path):
+    """``test_spp`` renders the held-out view (view 0) with more samples: its image
+    changes and lies closer to a converged render, while every training view stays
+    byte-identical to the plain ``spp`` dataset (same seeds, same spp)."""
+    plain, scenes_dir = rendered  # the mini rig: 4 spp everywhere
+    clean = render_dataset("mini", tmp_path / "clean", views=8, test_spp=64, extra_dirs=[scenes_dir], progress=False)
+    assert not clean.cached and clean.hash != plain.hash
+    assert read_manifest(clean.path)["settings"]["test_spp"] == 64
+    a, b = load_dataset(plain.path), load_dataset(clean.path)
+    np.testing.assert_array_equal(a.train.images, b.train.images)
+    np.testing.assert_array_equal(a.points.xyz, b.points.xyz)  # points come from training views only
+    assert not np.array_equal(a.test.images, b.test.images)
+    # Against a 1024-spp render of the test view, quantised like the dataset: the per-pixel
+    # Monte Carlo variance falls as 1/spp, so the expected MSE ratio is about 4/64 = 1/16
+    # (plus the same small floor on both sides: the reference's own noise, 1/1024, and
+    # 8-bit rounding, 1/(12*255^2)). Requiring only 1/4 leaves room for the estimate's
+    # spread over 32x32x3 values and for clipping, which tames the noise of bright pixels.
+    mi_scene = load_mitsuba_scene(get_scene("mini", [scenes_dir]))
+    camera = plan_render("mini", views=8, extra_dirs=[scenes_dir]).cameras[0]
+    ref = np.round(linear_to_srgb(render_rgb(mi_scene, camera, spp=1024, seed=99)) * 255) / 255
+    mse_plain = float(((a.test.images[0] - ref) ** 2).mean())
+    mse_clean = float(((b.test.images[0] - ref) ** 2).mean())
+    assert mse_plain > 0 and mse_clean < mse_plain / 4, (mse_clean, mse_plain)
+
+
+def test_test_spp_keeps_old_cache_keys_and_rejects_bad_values(rendered, tmp_path):
+    """Datasets rendered before ``test_spp`` existed keep their key: the settings hashed
+    are the old ones unless the test views really get another spp."""
+    plain, scenes_dir = rendered
+    old = plan_render("mini", views=8, extra_dirs=[scenes_dir])
+    assert set(old.settings()) == {"resolution", "views", "test", "spp", "seed", "points"}
+    assert old.hash() == plain.hash == read_manifest(plain.path)["hash"]
+    same = plan_render("mini", views=8, test_spp=4, extra_dirs=[scenes_dir])  # the rig's spp: the same plan
+    assert same.hash() == old.hash() and same.settings() == old.settings()
+    assert render_dataset("mini", plain.path, views=8, test_spp=4, extra_dirs=[scenes_dir], progress=False).cached
+    assert plan_render("mini", views=8, test_spp=5, extra_dirs=[scenes_dir]).hash() != old.hash()
+    for bad in (0, -3, 2.5, True):
+        one_line_error(lambda: render_dataset("mini", tmp_path / "bad", test_spp=bad, extra_dirs=[scenes_dir]),
+                       "--test-spp: expected a positive int", repr(bad))
+    assert not (tmp_path / "bad").exists()
+
+
 def test_interrupted_render_leaves_no_dataset(tmp_path, user_scenes, monkeypatch):
     def boom(plan, folder, progress):
         (folder / "images").mkdir()
@@ -331,6 +373,13 @@ def test_cli_list_and_render(tmp_path, user_scenes):
     assert second.stdout.strip() == f"cached: {out}"
     bad = runner.invoke(main, ["scenes", "render", "mini", "--views", "0", "--scenes-dir", str(user_scenes)])
     assert bad.exit_code == 2 and bad.output.strip() == "splatbench: error: --views: expected a positive int, got 0"
+    bad = runner.invoke(main, ["scenes", "render", "mini", "--test-spp", "0", "--scenes-dir", str(user_scenes)])
+    assert bad.exit_code == 2 and bad.output.strip() == "splatbench: error: --test-spp: expected a positive int, got 0"
+    clean = runner.invoke(main, ["scenes", "render", "mini", "--resolution", "16", "--views", "2", "--spp", "1",
+                                 "--test-spp", "8", "--out", str(tmp_path / "cli-clean"), "--scenes-dir",
+                                 str(user_scenes)])
+    assert clean.exit_code == 0, clean.output
+    assert read_manifest(tmp_path / "cli-clean")["settings"]["test_spp"] == 8
 
 
 def test_sample_surface_is_deterministic_across_loads_with_a_normal_per_point():

@@ -6,6 +6,9 @@ Config (the nested dict an experiment gives one run)::
     data.resolution      dataset image width in pixels (default: the scene rig's)
     data.views           views rendered, every 8th held out for testing (default: the rig's total)
     data.spp             Mitsuba samples per pixel (default: the rig's)
+    data.test_spp        samples per pixel of the held-out views (default: data.spp); more
+                         samples make cleaner test targets (their noise is a floor under
+                         every run's test PSNR; docs/training.md)
     <any TrainConfig field> but ``dataset`` and ``out``, which are machine-specific:
                          the kind sets them (the dataset folder, the run's work folder)
 
@@ -15,7 +18,8 @@ is the same run as one left out, and a changed default makes new runs.
 
 Datasets are rendered once, in the parent, by `prepare` (Mitsuba, cached by content
 hash) into ``$SPLATBENCH_DATASETS`` (default ``./data/scenes``, made absolute and
-exported to the workers) as ``<scene>-<W>-v<views>-s<spp>``. A worker calls
+exported to the workers) as ``<scene>-<W>-v<views>-s<spp>`` (``-t<test_spp>`` appended when
+the test views have their own spp). A worker calls
 `splatbench.scenes.render_dataset` again, which finds the cache (or renders, on a
 remote Dask worker that has no copy).
 
@@ -42,7 +46,7 @@ DATASETS_ENV = "SPLATBENCH_DATASETS"
 #: TrainConfig fields the kind owns (machine-specific paths; never in a config).
 OWNED_FIELDS = ("dataset", "out")
 #: The ``data`` table: how the scene is rendered into a dataset.
-DATA_FIELDS = ("resolution", "views", "spp")
+DATA_FIELDS = ("resolution", "views", "spp", "test_spp")
 
 #: Metric name -> meaning (every one comes from `splatbench.train.TrainResult`).
 METRICS: dict[str, str] = {
@@ -79,7 +83,7 @@ def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]
         if key in OWNED_FIELDS:
             what = "the rendered scene" if key == "dataset" else "the run's folder"
             raise InputError(f"{key}: set by the train kind ({what}); choose the scene with 'scenes' and its "
-                             f"rendering with data.resolution / data.views / data.spp")
+                             f"rendering with data.resolution / data.views / data.spp / data.test_spp")
         if key not in known:
             close = difflib.get_close_matches(key, known, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
@@ -143,6 +147,9 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
         "views": data.get("views") or int(rig.train_views + rig.test_views),
         "spp": data.get("spp") or int(rig.spp),
     }
+    test_spp = data.get("test_spp")
+    if test_spp is not None and test_spp != out["data"]["spp"]:  # at its default (spp) it is left out: same run id
+        out["data"]["test_spp"] = test_spp
     return out
 
 
@@ -160,8 +167,10 @@ def datasets_dir() -> Path:
 
 
 def dataset_folder(scene: str, data: dict[str, Any]) -> Path:
-    """Where the dataset of ``scene`` rendered with ``data`` lives."""
-    return datasets_dir() / f"{scene}-{data['resolution']}-v{data['views']}-s{data['spp']}"
+    """Where the dataset of ``scene`` rendered with ``data`` (a resolved ``data`` table) lives."""
+    name = f"{scene}-{data['resolution']}-v{data['views']}-s{data['spp']}"
+    test_spp = data.get("test_spp")
+    return datasets_dir() / (name if test_spp in (None, data["spp"]) else f"{name}-t{test_spp}")
 
 
 def ensure_dataset(scene: str, data: dict[str, Any], *, progress: bool = False):
@@ -169,7 +178,7 @@ def ensure_dataset(scene: str, data: dict[str, Any], *, progress: bool = False):
     from splatbench.scenes.render import render_dataset
 
     return render_dataset(scene, dataset_folder(scene, data), resolution=data["resolution"], views=data["views"],
-                          spp=data["spp"], progress=progress)
+                          spp=data["spp"], test_spp=data.get("test_spp"), progress=progress)
 
 
 def prepare(configs: list[dict[str, Any]]) -> None:
@@ -185,7 +194,8 @@ def prepare(configs: list[dict[str, Any]]) -> None:
         data = config["data"]
         result = ensure_dataset(config["scene"], data, progress=sys.stderr.isatty())
         how = "cached" if result.cached else f"rendered in {result.seconds:.1f} s"
-        print(f"dataset {config['scene']} {data['resolution']}px, {data['views']} views, {data['spp']} spp: "
+        spp = f"{data['spp']} spp" + (f" (test views {data['test_spp']})" if data.get("test_spp") else "")
+        print(f"dataset {config['scene']} {data['resolution']}px, {data['views']} views, {spp}: "
               f"{how} ({result.path})", file=sys.stderr, flush=True)
         if any(c.get("init") == "sfm" and c["scene"] == config["scene"] and c["data"] == data for c in configs):
             _prepare_sfm(result.path)

@@ -9,7 +9,7 @@ Catalog (``catalog.py``, no Mitsuba import)::
 
 Rendering (``render.py``, Mitsuba variant ``llvm_ad_rgb``)::
 
-    render_dataset(scene, out=None, *, resolution=None, views=None, spp=None, force=False)
+    render_dataset(scene, out=None, *, resolution=None, views=None, spp=None, test_spp=None, force=False)
         -> RenderedDataset(path, cached, seconds, train, test, hash)
     load_mitsuba_scene(scene) -> mi.Scene              .shapes() for surface sampling
     render_rgb(mi_scene, camera, *, spp, seed=0) -> [H, W, 3] linear RGB

@@ -41,13 +41,16 @@ def list_(scenes_dirs: tuple[Path, ...]) -> None:
 @click.option("--resolution", default=None, help="Width W (height keeps the rig's aspect) or WxH. Default: the rig's.")
 @click.option("--views", type=int, default=None,
               help="Total number of views; every 8th (i % 8 == 0) is a test view. Default: the rig's train + test.")
-@click.option("--spp", type=int, default=None, help="Samples per pixel. Default: the rig's.")
+@click.option("--spp", type=int, default=None, help="Samples per pixel (training views). Default: the rig's.")
+@click.option("--test-spp", type=int, default=None,
+              help="Samples per pixel of the test views (cleaner evaluation targets: their Monte Carlo noise is "
+                   "a floor under every model's test PSNR). Default: --spp.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Dataset folder. Default: data/scenes/<NAME>-<W> in the current folder.")
 @click.option("--force", is_flag=True, help="Render even when the cached dataset matches.")
 @_SCENES_DIR
-def render(name: str, resolution: str | None, views: int | None, spp: int | None, out: Path | None, force: bool,
-           scenes_dirs: tuple[Path, ...]) -> None:
+def render(name: str, resolution: str | None, views: int | None, spp: int | None, test_spp: int | None,
+           out: Path | None, force: bool, scenes_dirs: tuple[Path, ...]) -> None:
     """Render scene NAME (a catalog name or a scene folder path) into a dataset folder.
 
     Writes images/ (8-bit sRGB), depth/ (camera z, .npy), transforms_{train,test}.json,
@@ -56,7 +59,7 @@ def render(name: str, resolution: str | None, views: int | None, spp: int | None
     """
     from splatbench.scenes.render import render_dataset
 
-    result = render_dataset(name, out, resolution=resolution, views=views, spp=spp, force=force,
+    result = render_dataset(name, out, resolution=resolution, views=views, spp=spp, test_spp=test_spp, force=force,
                             extra_dirs=scenes_dirs)
     if result.cached:
         click.echo(f"cached: {result.path}")

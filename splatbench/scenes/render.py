@@ -27,8 +27,12 @@ Decisions:
   (no silhouette edges) are unprojected with their depth, a seeded random subset of
   ``rig.points``; colour is the pixel's sRGB value. Each point keeps one observation
   (its source pixel) in the COLMAP track. Test views never contribute.
+* Test views may get more samples (``test_spp``, default ``spp``): their Monte Carlo noise
+  is error no model can fit, a floor under every test PSNR. Training views keep ``spp``
+  and their seeds (a view's seed does not depend on its spp), so their images do not change.
 * The cache key hashes every file of the scene folder, the resolved settings
-  (resolution, views, test indices, spp, seed, points) and the renderer identity
+  (resolution, views, test indices, spp, seed, points; ``test_spp`` only when it differs
+  from ``spp``, so datasets made before it existed keep their key) and the renderer identity
   (`RENDERER_VERSION`, splatbench and Mitsuba versions). An existing dataset with the
   same hash is reused; anything else renders into a temporary sibling folder that is
   renamed into place once complete.
@@ -38,6 +42,7 @@ Example::
     from splatbench.scenes import render_dataset
     result = render_dataset("diffuse", resolution=64, views=8, spp=16)
     result.path, result.cached        # Path('data/scenes/diffuse-64'), False
+    render_dataset("glossy", resolution=128, views=64, spp=64, test_spp=2048)  # cleaner test targets
 """
 
 from __future__ import annotations
@@ -173,18 +178,26 @@ class RenderPlan:
     scene: SceneSpec
     cameras: list[Camera]
     test: tuple[int, ...]     # indices of held-out views
-    spp: int
+    spp: int                  # samples per pixel of the training views
     seed: int
     points: int
     names: list[str] = field(default_factory=list)  # image file names, in view order
+    test_spp: int | None = None  # samples per pixel of the test views; None: spp
+
+    def view_spp(self, index: int) -> int:
+        """Samples per pixel of view ``index``: ``test_spp`` for a test view (when set), else ``spp``."""
+        return self.test_spp if self.test_spp is not None and index in self.test else self.spp
 
     @property
     def resolution(self) -> tuple[int, int]:
         return self.cameras[0].width, self.cameras[0].height
 
     def settings(self) -> dict[str, Any]:
-        return {"resolution": list(self.resolution), "views": len(self.cameras), "test": list(self.test),
-                "spp": self.spp, "seed": self.seed, "points": self.points}
+        settings = {"resolution": list(self.resolution), "views": len(self.cameras), "test": list(self.test),
+                    "spp": self.spp, "seed": self.seed, "points": self.points}
+        if self.test_spp is not None and self.test_spp != self.spp:  # absent otherwise: old keys stay valid
+            settings["test_spp"] = self.test_spp
+        return settings
 
     def inputs(self) -> dict[str, Any]:
         """What the cache hashes: scene files (sha256), settings and renderer identity."""
@@ -198,12 +211,15 @@ class RenderPlan:
 
 
 def plan_render(scene: SceneSpec | str | Path, *, resolution: Any = None, views: int | None = None,
-                spp: int | None = None, extra_dirs: Iterable[str | Path] = ()) -> RenderPlan:
+                spp: int | None = None, test_spp: int | None = None,
+                extra_dirs: Iterable[str | Path] = ()) -> RenderPlan:
     """Resolve a scene and the overrides into a `RenderPlan`.
 
     ``resolution``: an int (the width; the height keeps the rig's aspect ratio), ``"WxH"``
     or ``(W, H)``. ``views``: the total number of views; every 8th (``i % 8 == 0``) is
     then a test view. Without it the rig's ``train_views`` / ``test_views`` apply.
+    ``spp``: samples per pixel (default: the rig's); ``test_spp``: those of the test
+    views (default: ``spp``; a value equal to ``spp`` is the same plan as none).
     """
     spec = scene if isinstance(scene, SceneSpec) else get_scene(scene, extra_dirs)
     rig = spec.rig
@@ -212,11 +228,14 @@ def plan_render(scene: SceneSpec | str | Path, *, resolution: Any = None, views:
         raise InputError(f"--views: expected a positive int, got {views!r}")
     if spp is not None and not (isinstance(spp, int) and spp > 0):
         raise InputError(f"--spp: expected a positive int, got {spp!r}")
+    if test_spp is not None and not (isinstance(test_spp, int) and not isinstance(test_spp, bool) and test_spp > 0):
+        raise InputError(f"--test-spp: expected a positive int, got {test_spp!r}")
     cameras = rig.cameras(views, res)
     digits = max(4, len(str(len(cameras) - 1)))
     names = [f"{i:0{digits}d}.png" for i in range(len(cameras))]
-    return RenderPlan(spec, cameras, tuple(rig.test_indices(views)), rig.spp if spp is None else spp,
-                      rig.seed, rig.points, names)
+    train_spp = rig.spp if spp is None else spp
+    return RenderPlan(spec, cameras, tuple(rig.test_indices(views)), train_spp, rig.seed, rig.points, names,
+                      None if test_spp == train_spp else test_spp)
 
 
 def default_out(plan: RenderPlan) -> Path:
@@ -247,15 +266,17 @@ def read_manifest(folder: str | Path) -> dict | None:
 
 
 def render_dataset(scene: SceneSpec | str | Path, out: str | Path | None = None, *, resolution: Any = None,
-                   views: int | None = None, spp: int | None = None, force: bool = False, progress: bool = True,
+                   views: int | None = None, spp: int | None = None, test_spp: int | None = None,
+                   force: bool = False, progress: bool = True,
                    extra_dirs: Iterable[str | Path] = ()) -> RenderedDataset:
     """Render ``scene`` into the dataset folder ``out`` unless it already holds the same render.
 
     ``out`` defaults to `default_out` (``data/scenes/<name>-<W>``). A folder that exists
     but holds no ``manifest.json`` (and is not empty) is never replaced: `InputError`.
     ``force`` renders even when the cache matches. ``progress`` shows a bar over views.
+    ``spp`` / ``test_spp``: samples per pixel of the training / test views (`plan_render`).
     """
-    plan = plan_render(scene, resolution=resolution, views=views, spp=spp, extra_dirs=extra_dirs)
+    plan = plan_render(scene, resolution=resolution, views=views, spp=spp, test_spp=test_spp, extra_dirs=extra_dirs)
     out = Path(out) if out is not None else default_out(plan)
     digest = plan.hash()
     n_test = len(plan.test)
@@ -303,7 +324,8 @@ def _render_into(plan: RenderPlan, folder: Path, progress: bool) -> None:
     bar = tqdm(range(n), desc=f"render {plan.scene.name}", unit="view", disable=not progress, leave=False)
     for i in bar:
         cam = plan.cameras[i]
-        rgb = to_uint8(linear_to_srgb(render_rgb(mi_scene, cam, spp=plan.spp, seed=plan.seed * 1_000_003 + i)))
+        rgb = to_uint8(linear_to_srgb(render_rgb(mi_scene, cam, spp=plan.view_spp(i),
+                                                 seed=plan.seed * 1_000_003 + i)))
         depth = render_depth(mi_scene, cam)
         _save_png_u8(rgb, folder / "images" / plan.names[i])
         np.save(folder / "depth" / Path(plan.names[i]).with_suffix(".npy"), depth)
