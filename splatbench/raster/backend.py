@@ -13,6 +13,7 @@ from types import ModuleType
 import splatbench  # noqa: F401  (configures libLLVM before drjit loads)
 import drjit as dr
 
+from splatbench.devices import check_device
 from splatbench.errors import InputError
 
 
@@ -31,16 +32,14 @@ def cuda_available() -> bool:
 @lru_cache(maxsize=None)
 def get_backend(device: str = "auto") -> Backend:
     """The backend for ``device`` ("cpu", "cuda" or "auto": CUDA when available)."""
-    if device == "auto":
+    if check_device(device) == "auto":
         device = "cuda" if cuda_available() else "cpu"
     if device == "cuda":
         if not cuda_available():
             raise InputError("device: 'cuda' requested but Dr.Jit finds no CUDA device")
         import drjit.cuda.ad as t
         return Backend("cuda", t)
-    if device == "cpu":
-        if not dr.has_backend(dr.JitBackend.LLVM):
-            raise InputError("device: 'cpu' requested but Dr.Jit's LLVM backend is unavailable")
-        import drjit.llvm.ad as t
-        return Backend("llvm", t)
-    raise InputError(f"device: expected 'auto', 'cpu' or 'cuda', got {device!r}")
+    if not dr.has_backend(dr.JitBackend.LLVM):
+        raise InputError("device: 'cpu' requested but Dr.Jit's LLVM backend is unavailable")
+    import drjit.llvm.ad as t
+    return Backend("llvm", t)

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from splatbench.checks import check_sh_degree
+from splatbench.devices import check_device
 from splatbench.errors import InputError
 from splatbench.fsutil import read_text
 from splatbench.overrides import parse_override
@@ -158,8 +159,7 @@ class TrainConfig:
                 raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
         elif len(self.background) != 3 or not all(0 <= c <= 1 for c in self.background):
             raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
-        if self.device not in ("auto", "cpu", "cuda"):
-            raise InputError(f"device: expected 'auto', 'cpu' or 'cuda', got {self.device!r}")
+        check_device(self.device, "device")
         from splatbench.train.schedule import SCHEDULES, check_final_window
 
         if self.schedule not in SCHEDULES:
