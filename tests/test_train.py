@@ -548,6 +548,35 @@ def test_frozen_means_with_a_gradient_densifier_is_one_line():
     TrainConfig(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0, strategy="mcmc")  # no screen gradient used
 
 
+def test_frozen_means_check_follows_the_strategys_declaration(monkeypatch):
+    # the check reads the Strategy protocol's reads_mean_gradients, not the strategy's class:
+    # a default-like strategy declaring that it reads no mean gradient is accepted with frozen
+    # means, a no-op one declaring that it does is refused, and the error lists the strategies
+    # that would do
+    import dataclasses
+    from typing import ClassVar
+
+    from splatbench.strategies import STRATEGIES, DefaultStrategy, NoneStrategy
+    from splatbench.train import TrainConfig
+
+    @dataclasses.dataclass(frozen=True)
+    class Gradless(DefaultStrategy):
+        reads_mean_gradients: ClassVar[bool] = False
+
+    @dataclasses.dataclass(frozen=True)
+    class Reader(NoneStrategy):
+        reads_mean_gradients: ClassVar[bool] = True
+
+    monkeypatch.setitem(STRATEGIES, "gradless", (Gradless, {}))
+    monkeypatch.setitem(STRATEGIES, "reader", (Reader, {}))
+    frozen = dict(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0)
+    assert TrainConfig(**frozen, strategy="gradless").strategy == "gradless"
+    with pytest.raises(InputError) as err:
+        TrainConfig(**frozen, strategy="reader")
+    assert str(err.value) == ("lr_means: 0 freezes the means, but strategy 'reader' densifies from their screen-space "
+                              "gradients (use a positive lr_means, or strategy=none or mcmc or gradless)")
+
+
 def test_a_model_pruned_to_nothing_trains_on_and_says_so(tmp_path, tiny_diffuse):
     # every Gaussian starts below the prune threshold (opacity 0.001 < 0.005), so the first
     # refinement (step 4) removes them all; the run must go on (an empty model steps: empty

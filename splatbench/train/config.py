@@ -166,13 +166,14 @@ class TrainConfig:
             raise InputError(f"schedule: expected one of {', '.join(map(repr, SCHEDULES))}, got {self.schedule!r}")
         strategy = self.make_strategy()
         check_final_window(strategy, self.iterations, self.schedule)
-        from splatbench.strategies.default import DefaultStrategy
+        if self.lr_means == 0 and strategy.reads_mean_gradients:
+            # frozen means have no screen-space gradient (the rasterizer's backward skips it), and this
+            # strategy declares that it reads it (the Strategy protocol's reads_mean_gradients)
+            from splatbench.strategies import STRATEGIES
 
-        if self.lr_means == 0 and isinstance(strategy, DefaultStrategy):
-            # frozen means have no screen-space gradient (the rasterizer's backward skips it), and the
-            # default/absgrad strategies densify from it
+            free = [name for name, (cls, _) in STRATEGIES.items() if not cls.reads_mean_gradients]
             raise InputError(f"lr_means: 0 freezes the means, but strategy {self.strategy!r} densifies from their "
-                             "screen-space gradients (use a positive lr_means, or strategy=none or mcmc)")
+                             f"screen-space gradients (use a positive lr_means, or strategy={' or '.join(free)})")
         return self
 
     def make_strategy(self, *, scaled: bool = True):
