@@ -57,7 +57,7 @@ class MCMCStrategy:
     name: ClassVar[str] = "mcmc"
     absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad
     #: Relocation samples by opacity, the noise by opacity and covariance: no screen-space
-    #: gradient is read (as in gsplat's MCMCStrategy and ubc-vision/3dgs-mcmc).
+    #: gradient is read (as in gsplat 1.5.3's MCMCStrategy).
     reads_mean_gradients: ClassVar[bool] = False
     initial_opacity: ClassVar[float] = 0.5  # init_opacity="auto" (ubc-vision/3dgs-mcmc create_from_pcd)
     #: Scaled by ``TrainConfig.schedule = "scaled"``; refine_every stays as written.
