@@ -253,8 +253,8 @@ def test_cli_table_exit_codes_and_bad_specs():
                           ("no-such-backend", "unknown backend 'no-such-backend'")):
         bad = runner.invoke(main, ["conform", spec])
         assert bad.exit_code == 2 and message in bad.output, bad.output
-    gpu = runner.invoke(main, ["conform", "torch", "--device", "tpu"])
-    assert gpu.exit_code == 2 and "device: backend 'torch' runs on cpu, not 'tpu'" in gpu.output
+    gpu = runner.invoke(main, ["conform", "torch", "--device", "cuda"])  # the torch backend declares cpu only
+    assert gpu.exit_code == 2 and "device: backend 'torch' runs on cpu, not 'cuda'" in gpu.output
     unknown = runner.invoke(main, ["conform", "torch", "--probe", "nope"])
     assert unknown.exit_code == 2 and "probes: unknown probe 'nope'" in unknown.output
     listed = runner.invoke(main, ["conform", "drjit", "--list"])

@@ -619,11 +619,51 @@ def test_training_steps_through_the_rasterizer(name):
 @pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc"])
 def test_every_strategy_states_the_whole_protocol(name):
     """The trainer reads ``absgrad``, ``schedule_fields`` and ``initial_opacity`` directly
-    (no getattr probing): each registered strategy must declare them with the right types."""
+    (no getattr probing), the config ``reads_mean_gradients``: each registered strategy must
+    declare them with the right types."""
     from splatbench.strategies import STRATEGIES
 
     strategy = make_strategy(name)
     assert type(strategy) is STRATEGIES[name][0]
     assert isinstance(strategy.absgrad, bool) and strategy.absgrad == (name == "absgrad")
+    assert "reads_mean_gradients" in vars(type(strategy)) and isinstance(strategy.reads_mean_gradients, bool)
     assert isinstance(strategy.schedule_fields, dict) and isinstance(strategy.initial_opacity, float)
     assert all(hasattr(strategy, field) for field in strategy.schedule_fields)
+
+
+@dataclass
+class CountingInfo(FakeInfo):
+    """A `FakeInfo` that counts reads of the screen-space mean gradients."""
+
+    reads: list = None
+
+    @property
+    def means2d_grad(self):
+        self.reads.append("means2d_grad")
+        return self.grad
+
+    @property
+    def means2d_absgrad(self):
+        self.reads.append("means2d_absgrad")
+        return self.absgrad
+
+
+@pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc"])
+def test_reads_mean_gradients_is_what_the_hooks_read(name):
+    """The declaration `TrainConfig`'s frozen-means check trusts: over a run with refinements
+    (so every code path of the hooks runs), a strategy reads the screen-space mean gradients
+    exactly when it declares ``reads_mean_gradients``."""
+    params, opts = make_params(40, seed=3)
+    schedule = {"refine_start": 0, "refine_every": 3, "refine_stop": 10}
+    strat = make_strategy(name, **{k: v for k, v in schedule.items() if k in strategy_fields(name)})
+    state = strat.initialize_state(params)
+    g = torch.Generator().manual_seed(4)
+    reads: list[str] = []
+    for step in range(12):
+        n = params["means"].shape[0]
+        info = fake_info(torch.randn(n, 2, generator=g) * 1e-3, absgrad_px=torch.rand(n, 2, generator=g) * 4e-3)
+        info = CountingInfo(**{**vars(info), "reads": reads})
+        strat.pre_backward(params, opts, state, ctx(step, info))
+        strat.post_backward(params, opts, state, ctx(step, info))
+        adam_step(params, opts, step)
+    assert bool(reads) == strat.reads_mean_gradients, reads

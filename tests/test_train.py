@@ -297,6 +297,9 @@ def test_checkpoint_resumes_training_exactly(tmp_path, tiny_diffuse):
     for name in ("means", "log_scales", "quats", "opacity_logits", "sh"):
         assert getattr(a, name).tobytes() == getattr(b, name).tobytes(), name
     assert resumed.history == straight.history and resumed.iterations == 20
+    # the resumed run says so, first among its notes; a straight run does not
+    assert resumed.notes[0] == f"resumed from {checkpoint} at step 10 of 20"
+    assert not any(n.startswith("resumed from") for n in straight.notes + first.notes)
     # a different config is refused before any step, naming the field
     with pytest.raises(InputError, match="resume: .* was written with seed=0, this run has seed=1"):
         train(config(tmp_path, out=str(tmp_path / "other"), seed=1, **base), dataset=tiny_diffuse, resume=checkpoint)
@@ -431,15 +434,30 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     res = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                "--set", "checkpoint_every=2", "--json", "--quiet", "--out", str(tmp_path / "c")])
     assert res.exit_code == 0, res.output
+    checkpoint = tmp_path / "c" / "checkpoints" / "iteration_2.pt"
     again = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
-                                 "--resume", str(tmp_path / "c" / "checkpoints" / "iteration_2.pt"), "--json",
+                                 "--resume", str(checkpoint), "--json",
                                  "--quiet", "--out", str(tmp_path / "r")])
     assert again.exit_code == 0, again.output
     assert (tmp_path / "r" / "point_cloud.ply").read_bytes() == (tmp_path / "c" / "point_cloud.ply").read_bytes()
+    assert json.loads(again.stdout)["notes"][0] == f"resumed from {checkpoint} at step 2 of 3"
     gone = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                 "--resume", str(tmp_path / "none.pt"), "--quiet", "--out", str(tmp_path / "g")])
     assert gone.exit_code == 2 and gone.stderr.strip() == \
         f"splatbench: error: resume: no such checkpoint {str(tmp_path / 'none.pt')!r}"
+    # with the progress bar, the line comes once, on stderr, as the run starts (before the bar),
+    # and the bar counts on from the checkpoint's step; the summary does not repeat it
+    shown = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                 "--resume", str(checkpoint), "--out", str(tmp_path / "s")])
+    assert shown.exit_code == 0, shown.output
+    line = f"resumed from {checkpoint} at step 2 of 3"
+    assert shown.stderr.startswith(line + "\n") and shown.stderr.count("resumed from") == 1
+    assert "3/3" in shown.stderr and "1/3" not in shown.stderr and "resumed from" not in shown.stdout
+    # --quiet: no bar and no line as it starts; the summary's notes carry it
+    quiet = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                 "--resume", str(checkpoint), "--quiet", "--out", str(tmp_path / "q")])
+    assert quiet.exit_code == 0, quiet.output
+    assert f"note: {line}" in quiet.stdout.splitlines() and "resumed from" not in quiet.stderr
 
 
 def test_cli_rejects_graphdecos_absolute_schedule_on_a_short_run_before_reading_data(tmp_path, tiny_diffuse_dir):
@@ -528,6 +546,35 @@ def test_frozen_means_with_a_gradient_densifier_is_one_line():
     with pytest.raises(InputError, match="lr_means: 0 freezes the means, but strategy 'default' densifies"):
         TrainConfig(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0)
     TrainConfig(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0, strategy="mcmc")  # no screen gradient used
+
+
+def test_frozen_means_check_follows_the_strategys_declaration(monkeypatch):
+    # the check reads the Strategy protocol's reads_mean_gradients, not the strategy's class:
+    # a default-like strategy declaring that it reads no mean gradient is accepted with frozen
+    # means, a no-op one declaring that it does is refused, and the error lists the strategies
+    # that would do
+    import dataclasses
+    from typing import ClassVar
+
+    from splatbench.strategies import STRATEGIES, DefaultStrategy, NoneStrategy
+    from splatbench.train import TrainConfig
+
+    @dataclasses.dataclass(frozen=True)
+    class Gradless(DefaultStrategy):
+        reads_mean_gradients: ClassVar[bool] = False
+
+    @dataclasses.dataclass(frozen=True)
+    class Reader(NoneStrategy):
+        reads_mean_gradients: ClassVar[bool] = True
+
+    monkeypatch.setitem(STRATEGIES, "gradless", (Gradless, {}))
+    monkeypatch.setitem(STRATEGIES, "reader", (Reader, {}))
+    frozen = dict(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0)
+    assert TrainConfig(**frozen, strategy="gradless").strategy == "gradless"
+    with pytest.raises(InputError) as err:
+        TrainConfig(**frozen, strategy="reader")
+    assert str(err.value) == ("lr_means: 0 freezes the means, but strategy 'reader' densifies from their screen-space "
+                              "gradients (use a positive lr_means, or strategy=none or mcmc or gradless)")
 
 
 def test_a_model_pruned_to_nothing_trains_on_and_says_so(tmp_path, tiny_diffuse):

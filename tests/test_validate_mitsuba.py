@@ -118,3 +118,30 @@ def test_cli_lists_the_package_sweeps_and_default_folder():
 
     assert cli._SWEEP_NAMES == tuple(vm.SWEEPS)
     assert cli.mitsuba.params[0].name == "out" and cli.mitsuba.params[0].default == vm.DEFAULT_OUT
+
+
+def test_report_of_the_committed_rows_is_byte_identical(tmp_path):
+    """`SweepRow` holds a `ComparisonMetrics` (not a copy of its fields); the CSV and markdown
+    it writes are the committed baseline's, byte for byte, when built from that baseline's rows
+    (its numbers are printed with 4 significant digits, which re-print unchanged)."""
+    import csv
+    from dataclasses import fields
+    from pathlib import Path
+
+    committed = Path(__file__).resolve().parents[1] / "reports" / "validate_mitsuba"
+    ints = {"gaussians", "rehit_pixels"}
+    rows = []
+    with open(committed / "table.csv", newline="", encoding="utf-8") as fh:
+        reader = csv.DictReader(fh)
+        assert reader.fieldnames == vm.SweepRow.column_names()
+        for r in reader:
+            v = {k: (int(x) if k in ints else x if k in ("sweep", "parameter", "options") else float(x))
+                 for k, x in r.items()}
+            metrics = vm.ComparisonMetrics(**{f.name: v[f.name] for f in fields(vm.ComparisonMetrics)})
+            rows.append(vm.SweepRow(v["sweep"], v["parameter"], v["value"], v["options"], v["gaussians"], metrics))
+    assert len(rows) == 32 and {r.sweep for r in rows} == set(vm.SWEEPS)
+    paths = vm.write_report(rows, tmp_path, width=128)
+    assert paths.csv.read_bytes() == (committed / "table.csv").read_bytes()
+    table = paths.markdown.read_text(encoding="utf-8")  # no probe or checks given: the table alone
+    assert table == vm.markdown_table(rows, 128) and (committed / "table.md").read_text(encoding="utf-8").startswith(
+        table)

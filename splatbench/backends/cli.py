@@ -13,6 +13,8 @@ from pathlib import Path
 
 import click
 
+from splatbench.devices import device_option
+
 
 @click.command()
 @click.option("--backend", "backends", multiple=True, required=True, metavar="NAME|module:function",
@@ -27,8 +29,7 @@ import click
 @click.option("--scene", "scenes", multiple=True, metavar="NAME",
               help="A workload by the experiment grids' name: synthetic-N-S, synthetic-N-WxH, garden, garden-vK "
                    "(repeatable).")
-@click.option("--device", default="cpu", show_default=True, type=click.Choice(["cpu", "cuda"]),
-              help="Where the input tensors live and the backends run.")
+@device_option
 @click.option("--repeats", default=5, show_default=True, type=int, help="Timed rounds (median and spread).")
 @click.option("--out", "out", type=click.Path(path_type=Path, file_okay=False), default=Path("out/compare"),
               show_default=True, help="Folder for report.md, results.parquet and the figures.")

@@ -34,17 +34,24 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 from splatbench.backends.compare_types import (BOUNDARY_FRACTION, MAX_ORACLE_PIXELS, GradError, ImageError, Timing,
                                                gradient_bound)
+from splatbench.devices import torch_device
 from splatbench.errors import InputError, one_line
+
+if TYPE_CHECKING:
+    from splatbench.backends.base import Backend
+
 
 @dataclass(frozen=True)
 class CompareSettings:
     """How `run_compare` measures.
 
-    repeats: timed rounds; device: "cpu" or "cuda" (where the input tensors live);
+    repeats: timed rounds; device: "cpu", "cuda" or "auto" (where the input tensors live;
+    auto: CUDA when torch sees a GPU and every backend compared runs there, else the CPU);
     seed: of the random cotangents and the finite-difference sample; error_scale:
     resolution factor of the error measurement (None: `auto_scale`); grad_oracle:
     "auto" (``torch64`` when registered, else "fd"), "fd", "none" or a backend name;
@@ -53,7 +60,7 @@ class CompareSettings:
     """
 
     repeats: int = 5
-    device: str = "cpu"
+    device: str = "auto"
     seed: int = 0
     error_scale: float | None = None
     grad_oracle: str = "auto"
@@ -63,17 +70,20 @@ class CompareSettings:
     def validate(self) -> None:
         if self.repeats < 1:
             raise InputError(f"--repeats: expected a count >= 1, got {self.repeats}")
-        if self.device not in ("cpu", "cuda"):
-            raise InputError(f"--device: expected 'cpu' or 'cuda', got {self.device!r}")
+        torch_device(self.device, "--device")  # unknown, or 'cuda' without a GPU: fails here, before any work
         if self.error_scale is not None and not 0 < self.error_scale <= 1:
             raise InputError(f"--error-scale: expected a factor in (0, 1], got {self.error_scale}")
         if self.fd_entries < 1:
             raise InputError(f"--fd-entries: expected a count >= 1, got {self.fd_entries}")
-        if self.device == "cuda":
-            import torch
 
-            if not torch.cuda.is_available():
-                raise InputError("--device: 'cuda' asked for, but torch finds no CUDA device (use --device cpu)")
+
+def _device(device: str, backends: Sequence[Backend]) -> str:
+    """``"cpu"`` or ``"cuda"`` for ``device``: "auto" takes CUDA only when torch sees a GPU and every
+    backend lists "cuda" in its devices (so one CPU-only backend does not turn into an error row)."""
+    resolved = torch_device(device, "--device")
+    if device == "auto" and not all("cuda" in b.info.devices for b in backends):
+        return "cpu"
+    return resolved
 
 
 @dataclass(frozen=True)
@@ -156,6 +166,7 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
     resolved = [get_backend(b) for b in backends]
     if not resolved:
         raise InputError("--backend: give at least one backend")
+    settings = replace(settings, device=_device(settings.device, resolved))
     names = [b.name for b in resolved]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from splatbench.devices import device_option
+
 
 @click.group()
 def bench() -> None:
@@ -21,8 +23,7 @@ def bench() -> None:
 @click.option("--repeats", default=5, show_default=True, type=int, help="Timed runs per measurement (median).")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=Path("out/bench"), show_default=True,
               help="Folder for raster.csv and raster.json.")
-@click.option("--device", default="auto", show_default=True, metavar="cpu|cuda|auto",
-              help="Dr.Jit backend (auto: CUDA when available).")
+@device_option
 @click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
               help="Rasterizer option (repeatable), e.g. tile_size=8.")
 def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[str, ...], repeats: int, out: Path,
@@ -163,8 +164,7 @@ def ab_train(against: str, sizes: tuple[int, ...], gaussians: int, block: int, p
 @click.option("--seed", default=0, show_default=True, type=int, help="Scene and training seed.")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=Path("out/bench"), show_default=True,
               help="Folder for train.csv and train.json.")
-@click.option("--device", default="auto", show_default=True, metavar="cpu|cuda|auto",
-              help="Dr.Jit backend (auto: CUDA when available).")
+@device_option
 def train(sizes: tuple[int, ...], gaussians: int, iterations: int, warmup: int, seed: int, out: Path,
           device: str) -> None:
     """Training throughput: iterations/s and the share of rasterizer forward, backward,

@@ -14,6 +14,7 @@ import splatbench  # noqa: F401  (configures libLLVM before drjit loads)
 import drjit as dr
 
 from splatbench import _llvm
+from splatbench.devices import check_device
 from splatbench.errors import InputError
 
 
@@ -32,20 +33,18 @@ def cuda_available() -> bool:
 @lru_cache(maxsize=None)
 def get_backend(device: str = "auto") -> Backend:
     """The backend for ``device`` ("cpu", "cuda" or "auto": CUDA when available)."""
-    if device == "auto":
+    if check_device(device) == "auto":
         device = "cuda" if cuda_available() else "cpu"
     if device == "cuda":
         if not cuda_available():
             raise InputError("device: 'cuda' requested but Dr.Jit finds no CUDA device")
         import drjit.cuda.ad as t
         return Backend("cuda", t)
-    if device == "cpu":
-        try:
-            _llvm.require()
-        except _llvm.LLVMNotFoundError as exc:
-            raise InputError(f"device: 'cpu' needs Dr.Jit's LLVM backend: {exc}") from None
-        if not dr.has_backend(dr.JitBackend.LLVM):
-            raise InputError("device: 'cpu' requested but Dr.Jit's LLVM backend is unavailable")
-        import drjit.llvm.ad as t
-        return Backend("llvm", t)
-    raise InputError(f"device: expected 'auto', 'cpu' or 'cuda', got {device!r}")
+    try:
+        _llvm.require()
+    except _llvm.LLVMNotFoundError as exc:
+        raise InputError(f"device: 'cpu' needs Dr.Jit's LLVM backend: {exc}") from None
+    if not dr.has_backend(dr.JitBackend.LLVM):
+        raise InputError("device: 'cpu' requested but Dr.Jit's LLVM backend is unavailable")
+    import drjit.llvm.ad as t
+    return Backend("llvm", t)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields, replace
 
+from splatbench.devices import check_device
 from splatbench.errors import InputError
 
 RADIUS_RULES = ("3sigma", "opacity")
@@ -46,8 +47,7 @@ class RasterOptions:
             raise InputError(f"far: expected a value > 0, got {self.far!r}")
         if self.radius not in RADIUS_RULES:
             raise InputError(f"radius: expected one of {RADIUS_RULES}, got {self.radius!r}")
-        if self.device not in ("auto", "cpu", "cuda"):
-            raise InputError(f"device: expected 'auto', 'cpu' or 'cuda', got {self.device!r}")
+        check_device(self.device)
 
     @classmethod
     def from_kwargs(cls, base: RasterOptions | None = None, **kwargs) -> RasterOptions:

@@ -89,6 +89,10 @@ class Strategy(Protocol):
     #: Whether `post_backward` reads ``info.means2d_absgrad`` (AbsGS): the trainer
     #: rasterizes with ``absgrad=strategy.absgrad`` (the extra accumulation costs time).
     absgrad: bool
+    #: Whether the hooks read the screen-space mean gradients (``info.means2d_grad`` or
+    #: ``info.means2d_absgrad``), as graphdeco's adaptive density control does. Frozen means
+    #: (``lr_means = 0``) have none, so `TrainConfig` refuses them with such a strategy.
+    reads_mean_gradients: ClassVar[bool]
 
     def last_topology_change(self, iterations: int) -> TopologyChange | None:
         """The last step of a run of ``iterations`` steps at which this strategy may

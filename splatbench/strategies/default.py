@@ -106,6 +106,8 @@ class DefaultStrategy:
     schedule_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False, "reset_every": True}
     #: TrainConfig.init_opacity='auto' (graphdeco create_from_pcd: inverse_sigmoid(0.1))
     initial_opacity: ClassVar[float] = 0.1
+    #: Clone / split from the averaged info.means2d_grad (AbsGS: info.means2d_absgrad).
+    reads_mean_gradients: ClassVar[bool] = True
 
     refine_start: int = 500       # refine only after this many iterations
     refine_stop: int = 15_000     # no accumulation, refinement or opacity reset from here on

@@ -56,6 +56,9 @@ class MCMCStrategy:
 
     name: ClassVar[str] = "mcmc"
     absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad
+    #: Relocation samples by opacity, the noise by opacity and covariance: no screen-space
+    #: gradient is read (as in gsplat 1.5.3's MCMCStrategy).
+    reads_mean_gradients: ClassVar[bool] = False
     initial_opacity: ClassVar[float] = 0.5  # init_opacity="auto" (ubc-vision/3dgs-mcmc create_from_pcd)
     #: Scaled by ``TrainConfig.schedule = "scaled"``; refine_every stays as written.
     schedule_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False}

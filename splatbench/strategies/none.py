@@ -14,6 +14,7 @@ class NoneStrategy:
 
     name: ClassVar[str] = "none"
     absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad
+    reads_mean_gradients: ClassVar[bool] = False  # no hook reads anything
     initial_opacity: ClassVar[float] = 0.1  # init_opacity="auto" (graphdeco create_from_pcd)
     schedule_fields: ClassVar[dict[str, bool]] = {}
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from splatbench.devices import device_option
 from splatbench.stress.cases import CATEGORIES
 
 SHOWN_FAILURES = 5  # failing cases listed per category (all of them go to --json)
@@ -40,10 +41,9 @@ def format_report(report) -> list[str]:
               help="Only these categories (repeatable; default: all).")
 @click.option("--jobs", default=None, type=click.IntRange(min=1),
               help="Worker processes (default: the CPU count, at most 4); 1 runs in this process.")
-@click.option("--device", default=None, type=click.Choice(["cpu", "cuda", "auto"]),
-              help="Rasterizer device (default: the rasterizer's, CUDA when available).")
+@device_option
 def stress(cases: int, seed: int, json_path: Path | None, categories: tuple[str, ...], jobs: int | None,
-           device: str | None) -> None:
+           device: str) -> None:
     """Render degenerate and non-finite scenes forward and backward; exit 1 on any
     NaN/Inf output or gradient, or any unexpected error (see docs/stress.md)."""
     import os

@@ -70,6 +70,11 @@ def save_checkpoint(trainer: Any, path: str | Path, *, extra: dict[str, Any] | N
     return p
 
 
+def resume_line(path: str | Path, step: int, iterations: int) -> str:
+    """The one line a resumed run prints and keeps in its notes: ``resumed from PATH at step N of M``."""
+    return f"resumed from {path} at step {step} of {iterations}"
+
+
 def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
     """Put the state saved at ``path`` into ``trainer`` (built from the same config and
     dataset); return the checkpoint's ``extra``. One-line `InputError` on any mismatch."""
@@ -104,4 +109,4 @@ def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
     return dict(state["extra"])
 
 
-__all__ = ["save_checkpoint", "load_checkpoint", "CHECKPOINT_FORMAT"]
+__all__ = ["save_checkpoint", "load_checkpoint", "resume_line", "CHECKPOINT_FORMAT"]

@@ -25,7 +25,9 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender folder).
 
     Prints the test PSNR / SSIM, Gaussian count, SH degree and the PLY path; writes
-    config.toml, point_cloud.ply and result.json under the output folder.
+    config.toml, point_cloud.ply and result.json under the output folder. A resumed run
+    says so in one line, ``resumed from CKPT at step N of M`` (on stderr as it starts,
+    unless --quiet; always among the result's notes, so in --json and result.json).
     """
     from splatbench.train.config import TrainConfig, apply_overrides, load_config
 
@@ -33,16 +35,22 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     config = apply_overrides(config, [f"dataset={_toml_str(str(dataset))}", *overrides]
                              + ([f"out={_toml_str(str(out))}"] if out is not None else []))  # validated
 
+    from splatbench.train.checkpoint import resume_line
     from splatbench.train.loop import train as run
 
     bar = None
+    shown = ""  # the resume line, once printed as the run starts
 
     def progress(status) -> None:
-        nonlocal bar
+        nonlocal bar, shown
         if bar is None:  # created at the first step: set-up errors print without a bar
             from tqdm import tqdm
 
-            bar = tqdm(total=config.iterations, desc="train", unit="it", dynamic_ncols=True, leave=True)
+            if resume is not None:  # status.step: the first step after the checkpoint's
+                shown = resume_line(resume, status.step, config.iterations)
+                click.echo(shown, err=True)
+            bar = tqdm(total=config.iterations, initial=status.step, desc="train", unit="it", dynamic_ncols=True,
+                       leave=True)
         bar.update(1)
         if status.step % 10 == 0 or status.step + 1 == config.iterations:
             bar.set_postfix(loss=f"{status.loss:.4f}", psnr=f"{status.psnr:.2f}", n=status.num_gaussians,
@@ -63,7 +71,7 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     click.echo(f"{result.iterations} iterations in {result.train_seconds:.1f} s "
                f"({result.iterations / max(result.train_seconds, 1e-9):.2f} it/s), render "
                f"{fmt(result.render_ms_per_view, '.1f')} ms/view, peak RSS {result.peak_rss_mb:.0f} MB")
-    for note in result.notes:
+    for note in (n for n in result.notes if n != shown):
         click.echo(note if note.startswith("warning: ") else f"note: {note}", err=note.startswith("warning: "))
     click.echo(f"wrote {result.ply_path}")
 

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from splatbench.checks import check_sh_degree
+from splatbench.devices import check_device
 from splatbench.errors import InputError
 from splatbench.fsutil import read_text
 from splatbench.overrides import parse_override
@@ -158,21 +159,21 @@ class TrainConfig:
                 raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
         elif len(self.background) != 3 or not all(0 <= c <= 1 for c in self.background):
             raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
-        if self.device not in ("auto", "cpu", "cuda"):
-            raise InputError(f"device: expected 'auto', 'cpu' or 'cuda', got {self.device!r}")
+        check_device(self.device, "device")
         from splatbench.train.schedule import SCHEDULES, check_final_window
 
         if self.schedule not in SCHEDULES:
             raise InputError(f"schedule: expected one of {', '.join(map(repr, SCHEDULES))}, got {self.schedule!r}")
         strategy = self.make_strategy()
         check_final_window(strategy, self.iterations, self.schedule)
-        from splatbench.strategies.default import DefaultStrategy
+        if self.lr_means == 0 and strategy.reads_mean_gradients:
+            # frozen means have no screen-space gradient (the rasterizer's backward skips it), and this
+            # strategy declares that it reads it (the Strategy protocol's reads_mean_gradients)
+            from splatbench.strategies import STRATEGIES
 
-        if self.lr_means == 0 and isinstance(strategy, DefaultStrategy):
-            # frozen means have no screen-space gradient (the rasterizer's backward skips it), and the
-            # default/absgrad strategies densify from it
+            free = [name for name, (cls, _) in STRATEGIES.items() if not cls.reads_mean_gradients]
             raise InputError(f"lr_means: 0 freezes the means, but strategy {self.strategy!r} densifies from their "
-                             "screen-space gradients (use a positive lr_means, or strategy=none or mcmc)")
+                             f"screen-space gradients (use a positive lr_means, or strategy={' or '.join(free)})")
         return self
 
     def make_strategy(self, *, scaled: bool = True):

@@ -373,7 +373,7 @@ def _save_checkpoint(trainer: Trainer, out: Path, extra: dict) -> Path:
 
 def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
     from splatbench.bench.memory import peak_rss_mb
-    from splatbench.train.checkpoint import load_checkpoint
+    from splatbench.train.checkpoint import load_checkpoint, resume_line
 
     out = Path(config.out)
     if out.exists() and not out.is_dir():
@@ -386,8 +386,10 @@ def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
     history: list[HistoryPoint] = []
     evaluations: list[EvalPoint] = []
     loop_seconds = 0.0
+    resumed: list[str] = []
     if resume is not None:
         extra = load_checkpoint(trainer, resume)
+        resumed.append(resume_line(resume, trainer.step_index, config.iterations))
         history, evaluations = list(extra.get("history", [])), list(extra.get("evaluations", []))
         loop_seconds = float(extra.get("loop_seconds", 0.0))
     save_config(config, out / "config.toml")
@@ -431,7 +433,7 @@ def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
         ev = trainer.evaluate(lpips_fn)
     except Interrupted as exc:
         raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
-    notes = ([trainer.init_note] if trainer.init_note else []) + [trainer.background_note] \
+    notes = resumed + ([trainer.init_note] if trainer.init_note else []) + [trainer.background_note] \
         + ([] if lpips_fn is not None else [lpips_note])
     if trainer.num_gaussians == 0:
         gone = next((h.step for h in history if h.num_gaussians == 0), trainer.step_index)

@@ -32,6 +32,7 @@ import sys
 import types
 
 from splatbench.backends.base import Backend, BackendInfo
+from splatbench.devices import torch_device
 from splatbench.errors import InputError
 
 VERSION = "1.5.3"
@@ -207,12 +208,8 @@ def make_gsplat_backend(device: str = "auto") -> Backend:
     gsplat = _import_gsplat()
     from splatbench.backends.builtins.inputs import check_inputs
 
-    if device not in ("auto", "cpu", "cuda"):
-        raise InputError(f"device: expected 'auto', 'cpu' or 'cuda', got {device!r}")
+    use_cuda = torch_device(device) == "cuda"
     has_cuda = torch.cuda.is_available()
-    if device == "cuda" and not has_cuda:
-        raise InputError("device: 'cuda' requested but torch finds no CUDA device")
-    use_cuda = device == "cuda" or (device == "auto" and has_cuda)
     render = _render_cuda if use_cuda else _render_cpu
 
     def fn(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):

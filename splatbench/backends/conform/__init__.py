@@ -25,6 +25,7 @@ from splatbench.backends.conform.judges import JUDGES, Context
 from splatbench.backends.conform.oracle import conventions_of
 from splatbench.backends.conform.probes import PROBES, Probe, probe_names
 from splatbench.backends.conform.results import STATUSES, ConformReport, ProbeResult
+from splatbench.devices import check_device, torch_device
 from splatbench.errors import InputError
 
 #: The cause given when the backend fails on a probe's scene (raises, bad shape, NaN), where the
@@ -52,12 +53,13 @@ def _preflight(backend: Backend, scene, device: str) -> None:
 __all__ = ["conform", "BackendFault", "ConformReport", "ProbeResult", "PROBES", "Probe", "STATUSES", "probe_names"]
 
 
-def conform(backend, *, device: str | None = None, probes: tuple[str, ...] | None = None) -> ConformReport:
+def conform(backend, *, device: str = "auto", probes: tuple[str, ...] | None = None) -> ConformReport:
     """Run the conformance probes on ``backend`` and judge each.
 
     Args:
         backend: a `Backend`, a callable, or a spec for `get_backend` ("drjit", "mypkg.rast:render", ...).
-        device: where the inputs live ("cpu", "cuda"); default "cpu" when the backend runs there.
+        device: where the inputs live: "cpu", "cuda" or "auto" (default: CUDA when torch sees a GPU
+            and the backend lists "cuda" in its devices, else "cpu", or the backend's only device).
         probes: names of the probes to run (default: all, in `PROBES` order).
 
     Returns:
@@ -67,7 +69,9 @@ def conform(backend, *, device: str | None = None, probes: tuple[str, ...] | Non
 
     backend = get_backend(backend) if not isinstance(backend, Backend) else backend
     devices = backend.info.devices
-    device = device or ("cpu" if "cpu" in devices else devices[0])
+    if check_device(device) == "auto":
+        device = "cuda" if "cuda" in devices and torch_device("auto") == "cuda" else \
+            ("cpu" if "cpu" in devices else devices[0])
     if device not in devices:
         raise InputError(f"device: backend {backend.name!r} runs on {', '.join(devices)}, not {device!r}")
     selected = PROBES

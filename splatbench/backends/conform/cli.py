@@ -8,6 +8,8 @@ import time
 
 import click
 
+from splatbench.devices import device_option
+
 
 def _number(x: float | None) -> str:
     return "-" if x is None else f"{x:.2e}"
@@ -43,10 +45,10 @@ def format_table(report, seconds: float) -> str:
 @click.command()
 @click.argument("backend")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (a 'probes' list) instead of a table.")
-@click.option("--device", default=None, help="Where the inputs live (cpu, cuda); default cpu.")
+@device_option
 @click.option("--probe", "probes", multiple=True, help="Run only this probe (repeatable); see --list.")
 @click.option("--list", "list_probes", is_flag=True, help="List the probes and what each checks, then exit.")
-def conform(backend: str, as_json: bool, device: str | None, probes: tuple[str, ...], list_probes: bool) -> None:
+def conform(backend: str, as_json: bool, device: str, probes: tuple[str, ...], list_probes: bool) -> None:
     """Check BACKEND against 3DGS conventions on small probe scenes.
 
     BACKEND is a built-in name (drjit, torch, gsplat, reference, ...), an installed entry

@@ -54,7 +54,7 @@ Example::
     from splatbench.validate import mitsuba as vm
     g, cam = vm.size_cases(64)[0].gaussians, vm.size_cases(64)[0].camera
     c = vm.compare(g, cam)
-    c.psnr, c.max_error, c.rehit_pixels
+    c.metrics.psnr, c.metrics.max_error, c.metrics.rehit_pixels
 """
 
 from splatbench.mitsuba_loader import MITSUBA_VARIANT
@@ -67,12 +67,12 @@ from splatbench.validate.mitsuba.probe import ProbeRow, intersection_probe
 from splatbench.validate.mitsuba.report import (DEFAULT_OUT, ReportPaths, markdown_table, probe_markdown,
                                                 write_report)
 from splatbench.validate.mitsuba.scene import (DEFAULT_OPTIONS, ELLIPSOID_EXTENT, MATCHED_OPTIONS, OPTION_SETS,
-                                               SWEEP_OPACITY, Comparison, compare, mitsuba_scene, mitsuba_volprim,
-                                               render_splat, render_traced)
+                                               SWEEP_OPACITY, Comparison, ComparisonMetrics, compare,
+                                               mitsuba_scene, mitsuba_volprim, render_splat, render_traced)
 
 __all__ = ["MITSUBA_VARIANT", "SWEEPS", "Case", "SweepRow", "angle_cases", "anisotropy_cases", "overlap_cases",
            "run_case", "run_sweeps", "sh_cases", "size_cases", "MIN_TREND_SIGMA_PX", "PREDICTION_ATOL", "Check",
            "check_tight", "check_trends", "IsotropicPrediction", "isotropic_prediction", "ProbeRow",
            "intersection_probe", "DEFAULT_OUT", "ReportPaths", "markdown_table", "probe_markdown", "write_report",
            "DEFAULT_OPTIONS", "ELLIPSOID_EXTENT", "MATCHED_OPTIONS", "OPTION_SETS", "SWEEP_OPACITY", "Comparison",
-           "compare", "mitsuba_scene", "mitsuba_volprim", "render_splat", "render_traced"]
+           "ComparisonMetrics", "compare", "mitsuba_scene", "mitsuba_volprim", "render_splat", "render_traced"]

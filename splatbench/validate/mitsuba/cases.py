@@ -8,14 +8,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_C0, Gaussians
-from splatbench.validate.mitsuba.scene import OPTION_SETS, SWEEP_OPACITY, compare
+from splatbench.validate.mitsuba.scene import OPTION_SETS, SWEEP_OPACITY, ComparisonMetrics, compare
 
 
 @dataclass(frozen=True)
@@ -32,19 +32,24 @@ class Case:
 
 @dataclass(frozen=True)
 class SweepRow:
-    """One line of the report table (CSV and markdown columns, in this order)."""
+    """One line of the report table: the case, then its `ComparisonMetrics` (`columns`)."""
 
     sweep: str
     parameter: str
     value: float
     options: str
     gaussians: int
-    psnr: float
-    max_error: float
-    mean_error: float
-    psnr_shipped: float
-    max_error_shipped: float
-    rehit_pixels: int
+    metrics: ComparisonMetrics
+
+    @staticmethod
+    def column_names() -> list[str]:
+        """The CSV and markdown columns, in order: the case's fields, then the metrics'."""
+        return [f.name for f in fields(SweepRow) if f.name != "metrics"] + [f.name for f in fields(ComparisonMetrics)]
+
+    def columns(self) -> dict[str, object]:
+        """{column name: value} in `column_names` order."""
+        case = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "metrics"}
+        return {**case, **asdict(self.metrics)}
 
 
 _DISTANCE = 400.0  # camera distance to the target (world units; see "Scale" in docs/validation.md)
@@ -205,8 +210,7 @@ SWEEPS: dict[str, Callable[[int], list[Case]]] = {
 def run_case(case: Case) -> SweepRow:
     """Render one `Case` with both renderers and summarise it."""
     c = compare(case.gaussians, case.camera, OPTION_SETS[case.options])
-    return SweepRow(case.sweep, case.parameter, case.value, case.options, len(case.gaussians), c.psnr, c.max_error,
-                    c.mean_error, c.psnr_shipped, c.max_error_shipped, c.rehit_pixels)
+    return SweepRow(case.sweep, case.parameter, case.value, case.options, len(case.gaussians), c.metrics)
 
 
 def run_sweeps(width: int = 128, sweeps: Iterable[str] | None = None, *, progress: bool = False) -> list[SweepRow]:

@@ -49,9 +49,10 @@ def check_tight(width: int = 128, max_sigma_px: float | None = None) -> list[Che
         out.append(Check(f"tight bound >= 40 dB ({tag})", pred.bound_psnr >= 40.0,
                          f"derived bound {pred.bound_psnr:.1f} dB (rho <= {pred.rho.max():.4f}, "
                          f"{pred.band_pixels} band pixels)"))
-        out.append(Check(f"tight PSNR within bound ({tag})", c.psnr >= pred.bound_psnr and
-                         c.max_error <= pred.bound_max,
-                         f"PSNR {c.psnr:.1f} dB >= {pred.bound_psnr:.1f}; max error {c.max_error:.2e} <= "
+        m = c.metrics
+        out.append(Check(f"tight PSNR within bound ({tag})", m.psnr >= pred.bound_psnr and
+                         m.max_error <= pred.bound_max,
+                         f"PSNR {m.psnr:.1f} dB >= {pred.bound_psnr:.1f}; max error {m.max_error:.2e} <= "
                          f"{pred.bound_max:.2e}"))
         out.append(Check(f"closed form predicts both renderers ({tag})", residual <= PREDICTION_ATOL,
                          f"max |measured - predicted difference| {residual:.1e} <= {PREDICTION_ATOL:g}"))
@@ -69,7 +70,7 @@ def check_trends(rows: Sequence[SweepRow], *, tolerance_db: float = 0.5, min_dro
     """
     out = []
     for sweep, strict in (("size", True), ("overlap", False)):
-        psnrs = [r.psnr for r in rows if r.sweep == sweep and r.options == "matched"
+        psnrs = [r.metrics.psnr for r in rows if r.sweep == sweep and r.options == "matched"
                  and (sweep != "size" or r.value >= MIN_TREND_SIGMA_PX)]
         if len(psnrs) < 2:
             continue

@@ -47,9 +47,7 @@ def markdown_table(rows: Sequence[SweepRow], width: int) -> str:
               "max error shipped | re-hit pixels |")
     lines += [header, "|" + "---|" * 11]
     for r in rows:
-        lines.append(f"| {r.sweep} | {r.parameter} | {_fmt(r.value)} | {r.options} | {r.gaussians} | "
-                     f"{_fmt(r.psnr)} | {_fmt(r.max_error)} | {_fmt(r.mean_error)} | {_fmt(r.psnr_shipped)} | "
-                     f"{_fmt(r.max_error_shipped)} | {r.rehit_pixels} |")
+        lines.append("| " + " | ".join(_fmt(v) for v in r.columns().values()) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -86,12 +84,11 @@ def write_report(rows: Sequence[SweepRow], out_dir: str | Path = DEFAULT_OUT, *,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     csv_path, md_path, plot_path = out / "table.csv", out / "table.md", out / "plot.png"
-    names = [f.name for f in SweepRow.__dataclass_fields__.values()]
     with open(csv_path, "w", newline="", encoding="utf-8") as fh:
-        writer = csv.DictWriter(fh, fieldnames=names)
+        writer = csv.DictWriter(fh, fieldnames=SweepRow.column_names())
         writer.writeheader()
         for r in rows:
-            writer.writerow({k: (_fmt(v) if isinstance(v, float) else v) for k, v in asdict(r).items()})
+            writer.writerow({k: (_fmt(v) if isinstance(v, float) else v) for k, v in r.columns().items()})
     text = markdown_table(rows, width)
     extra = {}
     if probe:
@@ -117,8 +114,9 @@ def write_report(rows: Sequence[SweepRow], out_dir: str | Path = DEFAULT_OUT, *,
             if not sel:
                 continue
             x = [r.value for r in sel]
-            ax.plot(x, [min(r.psnr, 120.0) for r in sel], "o" + style, color="tab:blue", label=f"PSNR ({opt})")
-            ax2.semilogy(x, [max(r.max_error, 1e-9) for r in sel], "s" + style, color="tab:red",
+            ax.plot(x, [min(r.metrics.psnr, 120.0) for r in sel], "o" + style, color="tab:blue",
+                    label=f"PSNR ({opt})")
+            ax2.semilogy(x, [max(r.metrics.max_error, 1e-9) for r in sel], "s" + style, color="tab:red",
                          label=f"max error ({opt})")
         ax.set_xlabel(_LABELS.get(name, name))
         ax.set_ylabel("PSNR (dB)", color="tab:blue")

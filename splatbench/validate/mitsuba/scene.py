@@ -111,25 +111,36 @@ def render_splat(gaussians: Gaussians, camera: Camera, options: dict | None = No
 
 
 @dataclass(frozen=True)
-class Comparison:
-    """The same Gaussians rendered by the rasterizer and by Mitsuba, and how far apart they are.
+class ComparisonMetrics:
+    """How far apart the rasterizer and Mitsuba are on one scene (a `Comparison`'s numbers,
+    and a `SweepRow`'s columns after the case's).
 
-    splat, traced, traced_shipped: [H, W, 3] float32 (linear, black background).
     psnr, max_error, mean_error: splat vs traced (``volprim_rf_dedup``); PSNR with peak 1.
     psnr_shipped, max_error_shipped: splat vs ``volprim_rf_basic`` as shipped.
     rehit_pixels: pixels where the shipped integrator composited a primitive twice
     (where the two Mitsuba images differ by more than 1e-6).
     """
 
-    splat: np.ndarray
-    traced: np.ndarray
-    traced_shipped: np.ndarray
     psnr: float
     max_error: float
     mean_error: float
     psnr_shipped: float
     max_error_shipped: float
     rehit_pixels: int
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """The same Gaussians rendered by the rasterizer and by Mitsuba, and how far apart they are.
+
+    splat, traced, traced_shipped: [H, W, 3] float32 (linear, black background).
+    metrics: `ComparisonMetrics` of splat against the two traced images.
+    """
+
+    splat: np.ndarray
+    traced: np.ndarray
+    traced_shipped: np.ndarray
+    metrics: ComparisonMetrics
 
 
 def compare(gaussians: Gaussians, camera: Camera, options: dict | None = None) -> Comparison:
@@ -141,7 +152,8 @@ def compare(gaussians: Gaussians, camera: Camera, options: dict | None = None) -
     rehits = int(np.count_nonzero(np.abs(shipped.astype(np.float64) - traced).max(axis=-1) > 1e-6))
     # linear radiance, unclipped, in float64 (the one PSNR of splatbench, peak 1)
     splat64 = splat.astype(np.float64)
-    return Comparison(splat, traced, shipped, psnr(splat64, traced.astype(np.float64), clamp=False),
-                      float(err.max()), float(err.mean()), psnr(splat64, shipped.astype(np.float64), clamp=False),
-                      float(np.abs(splat64 - shipped).max()), rehits)
+    metrics = ComparisonMetrics(psnr(splat64, traced.astype(np.float64), clamp=False), float(err.max()),
+                                float(err.mean()), psnr(splat64, shipped.astype(np.float64), clamp=False),
+                                float(np.abs(splat64 - shipped).max()), rehits)
+    return Comparison(splat, traced, shipped, metrics)
 
