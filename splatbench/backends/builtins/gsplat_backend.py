@@ -220,7 +220,7 @@ def make_gsplat_backend(device: str = "auto") -> Backend:
         # gsplat culls depth <= near itself; dropping those Gaussians first keeps its
         # projection from dividing by z ~ 0, whose 0·inf would put NaN in their (zero) gradients.
         with torch.no_grad():
-            Wc = torch.as_tensor(camera.world_to_camera, dtype=torch.float32)
+            Wc = torch.as_tensor(camera.world_to_camera, dtype=torch.float32, device=means.device)
             z = means @ Wc[2, :3] + Wc[2, 3]
             keep = torch.nonzero((z > camera.near) & (z < camera.far)).squeeze(1)
         rgbd, alpha = render(means[keep], log_scales[keep].exp(), quats[keep], torch.sigmoid(logits[keep]),
