@@ -193,7 +193,10 @@ def _render_cuda(means, scales, quats, opacities, sh, camera, degree, background
     bg = torch.tensor(background, dtype=torch.float32, device=dev)[None]
     render, alphas, _ = rasterization(*args, viewmats, Ks, camera.width, camera.height, near_plane=camera.near,
                                       far_plane=camera.far, eps2d=EPS2D, sh_degree=degree, tile_size=TILE,
-                                      backgrounds=bg, render_mode="RGB+ED")
+                                      backgrounds=bg, render_mode="RGB+ED",
+                                      # packed=False: gsplat 1.5.3 asserts on backgrounds when packed
+                                      # (nerfstudio-project/gsplat#764; hit on the H100, reports/cuda)
+                                      packed=False)
     render, alpha = render[0].to(means.device), alphas[0, ..., 0].to(means.device)
     # gsplat returns depth = D / max(alpha, 1e-10); turn it back into D for one code path below.
     return torch.cat([render[..., :3], render[..., 3:] * alpha.clamp(min=1e-10)[..., None]], -1), alpha
