@@ -93,3 +93,16 @@ def test_demo_checks_garden_runs_the_grid_and_writes_its_report(tmp_path):
     code, out = invoke("demo", *common, "--no-garden")
     assert code == 0, out
     assert "tinydemo: done 0, skipped 2 (finished)" in out and "Dr.Jit rasterizer" not in out
+
+
+def test_demo_report_goes_under_out_by_default(tmp_path, monkeypatch):
+    """Without --report-dir the report lands in out/<name>/report, never in the committed reports/
+    (a fresh clone stays clean after `make demo`)."""
+    exp = tmp_path / "tiny.toml"
+    exp.write_text('name = "tinydemo"\nkind = "dummy"\nscenes = ["alpha"]\nseeds = [0]\n[axes]\nx = [0.0]\n')
+    monkeypatch.chdir(tmp_path)
+    code, out = invoke("demo", "--experiment", exp, "--results", "results", "--workers", "1", "--no-garden")
+    assert code == 0, out
+    report = tmp_path / "out" / "tinydemo" / "report" / "report.md"
+    assert out.strip().splitlines()[-1] == f"report: {report.resolve()}" and report.is_file()
+    assert not (tmp_path / "reports").exists()
