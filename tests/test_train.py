@@ -422,6 +422,23 @@ def test_auto_sh_judges_the_bands_on_trial_at_the_end_of_the_run():
     assert cut.degree == 0 and "the run ended, bands above 0 dropped" in cut.reason
 
 
+def test_sh_auto_lookahead_changes_only_auto_run_ids():
+    """The experiment runner hashes the resolved config (splatbench.experiments.grid):
+    sh_auto_lookahead is read only under sh_degree="auto", so a fixed-degree run leaves
+    it out (its id, and every committed fixed-degree report, stays as it was), while an
+    auto run's id depends on it."""
+    from splatbench.experiments.grid import make_run_id
+    from splatbench.experiments.train_kind import TRAIN
+
+    def run_id(**kw):
+        return make_run_id("train", TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 10, **kw}))
+
+    assert "sh_auto_lookahead" not in TRAIN.resolve({"scene": "diffuse", "seed": 0, "sh_degree": 3})
+    assert run_id(sh_degree=3) == run_id(sh_degree=3, sh_auto_lookahead=0)
+    assert run_id(sh_degree="auto") == run_id(sh_degree="auto", sh_auto_lookahead=2)   # the default
+    assert run_id(sh_degree="auto") != run_id(sh_degree="auto", sh_auto_lookahead=0)
+
+
 AUTO = dict(iterations=30, sh_degree="auto", sh_interval=15, lr_sh_rest=2e-2, sh_auto_probe_views=0)
 
 

@@ -147,8 +147,8 @@ class ShSchedule:
         failed = degree - base
         if degree == self.max_degree or failed > self.lookahead or last:
             self.degree = base
-            why = ("degree 3 reached" if degree == self.max_degree else
-                   "the run ended" if last else f"{failed} band(s) in a row failed (sh_auto_lookahead={self.lookahead})")
+            why = (f"degree {degree} reached" if degree == self.max_degree else "the run ended" if last else
+                   f"{failed} band(s) in a row failed (sh_auto_lookahead={self.lookahead})")
             self._settle(f"auto: {what}; {why}, bands above {base} dropped; settled at degree {base}")
 
     def _settle(self, reason: str) -> None:
