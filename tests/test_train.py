@@ -394,6 +394,8 @@ def test_auto_sh_settles_at_3_with_look_ahead_and_at_0_without():
     assert degrees[10:20] == [1] * 10 and degrees[20:30] == [2] * 10 and degrees[30:] == [3] * 20
     assert [(d.degree, d.baseline, d.kept) for d in sched.decisions] == [(1, 0, False), (2, 0, False), (3, 0, True)]
     assert sched.degree == 3 and sched.settled and "degree 3 gained 0.600 dB over degree 0" in sched.reason
+    exact, _ = run_auto(scripted({**gains, (3, 0): 0.3}), 50)   # exactly on the bar 0.1 x 3: kept
+    assert exact.degree == 3 and exact.decisions[-1].needed_db == 0.3
     greedy, degrees = run_auto(scripted(gains), 50, lookahead=0)
     assert degrees[20:] == [0] * 30 and greedy.degree == 0
     assert [(d.degree, d.baseline, d.kept) for d in greedy.decisions] == [(1, 0, False)]

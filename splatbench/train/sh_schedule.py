@@ -131,7 +131,7 @@ class ShSchedule:
             raise ValueError("ShSchedule: sh_degree='auto' needs a probe to measure bands")
         degree, base = self.degree, self.kept
         m = probe(degree, base)
-        needed = self.min_gain_db * (degree - base)
+        needed = round(self.min_gain_db * (degree - base), 9)  # 0.1 x 3 is 0.30000000000000004 unrounded
         kept = m.gain_db >= needed
         self.decisions.append(ShDecision(step, degree, base, m.gain_db, needed, m.energy_ratio, kept))
         where = "held-out training views" if m.held_out else "training views"
