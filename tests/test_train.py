@@ -166,6 +166,9 @@ BAD_CONFIGS = [
     (["init=poisson"], "init"),
     (["sh_degree=4"], "sh_degree"),
     (["sh_degree=high"], "sh_degree"),
+    (["sh_auto_lookahead=3"], "sh_auto_lookahead"),   # 0..2: after band 1, at most bands 2 and 3
+    (["sh_auto_lookahead=-1"], "sh_auto_lookahead"),
+    (["sh_auto_lookahead=1.5"], "sh_auto_lookahead"),
     (["background=[2, 0, 0]"], "background"),
     (["ssim_window=10"], "ssim_window"),
 ]
@@ -350,19 +353,92 @@ def test_trainer_follows_the_sh_schedule(tmp_path, tiny_diffuse, counting):
     assert result.sh_degree == 2 and Gaussians.from_ply(result.ply_path).sh_degree == 2
 
 
-def test_auto_sh_schedule_keeps_bands_that_gain_and_drops_the_first_that_does_not():
-    gains = {1: 2.0, 2: 0.01}
-    probe = lambda band: BandMeasure(gains[band], 0.5, 4)  # noqa: E731
-    sched = ShSchedule("auto", 10, min_gain_db=0.1)
+def scripted(gains: dict[tuple[int, int], float], calls: list | None = None):
+    """A probe with no rendering: (degree, baseline) -> the scripted gain (dB)."""
+    def probe(degree: int, baseline: int) -> BandMeasure:
+        if calls is not None:
+            calls.append((degree, baseline))
+        return BandMeasure(gains[degree, baseline], 0.5, 4)
+    return probe
+
+
+def run_auto(probe, steps: int, **kw) -> tuple[ShSchedule, list[int]]:
+    sched = ShSchedule("auto", 10, min_gain_db=0.1, **kw)
+    degrees = [sched.update(s, probe) for s in range(steps)]
+    sched.finish(steps, probe)
+    return sched, degrees
+
+
+def test_greedy_auto_sh_keeps_bands_that_gain_and_drops_the_first_that_does_not():
+    probe = scripted({(1, 0): 2.0, (2, 1): 0.01})
+    sched = ShSchedule("auto", 10, min_gain_db=0.1, lookahead=0)
     degrees = [sched.update(s, probe) for s in range(40)]
     assert degrees[:10] == [0] * 10 and degrees[10:20] == [1] * 10 and degrees[20:30] == [2] * 10
     assert degrees[30:] == [1] * 10                     # band 2 dropped at step 30, settled
-    assert [(d.band, d.kept) for d in sched.decisions] == [(1, True), (2, False)]
-    assert "band 2 gained 0.010 dB < 0.1 dB" in sched.reason
+    assert [(d.degree, d.baseline, d.kept) for d in sched.decisions] == [(1, 0, True), (2, 1, False)]
+    assert "degree 2 gained 0.010 dB over degree 1 (< 0.1 dB" in sched.reason
     assert sched.finish(40, probe) == 1
     ended = ShSchedule("auto", 10)
     [ended.update(s, probe) for s in range(5)]
     assert ended.finish(5, probe) == 0 and "before band 1" in ended.reason
+
+
+# glossy's case: band 1 alone gains 0.05 dB (< 0.1), bands 1-3 together 0.6 dB (>= 3 x 0.1)
+WEAK_BAND_1 = {(1, 0): 0.05, (2, 0): 0.15, (3, 0): 0.6}   # per added band: 0.05, 0.075, 0.2 dB
+
+
+def test_auto_sh_settles_at_3_with_look_ahead_and_at_0_without():
+    gains, calls = WEAK_BAND_1, []
+    sched, degrees = run_auto(scripted(gains, calls), 50)
+    assert calls == [(1, 0), (2, 0), (3, 0)]            # each against the last kept degree, not d - 1
+    assert degrees[10:20] == [1] * 10 and degrees[20:30] == [2] * 10 and degrees[30:] == [3] * 20
+    assert [(d.degree, d.baseline, d.kept) for d in sched.decisions] == [(1, 0, False), (2, 0, False), (3, 0, True)]
+    assert sched.degree == 3 and sched.settled and "degree 3 gained 0.600 dB over degree 0" in sched.reason
+    exact, _ = run_auto(scripted({**gains, (3, 0): 0.3}), 50)   # exactly on the bar 0.1 x 3: kept
+    assert exact.degree == 3 and exact.decisions[-1].needed_db == 0.3
+    greedy, degrees = run_auto(scripted(gains), 50, lookahead=0)
+    assert degrees[20:] == [0] * 30 and greedy.degree == 0
+    assert [(d.degree, d.baseline, d.kept) for d in greedy.decisions] == [(1, 0, False)]
+    one, _ = run_auto(scripted(gains), 50, lookahead=1)   # stops after bands 1 and 2 both failed
+    assert one.degree == 0 and [d.degree for d in one.decisions] == [1, 2] and "2 band(s) in a row" in one.reason
+
+
+def test_auto_sh_drops_every_trained_band_when_none_helps():
+    sched, degrees = run_auto(scripted({(1, 0): 0.02, (2, 0): 0.1, (3, 0): 0.2}), 50)  # 0.02, 0.05, 0.067 per band
+    assert degrees[30:40] == [3] * 10 and degrees[40:] == [0] * 10   # bands 1-3 trained, then dropped
+    assert sched.degree == 0 and sched.kept == 0 and sched.settled
+    assert [d.kept for d in sched.decisions] == [False, False, False]
+    assert "degree 3 reached, bands above 0 dropped; settled at degree 0" in sched.reason
+
+
+def test_auto_sh_keeps_band_1_when_bands_2_and_3_do_not_help():
+    sched, degrees = run_auto(scripted({(1, 0): 0.8, (2, 1): 0.03, (3, 1): 0.1}), 50)  # 3 vs 1: 0.05 per band
+    assert degrees[40:] == [1] * 10 and sched.degree == 1
+    assert [(d.degree, d.baseline, d.kept) for d in sched.decisions] == [(1, 0, True), (2, 1, False), (3, 1, False)]
+
+
+def test_auto_sh_judges_the_bands_on_trial_at_the_end_of_the_run():
+    sched, _ = run_auto(scripted({(1, 0): 0.05, (2, 0): 0.3}), 25)   # ends with degree 2 on trial
+    assert sched.degree == 2 and "degree 2 at the end" in sched.reason
+    cut, _ = run_auto(scripted({(1, 0): 0.05, (2, 0): 0.1}), 25)
+    assert cut.degree == 0 and "the run ended, bands above 0 dropped" in cut.reason
+
+
+def test_sh_auto_lookahead_changes_only_auto_run_ids():
+    """The experiment runner hashes the resolved config (splatbench.experiments.grid):
+    sh_auto_lookahead is read only under sh_degree="auto", so a fixed-degree run leaves
+    it out (its id, and every committed fixed-degree report, stays as it was), while an
+    auto run's id depends on it."""
+    from splatbench.experiments.grid import make_run_id
+    from splatbench.experiments.train_kind import TRAIN
+
+    def run_id(**kw):
+        return make_run_id("train", TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 10, **kw}))
+
+    assert "sh_auto_lookahead" not in TRAIN.resolve({"scene": "diffuse", "seed": 0, "sh_degree": 3})
+    assert run_id(sh_degree=3) == run_id(sh_degree=3, sh_auto_lookahead=0)
+    assert run_id(sh_degree="auto") == run_id(sh_degree="auto", sh_auto_lookahead=2)   # the default
+    assert run_id(sh_degree="auto") != run_id(sh_degree="auto", sh_auto_lookahead=0)
 
 
 AUTO = dict(iterations=30, sh_degree="auto", sh_interval=15, lr_sh_rest=2e-2, sh_auto_probe_views=0)
@@ -383,14 +459,14 @@ def truth_init(monkeypatch):
 def test_auto_sh_picks_0_for_a_view_independent_scene(tmp_path, truth_init):
     result = train(config(tmp_path, init="truth", **AUTO), dataset=synthetic_dataset(tmp_path, view_dependent=False))
     assert result.sh_degree == 0, result.sh_degree_reason
-    assert [(d["band"], d["kept"]) for d in result.sh_decisions] == [(1, False)]
-    assert "band 1 gained" in result.sh_degree_reason and Gaussians.from_ply(result.ply_path).sh_degree == 0
+    assert [(d["degree"], d["baseline"], d["kept"]) for d in result.sh_decisions] == [(1, 0, False)]
+    assert "degree 1 gained" in result.sh_degree_reason and Gaussians.from_ply(result.ply_path).sh_degree == 0
 
 
 def test_auto_sh_keeps_band_1_for_a_view_dependent_scene(tmp_path, truth_init):
     result = train(config(tmp_path, init="truth", **AUTO), dataset=synthetic_dataset(tmp_path, view_dependent=True))
     assert result.sh_degree == 1, result.sh_degree_reason
-    assert [(d["band"], d["kept"]) for d in result.sh_decisions] == [(1, True)]
+    assert [(d["degree"], d["baseline"], d["kept"]) for d in result.sh_decisions] == [(1, 0, True)]
     assert result.sh_decisions[0]["gain_db"] >= 0.1
 
 

@@ -140,6 +140,8 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
     cfg = _train_config(train)
     rig = get_scene(scene).rig
     out = {k: v for k, v in cfg.to_dict().items() if k not in OWNED_FIELDS}
+    if cfg.sh_degree != "auto":  # read only by sh_degree="auto": left out, so fixed-degree run ids are unchanged
+        del out["sh_auto_lookahead"]
     out["strategy_options"] = _strategy_options(cfg)
     out["scene"] = scene
     out["data"] = {

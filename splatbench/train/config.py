@@ -38,6 +38,7 @@ from splatbench.devices import check_device
 from splatbench.errors import InputError
 from splatbench.fsutil import read_text
 from splatbench.overrides import parse_override
+from splatbench.train.sh_schedule import MAX_LOOKAHEAD
 
 #: Learning-rate fields (Adam, one optimizer per parameter group); 0 freezes a group.
 LR_FIELDS = ("lr_means", "lr_means_final", "lr_log_scales", "lr_quats", "lr_opacity_logits", "lr_sh_dc",
@@ -72,7 +73,9 @@ class TrainConfig:
                                       # written (splatbench.train.schedule)
     sh_degree: int | str = 3          # maximum SH degree 0..3, or "auto" (measure each band, keep what helps)
     sh_interval: int = 1000           # raise the active SH degree by one every this many steps (scaled)
-    sh_auto_min_gain_db: float = 0.1  # auto: a band must raise training PSNR by this much (dB) to be kept
+    sh_auto_min_gain_db: float = 0.1  # auto: dB of probe-view PSNR each added band must earn to be kept
+    sh_auto_lookahead: int = 2        # auto: bands still tried after a band fails, judged together with it
+                                      # against the last kept degree (0..2; 0 = greedy, 2 = up to degree 3)
     sh_auto_probe_views: int = 8      # auto: training views rendered to measure a band's gain (0 = all)
     sh_auto_holdout_every: int = 8    # auto: hold every n-th training view out of training until the degree
                                       # settles and measure bands on those views instead (0 = off)
@@ -154,6 +157,9 @@ class TrainConfig:
             raise InputError(f"ssim_lambda: expected a number in [0, 1], got {self.ssim_lambda!r}")
         if not (math.isfinite(self.sh_auto_min_gain_db) and self.sh_auto_min_gain_db >= 0):
             raise InputError(f"sh_auto_min_gain_db: expected a number >= 0, got {self.sh_auto_min_gain_db!r}")
+        if not 0 <= self.sh_auto_lookahead <= MAX_LOOKAHEAD:
+            raise InputError(f"sh_auto_lookahead: expected an int in 0..{MAX_LOOKAHEAD} (bands tried after one "
+                             f"fails; 0 = greedy, {MAX_LOOKAHEAD} = up to degree 3), got {self.sh_auto_lookahead}")
         if isinstance(self.background, str):
             if self.background != "auto":
                 raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")

@@ -146,7 +146,8 @@ class Trainer:
         self.means_lr = ExponentialLR(config.lr_means, config.lr_means_final, config.iterations, self.extent)
         self.state = self.strategy.initialize_state(self.params)
         self.absgrad = bool(self.strategy.absgrad)  # declared by the Strategy protocol
-        self.sh = ShSchedule(config.sh_degree, config.sh_steps, min_gain_db=config.sh_auto_min_gain_db)
+        self.sh = ShSchedule(config.sh_degree, config.sh_steps, min_gain_db=config.sh_auto_min_gain_db,
+                             lookahead=config.sh_auto_lookahead)
         self.images = torch.from_numpy(np.ascontiguousarray(train.images, dtype=np.float32))
         self.alphas = None if train.alphas is None else torch.from_numpy(np.asarray(train.alphas, np.float32))
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
@@ -272,8 +273,9 @@ class Trainer:
 
     # ------------------------------------------------------------------ SH probe
     @torch.no_grad()
-    def probe_band(self, band: int) -> BandMeasure:
-        """Training-view PSNR gain of SH band ``band`` and its relative coefficient energy."""
+    def probe_band(self, degree: int, baseline: int) -> BandMeasure:
+        """Probe-view PSNR gain of SH degree ``degree`` over degree ``baseline`` (< degree)
+        and the relative coefficient energy of bands ``baseline+1..degree``."""
         cams = self.dataset.train.cameras
         k = self.config.sh_auto_probe_views
         if self.holdout:
@@ -284,12 +286,12 @@ class Trainer:
             idx = sorted({int(i) for i in np.linspace(0, len(cams) - 1, k).round()})
         gains, visible = [], torch.zeros(self.num_gaussians)
         for i in idx:
-            with_band, _, _, info = self._render(cams[i], band, self.background.tolist())
-            without, _, _, _ = self._render(cams[i], band - 1, self.background.tolist())
+            with_band, _, _, info = self._render(cams[i], degree, self.background.tolist())
+            without, _, _, _ = self._render(cams[i], baseline, self.background.tolist())
             gains.append(psnr(with_band, self.images[i]) - psnr(without, self.images[i]))
             visible += info.visible.float()
         w = torch.sigmoid(self.params["opacity_logits"]) * visible
-        lo, hi = band ** 2 - 1, (band + 1) ** 2 - 1  # band's rows in sh_rest
+        lo, hi = (baseline + 1) ** 2 - 1, (degree + 1) ** 2 - 1  # rows of bands baseline+1..degree in sh_rest
         e_band = (w[:, None, None] * self.params["sh_rest"][:, lo:hi] ** 2).sum()
         e_dc = (w[:, None, None] * self.params["sh_dc"] ** 2).sum()
         ratio = float(torch.sqrt(e_band / e_dc)) if float(e_dc) > 0 else 0.0
