@@ -389,8 +389,10 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     evaluations: list[EvalPoint] = []
     loop_seconds = 0.0
     resumed: list[str] = []
+    resumed_step = None
     if resume is not None:
         extra = load_checkpoint(trainer, resume)
+        resumed_step = trainer.step_index
         resumed.append(resume_line(resume, trainer.step_index, config.iterations))
         history, evaluations = list(extra.get("history", [])), list(extra.get("evaluations", []))
         loop_seconds = float(extra.get("loop_seconds", 0.0))
@@ -453,7 +455,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,
         test_views=ev.views, history=history, evaluations=evaluations,
         sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary,
-        warmup_seconds=round(warmup_seconds, 3))
+        warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step)
     (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
     return result
 
