@@ -4,7 +4,8 @@ Every command's ``--device`` is `device_option` (the same choices, help text, de
 and one-line error), and every config or settings object that names a device checks it
 with `check_device`. What "CUDA when available" means depends on who runs the work:
 Dr.Jit's CUDA backend for the rasterizer (`splatbench.raster.backend.get_backend`),
-torch's CUDA for input tensors handed to other rasterizers (`torch_device`).
+torch's CUDA for input tensors handed to other rasterizers (`torch_device`); ``"cuda"`` where
+the one who looks finds no GPU is the one `no_cuda` line, whoever asks.
 Torch- and Dr.Jit-free, so the command modules can import it at no cost.
 """
 
@@ -28,6 +29,12 @@ def check_device(device: object, field: str = "device") -> str:
     return device  # type: ignore[return-value]
 
 
+def no_cuda(finder: str, field: str = "device") -> InputError:
+    """The one no-GPU error (every command and API says it the same way): ``"cuda"`` was asked
+    for, but ``finder`` ("Dr.Jit" or "torch", whoever would run the work) sees no CUDA device."""
+    return InputError(f"{field}: 'cuda' asked for, but {finder} finds no CUDA device (use cpu or auto)")
+
+
 def torch_device(device: str, field: str = "device") -> str:
     """``"cpu"`` or ``"cuda"``: where torch tensors go for ``device`` (``"auto"``: CUDA when
     torch sees a GPU). A one-line `InputError` for an unknown device or ``"cuda"`` without one."""
@@ -39,7 +46,7 @@ def torch_device(device: str, field: str = "device") -> str:
     if torch.cuda.is_available():
         return "cuda"
     if device == "cuda":
-        raise InputError(f"{field}: 'cuda' asked for, but torch finds no CUDA device (use cpu or auto)")
+        raise no_cuda("torch", field)
     return "cpu"
 
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 import shutil
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -297,7 +297,8 @@ def sfm_inputs(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True) ->
     return inputs
 
 
-def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True) -> tuple[SfmRun, bool]:
+def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True,
+               say: Callable[[str], None] | None = None) -> tuple[SfmRun, bool]:
     """`run_sfm` (single-threaded, deterministic) on the training views, reused while its inputs are unchanged.
 
     The model, its points and a manifest (the `sfm_inputs` hash and the run's numbers)
@@ -305,6 +306,8 @@ def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True) ->
     (no pycolmap); otherwise SfM runs into a temporary sibling folder that replaces
     ``<dataset>/sfm`` atomically (`splatbench.fsutil.replace_dir`), as the scene renders
     are cached. Returns ``(run, cached)``; ``run.seconds`` is that of the original run.
+    ``say`` gets one line before anything slow: ``SfM: reusing DIR`` or ``SfM: running
+    pycolmap on N training views (cached in DIR)``.
 
     Raises:
         InputError: the dataset cannot be read, or SfM registers no usable model.
@@ -319,8 +322,11 @@ def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True) ->
     out = root / SFM_DIR
     inputs = sfm_inputs(ds, seed=seed, known_intrinsics=known_intrinsics)
     manifest = read_manifest(out)
+    say = say or (lambda line: None)
     if manifest is not None and manifest.get("hash") == inputs["hash"] and (out / SFM_POINTS).is_file():
+        say(f"SfM: reusing {out}")
         return _read_cached(out, manifest), True
+    say(f"SfM: running pycolmap on {len(ds.train)} training views (cached in {out})")
     tmp = Path(tempfile.mkdtemp(prefix=f".{SFM_DIR}.run-", dir=root))
     try:
         run = run_sfm(ds, seed=seed, single_thread=True, known_intrinsics=known_intrinsics, out=tmp / SFM_DIR)

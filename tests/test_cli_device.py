@@ -3,6 +3,8 @@ the same choices, help text, default and one-line error; ``train --set device=``
 
 from __future__ import annotations
 
+import re
+
 import click
 import pytest
 from click.testing import CliRunner
@@ -90,3 +92,47 @@ def test_auto_takes_cuda_only_where_the_backends_run(monkeypatch):
     assert conform(cpu_only, probes=("depth_order",)).device == "cpu"
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     assert _device("auto", [both]) == "cpu"
+
+
+# 'cuda' on a machine without a GPU (faked, so this runs everywhere): one line before any work,
+# in the one wording of `splatbench.devices.no_cuda`, naming who looked (Dr.Jit runs the
+# rasterizer; torch holds the inputs handed to other rasterizers) and the fix.
+NO_GPU = "'cuda' asked for, but {} finds no CUDA device (use cpu or auto)"
+NO_GPU_COMMANDS = {
+    "stress": (["stress", "--cases", "3"], "device: " + NO_GPU.format("Dr.Jit")),
+    "bench raster": (["bench", "raster"], "device: " + NO_GPU.format("Dr.Jit")),
+    "bench train": (["bench", "train"], "device: " + NO_GPU.format("Dr.Jit")),
+    "compare": (["compare", "--backend", "torch"], "--device: " + NO_GPU.format("torch")),
+    "conform drjit": (["conform", "drjit"], "device: " + NO_GPU.format("torch")),
+    "conform torch": (["conform", "torch"], "device: " + NO_GPU.format("torch")),
+}
+
+
+@pytest.fixture
+def no_gpu(monkeypatch):
+    import torch
+
+    from splatbench.raster import backend
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.setattr(backend, "cuda_available", lambda: False)
+    backend.get_backend.cache_clear()  # a real GPU's "cuda" backend may be cached
+    yield
+    backend.get_backend.cache_clear()
+
+
+@pytest.mark.parametrize("path", sorted(NO_GPU_COMMANDS))
+def test_cuda_without_a_gpu_is_one_line_everywhere(no_gpu, path):
+    args, expected = NO_GPU_COMMANDS[path]
+    code, lines = _stderr_lines([*args, "--device", "cuda"])
+    assert (code, lines) == (2, ["splatbench: error: " + expected])
+
+
+def test_no_cuda_is_said_in_one_place(no_gpu):
+    from splatbench.raster.backend import get_backend
+
+    with pytest.raises(InputError, match="^device: " + re.escape(NO_GPU.format("Dr.Jit")) + "$"):
+        get_backend("cuda")
+    with pytest.raises(InputError, match="^where: " + re.escape(NO_GPU.format("torch")) + "$"):
+        torch_device("cuda", "where")
+    assert get_backend("auto").name == "llvm" and torch_device("auto") == "cpu"

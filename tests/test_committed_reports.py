@@ -37,12 +37,14 @@ def test_every_shipped_experiment_is_reported():
     assert not missing, f"no committed report for: {missing} (run `make reports`)"
 
 
-@pytest.mark.parametrize("name", [n for n in SHIPPED if (ROOT / "reports" / n / "PENDING.md").is_file()])
-def test_a_pending_report_is_not_there_yet_and_its_grid_expands(name):
-    folder = ROOT / "reports" / name
-    assert not (folder / "report.md").is_file(), f"reports/{name} is reported now: delete reports/{name}/PENDING.md"
-    assert f"make reports REPORTS={name}" in (folder / "PENDING.md").read_text(encoding="utf-8")
-    assert expand(load_experiment(ROOT / "experiments" / f"{name}.toml"))
+def test_a_pending_report_is_not_there_yet_and_its_grid_expands():
+    # One test looping over the PENDING.md reports, not one per report: usually there are none,
+    # and an empty parametrisation would print a "got empty parameter set" skip in every run.
+    for name in (n for n in SHIPPED if (ROOT / "reports" / n / "PENDING.md").is_file()):
+        folder = ROOT / "reports" / name
+        assert not (folder / "report.md").is_file(), f"reports/{name} is reported now: delete reports/{name}/PENDING.md"
+        assert f"make reports REPORTS={name}" in (folder / "PENDING.md").read_text(encoding="utf-8"), name
+        assert expand(load_experiment(ROOT / "experiments" / f"{name}.toml")), name
 
 
 @pytest.mark.parametrize("name", SHIPPED)

@@ -109,3 +109,28 @@ def test_a_dataset_sfm_cannot_register_is_one_line(capture, tmp_path, capfd):
     assert not (capture / SFM_DIR).exists() and not list(capture.glob(".sfm.run-*"))  # nothing half-written
     # and COLMAP's own error log (glog lines such as "E20261123 ... sfm.cc:310] ...") stays quiet
     assert not re.search(r"^[EWF]\d{8} ", capfd.readouterr().err, re.M)
+
+
+def test_train_says_sfm_as_it_starts_and_ends_before_the_progress_bar(capture, tmp_path, monkeypatch):
+    """SfM takes minutes on a real capture: one line before it starts (running, or reusing the
+    cache) and its result note as soon as it ends, on stderr ahead of the bar, not only at the end."""
+    from click.testing import CliRunner
+
+    import splatbench.sfm as sfm_module
+    from splatbench.cli import main
+
+    events: list[str] = []
+    real = sfm_module.run_sfm
+    monkeypatch.setattr(sfm_module, "run_sfm", lambda *a, **k: events.append("run_sfm") or real(*a, **k))
+    cached_sfm(load_dataset(capture), say=events.append)
+    assert events == [f"SfM: running pycolmap on 12 training views (cached in {capture / SFM_DIR})", "run_sfm"]
+
+    res = CliRunner().invoke(main, ["train", str(capture), "--out", str(tmp_path / "run"), "--set", "iterations=2",
+                                    "--set", "init='sfm'", "--set", "strategy='none'", "--set", "sh_degree=0",
+                                    "--set", "schedule='absolute'"])
+    assert res.exit_code == 0, res.output
+    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    assert lines[0] == f"SfM: reusing {capture / SFM_DIR}" and events[-1] == "run_sfm"  # not rerun
+    assert lines[1].startswith("SfM: ") and "training views registered" in lines[1] and "cached in" in lines[1]
+    assert any("train" in line and "it" in line for line in lines[2:])  # the progress bar comes after
+    assert lines[1] not in res.stdout  # said once, as it happened, not again among the final notes

@@ -164,3 +164,21 @@ def test_cli_exits_nonzero_on_a_failure(monkeypatch):
     result = CliRunner().invoke(main, ["stress", "--cases", "2", "--jobs", "1", "--category", "needles"])
     assert result.exit_code == 1
     assert "FAIL build_case('needles'" in result.output and "non-finite gradients ['quats']" in result.output
+
+
+def test_a_device_that_cannot_run_fails_before_any_case(monkeypatch):
+    """'cuda' without a GPU (faked) is the caller's fault, not a robustness failure of every case:
+    one `InputError` before the first case (the CLI's one line: tests/test_cli_device.py)."""
+    from splatbench.raster import backend
+
+    monkeypatch.setattr(backend, "cuda_available", lambda: False)
+    backend.get_backend.cache_clear()
+    ran = []
+    try:
+        with pytest.raises(InputError, match=r"^device: 'cuda' asked for, but Dr\.Jit finds no CUDA device"):
+            run(4, device="cuda", on_case=ran.append)
+        with pytest.raises(InputError, match=r"^device: expected 'auto', 'cpu' or 'cuda', got 'tpu'$"):
+            run(4, device="tpu", on_case=ran.append)
+    finally:
+        backend.get_backend.cache_clear()
+    assert ran == []

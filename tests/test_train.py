@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -303,6 +304,11 @@ def test_checkpoint_resumes_training_exactly(tmp_path, tiny_diffuse):
     # the resumed run says so, first among its notes; a straight run does not
     assert resumed.notes[0] == f"resumed from {checkpoint} at step 10 of 20"
     assert not any(n.startswith("resumed from") for n in straight.notes + first.notes)
+    # its train_seconds counts the checkpoint's 10 steps too (timed by the first run; the summary
+    # line says so), and it knows where it resumed
+    before = torch.load(checkpoint, map_location="cpu", weights_only=False)["extra"]["loop_seconds"]
+    assert 0 < round(before, 3) < resumed.train_seconds
+    assert (resumed.resumed_step, straight.resumed_step, first.resumed_step) == (10, None, None)
     # a different config is refused before any step, naming the field
     with pytest.raises(InputError, match="resume: .* was written with seed=0, this run has seed=1"):
         train(config(tmp_path, out=str(tmp_path / "other"), seed=1, **base), dataset=tiny_diffuse, resume=checkpoint)
@@ -529,6 +535,12 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     line = f"resumed from {checkpoint} at step 2 of 3"
     assert shown.stderr.startswith(line + "\n") and shown.stderr.count("resumed from") == 1
     assert "3/3" in shown.stderr and "1/3" not in shown.stderr and "resumed from" not in shown.stdout
+    # the summary says what its time covers: the checkpoint's steps, timed by the run that wrote it
+    assert re.search(r"^3 iterations \(steps 0\.\.1 timed before the checkpoint, 2\.\.2 in this resumed run\) "
+                     r"in \d+\.\d s ", shown.stdout, re.M), shown.stdout
+    fresh = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                 "--quiet", "--out", str(tmp_path / "f")])
+    assert fresh.exit_code == 0 and re.search(r"^3 iterations in \d+\.\d s ", fresh.stdout, re.M), fresh.output
     # --quiet: no bar and no line as it starts; the summary's notes carry it
     quiet = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                  "--resume", str(checkpoint), "--quiet", "--out", str(tmp_path / "q")])

@@ -14,7 +14,7 @@ import splatbench  # noqa: F401  (configures libLLVM before drjit loads)
 import drjit as dr
 
 from splatbench import _llvm
-from splatbench.devices import check_device
+from splatbench.devices import check_device, no_cuda
 from splatbench.errors import InputError
 
 
@@ -37,7 +37,7 @@ def get_backend(device: str = "auto") -> Backend:
         device = "cuda" if cuda_available() else "cpu"
     if device == "cuda":
         if not cuda_available():
-            raise InputError("device: 'cuda' requested but Dr.Jit finds no CUDA device")
+            raise no_cuda("Dr.Jit")
         import drjit.cuda.ad as t
         return Backend("cuda", t)
     try:

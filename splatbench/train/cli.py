@@ -26,8 +26,10 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
 
     Prints the test PSNR / SSIM, Gaussian count, SH degree and the PLY path; writes
     config.toml, point_cloud.ply and result.json under the output folder. A resumed run
-    says so in one line, ``resumed from CKPT at step N of M`` (on stderr as it starts,
-    unless --quiet; always among the result's notes, so in --json and result.json).
+    says so in one line, ``resumed from CKPT at step N of M``; init=sfm says
+    ``SfM: running pycolmap on N training views (cached in DIR)`` or ``SfM: reusing DIR``
+    before SfM starts and its result as it ends. These lines go to stderr as they happen,
+    unless --quiet, and are always among the result's notes (so in --json and result.json).
     """
     from splatbench.train.config import TrainConfig, apply_overrides, load_config
 
@@ -39,16 +41,19 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     from splatbench.train.loop import train as run
 
     bar = None
-    shown = ""  # the resume line, once printed as the run starts
+    shown: set[str] = set()  # notes already printed as they happened (SfM, the resume line)
+
+    def say(line: str) -> None:
+        shown.add(line)
+        click.echo(line, err=True)
 
     def progress(status) -> None:
-        nonlocal bar, shown
+        nonlocal bar
         if bar is None:  # created at the first step: set-up errors print without a bar
             from tqdm import tqdm
 
             if resume is not None:  # status.step: the first step after the checkpoint's
-                shown = resume_line(resume, status.step, config.iterations)
-                click.echo(shown, err=True)
+                say(resume_line(resume, status.step, config.iterations))
             bar = tqdm(total=config.iterations, initial=status.step, desc="train", unit="it", dynamic_ncols=True,
                        leave=True)
         bar.update(1)
@@ -57,7 +62,7 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
                             sh=status.sh_degree, refresh=False)
 
     try:
-        result = run(config, progress=None if quiet else progress, resume=resume)
+        result = run(config, progress=None if quiet else progress, resume=resume, say=None if quiet else say)
     finally:
         if bar is not None:
             bar.close()
@@ -68,12 +73,23 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     click.echo(f"test PSNR {fmt(result.test_psnr, '.2f')} dB, SSIM {fmt(result.test_ssim, '.4f')}, "
                f"LPIPS {fmt(result.test_lpips, '.4f')} ({result.test_views} test views)")
     click.echo(f"{result.num_gaussians} Gaussians, SH degree {result.sh_degree} ({result.sh_degree_reason})")
-    click.echo(f"{result.iterations} iterations in {result.train_seconds:.1f} s "
+    click.echo(f"{result.iterations} iterations{_timed_steps(result)} in {result.train_seconds:.1f} s "
                f"({result.iterations / max(result.train_seconds, 1e-9):.2f} it/s), render "
                f"{fmt(result.render_ms_per_view, '.1f')} ms/view, peak RSS {result.peak_rss_mb:.0f} MB")
-    for note in (n for n in result.notes if n != shown):
+    for note in (n for n in result.notes if n not in shown):
         click.echo(note if note.startswith("warning: ") else f"note: {note}", err=note.startswith("warning: "))
     click.echo(f"wrote {result.ply_path}")
+
+
+def _timed_steps(result) -> str:
+    """What ``train_seconds`` covers when it is more than this run: a resumed run's loop time
+    includes the checkpoint's steps, timed by the run that wrote it."""
+    k, n = result.resumed_step, result.iterations
+    if k is None:
+        return ""
+    before = f"steps 0..{k - 1} timed before the checkpoint" if k else "no steps before the checkpoint"
+    after = f"{k}..{n - 1} in this resumed run" if k < n else "none in this resumed run"
+    return f" ({before}, {after})"
 
 
 def _toml_str(text: str) -> str:

@@ -48,6 +48,7 @@ class InitSettings:
     random_points: int    # init="random": number of points
     seed: int             # init="random": numpy seed
     sfm_seed: int = 0     # init="sfm": pycolmap's seed
+    say: Callable[[str], None] | None = None  # progress lines as they happen (init="sfm": starting, done)
 
 
 @dataclass(frozen=True)
@@ -102,8 +103,9 @@ def sfm(dataset, settings: InitSettings) -> Initialization:
     from splatbench.sfm import cached_sfm
 
     root = str(dataset.root)
+    say = settings.say or (lambda line: None)
     try:
-        run, cached = cached_sfm(dataset, seed=settings.sfm_seed)
+        run, cached = cached_sfm(dataset, seed=settings.sfm_seed, say=say)
     except InputError as exc:
         raise InputError(f"init: 'sfm' failed on {root!r}: {exc} (use init=surface or init=random)") from None
     if len(run.xyz) < 2:
@@ -115,6 +117,7 @@ def sfm(dataset, settings: InitSettings) -> Initialization:
     note = (f"SfM: {len(run.xyz)} points, {run.registered}/{run.total} training views registered (camera-centre "
             f"RMSE {run.center_rmse_rel:.2%} of the rig radius; {'cached' if cached else 'ran'} in "
             f"{run.model_path.parent})")
+    say(note)  # as soon as SfM is done, not only among the run's notes at the end
     return Initialization(gaussians, summary, note)
 
 

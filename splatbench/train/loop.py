@@ -117,7 +117,7 @@ class Trainer:
     """A training run in progress. ``Trainer(config)`` validates everything and sets up
     (no rendering); `step` runs one iteration; `evaluate` measures the test split."""
 
-    def __init__(self, config: TrainConfig, *, dataset=None) -> None:
+    def __init__(self, config: TrainConfig, *, dataset=None, say: Callable[[str], None] | None = None) -> None:
         self.config = config  # validated on construction
         self.strategy = config.make_strategy()
         if dataset is None:
@@ -137,7 +137,7 @@ class Trainer:
         torch.manual_seed(config.seed)
         np.random.seed(config.seed % 2**32)
         init = initialize(config.init, dataset, InitSettings(config.max_sh_degree, config.initial_opacity,
-                                                             config.init_random_points, config.seed))
+                                                             config.init_random_points, config.seed, say=say))
         gaussians, self.init_summary, self.init_note = init.gaussians, init.summary, init.note
         self.extent = scene_extent(train.cameras)
         self.lrs = lr_groups(config)
@@ -319,7 +319,7 @@ class Trainer:
 
 
 def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None = None,
-          dataset=None, resume: str | Path | None = None) -> TrainResult:
+          dataset=None, resume: str | Path | None = None, say: Callable[[str], None] | None = None) -> TrainResult:
     """Train 3DGS on ``config.dataset`` and return the measured `TrainResult`.
 
     Every input problem (config field, dataset, initialisation) is a one-line
@@ -331,7 +331,9 @@ def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None 
     ``point_cloud.ply`` (the final model) and ``result.json``. ``progress`` is called
     after every step; ``dataset`` (a loaded `splatbench.data.Dataset`) replaces reading
     ``config.dataset``; ``resume`` (a ``.pt`` checkpoint of a run with the same config)
-    continues that run exactly.
+    continues that run exactly. ``say`` gets set-up lines as they happen, before the first
+    step (init="sfm": ``SfM: running pycolmap ...`` / ``SfM: reusing ...``, then its result
+    note, which is also among the result's notes).
 
     Example::
 
@@ -339,7 +341,7 @@ def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None 
         result.test_psnr, result.num_gaussians, result.ply_path
     """
     with torch_threads(config.torch_threads):
-        return _train(config, progress, dataset, resume)
+        return _train(config, progress, dataset, resume, say)
 
 
 @contextmanager
@@ -373,7 +375,7 @@ def _save_checkpoint(trainer: Trainer, out: Path, extra: dict) -> Path:
     return path
 
 
-def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
+def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     from splatbench.bench.memory import peak_rss_mb
     from splatbench.train.checkpoint import load_checkpoint, resume_line
 
@@ -381,7 +383,7 @@ def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
     if out.exists() and not out.is_dir():
         raise InputError(f"out: {str(out)!r} is a file, not a folder; choose another output folder")
     try:
-        trainer = Trainer(config, dataset=dataset)
+        trainer = Trainer(config, dataset=dataset, say=say)
     except Interrupted as exc:
         raise Interrupted(exc.signum, "nothing kept: training had not started (loading the dataset, "
                                       "initialising)") from None
@@ -389,8 +391,10 @@ def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
     evaluations: list[EvalPoint] = []
     loop_seconds = 0.0
     resumed: list[str] = []
+    resumed_step = None
     if resume is not None:
         extra = load_checkpoint(trainer, resume)
+        resumed_step = trainer.step_index
         resumed.append(resume_line(resume, trainer.step_index, config.iterations))
         history, evaluations = list(extra.get("history", [])), list(extra.get("evaluations", []))
         loop_seconds = float(extra.get("loop_seconds", 0.0))
@@ -453,7 +457,7 @@ def _train(config: TrainConfig, progress, dataset, resume) -> TrainResult:
         peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,
         test_views=ev.views, history=history, evaluations=evaluations,
         sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary,
-        warmup_seconds=round(warmup_seconds, 3))
+        warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step)
     (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
     return result
 

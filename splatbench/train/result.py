@@ -33,7 +33,8 @@ class TrainResult:
     test_ssim: float | None             # mean SSIM (kornia, window 11)
     test_lpips: float | None            # mean LPIPS-Alex; None when unavailable (see `notes`)
     num_gaussians: int                  # N at the end
-    train_seconds: float                # wall time of the optimisation loop (no evaluation, no I/O, no compilation)
+    train_seconds: float                # wall time of the optimisation loop over all `iterations` steps, a resumed
+                                        # run's earlier ones included (no evaluation, no I/O, no compilation)
     iterations: int                     # steps run
     sh_degree: int                      # SH degree in use at the end (the PLY holds this many bands)
     sh_degree_reason: str               # why (fixed schedule, or the automatic schedule's measurement)
@@ -50,6 +51,8 @@ class TrainResult:
     init: dict = field(default_factory=dict)   # how the initial Gaussians were made: method, points (and for
                                                # init="sfm": registered, total, center_rmse_rel, cached, ...)
     warmup_seconds: float = 0.0         # kernel compilation / cache loading before the loop (not in train_seconds)
+    resumed_step: int | None = None     # --resume: the checkpoint's step (its earlier steps' loop time, timed by the
+                                        # run that wrote it, is in train_seconds); None: not resumed
 
     def to_dict(self) -> dict:
         """JSON-ready dict; NaN / inf become None; history rows become objects."""

@@ -72,6 +72,8 @@ def conform(backend, *, device: str = "auto", probes: tuple[str, ...] | None = N
     if check_device(device) == "auto":
         device = "cuda" if "cuda" in devices and torch_device("auto") == "cuda" else \
             ("cpu" if "cpu" in devices else devices[0])
+    if device == "cuda":
+        torch_device("cuda")  # no GPU at all: say that, not that the backend lacks CUDA (its inputs are torch's)
     if device not in devices:
         raise InputError(f"device: backend {backend.name!r} runs on {', '.join(devices)}, not {device!r}")
     selected = PROBES
