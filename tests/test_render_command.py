@@ -120,3 +120,28 @@ def test_bad_up_or_background_is_one_line(tmp_path, args, message):
     bright_above().to_ply(tmp_path / "m.ply")
     code, out, _ = run(tmp_path / "m.ply", *args)
     assert code == 2 and len(out.strip().splitlines()) == 1 and out.startswith(f"splatbench: error: {message}"), out
+
+
+def test_camera_option_renders_from_a_datasets_test_view(tmp_path):
+    """--camera DATASET:VIEW uses that test camera at its size: a Gaussian placed on its
+    optical axis lands on the principal point (the image centre)."""
+    from splatbench.data import load_dataset
+    from splatbench.scenes.render import render_dataset
+
+    folder = render_dataset("diffuse", tmp_path / "d", resolution=16, views=16, spp=1, progress=False).path
+    cam = load_dataset(folder).test.cameras[1]  # views 0 and 8 are the test views
+    point = cam.center + 2.0 * cam.rotation[2]  # 2 units along the optical axis
+    g = bright_above()
+    g = Gaussians(means=np.stack([point, point + 100.0]), log_scales=g.log_scales, quats=g.quats,
+                  opacity_logits=g.opacity_logits, sh=g.sh[::-1].copy())  # the bright one on the axis
+    g.to_ply(tmp_path / "m.ply")
+    code, out, image = run(tmp_path / "m.ply", "--camera", f"{folder}:1", "--out", tmp_path / "c.png")
+    assert code == 0, out
+    assert image.shape == (16, 16, 3) and "note: up" not in out
+    lum = image.sum(axis=2)
+    assert lum[7:9, 7:9].min() == lum.max() > 600  # the 2x2 pixels around the centre (cx = cy = 8)
+    code, out, _ = run(tmp_path / "m.ply", "--camera", f"{folder}:2")
+    assert code == 2 and out.strip() == (f"splatbench: error: --camera: {str(folder)!r} has 2 test views; "
+                                         "give DATASET:VIEW with VIEW in 0..1")
+    code, out, _ = run(tmp_path / "m.ply", "--camera", str(folder), "--up", "+y")
+    assert code == 2 and "--up: does not apply with --camera" in out

@@ -76,6 +76,20 @@ def parse_background(text: str) -> tuple[float, float, float]:
         raise InputError(f"--background: expected R,G,B, 3 numbers in [0, 1], got {text!r}") from None
 
 
+def dataset_camera(spec: str):
+    """``--camera DATASET[:VIEW]``: test view VIEW (default 0) of a dataset folder (`Camera`)."""
+    from splatbench.data import load_dataset
+
+    folder, sep, view = spec.rpartition(":")
+    if not (sep and view.isdigit()):
+        folder, view = spec, "0"
+    test = load_dataset(folder).test
+    if not int(view) < len(test):
+        raise InputError(f"--camera: {folder!r} has {len(test)} test views; give DATASET:VIEW with VIEW in "
+                         f"0..{len(test) - 1}" if len(test) else f"--camera: {folder!r} has no test views")
+    return test.cameras[int(view)]
+
+
 def _axis_name(up) -> str:
     """``+y`` for (0, 1, 0), else the vector rounded to 3 decimals."""
     for name, vector in _AXES.items():
@@ -95,13 +109,16 @@ def _axis_name(up) -> str:
 @click.option("--elevation", type=click.FloatRange(-89, 89), default=None, metavar="DEG",
               help="Degrees above the horizontal the framing camera looks down from. Default: "
                    f"{KNOWN_UP_ELEVATION:g} when the up is known (recorded or --up), else 0.")
+@click.option("--camera", "camera_spec", default=None, metavar="DATASET[:VIEW]",
+              help="Render a PLY from test view VIEW (default 0) of a dataset folder, at its size, instead of "
+                   "the framing camera (--size, --up and --elevation then do not apply).")
 @click.option("--background", "background", default=None, metavar="R,G,B",
               help="RGB in [0, 1] behind the splats. Default: the background the PLY records "
                    "(the one it was trained on), else black.")
 @click.option("--sh-degree", type=int, default=None, help="SH bands to evaluate (default: all).")
 @click.option("--option", "options", multiple=True, help="Rasterizer option key=value (repeatable), e.g. tile_size=8.")
 def render(source: Path, out: Path | None, view: int, size: str, up: str | None, elevation: float | None,
-           background: str | None, sh_degree: int | None, options: tuple[str, ...]) -> None:
+           camera_spec: str | None, background: str | None, sh_degree: int | None, options: tuple[str, ...]) -> None:
     """Render SOURCE (a 3DGS .ply or a workload .npz) to a PNG and print its path.
 
     A PLY is framed by a camera looking at the middle of its Gaussians, with the world's
@@ -113,12 +130,15 @@ def render(source: Path, out: Path | None, view: int, size: str, up: str | None,
 
     if sh_degree is not None:
         check_sh_degree("--sh-degree", sh_degree)
+    if camera_spec is not None and (up is not None or elevation is not None):
+        raise InputError(f"{'--up' if up is not None else '--elevation'}: does not apply with --camera "
+                         "(the dataset's camera is placed already); leave it out")
     up_vector = parse_up(up) if up is not None else None
     rgb = parse_background(background) if background is not None else None
     out = out or source.with_suffix(".png")
     if out.is_dir():
         raise InputError(f"--out: {str(out)!r} is a folder; give the path of the PNG to write")
-    notes = []
+    notes: list[str] = []
     if source.suffix == ".ply":
         try:
             width, height = (int(v) for v in size.lower().split("x"))
@@ -129,24 +149,18 @@ def render(source: Path, out: Path | None, view: int, size: str, up: str | None,
         if len(gaussians) == 0:
             raise InputError(f"source: {str(source)!r} holds 0 Gaussians (an empty vertex element); nothing to render")
         hints = read_view_hints(source)
-        assumed = False
-        if up_vector is None and hints.up is not None:
-            up_vector = hints.up
-            notes.append(f"up {_axis_name(up_vector)} (recorded in the PLY)")
-        elif up_vector is None:
-            up_vector, assumed = DEFAULT_UP, True
-            notes.append(f"up {_axis_name(up_vector)} (COLMAP's y-down world; the PLY records none: "
-                         f"pass --up +y if the picture is upside down)")
         if rgb is None and hints.background is not None:
             rgb = hints.background
             notes.append(f"background {[round(c, 4) for c in rgb]} (recorded in the PLY)")
-        if elevation is None:
-            elevation = 0.0 if assumed else KNOWN_UP_ELEVATION
-        camera = framing_camera(gaussians, width, height, up=up_vector, elevation_deg=elevation)
+        if camera_spec is not None:
+            camera = dataset_camera(camera_spec)
+        else:
+            camera, note = _framing(gaussians, width, height, up_vector, hints.up, elevation)
+            notes = [note, *notes] if note else notes
     elif source.suffix == ".npz":
-        if up_vector is not None or elevation is not None:
-            option = "--up" if up_vector is not None else "--elevation"
-            raise InputError(f"{option}: only for a .ply (a workload .npz brings its own camera); leave it out")
+        given = [o for o, v in (("--up", up), ("--elevation", elevation), ("--camera", camera_spec)) if v is not None]
+        if given:
+            raise InputError(f"{given[0]}: only for a .ply (a workload .npz brings its own camera); leave it out")
         workload = load_npz(source, view=view)
         gaussians, camera = workload.gaussians, workload.camera
     else:
@@ -157,3 +171,18 @@ def render(source: Path, out: Path | None, view: int, size: str, up: str | None,
     for note in notes:
         click.echo(f"note: {note}", err=True)
     click.echo(f"rendered {len(gaussians)} Gaussians at {camera.width}x{camera.height}: {path.resolve()}")
+
+
+def _framing(gaussians, width: int, height: int, up, recorded_up, elevation: float | None):
+    """The framing camera for ``--up`` (``up``), else the PLY's ``recorded_up``, else
+    `DEFAULT_UP` (level: the up is a guess), and a note saying where the up came from."""
+    if up is not None:
+        note = ""
+    elif recorded_up is not None:
+        up, note = recorded_up, f"up {_axis_name(recorded_up)} (recorded in the PLY)"
+    else:
+        up, note = DEFAULT_UP, (f"up {_axis_name(DEFAULT_UP)} (COLMAP's y-down world; the PLY records none: "
+                                f"pass --up +y if the picture is upside down)")
+        elevation = 0.0 if elevation is None else elevation
+    elevation = KNOWN_UP_ELEVATION if elevation is None else elevation
+    return framing_camera(gaussians, width, height, up=up, elevation_deg=elevation), note
