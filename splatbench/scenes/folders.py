@@ -16,10 +16,9 @@ settings looks for it.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from splatbench.scenes.render import RenderPlan
+# `plan` below is a `splatbench.scenes.render.RenderPlan` (not imported: render imports this module)
 
 
 def dataset_name(scene: str, resolution: int | str, views: int, spp: int, test_spp: int | None = None) -> str:
@@ -29,12 +28,12 @@ def dataset_name(scene: str, resolution: int | str, views: int, spp: int, test_s
     return name if test_spp in (None, spp) else f"{name}-t{test_spp}"
 
 
-def _resolution_token(plan: RenderPlan) -> str:
+def _resolution_token(plan: Any) -> str:
     w, h = plan.resolution
     return str(w) if w == h else f"{w}x{h}"
 
 
-def at_rig_defaults(plan: RenderPlan) -> bool:
+def at_rig_defaults(plan: Any) -> bool:
     """True when ``plan`` renders the rig's own views, test split and samples per pixel
     (any resolution): a ``--views`` or ``--spp`` equal to the rig's is no difference."""
     rig = plan.scene.rig
@@ -42,7 +41,7 @@ def at_rig_defaults(plan: RenderPlan) -> bool:
             and plan.spp == rig.spp and plan.test_spp is None)
 
 
-def default_out(plan: RenderPlan) -> Path:
+def default_out(plan: Any) -> Path:
     """``data/scenes/<name>-<W>`` (``-<W>x<H>`` when not square) at the rig's views, split
     and spp, else ``data/scenes/`` + `dataset_name`; relative to the current folder."""
     token = _resolution_token(plan)
