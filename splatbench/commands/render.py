@@ -18,8 +18,8 @@ DEFAULT_UP = (0.0, -1.0, 0.0)
 #: Elevation of the framing camera when the world's up is known (it then looks down onto
 #: the floor, as the scene rigs do); 0 when the up is assumed.
 KNOWN_UP_ELEVATION = 20.0
-_AXES = {f"{sign}{axis}": tuple(float(s) * (axis == a) for a in "xyz")
-         for axis in "xyz" for sign, s in (("+", 1), ("-", -1))}
+_AXES = {f"{sign}{axis}": tuple(value if a == axis else 0.0 for a in "xyz")
+         for axis in "xyz" for sign, value in (("+", 1.0), ("-", -1.0))}
 
 
 def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0, up=DEFAULT_UP,
