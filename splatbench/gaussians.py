@@ -13,7 +13,7 @@ import numpy as np
 
 from splatbench.checks import SH_BASES_OF_DEGREE, as_float_array, check_sh_degree
 from splatbench.errors import InputError
-from splatbench.ply import read_ply, write_ply
+from splatbench.ply import ViewHints, read_ply, write_ply
 
 #: The degree-0 SH constant, ``1 / (2·sqrt(pi))``.
 SH_C0 = 0.28209479177387814
@@ -179,6 +179,7 @@ class Gaussians:
         except InputError as exc:
             raise InputError(f"{os.fspath(path)}: {exc}") from None
 
-    def to_ply(self, path: str | os.PathLike) -> None:
-        """Write a graphdeco-inria 3DGS ``.ply`` atomically (see `splatbench.ply.write_ply`)."""
-        write_ply(self, path)
+    def to_ply(self, path: str | os.PathLike, hints: ViewHints | None = None) -> None:
+        """Write a graphdeco-inria 3DGS ``.ply`` atomically (see `splatbench.ply.write_ply`);
+        ``hints`` (`splatbench.ply.ViewHints`: up, background) go into its header comments."""
+        write_ply(self, path, hints)

@@ -17,6 +17,12 @@ comment (``comment splatbench sh_degree D``); reading such a file gives back deg
 as zeros and ignored on reading. Files from other writers with fewer ``f_rest_*``
 (``3·((D+1)² − 1)``, channel-major over their own ``(D+1)² − 1``) are read too; without
 the comment the degree is the one the ``f_rest_*`` count gives.
+
+Two more optional header comments say how the model should be viewed (`ViewHints`):
+``comment splatbench up X Y Z`` (the world's up direction, e.g. ``0 1 0`` for the y-up
+Mitsuba scenes) and ``comment splatbench background R G B`` (the RGB in [0, 1] it was
+trained on). `splatbench train` writes them when it knows them; ``splatbench render``
+uses them. Other readers (graphdeco's ``load_ply``, viewers) skip comments.
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from __future__ import annotations
 import os
 import re
 import tempfile
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -41,6 +48,9 @@ _F_REST = re.compile(r"^f_rest_(\d+)$")
 WRITE_DEGREE = 3
 #: Header comment prefix recording the degree of the model a file holds.
 _DEGREE_COMMENT = "splatbench sh_degree "
+#: Header comment prefixes of the `ViewHints` fields.
+_UP_COMMENT = "splatbench up "
+_BACKGROUND_COMMENT = "splatbench background "
 
 
 def property_names(sh_degree: int = WRITE_DEGREE) -> list[str]:
@@ -62,6 +72,57 @@ class PlyArrays(NamedTuple):
     quats: np.ndarray
     opacity_logits: np.ndarray
     sh: np.ndarray
+
+
+@dataclass(frozen=True)
+class ViewHints:
+    """How a model wants to be viewed, recorded in its header; None: not recorded.
+
+    ``up`` [3]: the world's up direction (a unit vector). ``background`` [3]: RGB in [0, 1]
+    behind the splats during training.
+    """
+
+    up: tuple[float, float, float] | None = None
+    background: tuple[float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.up is not None:
+            object.__setattr__(self, "up", _unit_vector("up", self.up))
+        if self.background is not None:
+            object.__setattr__(self, "background", _rgb01("background", self.background))
+
+    def comments(self) -> list[str]:
+        """The header comment lines (without ``comment ``) that record the set fields."""
+        lines = []
+        for prefix, value in ((_UP_COMMENT, self.up), (_BACKGROUND_COMMENT, self.background)):
+            if value is not None:
+                lines.append(prefix + " ".join(repr(float(v)) for v in value))  # repr: exact round trip
+        return lines
+
+
+def _three_floats(field: str, value) -> tuple[float, float, float]:
+    try:
+        v = tuple(float(x) for x in value)
+    except (TypeError, ValueError):
+        raise InputError(f"{field}: expected 3 numbers, got {value!r}") from None
+    if len(v) != 3 or not all(np.isfinite(v)):
+        raise InputError(f"{field}: expected 3 finite numbers, got {list(value)!r}")
+    return v  # type: ignore[return-value]
+
+
+def _unit_vector(field: str, value) -> tuple[float, float, float]:
+    v = np.asarray(_three_floats(field, value))
+    norm = float(np.linalg.norm(v))
+    if not norm > 0:
+        raise InputError(f"{field}: expected a non-zero direction, got {v.tolist()}")
+    return tuple(float(x) for x in v / norm)  # type: ignore[return-value]
+
+
+def _rgb01(field: str, value) -> tuple[float, float, float]:
+    v = _three_floats(field, value)
+    if not all(0 <= c <= 1 for c in v):
+        raise InputError(f"{field}: expected 3 values in [0, 1], got {list(v)}")
+    return v
 
 
 def to_vertex_array(gaussians: PlyArrays) -> np.ndarray:
@@ -88,9 +149,9 @@ def to_vertex_array(gaussians: PlyArrays) -> np.ndarray:
     return vertex
 
 
-def write_ply(gaussians: PlyArrays, path: str | os.PathLike) -> None:
+def write_ply(gaussians: PlyArrays, path: str | os.PathLike, hints: ViewHints | None = None) -> None:
     """Write ``gaussians`` (`PlyArrays` or a `Gaussians`) to ``path`` atomically (temporary
-    file, then `os.replace`); the header records its SH degree."""
+    file, then `os.replace`); the header records its SH degree and ``hints`` (`ViewHints`)."""
     from plyfile import PlyData, PlyElement
 
     path = os.fspath(path)
@@ -100,7 +161,8 @@ def write_ply(gaussians: PlyArrays, path: str | os.PathLike) -> None:
     try:
         with os.fdopen(fd, "wb") as stream:
             PlyData([element], text=False, byte_order="<",
-                    comments=[f"{_DEGREE_COMMENT}{SH_BASES_OF_DEGREE.index(gaussians.sh.shape[1])}"]).write(stream)
+                    comments=[f"{_DEGREE_COMMENT}{SH_BASES_OF_DEGREE.index(gaussians.sh.shape[1])}",
+                              *(hints.comments() if hints is not None else [])]).write(stream)
             stream.flush()
             os.fsync(stream.fileno())
         replace_file(tmp, path)
@@ -177,6 +239,32 @@ def read_ply(path: str | os.PathLike) -> PlyArrays:
         opacity_logits=np.asarray(data["opacity"], dtype=np.float32),
         sh=sh,
     )
+
+
+def read_view_hints(path: str | os.PathLike) -> ViewHints:
+    """The `ViewHints` a PLY's header comments record (fields absent: None); reads the
+    header only. A malformed hint is one `InputError` line naming the file and the comment."""
+    path = os.fspath(path)
+    comments = []
+    try:
+        with open(path, "rb") as stream:
+            for _ in range(100_000):  # a header is a few hundred lines; stop on a file that is not one
+                line = stream.readline()
+                if not line or line.strip() == b"end_header":
+                    break
+                if line.startswith(b"comment "):
+                    comments.append(line[len(b"comment "):].decode("ascii", "replace").strip())
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    found: dict[str, tuple[float, float, float]] = {}
+    for line in comments:
+        for field, prefix in (("up", _UP_COMMENT), ("background", _BACKGROUND_COMMENT)):
+            if line.startswith(prefix):
+                try:
+                    found[field] = getattr(ViewHints(**{field: line[len(prefix):].split()}), field)
+                except InputError as exc:
+                    raise InputError(f"{path}: header comment {line!r}: {exc}") from None
+    return ViewHints(**found)
 
 
 def _recorded_degree(comments: list[str]) -> int | None:

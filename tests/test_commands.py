@@ -21,14 +21,17 @@ def invoke(*args) -> tuple[int, str]:
 
 
 def test_render_a_ply_frames_its_gaussian(tmp_path):
-    """One red Gaussian: the framing camera puts it in the middle of a WxH PNG on black."""
+    """One red Gaussian: the framing camera puts it in the middle of a WxH PNG on black;
+    a PLY that records no up is framed y-down (COLMAP's world) and the command says so."""
     red = np.array([[[0.9, 0.05, 0.05]]])
     g = Gaussians(means=np.array([[1.0, 2.0, 3.0]]), log_scales=np.full((1, 3), -1.0),
                   quats=np.array([[1.0, 0, 0, 0]]), opacity_logits=np.array([4.0]), sh=(red - 0.5) / SH_C0)
     g.to_ply(tmp_path / "one.ply")
     code, out = invoke("render", tmp_path / "one.ply", "--size", "40x30", "--out", tmp_path / "one.png")
     assert code == 0, out
-    assert out.strip() == f"rendered 1 Gaussians at 40x30: {(tmp_path / 'one.png').resolve()}"
+    assert out.strip().splitlines() == [
+        "note: up -y (COLMAP's y-down world; the PLY records none: pass --up +y if the picture is upside down)",
+        f"rendered 1 Gaussians at 40x30: {(tmp_path / 'one.png').resolve()}"]
     img = np.asarray(Image.open(tmp_path / "one.png").convert("RGB"))
     assert img.shape == (30, 40, 3)
     centre, corner = img[15, 20].astype(int), img[0, 0].astype(int)

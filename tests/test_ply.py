@@ -237,3 +237,44 @@ def test_write_replaces_atomically_and_cleans_up(tmp_path, monkeypatch):
     second.to_ply(path)
     assert Gaussians.from_ply(path).sh.tobytes() == second.sh.tobytes()
     assert os.listdir(tmp_path) == ["scene.ply"]
+
+
+# ------------------------------------------------------------------ view hints
+def test_view_hints_round_trip_and_leave_graphdecos_62_properties(tmp_path):
+    """Up and background go into header comments only: the vertex layout and data are
+    those of a file without them, and the values come back exactly (repr round trip)."""
+    from splatbench.ply import ViewHints, read_view_hints
+
+    g = make(5, 4, seed=3)
+    plain, hinted = tmp_path / "plain.ply", tmp_path / "hinted.ply"
+    g.to_ply(plain)
+    g.to_ply(hinted, ViewHints(up=(0.0, 2.0, 0.0), background=(0.5, 1 / 3, 0.0)))
+    assert read_view_hints(plain) == ViewHints(None, None)
+    hints = read_view_hints(hinted)
+    assert hints.up == (0.0, 1.0, 0.0)                  # normalised on construction
+    assert hints.background == (0.5, 1 / 3, 0.0)        # bit-exact floats
+    a, b = PlyData.read(str(plain)), PlyData.read(str(hinted))
+    assert [p.name for p in b["vertex"].properties] == [p.name for p in a["vertex"].properties] == GRAPHDECO_62
+    assert b["vertex"].data.tobytes() == a["vertex"].data.tobytes()
+    assert "splatbench up 0.0 1.0 0.0" in b.comments
+    assert "splatbench background 0.5 0.3333333333333333 0.0" in b.comments
+    back = Gaussians.from_ply(hinted)
+    assert all(getattr(back, f).tobytes() == getattr(Gaussians.from_ply(plain), f).tobytes() for f in FIELDS)
+
+
+@pytest.mark.parametrize("comment, expect", [
+    ("splatbench up 0 0 0", "non-zero direction"),
+    ("splatbench up 0 1", "3 finite numbers"),
+    ("splatbench up 0 nan 1", "3 finite numbers"),
+    ("splatbench background 0.5 2 0", "in [0, 1]"),
+    ("splatbench background a b c", "3 numbers"),
+])
+def test_malformed_view_hint_is_one_line_naming_file_and_comment(tmp_path, comment, expect):
+    from splatbench.ply import read_view_hints
+
+    good, path = tmp_path / "good.ply", tmp_path / "bad.ply"
+    write_graphdeco_style(good, make(2, 1))
+    ply = PlyData.read(str(good))
+    ply.comments = [comment]
+    ply.write(str(path))
+    one_line_error(lambda: read_view_hints(path), str(path), repr(comment), expect)

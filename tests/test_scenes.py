@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -120,6 +121,30 @@ def test_rig_kinds_place_cameras_as_documented():
     # --views V: every 8th view is a test view
     assert RigSpec(kind="orbit", radius=1.0).test_indices(20) == [0, 8, 16]
     assert RigSpec(kind="orbit", radius=1.0, train_views=100, test_views=200).test_indices()[:3] == [0, 1, 3]
+
+
+@pytest.mark.parametrize("up", [(0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (0.0, -1.0, 0.0), (1.0, 2.0, -0.5)])
+def test_rig_up_is_recovered_exactly_from_the_cameras(up):
+    """Every rig kind, any up: the direction perpendicular to every camera's x axis is the
+    rig's up (float64 round-off: 1e-12); the built-in rigs give exactly +y."""
+    from splatbench.scenes.orientation import rig_up
+
+    base = dict(radius=3.0, target=(1.0, 0.5, -2.0), train_views=7, test_views=1, up=up)
+    for rig in (RigSpec(kind="orbit", **base), RigSpec(kind="hemisphere", **base),
+                RigSpec(kind="forward", spread=0.5, **base)):
+        np.testing.assert_allclose(rig_up(rig.cameras()), np.array(up) / np.linalg.norm(up), atol=1e-12)
+    for name in BUILTIN:
+        assert rig_up(get_scene(name).rig.cameras()).tolist() == [0.0, 1.0, 0.0], name
+
+
+def test_rig_up_of_views_along_one_azimuth_still_points_up():
+    """Parallel x axes leave the up direction undetermined within a plane: the cameras'
+    mean image-up is used, which is never upside down (positive along the true up)."""
+    from splatbench.scenes.orientation import rig_up
+
+    rig = RigSpec(kind="orbit", radius=3.0, azimuth_deg=(30.0, 30.0), elevation_deg=(10.0, 60.0))
+    assert rig_up(rig.cameras()) @ np.array([0.0, 1.0, 0.0]) > 0.5
+    assert rig_up(rig.cameras()[:1]) @ np.array([0.0, 1.0, 0.0]) > 0.5
 
 
 @pytest.mark.parametrize("fields, part", [
@@ -291,6 +316,10 @@ def test_cache_skips_the_same_render_and_redoes_a_changed_one(rendered):
     rig.write_text(rig.read_text().replace("seed = 0", "seed = 1"))
     changed = render_dataset("mini", result.path, views=8, spp=2, extra_dirs=[scenes_dir], progress=False)
     assert not changed.cached and changed.hash != spp.hash
+    assert changed.replaced == f"replaced {result.path}, which held a different render: seed 0 -> 1"
+    (scenes_dir / "mini" / "notes.txt").write_text("a file of the scene folder")  # settings unchanged
+    assert render_dataset("mini", result.path, views=8, spp=2, extra_dirs=[scenes_dir], progress=False).replaced == \
+        f"replaced {result.path}, which held a different render: scene files changed: notes.txt"
     assert render_dataset("mini", result.path, views=8, spp=2, extra_dirs=[scenes_dir], progress=False).cached
 
 
@@ -390,3 +419,58 @@ def test_sample_surface_is_deterministic_across_loads_with_a_normal_per_point():
     np.testing.assert_array_equal(first.xyz, second.xyz)
     assert first.normals.shape == first.xyz.shape == (2000, 3)
     np.testing.assert_allclose(np.linalg.norm(first.normals, axis=1), 1.0, atol=1e-5)
+
+
+# ----------------------------------------------------------------- dataset folders
+def test_default_folder_names_the_settings_that_differ_from_the_rig():
+    """The rig's own views and spp keep ``<name>-<W>``; any other views, spp or test_spp
+    get the experiment runner's name (one function), so they never share a folder."""
+    from splatbench.experiments.train_kind import dataset_folder
+    from splatbench.scenes import dataset_name, default_out
+
+    def out(**kw):
+        return default_out(plan_render("glossy", **kw)).as_posix()
+
+    assert out() == "data/scenes/glossy-256" and out(resolution=64) == "data/scenes/glossy-64"
+    assert out(resolution=64, views=64, spp=128, test_spp=128) == "data/scenes/glossy-64"  # the rig's values
+    names = {out(resolution=64, test_spp=256), out(resolution=64, test_spp=64), out(resolution=64, spp=32),
+             out(resolution=64, views=16), out(resolution=64)}
+    assert len(names) == 5
+    assert out(resolution=64, test_spp=256) == "data/scenes/glossy-64-v64-s128-t256"
+    data = {"resolution": 128, "views": 64, "spp": 64, "test_spp": 2048}
+    assert out(**data) == "data/scenes/" + dataset_folder("glossy", data).name == \
+        "data/scenes/" + dataset_name("glossy", 128, 64, 64, 2048)
+
+
+def test_cli_renders_with_other_settings_into_other_folders_and_says_what_it_replaces(tmp_path, user_scenes,
+                                                                                       monkeypatch):
+    from click.testing import CliRunner
+
+    from splatbench.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    runner = CliRunner()
+
+    def render(*args):
+        res = runner.invoke(main, ["scenes", "render", "mini", "--scenes-dir", str(user_scenes), *args])
+        assert res.exit_code == 0, res.output
+        return res.stdout.strip().splitlines()
+
+    # no --out: the rig's settings, then two test_spp values -- three folders, none replaced
+    for args, folder in (((), "mini-32"), (("--test-spp", "8"), "mini-32-v8-s4-t8"),
+                         (("--test-spp", "16"), "mini-32-v8-s4-t16")):
+        lines = render(*args)
+        assert len(lines) == 1 and lines[0].startswith(f"dataset: {Path('data/scenes') / folder} ("), lines
+    assert read_manifest(tmp_path / "data/scenes/mini-32")["settings"].get("test_spp") is None
+    assert read_manifest(tmp_path / "data/scenes/mini-32-v8-s4-t8")["settings"]["test_spp"] == 8
+    assert read_manifest(tmp_path / "data/scenes/mini-32-v8-s4-t16")["settings"]["test_spp"] == 16
+    # an explicit --out over another dataset replaces it and says what it held
+    out = tmp_path / "mine"
+    render("--test-spp", "8", "--out", str(out))
+    lines = render("--test-spp", "16", "--out", str(out))
+    assert lines[0] == f"replaced {out}, which held a different render: test_spp 8 -> 16"
+    assert lines[1].startswith(f"dataset: {out} (")
+    lines = render("--test-spp", "16", "--out", str(out), "--force")
+    assert lines[0] == f"replaced {out}, which held the same render (--force)"
+    lines = render("--spp", "2", "--out", str(out))
+    assert lines[0] == f"replaced {out}, which held a different render: spp 4 -> 2; test_spp 16 -> 2"

@@ -261,6 +261,21 @@ def test_trained_sh0_model_saves_graphdecos_62_properties_and_reads_back_as_degr
     assert back.sh_degree == 0 and back.sh.shape == (60, 1, 3)
 
 
+def test_saved_ply_records_the_datasets_up_and_the_background(tmp_path, tiny_diffuse):
+    """A Mitsuba render declares its up (+y, the rig's): the PLY records it and the
+    background trained on, for `splatbench render`; a dataset without a splatbench
+    manifest (the synthetic one) declares no up and records none."""
+    from splatbench.ply import read_view_hints
+
+    trainer = Trainer(config(tmp_path, background=[0.25, 0.5, 0.75]), dataset=tiny_diffuse)
+    hints = read_view_hints(trainer.save_ply(tmp_path / "mitsuba.ply"))
+    assert hints.up == (0.0, 1.0, 0.0)
+    assert hints.background == tuple(np.float32([0.25, 0.5, 0.75]).tolist())  # the float32 tensor it rendered with
+    synthetic = synthetic_dataset(tmp_path, view_dependent=False, views=8, n=20)
+    hints = read_view_hints(Trainer(config(tmp_path), dataset=synthetic).save_ply(tmp_path / "synthetic.ply"))
+    assert hints.up is None and hints.background == (0.0, 0.0, 0.0)  # "auto" without empty pixels: black
+
+
 def test_auto_initial_opacity_is_the_strategys_reference_value(tmp_path, tiny_diffuse):
     """graphdeco's create_from_pcd starts at 0.1, 3DGS-MCMC's at 0.5; a number overrides both."""
     assert config(tmp_path).initial_opacity == 0.1

@@ -12,9 +12,23 @@ from splatbench.errors import InputError
 from splatbench.overrides import parse_overrides
 
 
-def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0):
-    """A look-at camera that frames the central 98 % of the Gaussians from -z.
+#: The up direction assumed for a PLY that records none: -y, as COLMAP captures (and so
+#: graphdeco's models of them) have their world y axis pointing down.
+DEFAULT_UP = (0.0, -1.0, 0.0)
+#: Elevation of the framing camera when the world's up is known (it then looks down onto
+#: the floor, as the scene rigs do); 0 when the up is assumed.
+KNOWN_UP_ELEVATION = 20.0
+_AXES = {f"{sign}{axis}": tuple(value if a == axis else 0.0 for a in "xyz")
+         for axis in "xyz" for sign, value in (("+", 1.0), ("-", -1.0))}
 
+
+def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0, up=DEFAULT_UP,
+                   elevation_deg: float = 0.0):
+    """A look-at camera that frames the central 98 % of the Gaussians, ``up`` [3] up in the image.
+
+    It looks along the first world axis of +z, +y that is not within 25° of ``up`` (+z
+    for a y-up or y-down world, +y for a z-up one), made perpendicular to ``up``, from
+    ``elevation_deg`` above that horizontal direction (down onto a floor).
     The framed radius is at least 3 standard deviations of the largest of those
     Gaussians (so one Gaussian, or several at one point, fill the view rather than
     vanish), and the near plane is 1 % of the camera's distance (so a small scene is
@@ -23,13 +37,65 @@ def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0):
 
     if len(gaussians) == 0:
         raise InputError("gaussians: 0 Gaussians, nothing to frame or render")
+    up_ = np.asarray(up, dtype=np.float64)
+    up_ = up_ / np.linalg.norm(up_)
+    axes = (np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    axis = next(a for a in axes if abs(a @ up_) < np.cos(np.radians(25)))  # one of them is: they are orthogonal
+    forward = axis - (axis @ up_) * up_
+    forward /= np.linalg.norm(forward)
     lo, hi = np.percentile(gaussians.means, [1, 99], axis=0)
     center = (lo + hi) / 2
     sigma = float(np.percentile(np.exp(np.clip(gaussians.log_scales, -20, 20)).max(axis=1), 99))
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 3 * sigma, 1e-6)
     distance = radius / np.tan(np.radians(fov_x_deg) / 2) * 1.2
-    return Camera.look_at(center - np.array([0.0, 0.0, distance]), center, np.array([0.0, -1.0, 0.0]),
+    if elevation_deg:
+        e = np.radians(elevation_deg)
+        forward = np.cos(e) * forward - np.sin(e) * up_
+    return Camera.look_at(center - distance * forward, center, up_,
                           width, height, fov_x_deg, near=min(0.01, distance / 100))
+
+
+def parse_up(text: str) -> tuple[float, float, float]:
+    """``--up``: an axis (``+y``, ``-z``, ...) or ``X,Y,Z``; a unit vector."""
+    from splatbench.ply import ViewHints
+
+    try:
+        return ViewHints(up=_AXES.get(text.strip().lower()) or text.split(",")).up
+    except InputError:
+        raise InputError(f"--up: expected one of {', '.join(_AXES)} or X,Y,Z (3 finite numbers, not all zero), "
+                         f"got {text!r}") from None
+
+
+def parse_background(text: str) -> tuple[float, float, float]:
+    """``--background``: ``R,G,B`` in [0, 1]."""
+    from splatbench.ply import ViewHints
+
+    try:
+        return ViewHints(background=text.split(",")).background
+    except InputError:
+        raise InputError(f"--background: expected R,G,B, 3 numbers in [0, 1], got {text!r}") from None
+
+
+def dataset_camera(spec: str):
+    """``--camera DATASET[:VIEW]``: test view VIEW (default 0) of a dataset folder (`Camera`)."""
+    from splatbench.data import load_dataset
+
+    folder, sep, view = spec.rpartition(":")
+    if not (sep and view.isdigit()):
+        folder, view = spec, "0"
+    test = load_dataset(folder).test
+    if not int(view) < len(test):
+        raise InputError(f"--camera: {folder!r} has {len(test)} test views; give DATASET:VIEW with VIEW in "
+                         f"0..{len(test) - 1}" if len(test) else f"--camera: {folder!r} has no test views")
+    return test.cameras[int(view)]
+
+
+def _axis_name(up) -> str:
+    """``+y`` for (0, 1, 0), else the vector rounded to 3 decimals."""
+    for name, vector in _AXES.items():
+        if np.allclose(up, vector, atol=1e-9):
+            return name
+    return ",".join(f"{v:.3g}" for v in up)
 
 
 @click.command()
@@ -37,19 +103,42 @@ def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0):
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None, help="PNG to write (default: beside SOURCE).")
 @click.option("--view", default=0, show_default=True, help="Camera index of a workload with several views.")
 @click.option("--size", default="640x480", show_default=True, help="WxH of the framing camera used for a PLY.")
+@click.option("--up", "up", default=None, metavar="AXIS|X,Y,Z",
+              help="World up of a PLY (+y, -y, +z, -z, +x, -x or X,Y,Z). Default: the up the PLY records "
+                   "(splatbench train writes it: +y for the Mitsuba scenes), else -y (COLMAP's y-down world).")
+@click.option("--elevation", type=click.FloatRange(-89, 89), default=None, metavar="DEG",
+              help="Degrees above the horizontal the framing camera looks down from. Default: "
+                   f"{KNOWN_UP_ELEVATION:g} when the up is known (recorded or --up), else 0.")
+@click.option("--camera", "camera_spec", default=None, metavar="DATASET[:VIEW]",
+              help="Render a PLY from test view VIEW (default 0) of a dataset folder, at its size, instead of "
+                   "the framing camera (--size, --up and --elevation then do not apply).")
+@click.option("--background", "background", default=None, metavar="R,G,B",
+              help="RGB in [0, 1] behind the splats. Default: the background the PLY records "
+                   "(the one it was trained on), else black.")
 @click.option("--sh-degree", type=int, default=None, help="SH bands to evaluate (default: all).")
 @click.option("--option", "options", multiple=True, help="Rasterizer option key=value (repeatable), e.g. tile_size=8.")
-def render(source: Path, out: Path | None, view: int, size: str, sh_degree: int | None, options: tuple[str, ...]) -> None:
-    """Render SOURCE (a 3DGS .ply or a workload .npz) to a PNG and print its path."""
+def render(source: Path, out: Path | None, view: int, size: str, up: str | None, elevation: float | None,
+           camera_spec: str | None, background: str | None, sh_degree: int | None, options: tuple[str, ...]) -> None:
+    """Render SOURCE (a 3DGS .ply or a workload .npz) to a PNG and print its path.
+
+    A PLY is framed by a camera looking at the middle of its Gaussians, with the world's
+    up (--up, or the one the PLY records) up in the image."""
     import splatbench
     from splatbench.images import save_png
+    from splatbench.ply import read_view_hints
     from splatbench.workloads import load_npz
 
     if sh_degree is not None:
         check_sh_degree("--sh-degree", sh_degree)
+    if camera_spec is not None and (up is not None or elevation is not None):
+        raise InputError(f"{'--up' if up is not None else '--elevation'}: does not apply with --camera "
+                         "(the dataset's camera is placed already); leave it out")
+    up_vector = parse_up(up) if up is not None else None
+    rgb = parse_background(background) if background is not None else None
     out = out or source.with_suffix(".png")
     if out.is_dir():
         raise InputError(f"--out: {str(out)!r} is a folder; give the path of the PNG to write")
+    notes: list[str] = []
     if source.suffix == ".ply":
         try:
             width, height = (int(v) for v in size.lower().split("x"))
@@ -59,12 +148,41 @@ def render(source: Path, out: Path | None, view: int, size: str, sh_degree: int 
         gaussians = splatbench.Gaussians.from_ply(source)
         if len(gaussians) == 0:
             raise InputError(f"source: {str(source)!r} holds 0 Gaussians (an empty vertex element); nothing to render")
-        camera = framing_camera(gaussians, width, height)
+        hints = read_view_hints(source)
+        if rgb is None and hints.background is not None:
+            rgb = hints.background
+            notes.append(f"background {[round(c, 4) for c in rgb]} (recorded in the PLY)")
+        if camera_spec is not None:
+            camera = dataset_camera(camera_spec)
+        else:
+            camera, note = _framing(gaussians, width, height, up_vector, hints.up, elevation)
+            notes = [note, *notes] if note else notes
     elif source.suffix == ".npz":
+        given = [o for o, v in (("--up", up), ("--elevation", elevation), ("--camera", camera_spec)) if v is not None]
+        if given:
+            raise InputError(f"{given[0]}: only for a .ply (a workload .npz brings its own camera); leave it out")
         workload = load_npz(source, view=view)
         gaussians, camera = workload.gaussians, workload.camera
     else:
         raise InputError(f"source: expected a .ply or .npz file, got {str(source)!r}")
-    result = splatbench.render(gaussians, camera, sh_degree=sh_degree, **parse_overrides(options, "--option"))
+    result = splatbench.render(gaussians, camera, sh_degree=sh_degree, background=rgb or (0.0, 0.0, 0.0),
+                               **parse_overrides(options, "--option"))
     path = save_png(result.rgb, out)
+    for note in notes:
+        click.echo(f"note: {note}", err=True)
     click.echo(f"rendered {len(gaussians)} Gaussians at {camera.width}x{camera.height}: {path.resolve()}")
+
+
+def _framing(gaussians, width: int, height: int, up, recorded_up, elevation: float | None):
+    """The framing camera for ``--up`` (``up``), else the PLY's ``recorded_up``, else
+    `DEFAULT_UP` (level: the up is a guess), and a note saying where the up came from."""
+    if up is not None:
+        note = ""
+    elif recorded_up is not None:
+        up, note = recorded_up, f"up {_axis_name(recorded_up)} (recorded in the PLY)"
+    else:
+        up, note = DEFAULT_UP, (f"up {_axis_name(DEFAULT_UP)} (COLMAP's y-down world; the PLY records none: "
+                                f"pass --up +y if the picture is upside down)")
+        elevation = 0.0 if elevation is None else elevation
+    elevation = KNOWN_UP_ELEVATION if elevation is None else elevation
+    return framing_camera(gaussians, width, height, up=up, elevation_deg=elevation), note

@@ -170,9 +170,9 @@ def datasets_dir() -> Path:
 
 def dataset_folder(scene: str, data: dict[str, Any]) -> Path:
     """Where the dataset of ``scene`` rendered with ``data`` (a resolved ``data`` table) lives."""
-    name = f"{scene}-{data['resolution']}-v{data['views']}-s{data['spp']}"
-    test_spp = data.get("test_spp")
-    return datasets_dir() / (name if test_spp in (None, data["spp"]) else f"{name}-t{test_spp}")
+    from splatbench.scenes.folders import dataset_name
+
+    return datasets_dir() / dataset_name(scene, data["resolution"], data["views"], data["spp"], data.get("test_spp"))
 
 
 def ensure_dataset(scene: str, data: dict[str, Any], *, progress: bool = False):

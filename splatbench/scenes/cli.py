@@ -46,7 +46,8 @@ def list_(scenes_dirs: tuple[Path, ...]) -> None:
               help="Samples per pixel of the test views (cleaner evaluation targets: their Monte Carlo noise is "
                    "a floor under every model's test PSNR). Default: --spp.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
-              help="Dataset folder. Default: data/scenes/<NAME>-<W> in the current folder.")
+              help="Dataset folder. Default, in the current folder: data/scenes/<NAME>-<W> at the rig's views and "
+                   "spp, else data/scenes/<NAME>-<W>-v<VIEWS>-s<SPP>[-t<TEST_SPP>] (as experiments name them).")
 @click.option("--force", is_flag=True, help="Render even when the cached dataset matches.")
 @_SCENES_DIR
 def render(name: str, resolution: str | None, views: int | None, spp: int | None, test_spp: int | None,
@@ -64,5 +65,7 @@ def render(name: str, resolution: str | None, views: int | None, spp: int | None
     if result.cached:
         click.echo(f"cached: {result.path}")
         return
+    if result.replaced:
+        click.echo(result.replaced)
     click.echo(f"dataset: {result.path} ({result.train} train + {result.test} test views, "
                f"rendered in {result.seconds:.1f} s)")

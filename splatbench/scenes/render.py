@@ -40,8 +40,9 @@ Decisions:
 Example::
 
     from splatbench.scenes import render_dataset
-    result = render_dataset("diffuse", resolution=64, views=8, spp=16)
-    result.path, result.cached        # Path('data/scenes/diffuse-64'), False
+    result = render_dataset("diffuse", resolution=64)
+    result.path, result.cached        # Path('data/scenes/diffuse-64'), False (the rig's views and spp)
+    render_dataset("diffuse", resolution=64, views=8, spp=16).path   # Path('data/scenes/diffuse-64-v8-s16')
     render_dataset("glossy", resolution=128, views=64, spp=64, test_spp=2048)  # cleaner test targets
 """
 
@@ -66,6 +67,7 @@ from splatbench.errors import InputError
 from splatbench.fsutil import replace_dir
 from splatbench.mitsuba_loader import MITSUBA_VARIANT, mitsuba
 from splatbench.scenes.catalog import SceneSpec, get_scene, parse_resolution
+from splatbench.scenes.folders import default_out, describe_replaced
 from splatbench.versions import package_version
 
 #: Bump when the renderer's output changes for the same inputs (invalidates caches).
@@ -238,12 +240,6 @@ def plan_render(scene: SceneSpec | str | Path, *, resolution: Any = None, views:
                       None if test_spp == train_spp else test_spp)
 
 
-def default_out(plan: RenderPlan) -> Path:
-    """``data/scenes/<name>-<W>`` (or ``-<W>x<H>`` when not square), relative to the current folder."""
-    w, h = plan.resolution
-    return Path("data") / "scenes" / f"{plan.scene.name}-{w if w == h else f'{w}x{h}'}"
-
-
 @dataclass(frozen=True)
 class RenderedDataset:
     """Outcome of `render_dataset`."""
@@ -254,6 +250,7 @@ class RenderedDataset:
     train: int        # number of training views
     test: int         # number of test views
     hash: str         # the content hash in manifest.json
+    replaced: str = ""  # one line saying what an overwritten dataset held (`describe_replaced`); "" if none
 
 
 def read_manifest(folder: str | Path) -> dict | None:
@@ -271,8 +268,10 @@ def render_dataset(scene: SceneSpec | str | Path, out: str | Path | None = None,
                    extra_dirs: Iterable[str | Path] = ()) -> RenderedDataset:
     """Render ``scene`` into the dataset folder ``out`` unless it already holds the same render.
 
-    ``out`` defaults to `default_out` (``data/scenes/<name>-<W>``). A folder that exists
-    but holds no ``manifest.json`` (and is not empty) is never replaced: `InputError`.
+    ``out`` defaults to `default_out` (``data/scenes/<name>-<W>`` at the rig's views and
+    spp, else a name with them: ``<name>-<W>-v<views>-s<spp>[-t<test_spp>]``). A folder that
+    exists but holds no ``manifest.json`` (and is not empty) is never replaced: `InputError`;
+    one that holds another dataset is, and ``replaced`` says what it held.
     ``force`` renders even when the cache matches. ``progress`` shows a bar over views.
     ``spp`` / ``test_spp``: samples per pixel of the training / test views (`plan_render`).
     """
@@ -287,6 +286,7 @@ def render_dataset(scene: SceneSpec | str | Path, out: str | Path | None = None,
     if out.exists() and (not out.is_dir() or (existing is None and any(out.iterdir()))):
         raise InputError(f"--out: {str(out)!r} exists and is not a splatbench dataset (no {MANIFEST}); "
                          f"refusing to replace it")
+    replaced = "" if existing is None else describe_replaced(out, existing, {**plan.inputs(), "hash": digest})
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
     try:
@@ -302,7 +302,7 @@ def render_dataset(scene: SceneSpec | str | Path, out: str | Path | None = None,
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
-    return RenderedDataset(out, False, seconds, n_train, n_test, digest)
+    return RenderedDataset(out, False, seconds, n_train, n_test, digest, replaced)
 
 
 # ----------------------------------------------------------------------- internals

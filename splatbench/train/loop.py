@@ -36,7 +36,9 @@ import torch
 
 from splatbench.errors import InputError
 from splatbench.interrupt import Interrupted, deferred
+from splatbench.ply import ViewHints
 from splatbench.raster.torch_bridge import rasterize
+from splatbench.scenes.orientation import dataset_up
 from splatbench.strategies.base import StepContext
 from splatbench.train.config import TrainConfig, save_config
 from splatbench.train.initializers import InitSettings, initialize
@@ -153,6 +155,8 @@ class Trainer:
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
         self.gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
         self.background, self.background_note = resolve_background(config.background, train)
+        # recorded in the saved PLY for `splatbench render`; None for a dataset with no declared up
+        self.world_up = dataset_up(dataset.root, train.cameras)
         self.generator = torch.Generator().manual_seed(config.seed)
         self._order: list[int] = []
         k = config.sh_auto_holdout_every if self.sh.auto else 0
@@ -176,10 +180,12 @@ class Trainer:
         return gaussians_from_params(self.params, self.sh.degree)
 
     def save_ply(self, path: str | Path) -> Path:
-        """Write the current model as a graphdeco 3DGS PLY (atomically: temp file + rename)."""
+        """Write the current model as a graphdeco 3DGS PLY (atomically: temp file + rename),
+        with the dataset's up (when declared) and the background in its header comments."""
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
-        self.gaussians().to_ply(p)
+        up = None if self.world_up is None else tuple(self.world_up.tolist())
+        self.gaussians().to_ply(p, ViewHints(up=up, background=tuple(self.background.tolist())))
         return p
 
     def _sh(self, degree: int) -> torch.Tensor:
