@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from click.testing import CliRunner
 from PIL import Image
@@ -52,6 +53,50 @@ def test_report_of_a_finished_dummy_grid(tmp_path):
     assert lines == ["sweep: 4 done, 0 failed, 0 not run of 4", str(tmp_path / "report" / "report.md")]
     text = (tmp_path / "report" / "report.md").read_text()
     assert "sweep" in text and (tmp_path / "report" / "results.parquet").is_file()
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_report_never_replaces_a_report_with_fewer_finished_runs(tmp_path):
+    """No finished run: one line, exit 2, nothing written. A results folder with fewer finished
+    runs than the report folder's results.parquet: refused the same way, naming --force, the
+    folder byte-identical; --force replaces it."""
+    exp = tmp_path / "sweep.toml"
+    exp.write_text('name = "sweep"\nkind = "dummy"\nscenes = ["alpha"]\nseeds = [0, 1]\n[axes]\nx = [0.0, 2.0]\n')
+    results, report = tmp_path / "results", tmp_path / "report"
+    code, out = invoke("report", exp, "--results", results, "--out", report)
+    assert code == 2 and out.strip() == (f"splatbench: error: sweep: no finished run of the 4 in {results / 'sweep'}; "
+                                         f"run `splatbench run {exp}` first")
+    assert not report.exists()
+
+    assert invoke("run", exp, "--results", results, "--workers", "1", "--no-progress")[0] == 0
+    assert invoke("report", exp, "--results", results, "--out", report)[0] == 0
+    before = _snapshot(report)
+    assert {"report.md", "results.parquet"} <= set(before)
+
+    runs = sorted((results / "sweep").glob("*.json"))
+    assert len(runs) == 4
+    for path in runs[1:]:
+        path.unlink()
+    code, out = invoke("report", exp, "--results", results, "--out", report)
+    assert code == 2 and out.strip() == (
+        f"splatbench: error: {report / 'results.parquet'}: holds 4 finished runs, the report from "
+        f"{results / 'sweep'} would hold 1; run the rest with `splatbench run {exp}`, or pass --force to replace it")
+    assert _snapshot(report) == before
+    runs[0].unlink()
+    code, out = invoke("report", exp, "--results", results, "--out", report, "--force")
+    assert code == 2 and "no finished run of the 4" in out  # --force never writes an empty report
+    assert _snapshot(report) == before
+
+    assert invoke("run", exp, "--results", results, "--workers", "1", "--no-progress")[0] == 0
+    runs[-1].unlink()
+    code, out = invoke("report", exp, "--results", results, "--out", report, "--force")
+    assert code == 0, out
+    assert out.strip().splitlines()[0] == "sweep: 3 done, 0 failed, 1 not run of 4"
+    assert _snapshot(report)["results.parquet"] != before["results.parquet"]
+    assert len(pd.read_parquet(report / "results.parquet")) == 3
 
 
 def test_bench_train_writes_one_row_per_size(tmp_path):

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from splatbench.errors import InputError
 from splatbench.experiments.grid import expand
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.experiments.store import TABLE_NAME, atomic_write, build_table, experiment_dir, read_records
@@ -105,6 +106,21 @@ def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int) -> 
         if f is not None:
             findings[name] = f
     return Report(spec, table, total, metrics, axes, findings)
+
+
+def reported_done(out: str | Path) -> int | None:
+    """Runs with status ``done`` in the report folder ``out``'s ``results.parquet``; None
+    when ``out`` holds no report table (what `splatbench report` compares before it
+    replaces a report, so that a partial results folder cannot shrink a baseline)."""
+    path = Path(out) / TABLE_NAME
+    if not path.is_file():
+        return None
+    try:
+        status = pd.read_parquet(path, columns=["status"]).status
+    except Exception as exc:  # noqa: BLE001 - any unreadable table is one line, not a traceback
+        raise InputError(f"{path}: cannot be read as a report table ({type(exc).__name__}); "
+                         f"pass --force to replace the report") from None
+    return int((status == "done").sum())
 
 
 def write_report(report: Report, out: str | Path) -> Path:
@@ -249,5 +265,5 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in text)
 
 
-__all__ = ["Report", "build_report", "write_report", "grid_table", "render_markdown", "run_time", "duration",
+__all__ = ["Report", "build_report", "write_report", "reported_done", "grid_table", "render_markdown", "run_time", "duration",
            "REPORT_NAME", "FIGURES"]
