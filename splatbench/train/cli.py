@@ -15,13 +15,17 @@ import click
               help="Override a config field (repeatable), e.g. --set iterations=2000 --set sh_degree=auto "
                    "--set strategy_options.cap_max=50000.")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None,
-              help="Output folder (default: the config's `out`, runs/train).")
+              help="Output folder (default: the config's `out`, runs/train). One holding another run is refused "
+                   "unless --resume continues one of its checkpoints or --force replaces it.")
+@click.option("--force", is_flag=True,
+              help="Train into an --out folder that holds an earlier run: its result.json, config.toml, "
+                   "point_cloud.ply/.png and checkpoints are removed first (nothing else).")
 @click.option("--resume", type=click.Path(path_type=Path), default=None,
               help="Continue exactly from a checkpoint (checkpoints/iteration_<step>.pt) of a run with this config.")
 @click.option("--json", "as_json", is_flag=True, help="Print the TrainResult as one JSON line at the end.")
 @click.option("--quiet", is_flag=True, help="No progress bar (for sweeps).")
 def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], out: Path | None,
-          resume: Path | None, as_json: bool, quiet: bool) -> None:
+          resume: Path | None, force: bool, as_json: bool, quiet: bool) -> None:
     """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender folder).
 
     Prints the test PSNR / SSIM, Gaussian count, SH degree and the PLY path; writes
@@ -30,6 +34,10 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     ``SfM: running pycolmap on N training views (cached in DIR)`` or ``SfM: reusing DIR``
     before SfM starts and its result as it ends. These lines go to stderr as they happen,
     unless --quiet, and are always among the result's notes (so in --json and result.json).
+
+    An output folder that already holds a run (result.json, point_cloud.ply or
+    checkpoints/) is refused in one line, exit 2, untouched, unless --resume names one of
+    its own checkpoints or --force is given (splatbench.train.out_folder).
     """
     from splatbench.train.config import TrainConfig, apply_overrides, load_config
 
@@ -39,6 +47,11 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
 
     from splatbench.train.checkpoint import resume_line
     from splatbench.train.loop import train as run
+    from splatbench.train.out_folder import claim_out
+
+    removed = claim_out(config.out, resume=resume, force=force)
+    if removed and not quiet:
+        click.echo(f"--force: removed {len(removed)} file(s) of the earlier run in {config.out}", err=True)
 
     bar = None
     shown: set[str] = set()  # notes already printed as they happened (SfM, the resume line)
