@@ -68,7 +68,7 @@ def test_report_never_replaces_a_report_with_fewer_finished_runs(tmp_path):
     results, report = tmp_path / "results", tmp_path / "report"
     code, out = invoke("report", exp, "--results", results, "--out", report)
     assert code == 2 and out.strip() == (f"splatbench: error: sweep: no finished run of the 4 in {results / 'sweep'}; "
-                                         f"run `splatbench run {exp}` first")
+                                         f"run `splatbench run {exp} --results {results}` first")
     assert not report.exists()
 
     assert invoke("run", exp, "--results", results, "--workers", "1", "--no-progress")[0] == 0
@@ -83,7 +83,7 @@ def test_report_never_replaces_a_report_with_fewer_finished_runs(tmp_path):
     code, out = invoke("report", exp, "--results", results, "--out", report)
     assert code == 2 and out.strip() == (
         f"splatbench: error: {report / 'results.parquet'}: holds 4 finished runs, the report from "
-        f"{results / 'sweep'} would hold 1; run the rest with `splatbench run {exp}`, or pass --force to replace it")
+        f"{results / 'sweep'} would hold 1; run the rest with `splatbench run {exp} --results {results}`, or pass --force to replace it")
     assert _snapshot(report) == before
     runs[0].unlink()
     code, out = invoke("report", exp, "--results", results, "--out", report, "--force")

@@ -31,6 +31,7 @@ def report(experiment: Path, results: Path | None, out: Path | None, force: bool
     from splatbench.reports.report import build_report, reported_done, write_report
 
     spec = load_experiment(experiment)
+    rerun = f"splatbench run {experiment}" + (f" --results {results}" if results is not None else "")
     results = results or spec.runner.results or Path("results")
     out = out or Path("reports") / spec.name
     rep = build_report(spec, results)
@@ -38,11 +39,11 @@ def report(experiment: Path, results: Path | None, out: Path | None, force: bool
     if not rep.done:
         failed = f" ({rep.failed} failed)" if rep.failed else ""
         raise InputError(f"{spec.name}: no finished run of the {rep.total} in {folder}{failed}; "
-                         f"run `splatbench run {experiment}` first")
+                         f"run `{rerun}` first")
     before = None if force else reported_done(out)
     if before is not None and before > rep.done:
         raise InputError(f"{out / TABLE_NAME}: holds {before} finished runs, the report from {folder} would "
-                         f"hold {rep.done}; run the rest with `splatbench run {experiment}`, or pass --force "
+                         f"hold {rep.done}; run the rest with `{rerun}`, or pass --force "
                          f"to replace it")
     path = write_report(rep, out)
     click.echo(f"{spec.name}: {rep.done} done, {rep.failed} failed, {rep.total - len(rep.table)} not run "
