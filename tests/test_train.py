@@ -398,6 +398,8 @@ def test_greedy_auto_sh_keeps_bands_that_gain_and_drops_the_first_that_does_not(
     assert degrees[30:] == [1] * 10                     # band 2 dropped at step 30, settled
     assert [(d.degree, d.baseline, d.kept) for d in sched.decisions] == [(1, 0, True), (2, 1, False)]
     assert "degree 2 gained 0.010 dB over degree 1 (< 0.1 dB" in sched.reason
+    # the trial length is named as a trial (degree 2 trained steps 20..29), not as the run's length
+    assert "after a 10-step trial of degree 2;" in sched.reason and "after 10 steps" not in sched.reason
     assert sched.finish(40, probe) == 1
     ended = ShSchedule("auto", 10)
     [ended.update(s, probe) for s in range(5)]
