@@ -540,6 +540,18 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     assert again.exit_code == 0, again.output
     assert (tmp_path / "r" / "point_cloud.ply").read_bytes() == (tmp_path / "c" / "point_cloud.ply").read_bytes()
     assert json.loads(again.stdout)["notes"][0] == f"resumed from {checkpoint} at step 2 of 3"
+    ply = checkpoint.with_suffix(".ply")   # the model beside it, given by mistake: pointed to the .pt
+    wrong = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                 "--resume", str(ply), "--quiet", "--out", str(tmp_path / "w")])
+    assert wrong.exit_code == 2 and wrong.stderr.strip() == (
+        f"splatbench: error: resume: {str(ply)!r} is not a readable checkpoint (UnpicklingError); "
+        f"the checkpoint is the .pt file beside it: --resume {checkpoint}"), wrong.stderr
+    (tmp_path / "junk.pt").write_bytes(b"not a pickle")   # no .pt beside it: where checkpoints live
+    junk = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                "--resume", str(tmp_path / "junk.pt"), "--quiet", "--out", str(tmp_path / "j")])
+    assert junk.exit_code == 2 and len(junk.stderr.strip().splitlines()) == 1, junk.stderr
+    assert junk.stderr.strip().endswith("; checkpoints are the checkpoints/iteration_<step>.pt files "
+                                        "of a run's output folder"), junk.stderr
     gone = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                 "--resume", str(tmp_path / "none.pt"), "--quiet", "--out", str(tmp_path / "g")])
     assert gone.exit_code == 2 and gone.stderr.strip() == \
