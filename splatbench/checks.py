@@ -123,6 +123,18 @@ def image_size_problem(width: int, height: int, *, memory: bool = True) -> str |
     return None
 
 
+def parse_size(text: str, flag: str) -> tuple[int, int]:
+    """``"WxH"`` -> (W, H), both >= 1; a one-line `InputError` naming ``flag`` otherwise."""
+    parts = text.lower().split("x")
+    try:
+        width, height = (int(p) for p in parts)
+    except ValueError:
+        raise InputError(f"{flag}: expected WxH, got {text!r}") from None
+    if width < 1 or height < 1:
+        raise InputError(f"{flag}: expected WxH with W, H >= 1, got {text!r}")
+    return width, height
+
+
 def check_image_size(width: int, height: int, *, field: str = "size", memory: bool = True) -> None:
     """Raise a one-line `InputError` naming ``field`` when `image_size_problem` finds one."""
     problem = image_size_problem(width, height, memory=memory)

@@ -115,6 +115,9 @@ def test_framing_camera_looks_down_by_the_elevation_with_up_up(up):
     (["--background", "0.5,0.5"], "--background: expected R,G,B, 3 numbers in [0, 1], got '0.5,0.5'"),
     (["--background", "0,2,0"], "--background: expected R,G,B"),
     (["--elevation", "90"], "Invalid value for '--elevation': 90.0 is not in the range -89<=x<=89"),
+    (["--size", "0x0"], "--size: expected WxH with W, H >= 1, got '0x0'"),   # not the camera's 'width: ...'
+    (["--size", "64x-1"], "--size: expected WxH with W, H >= 1, got '64x-1'"),
+    (["--size", "64"], "--size: expected WxH, got '64'"),
 ])
 def test_bad_up_or_background_is_one_line(tmp_path, args, message):
     bright_above().to_ply(tmp_path / "m.ply")
@@ -140,8 +143,11 @@ def test_camera_option_renders_from_a_datasets_test_view(tmp_path):
     assert image.shape == (16, 16, 3) and "note: up" not in out
     lum = image.sum(axis=2)
     assert lum[7:9, 7:9].min() == lum.max() > 600  # the 2x2 pixels around the centre (cx = cy = 8)
-    code, out, _ = run(tmp_path / "m.ply", "--camera", f"{folder}:2")
-    assert code == 2 and out.strip() == (f"splatbench: error: --camera: {str(folder)!r} has 2 test views; "
-                                         "give DATASET:VIEW with VIEW in 0..1")
+    for view in ("2", "x", "-1", ""):   # out of range, not a number, negative, empty: VIEW named, not DATASET
+        code, out, _ = run(tmp_path / "m.ply", "--camera", f"{folder}:{view}")
+        assert code == 2 and out.strip() == (f"splatbench: error: --camera: view {view!r} is not a view index "
+                                             f"(0..1) of {folder}; give DATASET:VIEW"), out
+    code, out, _ = run(tmp_path / "m.ply", "--camera", f"{tmp_path / 'none'}:1")   # a missing folder is the dataset's
+    assert code == 2 and out.startswith(f"splatbench: error: dataset: {str(tmp_path / 'none')!r} is not a dataset")
     code, out, _ = run(tmp_path / "m.ply", "--camera", str(folder), "--up", "+y")
     assert code == 2 and "--up: does not apply with --camera" in out

@@ -23,7 +23,7 @@ from splatbench import Gaussians
 REPO = Path(__file__).resolve().parents[1]
 SPLATBENCH = [sys.executable, "-c", "from splatbench.cli import main; main(prog_name='splatbench')"]
 KEPT = re.compile(r"^splatbench: interrupted by (SIGTERM|SIGINT); kept the last checkpoint (\S+) "
-                  r"\(the model after step (\d+) of 5000; resume with --resume (\S+)\)$")
+                  r"\(the model after (\d+) of 5000 steps; resume with --resume (\S+)\)$")
 #: Seconds from the signal to the exit: the step in progress finishes (well under a
 #: second at 32 px), the checkpoint is written; the CLI then skips interpreter teardown.
 EXIT_WITHIN = 10.0

@@ -398,6 +398,8 @@ def test_greedy_auto_sh_keeps_bands_that_gain_and_drops_the_first_that_does_not(
     assert degrees[30:] == [1] * 10                     # band 2 dropped at step 30, settled
     assert [(d.degree, d.baseline, d.kept) for d in sched.decisions] == [(1, 0, True), (2, 1, False)]
     assert "degree 2 gained 0.010 dB over degree 1 (< 0.1 dB" in sched.reason
+    # the trial length is named as a trial (degree 2 trained steps 20..29), not as the run's length
+    assert "after a 10-step trial of degree 2;" in sched.reason and "after 10 steps" not in sched.reason
     assert sched.finish(40, probe) == 1
     ended = ShSchedule("auto", 10)
     [ended.update(s, probe) for s in range(5)]
@@ -538,6 +540,18 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     assert again.exit_code == 0, again.output
     assert (tmp_path / "r" / "point_cloud.ply").read_bytes() == (tmp_path / "c" / "point_cloud.ply").read_bytes()
     assert json.loads(again.stdout)["notes"][0] == f"resumed from {checkpoint} at step 2 of 3"
+    ply = checkpoint.with_suffix(".ply")   # the model beside it, given by mistake: pointed to the .pt
+    wrong = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                 "--resume", str(ply), "--quiet", "--out", str(tmp_path / "w")])
+    assert wrong.exit_code == 2 and wrong.stderr.strip() == (
+        f"splatbench: error: resume: {str(ply)!r} is not a readable checkpoint (UnpicklingError); "
+        f"the checkpoint is the .pt file beside it: --resume {checkpoint}"), wrong.stderr
+    (tmp_path / "junk.pt").write_bytes(b"not a pickle")   # no .pt beside it: where checkpoints live
+    junk = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
+                                "--resume", str(tmp_path / "junk.pt"), "--quiet", "--out", str(tmp_path / "j")])
+    assert junk.exit_code == 2 and len(junk.stderr.strip().splitlines()) == 1, junk.stderr
+    assert junk.stderr.strip().endswith("; checkpoints are the checkpoints/iteration_<step>.pt files "
+                                        "of a run's output folder"), junk.stderr
     gone = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                 "--resume", str(tmp_path / "none.pt"), "--quiet", "--out", str(tmp_path / "g")])
     assert gone.exit_code == 2 and gone.stderr.strip() == \
@@ -551,8 +565,8 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     assert shown.stderr.startswith(line + "\n") and shown.stderr.count("resumed from") == 1
     assert "3/3" in shown.stderr and "1/3" not in shown.stderr and "resumed from" not in shown.stdout
     # the summary says what its time covers: the checkpoint's steps, timed by the run that wrote it
-    assert re.search(r"^3 iterations \(steps 0\.\.1 timed before the checkpoint, 2\.\.2 in this resumed run\) "
-                     r"in \d+\.\d s ", shown.stdout, re.M), shown.stdout
+    assert re.search(r"^3 iterations \(2 before the checkpoint, 1 in this resumed run\) "
+                     r"in \d+\.\d s in all \(", shown.stdout, re.M), shown.stdout
     fresh = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                  "--quiet", "--out", str(tmp_path / "f")])
     assert fresh.exit_code == 0 and re.search(r"^3 iterations in \d+\.\d s ", fresh.stdout, re.M), fresh.output

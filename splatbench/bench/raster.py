@@ -35,6 +35,7 @@ from splatbench.bench.machine import MachineInfo, resolve_device
 from splatbench.bench.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
 from splatbench.bench.timing import (StageSplit, forward_backward_with_init, forward_with_init, milliseconds,
                                      staged_runs, time_runs, torch_params)
+from splatbench.checks import parse_size
 from splatbench.errors import InputError, SplatbenchError
 
 
@@ -103,18 +104,6 @@ class WorkloadSpec:
         if self.kind != "synthetic":
             return None
         return TARGETS.get((self.n, self.width, self.height))
-
-
-def parse_size(text: str, flag: str) -> tuple[int, int]:
-    """``"WxH"`` -> (W, H), both >= 1."""
-    parts = text.lower().split("x")
-    try:
-        width, height = (int(p) for p in parts)
-    except ValueError:
-        raise InputError(f"{flag}: expected WxH, got {text!r}") from None
-    if width < 1 or height < 1:
-        raise InputError(f"{flag}: expected WxH with W, H >= 1, got {text!r}")
-    return width, height
 
 
 def parse_synthetic(count: str, size: str, seed: int = 0) -> WorkloadSpec:

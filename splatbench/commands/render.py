@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from splatbench.checks import check_image_size, check_sh_degree
+from splatbench.checks import check_image_size, check_sh_degree, parse_size
 from splatbench.errors import InputError
 from splatbench.overrides import parse_overrides
 
@@ -81,12 +81,14 @@ def dataset_camera(spec: str):
     from splatbench.data import load_dataset
 
     folder, sep, view = spec.rpartition(":")
-    if not (sep and view.isdigit()):
+    if not sep or not folder or Path(spec).is_dir():   # no VIEW (or a folder whose name holds ':')
         folder, view = spec, "0"
     test = load_dataset(folder).test
-    if not int(view) < len(test):
-        raise InputError(f"--camera: {folder!r} has {len(test)} test views; give DATASET:VIEW with VIEW in "
-                         f"0..{len(test) - 1}" if len(test) else f"--camera: {folder!r} has no test views")
+    if not len(test):
+        raise InputError(f"--camera: {folder} has no test views")
+    if not (view.isdigit() and int(view) < len(test)):
+        raise InputError(f"--camera: view {view!r} is not a view index (0..{len(test) - 1}) of {folder}; "
+                         f"give DATASET:VIEW")
     return test.cameras[int(view)]
 
 
@@ -140,10 +142,7 @@ def render(source: Path, out: Path | None, view: int, size: str, up: str | None,
         raise InputError(f"--out: {str(out)!r} is a folder; give the path of the PNG to write")
     notes: list[str] = []
     if source.suffix == ".ply":
-        try:
-            width, height = (int(v) for v in size.lower().split("x"))
-        except ValueError:
-            raise InputError(f"--size: expected WxH, got {size!r}") from None
+        width, height = parse_size(size, "--size")
         check_image_size(width, height, field="--size")
         gaussians = splatbench.Gaussians.from_ply(source)
         if len(gaussians) == 0:

@@ -84,7 +84,10 @@ def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
     except FileNotFoundError:
         raise InputError(f"resume: no such checkpoint {str(p)!r}") from None
     except Exception as exc:  # noqa: BLE001 - any unpickling failure is a bad file
-        raise InputError(f"resume: {str(p)!r} is not a readable checkpoint ({type(exc).__name__})") from None
+        pt = p.with_suffix(".pt")
+        hint = (f"; the checkpoint is the .pt file beside it: --resume {pt}" if p.suffix != ".pt" and pt.is_file()
+                else "; checkpoints are the checkpoints/iteration_<step>.pt files of a run's output folder")
+        raise InputError(f"resume: {str(p)!r} is not a readable checkpoint ({type(exc).__name__}){hint}") from None
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise InputError(f"resume: {str(p)!r} is not a {CHECKPOINT_FORMAT} checkpoint")
     saved, now = state["config"], trainer.config.to_dict()

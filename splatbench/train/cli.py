@@ -86,7 +86,8 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     click.echo(f"test PSNR {fmt(result.test_psnr, '.2f')} dB, SSIM {fmt(result.test_ssim, '.4f')}, "
                f"LPIPS {fmt(result.test_lpips, '.4f')} ({result.test_views} test views)")
     click.echo(f"{result.num_gaussians} Gaussians, SH degree {result.sh_degree} ({result.sh_degree_reason})")
-    click.echo(f"{result.iterations} iterations{_timed_steps(result)} in {result.train_seconds:.1f} s "
+    click.echo(f"{result.iterations} iterations{_timed_steps(result)} in {result.train_seconds:.1f} s"
+               f"{'' if result.resumed_step is None else ' in all'} "
                f"({result.iterations / max(result.train_seconds, 1e-9):.2f} it/s), render "
                f"{fmt(result.render_ms_per_view, '.1f')} ms/view, peak RSS {result.peak_rss_mb:.0f} MB")
     for note in (n for n in result.notes if n not in shown):
@@ -95,14 +96,13 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
 
 
 def _timed_steps(result) -> str:
-    """What ``train_seconds`` covers when it is more than this run: a resumed run's loop time
-    includes the checkpoint's steps, timed by the run that wrote it."""
+    """What ``train_seconds`` covers when it is more than this run, in counts: a resumed run's
+    loop time includes the checkpoint's steps, timed by the run that wrote it
+    (`` (297 before the checkpoint, 303 in this resumed run)``)."""
     k, n = result.resumed_step, result.iterations
     if k is None:
         return ""
-    before = f"steps 0..{k - 1} timed before the checkpoint" if k else "no steps before the checkpoint"
-    after = f"{k}..{n - 1} in this resumed run" if k < n else "none in this resumed run"
-    return f" ({before}, {after})"
+    return f" ({k} before the checkpoint, {n - k} in this resumed run)"
 
 
 def _toml_str(text: str) -> str:

@@ -438,8 +438,8 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
             ply = trainer.save_ply(out / "point_cloud.ply")
     except Interrupted as exc:
         path = _save_checkpoint(trainer, out, state())
-        raise Interrupted(exc.signum, f"kept the last checkpoint {path} (the model after step "
-                                      f"{trainer.step_index} of {config.iterations}; resume with "
+        raise Interrupted(exc.signum, f"kept the last checkpoint {path} (the model after "
+                                      f"{trainer.step_index} of {config.iterations} steps; resume with "
                                       f"--resume {path.with_suffix('.pt')})") from None
     try:
         ev = trainer.evaluate(lpips_fn)

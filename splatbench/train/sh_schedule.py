@@ -138,7 +138,8 @@ class ShSchedule:
         what = (f"degree {degree} gained {m.gain_db:.3f} dB over degree {base} "
                 f"({'>=' if kept else '<'} {needed:.3g} dB = {self.min_gain_db} dB x {degree - base} "
                 f"band{'s' if degree - base > 1 else ''}) on {m.views} {where} "
-                f"(relative energy {m.energy_ratio:.3f}) after {step - self._last_raise} steps")
+                f"(relative energy {m.energy_ratio:.3f}) "
+                f"after a {step - self._last_raise}-step trial of degree {degree}")
         if kept:
             self.kept = degree
             if degree == self.max_degree or last:
