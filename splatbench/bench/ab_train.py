@@ -31,7 +31,7 @@ from pathlib import Path
 
 from splatbench.bench.ab import AbResult, Worker, old_tree, summarize
 from splatbench.bench.load import Load
-from splatbench.bench.train import STANDARD_SIZES
+from splatbench.bench.train import STANDARD_SIZES, check_train_settings
 from splatbench.errors import InputError
 
 TRAIN_WORKER = r"""
@@ -79,16 +79,10 @@ class AbTrainSettings:
     seed: int = 0                        # scene and training seed
 
     def __post_init__(self) -> None:
-        for name in ("gaussians", "views", "block", "threads"):
-            if getattr(self, name) < 1:
-                raise InputError(f"--{name}: expected a count >= 1, got {getattr(self, name)}")
         if self.pairs < 5:
             raise InputError(f"--pairs: expected >= 5 timed blocks per side, got {self.pairs}")
-        if self.warmup < 0:
-            raise InputError(f"--warmup: expected a count >= 0, got {self.warmup}")
-        for s in self.sizes:
-            if s < 16:
-                raise InputError(f"--size: expected a side >= 16 pixels (the 11-tap SSIM window), got {s}")
+        check_train_settings(self, ("gaussians", "views", "block", "threads"), min_size=16,
+                             size_reason=" (the 11-tap SSIM window)")
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,20 @@ from splatbench.errors import InputError
 STANDARD_SIZES = (128, 256)
 
 
+def check_train_settings(settings, counts: tuple[str, ...], *, min_size: int, size_reason: str = "") -> None:
+    """The one-line checks of a training benchmark's settings (`TrainBenchSettings`, and
+    ``bench ab-train``'s `AbTrainSettings`): each field in ``counts`` >= 1, ``warmup`` >= 0,
+    each of ``sizes`` >= ``min_size`` pixels (``size_reason``: why, for the message)."""
+    for name in counts:
+        if getattr(settings, name) < 1:
+            raise InputError(f"--{name}: expected a count >= 1, got {getattr(settings, name)}")
+    if settings.warmup < 0:
+        raise InputError(f"--warmup: expected a count >= 0, got {settings.warmup}")
+    for s in settings.sizes:
+        if s < min_size:
+            raise InputError(f"--size: expected a side >= {min_size} pixels{size_reason}, got {s}")
+
+
 @dataclass(frozen=True)
 class TrainBenchSettings:
     """How each size is benchmarked."""
@@ -48,14 +62,7 @@ class TrainBenchSettings:
     torch_threads: int = 1                  # torch intra-op threads (as `TrainConfig.torch_threads`)
 
     def validate(self) -> None:
-        for name in ("gaussians", "views", "iterations"):
-            if getattr(self, name) < 1:
-                raise InputError(f"--{name}: expected a count >= 1, got {getattr(self, name)}")
-        if self.warmup < 0:
-            raise InputError(f"--warmup: expected a count >= 0, got {self.warmup}")
-        for s in self.sizes:
-            if s < 8:
-                raise InputError(f"--size: expected a side >= 8 pixels, got {s}")
+        check_train_settings(self, ("gaussians", "views", "iterations"), min_size=8)
 
 
 @dataclass
