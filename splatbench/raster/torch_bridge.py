@@ -84,14 +84,13 @@ def to_torch(x) -> torch.Tensor:
     return torch.from_dlpack(x)
 
 
-def _new_scope(device: str) -> None:
-    """Start a new Dr.Jit scope (basic block) on the backend of ``device``.
+def _new_scope(backend) -> None:
+    """Start a new Dr.Jit scope (basic block) on ``backend`` (a `Backend`).
 
     PyTorch runs the backward of CUDA tensors on its own per-device thread, so Dr.Jit
     variables made there and on the caller's thread meet in later calls; Dr.Jit needs a
     new scope at each such hand-over (`drjit.detail.new_scope`), as its own torch
     wrapper (`drjit.interop`) does at both ends of forward and backward."""
-    backend = get_backend(device)
     dr.detail.new_scope(dr.JitBackend.CUDA if backend.name == "cuda" else dr.JitBackend.LLVM)
 
 
@@ -100,7 +99,7 @@ class _Rasterize(torch.autograd.Function):
     def forward(ctx, means, log_scales, quats, opacity_logits, sh, camera, degree, background, options,
                 loop_ad, absgrad, timer, info_box):
         backend = get_backend(options.device)
-        _new_scope(options.device)
+        _new_scope(backend)
         m = backend.t
         params = (means, log_scales, quats, opacity_logits, sh)
         inputs = [to_drjit(backend, t) for t in params]
@@ -118,11 +117,11 @@ class _Rasterize(torch.autograd.Function):
         rgb = to_torch(frame.rgb).T.reshape(H, W, 3).contiguous().to(out)  # Array3f views as [3, H*W]
         alpha = to_torch(frame.alpha).reshape(H, W).to(out)
         depth = to_torch(frame.depth).reshape(H, W).to(out)
-        ctx.dr_inputs, ctx.frame, ctx.m, ctx.device = inputs, frame, m, options.device
+        ctx.dr_inputs, ctx.frame, ctx.m, ctx.backend = inputs, frame, m, backend
         ctx.saved_shapes = [tuple(t.shape) for t in (means, log_scales, quats, opacity_logits, sh)]
         ctx.saved_devices = [t.device for t in (means, log_scales, quats, opacity_logits, sh)]
         info_box.append(frame)
-        _new_scope(options.device)
+        _new_scope(backend)
         return rgb, alpha, depth
 
     @staticmethod
@@ -131,8 +130,8 @@ class _Rasterize(torch.autograd.Function):
         if not any(ctx.needs_input_grad[:5]):
             return (None,) * 13
         _ = ctx.saved_tensors  # raises if a parameter was changed in place since the forward pass
-        backend = get_backend(ctx.device)
-        _new_scope(ctx.device)  # this may be torch's autograd thread, not the forward's
+        backend = ctx.backend
+        _new_scope(backend)  # this may be torch's autograd thread, not the forward's
 
         def cotangent(v, shape):
             return to_drjit(backend, v.reshape(shape)).array
@@ -164,7 +163,7 @@ class _Rasterize(torch.autograd.Function):
                 continue
             grads.append(to_torch(dr.grad(x)).reshape(like).to(where))
         ctx.dr_inputs = None  # release the Dr.Jit graph
-        _new_scope(ctx.device)
+        _new_scope(backend)
         return (*grads, None, None, None, None, None, None, None, None)
 
 
