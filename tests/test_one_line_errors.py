@@ -20,7 +20,7 @@ from click.testing import CliRunner
 import splatbench
 from splatbench import Gaussians
 from splatbench.checks import DRJIT_MAX_ENTRIES, check_image_size, image_size_problem
-from splatbench.commands.render import framing_camera
+from splatbench.framing import framing_camera
 from splatbench.errors import InputError
 
 SWEEP = 'name = "sweep"\nkind = "dummy"\nscenes = ["alpha"]\nseeds = [0, 1]\n'

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from PIL import Image
 
 from splatbench.cli import main
-from splatbench.commands.render import framing_camera
+from splatbench.framing import framing_camera
 from splatbench.gaussians import SH_C0, Gaussians
 from splatbench.ply import ViewHints
 
@@ -151,3 +151,22 @@ def test_camera_option_renders_from_a_datasets_test_view(tmp_path):
     assert code == 2 and out.startswith(f"splatbench: error: dataset: {str(tmp_path / 'none')!r} is not a dataset")
     code, out, _ = run(tmp_path / "m.ply", "--camera", str(folder), "--up", "+y")
     assert code == 2 and "--up: does not apply with --camera" in out
+
+
+def test_framing_rig_circles_the_up_axis_at_one_elevation():
+    """Each rig camera looks at the same centre from the same distance and elevation; their
+    horizontal directions are evenly spaced (azimuth 360/n apart) about the up axis."""
+    from splatbench.framing import framing_rig
+    g = bright_above()
+    up = np.array([0.0, 0.0, 1.0])
+    rig = framing_rig(g, 4, W, H, up=up, elevation_deg=30.0)
+    eyes = np.array([np.linalg.inv(c.world_to_camera)[:3, 3] for c in rig])
+    axes = np.array([c.world_to_camera[2, :3] for c in rig])  # camera +z (viewing direction) in world
+    dist = np.linalg.norm(eyes - eyes.mean(0), axis=1)
+    assert np.allclose(dist, dist[0], rtol=1e-9)
+    elev = np.degrees(np.arcsin(-(axes @ up)))  # looking down by the elevation
+    assert np.allclose(elev, 30.0, atol=1e-6)
+    horiz = axes - (axes @ up)[:, None] * up
+    horiz /= np.linalg.norm(horiz, axis=1)[:, None]
+    cos = np.sum(horiz * np.roll(horiz, -1, axis=0), axis=1)
+    assert np.allclose(cos, 0.0, atol=1e-9)  # 90 degrees apart for 4 views

@@ -9,50 +9,11 @@ import numpy as np
 
 from splatbench.checks import check_image_size, check_sh_degree, parse_size
 from splatbench.errors import InputError
+from splatbench.framing import DEFAULT_UP, KNOWN_UP_ELEVATION, framing_camera
 from splatbench.overrides import parse_overrides
 
-
-#: The up direction assumed for a PLY that records none: -y, as COLMAP captures (and so
-#: graphdeco's models of them) have their world y axis pointing down.
-DEFAULT_UP = (0.0, -1.0, 0.0)
-#: Elevation of the framing camera when the world's up is known (it then looks down onto
-#: the floor, as the scene rigs do); 0 when the up is assumed.
-KNOWN_UP_ELEVATION = 20.0
 _AXES = {f"{sign}{axis}": tuple(value if a == axis else 0.0 for a in "xyz")
          for axis in "xyz" for sign, value in (("+", 1.0), ("-", -1.0))}
-
-
-def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0, up=DEFAULT_UP,
-                   elevation_deg: float = 0.0):
-    """A look-at camera that frames the central 98 % of the Gaussians, ``up`` [3] up in the image.
-
-    It looks along the first world axis of +z, +y that is not within 25° of ``up`` (+z
-    for a y-up or y-down world, +y for a z-up one), made perpendicular to ``up``, from
-    ``elevation_deg`` above that horizontal direction (down onto a floor).
-    The framed radius is at least 3 standard deviations of the largest of those
-    Gaussians (so one Gaussian, or several at one point, fill the view rather than
-    vanish), and the near plane is 1 % of the camera's distance (so a small scene is
-    not clipped by the default near plane)."""
-    from splatbench import Camera
-
-    if len(gaussians) == 0:
-        raise InputError("gaussians: 0 Gaussians, nothing to frame or render")
-    up_ = np.asarray(up, dtype=np.float64)
-    up_ = up_ / np.linalg.norm(up_)
-    axes = (np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
-    axis = next(a for a in axes if abs(a @ up_) < np.cos(np.radians(25)))  # one of them is: they are orthogonal
-    forward = axis - (axis @ up_) * up_
-    forward /= np.linalg.norm(forward)
-    lo, hi = np.percentile(gaussians.means, [1, 99], axis=0)
-    center = (lo + hi) / 2
-    sigma = float(np.percentile(np.exp(np.clip(gaussians.log_scales, -20, 20)).max(axis=1), 99))
-    radius = max(float(np.linalg.norm(hi - lo)) / 2, 3 * sigma, 1e-6)
-    distance = radius / np.tan(np.radians(fov_x_deg) / 2) * 1.2
-    if elevation_deg:
-        e = np.radians(elevation_deg)
-        forward = np.cos(e) * forward - np.sin(e) * up_
-    return Camera.look_at(center - distance * forward, center, up_,
-                          width, height, fov_x_deg, near=min(0.01, distance / 100))
 
 
 def parse_up(text: str) -> tuple[float, float, float]:
