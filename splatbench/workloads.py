@@ -1,4 +1,5 @@
-"""Rendering workloads: the standard synthetic scene, npz scenes, and the garden SfM view.
+"""Rendering workloads: the standard synthetic scene, npz scenes, the garden SfM view, and
+trained models (a 3DGS PLY framed from a few directions).
 
 A workload is a set of Gaussians and one camera; benchmarks, the stress test and
 the parity tests all draw their scenes from here.
@@ -14,9 +15,12 @@ import numpy as np
 from splatbench.cameras import Camera
 from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
-from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians
+from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians, quat_to_rotmat
 
 GARDEN_SFM = Path(__file__).parent / "data" / "garden_sfm.npz"  # real SfM data; see data/NOTICE.md
+#: Real trained 3DGS models (PlayCanvas, MIT; see data/NOTICE.md), by name: `--model guitar`.
+MODELS_DIR = Path(__file__).parent / "data" / "models"
+BUNDLED_MODELS = {"guitar": MODELS_DIR / "pc_guitar.ply", "biker": MODELS_DIR / "pc_biker.ply"}
 WORKLOAD_KEYS = ("means", "log_scales", "quats", "opacity_logits", "sh", "viewmat", "K", "width", "height")
 SFM_KEYS = ("means3d", "colors", "viewmats", "Ks", "width", "height")
 
@@ -38,10 +42,12 @@ def random_unit_quats(rng: np.random.Generator, n: int) -> np.ndarray:
 
 def synthetic(n: int, width: int, height: int, seed: int = 0, *, sh_degree: int = 3,
               sigma_px: tuple[float, float] = (0.3, 6.0), anisotropy: float = 0.25,
-              depth_range: tuple[float, float] = (2.0, 6.0), margin: float = 0.1) -> Workload:
+              depth_range: tuple[float, float] = (2.0, 6.0), margin: float = 0.1,
+              random_pose: bool = False) -> Workload:
     """The standard synthetic workload.
 
-    Camera at the origin looking down +z, fx = fy = W, cx = W/2, cy = H/2. Means
+    Camera at the origin looking down +z, fx = fy = W, cx = W/2, cy = H/2 (with
+    ``random_pose``: the same image from a random rigid camera pose, see `random_pose`). Means
     uniform in depth on ``depth_range`` and uniform over the image inset by
     ``margin`` on each side; 1-sigma screen size log-uniform on ``sigma_px`` pixels
     with ``anisotropy`` log-normal spread per axis; random unit quaternions;
@@ -61,7 +67,77 @@ def synthetic(n: int, width: int, height: int, seed: int = 0, *, sh_degree: int 
     sh = np.concatenate([0.5 * rng.standard_normal((n, 1, 3)), 0.05 * rng.standard_normal((n, k - 1, 3))], 1)
     gaussians = Gaussians(means, log_scales, random_unit_quats(rng, n), rng.standard_normal(n), sh)
     camera = Camera(width, height, f, f, width / 2, height / 2, np.eye(4))
-    return Workload(f"synthetic-{n}-{width}x{height}-s{seed}", gaussians, camera)
+    name = f"synthetic-{n}-{width}x{height}-s{seed}"
+    if random_pose:
+        return posed(Workload(name + "-posed", gaussians, camera), seed)
+    return Workload(name, gaussians, camera)
+
+
+def posed(workload: Workload, seed: int) -> Workload:
+    """``workload`` (its camera at the origin, the identity pose) moved to a random rigid camera
+    pose, seeded: a uniformly random rotation R and a centre c ~ N(0, 2² I). The means are
+    mapped to x_world = Rᵀ x_cam + c and the camera gets world_to_camera = [R | -R c], so the
+    camera-space means, and so the image up to the SH view directions, stay those of the
+    identity pose; the rotations turn with them (q_world = q_R* q_cam, q_R the quaternion of R).
+
+    At the identity a world-space mistake cancels out (a view direction taken from the world
+    origin, W for Wᵀ, a sign error in the translation): a compared backend with one of those
+    renders the identity-pose image correctly. Here it does not.
+    """
+    rng = np.random.default_rng([seed, 0x9E37])  # its own stream: the Gaussians stay those of `seed`
+    q = random_unit_quats(rng, 1)[0]
+    R = quat_to_rotmat(q[None])[0]
+    c = 2.0 * rng.standard_normal(3)
+    w2c = np.eye(4)
+    w2c[:3, :3], w2c[:3, 3] = R, -R @ c
+    g = workload.gaussians
+    means = (np.asarray(g.means, dtype=np.float64) - workload.camera.world_to_camera[:3, 3]) \
+        @ workload.camera.world_to_camera[:3, :3]  # back to camera space (identity: unchanged)
+    moved = Gaussians(means @ R + c, g.log_scales, _quat_product(q * [1, -1, -1, -1], np.asarray(g.quats)),
+                      g.opacity_logits, g.sh)
+    cam = workload.camera
+    return Workload(workload.name, moved, Camera(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, w2c,
+                                                 near=cam.near, far=cam.far))
+
+
+def _quat_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a b of (w, x, y, z) quaternions: a [4], b [N, 4] -> [N, 4]."""
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b.T
+    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=1)
+
+
+def model_path(model: str | Path) -> Path:
+    """A bundled model's name (`BUNDLED_MODELS`: guitar, biker) or a PLY file, as an existing path."""
+    if str(model).lower() in BUNDLED_MODELS:
+        return BUNDLED_MODELS[str(model).lower()]
+    path = Path(model).expanduser()
+    if not path.is_file():
+        raise InputError(f"--model: no such file {str(model)!r} (a 3DGS .ply, or one of "
+                         f"{', '.join(BUNDLED_MODELS)})")
+    return path
+
+
+def model_workload(model: str | Path, view: int, views: int, width: int, height: int, up=None) -> Workload:
+    """View ``view`` of ``views`` around a trained model (a 3DGS PLY, or a `BUNDLED_MODELS` name).
+
+    The cameras are `splatbench.framing.framing_rig`'s: evenly spaced azimuths about the up
+    axis, 20° above the horizontal, framing the model at ``width`` x ``height``. The up axis:
+    ``up`` [3] when given, else the one the PLY records (`splatbench.ply.ViewHints`), else
+    `splatbench.framing.DEFAULT_UP`.
+    """
+    from splatbench.framing import DEFAULT_UP, framing_rig
+    from splatbench.ply import read_view_hints
+
+    path = model_path(model)
+    if not 0 <= view < views:
+        raise InputError(f"view: expected an index in [0, {views}), got {view}")
+    gaussians = Gaussians.from_ply(path)
+    if up is None:
+        up = read_view_hints(path).up or DEFAULT_UP
+    camera = framing_rig(gaussians, views, width, height, up=up)[view]
+    return Workload(f"{path.stem}-view{view}", gaussians, camera)
 
 
 def save_npz(workload: Workload, path: str | Path) -> None:

@@ -75,8 +75,9 @@ GARDEN = "garden"  # `--workload garden`: the bundled SfM capture, view 0 (648x4
 class WorkloadSpec:
     """A workload to build inside the benchmark process (cheap to pass between processes).
 
-    ``kind`` "synthetic": `splatbench.workloads.synthetic(n, width, height, seed)`;
-    ``kind`` "npz": `splatbench.workloads.load_npz(path, view=view)`.
+    ``kind`` "synthetic": `splatbench.workloads.synthetic(n, width, height, seed, random_pose=posed)`;
+    ``kind`` "npz": `splatbench.workloads.load_npz(path, view=view)`;
+    ``kind`` "model": `splatbench.workloads.model_workload(path, view, views, width, height, up)`.
     """
 
     kind: str
@@ -85,18 +86,24 @@ class WorkloadSpec:
     height: int = 0      # synthetic: image height (pixels)
     seed: int = 0        # synthetic: random seed
     path: str = ""       # npz: absolute path of the file
-    view: int = 0        # npz: camera index
+    view: int = 0        # npz, model: camera index
     label: str = ""      # name in the results ("" = the workload's own name)
+    posed: bool = False  # synthetic: a random camera pose instead of the identity
+    views: int = 0       # model: cameras around the model (view is one of them)
+    up: tuple = ()       # model: the world's up [3] (() = the PLY's, else the default)
 
     def build(self):
         """The `splatbench.workloads.Workload` (Gaussians and camera)."""
-        from splatbench.workloads import load_npz, synthetic
+        from splatbench.workloads import load_npz, model_workload, synthetic
 
         if self.kind == "synthetic":
-            return synthetic(self.n, self.width, self.height, self.seed)
+            return synthetic(self.n, self.width, self.height, self.seed, random_pose=self.posed)
         if self.kind == "npz":
             return load_npz(self.path, view=self.view)
-        raise InputError(f"workload kind: expected 'synthetic' or 'npz', got {self.kind!r}")
+        if self.kind == "model":
+            return model_workload(self.path, self.view, self.views, self.width, self.height,
+                                  tuple(self.up) if self.up else None)
+        raise InputError(f"workload kind: expected 'synthetic', 'npz' or 'model', got {self.kind!r}")
 
     @property
     def target(self) -> Target | None:
@@ -106,8 +113,8 @@ class WorkloadSpec:
         return TARGETS.get((self.n, self.width, self.height))
 
 
-def parse_synthetic(count: str, size: str, seed: int = 0) -> WorkloadSpec:
-    """``--synthetic N WxH`` -> a synthetic `WorkloadSpec`."""
+def parse_synthetic(count: str, size: str, seed: int = 0, *, posed: bool = False) -> WorkloadSpec:
+    """``--synthetic N WxH`` -> a synthetic `WorkloadSpec` (``posed``: from a random camera pose)."""
     try:
         n = int(count)
     except ValueError:
@@ -115,7 +122,30 @@ def parse_synthetic(count: str, size: str, seed: int = 0) -> WorkloadSpec:
     if n < 1:
         raise InputError(f"--synthetic: expected a Gaussian count >= 1, got {count!r}")
     width, height = parse_size(size, "--synthetic")
-    return WorkloadSpec("synthetic", n=n, width=width, height=height, seed=seed)
+    return WorkloadSpec("synthetic", n=n, width=width, height=height, seed=seed, posed=posed)
+
+
+#: ``--model``'s defaults: cameras around the model, and their image size.
+MODEL_VIEWS = 3
+MODEL_SIZE = "256x256"
+
+
+def parse_model(model: str, up: str | None = None, views: int = MODEL_VIEWS,
+                size: str = MODEL_SIZE) -> list[WorkloadSpec]:
+    """``--model FILE.ply|guitar|biker`` [``--up``, ``--model-views``, ``--model-size``] -> one
+    model `WorkloadSpec` per view (`splatbench.workloads.model_workload`)."""
+    from splatbench.framing import parse_up
+    from splatbench.workloads import model_path
+
+    path = model_path(model)
+    if path.suffix.lower() != ".ply":
+        raise InputError(f"--model: expected a 3DGS .ply file (or a bundled model's name), got {model!r}")
+    if views < 1:
+        raise InputError(f"--model-views: expected a count >= 1, got {views}")
+    width, height = parse_size(size, "--model-size")
+    vector = parse_up(up) if up is not None else ()
+    return [WorkloadSpec("model", path=str(path.resolve()), view=k, views=views, width=width, height=height,
+                         up=tuple(vector)) for k in range(views)]
 
 
 def parse_workload(arg: str) -> WorkloadSpec:
@@ -318,7 +348,9 @@ def run_isolated(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResu
 
 def describe(spec: WorkloadSpec) -> str:
     if spec.kind == "synthetic":
-        return f"synthetic {spec.n} {spec.width}x{spec.height} (seed {spec.seed})"
+        return f"synthetic {spec.n} {spec.width}x{spec.height} (seed {spec.seed}{', posed' if spec.posed else ''})"
+    if spec.kind == "model":
+        return spec.label or f"{Path(spec.path).stem} view {spec.view} of {spec.views} at {spec.width}x{spec.height}"
     return spec.label or Path(spec.path).name
 
 
