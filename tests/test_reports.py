@@ -24,7 +24,7 @@ from splatbench.experiments.store import write_record, write_table
 from splatbench.reports import build_report, write_report
 from splatbench.reports.figures import pareto_front
 from splatbench.reports.findings import fmt_interval
-from splatbench.reports.stats import paired_difference, paired_ratio
+from splatbench.metrics.stats import paired_difference, paired_ratio
 from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
 from splatbench.reports.tables import Stat
 
@@ -400,7 +400,7 @@ def test_product_grid_rows_average_each_seed_first(tmp_path):
     """In a product grid a row pools the other axis's values: the interval is over seeds
     (each seed's runs averaged first), not over runs, so n is the number of seeds."""
     from splatbench.experiments.runner import run_experiment
-    from splatbench.reports.stats import t_interval
+    from splatbench.metrics.stats import t_interval
 
     spec = parse_experiment({"name": "prod", "kind": "dummy", "scenes": ["alpha"], "seeds": [0, 1, 2],
                              "axes": {"x": [1.0, 2.0], "n": [3, 5]}}, source="prod.toml")

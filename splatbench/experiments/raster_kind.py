@@ -18,7 +18,7 @@ affordable).
 
 One run:
 
-1. Timing, at the workload's full resolution: `splatbench.bench.timing`'s closures
+1. Timing, at the workload's full resolution: `splatbench.metrics.timing`'s closures
    (forward under ``no_grad``; forward + backward of ``rgb.sum()`` to all five
    groups) with the run's options and with the default options, each warmed up first
    (kernels compile or load from Dr.Jit's cache outside the timed part). Then
@@ -26,12 +26,12 @@ One run:
    call with the run's options and one with the defaults, back to back, so both see
    the same load. Per pair, the ratio option / default; ``fwd_rel`` and
    ``fwd_bwd_rel`` are the **median ratio** over pairs with a 95 % percentile-bootstrap
-   interval (``*_low``, ``*_high``; `splatbench.reports.stats.bootstrap_median_ratio`).
+   interval (``*_low``, ``*_high``; `splatbench.metrics.stats.bootstrap_median_ratio`).
    SH is sliced to the evaluated degree, as the trainer does.
 2. Load: the 1-minute load average is read before and after the timed pairs, and the
    process's own share of it (its CPU use over them, CPU seconds / wall seconds, in
    cores, damped as the load average damps it) is subtracted: ``load_other`` estimates
-   the load of *other* processes (`splatbench.bench.load`, the rule ``splatbench bench
+   the load of *other* processes (`splatbench.metrics.load`, the rule ``splatbench bench
    ab`` uses too). ``loaded`` is 1 when it exceeded half the usable cores (``cores``):
    such a run is marked in the table and left out of the findings (docs/reports.md: how
    to get quiet numbers).
@@ -80,7 +80,7 @@ from typing import Any
 
 import numpy as np
 
-from splatbench.bench.load import Load, own_share
+from splatbench.metrics.load import Load, own_share
 from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
@@ -128,7 +128,7 @@ METRICS: dict[str, str] = {
     "load_after": "1-minute load average after them",
     "own_cpu": "this process's CPU use during the timed pairs (CPU seconds / wall seconds, in cores)",
     "load_other": "estimated load of other processes: the largest of load(t) - own_before * exp(-t / 60 s) - own_cpu "
-                  "* (1 - exp(-t / 60 s)) over the section's samples (splatbench.bench.load)",
+                  "* (1 - exp(-t / 60 s)) over the section's samples (splatbench.metrics.load)",
     "own_before": "this process's own share of the load average when the timed pairs started (its earlier CPU "
                   "use: warm-up, the previous run's error renders), an exponential moving average",
     "cores": "CPU cores this process may use",
@@ -316,10 +316,10 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     import torch
 
     import splatbench
-    from splatbench.bench.machine import resolve_device
-    from splatbench.bench.timing import forward_backward_with_init, forward_with_init, time_runs, torch_params
-    from splatbench.reports.stats import bootstrap_median_ratio
-    from splatbench.train.metrics import psnr
+    from splatbench.metrics.machine import resolve_device
+    from splatbench.metrics.timing import forward_backward_with_init, forward_with_init, time_runs, torch_params
+    from splatbench.metrics.stats import bootstrap_median_ratio
+    from splatbench.metrics.image import psnr
 
     limit_threads()
     own_share()  # a checkpoint of the own-load tracker: what ran before this run, then the warm-up

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from splatbench.reports.stats import t_interval
+from splatbench.metrics.stats import t_interval
 from splatbench.reports.tables import AxisTable, MetricSpec, done_runs
 
 

@@ -8,7 +8,7 @@ axis:
 * **best**: per scene, the row with the best mean of the kind's primary metric;
 * **vs**: every other row against the reference row (the one-at-a-time base, else the
   axis's first value), per scene, for each of the kind's comparisons, **paired over
-  seeds** (`splatbench.reports.stats`): ``diff`` is the mean of ``b_s - a_s`` with
+  seeds** (`splatbench.metrics.stats`): ``diff`` is the mean of ``b_s - a_s`` with
   its t interval, ``ratio`` the geometric mean of ``b_s / a_s`` with its interval;
   ``mean`` is the row's own mean (for a metric that is already relative to the base,
   like the raster kind's time ratio) with its t interval. When the interval contains
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import pandas as pd
 
 from splatbench.reports.kind_report import Comparison, FindingRules, kind_report
-from splatbench.reports.stats import Interval, paired_difference, paired_ratio, t_interval
+from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
 from splatbench.reports.tables import AxisTable, MetricSpec, Row, display, done_runs, seed_values
 
 

@@ -12,7 +12,7 @@ copy of the grid per row and keeps the run ids), so a report always describes th
 grid as written, never a stale one. Statistics are over the *done* runs of a row,
 **seed by seed**: a row's runs of one seed are averaged first (in a product grid they
 are that seed's runs of every other axis value), then the mean over seeds is given
-with the half-width of its 95 % Student's t interval (`splatbench.reports.stats`; the
+with the half-width of its 95 % Student's t interval (`splatbench.metrics.stats`; the
 seed is the unit of replication). With one seed there is no interval: the mean alone.
 """
 
@@ -31,7 +31,7 @@ from splatbench.experiments.grid import expand
 from splatbench.experiments.configs import flatten, unflatten
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.reports.kind_report import MetricSpec, kind_report
-from splatbench.reports.stats import t_quantile
+from splatbench.metrics.stats import t_quantile
 
 
 def metric_specs(kind: str, table: pd.DataFrame) -> tuple[MetricSpec, ...]:

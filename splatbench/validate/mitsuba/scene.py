@@ -17,7 +17,7 @@ from splatbench.errors import InputError
 from splatbench.gaussians import Gaussians
 from splatbench.mitsuba_loader import mitsuba
 from splatbench.raster import render
-from splatbench.train.metrics import psnr
+from splatbench.metrics.image import psnr
 
 #: The extent of Mitsuba's ellipsoid shells in sigma; the rasterizer's ``radius="3sigma"``.
 ELLIPSOID_EXTENT = 3.0
