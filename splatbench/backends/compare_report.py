@@ -311,7 +311,7 @@ _outlier_cell(r), r.forward_verdict] for _, r in table.iterrows()]), "",
 def write_compare(result: CompareResult, out: str | Path) -> Path:
     """Write ``out``/results.parquet, ``out``/run.json, the figures and ``out``/report.md;
     returns report.md's path."""
-    from splatbench.experiments.store import atomic_write
+    from splatbench.fsutil import atomic_write
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -324,7 +324,7 @@ def write_compare(result: CompareResult, out: str | Path) -> Path:
 
 def rewrite_report(out: str | Path) -> Path:
     """(Re)write ``out``/report.md and its figures from ``out``/results.parquet and run.json."""
-    from splatbench.experiments.store import atomic_write
+    from splatbench.fsutil import atomic_write
 
     out = Path(out)
     table = pd.read_parquet(out / "results.parquet")

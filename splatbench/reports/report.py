@@ -31,7 +31,8 @@ import pandas as pd
 from splatbench.errors import InputError
 from splatbench.experiments.grid import expand
 from splatbench.experiments.spec import ExperimentSpec
-from splatbench.experiments.store import TABLE_NAME, atomic_write, build_table, experiment_dir, read_records
+from splatbench.experiments.store import TABLE_NAME, build_table, experiment_dir, read_records
+from splatbench.fsutil import atomic_write
 from splatbench.reports.figures import cell_means, curves_figure, pareto_figure
 from splatbench.reports.findings import Finding, axis_finding
 from splatbench.reports.kind_report import kind_report
