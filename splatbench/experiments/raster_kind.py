@@ -80,14 +80,14 @@ from typing import Any
 
 import numpy as np
 
-from splatbench.metrics.load import Load, own_share
 from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
+from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.experiments.workers import limit_threads
+from splatbench.metrics.load import Load, own_share
+from splatbench.metrics.spec import MetricSpec
 from splatbench.raster.options import RasterOptions
-from splatbench.reports.findings import parity_finding
-from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, TimeQuality
 
 #: Fields passed to the rasterizer as `RasterOptions` (sh_degree goes separately).
 OPTION_FIELDS = ("tile_size", "alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius", "antialiased",
@@ -381,7 +381,7 @@ def _r4(x: float) -> float:
 
 
 #: The ``raster`` kind (``kind = "raster"``).
-#: What the reports of raster runs show (`splatbench.reports.kind_report`).
+#: What the reports of raster runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
     metrics=(
 
@@ -403,7 +403,6 @@ REPORT = KindReport(
     time_quality=TimeQuality("fwd_bwd_rel", "exact_psnr", "speed_vs_error",
                              "Rasterizer speed against error to the exact Gaussian mixture (mean over seeds)"),
     meanings=METRICS,
-    run_findings=(("parity", parity_finding),),
 )
 
 RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, prepare=prepare,

@@ -8,6 +8,7 @@ from another.
 * `load`: the load of *other* processes around a timed section (the quiet-machine rule);
 * `machine`: where a measurement ran (`MachineInfo`);
 * `stats`: intervals over seeds, paired differences and ratios, bootstrap of a median ratio;
+* `spec`: how a report shows a metric (`MetricSpec`).
 """
 
 from splatbench.metrics.image import psnr, ssim_metric
