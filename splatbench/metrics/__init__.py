@@ -11,6 +11,21 @@ from another.
 * `spec`: how a report shows a metric (`MetricSpec`).
 """
 
-from splatbench.metrics.image import psnr, ssim_metric
+import importlib
 
-__all__ = ["psnr", "ssim_metric"]
+#: What this package exports: name -> the module that defines it, imported on first use
+#: (the image metrics need torch; the experiment runner and the reports, which import
+#: `spec` and `stats`, start without it).
+_EXPORTS = {
+    "psnr": "splatbench.metrics.image",
+    "ssim_metric": "splatbench.metrics.image",
+}
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'splatbench.metrics' has no attribute {name!r}")
+
+
+__all__ = list(_EXPORTS)
