@@ -22,6 +22,9 @@ GARDEN_SFM = Path(__file__).parent / "data" / "garden_sfm.npz"  # real SfM data;
 #: Real trained 3DGS models (PlayCanvas, MIT; see data/NOTICE.md), by name: `--model guitar`.
 MODELS_DIR = Path(__file__).parent / "data" / "models"
 BUNDLED_MODELS = {"guitar": MODELS_DIR / "pc_guitar.ply", "biker": MODELS_DIR / "pc_biker.ply"}
+#: ``--model``'s defaults: cameras around the model, and their image size.
+MODEL_VIEWS = 3
+MODEL_SIZE = "256x256"
 WORKLOAD_KEYS = ("means", "log_scales", "quats", "opacity_logits", "sh", "viewmat", "K", "width", "height")
 SFM_KEYS = ("means3d", "colors", "viewmats", "Ks", "width", "height")
 
@@ -219,3 +222,24 @@ def build_workload(name: str, seed: int) -> Workload:
     if kind == "synthetic":
         return synthetic(args["n"], args["width"], args["height"], seed)
     return load_npz(GARDEN_SFM, view=args["view"])
+
+
+def model_options(command):
+    """``--model``, ``--up``, ``--model-views`` and ``--model-size`` (one definition for `splatbench
+    compare` and `splatbench bench raster`): the command receives ``models``, ``up``,
+    ``model_views`` and ``model_size`` (`splatbench.bench.raster.parse_models` reads them)."""
+    import click
+
+    for option in reversed((
+        click.option("--model", "models", multiple=True, metavar="FILE.ply|guitar|biker",
+                     help="A trained 3DGS model as workloads: --model-views cameras around it, 20 degrees above "
+                          "the horizontal (repeatable); guitar and biker are the bundled real models."),
+        click.option("--up", default=None, metavar="AXIS|X,Y,Z",
+                     help="The models' up axis (+y, -z, ... or X,Y,Z) [default: the one the PLY records, else -y]."),
+        click.option("--model-views", "model_views", default=MODEL_VIEWS, show_default=True, type=int,
+                     help="Cameras around each --model."),
+        click.option("--model-size", "model_size", default=MODEL_SIZE, show_default=True, metavar="WxH",
+                     help="Image size of the --model views."),
+    )):
+        command = option(command)
+    return command

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import click
 
-from splatbench.bench.model_options import model_options, model_specs
 from splatbench.devices import device_option
+from splatbench.workloads import model_options
 
 
 @click.command()
@@ -57,7 +57,7 @@ def compare(backends: tuple[str, ...], synthetic: tuple[tuple[str, str], ...], s
     from splatbench.backends.compare import CompareSettings, run_compare
     from splatbench.backends.compare_report import findings, result_table, write_compare
     from splatbench.backends.registry import get_backend
-    from splatbench.bench.raster import parse_synthetic, parse_workload
+    from splatbench.bench.raster import parse_models, parse_synthetic, parse_workload
     from splatbench.workloads import build_workload
 
     settings = CompareSettings(repeats=repeats, device=device, seed=seed, error_scale=error_scale,
@@ -65,7 +65,7 @@ def compare(backends: tuple[str, ...], synthetic: tuple[tuple[str, str], ...], s
     settings.validate()
     specs = [parse_synthetic(count, size, seed, posed=True) for count, size in synthetic]
     specs += [parse_workload(w) for w in workloads]
-    specs += model_specs(models, up, model_views, model_size)
+    specs += parse_models(models, up, model_views, model_size)
     specs += [build_workload(name, seed) for name in scenes]
     if not specs:
         specs = [parse_synthetic("2000", "128x128", seed, posed=True)]

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
-from splatbench.bench.model_options import model_options
 from splatbench.devices import device_option
+from splatbench.workloads import model_options
 
 
 @click.group()
@@ -38,9 +38,8 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
     runs in its own subprocess so its peak RSS is its own.
     """
     from splatbench.metrics.machine import load_average, machine_info
-    from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, parse_synthetic, parse_workload,
-                                         run_suite, standard_suite, write_csv, write_json)
-    from splatbench.bench.model_options import model_specs
+    from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, parse_models, parse_synthetic,
+                                         parse_workload, run_suite, standard_suite, write_csv, write_json)
     from splatbench.checks import check_image_size
     from splatbench.overrides import parse_overrides
 
@@ -50,7 +49,7 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
     for spec in specs:  # before any workload runs (Dr.Jit's array limit, this machine's memory)
         check_image_size(spec.width, spec.height, field="--synthetic")
     specs += [parse_workload(w) for w in workloads]
-    specs += model_specs(models, up, model_views, model_size)
+    specs += parse_models(models, up, model_views, model_size)
     if not specs:
         specs = standard_suite(seed)
 

@@ -125,18 +125,15 @@ def parse_synthetic(count: str, size: str, seed: int = 0, *, posed: bool = False
     return WorkloadSpec("synthetic", n=n, width=width, height=height, seed=seed, posed=posed)
 
 
-#: ``--model``'s defaults: cameras around the model, and their image size.
-MODEL_VIEWS = 3
-MODEL_SIZE = "256x256"
-
-
-def parse_model(model: str, up: str | None = None, views: int = MODEL_VIEWS,
-                size: str = MODEL_SIZE) -> list[WorkloadSpec]:
+def parse_model(model: str, up: str | None = None, views: int | None = None,
+                size: str | None = None) -> list[WorkloadSpec]:
     """``--model FILE.ply|guitar|biker`` [``--up``, ``--model-views``, ``--model-size``] -> one
     model `WorkloadSpec` per view (`splatbench.workloads.model_workload`)."""
     from splatbench.framing import parse_up
-    from splatbench.workloads import model_path
+    from splatbench.workloads import MODEL_SIZE, MODEL_VIEWS, model_path
 
+    views = MODEL_VIEWS if views is None else views
+    size = MODEL_SIZE if size is None else size
     path = model_path(model)
     if path.suffix.lower() != ".ply":
         raise InputError(f"--model: expected a 3DGS .ply file (or a bundled model's name), got {model!r}")
@@ -146,6 +143,14 @@ def parse_model(model: str, up: str | None = None, views: int = MODEL_VIEWS,
     vector = parse_up(up) if up is not None else ()
     return [WorkloadSpec("model", path=str(path.resolve()), view=k, views=views, width=width, height=height,
                          up=tuple(vector)) for k in range(views)]
+
+
+def parse_models(models, up: str | None, views: int | None = None, size: str | None = None) -> list[WorkloadSpec]:
+    """The `WorkloadSpec`s of the ``--model`` options (`splatbench.workloads.model_options`): one per
+    model and view; ``--up`` without a model is an error."""
+    if up is not None and not models:
+        raise InputError("--up: applies to --model only")
+    return [spec for m in models for spec in parse_model(m, up, views, size)]
 
 
 def parse_workload(arg: str) -> WorkloadSpec:
