@@ -40,6 +40,8 @@ from splatbench.fsutil import read_text
 from splatbench.overrides import parse_override
 from splatbench.train.sh_schedule import MAX_LOOKAHEAD
 
+#: Keys of the ``data`` table.
+DATA_KEYS = ("downscale",)
 #: Learning-rate fields (Adam, one optimizer per parameter group); 0 freezes a group.
 LR_FIELDS = ("lr_means", "lr_means_final", "lr_log_scales", "lr_quats", "lr_opacity_logits", "lr_sh_dc",
              "lr_sh_rest")
@@ -54,6 +56,9 @@ class TrainConfig:
     out: str = "runs/train"           # output folder: point_cloud.ply, checkpoints/, config.toml, result.json
     layout: str = "auto"              # dataset layout: "auto", "colmap" or "blender"
     test_every: int = 8               # hold out every n-th view when the dataset gives no split
+    data: dict[str, Any] = field(default_factory=dict)  # how the dataset is loaded (`--set data.downscale=8`):
+                                      # downscale = N divides the image size (images_N/ when present;
+                                      # splatbench.data.load_dataset); DATA_KEYS
     seed: int = 0                     # seeds torch, numpy, the view order and random backgrounds
     # --- initialisation
     init: str = "surface"             # "surface" (the dataset's own points: true-surface samples of a rendered
@@ -137,6 +142,11 @@ class TrainConfig:
             raise InputError(f"init: unknown initialisation {self.init!r} (expected one of: {', '.join(INITIALIZERS)})")
         if self.layout not in ("auto", "colmap", "blender"):
             raise InputError(f"layout: expected 'auto', 'colmap' or 'blender', got {self.layout!r}")
+        for key, value in self.data.items():
+            if key not in DATA_KEYS:
+                raise InputError(f"data.{key}: unknown key (known: {', '.join(DATA_KEYS)})")
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+                raise InputError(f"data.{key}: expected an int >= 1, got {value!r}")
         check_sh_degree("sh_degree", self.sh_degree, allow_auto=True)
         positive = ("sh_interval", "log_every", "init_random_points", "ssim_window")
         for name in positive:
@@ -210,6 +220,11 @@ class TrainConfig:
         return scale_step(self.sh_interval, self.iterations, self.schedule, interval=True)
 
     @property
+    def downscale(self) -> int:
+        """``data.downscale`` (1 when not set)."""
+        return int(self.data.get("downscale", 1))
+
+    @property
     def max_sh_degree(self) -> int:
         """The highest SH degree the run may use (3 under ``"auto"``)."""
         return 3 if self.sh_degree == "auto" else int(self.sh_degree)
@@ -266,11 +281,12 @@ def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...])
     data = config.to_dict()
     for item in overrides:
         key, value = parse_override(item)
-        if key.startswith("strategy_options."):
+        table = key.split(".", 1)[0]
+        if "." in key and table in ("strategy_options", "data"):
             sub = key.split(".", 1)[1]
             if not sub:
-                raise InputError(f"--set: empty strategy option in {item!r}")
-            data["strategy_options"] = {**data["strategy_options"], sub: value}
+                raise InputError(f"--set: empty {table} key in {item!r}")
+            data[table] = {**data[table], sub: value}
         else:
             data[key] = value
     return TrainConfig.from_dict(data, source="--set")

@@ -1,0 +1,231 @@
+"""Captures as they come: lens distortion undistorted on load (pycolmap), downscaling, the
+every-8th split, teacher scenes and grids over any scene (splatbench.data, scenes.teacher,
+experiments.train_kind)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from splatbench.data import load_dataset
+from splatbench.errors import InputError
+
+FOX = Path(__file__).resolve().parents[2] / "shared" / "data" / "fox"
+W, H = 64, 48
+OPENCV = {"fl_x": 60.0, "fl_y": 61.0, "cx": 31.0, "cy": 24.5, "k1": 0.12, "k2": -0.05, "p1": 0.002, "p2": -0.001}
+
+
+def _colour(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """A smooth colour of the ray direction (x/z, y/z) [.., 3] in [0.1, 0.9]."""
+    return np.stack([0.5 + 0.4 * np.sin(3 * x) * np.cos(2 * y), 0.5 + 0.4 * np.cos(2.5 * x + y),
+                     0.5 + 0.4 * np.sin(2 * y - x)], axis=-1)
+
+
+def _lens():
+    import pycolmap
+
+    p = OPENCV
+    return pycolmap.Camera(model="OPENCV", width=W, height=H,
+                           params=[p["fl_x"], p["fl_y"], p["cx"], p["cy"], p["k1"], p["k2"], p["p1"], p["p2"]])
+
+
+def _distorted_capture(root: Path, n: int = 3, extra: dict | None = None) -> Path:
+    """A transforms.json capture whose photos are the smooth colour of each pixel's ray
+    through the OPENCV lens (exact, no resampling)."""
+    lens = _lens()
+    j, i = np.meshgrid(np.arange(W) + 0.5, np.arange(H) + 0.5)
+    rays = lens.cam_from_img(np.stack([j.ravel(), i.ravel()], axis=1))
+    image = (_colour(rays[:, 0], rays[:, 1]).reshape(H, W, 3) * 255).round().astype(np.uint8)
+    (root / "images").mkdir(parents=True)
+    frames = []
+    for k in range(n):
+        Image.fromarray(image).save(root / "images" / f"{k:04d}.png")
+        c2w = np.eye(4)
+        c2w[:3, 3] = [k * 0.1, 0.0, 2.0]
+        frames.append({"file_path": f"images/{k:04d}.png", "transform_matrix": c2w.tolist(), "sharpness": 1.0})
+    meta = {**OPENCV, "w": W, "h": H, "aabb_scale": 4, "frames": frames, **(extra or {})}
+    (root / "transforms.json").write_text(json.dumps(meta))
+    return root
+
+
+def test_transforms_with_distortion_is_undistorted_by_pycolmap(tmp_path, monkeypatch):
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    lines: list[str] = []
+    ds = load_dataset(_distorted_capture(tmp_path / "cap"), test_every=0, say=lines.append)
+    assert any("OPENCV lens distortion undistorted by pycolmap" in n for n in ds.notes)
+    assert any("ignored keys aabb_scale, sharpness" in n for n in ds.notes)
+    cam = ds.train.cameras[0]
+    import pycolmap
+
+    expected = pycolmap.undistort_camera(pycolmap.UndistortCameraOptions(), _lens())
+    assert (cam.width, cam.height) == (expected.width, expected.height)
+    # Each undistorted pixel must show the colour of its pinhole ray. Error budget: 8-bit
+    # rounding of the source and of the output (2 x 0.5/255) plus bilinear interpolation
+    # of a function with |f''| <= 0.4 * 3^2 over 1/60-wide pixels ((1/60)^2 / 8 * 3.6 * 2
+    # < 3e-4): 0.005 bounds it; a wrong principal point or a skipped remap is off by > 0.02.
+    j, i = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
+    want = _colour((j - cam.cx) / cam.fx, (i - cam.cy) / cam.fy)
+    err = np.abs(ds.train.images[0] - want)[2:-2, 2:-2]  # the outermost pixels interpolate with the border
+    assert err.max() < 0.005, err.max()
+    # cached by content: a second load reuses the folder and does not run pycolmap again
+    lines.clear()
+    again = load_dataset(tmp_path / "cap", test_every=0, say=lines.append)
+    assert not any(line.startswith("undistorting") for line in lines)
+    assert np.array_equal(again.train.images, ds.train.images)
+
+
+@pytest.mark.parametrize("extra, message", [
+    ({"k4": 0.1}, "k4: an OPENCV camera has no k4 term"),
+    ({"camera_model": "PINHOLE"}, "camera_model PINHOLE with distortion"),
+    ({"camera_model": "EQUIRECTANGULAR"}, "camera_model: expected PINHOLE"),
+    ({"camera_model": "OPENCV_FISHEYE"}, "p1, p2: an OPENCV_FISHEYE camera has no tangential terms"),
+])
+def test_what_cannot_be_undistorted_is_refused_in_one_line(tmp_path, monkeypatch, extra, message):
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    with pytest.raises(InputError, match=message) as exc:
+        load_dataset(_distorted_capture(tmp_path / "cap", extra=extra))
+    assert "\n" not in str(exc.value)
+
+
+def _pinhole_capture(root: Path, n: int, size=(32, 24)) -> Path:
+    (root / "images").mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    frames = []
+    for k in range(n):
+        Image.fromarray(rng.integers(0, 255, (size[1], size[0], 3), dtype=np.uint8)).save(
+            root / "images" / f"{k:04d}.png")
+        c2w = np.eye(4)
+        c2w[:3, 3] = [k * 0.1, 0.0, 2.0]
+        frames.append({"file_path": f"images/{k:04d}.png", "transform_matrix": c2w.tolist()})
+    meta = {"fl_x": 30.0, "fl_y": 30.0, "cx": 16.0, "cy": 12.0, "w": size[0], "h": size[1], "frames": frames[::-1]}
+    (root / "transforms.json").write_text(json.dumps(meta))
+    return root
+
+
+def test_downscale_scales_cameras_and_prefers_images_n(tmp_path):
+    root = _pinhole_capture(tmp_path / "cap", 17)
+    ds = load_dataset(root, downscale=2)
+    cam = ds.train.cameras[0]
+    assert (cam.width, cam.height, cam.fx, cam.cx) == (16, 12, 15.0, 8.0)
+    assert ds.train.images.shape[1:] == (12, 16, 3)
+    # every 8th image by sorted name (frames are listed in reverse): 0000, 0008, 0016
+    assert ds.test.names == ["images/0000.png", "images/0008.png", "images/0016.png"]
+    assert any("every 8th image by sorted name" in n for n in ds.notes)
+    # an images_2/ folder is read instead of resizing (graphdeco's copies), cameras fitted to it
+    (root / "images_2").mkdir()
+    for k in range(17):
+        Image.fromarray(np.full((12, 16, 3), k, np.uint8)).save(root / "images_2" / f"{k:04d}.png")
+    ds2 = load_dataset(root, downscale=2)
+    assert ds2.test.images[1].max() == pytest.approx(8 / 255)  # images_2/0008.png, not a resized original
+    assert ds2.train.cameras[0].fx == 15.0
+    assert any("reading images_2/" in n for n in ds2.notes)
+    with pytest.raises(InputError, match="downscale: expected an int >= 1"):
+        load_dataset(root, downscale=0)
+
+
+def test_long_side_over_1600_px_is_noted(tmp_path):
+    root = _pinhole_capture(tmp_path / "cap", 2, size=(1700, 8))
+    assert any("exceeds 1600 px" in n for n in load_dataset(root).notes)
+    assert not any("exceeds 1600 px" in n for n in load_dataset(root, downscale=2).notes)
+
+
+def test_colmap_opencv_capture_undistorts_to_the_pinhole_colours(tmp_path, monkeypatch):
+    """A COLMAP model with an OPENCV camera (the photos made through the lens, exactly) loads
+    as PINHOLE views whose pixels show their pinhole rays' colours (same budget as above)."""
+    import pycolmap
+
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    cap = _distorted_capture(tmp_path / "cap", n=2)
+    rec = pycolmap.Reconstruction()
+    cam = _lens()
+    cam.camera_id = 1
+    rec.add_camera_with_trivial_rig(cam)
+    for k in range(2):
+        image = pycolmap.Image(name=f"{k:04d}.png", camera_id=1, image_id=k + 1)
+        rec.add_image_with_trivial_frame(image, pycolmap.Rigid3d(pycolmap.Rotation3d(), [k * 0.1, 0.0, 2.0]))
+    (cap / "sparse" / "0").mkdir(parents=True)
+    rec.write(str(cap / "sparse" / "0"))
+    ds = load_dataset(cap, layout="colmap", test_every=0)
+    c = ds.train.cameras[0]
+    j, i = np.meshgrid(np.arange(c.width) + 0.5, np.arange(c.height) + 0.5)
+    err = np.abs(ds.train.images[1] - _colour((j - c.cx) / c.fx, (i - c.cy) / c.fy))[2:-2, 2:-2]
+    assert err.max() < 0.005, err.max()
+    assert np.allclose(ds.train.cameras[1].translation, [0.1, 0.0, 2.0])
+
+
+@pytest.mark.skipif(not FOX.is_dir(), reason="needs ../shared/data/fox (NVIDIA non-commercial licence, not bundled)")
+def test_fox_capture_loads_undistorted_and_downscaled(tmp_path, monkeypatch):
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    ds = load_dataset(FOX, downscale=8)
+    # COLMAP's undistorter crops the 1080x1920 photos to the 1067x1897 pixels that saw the
+    # scene (keeping 1080x1920 would add 36k blank pixels); / 8 -> 133x237
+    assert {(c.width, c.height) for c in ds.train.cameras + ds.test.cameras} == {(133, 237)}
+    assert (len(ds.train), len(ds.test)) == (58, 9)
+    assert ds.test.names[:2] == ["images/0001.jpg", "images/0009.jpg"]
+    assert ds.train.alphas is None  # a real capture is opaque
+
+
+def _small_ply(path: Path, up=None) -> Path:
+    from splatbench.gaussians import Gaussians
+    from splatbench.ply import ViewHints
+
+    rng = np.random.default_rng(1)
+    n = 60
+    sh = np.zeros((n, 1, 3))
+    sh[:, 0] = rng.uniform(-1, 1, (n, 3))
+    Gaussians(means=rng.normal(0, 0.5, (n, 3)), log_scales=np.full((n, 3), np.log(0.15)),
+              quats=np.tile([1.0, 0, 0, 0], (n, 1)), opacity_logits=np.full(n, 3.0), sh=sh).to_ply(
+        path, ViewHints(up=up) if up else None)
+    return path
+
+
+def test_teacher_scene_renders_exact_views_and_points(tmp_path):
+    from splatbench.scenes.teacher import render_teacher
+
+    ply = _small_ply(tmp_path / "toy.ply", up=(0.0, 0.0, 1.0))
+    t = render_teacher(ply, tmp_path / "teacher", views=16, resolution=24)
+    assert t.up == (0.0, 0.0, 1.0) and t.up_source == "the PLY's hint" and not t.cached
+    ds = load_dataset(t.path)
+    assert (len(ds.train), len(ds.test)) == (14, 2) and ds.train.images.shape[1:] == (24, 24, 3)
+    assert ds.points is not None and len(ds.points) > 10
+    # the points are unprojected render depth, not the teacher's 60 Gaussian centres
+    assert len(ds.points) != 60
+    assert render_teacher(ply, tmp_path / "teacher", views=16, resolution=24).cached
+
+
+def test_grid_over_catalog_folder_and_teacher_scenes(tmp_path, monkeypatch):
+    from splatbench.experiments.grid import load_experiment
+    from splatbench.experiments.runner import run_experiment
+
+    monkeypatch.setenv("SPLATBENCH_DATASETS", str(tmp_path / "datasets"))
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    _pinhole_capture(tmp_path / "exp" / "cap", 9)
+    _small_ply(tmp_path / "exp" / "toy.ply")
+    (tmp_path / "exp" / "grid.toml").write_text("""
+name = "mixed"
+kind = "train"
+scenes = ["diffuse", { name = "cap", path = "cap", downscale = 2 }, { name = "toy", model = "toy.ply", views = 9 }]
+[base]
+iterations = 20
+init = "random"
+init_random_points = 200
+data.resolution = 16
+data.views = 9
+data.spp = 2
+""")
+    spec = load_experiment(tmp_path / "exp" / "grid.toml")
+    summary = run_experiment(spec, results_dir=tmp_path / "results", workers=1, progress=False)
+    from splatbench.experiments.store import read_records
+
+    rows = {r.scene: r for r in read_records(tmp_path / "results" / "mixed").values()}
+    assert set(rows) == {"diffuse", "cap", "toy"}
+    assert all(r.status == "done" for r in rows.values()), [r.error for r in rows.values()]
+    assert rows["cap"].config["data"] == {"path": str((tmp_path / "exp" / "cap").resolve()), "downscale": 2}
+    assert rows["toy"].config["data"]["resolution"] == 16 and rows["toy"].config["data"]["views"] == 9
+    assert "spp" not in rows["toy"].config["data"]
+    assert all(r.metrics["test_psnr"] is not None for r in rows.values())
+    assert summary is not None
