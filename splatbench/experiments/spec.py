@@ -143,9 +143,9 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
     scenes, scene_sources = [], {}
     for i, s in enumerate(entries):
         if isinstance(s, Mapping):
-            name, fields = _scene_table(s, f"scenes[{i}]", fail, base_dir)
-            scenes.append(name)
-            scene_sources[name] = fields
+            scene_name, fields = _scene_table(s, f"scenes[{i}]", fail, base_dir)
+            scenes.append(scene_name)
+            scene_sources[scene_name] = fields
         elif isinstance(s, str) and s:
             scenes.append(s)
         else:
