@@ -298,3 +298,34 @@ def test_opencv_capture_trains_like_the_same_scene_rendered_pinhole(tmp_path, mo
     print(f"pinhole {p_pin:.2f} dB, OPENCV undistorted {p_dist:.2f} dB, resampling floor {p_r:.2f} dB, "
           f"predicted {p_pred:.2f} dB")
     assert p_dist >= p_pred - 1.0, (p_pin, p_dist, p_r, p_pred)
+
+
+def test_train_config_data_downscale():
+    from splatbench.train.config import TrainConfig, apply_overrides
+
+    cfg = apply_overrides(TrainConfig(), ["data.downscale=8"])
+    assert cfg.downscale == 8 and cfg.data == {"downscale": 8} and TrainConfig().downscale == 1
+    assert TrainConfig.from_toml(cfg.to_toml()) == cfg
+    with pytest.raises(InputError, match="data.size: unknown key"):
+        apply_overrides(TrainConfig(), ["data.size=8"])
+    with pytest.raises(InputError, match="data.downscale: expected an int >= 1"):
+        apply_overrides(TrainConfig(), ["data.downscale=0"])
+
+
+def test_scene_tables_are_checked_in_one_line(tmp_path):
+    from splatbench.experiments.spec import parse_experiment
+
+    def parse(scene):
+        return parse_experiment({"kind": "train", "scenes": [scene]}, source="x.toml", default_name="x",
+                                base_dir=tmp_path)
+
+    with pytest.raises(InputError, match="x.toml: scenes.a: expected exactly one of 'path'"):
+        parse({"name": "a"})
+    with pytest.raises(InputError, match="scenes.a.path: .* is not a dataset folder"):
+        parse({"name": "a", "path": "nowhere"})
+    with pytest.raises(InputError, match="scenes.a.views: unknown key"):
+        (tmp_path / "d").mkdir()
+        parse({"name": "a", "path": "d", "views": 3})
+    spec = parse({"name": "a", "path": "d", "downscale": 4})
+    assert spec.name == "x" and spec.scenes == ("a",)
+    assert spec.scene_sources["a"] == {"path": str((tmp_path / "d").resolve()), "downscale": 4}
