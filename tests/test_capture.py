@@ -228,21 +228,29 @@ data.spp = 2
     assert rows["toy"].config["data"]["resolution"] == 16 and rows["toy"].config["data"]["views"] == 9
     assert "spp" not in rows["toy"].config["data"]
     assert all(r.metrics["test_psnr"] is not None for r in rows.values())
-    assert summary is not None
+    assert (summary.done, summary.failed) == (3, 0)
+    from splatbench.reports.report import build_report, write_report
+
+    text = write_report(build_report(spec, tmp_path / "results"), tmp_path / "report").read_text()
+    assert "scenes diffuse, cap, toy" in text and "Scenes from files: `cap` path" in text
 
 
 @pytest.mark.slow
 def test_opencv_capture_trains_like_the_same_scene_rendered_pinhole(tmp_path, monkeypatch):
     """A teacher scene rendered pinhole, and the same views seen through a known OPENCV lens
     (a COLMAP capture made by sampling 2x-resolution, wider pinhole renders at each distorted
-    pixel's ray), train to the same test PSNR once the loader has undistorted the second.
+    pixel's ray; the pinhole dataset's points as its points3D), train to the same test PSNR
+    once the loader has undistorted the second.
 
     Bound, derived: the undistorted targets differ from exact pinhole renders of their cameras
     by resampling error of PSNR ``P_r`` (measured below: bilinear twice). A model fitting the
     scene to ``P_pin`` then scores, with independent errors adding in MSE,
     ``P_pred = -10 log10(10^(-P_pin/10) + 10^(-P_r/10))`` against them. The run must reach
-    ``P_pred - 1 dB``: the 1 dB covers the two runs' different crops and random
-    initialisations at this length (seed-to-seed spread of 300-step runs here is ~0.3 dB)."""
+    ``P_pred - 1 dB``; the 1 dB is an allowance (not derived) for what the prediction leaves
+    out: the undistorted views are a crop of the pinhole ones (less border), and the two runs
+    see different pixels, so their optimisations differ. A loader that ignored the lens (the
+    old behaviour) or put the principal point off would leave target and camera inconsistent
+    by several pixels at the borders."""
     import pycolmap
     from scipy.ndimage import map_coordinates
 
@@ -281,6 +289,9 @@ def test_opencv_capture_trains_like_the_same_scene_rendered_pinhole(tmp_path, mo
         Image.fromarray(img).save(cap / "images" / Path(name).name)
         image = pycolmap.Image(name=Path(name).name, camera_id=1, image_id=n + 1)
         rec.add_image_with_trivial_frame(image, cam.to_colmap()[1])
+    points = every.points
+    for xyz, rgb in zip(points.xyz, points.rgb):
+        rec.add_point3D(xyz, pycolmap.Track(), rgb)
     (cap / "sparse" / "0").mkdir(parents=True)
     rec.write(str(cap / "sparse" / "0"))
     (cap / "split.json").write_text((pin / "split.json").read_text())
@@ -291,7 +302,7 @@ def test_opencv_capture_trains_like_the_same_scene_rendered_pinhole(tmp_path, mo
         exact = render(teacher, cam).rgb
         floor.append(np.mean((exact[2:-2, 2:-2] - gt[2:-2, 2:-2]) ** 2))
     p_r = -10 * np.log10(np.mean(floor))
-    settings = dict(iterations=300, init="random", init_random_points=3000, strategy="none")
+    settings = dict(iterations=300)  # init "surface": the same points3D for both
     p_pin = train(TrainConfig(dataset=str(pin), out=str(tmp_path / "run-pin"), **settings)).test_psnr
     p_dist = train(TrainConfig(dataset=str(cap), out=str(tmp_path / "run-dist"), **settings)).test_psnr
     p_pred = -10 * np.log10(10 ** (-p_pin / 10) + 10 ** (-p_r / 10))
