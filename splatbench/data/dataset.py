@@ -61,7 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
-from splatbench.data.undistort import UNDISTORTED_MODELS, Lens, check_lens
+from splatbench.data.undistort import Lens, check_lens
 from splatbench.errors import InputError
 
 LAYOUTS = ("auto", "colmap", "blender")
