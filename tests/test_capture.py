@@ -157,6 +157,7 @@ def test_colmap_opencv_capture_undistorts_to_the_pinhole_colours(tmp_path, monke
     assert np.allclose(ds.train.cameras[1].translation, [0.1, 0.0, 2.0])
 
 
+@pytest.mark.slow  # reads and undistorts 67 photos of 1080x1920 (~15 s)
 @pytest.mark.skipif(not FOX.is_dir(), reason="needs ../shared/data/fox (NVIDIA non-commercial licence, not bundled)")
 def test_fox_capture_loads_undistorted_and_downscaled(tmp_path, monkeypatch):
     monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
@@ -197,15 +198,7 @@ def test_teacher_scene_renders_exact_views_and_points(tmp_path):
     assert render_teacher(ply, tmp_path / "teacher", views=16, resolution=24).cached
 
 
-def test_grid_over_catalog_folder_and_teacher_scenes(tmp_path, monkeypatch):
-    from splatbench.experiments.grid import load_experiment
-    from splatbench.experiments.runner import run_experiment
-
-    monkeypatch.setenv("SPLATBENCH_DATASETS", str(tmp_path / "datasets"))
-    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
-    _pinhole_capture(tmp_path / "exp" / "cap", 9)
-    _small_ply(tmp_path / "exp" / "toy.ply")
-    (tmp_path / "exp" / "grid.toml").write_text("""
+_MIXED = """
 name = "mixed"
 kind = "train"
 scenes = ["diffuse", { name = "cap", path = "cap", downscale = 2 }, { name = "toy", model = "toy.ply", views = 9 }]
@@ -216,8 +209,37 @@ init_random_points = 200
 data.resolution = 16
 data.views = 9
 data.spp = 2
-""")
-    spec = load_experiment(tmp_path / "exp" / "grid.toml")
+"""
+
+
+def _mixed_grid(tmp_path):
+    from splatbench.experiments.grid import load_experiment
+
+    _pinhole_capture(tmp_path / "exp" / "cap", 9)
+    _small_ply(tmp_path / "exp" / "toy.ply")
+    (tmp_path / "exp" / "grid.toml").write_text(_MIXED)
+    return load_experiment(tmp_path / "exp" / "grid.toml")
+
+
+def test_grid_scenes_resolve_per_scene_type(tmp_path):
+    """Expansion only (no run): each scene type keeps the data keys that apply to it."""
+    from splatbench.experiments.grid import expand
+
+    runs = {r.scene: r.config for r in expand(_mixed_grid(tmp_path))}
+    assert runs["diffuse"]["data"] == {"resolution": 16, "views": 9, "spp": 2}
+    assert runs["cap"]["data"] == {"path": str((tmp_path / "exp" / "cap").resolve()), "downscale": 2}
+    assert runs["toy"]["data"] == {"model": str((tmp_path / "exp" / "toy.ply").resolve()), "views": 9,
+                                   "resolution": 16}
+    assert runs["cap"]["iterations"] == runs["toy"]["iterations"] == 20
+
+
+@pytest.mark.slow
+def test_grid_over_catalog_folder_and_teacher_scenes_runs_and_reports(tmp_path, monkeypatch):
+    from splatbench.experiments.runner import run_experiment
+
+    monkeypatch.setenv("SPLATBENCH_DATASETS", str(tmp_path / "datasets"))
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    spec = _mixed_grid(tmp_path)
     summary = run_experiment(spec, results_dir=tmp_path / "results", workers=1, progress=False)
     from splatbench.experiments.store import read_records
 
@@ -233,6 +255,7 @@ data.spp = 2
 
     text = write_report(build_report(spec, tmp_path / "results"), tmp_path / "report").read_text()
     assert "scenes diffuse, cap, toy" in text and "Scenes from files: `cap` path" in text
+
 
 
 @pytest.mark.slow
