@@ -1,5 +1,5 @@
 """Captures as they come: lens distortion undistorted on load (pycolmap), downscaling, the
-every-8th split, teacher scenes and grids over any scene (splatbench.data, scenes.teacher,
+every-8th split, teacher scenes and grids over any scene (splatbench.data, experiments.teacher,
 experiments.train_kind)."""
 
 from __future__ import annotations
@@ -185,7 +185,7 @@ def _small_ply(path: Path, up=None) -> Path:
 
 
 def test_teacher_scene_renders_exact_views_and_points(tmp_path):
-    from splatbench.scenes.teacher import render_teacher
+    from splatbench.experiments.teacher import render_teacher
 
     ply = _small_ply(tmp_path / "toy.ply", up=(0.0, 0.0, 1.0))
     t = render_teacher(ply, tmp_path / "teacher", views=16, resolution=24)
@@ -280,7 +280,7 @@ def test_opencv_capture_trains_like_the_same_scene_rendered_pinhole(tmp_path, mo
     from splatbench.cameras import Camera
     from splatbench.gaussians import Gaussians
     from splatbench.raster.api import render
-    from splatbench.scenes.teacher import render_teacher
+    from splatbench.experiments.teacher import render_teacher
     from splatbench.train import TrainConfig, train
 
     monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))

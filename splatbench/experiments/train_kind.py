@@ -7,7 +7,7 @@ Config (the nested dict an experiment gives one run)::
     data.path            a dataset folder (a scene table ``{ name, path, downscale }``)
     data.downscale       its image size divided by N (TrainConfig.data.downscale; default 1)
     data.model           a 3DGS PLY rendered as a teacher scene (``{ name, model, views,
-                         resolution, up }``; splatbench.scenes.teacher), with data.views
+                         resolution, up }``; splatbench.experiments.teacher), with data.views
                          (default 64), data.resolution (default 128) and data.up (default:
                          the PLY's hint, else -y)
     data.resolution      dataset image width in pixels (default: the scene rig's)
@@ -223,7 +223,7 @@ def ensure_dataset(scene: str, data: dict[str, Any], *, progress: bool = False):
     if kind == "folder":
         return FolderDataset(Path(data["path"]), True, None, 0.0)
     if kind == "teacher":
-        from splatbench.scenes.teacher import render_teacher
+        from splatbench.experiments.teacher import render_teacher
 
         out = datasets_dir() / f"teacher-{scene}-{data['resolution']}-v{data['views']}"
         return render_teacher(data["model"], out, views=data["views"], resolution=data["resolution"],
