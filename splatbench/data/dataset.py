@@ -38,7 +38,7 @@ images are resized by 1/N (PIL bicubic, as graphdeco's ``-r N``), or read from a
 ``images_N/`` folder beside ``images/`` when one exists (graphdeco's and Mip-NeRF 360's
 copies; distorted captures are undistorted from the full images instead); the cameras
 are scaled to the result. A note is added when the images' long side exceeds 1,600 px
-at downscale 1 (graphdeco would shrink them; splatbench keeps what it is given).
+at downscale 1 (graphdeco shrinks images wider than 1,600 px; splatbench keeps what it is given).
 
 Real captures are opaque: nothing is composited under RGB photos.
 
@@ -228,8 +228,9 @@ class _Load:
         views = dataset.train if len(dataset.train) else dataset.test
         if self.downscale == 1 and len(views) and max(views.images.shape[1:3]) > 1600:
             h, w = views.images.shape[1:3]
-            self.note(f"images are {w}x{h}: the long side exceeds 1600 px, which graphdeco's train.py would "
-                      f"shrink to 1600 px wide; splatbench keeps them (set data.downscale=N to train smaller)")
+            would = "would shrink these" if w > 1600 else "would keep these (it checks the width only)"
+            self.note(f"images are {w}x{h}: the long side exceeds 1600 px (graphdeco's train.py shrinks images wider "
+                      f"than 1600 px to 1600 and {would}); splatbench keeps them (data.downscale=N trains smaller)")
         return self.notes
 
 
