@@ -15,17 +15,17 @@ from __future__ import annotations
 
 from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins, ellipse_meets_rect, support_radius_sq, tile_pixel_offsets
+from splatbench.raster.records import Records, load_records
 
 
-def block_masks(m, rec, bins: Bins, block: int, alpha_min: float, load) -> list:
+def block_masks(m, rec: Records, bins: Bins, block: int, alpha_min: float) -> list:
     """Words of [P] UInt32: bit b % 32 of word b // 32 is set when pair p's ellipse
     meets block b of its tile (blocks row-major, as `compositing.make_lanes` orders a
     tile's lanes); blocks wholly outside the image never get a bit."""
     grid = bins.grid
     side = grid.tile_size // block
-    geo, _ = load(rec, bins.gaussian_ids)
-    u, v, ca, cb, cc, opacity, _, cutoff = geo
-    r2 = support_radius_sq(cutoff, opacity, alpha_min)
+    geo, _ = load_records(m, rec, bins.gaussian_ids)
+    r2 = support_radius_sq(geo.cutoff_sq, geo.opacity, alpha_min)
     tx, ty = bins.tiles % grid.tiles_x, bins.tiles // grid.tiles_x
     words = [dr.zeros(m.UInt32, bins.num_pairs) for _ in range(-(-side * side // 32))]
     for b in range(side * side):
@@ -33,21 +33,22 @@ def block_masks(m, rec, bins: Bins, block: int, alpha_min: float, load) -> list:
         x_lo = tx * grid.tile_size + bx * block
         y_lo = ty * grid.tile_size + by * block
         exists = (x_lo < grid.width) & (y_lo < grid.height)
-        hit = exists & ellipse_meets_rect(*tile_pixel_offsets(grid, tx, ty, u, v, block, bx, by), ca, cb, cc, r2)
+        hit = exists & ellipse_meets_rect(*tile_pixel_offsets(grid, tx, ty, geo.u, geo.v, block, bx, by),
+                                         geo.conic_a, geo.conic_b, geo.conic_c, r2)
         words[b // 32] |= dr.select(hit, m.UInt32(1 << (b % 32)), m.UInt32(0))
     return words
 
 
-def block_lists(m, rec, bins: Bins, lanes, alpha_min: float, load):
+def block_lists(m, rec: Records, bins: Bins, lanes, alpha_min: float):
     """`Lanes` whose [start, end) index their own list ``pairs`` (UInt32 sorted pair
     positions, depth order) instead of the tile's range.
 
-    ``rec``: packed `Records`; ``load(rec, gid)``: the compositing loop's record load.
+    ``rec``: the packed `Records` of the Gaussians.
     """
     UInt32 = m.UInt32
     L = lanes.lanes_per_tile
     block = bins.grid.tile_size // int(round(L ** 0.5))
-    words = block_masks(m, rec, bins, block, alpha_min, load)
+    words = block_masks(m, rec, bins, block, alpha_min)
     dr.eval(words)
     # Which bit of which word each lane reads (lane = tile * L + b).
     b = dr.arange(UInt32, dr.width(lanes.start)) % L

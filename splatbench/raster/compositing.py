@@ -35,11 +35,11 @@ from typing import NamedTuple
 
 from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins, TileGrid, bin_gaussians
+from splatbench.raster.blocks import block_lists
 from splatbench.raster.projection import DEFAULTS, Projection, array_namespace, next_power_of_two
+from splatbench.raster.records import GeoRecord, Records, Splats, load_records, pack_records
 from splatbench.raster.reduction import PAIR_GROUPS, bucket, reduce_pairs, lane_slots
 
-GEO = 8  # geometry record per Gaussian: u, v, conic A, B, C, opacity, depth, cutoff_sq
-COL = 4  # colour record per Gaussian: r, g, b, (padding: packet loads need a power of two)
 # Each lane shades a PIXEL_BLOCK x PIXEL_BLOCK block of pixels: one load of a record
 # serves them all, and their gradient terms are summed in registers before a scatter.
 # 4x4 measured best on AVX-512 (one 16-lane packet per 16x16 tile); see docs/benchmarks.md.
@@ -80,40 +80,6 @@ class Composite(NamedTuple):
     rgb: object
     alpha: object
     depth_sum: object
-
-
-@dataclass(frozen=True)
-class Splats:
-    """Per-Gaussian screen-space attributes read by the compositing loop."""
-
-    means2d: object    # Array2f [N]
-    conics: object     # Array3f [N]
-    opacities: object  # Float [N]
-    colors: object     # Array3f [N]
-    depths: object     # Float [N]
-    cutoff_sq: object  # Float [N], detached
-
-
-class Records(NamedTuple):
-    """Per-Gaussian data packed for packet loads: ``geo`` [N * GEO], ``col`` [N * COL].
-    One packet gather of a record replaces a scalar gather per field in the loops."""
-
-    geo: object
-    col: object
-
-
-def pack_records(m, s: Splats) -> Records:
-    """Interleave the splat attributes into `Records` (differentiable scatters)."""
-    n = dr.width(s.opacities)
-    idx = dr.arange(m.UInt32, n)
-    geo = dr.zeros(m.Float, GEO * n)
-    col = dr.zeros(m.Float, COL * n)
-    fields = (s.means2d.x, s.means2d.y, s.conics.x, s.conics.y, s.conics.z, s.opacities, s.depths, s.cutoff_sq)
-    for k, value in enumerate(fields):
-        dr.scatter(geo, value, idx * GEO + k, mode=dr.ReduceMode.Permute)
-    for k, value in enumerate((s.colors.x, s.colors.y, s.colors.z)):
-        dr.scatter(col, value, idx * COL + k, mode=dr.ReduceMode.Permute)
-    return Records(geo, col)
 
 
 class Lanes(NamedTuple):
@@ -170,12 +136,10 @@ def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
 
 def lanes_for(m, rec: Records, bins: Bins, cfg: CompositeSettings) -> Lanes:
     """The compositing lanes with their per-block lists (`blocks.block_lists`)."""
-    from splatbench.raster.blocks import block_lists
-
     lanes = make_lanes(m, bins.grid, bins)
     if bins.num_pairs == 0:
         return lanes
-    return block_lists(m, rec, bins, lanes, cfg.alpha_min, lambda r, gid: _load(m, r, gid))
+    return block_lists(m, rec, bins, lanes, cfg.alpha_min)
 
 
 def _half_mahalanobis(conic_a, conic_b, conic_c, dx, dy):
@@ -184,26 +148,17 @@ def _half_mahalanobis(conic_a, conic_b, conic_c, dx, dy):
     return 0.5 * (conic_a * dx * dx + conic_c * dy * dy) + conic_b * dx * dy
 
 
-def _alpha_at(rec, px, py, cfg: CompositeSettings, active):
-    """Alpha of one Gaussian (geometry record ``rec``) at pixel centre (px, py), and
+def _alpha_at(geo: GeoRecord, px, py, cfg: CompositeSettings, active):
+    """Alpha of one Gaussian (geometry record ``geo``) at pixel centre (px, py), and
     the pieces its gradient needs."""
-    mean_x, mean_y, conic_a, conic_b, conic_c, opacity, depth, cutoff = rec
-    dx = px - mean_x
-    dy = py - mean_y
-    sigma = _half_mahalanobis(conic_a, conic_b, conic_c, dx, dy)
+    dx = px - geo.u
+    dy = py - geo.v
+    sigma = _half_mahalanobis(geo.conic_a, geo.conic_b, geo.conic_c, dx, dy)
     gauss = dr.exp(-sigma)
-    raw = opacity * gauss
+    raw = geo.opacity * gauss
     alpha = dr.minimum(raw, cfg.alpha_max)
-    contributes = active & (sigma <= 0.5 * cutoff) & (alpha >= cfg.alpha_min)
+    contributes = active & (sigma <= 0.5 * geo.cutoff_sq) & (alpha >= cfg.alpha_min)
     return alpha, contributes, dx, dy, gauss, raw
-
-
-def _load(m, rec: Records, gid, active=True):
-    """(geometry fields, colour fields) of Gaussians ``gid`` as lists of Float."""
-    n = dr.width(gid)
-    geo = dr.gather(m.ArrayXf, rec.geo, gid, active, shape=(GEO, n))
-    col = dr.gather(m.ArrayXf, rec.col, gid, active, shape=(COL, n))
-    return [geo[k] for k in range(GEO)], [col[k] for k in range(3)]
 
 
 class _Forward(NamedTuple):
@@ -242,7 +197,7 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
     def body(*state):
         i, pix = unpack(state)
         gid = dr.gather(UInt32, ids, pair_at(m, lanes, i))
-        geo, (cr, cg, cb) = _load(m, rec, gid)
+        geo, (cr, cg, cb) = load_records(m, rec, gid)
         out = [i + 1]
         for k, (T, r, g, b, depth_sum, stop) in enumerate(pix):
             alpha, contributes, _, _, _, _ = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, stop == lanes.end)
@@ -250,7 +205,7 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
             stop_now = contributes & (t_next < cfg.transmittance_min)
             take = contributes & ~stop_now
             w = dr.select(take, T * alpha, 0.0)
-            out += [dr.select(take, t_next, T), r + w * cr, g + w * cg, b + w * cb, depth_sum + w * geo[6],
+            out += [dr.select(take, t_next, T), r + w * cr, g + w * cg, b + w * cb, depth_sum + w * geo.depth,
                     dr.select(stop_now, i, stop)]
         return tuple(out)
 
@@ -356,8 +311,8 @@ class _CompositeOp(dr.CustomOp):
             i = i - 1
             p = pair_at(m, lanes, i)
             gid = dr.gather(UInt32, ids, p)
-            geo, (cr, cg, cb) = _load(m, rec, gid)
-            ca, cbk, cc, depth = geo[2], geo[3], geo[4], geo[6]
+            geo, (cr, cg, cb) = load_records(m, rec, gid)
+            ca, cbk, cc, depth = geo.conic_a, geo.conic_b, geo.conic_c, geo.depth
             sums = {key: 0.0 for key in keys}
             out = [i]
             any_on = None

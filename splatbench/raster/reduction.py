@@ -5,12 +5,14 @@ from __future__ import annotations
 
 from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins
+from splatbench.raster.records import COL, COLOUR_GRAD_KEYS, GEO, GEO_GRAD_KEYS
 
-# Per-pair gradient accumulators, packed like the records so that the backward loop
-# does one packet scatter-add per group and the reduction one packet load per pair.
+# Per-pair gradient accumulators, packed like the records (`records.GeoRecord` order) so
+# that the backward loop does one packet scatter-add per group and the reduction one packet
+# load per pair: name -> (width, the gradient key of each slot; None: padding, never read).
 PAIR_GROUPS = {
-    "geo": (8, ("mx", "my", "ca", "cb", "cc", "o", "z", None)),
-    "col": (4, ("r", "g", "b", None)),
+    "geo": (GEO, tuple(GEO_GRAD_KEYS)),
+    "col": (COL, (*COLOUR_GRAD_KEYS, None)),
     "abs": (2, ("ax", "ay")),
 }
 
