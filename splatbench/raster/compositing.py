@@ -17,7 +17,7 @@ a tile add into one slot per pair (`ReduceMode.Expand`: per-thread copies, and a
 tile never spans two threads); that mode exists only on LLVM, so elsewhere (CUDA)
 each lane writes a slot of its own and the reduction sums a pair's lane slots in
 lane order: no atomics, the same result every run (see `lane_slots`). Dr.Jit's own AD
-through the forward loop (`composite(..., loop_ad=True)`) is kept as a test-only
+through the forward loop (`composite_loop_ad`) is kept as a test-only
 second backward that checks the hand-written one.
 
 Size (~490 lines, over the ~400 guideline on purpose): the forward loop and the
@@ -34,9 +34,10 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from splatbench.raster.device import dr
-from splatbench.raster.binning import Bins, TileGrid, bin_gaussians
+from splatbench.raster.binning import Bins, TileGrid
 from splatbench.raster.blocks import block_lists
-from splatbench.raster.projection import DEFAULTS, Projection, array_namespace, next_power_of_two
+from splatbench.raster.options import RasterOptions
+from splatbench.raster.projection import Projection, array_namespace, next_power_of_two
 from splatbench.raster.records import GeoRecord, Records, Splats, load_records, pack_records
 from splatbench.raster.reduction import PAIR_GROUPS, bucket, reduce_pairs, lane_slots
 
@@ -66,10 +67,17 @@ def needed_keys(inputs: dict, absgrad: bool) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class CompositeSettings:
+    """The compositing thresholds (`RasterOptions`' meanings) and the RGB background."""
+
     alpha_min: float
     alpha_max: float
     transmittance_min: float
     background: tuple[float, float, float]
+
+    @classmethod
+    def from_options(cls, options: RasterOptions, background=(0.0, 0.0, 0.0)) -> CompositeSettings:
+        return cls(float(options.alpha_min), float(options.alpha_max), float(options.transmittance_min),
+                   tuple(float(c) for c in background))
 
 
 class Composite(NamedTuple):
@@ -242,7 +250,7 @@ class _CompositeOp(dr.CustomOp):
         # side, so a cycle through them would never be collected (a leak per call).
         self.state = state
         self.m, self.bins, self.cfg = m, state.bins, cfg
-        self.want_absgrad, self.timer = state.want_absgrad, state.timer
+        self.want_absgrad = state.want_absgrad
         self.n = dr.width(opacities)
         self.records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
         dr.eval(self.records)
@@ -373,8 +381,8 @@ class _CompositeOp(dr.CustomOp):
             if group[0] in keys:  # a group is computed whole or not at all (`needed_keys`)
                 values = [buf[key] for key in group]
                 self.set_grad_in(name, values[0] if len(values) == 1 else getattr(m, f"Array{len(values)}f")(*values))
-        if self.timer is not None:
-            self.timer.mark("backward_compositing")
+        if self.state.timer is not None:
+            self.state.timer.mark("backward_compositing")
 
     def name(self):
         return "splatbench.composite"
@@ -390,58 +398,55 @@ class CompositeState:
     ``abs_grad_means2d`` [N, 2] (per-pixel |d loss / d mean2d| summed, for AbsGS).
     ``grad_keys``: the per-pair gradient terms the backward pass accumulates
     (`needed_keys`; a frozen group's are left out, and with them their per-pixel work).
+    ``timer``: None, or a benchmark's `StageTimer` that the caller attaches after
+    `composite` returns; the backward pass marks "backward_compositing" on it.
     It holds no reference to the op (see `_CompositeOp.eval`).
     """
 
     __slots__ = ("bins", "want_absgrad", "timer", "grad_means2d", "abs_grad_means2d", "grad_keys")
 
-    def __init__(self, bins: Bins, want_absgrad: bool = False, timer=None, grad_keys: tuple[str, ...] = ()) -> None:
+    def __init__(self, bins: Bins, want_absgrad: bool = False, grad_keys: tuple[str, ...] = ()) -> None:
         self.bins = bins
         self.want_absgrad = want_absgrad
-        self.timer = timer
+        self.timer = None
         self.grad_keys = grad_keys  # the `GRAD_KEYS` the backward pass accumulates (`needed_keys`)
         self.grad_means2d = None
         self.abs_grad_means2d = None
 
 
-def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, width: int, height: int,
-              *, background=(0.0, 0.0, 0.0), alpha_min: float = DEFAULTS.alpha_min,
-              alpha_max: float = DEFAULTS.alpha_max, transmittance_min: float = DEFAULTS.transmittance_min,
-              tile_size: int = DEFAULTS.tile_size, extents=None,
-              loop_ad: bool = False, absgrad: bool = False, timer=None) -> tuple[Composite, CompositeState]:
-    """Alpha-composite screen-space Gaussians (mirrors `reference.composite`, matched mode).
+def composite(proj: Projection, colors, bins: Bins, settings: CompositeSettings, *,
+              absgrad: bool = False) -> tuple[Composite, CompositeState]:
+    """Alpha-composite screen-space Gaussians (mirrors `reference.composite`, matched mode):
+    the last stage of `project` -> `bin_gaussians` -> `composite`.
 
     Args:
-        means2d: [N, 2] Array2f. conics: [N, 3] Array3f. opacities, depths,
-        cutoff_sq: [N] Float. colors: [N, 3] Array3f. visible: [N] Bool.
-        extents: [N, 2] cutoff bounding-box half sizes (from `project`).
-        loop_ad: differentiate the loop with Dr.Jit's AD instead of the
-            hand-written backward (test-only: slower, checks the CustomOp).
+        proj: `Projection` of N Gaussians (means2d [N, 2], conics [N, 3], opacities [N],
+            depths [N], cutoff_sq [N]; gradients flow to the first four).
+        colors: [N, 3] Array3f, the Gaussians' colours.
+        bins: `Bins` of ``proj`` from `bin_gaussians`, with ``settings.alpha_min``.
+        settings: thresholds and background (`CompositeSettings`).
         absgrad: also accumulate per-pixel |d loss / d mean2d| (AbsGS) in backward.
-        timer: optional `StageTimer` (benchmarks): marks "binning" and, in backward,
-            "backward_compositing".
 
     Returns:
         (`Composite` in row-major image order, `CompositeState`).
     """
-    m = array_namespace(opacities)
-    proj = Projection(means2d, conics, depths, opacities, cutoff_sq, extents, None, visible)
-    grid = TileGrid(width, height, tile_size)
-    bins = bin_gaussians(proj, grid, float(alpha_min))
-    if timer is not None:
-        timer.mark("binning")
-    cfg = CompositeSettings(float(alpha_min), float(alpha_max), float(transmittance_min),
-                            tuple(float(c) for c in background))
-    if loop_ad:
-        records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
-        lanes = lanes_for(m, records, bins, cfg)
-        # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
-        # count (the longest tile list, rounded up to a power of two); -1 is wrong here.
-        bound = next_power_of_two(max(bins.max_list_length, 1))
-        fwd = _forward_loop(m, records, bins.gaussian_ids, lanes, cfg, max_iterations=bound)
-        return _to_image(m, grid, lanes, fwd, cfg.background), CompositeState(bins)
-    keys = needed_keys({"means2d": means2d, "conics": conics, "opacities": opacities, "colors": colors,
-                        "depths": depths}, absgrad)
-    state = CompositeState(bins, absgrad, timer, keys)
-    out = dr.custom(_CompositeOp, means2d, conics, opacities, colors, depths, cutoff_sq, state, cfg)
+    keys = needed_keys({"means2d": proj.means2d, "conics": proj.conics, "opacities": proj.opacities,
+                        "colors": colors, "depths": proj.depths}, absgrad)
+    state = CompositeState(bins, absgrad, grad_keys=keys)
+    out = dr.custom(_CompositeOp, proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq,
+                    state, settings)
     return Composite(*out), state
+
+
+def composite_loop_ad(proj: Projection, colors, bins: Bins, settings: CompositeSettings) -> tuple[Composite,
+                                                                                                  CompositeState]:
+    """`composite` differentiated by Dr.Jit's AD through the forward loop instead of the
+    hand-written backward (test-only: slower; checks `_CompositeOp`)."""
+    m = array_namespace(proj.opacities)
+    records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq))
+    lanes = lanes_for(m, records, bins, settings)
+    # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
+    # count (the longest tile list, rounded up to a power of two); -1 is wrong here.
+    bound = next_power_of_two(max(bins.max_list_length, 1))
+    fwd = _forward_loop(m, records, bins.gaussian_ids, lanes, settings, max_iterations=bound)
+    return _to_image(m, bins.grid, lanes, fwd, settings.background), CompositeState(bins)
