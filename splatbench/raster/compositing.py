@@ -178,6 +178,53 @@ class _Forward(NamedTuple):
     stop: list  # exclusive end of each pixel's composited range
 
 
+class _FrontPixel(NamedTuple):
+    """One pixel's state in the forward walk (front to back). No Bool on purpose: Dr.Jit 1.5
+    emits invalid LLVM IR (i8 vs i1) when reverse-mode AD through the loop has to record a
+    Bool state variable; a pixel is live while ``stop`` still equals the lane's end."""
+
+    T: object          # transmittance in front of the next Gaussian
+    r: object          # colour composited so far
+    g: object
+    b: object
+    depth_sum: object  # sum of T alpha z: the oracle's D (reference/composite.py)
+    stop: object       # UInt32: where the pixel stopped; the lane's end while live (start if outside the image)
+
+
+class _BackPixel(NamedTuple):
+    """One pixel's state in the backward walk (back to front).
+
+    T: the transmittance in front of the Gaussians walked so far (T_final at the start).
+    behind: only when alpha's cotangent is wanted (else None, and not carried), S =
+    v . (what lies behind): the cotangent-weighted colour and depth composited behind the
+    current Gaussian (background included), v_rgb . rgb_behind + v_depth . depth_behind.
+    One scalar instead of the four channels: the walk is bound by the values it keeps
+    live, not by arithmetic.
+    """
+
+    T: object
+    behind: object = None
+
+    def step(self, on, T_i, w, v_here) -> _BackPixel:
+        """The state once the walk has passed a Gaussian (``on``: it contributed, with
+        weight ``w`` = T_i alpha and cotangent-weighted value ``v_here``)."""
+        T = dr.select(on, T_i, self.T)
+        if self.behind is None:
+            return _BackPixel(T)
+        return _BackPixel(T, dr.select(on, self.behind + w * v_here, self.behind))
+
+
+def _pack(i, pixels) -> tuple:
+    """The flat state a compositing loop carries: the list index ``i``, then each pixel's
+    fields in order (a field that is None is not carried)."""
+    return (i, *(value for pixel in pixels for value in pixel if value is not None))
+
+
+def _unpack(state, pixel_type, width: int):
+    """(index, [pixel_type of each pixel]) from a flat loop state of ``width`` fields per pixel."""
+    return state[0], [pixel_type(*state[1 + width * k: 1 + width * (k + 1)]) for k in range((len(state) - 1) // width)]
+
+
 def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, max_iterations=None) -> _Forward:
     Float, UInt32 = m.Float, m.UInt32
     K = len(lanes.px)
@@ -186,46 +233,39 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
     one = dr.full(Float, 1.0, n)
     if dr.width(ids) == 0:  # nothing visible: every pixel shows the background
         return _Forward([m.Array3f(zero, zero, zero)] * K, [one] * K, [zero] * K, [UInt32(lanes.start)] * K)
-
-    # state: i, then per pixel (T, r, g, b, depth_sum, stop); depth_sum = sum of T alpha z, the
-    # oracle's D (reference/composite.py). A pixel is live while its stop
-    # index still equals the lane's end (pixels outside the image start at `start`).
-    # No Bool in the state on purpose: Dr.Jit 1.5 emits invalid LLVM IR (i8 vs i1)
-    # when reverse-mode AD through the loop has to record a Bool state variable.
-    def unpack(state):
-        return state[0], [state[1 + 6 * k: 7 + 6 * k] for k in range(K)]
+    width = len(_FrontPixel._fields)
 
     def cond(*state):
-        i, pix = unpack(state)
-        live = pix[0][5] == lanes.end
-        for p in pix[1:]:
-            live = live | (p[5] == lanes.end)
+        i, pixels = _unpack(state, _FrontPixel, width)
+        live = pixels[0].stop == lanes.end
+        for p in pixels[1:]:
+            live = live | (p.stop == lanes.end)
         return (i < lanes.end) & live
 
     def body(*state):
-        i, pix = unpack(state)
+        i, pixels = _unpack(state, _FrontPixel, width)
         gid = dr.gather(UInt32, ids, pair_at(m, lanes, i))
         geo, (cr, cg, cb) = load_records(m, rec, gid)
-        out = [i + 1]
-        for k, (T, r, g, b, depth_sum, stop) in enumerate(pix):
-            alpha, contributes, _, _, _, _ = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, stop == lanes.end)
-            t_next = T * (1.0 - alpha)
+        i_next = i + 1
+        after = []
+        for k, p in enumerate(pixels):
+            alpha, contributes, _, _, _, _ = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, p.stop == lanes.end)
+            t_next = p.T * (1.0 - alpha)
             stop_now = contributes & (t_next < cfg.transmittance_min)
             take = contributes & ~stop_now
-            w = dr.select(take, T * alpha, 0.0)
-            out += [dr.select(take, t_next, T), r + w * cr, g + w * cg, b + w * cb, depth_sum + w * geo.depth,
-                    dr.select(stop_now, i, stop)]
-        return tuple(out)
+            w = dr.select(take, p.T * alpha, 0.0)
+            after.append(_FrontPixel(T=dr.select(take, t_next, p.T), r=p.r + w * cr, g=p.g + w * cg, b=p.b + w * cb,
+                                     depth_sum=p.depth_sum + w * geo.depth, stop=dr.select(stop_now, i, p.stop)))
+        return _pack(i_next, after)
 
-    state = [UInt32(lanes.start)]
-    for k in range(K):
-        state += [Float(one), Float(zero), Float(zero), Float(zero), Float(zero),
-                  dr.select(lanes.inside[k], lanes.end, lanes.start)]
+    start = _pack(UInt32(lanes.start), [_FrontPixel(Float(one), Float(zero), Float(zero), Float(zero), Float(zero),
+                                                    dr.select(lanes.inside[k], lanes.end, lanes.start))
+                                        for k in range(K)])
     kwargs = {} if max_iterations is None else {"max_iterations": max_iterations}
-    final = dr.while_loop(tuple(state), cond, body, mode="symbolic", **kwargs)
-    _, pix = unpack(final)
-    return _Forward([m.Array3f(p[1], p[2], p[3]) for p in pix], [p[0] for p in pix], [p[4] for p in pix],
-                    [p[5] for p in pix])
+    final = dr.while_loop(start, cond, body, mode="symbolic", **kwargs)
+    _, pixels = _unpack(final, _FrontPixel, width)
+    return _Forward([m.Array3f(p.r, p.g, p.b) for p in pixels], [p.T for p in pixels], [p.depth_sum for p in pixels],
+                    [p.stop for p in pixels])
 
 
 def _to_image(m, grid: TileGrid, lanes: Lanes, fwd: _Forward, bg) -> Composite:
@@ -238,6 +278,145 @@ def _to_image(m, grid: TileGrid, lanes: Lanes, fwd: _Forward, bg) -> Composite:
         dr.scatter(T, fwd.T[k], idx, ok, mode=dr.ReduceMode.Permute)
         dr.scatter(depth_sum, fwd.depth_sum[k], idx, ok, mode=dr.ReduceMode.Permute)
     return Composite(rgb + T * m.Array3f(*bg), 1.0 - T, depth_sum)
+
+
+@dataclass(frozen=True)
+class _WalkPlan:
+    """What the backward walk computes for the gradient ``keys`` it accumulates: alpha's
+    cotangent (and the sum S behind it) only for the geometry and opacity; the weight
+    T alpha only for colours and depth."""
+
+    keys: tuple[str, ...]
+    want_sigma: bool  # the 2D mean and conic terms
+    want_va: bool     # alpha's cotangent (carries S per pixel)
+    want_w: bool      # the colour and depth terms
+
+    @classmethod
+    def of(cls, keys: tuple[str, ...]) -> _WalkPlan:
+        want_sigma = any(k in keys for k in ("mx", "my", "ca", "cb", "cc"))
+        return cls(keys, want_sigma, want_sigma or "o" in keys, any(k in keys for k in ("r", "g", "b", "z")))
+
+    @property
+    def width(self) -> int:
+        """Loop-state fields per pixel: (T, S), or (T,) without alpha's cotangent."""
+        return 2 if self.want_va else 1
+
+
+class _PixelCotangent(NamedTuple):
+    """What the backward walk reads of one pixel of each lane (lane order)."""
+
+    v_rgb: object    # Array3f, d loss / d rgb (zero for pixels outside the image)
+    v_alpha: object  # d loss / d alpha
+    v_depth: object  # d loss / d depth_sum
+    T_final: object  # transmittance after the forward walk
+    stop: object     # exclusive end of the forward walk's range
+
+
+def _lane_cotangents(m, lanes: Lanes, fwd: _Forward, v_rgb_img, v_alpha_img, v_d_img) -> list[_PixelCotangent]:
+    """The outputs' cotangents, image order -> lane order, with the forward walk's end state."""
+    K = len(lanes.px)
+    v_rgb = [dr.gather(m.Array3f, v_rgb_img, lanes.image_index[k], lanes.inside[k]) for k in range(K)]
+    v_alpha = [dr.gather(m.Float, v_alpha_img, lanes.image_index[k], lanes.inside[k]) for k in range(K)]
+    v_d = [dr.gather(m.Float, v_d_img, lanes.image_index[k], lanes.inside[k]) for k in range(K)]
+    return [_PixelCotangent(v_rgb[k], v_alpha[k], v_d[k], fwd.T[k], fwd.stop[k]) for k in range(K)]
+
+
+class _PairBuffers(NamedTuple):
+    """Per-pair gradient accumulators, `reduction.PAIR_GROUPS` name -> Float buffer. Slot p
+    belongs to one (tile, Gaussian) pair, so only the lanes of one tile ever add into it.
+    Expand (LLVM): per-thread copies, non-atomic updates; still deterministic: a slot is
+    only written by the lanes of one tile, and a tile never spans two threads. Per-lane
+    slots (CUDA, `lane_slots`): each slot is written once, by one lane, without atomics."""
+
+    groups: dict
+    slots_per_pair: int  # L: lanes per tile with per-lane slots, else 1
+    sub_slot: object     # UInt32 lane % L with per-lane slots, else None
+
+    @classmethod
+    def allocate(cls, m, bins: Bins, lanes: Lanes, keys) -> _PairBuffers:
+        cap = bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
+        per_lane = lane_slots(m)
+        L = lanes.lanes_per_tile if per_lane else 1
+        groups = {name: dr.zeros(m.Float, size * cap * L) for name, (size, group) in PAIR_GROUPS.items()
+                  if any(key in keys for key in group)}
+        sub_slot = dr.arange(m.UInt32, dr.width(lanes.start)) % L if per_lane else None
+        return cls(groups, L, sub_slot)
+
+    def add(self, m, p, sums: dict, active) -> None:
+        """Add one step's terms (``sums``: key -> Float, summed over a lane's pixels) into pair slot ``p``."""
+        for name, buffer in self.groups.items():
+            values = m.ArrayXf([sums[key] if key in sums else 0.0 for key in PAIR_GROUPS[name][1]])
+            if self.sub_slot is not None:
+                dr.scatter(buffer, values, p * self.slots_per_pair + self.sub_slot, active)
+            else:
+                dr.scatter_add(buffer, values, p, active, mode=dr.ReduceMode.Expand)
+
+
+def _adjoint_step(geo: GeoRecord, colour, px, py, cfg: CompositeSettings, plan: _WalkPlan, pix: _PixelCotangent,
+                  state: _BackPixel, active, sums: dict):
+    """The adjoint of one forward step at one pixel: adds the pixel's gradient terms for the
+    Gaussian (``geo``, ``colour``) into ``sums``; returns (on, T_i, w, v_here) for `_BackPixel.step`."""
+    cr, cg, cb = colour
+    alpha, on, dx, dy, gauss, raw = _alpha_at(geo, px, py, cfg, active)
+    inv_1ma = 1.0 / (1.0 - alpha)
+    T_i = state.T * inv_1ma  # transmittance in front of this Gaussian
+    w = T_i * alpha
+    vr, vg, vb = pix.v_rgb.x, pix.v_rgb.y, pix.v_rgb.z
+    terms, v_here = {}, None
+    if plan.want_va:
+        v_here = vr * cr + vg * cg + vb * cb + pix.v_depth * geo.depth  # v . (colour, depth) of this one
+        v_a = T_i * v_here - state.behind * inv_1ma + pix.v_alpha * pix.T_final * inv_1ma
+        v_raw = dr.select(on & (raw < cfg.alpha_max), v_a, 0.0)
+        terms["o"] = v_raw * gauss
+    if plan.want_sigma:
+        ca, cb_, cc = geo.conic_a, geo.conic_b, geo.conic_c
+        v_sigma = -v_raw * raw
+        v_mx = v_sigma * -(ca * dx + cb_ * dy)
+        v_my = v_sigma * -(cb_ * dx + cc * dy)
+        terms.update({"mx": v_mx, "my": v_my, "ca": v_sigma * 0.5 * dx * dx, "cb": v_sigma * dx * dy,
+                      "cc": v_sigma * 0.5 * dy * dy, "ax": dr.abs(v_mx), "ay": dr.abs(v_my)})
+    if plan.want_w:
+        w_on = dr.select(on, w, 0.0)
+        terms.update({"r": vr * w_on, "g": vg * w_on, "b": vb * w_on, "z": pix.v_depth * w_on})
+    for key in plan.keys:
+        sums[key] = sums[key] + terms[key]
+    return on, T_i, w, v_here
+
+
+def _walk_back(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, plan: _WalkPlan,
+               cotangents: list[_PixelCotangent], buffers: _PairBuffers) -> None:
+    """Walk each lane's list back to front from the largest stop index of its pixels,
+    recovering transmittance by division, and add each step's terms into ``buffers``."""
+    UInt32 = m.UInt32
+    start_i = cotangents[0].stop
+    for c in cotangents[1:]:
+        start_i = dr.maximum(start_i, c.stop)
+
+    def cond(*state):
+        return state[0] > lanes.start
+
+    def body(*state):
+        i, pixels = _unpack(state, _BackPixel, plan.width)
+        i = i - 1
+        p = pair_at(m, lanes, i)
+        geo, colour = load_records(m, rec, dr.gather(UInt32, ids, p))
+        sums = {key: 0.0 for key in plan.keys}
+        after, any_on = [], None
+        for k, (pix, pixel) in enumerate(zip(cotangents, pixels)):
+            on, T_i, w, v_here = _adjoint_step(geo, colour, lanes.px[k], lanes.py[k], cfg, plan, pix, pixel,
+                                               i < pix.stop, sums)
+            any_on = on if any_on is None else any_on | on
+            after.append(pixel.step(on, T_i, w, v_here))
+        buffers.add(m, p, sums, any_on)
+        return _pack(i, after)
+
+    bg = cfg.background
+    start = _pack(UInt32(start_i), [
+        _BackPixel(m.Float(c.T_final),
+                   c.T_final * (c.v_rgb.x * bg[0] + c.v_rgb.y * bg[1] + c.v_rgb.z * bg[2]) if plan.want_va else None)
+        for c in cotangents])
+    dr.while_loop(start, cond, body, mode="symbolic")
+    dr.eval(buffers.groups)
 
 
 class _CompositeOp(dr.CustomOp):
@@ -263,126 +442,42 @@ class _CompositeOp(dr.CustomOp):
         return tuple(_to_image(m, self.bins.grid, self.lanes, fwd, cfg.background))
 
     def backward(self):
-        m, rec, lanes, cfg, bins = self.m, self.records, self.lanes, self.cfg, self.bins
-        Float, UInt32 = m.Float, m.UInt32
         keys = self.state.grad_keys  # only what a trainable input needs (`needed_keys`)
-        want_means2d = "mx" in keys
-        if bins.num_pairs == 0 or not keys:  # nothing composited, or nothing to differentiate
-            zero = dr.zeros(Float, self.n)
-            self.state.grad_means2d = m.Array2f(zero, zero) if want_means2d else None
-            self.state.abs_grad_means2d = m.Array2f(zero, zero) if self.want_absgrad else None
-            self.records = self.lanes = self.fwd = None
+        if self.bins.num_pairs == 0 or not keys:  # nothing composited, or nothing to differentiate
+            self._publish_zeros(keys)
             return
-        # What the walk computes: alpha's cotangent (and the sum S of what lies behind it)
-        # only for the geometry and opacity; the weight T alpha only for colours and depth.
-        want_sigma = any(k in keys for k in ("mx", "my", "ca", "cb", "cc"))
-        want_va = want_sigma or "o" in keys
-        want_w = any(k in keys for k in ("r", "g", "b", "z"))
-        # Per pixel state: T and, for alpha's cotangent, S = v . (what lies behind): the
-        # cotangent-weighted colour and depth composited behind this Gaussian (background
-        # included), v_rgb . rgb_behind + v_depth . depth_behind. One scalar instead of the
-        # four channels: the walk is bound by the values it keeps live, not by arithmetic.
-        width = 2 if want_va else 1
-        v_rgb_img, v_alpha_img, v_d_img = self.grad_out()
-        K = len(lanes.px)
-        # Image order -> lane order (pixels outside the image get zero cotangents).
-        v_rgb = [dr.gather(m.Array3f, v_rgb_img, lanes.image_index[k], lanes.inside[k]) for k in range(K)]
-        v_alpha = [dr.gather(Float, v_alpha_img, lanes.image_index[k], lanes.inside[k]) for k in range(K)]
-        v_d = [dr.gather(Float, v_d_img, lanes.image_index[k], lanes.inside[k]) for k in range(K)]
-        T_final, stop = self.fwd.T, self.fwd.stop
-        bg = cfg.background
-        ids = bins.gaussian_ids
-        # Per-pair accumulators: slot p belongs to one (tile, Gaussian) pair, so only the
-        # lanes of one tile ever add into it.
-        cap = bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
-        per_lane = lane_slots(m)
-        L = lanes.lanes_per_tile if per_lane else 1
-        pair = {name: dr.zeros(Float, size * cap * L) for name, (size, group) in PAIR_GROUPS.items()
-                if any(key in keys for key in group)}
-        # Expand (LLVM): per-thread copies, non-atomic updates. Still deterministic: a slot
-        # is only written by the lanes of one tile, and a tile never spans two threads.
-        # Per-lane slots (CUDA): each slot is written once, by one lane, without atomics.
-        sub_slot = dr.arange(UInt32, dr.width(lanes.start)) % L if per_lane else None
-        # Each lane walks its own list back from the largest stop index of its pixels.
-        start_i = stop[0]
-        for s in stop[1:]:
-            start_i = dr.maximum(start_i, s)
-
-        def unpack(state):  # i, then per pixel (T, S) or (T,)
-            return state[0], [state[1 + width * k: 1 + width * (k + 1)] for k in range(K)]
-
-        def cond(*state):
-            return state[0] > lanes.start
-
-        def body(*state):
-            i, pix = unpack(state)
-            i = i - 1
-            p = pair_at(m, lanes, i)
-            gid = dr.gather(UInt32, ids, p)
-            geo, (cr, cg, cb) = load_records(m, rec, gid)
-            ca, cbk, cc, depth = geo.conic_a, geo.conic_b, geo.conic_c, geo.depth
-            sums = {key: 0.0 for key in keys}
-            out = [i]
-            any_on = None
-            for k, px_state in enumerate(pix):
-                T = px_state[0]
-                alpha, on, dx, dy, gauss, raw = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, i < stop[k])
-                inv_1ma = 1.0 / (1.0 - alpha)
-                T_i = T * inv_1ma  # transmittance in front of this Gaussian
-                w = T_i * alpha
-                vr, vg, vb = v_rgb[k].x, v_rgb[k].y, v_rgb[k].z
-                terms = {}
-                if want_va:
-                    behind = px_state[1]
-                    v_here = vr * cr + vg * cg + vb * cb + v_d[k] * depth  # v . (colour, depth) of this one
-                    v_a = T_i * v_here - behind * inv_1ma + v_alpha[k] * T_final[k] * inv_1ma
-                    v_raw = dr.select(on & (raw < cfg.alpha_max), v_a, 0.0)
-                    terms["o"] = v_raw * gauss
-                if want_sigma:
-                    v_sigma = -v_raw * raw
-                    v_mx = v_sigma * -(ca * dx + cbk * dy)
-                    v_my = v_sigma * -(cbk * dx + cc * dy)
-                    terms.update({"mx": v_mx, "my": v_my, "ca": v_sigma * 0.5 * dx * dx, "cb": v_sigma * dx * dy,
-                                  "cc": v_sigma * 0.5 * dy * dy, "ax": dr.abs(v_mx), "ay": dr.abs(v_my)})
-                if want_w:
-                    w_on = dr.select(on, w, 0.0)
-                    terms.update({"r": vr * w_on, "g": vg * w_on, "b": vb * w_on, "z": v_d[k] * w_on})
-                for key in keys:
-                    sums[key] = sums[key] + terms[key]
-                any_on = on if any_on is None else any_on | on
-                out.append(dr.select(on, T_i, T))
-                if want_va:
-                    out.append(dr.select(on, behind + w * v_here, behind))
-            for name, buffer in pair.items():
-                values = m.ArrayXf([sums[key] if key in keys else 0.0 for key in PAIR_GROUPS[name][1]])
-                if per_lane:
-                    dr.scatter(buffer, values, p * L + sub_slot, any_on)
-                else:
-                    dr.scatter_add(buffer, values, p, any_on, mode=dr.ReduceMode.Expand)
-            return tuple(out)
-
-        state = [UInt32(start_i)]
-        for k in range(K):
-            T = T_final[k]
-            v = v_rgb[k]
-            state += [Float(T), T * (v.x * bg[0] + v.y * bg[1] + v.z * bg[2])][:width]
-        dr.while_loop(tuple(state), cond, body, mode="symbolic")
-        dr.eval(pair)
+        m, lanes = self.m, self.lanes
+        cotangents = _lane_cotangents(m, lanes, self.fwd, *self.grad_out())
+        buffers = _PairBuffers.allocate(m, self.bins, lanes, keys)
+        _walk_back(m, self.records, self.bins.gaussian_ids, lanes, self.cfg, _WalkPlan.of(keys), cotangents, buffers)
         # The walk was the last reader of the records, lane lists and forward state:
         # release them before the reduction allocates (the op runs its backward once).
-        del state, v_rgb, v_alpha, v_d, T_final, stop, start_i, rec, lanes
+        del cotangents, lanes
         self.records = self.lanes = self.fwd = None
-        buf = reduce_pairs(m, bins, pair, self.n, L)
-        if want_means2d:
-            self.state.grad_means2d = m.Array2f(buf["mx"], buf["my"])
-        if self.want_absgrad:
-            self.state.abs_grad_means2d = m.Array2f(buf["ax"], buf["ay"])
-        for name, group in INPUT_KEYS.items():
-            if group[0] in keys:  # a group is computed whole or not at all (`needed_keys`)
-                values = [buf[key] for key in group]
-                self.set_grad_in(name, values[0] if len(values) == 1 else getattr(m, f"Array{len(values)}f")(*values))
+        self._publish(reduce_pairs(m, self.bins, buffers.groups, self.n, buffers.slots_per_pair), keys)
         if self.state.timer is not None:
             self.state.timer.mark("backward_compositing")
+
+    def _publish_zeros(self, keys) -> None:
+        """Nothing to walk: zero screen-space gradients where they are asked for (the inputs get none)."""
+        m = self.m
+        zero = dr.zeros(m.Float, self.n)
+        self.state.grad_means2d = m.Array2f(zero, zero) if "mx" in keys else None
+        self.state.abs_grad_means2d = m.Array2f(zero, zero) if self.want_absgrad else None
+        self.records = self.lanes = self.fwd = None
+
+    def _publish(self, sums: dict, keys) -> None:
+        """Hand the per-Gaussian sums on: the screen-space mean's to the state (densification,
+        AbsGS), each differentiable input's to Dr.Jit."""
+        m = self.m
+        if "mx" in keys:
+            self.state.grad_means2d = m.Array2f(sums["mx"], sums["my"])
+        if self.want_absgrad:
+            self.state.abs_grad_means2d = m.Array2f(sums["ax"], sums["ay"])
+        for name, group in INPUT_KEYS.items():
+            if group[0] in keys:  # a group is computed whole or not at all (`needed_keys`)
+                values = [sums[key] for key in group]
+                self.set_grad_in(name, values[0] if len(values) == 1 else getattr(m, f"Array{len(values)}f")(*values))
 
     def name(self):
         return "splatbench.composite"
