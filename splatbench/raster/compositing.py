@@ -20,12 +20,11 @@ lane order: no atomics, the same result every run (see `lane_slots`). Dr.Jit's o
 through the forward loop (`composite_loop_ad`) is kept as a test-only
 second backward that checks the hand-written one.
 
-Size (~490 lines, over the ~400 guideline on purpose): the forward loop and the
-`dr.CustomOp` that walks it backwards share the record layout, the lane lists and
-`_alpha_at`, and each line of the backward mirrors one of the forward; split across
-modules, a change to one would no longer sit beside its adjoint. The lane/record
-plumbing that does not need that (`blocks`, `binning`, `reduction`, `work`) lives
-elsewhere.
+The loops carry a flat tuple of Dr.Jit arrays; `_FrontPixel` and `_BackPixel` name each
+pixel's part of it. The backward pass runs in named steps (`_WalkPlan`, `_lane_cotangents`,
+`reduction.PairBuffers`, `_walk_back`, `_adjoint_step` per pixel, `_publish`), each
+beside the forward code it differentiates. The record layout (`records`), the lanes and
+their lists (`blocks`), binning and the per-pair reduction live in modules of their own.
 """
 
 from __future__ import annotations
@@ -35,16 +34,12 @@ from typing import NamedTuple
 
 from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins, TileGrid
-from splatbench.raster.blocks import block_lists
+from splatbench.raster.blocks import Lanes, lanes_for, pair_at
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.projection import Projection, array_namespace, next_power_of_two
 from splatbench.raster.records import GeoRecord, Records, Splats, load_records, pack_records
-from splatbench.raster.reduction import PAIR_GROUPS, bucket, reduce_pairs, lane_slots
+from splatbench.raster.reduction import PairBuffers, reduce_pairs
 
-# Each lane shades a PIXEL_BLOCK x PIXEL_BLOCK block of pixels: one load of a record
-# serves them all, and their gradient terms are summed in registers before a scatter.
-# 4x4 measured best on AVX-512 (one 16-lane packet per 16x16 tile); see docs/benchmarks.md.
-PIXEL_BLOCK = 4
 GRAD_KEYS = ("mx", "my", "ca", "cb", "cc", "o", "r", "g", "b", "z", "ax", "ay")
 #: The per-pair gradient terms each differentiable input of the op receives.
 INPUT_KEYS = {"means2d": ("mx", "my"), "conics": ("ca", "cb", "cc"), "opacities": ("o",),
@@ -88,66 +83,6 @@ class Composite(NamedTuple):
     rgb: object
     alpha: object
     depth_sum: object
-
-
-class Lanes(NamedTuple):
-    """Compositing lanes in tile order; each lane shades K = block^2 pixels.
-
-    px, py, inside, image_index: lists of K arrays (pixel centres, whether the
-    pixel exists, its row-major index); start, end: the lane's range in its list.
-    lanes_per_tile: lanes that share one tile. pairs: None when each lane walks its
-    tile's range of the sorted pairs; else the lanes' own lists (`blocks.block_lists`),
-    each entry a sorted pair position.
-    """
-
-    px: list
-    py: list
-    inside: list
-    image_index: list
-    start: object
-    end: object
-    lanes_per_tile: int
-    pairs: object = None
-
-
-def pair_at(m, lanes: Lanes, i):
-    """Sorted pair position of entry ``i`` of each lane's list."""
-    return i if lanes.pairs is None else dr.gather(m.UInt32, lanes.pairs, i)
-
-
-def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
-    ts = grid.tile_size
-    block = min(PIXEL_BLOCK, ts)
-    side = ts // block                      # lanes per tile side
-    lanes_per_tile = side * side
-    lane = dr.arange(m.UInt32, grid.num_tiles * lanes_per_tile)
-    tile = lane // lanes_per_tile           # powers of two: shifts
-    local = lane % lanes_per_tile
-    x0 = (tile % grid.tiles_x) * ts + (local % side) * block
-    y0 = (tile // grid.tiles_x) * ts + (local // side) * block
-    px, py, inside, image_index = [], [], [], []
-    for ky in range(block):
-        for kx in range(block):
-            x, y = x0 + kx, y0 + ky
-            ok = (x < grid.width) & (y < grid.height)
-            px.append(m.Float(x) + 0.5)
-            py.append(m.Float(y) + 0.5)
-            inside.append(ok)
-            image_index.append(dr.select(ok, y * grid.width + x, 0))
-    start = dr.gather(m.UInt32, bins.tile_start, tile)
-    any_inside = inside[0]
-    for ok in inside[1:]:
-        any_inside |= ok
-    end = dr.select(any_inside, dr.gather(m.UInt32, bins.tile_end, tile), start)
-    return Lanes(px, py, inside, image_index, start, end, lanes_per_tile)
-
-
-def lanes_for(m, rec: Records, bins: Bins, cfg: CompositeSettings) -> Lanes:
-    """The compositing lanes with their per-block lists (`blocks.block_lists`)."""
-    lanes = make_lanes(m, bins.grid, bins)
-    if bins.num_pairs == 0:
-        return lanes
-    return block_lists(m, rec, bins, lanes, cfg.alpha_min)
 
 
 def _half_mahalanobis(conic_a, conic_b, conic_c, dx, dy):
@@ -321,37 +256,6 @@ def _lane_cotangents(m, lanes: Lanes, fwd: _Forward, v_rgb_img, v_alpha_img, v_d
     return [_PixelCotangent(v_rgb[k], v_alpha[k], v_d[k], fwd.T[k], fwd.stop[k]) for k in range(K)]
 
 
-class _PairBuffers(NamedTuple):
-    """Per-pair gradient accumulators, `reduction.PAIR_GROUPS` name -> Float buffer. Slot p
-    belongs to one (tile, Gaussian) pair, so only the lanes of one tile ever add into it.
-    Expand (LLVM): per-thread copies, non-atomic updates; still deterministic: a slot is
-    only written by the lanes of one tile, and a tile never spans two threads. Per-lane
-    slots (CUDA, `lane_slots`): each slot is written once, by one lane, without atomics."""
-
-    groups: dict
-    slots_per_pair: int  # L: lanes per tile with per-lane slots, else 1
-    sub_slot: object     # UInt32 lane % L with per-lane slots, else None
-
-    @classmethod
-    def allocate(cls, m, bins: Bins, lanes: Lanes, keys) -> _PairBuffers:
-        cap = bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
-        per_lane = lane_slots(m)
-        L = lanes.lanes_per_tile if per_lane else 1
-        groups = {name: dr.zeros(m.Float, size * cap * L) for name, (size, group) in PAIR_GROUPS.items()
-                  if any(key in keys for key in group)}
-        sub_slot = dr.arange(m.UInt32, dr.width(lanes.start)) % L if per_lane else None
-        return cls(groups, L, sub_slot)
-
-    def add(self, m, p, sums: dict, active) -> None:
-        """Add one step's terms (``sums``: key -> Float, summed over a lane's pixels) into pair slot ``p``."""
-        for name, buffer in self.groups.items():
-            values = m.ArrayXf([sums[key] if key in sums else 0.0 for key in PAIR_GROUPS[name][1]])
-            if self.sub_slot is not None:
-                dr.scatter(buffer, values, p * self.slots_per_pair + self.sub_slot, active)
-            else:
-                dr.scatter_add(buffer, values, p, active, mode=dr.ReduceMode.Expand)
-
-
 def _adjoint_step(geo: GeoRecord, colour, px, py, cfg: CompositeSettings, plan: _WalkPlan, pix: _PixelCotangent,
                   state: _BackPixel, active, sums: dict):
     """The adjoint of one forward step at one pixel: adds the pixel's gradient terms for the
@@ -384,7 +288,7 @@ def _adjoint_step(geo: GeoRecord, colour, px, py, cfg: CompositeSettings, plan: 
 
 
 def _walk_back(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, plan: _WalkPlan,
-               cotangents: list[_PixelCotangent], buffers: _PairBuffers) -> None:
+               cotangents: list[_PixelCotangent], buffers: PairBuffers) -> None:
     """Walk each lane's list back to front from the largest stop index of its pixels,
     recovering transmittance by division, and add each step's terms into ``buffers``."""
     UInt32 = m.UInt32
@@ -433,7 +337,7 @@ class _CompositeOp(dr.CustomOp):
         self.n = dr.width(opacities)
         self.records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
         dr.eval(self.records)
-        self.lanes = lanes_for(m, self.records, self.bins, cfg)
+        self.lanes = lanes_for(m, self.records, self.bins, cfg.alpha_min)
         fwd = _forward_loop(m, self.records, self.bins.gaussian_ids, self.lanes, cfg)
         dr.eval(fwd)
         self.fwd = fwd
@@ -448,7 +352,7 @@ class _CompositeOp(dr.CustomOp):
             return
         m, lanes = self.m, self.lanes
         cotangents = _lane_cotangents(m, lanes, self.fwd, *self.grad_out())
-        buffers = _PairBuffers.allocate(m, self.bins, lanes, keys)
+        buffers = PairBuffers.allocate(m, self.bins, lanes, keys)
         _walk_back(m, self.records, self.bins.gaussian_ids, lanes, self.cfg, _WalkPlan.of(keys), cotangents, buffers)
         # The walk was the last reader of the records, lane lists and forward state:
         # release them before the reduction allocates (the op runs its backward once).
@@ -539,7 +443,7 @@ def composite_loop_ad(proj: Projection, colors, bins: Bins, settings: CompositeS
     hand-written backward (test-only: slower; checks `_CompositeOp`)."""
     m = array_namespace(proj.opacities)
     records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq))
-    lanes = lanes_for(m, records, bins, settings)
+    lanes = lanes_for(m, records, bins, settings.alpha_min)
     # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
     # count (the longest tile list, rounded up to a power of two); -1 is wrong here.
     bound = next_power_of_two(max(bins.max_list_length, 1))

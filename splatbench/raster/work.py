@@ -17,7 +17,8 @@ from splatbench.raster.device import dr, get_device
 from splatbench.raster.binning import TileGrid, bin_gaussians
 # The compositing loop's own lanes, lists, per-pixel test and record loads, so that
 # the counts are of exactly the decisions it makes.
-from splatbench.raster.compositing import CompositeSettings, _alpha_at, _half_mahalanobis, lanes_for, pair_at
+from splatbench.raster.blocks import lanes_for, pair_at
+from splatbench.raster.compositing import CompositeSettings, _alpha_at, _half_mahalanobis
 from splatbench.raster.records import Splats, load_records, pack_records
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.pipeline import project_view
@@ -86,7 +87,7 @@ def work_stats(gaussians, camera, **options) -> WorkStats:
 def _count(m, records, bins, cfg: CompositeSettings) -> tuple[int, int, int, int]:
     """(block_evaluations, performed, inside_cutoff, useful), walking the lanes' own lists."""
     UInt32 = m.UInt32
-    lanes = lanes_for(m, records, bins, cfg)
+    lanes = lanes_for(m, records, bins, cfg.alpha_min)
     K = len(lanes.px)
 
     def body(i, inside, useful):
