@@ -187,6 +187,14 @@ def model(net: str) -> LPIPSNet:
     return LPIPSNet(net, load_weights(net)).eval()
 
 
+def convention(net: str, scale_inputs: bool) -> str:
+    """How an LPIPS figure was computed, in words (for reports and the CLI)."""
+    nets = {"alex": "AlexNet", "vgg": "VGG-16"}
+    inputs = ("inputs scaled to [-1, 1] as the lpips package expects" if scale_inputs
+              else "[0, 1] images fed unscaled as graphdeco's metrics.py does")
+    return f"LPIPS v0.1, {nets[_check_net(net)]} backbone, {inputs}"
+
+
 def lpips(pred, target, *, net: str = "alex", scale_inputs: bool = True) -> float | np.ndarray:
     """LPIPS v0.1 distance (lower is more similar) of images in [0, 1].
 
@@ -221,4 +229,4 @@ def lpips(pred, target, *, net: str = "alex", scale_inputs: bool = True) -> floa
     return float(d[0]) if single else d
 
 
-__all__ = ["lpips", "load_weights", "load_checkpoint", "weights_path", "LPIPSNet", "model"]
+__all__ = ["lpips", "convention", "load_weights", "load_checkpoint", "weights_path", "LPIPSNet", "model"]

@@ -19,7 +19,9 @@ axis:
 * **auto** (train kind, SH degree axis): the degree ``auto`` ended at, per seed.
 
 Runs whose ``metric.loaded`` is 1 (the raster kind: timed while the load average
-exceeded half the cores) are left out of every finding (not of the tables).
+exceeded half the cores) are left out of every finding (not of the tables). Runs whose
+``metric.time_loaded`` is 1 (the train kind) are left out of the comparisons of the
+kind's ``timed`` metrics only: their quality metrics do not depend on the load.
 """
 
 from __future__ import annotations
@@ -153,9 +155,19 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame) -> Finding | N
     scenes = list(dict.fromkeys(table.frame.scene))
     usable = usable_runs(runs)
     excluded = len(done_runs(runs)) - len(usable)
+    declared = kind_report(kind)
+    timed = set(declared.timed) if declared is not None else set()
+    untimed = 0
+    if timed and "metric.time_loaded" in usable.columns:
+        loaded = pd.to_numeric(usable["metric.time_loaded"], errors="coerce").fillna(0) != 0
+        untimed = int(loaded.sum())
+        timed_usable = usable[~loaded]
+    else:
+        timed_usable = usable
 
     def values(scene: str, row: Row, metric: str) -> dict[int, float]:
-        sel = usable[(usable.scene == scene) & usable.run_id.isin(row.run_ids)]
+        pool = timed_usable if metric in timed else usable
+        sel = pool[(pool.scene == scene) & pool.run_id.isin(row.run_ids)]
         return seed_values(sel, metric) if len(sel) else {}
 
     claims: list[Claim] = []
@@ -231,8 +243,11 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame) -> Finding | N
     if excluded:
         lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
                      f"these findings (marked in the table's `loaded` column).")
+    if untimed:
+        lines.append(f"- {untimed} run(s) timed while other processes loaded the machine are left out of the "
+                     f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons (marked in "
+                     f"the table's `timed under load` column; their quality metrics are kept).")
 
-    declared = kind_report(kind)
     for note in declared.axis_notes if declared is not None else ():
         more_lines, more_claims = note(table, runs, scenes)
         lines += more_lines

@@ -65,7 +65,10 @@ class KindReport:
     and comparisons (None: no findings); time_quality: the Pareto figure (None: none);
     meanings: metric name -> meaning (the report's "Metrics" section); axis_notes:
     ``fn(axis_table, runs, scenes) -> (lines, claims)`` appended to each axis finding;
-    run_findings: ``(name, fn(runs) -> Finding | None)`` findings over all runs.
+    run_findings: ``(name, fn(runs) -> Finding | None)`` findings over all runs;
+    timed: metrics that are times: a run whose ``metric.time_loaded`` is 1 (timed while
+    others loaded the machine) is left out of their comparisons only; metric_notes:
+    ``fn(runs) -> lines`` appended to the report's "Metrics" section (e.g. which LPIPS).
     """
 
     metrics: tuple[MetricSpec, ...]
@@ -74,6 +77,8 @@ class KindReport:
     meanings: Mapping[str, str] = field(default_factory=dict)
     axis_notes: tuple[Callable[..., tuple[list, list]], ...] = ()
     run_findings: tuple[tuple[str, Callable[[Any], Any]], ...] = ()
+    timed: tuple[str, ...] = ()
+    metric_notes: tuple[Callable[[Any], list[str]], ...] = ()
 
 
 def kind_report(kind: str) -> KindReport | None:

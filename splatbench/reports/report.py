@@ -207,6 +207,9 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
     if meanings:
         lines += ["## Metrics", ""]
         lines += [f"- `{m.label}` (`metric.{m.name}`): {meanings.get(m.name, '')}" for m in report.metrics]
+        declared = kind_report(spec.kind)
+        for note in declared.metric_notes if declared is not None else ():
+            lines += note(table)
         lines.append("")
 
     failed = table[table.status == "failed"] if len(table) else table

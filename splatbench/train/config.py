@@ -100,6 +100,11 @@ class TrainConfig:
     strategy_options: dict[str, Any] = field(default_factory=dict)  # fields of the strategy's dataclass
     # --- evaluation, logging, checkpoints
     eval_every: int = 0               # evaluate on the test views every this many steps (0 = only at the end)
+    lpips_net: str = "alex"           # LPIPS v0.1 of the final test evaluation: "alex" (gsplat, NerfBaselines),
+                                      # "vgg" (graphdeco's metrics.py; ~20x AlexNet's time) or "none"; the
+                                      # eval_every evaluations use AlexNet (splatbench.metrics.lpips)
+    lpips_scale_inputs: bool = True   # feed LPIPS images scaled to [-1, 1] (the lpips package's convention);
+                                      # false: [0, 1] unscaled, as graphdeco's metrics.py does
     log_every: int = 100              # record (step, loss, PSNR, N) in the history every this many steps
     checkpoint_every: int = 0         # write checkpoints/iteration_<step>.ply every this many steps (0 = off)
     device: str = "auto"              # rasterizer backend: "cpu" (Dr.Jit LLVM), "cuda" or "auto"
@@ -165,6 +170,8 @@ class TrainConfig:
                 raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
         elif len(self.background) != 3 or not all(0 <= c <= 1 for c in self.background):
             raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
+        if self.lpips_net not in ("alex", "vgg", "none"):
+            raise InputError(f"lpips_net: expected 'alex', 'vgg' or 'none', got {self.lpips_net!r}")
         check_device(self.device, "device")
         from splatbench.train.schedule import SCHEDULES, check_final_window
 
