@@ -206,8 +206,8 @@ def lpips(pred, target, *, net: str = "alex", scale_inputs: bool = True) -> floa
     ~16 px per side are refused (AlexNet's first layers need them).
     """
     _check_net(net)
-    p = torch.as_tensor(np.asarray(pred) if not isinstance(pred, torch.Tensor) else pred).detach()
-    t = torch.as_tensor(np.asarray(target) if not isinstance(target, torch.Tensor) else target).detach()
+    p = (pred if isinstance(pred, torch.Tensor) else torch.from_numpy(np.asarray(pred))).detach().cpu()
+    t = (target if isinstance(target, torch.Tensor) else torch.from_numpy(np.asarray(target))).detach().cpu()
     single = p.dim() == 3
     if p.shape != t.shape or p.dim() not in (3, 4) or p.shape[-1] != 3:
         raise InputError(f"lpips: expected pred and target of one shape [H, W, 3] or [B, H, W, 3], "
