@@ -13,7 +13,7 @@ from PIL import Image
 from reference.lpips import lpips as lpips_numpy
 from splatbench import InputError
 from splatbench.metrics import lpips
-from splatbench.metrics.lpips import load_checkpoint, load_weights, weights_path
+from splatbench.metrics.perceptual import load_checkpoint, load_weights, weights_path
 
 IMAGES = Path(__file__).parent / "data" / "perceptual_similarity"
 

@@ -36,10 +36,10 @@ from typing import Any
 
 from splatbench.checks import check_image_size
 from splatbench.errors import InputError
+from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.experiments.workers import limit_threads
-from splatbench.reports.findings import auto_sh_degree_note
-from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, TimeQuality
+from splatbench.metrics.spec import MetricSpec
 
 #: Environment variable naming the folder of rendered datasets.
 DATASETS_ENV = "SPLATBENCH_DATASETS"
@@ -68,7 +68,7 @@ METRICS: dict[str, str] = {
     "load_before": "1-minute load average when the run started (before warm-up)",
     "load_after": "1-minute load average after the final evaluation",
     "load_other": "estimated load of other processes (the largest sample less the run's own share; "
-                  "splatbench.bench.load)",
+                  "splatbench.metrics.load)",
     "cores": "usable CPU cores",
     "time_loaded": "1 when load_other exceeded cores / 2: the run's times are not trusted and are left out of the "
                    "time comparisons of the findings (quality metrics are kept)",
@@ -264,23 +264,8 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     return RunOutput(metrics=metrics, curves=curves)
 
 
-def lpips_note(runs) -> list[str]:
-    """The report's line saying which LPIPS its column is (net and input convention), from
-    the done runs' ``lpips_net`` / ``lpips_scale_inputs``; none for a table without them."""
-    from splatbench.metrics.lpips import convention
-
-    if "metric.lpips_net" not in runs.columns:
-        return []
-    done = runs[(runs.status == "done") & runs["metric.lpips_net"].fillna("").astype(bool)]
-    kinds = sorted({(str(r["metric.lpips_net"]), bool(r["metric.lpips_scale_inputs"])) for _, r in done.iterrows()})
-    if len(kinds) == 1:
-        return [f"- The `LPIPS` column is {convention(*kinds[0])}."]
-    return [f"- The `LPIPS` column mixes {len(kinds)} conventions (compare within one only): "
-            + "; ".join(convention(*k) for k in kinds) + "."] if kinds else []
-
-
 #: The ``train`` kind (``kind = "train"``).
-#: What the reports of train runs show (`splatbench.reports.kind_report`).
+#: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
     metrics=(
 
@@ -297,9 +282,7 @@ REPORT = KindReport(
     time_quality=TimeQuality("train_seconds", "test_psnr", "time_vs_error",
                              "Training time against test PSNR per cell (mean over seeds)"),
     meanings=METRICS,
-    axis_notes=(auto_sh_degree_note,),
     timed=("train_seconds", "render_ms_per_view"),
-    metric_notes=(lpips_note,),
 )
 
 TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scenes=scenes, prepare=prepare,

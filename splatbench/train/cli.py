@@ -107,7 +107,7 @@ def _lpips_how(result) -> str:
 
 def _load_line(result) -> str:
     """The machine's load around the run and the CPU time of the loop (times are not
-    trusted when others' load exceeded half the cores: `splatbench.bench.load`)."""
+    trusted when others' load exceeded half the cores: `splatbench.metrics.load`)."""
     load = result.load
     if not load:
         return ""

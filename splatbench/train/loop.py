@@ -43,7 +43,7 @@ from splatbench.strategies.base import StepContext
 from splatbench.train.config import TrainConfig, save_config
 from splatbench.train.initializers import InitSettings, initialize
 from splatbench.train.losses import photometric_loss
-from splatbench.train.metrics import psnr, ssim_metric
+from splatbench.metrics.image import psnr, ssim_metric
 from splatbench.train.params import (ExponentialLR, gaussians_from_params, make_optimizers, params_from_gaussians,
                                      refreeze, scene_extent, set_lr)
 from splatbench.train.result import EvalPoint, HistoryPoint, TrainResult
@@ -336,7 +336,7 @@ def lpips_plan(config: TrainConfig, test) -> tuple[list[tuple[str, bool]], list[
     """(the final evaluation's LPIPS ``[(net, scale_inputs)]``, the curves', a note when
     LPIPS is skipped): none with ``lpips_net="none"``, without the weights installed, or
     for test images under 16 px (AlexNet's first layers need them)."""
-    from splatbench.metrics.lpips import weights_path
+    from splatbench.metrics.perceptual import weights_path
 
     if config.lpips_net == "none" or len(test) == 0:
         return [], [], ""
@@ -408,8 +408,8 @@ def _save_checkpoint(trainer: Trainer, out: Path, extra: dict) -> Path:
 
 
 def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
-    from splatbench.bench.load import Load, process_cpu_seconds
-    from splatbench.bench.memory import peak_rss_mb
+    from splatbench.metrics.load import Load, process_cpu_seconds
+    from splatbench.metrics.memory import peak_rss_mb
     from splatbench.train.checkpoint import load_checkpoint, resume_line
 
     out = Path(config.out)

@@ -56,7 +56,7 @@ class TrainResult:
     lpips_scale_inputs: bool = True     # test_lpips's inputs: scaled to [-1, 1] (True) or [0, 1] unscaled
     cpu_seconds: float = 0.0            # CPU seconds of the process (all threads) over the loop train_seconds times
     load: dict = field(default_factory=dict)  # the machine's load from warm-up to the final evaluation
-                                        # (`splatbench.bench.load.Load.metrics`: load_before, load_after,
+                                        # (`splatbench.metrics.load.Load.metrics`: load_before, load_after,
                                         # own_cpu, own_before, load_other, cores, loaded)
     resumed_step: int | None = None     # --resume: the checkpoint's step (its earlier steps' loop time, timed by the
                                         # run that wrote it, is in train_seconds); None: not resumed

@@ -1,4 +1,4 @@
-"""Image metrics for evaluation: PSNR and SSIM (kornia). LPIPS: `splatbench.metrics.lpips`."""
+"""Image metrics for evaluation: PSNR and SSIM (kornia). LPIPS: `splatbench.metrics.perceptual`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,10 @@ import math
 import numpy as np
 import torch
 
-from splatbench.train.losses import ssim
+
+def to_bchw(image: torch.Tensor) -> torch.Tensor:
+    """[H, W, 3] -> [1, 3, H, W] (a view)."""
+    return image.permute(2, 0, 1).unsqueeze(0)
 
 
 def psnr(pred: torch.Tensor | np.ndarray, target: torch.Tensor | np.ndarray, *, clamp: bool = True) -> float:
@@ -23,9 +26,12 @@ def psnr(pred: torch.Tensor | np.ndarray, target: torch.Tensor | np.ndarray, *, 
 
 
 def ssim_metric(pred: torch.Tensor, target: torch.Tensor, window: int = 11) -> float:
-    """Mean SSIM (kornia, window 11) of [H, W, 3] images, ``pred`` clamped to [0, 1]."""
+    """Mean SSIM (``kornia.metrics.ssim``: Gaussian window 11, σ = 1.5) of [H, W, 3]
+    images, ``pred`` clamped to [0, 1]."""
+    import kornia  # late: kornia takes a second to import and only evaluation needs it
+
     with torch.no_grad():
-        return float(ssim(pred.clamp(0, 1), target, window))
+        return float(kornia.metrics.ssim(to_bchw(pred.clamp(0, 1)), to_bchw(target), window, max_val=1.0).mean())
 
 
-__all__ = ["psnr", "ssim_metric"]
+__all__ = ["psnr", "ssim_metric", "to_bchw"]
