@@ -66,6 +66,9 @@ AXES: tuple[Axis, ...] = (
     Axis("near_plane", "camera", (0.2, 0.01), "culling plane: camera.near, graphdeco's fixed 0.2, or 0.01"),
     Axis("depth", "normalised", ("unnormalised", "distance"),
          "expected camera z / alpha, sum T a z, or the expected distance to the camera / alpha"),
+    Axis("radius", GRAPHDECO["radius"], ("opacity",),
+         "footprint cutoff: 3 sigma, or where alpha falls below alpha_min ('none' declares the same)"),
+    Axis("transmittance_min", GRAPHDECO["transmittance_min"], (0.0,), "early termination threshold (0: none)"),
 )
 AXIS = {a.name: a for a in AXES}
 #: Every declarable convention (the approximations and the vocabulary) -> graphdeco's value.

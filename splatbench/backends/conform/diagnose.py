@@ -4,7 +4,8 @@ defects that remain.
 Fingerprinting (`fingerprint`). In two stages, the basic probes first, then every probe: for the
 probes that fail, each alternative value of each axis of the convention vocabulary
 (`splatbench.backends.base.AXES`, most basic first) is tried in the oracle, and scored by the failing
-probes it makes pass (forward probes; the gradient probes for "detached", the one axis that changes
+probes it makes pass (after the basic stage, only candidates that make a failing probe isolating their
+axis pass are scored: a convention that differs always fails those) (forward probes; the gradient probes for "detached", the one axis that changes
 gradients only). The best candidate is kept when, with every probe rerun against the oracle under it
 (outputs and gradients), fewer probes fail and none that passed fails; then the search repeats. When
 no single alternative explains a failing basic probe, pairs of alternatives are tried on the basic
@@ -30,7 +31,7 @@ from splatbench.backends.base import AXES, AXIS
 from splatbench.backends.conform.calls import Fault
 from splatbench.backends.conform.judges import JUDGES, Context
 from splatbench.backends.conform.oracle import projection
-from splatbench.backends.conform.probes import BASIC, Probe
+from splatbench.backends.conform.probes import AXIS_PROBES, BASIC, Probe
 from splatbench.backends.conform.results import ProbeResult
 from splatbench.backends.conform.scenes import ProbeScene
 
@@ -38,9 +39,9 @@ from splatbench.backends.conform.scenes import ProbeScene
 #: probe's own convention cannot be judged.
 FAULT_CAUSE = "the backend failed on this probe's scene (see measured), so the convention could not be judged"
 OK = ("pass", "warn", "skip")
-#: Features every probe scene exercises: a wrong pixel centre, activation, low-pass, skip, early stop
-#: or cutoff changes any render.
-EVERYWHERE = ("pixel_centre", "scale_activation", "opacity_activation", "eps2d", "alpha_min", "early_stop", "radius")
+#: Features every probe scene exercises: a wrong pixel centre, activation, low-pass or skip changes any render.
+EVERYWHERE = ("pixel_centre", "scale_activation", "opacity_activation", "eps2d", "alpha_min")
+TAIL_D2 = 4.0  # a footprint's "tail": beyond 2 sigma, where a cutoff other than the declared one shows
 MAX_ROOTS = 3  # exhaustive cover search up to this size, greedy beyond
 
 
@@ -125,9 +126,16 @@ def fingerprint(selected: tuple[Probe, ...], ctx: Context,
                 break
             here = dataclasses.replace(ctx, conv=conv)
             scored = []
+            names = {p.name for p in failing}
             for (change,) in _candidates(conv, changed):
                 if change in rejected:
                     continue
+                if stage is not stages[0]:
+                    # A convention that differs fails the probes isolating its axis: a candidate that does
+                    # not make one of them pass cannot be it (and costs nothing more to rule out).
+                    own = [p for p in failing if p.name in AXIS_PROBES[next(iter(change))]]
+                    if not own or not _explained(own, here, change):
+                        continue
                 explains = _explained(failing, here, change)
                 if explains:
                     scored.append((len(explains), change))
@@ -157,7 +165,7 @@ def _pairs(failing: list[Probe], ctx: Context, changed: set[str], rejected: list
         if set(a) & set(b) or {"sh_view_direction": "detached"} in (a, b):
             continue
         change = {**a, **b}
-        if change in rejected:
+        if change in rejected or not _explained(failing[:1], ctx, change):  # the first probe rules most out
             continue
         explains = _explained(failing, ctx, change)
         if explains:
@@ -216,7 +224,14 @@ def exercises(probe: Probe, s: ProbeScene, conv: dict) -> frozenset[str]:
         f.add("tiles")
     if ((u < -0.15 * cam.width) | (u > 1.15 * cam.width) | (v < -0.15 * cam.height) | (v > 1.15 * cam.height)).any():
         f.add("jacobian_clamp")
-    if (projection(s, conv).opacities > AXIS["alpha_max"].graphdeco).any():
+    proj = projection(s, conv)
+    d2, raw = _contributions(s, proj)
+    keep = raw >= conv["alpha_min"]
+    if (keep & (d2 > TAIL_D2)).any():
+        f.add("radius")
+    if (np.cumprod(1 - np.minimum(raw, conv["alpha_max"]) * keep, axis=1) < 1e-4).any():
+        f.add("early_stop")
+    if (proj.opacities > AXIS["alpha_max"].graphdeco).any():
         f.add("alpha_max")
         if groups:
             f.add("alpha_max_grad")
@@ -226,24 +241,42 @@ def exercises(probe: Probe, s: ProbeScene, conv: dict) -> frozenset[str]:
     return frozenset(f)
 
 
+def _contributions(s: ProbeScene, proj) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel and visible Gaussian (depth order): Mahalanobis d^2 [P, M] and raw alpha o exp(-d^2 / 2)."""
+    c = s.camera
+    vis = np.flatnonzero(proj.visible)
+    vis = vis[np.argsort(proj.depths[vis], kind="stable")]
+    jj, ii = np.meshgrid(np.arange(c.width) + 0.5, np.arange(c.height) + 0.5)
+    dx = jj.reshape(-1, 1) - proj.means2d[vis, 0]
+    dy = ii.reshape(-1, 1) - proj.means2d[vis, 1]
+    A, B, C = proj.conics[vis].T
+    d2 = A * dx * dx + C * dy * dy + 2 * B * dx * dy
+    return d2, proj.opacities[vis] * np.exp(-d2 / 2)
+
+
 def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], conv: dict) -> list[Defect]:
-    """The smallest set of failing probes whose features account for every failing probe."""
+    """The smallest set of failing probes whose features account for every failing probe; among sets of
+    that size, the one whose features the fewest passing probes exercise (a defect in a feature fails
+    the probes that use it), then the earliest."""
     failing = [p for p in selected if results[p.name].status == "fail"]
     if not failing:
         return []
-    uses = {p.name: exercises(p, p.build(), conv) for p in failing}
+    uses = {p.name: exercises(p, p.build(), conv) for p in selected if results[p.name].status in ("fail", "pass")}
     names = [p.name for p in failing]
+    passing = [n for n in uses if results[n].status == "pass"]
 
     def covers(root: str) -> set[str]:
         return {n for n in names if root in uses[n]}
 
+    def contradictions(combo) -> int:
+        return sum(any(r in uses[n] for r in combo) for n in passing)
+
     chosen = None
     for size in range(1, min(MAX_ROOTS, len(names)) + 1):
-        for combo in itertools.combinations(names, size):
-            if set().union(*(covers(r) for r in combo)) == set(names):
-                chosen = list(combo)
-                break
-        if chosen:
+        covering = [combo for combo in itertools.combinations(names, size)
+                    if set().union(*(covers(r) for r in combo)) == set(names)]
+        if covering:
+            chosen = list(min(covering, key=contradictions))  # min keeps the earliest of equals
             break
     if chosen is None:  # greedy: the root covering most of what is left, earliest first
         chosen, left = [], set(names)

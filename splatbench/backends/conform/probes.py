@@ -148,5 +148,17 @@ PROBES: tuple[Probe, ...] = (
 )
 
 
+#: Each axis of the convention vocabulary -> the probes that isolate it (a diagnosis names these).
+AXIS_PROBES: dict[str, tuple[str, ...]] = {
+    "pixel_centre": ("pixel_centre",), "opacity_activation": ("opacity_activation",),
+    "scale_activation": ("scale_activation",), "quat_order": ("quat_order",), "eps2d": ("eps2d",),
+    "background": ("background",), "sh_view_direction": ("sh_viewdir", "sh_viewdir_grad"), "sort_key": ("depth_order",),
+    "sh_basis": ("sh_degree1", "sh_degree2", "sh_degree3"), "sh_degree": ("sh_degree_arg", "sh_degree3", "sh_degree2"),
+    "colour_clamp": ("colour_clamp",), "jacobian_clamp": ("jacobian_clamp",), "alpha_max": ("alpha_max",),
+    "alpha_min": ("alpha_min",), "near_plane": ("near_plane",), "depth": ("expected_depth",),
+    "radius": ("radius",), "transmittance_min": ("early_stop",),
+}
+
+
 def probe_names() -> tuple[str, ...]:
     return tuple(p.name for p in PROBES)
