@@ -18,7 +18,6 @@ import torch
 from click.testing import CliRunner
 
 import reference
-import splatbench
 from splatbench.backends import Backend, BackendInfo
 from splatbench.backends.base import AXIS
 from splatbench.backends.conform import FAULT_CAUSE, PROBES, conform
@@ -157,7 +156,7 @@ def _assert_one_root_cause(report, probe: str, what: str) -> None:
 # Broken backends whose failure cascades through many probes, checked in the default suite; every
 # one of BUGS is checked by the slow test below (each new convention costs a full set of finite
 # differences, ~5-15 s).
-FAST_BUGS = ("sort_strided", "quat_transposed", "sh1_sign", "conic_b_grad_half", "no_colour_clamp")
+FAST_BUGS = ("sort_strided", "conic_b_grad_half")
 
 
 @pytest.mark.parametrize("bug", [pytest.param(b, marks=() if b in FAST_BUGS else pytest.mark.slow)
@@ -191,7 +190,7 @@ def test_a_dense_rasterizer_with_one_convention_bug_is_diagnosed(bug, monkeypatc
     explained = [p["name"] for p in out["probes"] if p["status"] == "explained"]
     assert explained == out["diagnosis"][0]["explains"] and explained
     assert {p["status"] for p in out["probes"]} <= {"pass", "explained"}
-    assert out["version"] == splatbench.__version__  # the tests' own module: splatbench's distribution
+    assert out["version"] == "unknown"  # tests/ belongs to no installed distribution, and declares none
 
 
 @pytest.mark.parametrize("bug", sorted(DENSE_BUGS))

@@ -4,18 +4,20 @@ defects that remain.
 Fingerprinting (`fingerprint`). In two stages, the basic probes first, then every probe: for the
 probes that fail, each alternative value of each axis of the convention vocabulary
 (`splatbench.backends.base.AXES`, most basic first) is tried in the oracle, and scored by the failing
-probes it makes pass (after the basic stage, only candidates that make a failing probe isolating their
-axis pass are scored: a convention that differs always fails those) (forward probes; the gradient probes for "detached", the one axis that changes
-gradients only). The best candidate is kept when, with every probe rerun against the oracle under it
-(outputs and gradients), fewer probes fail and none that passed fails; then the search repeats. When
+probes it makes pass: on the basic stage, forward probes only (the gradient probes for "detached", the
+one axis that changes gradients only); after it, outputs and gradients, but only for candidates that
+make a probe isolating their axis pass (a convention that differs always fails, or warns in, those).
+The best candidate is kept when, with every probe rerun against the oracle under it (outputs and
+gradients), fewer probes fail and none that passed fails; then the search repeats. When
 no single alternative explains a failing basic probe, pairs of alternatives are tried on the basic
 probes. The probe scenes are tiny, so the search costs a few dozen small renders per axis.
 
 Root causes (`root_causes`). Each probe isolates one feature (its name) and exercises others (a
 scene with two Gaussians exercises the depth order, an anisotropic rotated one the quaternion order,
 a gradient of means the conic's gradient, ...: `exercises`). The defects are the smallest set of
-failing probes whose features account for every failing probe (ties: the earliest probes); each
-lists the failing probes that follow from it.
+failing probes whose features account for every failing probe (ties: the set whose features the
+fewest passing probes exercise, then the earliest probes); each lists the failing probes that follow
+from it.
 """
 
 from __future__ import annotations
@@ -96,17 +98,30 @@ def _candidates(conv: dict, changed: set[str]):
                 yield ({axis.name: value},)
 
 
-def _explained(probes: list[Probe], ctx: Context, change: dict) -> list[str]:
-    """The probes (all failing under ctx.conv) that pass under ctx.conv + change."""
+def _explained(probes: list[Probe], ctx: Context, change: dict, *, forward_only: bool = False) -> list[str]:
+    """The probes (all failing under ctx.conv) that pass, or only warn, under ctx.conv + change.
+    ``forward_only``: judge the forward probes only (a cheap first look: no finite differences)."""
     gradient_only = change == {"sh_view_direction": "detached"}  # the same forward: only gradients can tell
     trial = dataclasses.replace(ctx, conv={**ctx.conv, **change})
     out = []
     for p in probes:
-        if (p.kind in ("gradient", "direction")) != gradient_only:
+        gradient = p.kind in ("gradient", "direction")
+        if (gradient and forward_only and not gradient_only) or (gradient_only and not gradient):
             continue
         if judge(p, trial).status in OK:
             out.append(p.name)
     return out
+
+
+def _isolates(change: dict, failing: list[Probe], warned: list[Probe], ctx: Context) -> bool:
+    """Whether ``change`` makes a failing probe isolating its axis pass (or warn), or a warning one pass:
+    a convention that differs always shows in those probes."""
+    axis = next(iter(change))
+    own = [p for p in failing if p.name in AXIS_PROBES[axis]]
+    if own and _explained(own, ctx, change):
+        return True
+    trial = dataclasses.replace(ctx, conv={**ctx.conv, **change})
+    return any(judge(p, trial).status == "pass" for p in warned if p.name in AXIS_PROBES[axis])
 
 
 def fingerprint(selected: tuple[Probe, ...], ctx: Context,
@@ -126,17 +141,18 @@ def fingerprint(selected: tuple[Probe, ...], ctx: Context,
                 break
             here = dataclasses.replace(ctx, conv=conv)
             scored = []
-            names = {p.name for p in failing}
+            warned = [by_name[n] for n in stage if results[n].status == "warn"]
             for (change,) in _candidates(conv, changed):
                 if change in rejected:
                     continue
-                if stage is not stages[0]:
-                    # A convention that differs fails the probes isolating its axis: a candidate that does
-                    # not make one of them pass cannot be it (and costs nothing more to rule out).
-                    own = [p for p in failing if p.name in AXIS_PROBES[next(iter(change))]]
-                    if not own or not _explained(own, here, change):
-                        continue
-                explains = _explained(failing, here, change)
+                if stage is stages[0]:
+                    explains = _explained(failing, here, change, forward_only=True)
+                elif _isolates(change, failing, warned, here):
+                    # A convention that differs fails (or warns in) the probes isolating its axis: one that
+                    # does not make them pass cannot be it. Those that do are scored on outputs and gradients.
+                    explains = _explained(failing, here, change)
+                else:
+                    continue
                 if explains:
                     scored.append((len(explains), change))
             if not scored and stage is stages[0]:
@@ -165,9 +181,9 @@ def _pairs(failing: list[Probe], ctx: Context, changed: set[str], rejected: list
         if set(a) & set(b) or {"sh_view_direction": "detached"} in (a, b):
             continue
         change = {**a, **b}
-        if change in rejected or not _explained(failing[:1], ctx, change):  # the first probe rules most out
-            continue
-        explains = _explained(failing, ctx, change)
+        if change in rejected or not _explained(failing[:1], ctx, change, forward_only=True):
+            continue  # the first probe rules most pairs out
+        explains = _explained(failing, ctx, change, forward_only=True)
         if explains:
             scored.append((len(explains), change))
     return scored

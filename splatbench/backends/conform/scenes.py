@@ -128,11 +128,12 @@ def basic_centred() -> ProbeScene:
 
 @functools.cache
 def basic_overlap() -> ProbeScene:
-    # Two overlapping translucent Gaussians at different depths (listed far first) over a coloured
-    # background: compositing order, transmittance and the background's weight.
+    # Two overlapping translucent Gaussians over a coloured background: compositing order, transmittance
+    # and the background's weight. Listed far first; the nearer in camera z (off axis) is the farther
+    # from the camera centre (4.36 against 4.30), so a sort on distance gets the order wrong too.
     cam = camera(12, 12)
-    z = np.array([5.5, 4.0])
-    means = np.array([at(cam, 6.6, 6.3, 5.5), at(cam, 5.4, 5.8, 4.0)])
+    z = np.array([4.3, 4.0])
+    means = np.array([at(cam, 5.5, 6.3, 4.3), at(cam, 1.5, 6.0, 4.0)])
     return scene(cam, means, [2.6, 2.0], [0.32, 0.3], dc([(0.2, 0.3, 0.9), (0.9, 0.4, 0.1)]), z=z, seed=32,
                  background=(0.1, 0.6, 0.3))
 
