@@ -2,19 +2,23 @@
 
     from splatbench.backends.conform import conform
     report = conform("drjit")                   # a Backend, a callable, or a get_backend spec
-    report.passed, report.failed                # True / names of the failing probes
-    report.to_dict()                            # {"backend", "passed", "summary", "probes": [...]}
+    report.passed, report.failed                # nothing differs and no defect / probes still failing
+    report.diagnosis, report.defects            # conventions found to differ / root causes left
+    report.to_dict()                            # {"diagnosis", "defects", "version", "probes": [...], ...}
 
-Each probe (`probes.PROBES`) renders a tiny scene (`scenes`) with the backend (float32
-torch inputs) and with the float64 oracle (`reference_render`, matched to the conventions
-the backend declares in its `BackendInfo`), and gets a status: pass, fail, warn (a declared
-approximation not followed, but one of its listed alternatives is) or skip (the backend
-lacks the output or gradients the probe needs). Modules:
+Each probe (`probes.PROBES`, the basic ones first) renders a tiny scene (`scenes`) with the
+backend (float32 torch inputs) and with the float64 oracle (`reference_render`, matched to the
+conventions the backend declares in its `BackendInfo`), and gets a status: pass, fail, warn
+(a declared approximation not followed, but one of its listed alternatives is) or skip (the
+backend lacks the output or gradients the probe needs). Failures are then diagnosed
+(`diagnose`): the conventions of the vocabulary that explain them (those probes become
+"explained"), and the root causes of the rest. Modules:
 
     scenes    the probe scenes            probes    what each probe checks, and the likely cause
     oracle    float64 renders, finite differences, derived tolerances (derivation in its docstring)
     calls     calling the backend         judges    pass / fail / warn per kind of probe
-    results   ProbeResult, ConformReport
+    diagnose  fingerprinting, root causes results   ProbeResult, ConformReport
+    images    --save-images
 """
 
 from __future__ import annotations
