@@ -23,7 +23,8 @@ def format_table(report, seconds: float) -> str:
     rows += [(r.name, r.status.upper() if r.status in ("fail", "warn") else r.status, _number(r.deviation),
               _number(r.tolerance)) for r in report.results]
     widths = [max(len(row[i]) for row in rows) for i in range(4)]
-    lines = [f"conform {report.backend} {report.version} on {report.device}"
+    version = "" if report.version == "unknown" else f" {report.version}"
+    lines = [f"conform {report.backend}{version} on {report.device}"
              + (f" (declared: {', '.join(f'{k}={v:g}' if isinstance(v, float) else f'{k}={v}' for k, v in report.declared.items())})" if report.declared
                 else " (nothing declared: graphdeco's conventions assumed)")]
     lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
