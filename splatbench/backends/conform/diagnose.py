@@ -90,12 +90,13 @@ def _failing(results: dict[str, ProbeResult], names=None) -> list[str]:
 
 
 def _candidates(conv: dict, changed: set[str]):
+    """Each single change {axis: value} to ``conv`` on an axis not yet diagnosed, in the vocabulary's order."""
     for axis in AXES:
         if axis.name in changed:
             continue
         for value in (axis.graphdeco, *axis.alternatives):
             if value != conv[axis.name]:
-                yield ({axis.name: value},)
+                yield {axis.name: value}
 
 
 def _explained(probes: list[Probe], ctx: Context, change: dict, *, forward_only: bool = False) -> list[str]:
@@ -142,7 +143,7 @@ def fingerprint(selected: tuple[Probe, ...], ctx: Context,
             here = dataclasses.replace(ctx, conv=conv)
             scored = []
             warned = [by_name[n] for n in stage if results[n].status == "warn"]
-            for (change,) in _candidates(conv, changed):
+            for change in _candidates(conv, changed):
                 if change in rejected:
                     continue
                 if stage is stages[0]:
@@ -175,7 +176,7 @@ def fingerprint(selected: tuple[Probe, ...], ctx: Context,
 
 def _pairs(failing: list[Probe], ctx: Context, changed: set[str], rejected: list[dict]) -> list:
     """Two alternatives at once, scored on the failing basic probes (each alone explained none)."""
-    singles = [c for (c,) in _candidates(ctx.conv, changed)]
+    singles = list(_candidates(ctx.conv, changed))
     scored = []
     for a, b in itertools.combinations(singles, 2):
         if set(a) & set(b) or {"sh_view_direction": "detached"} in (a, b):
