@@ -528,9 +528,11 @@ def run_strategy(name: str, seed: int, **fields):
     return snapshot(params)
 
 
-@pytest.mark.parametrize("name", ["default", "absgrad", "mcmc"])
+@pytest.mark.parametrize("name", ["default", "absgrad", "mcmc", "budget"])
 def test_same_seed_same_tensors(name):
-    a, b, c = run_strategy(name, 1), run_strategy(name, 1), run_strategy(name, 2)
+    # budget: a refine window of 3 refinements, so that each has a share of the budget to grow by
+    extra = {"refine_stop": 10} if name == "budget" else {}
+    a, b, c = run_strategy(name, 1, **extra), run_strategy(name, 1, **extra), run_strategy(name, 2, **extra)
     assert a["means"].shape[0] > 40  # something was added
     for k in PARAM_GROUPS:
         assert torch.equal(a[k], b[k]), k
@@ -576,7 +578,7 @@ def test_registry_presets_and_overrides():
 # ---------------------------------------------------------------------------
 # With the rasterizer
 
-@pytest.mark.parametrize("name", ["default", "absgrad", "mcmc"])
+@pytest.mark.parametrize("name", ["default", "absgrad", "mcmc", "budget"])
 def test_training_steps_through_the_rasterizer(name):
     """A few real optimisation steps: rasterize, backward, Adam, post_backward, with
     densification every other step; shapes stay consistent and Adam keeps working."""
@@ -616,7 +618,7 @@ def test_training_steps_through_the_rasterizer(name):
     assert counts[-1] > 200, counts
 
 
-@pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc"])
+@pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc", "budget"])
 def test_every_strategy_states_the_whole_protocol(name):
     """The trainer reads ``absgrad``, ``schedule_fields`` and ``initial_opacity`` directly
     (no getattr probing), the config ``reads_mean_gradients``: each registered strategy must
@@ -629,6 +631,10 @@ def test_every_strategy_states_the_whole_protocol(name):
     assert "reads_mean_gradients" in vars(type(strategy)) and isinstance(strategy.reads_mean_gradients, bool)
     assert isinstance(strategy.schedule_fields, dict) and isinstance(strategy.initial_opacity, float)
     assert all(hasattr(strategy, field) for field in strategy.schedule_fields)
+    assert "run_fraction_fields" in vars(type(strategy)) or "run_fraction_fields" in vars(DefaultStrategy)
+    assert isinstance(strategy.run_fraction_fields, dict)
+    assert all(hasattr(strategy, field) for field in strategy.run_fraction_fields)
+    assert set(strategy.schedule_fields) <= set(strategy.run_fraction_fields)
 
 
 @dataclass
@@ -648,7 +654,7 @@ class CountingInfo(FakeInfo):
         return self.absgrad
 
 
-@pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc"])
+@pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc", "budget"])
 def test_reads_mean_gradients_is_what_the_hooks_read(name):
     """The declaration `TrainConfig`'s frozen-means check trusts: over a run with refinements
     (so every code path of the hooks runs), a strategy reads the screen-space mean gradients
