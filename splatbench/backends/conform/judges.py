@@ -63,7 +63,7 @@ def _psnr(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
     """", rgb PSNR x dB against the oracle" (peak 1), or "" when rgb is not compared."""
     if "rgb" not in outputs:
         return ""
-    from splatbench.train.metrics import psnr
+    from splatbench.metrics.image import psnr
 
     value = psnr(got[..., :3], ref[..., :3], clamp=False)
     return f", rgb PSNR {value:.1f} dB against the oracle" if math.isfinite(value) else ""
