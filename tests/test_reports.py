@@ -292,6 +292,29 @@ def test_train_kind_config_errors_and_defaults():
     assert {"diffuse", "glossy", "textured"} <= kind.scenes()
 
 
+def test_train_kind_keeps_run_fractions_and_earlier_run_ids():
+    """A step field written as a fraction of the run stays that string in the resolved
+    config (the run scales it once, as written; a resolved step count would be scaled
+    again under schedule = "scaled"), and revised_opacity = false, the behaviour before
+    the field existed, is left out, so earlier default-strategy run ids stay valid."""
+    from splatbench.experiments.grid import make_run_id
+    from splatbench.experiments.train_kind import TRAIN
+    from splatbench.train.config import TrainConfig
+
+    base = {"scene": "diffuse", "seed": 0, "iterations": 2000}
+    resolved = TRAIN.resolve({**base, "strategy_options": {"refine_stop": "75%", "reset_every": 0}})
+    assert resolved["strategy_options"]["refine_stop"] == "75%" and resolved["strategy_options"]["reset_every"] == 0
+    cfg = TrainConfig.from_dict({k: v for k, v in resolved.items() if k not in ("scene", "data")})
+    assert cfg.make_strategy().refine_stop == 1500   # 75 % of 2000, not scaled again
+    plain = TRAIN.resolve(base)
+    assert "revised_opacity" not in plain["strategy_options"]
+    assert make_run_id("train", plain) == make_run_id("train", TRAIN.resolve(
+        {**base, "strategy_options": {"revised_opacity": False}}))
+    revised = TRAIN.resolve({**base, "strategy_options": {"revised_opacity": True}})
+    assert revised["strategy_options"]["revised_opacity"] is True
+    assert make_run_id("train", revised) != make_run_id("train", plain)
+
+
 def test_train_kind_test_spp(tmp_path, monkeypatch):
     """data.test_spp: validated at the boundary; at its default (data.spp) the run and its
     dataset folder are the ones made before the field existed; otherwise the test views

@@ -131,11 +131,24 @@ def validate(config: dict[str, Any]) -> None:
     _train_config(train)
 
 
+#: Strategy fields added after runs were reported, left out of the resolved config at
+#: these values (the behaviour before they existed), so that earlier run ids stay valid.
+_LATER_FIELDS: dict[str, Any] = {"revised_opacity": False}
+
+
 def _strategy_options(cfg) -> dict[str, Any]:
     """Every field of the configured strategy (preset and overrides applied, schedule
-    fields as written, not scaled), JSON values."""
+    fields as written, not scaled), JSON values; a step field written as a fraction of
+    the run ("50%") stays that string, so the run scales it, once, as the file says."""
+    from splatbench.train.schedule import parse_run_fraction
+
     strategy = cfg.make_strategy(scaled=False)
-    return {f.name: _json(getattr(strategy, f.name)) for f in dataclasses.fields(strategy)}
+    out = {f.name: _json(getattr(strategy, f.name)) for f in dataclasses.fields(strategy)
+           if not (f.name in _LATER_FIELDS and getattr(strategy, f.name) == _LATER_FIELDS[f.name])}
+    for name, value in cfg.strategy_options.items():
+        if name in strategy.run_fraction_fields and parse_run_fraction(value, f"strategy_options.{name}") is not None:
+            out[name] = value
+    return out
 
 
 def _json(value: Any) -> Any:
