@@ -206,7 +206,7 @@ scenes = ["diffuse", { name = "cap", path = "cap", downscale = 2 }, { name = "to
 iterations = 20
 init = "random"
 init_random_points = 200
-data.resolution = 16
+data.resolution = 40     # LPIPS (AlexNet) needs images of about 32 px or more
 data.views = 9
 data.spp = 2
 """
@@ -215,7 +215,7 @@ data.spp = 2
 def _mixed_grid(tmp_path):
     from splatbench.experiments.grid import load_experiment
 
-    _pinhole_capture(tmp_path / "exp" / "cap", 9)
+    _pinhole_capture(tmp_path / "exp" / "cap", 9, size=(80, 64))
     _small_ply(tmp_path / "exp" / "toy.ply")
     (tmp_path / "exp" / "grid.toml").write_text(_MIXED)
     return load_experiment(tmp_path / "exp" / "grid.toml")
@@ -226,10 +226,10 @@ def test_grid_scenes_resolve_per_scene_type(tmp_path):
     from splatbench.experiments.grid import expand
 
     runs = {r.scene: r.config for r in expand(_mixed_grid(tmp_path))}
-    assert runs["diffuse"]["data"] == {"resolution": 16, "views": 9, "spp": 2}
+    assert runs["diffuse"]["data"] == {"resolution": 40, "views": 9, "spp": 2}
     assert runs["cap"]["data"] == {"path": str((tmp_path / "exp" / "cap").resolve()), "downscale": 2}
     assert runs["toy"]["data"] == {"model": str((tmp_path / "exp" / "toy.ply").resolve()), "views": 9,
-                                   "resolution": 16}
+                                   "resolution": 40}
     assert runs["cap"]["iterations"] == runs["toy"]["iterations"] == 20
 
 
@@ -247,7 +247,7 @@ def test_grid_over_catalog_folder_and_teacher_scenes_runs_and_reports(tmp_path, 
     assert set(rows) == {"diffuse", "cap", "toy"}
     assert all(r.status == "done" for r in rows.values()), [r.error for r in rows.values()]
     assert rows["cap"].config["data"] == {"path": str((tmp_path / "exp" / "cap").resolve()), "downscale": 2}
-    assert rows["toy"].config["data"]["resolution"] == 16 and rows["toy"].config["data"]["views"] == 9
+    assert rows["toy"].config["data"]["resolution"] == 40 and rows["toy"].config["data"]["views"] == 9
     assert "spp" not in rows["toy"].config["data"]
     assert all(r.metrics["test_psnr"] is not None for r in rows.values())
     assert (summary.done, summary.failed) == (3, 0)
