@@ -43,7 +43,10 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
+from splatbench.data.colmap_bounds import check_colmap_binary
 from splatbench.errors import InputError
+from splatbench.ply import read_ply_data
+from splatbench.safeio import read_image_with_alpha, read_npy
 
 LAYOUTS = ("auto", "colmap", "blender")
 #: COLMAP camera models accepted as they are (no distortion).
@@ -157,6 +160,8 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, bg: np.ndarray) -
     for part in ("cameras", "images", "points3D"):
         if not (sparse / f"{part}.{ext}").is_file():
             raise InputError(f"{sparse / f'{part}.{ext}'}: missing")
+    if ext == "bin":
+        check_colmap_binary(sparse)  # every count against the bytes that follow, before pycolmap allocates
     try:
         rec = pycolmap.Reconstruction(str(sparse))
     except Exception as exc:  # pycolmap raises ValueError/RuntimeError with a source location
@@ -308,37 +313,31 @@ def _resolve_image(root: Path, where: str, file_path: str) -> str:
 
 
 def _read_ply(root: Path, file: str, rel: str) -> PointCloud:
-    from plyfile import PlyData
-
     path = root / rel
     if not path.is_file():
         raise InputError(f"{file}: ply_file_path: {rel!r} does not exist")
+    ply = read_ply_data(path, rel)  # counts checked against the file's size
     try:
-        vertex = PlyData.read(str(path))["vertex"]
+        vertex = ply["vertex"]
         xyz = np.stack([np.asarray(vertex[a], dtype=np.float64) for a in "xyz"], axis=1)
         names = vertex.data.dtype.names
         if all(c in names for c in ("red", "green", "blue")):
             rgb = np.stack([np.asarray(vertex[c]) for c in ("red", "green", "blue")], axis=1).astype(np.uint8)
         else:
             rgb = np.full(xyz.shape, 128, dtype=np.uint8)
-    except (KeyError, ValueError, OSError) as exc:
+    except (KeyError, ValueError, OSError, TypeError) as exc:
         raise InputError(f"{rel}: cannot read the point cloud ({exc})") from None
+    if not np.isfinite(xyz).all():
+        raise InputError(f"{rel}: x, y, z: {int((~np.isfinite(xyz)).any(axis=1).sum())} points are not finite")
     return PointCloud(xyz, rgb)
 
 
 # ------------------------------------------------------------------------ shared
 def _read_image(root: Path, rel: str, bg: np.ndarray, context: str) -> tuple[np.ndarray, np.ndarray | None]:
-    from PIL import Image
-
     path = root / rel
     if not path.is_file():
         raise InputError(f"{rel}: missing ({context})")
-    try:
-        with Image.open(path) as im:
-            has_alpha = im.mode in ("RGBA", "LA", "PA") or (im.mode == "P" and "transparency" in im.info)
-            arr = np.asarray(im.convert("RGBA" if has_alpha else "RGB"))
-    except OSError as exc:
-        raise InputError(f"{rel}: cannot read the image ({exc})") from None
+    arr, has_alpha = read_image_with_alpha(path, what=rel)  # decompression bombs refused
     data = arr.astype(np.float32) / 255.0
     if not has_alpha:
         return data, None
@@ -374,7 +373,9 @@ def _split(root: Path, views: list) -> Split:
             if not path.is_file():
                 raise InputError(f"{path.relative_to(root).as_posix()}: missing (depth/ holds depth maps, "
                                  f"but none for {rel})")
-            d = np.load(path)
+            d = read_npy(path, what=path.relative_to(root).as_posix())
+            if d.dtype.kind not in "fiu":
+                raise InputError(f"{path.relative_to(root).as_posix()}: depth dtype {d.dtype}, expected float32")
             if d.shape != (h, w):
                 raise InputError(f"{path.relative_to(root).as_posix()}: depth shape {list(d.shape)} disagrees "
                                  f"with its image {h}x{w}")
