@@ -68,8 +68,8 @@ def _npy_header(stream, what: str) -> tuple[tuple[int, ...], np.dtype, int]:
             shape, _, dtype = fmt.read_array_header_2_0(stream)
         else:
             raise ValueError(f"unsupported .npy version {version}")
-    except (ValueError, EOFError, SyntaxError, TypeError, OverflowError, UnicodeDecodeError) as exc:
-        raise InputError(f"{what}: not a valid .npy array ({_short(exc)})") from None
+    except Exception as exc:  # noqa: BLE001 - numpy parses the header dict with ast: SyntaxError, TokenError ...
+        raise InputError(f"{what}: not a valid .npy array ({type(exc).__name__}: {_short(exc)})") from None
     if dtype.hasobject:
         raise InputError(f"{what}: holds Python objects (dtype {dtype}); only numeric arrays are read (no pickle)")
     count = 1
@@ -91,8 +91,8 @@ def read_npy(path: str | os.PathLike, *, what: str) -> np.ndarray:
         stream.seek(0)
         try:
             return np.load(stream, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
-            raise InputError(f"{what}: cannot read the array ({_short(exc)})") from None
+        except Exception as exc:  # noqa: BLE001 - a damaged array is data, any failure one line
+            raise InputError(f"{what}: cannot read the array ({type(exc).__name__}: {_short(exc)})") from None
 
 
 def read_npz(path: str | os.PathLike, *, what: str) -> dict[str, np.ndarray]:
@@ -127,8 +127,7 @@ def read_npz(path: str | os.PathLike, *, what: str) -> dict[str, np.ndarray]:
                     if nbytes != info.file_size - member.tell():
                         raise InputError(f"{where}: header claims {nbytes} bytes of data, the member holds "
                                          f"{info.file_size - member.tell()}; truncated or damaged")
-                    member_bytes = member.read()
-                out[key] = np.load(io.BytesIO(member_bytes), allow_pickle=False)
+                out[key] = np.load(io.BytesIO(archive.read(info)), allow_pickle=False)  # at most file_size bytes
     except InputError:
         raise
     except FileNotFoundError:

@@ -6,8 +6,9 @@ points per image, points, track lengths, rigs, sensors, frames) before reading t
 `check_colmap_binary` walks each file's records (the layouts of COLMAP's
 ``colmap/scene/reconstruction_io_binary.cc``, as pycolmap 4 writes them) and refuses, in
 one `InputError` line naming the file and the field, any count whose records cannot fit
-in the bytes left, or a camera model id COLMAP does not define. It allocates nothing
-beyond the file's bytes. Text models (``.txt``) state no counts that are allocated ahead.
+in the bytes left, a camera model id COLMAP does not define, or an image name that is
+not UTF-8. It allocates nothing beyond the file's bytes. Text models (``.txt``) state no
+counts that are allocated ahead; `check_colmap_text` checks they are UTF-8.
 """
 
 from __future__ import annotations
@@ -55,6 +56,10 @@ class _Cursor:
         end = self.data.find(b"\0", self.pos)
         if end < 0:
             raise InputError(f"{self.what}: {field}: no terminating NUL (truncated or damaged)")
+        try:
+            self.data[self.pos:end].decode("utf-8")
+        except UnicodeDecodeError:
+            raise InputError(f"{self.what}: {field}: {self.data[self.pos:end]!r:.80} is not UTF-8 text") from None
         self.pos = end + 1
 
 
@@ -108,6 +113,19 @@ def _frames(c: _Cursor) -> None:
 _WALKERS = {"cameras": _cameras, "images": _images, "points3D": _points, "rigs": _rigs, "frames": _frames}
 
 
+def check_colmap_text(sparse: str | Path) -> None:
+    """The ``.txt`` files of the model folder ``sparse`` must be UTF-8 text (pycolmap
+    hands image names to Python as UTF-8); one `InputError` line naming the file and
+    the byte otherwise."""
+    for part in _WALKERS:
+        path = Path(sparse) / f"{part}.txt"
+        if path.is_file():
+            try:
+                path.read_bytes().decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise InputError(f"{path}: not UTF-8 text (byte {exc.start}); the file is damaged") from None
+
+
 def check_colmap_binary(sparse: str | Path, label: str | None = None) -> None:
     """Walk ``cameras.bin``, ``images.bin``, ``points3D.bin`` (and ``rigs.bin``,
     ``frames.bin`` when present) of the model folder ``sparse``; one `InputError` line,
@@ -123,4 +141,4 @@ def check_colmap_binary(sparse: str | Path, label: str | None = None) -> None:
         walk(_Cursor(path.read_bytes(), what))
 
 
-__all__ = ["check_colmap_binary", "CAMERA_MODEL_PARAMS"]
+__all__ = ["check_colmap_binary", "check_colmap_text", "CAMERA_MODEL_PARAMS"]

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
-from splatbench.data.colmap_bounds import check_colmap_binary
+from splatbench.data.colmap_bounds import check_colmap_binary, check_colmap_text
 from splatbench.errors import InputError
 from splatbench.ply import read_ply_data
 from splatbench.safeio import read_image_with_alpha, read_npy
@@ -65,6 +65,9 @@ class PointCloud:
         if self.xyz.ndim != 2 or self.xyz.shape[1] != 3 or self.rgb.shape != self.xyz.shape:
             raise InputError(f"points: expected xyz [M, 3] and rgb [M, 3], got {list(self.xyz.shape)} "
                              f"and {list(self.rgb.shape)}")
+        bad = int((~np.isfinite(self.xyz)).any(axis=1).sum())
+        if bad:
+            raise InputError(f"points: x, y, z of {bad} of {len(self.xyz)} points are not finite")
 
     def __len__(self) -> int:
         return len(self.xyz)
@@ -162,6 +165,8 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, bg: np.ndarray) -
             raise InputError(f"{sparse / f'{part}.{ext}'}: missing")
     if ext == "bin":
         check_colmap_binary(sparse)  # every count against the bytes that follow, before pycolmap allocates
+    else:
+        check_colmap_text(sparse)
     try:
         rec = pycolmap.Reconstruction(str(sparse))
     except Exception as exc:  # pycolmap raises ValueError/RuntimeError with a source location
@@ -195,8 +200,11 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, bg: np.ndarray) -
     points = None
     if rec.num_points3D():
         pts = [p for _, p in sorted(rec.points3D.items())]  # by point3D id
-        points = PointCloud(np.array([p.xyz for p in pts], dtype=np.float64).reshape(-1, 3),
-                            np.array([p.color for p in pts], dtype=np.uint8).reshape(-1, 3))
+        try:
+            points = PointCloud(np.array([p.xyz for p in pts], dtype=np.float64).reshape(-1, 3),
+                                np.array([p.color for p in pts], dtype=np.uint8).reshape(-1, 3))
+        except InputError as exc:
+            raise InputError(f"{sparse / f'points3D.{ext}'}: {exc}") from None
     return Dataset(root.resolve().name, _split(root, [views[i] for i in train_ids]),
                    _split(root, [views[i] for i in test_ids]), points, root, "colmap")
 
@@ -327,9 +335,10 @@ def _read_ply(root: Path, file: str, rel: str) -> PointCloud:
             rgb = np.full(xyz.shape, 128, dtype=np.uint8)
     except (KeyError, ValueError, OSError, TypeError) as exc:
         raise InputError(f"{rel}: cannot read the point cloud ({exc})") from None
-    if not np.isfinite(xyz).all():
-        raise InputError(f"{rel}: x, y, z: {int((~np.isfinite(xyz)).any(axis=1).sum())} points are not finite")
-    return PointCloud(xyz, rgb)
+    try:
+        return PointCloud(xyz, rgb)
+    except InputError as exc:
+        raise InputError(f"{rel}: {exc}") from None
 
 
 # ------------------------------------------------------------------------ shared

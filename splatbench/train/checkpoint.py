@@ -145,9 +145,10 @@ def resume_line(path: str | Path, step: int, iterations: int) -> str:
     return f"resumed from {path} at step {step} of {iterations}"
 
 
-def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
-    """Put the state saved at ``path`` into ``trainer`` (built from the same config and
-    dataset); return the checkpoint's ``extra``. One-line `InputError` on any mismatch."""
+def read_checkpoint(path: str | Path) -> dict[str, Any]:
+    """The state saved at ``path`` with its objects rebuilt (`_CLASSES` only), read as data
+    (``weights_only=True``): nothing in the file is executed. A missing, damaged, foreign
+    or older-format file is a one-line `InputError`."""
     p = Path(path)
     try:
         state = torch.load(p, map_location="cpu", weights_only=True)  # tensors and plain containers only
@@ -164,6 +165,21 @@ def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
         raise InputError(f"resume: {str(p)!r} is not a readable checkpoint ({reason}){hint}") from None
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise InputError(f"resume: {str(p)!r} is not a {CHECKPOINT_FORMAT} checkpoint")
+    try:
+        for key in ("strategy_state", "sh", "extra"):
+            state[key] = _decode(state[key])
+    except Exception as exc:  # noqa: BLE001 - unknown names, missing keys, bad generator states
+        raise InputError(f"resume: {str(p)!r} is a damaged {CHECKPOINT_FORMAT} checkpoint "
+                         f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") from None
+    return state
+
+
+def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
+    """Put the state saved at ``path`` into ``trainer`` (built from the same config and
+    dataset); return the checkpoint's ``extra``. One-line `InputError` on any mismatch
+    or damage; the file is read as data (`read_checkpoint`)."""
+    p = Path(path)
+    state = read_checkpoint(p)
     try:
         return _apply(trainer, state, p)
     except InputError:
@@ -190,14 +206,14 @@ def _apply(trainer: Any, state: dict[str, Any], p: Path) -> dict[str, Any]:
     trainer.optimizers = make_optimizers(trainer.params, trainer.lrs, trainer.config.adam_eps)
     for name in PARAM_GROUPS:
         trainer.optimizers[name].load_state_dict(state["optimizers"][name])
-    trainer.state = _decode(state["strategy_state"])
-    trainer.sh = _decode(state["sh"])
+    trainer.state = state["strategy_state"]
+    trainer.sh = state["sh"]
     trainer._order = [int(i) for i in state["order"]]
     trainer.generator.set_state(state["generator"])
     torch.set_rng_state(state["torch_rng"])
     _set_numpy_rng_state(state["numpy_rng"])
     trainer.step_index = int(state["step_index"])
-    return dict(_decode(state["extra"]))
+    return dict(state["extra"])
 
 
-__all__ = ["save_checkpoint", "load_checkpoint", "resume_line", "CHECKPOINT_FORMAT"]
+__all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint", "resume_line", "CHECKPOINT_FORMAT"]
