@@ -156,7 +156,9 @@ def read_image_with_alpha(path: str | os.PathLike, *, what: str, mode: str | Non
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)  # refuse at the limit, not 2x
-            with Image.open(path) as im:
+            # from memory: BytesIO.read(n) returns what is there, where a file's read(n) first
+            # allocates n bytes (Pillow reads a PNG's trailing IDAT by its stated length, up to 2 GiB)
+            with Image.open(io.BytesIO(Path(path).read_bytes())) as im:
                 has_alpha = im.mode in ("RGBA", "LA", "PA") or (im.mode == "P" and "transparency" in im.info)
                 target = mode or ("RGBA" if has_alpha else "RGB")
                 arr = np.asarray(im.convert(target))

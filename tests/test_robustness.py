@@ -288,3 +288,32 @@ def test_a_hostile_ply_point_cloud_in_a_blender_dataset(tmp_path):
     _blender(tmp_path / "b")
     hostile_ply(tmp_path / "b" / "points3D.ply")
     one_line_error(lambda: load_dataset(tmp_path / "b"), "points3D.ply", "element 'vertex' count", "100000000000")
+
+
+def test_found_a_png_chunk_length_pillow_would_allocate(tmp_path):
+    """A 6x4 PNG whose IDAT states 134 MB: Pillow read the rest of the chunk with
+    file.read(134 MB) (allocated before reading). Now read from memory: the read gives
+    what is there, and the peak stays near the file's size."""
+    import tracemalloc
+    import zlib
+
+    from splatbench.safeio import read_image
+
+    raw = zlib.compress(b"".join(b"\0" + bytes(18) for _ in range(4)))
+    def chunk(kind: bytes, data: bytes, length: int | None = None) -> bytes:
+        return struct.pack(">I", len(data) if length is None else length) + kind + data + \
+            struct.pack(">I", zlib.crc32(kind + data))
+
+    path = tmp_path / "a.png"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 6, 4, 8, 2, 0, 0, 0))
+                     + chunk(b"IDAT", raw, length=0x08000057) + chunk(b"IEND", b""))
+    tracemalloc.start()
+    try:
+        try:
+            read_image(path, what="a.png")
+        except InputError as exc:
+            assert "\n" not in str(exc)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20, peak
