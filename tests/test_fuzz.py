@@ -160,10 +160,23 @@ def _valid_checkpoint(state) -> None:
     assert isinstance(state, dict) and state["format"].startswith("splatbench-checkpoint/")
 
 
-def _valid_record(rec) -> None:
+def _valid_record(rec) -> str | None:
     from splatbench.experiments.store import RunRecord
 
-    assert rec is None or isinstance(rec, RunRecord)
+    if rec is None:
+        return "refused (None)"  # the runner reports the file and redoes the run
+    assert isinstance(rec, RunRecord)
+    rec.row()
+    return None
+
+
+def _valid_owner(owner) -> str | None:
+    from splatbench.experiments.claims import Owner
+
+    if owner is None:
+        return "refused (None)"  # no owner: held while recent, then stale
+    assert isinstance(owner, Owner) and owner.pid > 0
+    return None
 
 
 def _valid_array(a) -> None:
@@ -177,7 +190,7 @@ def _valid_array(a) -> None:
 class Reader:
     build: Callable[[Path], None]      # writes the valid seed into an empty folder
     read: Callable[[Path], object]     # reads the (mutated) folder
-    check: Callable[[object], None]    # what a successful read must satisfy
+    check: Callable[[object], str | None]  # asserts what a successful read must satisfy
     cases: int                         # default-suite cases (the slow suite runs 10x)
     text: tuple[str, ...] = ()         # files mutated with the text operations too
     members: bool = False              # npz: also mutate one member's .npy bytes inside a valid zip
@@ -270,7 +283,7 @@ READERS: dict[str, Reader] = {
                          lambda f: __import__("splatbench.train.checkpoint").train.checkpoint.read_checkpoint(
                              f / "c.pt"), _valid_checkpoint, 200),
     "result-record": Reader(_record, _read_record, _valid_record, 200, text=("0123456789abcdef.json",)),
-    "claim": Reader(lambda f: _in(f, _claim, "c.claim"), _read_claim, lambda o: None, 200, text=("c.claim",)),
+    "claim": Reader(lambda f: _in(f, _claim, "c.claim"), _read_claim, _valid_owner, 200, text=("c.claim",)),
 }
 
 
