@@ -133,8 +133,7 @@ def read_npz(path: str | os.PathLike, *, what: str) -> dict[str, np.ndarray]:
     except FileNotFoundError:
         raise InputError(f"{what}: no such file {os.fspath(path)!r}") from None
     except Exception as exc:  # noqa: BLE001 - zipfile, zlib, struct and numpy faults all mean a damaged archive
-        raise InputError(f"{what}: {Path(path).name} is not a readable npz ({type(exc).__name__}: "
-                         f"{_short(exc)})") from None
+        raise InputError(f"{what}: not a readable npz ({type(exc).__name__}: {_short(exc)})") from None
     return out
 
 
