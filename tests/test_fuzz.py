@@ -259,7 +259,7 @@ def _read_image(folder: Path):
 
 
 READERS: dict[str, Reader] = {
-    "ply-binary": Reader(lambda f: _in(f, _gaussians(3, 1).to_ply, "m.ply"),
+    "ply-binary": Reader(lambda f: _in(f, _gaussians(12, 1).to_ply, "m.ply"),  # 12 rows: the data outweighs the header
                          lambda f: Gaussians.from_ply(f / "m.ply"), _finite_gaussians, 200),
     "ply-ascii": Reader(_ply_ascii, lambda f: Gaussians.from_ply(f / "m.ply"), _finite_gaussians, 200,
                         text=("m.ply",)),
