@@ -32,6 +32,8 @@ from splatbench.errors import InputError
 
 #: The most elements (vertices, points, cameras, images, array entries) any file may claim.
 MAX_COUNT = 2_000_000_000
+#: numpy's own ceiling on a .npy header (``max_header_size``), checked here before reading it.
+_MAX_NPY_HEADER = 10000
 #: Deflate expands at most ~1032:1; an npz member claiming more than this per compressed byte lies.
 _DEFLATE_RATIO = 1100
 
@@ -62,12 +64,17 @@ def _npy_header(stream, what: str) -> tuple[tuple[int, ...], np.dtype, int]:
     fmt = np.lib.format
     try:
         version = fmt.read_magic(stream)
-        if version == (1, 0):
-            shape, _, dtype = fmt.read_array_header_1_0(stream)
-        elif version in ((2, 0), (3, 0)):
-            shape, _, dtype = fmt.read_array_header_2_0(stream)
-        else:
+        if version not in ((1, 0), (2, 0), (3, 0)):
             raise ValueError(f"unsupported .npy version {version}")
+        # the header's length, bounded before numpy reads it (numpy reads first, then checks)
+        size_field = stream.read(2 if version == (1, 0) else 4)
+        length = int.from_bytes(size_field, "little")
+        if len(size_field) < (2 if version == (1, 0) else 4) or length > _MAX_NPY_HEADER:
+            raise ValueError(f"header length {length} (at most {_MAX_NPY_HEADER})")
+        head = io.BytesIO(fmt.magic(*version) + size_field + stream.read(length))
+        fmt.read_magic(head)
+        read_header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+        shape, _, dtype = read_header(head)
     except Exception as exc:  # noqa: BLE001 - numpy parses the header dict with ast: SyntaxError, TokenError ...
         raise InputError(f"{what}: not a valid .npy array ({type(exc).__name__}: {_short(exc)})") from None
     if dtype.hasobject:

@@ -317,3 +317,25 @@ def test_found_a_png_chunk_length_pillow_would_allocate(tmp_path):
     finally:
         tracemalloc.stop()
     assert peak < 16 * 2**20, peak
+
+
+def test_found_a_npy_header_length_numpy_would_allocate(tmp_path):
+    """A version-3 .npy whose 4-byte header length reads 662 MB (a version byte flipped
+    from 1): numpy reads a header of that length before checking it. Now the length is
+    bounded (numpy's 10000) before anything is read."""
+    import tracemalloc
+
+    from splatbench.safeio import read_npy
+
+    path = tmp_path / "d.npy"
+    np.save(path, np.zeros((4, 6), np.float32))
+    data = bytearray(path.read_bytes())
+    data[6] = 3  # version 3.0: the length field becomes 4 bytes, b"v\x00{'"
+    path.write_bytes(bytes(data))
+    tracemalloc.start()
+    try:
+        one_line_error(lambda: read_npy(path, what="d.npy"), "d.npy", "header length", "at most 10000")
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20, peak
