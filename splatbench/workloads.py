@@ -6,6 +6,7 @@ the parity tests all draw their scenes from here.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -109,3 +110,33 @@ def _from_sfm(name: str, arrays: dict, view: int) -> Workload:
 
     gaussians = from_points(arrays["means3d"], arrays["colors"])
     return Workload(f"{name}-view{view}", gaussians, sfm_camera(arrays, view))
+
+
+# --------------------------------------------------------------------------- names
+_SYNTHETIC = re.compile(r"^synthetic-(\d+)-(\d+)(?:x(\d+))?$")
+_GARDEN = re.compile(r"^garden(?:-v(\d+))?$")
+
+
+def parse_workload_name(name: str) -> tuple[str, dict[str, int]]:
+    """``"synthetic-20000-256"`` -> ("synthetic", {n, width, height}); ``"garden-v2"`` ->
+    ("garden", {view}); one-line `InputError` otherwise."""
+    m = _SYNTHETIC.match(name)
+    if m:
+        n, w = int(m.group(1)), int(m.group(2))
+        h = int(m.group(3)) if m.group(3) else w
+        if n < 1 or w < 1 or h < 1 or w * h > 4096 * 4096:
+            raise InputError(f"scene: {name!r}: expected N >= 1 Gaussians and a size up to 4096x4096")
+        return "synthetic", {"n": n, "width": w, "height": h}
+    m = _GARDEN.match(name)
+    if m:
+        return "garden", {"view": int(m.group(1) or 0)}
+    raise InputError(f"scene: unknown workload {name!r} (expected 'synthetic-N-S', 'synthetic-N-WxH', 'garden' "
+                     f"or 'garden-vK')")
+
+
+def build_workload(name: str, seed: int) -> Workload:
+    """The `Workload` a workload name (`parse_workload_name`) and seed stand for."""
+    kind, args = parse_workload_name(name)
+    if kind == "synthetic":
+        return synthetic(args["n"], args["width"], args["height"], seed)
+    return load_npz(GARDEN_SFM, view=args["view"])

@@ -53,7 +53,7 @@ def compare(backends: tuple[str, ...], synthetic: tuple[tuple[str, str], ...], s
     from splatbench.backends.compare_report import findings, result_table, write_compare
     from splatbench.backends.registry import get_backend
     from splatbench.bench.raster import parse_synthetic, parse_workload
-    from splatbench.experiments.raster_kind import build_workload
+    from splatbench.workloads import build_workload
 
     settings = CompareSettings(repeats=repeats, device=device, seed=seed, error_scale=error_scale,
                                grad_oracle=grad_oracle, fd_entries=fd_entries, max_call_s=max_call_s)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.raster.backend import dr, get_backend
+from splatbench.raster.device import dr, get_device
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.pipeline import (check_background, check_clip_planes, check_sh_range, frame_to_numpy,
                                        render_frame, resolve_sh_degree)
@@ -73,8 +73,7 @@ def render(gaussians, camera, *, sh_degree: int | None = None, background=(0.0, 
         flat = int(np.argmax(np.abs(gaussians.sh)))
         check_sh_range(float(np.abs(gaussians.sh).flat[flat]), np.unravel_index(flat, gaussians.sh.shape))
     bg = check_background(background)
-    backend = get_backend(opts.device)
-    m = backend.t
+    m = get_device(opts.device).t
     with dr.suspend_grad():
         frame = render_frame(to_tensor(m, gaussians.means), to_tensor(m, gaussians.log_scales),
                              to_tensor(m, gaussians.quats), to_tensor(m, gaussians.opacity_logits),

@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from splatbench.raster.backend import dr
+from splatbench.raster.device import dr
 from splatbench.raster.options import RasterOptions
 
 #: The rasterizer's defaults: one source, `RasterOptions` (graphdeco's values).

@@ -6,7 +6,7 @@ so unused bands cost neither time nor gradient work.
 
 from __future__ import annotations
 
-from splatbench.raster.backend import dr
+from splatbench.raster.device import dr
 from splatbench.raster.projection import array_namespace
 
 C0 = 0.28209479177387814
