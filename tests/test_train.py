@@ -346,7 +346,7 @@ def test_checkpoint_resumes_training_exactly(tmp_path, tiny_diffuse):
     assert not any(n.startswith("resumed from") for n in straight.notes + first.notes)
     # its train_seconds counts the checkpoint's 10 steps too (timed by the first run; the summary
     # line says so), and it knows where it resumed
-    before = torch.load(checkpoint, map_location="cpu", weights_only=False)["extra"]["loop_seconds"]
+    before = torch.load(checkpoint, map_location="cpu", weights_only=True)["extra"]["loop_seconds"]
     assert 0 < round(before, 3) < resumed.train_seconds
     assert (resumed.resumed_step, straight.resumed_step, first.resumed_step) == (10, None, None)
     # a different config is refused before any step, naming the field

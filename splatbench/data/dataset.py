@@ -61,8 +61,11 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
+from splatbench.data.colmap_bounds import check_colmap_binary, check_colmap_text
 from splatbench.data.undistort import Lens, check_lens
 from splatbench.errors import InputError
+from splatbench.ply import read_ply_data
+from splatbench.safeio import read_image_with_alpha, read_npy
 
 LAYOUTS = ("auto", "colmap", "blender")
 #: COLMAP camera models accepted as they are (no distortion).
@@ -81,6 +84,9 @@ class PointCloud:
         if self.xyz.ndim != 2 or self.xyz.shape[1] != 3 or self.rgb.shape != self.xyz.shape:
             raise InputError(f"points: expected xyz [M, 3] and rgb [M, 3], got {list(self.xyz.shape)} "
                              f"and {list(self.rgb.shape)}")
+        bad = int((~np.isfinite(self.xyz)).any(axis=1).sum())
+        if bad:
+            raise InputError(f"points: x, y, z of {bad} of {len(self.xyz)} points are not finite")
 
     def __len__(self) -> int:
         return len(self.xyz)
@@ -263,6 +269,10 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, load: _Load) -> D
     for part in ("cameras", "images", "points3D"):
         if not (sparse / f"{part}.{ext}").is_file():
             raise InputError(f"{sparse / f'{part}.{ext}'}: missing")
+    if ext == "bin":
+        check_colmap_binary(sparse)  # every count against the bytes that follow, before pycolmap allocates
+    else:
+        check_colmap_text(sparse)
     try:
         rec = pycolmap.Reconstruction(str(sparse))
     except Exception as exc:  # pycolmap raises ValueError/RuntimeError with a source location
@@ -311,8 +321,11 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, load: _Load) -> D
     points = None
     if rec.num_points3D():
         pts = [p for _, p in sorted(rec.points3D.items())]  # by point3D id
-        points = PointCloud(np.array([p.xyz for p in pts], dtype=np.float64).reshape(-1, 3),
-                            np.array([p.color for p in pts], dtype=np.uint8).reshape(-1, 3))
+        try:
+            points = PointCloud(np.array([p.xyz for p in pts], dtype=np.float64).reshape(-1, 3),
+                                np.array([p.color for p in pts], dtype=np.uint8).reshape(-1, 3))
+        except InputError as exc:
+            raise InputError(f"{sparse / f'points3D.{ext}'}: {exc}") from None
     return Dataset(root.resolve().name, _split(root, [views[i] for i in train_ids], load),
                    _split(root, [views[i] for i in test_ids], load), points, root, "colmap")
 
@@ -489,37 +502,32 @@ def _resolve_image(root: Path, where: str, file_path: str) -> str:
 
 
 def _read_ply(root: Path, file: str, rel: str) -> PointCloud:
-    from plyfile import PlyData
-
     path = root / rel
     if not path.is_file():
         raise InputError(f"{file}: ply_file_path: {rel!r} does not exist")
+    ply = read_ply_data(path, rel)  # counts checked against the file's size
     try:
-        vertex = PlyData.read(str(path))["vertex"]
+        vertex = ply["vertex"]
         xyz = np.stack([np.asarray(vertex[a], dtype=np.float64) for a in "xyz"], axis=1)
         names = vertex.data.dtype.names
         if all(c in names for c in ("red", "green", "blue")):
             rgb = np.stack([np.asarray(vertex[c]) for c in ("red", "green", "blue")], axis=1).astype(np.uint8)
         else:
             rgb = np.full(xyz.shape, 128, dtype=np.uint8)
-    except (KeyError, ValueError, OSError) as exc:
+    except (KeyError, ValueError, OSError, TypeError) as exc:
         raise InputError(f"{rel}: cannot read the point cloud ({exc})") from None
-    return PointCloud(xyz, rgb)
+    try:
+        return PointCloud(xyz, rgb)
+    except InputError as exc:
+        raise InputError(f"{rel}: {exc}") from None
 
 
 # ------------------------------------------------------------------------ shared
 def _read_image(root: Path, rel: str, bg: np.ndarray, context: str) -> tuple[np.ndarray, np.ndarray | None]:
-    from PIL import Image
-
     path = root / rel
     if not path.is_file():
         raise InputError(f"{rel}: missing ({context})")
-    try:
-        with Image.open(path) as im:
-            has_alpha = im.mode in ("RGBA", "LA", "PA") or (im.mode == "P" and "transparency" in im.info)
-            arr = np.asarray(im.convert("RGBA" if has_alpha else "RGB"))
-    except OSError as exc:
-        raise InputError(f"{rel}: cannot read the image ({exc})") from None
+    arr, has_alpha = read_image_with_alpha(path, what=rel)  # decompression bombs refused
     data = arr.astype(np.float32) / 255.0
     if not has_alpha:
         return data, None
@@ -557,7 +565,9 @@ def _split(root: Path, views: list, load: _Load) -> Split:
             if not path.is_file():
                 raise InputError(f"{path.relative_to(root).as_posix()}: missing (depth/ holds depth maps, "
                                  f"but none for {rel})")
-            d = np.load(path)
+            d = read_npy(path, what=path.relative_to(root).as_posix())
+            if d.dtype.kind not in "fiu":
+                raise InputError(f"{path.relative_to(root).as_posix()}: depth dtype {d.dtype}, expected float32")
             if d.shape != (h, w):
                 raise InputError(f"{path.relative_to(root).as_posix()}: depth shape {list(d.shape)} disagrees "
                                  f"with its image {h}x{w}")
