@@ -286,6 +286,21 @@ def test_faults_fail_the_probe_in_one_line():
     assert faulted and all(r.status == "fail" and r.cause == FAULT_CAUSE for r in faulted)
 
 
+def test_an_empty_render_is_said_to_be_one():
+    """A backend that draws nothing on a scene (metal-gauss culls every Gaussian whose 3-sigma radius
+    reaches the image size, and the probe images are small) is told so: not "no autograd graph,
+    declare gradients=False", and not only the probe's own cause."""
+    def draws_nothing(means, log_scales, quats, opacity_logits, sh, camera, **kwargs):
+        zeros = torch.zeros(camera.height, camera.width, dtype=means.dtype)
+        return torch.zeros(camera.height, camera.width, 3, dtype=means.dtype), zeros, zeros
+
+    report = conform(_wrap(draws_nothing), probes=("depth_order", "grad_means"), diagnose=False)
+    forward, gradient = report.results
+    assert forward.status == "fail" and forward.detail.startswith("the backend drew nothing (alpha 0 everywhere")
+    assert gradient.status == "fail" and "drew nothing on this scene" in gradient.detail
+    assert "declare gradients=False" not in gradient.detail
+
+
 def test_probes_a_backend_cannot_run_are_skipped():
     report = conform(_wrap(dense().fn, gradients=False, outputs=("rgb", "alpha")),
                      probes=("expected_depth", "grad_means", "conic_B", "background"))

@@ -117,6 +117,9 @@ def vjp(backend: Backend, s: ProbeScene, v: np.ndarray, device: str) -> dict[str
     params = _tensors(s, device, True)
     out = _render(backend, s, params)
     if not all(isinstance(x, torch.Tensor) for x in out) or not any(x.requires_grad for x in out):
+        if all(isinstance(x, torch.Tensor) and not x.detach().any() for x in out):
+            raise Fault("the backend drew nothing on this scene (every output zero), so its outputs carry no "
+                        "autograd graph: a cull, not a missing backward")
         raise Fault("outputs carry no autograd graph (declare gradients=False if the backend has none)")
     loss = sum((x.double() * torch.as_tensor(v[..., sl].reshape(x.shape), device=x.device)).sum()
                for x, sl in zip(out, OUTPUT_CHANNELS.values()) if x.requires_grad)

@@ -76,6 +76,17 @@ def _psnr(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
     return f", rgb PSNR {value:.1f} dB against the oracle" if math.isfinite(value) else ""
 
 
+def _nothing_drawn(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
+    """"the backend drew nothing ...; " when its alpha is zero everywhere and the oracle's is not, else "".
+
+    An empty image fails every probe whatever the probe isolates (a cull outside the convention
+    vocabulary, e.g. of Gaussians wider than the image): said first, so no probe's cause is read
+    as the reason."""
+    if "alpha" not in outputs or got[..., 3].any() or not ref[..., 3].any():
+        return ""
+    return f"the backend drew nothing (alpha 0 everywhere; the oracle covers {int((ref[..., 3] > 0).sum())} pixels); "
+
+
 def _compared(probe: Probe, ctx: Context) -> tuple[str, ...]:
     return tuple(o for o in probe.outputs if o in ctx.backend.info.outputs)
 
@@ -91,8 +102,8 @@ def _judge_forward(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
     dev = float(diff.max())
     ok = dev <= atol
     detail = (f"{', '.join(outputs)} within tolerance" if ok else
-              f"{int((diff > atol).sum())} of {diff.size} pixels differ{_psnr(got, ref, outputs)}; "
-              f"largest: {_worst(got, ref, outputs)}")
+              f"{_nothing_drawn(got, ref, outputs)}{int((diff > atol).sum())} of {diff.size} pixels differ"
+              f"{_psnr(got, ref, outputs)}; largest: {_worst(got, ref, outputs)}")
     return ProbeResult(probe.name, probe.kind, "pass" if ok else "fail", probe.checks, dev, atol, source, detail,
                        None if ok else probe.cause)
 
