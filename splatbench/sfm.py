@@ -39,6 +39,7 @@ import numpy as np
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
 from splatbench.fsutil import replace_dir
+from splatbench.safeio import read_npz
 
 #: Folder under the dataset that receives the model (``sfm/0/*.bin``) and the database.
 SFM_DIR = "sfm"
@@ -346,8 +347,8 @@ def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True,
 
 def _read_cached(folder: Path, manifest: dict[str, Any]) -> SfmRun:
     try:
-        with np.load(folder / SFM_POINTS) as points:
-            xyz, rgb = points["xyz"].astype(np.float64), points["rgb"].astype(np.uint8)
+        points = read_npz(folder / SFM_POINTS, what=f"{folder / SFM_POINTS}")
+        xyz, rgb = points["xyz"].astype(np.float64), points["rgb"].astype(np.uint8)
         m = manifest
         return SfmRun(int(m["registered"]), int(m["total"]), float(m["center_rmse"]), float(m["rig_radius"]),
                       xyz, rgb, Similarity(float(m["scale"]), np.asarray(m["rotation"], np.float64),

@@ -17,6 +17,7 @@ from splatbench.cameras import Camera
 from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians, quat_to_rotmat
+from splatbench.safeio import read_npz
 
 GARDEN_SFM = Path(__file__).parent / "data" / "garden_sfm.npz"  # real SfM data; see data/NOTICE.md
 #: Real trained 3DGS models (PlayCanvas, MIT; see data/NOTICE.md), by name: `--model guitar`.
@@ -157,11 +158,7 @@ def load_npz(path: str | Path, *, view: int = 0) -> Workload:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"workload: no such file {str(path)!r}")
-    try:
-        with np.load(path) as data:
-            arrays = {k: data[k] for k in data.files}
-    except Exception as exc:  # noqa: BLE001 - any unreadable file gets one line
-        raise InputError(f"workload: {path.name}: not a readable npz ({exc})") from None
+    arrays = read_npz(path, what=f"workload: {path.name}")  # every header checked against the file; no pickle
     if all(k in arrays for k in SFM_KEYS):
         return _from_sfm(path.stem, arrays, view)
     missing = [k for k in WORKLOAD_KEYS if k not in arrays]

@@ -201,7 +201,7 @@ def test_truncated_data(tmp_path, cut):
     make(20, 16).to_ply(path)
     data = path.read_bytes()
     path.write_bytes(data[:-cut])
-    one_line_error(lambda: Gaussians.from_ply(path), "scene.ply", "truncated", "early end-of-file")
+    one_line_error(lambda: Gaussians.from_ply(path), "scene.ply", "truncated", "claims 20 entries")
 
 
 def test_missing_file(tmp_path):

@@ -95,9 +95,12 @@ class Owner:
     def parse(cls, text: str) -> Owner | None:
         try:
             data = json.loads(text)
-            return cls(str(data["host"]), int(data["pid"]), data["start"], str(data["token"]), str(data["claimed"]))
-        except (ValueError, KeyError, TypeError):
+            owner = cls(str(data["host"]), int(data["pid"]), data["start"], str(data["token"]), str(data["claimed"]))
+        except (ValueError, KeyError, TypeError, OverflowError, RecursionError):
+            return None  # a damaged claim: treated as no owner (stale)
+        if owner.pid <= 0 or not (owner.start is None or isinstance(owner.start, str)):
             return None
+        return owner
 
     def gone(self, mtime: float) -> bool:
         """Whether this owner no longer holds its claim (module doc: stale)."""

@@ -248,8 +248,10 @@ def exact_model(scene: str, seed: int, scale: float) -> np.ndarray:
     path = cache_dir() / f"{scene}-s{key['seed']}-exact-{digest}.npy"
     if path.is_file():
         try:
-            return np.load(path)
-        except (OSError, ValueError):
+            from splatbench.safeio import read_npy
+
+            return read_npy(path, what=str(path))  # header checked against the file; no pickle
+        except (OSError, ValueError):  # InputError is a ValueError
             pass  # a damaged file: compute again
     from splatbench.backends import reference_render as oracle
 

@@ -110,11 +110,14 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     remove_stale_temps(folder)
     remove_stale_claim_temps(folder)
     ids = [r.run_id for r in runs]
-    records = {rid: rec for rid, rec in read_records(folder).items() if rid in set(ids)}
+    damaged: list[tuple[Path, str]] = []
+    records = {rid: rec for rid, rec in read_records(folder, damaged).items() if rid in set(ids)}
     pending = [r for r in runs if r.run_id not in records or records[r.run_id].status != "done"]
     skipped = len(runs) - len(pending)
 
     log = _logger(progress)
+    for path, reason in damaged:  # the run is pending: its new result replaces the file
+        log(f"{spec.name}: damaged result file {path.name} ({reason}); its run is redone")
     save_table(folder, ids)
     log(f"{spec.name}: {len(runs)} runs, {skipped} already done, {len(pending)} to run "
         f"({executor}, {workers} worker{'s' * (workers != 1)}); results in {folder}")

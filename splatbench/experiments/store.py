@@ -119,27 +119,76 @@ def write_record(results_dir: str | Path, record: RunRecord) -> Path:
     return atomic_write(path, lambda temp: temp.write_text(text, encoding="utf-8"))
 
 
-def read_record(path: str | Path) -> RunRecord | None:
-    """The record in ``path``, or None when it is missing or not a valid record."""
+#: Field types of a stored record (`check_record`); None allowed where the default is None.
+_FIELD_TYPES: dict[str, tuple[type, ...]] = {
+    "run_id": (str,), "experiment": (str,), "kind": (str,), "scene": (str,), "seed": (int,), "status": (str,),
+    "config": (dict,), "labels": (dict,), "metrics": (dict,), "error": (str, type(None)),
+    "traceback": (str, type(None)), "seconds": (int, float), "started": (str,), "finished": (str,),
+    "worker": (str,)}
+
+
+def check_record(data: Any, name: str) -> RunRecord:
+    """The `RunRecord` in the parsed JSON ``data`` of the file ``name``; `ValueError` (one
+    line naming the field) when a field is missing, extra, of the wrong type, or the
+    record cannot become a table row."""
+    if not isinstance(data, dict):
+        raise ValueError(f"expected a JSON object, got {type(data).__name__}")
+    if data.get("format", RECORD_FORMAT) != RECORD_FORMAT:
+        raise ValueError(f"format: expected {RECORD_FORMAT}, got {data.get('format')!r}")
+    extra = sorted(set(data) - set(_FIELD_TYPES) - {"format", "curves"})
+    if extra:
+        raise ValueError(f"unknown fields {extra}")
+    for key, types in _FIELD_TYPES.items():
+        if key not in data:
+            if key in ("run_id", "experiment", "kind", "scene", "seed", "status", "config"):
+                raise ValueError(f"{key}: missing")
+            continue
+        value = data[key]
+        if not isinstance(value, types) or isinstance(value, bool):
+            raise ValueError(f"{key}: expected {' or '.join(t.__name__ for t in types)}, got {value!r:.60}")
+    record = RunRecord.from_dict(data)
+    if record.status not in STATUSES:
+        raise ValueError(f"status: expected one of {', '.join(STATUSES)}, got {record.status!r:.60}")
+    if f"{record.run_id}.json" != name:
+        raise ValueError(f"run_id: {record.run_id!r:.40} is not the file's name")
     try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-        record = RunRecord.from_dict(data)
-    except (OSError, ValueError, TypeError):
-        return None
-    if record.status not in STATUSES or f"{record.run_id}.json" != Path(path).name:
-        return None
+        record.row()
+    except (ValueError, TypeError, AttributeError) as exc:  # InputError is a ValueError
+        raise ValueError(f"not a table row ({exc})") from None
     return record
 
 
-def read_records(folder: str | Path) -> dict[str, RunRecord]:
-    """Every record in an experiment folder, by run id; temporary files are never read."""
+def read_record(path: str | Path, damaged: list[tuple[Path, str]] | None = None) -> RunRecord | None:
+    """The record in ``path``, or None when it is missing or not a valid record (then, for
+    a file that exists, ``(path, reason)`` is appended to ``damaged``: the run is redone)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError) as exc:  # UnicodeDecodeError is a ValueError
+        reason = f"unreadable ({type(exc).__name__})"
+    else:
+        try:
+            return check_record(json.loads(text), path.name)
+        except (ValueError, TypeError, RecursionError) as exc:  # JSONDecodeError is a ValueError
+            reason = " ".join(str(exc).split())[:200] or type(exc).__name__
+    if damaged is not None:
+        damaged.append((path, reason))
+    return None
+
+
+def read_records(folder: str | Path, damaged: list[tuple[Path, str]] | None = None) -> dict[str, RunRecord]:
+    """Every valid record in an experiment folder, by run id; temporary files are never
+    read. A damaged result file is skipped (its run is not done) and, given ``damaged``,
+    listed there as ``(path, reason)``."""
     folder = Path(folder)
     if not folder.is_dir():
         return {}
     records = {}
     for entry in sorted(os.scandir(folder), key=lambda e: e.name):
         if _RESULT_NAME.match(entry.name) and entry.is_file():
-            record = read_record(entry.path)
+            record = read_record(entry.path, damaged)
             if record is not None:
                 records[record.run_id] = record
     return records
@@ -211,5 +260,5 @@ def read_table(folder: str | Path) -> pd.DataFrame:
 
 
 __all__ = ["RunRecord", "RECORD_FORMAT", "TABLE_NAME", "WORK_DIR", "STATUSES", "CORE_COLUMNS", "VOLATILE_COLUMNS",
-           "experiment_dir", "result_path", "write_record", "read_record", "read_records",
+           "experiment_dir", "result_path", "write_record", "check_record", "read_record", "read_records",
            "remove_stale_temps", "build_table", "write_table", "save_table", "read_table", "worker_name"]

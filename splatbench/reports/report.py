@@ -37,7 +37,7 @@ from splatbench.figures import pareto_figure
 from splatbench.metrics.spec import MetricSpec
 from splatbench.reports.figures import cell_means, curves_figure
 from splatbench.reports.findings import Finding, axis_finding
-from splatbench.reports.notes import axis_notes, run_findings
+from splatbench.reports.notes import axis_notes, metric_notes, run_findings
 from splatbench.reports.tables import AxisTable, axis_table, cell_labels, display, kind_report, metric_specs
 
 REPORT_NAME = "report.md"
@@ -173,6 +173,12 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
     ]
     if spec.base:
         lines += ["Shared settings: " + ", ".join(f"`{k} = {display(v)}`" for k, v in spec.base.items()) + ".", ""]
+    if spec.scene_sources:  # dataset folders and teacher models: where their data comes from
+        lines += ["Scenes from files: " + "; ".join(
+            f"`{name}` " + ", ".join(f"{k} `{display(v)}`" for k, v in src.items())
+            for name, src in spec.scene_sources.items())
+            + " (a scene's own keys win over the shared `data.*`; `data` keys of another scene type do not apply "
+              "to it).", ""]
     timing = run_time(table)
     if timing:
         lines += [timing, ""]
@@ -209,6 +215,8 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
     if meanings:
         lines += ["## Metrics", ""]
         lines += [f"- `{m.label}` (`metric.{m.name}`): {meanings.get(m.name, '')}" for m in report.metrics]
+        for note in metric_notes(spec.kind):
+            lines += note(table)
         lines.append("")
 
     failed = table[table.status == "failed"] if len(table) else table

@@ -9,6 +9,14 @@ draws the next), the torch and numpy global random states, the step index, and t
 training history and evaluations recorded so far. It is written with `torch.save`
 (atomically: temporary file, then rename) beside the PLY of the same step.
 
+A checkpoint is data, never code: it holds only tensors, numbers, strings, lists and
+dicts, and is read with ``torch.load(weights_only=True)``, which reconstructs nothing
+else. The trainer's objects (the strategy's state, the SH schedule, history points)
+are written as ``{"__object__": NAME, "fields": {...}}`` and rebuilt only for the names
+in `_CLASSES`; generators and the numpy random state as tensors and lists. A file with
+anything else in it (a pickle payload, a checkpoint of the older pickled format
+``splatbench-checkpoint/1``) is refused in one line and nothing in it runs.
+
 Resuming checks the checkpoint against the run: the config must be the same in every
 field but ``out`` and ``checkpoint_every`` (the schedules depend on ``iterations``, the
 view order on ``seed``), and the dataset must have the same training views; anything
@@ -32,10 +40,72 @@ import torch
 
 from splatbench.errors import InputError
 from splatbench.strategies.base import PARAM_GROUPS
+from splatbench.strategies.default import DefaultState, LossPlateau, RefineStats
+from splatbench.strategies.mcmc import MCMCState, MCMCStats
 from splatbench.train.params import make_optimizers
+from splatbench.train.result import EvalPoint, HistoryPoint
+from splatbench.train.sh_schedule import ShDecision, ShSchedule
 
-#: Bump when the checkpoint's content changes.
-CHECKPOINT_FORMAT = "splatbench-checkpoint/1"
+#: Bump when the checkpoint's content changes (2: plain data, read with weights_only=True).
+CHECKPOINT_FORMAT = "splatbench-checkpoint/2"
+#: The only classes a checkpoint may name; each is rebuilt from its fields, nothing is called.
+_CLASSES = {cls.__name__: cls for cls in (DefaultState, LossPlateau, RefineStats, MCMCState, MCMCStats,
+                                          ShSchedule, ShDecision, HistoryPoint, EvalPoint)}
+_OBJECT, _TUPLE, _GENERATOR, _NUMPY_RNG = "__object__", "__tuple__", "__generator__", "__numpy_rng__"
+
+
+def _encode(value: Any) -> Any:
+    """``value`` as tensors, numbers, strings, lists and dicts (what weights_only loads)."""
+    if value is None or isinstance(value, (bool, int, float, str, torch.Tensor)):
+        return value
+    if isinstance(value, torch.Generator):
+        return {_GENERATOR: value.get_state(), "device": str(value.device)}
+    if type(value).__name__ in _CLASSES and _CLASSES[type(value).__name__] is type(value):
+        fields = value._asdict() if isinstance(value, tuple) else vars(value)
+        return {_OBJECT: type(value).__name__, "fields": {k: _encode(v) for k, v in fields.items()}}
+    if isinstance(value, tuple):
+        return {_TUPLE: [_encode(v) for v in value]}
+    if isinstance(value, list):
+        return [_encode(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _encode(v) for k, v in value.items()}
+    raise TypeError(f"checkpoint: cannot store a {type(value).__qualname__} as data (add it to _CLASSES)")
+
+
+def _decode(value: Any) -> Any:
+    """The inverse of `_encode`; a name outside `_CLASSES` is a `ValueError` (a bad file)."""
+    if isinstance(value, list):
+        return [_decode(v) for v in value]
+    if not isinstance(value, dict):
+        return value
+    if _GENERATOR in value:
+        gen = torch.Generator(device=str(value["device"]))
+        gen.set_state(value[_GENERATOR])
+        return gen
+    if _TUPLE in value:
+        return tuple(_decode(v) for v in value[_TUPLE])
+    if _OBJECT in value:
+        cls = _CLASSES.get(value[_OBJECT]) if isinstance(value[_OBJECT], str) else None
+        if cls is None or not isinstance(value.get("fields"), dict):
+            raise ValueError(f"unknown object {value[_OBJECT]!r}")
+        fields = {k: _decode(v) for k, v in value["fields"].items()}
+        if issubclass(cls, tuple):
+            return cls(**fields)
+        obj = object.__new__(cls)
+        obj.__dict__.update(fields)
+        return obj
+    return {k: _decode(v) for k, v in value.items()}
+
+
+def _numpy_rng_state() -> dict[str, Any]:
+    name, keys, pos, has_gauss, cached = np.random.get_state()
+    return {_NUMPY_RNG: name, "keys": keys.tolist(), "pos": int(pos), "has_gauss": int(has_gauss),
+            "cached": float(cached)}
+
+
+def _set_numpy_rng_state(state: dict[str, Any]) -> None:
+    np.random.set_state((state[_NUMPY_RNG], np.asarray(state["keys"], dtype=np.uint32), int(state["pos"]),
+                         int(state["has_gauss"]), float(state["cached"])))
 #: Config fields that may differ between the run that wrote a checkpoint and the one resuming it.
 FREE_FIELDS = ("out", "checkpoint_every")
 
@@ -51,13 +121,13 @@ def save_checkpoint(trainer: Any, path: str | Path, *, extra: dict[str, Any] | N
         "step_index": trainer.step_index,
         "params": {name: trainer.params[name].detach().clone() for name in PARAM_GROUPS},
         "optimizers": {name: trainer.optimizers[name].state_dict() for name in PARAM_GROUPS},
-        "strategy_state": trainer.state,
-        "sh": trainer.sh,
-        "order": list(trainer._order),
+        "strategy_state": _encode(trainer.state),
+        "sh": _encode(trainer.sh),
+        "order": [int(i) for i in trainer._order],
         "generator": trainer.generator.get_state(),
         "torch_rng": torch.get_rng_state(),
-        "numpy_rng": np.random.get_state(),
-        "extra": extra or {},
+        "numpy_rng": _numpy_rng_state(),
+        "extra": _encode(extra or {}),
     }
     fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".pt", dir=p.parent)
     try:
@@ -75,21 +145,51 @@ def resume_line(path: str | Path, step: int, iterations: int) -> str:
     return f"resumed from {path} at step {step} of {iterations}"
 
 
-def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
-    """Put the state saved at ``path`` into ``trainer`` (built from the same config and
-    dataset); return the checkpoint's ``extra``. One-line `InputError` on any mismatch."""
+def read_checkpoint(path: str | Path) -> dict[str, Any]:
+    """The state saved at ``path`` with its objects rebuilt (`_CLASSES` only), read as data
+    (``weights_only=True``): nothing in the file is executed. A missing, damaged, foreign
+    or older-format file is a one-line `InputError`."""
     p = Path(path)
     try:
-        state = torch.load(p, map_location="cpu", weights_only=False)
+        state = torch.load(p, map_location="cpu", weights_only=True)  # tensors and plain containers only
     except FileNotFoundError:
         raise InputError(f"resume: no such checkpoint {str(p)!r}") from None
-    except Exception as exc:  # noqa: BLE001 - any unpickling failure is a bad file
+    except Exception as exc:  # noqa: BLE001 - a refused global, a damaged zip: a bad file, nothing executed
         pt = p.with_suffix(".pt")
         hint = (f"; the checkpoint is the .pt file beside it: --resume {pt}" if p.suffix != ".pt" and pt.is_file()
                 else "; checkpoints are the checkpoints/iteration_<step>.pt files of a run's output folder")
-        raise InputError(f"resume: {str(p)!r} is not a readable checkpoint ({type(exc).__name__}){hint}") from None
+        refused = "Unsupported global" in str(exc)  # torch named a class or function it would not call
+        reason = ("it holds objects other than tensors and plain data (a checkpoint of an older splatbench, "
+                  f"before {CHECKPOINT_FORMAT}, or not a splatbench checkpoint), refused without running them"
+                  if refused else f"{type(exc).__name__}")
+        raise InputError(f"resume: {str(p)!r} is not a readable checkpoint ({reason}){hint}") from None
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise InputError(f"resume: {str(p)!r} is not a {CHECKPOINT_FORMAT} checkpoint")
+    try:
+        for key in ("strategy_state", "sh", "extra"):
+            state[key] = _decode(state[key])
+    except Exception as exc:  # noqa: BLE001 - unknown names, missing keys, bad generator states
+        raise InputError(f"resume: {str(p)!r} is a damaged {CHECKPOINT_FORMAT} checkpoint "
+                         f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") from None
+    return state
+
+
+def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
+    """Put the state saved at ``path`` into ``trainer`` (built from the same config and
+    dataset); return the checkpoint's ``extra``. One-line `InputError` on any mismatch
+    or damage; the file is read as data (`read_checkpoint`)."""
+    p = Path(path)
+    state = read_checkpoint(p)
+    try:
+        return _apply(trainer, state, p)
+    except InputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - missing keys, wrong types or shapes: a damaged checkpoint
+        raise InputError(f"resume: {str(p)!r} is a damaged {CHECKPOINT_FORMAT} checkpoint "
+                         f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") from None
+
+
+def _apply(trainer: Any, state: dict[str, Any], p: Path) -> dict[str, Any]:
     saved, now = state["config"], trainer.config.to_dict()
     for key in now:
         if key not in FREE_FIELDS and saved.get(key) != now[key]:
@@ -97,19 +197,23 @@ def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
                              f"{key}={now[key]!r} (resume with the checkpoint's config)")
     if state["train_names"] != list(trainer.dataset.train.names):
         raise InputError(f"resume: {str(p)!r} was written on other training views than {str(trainer.dataset.root)!r}")
-    trainer.params = {name: torch.nn.Parameter(state["params"][name], requires_grad=trainer.lrs[name] > 0)
+    params = {name: state["params"][name] for name in PARAM_GROUPS}
+    for name, value in params.items():
+        if not isinstance(value, torch.Tensor) or not torch.isfinite(value).all():
+            raise InputError(f"resume: {str(p)!r}: params.{name}: expected a finite tensor")
+    trainer.params = {name: torch.nn.Parameter(params[name], requires_grad=trainer.lrs[name] > 0)
                       for name in PARAM_GROUPS}
     trainer.optimizers = make_optimizers(trainer.params, trainer.lrs, trainer.config.adam_eps)
     for name in PARAM_GROUPS:
         trainer.optimizers[name].load_state_dict(state["optimizers"][name])
     trainer.state = state["strategy_state"]
     trainer.sh = state["sh"]
-    trainer._order = list(state["order"])
+    trainer._order = [int(i) for i in state["order"]]
     trainer.generator.set_state(state["generator"])
     torch.set_rng_state(state["torch_rng"])
-    np.random.set_state(state["numpy_rng"])
+    _set_numpy_rng_state(state["numpy_rng"])
     trainer.step_index = int(state["step_index"])
     return dict(state["extra"])
 
 
-__all__ = ["save_checkpoint", "load_checkpoint", "resume_line", "CHECKPOINT_FORMAT"]
+__all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint", "resume_line", "CHECKPOINT_FORMAT"]

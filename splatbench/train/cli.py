@@ -13,7 +13,7 @@ import click
               help="TOML config (fields of TrainConfig; see docs/training.md).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
               help="Override a config field (repeatable), e.g. --set iterations=2000 --set sh_degree=auto "
-                   "--set strategy_options.cap_max=50000.")
+                   "--set strategy_options.cap_max=50000 --set data.downscale=8 (images / 8, or images_8/).")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default: the config's `out`, runs/train). One holding another run is refused "
                    "unless --resume continues one of its checkpoints or --force replaces it.")
@@ -26,7 +26,11 @@ import click
 @click.option("--quiet", is_flag=True, help="No progress bar (for sweeps).")
 def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], out: Path | None,
           resume: Path | None, force: bool, as_json: bool, quiet: bool) -> None:
-    """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender folder).
+    """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender / instant-ngp folder).
+
+    A capture whose cameras have lens distortion is undistorted by pycolmap first (cached
+    by content); that, the test split chosen and ignored keys are said in notes
+    (docs/training.md, "Real captures").
 
     Prints the test PSNR / SSIM, Gaussian count, SH degree and the PLY path; writes
     config.toml, point_cloud.ply and result.json under the output folder. A resumed run
@@ -84,15 +88,36 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
         return
     fmt = (lambda x, spec: "n/a" if x is None else format(x, spec))
     click.echo(f"test PSNR {fmt(result.test_psnr, '.2f')} dB, SSIM {fmt(result.test_ssim, '.4f')}, "
-               f"LPIPS {fmt(result.test_lpips, '.4f')} ({result.test_views} test views)")
+               f"LPIPS {fmt(result.test_lpips, '.4f')}{_lpips_how(result)} ({result.test_views} test views)")
     click.echo(f"{result.num_gaussians} Gaussians, SH degree {result.sh_degree} ({result.sh_degree_reason})")
     click.echo(f"{result.iterations} iterations{_timed_steps(result)} in {result.train_seconds:.1f} s"
                f"{'' if result.resumed_step is None else ' in all'} "
                f"({result.iterations / max(result.train_seconds, 1e-9):.2f} it/s), render "
                f"{fmt(result.render_ms_per_view, '.1f')} ms/view, peak RSS {result.peak_rss_mb:.0f} MB")
+    if _load_line(result):
+        click.echo(_load_line(result))
     for note in (n for n in result.notes if n not in shown):
         click.echo(note if note.startswith("warning: ") else f"note: {note}", err=note.startswith("warning: "))
     click.echo(f"wrote {result.ply_path}")
+
+
+def _lpips_how(result) -> str:
+    """`` (AlexNet, inputs in [-1, 1])``: which LPIPS the figure is."""
+    if not result.lpips_net:
+        return ""
+    return f" ({'AlexNet' if result.lpips_net == 'alex' else 'VGG'}, inputs in " \
+           f"{'[-1, 1]' if result.lpips_scale_inputs else '[0, 1] unscaled'})"
+
+
+def _load_line(result) -> str:
+    """The machine's load around the run and the CPU time of the loop (times are not
+    trusted when others' load exceeded half the cores: `splatbench.metrics.load`)."""
+    load = result.load
+    if not load:
+        return ""
+    flag = "; LOADED: others' load exceeded half the cores, times not trusted" if load.get("loaded") else ""
+    return (f"load average {load['load_before']:.2f} -> {load['load_after']:.2f} (others' {load['load_other']:.2f} "
+            f"on {load['cores']} cores){flag}; loop CPU time {result.cpu_seconds:.1f} s")
 
 
 def _timed_steps(result) -> str:

@@ -40,6 +40,8 @@ from splatbench.fsutil import read_text
 from splatbench.overrides import parse_override
 from splatbench.train.sh_schedule import MAX_LOOKAHEAD
 
+#: Keys of the ``data`` table.
+DATA_KEYS = ("downscale",)
 #: Learning-rate fields (Adam, one optimizer per parameter group); 0 freezes a group.
 LR_FIELDS = ("lr_means", "lr_means_final", "lr_log_scales", "lr_quats", "lr_opacity_logits", "lr_sh_dc",
              "lr_sh_rest")
@@ -54,6 +56,9 @@ class TrainConfig:
     out: str = "runs/train"           # output folder: point_cloud.ply, checkpoints/, config.toml, result.json
     layout: str = "auto"              # dataset layout: "auto", "colmap" or "blender"
     test_every: int = 8               # hold out every n-th view when the dataset gives no split
+    data: dict[str, Any] = field(default_factory=dict)  # how the dataset is loaded (`--set data.downscale=8`):
+                                      # downscale = N divides the image size (images_N/ when present;
+                                      # splatbench.data.load_dataset); DATA_KEYS
     seed: int = 0                     # seeds torch, numpy, the view order and random backgrounds
     # --- initialisation
     init: str = "surface"             # "surface" (the dataset's own points: true-surface samples of a rendered
@@ -96,10 +101,15 @@ class TrainConfig:
                                       # nothing hit, e.g. a constant sky), black when it marks none (3DGS)
     random_background: bool = False   # a uniformly random background colour per training step
     # --- densification (splatbench.strategies)
-    strategy: str = "default"         # "none", "default" (3DGS), "absgrad" (AbsGS), "mcmc" (3DGS-MCMC)
+    strategy: str = "default"         # "none", "default" (3DGS), "absgrad" (AbsGS), "mcmc" (3DGS-MCMC), "budget" (Taming 3DGS)
     strategy_options: dict[str, Any] = field(default_factory=dict)  # fields of the strategy's dataclass
     # --- evaluation, logging, checkpoints
     eval_every: int = 0               # evaluate on the test views every this many steps (0 = only at the end)
+    lpips_net: str = "alex"           # LPIPS v0.1 of the final test evaluation: "alex" (gsplat, NerfBaselines),
+                                      # "vgg" (graphdeco's metrics.py; ~20x AlexNet's time) or "none"; the
+                                      # eval_every evaluations use AlexNet (splatbench.metrics.lpips)
+    lpips_scale_inputs: bool = True   # feed LPIPS images scaled to [-1, 1] (the lpips package's convention);
+                                      # false: [0, 1] unscaled, as graphdeco's metrics.py does
     log_every: int = 100              # record (step, loss, PSNR, N) in the history every this many steps
     checkpoint_every: int = 0         # write checkpoints/iteration_<step>.ply every this many steps (0 = off)
     device: str = "auto"              # rasterizer backend: "cpu" (Dr.Jit LLVM), "cuda" or "auto"
@@ -137,6 +147,11 @@ class TrainConfig:
             raise InputError(f"init: unknown initialisation {self.init!r} (expected one of: {', '.join(INITIALIZERS)})")
         if self.layout not in ("auto", "colmap", "blender"):
             raise InputError(f"layout: expected 'auto', 'colmap' or 'blender', got {self.layout!r}")
+        for key, value in self.data.items():
+            if key not in DATA_KEYS:
+                raise InputError(f"data.{key}: unknown key (known: {', '.join(DATA_KEYS)})")
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+                raise InputError(f"data.{key}: expected an int >= 1, got {value!r}")
         check_sh_degree("sh_degree", self.sh_degree, allow_auto=True)
         positive = ("sh_interval", "log_every", "init_random_points", "ssim_window")
         for name in positive:
@@ -165,6 +180,8 @@ class TrainConfig:
                 raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
         elif len(self.background) != 3 or not all(0 <= c <= 1 for c in self.background):
             raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
+        if self.lpips_net not in ("alex", "vgg", "none"):
+            raise InputError(f"lpips_net: expected 'alex', 'vgg' or 'none', got {self.lpips_net!r}")
         check_device(self.device, "device")
         from splatbench.train.schedule import SCHEDULES, check_final_window
 
@@ -185,15 +202,18 @@ class TrainConfig:
     def make_strategy(self, *, scaled: bool = True):
         """The densification strategy this config names (`InputError` if unknown). A
         strategy with a ``seed`` field gets the run's ``seed`` unless the options set one.
-        ``scaled``: its schedule fields in this run's steps (``schedule``); False: as written."""
-        from splatbench.strategies import make_strategy, strategy_fields
-        from splatbench.train.schedule import scaled_strategy
+        ``scaled``: its schedule fields in this run's steps (``schedule``); False: as written.
+        Step fields written as a fraction of the run ("25%", "1/4") are in run steps either way."""
+        from splatbench.strategies import STRATEGIES, make_strategy, strategy_fields
+        from splatbench.train.schedule import resolve_run_fractions, scaled_strategy
 
         options = dict(self.strategy_options)
         if "seed" in strategy_fields(self.strategy) and "seed" not in options:
             options["seed"] = self.seed
+        options, fixed = resolve_run_fractions(STRATEGIES[self.strategy][0].run_fraction_fields, options,
+                                               self.iterations)
         strategy = make_strategy(self.strategy, **options)
-        return scaled_strategy(strategy, self.iterations, self.schedule) if scaled else strategy
+        return scaled_strategy(strategy, self.iterations, self.schedule, fixed=fixed) if scaled else strategy
 
     @property
     def initial_opacity(self) -> float:
@@ -208,6 +228,11 @@ class TrainConfig:
         from splatbench.train.schedule import scale_step
 
         return scale_step(self.sh_interval, self.iterations, self.schedule, interval=True)
+
+    @property
+    def downscale(self) -> int:
+        """``data.downscale`` (1 when not set)."""
+        return int(self.data.get("downscale", 1))
 
     @property
     def max_sh_degree(self) -> int:
@@ -266,11 +291,12 @@ def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...])
     data = config.to_dict()
     for item in overrides:
         key, value = parse_override(item)
-        if key.startswith("strategy_options."):
+        table = key.split(".", 1)[0]
+        if "." in key and table in ("strategy_options", "data"):
             sub = key.split(".", 1)[1]
             if not sub:
-                raise InputError(f"--set: empty strategy option in {item!r}")
-            data["strategy_options"] = {**data["strategy_options"], sub: value}
+                raise InputError(f"--set: empty {table} key in {item!r}")
+            data[table] = {**data[table], sub: value}
         else:
             data[key] = value
     return TrainConfig.from_dict(data, source="--set")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,6 +24,13 @@ class Context:
     conv: dict
     device: str
     vjps: dict  # scene name -> gradients of the shared cotangent loss (one backward per scene)
+    outs: dict = field(default_factory=dict)  # scene name -> the backend's outputs [H, W, 5] (one render per scene)
+
+
+def _backend_outputs(s: ProbeScene, name: str, ctx: Context) -> np.ndarray:
+    if name not in ctx.outs:
+        ctx.outs[name] = backend_outputs(ctx.backend, s, ctx.device)
+    return ctx.outs[name]
 
 
 def _pixel_diff(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> np.ndarray:
@@ -69,6 +76,17 @@ def _psnr(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
     return f", rgb PSNR {value:.1f} dB against the oracle" if math.isfinite(value) else ""
 
 
+def _nothing_drawn(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
+    """"the backend drew nothing ...; " when its alpha is zero everywhere and the oracle's is not, else "".
+
+    An empty image fails every probe whatever the probe isolates (a cull outside the convention
+    vocabulary, e.g. of Gaussians wider than the image): said first, so no probe's cause is read
+    as the reason."""
+    if "alpha" not in outputs or got[..., 3].any() or not ref[..., 3].any():
+        return ""
+    return f"the backend drew nothing (alpha 0 everywhere; the oracle covers {int((ref[..., 3] > 0).sum())} pixels); "
+
+
 def _compared(probe: Probe, ctx: Context) -> tuple[str, ...]:
     return tuple(o for o in probe.outputs if o in ctx.backend.info.outputs)
 
@@ -79,13 +97,13 @@ def _judge_forward(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
         return _skip(probe, f"the backend does not produce {', '.join(probe.outputs)}")
     atol, source = forward_tolerance(s, ctx.conv)
     ref = oracle(probe.build.__name__, s, ctx.conv)
-    got = backend_outputs(ctx.backend, s, ctx.device)
+    got = _backend_outputs(s, probe.build.__name__, ctx)
     diff = _pixel_diff(got, ref, outputs)
     dev = float(diff.max())
     ok = dev <= atol
     detail = (f"{', '.join(outputs)} within tolerance" if ok else
-              f"{int((diff > atol).sum())} of {diff.size} pixels differ{_psnr(got, ref, outputs)}; "
-              f"largest: {_worst(got, ref, outputs)}")
+              f"{_nothing_drawn(got, ref, outputs)}{int((diff > atol).sum())} of {diff.size} pixels differ"
+              f"{_psnr(got, ref, outputs)}; largest: {_worst(got, ref, outputs)}")
     return ProbeResult(probe.name, probe.kind, "pass" if ok else "fail", probe.checks, dev, atol, source, detail,
                        None if ok else probe.cause)
 
@@ -93,7 +111,7 @@ def _judge_forward(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
 def _judge_approximation(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
     outputs = _compared(probe, ctx)
     atol, source = forward_tolerance(s, ctx.conv)
-    got = backend_outputs(ctx.backend, s, ctx.device)
+    got = _backend_outputs(s, probe.build.__name__, ctx)
     ref = oracle(probe.build.__name__, s, ctx.conv)
     diff = _pixel_diff(got, ref, outputs)
     dev = float(diff.max())

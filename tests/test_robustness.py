@@ -1,0 +1,341 @@
+"""Files from others are data, never code (docs/robustness.md).
+
+A checkpoint carrying a pickle payload is refused and the payload never runs; files
+claiming 10^11 elements in under 1 KB are refused in one line with little memory; a
+damaged result file of a grid is reported and its run redone; and the regression cases
+of what the fuzzing campaign (tests/test_fuzz.py) found.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+import subprocess
+import sys
+import textwrap
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from splatbench.errors import InputError
+from tests.assertions import one_line_error
+from tests.test_fuzz import _colmap, _gaussians
+
+REPO = Path(__file__).resolve().parents[1]
+#: Peak resident memory allowed to a process that reads one hostile file (the issue's bound).
+PEAK_MB = 300
+
+
+class Payload:
+    """Unpickling this runs ``exec`` on code that writes ``marker``."""
+
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def __reduce__(self):
+        return exec, (f"open({str(self.marker)!r}, 'w').write('payload ran')",)
+
+
+def payload_checkpoint(path: Path, marker: Path) -> Path:
+    from splatbench.train.checkpoint import CHECKPOINT_FORMAT
+
+    torch.save({"format": CHECKPOINT_FORMAT, "strategy_state": Payload(marker)}, path)
+    return path
+
+
+def test_the_payload_is_live_when_unpickled(tmp_path):
+    """Control: the file below does run code when unpickled the old way (weights_only=False)."""
+    marker = tmp_path / "ran.txt"
+    torch.load(payload_checkpoint(tmp_path / "p.pt", marker), weights_only=False)
+    assert marker.read_text() == "payload ran"
+
+
+def test_train_resume_refuses_a_pickle_payload_in_one_line_and_never_runs_it(tmp_path):
+    from tests.test_one_line_errors import assert_one_line
+
+    from splatbench.scenes.render import render_dataset
+
+    data = render_dataset("diffuse", tmp_path / "ds", resolution=16, views=4, spp=1, progress=False).path
+    marker = tmp_path / "ran.txt"
+    ckpt = payload_checkpoint(tmp_path / "their.pt", marker)
+    line = assert_one_line(["train", data, "--out", tmp_path / "o", "--quiet", "--set", "iterations=2",
+                            "--resume", ckpt], "is not a readable checkpoint")
+    assert "refused without running them" in line and str(ckpt) in line
+    assert not marker.exists()
+
+
+def test_an_old_pickled_checkpoint_is_refused(tmp_path):
+    """Format 1 pickled the trainer's objects: such a file is refused, nothing rebuilt."""
+    from splatbench.strategies.default import DefaultStrategy
+    from splatbench.train.checkpoint import read_checkpoint
+
+    path = tmp_path / "old.pt"
+    torch.save({"format": "splatbench-checkpoint/1",
+                "strategy_state": DefaultStrategy().initialize_state({"means": torch.zeros(2, 3)})}, path)
+    one_line_error(lambda: read_checkpoint(path), "old.pt", "refused without running them")
+    torch.save({"format": "splatbench-checkpoint/1"}, path)  # plain data, but another format
+    one_line_error(lambda: read_checkpoint(path), "is not a splatbench-checkpoint/2 checkpoint")
+
+
+def test_checkpoint_objects_round_trip_as_data(tmp_path):
+    """MCMC's state (generator, stats, noise) and the SH schedule survive `_encode`, a
+    weights_only load and `_decode`; a name outside the allowlist is refused."""
+    from splatbench.strategies.mcmc import MCMCState, MCMCStats
+    from splatbench.train import checkpoint as ck
+    from splatbench.train.sh_schedule import ShSchedule
+
+    gen = torch.Generator()
+    gen.manual_seed(7)
+    torch.rand(3, generator=gen)
+    state = MCMCState(gen, None, True, MCMCStats(3, 1, 2, 10), [MCMCStats(3, 1, 2, 10)], torch.ones(2, 3))
+    path = tmp_path / "s.pt"
+    torch.save({"s": ck._encode(state), "sh": ck._encode(ShSchedule("auto", 5))}, path)
+    loaded = torch.load(path, weights_only=True)
+    back, sh = ck._decode(loaded["s"]), ck._decode(loaded["sh"])
+    assert isinstance(back, MCMCState) and back.last == state.last and back.history == state.history
+    assert torch.equal(back.generator.get_state(), gen.get_state()) and torch.equal(back.last_noise, state.last_noise)
+    assert isinstance(sh, ShSchedule) and vars(sh) == vars(ShSchedule("auto", 5))
+    with pytest.raises(ValueError, match="unknown object 'Popen'"):
+        ck._decode({"__object__": "Popen", "fields": {}})
+
+
+# --------------------------------------------------------------- hostile counts
+def hostile_ply(path: Path) -> Path:
+    from splatbench.ply import property_names
+
+    header = "ply\nformat binary_little_endian 1.0\nelement vertex 100000000000\n"
+    header += "".join(f"property float {n}\n" for n in property_names(0)) + "end_header\n"  # degree 0: 17
+    path.write_bytes(header.encode() + b"\0" * 64)
+    return path
+
+
+def hostile_cameras_bin(folder: Path) -> Path:
+    _colmap(folder, text=False)
+    cameras = folder / "sparse" / "0" / "cameras.bin"
+    cameras.write_bytes(struct.pack("<QiiQQ4d", 10**11, 1, 1, 6, 4, 5.0, 5.0, 3.0, 2.0))
+    return folder
+
+
+def hostile_npz(path: Path) -> Path:
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f4", "fortran_order": False, "shape": (10**11,)})
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as z:
+        z.writestr("means.npy", header.getvalue() + b"\0" * 16)
+    return path
+
+
+READ = {
+    "ply": "from splatbench import Gaussians; Gaussians.from_ply(PATH)",
+    "cameras.bin": "from splatbench.data import load_dataset; load_dataset(PATH)",
+    "npz": "from splatbench.workloads import load_npz; load_npz(PATH)",
+}
+
+
+@pytest.mark.parametrize("kind,make,size_of", [
+    ("ply", lambda t: hostile_ply(t / "h.ply"), lambda p: p.stat().st_size),
+    ("cameras.bin", lambda t: hostile_cameras_bin(t / "ds"), lambda p: (p / "sparse/0/cameras.bin").stat().st_size),
+    ("npz", lambda t: hostile_npz(t / "h.npz"), lambda p: p.stat().st_size),
+])
+@pytest.mark.skipif(not Path("/proc/self/status").is_file(), reason="reads VmHWM from /proc")
+def test_a_file_claiming_1e11_elements_is_one_line_with_little_memory(tmp_path, kind, make, size_of):
+    """Each read in a fresh process: one InputError line, peak resident memory under PEAK_MB.
+
+    The peak is the process's VmHWM (/proc/self/status), not ru_maxrss: Linux keeps
+    ru_maxrss across exec, so a child of this pytest process would report pytest's own."""
+    path = make(tmp_path)
+    assert size_of(path) < 1024
+    code = textwrap.dedent(f"""
+        import resource, sys
+        from splatbench.errors import InputError
+        PATH = {str(path)!r}
+        try:
+            {READ[kind]}
+        except InputError as exc:
+            print("ERROR", exc)
+        hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM:")][0].split()[1]
+        print("PEAK_MB", int(hwm) / 1024, "ru_maxrss_MB", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and not out.stderr.strip(), out.stderr
+    lines = out.stdout.splitlines()
+    assert len(lines) == 2 and lines[0].startswith("ERROR ") and "100000000000" in lines[0], lines
+    assert float(lines[1].split()[1]) < PEAK_MB, lines
+
+
+def test_a_decompression_bomb_image_is_one_line(tmp_path):
+    """A PNG header claiming 100000 x 100000 pixels (10^10) in 57 bytes: refused at open."""
+    import zlib
+
+    from splatbench.safeio import read_image
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    path = tmp_path / "bomb.png"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 100000, 100000, 8, 2, 0, 0, 0))
+                     + chunk(b"IDAT", zlib.compress(b"")) + chunk(b"IEND", b""))
+    one_line_error(lambda: read_image(path, what="bomb.png"), "bomb.png", "decompression bomb")
+
+
+def test_colmap_model_ids_agree_with_pycolmap():
+    from splatbench.data.colmap_bounds import CAMERA_MODEL_PARAMS
+    from splatbench.interrupt import import_pycolmap
+
+    pycolmap = import_pycolmap()
+    ours = {int(v): pycolmap.Camera.create_from_model_name(0, name, 1.0, 1, 1).params.size
+            for name, v in pycolmap.CameraModelId.__members__.items() if name != "INVALID"}
+    assert ours == CAMERA_MODEL_PARAMS
+
+
+# --------------------------------------------------------------- grid files
+def test_a_damaged_result_file_is_reported_and_its_run_redone(tmp_path, capsys):
+    from splatbench.experiments import parse_experiment, run_experiment
+    from splatbench.experiments.store import read_records
+
+    spec = parse_experiment({"name": "g", "kind": "dummy", "scenes": ["alpha"], "seeds": [0, 1, 2, 3]},
+                            source="g.toml")
+    first = run_experiment(spec, workers=1, results_dir=tmp_path, progress=False)
+    assert first.done == 4
+    files = sorted((tmp_path / "g").glob("*.json"))
+    records = {p: json.loads(p.read_text()) for p in files}
+    files[0].write_text(files[0].read_text()[:40])                               # torn
+    files[1].write_text(json.dumps({**records[files[1]], "seed": "zero"}))       # wrong type
+    files[2].write_text(json.dumps({**records[files[2]], "config": {"a b": 1}}))  # not a table row
+    files[3].write_bytes(b"\xff\xfe" + files[3].read_bytes())                    # not UTF-8
+    capsys.readouterr()
+    second = run_experiment(spec, workers=1, results_dir=tmp_path, progress=True)
+    err = capsys.readouterr().err
+    assert (second.done, second.skipped) == (4, 0)
+    for p in files:
+        assert f"damaged result file {p.name}" in err and "its run is redone" in err
+    assert {r.run_id: r.to_dict()["metrics"] for r in read_records(tmp_path / "g").values()} == \
+        {Path(p).stem: d["metrics"] for p, d in records.items()}
+
+
+def test_a_damaged_claim_is_no_owner():
+    from splatbench.experiments.claims import Owner
+
+    good = json.loads(Owner.me().text())
+    for bad in ("[" * 100_000, json.dumps({**good, "pid": 1e309}), json.dumps({**good, "pid": -1}),
+                json.dumps({**good, "start": [1]}), "\udcff"):
+        assert Owner.parse(bad) is None
+
+
+# --------------------------------------------------------------- what the fuzzing found
+def test_found_a_non_utf8_image_name_in_images_bin(tmp_path):
+    """images.bin naming an image b"\\x80v0.png": was a UnicodeDecodeError from pycolmap's
+    binding, now one line naming the file."""
+    from splatbench.data import load_dataset
+
+    _colmap(tmp_path / "ds", text=False)
+    images = tmp_path / "ds" / "sparse" / "0" / "images.bin"
+    images.write_bytes(images.read_bytes().replace(b"v0.png\0", b"\x80v0.png\0", 1))
+    one_line_error(lambda: load_dataset(tmp_path / "ds"), "images.bin", "image 0 name", "not UTF-8")
+
+
+def test_found_a_nan_sfm_point(tmp_path):
+    """A NaN x in points3D.bin: was accepted into Dataset.points, now one line."""
+    from splatbench.data import load_dataset
+
+    _colmap(tmp_path / "ds", text=False)
+    points = tmp_path / "ds" / "sparse" / "0" / "points3D.bin"
+    data = bytearray(points.read_bytes())
+    data[16:24] = struct.pack("<d", float("nan"))  # point 0: count (8) + id (8), then x
+    points.write_bytes(bytes(data))
+    one_line_error(lambda: load_dataset(tmp_path / "ds"), "points3D.bin", "1 of 2 points are not finite")
+
+
+def test_found_a_npy_header_numpy_cannot_parse(tmp_path):
+    """A .npy header with its dict cut short: was a SyntaxError from numpy's header parser."""
+    from splatbench.safeio import read_npy
+
+    path = tmp_path / "d.npy"
+    np.save(path, np.zeros((4, 6), np.float32))
+    data = path.read_bytes()
+    path.write_bytes(data[:10] + b"{'descr': '<f4'\x93NUMPY\0" + data[10:])
+    one_line_error(lambda: read_npy(path, what="d.npy"), "d.npy", "not a valid .npy array")
+
+
+def test_found_npz_members_must_be_read_whole(tmp_path):
+    """The bounded npz reader first read each member after its header: every valid npz
+    failed. A valid workload reads back exactly."""
+    from splatbench.workloads import load_npz, save_npz, synthetic
+
+    w = synthetic(3, 8, 6, seed=0)
+    save_npz(w, tmp_path / "w.npz")
+    back = load_npz(tmp_path / "w.npz")
+    assert np.array_equal(back.gaussians.means, w.gaussians.means)
+    assert np.array_equal(back.camera.K, w.camera.K) and back.camera.width == w.camera.width
+
+
+def test_an_object_array_in_an_npz_is_refused_unread(tmp_path):
+    from splatbench.safeio import read_npz
+
+    path = tmp_path / "o.npz"
+    np.savez(path, means=np.array([Payload(tmp_path / "ran.txt")], dtype=object))
+    one_line_error(lambda: read_npz(path, what="o.npz"), "o.npz", "array 'means'", "Python objects")
+    assert not (tmp_path / "ran.txt").exists()
+
+
+def test_a_hostile_ply_point_cloud_in_a_blender_dataset(tmp_path):
+    from splatbench.data import load_dataset
+    from tests.test_fuzz import _blender
+
+    _blender(tmp_path / "b")
+    hostile_ply(tmp_path / "b" / "points3D.ply")
+    one_line_error(lambda: load_dataset(tmp_path / "b"), "points3D.ply", "element 'vertex' count", "100000000000")
+
+
+def test_found_a_png_chunk_length_pillow_would_allocate(tmp_path):
+    """A 6x4 PNG whose IDAT states 134 MB: Pillow read the rest of the chunk with
+    file.read(134 MB) (allocated before reading). Now read from memory: the read gives
+    what is there, and the peak stays near the file's size."""
+    import tracemalloc
+    import zlib
+
+    from splatbench.safeio import read_image
+
+    raw = zlib.compress(b"".join(b"\0" + bytes(18) for _ in range(4)))
+    def chunk(kind: bytes, data: bytes, length: int | None = None) -> bytes:
+        return struct.pack(">I", len(data) if length is None else length) + kind + data + \
+            struct.pack(">I", zlib.crc32(kind + data))
+
+    path = tmp_path / "a.png"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 6, 4, 8, 2, 0, 0, 0))
+                     + chunk(b"IDAT", raw, length=0x08000057) + chunk(b"IEND", b""))
+    tracemalloc.start()
+    try:
+        try:
+            read_image(path, what="a.png")
+        except InputError as exc:
+            assert "\n" not in str(exc)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20, peak
+
+
+def test_found_a_npy_header_length_numpy_would_allocate(tmp_path):
+    """A version-3 .npy whose 4-byte header length reads 662 MB (a version byte flipped
+    from 1): numpy reads a header of that length before checking it. Now the length is
+    bounded (numpy's 10000) before anything is read."""
+    import tracemalloc
+
+    from splatbench.safeio import read_npy
+
+    path = tmp_path / "d.npy"
+    np.save(path, np.zeros((4, 6), np.float32))
+    data = bytearray(path.read_bytes())
+    data[6] = 3  # version 3.0: the length field becomes 4 bytes, b"v\x00{'"
+    path.write_bytes(bytes(data))
+    tracemalloc.start()
+    try:
+        one_line_error(lambda: read_npy(path, what="d.npy"), "d.npy", "header length", "at most 10000")
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20, peak
