@@ -113,7 +113,7 @@ def test_grid_expands_in_documented_order_with_labels():
     first, last = runs[0], runs[-1]
     assert first.labels == {"x": 0.0, "opts.a": 1, "mode": "good"}
     assert last.labels == {"x": 1.5, "opts.a": 2, "mode": "bad"}
-    assert last.config == {"x": 1.5, "n": 2, "mode": "fail", "sleep": 0.5, "opts": {"a": 2, "b": "q"},
+    assert last.config == {"x": 1.5, "n": 2, "mode": "fail", "sleep": 0.5, "gate": "", "opts": {"a": 2, "b": "q"},
                            "scene": "beta", "seed": 1}
     assert first.config["mode"] == "ok" and first.config["sleep"] == 0.0  # the kind's defaults, resolved
     assert len({r.run_id for r in runs}) == len(runs)
@@ -141,7 +141,7 @@ def test_run_id_is_the_hash_of_the_full_resolved_config():
         """)
     assert expand(same)[0].run_id == run.run_id
     # Changing any single field (or scene, seed, kind) changes it.
-    changes = {"x": 0.25, "n": 3, "sleep": 0.1, "mode": "fail", "opts": {"a": 5, "b": "q"},
+    changes = {"x": 0.25, "n": 3, "sleep": 0.1, "gate": "g", "mode": "fail", "opts": {"a": 5, "b": "q"},
                "opts.b": None, "scene": "beta", "seed": 7}
     ids = {run.run_id}
     for key, value in changes.items():
