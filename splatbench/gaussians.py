@@ -12,16 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.checks import SH_BASES_OF_DEGREE, as_float_array, check_sh_degree
+from splatbench.conventions import LOG_SCALE_CLIP, QUAT_MIN, SH_C0
 from splatbench.errors import InputError
 from splatbench.ply import ViewHints, read_ply, write_ply
 
-#: The degree-0 SH constant, ``1 / (2·sqrt(pi))``.
-SH_C0 = 0.28209479177387814
-#: ``scales = exp(clip(log_scales, -LOG_SCALE_CLIP, LOG_SCALE_CLIP))`` (conventions.md).
-LOG_SCALE_CLIP = 20.0
 
-
-QUAT_MIN = 1e-20  # docs/conventions.md: smaller quaternions count as zero
 
 
 def normalize_quats(quats: np.ndarray) -> np.ndarray:
