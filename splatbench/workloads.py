@@ -1,24 +1,30 @@
 """Rendering workloads: the standard synthetic scene, npz scenes, and the garden SfM view.
 
 A workload is a set of Gaussians and one camera; benchmarks, the stress test and
-the parity tests all draw their scenes from here.
+the parity tests all draw their scenes from here. This module is also the one home of
+workload naming: a `WorkloadSpec` (cheap to pass between processes) is what the
+command line's ``--synthetic N WxH`` / ``--workload FILE.npz|garden`` (`parse_synthetic`,
+`parse_workload`) and an experiment's scene names ``synthetic-N-S``, ``synthetic-N-WxH``,
+``garden``, ``garden-vK`` (`parse_workload_name`, `workload_spec`) stand for.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from splatbench.cameras import Camera
-from splatbench.checks import check_sh_degree
+from splatbench.checks import check_sh_degree, parse_size
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians
 
 GARDEN_SFM = Path(__file__).parent / "data" / "garden_sfm.npz"  # real SfM data; see data/NOTICE.md
 WORKLOAD_KEYS = ("means", "log_scales", "quats", "opacity_logits", "sh", "viewmat", "K", "width", "height")
 SFM_KEYS = ("means3d", "colors", "viewmats", "Ks", "width", "height")
+GARDEN = "garden"  # `--workload garden` / scene "garden": the bundled SfM capture, view 0 (648x420)
 
 
 @dataclass(frozen=True)
@@ -112,3 +118,88 @@ def _from_sfm(name: str, arrays: dict, view: int) -> Workload:
 
     gaussians = from_points(arrays["means3d"], arrays["colors"])
     return Workload(f"{name}-view{view}", gaussians, sfm_camera(arrays, view))
+
+
+# --------------------------------------------------------------------------- naming
+@dataclass(frozen=True)
+class WorkloadSpec:
+    """A workload to build where it is used (cheap to pass between processes).
+
+    ``kind`` "synthetic": `synthetic(n, width, height, seed)`;
+    ``kind`` "npz": `load_npz(path, view=view)`.
+    """
+
+    kind: str
+    n: int = 0           # synthetic: number of Gaussians
+    width: int = 0       # synthetic: image width (pixels)
+    height: int = 0      # synthetic: image height (pixels)
+    seed: int = 0        # synthetic: random seed
+    path: str = ""       # npz: absolute path of the file
+    view: int = 0        # npz: camera index
+    label: str = ""      # name in the results ("" = the workload's own name)
+
+    def build(self) -> Workload:
+        """The `Workload` (Gaussians and camera)."""
+        if self.kind == "synthetic":
+            return synthetic(self.n, self.width, self.height, self.seed)
+        if self.kind == "npz":
+            return load_npz(self.path, view=self.view)
+        raise InputError(f"workload kind: expected 'synthetic' or 'npz', got {self.kind!r}")
+
+
+def parse_synthetic(count: str, size: str, seed: int = 0) -> WorkloadSpec:
+    """``--synthetic N WxH`` -> a synthetic `WorkloadSpec`."""
+    try:
+        n = int(count)
+    except ValueError:
+        raise InputError(f"--synthetic: expected a Gaussian count, got {count!r}") from None
+    if n < 1:
+        raise InputError(f"--synthetic: expected a Gaussian count >= 1, got {count!r}")
+    width, height = parse_size(size, "--synthetic")
+    return WorkloadSpec("synthetic", n=n, width=width, height=height, seed=seed)
+
+
+def parse_workload(arg: str) -> WorkloadSpec:
+    """``--workload FILE.npz|garden`` -> an npz `WorkloadSpec` (the file must exist)."""
+    if arg.lower() == GARDEN:
+        return WorkloadSpec("npz", path=str(GARDEN_SFM), view=0, label="garden-view0")
+    path = Path(arg).expanduser()
+    if not path.is_file():
+        raise InputError(f"--workload: no such file {arg!r}")
+    if path.suffix != ".npz":
+        raise InputError(f"--workload: expected a .npz file or 'garden', got {arg!r}")
+    return WorkloadSpec("npz", path=str(path.resolve()), view=0)
+
+
+_SYNTHETIC = re.compile(r"^synthetic-(\d+)-(\d+)(?:x(\d+))?$")
+_GARDEN = re.compile(r"^garden(?:-v(\d+))?$")
+
+
+def parse_workload_name(name: str) -> tuple[str, dict[str, int]]:
+    """``"synthetic-20000-256"`` -> ("synthetic", {n, width, height}); ``"garden-v2"`` ->
+    ("garden", {view}); one-line `InputError` otherwise."""
+    m = _SYNTHETIC.match(name)
+    if m:
+        n, w = int(m.group(1)), int(m.group(2))
+        h = int(m.group(3)) if m.group(3) else w
+        if n < 1 or w < 1 or h < 1 or w * h > 4096 * 4096:
+            raise InputError(f"scene: {name!r}: expected N >= 1 Gaussians and a size up to 4096x4096")
+        return "synthetic", {"n": n, "width": w, "height": h}
+    m = _GARDEN.match(name)
+    if m:
+        return "garden", {"view": int(m.group(1) or 0)}
+    raise InputError(f"scene: unknown workload {name!r} (expected 'synthetic-N-S', 'synthetic-N-WxH', 'garden' "
+                     f"or 'garden-vK')")
+
+
+def workload_spec(name: str, seed: int) -> WorkloadSpec:
+    """The `WorkloadSpec` a scene name (`parse_workload_name`) and seed stand for."""
+    kind, args = parse_workload_name(name)
+    if kind == "synthetic":
+        return WorkloadSpec("synthetic", n=args["n"], width=args["width"], height=args["height"], seed=seed)
+    return WorkloadSpec("npz", path=str(GARDEN_SFM), view=args["view"])
+
+
+def build_workload(name: str, seed: int) -> Workload:
+    """The `Workload` a scene name and seed stand for."""
+    return workload_spec(name, seed).build()

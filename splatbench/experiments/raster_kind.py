@@ -72,7 +72,6 @@ import hashlib
 import json
 import math
 import os
-import re
 import statistics
 import sys
 from pathlib import Path
@@ -88,6 +87,7 @@ from splatbench.experiments.workers import limit_threads
 from splatbench.raster.options import RasterOptions
 from splatbench.reports.findings import parity_finding
 from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, TimeQuality
+from splatbench.workloads import build_workload, parse_workload_name
 
 #: Fields passed to the rasterizer as `RasterOptions` (sh_degree goes separately).
 OPTION_FIELDS = ("tile_size", "alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius", "antialiased",
@@ -149,38 +149,6 @@ METRICS: dict[str, str] = {
     "error_width": "width of the error measurement (pixels)", "error_height": "its height",
     "device": "where the rasterizer ran ('cpu' or 'cuda')",
 }
-
-_SYNTHETIC = re.compile(r"^synthetic-(\d+)-(\d+)(?:x(\d+))?$")
-_GARDEN = re.compile(r"^garden(?:-v(\d+))?$")
-
-
-# --------------------------------------------------------------------------- workloads
-def parse_workload_name(name: str) -> tuple[str, dict[str, int]]:
-    """``"synthetic-20000-256"`` -> ("synthetic", {n, width, height}); ``"garden-v2"`` ->
-    ("garden", {view}); one-line `InputError` otherwise."""
-    m = _SYNTHETIC.match(name)
-    if m:
-        n, w = int(m.group(1)), int(m.group(2))
-        h = int(m.group(3)) if m.group(3) else w
-        if n < 1 or w < 1 or h < 1 or w * h > 4096 * 4096:
-            raise InputError(f"scene: {name!r}: expected N >= 1 Gaussians and a size up to 4096x4096")
-        return "synthetic", {"n": n, "width": w, "height": h}
-    m = _GARDEN.match(name)
-    if m:
-        return "garden", {"view": int(m.group(1) or 0)}
-    raise InputError(f"scene: unknown workload {name!r} (expected 'synthetic-N-S', 'synthetic-N-WxH', 'garden' "
-                     f"or 'garden-vK')")
-
-
-def build_workload(name: str, seed: int):
-    """The `splatbench.workloads.Workload` a scene name and seed stand for."""
-    from splatbench.workloads import GARDEN_SFM, load_npz, synthetic
-
-    kind, args = parse_workload_name(name)
-    if kind == "synthetic":
-        return synthetic(args["n"], args["width"], args["height"], seed)
-    return load_npz(GARDEN_SFM, view=args["view"])
-
 
 # --------------------------------------------------------------------------- config
 def validate(config: dict[str, Any]) -> None:
