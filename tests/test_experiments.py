@@ -183,14 +183,14 @@ def test_one_at_a_time_grid_and_table_valued_axis():
 
 # --------------------------------------------------------------------------- malformed files
 MALFORMED = {
-    "unknown top-level field": ('kind = "dummy"\nscenes = ["alpha"]\nsceens = ["beta"]\n', r"sceens: unknown field"),
+    "unknown top-level field": ('kind = "dummy"\nscenes = ["alpha"]\nsceens = ["beta"]\n', r"sceens: unknown key \(did you mean 'scenes'\?\)"),
     "empty axis": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nx = []\n', r"axes\.x: empty axis"),
     "empty variant": ('kind = "dummy"\nscenes = ["alpha"]\n[variants.v]\n', r"variants\.v: empty axis"),
     "unknown scene": ('kind = "dummy"\nscenes = ["alpha", "delta"]\n', r"scenes: unknown scene 'delta'"),
     "unknown config key in base": ('kind = "dummy"\nscenes = ["alpha"]\n[base]\nopts.c = 1\n',
-                                   r"base: opts\.c: unknown config field"),
+                                   r"base: opts\.c: unknown key"),
     "unknown config key in an axis": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nxx = [1, 2]\n',
-                                      r"axes\.xx = 1: xx: unknown config field"),
+                                      r"axes\.xx = 1: xx: unknown key"),
     "bad value in a variant": ('kind = "dummy"\nscenes = ["alpha"]\n[variants.v]\nok = {}\nno = { mode = "x" }\n',
                                r"variants\.v\.no: mode: expected 'ok', 'fail' or 'crash'"),
     "unknown kind": ('kind = "nope"\nscenes = ["alpha"]\n', r"kind: unknown run kind 'nope'"),
@@ -198,7 +198,7 @@ MALFORMED = {
     "reserved key": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nseed = [1, 2]\n', r"axes\.seed: 'seed' is set by"),
     "duplicate seed": ('kind = "dummy"\nscenes = ["alpha"]\nseeds = [1, 1]\n', r"seeds: duplicate value 1"),
     "unknown runner field": ('kind = "dummy"\nscenes = ["alpha"]\n[runner]\nthreads = 2\n',
-                             r"runner\.threads: unknown field"),
+                             r"runner\.threads: unknown key"),
     "bad scheduler": ('kind = "dummy"\nscenes = ["alpha"]\n[runner]\nscheduler = "127.0.0.1"\n',
                       r"runner\.scheduler: expected an address like tcp://HOST:PORT"),
     "invalid TOML": ('kind = "dummy"\nscenes = [\n', r"invalid TOML"),

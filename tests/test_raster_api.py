@@ -104,7 +104,7 @@ def test_rasterize_rejects_non_finite_input_naming_the_field(scene, field):
     ({"alpha_min": 0.995}, "alpha_min: expected a value in (0, alpha_max)"),
     ({"radius": "5sigma"}, "radius: expected one of"),
     ({"eps2d": -1.0}, "eps2d: expected a finite value >= 0"),
-    ({"tile_szie": 16}, "tile_szie: unknown rasterizer option"),
+    ({"tile_szie": 16}, "tile_szie: unknown key (did you mean 'tile_size'?)"),
     ({"sh_degree": 4}, "sh_degree: expected an int in 0..3, got 4"),
     ({"background": (1, 2)}, "background: expected 3 values in [0, 1]"),
     ({"background": (2, 0, 0)}, "background: expected 3 values in [0, 1], got [2, 0, 0]"),

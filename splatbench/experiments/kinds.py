@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from splatbench.checks import check_keys
 from splatbench.errors import InputError
 from splatbench.experiments.configs import flatten, override, unflatten
 
@@ -120,9 +121,8 @@ DUMMY_SCENES = frozenset({"alpha", "beta", "gamma"})
 
 def _dummy_validate(config: dict[str, Any]) -> None:
     known = {**flatten(DUMMY_DEFAULTS), "scene": "", "seed": 0}
+    check_keys(flatten(config), known)
     for key, value in flatten(config).items():
-        if key not in known:
-            raise InputError(f"{key}: unknown config field (known: {', '.join(sorted(known))})")
         expected = type(known[key])
         ok = (isinstance(value, (int, float)) and not isinstance(value, bool)) if expected is float \
             else isinstance(value, expected) and not (expected is int and isinstance(value, bool))

@@ -34,7 +34,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from splatbench.checks import check_image_size
+from splatbench.checks import check_image_size, check_keys
 from splatbench.errors import InputError
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.experiments.workers import limit_threads
@@ -75,8 +75,6 @@ def _train_fields() -> tuple[str, ...]:
 def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]:
     """(scene, the ``data`` table, the TrainConfig fields) of a nested run config; one-line
     `InputError` naming the field for anything unknown."""
-    import difflib
-
     fields = _train_fields()
     known = sorted({*fields, "scene", "data"} - set(OWNED_FIELDS))
     for key in config:
@@ -84,19 +82,15 @@ def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]
             what = "the rendered scene" if key == "dataset" else "the run's folder"
             raise InputError(f"{key}: set by the train kind ({what}); choose the scene with 'scenes' and its "
                              f"rendering with data.resolution / data.views / data.spp / data.test_spp")
-        if key not in known:
-            close = difflib.get_close_matches(key, known, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise InputError(f"{key}: unknown key {key!r}{hint}")
+    check_keys(config, known)
     scene = config.get("scene")
     if not isinstance(scene, str) or not scene:
         raise InputError(f"scene: expected a scene name, got {scene!r}")
     data = config.get("data", {})
     if not isinstance(data, dict):
         raise InputError(f"data: expected a table of {', '.join(DATA_FIELDS)}, got {data!r}")
+    check_keys(data, DATA_FIELDS, prefix="data.")
     for key, value in data.items():
-        if key not in DATA_FIELDS:
-            raise InputError(f"data.{key}: unknown key (known: {', '.join(DATA_FIELDS)})")
         if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
             raise InputError(f"data.{key}: expected an int >= 1, got {value!r}")
     if data.get("resolution") is not None:  # the width; checked as a square image (the rigs are square)
