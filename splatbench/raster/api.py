@@ -9,8 +9,8 @@ import numpy as np
 from splatbench.errors import InputError
 from splatbench.raster.backend import dr, get_backend
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import (check_background, check_clip_planes, check_sh_range, frame_to_numpy,
-                                       render_frame, resolve_sh_degree)
+from splatbench.raster.pipeline import (check_background, check_sh_range, check_view, frame_to_numpy, render_frame,
+                                       resolve_sh_degree)
 
 
 @dataclass(frozen=True)
@@ -57,17 +57,12 @@ def render(gaussians, camera, *, sh_degree: int | None = None, background=(0.0, 
         >>> res.rgb.shape, res.alpha.shape, res.radii.shape
         ((H, W, 3), (H, W), (N,))
     """
-    from splatbench.cameras import Camera
-    from splatbench.checks import check_image_size
     from splatbench.gaussians import Gaussians
 
     if not isinstance(gaussians, Gaussians):
         raise InputError(f"gaussians: expected splatbench.Gaussians, got {type(gaussians).__name__}")
-    if not isinstance(camera, Camera):
-        raise InputError(f"camera: expected splatbench.Camera, got {type(camera).__name__}")
     opts = RasterOptions.from_kwargs(**options)
-    check_clip_planes(camera, opts)
-    check_image_size(camera.width, camera.height, field="camera width, height")
+    check_view(camera, opts)
     degree = resolve_sh_degree(gaussians.sh.shape[1], sh_degree)
     if gaussians.sh.size:
         flat = int(np.argmax(np.abs(gaussians.sh)))

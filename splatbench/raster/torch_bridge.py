@@ -23,7 +23,7 @@ import torch
 from splatbench.errors import InputError
 from splatbench.raster.backend import dr, get_backend
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import (SH_ABS_MAX, Frame, check_background, check_clip_planes, check_sh_range,
+from splatbench.raster.pipeline import (SH_ABS_MAX, Frame, check_background, check_view, check_sh_range,
                                        render_frame, resolve_sh_degree)
 from splatbench.checks import check_finite, check_shape
 
@@ -212,7 +212,7 @@ def rasterize(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree
     _check("opacity_logits", opacity_logits, ("N",), sizes)
     sh_largest = _check("sh", sh, ("N", None, 3), sizes)
     opts = RasterOptions.from_kwargs(**options)
-    check_clip_planes(camera, opts)
+    check_view(camera, opts)
     degree = resolve_sh_degree(sh.shape[1], sh_degree)
     if sh_largest > SH_ABS_MAX:  # only then find where (a full |sh| temporary)
         flat = int(sh.detach().abs().argmax())
