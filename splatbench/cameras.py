@@ -147,7 +147,7 @@ class Camera:
     fy: float
     cx: float
     cy: float
-    world_to_camera: np.ndarray
+    world_to_camera: np.ndarray  # [4, 4], read-only after construction
     near: float = 0.01
     far: float = 1e10
 

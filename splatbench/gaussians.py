@@ -74,11 +74,11 @@ class Gaussians:
         len(g), g.sh_degree, g.covariances().shape   # 2, 3, (2, 3, 3)
     """
 
-    means: np.ndarray
-    log_scales: np.ndarray
-    quats: np.ndarray
-    opacity_logits: np.ndarray
-    sh: np.ndarray
+    means: np.ndarray           # [N, 3]
+    log_scales: np.ndarray      # [N, 3]
+    quats: np.ndarray           # [N, 4] (w, x, y, z)
+    opacity_logits: np.ndarray  # [N]
+    sh: np.ndarray              # [N, K, 3]
 
     def __post_init__(self) -> None:
         sizes: dict[str, int] = {}

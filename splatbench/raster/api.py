@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from splatbench.errors import InputError
 from splatbench.raster.backend import dr, get_backend
 from splatbench.raster.options import RasterOptions
+
+if TYPE_CHECKING:
+    from splatbench.cameras import Camera
+    from splatbench.gaussians import Gaussians
 from splatbench.raster.pipeline import (check_background, check_sh_range, check_view, frame_to_numpy, render_frame,
                                        resolve_sh_degree)
 
@@ -23,11 +28,11 @@ class RenderResult:
     pairs composited; sh_degree: the degree evaluated.
     """
 
-    rgb: np.ndarray
-    alpha: np.ndarray
-    depth: np.ndarray
-    radii: np.ndarray
-    visible: np.ndarray
+    rgb: np.ndarray      # [H, W, 3]
+    alpha: np.ndarray    # [H, W]
+    depth: np.ndarray    # [H, W]
+    radii: np.ndarray    # [N]
+    visible: np.ndarray  # [N]
     num_pairs: int
     sh_degree: int
 
@@ -37,8 +42,14 @@ def to_tensor(m, array: np.ndarray):
     return m.TensorXf(np.array(array, dtype=np.float32, order="C"))
 
 
-def render(gaussians, camera, *, sh_degree: int | None = None, background=(0.0, 0.0, 0.0),
-           **options) -> RenderResult:
+def render(
+    gaussians: Gaussians,          # N Gaussians, SH with K bases
+    camera: Camera,                # width W, height H
+    *,
+    sh_degree: int | None = None,
+    background=(0.0, 0.0, 0.0),
+    **options,
+) -> RenderResult:                 # rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N], visible [N]
     """Render ``gaussians`` seen from ``camera`` with the Dr.Jit tile rasterizer.
 
     Args:
