@@ -62,13 +62,22 @@ def workers_of(pid: int, timeout: float = 60.0) -> list[psutil.Process]:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         try:
-            kids = [p for p in psutil.Process(pid).children(recursive=True) if "spawn_main" in " ".join(p.cmdline())]
+            kids = [p for p in psutil.Process(pid).children(recursive=True) if _is_worker(p)]
         except psutil.NoSuchProcess:
             return []
         if kids:
             return kids
         time.sleep(0.05)
     return []
+
+
+def _is_worker(proc: psutil.Process) -> bool:
+    """A live pool worker; a killed one not yet reaped (a zombie: no command line) or one
+    gone meanwhile is not."""
+    try:
+        return "spawn_main" in " ".join(proc.cmdline())
+    except psutil.Error:
+        return False
 
 
 def alive(procs: list[psutil.Process]) -> list[int]:
@@ -182,7 +191,16 @@ def test_sigterm_to_the_runner_stops_its_workers_and_releases_its_claims(tmp_pat
 
 
 # --------------------------------------------------------------------------- fault injection
-def _wait_for(what: str, condition, proc: subprocess.Popen, log: Path, timeout: float = 180.0):
+def _tree(pid: int) -> str:
+    """The runner's process tree, for a failure message."""
+    try:
+        kids = psutil.Process(pid).children(recursive=True)
+        return "; ".join(f"{p.pid} {'worker' if _is_worker(p) else 'other'}" for p in kids)
+    except psutil.NoSuchProcess:
+        return "(the runner is gone)"
+
+
+def _wait_for(what: str, condition, proc: subprocess.Popen, log: Path, timeout: float = 60.0):
     """Poll ``condition`` until it returns something true; fail naming ``what`` after
     ``timeout`` s or when the runner exits first. Generous: no verdict rests on speed."""
     deadline = time.monotonic() + timeout
@@ -192,7 +210,9 @@ def _wait_for(what: str, condition, proc: subprocess.Popen, log: Path, timeout: 
             return value
         assert proc.poll() is None, (f"the runner exited ({proc.returncode}) before {what}", log.read_text()[-2000:])
         time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}: {log.read_text()[-2000:]}")
+    gate = sorted(p.name for p in (log.parent / "gate").iterdir())
+    raise AssertionError(f"timed out waiting for {what}: processes {_tree(proc.pid)}; gate {gate}; "
+                         f"log {log.read_text()[-2000:]}")
 
 
 def _fault_injection(tmp_path: Path, rounds: int, seed: int) -> None:
