@@ -183,7 +183,7 @@ def read_ply(path: str | os.PathLike) -> PlyArrays:
     name = path
     try:
         with open(path, "rb") as stream:
-            ply = PlyData.read(stream, mmap=False)
+            ply = PlyData.read(stream, mmap="c")  # copy-on-write map: the columns are copied below
     except FileNotFoundError:
         raise InputError(f"{name}: no such file") from None
     except IsADirectoryError:
