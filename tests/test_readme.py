@@ -1,6 +1,6 @@
-"""Every ```python block of README.md runs as written from the repository root, each
-in a fresh interpreter (so it may use only what it imports and what the repository
-holds)."""
+"""Every ```python block of README.md and docs/experiments.md runs as written from the
+repository root, each in a fresh interpreter (so it may use only what it imports and
+what the repository holds). Other docs' blocks are signatures to fill in, not programs."""
 
 from __future__ import annotations
 
@@ -15,16 +15,22 @@ REPO = Path(__file__).resolve().parents[1]
 BLOCK = re.compile(r"^```python\n(.*?)^```$", re.S | re.M)
 
 
-def python_blocks(text: str) -> list[str]:
-    return BLOCK.findall(text)
+DOCS = ("README.md", "docs/experiments.md")
 
 
-def test_the_readme_has_python_blocks():
-    assert python_blocks((REPO / "README.md").read_text(encoding="utf-8"))
+def python_blocks(name: str) -> list[str]:
+    return BLOCK.findall((REPO / name).read_text(encoding="utf-8"))
 
 
-@pytest.mark.parametrize("index", range(len(python_blocks((REPO / "README.md").read_text(encoding="utf-8")))))
-def test_readme_python_block_runs_as_written(index):
-    code = python_blocks((REPO / "README.md").read_text(encoding="utf-8"))[index]
+BLOCKS = [(name, i) for name in DOCS for i in range(len(python_blocks(name)))]
+
+
+def test_each_document_has_python_blocks():
+    assert {name for name, _ in BLOCKS} == set(DOCS)
+
+
+@pytest.mark.parametrize("name, index", BLOCKS, ids=[f"{n}-{i}" for n, i in BLOCKS])
+def test_python_block_runs_as_written(name, index):
+    code = python_blocks(name)[index]
     done = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, f"README python block {index} failed:\n{code}\n{done.stderr[-3000:]}"
+    assert done.returncode == 0, f"{name}: python block {index} failed:\n{code}\n{done.stderr[-3000:]}"
