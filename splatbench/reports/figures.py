@@ -90,7 +90,7 @@ def curves_figure(table: AxisTable, runs: pd.DataFrame, path: Path) -> Path | No
     fig.suptitle(f"{y_label} during training, by {table.axis} (mean over runs)", fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)  # titles and labels never clipped
     plt.close(fig)
     return path
 
@@ -141,9 +141,13 @@ def pareto_figure(means: pd.DataFrame, scenes: Sequence[str], time: MetricSpec, 
         if "time_half" in sub.columns:
             ax.errorbar(sub.time, sub.quality, xerr=sub.time_half.fillna(0.0), yerr=sub.quality_half.fillna(0.0),
                         fmt="none", ecolor="tab:blue", elinewidth=0.8, capsize=2, alpha=0.7, zorder=2)
+        finite = sub.time[np.isfinite(sub.time)]
+        middle = float(finite.min() + finite.max()) / 2 if len(finite) else 0.0
         for _, r in sub.iterrows():
-            if math.isfinite(r.time) and math.isfinite(r.quality):
-                ax.annotate(r.cell, (r.time, r.quality), fontsize=6, xytext=(3, 3), textcoords="offset points")
+            if math.isfinite(r.time) and math.isfinite(r.quality):  # labels point inwards: never off the edge
+                right = r.time > middle
+                ax.annotate(r.cell, (r.time, r.quality), fontsize=6, xytext=(-3 if right else 3, 3),
+                            textcoords="offset points", ha="right" if right else "left")
         if idx:
             fx, fy = sub.time[idx].to_numpy(), sub.quality[idx].to_numpy()
             ax.step(fx, fy, where="post", color="tab:red", linewidth=1.0, zorder=2, label="Pareto front")
@@ -156,7 +160,7 @@ def pareto_figure(means: pd.DataFrame, scenes: Sequence[str], time: MetricSpec, 
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)  # titles and labels never clipped
     plt.close(fig)
     return fronts
 
