@@ -4,7 +4,8 @@
    (138,766 Gaussians seeded as 3DGS does, 648x420) rendered by the Dr.Jit
    rasterizer, and at quarter resolution by the float64 reference; prints the render
    time and their largest difference, writes ``out/demo/garden.png`` and
-   ``garden_difference.png`` (a few seconds).
+   ``garden_difference.png`` (the difference per pixel on a log colour scale, the
+   parity tolerance marked), and names both (a few seconds).
 2. The demo experiment, ``experiments/demo.toml``: its scenes rendered with Mitsuba
    (cached by content hash under ``data/scenes``), its training grid run on the local
    executor (resumable: runs already done are skipped), results under ``results/demo``.
@@ -33,6 +34,7 @@ def garden_check(out: Path, scale: float) -> None:
     from splatbench.backends import reference_render
     from splatbench.backends.compare_types import BOUNDARY_FRACTION, FORWARD_ATOL
     from splatbench.images import save_png
+    from splatbench.reports.figures import difference_figure
     from splatbench.workloads import GARDEN_SFM, load_npz
 
     workload = load_npz(GARDEN_SFM, view=0)
@@ -48,7 +50,9 @@ def garden_check(out: Path, scale: float) -> None:
     fast = splatbench.render(g, small)
     ref = reference_render(None, g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, small)
     err = np.abs(fast.rgb - ref.rgb)
-    save_png(np.clip(err / max(float(err.max()), 1e-12), 0, 1), out / "garden_difference.png")
+    difference = difference_figure(err.max(axis=-1), out / "garden_difference.png", tolerance=FORWARD_ATOL,
+                                   title=f"|Dr.Jit rasterizer - float64 reference|, garden at "
+                                         f"{small.width}x{small.height}")
     # the max is over every pixel, the boundary band included: the parity rule is per pixel
     # (FORWARD_ATOL), with up to 1 pixel in 500 (BOUNDARY_FRACTION) allowed above it
     pixels = small.width * small.height
@@ -57,7 +61,7 @@ def garden_check(out: Path, scale: float) -> None:
     click.echo(f"reference check at {small.width}x{small.height}: max |fast - reference| = {err.max():.2e} "
                f"over all pixels; {over} of {pixels} above the {FORWARD_ATOL:.0e} parity tolerance (allowed: "
                f"{allowed}, 1 in 500, the boundary band where float32 and float64 take a discrete decision "
-               f"differently) (image: {image})")
+               f"differently) (image: {image}; the difference, on a colour scale: {difference})")
 
 
 @click.command()

@@ -9,6 +9,8 @@
   other cell is both faster and better, on the means) are ringed and joined by a
   step line. `pareto_front` is the
   computation, shared with the report text.
+* `difference_figure`: a per-pixel error map with its colour scale (the demo's
+  ``garden_difference.png``).
 """
 
 from __future__ import annotations
@@ -165,4 +167,28 @@ def pareto_figure(means: pd.DataFrame, scenes: Sequence[str], time: MetricSpec, 
     return fronts
 
 
-__all__ = ["curves_figure", "pareto_figure", "pareto_front", "cell_means", "mean_curve", "curve_keys"]
+def difference_figure(error: np.ndarray, path: Path, *, tolerance: float, title: str) -> Path:
+    """``error`` [H, W] (>= 0) on a log colour scale with its colour bar, from tolerance / 100
+    (and below, zeros included) to its maximum; the ``tolerance`` is marked on the bar."""
+    from matplotlib.colors import LogNorm
+
+    plt = _pyplot()
+    height, width = error.shape
+    low = tolerance / 100
+    high = max(float(error.max()), tolerance * 10)
+    fig, ax = plt.subplots(figsize=(6.4, 6.4 * height / width))
+    shown = ax.imshow(np.maximum(error, low), norm=LogNorm(vmin=low, vmax=high), cmap="magma",
+                      interpolation="nearest")
+    ax.set_axis_off()
+    ax.set_title(title, fontsize=9)
+    bar = fig.colorbar(shown, ax=ax, fraction=0.046 * height / width, pad=0.02)  # as tall as the image
+    bar.set_label(f"|difference|, max over RGB (cyan: the {tolerance:.0e} tolerance)", fontsize=7)
+    bar.ax.axhline(tolerance, color="cyan", linewidth=1.5)
+    bar.ax.tick_params(labelsize=7)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)
+    plt.close(fig)
+    return path
+
+
+__all__ = ["curves_figure", "pareto_figure", "difference_figure", "pareto_front", "cell_means", "mean_curve", "curve_keys"]
