@@ -11,7 +11,10 @@ cannot share a bug. Clarity over speed: one pixel at a time.
     finite_difference_grad   central differences of a loss of `render`
 
 Every op takes ``mode="matched"`` (the fast path's rules: cutoffs, clamps, early stop)
-or ``mode="exact"`` (the smooth function, for finite differences).
+or ``mode="exact"`` (the smooth function, for finite differences). ``render`` also takes
+keywords for conventions other than graphdeco's (pixel centre, activations, quaternion
+order, SH direction / basis / degree, colour clamp, background, sort key, depth, Jacobian
+clamp), so other rasterizers' behaviour can be reproduced (docs/conventions.md, last section).
 """
 
 from reference.composite import Composite, composite

@@ -15,6 +15,7 @@ from reference.project import MODES, _as_array, _as_choice, _as_scalar, _as_size
 # The bounding-box prefilter is padded by this relative amount (plus as much in
 # pixels) so rounding can never drop a pixel that the exact sigma test would keep.
 BOX_PAD = 1e-9
+BACKGROUND_MODES = ("weighted", "added", "ignored")
 
 
 class Composite(NamedTuple):
@@ -30,7 +31,7 @@ def _half_mahalanobis(A, B, C, dx, dy):
     return 0.5 * (A * dx * dx + C * dy * dy) + B * dx * dy
 
 
-def _blend(alphas, colors, depths, background):
+def _blend(alphas, colors, depths, background, background_mode="weighted", normalise_depth=True):
     """Front-to-back 'over' of the given contributions, all of which are kept.
 
     Args:
@@ -46,16 +47,18 @@ def _blend(alphas, colors, depths, background):
     T_before = np.concatenate([np.ones_like(alphas[:, :1]), T_after[:, :-1]], axis=1)
     T_final = T_after[:, -1] if alphas.shape[1] else np.ones(alphas.shape[0])
     weights = T_before * alphas  # [P, M]  T·α
-    rgb = weights @ colors + T_final[:, None] * background
+    behind = {"weighted": T_final, "added": np.ones_like(T_final), "ignored": np.zeros_like(T_final)}
+    rgb = weights @ colors + behind[background_mode][:, None] * background
     alpha = 1.0 - T_final
     D = weights @ depths
-    depth = np.where(alpha > 0, D / np.where(alpha > 0, alpha, 1.0), 0.0)
+    depth = np.where(alpha > 0, D / np.where(alpha > 0, alpha, 1.0), 0.0) if normalise_depth else D
     return rgb, alpha, depth
 
 
 def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, width, height, *,
               mode="matched", background=(0.0, 0.0, 0.0), alpha_min=1 / 255, alpha_max=0.99,
-              transmittance_min=1e-4) -> Composite:
+              transmittance_min=1e-4, pixel_offset=0.5, sort_keys=None, background_mode="weighted",
+              normalise_depth=True) -> Composite:
     """Alpha-composite projected Gaussians (mirrors ``splatbench.raster.composite``).
 
     For every pixel centre p = (j + 0.5, i + 0.5), visible Gaussians in ascending depth
@@ -82,6 +85,10 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
         mode: "matched" or "exact".
         background: [3] colour behind everything.
         alpha_min, alpha_max, transmittance_min: the matched-mode thresholds.
+        Convention alternatives (graphdeco's by default): pixel_offset, where pixel (i, j) is
+            sampled (0.5: its centre; 0: integer coordinates); sort_keys [N], the compositing
+            order (default: depths); background_mode "weighted" (by T_final), "added" (as is)
+            or "ignored"; normalise_depth False returns D itself, not D / alpha.
 
     Returns:
         `Composite` (rgb [H, W, 3], alpha [H, W], depth [H, W]).
@@ -102,10 +109,14 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
     alpha_min = _as_scalar("alpha_min", alpha_min, low=0.0)
     alpha_max = _as_scalar("alpha_max", alpha_max, low=0.0)
     transmittance_min = _as_scalar("transmittance_min", transmittance_min, low=0.0)
+    pixel_offset = _as_scalar("pixel_offset", pixel_offset)
+    keys = depths if sort_keys is None else _as_array("sort_keys", sort_keys, ("N",), sizes)
+    blend = dict(background_mode=_as_choice("background_mode", background_mode, BACKGROUND_MODES),
+                 normalise_depth=bool(normalise_depth))
 
     # Candidates: visible Gaussians by ascending depth, ties by ascending index.
     index = np.flatnonzero(visible)
-    index = index[np.lexsort((index, depths[index]))]
+    index = index[np.lexsort((index, keys[index]))]
     mx, my = means2d[index, 0], means2d[index, 1]
     A, B, C = conics[index, 0], conics[index, 1], conics[index, 2]
     o, c, z, r2 = opacities[index], colors[index], depths[index], cutoff_sq[index]
@@ -113,18 +124,18 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
     rgb = np.empty((height, width, 3))
     alpha = np.empty((height, width))
     depth = np.empty((height, width))
-    px = np.arange(width) + 0.5  # pixel-centre u of every column
+    px = np.arange(width) + pixel_offset  # pixel-centre u of every column
 
     if exact:
         for i in range(height):
             dx = px[:, None] - mx[None, :]  # [W, M]
-            dy = (i + 0.5) - my[None, :]
+            dy = (i + pixel_offset) - my[None, :]
             with np.errstate(invalid="ignore", over="ignore"):
                 sigma = _half_mahalanobis(A, B, C, dx, dy)
             # sigma >= 0 for a positive-definite conic; the max only removes rounding
             # below 0 (so alpha <= o), and inf - inf at absurd distances means "far".
             sigma = np.where(np.isnan(sigma), np.inf, np.maximum(sigma, 0.0))
-            rgb[i], alpha[i], depth[i] = _blend(o * np.exp(-sigma), c, z, background)
+            rgb[i], alpha[i], depth[i] = _blend(o * np.exp(-sigma), c, z, background, **blend)
         return Composite(rgb, alpha, depth)
 
     # Matched mode. Screen extent of each ellipse d² <= R², from Σ2D = inverse(conic).
@@ -133,7 +144,7 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
         rx = np.sqrt(r2 * C / det) * (1 + BOX_PAD) + BOX_PAD
         ry = np.sqrt(r2 * A / det) * (1 + BOX_PAD) + BOX_PAD
     for i in range(height):
-        py = i + 0.5
+        py = i + pixel_offset
         row = np.flatnonzero(np.abs(py - my) <= ry)  # still in compositing order
         for j in range(width):
             cand = row[np.abs(px[j] - mx[row]) <= rx[row]]
@@ -147,6 +158,6 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
             T_next = np.cumprod(1.0 - a)
             stop = np.flatnonzero(T_next < transmittance_min)
             n = stop[0] if stop.size else a.size
-            out = _blend(a[None, :n], c[cand[:n]], z[cand[:n]], background)
+            out = _blend(a[None, :n], c[cand[:n]], z[cand[:n]], background, **blend)
             rgb[i, j], alpha[i, j], depth[i, j] = out[0][0], out[1][0], out[2][0]
     return Composite(rgb, alpha, depth)

@@ -12,6 +12,10 @@ import numpy as np
 
 MODES = ("matched", "exact")
 RADII = ("3sigma", "opacity")
+# Convention alternatives the oracle can follow besides graphdeco's (docs/backends.md, the vocabulary).
+QUAT_ORDERS = ("wxyz", "xyzw")
+SCALE_ACTIVATIONS = ("exp", "raw")  # raw: log_scales used as the scales themselves
+OPACITY_ACTIVATIONS = ("sigmoid", "raw")  # raw: logits clamped to [0, 1] used as opacities
 LOG_SCALE_CLIP = 20.0  # scales = exp(clip(log_scales, -20, 20)) in matched mode
 BIG_FACTOR = 1e4  # cull when a 2D variance exceeds (1e4 * max(W, H))^2
 JACOBIAN_GUARD = 0.3  # graphdeco's 1.3 * tan(fov / 2) limit, split per side
@@ -148,7 +152,8 @@ class Projection(NamedTuple):
 
 def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width, height, *,
             mode="matched", eps2d=0.3, near=0.01, far=1e10, radius="3sigma",
-            alpha_min=1 / 255, antialiased=False) -> Projection:
+            alpha_min=1 / 255, antialiased=False, quat_order="wxyz", scale_activation="exp",
+            opacity_activation="sigmoid", jacobian_guard=JACOBIAN_GUARD) -> Projection:
     """Project 3D Gaussians to 2D (mirrors ``splatbench.raster.project``).
 
     Args:
@@ -170,6 +175,11 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width,
             o <= alpha_min).
         alpha_min: alpha threshold used by radius="opacity".
         antialiased: Mip-Splatting opacity compensation o *= sqrt(det Σ2D_raw / det Σ2D).
+        quat_order: "wxyz" (graphdeco) or "xyzw" (quaternions read with w last).
+        scale_activation: "exp" (graphdeco) or "raw" (log_scales used as scales).
+        opacity_activation: "sigmoid" (graphdeco) or "raw" (logits clamped to [0, 1]).
+        jacobian_guard: the Jacobian clamp's margin (0.3: graphdeco's 1.3 x the half field of
+            view), or None for no clamp.
 
     Returns:
         `Projection` (means2d [N, 2], conics [N, 3], depths [N], opacities [N],
@@ -191,6 +201,11 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width,
     eps2d = _as_scalar("eps2d", eps2d, low=0.0)
     near, far = _as_scalar("near", near), _as_scalar("far", far, allow_inf=True)
     alpha_min = _as_scalar("alpha_min", alpha_min, low=0.0)
+    if _as_choice("quat_order", quat_order, QUAT_ORDERS) == "xyzw":
+        quats = quats[:, [3, 0, 1, 2]]
+    raw_scales = _as_choice("scale_activation", scale_activation, SCALE_ACTIVATIONS) == "raw"
+    raw_opacity = _as_choice("opacity_activation", opacity_activation, OPACITY_ACTIVATIONS) == "raw"
+    guard = np.inf if jacobian_guard is None else _as_scalar("jacobian_guard", jacobian_guard, low=0.0)
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     n = means.shape[0]
 
@@ -211,10 +226,10 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width,
         #    footprint stretched by ~x/z that smears across the image: on garden that alone put the
         #    exact render 17 dB from every rasterizer (46.5 dB with the clamp; docs/conventions.md).
         tx, ty = t[:, 0], t[:, 1]
-        lim_x_pos = (width - cx) / fx + JACOBIAN_GUARD * (width / 2) / fx
-        lim_x_neg = cx / fx + JACOBIAN_GUARD * (width / 2) / fx
-        lim_y_pos = (height - cy) / fy + JACOBIAN_GUARD * (height / 2) / fy
-        lim_y_neg = cy / fy + JACOBIAN_GUARD * (height / 2) / fy
+        lim_x_pos = (width - cx) / fx + guard * (width / 2) / fx
+        lim_x_neg = cx / fx + guard * (width / 2) / fx
+        lim_y_pos = (height - cy) / fy + guard * (height / 2) / fy
+        lim_y_neg = cy / fy + guard * (height / 2) / fy
         tx = z * np.clip(t[:, 0] / z, -lim_x_neg, lim_x_pos)
         ty = z * np.clip(t[:, 1] / z, -lim_y_neg, lim_y_pos)
         J = np.zeros((n, 2, 3))
@@ -226,7 +241,11 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width,
         means2d = np.stack([fx * t[:, 0] / z + cx, fy * t[:, 1] / z + cy], axis=1)
 
         # 4. Σ2D = J Wr Σ Wrᵀ Jᵀ + eps2d I.
-        cov_world = covariance(log_scales, quats, clip=not exact)
+        if raw_scales:  # the scales' sign does not matter: Σ = R S Sᵀ Rᵀ
+            M = quat_to_rotmat(quats) * log_scales[:, None, :]
+            cov_world = np.einsum("nik,njk->nij", M, M)
+        else:
+            cov_world = covariance(log_scales, quats, clip=not exact)
         cov_cam = Wr @ cov_world @ Wr.T
         cov2d_raw = J @ cov_cam @ J.transpose(0, 2, 1)  # [N, 2, 2]
         xx = cov2d_raw[:, 0, 0] + eps2d
@@ -245,7 +264,7 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width,
         keep &= np.isfinite(conics).all(axis=1)
 
         # 7. Opacity, with the Mip-Splatting compensation.
-        opacities = _sigmoid(logits)
+        opacities = np.clip(logits, 0.0, 1.0) if raw_opacity else _sigmoid(logits)
         if antialiased:
             det_raw = np.maximum(cov2d_raw[:, 0, 0] * cov2d_raw[:, 1, 1] - cov2d_raw[:, 0, 1] ** 2, 0.0)
             opacities = opacities * np.sqrt(det_raw / det)

@@ -7,8 +7,13 @@ from typing import NamedTuple
 import numpy as np
 
 from reference.composite import composite
-from reference.project import _as_array, project
+from reference.project import JACOBIAN_GUARD, _as_array, _as_choice, project
 from reference.sh import eval_sh, sh_degree_for
+
+
+SH_VIEW_DIRECTIONS = ("camera_to_mean", "mean_to_camera", "world_origin")
+SORT_KEYS = ("view_z", "distance", "world_z", "index")
+DEPTH_MODES = ("normalised", "unnormalised", "distance")
 
 
 class RenderOutput(NamedTuple):
@@ -38,7 +43,10 @@ def _normalize(v):
 def render(means, log_scales, quats, opacity_logits, sh, K, world_to_camera, width, height, *,
            mode="matched", background=(0.0, 0.0, 0.0), sh_degree=None, eps2d=0.3, near=0.01,
            far=1e10, radius="3sigma", alpha_min=1 / 255, alpha_max=0.99, transmittance_min=1e-4,
-           antialiased=False) -> RenderOutput:
+           antialiased=False, pixel_offset=0.5, quat_order="wxyz", scale_activation="exp",
+           opacity_activation="sigmoid", jacobian_guard=JACOBIAN_GUARD, sh_view_direction="camera_to_mean",
+           sh_dir_means=None, sh_basis="graphdeco", sh_max_degree=3, sh_degree_arg=True, colour_clamp="min0",
+           background_mode="weighted", sort_key="view_z", depth_mode="normalised") -> RenderOutput:
     """Render Gaussians to an image (mirrors ``splatbench.raster.render``).
 
     Args:
@@ -50,23 +58,50 @@ def render(means, log_scales, quats, opacity_logits, sh, K, world_to_camera, wid
         background: [3]. sh_degree: None = every band in ``sh``; a larger degree than
             ``sh`` holds is a ValueError. Remaining keywords: see `project` and `composite`.
 
+    Convention alternatives (the defaults are graphdeco's; docs/backends.md lists them):
+        sh_view_direction: "camera_to_mean" (normalize(mean - camera centre)), "mean_to_camera"
+            (its negative) or "world_origin" (normalize(mean)); sh_dir_means [N, 3]: the means
+            the direction is taken from (default ``means``; fixed means make the direction
+            "detached" under finite differences). sh_basis, colour_clamp: see `eval_sh`.
+        sh_max_degree: the highest band evaluated (0..3); sh_degree_arg False evaluates every
+            band ``sh`` holds whatever ``sh_degree`` says.
+        sort_key: "view_z" (camera z), "distance" (to the camera centre), "world_z" or "index".
+        depth_mode: "normalised" (D / alpha), "unnormalised" (D) or "distance" (the expected
+            distance to the camera centre, normalised).
+        pixel_offset, background_mode: see `composite`; quat_order, scale_activation,
+            opacity_activation, jacobian_guard: see `project`.
+
     Returns:
         `RenderOutput` (rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N], visible [N]).
     """
     proj = project(means, log_scales, quats, opacity_logits, K, world_to_camera, width, height,
                    mode=mode, eps2d=eps2d, near=near, far=far, radius=radius,
-                   alpha_min=alpha_min, antialiased=antialiased)
+                   alpha_min=alpha_min, antialiased=antialiased, quat_order=quat_order,
+                   scale_activation=scale_activation, opacity_activation=opacity_activation,
+                   jacobian_guard=jacobian_guard)
     means = np.asarray(means, dtype=np.float64)
     sh = _as_array("sh", sh, (means.shape[0], None, 3), {})
-    degree = sh_degree_for(sh.shape[1], sh_degree)
+    degree = sh_degree_for(sh.shape[1], sh_degree if sh_degree_arg else None)
+    if isinstance(sh_max_degree, bool) or sh_max_degree not in (0, 1, 2, 3):
+        raise ValueError(f"sh_max_degree: expected an int in 0..3, got {sh_max_degree!r}")
+    degree = min(degree, int(sh_max_degree))
 
     # Colour of the visible Gaussians only (culled ones are never drawn).
-    dirs = _normalize(means - camera_centre(world_to_camera))
+    eye = camera_centre(world_to_camera)
+    at = means if sh_dir_means is None else _as_array("sh_dir_means", sh_dir_means, (means.shape[0], 3), {})
+    view = {"camera_to_mean": lambda m: m - eye, "mean_to_camera": lambda m: eye - m, "world_origin": lambda m: m}
+    dirs = _normalize(view[_as_choice("sh_view_direction", sh_view_direction, SH_VIEW_DIRECTIONS)](at))
     colors = np.zeros((means.shape[0], 3))
     vis = proj.visible
-    colors[vis] = eval_sh(sh[vis], dirs[vis], degree)
+    colors[vis] = eval_sh(sh[vis], dirs[vis], degree, basis=sh_basis, colour_clamp=colour_clamp)
 
-    out = composite(proj.means2d, proj.conics, proj.opacities, colors, proj.depths,
+    distance = np.linalg.norm(means - eye, axis=1)
+    keys = {"view_z": proj.depths, "distance": distance, "world_z": means[:, 2],
+            "index": np.arange(means.shape[0], dtype=np.float64)}[_as_choice("sort_key", sort_key, SORT_KEYS)]
+    depth_of = distance if _as_choice("depth_mode", depth_mode, DEPTH_MODES) == "distance" else proj.depths
+    out = composite(proj.means2d, proj.conics, proj.opacities, colors, np.where(vis, depth_of, 0.0),
                     proj.cutoff_sq, vis, width, height, mode=mode, background=background,
-                    alpha_min=alpha_min, alpha_max=alpha_max, transmittance_min=transmittance_min)
+                    alpha_min=alpha_min, alpha_max=alpha_max, transmittance_min=transmittance_min,
+                    pixel_offset=pixel_offset, sort_keys=keys, background_mode=background_mode,
+                    normalise_depth=depth_mode != "unnormalised")
     return RenderOutput(out.rgb, out.alpha, out.depth, proj.radii, proj.visible)

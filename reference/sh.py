@@ -18,6 +18,10 @@ C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.37317633259
       -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
 
 MAX_DEGREE = 3
+#: "graphdeco": the constants above, Condon-Shortley phase included (odd orders m negative);
+#: "no_condon_shortley": the same real SH without that phase (every constant positive).
+SH_BASES = ("graphdeco", "no_condon_shortley")
+COLOUR_CLAMPS = ("min0", "none", "0_1")  # max(c, 0) (graphdeco), none, clip(c, 0, 1)
 
 
 def sh_degree_for(num_bases, sh_degree=None, *, name="sh_degree"):
@@ -38,12 +42,13 @@ def sh_degree_for(num_bases, sh_degree=None, *, name="sh_degree"):
     return int(sh_degree)
 
 
-def sh_basis(dirs, degree):
+def sh_basis(dirs, degree, convention="graphdeco"):
     """Real SH basis values in graphdeco's order and signs.
 
     Args:
         dirs: [N, 3] unit directions (x, y, z).
         degree: 0..3.
+        convention: one of SH_BASES (the sign convention).
 
     Returns:
         basis: [N, (degree+1)²] float64.
@@ -60,10 +65,16 @@ def sh_basis(dirs, degree):
         basis += [C3[0] * y * (3 * xx - yy), C3[1] * x * y * z, C3[2] * y * (4 * zz - xx - yy),
                   C3[3] * z * (2 * zz - 3 * xx - 3 * yy), C3[4] * x * (4 * zz - xx - yy),
                   C3[5] * z * (xx - yy), C3[6] * x * (xx - 3 * yy)]
-    return np.stack(basis, axis=1)
+    values = np.stack(basis, axis=1)
+    if convention == "no_condon_shortley":  # every graphdeco term with a negative constant flips sign
+        signs = np.sign([C0, -C1, C1, -C1, *C2, *C3])[:values.shape[1]]
+        values = values * np.where(signs < 0, -1.0, 1.0)[None]
+    elif convention != "graphdeco":
+        raise ValueError(f"sh_basis: expected one of {list(SH_BASES)}, got {convention!r}")
+    return values
 
 
-def eval_sh(sh, dirs, degree):
+def eval_sh(sh, dirs, degree, *, basis="graphdeco", colour_clamp="min0"):
     """Colour from SH coefficients (mirrors ``splatbench.raster.eval_sh``).
 
     Args:
@@ -71,9 +82,10 @@ def eval_sh(sh, dirs, degree):
             Bands above ``degree`` are ignored.
         dirs: [N, 3] unit view directions, normalize(mean - camera_centre), world space.
         degree: 0..3.
+        basis: one of SH_BASES; colour_clamp: one of COLOUR_CLAMPS.
 
     Returns:
-        colors: [N, 3] float64, ``max(Σ_k sh[:, k] * basis_k(dirs) + 0.5, 0)``.
+        colors: [N, 3] float64, ``max(Σ_k sh[:, k] * basis_k(dirs) + 0.5, 0)`` (graphdeco's clamp).
     """
     sizes = {}
     sh = _as_array("sh", sh, ("N", None, 3), sizes)
@@ -83,5 +95,9 @@ def eval_sh(sh, dirs, degree):
     bases = (degree + 1) ** 2
     if sh.shape[1] < bases:
         raise ValueError(f"degree={degree} needs K={bases} SH coefficients, sh has K={sh.shape[1]}")
-    rgb = np.einsum("nk,nkc->nc", sh_basis(dirs, degree), sh[:, :bases, :])
-    return np.maximum(rgb + 0.5, 0.0)
+    if colour_clamp not in COLOUR_CLAMPS:
+        raise ValueError(f"colour_clamp: expected one of {list(COLOUR_CLAMPS)}, got {colour_clamp!r}")
+    rgb = np.einsum("nk,nkc->nc", sh_basis(dirs, degree, basis), sh[:, :bases, :]) + 0.5
+    if colour_clamp == "none":
+        return rgb
+    return np.clip(rgb, 0.0, 1.0 if colour_clamp == "0_1" else None)

@@ -3,7 +3,7 @@
 Every command's ``--device`` is `device_option` (the same choices, help text, default
 and one-line error), and every config or settings object that names a device checks it
 with `check_device`. What "CUDA when available" means depends on who runs the work:
-Dr.Jit's CUDA backend for the rasterizer (`splatbench.raster.backend.get_backend`),
+Dr.Jit's CUDA backend for the rasterizer (`splatbench.raster.device.get_device`),
 torch's CUDA for input tensors handed to other rasterizers (`torch_device`); ``"cuda"`` where
 the one who looks finds no GPU is the one `no_cuda` line, whoever asks.
 Torch- and Dr.Jit-free, so the command modules can import it at no cost.

@@ -4,16 +4,20 @@ permissions an ordinary ``open`` / ``mkdir`` would have given them.
 `tempfile.mkstemp` and `tempfile.mkdtemp` create 0600 files and 0700 folders
 whatever the umask; renamed into place as they are, a result would be unreadable to
 the rest of a group. `replace_file` and `replace_dir` first give the temporary its
-umask mode (0644 / 0755 under umask 022).
+umask mode (0644 / 0755 under umask 022). `atomic_write` writes one file through a
+fsync'd temporary ``.<name>.<pid>.<random>.tmp`` beside it (the result store, the reports).
 """
 
 from __future__ import annotations
 
 import os
+import secrets
 import shutil
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+
+from splatbench.errors import InputError
 
 
 def current_umask() -> int:
@@ -67,11 +71,42 @@ def replace_dir(tmp: Path, out: Path, *, accept_existing: Callable[[Path], bool]
             shutil.rmtree(trash, ignore_errors=True)
 
 
+def atomic_write(path: str | Path, write) -> Path:
+    """Call ``write(temp_path)``, fsync the temporary file, rename it onto ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    try:
+        write(temp)
+        fd = os.open(temp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(temp, path)
+    except BaseException:
+        temp.unlink(missing_ok=True)
+        raise
+    _fsync_dir(path.parent)
+    return path
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:  # pragma: no cover - platforms without directory fds
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # pragma: no cover
+        pass
+    finally:
+        os.close(fd)
+
+
 def read_text(path: str | os.PathLike, what: str) -> str:
     """The UTF-8 text of ``path``; a one-line `InputError` starting ``what:`` when it
     cannot be read or is not UTF-8."""
-    from splatbench.errors import InputError
-
     p = Path(path)
     try:
         return p.read_text(encoding="utf-8")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
-from splatbench.raster.backend import cuda_available
+from splatbench.raster.device import cuda_available
 
 
 @pytest.fixture(params=["cpu", "cuda"], ids=["drjit-llvm", "drjit-cuda"])

@@ -13,10 +13,10 @@ from dataclasses import fields, replace
 import pytest
 from click.testing import CliRunner
 
-from splatbench.bench.machine import MachineInfo
+from splatbench.metrics.machine import MachineInfo
 from splatbench.bench.raster import (CSV_COLUMNS, STANDARD_SYNTHETIC, RasterBenchResult, format_table, leak_warnings,
                                      standard_suite, target_of)
-from splatbench.bench.timing import StageSplit
+from splatbench.metrics.timing import StageSplit
 from splatbench.cli import main
 from splatbench.errors import InputError
 from splatbench.workloads import GARDEN_SFM, parse_synthetic, parse_workload, workload_spec

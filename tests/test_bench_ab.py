@@ -14,8 +14,8 @@ from pathlib import Path
 from click.testing import CliRunner
 
 from splatbench.bench import ab
-from splatbench.bench import load as load_rule
-from splatbench.bench.load import LOAD_TAU_S, Load
+from splatbench.metrics import load as load_rule
+from splatbench.metrics.load import LOAD_TAU_S, Load
 from splatbench.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -92,7 +92,7 @@ def test_own_share_follows_the_kernel_average_of_own_cpu_use():
     # 60 s idle after that leaves 1.729·e^-1 = 0.636. Piecewise-constant use between calls,
     # so the tracker reproduces these closed forms to float64 round-off.
 
-    from splatbench.bench.load import OwnShare
+    from splatbench.metrics.load import OwnShare
 
     t, c = [0.0], [0.0]
     share = OwnShare(clock=lambda: t[0], cpu=lambda: c[0], age_s=None)

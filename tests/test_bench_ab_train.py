@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from splatbench.bench import ab, ab_train
-from splatbench.bench import load as load_rule
+from splatbench.metrics import load as load_rule
 from splatbench.bench.ab_train import AbTrainSettings, format_train_result, run_ab_train
 from splatbench.cli import main
 from splatbench.errors import InputError

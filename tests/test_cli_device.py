@@ -112,13 +112,13 @@ NO_GPU_COMMANDS = {
 def no_gpu(monkeypatch):
     import torch
 
-    from splatbench.raster import backend
+    from splatbench.raster import device as raster_device
 
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
-    monkeypatch.setattr(backend, "cuda_available", lambda: False)
-    backend.get_backend.cache_clear()  # a real GPU's "cuda" backend may be cached
+    monkeypatch.setattr(raster_device, "cuda_available", lambda: False)
+    raster_device.get_device.cache_clear()  # a real GPU's "cuda" backend may be cached
     yield
-    backend.get_backend.cache_clear()
+    raster_device.get_device.cache_clear()
 
 
 @pytest.mark.parametrize("path", sorted(NO_GPU_COMMANDS))
@@ -129,10 +129,10 @@ def test_cuda_without_a_gpu_is_one_line_everywhere(no_gpu, path):
 
 
 def test_no_cuda_is_said_in_one_place(no_gpu):
-    from splatbench.raster.backend import get_backend
+    from splatbench.raster.device import get_device
 
     with pytest.raises(InputError, match="^device: " + re.escape(NO_GPU.format("Dr.Jit")) + "$"):
-        get_backend("cuda")
+        get_device("cuda")
     with pytest.raises(InputError, match="^where: " + re.escape(NO_GPU.format("torch")) + "$"):
         torch_device("cuda", "where")
-    assert get_backend("auto").name == "llvm" and torch_device("auto") == "cpu"
+    assert get_device("auto").name == "llvm" and torch_device("auto") == "cpu"

@@ -1,4 +1,10 @@
-"""No import cycle between splatbench modules (issue #14); reference/ imports no splatbench.
+"""The layers of docs/architecture.md, enforced; no import cycle between splatbench modules
+(issue #14); reference/ imports no splatbench.
+
+Every import of a splatbench module is checked against the table in docs/architecture.md
+(read from the file, so the table is the rule): a module may import its own part, the
+parts its row names, and any lower level; a failure names the file, the line, the import
+and the rule.
 
 Every ``import`` statement of every module under ``splatbench/`` counts, wherever it
 is written: at the top, inside a function (a late import written to dodge a cycle is
@@ -18,7 +24,9 @@ test runs in well under a second. Edges:
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 
@@ -37,13 +45,25 @@ def module_names(root: Path = ROOT) -> dict[str, Path]:
     return out
 
 
-def imports_of(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
-    """The package modules that ``name`` (at ``path``) imports, anywhere in its body."""
+class Import(NamedTuple):
+    """One import statement's package module: where it is written and what it names."""
+
+    line: int
+    target: str
+    main: bool  # written under the module's ``if __name__ == "__main__":`` block
+
+
+def import_edges(name: str, path: Path, modules: dict[str, Path]) -> list[Import]:
+    """Every import of a package module that ``name`` (at ``path``) makes, anywhere in its body."""
     is_package = path.name == "__init__.py"
-    targets: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    main_lines = {n.lineno for block in tree.body if _is_main_block(block) for n in ast.walk(block)
+                  if hasattr(n, "lineno")}
+    out: list[Import] = []
+    for node in ast.walk(tree):
+        targets: list[str | None] = []
         if isinstance(node, ast.Import):
-            targets.update(_known_prefix(alias.name, modules) for alias in node.names)
+            targets = [_known_prefix(alias.name, modules) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
@@ -52,10 +72,20 @@ def imports_of(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
                 base = ".".join(anchor + ([base] if base else []))
             for alias in node.names:
                 full = f"{base}.{alias.name}"
-                targets.add(full if full in modules else _known_prefix(base, modules))
-    targets.discard(None)
-    targets.discard(name)  # `from splatbench.x import y` inside x's own package __init__ is no cycle
-    return {t for t in targets if t is not None}
+                targets.append(full if full in modules else _known_prefix(base, modules))
+        # `from splatbench.x import y` inside x's own package __init__ is no cycle
+        out += [Import(node.lineno, t, node.lineno in main_lines) for t in targets if t is not None and t != name]
+    return sorted(set(out))
+
+
+def _is_main_block(node: ast.stmt) -> bool:
+    return isinstance(node, ast.If) and isinstance(node.test, ast.Compare) and \
+        isinstance(node.test.left, ast.Name) and node.test.left.id == "__name__"
+
+
+def imports_of(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """The package modules that ``name`` (at ``path``) imports, anywhere in its body."""
+    return {i.target for i in import_edges(name, path, modules)}
 
 
 def _known_prefix(dotted: str, modules: dict[str, Path]) -> str | None:
@@ -157,6 +187,155 @@ def test_reference_imports_nothing_from_splatbench():
                 [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else []
             offenders += [f"{path.name}:{node.lineno} {n}" for n in names if n.split(".")[0] == PACKAGE]
     assert not offenders, f"reference/ imports splatbench: {offenders}"
+
+# --------------------------------------------------------------------------- the layer table
+ARCHITECTURE = ROOT.parent / "docs" / "architecture.md"
+
+
+class Part(NamedTuple):
+    """One row of the layer table."""
+
+    level: int
+    name: str
+    modules: tuple[str, ...]
+    also: frozenset[str]   # sibling parts it may import
+    rule: str
+
+
+#: Imports that run against the table today, each with its reason; the list only shrinks
+#: (`test_known_exceptions_still_occur` fails once one is gone).
+KNOWN_EXCEPTIONS: dict[tuple[str, str], str] = {}
+
+
+def layer_table(path: Path = ARCHITECTURE) -> list[Part]:
+    """The rows of the first markdown table of ``path`` whose header starts ``| Level |``."""
+    parts, rows = [], False
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if line.startswith("| Level |"):
+            rows = True
+            continue
+        if rows and line.startswith("|---"):
+            continue
+        if rows and not line.startswith("|"):
+            break
+        if rows:
+            level, name, modules, also, rule = (c.strip() for c in line.strip().strip("|").split("|"))
+            parts.append(Part(int(level), name, tuple(re.findall(r"`([\w.]+)`", modules)),
+                              frozenset(a.strip() for a in also.split(",") if a.strip()), rule))
+    return parts
+
+
+def part_of(module: str, parts: list[Part]) -> Part | None:
+    """The row whose module is the longest dotted prefix of ``module`` (``splatbench`` alone
+    matches only the package's own ``__init__``)."""
+    best, length = None, -1
+    for part in parts:
+        for prefix in part.modules:
+            hit = module == prefix or (prefix != "splatbench" and module.startswith(prefix + "."))
+            if hit and len(prefix) > length:
+                best, length = part, len(prefix)
+    return best
+
+
+def allowed(src: Part, dst: Part) -> bool:
+    return dst.level < src.level or dst.name == src.name or dst.name in src.also
+
+
+def violations(root: Path = ROOT, table: Path = ARCHITECTURE) -> list[tuple[str, str, str]]:
+    """``(module, target, message)`` of every import that runs against the table."""
+    parts = layer_table(table)
+    entry = max(parts, key=lambda p: p.level)
+    modules = module_names(root)
+    out = []
+    for name, path in modules.items():
+        src = part_of(name, parts)
+        for imp in import_edges(name, path, modules):
+            dst = part_of(imp.target, parts)
+            here = entry if imp.main else src
+            if src is None or dst is None or allowed(here, dst):
+                continue
+            where = f"{path.relative_to(root.parent)}:{imp.line}"
+            may = "".join(f"{a}, " for a in sorted(src.also))
+            out.append((name, imp.target, f"{where} imports {imp.target} ({dst.name}, level {dst.level}): "
+                                          f"{src.name} (level {src.level}) may import only {src.name}, {may}and "
+                                          f"levels below {src.level}. Rule: {src.rule}"))
+    return out
+
+
+def test_the_table_is_read():
+    """The table has its rows, and every row's parts named under "also imports" exist."""
+    parts = layer_table()
+    names = {p.name for p in parts}
+    assert {"train", "bench", "experiments", "reports", "compare", "conform", "measurement", "plugins",
+            "rasterizer", "model", "foundation", "oracle"} <= names, names
+    assert all(a in names for p in parts for a in p.also), [(p.name, p.also) for p in parts]
+
+
+def test_every_module_has_a_row():
+    parts = layer_table()
+    homeless = [m for m in module_names() if part_of(m, parts) is None]
+    assert not homeless, f"modules on no row of {ARCHITECTURE.name} (add them to the table): {homeless}"
+
+
+def test_every_import_follows_the_layer_table():
+    found = [msg for module, target, msg in violations() if (module, target) not in KNOWN_EXCEPTIONS]
+    assert not found, f"imports against the table in {ARCHITECTURE.name}:\n  " + "\n  ".join(found)
+
+
+def test_known_exceptions_still_occur():
+    found = {(module, target) for module, target, _ in violations()}
+    gone = [pair for pair in KNOWN_EXCEPTIONS if pair not in found]
+    assert not gone, f"these exceptions no longer occur: remove them from KNOWN_EXCEPTIONS: {gone}"
+
+
+@pytest.mark.parametrize("importer, imported", [
+    ("experiments", "reports"),   # a run kind declares its report as data
+    ("train", "bench"),           # training measures with splatbench.metrics
+    ("compare", "train"), ("compare", "experiments"),
+    ("conform", "train"), ("conform", "experiments"),
+])
+def test_no_import_from(importer, imported):
+    """The issue's must-show pairs, named: no module of ``importer`` imports ``imported``."""
+    parts = {p.name: p for p in layer_table()}
+    assert not allowed(parts[importer], parts[imported]), "the table itself allows it"
+    table = layer_table()
+    modules = module_names()
+    found = [f"{name} -> {imp.target} (line {imp.line})" for name, path in modules.items()
+             if part_of(name, table) is parts[importer]
+             for imp in import_edges(name, path, modules) if part_of(imp.target, table) is parts[imported]]
+    assert not found, found
+
+
+def test_the_checker_sees_a_break(tmp_path):
+    """The checker itself: a late import against the table, one under TYPE_CHECKING, and one
+    in a ``__main__`` block (the entry layer: allowed) on a small table."""
+    pkg = tmp_path / PACKAGE
+    (pkg / "low").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "low" / "__init__.py").write_text("")
+    (pkg / "top.py").write_text("")
+    (pkg / "low" / "a.py").write_text("def f():\n    from splatbench import high\n")
+    (pkg / "low" / "b.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import splatbench.high\n")
+    (pkg / "low" / "c.py").write_text("if __name__ == '__main__':\n    from splatbench import top\n")
+    (pkg / "high.py").write_text("from splatbench.low import a\n")
+    doc = tmp_path / "arch.md"
+    doc.write_text("| Level | Part | Modules | Also imports | Rule |\n|---|---|---|---|---|\n"
+                   "| 3 | top | `splatbench.top` | | anything |\n"
+                   "| 2 | high | `splatbench.high` | | above low |\n"
+                   "| 1 | low | `splatbench`, `splatbench.low` | | nothing above |\n")
+    found = sorted((m, t) for m, t, _ in violations(pkg, doc))
+    assert found == [("splatbench.low.a", "splatbench.high"), ("splatbench.low.b", "splatbench.high")]
+    message = violations(pkg, doc)[0][2]
+    assert message.startswith("splatbench/low/a.py:2 imports splatbench.high (high, level 2)") and \
+        message.endswith("Rule: nothing above")
+
+
+def test_one_class_named_backend():
+    """``Backend`` is the rasterizer plugin of splatbench.backends, nothing else."""
+    found = [f"{path.relative_to(ROOT.parent)}:{node.lineno}" for path in sorted(ROOT.rglob("*.py"))
+             for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+             if isinstance(node, ast.ClassDef) and node.name == "Backend"]
+    assert len(found) == 1 and found[0].startswith("splatbench/backends/base.py:"), found
 
 
 if __name__ == "__main__":  # `python tests/test_imports.py` lists the cycles

@@ -54,9 +54,9 @@ import splatbench
 import drjit as dr
 print("env", os.environ[llvm.ENV_VAR])
 print("llvm", bool(dr.has_backend(dr.JitBackend.LLVM)))
-from splatbench.raster.backend import get_backend
+from splatbench.raster.device import get_device
 try:
-    get_backend("cpu")
+    get_device("cpu")
 except splatbench.InputError as exc:
     print("error", exc)
 """

@@ -16,7 +16,8 @@ import torch
 
 from splatbench.errors import InputError
 from splatbench.train.dssim import dssim, gaussian_window
-from splatbench.train.losses import photometric_loss, to_bchw
+from splatbench.metrics.image import to_bchw
+from splatbench.train.losses import photometric_loss
 
 EPS32 = float(torch.finfo(torch.float32).eps)
 

@@ -16,7 +16,7 @@ import pytest
 import splatbench
 from splatbench import Camera, Gaussians
 from splatbench.raster.api import to_tensor
-from splatbench.raster.backend import dr, get_backend
+from splatbench.raster.device import dr, get_device
 from splatbench.raster.compositing import CompositeSettings, _alpha_at
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.pipeline import project_view
@@ -40,7 +40,7 @@ def elongated_scene(n: int, seed: int) -> tuple[Gaussians, Camera]:
 def dense_useful(gaussians, camera, opts: RasterOptions) -> int:
     """(pixel, Gaussian) pairs the compositing loop's per-pixel test accepts, over the
     whole image, ignoring tiles entirely."""
-    m = get_backend("cpu").t
+    m = get_device("cpu").t
     with dr.suspend_grad():
         proj = project_view(*(to_tensor(m, getattr(gaussians, k)) for k in
                               ("means", "log_scales", "quats", "opacity_logits")), camera, opts)

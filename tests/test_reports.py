@@ -22,9 +22,9 @@ from splatbench.errors import InputError
 from splatbench.experiments import RunRecord, expand, parse_experiment
 from splatbench.experiments.store import write_record, write_table
 from splatbench.reports import build_report, write_report
-from splatbench.reports.figures import pareto_front
+from splatbench.figures import pareto_front
 from splatbench.reports.findings import fmt_interval
-from splatbench.reports.stats import paired_difference, paired_ratio
+from splatbench.metrics.stats import paired_difference, paired_ratio
 from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
 from splatbench.reports.tables import Stat
 
@@ -400,7 +400,7 @@ def test_product_grid_rows_average_each_seed_first(tmp_path):
     """In a product grid a row pools the other axis's values: the interval is over seeds
     (each seed's runs averaged first), not over runs, so n is the number of seeds."""
     from splatbench.experiments.runner import run_experiment
-    from splatbench.reports.stats import t_interval
+    from splatbench.metrics.stats import t_interval
 
     spec = parse_experiment({"name": "prod", "kind": "dummy", "scenes": ["alpha"], "seeds": [0, 1, 2],
                              "axes": {"x": [1.0, 2.0], "n": [3, 5]}}, source="prod.toml")
@@ -424,12 +424,15 @@ def test_product_grid_rows_average_each_seed_first(tmp_path):
 
 
 def test_a_new_kind_declares_its_report_in_one_place():
-    """A kind's metrics, findings rules and extra findings come from its own `KindReport`
-    (passed to its `RunKind`): the report code names no kind."""
+    """A kind's metrics and findings rules come from its own `KindReport` (plain data passed
+    to its `RunKind`), its extra findings from notes registered with the reports under its
+    name: the report code names no kind, and the kind imports no report code."""
     from splatbench.experiments.kinds import RunKind, RunOutput, register_kind
+    from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport
+    from splatbench.metrics.spec import MetricSpec
     from splatbench.reports.findings import rules_for
-    from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, kind_report
-    from splatbench.reports.tables import metric_specs
+    from splatbench.reports.notes import auto_sh_degree_note, axis_notes, register_axis_note, run_findings
+    from splatbench.reports.tables import kind_report, metric_specs
 
     declared = KindReport(metrics=(MetricSpec("loss", "loss", ".3f", "", "lower"),),
                           rules=FindingRules("loss", (Comparison("loss", "diff"),)))
@@ -440,6 +443,14 @@ def test_a_new_kind_declares_its_report_in_one_place():
     assert metric_specs("toy-report-kind", table) == declared.metrics      # its own metrics only
     assert rules_for("toy-report-kind", declared.metrics) == declared.rules
     assert [m.name for m in metric_specs("no-such-kind", table)] == ["loss", "other"]  # undeclared: every one
+
+    def note(axis_table, runs, scenes):
+        return ["- a toy note"], []
+
+    assert register_axis_note("toy-report-kind", note) is note
+    assert axis_notes("toy-report-kind") == (note,) and axis_notes("no-such-kind") == ()
+    assert [name for name, _ in run_findings("raster")] == ["parity"]  # the built-in kinds' notes
+    assert axis_notes("train") == (auto_sh_degree_note,)
 
 
 def test_a_cell_whose_runs_all_failed_reports_a_dash(tmp_path):

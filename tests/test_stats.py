@@ -7,7 +7,7 @@ import math
 import pytest
 from scipy import stats as sps
 
-from splatbench.reports.stats import (bootstrap_median_ratio, paired_difference, paired_ratio, t_interval,
+from splatbench.metrics.stats import (bootstrap_median_ratio, paired_difference, paired_ratio, t_interval,
                                       t_quantile)
 from splatbench.reports.tables import Stat
 

@@ -169,10 +169,10 @@ def test_cli_exits_nonzero_on_a_failure(monkeypatch):
 def test_a_device_that_cannot_run_fails_before_any_case(monkeypatch):
     """'cuda' without a GPU (faked) is the caller's fault, not a robustness failure of every case:
     one `InputError` before the first case (the CLI's one line: tests/test_cli_device.py)."""
-    from splatbench.raster import backend
+    from splatbench.raster import device as raster_device
 
-    monkeypatch.setattr(backend, "cuda_available", lambda: False)
-    backend.get_backend.cache_clear()
+    monkeypatch.setattr(raster_device, "cuda_available", lambda: False)
+    raster_device.get_device.cache_clear()
     ran = []
     try:
         with pytest.raises(InputError, match=r"^device: 'cuda' asked for, but Dr\.Jit finds no CUDA device"):
@@ -180,5 +180,5 @@ def test_a_device_that_cannot_run_fails_before_any_case(monkeypatch):
         with pytest.raises(InputError, match=r"^device: expected 'auto', 'cpu' or 'cuda', got 'tpu'$"):
             run(4, device="tpu", on_case=ran.append)
     finally:
-        backend.get_backend.cache_clear()
+        raster_device.get_device.cache_clear()
     assert ran == []

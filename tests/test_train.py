@@ -596,7 +596,7 @@ def test_cli_rejects_graphdecos_absolute_schedule_on_a_short_run_before_reading_
 
 # ----------------------------------------------------------------------------- benchmark harness
 def test_bench_train_reports_throughput_and_a_time_split_that_adds_up(tmp_path):
-    from splatbench.bench.machine import machine_info
+    from splatbench.metrics.machine import machine_info
     from splatbench.bench.train import TrainBenchSettings, format_table, run_size, write_csv, write_json
 
     settings = TrainBenchSettings(sizes=(16,), gaussians=60, views=3, iterations=3, warmup=1)
@@ -646,7 +646,7 @@ def test_a_step_after_warm_up_compiles_no_kernel_for_a_new_view():
 
 def test_psnr_is_one_function_for_tensors_and_float64_arrays():
     """`train.metrics.psnr` is the only PSNR (the raster run kind calls it with clamp=False)."""
-    from splatbench.train.metrics import psnr
+    from splatbench.metrics.image import psnr
 
     a = np.full((4, 4, 3), 1.5)          # above 1: only the clamp can bring it to the target
     b = np.full((4, 4, 3), 0.9)

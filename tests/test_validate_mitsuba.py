@@ -16,6 +16,7 @@ from click.testing import CliRunner
 
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench import Camera, InputError
+from splatbench.backends.builtins.mitsuba_scene import mitsuba_volprim
 from splatbench.validate import mitsuba as vm
 from splatbench.validate.mitsuba import cases
 
@@ -28,7 +29,7 @@ def test_sh_basis_is_graphdeco_s():
 
     from reference.sh import sh_basis
 
-    mi = vm.mitsuba_volprim()
+    mi = mitsuba_volprim()
     rng = np.random.default_rng(3)
     d = rng.normal(size=(64, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)

@@ -30,6 +30,51 @@ GRAPHDECO = {name: getattr(RasterOptions(), name) for name in ("alpha_min", "alp
 OUTPUTS = ("rgb", "alpha", "depth")
 
 
+@dataclass(frozen=True)
+class Axis:
+    """One axis of the convention vocabulary: graphdeco's value and the alternatives found in real code."""
+
+    name: str
+    graphdeco: Any
+    alternatives: tuple
+    meaning: str
+
+
+#: The convention vocabulary (docs/backends.md, "Conventions"): every axis `BackendInfo` can declare
+#: besides the approximations above, in the order conform searches them (the most basic first).
+AXES: tuple[Axis, ...] = (
+    Axis("pixel_centre", "half", ("integer",), "pixel (i, j) sampled at (j + 0.5, i + 0.5), or at (j, i)"),
+    Axis("opacity_activation", "sigmoid", ("raw",), "opacity = sigmoid(logit), or the logit clamped to [0, 1]"),
+    Axis("scale_activation", "exp", ("raw",), "scales = exp(log_scales), or log_scales themselves"),
+    Axis("quat_order", "wxyz", ("xyzw",), "quaternion component order"),
+    Axis("eps2d", 0.3, (0.0, 0.1), "low-pass added to the 2D covariance (pixel^2)"),
+    Axis("background", "weighted", ("added", "ignored"),
+         "rgb + T_final * background, rgb + background, or no background"),
+    Axis("sh_view_direction", "camera_to_mean", ("mean_to_camera", "world_origin", "detached"),
+         "SH direction normalize(mean - camera centre), reversed, normalize(mean), or detached from the means "
+         "(same forward, no d/dmeans through the colour)"),
+    Axis("sort_key", "view_z", ("distance", "world_z", "index"),
+         "compositing order: camera z, distance to the camera, world z, input order"),
+    Axis("sh_basis", "graphdeco", ("no_condon_shortley",),
+         "SH band signs: graphdeco's (Condon-Shortley phase), or every constant positive"),
+    Axis("sh_degree", 3, (2, 1, 0, "ignored"),
+         "highest SH band evaluated; 'ignored': every band given, whatever the sh_degree argument says"),
+    Axis("colour_clamp", "min0", ("none", "0_1"), "colour = max(SH + 0.5, 0), unclamped, or clipped to [0, 1]"),
+    Axis("jacobian_clamp", 1.3, ("none",), "EWA Jacobian taken at the point clamped to 1.3 x the half FoV, or not"),
+    Axis("alpha_max", GRAPHDECO["alpha_max"], (0.999, 1.0), "alpha clamp"),
+    Axis("alpha_min", GRAPHDECO["alpha_min"], (0.0,), "contributions below it are skipped"),
+    Axis("near_plane", "camera", (0.2, 0.01), "culling plane: camera.near, graphdeco's fixed 0.2, or 0.01"),
+    Axis("depth", "normalised", ("unnormalised", "distance"),
+         "expected camera z / alpha, sum T a z, or the expected distance to the camera / alpha"),
+    Axis("radius", GRAPHDECO["radius"], ("opacity",),
+         "footprint cutoff: 3 sigma, or where alpha falls below alpha_min ('none' declares the same)"),
+    Axis("transmittance_min", GRAPHDECO["transmittance_min"], (0.0,), "early termination threshold (0: none)"),
+)
+AXIS = {a.name: a for a in AXES}
+#: Every declarable convention (the approximations and the vocabulary) -> graphdeco's value.
+CONVENTIONS = {**GRAPHDECO, **{a.name: a.graphdeco for a in AXES}}
+
+
 class RasterFn(Protocol):
     def __call__(self, means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int | None = None,
                  background=None) -> tuple[Any, Any, Any]: ...
@@ -50,6 +95,10 @@ class BackendInfo:
       threshold (0 = none); eps2d: low-pass added to the 2D covariance (pixel^2);
       radius: "3sigma", "opacity", or "none" (dense: no cutoff); tile_size: 0 = no tiles;
       antialiased: Mip-Splatting opacity compensation.
+    Declared conventions (None = graphdeco's; the values each takes: `AXES`, docs/backends.md):
+      pixel_centre, opacity_activation, scale_activation, quat_order, background,
+      sh_view_direction, sort_key, sh_basis, sh_degree, colour_clamp, jacobian_clamp,
+      near_plane, depth (and eps2d, alpha_max, alpha_min above).
     exact: True for a backend that renders the exact Gaussian mixture (no skip, no
       clamp, no cutoff, no early stop): its errors are compared in "exact" mode.
     """
@@ -68,21 +117,42 @@ class BackendInfo:
     radius: str | None = None
     tile_size: int | None = None
     antialiased: bool | None = None
+    pixel_centre: str | None = None
+    opacity_activation: str | None = None
+    scale_activation: str | None = None
+    quat_order: str | None = None
+    background: str | None = None
+    sh_view_direction: str | None = None
+    sort_key: str | None = None
+    sh_basis: str | None = None
+    sh_degree: int | str | None = None
+    colour_clamp: str | None = None
+    jacobian_clamp: float | str | None = None
+    near_plane: float | str | None = None
+    depth: str | None = None
     exact: bool = False
     description: str = ""
     declared: tuple[str, ...] = field(default=(), repr=False)
 
     def __post_init__(self) -> None:
-        given = tuple(k for k in GRAPHDECO if getattr(self, k) is not None)
+        for axis in AXES:
+            if axis.name in GRAPHDECO:  # numeric approximations: any value may be declared
+                continue
+            value = getattr(self, axis.name)
+            if value is not None and value != axis.graphdeco and value not in axis.alternatives:
+                raise ValueError(f"BackendInfo.{axis.name}: {value!r} is not in the convention vocabulary "
+                                 f"(one of {[axis.graphdeco, *axis.alternatives]}; docs/backends.md)")
+        given = tuple(k for k in CONVENTIONS if getattr(self, k) is not None)
         object.__setattr__(self, "declared", given)
 
     def convention(self, key: str):
-        """The value of an approximation this backend follows (declared, else graphdeco's)."""
+        """The value of a convention or approximation this backend follows (declared, else graphdeco's)."""
         value = getattr(self, key)
-        return GRAPHDECO[key] if value is None else value
+        return CONVENTIONS[key] if value is None else value
 
     def reference_options(self) -> dict:
-        """Keyword arguments of `reference.render(mode="matched")` that reproduce these conventions."""
+        """The conventions mapping of `reference_render` (approximations and vocabulary axes) that
+        reproduces this backend."""
         radius = self.convention("radius")
         if radius == "none":
             # No cutoff renders as the "opacity" rule: it cuts exactly where o·exp(-sigma) falls
@@ -90,7 +160,8 @@ class BackendInfo:
             radius = "opacity"
         return {"alpha_min": self.convention("alpha_min"), "alpha_max": self.convention("alpha_max"),
                 "transmittance_min": self.convention("transmittance_min"), "eps2d": self.convention("eps2d"),
-                "radius": radius, "antialiased": self.convention("antialiased")}
+                "radius": radius, "antialiased": self.convention("antialiased"),
+                **{a.name: self.convention(a.name) for a in AXES if a.name not in GRAPHDECO}}
 
 
 @dataclass(frozen=True)

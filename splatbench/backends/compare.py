@@ -131,7 +131,7 @@ class CompareRow:
 class CompareResult:
     rows: tuple[CompareRow, ...]
     settings: CompareSettings
-    machine: object               # `splatbench.bench.machine.MachineInfo`
+    machine: object               # `splatbench.metrics.machine.MachineInfo`
     command: str
     seconds: float
     notes: tuple[str, ...] = ()   # per workload: resolution of the error measurement, oracles
@@ -161,7 +161,7 @@ def run_compare(backends: Sequence, workloads: Sequence[Workload | WorkloadSpec]
     from splatbench.backends.compare_measure import FLOAT64_ORACLE, GradOracle, OracleImages, time_backends, \
         torch_inputs
     from splatbench.backends.registry import available, get_backend
-    from splatbench.bench.machine import load_average, machine_info
+    from splatbench.metrics.machine import load_average, machine_info
 
     settings.validate()
     resolved = [get_backend(b) for b in backends]

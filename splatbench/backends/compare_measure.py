@@ -21,7 +21,7 @@ from splatbench.backends.builtins.reference_backend import GROUPS
 from splatbench.backends.compare_types import (DEPTH_ALPHA_MIN, FORWARD_ATOL, OFF_THRESHOLD, GradError, ImageError,
                                                Timing)
 from splatbench.errors import InputError, one_line
-from splatbench.train.metrics import psnr
+from splatbench.metrics.image import psnr
 
 
 def as_numpy(x) -> np.ndarray:
@@ -131,7 +131,7 @@ class Cotangents:
 
 def torch_inputs(workload, device: str) -> tuple:
     """The five parameter groups as float32 torch tensors on ``device``."""
-    from splatbench.bench.timing import torch_params
+    from splatbench.metrics.timing import torch_params
 
     return tuple(p.to(device) for p in torch_params(workload.gaussians))
 
@@ -303,7 +303,7 @@ def _release_caches() -> None:
 
 def peak_rise(fn: Callable[[], None], device: str) -> tuple[float, str]:
     """(MB, what it is) of the memory one call of ``fn`` needs above what is held before it."""
-    from splatbench.bench.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
+    from splatbench.metrics.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
 
     gc.collect()
     if device == "cuda":

@@ -165,9 +165,9 @@ def findings(table: pd.DataFrame) -> list[str]:
 # ----------------------------------------------------------------------------- figures
 def time_figures(table: pd.DataFrame, out: Path) -> list[Path]:
     """Forward (and forward+backward) median time against rgb PSNR to the exact mixture, one
-    panel per workload, Pareto front marked (`splatbench.reports.figures.pareto_figure`)."""
-    from splatbench.reports.figures import pareto_figure
-    from splatbench.reports.tables import MetricSpec
+    panel per workload, Pareto front marked (`splatbench.figures.pareto_figure`)."""
+    from splatbench.figures import pareto_figure
+    from splatbench.metrics.spec import MetricSpec
 
     quality = MetricSpec("exact_rgb_psnr", "rgb PSNR to the exact mixture (dB)", ".1f", "dB", "higher")
     paths = []
@@ -311,7 +311,7 @@ _outlier_cell(r), r.forward_verdict] for _, r in table.iterrows()]), "",
 def write_compare(result: CompareResult, out: str | Path) -> Path:
     """Write ``out``/results.parquet, ``out``/run.json, the figures and ``out``/report.md;
     returns report.md's path."""
-    from splatbench.experiments.store import atomic_write
+    from splatbench.fsutil import atomic_write
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -324,7 +324,7 @@ def write_compare(result: CompareResult, out: str | Path) -> Path:
 
 def rewrite_report(out: str | Path) -> Path:
     """(Re)write ``out``/report.md and its figures from ``out``/results.parquet and run.json."""
-    from splatbench.experiments.store import atomic_write
+    from splatbench.fsutil import atomic_write
 
     out = Path(out)
     table = pd.read_parquet(out / "results.parquet")

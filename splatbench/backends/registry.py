@@ -63,7 +63,11 @@ def _load(target: str, label: str):
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise InputError(f"backend: cannot import module {module_name!r} for {label!r} ({exc})") from None
+        hint = ""
+        if isinstance(exc, ModuleNotFoundError) and exc.name and module_name.startswith(exc.name):
+            hint = (f"; the folder holding it must be on PYTHONPATH (the current folder is not on the "
+                    f"splatbench command's path): PYTHONPATH=/path/to/folder splatbench ...")
+        raise InputError(f"backend: cannot import module {module_name!r} for {label!r} ({exc}){hint}") from None
     except Exception as exc:  # noqa: BLE001 - user code failing on import is bad input, named in one line
         where = ""
         if isinstance(exc, SyntaxError) and exc.filename:

@@ -9,7 +9,7 @@ worker runs Dr.Jit and torch on ``threads`` threads. The ratio old/new of the
 medians is reported only when the load of *other* processes stayed low: the
 1-minute load average is sampled before the workers start, between the pairs of
 runs and at the end, and the workers' own share of it (from the CPU seconds they
-report) is subtracted by `splatbench.bench.load.Load`, the rule the ``raster`` run
+report) is subtracted by `splatbench.metrics.load.Load`, the rule the ``raster`` run
 kind uses too. Otherwise the ratio is withheld (`AbResult.ratio` is None) and
 `AbResult.note` says why. docs/benchmarks.md shows the command.
 
@@ -32,8 +32,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from splatbench.bench import load as load_rule
-from splatbench.bench.load import Load, usable_cores
+from splatbench.metrics import load as load_rule
+from splatbench.metrics.load import Load, usable_cores
 from splatbench.errors import InputError, SplatbenchError
 
 WORKER = r"""
@@ -86,7 +86,7 @@ class AbResult:
     loads: list[float] = field(default_factory=list)  # 1-minute load average: before the workers start,
     #                                                   before each pair of runs, after the last
     own_cpu: float = 0.0        # cores the two workers kept busy, from their start to the last run
-    load_other: float = 0.0     # estimated load of other processes (`splatbench.bench.load.Load.other`)
+    load_other: float = 0.0     # estimated load of other processes (`splatbench.metrics.load.Load.other`)
     cores: int = 0              # usable cores
     ratio: float | None = None  # old_median / new_median; None when the machine was not quiet
     note: str = ""              # why the ratio is withheld ("" when it is reported)

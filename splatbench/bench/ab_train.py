@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from splatbench.bench.ab import AbResult, Worker, old_tree, summarize
-from splatbench.bench.load import Load
+from splatbench.metrics.load import Load
 from splatbench.bench.train import STANDARD_SIZES, check_train_settings
 from splatbench.errors import InputError
 

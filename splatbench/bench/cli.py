@@ -34,9 +34,9 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
     256x256, 100000 512x512, 1000000 800x800, and the garden view. Each workload
     runs in its own subprocess so its peak RSS is its own.
     """
-    from splatbench.bench.machine import load_average, machine_info
     from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, run_suite, standard_suite,
                                          write_csv, write_json)
+    from splatbench.metrics.machine import load_average, machine_info
     from splatbench.workloads import parse_synthetic, parse_workload
     from splatbench.checks import check_image_size
     from splatbench.overrides import parse_overrides
@@ -95,8 +95,8 @@ def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmu
     from dataclasses import asdict
 
     from splatbench.bench.ab import run_ab
-    from splatbench.bench.machine import machine_info
     from splatbench.bench.raster import STANDARD_SYNTHETIC
+    from splatbench.metrics.machine import machine_info
     from splatbench.workloads import parse_synthetic
 
     specs = [parse_synthetic(count, size) for count, size in synthetic]
@@ -139,7 +139,7 @@ def ab_train(against: str, sizes: tuple[int, ...], gaussians: int, block: int, p
 
     from splatbench.bench.ab_train import AbTrainSettings, format_train_result, run_ab_train
     from splatbench.bench.train import STANDARD_SIZES
-    from splatbench.bench.machine import machine_info
+    from splatbench.metrics.machine import machine_info
 
     settings = AbTrainSettings(sizes=tuple(sizes) or STANDARD_SIZES, gaussians=gaussians, block=block, pairs=pairs,
                                warmup=warmup, threads=threads)
@@ -171,7 +171,7 @@ def train(sizes: tuple[int, ...], gaussians: int, iterations: int, warmup: int, 
           device: str) -> None:
     """Training throughput: iterations/s and the share of rasterizer forward, backward,
     loss and optimizer in a step (see splatbench/bench/train.py)."""
-    from splatbench.bench.machine import load_average, machine_info
+    from splatbench.metrics.machine import load_average, machine_info
     from splatbench.bench.train import (STANDARD_SIZES, TrainBenchSettings, format_table, run_size, write_csv,
                                         write_json)
 

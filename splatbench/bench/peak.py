@@ -32,9 +32,9 @@ class PeakResult:
 
 def fp32_peak(device: str = "cpu", lanes: int = 1 << 20, runs: int = 5) -> PeakResult:
     """Measure the FP32 FMA rate of the Dr.Jit backend for ``device`` ("cpu" or "cuda")."""
-    from splatbench.raster.backend import dr, get_backend
+    from splatbench.raster.device import dr, get_device
 
-    m = get_backend(device).t
+    m = get_device(device).t
 
     def launch() -> float:
         with dr.suspend_grad():

@@ -1,8 +1,8 @@
 """Rasterizer benchmark: run time, stage split, throughput and peak memory per workload.
 
 Laid out like pytorch3d's ``tests/benchmarks/bm_rasterize_points.py``: the timing
-closures live in `splatbench.bench.timing`, the machine description in
-`splatbench.bench.machine`; `run_one` warms the closures up and times them on
+closures live in `splatbench.metrics.timing`, the machine description in
+`splatbench.metrics.machine`; `run_one` warms the closures up and times them on
 one workload; `run_isolated` runs `run_one` in a fresh interpreter
 (``python -m splatbench.bench.raster --one ...``) so that the peak RSS it reports is
 that workload's alone. `run_suite` runs a list of workloads that way.
@@ -31,9 +31,9 @@ from pathlib import Path
 from typing import Callable
 
 from splatbench.bench.files import write_csv_rows, write_results_json
-from splatbench.bench.machine import MachineInfo, resolve_device
-from splatbench.bench.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
-from splatbench.bench.timing import (StageSplit, forward_backward_with_init, forward_with_init, milliseconds,
+from splatbench.metrics.machine import MachineInfo, resolve_device
+from splatbench.metrics.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
+from splatbench.metrics.timing import (StageSplit, forward_backward_with_init, forward_with_init, milliseconds,
                                      staged_runs, time_runs, torch_params)
 from splatbench.errors import InputError, SplatbenchError
 from splatbench.workloads import GARDEN, WorkloadSpec, parse_synthetic, parse_workload

@@ -127,8 +127,8 @@ def synthetic_scene(size: int, n: int, views: int, seed: int):
 
 def run_size(size: int, settings: TrainBenchSettings) -> TrainBenchResult:
     """Benchmark training at ``size`` x ``size`` in this process."""
-    from splatbench.bench.memory import peak_rss_mb
-    from splatbench.bench.machine import resolve_device
+    from splatbench.metrics.memory import peak_rss_mb
+    from splatbench.metrics.machine import resolve_device
     from splatbench.train.config import TrainConfig
     from splatbench.train.loop import StepTimes, Trainer, torch_threads
 

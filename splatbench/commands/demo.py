@@ -34,7 +34,7 @@ def garden_check(out: Path, scale: float) -> None:
     from splatbench.backends import reference_render
     from splatbench.backends.compare_types import BOUNDARY_FRACTION, FORWARD_ATOL
     from splatbench.images import save_png
-    from splatbench.reports.figures import difference_figure
+    from splatbench.figures import difference_figure
     from splatbench.workloads import GARDEN_SFM, load_npz
 
     workload = load_npz(GARDEN_SFM, view=0)

@@ -12,7 +12,7 @@ A claim is *stale*, and is taken over, when its owner is gone:
   another time (the pid was reused);
 - on another host (a shared file system): the claim's file was not touched for
   `HEARTBEAT_TIMEOUT` seconds (a live owner touches its claims every
-  `HEARTBEAT_EVERY` seconds, `Claim.touch`).
+  `HEARTBEAT_EVERY` seconds, `RunClaim.touch`).
 Taking over renames the stale file to a private name (one renamer wins), checks
 that the file it moved is the stale one it judged (otherwise puts it back) and
 claims again. The owner releases a claim when its run is recorded (done or failed)
@@ -107,7 +107,7 @@ class Owner:
 
 
 @dataclass(frozen=True)
-class Claim:
+class RunClaim:
     """A claim this process holds on one run."""
 
     path: Path
@@ -138,7 +138,7 @@ def _read(path: Path) -> tuple[Owner | None, float]:
     return Owner.parse(text), mtime
 
 
-def try_claim(folder: str | Path, run_id: str) -> Claim | None:
+def try_claim(folder: str | Path, run_id: str) -> RunClaim | None:
     """Claim run ``run_id`` of the experiment in ``folder``; None when a live owner
     holds it (module doc)."""
     path = claim_path(folder, run_id)
@@ -149,7 +149,7 @@ def try_claim(folder: str | Path, run_id: str) -> Claim | None:
         temp.write_text(me.text(), encoding="utf-8")
         try:
             os.link(temp, path)
-            return Claim(path, me)
+            return RunClaim(path, me)
         except FileExistsError:
             pass
         finally:
@@ -191,5 +191,5 @@ def remove_stale_claim_temps(folder: str | Path) -> None:
             entry.unlink(missing_ok=True)
 
 
-__all__ = ["Claim", "Owner", "try_claim", "claim_path", "pid_alive", "process_start", "remove_stale_claim_temps",
+__all__ = ["RunClaim", "Owner", "try_claim", "claim_path", "pid_alive", "process_start", "remove_stale_claim_temps",
            "CLAIMS_DIR", "HEARTBEAT_EVERY", "HEARTBEAT_TIMEOUT"]

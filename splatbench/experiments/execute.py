@@ -7,7 +7,6 @@ record, so a killed parent loses nothing that finished (see `runner`).
 
 from __future__ import annotations
 
-import os
 import time
 import traceback
 from datetime import datetime
@@ -18,13 +17,15 @@ from splatbench.experiments.configs import plain
 from splatbench.experiments.grid import RunSpec
 from splatbench.experiments.kinds import check_output, get_kind
 from splatbench.experiments.store import WORK_DIR, RunRecord, experiment_dir, worker_name, write_record
-from splatbench.experiments.workers import RUNNER_ENV, die_with_runner
+from splatbench.experiments.workers import die_with_runner
 
 
-def execute_run(run: RunSpec, results_dir: str) -> dict[str, Any]:
+def execute_run(run: RunSpec, results_dir: str, runner: str = "") -> dict[str, Any]:
     """Run ``run`` in this process, write its result file atomically, return the record
-    (as a dict). A failing kind gives a ``failed`` record with a one-line error."""
-    die_with_runner(os.environ.get(RUNNER_ENV, ""))
+    (as a dict). A failing kind gives a ``failed`` record with a one-line error.
+    ``runner``: the runner's ``host:pid:start`` this process must die with
+    (`die_with_runner`; "" for none)."""
+    die_with_runner(runner)
     started, t0 = datetime.now().astimezone(), time.perf_counter()
     workdir = experiment_dir(results_dir, run.experiment) / WORK_DIR / run.run_id
     record = RunRecord(run_id=run.run_id, experiment=run.experiment, kind=run.kind, scene=run.scene, seed=run.seed,

@@ -18,7 +18,7 @@ import time
 
 from splatbench.experiments.execute import execute_run
 from splatbench.experiments.grid import RunSpec
-from splatbench.experiments.workers import RUNNER_ENV, THREADS_ENV, init_worker, runner_id
+from splatbench.experiments.workers import THREADS_ENV, init_worker, runner_id
 
 
 class LocalExecutor:
@@ -93,10 +93,12 @@ class DaskExecutor:
         from distributed import Client, LocalCluster
 
         self.cluster = None
+        self.runner = ""  # the workers of a cluster of our own die with this runner (`die_with_runner`)
         if scheduler is None:
+            self.runner = runner_id()
             self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                         dashboard_address=None, silence_logs=logging.ERROR,
-                                        env={THREADS_ENV: str(threads), RUNNER_ENV: runner_id()})
+                                        env={THREADS_ENV: str(threads)})
             self.client = Client(self.cluster)
         else:
             self.client = Client(scheduler)
@@ -107,7 +109,7 @@ class DaskExecutor:
         return sys.maxsize  # the scheduler queues; a dying worker costs only its own task
 
     def submit(self, run: RunSpec, results_dir: str):
-        return self.client.submit(execute_run, run, results_dir, key=f"run-{run.run_id}-{os.urandom(4).hex()}",
+        return self.client.submit(execute_run, run, results_dir, self.runner, key=f"run-{run.run_id}-{os.urandom(4).hex()}",
                                   pure=False)
 
     def wait(self, futures, timeout: float | None = None) -> set:

@@ -38,6 +38,7 @@ from typing import Any
 from splatbench.checks import check_keys
 from splatbench.errors import InputError
 from splatbench.experiments.configs import flatten, override, unflatten
+from splatbench.experiments.kind_report import KindReport
 
 #: A table cell: what a metric may be.
 Scalar = bool | int | float | str | None
@@ -68,9 +69,8 @@ class RunKind:
     scenes: Callable[[], set[str]] | None = None
     prepare: Callable[[list[dict[str, Any]]], None] | None = None
     description: str = ""
-    #: What its reports show: a `splatbench.reports.kind_report.KindReport` (None: every
-    #: numeric metric, the first one compared).
-    report: Any = None
+    #: What its reports show (None: every numeric metric, the first one compared).
+    report: KindReport | None = None
 
 
 #: Kinds known by name in every process: name -> "module:ATTR" (imported on first use).

@@ -2,7 +2,7 @@
 default options, and measure the error those options trade in against the exact
 Gaussian mixture.
 
-Scene names are workloads (`parse_workload_name`)::
+Scene names are workloads (`splatbench.workloads.parse_workload_name`)::
 
     synthetic-N-S        `splatbench.workloads.synthetic(N, S, S, seed)` (seed = the run's seed)
     synthetic-N-WxH      the same at W x H
@@ -18,7 +18,7 @@ affordable).
 
 One run:
 
-1. Timing, at the workload's full resolution: `splatbench.bench.timing`'s closures
+1. Timing, at the workload's full resolution: `splatbench.metrics.timing`'s closures
    (forward under ``no_grad``; forward + backward of ``rgb.sum()`` to all five
    groups) with the run's options and with the default options, each warmed up first
    (kernels compile or load from Dr.Jit's cache outside the timed part). Then
@@ -26,12 +26,12 @@ One run:
    call with the run's options and one with the defaults, back to back, so both see
    the same load. Per pair, the ratio option / default; ``fwd_rel`` and
    ``fwd_bwd_rel`` are the **median ratio** over pairs with a 95 % percentile-bootstrap
-   interval (``*_low``, ``*_high``; `splatbench.reports.stats.bootstrap_median_ratio`).
+   interval (``*_low``, ``*_high``; `splatbench.metrics.stats.bootstrap_median_ratio`).
    SH is sliced to the evaluated degree, as the trainer does.
 2. Load: the 1-minute load average is read before and after the timed pairs, and the
    process's own share of it (its CPU use over them, CPU seconds / wall seconds, in
    cores, damped as the load average damps it) is subtracted: ``load_other`` estimates
-   the load of *other* processes (`splatbench.bench.load`, the rule ``splatbench bench
+   the load of *other* processes (`splatbench.metrics.load`, the rule ``splatbench bench
    ab`` uses too). ``loaded`` is 1 when it exceeded half the usable cores (``cores``):
    such a run is marked in the table and left out of the findings (docs/reports.md: how
    to get quiet numbers).
@@ -80,14 +80,14 @@ from typing import Any
 
 import numpy as np
 
-from splatbench.bench.load import Load, own_share
 from splatbench.checks import check_keys, check_sh_degree, check_type
 from splatbench.errors import InputError
+from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.experiments.workers import limit_threads
+from splatbench.metrics.load import Load, own_share
+from splatbench.metrics.spec import MetricSpec
 from splatbench.raster.options import RasterOptions
-from splatbench.reports.findings import parity_finding
-from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, TimeQuality
 from splatbench.workloads import build_workload, parse_workload_name
 
 #: Fields passed to the rasterizer as `RasterOptions` (sh_degree goes separately).
@@ -129,7 +129,7 @@ METRICS: dict[str, str] = {
     "load_after": "1-minute load average after them",
     "own_cpu": "this process's CPU use during the timed pairs (CPU seconds / wall seconds, in cores)",
     "load_other": "estimated load of other processes: the largest of load(t) - own_before * exp(-t / 60 s) - own_cpu "
-                  "* (1 - exp(-t / 60 s)) over the section's samples (splatbench.bench.load)",
+                  "* (1 - exp(-t / 60 s)) over the section's samples (splatbench.metrics.load)",
     "own_before": "this process's own share of the load average when the timed pairs started (its earlier CPU "
                   "use: warm-up, the previous run's error renders), an exponential moving average",
     "cores": "CPU cores this process may use",
@@ -267,10 +267,10 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     import torch
 
     import splatbench
-    from splatbench.bench.machine import resolve_device
-    from splatbench.bench.timing import forward_backward_with_init, forward_with_init, time_runs, torch_params
-    from splatbench.reports.stats import bootstrap_median_ratio
-    from splatbench.train.metrics import psnr
+    from splatbench.metrics.machine import resolve_device
+    from splatbench.metrics.timing import forward_backward_with_init, forward_with_init, time_runs, torch_params
+    from splatbench.metrics.stats import bootstrap_median_ratio
+    from splatbench.metrics.image import psnr
 
     limit_threads()
     own_share()  # a checkpoint of the own-load tracker: what ran before this run, then the warm-up
@@ -332,7 +332,7 @@ def _r4(x: float) -> float:
 
 
 #: The ``raster`` kind (``kind = "raster"``).
-#: What the reports of raster runs show (`splatbench.reports.kind_report`).
+#: What the reports of raster runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
     metrics=(
 
@@ -354,12 +354,11 @@ REPORT = KindReport(
     time_quality=TimeQuality("fwd_bwd_rel", "exact_psnr", "speed_vs_error",
                              "Rasterizer speed against error to the exact Gaussian mixture (mean over seeds)"),
     meanings=METRICS,
-    run_findings=(("parity", parity_finding),),
 )
 
 RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, prepare=prepare,
                  description="time the rasterizer under options against the defaults; error against the exact model",
                  report=REPORT)
 
-__all__ = ["RASTER", "REPORT", "DEFAULTS", "METRICS", "OPTION_FIELDS", "parse_workload_name", "build_workload",
-           "reference_render", "exact_model", "cache_dir", "Load", "MIN_PAIRS", "PROTOCOL"]
+__all__ = ["RASTER", "REPORT", "DEFAULTS", "METRICS", "OPTION_FIELDS", "reference_render", "exact_model", "cache_dir",
+           "MIN_PAIRS", "PROTOCOL"]

@@ -50,7 +50,7 @@ from pathlib import Path
 from typing import Any
 
 from splatbench.errors import InputError, one_line
-from splatbench.experiments.claims import HEARTBEAT_EVERY, Claim, remove_stale_claim_temps, try_claim
+from splatbench.experiments.claims import HEARTBEAT_EVERY, RunClaim, remove_stale_claim_temps, try_claim
 from splatbench.experiments.configs import plain
 from splatbench.experiments.executors import DaskExecutor, LocalExecutor
 from splatbench.experiments.grid import RunSpec, expand
@@ -127,7 +127,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
 
     threads = max(1, cpus // workers)
     done = failed = claimed = 0
-    claims: dict[str, Claim] = {}
+    claims: dict[str, RunClaim] = {}
     bar = _progress_bar(len(pending), spec.name, progress)
 
     def admit(run: RunSpec) -> bool:

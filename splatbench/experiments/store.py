@@ -6,8 +6,8 @@ Layout, under a results folder::
     <experiment>/results.parquet    the table: one row per run of the grid, grid order
     <experiment>/work/<run_id>/     the run's own working folder (kinds' artifacts)
 
-Every file is written atomically: a temporary file ``.<name>.<pid>.<random>.tmp`` in
-the same folder, flushed and fsync'd, then `os.replace`d onto its name (and the
+Every file is written atomically (`splatbench.fsutil.atomic_write`): a temporary
+file ``.<name>.<pid>.<random>.tmp`` in the same folder, flushed and fsync'd, then `os.replace`d onto its name (and the
 folder fsync'd). A reader lists only names ``<16 hex>.json``, so it never sees a
 temporary file, and a ``<run_id>.json`` is always whole: a process killed
 mid-write leaves at most a stray temporary file (removed by the next run when
@@ -27,7 +27,6 @@ import fcntl
 import json
 import os
 import re
-import secrets
 import socket
 from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field
@@ -38,6 +37,7 @@ import pandas as pd
 
 from splatbench.experiments.claims import pid_alive
 from splatbench.experiments.configs import flatten
+from splatbench.fsutil import atomic_write
 
 #: Version of the per-run file layout.
 RECORD_FORMAT = 1
@@ -48,7 +48,8 @@ CORE_COLUMNS = ("run_id", "experiment", "kind", "scene", "seed", "status", "erro
 VOLATILE_COLUMNS = ("seconds", "started", "finished", "worker")
 
 _RESULT_NAME = re.compile(r"^[0-9a-f]{16}\.json$")
-_TEMP_NAME = re.compile(r"^\..+\.(\d+)\.[0-9a-f]+\.tmp$")
+_TEMP_NAME = re.compile(  # `splatbench.fsutil.atomic_write`'s temporary files
+    r"^\..+\.(\d+)\.[0-9a-f]+\.tmp$")
 
 
 @dataclass
@@ -109,39 +110,6 @@ def experiment_dir(results_dir: str | Path, experiment: str) -> Path:
 
 def result_path(results_dir: str | Path, experiment: str, run_id: str) -> Path:
     return experiment_dir(results_dir, experiment) / f"{run_id}.json"
-
-
-def atomic_write(path: str | Path, write) -> Path:
-    """Call ``write(temp_path)``, fsync the temporary file, rename it onto ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-    try:
-        write(temp)
-        fd = os.open(temp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(temp, path)
-    except BaseException:
-        temp.unlink(missing_ok=True)
-        raise
-    _fsync_dir(path.parent)
-    return path
-
-
-def _fsync_dir(folder: Path) -> None:
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:  # pragma: no cover - platforms without directory fds
-        return
-    try:
-        os.fsync(fd)
-    except OSError:  # pragma: no cover
-        pass
-    finally:
-        os.close(fd)
 
 
 def write_record(results_dir: str | Path, record: RunRecord) -> Path:
@@ -243,5 +211,5 @@ def read_table(folder: str | Path) -> pd.DataFrame:
 
 
 __all__ = ["RunRecord", "RECORD_FORMAT", "TABLE_NAME", "WORK_DIR", "STATUSES", "CORE_COLUMNS", "VOLATILE_COLUMNS",
-           "experiment_dir", "result_path", "atomic_write", "write_record", "read_record", "read_records",
+           "experiment_dir", "result_path", "write_record", "read_record", "read_records",
            "remove_stale_temps", "build_table", "write_table", "save_table", "read_table", "worker_name"]

@@ -36,10 +36,10 @@ from typing import Any
 
 from splatbench.checks import check_image_size, check_keys
 from splatbench.errors import InputError
+from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.experiments.workers import limit_threads
-from splatbench.reports.findings import auto_sh_degree_note
-from splatbench.reports.kind_report import Comparison, FindingRules, KindReport, MetricSpec, TimeQuality
+from splatbench.metrics.spec import MetricSpec
 
 #: Environment variable naming the folder of rendered datasets.
 DATASETS_ENV = "SPLATBENCH_DATASETS"
@@ -240,7 +240,7 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
 
 
 #: The ``train`` kind (``kind = "train"``).
-#: What the reports of train runs show (`splatbench.reports.kind_report`).
+#: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
     metrics=(
 
@@ -255,7 +255,6 @@ REPORT = KindReport(
     time_quality=TimeQuality("train_seconds", "test_psnr", "time_vs_error",
                              "Training time against test PSNR per cell (mean over seeds)"),
     meanings=METRICS,
-    axis_notes=(auto_sh_degree_note,),
 )
 
 TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scenes=scenes, prepare=prepare,

@@ -18,7 +18,6 @@ import time
 from splatbench.experiments.claims import pid_alive, process_start
 
 THREADS_ENV = "SPLATBENCH_WORKER_THREADS"
-RUNNER_ENV = "SPLATBENCH_RUNNER"  # host:pid:start of the runner whose workers must die with it
 
 
 def init_worker(threads: int, runner: str = "") -> None:
@@ -96,5 +95,5 @@ def limit_threads() -> None:
         dr.set_thread_count(threads)
 
 
-__all__ = ["THREADS_ENV", "RUNNER_ENV", "init_worker", "die_with_runner", "runner_id", "fast_exit", "worker_threads",
+__all__ = ["THREADS_ENV", "init_worker", "die_with_runner", "runner_id", "fast_exit", "worker_threads",
            "limit_threads"]

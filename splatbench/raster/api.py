@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.raster.backend import dr, get_backend
+from splatbench.raster.device import dr, get_device
 from splatbench.raster.options import RasterOptions
 
 if TYPE_CHECKING:
@@ -79,8 +79,7 @@ def render(
         flat = int(np.argmax(np.abs(gaussians.sh)))
         check_sh_range(float(np.abs(gaussians.sh).flat[flat]), np.unravel_index(flat, gaussians.sh.shape))
     bg = check_background(background)
-    backend = get_backend(opts.device)
-    m = backend.t
+    m = get_device(opts.device).t
     with dr.suspend_grad():
         frame = render_frame(to_tensor(m, gaussians.means), to_tensor(m, gaussians.log_scales),
                              to_tensor(m, gaussians.quats), to_tensor(m, gaussians.opacity_logits),

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from splatbench.raster.backend import dr
+from splatbench.raster.device import dr
 from splatbench.raster.projection import Projection, array_namespace
 
 # Slack of the rectangle test, relative to the size of the quadratic form's terms

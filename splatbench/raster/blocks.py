@@ -13,7 +13,7 @@ accumulates into pair slot ``p`` as before.
 
 from __future__ import annotations
 
-from splatbench.raster.backend import dr
+from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins, ellipse_meets_rect, support_radius_sq, tile_pixel_offsets
 
 

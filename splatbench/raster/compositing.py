@@ -33,7 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from splatbench.raster.backend import dr
+from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins, TileGrid, bin_gaussians
 from splatbench.raster.projection import DEFAULTS, Projection, array_namespace, next_power_of_two
 from splatbench.raster.reduction import PAIR_GROUPS, bucket, reduce_pairs, lane_slots

@@ -9,7 +9,7 @@ import numpy as np
 from splatbench.checks import check_image_size, check_sh_degree
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES_OF_DEGREE
-from splatbench.raster.backend import dr
+from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins, TileGrid
 from splatbench.raster.compositing import Composite, CompositeState, composite
 from splatbench.raster.options import RasterOptions

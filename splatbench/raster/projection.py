@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from splatbench.conventions import BIG_FACTOR, JACOBIAN_GUARD, LOG_SCALE_CLIP, QUAT_MIN
-from splatbench.raster.backend import dr
+from splatbench.raster.device import dr
 from splatbench.raster.options import RasterOptions
 
 #: The rasterizer's defaults: one source, `RasterOptions` (graphdeco's values).

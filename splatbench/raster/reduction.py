@@ -3,7 +3,7 @@ deterministic reduction per Gaussian (used by `compositing._CompositeOp`)."""
 
 from __future__ import annotations
 
-from splatbench.raster.backend import dr
+from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins
 
 # Per-pair gradient accumulators, packed like the records so that the backward loop

@@ -7,7 +7,7 @@ so unused bands cost neither time nor gradient work.
 from __future__ import annotations
 
 from splatbench.conventions import SH_C0, SH_C1, SH_C2, SH_C3
-from splatbench.raster.backend import dr
+from splatbench.raster.device import dr
 from splatbench.raster.projection import array_namespace
 
 C0, C1, C2, C3 = SH_C0, SH_C1, SH_C2, SH_C3

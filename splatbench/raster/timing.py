@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from collections import defaultdict
 
-from splatbench.raster.backend import dr
+from splatbench.raster.device import dr
 
 STAGES = ("preprocess", "binning", "compositing", "backward_compositing", "backward_preprocess")
 

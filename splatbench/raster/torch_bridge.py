@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from splatbench.errors import InputError
-from splatbench.raster.backend import dr, get_backend
+from splatbench.raster.device import Device, dr, get_device
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.pipeline import (SH_ABS_MAX, Frame, check_background, check_view, check_sh_range,
                                        render_frame, resolve_sh_degree)
@@ -65,18 +65,18 @@ class RasterInfo:
         return None if grad is None else torch.from_numpy(np.array(grad.numpy(), dtype=np.float32).T.copy())
 
 
-def torch_device(backend) -> torch.device:
-    """The torch device whose memory the Dr.Jit ``backend`` can read in place."""
-    return torch.device("cuda" if backend.name == "cuda" else "cpu")
+def torch_device(dev: Device) -> torch.device:
+    """The torch device whose memory the Dr.Jit ``dev`` can read in place."""
+    return torch.device("cuda" if dev.name == "cuda" else "cpu")
 
 
-def to_drjit(backend, t: torch.Tensor):
-    """A Dr.Jit tensor viewing ``t`` (moved to the backend's device and made contiguous
+def to_drjit(dev: Device, t: torch.Tensor):
+    """A Dr.Jit tensor viewing ``t`` (moved to ``dev``'s memory and made contiguous
     float32 first only where it is not already: then the copy is what is viewed)."""
-    t = t.detach().to(device=torch_device(backend), dtype=torch.float32).contiguous()
+    t = t.detach().to(device=torch_device(dev), dtype=torch.float32).contiguous()
     if t.is_cuda:  # torch and Dr.Jit use different CUDA streams: finish torch's writes first
         torch.cuda.synchronize(t.device)
-    return backend.t.TensorXf(t)
+    return dev.t.TensorXf(t)
 
 
 def to_torch(x) -> torch.Tensor:
@@ -88,25 +88,25 @@ def to_torch(x) -> torch.Tensor:
     return torch.from_dlpack(x)
 
 
-def _new_scope(backend) -> None:
-    """Start a new Dr.Jit scope (basic block) on ``backend`` (a `Backend`).
+def _new_scope(dev: Device) -> None:
+    """Start a new Dr.Jit scope (basic block) on ``dev`` (a `Device`).
 
     PyTorch runs the backward of CUDA tensors on its own per-device thread, so Dr.Jit
     variables made there and on the caller's thread meet in later calls; Dr.Jit needs a
     new scope at each such hand-over (`drjit.detail.new_scope`), as its own torch
     wrapper (`drjit.interop`) does at both ends of forward and backward."""
-    dr.detail.new_scope(dr.JitBackend.CUDA if backend.name == "cuda" else dr.JitBackend.LLVM)
+    dr.detail.new_scope(dr.JitBackend.CUDA if dev.name == "cuda" else dr.JitBackend.LLVM)
 
 
 class _Rasterize(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means, log_scales, quats, opacity_logits, sh, camera, degree, background, options,
                 loop_ad, absgrad, timer, info_box):
-        backend = get_backend(options.device)
-        _new_scope(backend)
-        m = backend.t
+        dev = get_device(options.device)
+        _new_scope(dev)
+        m = dev.t
         params = (means, log_scales, quats, opacity_logits, sh)
-        inputs = [to_drjit(backend, t) for t in params]
+        inputs = [to_drjit(dev, t) for t in params]
         # The Dr.Jit inputs alias these tensors' memory: let torch detect in-place changes.
         ctx.save_for_backward(*params)
         for x, needs in zip(inputs, ctx.needs_input_grad[:5]):
@@ -121,11 +121,11 @@ class _Rasterize(torch.autograd.Function):
         rgb = to_torch(frame.rgb).T.reshape(H, W, 3).contiguous().to(out)  # Array3f views as [3, H*W]
         alpha = to_torch(frame.alpha).reshape(H, W).to(out)
         depth = to_torch(frame.depth).reshape(H, W).to(out)
-        ctx.dr_inputs, ctx.frame, ctx.m, ctx.backend = inputs, frame, m, backend
+        ctx.dr_inputs, ctx.frame, ctx.m, ctx.dev = inputs, frame, m, dev
         ctx.saved_shapes = [tuple(t.shape) for t in (means, log_scales, quats, opacity_logits, sh)]
         ctx.saved_devices = [t.device for t in (means, log_scales, quats, opacity_logits, sh)]
         info_box.append(frame)
-        _new_scope(backend)
+        _new_scope(dev)
         return rgb, alpha, depth
 
     @staticmethod
@@ -134,11 +134,11 @@ class _Rasterize(torch.autograd.Function):
         if not any(ctx.needs_input_grad[:5]):
             return (None,) * 13
         _ = ctx.saved_tensors  # raises if a parameter was changed in place since the forward pass
-        backend = ctx.backend
-        _new_scope(backend)  # this may be torch's autograd thread, not the forward's
+        dev = ctx.dev
+        _new_scope(dev)  # this may be torch's autograd thread, not the forward's
 
         def cotangent(v, shape):
-            return to_drjit(backend, v.reshape(shape)).array
+            return to_drjit(dev, v.reshape(shape)).array
 
         v_rgb = cotangent(v_rgb, (-1, 3))  # [H*W * 3], pixel-major
         pixel = dr.arange(m.UInt32, dr.width(frame.alpha)) * 3
@@ -167,7 +167,7 @@ class _Rasterize(torch.autograd.Function):
                 continue
             grads.append(to_torch(dr.grad(x)).reshape(like).to(where))
         ctx.dr_inputs = None  # release the Dr.Jit graph
-        _new_scope(backend)
+        _new_scope(dev)
         return (*grads, None, None, None, None, None, None, None, None)
 
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.raster.api import to_tensor
-from splatbench.raster.backend import dr, get_backend
+from splatbench.raster.device import dr, get_device
 from splatbench.raster.binning import TileGrid, bin_gaussians
 # The compositing loop's own lanes, lists, per-pixel test and record loads, so that
 # the counts are of exactly the decisions it makes.
@@ -65,7 +65,7 @@ def work_stats(gaussians, camera, **options) -> WorkStats:
         `WorkStats` (integers).
     """
     opts = RasterOptions.from_kwargs(**options)
-    m = get_backend(opts.device).t
+    m = get_device(opts.device).t
     if len(gaussians) == 0:
         return WorkStats(0, 0, 0, 0, 0, 0, 0)
     with dr.suspend_grad():

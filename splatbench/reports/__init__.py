@@ -4,15 +4,15 @@
     report = build_report(spec, "results")            # tables, findings, the run table
     write_report(report, "reports/sh_degree")          # report.md, figures/*.png, results.parquet
 
-Modules: `stats` (t intervals over seeds, paired differences, bootstrap median ratio),
-`tables` (axis rows, mean ± 95 % interval, metric specs per kind), `findings` (claims
-computed from the tables: paired differences with intervals), `figures` (training curves, time against
-error with the Pareto front), `report` (assembly, markdown), `cli`
-(``splatbench report``). See docs/reports.md.
+Modules: `tables` (axis rows, mean ± 95 % interval, metric specs per kind), `findings`
+(claims computed from the tables: paired differences with intervals), `notes`
+(kind-specific findings, registered by kind name), `figures` (training curves, the
+cells of the time-against-error figure), `report` (assembly, markdown), `cli`
+(``splatbench report``). Statistics are `splatbench.metrics.stats`. See docs/reports.md.
 """
 
 from splatbench.reports.findings import Claim, Finding
 from splatbench.reports.report import Report, build_report, report_from_table, write_report
-from splatbench.reports.tables import AxisTable, MetricSpec, Stat
+from splatbench.reports.tables import AxisTable, Stat
 
-__all__ = ["Report", "build_report", "report_from_table", "write_report", "AxisTable", "MetricSpec", "Stat", "Claim", "Finding"]
+__all__ = ["Report", "build_report", "report_from_table", "write_report", "AxisTable", "Stat", "Claim", "Finding"]

@@ -1,16 +1,11 @@
-"""Report figures (matplotlib, Agg backend, PNG): training curves and time against error.
+"""Report figures (matplotlib, Agg backend, PNG): training curves, and the cell means
+the time-against-error figure draws.
 
 * `curves_figure`: one panel per scene, one line per axis row: the mean over the
   row's runs of the test PSNR at each evaluation (``eval_step`` / ``eval_psnr`` in the
   curves) when runs evaluated at least twice, else of the training-view PSNR.
-* `pareto_figure`: one panel per scene, one point per grid cell (mean over seeds, with
-  95 % t-interval bars over seeds in both directions when a cell has two seeds or
-  more): a time metric across, a quality metric up; the Pareto-optimal cells (no
-  other cell is both faster and better, on the means) are ringed and joined by a
-  step line. `pareto_front` is the
-  computation, shared with the report text.
-* `difference_figure`: a per-pixel error map with its colour scale (the demo's
-  ``garden_difference.png``).
+* `cell_means`: one point per grid cell (mean over seeds, with the half-widths of the
+  95 % t intervals over seeds), what `splatbench.figures.pareto_figure` draws.
 """
 
 from __future__ import annotations
@@ -23,22 +18,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from splatbench.reports.stats import t_interval
-from splatbench.reports.tables import AxisTable, MetricSpec, done_runs
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _panels(plt, count: int, width: float = 4.2, height: float = 3.4):
-    fig, axes = plt.subplots(1, count, figsize=(width * count, height), squeeze=False)
-    return fig, list(axes[0])
+from splatbench.figures import panels, pyplot
+from splatbench.metrics.stats import t_interval
+from splatbench.reports.tables import AxisTable, done_runs
 
 
 def mean_curve(curves: Sequence[dict], x_key: str, y_key: str) -> tuple[np.ndarray, np.ndarray]:
@@ -75,8 +57,8 @@ def curves_figure(table: AxisTable, runs: pd.DataFrame, path: Path) -> Path | No
         return None
     x_key, y_key, y_label = keys
     scenes = list(dict.fromkeys(table.frame.scene))
-    plt = _pyplot()
-    fig, axes = _panels(plt, len(scenes))
+    plt = pyplot()
+    fig, axes = panels(plt, len(scenes))
     for ax, scene in zip(axes, scenes):
         ids = set(done.run_id[done.scene == scene])
         for row in table.rows:
@@ -95,18 +77,6 @@ def curves_figure(table: AxisTable, runs: pd.DataFrame, path: Path) -> Path | No
     fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)  # titles and labels never clipped
     plt.close(fig)
     return path
-
-
-def pareto_front(times: Sequence[float], quality: Sequence[float]) -> list[int]:
-    """Indices of the points no other point dominates (time <= and quality >=, one
-    strictly), sorted by time. NaN points are never on the front."""
-    pts = [(t, q, i) for i, (t, q) in enumerate(zip(times, quality)) if math.isfinite(t) and math.isfinite(q)]
-    front = []
-    for t, q, i in pts:
-        dominated = any((t2 <= t and q2 >= q) and (t2 < t or q2 > q) for t2, q2, _ in pts)
-        if not dominated:
-            front.append((t, i))
-    return [i for _, i in sorted(front)]
 
 
 def cell_means(runs: pd.DataFrame, labels: pd.Series, time: str, quality: str) -> pd.DataFrame:
@@ -129,66 +99,4 @@ def cell_means(runs: pd.DataFrame, labels: pd.Series, time: str, quality: str) -
     return out.sort_values(["order"], kind="stable").drop(columns="order").reset_index(drop=True)
 
 
-def pareto_figure(means: pd.DataFrame, scenes: Sequence[str], time: MetricSpec, quality: MetricSpec, path: Path,
-                  title: str) -> dict[str, list[str]]:
-    """Time against quality per scene, the Pareto front marked; returns scene -> front cells."""
-    plt = _pyplot()
-    fig, axes = _panels(plt, len(scenes), 4.6, 3.8)
-    fronts: dict[str, list[str]] = {}
-    for ax, scene in zip(axes, scenes):
-        sub = means[means.scene == scene].reset_index(drop=True)
-        idx = pareto_front(list(sub.time), list(sub.quality))
-        fronts[scene] = [sub.cell[i] for i in idx]
-        ax.scatter(sub.time, sub.quality, s=18, color="tab:blue", zorder=3)
-        if "time_half" in sub.columns:
-            ax.errorbar(sub.time, sub.quality, xerr=sub.time_half.fillna(0.0), yerr=sub.quality_half.fillna(0.0),
-                        fmt="none", ecolor="tab:blue", elinewidth=0.8, capsize=2, alpha=0.7, zorder=2)
-        finite = sub.time[np.isfinite(sub.time)]
-        middle = float(finite.min() + finite.max()) / 2 if len(finite) else 0.0
-        for _, r in sub.iterrows():
-            if math.isfinite(r.time) and math.isfinite(r.quality):  # labels point inwards: never off the edge
-                right = r.time > middle
-                ax.annotate(r.cell, (r.time, r.quality), fontsize=6, xytext=(-3 if right else 3, 3),
-                            textcoords="offset points", ha="right" if right else "left")
-        if idx:
-            fx, fy = sub.time[idx].to_numpy(), sub.quality[idx].to_numpy()
-            ax.step(fx, fy, where="post", color="tab:red", linewidth=1.0, zorder=2, label="Pareto front")
-            ax.scatter(fx, fy, s=70, facecolors="none", edgecolors="tab:red", linewidths=1.2, zorder=4)
-            ax.legend(fontsize=7, loc="lower right")
-        ax.set_title(scene)
-        ax.set_xlabel(f"{time.label} (lower is better)")
-        ax.set_ylabel(f"{quality.label} (higher is better)")
-        ax.grid(alpha=0.3)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)  # titles and labels never clipped
-    plt.close(fig)
-    return fronts
-
-
-def difference_figure(error: np.ndarray, path: Path, *, tolerance: float, title: str) -> Path:
-    """``error`` [H, W] (>= 0) on a log colour scale with its colour bar, from tolerance / 100
-    (and below, zeros included) to its maximum; the ``tolerance`` is marked on the bar."""
-    from matplotlib.colors import LogNorm
-
-    plt = _pyplot()
-    height, width = error.shape
-    low = tolerance / 100
-    high = max(float(error.max()), tolerance * 10)
-    fig, ax = plt.subplots(figsize=(6.4, 6.4 * height / width))
-    shown = ax.imshow(np.maximum(error, low), norm=LogNorm(vmin=low, vmax=high), cmap="magma",
-                      interpolation="nearest")
-    ax.set_axis_off()
-    ax.set_title(title, fontsize=9)
-    bar = fig.colorbar(shown, ax=ax, fraction=0.046 * height / width, pad=0.02)  # as tall as the image
-    bar.set_label(f"|difference|, max over RGB (cyan: the {tolerance:.0e} tolerance)", fontsize=7)
-    bar.ax.axhline(tolerance, color="cyan", linewidth=1.5)
-    bar.ax.tick_params(labelsize=7)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)
-    plt.close(fig)
-    return path
-
-
-__all__ = ["curves_figure", "pareto_figure", "difference_figure", "pareto_front", "cell_means", "mean_curve", "curve_keys"]
+__all__ = ["curves_figure", "cell_means", "mean_curve", "curve_keys"]

@@ -8,7 +8,7 @@ axis:
 * **best**: per scene, the row with the best mean of the kind's primary metric;
 * **vs**: every other row against the reference row (the one-at-a-time base, else the
   axis's first value), per scene, for each of the kind's comparisons, **paired over
-  seeds** (`splatbench.reports.stats`): ``diff`` is the mean of ``b_s - a_s`` with
+  seeds** (`splatbench.metrics.stats`): ``diff`` is the mean of ``b_s - a_s`` with
   its t interval, ``ratio`` the geometric mean of ``b_s / a_s`` with its interval;
   ``mean`` is the row's own mean (for a metric that is already relative to the base,
   like the raster kind's time ratio) with its t interval. When the interval contains
@@ -16,7 +16,8 @@ axis:
   says "no significant difference"; with one seed it says no interval can be computed;
 * **count**: how many such comparisons the table makes (each at 95 %, no correction
   for multiplicity);
-* **auto** (train kind, SH degree axis): the degree ``auto`` ended at, per seed.
+* kind-specific notes appended to it (`splatbench.reports.notes`, registered by kind
+  name), e.g. the degree ``auto`` ended at on the train kind's SH degree axis.
 
 Runs whose ``metric.loaded`` is 1 (the raster kind: timed while the load average
 exceeded half the cores) are left out of every finding (not of the tables).
@@ -25,13 +26,15 @@ exceeded half the cores) are left out of every finding (not of the tables).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import pandas as pd
 
-from splatbench.reports.kind_report import Comparison, FindingRules, kind_report
-from splatbench.reports.stats import Interval, paired_difference, paired_ratio, t_interval
-from splatbench.reports.tables import AxisTable, MetricSpec, Row, display, done_runs, seed_values
+from splatbench.experiments.kind_report import Comparison, FindingRules
+from splatbench.metrics.spec import MetricSpec
+from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
+from splatbench.reports.tables import AxisTable, Row, done_runs, kind_report, seed_values
 
 
 def rules_for(kind: str, metrics: tuple[MetricSpec, ...]) -> FindingRules | None:
@@ -142,8 +145,13 @@ def usable_runs(runs: pd.DataFrame) -> pd.DataFrame:
     return done
 
 
-def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame) -> Finding | None:
-    """The finding of one axis (None when the kind has no rules or nothing is done)."""
+#: A kind-specific note on one axis: ``note(axis_table, runs, scenes) -> (lines, claims)``.
+AxisNote = Callable[[AxisTable, pd.DataFrame, list[str]], tuple[list[str], list["Claim"]]]
+
+
+def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequence[AxisNote] = ()) -> Finding | None:
+    """The finding of one axis (None when the kind has no rules or nothing is done),
+    with the lines and claims of ``notes`` appended."""
     rules = rules_for(kind, table.metrics)
     if rules is None or table.frame.empty:
         return None
@@ -232,8 +240,7 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame) -> Finding | N
         lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
                      f"these findings (marked in the table's `loaded` column).")
 
-    declared = kind_report(kind)
-    for note in declared.axis_notes if declared is not None else ():
+    for note in notes:
         more_lines, more_claims = note(table, runs, scenes)
         lines += more_lines
         claims += more_claims
@@ -245,58 +252,5 @@ def _name(spec: MetricSpec) -> str:
     return spec.label.split(" (")[0]
 
 
-def auto_sh_degree_note(table: AxisTable, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
-    """Train kind, ``sh_degree`` axis: the degree the ``auto`` rows ended at, per scene."""
-    lines: list[str] = []
-    claims: list[Claim] = []
-    if table.axis != "sh_degree" or "metric.sh_degree" not in runs.columns:
-        return lines, claims
-    auto = [r for r in table.rows if r.value == "auto"]
-    if auto:
-        parts = []
-        done = done_runs(runs)
-        for scene in scenes:
-            sel = done[(done.scene == scene) & done.run_id.isin(auto[0].run_ids)]
-            degrees = [int(d) for d in pd.to_numeric(sel["metric.sh_degree"], errors="coerce").dropna()]
-            if not degrees:
-                continue
-            mean = sum(degrees) / len(degrees)
-            if len(set(degrees)) == 1:
-                text = f"{degrees[0]}"
-                where = "every seed" if len(degrees) > 1 else "one seed"
-            else:
-                text = f"{min(degrees)}–{max(degrees)}"
-                where = "per seed: " + ", ".join(map(str, degrees))
-            claims.append(Claim("auto", scene, auto[0].label, "sh_degree", "mean", mean, text))
-            parts.append(f"{text} on {scene} ({where})")
-        if parts:
-            lines.append("- `auto` ended at SH degree " + ", ".join(parts) + ".")
-    return lines, claims
-
-
-def parity_finding(runs: pd.DataFrame) -> Finding | None:
-    """Raster kind: the largest implementation error against the matched reference."""
-    col = "metric.parity_max_abs"
-    done = done_runs(runs)
-    if col not in done.columns or done[col].dropna().empty:
-        return None
-    values = pd.to_numeric(done[col])
-    worst = float(values.max())
-    row = done.loc[values.idxmax()]
-    # the worst run's cell: the axes where it differs from the most common value (the base, one at a time)
-    axes = [c for c in done.columns if c.startswith("axis.")]
-    cell = ", ".join(f"{c[5:]}={row[c]}" for c in axes if row[c] != done[c].mode().iloc[0]) or "the base"
-    text = f"{worst:.1e}"
-    claim = Claim("parity", "", "", "parity_max_abs", "max", worst, text)
-    return Finding("parity", [f"- Against the float64 reference with the *same* options, the largest difference "
-                              f"over all {len(done)} runs is {text} ({row['scene']}, {cell}). Most of a pixel's "
-                              f"difference is float32 rounding (~1e-6); a pixel where float32 and float64 fall on "
-                              f"different sides of a threshold (alpha_min, the cutoff, the early stop) differs by a "
-                              f"whole contribution, up to about alpha_min x its colour, which is why the largest "
-                              f"difference grows with alpha_min. The exact-error columns above are what each option "
-                              f"trades in against the exact Gaussian mixture."],
-                   [claim])
-
-
-__all__ = ["Comparison", "FindingRules", "Claim", "Finding", "axis_finding", "parity_finding", "auto_sh_degree_note",
-           "fmt_number", "fmt_interval", "paired", "reference_row", "usable_runs", "display"]
+__all__ = ["Claim", "Finding", "AxisNote", "axis_finding", "rules_for", "fmt_number", "fmt_interval", "paired",
+           "reference_row", "usable_runs"]

@@ -31,11 +31,14 @@ import pandas as pd
 from splatbench.errors import InputError
 from splatbench.experiments.grid import expand
 from splatbench.experiments.spec import ExperimentSpec
-from splatbench.experiments.store import TABLE_NAME, atomic_write, build_table, experiment_dir, read_records
-from splatbench.reports.figures import cell_means, curves_figure, pareto_figure
+from splatbench.experiments.store import TABLE_NAME, build_table, experiment_dir, read_records
+from splatbench.fsutil import atomic_write
+from splatbench.figures import pareto_figure
+from splatbench.metrics.spec import MetricSpec
+from splatbench.reports.figures import cell_means, curves_figure
 from splatbench.reports.findings import Finding, axis_finding
-from splatbench.reports.kind_report import kind_report
-from splatbench.reports.tables import AxisTable, MetricSpec, axis_table, cell_labels, display, metric_specs
+from splatbench.reports.notes import axis_notes, run_findings
+from splatbench.reports.tables import AxisTable, axis_table, cell_labels, display, kind_report, metric_specs
 
 REPORT_NAME = "report.md"
 FIGURES = "figures"
@@ -97,11 +100,10 @@ def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int) -> 
     axes = [axis_table(spec, axis, table, metrics) for axis in spec.dimensions]
     findings: dict[str, Finding] = {}
     for t in axes:
-        f = axis_finding(t, spec.kind, table)
+        f = axis_finding(t, spec.kind, table, axis_notes(spec.kind))
         if f is not None:
             findings[t.axis] = f
-    declared = kind_report(spec.kind)
-    for name, make in declared.run_findings if declared is not None else ():
+    for name, make in run_findings(spec.kind):
         f = make(table)
         if f is not None:
             findings[name] = f

@@ -12,7 +12,7 @@ copy of the grid per row and keeps the run ids), so a report always describes th
 grid as written, never a stale one. Statistics are over the *done* runs of a row,
 **seed by seed**: a row's runs of one seed are averaged first (in a product grid they
 are that seed's runs of every other axis value), then the mean over seeds is given
-with the half-width of its 95 % Student's t interval (`splatbench.reports.stats`; the
+with the half-width of its 95 % Student's t interval (`splatbench.metrics.stats`; the
 seed is the unit of replication). With one seed there is no interval: the mean alone.
 """
 
@@ -27,11 +27,23 @@ from typing import Any
 
 import pandas as pd
 
-from splatbench.experiments.grid import expand
+from splatbench.errors import InputError
 from splatbench.experiments.configs import flatten, unflatten
+from splatbench.experiments.grid import expand
+from splatbench.experiments.kind_report import KindReport
+from splatbench.experiments.kinds import get_kind
 from splatbench.experiments.spec import ExperimentSpec
-from splatbench.reports.kind_report import MetricSpec, kind_report
-from splatbench.reports.stats import t_quantile
+from splatbench.metrics.spec import MetricSpec
+from splatbench.metrics.stats import t_quantile
+
+
+def kind_report(kind: str) -> KindReport | None:
+    """The `KindReport` the run kind ``kind`` declares (None for a kind without one or an
+    unknown kind: a results folder may name a kind this process does not know)."""
+    try:
+        return get_kind(kind).report
+    except InputError:
+        return None
 
 
 def metric_specs(kind: str, table: pd.DataFrame) -> tuple[MetricSpec, ...]:
@@ -270,5 +282,5 @@ def _json(value: Any) -> str:
     return json.dumps(value, sort_keys=True)
 
 
-__all__ = ["MetricSpec", "metric_specs", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
+__all__ = ["kind_report", "metric_specs", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
            "axis_table", "cell_labels", "done_runs"]

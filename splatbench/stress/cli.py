@@ -50,10 +50,10 @@ def stress(cases: int, seed: int, json_path: Path | None, categories: tuple[str,
 
     from tqdm import tqdm
 
-    from splatbench.raster.backend import get_backend
+    from splatbench.raster.device import get_device
     from splatbench.stress.runner import run
 
-    get_backend(device)  # 'cuda' without a GPU: one line before the progress bar, not a failure per case
+    get_device(device)  # 'cuda' without a GPU: one line before the progress bar, not a failure per case
     with tqdm(total=cases, file=sys.stderr, unit="case", desc="stress") as bar:
         report = run(cases, seed, categories=categories or CATEGORIES, device=device,
                      jobs=jobs or min(4, os.cpu_count() or 1), on_case=lambda result: bar.update(1))

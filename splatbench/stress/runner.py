@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from splatbench.errors import InputError
-from splatbench.raster.backend import get_backend
+from splatbench.raster.device import get_device
 from splatbench.stress.cases import CATEGORIES, FIELDS, StressCase, build_case
 
 
@@ -218,7 +218,7 @@ def run(cases: int = 200, seed: int = 0, *, categories: Sequence[str] = CATEGORI
             raise InputError(f"category: expected one of {', '.join(CATEGORIES)}, got {name!r}")
     if device is not None:
         # An unknown device, or 'cuda' without a GPU, is one line here, not one failed case per case.
-        get_backend(device)
+        get_device(device)
     plan = [(categories[i % len(categories)], s) for i, s in enumerate(case_seeds(seed, cases))]
     results: list[CaseResult | None] = [None] * cases
 

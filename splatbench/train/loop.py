@@ -43,7 +43,7 @@ from splatbench.strategies.base import StepContext
 from splatbench.train.config import TrainConfig, save_config
 from splatbench.train.initializers import InitSettings, initialize
 from splatbench.train.losses import photometric_loss
-from splatbench.train.metrics import lpips_metric, psnr, ssim_metric
+from splatbench.metrics.image import lpips_metric, psnr, ssim_metric
 from splatbench.train.params import (ExponentialLR, gaussians_from_params, make_optimizers, params_from_gaussians,
                                      refreeze, scene_extent, set_lr)
 from splatbench.train.result import EvalPoint, HistoryPoint, TrainResult
@@ -382,7 +382,7 @@ def _save_checkpoint(trainer: Trainer, out: Path, extra: dict) -> Path:
 
 
 def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
-    from splatbench.bench.memory import peak_rss_mb
+    from splatbench.metrics.memory import peak_rss_mb
     from splatbench.train.checkpoint import load_checkpoint, resume_line
 
     out = Path(config.out)

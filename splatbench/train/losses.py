@@ -3,24 +3,16 @@
 SSIM is kornia's (``kornia.metrics.ssim``: Gaussian window, σ = 1.5, "same"
 padding), averaged over pixels and channels. Images are [H, W, 3] in [0, 1]. The
 loss's D-SSIM term is `splatbench.train.dssim.dssim`, the same value with its gradient
-formed in one fused pass (tested against kornia's); `ssim` (the metric) is kornia's.
+formed in one fused pass (tested against kornia's); the SSIM metric is
+`splatbench.metrics.image.ssim_metric` (kornia's).
 """
 
 from __future__ import annotations
 
 import torch
 
-
-def to_bchw(image: torch.Tensor) -> torch.Tensor:
-    """[H, W, 3] -> [1, 3, H, W] (a view)."""
-    return image.permute(2, 0, 1).unsqueeze(0)
-
-
-def ssim(pred: torch.Tensor, target: torch.Tensor, window: int = 11) -> torch.Tensor:
-    """Mean SSIM of two [H, W, 3] images (kornia), a differentiable scalar."""
-    import kornia
-
-    return kornia.metrics.ssim(to_bchw(pred), to_bchw(target), window, max_val=1.0).mean()
+from splatbench.metrics.image import to_bchw
+from splatbench.train.dssim import dssim
 
 
 def photometric_loss(pred: torch.Tensor, target: torch.Tensor, ssim_lambda: float = 0.2,
@@ -34,9 +26,7 @@ def photometric_loss(pred: torch.Tensor, target: torch.Tensor, ssim_lambda: floa
     l1 = (pred - target).abs().mean()
     if ssim_lambda == 0:
         return l1
-    from splatbench.train.dssim import dssim
-
     return (1 - ssim_lambda) * l1 + ssim_lambda * dssim(to_bchw(pred), to_bchw(target), window)
 
 
-__all__ = ["photometric_loss", "ssim", "to_bchw"]
+__all__ = ["photometric_loss"]

@@ -15,7 +15,7 @@ def make_drjit_backend(**options) -> Backend:
     ``radius="opacity"`` is compared against the reference with that rule.
     """
     import splatbench
-    from splatbench.raster.backend import cuda_available
+    from splatbench.raster.device import cuda_available
     from splatbench.raster.options import RasterOptions
 
     opts = RasterOptions.from_kwargs(**options)

@@ -1,6 +1,6 @@
 """The ``mitsuba`` backend: Gaussians ray-traced by Mitsuba 3 (``ellipsoids`` + ``volprim_rf_dedup``).
 
-The scene is `splatbench.validate.mitsuba.mitsuba_scene` (one ellipsoid per Gaussian,
+The scene is `splatbench.backends.builtins.mitsuba_scene.mitsuba_scene` (one ellipsoid per Gaussian,
 3-sigma shells, one ray through each pixel centre). Torch autograd reaches Mitsuba's
 own AD (the integrator's PRB-style backward) through `drjit.wrap`; the mapping
 from raw parameters to the scene's (``data = [mean, exp(log_scales), unit quat as
@@ -16,7 +16,7 @@ evaluated at its maximum along each pixel's ray (no EWA linearisation, no eps2d)
 cut at the 3-sigma ellipsoid; alpha is clamped at 0.9999 with no alpha_min skip;
 primitives are composited in the order the ray enters their shells; SH is evaluated
 in the ray's direction; a ray stops once its throughput is <= 0.01. The integrator is
-``volprim_rf_dedup`` (`splatbench.validate.mitsuba._volprim_dedup`): the shipped
+``volprim_rf_dedup`` (`splatbench.backends.builtins._volprim_dedup`): the shipped
 ``volprim_rf_basic`` and its backward pass, less the float32 re-hit that composites a
 small distant ellipsoid twice. Mitsuba's ray-ellipsoid test also misjudges ellipsoids
 that are small in absolute world units (sigma ~0.01), and its perspective sensor needs
@@ -62,7 +62,7 @@ def make_mitsuba_backend() -> Backend:
 
     from splatbench.backends.builtins.inputs import check_inputs
     from splatbench.gaussians import Gaussians
-    from splatbench.validate.mitsuba import mitsuba_scene, mitsuba_volprim
+    from splatbench.backends.builtins.mitsuba_scene import mitsuba_scene, mitsuba_volprim
 
     mi = mitsuba_volprim()
 

@@ -16,13 +16,15 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from splatbench.backends.base import GRAPHDECO, Backend, BackendInfo
+from splatbench.backends.base import AXES, AXIS, GRAPHDECO, Backend, BackendInfo
 from splatbench.errors import InputError
 
 GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
 MODES = ("matched", "exact")
 #: `reference.render` keywords a conventions mapping may set (near/far default to the camera's).
 REFERENCE_OPTIONS = ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius", "antialiased", "near", "far")
+#: The vocabulary's axes a conventions mapping may also set (`splatbench.backends.base.AXES`).
+AXIS_OPTIONS = tuple(a.name for a in AXES if a.name not in REFERENCE_OPTIONS)
 #: Rasterizer options with no counterpart in the reference (accelerations and placement only).
 FAST_ONLY = ("tile_size", "device")
 #: Central-difference half step. In float64 the truncation error is O(eps^2) ~ 1e-12 and the
@@ -50,9 +52,9 @@ def _options(conventions, camera) -> dict:
         for key, value in conventions.items():
             if key in FAST_ONLY:
                 continue
-            if key not in REFERENCE_OPTIONS:
+            if key not in REFERENCE_OPTIONS + AXIS_OPTIONS:
                 raise InputError(f"conventions: {key!r} has no counterpart in the reference "
-                                 f"(known: {', '.join(REFERENCE_OPTIONS + FAST_ONLY)})")
+                                 f"(known: {', '.join(REFERENCE_OPTIONS + AXIS_OPTIONS + FAST_ONLY)})")
             if value is not None:  # RasterOptions' near/far None means "the camera's"
                 opts[key] = value
     else:
@@ -60,7 +62,36 @@ def _options(conventions, camera) -> dict:
                          f"got {type(conventions).__name__}")
     opts.setdefault("near", camera.near)
     opts.setdefault("far", camera.far)
-    return opts
+    return _axes_to_keywords(opts)
+
+
+def _axes_to_keywords(opts: dict) -> dict:
+    """Replace the vocabulary's axes in ``opts`` by the `reference.render` keywords that follow them."""
+    out = {k: v for k, v in opts.items() if k not in AXIS_OPTIONS}
+    for name in AXIS_OPTIONS:
+        value = opts.get(name, AXIS[name].graphdeco)
+        if value != AXIS[name].graphdeco and value not in AXIS[name].alternatives:
+            raise InputError(f"conventions: {name}={value!r} is not in the vocabulary "
+                             f"(one of {[AXIS[name].graphdeco, *AXIS[name].alternatives]})")
+        if name == "pixel_centre":
+            out["pixel_offset"] = 0.5 if value == "half" else 0.0
+        elif name == "sh_view_direction":  # "detached" renders alike; its gradients are conform's to fake
+            out[name] = "camera_to_mean" if value == "detached" else value
+        elif name == "sh_degree":
+            out["sh_degree_arg"] = value != "ignored"
+            out["sh_max_degree"] = 3 if value == "ignored" else value
+        elif name == "background":
+            out["background_mode"] = value
+        elif name == "jacobian_clamp":
+            out["jacobian_guard"] = None if value == "none" else float(value) - 1.0
+        elif name == "near_plane":
+            if value != "camera":
+                out["near"] = float(value)
+        elif name == "depth":
+            out["depth_mode"] = value
+        else:  # quat_order, scale_activation, opacity_activation, sort_key, sh_basis, colour_clamp
+            out[name] = value
+    return out
 
 
 def reference_render(conventions, means, log_scales, quats, opacity_logits, sh, camera, *, mode="matched",
@@ -100,7 +131,7 @@ def reference_kwargs(conventions, camera, mode, sh_degree, background) -> dict:
     if mode not in MODES:
         raise InputError(f"mode: expected one of {list(MODES)}, got {mode!r}")
     opts = _options(conventions, camera)
-    if mode == "exact":
+    if mode == "exact":  # the exact mixture: no approximation, graphdeco's conventions
         opts = {k: opts[k] for k in ("near", "far")}
     bg = (0.0, 0.0, 0.0) if background is None else tuple(float(b) for b in _as_numpy(background).reshape(3))
     return dict(K=camera.K, world_to_camera=camera.world_to_camera, width=camera.width, height=camera.height,

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from splatbench.backends.base import Backend, BackendInfo
+from splatbench.backends.base import AXES, GRAPHDECO, Backend, BackendInfo
 from splatbench.errors import InputError
 
 BLOCK = 16  # pixels per block side (memory bound: BLOCK^2 x candidates per block)
@@ -280,6 +280,10 @@ def make_torch_matching(info: BackendInfo, dtype: str = "float64") -> Backend:
     (alpha_min, alpha_max, transmittance_min, eps2d, radius): the gradient oracle for it."""
     if info.convention("antialiased"):
         raise InputError(f"backend: the torch backend has no antialiased mode to match {info.name!r}")
+    other = [a.name for a in AXES if a.name not in GRAPHDECO and info.convention(a.name) != a.graphdeco]
+    if other:
+        raise InputError(f"backend: the torch backend follows graphdeco's {other[0]}, not {info.name!r}'s "
+                         f"{info.convention(other[0])!r}")
     radius = info.convention("radius")
     if radius not in ("3sigma", "opacity"):
         raise InputError(f"backend: the torch backend cannot match radius {radius!r} of {info.name!r}")

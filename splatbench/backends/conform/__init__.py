@@ -2,35 +2,39 @@
 
     from splatbench.backends.conform import conform
     report = conform("drjit")                   # a Backend, a callable, or a get_backend spec
-    report.passed, report.failed                # True / names of the failing probes
-    report.to_dict()                            # {"backend", "passed", "summary", "probes": [...]}
+    report.passed, report.failed                # nothing differs and no defect / probes still failing
+    report.diagnosis, report.defects            # conventions found to differ / root causes left
+    report.to_dict()                            # {"diagnosis", "defects", "version", "probes": [...], ...}
 
-Each probe (`probes.PROBES`) renders a tiny scene (`scenes`) with the backend (float32
-torch inputs) and with the float64 oracle (`reference_render`, matched to the conventions
-the backend declares in its `BackendInfo`), and gets a status: pass, fail, warn (a declared
-approximation not followed, but one of its listed alternatives is) or skip (the backend
-lacks the output or gradients the probe needs). Modules:
+Each probe (`probes.PROBES`, the basic ones first) renders a tiny scene (`scenes`) with the
+backend (float32 torch inputs) and with the float64 oracle (`reference_render`, matched to the
+conventions the backend declares in its `BackendInfo`), and gets a status: pass, fail, warn
+(a declared approximation not followed, but one of its listed alternatives is) or skip (the
+backend lacks the output or gradients the probe needs). Failures are then diagnosed
+(`diagnose`): the conventions of the vocabulary that explain them (those probes become
+"explained"), and the root causes of the rest. Modules:
 
     scenes    the probe scenes            probes    what each probe checks, and the likely cause
     oracle    float64 renders, finite differences, derived tolerances (derivation in its docstring)
     calls     calling the backend         judges    pass / fail / warn per kind of probe
-    results   ProbeResult, ConformReport
+    diagnose  fingerprinting, root causes results   ProbeResult, ConformReport
+    images    --save-images
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 from splatbench.backends.base import Backend
-from splatbench.backends.conform.calls import Fault
-from splatbench.backends.conform.judges import JUDGES, Context
+from splatbench.backends.conform.calls import Fault, captured
+from splatbench.backends.conform.diagnose import (FAULT_CAUSE, Defect, Finding, explained_by, fingerprint,
+                                                  root_causes, run_probes)
+from splatbench.backends.conform.judges import Context
 from splatbench.backends.conform.oracle import conventions_of
 from splatbench.backends.conform.probes import PROBES, Probe, probe_names
 from splatbench.backends.conform.results import STATUSES, ConformReport, ProbeResult
 from splatbench.devices import check_device, torch_device
 from splatbench.errors import InputError
-
-#: The cause given when the backend fails on a probe's scene (raises, bad shape, NaN), where the
-#: probe's own convention cannot be judged.
-FAULT_CAUSE = "the backend failed on this probe's scene (see measured), so the convention could not be judged"
 
 
 class BackendFault(InputError):
@@ -50,24 +54,44 @@ def _preflight(backend: Backend, scene, device: str) -> None:
                            f"-> (rgb [H, W, 3], alpha [H, W], depth [H, W]); see docs/backends.md)") from None
 
 
-__all__ = ["conform", "BackendFault", "ConformReport", "ProbeResult", "PROBES", "Probe", "STATUSES", "probe_names"]
+def backend_version(backend: Backend) -> str:
+    """The version of what was loaded: the backend's own, else that of the distribution providing the
+    module of its function (a user's ``module:function`` installed as a package), else "unknown"."""
+    if backend.info.version not in ("", "unknown"):
+        return backend.info.version
+    from importlib import metadata
+
+    top = (getattr(backend.fn, "__module__", None) or "").partition(".")[0]
+    for dist in metadata.packages_distributions().get(top, []):
+        try:
+            return metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            continue
+    return "unknown"
 
 
-def conform(backend, *, device: str = "auto", probes: tuple[str, ...] | None = None) -> ConformReport:
-    """Run the conformance probes on ``backend`` and judge each.
+__all__ = ["conform", "BackendFault", "ConformReport", "ProbeResult", "PROBES", "Probe", "STATUSES", "probe_names",
+           "Finding", "Defect", "FAULT_CAUSE", "backend_version"]
+
+
+def conform(backend, *, device: str = "auto", probes: tuple[str, ...] | None = None,
+            diagnose: bool = True) -> ConformReport:
+    """Run the conformance probes on ``backend``, judge each, and diagnose the failures.
 
     Args:
         backend: a `Backend`, a callable, or a spec for `get_backend` ("drjit", "mypkg.rast:render", ...).
         device: where the inputs live: "cpu", "cuda" or "auto" (default: CUDA when torch sees a GPU
             and the backend lists "cuda" in its devices, else "cpu", or the backend's only device).
-        probes: names of the probes to run (default: all, in `PROBES` order).
+        probes: names of the probes to run (default: all, in `PROBES` order, the basic probes first).
+        diagnose: search the convention vocabulary for what explains failing probes (`diagnose`).
 
     Returns:
-        `ConformReport` (``.passed``, ``.failed``, ``.results``, ``.to_dict()``).
+        `ConformReport` (``.passed``, ``.failed``, ``.diagnosis``, ``.defects``, ``.results``, ``.to_dict()``).
     """
     from splatbench.backends.registry import get_backend
 
-    backend = get_backend(backend) if not isinstance(backend, Backend) else backend
+    with captured() as printed:
+        backend = get_backend(backend) if not isinstance(backend, Backend) else backend
     devices = backend.info.devices
     if check_device(device) == "auto":
         device = "cuda" if "cuda" in devices and torch_device("auto") == "cuda" else \
@@ -84,14 +108,16 @@ def conform(backend, *, device: str = "auto", probes: tuple[str, ...] | None = N
             raise InputError(f"probes: unknown probe {unknown[0]!r} (known: {', '.join(known)})")
         selected = tuple(known[n] for n in probes)
     ctx = Context(backend, conventions_of(backend), device, {})
-    _preflight(backend, selected[0].build(), device)
-    results = []
-    for probe in selected:
-        s = probe.build()
-        try:
-            results.append(JUDGES[probe.kind](probe, s, ctx))
-        except Fault as fault:
-            results.append(ProbeResult(probe.name, probe.kind, "fail", probe.checks, None, None, "", str(fault),
-                                       FAULT_CAUSE))
+    with captured() as during:
+        _preflight(backend, selected[0].build(), device)
+        declared_results = run_probes(selected, ctx)
+        conv, findings, results = ctx.conv, [], declared_results
+        if diagnose and any(r.status == "fail" for r in results.values()):
+            conv, findings, results = fingerprint(selected, ctx, declared_results)
+        defects = root_causes(selected, results, conv)
+    why = explained_by(findings)
+    final = tuple(dataclasses.replace(declared_results[p.name], status="explained", explained_by=why[p.name])
+                  if p.name in why else results[p.name] for p in selected)
     declared = {k: getattr(backend.info, k) for k in backend.info.declared}
-    return ConformReport(backend.name, backend.info.description, device, declared, tuple(results))
+    return ConformReport(backend.name, backend.info.description, device, declared, final, tuple(findings),
+                         tuple(defects), backend_version(backend), printed.text + during.text)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,6 +24,13 @@ class Context:
     conv: dict
     device: str
     vjps: dict  # scene name -> gradients of the shared cotangent loss (one backward per scene)
+    outs: dict = field(default_factory=dict)  # scene name -> the backend's outputs [H, W, 5] (one render per scene)
+
+
+def _backend_outputs(s: ProbeScene, name: str, ctx: Context) -> np.ndarray:
+    if name not in ctx.outs:
+        ctx.outs[name] = backend_outputs(ctx.backend, s, ctx.device)
+    return ctx.outs[name]
 
 
 def _pixel_diff(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> np.ndarray:
@@ -63,7 +70,7 @@ def _psnr(got: np.ndarray, ref: np.ndarray, outputs: tuple[str, ...]) -> str:
     """", rgb PSNR x dB against the oracle" (peak 1), or "" when rgb is not compared."""
     if "rgb" not in outputs:
         return ""
-    from splatbench.train.metrics import psnr
+    from splatbench.metrics.image import psnr
 
     value = psnr(got[..., :3], ref[..., :3], clamp=False)
     return f", rgb PSNR {value:.1f} dB against the oracle" if math.isfinite(value) else ""
@@ -79,7 +86,7 @@ def _judge_forward(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
         return _skip(probe, f"the backend does not produce {', '.join(probe.outputs)}")
     atol, source = forward_tolerance(s, ctx.conv)
     ref = oracle(probe.build.__name__, s, ctx.conv)
-    got = backend_outputs(ctx.backend, s, ctx.device)
+    got = _backend_outputs(s, probe.build.__name__, ctx)
     diff = _pixel_diff(got, ref, outputs)
     dev = float(diff.max())
     ok = dev <= atol
@@ -93,7 +100,7 @@ def _judge_forward(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
 def _judge_approximation(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
     outputs = _compared(probe, ctx)
     atol, source = forward_tolerance(s, ctx.conv)
-    got = backend_outputs(ctx.backend, s, ctx.device)
+    got = _backend_outputs(s, probe.build.__name__, ctx)
     ref = oracle(probe.build.__name__, s, ctx.conv)
     diff = _pixel_diff(got, ref, outputs)
     dev = float(diff.max())

@@ -61,12 +61,48 @@ def stack(out) -> np.ndarray:
     return np.concatenate([rgb, alpha[..., None], depth[..., None]], axis=-1)
 
 
+def _kwargs(s: ProbeScene, conv: dict) -> dict:
+    from splatbench.backends.builtins.reference_backend import reference_kwargs
+
+    return reference_kwargs(conv, s.camera, "matched", s.sh_degree, s.background)
+
+
 def _oracle_params(s: ProbeScene, conv: dict, params: dict | None = None) -> np.ndarray:
-    from splatbench.backends.builtins.reference_backend import reference_render
+    import reference
 
     p = s.params() if params is None else params
-    out = reference_render(conv, *(p[k] for k in GROUPS), s.camera, sh_degree=s.sh_degree, background=s.background)
+    kwargs = _kwargs(s, conv)
+    if conv.get("sh_view_direction") == "detached":  # the direction from the unperturbed means: no d/dmeans
+        kwargs["sh_dir_means"] = s.means
+    out = reference.render(*(p[k] for k in GROUPS), **kwargs)
     return stack((out.rgb, out.alpha, out.depth))
+
+
+#: graphdeco's conventions as a conform conventions mapping.
+_GRAPHDECO_CONV: dict = {}
+
+
+def effective(name: str, s: ProbeScene, conv: dict) -> dict:
+    """``conv`` with every convention that changes nothing in this scene's render set back to graphdeco's.
+
+    Used as the cache key of the finite differences: a convention that leaves the render bitwise
+    unchanged leaves its derivatives unchanged too, since every probe scene keeps its pixels away from
+    discrete decisions (clamps, skips, cutoffs), which a step of FD_H cannot cross
+    (tests/test_conform.py). "detached" changes gradients only, so it is always kept."""
+    if not _GRAPHDECO_CONV:
+        from splatbench.backends.base import BackendInfo
+
+        _GRAPHDECO_CONV.update(BackendInfo(name="graphdeco").reference_options())
+    key = _key(name, conv, "effective")
+    if key not in _CACHE:
+        eff, ref = dict(conv), oracle(name, s, conv)
+        for k, v in conv.items():
+            if k in _GRAPHDECO_CONV and v != _GRAPHDECO_CONV[k] and not (k == "sh_view_direction" and v == "detached"):
+                trial = {**eff, k: _GRAPHDECO_CONV[k]}
+                if np.array_equal(oracle(name, s, trial), ref):
+                    eff = trial
+        _CACHE[key] = eff
+    return _CACHE[key]
 
 
 def oracle(name: str, s: ProbeScene, conv: dict) -> np.ndarray:
@@ -79,6 +115,7 @@ def oracle(name: str, s: ProbeScene, conv: dict) -> np.ndarray:
 
 def fd_jacobian(name: str, s: ProbeScene, conv: dict, group: str) -> np.ndarray:
     """d outputs / d each entry of ``group`` by central differences: [n_entries, H, W, 5] (cached)."""
+    conv = effective(name, s, conv)
     key = _key(name, conv, "fd", group)
     if key not in _CACHE:
         params = {k: np.array(v) for k, v in s.params().items()}
@@ -96,15 +133,18 @@ def fd_jacobian(name: str, s: ProbeScene, conv: dict, group: str) -> np.ndarray:
     return _CACHE[key]
 
 
+PROJECT_KEYWORDS = ("eps2d", "near", "far", "radius", "alpha_min", "antialiased", "quat_order", "scale_activation",
+                    "opacity_activation", "jacobian_guard")
+
+
 def projection(s: ProbeScene, conv: dict, params: dict | None = None):
     import reference
 
     p = s.params() if params is None else params
     c = s.camera
+    kwargs = _kwargs(s, conv)
     return reference.project(p["means"], p["log_scales"], p["quats"], p["opacity_logits"], c.K, c.world_to_camera,
-                             c.width, c.height, eps2d=conv["eps2d"], near=conv.get("near", c.near),
-                             far=conv.get("far", c.far), radius=conv["radius"], alpha_min=conv["alpha_min"],
-                             antialiased=conv["antialiased"])
+                             c.width, c.height, **{k: kwargs[k] for k in PROJECT_KEYWORDS})
 
 
 def _scene_constants(s: ProbeScene, conv: dict) -> tuple[int, float, float]:
@@ -149,6 +189,7 @@ def oracle_grad(name: str, s: ProbeScene, conv: dict, group: str, v: np.ndarray,
 
 def conic_jacobian(name: str, s: ProbeScene, conv: dict) -> np.ndarray:
     """d (A, B, C) / d (log_scales, quats) per Gaussian: [N, 3, 7], central differences (cached)."""
+    conv = effective(name, s, conv)
     key = _key(name, conv, "conic")
     if key not in _CACHE:
         n = s.means.shape[0]

@@ -6,6 +6,7 @@ Kinds:
   gradient       a random-cotangent VJP per parameter group against central differences of the oracle
   direction      the same VJP along directions of (log_scales, quats) that move one conic term
                  (A, B or C) of each Gaussian and nothing else, to first order
+  (the three basic probes, first, are forward probes of plain scenes that conform fingerprints first)
   approximation  a declared approximation (early stop, radius rule): "pass" when the backend does
                  what it declares, "warn" when every pixel matches one of the listed alternatives
                  (e.g. no early stop at all), "fail" otherwise
@@ -16,7 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
-from splatbench.backends.conform.scenes import (GROUPS, ProbeScene, alpha_max, alpha_min, background,
+from splatbench.backends.conform.scenes import (GROUPS, ProbeScene, alpha_max, basic_centred, basic_offaxis,
+                                                basic_overlap, alpha_min, background,
                                                 colour_clamp, conic,
                                                 depth_order, early_stop, eps2d, expected_depth, gradients,
                                                 intrinsics, jacobian_clamp, near_plane, opacity_activation,
@@ -57,7 +59,17 @@ class Probe:
 # The probes, in the order they run
 # ----------------------------------------------------------------------------
 
+#: The basic probes run (and are fingerprinted) first: they pin the conventions everything else depends on.
+BASIC = ("basic_centred", "basic_overlap", "basic_offaxis")
+
 PROBES: tuple[Probe, ...] = (
+    Probe("basic_centred", "one anisotropic Gaussian near the centre, degree-1 SH", "forward",
+          "a basic convention differs (pixel centre, activations, quaternion order, eps2d, SH): see the diagnosis",
+          basic_centred),
+    Probe("basic_overlap", "two overlapping translucent Gaussians, listed far first, over a background", "forward",
+          "compositing differs (order, transmittance, background): see the diagnosis", basic_overlap),
+    Probe("basic_offaxis", "a camera far from the world origin looking away from it, degree-1 SH", "forward",
+          "the camera pose or the SH view direction is handled differently: see the diagnosis", basic_offaxis),
     Probe("depth_order", "overlapping Gaussians listed far to near, in an order that a sort on index, on world z "
           "or on a strided read of the camera coordinates gets wrong", "forward",
           "Gaussians are not composited in ascending camera depth (sorted on the wrong key: index, world z, "
@@ -134,6 +146,18 @@ PROBES: tuple[Probe, ...] = (
           "the footprint is cut at another radius than declared (3 sigma in graphdeco)", radius,
           alternatives=({"radius": "3sigma"}, {"radius": "opacity"})),
 )
+
+
+#: Each axis of the convention vocabulary -> the probes that isolate it (a diagnosis names these).
+AXIS_PROBES: dict[str, tuple[str, ...]] = {
+    "pixel_centre": ("pixel_centre",), "opacity_activation": ("opacity_activation",),
+    "scale_activation": ("scale_activation",), "quat_order": ("quat_order",), "eps2d": ("eps2d",),
+    "background": ("background",), "sh_view_direction": ("sh_viewdir", "sh_viewdir_grad"), "sort_key": ("depth_order",),
+    "sh_basis": ("sh_degree1", "sh_degree2", "sh_degree3"), "sh_degree": ("sh_degree_arg", "sh_degree3", "sh_degree2"),
+    "colour_clamp": ("colour_clamp",), "jacobian_clamp": ("jacobian_clamp",), "alpha_max": ("alpha_max",),
+    "alpha_min": ("alpha_min",), "near_plane": ("near_plane",), "depth": ("expected_depth",),
+    "radius": ("radius",), "transmittance_min": ("early_stop",),
+}
 
 
 def probe_names() -> tuple[str, ...]:

@@ -116,6 +116,42 @@ def _sh_band(degree: int, n: int, seed: int, *, only_band: bool = True) -> np.nd
 # ----------------------------------------------------------------------------
 
 @functools.cache
+def basic_centred() -> ProbeScene:
+    # One anisotropic Gaussian near the image centre, degree-1 SH: pixel centre, activations,
+    # rotation, SH basis all act on it, and nothing else (no sort, no background).
+    cam = camera(12, 12)
+    means = np.array([at(cam, 6.2, 5.7, 4.0)])
+    sh = np.zeros((1, 4, 3))
+    sh[0, 0] = (np.array([0.8, 0.5, 0.3]) - 0.5) / C0
+    sh[0, 1:] = [[0.3, -0.2, 0.1], [-0.1, 0.25, 0.2], [0.2, 0.1, -0.3]]
+    return scene(cam, means, [[2.4, 1.3, 1.8]], [0.33], sh, z=np.array([4.0]), seed=31)
+
+
+@functools.cache
+def basic_overlap() -> ProbeScene:
+    # Two overlapping translucent Gaussians over a coloured background: compositing order, transmittance
+    # and the background's weight. Listed far first; the nearer in camera z (off axis) is the farther
+    # from the camera centre (4.36 against 4.30), so a sort on distance gets the order wrong too.
+    cam = camera(12, 12)
+    z = np.array([4.3, 4.0])
+    means = np.array([at(cam, 5.5, 6.3, 4.3), at(cam, 1.5, 6.0, 4.0)])
+    return scene(cam, means, [2.6, 2.0], [0.32, 0.3], dc([(0.2, 0.3, 0.9), (0.9, 0.4, 0.1)]), z=z, seed=32,
+                 background=(0.1, 0.6, 0.3))
+
+
+@functools.cache
+def basic_offaxis() -> ProbeScene:
+    # A camera far from the world origin, looking away from it, degree-1 SH on three Gaussians: the SH
+    # view direction, world vs camera axes.
+    cam = Camera.look_at(eye=[4.0, -3.0, -2.0], target=[5.0, -1.5, 2.0], up=[0.0, -1.0, 0.0], width=12,
+                         height=12, fov_x_deg=60.0)
+    means = _grid(cam, 3, 1, 4.0, margin=3.0)
+    sh = _sh_band(1, 3, 33)
+    sh[:, 1:, :] *= 2.0
+    return scene(cam, means, [1.5] * 3, [0.33] * 3, sh, seed=33)
+
+
+@functools.cache
 def depth_order() -> ProbeScene:
     # The camera looks along world x: listed far to near (index order is wrong), and world z
     # and a strided read of the camera points [x0 y0 z0 x1 ...] give two other wrong orders.

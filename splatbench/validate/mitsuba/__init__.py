@@ -43,7 +43,8 @@ alike) misjudges hit/miss for ellipsoids that are small in absolute world units
 and camera together, so the sweep scenes sit 400 units from the camera (sigma >= ~1.5),
 where the probe finds no wrong decision up to 300 sigma.
 
-Layout (one job per module): `scene` (the ``mi.Scene``, both renders, `compare`),
+Layout (one job per module): `scene` (both renders, `compare`; the ``mi.Scene`` itself is
+`splatbench.backends.builtins.mitsuba_scene`, shared with the ``mitsuba`` backend),
 `prediction` (the isotropic closed form), `cases` (the sweeps), `probe` (Mitsuba's
 intersection test), `checks` (pass/fail statements), `report` (CSV, markdown, plot).
 Mitsuba itself comes from `splatbench.mitsuba_loader` (one loader, one variant rule).
@@ -66,13 +67,12 @@ from splatbench.validate.mitsuba.prediction import IsotropicPrediction, isotropi
 from splatbench.validate.mitsuba.probe import ProbeRow, intersection_probe
 from splatbench.validate.mitsuba.report import (DEFAULT_OUT, ReportPaths, markdown_table, probe_markdown,
                                                 write_report)
-from splatbench.validate.mitsuba.scene import (DEFAULT_OPTIONS, ELLIPSOID_EXTENT, MATCHED_OPTIONS, OPTION_SETS,
-                                               SWEEP_OPACITY, Comparison, ComparisonMetrics, compare,
-                                               mitsuba_scene, mitsuba_volprim, render_splat, render_traced)
+from splatbench.validate.mitsuba.scene import (DEFAULT_OPTIONS, MATCHED_OPTIONS, OPTION_SETS, SWEEP_OPACITY,
+                                               Comparison, ComparisonMetrics, compare, render_splat, render_traced)
 
 __all__ = ["MITSUBA_VARIANT", "SWEEPS", "Case", "SweepRow", "angle_cases", "anisotropy_cases", "overlap_cases",
            "run_case", "run_sweeps", "sh_cases", "size_cases", "MIN_TREND_SIGMA_PX", "PREDICTION_ATOL", "Check",
            "check_tight", "check_trends", "IsotropicPrediction", "isotropic_prediction", "ProbeRow",
            "intersection_probe", "DEFAULT_OUT", "ReportPaths", "markdown_table", "probe_markdown", "write_report",
-           "DEFAULT_OPTIONS", "ELLIPSOID_EXTENT", "MATCHED_OPTIONS", "OPTION_SETS", "SWEEP_OPACITY", "Comparison",
-           "ComparisonMetrics", "compare", "mitsuba_scene", "mitsuba_volprim", "render_splat", "render_traced"]
+           "DEFAULT_OPTIONS", "MATCHED_OPTIONS", "OPTION_SETS", "SWEEP_OPACITY", "Comparison", "ComparisonMetrics",
+           "compare", "render_splat", "render_traced"]

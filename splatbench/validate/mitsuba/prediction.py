@@ -11,10 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from splatbench.backends.builtins.mitsuba_scene import ELLIPSOID_EXTENT
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_C0, Gaussians
-from splatbench.validate.mitsuba.scene import ELLIPSOID_EXTENT
 
 _EPS32 = float(np.finfo(np.float32).eps)
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from splatbench.validate.mitsuba.scene import ELLIPSOID_EXTENT, mitsuba_volprim
+from splatbench.backends.builtins.mitsuba_scene import ELLIPSOID_EXTENT, mitsuba_volprim
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,7 @@
 """Both renderers on the same Gaussians: Mitsuba's ray-traced ``ellipsoids`` and the rasterizer.
 
-`mitsuba_scene` builds the ``mi.Scene``, `render_traced` and `render_splat` render it,
+`splatbench.backends.builtins.mitsuba_scene` builds the ``mi.Scene`` (the ``mitsuba``
+backend's too), `render_traced` and `render_splat` render it,
 `compare` puts the two side by side (`Comparison`). Why they differ, and by how much,
 is in the package docstring (`splatbench.validate.mitsuba`) and docs/validation.md.
 """
@@ -8,19 +9,15 @@ is in the package docstring (`splatbench.validate.mitsuba`) and docs/validation.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from types import ModuleType
 
 import numpy as np
 
+from splatbench.backends.builtins.mitsuba_scene import mitsuba_scene, mitsuba_volprim
 from splatbench.cameras import Camera
-from splatbench.errors import InputError
 from splatbench.gaussians import Gaussians
-from splatbench.mitsuba_loader import mitsuba
+from splatbench.metrics.image import psnr
 from splatbench.raster import render
-from splatbench.train.metrics import psnr
 
-#: The extent of Mitsuba's ellipsoid shells in sigma; the rasterizer's ``radius="3sigma"``.
-ELLIPSOID_EXTENT = 3.0
 #: Rasterizer options that match ``volprim_rf_basic`` wherever the two definitions allow.
 MATCHED_OPTIONS = {"eps2d": 0.0, "alpha_min": 1e-7, "alpha_max": 0.9999, "transmittance_min": 0.0,
                    "radius": "3sigma"}
@@ -29,66 +26,6 @@ DEFAULT_OPTIONS: dict = {}
 OPTION_SETS = {"matched": MATCHED_OPTIONS, "3dgs": DEFAULT_OPTIONS}
 #: Opacity of every Gaussian in the sweeps (below Mitsuba's 0.9999 clamp).
 SWEEP_OPACITY = 0.8
-
-
-# ------------------------------------------------------------------------ Mitsuba
-def mitsuba_volprim() -> ModuleType:
-    """`splatbench.mitsuba_loader.mitsuba` (variant ``llvm_ad_rgb``) with ``volprim_rf_dedup`` registered."""
-    mi = mitsuba()
-    _register_dedup(mi)
-    return mi
-
-
-_REGISTERED: set[str] = set()
-
-
-def _register_dedup(mi: ModuleType) -> None:
-    """Register ``volprim_rf_dedup`` (`splatbench.validate.mitsuba._volprim_dedup`) for the current variant, once."""
-    if mi.variant() in _REGISTERED:
-        return
-    from splatbench.validate.mitsuba._volprim_dedup import DedupVolprim  # needs a JIT variant set first
-
-    mi.register_integrator("volprim_rf_dedup", lambda props: DedupVolprim(props))
-    _REGISTERED.add(mi.variant())
-
-
-def _quats_xyzw(g: Gaussians) -> np.ndarray:
-    """[N, 4] unit quaternions in Dr.Jit's order (x, y, z, w); zero quaternions become identity."""
-    q = g.rotations.astype(np.float32)
-    zero = ~np.any(q != 0, axis=1)
-    q[zero] = (1.0, 0.0, 0.0, 0.0)
-    return np.ascontiguousarray(np.concatenate([q[:, 1:], q[:, :1]], axis=1))
-
-
-def mitsuba_scene(gaussians: Gaussians, camera: Camera, *, integrator: str = "volprim_rf_dedup"):
-    """An ``mi.Scene``: one ``ellipsoids`` shape holding ``gaussians``, seen by ``camera``.
-
-    ``ellipsoids.data`` [N, 10] = centre, scale (the standard deviations), rotation as
-    (x, y, z, w); attributes ``opacities`` [N, 1] (after the sigmoid) and ``sh_coeffs``
-    [N, 3K] (basis-major, RGB-minor: ``sh.reshape(N, -1)``). ``integrator``:
-    ``"volprim_rf_dedup"`` or the shipped ``"volprim_rf_basic"``; either with
-    ``max_depth = -1`` (no limit on primitives per ray) and ``srgb_primitives = False``.
-    The sensor shoots one ray through each pixel centre.
-    """
-    if integrator not in ("volprim_rf_dedup", "volprim_rf_basic"):
-        raise InputError(f"integrator: expected 'volprim_rf_dedup' or 'volprim_rf_basic', got {integrator!r}")
-    if len(gaussians) == 0:
-        raise InputError("gaussians: the ellipsoids shape needs at least one Gaussian, got N=0")
-    mi = mitsuba_volprim()
-    n = len(gaussians)
-    data = np.concatenate([gaussians.means, gaussians.scales, _quats_xyzw(gaussians)], axis=1).astype(np.float32)
-    return mi.load_dict({
-        "type": "scene",
-        "integrator": {"type": integrator, "max_depth": -1, "srgb_primitives": False},
-        "sensor": {**camera.to_mitsuba(), "sampler": {"type": "stratified", "sample_count": 1, "jitter": False}},
-        "gaussians": {
-            "type": "ellipsoids",
-            "extent": ELLIPSOID_EXTENT,
-            "data": mi.TensorXf(np.ascontiguousarray(data)),
-            "opacities": mi.TensorXf(np.ascontiguousarray(gaussians.opacities.reshape(n, 1), dtype=np.float32)),
-            "sh_coeffs": mi.TensorXf(np.ascontiguousarray(gaussians.sh.reshape(n, -1), dtype=np.float32)),
-        },
-    })
 
 
 def render_traced(gaussians: Gaussians, camera: Camera, *, shipped: bool = False) -> np.ndarray:

@@ -1,6 +1,6 @@
 """``volprim_rf_dedup``: Mitsuba's ``volprim_rf_basic`` that composites a primitive once per entry.
 
-Import only after a Mitsuba JIT variant is set (`splatbench.validate.mitsuba.mitsuba_volprim`
+Import only after a Mitsuba JIT variant is set (`splatbench.backends.builtins.mitsuba_scene.mitsuba_volprim`
 does both). Dr.Jit's ``@dr.syntax`` rewrites `DedupVolprim.sample` against this
 module's globals, hence a module of its own.
 """

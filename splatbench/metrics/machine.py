@@ -50,9 +50,9 @@ def load_average() -> list[float]:
 
 def resolve_device(device: str) -> str:
     """"cpu" or "cuda": where the rasterizer runs for ``device`` ("auto" picks CUDA when present)."""
-    from splatbench.raster.backend import get_backend
+    from splatbench.raster.device import get_device
 
-    return "cuda" if get_backend(device).name == "cuda" else "cpu"
+    return "cuda" if get_device(device).name == "cuda" else "cpu"
 
 
 def machine_info(device: str) -> MachineInfo:

@@ -1,7 +1,8 @@
-"""Dr.Jit backend selection: LLVM on the CPU, CUDA where a GPU exists.
+"""The Dr.Jit device of a render: LLVM on the CPU, CUDA where a GPU exists.
 
-The same rasterizer code runs on both; a `Backend` carries the array types so no
-module-level state decides where work happens.
+The same rasterizer code runs on both; a `Device` carries the array types so no
+module-level state decides where work happens. (A rasterizer plugin, the other thing
+called a backend, is `splatbench.backends.Backend`.)
 """
 
 from __future__ import annotations
@@ -19,10 +20,10 @@ from splatbench.errors import InputError
 
 
 @dataclass(frozen=True)
-class Backend:
+class Device:
     """The Dr.Jit array namespace used for one render (``drjit.llvm.ad`` or ``drjit.cuda.ad``)."""
 
-    name: str  # "llvm" or "cuda"
+    name: str  # Dr.Jit's backend: "llvm" or "cuda"
     t: ModuleType
 
 
@@ -31,15 +32,15 @@ def cuda_available() -> bool:
 
 
 @lru_cache(maxsize=None)
-def get_backend(device: str = "auto") -> Backend:
-    """The backend for ``device`` ("cpu", "cuda" or "auto": CUDA when available)."""
+def get_device(device: str = "auto") -> Device:
+    """The `Device` for ``device`` ("cpu", "cuda" or "auto": CUDA when available)."""
     if check_device(device) == "auto":
         device = "cuda" if cuda_available() else "cpu"
     if device == "cuda":
         if not cuda_available():
             raise no_cuda("Dr.Jit")
         import drjit.cuda.ad as t
-        return Backend("cuda", t)
+        return Device("cuda", t)
     try:
         _llvm.require()
     except _llvm.LLVMNotFoundError as exc:
@@ -47,4 +48,4 @@ def get_backend(device: str = "auto") -> Backend:
     if not dr.has_backend(dr.JitBackend.LLVM):
         raise InputError("device: 'cpu' requested but Dr.Jit's LLVM backend is unavailable")
     import drjit.llvm.ad as t
-    return Backend("llvm", t)
+    return Device("llvm", t)

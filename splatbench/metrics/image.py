@@ -14,10 +14,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from splatbench.train.losses import ssim, to_bchw
-
 #: The torchvision AlexNet checkpoint LPIPS("alex") loads (torch hub cache, never fetched here).
 ALEXNET_CHECKPOINT = "alexnet-owt-7be5be79.pth"
+
+
+def to_bchw(image: torch.Tensor) -> torch.Tensor:
+    """[H, W, 3] -> [1, 3, H, W] (a view)."""
+    return image.permute(2, 0, 1).unsqueeze(0)
 
 
 def psnr(pred: torch.Tensor | np.ndarray, target: torch.Tensor | np.ndarray, *, clamp: bool = True) -> float:
@@ -33,9 +36,12 @@ def psnr(pred: torch.Tensor | np.ndarray, target: torch.Tensor | np.ndarray, *, 
 
 
 def ssim_metric(pred: torch.Tensor, target: torch.Tensor, window: int = 11) -> float:
-    """Mean SSIM (kornia, window 11) of [H, W, 3] images, ``pred`` clamped to [0, 1]."""
+    """Mean SSIM (``kornia.metrics.ssim``: Gaussian window 11, σ = 1.5) of [H, W, 3]
+    images, ``pred`` clamped to [0, 1]."""
+    import kornia  # late: kornia takes a second to import and only evaluation needs it
+
     with torch.no_grad():
-        return float(ssim(pred.clamp(0, 1), target, window))
+        return float(kornia.metrics.ssim(to_bchw(pred.clamp(0, 1)), to_bchw(target), window, max_val=1.0).mean())
 
 
 def lpips_metric() -> tuple[Callable[[torch.Tensor, torch.Tensor], float] | None, str]:
@@ -60,4 +66,4 @@ def lpips_metric() -> tuple[Callable[[torch.Tensor, torch.Tensor], float] | None
     return fn, "LPIPS (AlexNet)"
 
 
-__all__ = ["psnr", "ssim_metric", "lpips_metric"]
+__all__ = ["psnr", "ssim_metric", "lpips_metric", "to_bchw"]

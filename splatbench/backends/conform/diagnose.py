@@ -1,0 +1,323 @@
+"""From failing probes to root causes: which conventions the backend follows (fingerprinting), and the
+defects that remain.
+
+Fingerprinting (`fingerprint`). In two stages, the basic probes first, then every probe: for the
+probes that fail, each alternative value of each axis of the convention vocabulary
+(`splatbench.backends.base.AXES`, most basic first) is tried in the oracle, and scored by the failing
+probes it makes pass: on the basic stage, forward probes only (the gradient probes for "detached", the
+one axis that changes gradients only); after it, outputs and gradients, but only for candidates that
+make a probe isolating their axis pass (a convention that differs always fails, or warns in, those).
+The best candidate is kept when, with every probe rerun against the oracle under it (outputs and
+gradients), fewer probes fail and none that passed fails; then the search repeats. When
+no single alternative explains a failing basic probe, pairs of alternatives are tried on the basic
+probes. The probe scenes are tiny, so the search costs a few dozen small renders per axis.
+
+Root causes (`root_causes`). Each probe isolates one feature (its name) and exercises others (a
+scene with two Gaussians exercises the depth order, an anisotropic rotated one the quaternion order,
+a gradient of means the conic's gradient, ...: `exercises`). The defects are the smallest set of
+failing probes whose features account for every failing probe (ties: the set whose features the
+fewest passing probes exercise, then the earliest probes); each lists the failing probes that follow
+from it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from splatbench.backends.base import AXES, AXIS
+from splatbench.backends.conform.calls import Fault
+from splatbench.backends.conform.judges import JUDGES, Context
+from splatbench.backends.conform.oracle import projection
+from splatbench.backends.conform.probes import AXIS_PROBES, BASIC, Probe
+from splatbench.backends.conform.results import ProbeResult
+from splatbench.backends.conform.scenes import ProbeScene
+
+#: The cause given when the backend fails on a probe's scene (raises, bad shape, NaN), where the
+#: probe's own convention cannot be judged.
+FAULT_CAUSE = "the backend failed on this probe's scene (see measured), so the convention could not be judged"
+OK = ("pass", "warn", "skip")
+#: Features every probe scene exercises: a wrong pixel centre, activation, low-pass or skip changes any render.
+EVERYWHERE = ("pixel_centre", "scale_activation", "opacity_activation", "eps2d", "alpha_min")
+TAIL_D2 = 4.0  # a footprint's "tail": beyond 2 sigma, where a cutoff other than the declared one shows
+MAX_ROOTS = 3  # exhaustive cover search up to this size, greedy beyond
+
+
+@dataclass(frozen=True)
+class Finding:
+    """A convention found to differ from the declared one: ``axis`` is ``found``, not ``expected``;
+    ``explains``: the probes that fail under the declaration and pass under the finding."""
+
+    axis: str
+    expected: Any
+    found: Any
+    explains: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Defect:
+    """A failing probe no convention explains, with the other failing probes that follow from it."""
+
+    probe: str
+    cause: str
+    deviation: float | None
+    tolerance: float | None
+    follows: tuple[str, ...]
+
+
+def run_probes(selected: tuple[Probe, ...], ctx: Context) -> dict[str, ProbeResult]:
+    """Every probe in ``selected`` judged against the oracle under ``ctx.conv``."""
+    out = {}
+    for probe in selected:
+        out[probe.name] = judge(probe, ctx)
+    return out
+
+
+def judge(probe: Probe, ctx: Context) -> ProbeResult:
+    s = probe.build()
+    try:
+        return JUDGES[probe.kind](probe, s, ctx)
+    except Fault as fault:
+        return ProbeResult(probe.name, probe.kind, "fail", probe.checks, None, None, "", str(fault), FAULT_CAUSE)
+
+
+def _failing(results: dict[str, ProbeResult], names=None) -> list[str]:
+    return [n for n, r in results.items() if r.status == "fail" and (names is None or n in names)]
+
+
+def _candidates(conv: dict, changed: set[str]):
+    """Each single change {axis: value} to ``conv`` on an axis not yet diagnosed, in the vocabulary's order."""
+    for axis in AXES:
+        if axis.name in changed:
+            continue
+        for value in (axis.graphdeco, *axis.alternatives):
+            if value != conv[axis.name]:
+                yield {axis.name: value}
+
+
+def _explained(probes: list[Probe], ctx: Context, change: dict, *, forward_only: bool = False) -> list[str]:
+    """The probes (all failing under ctx.conv) that pass, or only warn, under ctx.conv + change.
+    ``forward_only``: judge the forward probes only (a cheap first look: no finite differences)."""
+    gradient_only = change == {"sh_view_direction": "detached"}  # the same forward: only gradients can tell
+    trial = dataclasses.replace(ctx, conv={**ctx.conv, **change})
+    out = []
+    for p in probes:
+        gradient = p.kind in ("gradient", "direction")
+        if (gradient and forward_only and not gradient_only) or (gradient_only and not gradient):
+            continue
+        if judge(p, trial).status in OK:
+            out.append(p.name)
+    return out
+
+
+def _isolates(change: dict, failing: list[Probe], warned: list[Probe], ctx: Context) -> bool:
+    """Whether ``change`` makes a failing probe isolating its axis pass (or warn), or a warning one pass:
+    a convention that differs always shows in those probes."""
+    axis = next(iter(change))
+    own = [p for p in failing if p.name in AXIS_PROBES[axis]]
+    if own and _explained(own, ctx, change):
+        return True
+    trial = dataclasses.replace(ctx, conv={**ctx.conv, **change})
+    return any(judge(p, trial).status == "pass" for p in warned if p.name in AXIS_PROBES[axis])
+
+
+def fingerprint(selected: tuple[Probe, ...], ctx: Context,
+                results: dict[str, ProbeResult]) -> tuple[dict, list[Finding], dict[str, ProbeResult]]:
+    """Search the vocabulary for the conventions that explain the failing probes (module docstring).
+
+    Returns the conventions found (a conform conventions mapping), the findings in the order found,
+    and every probe's result under those conventions."""
+    by_name = {p.name: p for p in selected}
+    declared, conv, findings, changed = dict(ctx.conv), dict(ctx.conv), [], set()
+    stages = [tuple(n for n in BASIC if n in by_name), tuple(by_name)]
+    for stage in stages:
+        rejected: list[dict] = []
+        while True:
+            failing = [by_name[n] for n in _failing(results, stage)]
+            if not failing:
+                break
+            here = dataclasses.replace(ctx, conv=conv)
+            scored = []
+            warned = [by_name[n] for n in stage if results[n].status == "warn"]
+            for change in _candidates(conv, changed):
+                if change in rejected:
+                    continue
+                if stage is stages[0]:
+                    explains = _explained(failing, here, change, forward_only=True)
+                elif _isolates(change, failing, warned, here):
+                    # A convention that differs fails (or warns in) the probes isolating its axis: one that
+                    # does not make them pass cannot be it. Those that do are scored on outputs and gradients.
+                    explains = _explained(failing, here, change)
+                else:
+                    continue
+                if explains:
+                    scored.append((len(explains), change))
+            if not scored and stage is stages[0]:
+                scored = _pairs(failing, here, changed, rejected)
+            if not scored:
+                break
+            best = max(scored, key=lambda sc: sc[0])[1]  # first of the best: the vocabulary's order
+            trial_results = run_probes(selected, dataclasses.replace(ctx, conv={**conv, **best}))
+            before, after = set(_failing(results)), set(_failing(trial_results))
+            if len(after) >= len(before) or after - before:
+                rejected.append(best)
+                continue
+            explains = tuple(n for n in by_name if n in before and n not in after)
+            for axis, value in best.items():
+                findings.append(Finding(axis, declared[axis], value, explains))
+                changed.add(axis)
+            conv, results = {**conv, **best}, trial_results
+    return conv, findings, results
+
+
+def _pairs(failing: list[Probe], ctx: Context, changed: set[str], rejected: list[dict]) -> list:
+    """Two alternatives at once, scored on the failing basic probes (each alone explained none)."""
+    singles = list(_candidates(ctx.conv, changed))
+    scored = []
+    for a, b in itertools.combinations(singles, 2):
+        if set(a) & set(b) or {"sh_view_direction": "detached"} in (a, b):
+            continue
+        change = {**a, **b}
+        if change in rejected or not _explained(failing[:1], ctx, change, forward_only=True):
+            continue  # the first probe rules most pairs out
+        explains = _explained(failing, ctx, change, forward_only=True)
+        if explains:
+            scored.append((len(explains), change))
+    return scored
+
+
+# ----------------------------------------------------------------------------
+# Root causes of what no convention explains
+# ----------------------------------------------------------------------------
+
+def exercises(probe: Probe, s: ProbeScene, conv: dict) -> frozenset[str]:
+    """The features (named by the probe that isolates each) a probe's verdict depends on."""
+    import reference
+
+    f = {probe.name, *EVERYWHERE}
+    cam = s.camera
+    groups = set(probe.groups) if probe.kind == "gradient" else \
+        {"log_scales", "quats"} if probe.kind == "direction" else set()
+    if len(s.means) >= 2:
+        f.add("depth_order")
+    scales = np.exp(s.log_scales)
+    qn = np.linalg.norm(s.quats, axis=1)
+    rotated = np.abs(np.abs(s.quats[:, 0]) / qn - 1) > 1e-6
+    if ((scales.max(1) / scales.min(1) > 1.05) & rotated).any():
+        f.add("quat_order")
+    if (np.abs(qn - 1) > 1e-3).any() or "quats" in groups:
+        f.add("quat_norm")
+    available = {1: 0, 4: 1, 9: 2, 16: 3}[s.sh.shape[1]]
+    degree = available if s.sh_degree is None else s.sh_degree
+    for band in range(1, degree + 1):
+        if np.abs(s.sh[:, band * band:(band + 1) ** 2]).max() > 0:
+            f.update((f"sh_degree{band}", "sh_viewdir"))
+    if s.sh_degree is not None:
+        f.add("sh_degree_arg")
+    if "means" in groups and "sh_viewdir" in f:
+        f.add("sh_viewdir_grad")
+    dirs = s.means - reference.camera_centre(cam.world_to_camera)
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    colour = np.einsum("nk,nkc->nc", reference.sh_basis(dirs, degree), s.sh[:, :(degree + 1) ** 2]) + 0.5
+    if (colour < 0).any() or (colour > 1).any():
+        f.add("colour_clamp")
+    if s.background is not None and any(b != 0 for b in s.background):
+        f.add("background")
+    if "depth" in probe.outputs and probe.kind in ("forward", "approximation") or groups:
+        f.add("expected_depth")
+    if cam.fx != cam.fy or cam.cx != cam.width / 2 or cam.cy != cam.height / 2:
+        f.add("intrinsics")
+    t = s.means @ cam.rotation.T + cam.translation
+    if (t[:, 2] < cam.near).any():
+        f.add("near_plane")
+    front = t[:, 2] > 0
+    u = cam.fx * t[front, 0] / t[front, 2] + cam.cx
+    v = cam.fy * t[front, 1] / t[front, 2] + cam.cy
+    if cam.width > 16 or cam.height > 16 or ((u < 0) | (u > cam.width) | (v < 0) | (v > cam.height)).any():
+        f.add("tiles")
+    if ((u < -0.15 * cam.width) | (u > 1.15 * cam.width) | (v < -0.15 * cam.height) | (v > 1.15 * cam.height)).any():
+        f.add("jacobian_clamp")
+    proj = projection(s, conv)
+    d2, raw = _contributions(s, proj)
+    keep = raw >= conv["alpha_min"]
+    if (keep & (d2 > TAIL_D2)).any():
+        f.add("radius")
+    if (np.cumprod(1 - np.minimum(raw, conv["alpha_max"]) * keep, axis=1) < 1e-4).any():
+        f.add("early_stop")
+    if (proj.opacities > AXIS["alpha_max"].graphdeco).any():
+        f.add("alpha_max")
+        if groups:
+            f.add("alpha_max_grad")
+    f.update(f"grad_{g}" for g in groups)
+    if groups & {"means", "log_scales", "quats"}:
+        f.update(("conic_A", "conic_B", "conic_C"))
+    return frozenset(f)
+
+
+def _contributions(s: ProbeScene, proj) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel and visible Gaussian (depth order): Mahalanobis d^2 [P, M] and raw alpha o exp(-d^2 / 2)."""
+    c = s.camera
+    vis = np.flatnonzero(proj.visible)
+    vis = vis[np.argsort(proj.depths[vis], kind="stable")]
+    jj, ii = np.meshgrid(np.arange(c.width) + 0.5, np.arange(c.height) + 0.5)
+    dx = jj.reshape(-1, 1) - proj.means2d[vis, 0]
+    dy = ii.reshape(-1, 1) - proj.means2d[vis, 1]
+    A, B, C = proj.conics[vis].T
+    d2 = A * dx * dx + C * dy * dy + 2 * B * dx * dy
+    return d2, proj.opacities[vis] * np.exp(-d2 / 2)
+
+
+def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], conv: dict) -> list[Defect]:
+    """The smallest set of failing probes whose features account for every failing probe; among sets of
+    that size, the one whose features the fewest passing probes exercise (a defect in a feature fails
+    the probes that use it), then the earliest."""
+    failing = [p for p in selected if results[p.name].status == "fail"]
+    if not failing:
+        return []
+    uses = {p.name: exercises(p, p.build(), conv) for p in selected if results[p.name].status in ("fail", "pass")}
+    names = [p.name for p in failing]
+    passing = [n for n in uses if results[n].status == "pass"]
+
+    def covers(root: str) -> set[str]:
+        return {n for n in names if root in uses[n]}
+
+    def contradictions(combo) -> int:
+        return sum(any(r in uses[n] for r in combo) for n in passing)
+
+    chosen = None
+    for size in range(1, min(MAX_ROOTS, len(names)) + 1):
+        covering = [combo for combo in itertools.combinations(names, size)
+                    if set().union(*(covers(r) for r in combo)) == set(names)]
+        if covering:
+            chosen = list(min(covering, key=contradictions))  # min keeps the earliest of equals
+            break
+    if chosen is None:  # greedy: the root covering most of what is left, earliest first
+        chosen, left = [], set(names)
+        while left:
+            best = max(names, key=lambda r: (len(covers(r) & left), -names.index(r)))
+            chosen.append(best)
+            left -= covers(best)
+    defects, taken = [], set(chosen)
+    for root in chosen:
+        r = results[root]
+        follows = tuple(n for n in names if n not in taken and root in uses[n])
+        taken.update(follows)
+        defects.append(Defect(root, r.cause or "", r.deviation, r.tolerance, follows))
+    return defects
+
+
+def explained_by(findings: list[Finding]) -> dict[str, str]:
+    """probe name -> the axis (or axes, comma-separated) whose finding explains it."""
+    out: dict[str, list[str]] = {}
+    for fd in findings:
+        for n in fd.explains:
+            out.setdefault(n, []).append(fd.axis)
+    return {n: ", ".join(axes) for n, axes in out.items()}
+
+
+__all__ = ["Finding", "Defect", "fingerprint", "root_causes", "run_probes", "exercises", "explained_by",
+           "FAULT_CAUSE"]

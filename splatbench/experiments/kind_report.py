@@ -1,0 +1,65 @@
+"""What a run kind declares about its reports, as plain data: metrics, findings rules,
+the time-against-quality figure, the metrics' meanings.
+
+A kind's module builds one `KindReport` and passes it to its `RunKind` (``report=``),
+so adding a kind touches that one file: the report code (`splatbench.reports`) reads
+it and names no kind. A kind without a `KindReport` (or a results folder of an unknown
+kind) gets every numeric metric and a comparison of the first one. Findings that need
+code of their own register with the reports by kind name (`splatbench.reports.notes`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from splatbench.metrics.spec import MetricSpec
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """How one metric of a row is set against the reference row.
+
+    how: "diff", "ratio" or "mean" (`splatbench.reports.findings`); null: the value that
+    means "no difference" for a "mean" comparison (None: no significance statement).
+    """
+
+    metric: str
+    how: str
+    null: float | None = None
+
+
+@dataclass(frozen=True)
+class FindingRules:
+    """A kind's primary metric (best-of) and its comparisons."""
+
+    primary: str
+    comparisons: tuple[Comparison, ...]
+
+
+@dataclass(frozen=True)
+class TimeQuality:
+    """The time-against-quality (Pareto) figure: its two metrics, file stem and title."""
+
+    time: str      # metric on the x axis (e.g. "train_seconds")
+    quality: str   # metric on the y axis (e.g. "test_psnr")
+    stem: str      # figure file stem under figures/
+    title: str
+
+
+@dataclass(frozen=True)
+class KindReport:
+    """A kind's report declarations.
+
+    metrics: the table's metrics, in column order; rules: the findings' primary metric
+    and comparisons (None: no findings); time_quality: the Pareto figure (None: none);
+    meanings: metric name -> meaning (the report's "Metrics" section).
+    """
+
+    metrics: tuple[MetricSpec, ...]
+    rules: FindingRules | None = None
+    time_quality: TimeQuality | None = None
+    meanings: Mapping[str, str] = field(default_factory=dict)
+
+
+__all__ = ["Comparison", "FindingRules", "TimeQuality", "KindReport"]
