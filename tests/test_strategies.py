@@ -528,9 +528,11 @@ def run_strategy(name: str, seed: int, **fields):
     return snapshot(params)
 
 
-@pytest.mark.parametrize("name", ["default", "absgrad", "mcmc"])
+@pytest.mark.parametrize("name", ["default", "absgrad", "mcmc", "budget"])
 def test_same_seed_same_tensors(name):
-    a, b, c = run_strategy(name, 1), run_strategy(name, 1), run_strategy(name, 2)
+    # budget: a refine window of 3 refinements, so that each has a share of the budget to grow by
+    extra = {"refine_stop": 10} if name == "budget" else {}
+    a, b, c = run_strategy(name, 1, **extra), run_strategy(name, 1, **extra), run_strategy(name, 2, **extra)
     assert a["means"].shape[0] > 40  # something was added
     for k in PARAM_GROUPS:
         assert torch.equal(a[k], b[k]), k
@@ -576,7 +578,7 @@ def test_registry_presets_and_overrides():
 # ---------------------------------------------------------------------------
 # With the rasterizer
 
-@pytest.mark.parametrize("name", ["default", "absgrad", "mcmc"])
+@pytest.mark.parametrize("name", ["default", "absgrad", "mcmc", "budget"])
 def test_training_steps_through_the_rasterizer(name):
     """A few real optimisation steps: rasterize, backward, Adam, post_backward, with
     densification every other step; shapes stay consistent and Adam keeps working."""
@@ -616,7 +618,7 @@ def test_training_steps_through_the_rasterizer(name):
     assert counts[-1] > 200, counts
 
 
-@pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc"])
+@pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc", "budget"])
 def test_every_strategy_states_the_whole_protocol(name):
     """The trainer reads ``absgrad``, ``schedule_fields`` and ``initial_opacity`` directly
     (no getattr probing), the config ``reads_mean_gradients``: each registered strategy must
@@ -629,6 +631,10 @@ def test_every_strategy_states_the_whole_protocol(name):
     assert "reads_mean_gradients" in vars(type(strategy)) and isinstance(strategy.reads_mean_gradients, bool)
     assert isinstance(strategy.schedule_fields, dict) and isinstance(strategy.initial_opacity, float)
     assert all(hasattr(strategy, field) for field in strategy.schedule_fields)
+    assert "run_fraction_fields" in vars(type(strategy)) or "run_fraction_fields" in vars(DefaultStrategy)
+    assert isinstance(strategy.run_fraction_fields, dict)
+    assert all(hasattr(strategy, field) for field in strategy.run_fraction_fields)
+    assert set(strategy.schedule_fields) <= set(strategy.run_fraction_fields)
 
 
 @dataclass
@@ -648,7 +654,7 @@ class CountingInfo(FakeInfo):
         return self.absgrad
 
 
-@pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc"])
+@pytest.mark.parametrize("name", ["none", "default", "absgrad", "mcmc", "budget"])
 def test_reads_mean_gradients_is_what_the_hooks_read(name):
     """The declaration `TrainConfig`'s frozen-means check trusts: over a run with refinements
     (so every code path of the hooks runs), a strategy reads the screen-space mean gradients
@@ -667,3 +673,109 @@ def test_reads_mean_gradients_is_what_the_hooks_read(name):
         strat.post_backward(params, opts, state, ctx(step, info))
         adam_step(params, opts, step)
     assert bool(reads) == strat.reads_mean_gradients, reads
+
+
+# ---------------------------------------------------------------------------
+# Budget (Taming 3DGS)
+
+def test_count_schedule_is_tamings_eq_2():
+    """f(k) = a k^2 + b k + N0, b = 2 (B - N0) / S, a = -(B - N0) / S^2: twice the linear
+    slope at the start, B at the last refinement, never above B, never decreasing."""
+    from splatbench.strategies.budget import count_schedule, refinement_count
+
+    assert count_schedule(100, 500, 4) == [275, 400, 475, 500]
+    counts = count_schedule(20_000, 35_000, 29)
+    assert counts[-1] == 35_000 and counts == sorted(counts) and max(counts) <= 35_000
+    assert counts[0] - 20_000 == 1016  # 2 x 15,000 / 29 - 15,000 / 29^2 = 1016.6
+    assert count_schedule(10, 20, 0) == []
+    # 3DGS's windows: it in (start, stop), multiples of every
+    assert refinement_count(500, 15_000, 100) == 144   # it = 600 .. 14,900
+    assert refinement_count(33, 1000, 100) == 9        # it = 100 .. 900
+    assert refinement_count(0, 10, 3) == 3 and refinement_count(10, 10, 3) == 0
+
+
+def budget_setup(n=60, seed=0, **fields):
+    params, opts = make_params(n, seed=seed, opacity=0.5)
+    with torch.no_grad():
+        params["log_scales"][: n // 2] = math.log(0.005)   # small: clone candidates at extent 1
+        params["log_scales"][n // 2:] = math.log(0.05)     # large: split candidates
+    strat = make_strategy("budget", refine_start=0, refine_every=1, refine_stop=5, reset_every=1000,
+                          max_world_size=0.0, **fields)
+    return params, opts, strat, strat.initialize_state(params)
+
+
+def test_budget_grows_to_its_targets_among_the_candidates_only():
+    params, opts, strat, state = budget_setup(budget=2.0)   # 60 -> 120 over 4 refinements
+    assert state.targets == [86, 105, 116, 120]             # 60 + 30 k - 3.75 k^2
+    for k, target in enumerate(state.targets):
+        n = params["means"].shape[0]
+        state.count[:] = 1
+        state.grad_accum[:] = 1e-4                       # below the threshold ...
+        cand = torch.arange(n) % 3 != 0                  # ... but for two thirds of them
+        state.grad_accum[cand] = 3e-4
+        stats = strat.refine(params, opts, state, step=k, scene_extent=1.0)
+        grown = stats.cloned + stats.split
+        # Taming floors each group's share of the headroom: at most 1 short of the target
+        assert stats.pruned == 0 and target - 1 <= stats.num_gaussians <= target, (k, stats)
+        assert grown == stats.num_gaussians - n <= int(cand.sum())
+        assert_consistent(params, opts)
+    # more Gaussians than the budget: no growth
+    n = params["means"].shape[0]
+    state.targets = [10]
+    state.refinements = 0
+    assert strat.refine(params, opts, state, step=9, scene_extent=1.0).num_gaussians == n
+
+
+def test_budget_shares_headroom_by_candidates_and_draws_by_score():
+    """Headroom split clone : split = 20 : 10 (candidates 2 : 1); within the split group,
+    Gaussians with a much larger score (opacity; the volume term, which would favour every
+    large Gaussian alike, off) are drawn first."""
+    params, opts, strat, state = budget_setup(budget=80, budget_mode="final_count", score_volume=0.0)
+    state.targets = [80]
+    with torch.no_grad():
+        params["opacity_logits"][:] = -4.0                     # opacity 0.018
+        params["opacity_logits"][30:40] = 4.0                  # opacity 0.98: high score
+    state.count[:] = 1
+    state.grad_accum[:] = 3e-4
+    state.grad_accum[40:50] = 0.0                              # split candidates: 30..39, 50..59
+    clone, split = strat.select(params, state, 1.0)
+    assert int(clone.sum()) == 20 * 30 // 50 and int(split.sum()) == 20 * 20 // 50
+    assert bool(clone[:30].all() == clone[:30].any()) or int(clone[30:].sum()) == 0
+    assert int(split[:30].sum()) == 0 and int(split[40:50].sum()) == 0
+    # 8 of 20 split candidates drawn; the 10 opaque ones score 100 x 0.982 / 0.018 + 25 = 5480, the
+    # others 125: each draw picks a transparent one with probability < 10 x 125 / (3 x 5480) < 8 %
+    assert int(split[30:40].sum()) >= 7
+
+
+def test_budget_final_count_and_multiplier_and_bad_values():
+    assert make_strategy("budget", budget=3.0).final_count(1000) == 3000
+    assert make_strategy("budget", budget=35_000, budget_mode="final_count").final_count(20_000) == 35_000
+    for fields, match in [({"budget_mode": "twice"}, "budget_mode"), ({"budget": 0.0}, "budget"),
+                          ({"budget": 10.5, "budget_mode": "final_count"}, "whole number"),
+                          ({"absgrad": True}, "absgrad"), ({"score_opacity": -1.0}, "score_opacity")]:
+        with pytest.raises(InputError, match=match):
+            make_strategy("budget", **fields)
+
+
+def test_budget_score_is_median_normalised():
+    from splatbench.strategies.budget import median_normalized
+
+    v = torch.tensor([0.0, 1.0, 2.0, 4.0, float("nan")])
+    # median of the positive values (1, 2, 4) is 2; zero and NaN score 0
+    torch.testing.assert_close(median_normalized(10.0, v), torch.tensor([0.0, 5.0, 10.0, 20.0, 0.0]))
+
+
+def test_reset_every_zero_means_never():
+    params, opts, strat, state, extent = grow_setup()
+    never = DefaultStrategy(refine_start=10_000, reset_every=0)
+    st = never.initialize_state(params)
+    before = params["opacity_logits"].detach().clone()
+    for step in range(0, 12):
+        never.post_backward(params, opts, st, ctx(step, fake_info(torch.zeros(20, 2))))
+    torch.testing.assert_close(params["opacity_logits"].detach(), before)
+    assert never.last_topology_change(12) is None
+    # and no size pruning, which 3DGS ties to the first reset: a Gaussian 10 x too large stays
+    with torch.no_grad():
+        params["log_scales"][5] = math.log(10.0)
+    st.count[:], st.grad_accum[:] = 1, 0
+    assert DefaultStrategy(reset_every=0).refine(params, opts, st, step=50_000, scene_extent=1.0).pruned == 0

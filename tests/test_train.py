@@ -242,8 +242,33 @@ def test_short_run_lowers_loss_and_writes_a_valid_ply(tmp_path):
     saved = json.loads((tmp_path / "run" / "result.json").read_text())
     assert TrainResult.from_dict(saved).history == result.history
     assert load_config(tmp_path / "run" / "config.toml") == cfg
-    if result.test_lpips is None:
-        assert any("LPIPS skipped" in n for n in result.notes)
+    # LPIPS (AlexNet, scaled: the default) of the final model, the same number as the last curve point
+    assert result.lpips_net == "alex" and result.lpips_scale_inputs
+    assert 0 < result.test_lpips < 1 and result.evaluations[-1].lpips == result.test_lpips
+    # the machine's load around the run, and the loop's CPU time (every step runs on this process's threads)
+    assert {"load_before", "load_after", "load_other", "cores", "loaded"} <= set(result.load)
+    assert result.cpu_seconds > 0 and saved["load"] == result.load
+
+
+def test_final_lpips_follows_the_config_and_the_curves_use_alexnet(tmp_path):
+    from splatbench.metrics import lpips
+
+    ds = synthetic_dataset(tmp_path, view_dependent=False, views=8, n=60)
+    cfg = config(tmp_path, iterations=4, eval_every=2, lpips_net="vgg", lpips_scale_inputs=False,
+                 background=[0.0, 0.0, 0.0], **FAST)
+    result = train(cfg, dataset=ds)
+    assert result.lpips_net == "vgg" and not result.lpips_scale_inputs
+    model = Gaussians.from_ply(result.ply_path)  # the final model, rendered again through the public API
+    want = np.mean([lpips(splatbench.render(model, cam).rgb, gt, net="vgg", scale_inputs=False)
+                    for cam, gt in zip(ds.test.cameras, ds.test.images)])
+    # the same PLY rendered by the same rasterizer, the same network: equal up to float32 rounding
+    assert result.test_lpips == pytest.approx(want, abs=1e-5)
+    alex = [p.lpips for p in result.evaluations]
+    assert len(alex) == 2 and all(0 < v < 1 for v in alex) and alex[-1] != pytest.approx(result.test_lpips, abs=1e-3)
+    off = train(config(tmp_path, iterations=2, lpips_net="none", out=str(tmp_path / "off"), **FAST), dataset=ds)
+    assert off.test_lpips is None and off.lpips_net == "" and off.evaluations[-1].lpips is None
+    with pytest.raises(InputError, match="lpips_net: expected"):
+        config(tmp_path, lpips_net="squeeze")
 
 
 def test_trained_sh0_model_saves_graphdecos_62_properties_and_reads_back_as_degree_0(tmp_path):

@@ -53,13 +53,16 @@ class KindReport:
 
     metrics: the table's metrics, in column order; rules: the findings' primary metric
     and comparisons (None: no findings); time_quality: the Pareto figure (None: none);
-    meanings: metric name -> meaning (the report's "Metrics" section).
+    meanings: metric name -> meaning (the report's "Metrics" section); timed: metrics that
+    are times: a run whose ``metric.time_loaded`` is 1 (timed while other processes
+    loaded the machine) is left out of their comparisons only.
     """
 
     metrics: tuple[MetricSpec, ...]
     rules: FindingRules | None = None
     time_quality: TimeQuality | None = None
     meanings: Mapping[str, str] = field(default_factory=dict)
+    timed: tuple[str, ...] = ()
 
 
 __all__ = ["Comparison", "FindingRules", "TimeQuality", "KindReport"]

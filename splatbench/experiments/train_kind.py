@@ -52,6 +52,10 @@ DATA_FIELDS = ("resolution", "views", "spp", "test_spp")
 METRICS: dict[str, str] = {
     "test_psnr": "mean PSNR (dB) of the final model on the test views",
     "test_ssim": "mean SSIM on the test views",
+    "test_lpips": "mean LPIPS v0.1 on the test views (lower is better; net and inputs: `lpips_net`, "
+                  "`lpips_scale_inputs`, and the line below)",
+    "lpips_net": "LPIPS backbone of test_lpips: alex or vgg (empty: not computed)",
+    "lpips_scale_inputs": "1: LPIPS inputs scaled to [-1, 1] (the lpips package); 0: [0, 1] unscaled (graphdeco)",
     "num_gaussians": "Gaussians at the end",
     "train_seconds": "wall time of the optimisation loop (s; no evaluation, no I/O)",
     "render_ms_per_view": "mean forward render time of a test view (ms)",
@@ -60,9 +64,17 @@ METRICS: dict[str, str] = {
     "iterations": "steps run",
     "test_views": "views evaluated",
     "dataset_hash": "content hash of the rendered dataset (scene files, settings, renderer)",
+    "cpu_seconds": "CPU seconds of the worker process (all threads) over the optimisation loop",
+    "load_before": "1-minute load average when the run started (before warm-up)",
+    "load_after": "1-minute load average after the final evaluation",
+    "load_other": "estimated load of other processes (the largest sample less the run's own share; "
+                  "splatbench.metrics.load)",
+    "cores": "usable CPU cores",
+    "time_loaded": "1 when load_other exceeded cores / 2: the run's times are not trusted and are left out of the "
+                   "time comparisons of the findings (quality metrics are kept)",
 }
 #: Keys of the curves: the training history (every ``log_every`` steps) and the test evaluations.
-CURVE_KEYS = ("step", "loss", "psnr", "num_gaussians", "eval_step", "eval_psnr", "eval_ssim")
+CURVE_KEYS = ("step", "loss", "psnr", "num_gaussians", "eval_step", "eval_psnr", "eval_ssim", "eval_lpips")
 
 
 # --------------------------------------------------------------------------- config
@@ -113,11 +125,24 @@ def validate(config: dict[str, Any]) -> None:
     _train_config(train)
 
 
+#: Strategy fields added after runs were reported, left out of the resolved config at
+#: these values (the behaviour before they existed), so that earlier run ids stay valid.
+_LATER_FIELDS: dict[str, Any] = {"revised_opacity": False}
+
+
 def _strategy_options(cfg) -> dict[str, Any]:
     """Every field of the configured strategy (preset and overrides applied, schedule
-    fields as written, not scaled), JSON values."""
+    fields as written, not scaled), JSON values; a step field written as a fraction of
+    the run ("50%") stays that string, so the run scales it, once, as the file says."""
+    from splatbench.train.schedule import parse_run_fraction
+
     strategy = cfg.make_strategy(scaled=False)
-    return {f.name: _json(getattr(strategy, f.name)) for f in dataclasses.fields(strategy)}
+    out = {f.name: _json(getattr(strategy, f.name)) for f in dataclasses.fields(strategy)
+           if not (f.name in _LATER_FIELDS and getattr(strategy, f.name) == _LATER_FIELDS[f.name])}
+    for name, value in cfg.strategy_options.items():
+        if name in strategy.run_fraction_fields and parse_run_fraction(value, f"strategy_options.{name}") is not None:
+            out[name] = value
+    return out
 
 
 def _json(value: Any) -> Any:
@@ -136,6 +161,9 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
     out = {k: v for k, v in cfg.to_dict().items() if k not in OWNED_FIELDS}
     if cfg.sh_degree != "auto":  # read only by sh_degree="auto": left out, so fixed-degree run ids are unchanged
         del out["sh_auto_lookahead"]
+    for name, default in (("lpips_net", "alex"), ("lpips_scale_inputs", True)):
+        if out[name] == default:  # added after the first grids: at the default left out, so their run ids hold
+            del out[name]
     out["strategy_options"] = _strategy_options(cfg)
     out["scene"] = scene
     out["data"] = {
@@ -227,6 +255,10 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
         "train_seconds": result.train_seconds, "render_ms_per_view": result.render_ms_per_view,
         "sh_degree": result.sh_degree, "peak_rss_mb": result.peak_rss_mb, "iterations": result.iterations,
         "test_views": result.test_views, "dataset_hash": dataset.hash[:16],
+        "test_lpips": result.test_lpips, "lpips_net": result.lpips_net,
+        "lpips_scale_inputs": int(result.lpips_scale_inputs), "cpu_seconds": result.cpu_seconds,
+        **{k: result.load[k] for k in ("load_before", "load_after", "load_other", "cores")},
+        "time_loaded": int(result.load["loaded"]),
     }
     rows = result.to_dict()  # NaN / inf already None there (the one JSON-safety rule of a result)
     history, evaluations = rows["history"], rows["evaluations"]
@@ -234,7 +266,7 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
         "step": [p["step"] for p in history], "loss": [p["loss"] for p in history],
         "psnr": [p["psnr"] for p in history], "num_gaussians": [p["num_gaussians"] for p in history],
         "eval_step": [p["step"] for p in evaluations], "eval_psnr": [p["psnr"] for p in evaluations],
-        "eval_ssim": [p["ssim"] for p in evaluations],
+        "eval_ssim": [p["ssim"] for p in evaluations], "eval_lpips": [p["lpips"] for p in evaluations],
     }
     return RunOutput(metrics=metrics, curves=curves)
 
@@ -246,15 +278,18 @@ REPORT = KindReport(
 
         MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher"),
         MetricSpec("test_ssim", "SSIM", ".4f", "", "higher"),
+        MetricSpec("test_lpips", "LPIPS", ".4f", "", "lower"),
         MetricSpec("num_gaussians", "Gaussians", ".0f", "", ""),
         MetricSpec("train_seconds", "train time (s)", ".1f", "s", "lower"),
         MetricSpec("render_ms_per_view", "render (ms/view)", ".1f", "ms", "lower"),
+        MetricSpec("time_loaded", "timed under load (fraction of runs)", ".2f", "", "", False),
     ),
-    rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff"), Comparison("train_seconds", "ratio"),
-                                     Comparison("num_gaussians", "ratio"))),
+    rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff"), Comparison("test_lpips", "diff"),
+                                     Comparison("train_seconds", "ratio"), Comparison("num_gaussians", "ratio"))),
     time_quality=TimeQuality("train_seconds", "test_psnr", "time_vs_error",
                              "Training time against test PSNR per cell (mean over seeds)"),
     meanings=METRICS,
+    timed=("train_seconds", "render_ms_per_view"),
 )
 
 TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scenes=scenes, prepare=prepare,

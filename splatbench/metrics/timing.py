@@ -74,14 +74,15 @@ def forward_with_init(params: tuple, camera, options: dict) -> Callable[[], RunS
 def forward_backward_with_init(params: tuple, camera, options: dict) -> Callable[..., RunStats]:
     """Forward and backward: loss = rgb.sum() through `splatbench.rasterize`, all five
     parameter groups requiring grad. The closure takes an optional `StageTimer`."""
-    from splatbench.raster.torch_bridge import rasterize
+    from splatbench.raster.hooks import Hooks
+    from splatbench.raster.torch_bridge import rasterize_with_hooks
 
     leaves = tuple(p.detach().requires_grad_(True) for p in params)
 
     def forward_backward(timer=None) -> RunStats:
         if timer is not None:
             timer.start()
-        rgb, _, _, info = rasterize(*leaves, camera, timer=timer, **options)
+        rgb, _, _, info = rasterize_with_hooks(*leaves, camera, Hooks(timer=timer), **options)
         if timer is not None:
             timer.mark("other")  # outputs copied to torch, RasterInfo
         rgb.sum().backward()

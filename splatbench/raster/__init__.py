@@ -1,10 +1,12 @@
 """The Dr.Jit tile rasterizer: `render` (numpy) and `rasterize` (torch, differentiable).
 
-Ops mirror `reference/` by name: `project`, `eval_sh`, `composite`.
+Ops mirror `reference/` by name: `project`, `eval_sh`, `composite`. The stages hand typed
+results on: `project` -> `Projection`, `bin_gaussians` -> `Bins`, `composite` -> `Composite`.
 """
 
 from splatbench.raster.api import RenderResult, render
-from splatbench.raster.compositing import composite
+from splatbench.raster.binning import Bins, TileGrid, bin_gaussians
+from splatbench.raster.compositing import CompositeSettings, composite
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.projection import project
 from splatbench.raster.sh import eval_sh
@@ -20,5 +22,5 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'splatbench.raster' has no attribute {name!r}")
 
 
-__all__ = ["render", "RenderResult", "rasterize", "RasterInfo", "RasterOptions", "project", "eval_sh", "composite",
-           "work_stats", "WorkStats"]
+__all__ = ["render", "RenderResult", "rasterize", "RasterInfo", "RasterOptions", "project", "eval_sh", "bin_gaussians",
+           "TileGrid", "Bins", "composite", "CompositeSettings", "work_stats", "WorkStats"]

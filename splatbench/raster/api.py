@@ -10,12 +10,12 @@ import numpy as np
 from splatbench.errors import InputError
 from splatbench.raster.device import dr, get_device
 from splatbench.raster.options import RasterOptions
+from splatbench.raster.pipeline import (check_background, check_sh_range, check_view, frame_to_numpy, render_frame,
+                                       resolve_sh_degree)
 
 if TYPE_CHECKING:
     from splatbench.cameras import Camera
     from splatbench.gaussians import Gaussians
-from splatbench.raster.pipeline import (check_background, check_sh_range, check_view, frame_to_numpy, render_frame,
-                                       resolve_sh_degree)
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,6 @@
-"""Per-block lists: each compositing lane walks only the pairs of its tile whose
-support ellipse meets the lane's PIXEL_BLOCK x PIXEL_BLOCK block of pixels.
+"""Compositing lanes (`Lanes`, in tile order) and their per-block lists: each lane walks
+only the pairs of its tile whose support ellipse meets the lane's PIXEL_BLOCK x PIXEL_BLOCK
+block of pixels.
 
 A tile's list holds every Gaussian whose ellipse meets some pixel of the tile, but a
 small ellipse meets only a few of the tile's blocks. `block_lists` tests every
@@ -13,19 +14,86 @@ accumulates into pair slot ``p`` as before.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 from splatbench.raster.device import dr
-from splatbench.raster.binning import Bins, ellipse_meets_rect, support_radius_sq, tile_pixel_offsets
+from splatbench.raster.binning import Bins, TileGrid, ellipse_meets_rect, support_radius_sq, tile_pixel_offsets
+from splatbench.raster.records import Records, load_records
+
+# Each lane shades a PIXEL_BLOCK x PIXEL_BLOCK block of pixels: one load of a record
+# serves them all, and their gradient terms are summed in registers before a scatter.
+# 4x4 measured best on AVX-512 (one 16-lane packet per 16x16 tile); see docs/benchmarks.md.
+PIXEL_BLOCK = 4
 
 
-def block_masks(m, rec, bins: Bins, block: int, alpha_min: float, load) -> list:
+class Lanes(NamedTuple):
+    """Compositing lanes in tile order; each lane shades K = block^2 pixels.
+
+    px, py, inside, image_index: lists of K arrays (pixel centres, whether the
+    pixel exists, its row-major index); start, end: the lane's range in its list.
+    lanes_per_tile: lanes that share one tile. pairs: None when each lane walks its
+    tile's range of the sorted pairs; else the lanes' own lists (`block_lists`),
+    each entry a sorted pair position.
+    """
+
+    px: list
+    py: list
+    inside: list
+    image_index: list
+    start: object
+    end: object
+    lanes_per_tile: int
+    pairs: object = None
+
+
+def pair_at(m, lanes: Lanes, i):
+    """Sorted pair position of entry ``i`` of each lane's list."""
+    return i if lanes.pairs is None else dr.gather(m.UInt32, lanes.pairs, i)
+
+
+def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
+    ts = grid.tile_size
+    block = min(PIXEL_BLOCK, ts)
+    side = ts // block                      # lanes per tile side
+    lanes_per_tile = side * side
+    lane = dr.arange(m.UInt32, grid.num_tiles * lanes_per_tile)
+    tile = lane // lanes_per_tile           # powers of two: shifts
+    local = lane % lanes_per_tile
+    x0 = (tile % grid.tiles_x) * ts + (local % side) * block
+    y0 = (tile // grid.tiles_x) * ts + (local // side) * block
+    px, py, inside, image_index = [], [], [], []
+    for ky in range(block):
+        for kx in range(block):
+            x, y = x0 + kx, y0 + ky
+            ok = (x < grid.width) & (y < grid.height)
+            px.append(m.Float(x) + 0.5)
+            py.append(m.Float(y) + 0.5)
+            inside.append(ok)
+            image_index.append(dr.select(ok, y * grid.width + x, 0))
+    start = dr.gather(m.UInt32, bins.tile_start, tile)
+    any_inside = inside[0]
+    for ok in inside[1:]:
+        any_inside |= ok
+    end = dr.select(any_inside, dr.gather(m.UInt32, bins.tile_end, tile), start)
+    return Lanes(px, py, inside, image_index, start, end, lanes_per_tile)
+
+
+def lanes_for(m, rec: Records, bins: Bins, alpha_min: float) -> Lanes:
+    """The compositing lanes with their per-block lists (`block_lists`)."""
+    lanes = make_lanes(m, bins.grid, bins)
+    if bins.num_pairs == 0:
+        return lanes
+    return block_lists(m, rec, bins, lanes, alpha_min)
+
+
+def block_masks(m, rec: Records, bins: Bins, block: int, alpha_min: float) -> list:
     """Words of [P] UInt32: bit b % 32 of word b // 32 is set when pair p's ellipse
-    meets block b of its tile (blocks row-major, as `compositing.make_lanes` orders a
+    meets block b of its tile (blocks row-major, as `make_lanes` orders a
     tile's lanes); blocks wholly outside the image never get a bit."""
     grid = bins.grid
     side = grid.tile_size // block
-    geo, _ = load(rec, bins.gaussian_ids)
-    u, v, ca, cb, cc, opacity, _, cutoff = geo
-    r2 = support_radius_sq(cutoff, opacity, alpha_min)
+    geo, _ = load_records(m, rec, bins.gaussian_ids)
+    r2 = support_radius_sq(geo.cutoff_sq, geo.opacity, alpha_min)
     tx, ty = bins.tiles % grid.tiles_x, bins.tiles // grid.tiles_x
     words = [dr.zeros(m.UInt32, bins.num_pairs) for _ in range(-(-side * side // 32))]
     for b in range(side * side):
@@ -33,21 +101,22 @@ def block_masks(m, rec, bins: Bins, block: int, alpha_min: float, load) -> list:
         x_lo = tx * grid.tile_size + bx * block
         y_lo = ty * grid.tile_size + by * block
         exists = (x_lo < grid.width) & (y_lo < grid.height)
-        hit = exists & ellipse_meets_rect(*tile_pixel_offsets(grid, tx, ty, u, v, block, bx, by), ca, cb, cc, r2)
+        hit = exists & ellipse_meets_rect(*tile_pixel_offsets(grid, tx, ty, geo.u, geo.v, block, bx, by),
+                                         geo.conic_a, geo.conic_b, geo.conic_c, r2)
         words[b // 32] |= dr.select(hit, m.UInt32(1 << (b % 32)), m.UInt32(0))
     return words
 
 
-def block_lists(m, rec, bins: Bins, lanes, alpha_min: float, load):
+def block_lists(m, rec: Records, bins: Bins, lanes, alpha_min: float):
     """`Lanes` whose [start, end) index their own list ``pairs`` (UInt32 sorted pair
     positions, depth order) instead of the tile's range.
 
-    ``rec``: packed `Records`; ``load(rec, gid)``: the compositing loop's record load.
+    ``rec``: the packed `Records` of the Gaussians.
     """
     UInt32 = m.UInt32
     L = lanes.lanes_per_tile
     block = bins.grid.tile_size // int(round(L ** 0.5))
-    words = block_masks(m, rec, bins, block, alpha_min, load)
+    words = block_masks(m, rec, bins, block, alpha_min)
     dr.eval(words)
     # Which bit of which word each lane reads (lane = tile * L + b).
     b = dr.arange(UInt32, dr.width(lanes.start)) % L

@@ -10,12 +10,13 @@ from splatbench.checks import check_image_size, check_sh_degree
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES_OF_DEGREE
 from splatbench.raster.device import dr
-from splatbench.raster.binning import Bins, TileGrid
-from splatbench.raster.compositing import Composite, CompositeState, composite
+from splatbench.raster.binning import Bins, TileGrid, bin_gaussians
+from splatbench.raster.compositing import (Composite, CompositeSettings, CompositeState, composite,
+                                           composite_loop_ad)
+from splatbench.raster.hooks import NO_HOOKS, Hooks
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.projection import Projection, array_namespace, columns, normalize, project
 from splatbench.raster.sh import eval_sh
-from splatbench.raster.timing import StageTimer
 
 # Input domain (docs/conventions.md): larger SH coefficients make the true gradients
 # exceed float32, so they are rejected at the boundary rather than turned into Inf.
@@ -107,44 +108,55 @@ def project_view(means, log_scales, quats, opacity_logits, camera, options: Rast
 
 def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int,
                  background: tuple[float, float, float], options: RasterOptions,
-                 loop_ad: bool = False, absgrad: bool = False, timer: StageTimer | None = None) -> Frame:
-    """Render one view from Dr.Jit tensors (AD flows to whichever inputs have it enabled).
+                 absgrad: bool = False, hooks: Hooks = NO_HOOKS) -> Frame:
+    """Render one view from Dr.Jit tensors (AD flows to whichever inputs have it enabled):
+    `project_view` -> `view_colors` -> `bin_gaussians` -> `composite`, each stage handing
+    its typed result to the next.
 
     Args:
         means: [N, 3], log_scales: [N, 3], quats: [N, 4], opacity_logits: [N],
         sh: [N, K, 3] Dr.Jit tensors (TensorXf). camera: `splatbench.Camera`.
         sh_degree: validated degree (see `resolve_sh_degree`).
-        loop_ad: test-only; differentiate compositing with Dr.Jit's loop AD.
         absgrad: accumulate the AbsGS screen-space gradient in the backward pass.
-        timer: benchmarks only; charges wall time to each stage (adds syncs).
+        hooks: test and benchmark `Hooks` (none from the public entry points).
     """
     if means.shape[0] == 0:
         return _empty_frame(means, camera, background, options)
+    timer = hooks.timer
     proj = project_view(means, log_scales, quats, opacity_logits, camera, options)
-    m = array_namespace(means.array)
-    # the camera centre enters as opaque values, like the projection's camera constants:
-    # as literals, every view compiled SH kernels of its own (degree >= 1)
-    cx, cy, cz = (dr.opaque(m.Float, float(c)) for c in camera.center)
-    mx, my, mz = columns(means, 3)
-    dirs = m.Array3f(*normalize(mx - cx, my - cy, mz - cz))  # overflow-safe, like the oracle's
-    colors = eval_sh(sh, dirs, sh_degree)
+    colors = view_colors(means, sh, camera, sh_degree)
     # One kernel for every per-Gaussian quantity (the compositing loop gathers from
     # them, which would otherwise evaluate each array in a kernel of its own).
     # Unpacked: Dr.Jit traverses tuples and dataclasses, but not NamedTuples.
     dr.eval(*proj, colors)
     if timer is not None:
         timer.mark("preprocess")
-    out, state = composite(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq,
-                           proj.visible, camera.width, camera.height, background=background,
-                           alpha_min=options.alpha_min, alpha_max=options.alpha_max,
-                           transmittance_min=options.transmittance_min, tile_size=options.tile_size,
-                           extents=proj.extents, loop_ad=loop_ad, absgrad=absgrad, timer=timer)
+    bins = bin_gaussians(proj, TileGrid(camera.width, camera.height, options.tile_size), float(options.alpha_min))
+    if timer is not None:
+        timer.mark("binning")
+    settings = CompositeSettings.from_options(options, background)
+    if hooks.loop_ad:
+        out, state = composite_loop_ad(proj, colors, bins, settings)
+    else:
+        out, state = composite(proj, colors, bins, settings, absgrad=absgrad)
+        state.timer = timer  # the backward pass marks "backward_compositing" on it
     covered = out.alpha > 0
     depth = dr.select(covered, out.depth_sum / dr.select(covered, out.alpha, 1.0), 0.0)
     if timer is not None:
         dr.eval(out.rgb, out.alpha, depth)
         timer.mark("compositing")
     return Frame(out.rgb, out.alpha, depth, proj, state)
+
+
+def view_colors(means, sh, camera, sh_degree: int):
+    """[N, 3] Array3f: each Gaussian's SH colour seen from the camera centre."""
+    m = array_namespace(means.array)
+    # the camera centre enters as opaque values, like the projection's camera constants:
+    # as literals, every view compiled SH kernels of its own (degree >= 1)
+    cx, cy, cz = (dr.opaque(m.Float, float(c)) for c in camera.center)
+    mx, my, mz = columns(means, 3)
+    dirs = m.Array3f(*normalize(mx - cx, my - cy, mz - cz))  # overflow-safe, like the oracle's
+    return eval_sh(sh, dirs, sh_degree)
 
 
 def _empty_frame(means, camera, background, options: RasterOptions) -> Frame:

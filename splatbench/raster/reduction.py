@@ -1,16 +1,21 @@
-"""Per-pair gradient buffers of the compositing backward pass and their
+"""Per-pair gradient buffers of the compositing backward pass (`PairBuffers`) and their
 deterministic reduction per Gaussian (used by `compositing._CompositeOp`)."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins
+from splatbench.raster.blocks import Lanes
+from splatbench.raster.records import COL, COLOUR_GRAD_KEYS, GEO, GEO_GRAD_KEYS
 
-# Per-pair gradient accumulators, packed like the records so that the backward loop
-# does one packet scatter-add per group and the reduction one packet load per pair.
+# Per-pair gradient accumulators, packed like the records (`records.GeoRecord` order) so
+# that the backward loop does one packet scatter-add per group and the reduction one packet
+# load per pair: name -> (width, the gradient key of each slot; None: padding, never read).
 PAIR_GROUPS = {
-    "geo": (8, ("mx", "my", "ca", "cb", "cc", "o", "z", None)),
-    "col": (4, ("r", "g", "b", None)),
+    "geo": (GEO, tuple(GEO_GRAD_KEYS)),
+    "col": (COL, (*COLOUR_GRAD_KEYS, None)),
     "abs": (2, ("ax", "ay")),
 }
 
@@ -29,6 +34,37 @@ def lane_slots(m) -> bool:
     LLVM, whose Expand mode makes the shared slot deterministic). Per-lane slots cost
     lanes_per_tile (16 at the default sizes) times the per-pair buffer memory."""
     return not m.__name__.startswith("drjit.llvm")
+
+
+class PairBuffers(NamedTuple):
+    """Per-pair gradient accumulators, `PAIR_GROUPS` name -> Float buffer. Slot p
+    belongs to one (tile, Gaussian) pair, so only the lanes of one tile ever add into it.
+    Expand (LLVM): per-thread copies, non-atomic updates; still deterministic: a slot is
+    only written by the lanes of one tile, and a tile never spans two threads. Per-lane
+    slots (CUDA, `lane_slots`): each slot is written once, by one lane, without atomics."""
+
+    groups: dict
+    slots_per_pair: int  # L: lanes per tile with per-lane slots, else 1
+    sub_slot: object     # UInt32 lane % L with per-lane slots, else None
+
+    @classmethod
+    def allocate(cls, m, bins: Bins, lanes: Lanes, keys) -> PairBuffers:
+        cap = bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
+        per_lane = lane_slots(m)
+        L = lanes.lanes_per_tile if per_lane else 1
+        groups = {name: dr.zeros(m.Float, size * cap * L) for name, (size, group) in PAIR_GROUPS.items()
+                  if any(key in keys for key in group)}
+        sub_slot = dr.arange(m.UInt32, dr.width(lanes.start)) % L if per_lane else None
+        return cls(groups, L, sub_slot)
+
+    def add(self, m, p, sums: dict, active) -> None:
+        """Add one step's terms (``sums``: key -> Float, summed over a lane's pixels) into pair slot ``p``."""
+        for name, buffer in self.groups.items():
+            values = m.ArrayXf([sums[key] if key in sums else 0.0 for key in PAIR_GROUPS[name][1]])
+            if self.sub_slot is not None:
+                dr.scatter(buffer, values, p * self.slots_per_pair + self.sub_slot, active)
+            else:
+                dr.scatter_add(buffer, values, p, active, mode=dr.ReduceMode.Expand)
 
 
 def reduce_pairs(m, bins: Bins, pair: dict, n: int, slots_per_pair: int = 1) -> dict:

@@ -23,6 +23,7 @@ import torch
 
 from splatbench.errors import InputError
 from splatbench.raster.device import Device, dr, get_device
+from splatbench.raster.hooks import NO_HOOKS, Hooks
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.pipeline import (SH_ABS_MAX, Frame, check_background, check_view, check_sh_range,
                                        render_frame, resolve_sh_degree)
@@ -101,7 +102,7 @@ def _new_scope(dev: Device) -> None:
 class _Rasterize(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means, log_scales, quats, opacity_logits, sh, camera, degree, background, options,
-                loop_ad, absgrad, timer, info_box):
+                absgrad, hooks, info_box):
         dev = get_device(options.device)
         _new_scope(dev)
         m = dev.t
@@ -113,8 +114,8 @@ class _Rasterize(torch.autograd.Function):
             if needs:
                 dr.enable_grad(x)
         frame = render_frame(*inputs, camera, sh_degree=degree, background=background, options=options,
-                             loop_ad=loop_ad, absgrad=absgrad, timer=timer)
-        ctx.timer, ctx.absgrad = timer, absgrad
+                             absgrad=absgrad, hooks=hooks)
+        ctx.timer, ctx.absgrad = hooks.timer, absgrad
         H, W = camera.height, camera.width
         # Outputs live where the parameters do (a no-op when Dr.Jit runs on that device).
         out = means.device
@@ -132,7 +133,7 @@ class _Rasterize(torch.autograd.Function):
     def backward(ctx, v_rgb, v_alpha, v_depth):
         m, frame, inputs = ctx.m, ctx.frame, ctx.dr_inputs
         if not any(ctx.needs_input_grad[:5]):
-            return (None,) * 13
+            return (None,) * 12
         _ = ctx.saved_tensors  # raises if a parameter was changed in place since the forward pass
         dev = ctx.dev
         _new_scope(dev)  # this may be torch's autograd thread, not the forward's
@@ -168,7 +169,7 @@ class _Rasterize(torch.autograd.Function):
             grads.append(to_torch(dr.grad(x)).reshape(like).to(where))
         ctx.dr_inputs = None  # release the Dr.Jit graph
         _new_scope(dev)
-        return (*grads, None, None, None, None, None, None, None, None)
+        return (*grads, None, None, None, None, None, None, None)
 
 
 def _check(name: str, t, spec, sizes) -> float:
@@ -200,8 +201,6 @@ def rasterize(
     sh_degree: int | None = None,
     background=None,               # 3 values in [0, 1] (default black)
     absgrad: bool = False,
-    loop_ad: bool = False,
-    timer=None,
     **options,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, RasterInfo]:  # [H, W, 3], [H, W], [H, W], info
     """Differentiable 3DGS rasterization of torch tensors through the Dr.Jit pipeline.
@@ -213,15 +212,20 @@ def rasterize(
         sh_degree: SH bands to evaluate (default: all in ``sh``); higher bands get zero gradient.
         background: RGB behind the splats (default black).
         absgrad: also accumulate ``info.means2d_absgrad`` (AbsGS) in the backward pass.
-        timer: benchmarks only; a `StageTimer` charged per stage (forward and backward).
-        loop_ad: test-only; differentiate compositing with Dr.Jit's loop AD instead of
-            the hand-written backward pass.
         **options: `RasterOptions` fields.
 
     Returns:
         rgb [H, W, 3], alpha [H, W], depth [H, W] (float32 torch tensors, differentiable
         with respect to every input with ``requires_grad``), and a `RasterInfo`.
     """
+    return rasterize_with_hooks(means, log_scales, quats, opacity_logits, sh, camera, NO_HOOKS, sh_degree=sh_degree,
+                                background=background, absgrad=absgrad, **options)
+
+
+def rasterize_with_hooks(means, log_scales, quats, opacity_logits, sh, camera, hooks: Hooks, *,
+                         sh_degree: int | None = None, background=None, absgrad: bool = False, **options):
+    """`rasterize` with test and benchmark `Hooks` (the gradient tests' and the stage
+    timings' entry point; arguments and results as for `rasterize`)."""
     sizes: dict[str, int] = {}
     _check("means", means, ("N", 3), sizes)
     _check("log_scales", log_scales, ("N", 3), sizes)
@@ -237,7 +241,7 @@ def rasterize(
     bg = check_background(background)
     box: list[Frame] = []  # receives the Dr.Jit frame from inside autograd's forward
     rgb, alpha, depth = _Rasterize.apply(means, log_scales, quats, opacity_logits, sh, camera, degree, bg,
-                                         opts, loop_ad, absgrad, timer, box)
+                                         opts, absgrad, hooks, box)
     frame = box[0]
     proj = frame.projection
     info = RasterInfo(

@@ -17,8 +17,9 @@ from splatbench.raster.device import dr, get_device
 from splatbench.raster.binning import TileGrid, bin_gaussians
 # The compositing loop's own lanes, lists, per-pixel test and record loads, so that
 # the counts are of exactly the decisions it makes.
-from splatbench.raster.compositing import (CompositeSettings, Splats, _alpha_at, _half_mahalanobis, _load,
-                                           lanes_for, pack_records, pair_at)
+from splatbench.raster.blocks import lanes_for, pair_at
+from splatbench.raster.compositing import CompositeSettings, _alpha_at, _half_mahalanobis
+from splatbench.raster.records import Splats, load_records, pack_records
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.pipeline import project_view
 
@@ -86,16 +87,15 @@ def work_stats(gaussians, camera, **options) -> WorkStats:
 def _count(m, records, bins, cfg: CompositeSettings) -> tuple[int, int, int, int]:
     """(block_evaluations, performed, inside_cutoff, useful), walking the lanes' own lists."""
     UInt32 = m.UInt32
-    lanes = lanes_for(m, records, bins, cfg)
+    lanes = lanes_for(m, records, bins, cfg.alpha_min)
     K = len(lanes.px)
 
     def body(i, inside, useful):
-        geo, _ = _load(m, records, dr.gather(UInt32, bins.gaussian_ids, pair_at(m, lanes, i)))
-        ca, cb, cc, cutoff = geo[2], geo[3], geo[4], geo[7]
+        geo, _ = load_records(m, records, dr.gather(UInt32, bins.gaussian_ids, pair_at(m, lanes, i)))
         for k in range(K):
             _, contributes, dx, dy, _, _ = _alpha_at(geo, lanes.px[k], lanes.py[k], cfg, lanes.inside[k])
-            sigma = _half_mahalanobis(ca, cb, cc, dx, dy)
-            inside = inside + dr.select(lanes.inside[k] & (sigma <= 0.5 * cutoff), 1, 0)
+            sigma = _half_mahalanobis(geo.conic_a, geo.conic_b, geo.conic_c, dx, dy)
+            inside = inside + dr.select(lanes.inside[k] & (sigma <= 0.5 * geo.cutoff_sq), 1, 0)
             useful = useful + dr.select(contributes, 1, 0)
         return i + 1, inside, useful
 

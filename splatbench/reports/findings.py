@@ -20,7 +20,9 @@ axis:
   name), e.g. the degree ``auto`` ended at on the train kind's SH degree axis.
 
 Runs whose ``metric.loaded`` is 1 (the raster kind: timed while the load average
-exceeded half the cores) are left out of every finding (not of the tables).
+exceeded half the cores) are left out of every finding (not of the tables). Runs whose
+``metric.time_loaded`` is 1 (the train kind) are left out of the comparisons of the
+kind's ``timed`` metrics only: their quality metrics do not depend on the load.
 """
 
 from __future__ import annotations
@@ -161,9 +163,19 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
     scenes = list(dict.fromkeys(table.frame.scene))
     usable = usable_runs(runs)
     excluded = len(done_runs(runs)) - len(usable)
+    declared = kind_report(kind)
+    timed = set(declared.timed) if declared is not None else set()
+    untimed = 0
+    if timed and "metric.time_loaded" in usable.columns:
+        loaded = pd.to_numeric(usable["metric.time_loaded"], errors="coerce").fillna(0) != 0
+        untimed = int(loaded.sum())
+        timed_usable = usable[~loaded]
+    else:
+        timed_usable = usable
 
     def values(scene: str, row: Row, metric: str) -> dict[int, float]:
-        sel = usable[(usable.scene == scene) & usable.run_id.isin(row.run_ids)]
+        pool = timed_usable if metric in timed else usable
+        sel = pool[(pool.scene == scene) & pool.run_id.isin(row.run_ids)]
         return seed_values(sel, metric) if len(sel) else {}
 
     claims: list[Claim] = []
@@ -239,6 +251,10 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
     if excluded:
         lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
                      f"these findings (marked in the table's `loaded` column).")
+    if untimed:
+        lines.append(f"- {untimed} run(s) timed while other processes loaded the machine are left out of the "
+                     f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons (marked in "
+                     f"the table's `timed under load` column; their quality metrics are kept).")
 
     for note in notes:
         more_lines, more_claims = note(table, runs, scenes)

@@ -7,7 +7,9 @@ so the experiments never import the reports:
 * axis notes (`register_axis_note`): ``note(axis_table, runs, scenes) -> (lines, claims)``
   appended to each axis finding of the kind (train: `auto_sh_degree_note`);
 * run findings (`register_run_finding`): ``finding(runs) -> Finding | None`` over all
-  runs of the kind (raster: `parity_finding`).
+  runs of the kind (raster: `parity_finding`);
+* metric notes (`register_metric_note`): ``note(runs) -> lines`` appended to the report's
+  "Metrics" section (train: `lpips_note`, which LPIPS the column is).
 """
 
 from __future__ import annotations
@@ -76,7 +78,27 @@ def parity_finding(runs: pd.DataFrame) -> Finding | None:
                    [claim])
 
 
+def lpips_note(runs: pd.DataFrame) -> list[str]:
+    """Train kind: which LPIPS the report's column is (net and input convention), from the
+    done runs' ``lpips_net`` / ``lpips_scale_inputs``; none for a table without them."""
+    from splatbench.metrics.perceptual import convention  # late: the reports start without torch
+
+    if "metric.lpips_net" not in runs.columns:
+        return []
+    done = done_runs(runs)
+    done = done[done["metric.lpips_net"].fillna("").astype(bool)]
+    kinds = sorted({(str(r["metric.lpips_net"]), bool(r["metric.lpips_scale_inputs"])) for _, r in done.iterrows()})
+    if len(kinds) == 1:
+        return [f"- The `LPIPS` column is {convention(*kinds[0])}."]
+    return [f"- The `LPIPS` column mixes {len(kinds)} conventions (compare within one only): "
+            + "; ".join(convention(*k) for k in kinds) + "."] if kinds else []
+
+
+#: A note of a report's "Metrics" section: ``note(runs) -> lines``.
+MetricNote = Callable[[pd.DataFrame], list[str]]
+
 _AXIS_NOTES: dict[str, list[AxisNote]] = {"train": [auto_sh_degree_note]}
+_METRIC_NOTES: dict[str, list[MetricNote]] = {"train": [lpips_note]}
 _RUN_FINDINGS: dict[str, list[tuple[str, RunFinding]]] = {"raster": [("parity", parity_finding)]}
 
 
@@ -92,6 +114,17 @@ def register_run_finding(kind: str, name: str, finding: RunFinding) -> RunFindin
     return finding
 
 
+def register_metric_note(kind: str, note: MetricNote) -> MetricNote:
+    """Append ``note``'s lines to the "Metrics" section of the reports of ``kind``."""
+    _METRIC_NOTES.setdefault(kind, []).append(note)
+    return note
+
+
+def metric_notes(kind: str) -> tuple[MetricNote, ...]:
+    """The metric notes registered for ``kind``."""
+    return tuple(_METRIC_NOTES.get(kind, ()))
+
+
 def axis_notes(kind: str) -> tuple[AxisNote, ...]:
     """The axis notes registered for ``kind`` (none for another kind)."""
     return tuple(_AXIS_NOTES.get(kind, ()))
@@ -102,5 +135,5 @@ def run_findings(kind: str) -> tuple[tuple[str, RunFinding], ...]:
     return tuple(_RUN_FINDINGS.get(kind, ()))
 
 
-__all__ = ["RunFinding", "auto_sh_degree_note", "parity_finding", "register_axis_note", "register_run_finding",
-           "axis_notes", "run_findings"]
+__all__ = ["RunFinding", "MetricNote", "auto_sh_degree_note", "parity_finding", "lpips_note", "register_axis_note",
+           "register_run_finding", "register_metric_note", "axis_notes", "run_findings", "metric_notes"]

@@ -37,7 +37,7 @@ from splatbench.figures import pareto_figure
 from splatbench.metrics.spec import MetricSpec
 from splatbench.reports.figures import cell_means, curves_figure
 from splatbench.reports.findings import Finding, axis_finding
-from splatbench.reports.notes import axis_notes, run_findings
+from splatbench.reports.notes import axis_notes, metric_notes, run_findings
 from splatbench.reports.tables import AxisTable, axis_table, cell_labels, display, kind_report, metric_specs
 
 REPORT_NAME = "report.md"
@@ -209,6 +209,8 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
     if meanings:
         lines += ["## Metrics", ""]
         lines += [f"- `{m.label}` (`metric.{m.name}`): {meanings.get(m.name, '')}" for m in report.metrics]
+        for note in metric_notes(spec.kind):
+            lines += note(table)
         lines.append("")
 
     failed = table[table.status == "failed"] if len(table) else table

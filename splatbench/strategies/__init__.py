@@ -7,8 +7,10 @@
     # (loss + strategy.regularization(params, step)).backward(); optimizer steps;
     # strategy.post_backward(params, optimizers, state, ctx)
 
-Names: "none", "default" (3DGS adaptive density control), "absgrad" (the same with
-AbsGS's gradient and threshold 8e-4), "mcmc" (3DGS-MCMC).
+Names: "none", "default" (3DGS adaptive density control; ``revised_opacity = true``
+gives split children the revised opacity of Rota Bulo et al.), "absgrad" (the same with
+AbsGS's gradient and threshold 8e-4), "mcmc" (3DGS-MCMC), "budget" (3DGS's candidates,
+grown toward a final count as Taming 3DGS does).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import dataclasses
 from splatbench.checks import dataclass_from_mapping
 from splatbench.errors import InputError
 from splatbench.strategies.base import PARAM_GROUPS, Optimizers, Params, StepContext, Strategy, TopologyChange
+from splatbench.strategies.budget import BudgetState, BudgetStrategy
 from splatbench.strategies.default import DefaultState, DefaultStrategy, RefineStats
 from splatbench.strategies.mcmc import MCMCState, MCMCStats, MCMCStrategy
 from splatbench.strategies.none import NoneStrategy
@@ -28,6 +31,7 @@ STRATEGIES: dict[str, tuple[type, dict[str, object]]] = {
     "default": (DefaultStrategy, {}),
     "absgrad": (DefaultStrategy, {"absgrad": True, "grad_threshold": 8e-4}),
     "mcmc": (MCMCStrategy, {}),
+    "budget": (BudgetStrategy, {}),
 }
 
 
@@ -56,7 +60,7 @@ def _lookup(name: str) -> tuple[type, dict[str, object]]:
 
 
 __all__ = [
-    "PARAM_GROUPS", "STRATEGIES", "DefaultState", "DefaultStrategy", "MCMCState", "MCMCStats", "MCMCStrategy",
+    "PARAM_GROUPS", "STRATEGIES", "BudgetState", "BudgetStrategy", "DefaultState", "DefaultStrategy", "MCMCState", "MCMCStats", "MCMCStrategy",
     "NoneStrategy", "Optimizers", "Params", "RefineStats", "StepContext", "Strategy", "TopologyChange", "make_strategy",
     "strategy_fields",
 ]

@@ -84,6 +84,9 @@ class Strategy(Protocol):
     #: Step-valued fields that `TrainConfig.schedule = "scaled"` multiplies by
     #: iterations / 30,000 (name -> True for a period, kept >= 1); see splatbench.train.schedule.
     schedule_fields: ClassVar[dict[str, bool]]
+    #: Step-valued fields that `TrainConfig.strategy_options` may also give as a fraction of
+    #: the run ("25%" or "1/4", name -> True for a period, kept >= 1); see splatbench.train.schedule.
+    run_fraction_fields: ClassVar[dict[str, bool]]
     #: The initial opacity of the reference implementation (`TrainConfig.init_opacity = "auto"`).
     initial_opacity: ClassVar[float]
     #: Whether `post_backward` reads ``info.means2d_absgrad`` (AbsGS): the trainer

@@ -1,5 +1,5 @@
-"""3DGS adaptive density control (Kerbl et al. 2023), and AbsGS (Ye et al. 2024)
-as the same strategy with another gradient.
+"""3DGS adaptive density control (Kerbl et al. 2023), with AbsGS's gradient (Ye et al.
+2024) and the revised split opacity (Rota Bulo et al. 2024) as options.
 
 Schedule (graphdeco-inria semantics, counted in completed iterations
 ``it = ctx.step + 1``, since `post_backward` runs after ``optimizer.step()``):
@@ -7,7 +7,7 @@ while ``it < refine_stop`` the screen-space gradient norm of every visible Gauss
 is accumulated; when ``refine_start < it`` and ``it % refine_every == 0`` the
 Gaussians are cloned, split and pruned and the accumulators are cleared; when
 ``it % reset_every == 0`` (and ``it < refine_stop``) opacities are clamped to
-``reset_value``.
+``reset_value`` (``reset_every = 0``: never).
 """
 
 from __future__ import annotations
@@ -88,7 +88,9 @@ class DefaultState:
 
 @dataclass(frozen=True)
 class DefaultStrategy:
-    """3DGS adaptive density control; ``absgrad=True`` is AbsGS (registry name "absgrad").
+    """3DGS adaptive density control; ``absgrad=True`` is AbsGS (registry name "absgrad"),
+    ``revised_opacity=True`` gives split children opacity 1 - sqrt(1 - o) (gsplat's option
+    of the same name, after "Revising Densification in Gaussian Splatting").
 
     Clone where the averaged gradient >= ``grad_threshold`` and max scale <=
     ``percent_dense`` x scene extent; split (two children, scale / 1.6) where the
@@ -104,6 +106,9 @@ class DefaultStrategy:
     #: Scaled by ``TrainConfig.schedule = "scaled"`` (True: a period); refine_every is a
     #: sample size (views per gradient average) and stays as written.
     schedule_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False, "reset_every": True}
+    #: Step fields that may be written as a fraction of the run ("25%", "1/4"; True: a period).
+    run_fraction_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False,
+                                                      "refine_every": True, "reset_every": True}
     #: TrainConfig.init_opacity='auto' (graphdeco create_from_pcd: inverse_sigmoid(0.1))
     initial_opacity: ClassVar[float] = 0.1
     #: Clone / split from the averaged info.means2d_grad (AbsGS: info.means2d_absgrad).
@@ -119,18 +124,22 @@ class DefaultStrategy:
                                   # (graphdeco passes 20 but clears max_radii2D in densification_postfix
                                   # before pruning reads it, so its rule never fires; gsplat: refine_scale2d_stop=0)
     max_world_size: float = 0.1   # prune max scale above this x scene extent after the first reset; 0 = off
-    reset_every: int = 3000       # clamp opacities every this many iterations
+    reset_every: int = 3000       # clamp opacities every this many iterations; 0 = never (and no size pruning)
     reset_value: float = 0.01     # ... to at most this opacity
     absgrad: bool = False         # accumulate AbsGS's |gradient| (info.means2d_absgrad) instead
+    revised_opacity: bool = False  # split children get opacity 1 - sqrt(1 - o) (gsplat revised_opacity)
     early_stop: bool = False      # stop densifying once the loss stops falling (off in 3DGS)
     early_stop_rel_tol: float = 0.005  # required relative drop of the mean loss per refine interval
     early_stop_patience: int = 2  # refinements in a row below that drop before stopping
     seed: int = 0                 # the split's random children
 
     def __post_init__(self) -> None:
-        check_fields(self, ("refine_every", "reset_every", "early_stop_patience"),
-                      ("refine_start", "refine_stop", "grad_threshold", "percent_dense", "prune_opacity",
+        check_fields(self, ("refine_every", "early_stop_patience"),
+                      ("refine_start", "refine_stop", "reset_every", "grad_threshold", "percent_dense", "prune_opacity",
                        "max_screen_size", "max_world_size", "early_stop_rel_tol"))
+        if not isinstance(self.reset_every, int) or isinstance(self.reset_every, bool):
+            raise InputError(f"{type(self).__name__}.reset_every: expected an integer >= 0 (0 = never), "
+                             f"got {self.reset_every!r}")
         if not 0.0 < self.reset_value < 1.0:
             raise InputError(f"DefaultStrategy.reset_value: expected a number in (0, 1), got {self.reset_value!r}")
 
@@ -142,7 +151,7 @@ class DefaultStrategy:
         """The last refinement or opacity reset of a run (an early stop only ends it sooner)."""
         hi = min(iterations, self.refine_stop - 1)  # completed iterations it = step + 1 < refine_stop
         refine = last_multiple(self.refine_every, self.refine_start, hi)
-        reset = last_multiple(self.reset_every, 0, hi)
+        reset = last_multiple(self.reset_every, 0, hi)  # None when reset_every is 0 (never)
         window = f"refine window {self.refine_start}..{self.refine_stop}, every {self.refine_every}"
         if refine is not None and (reset is None or refine >= reset):
             return TopologyChange(refine - 1, f"a refinement ({window})")
@@ -176,7 +185,7 @@ class DefaultStrategy:
                 state.stopped = True
                 return
             self.refine(params, optimizers, state, ctx.step, ctx.scene_extent)
-        if it % self.reset_every == 0:
+        if self.reset_every > 0 and it % self.reset_every == 0:
             ops.reset_opacity(params, optimizers, self.reset_value)
             if state.plateau is not None:
                 state.plateau.forget()
@@ -203,39 +212,54 @@ class DefaultStrategy:
         radii = info.radii.to(device=device, dtype=torch.float32)
         state.max_radii[vis] = torch.maximum(state.max_radii[vis], radii[vis])
 
-    @torch.no_grad()
-    def refine(self, params: Params, optimizers: Optimizers, state: DefaultState, step: int,
-               scene_extent: float) -> RefineStats:
-        """Clone, split and prune from the accumulated statistics, then clear them.
-        ``step`` is the ctx.step (pruning by size applies once ``step + 1 > reset_every``)."""
-        n = params["means"].shape[0]
+    def candidates(self, params: Params, state: DefaultState, scene_extent: float
+                   ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The averaged gradient [N] and the clone and split candidates ([N] bool each):
+        averaged gradient >= ``grad_threshold``, max scale <= / > ``percent_dense`` x extent."""
         avg = state.grad_accum / state.count.clamp_min(1)
         high = avg >= self.grad_threshold
         max_scale = torch.exp(params["log_scales"].detach()).amax(dim=-1).to(avg.device)
         small = max_scale <= self.percent_dense * scene_extent
-        clone, grow = high & small, high & ~small
-        size_prune = step + 1 > self.reset_every
+        return avg, high & small, high & ~small
+
+    def select(self, params: Params, state: DefaultState, scene_extent: float
+               ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The Gaussians to clone and to split ([N] bool each): every candidate (3DGS)."""
+        _, clone, grow = self.candidates(params, state, scene_extent)
+        return clone, grow
+
+    @torch.no_grad()
+    def refine(self, params: Params, optimizers: Optimizers, state: DefaultState, step: int,
+               scene_extent: float) -> RefineStats:
+        """Clone (``select``), split and prune from the accumulated statistics, then clear
+        them. ``step`` is the ctx.step (pruning by size applies once ``step + 1 >
+        reset_every``, never when ``reset_every`` is 0)."""
+        n = params["means"].shape[0]
+        device = state.grad_accum.device
+        clone, grow = self.select(params, state, scene_extent)
+        size_prune = self.reset_every > 0 and step + 1 > self.reset_every
         # too large on screen, known before growing: clones inherit it, split children do not
         big_screen = (state.max_radii > self.max_screen_size) if size_prune and self.max_screen_size > 0 \
-            else torch.zeros(n, dtype=torch.bool, device=avg.device)
+            else torch.zeros(n, dtype=torch.bool, device=device)
         # flags that follow the Gaussians through growing: clones copy their parent's
         # (a clone is never split: clone and split are disjoint), split children get False
         buffers = {"big_screen": big_screen & ~grow, "split": grow}
         n_clone = ops.duplicate(params, optimizers, clone, buffers=buffers)
         split_mask = buffers.pop("split")
-        n_split = ops.split(params, optimizers, split_mask, n=2, generator=state.generator, buffers=buffers)
+        n_split = ops.split(params, optimizers, split_mask, n=2, generator=state.generator, buffers=buffers,
+                            revised_opacity=self.revised_opacity)
         big = buffers["big_screen"]
-        prune = torch.sigmoid(params["opacity_logits"].detach()).to(avg.device) < self.prune_opacity
+        prune = torch.sigmoid(params["opacity_logits"].detach()).to(device) < self.prune_opacity
         if size_prune:
             prune |= big
             if self.max_world_size > 0:
-                prune |= torch.exp(params["log_scales"].detach()).amax(dim=-1).to(avg.device) \
+                prune |= torch.exp(params["log_scales"].detach()).amax(dim=-1).to(device) \
                     > self.max_world_size * scene_extent
         n_prune = ops.remove(params, optimizers, prune)
         m = params["means"].shape[0]
-        state.grad_accum = torch.zeros(m, device=avg.device)
-        state.count = torch.zeros(m, device=avg.device)
-        state.max_radii = torch.zeros(m, device=avg.device)
+        state.grad_accum = torch.zeros(m, device=device)
+        state.count = torch.zeros(m, device=device)
+        state.max_radii = torch.zeros(m, device=device)
         stats = RefineStats(step, n_clone, n_split, n_prune, m)
         state.last = stats
         state.history.append(stats)

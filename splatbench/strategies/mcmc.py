@@ -62,6 +62,9 @@ class MCMCStrategy:
     initial_opacity: ClassVar[float] = 0.5  # init_opacity="auto" (ubc-vision/3dgs-mcmc create_from_pcd)
     #: Scaled by ``TrainConfig.schedule = "scaled"``; refine_every stays as written.
     schedule_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False}
+    #: Step fields that may be written as a fraction of the run ("25%", "1/4"; True: a period).
+    run_fraction_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False,
+                                                      "refine_every": True}
 
     cap_max: int = 1_000_000      # most Gaussians ever (no addition beyond it)
     noise_lr: float = 5e5         # position noise = means_lr x noise_lr x gate(opacity) x covariance

@@ -17,6 +17,7 @@ class NoneStrategy:
     reads_mean_gradients: ClassVar[bool] = False  # no hook reads anything
     initial_opacity: ClassVar[float] = 0.1  # init_opacity="auto" (graphdeco create_from_pcd)
     schedule_fields: ClassVar[dict[str, bool]] = {}
+    run_fraction_fields: ClassVar[dict[str, bool]] = {}
 
     def last_topology_change(self, iterations: int) -> TopologyChange | None:
         return None

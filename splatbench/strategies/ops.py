@@ -177,11 +177,16 @@ def duplicate(params: Params, optimizers: Optimizers, mask: torch.Tensor, *,
 
 @torch.no_grad()
 def split(params: Params, optimizers: Optimizers, mask: torch.Tensor, n: int = 2, *,
-          generator: torch.Generator | None = None, buffers: Buffers | None = None) -> int:
+          generator: torch.Generator | None = None, buffers: Buffers | None = None,
+          revised_opacity: bool = False) -> int:
     """Replace each Gaussian in ``mask`` [N] by ``n`` children sampled from it (3DGS):
     means = parent + R (s * randn), scales = s / (0.8 n) (s / 1.6 for n = 2), the
     parent's rotation, opacity and colour. Parents are removed; the others keep their
     order and the children ([n, M] child-major) are appended with zero moments.
+    ``revised_opacity``: each child gets opacity 1 - (1 - o)^(1/n) instead of o, so
+    that n overlapping children let as much light through as their parent did
+    ("Revising Densification in Gaussian Splatting", Rota Bulo et al. 2024; gsplat's
+    ``split(revised_opacity=True)``: 1 - sqrt(1 - o) for its n = 2).
     Returns the number of parents split."""
     if n < 1:
         raise InputError(f"split: n must be >= 1, got {n}")
@@ -201,6 +206,8 @@ def split(params: Params, optimizers: Optimizers, mask: torch.Tensor, n: int = 2
             c = (p[sel][None] + offsets).reshape(n * m, 3)
         elif name == "log_scales":
             c = torch.log(scales / (0.8 * n)).repeat(n, 1)
+        elif name == "opacity_logits" and revised_opacity:
+            c = torch.logit(1.0 - torch.pow(1.0 - torch.sigmoid(p[sel]), 1.0 / n)).repeat(n)
         else:
             c = p[sel].repeat(n, *([1] * (p.dim() - 1)))
         return torch.cat([p[rest], c])

@@ -84,15 +84,36 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
         return
     fmt = (lambda x, spec: "n/a" if x is None else format(x, spec))
     click.echo(f"test PSNR {fmt(result.test_psnr, '.2f')} dB, SSIM {fmt(result.test_ssim, '.4f')}, "
-               f"LPIPS {fmt(result.test_lpips, '.4f')} ({result.test_views} test views)")
+               f"LPIPS {fmt(result.test_lpips, '.4f')}{_lpips_how(result)} ({result.test_views} test views)")
     click.echo(f"{result.num_gaussians} Gaussians, SH degree {result.sh_degree} ({result.sh_degree_reason})")
     click.echo(f"{result.iterations} iterations{_timed_steps(result)} in {result.train_seconds:.1f} s"
                f"{'' if result.resumed_step is None else ' in all'} "
                f"({result.iterations / max(result.train_seconds, 1e-9):.2f} it/s), render "
                f"{fmt(result.render_ms_per_view, '.1f')} ms/view, peak RSS {result.peak_rss_mb:.0f} MB")
+    if _load_line(result):
+        click.echo(_load_line(result))
     for note in (n for n in result.notes if n not in shown):
         click.echo(note if note.startswith("warning: ") else f"note: {note}", err=note.startswith("warning: "))
     click.echo(f"wrote {result.ply_path}")
+
+
+def _lpips_how(result) -> str:
+    """`` (AlexNet, inputs in [-1, 1])``: which LPIPS the figure is."""
+    if not result.lpips_net:
+        return ""
+    return f" ({'AlexNet' if result.lpips_net == 'alex' else 'VGG'}, inputs in " \
+           f"{'[-1, 1]' if result.lpips_scale_inputs else '[0, 1] unscaled'})"
+
+
+def _load_line(result) -> str:
+    """The machine's load around the run and the CPU time of the loop (times are not
+    trusted when others' load exceeded half the cores: `splatbench.metrics.load`)."""
+    load = result.load
+    if not load:
+        return ""
+    flag = "; LOADED: others' load exceeded half the cores, times not trusted" if load.get("loaded") else ""
+    return (f"load average {load['load_before']:.2f} -> {load['load_after']:.2f} (others' {load['load_other']:.2f} "
+            f"on {load['cores']} cores){flag}; loop CPU time {result.cpu_seconds:.1f} s")
 
 
 def _timed_steps(result) -> str:

@@ -96,10 +96,15 @@ class TrainConfig:
                                       # nothing hit, e.g. a constant sky), black when it marks none (3DGS)
     random_background: bool = False   # a uniformly random background colour per training step
     # --- densification (splatbench.strategies)
-    strategy: str = "default"         # "none", "default" (3DGS), "absgrad" (AbsGS), "mcmc" (3DGS-MCMC)
+    strategy: str = "default"         # "none", "default" (3DGS), "absgrad" (AbsGS), "mcmc" (3DGS-MCMC), "budget" (Taming 3DGS)
     strategy_options: dict[str, Any] = field(default_factory=dict)  # fields of the strategy's dataclass
     # --- evaluation, logging, checkpoints
     eval_every: int = 0               # evaluate on the test views every this many steps (0 = only at the end)
+    lpips_net: str = "alex"           # LPIPS v0.1 of the final test evaluation: "alex" (gsplat, NerfBaselines),
+                                      # "vgg" (graphdeco's metrics.py; ~20x AlexNet's time) or "none"; the
+                                      # eval_every evaluations use AlexNet (splatbench.metrics.lpips)
+    lpips_scale_inputs: bool = True   # feed LPIPS images scaled to [-1, 1] (the lpips package's convention);
+                                      # false: [0, 1] unscaled, as graphdeco's metrics.py does
     log_every: int = 100              # record (step, loss, PSNR, N) in the history every this many steps
     checkpoint_every: int = 0         # write checkpoints/iteration_<step>.ply every this many steps (0 = off)
     device: str = "auto"              # rasterizer backend: "cpu" (Dr.Jit LLVM), "cuda" or "auto"
@@ -165,6 +170,8 @@ class TrainConfig:
                 raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
         elif len(self.background) != 3 or not all(0 <= c <= 1 for c in self.background):
             raise InputError(f"background: expected 3 values in [0, 1] or 'auto', got {self.background!r}")
+        if self.lpips_net not in ("alex", "vgg", "none"):
+            raise InputError(f"lpips_net: expected 'alex', 'vgg' or 'none', got {self.lpips_net!r}")
         check_device(self.device, "device")
         from splatbench.train.schedule import SCHEDULES, check_final_window
 
@@ -185,15 +192,18 @@ class TrainConfig:
     def make_strategy(self, *, scaled: bool = True):
         """The densification strategy this config names (`InputError` if unknown). A
         strategy with a ``seed`` field gets the run's ``seed`` unless the options set one.
-        ``scaled``: its schedule fields in this run's steps (``schedule``); False: as written."""
-        from splatbench.strategies import make_strategy, strategy_fields
-        from splatbench.train.schedule import scaled_strategy
+        ``scaled``: its schedule fields in this run's steps (``schedule``); False: as written.
+        Step fields written as a fraction of the run ("25%", "1/4") are in run steps either way."""
+        from splatbench.strategies import STRATEGIES, make_strategy, strategy_fields
+        from splatbench.train.schedule import resolve_run_fractions, scaled_strategy
 
         options = dict(self.strategy_options)
         if "seed" in strategy_fields(self.strategy) and "seed" not in options:
             options["seed"] = self.seed
+        options, fixed = resolve_run_fractions(STRATEGIES[self.strategy][0].run_fraction_fields, options,
+                                               self.iterations)
         strategy = make_strategy(self.strategy, **options)
-        return scaled_strategy(strategy, self.iterations, self.schedule) if scaled else strategy
+        return scaled_strategy(strategy, self.iterations, self.schedule, fixed=fixed) if scaled else strategy
 
     @property
     def initial_opacity(self) -> float:

@@ -25,7 +25,7 @@ params, schedule, sh_schedule, losses, dssim, metrics, checkpoint, result).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +43,7 @@ from splatbench.strategies.base import StepContext
 from splatbench.train.config import TrainConfig, save_config
 from splatbench.train.initializers import InitSettings, initialize
 from splatbench.train.losses import photometric_loss
-from splatbench.metrics.image import lpips_metric, psnr, ssim_metric
+from splatbench.metrics.image import psnr, ssim_metric
 from splatbench.train.params import (ExponentialLR, gaussians_from_params, make_optimizers, params_from_gaussians,
                                      refreeze, scene_extent, set_lr)
 from splatbench.train.result import EvalPoint, HistoryPoint, TrainResult
@@ -82,7 +82,7 @@ class Evaluation:
 
     psnr: float | None
     ssim: float | None
-    lpips: float | None
+    lpips: dict[tuple[str, bool], float]  # (net, scale_inputs) -> mean LPIPS, for each one asked for
     render_ms_per_view: float | None
     views: int
     per_view_psnr: list[float] = field(default_factory=list)
@@ -305,12 +305,16 @@ class Trainer:
 
     # ------------------------------------------------------------------ evaluation
     @torch.no_grad()
-    def evaluate(self, lpips_fn=None) -> Evaluation:
-        """PSNR, SSIM (and LPIPS if ``lpips_fn``) of the current model on the test views."""
+    def evaluate(self, lpips: Sequence[tuple[str, bool]] = ()) -> Evaluation:
+        """PSNR, SSIM and LPIPS (each ``(net, scale_inputs)`` of ``lpips``,
+        `splatbench.metrics.lpips`) of the current model on the test views."""
+        from splatbench.metrics import lpips as lpips_distance
+
         test = self.dataset.test
         if len(test) == 0:
-            return Evaluation(None, None, None, None, 0)
-        psnrs, ssims, lps, seconds = [], [], [], 0.0
+            return Evaluation(None, None, {}, None, 0)
+        psnrs, ssims, seconds = [], [], 0.0
+        lps: dict[tuple[str, bool], list[float]] = {spec: [] for spec in lpips}
         for i, camera in enumerate(test.cameras):
             t0 = time.perf_counter()
             rgb, _, _, _ = self._render(camera, self.sh.degree, self.background.tolist())
@@ -318,10 +322,32 @@ class Trainer:
             gt = torch.from_numpy(np.ascontiguousarray(test.images[i], dtype=np.float32))
             psnrs.append(psnr(rgb, gt))
             ssims.append(ssim_metric(rgb, gt, self.config.ssim_window))
-            if lpips_fn is not None:
-                lps.append(lpips_fn(rgb, gt))
-        return Evaluation(float(np.mean(psnrs)), float(np.mean(ssims)), float(np.mean(lps)) if lps else None,
+            for (net, scaled), values in lps.items():
+                values.append(lpips_distance(rgb, gt, net=net, scale_inputs=scaled))
+        return Evaluation(float(np.mean(psnrs)), float(np.mean(ssims)), {k: float(np.mean(v)) for k, v in lps.items()},
                           1e3 * seconds / len(test), len(test), psnrs)
+
+
+#: The LPIPS of the ``eval_every`` evaluations (the curves): AlexNet, inputs scaled (cheap: ~1/20 of VGG).
+CURVE_LPIPS = ("alex", True)
+
+
+def lpips_plan(config: TrainConfig, test) -> tuple[list[tuple[str, bool]], list[tuple[str, bool]], str]:
+    """(the final evaluation's LPIPS ``[(net, scale_inputs)]``, the curves', a note when
+    LPIPS is skipped): none with ``lpips_net="none"``, without the weights installed, or
+    for test images under 16 px (AlexNet's first layers need them)."""
+    from splatbench.metrics.perceptual import weights_path
+
+    if config.lpips_net == "none" or len(test) == 0:
+        return [], [], ""
+    try:
+        weights_path(config.lpips_net), weights_path(CURVE_LPIPS[0])
+    except InputError as exc:
+        return [], [], f"LPIPS skipped: {exc}"
+    height, width = np.asarray(test.images[0]).shape[:2]
+    if min(height, width) < 16:
+        return [], [], f"LPIPS skipped: test images of {width}x{height} px are under 16 px on a side"
+    return [(config.lpips_net, config.lpips_scale_inputs)], [CURVE_LPIPS], ""
 
 
 def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None = None,
@@ -382,6 +408,7 @@ def _save_checkpoint(trainer: Trainer, out: Path, extra: dict) -> Path:
 
 
 def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
+    from splatbench.metrics.load import Load, process_cpu_seconds
     from splatbench.metrics.memory import peak_rss_mb
     from splatbench.train.checkpoint import load_checkpoint, resume_line
 
@@ -395,7 +422,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                                       "initialising)") from None
     history: list[HistoryPoint] = []
     evaluations: list[EvalPoint] = []
-    loop_seconds = 0.0
+    loop_seconds = cpu_seconds = 0.0
     resumed: list[str] = []
     resumed_step = None
     if resume is not None:
@@ -404,36 +431,41 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         resumed.append(resume_line(resume, trainer.step_index, config.iterations))
         history, evaluations = list(extra.get("history", [])), list(extra.get("evaluations", []))
         loop_seconds = float(extra.get("loop_seconds", 0.0))
+        cpu_seconds = float(extra.get("cpu_seconds", 0.0))
     save_config(config, out / "config.toml")
-    lpips_fn, lpips_note = lpips_metric()
+    final_lpips, curve_lpips, lpips_note = lpips_plan(config, trainer.dataset.test)
 
     def state() -> dict:
-        return {"history": history, "evaluations": evaluations, "loop_seconds": loop_seconds}
+        return {"history": history, "evaluations": evaluations, "loop_seconds": loop_seconds,
+                "cpu_seconds": cpu_seconds}
 
     status = None
+    load = Load.start()
     try:
         t0 = time.perf_counter()
         trainer.warm_up()  # outside every timed section (TrainResult.warmup_seconds); touches no state
         warmup_seconds = time.perf_counter() - t0
         for _ in range(config.iterations - trainer.step_index):
             with deferred():  # a stop signal ends the run between steps, never inside one
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), process_cpu_seconds()
                 status = trainer.step()
                 loop_seconds += time.perf_counter() - t0
+                cpu_seconds += process_cpu_seconds() - c0
             done = trainer.step_index
             if status.step % config.log_every == 0 or done == config.iterations:
                 history.append(HistoryPoint(status.step, status.loss, status.psnr, status.num_gaussians))
             if progress is not None:
                 progress(status)
             if config.eval_every and done % config.eval_every == 0 and done < config.iterations:
-                ev = trainer.evaluate()
+                ev = trainer.evaluate(curve_lpips)
                 if ev.psnr is not None:
-                    evaluations.append(EvalPoint(done, ev.psnr, ev.ssim))
+                    evaluations.append(EvalPoint(done, ev.psnr, ev.ssim, ev.lpips.get(CURVE_LPIPS)))
             if config.checkpoint_every and done % config.checkpoint_every == 0:
                 _save_checkpoint(trainer, out, state())
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), process_cpu_seconds()
         trainer.sh.finish(trainer.step_index, trainer.probe_band)
         loop_seconds += time.perf_counter() - t0
+        cpu_seconds += process_cpu_seconds() - c0
         with deferred():
             ply = trainer.save_ply(out / "point_cloud.ply")
     except Interrupted as exc:
@@ -442,11 +474,11 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                                       f"{trainer.step_index} of {config.iterations} steps; resume with "
                                       f"--resume {path.with_suffix('.pt')})") from None
     try:
-        ev = trainer.evaluate(lpips_fn)
+        ev = trainer.evaluate(list(dict.fromkeys(final_lpips + curve_lpips)))
     except Interrupted as exc:
         raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
     notes = resumed + ([trainer.init_note] if trainer.init_note else []) + [trainer.background_note] \
-        + ([] if lpips_fn is not None else [lpips_note])
+        + ([lpips_note] if lpips_note else [])
     if trainer.num_gaussians == 0:
         gone = next((h.step for h in history if h.num_gaussians == 0), trainer.step_index)
         notes.append(f"warning: the model is empty: every Gaussian was pruned (none left from step {gone} on), so it "
@@ -455,9 +487,12 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     if ev.views == 0:
         notes.append("no test views: test metrics are None")
     else:
-        evaluations.append(EvalPoint(trainer.step_index, ev.psnr, ev.ssim))
+        evaluations.append(EvalPoint(trainer.step_index, ev.psnr, ev.ssim, ev.lpips.get(CURVE_LPIPS)))
     result = TrainResult(
-        test_psnr=ev.psnr, test_ssim=ev.ssim, test_lpips=ev.lpips, num_gaussians=trainer.num_gaussians,
+        test_psnr=ev.psnr, test_ssim=ev.ssim, test_lpips=ev.lpips.get(final_lpips[0]) if final_lpips else None,
+        lpips_net=final_lpips[0][0] if final_lpips else "", lpips_scale_inputs=config.lpips_scale_inputs,
+        cpu_seconds=round(cpu_seconds, 3), load=load.stop().metrics(),
+        num_gaussians=trainer.num_gaussians,
         train_seconds=round(loop_seconds, 3), iterations=trainer.step_index, sh_degree=trainer.sh.degree,
         sh_degree_reason=trainer.sh.reason, ply_path=str(ply), render_ms_per_view=ev.render_ms_per_view,
         peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,

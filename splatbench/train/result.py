@@ -23,6 +23,7 @@ class EvalPoint(NamedTuple):
     step: int            # steps completed when evaluated
     psnr: float          # mean test PSNR (dB)
     ssim: float          # mean test SSIM
+    lpips: float | None = None  # mean test LPIPS v0.1, AlexNet, inputs scaled (None: not computed)
 
 
 @dataclass
@@ -31,7 +32,7 @@ class TrainResult:
 
     test_psnr: float | None             # mean PSNR (dB) of the final model on the test views
     test_ssim: float | None             # mean SSIM (kornia, window 11)
-    test_lpips: float | None            # mean LPIPS-Alex; None when unavailable (see `notes`)
+    test_lpips: float | None            # mean LPIPS v0.1 (`lpips_net`); None when not computed (see `notes`)
     num_gaussians: int                  # N at the end
     train_seconds: float                # wall time of the optimisation loop over all `iterations` steps, a resumed
                                         # run's earlier ones included (no evaluation, no I/O, no compilation)
@@ -51,6 +52,12 @@ class TrainResult:
     init: dict = field(default_factory=dict)   # how the initial Gaussians were made: method, points (and for
                                                # init="sfm": registered, total, center_rmse_rel, cached, ...)
     warmup_seconds: float = 0.0         # kernel compilation / cache loading before the loop (not in train_seconds)
+    lpips_net: str = ""                 # test_lpips's backbone: "alex", "vgg" ("" when not computed)
+    lpips_scale_inputs: bool = True     # test_lpips's inputs: scaled to [-1, 1] (True) or [0, 1] unscaled
+    cpu_seconds: float = 0.0            # CPU seconds of the process (all threads) over the loop train_seconds times
+    load: dict = field(default_factory=dict)  # the machine's load from warm-up to the final evaluation
+                                        # (`splatbench.metrics.load.Load.metrics`: load_before, load_after,
+                                        # own_cpu, own_before, load_other, cores, loaded)
     resumed_step: int | None = None     # --resume: the checkpoint's step (its earlier steps' loop time, timed by the
                                         # run that wrote it, is in train_seconds); None: not resumed
 

@@ -24,6 +24,17 @@ its last step, just before the final evaluation.
 The position learning rate decays exponentially over the whole run in both forms
 (graphdeco's ``position_lr_max_steps`` equals its 30,000 iterations).
 
+**Fractions of the run.** Whatever ``schedule`` says, a step field of the strategy
+named in its ``run_fraction_fields`` (refine start / stop / every, reset every) may
+be written as a fraction of this run's iterations, a string ``"25%"`` or ``"1/4"``:
+it becomes ``round(fraction x iterations)`` steps (a period at least 1) and is not
+scaled again. So a one-at-a-time grid around the defaults reads as proportions at
+any run length::
+
+    [axes]
+    strategy_options.refine_stop = ["25%", "50%", "75%"]
+    strategy_options.reset_every = ["10%", "20%", 0]     # 0: never
+
 Whatever the form, `check_final_window` rejects a run whose last topology change
 (densify, prune, opacity reset, relocation) falls in the final 10 % of its steps, so
 that the final evaluation always sees a model that has trained since its last change.
@@ -38,6 +49,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
+from typing import Any
 
 from splatbench.errors import InputError
 from splatbench.strategies.base import TopologyChange
@@ -54,7 +67,8 @@ def scale_step(value: int, iterations: int, schedule: str, *, interval: bool = F
     """``value`` (a step count) as the run uses it under ``schedule``.
 
     "absolute" returns ``value``; "scaled" returns ``value x iterations / 30,000``
-    rounded half up, at least 1 when ``interval`` (a period must be a positive step).
+    rounded half up, at least 1 when ``interval`` (a period must be a positive step;
+    `scaled_strategy` leaves a period of 0, "never", alone).
     """
     if schedule == "absolute":
         return int(value)
@@ -64,16 +78,57 @@ def scale_step(value: int, iterations: int, schedule: str, *, interval: bool = F
     return max(1, scaled) if interval else scaled
 
 
-def scaled_strategy(strategy, iterations: int, schedule: str):
+_PERCENT = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*%\s*$")
+_RATIO = re.compile(r"^\s*(\d+)\s*/\s*(\d+)\s*$")
+
+
+def parse_run_fraction(value: object, where: str) -> float | None:
+    """The fraction of the run ``value`` names (``"25%"`` -> 0.25, ``"1/4"`` -> 0.25), or
+    None when ``value`` is not a string. A string that is neither, or a fraction outside
+    [0, 1], is a one-line `InputError` naming ``where``."""
+    if not isinstance(value, str):
+        return None
+    m, r = _PERCENT.match(value), _RATIO.match(value)
+    frac = float(m.group(1)) / 100.0 if m else (int(r.group(1)) / int(r.group(2)) if r and int(r.group(2)) else None)
+    if frac is None or not 0.0 <= frac <= 1.0:
+        raise InputError(f"{where}: expected steps (an integer) or a fraction of the run between 0 and 1 "
+                         f"('25%' or '1/4'), got {value!r}")
+    return frac
+
+
+def resolve_run_fractions(fraction_fields: dict[str, bool], options: dict[str, Any], iterations: int
+                          ) -> tuple[dict[str, Any], frozenset[str]]:
+    """``options`` with each field of ``fraction_fields`` (name -> is-a-period) written as a
+    fraction of the run (`parse_run_fraction`) replaced by ``round(fraction x iterations)``
+    steps (a period at least 1), and the names so replaced. A fraction given for a field
+    outside ``fraction_fields`` is left for the strategy to reject."""
+    out, done = dict(options), set()
+    for name, value in options.items():
+        if name not in fraction_fields:
+            continue
+        frac = parse_run_fraction(value, f"strategy_options.{name}")
+        if frac is None:
+            continue
+        steps = int(math.floor(frac * iterations + 0.5))
+        out[name] = max(1, steps) if fraction_fields[name] else steps
+        done.add(name)
+    return out, frozenset(done)
+
+
+def scaled_strategy(strategy, iterations: int, schedule: str, *, fixed: frozenset[str] = frozenset()):
     """A copy of ``strategy`` with its ``schedule_fields`` (name -> is-an-interval) in
-    the steps of a run of ``iterations`` under ``schedule`` (unchanged when "absolute")."""
-    fields: dict[str, bool] = dict(strategy.schedule_fields)  # declared by the Strategy protocol
+    the steps of a run of ``iterations`` under ``schedule`` (unchanged when "absolute");
+    the fields in ``fixed`` (already in run steps, e.g. given as fractions) stay as they are."""
+    fields: dict[str, bool] = {k: v for k, v in strategy.schedule_fields.items()  # the Strategy protocol's
+                               if k not in fixed}
     if schedule == "absolute" or not fields:
         scale_step(0, iterations, schedule)  # validates the name
         return strategy
+    # a period of 0 means "never" (reset_every = 0) and stays 0
     return dataclasses.replace(strategy, **{name: scale_step(getattr(strategy, name), iterations, schedule,
                                                              interval=is_interval)
-                                            for name, is_interval in fields.items()})
+                                            for name, is_interval in fields.items()
+                                            if not (is_interval and getattr(strategy, name) == 0)})
 
 
 def final_window_start(iterations: int) -> int:
@@ -97,4 +152,4 @@ def check_final_window(strategy, iterations: int, schedule: str) -> None:
 
 
 __all__ = ["REFERENCE_ITERATIONS", "SCHEDULES", "FINAL_FRACTION", "TopologyChange", "scale_step", "scaled_strategy",
-           "final_window_start", "check_final_window"]
+           "final_window_start", "check_final_window", "parse_run_fraction", "resolve_run_fractions"]
