@@ -2,7 +2,11 @@
 trained models (a 3DGS PLY framed from a few directions).
 
 A workload is a set of Gaussians and one camera; benchmarks, the stress test and
-the parity tests all draw their scenes from here.
+the parity tests all draw their scenes from here. This module is also the one home of
+workload naming: a `WorkloadSpec` (cheap to pass between processes) is what the
+command line's ``--synthetic N WxH`` / ``--workload FILE.npz|garden`` (`parse_synthetic`,
+`parse_workload`) and an experiment's scene names ``synthetic-N-S``, ``synthetic-N-WxH``,
+``garden``, ``garden-vK`` (`parse_workload_name`, `workload_spec`) stand for.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
-from splatbench.checks import check_sh_degree
+from splatbench.checks import check_sh_degree, parse_size
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians, quat_to_rotmat
 from splatbench.safeio import read_npz
@@ -28,6 +32,7 @@ MODEL_VIEWS = 3
 MODEL_SIZE = "256x256"
 WORKLOAD_KEYS = ("means", "log_scales", "quats", "opacity_logits", "sh", "viewmat", "K", "width", "height")
 SFM_KEYS = ("means3d", "colors", "viewmats", "Ks", "width", "height")
+GARDEN = "garden"  # `--workload garden` / scene "garden": the bundled SfM capture, view 0 (648x420)
 
 
 @dataclass(frozen=True)
@@ -191,7 +196,91 @@ def _from_sfm(name: str, arrays: dict, view: int) -> Workload:
     return Workload(f"{name}-view{view}", gaussians, sfm_camera(arrays, view))
 
 
-# --------------------------------------------------------------------------- names
+# --------------------------------------------------------------------------- naming
+@dataclass(frozen=True)
+class WorkloadSpec:
+    """A workload to build where it is used (cheap to pass between processes).
+
+    ``kind`` "synthetic": `synthetic(n, width, height, seed, random_pose=posed)`;
+    ``kind`` "npz": `load_npz(path, view=view)`;
+    ``kind`` "model": `model_workload(path, view, views, width, height, up)`.
+    """
+
+    kind: str
+    n: int = 0           # synthetic: number of Gaussians
+    width: int = 0       # synthetic, model: image width (pixels)
+    height: int = 0      # synthetic, model: image height (pixels)
+    seed: int = 0        # synthetic: random seed
+    path: str = ""       # npz, model: absolute path of the file
+    view: int = 0        # npz, model: camera index
+    label: str = ""      # name in the results ("" = the workload's own name)
+    posed: bool = False  # synthetic: a random camera pose instead of the identity
+    views: int = 0       # model: cameras around the model (view is one of them)
+    up: tuple = ()       # model: the world's up [3] (() = the PLY's, else the default)
+
+    def build(self) -> Workload:
+        """The `Workload` (Gaussians and camera)."""
+        if self.kind == "synthetic":
+            return synthetic(self.n, self.width, self.height, self.seed, random_pose=self.posed)
+        if self.kind == "npz":
+            return load_npz(self.path, view=self.view)
+        if self.kind == "model":
+            return model_workload(self.path, self.view, self.views, self.width, self.height,
+                                  tuple(self.up) if self.up else None)
+        raise InputError(f"workload kind: expected 'synthetic', 'npz' or 'model', got {self.kind!r}")
+
+
+def parse_synthetic(count: str, size: str, seed: int = 0, *, posed: bool = False) -> WorkloadSpec:
+    """``--synthetic N WxH`` -> a synthetic `WorkloadSpec` (``posed``: from a random camera pose)."""
+    try:
+        n = int(count)
+    except ValueError:
+        raise InputError(f"--synthetic: expected a Gaussian count, got {count!r}") from None
+    if n < 1:
+        raise InputError(f"--synthetic: expected a Gaussian count >= 1, got {count!r}")
+    width, height = parse_size(size, "--synthetic")
+    return WorkloadSpec("synthetic", n=n, width=width, height=height, seed=seed, posed=posed)
+
+
+def parse_model(model: str, up: str | None = None, views: int | None = None,
+                size: str | None = None) -> list[WorkloadSpec]:
+    """``--model FILE.ply|guitar|biker`` [``--up``, ``--model-views``, ``--model-size``] -> one
+    model `WorkloadSpec` per view (`model_workload`)."""
+    from splatbench.framing import parse_up
+
+    views = MODEL_VIEWS if views is None else views
+    size = MODEL_SIZE if size is None else size
+    path = model_path(model)
+    if path.suffix.lower() != ".ply":
+        raise InputError(f"--model: expected a 3DGS .ply file (or a bundled model's name), got {model!r}")
+    if views < 1:
+        raise InputError(f"--model-views: expected a count >= 1, got {views}")
+    width, height = parse_size(size, "--model-size")
+    vector = parse_up(up) if up is not None else ()
+    return [WorkloadSpec("model", path=str(path.resolve()), view=k, views=views, width=width, height=height,
+                         up=tuple(vector)) for k in range(views)]
+
+
+def parse_models(models, up: str | None, views: int | None = None, size: str | None = None) -> list[WorkloadSpec]:
+    """The `WorkloadSpec`s of the ``--model`` options (`model_options`): one per model and view;
+    ``--up`` without a model is an error."""
+    if up is not None and not models:
+        raise InputError("--up: applies to --model only")
+    return [spec for m in models for spec in parse_model(m, up, views, size)]
+
+
+def parse_workload(arg: str) -> WorkloadSpec:
+    """``--workload FILE.npz|garden`` -> an npz `WorkloadSpec` (the file must exist)."""
+    if arg.lower() == GARDEN:
+        return WorkloadSpec("npz", path=str(GARDEN_SFM), view=0, label="garden-view0")
+    path = Path(arg).expanduser()
+    if not path.is_file():
+        raise InputError(f"--workload: no such file {arg!r}")
+    if path.suffix != ".npz":
+        raise InputError(f"--workload: expected a .npz file or 'garden', got {arg!r}")
+    return WorkloadSpec("npz", path=str(path.resolve()), view=0)
+
+
 _SYNTHETIC = re.compile(r"^synthetic-(\d+)-(\d+)(?:x(\d+))?$")
 _GARDEN = re.compile(r"^garden(?:-v(\d+))?$")
 
@@ -213,18 +302,23 @@ def parse_workload_name(name: str) -> tuple[str, dict[str, int]]:
                      f"or 'garden-vK')")
 
 
-def build_workload(name: str, seed: int) -> Workload:
-    """The `Workload` a workload name (`parse_workload_name`) and seed stand for."""
+def workload_spec(name: str, seed: int) -> WorkloadSpec:
+    """The `WorkloadSpec` a scene name (`parse_workload_name`) and seed stand for."""
     kind, args = parse_workload_name(name)
     if kind == "synthetic":
-        return synthetic(args["n"], args["width"], args["height"], seed)
-    return load_npz(GARDEN_SFM, view=args["view"])
+        return WorkloadSpec("synthetic", n=args["n"], width=args["width"], height=args["height"], seed=seed)
+    return WorkloadSpec("npz", path=str(GARDEN_SFM), view=args["view"])
+
+
+def build_workload(name: str, seed: int) -> Workload:
+    """The `Workload` a scene name and seed stand for."""
+    return workload_spec(name, seed).build()
 
 
 def model_options(command):
     """``--model``, ``--up``, ``--model-views`` and ``--model-size`` (one definition for `splatbench
     compare` and `splatbench bench raster`): the command receives ``models``, ``up``,
-    ``model_views`` and ``model_size`` (`splatbench.bench.raster.parse_models` reads them)."""
+    ``model_views`` and ``model_size`` (`parse_models` reads them)."""
     import click
 
     for option in reversed((

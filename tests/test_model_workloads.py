@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 import reference
-from splatbench.bench.raster import parse_model
+from splatbench.workloads import parse_model
 from splatbench.errors import InputError
 from splatbench.framing import DEFAULT_UP
 from splatbench.ply import ViewHints, read_ply, write_ply

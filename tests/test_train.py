@@ -149,7 +149,7 @@ def test_config_toml_round_trip_and_overrides(tmp_path):
     assert parse_override("init = random") == ("init", "random")
     assert cfg.iterations == 123                                               # the original is untouched
     # the config is validated on construction: MCMC's options under another strategy fail at once
-    with pytest.raises(InputError, match=r"^strategy 'default': unknown field 'cap_max'"):
+    with pytest.raises(InputError, match=r"^strategy 'default': strategy_options\.cap_max: unknown key \(known: "):
         apply_overrides(cfg, ["strategy=default"])
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.iterations = 5  # frozen: change a copy with dataclasses.replace / apply_overrides

@@ -57,8 +57,7 @@ def compare(backends: tuple[str, ...], synthetic: tuple[tuple[str, str], ...], s
     from splatbench.backends.compare import CompareSettings, run_compare
     from splatbench.backends.compare_report import findings, result_table, write_compare
     from splatbench.backends.registry import get_backend
-    from splatbench.bench.raster import parse_models, parse_synthetic, parse_workload
-    from splatbench.workloads import build_workload
+    from splatbench.workloads import parse_models, parse_synthetic, parse_workload, workload_spec
 
     settings = CompareSettings(repeats=repeats, device=device, seed=seed, error_scale=error_scale,
                                grad_oracle=grad_oracle, fd_entries=fd_entries, max_call_s=max_call_s)
@@ -66,7 +65,7 @@ def compare(backends: tuple[str, ...], synthetic: tuple[tuple[str, str], ...], s
     specs = [parse_synthetic(count, size, seed, posed=True) for count, size in synthetic]
     specs += [parse_workload(w) for w in workloads]
     specs += parse_models(models, up, model_views, model_size)
-    specs += [build_workload(name, seed) for name in scenes]
+    specs += [workload_spec(name, seed) for name in scenes]
     if not specs:
         specs = [parse_synthetic("2000", "128x128", seed, posed=True)]
     resolved = [get_backend(b) for b in backends]  # unknown names fail here, before any work

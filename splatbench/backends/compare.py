@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING
 from splatbench.backends.compare_types import MAX_ORACLE_PIXELS, GradError, ImageError, Timing, gradient_bound
 from splatbench.devices import torch_device
 from splatbench.errors import InputError, one_line
+from splatbench.workloads import Workload, WorkloadSpec
 
 if TYPE_CHECKING:
     from splatbench.backends.base import Backend
@@ -147,13 +148,13 @@ def auto_scale(width: int, height: int) -> float:
     return scale
 
 
-def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettings = CompareSettings(), *,
+def run_compare(backends: Sequence, workloads: Sequence[Workload | WorkloadSpec], settings: CompareSettings = CompareSettings(), *,
                 progress: Callable[[str], None] | None = None, command: str = "") -> CompareResult:
     """Compare ``backends`` on ``workloads`` (module doc).
 
     Args:
         backends: names, ``module:function`` strings, `Backend`s or callables (`get_backend`).
-        workloads: `splatbench.workloads.Workload`s, or `splatbench.bench.raster.WorkloadSpec`s.
+        workloads: `splatbench.workloads.Workload`s, or `splatbench.workloads.WorkloadSpec`s (built here).
         settings: `CompareSettings`. progress: called with one line per step.
         command: the command line, for the report.
 
@@ -190,8 +191,8 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
     rows: list[CompareRow] = []
     notes: list[str] = []
     for spec in workloads:
-        workload = spec.build() if hasattr(spec, "build") else spec
-        label = getattr(spec, "label", "") or workload.name
+        workload = spec.build() if isinstance(spec, WorkloadSpec) else spec
+        label = (spec.label if isinstance(spec, WorkloadSpec) else "") or workload.name
         camera = workload.camera
         scale = settings.error_scale or auto_scale(camera.width, camera.height)
         err_camera = camera if scale == 1 else camera.scaled(scale)

@@ -37,9 +37,10 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
     256x256, 100000 512x512, 1000000 800x800, and the garden view. Each workload
     runs in its own subprocess so its peak RSS is its own.
     """
+    from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, run_suite, standard_suite,
+                                         write_csv, write_json)
     from splatbench.metrics.machine import load_average, machine_info
-    from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, parse_models, parse_synthetic,
-                                         parse_workload, run_suite, standard_suite, write_csv, write_json)
+    from splatbench.workloads import parse_models, parse_synthetic, parse_workload
     from splatbench.checks import check_image_size
     from splatbench.overrides import parse_overrides
 
@@ -98,8 +99,9 @@ def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmu
     from dataclasses import asdict
 
     from splatbench.bench.ab import run_ab
+    from splatbench.bench.raster import STANDARD_SYNTHETIC
     from splatbench.metrics.machine import machine_info
-    from splatbench.bench.raster import STANDARD_SYNTHETIC, parse_synthetic
+    from splatbench.workloads import parse_synthetic
 
     specs = [parse_synthetic(count, size) for count, size in synthetic]
     workloads = [(s.n, s.width, s.height) for s in specs] or list(STANDARD_SYNTHETIC)

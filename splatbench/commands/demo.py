@@ -4,7 +4,8 @@
    (138,766 Gaussians seeded as 3DGS does, 648x420) rendered by the Dr.Jit
    rasterizer, and at quarter resolution by the float64 reference; prints the render
    time and their largest difference, writes ``out/demo/garden.png`` and
-   ``garden_difference.png`` (a few seconds).
+   ``garden_difference.png`` (the difference per pixel on a log colour scale, the
+   parity tolerance marked), and names both (a few seconds).
 2. The demo experiment, ``experiments/demo.toml``: its scenes rendered with Mitsuba
    (cached by content hash under ``data/scenes``), its training grid run on the local
    executor (resumable: runs already done are skipped), results under ``results/demo``.
@@ -33,6 +34,7 @@ def garden_check(out: Path, scale: float) -> None:
     from splatbench.backends import reference_render
     from splatbench.backends.compare_types import FORWARD_ATOL, over_bound
     from splatbench.images import save_png
+    from splatbench.figures import difference_figure
     from splatbench.workloads import GARDEN_SFM, load_npz
 
     workload = load_npz(GARDEN_SFM, view=0)
@@ -48,7 +50,9 @@ def garden_check(out: Path, scale: float) -> None:
     fast = splatbench.render(g, small)
     ref = reference_render(None, g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, small, band=True)
     err = np.abs(fast.rgb - ref.rgb)
-    save_png(np.clip(err / max(float(err.max()), 1e-12), 0, 1), out / "garden_difference.png")
+    difference = difference_figure(err.max(axis=-1), out / "garden_difference.png", tolerance=FORWARD_ATOL,
+                                   title=f"|Dr.Jit rasterizer - float64 reference|, garden at "
+                                         f"{small.width}x{small.height}")
     # the max is over every pixel, the boundary band included: the parity rule is per pixel
     # (FORWARD_ATOL, widened by depth ties), strict outside the band the oracle derives
     pixels = small.width * small.height
@@ -56,7 +60,8 @@ def garden_check(out: Path, scale: float) -> None:
     click.echo(f"reference check at {small.width}x{small.height}: max |fast - reference| = {err.max():.2e} "
                f"over all pixels; {over} of {pixels} above the {FORWARD_ATOL:.0e} parity tolerance, {outside} "
                f"of them outside the boundary band of {int(ref.band.sum())} pixels where float32 may take a "
-               f"discrete decision differently (allowed: 0) (image: {image})")
+               f"discrete decision differently (allowed: 0) (image: {image}; the difference, on a colour scale: "
+               f"{difference})")
 
 
 @click.command()

@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from splatbench.checks import unknown_key_problem
 from splatbench.errors import InputError
 from splatbench.experiments.configs import FIELD_KEY, canonical_json, check_value, flatten
 
@@ -122,7 +123,7 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
 
     for key in data:
         if key not in TOP_LEVEL_FIELDS:
-            raise fail(key, f"unknown field (expected one of: {', '.join(TOP_LEVEL_FIELDS)})")
+            raise fail(key, unknown_key_problem(key, TOP_LEVEL_FIELDS))
 
     name = data.get("name", default_name)
     if not isinstance(name, str) or not _NAME.match(name):
@@ -287,7 +288,7 @@ def _parse_runner(table: Any, fail, source: str, base_dir: Path | None) -> Runne
         raise fail("runner", f"expected a table, got {table!r}")
     for key in table:
         if key not in RUNNER_FIELDS:
-            raise fail(f"runner.{key}", f"unknown field (expected one of: {', '.join(RUNNER_FIELDS)})")
+            raise fail(f"runner.{key}", unknown_key_problem(key, RUNNER_FIELDS))
     workers = table.get("workers")
     if workers is not None and (not isinstance(workers, int) or isinstance(workers, bool) or workers < 1):
         raise fail("runner.workers", f"expected an int >= 1, got {workers!r}")

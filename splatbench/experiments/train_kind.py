@@ -46,7 +46,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from splatbench.checks import check_image_size
+from splatbench.checks import check_image_size, check_keys
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
@@ -104,8 +104,6 @@ def _train_fields() -> tuple[str, ...]:
 def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]:
     """(scene, the ``data`` table, the TrainConfig fields) of a nested run config; one-line
     `InputError` naming the field for anything unknown."""
-    import difflib
-
     fields = _train_fields()
     known = sorted({*fields, "scene", "data"} - set(OWNED_FIELDS))
     for key in config:
@@ -113,10 +111,7 @@ def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]
             what = "the rendered scene" if key == "dataset" else "the run's folder"
             raise InputError(f"{key}: set by the train kind ({what}); choose the scene with 'scenes' and its "
                              f"rendering with data.resolution / data.views / data.spp / data.test_spp")
-        if key not in known:
-            close = difflib.get_close_matches(key, known, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise InputError(f"{key}: unknown key {key!r}{hint}")
+    check_keys(config, known)
     scene = config.get("scene")
     if not isinstance(scene, str) or not scene:
         raise InputError(f"scene: expected a scene name, got {scene!r}")
@@ -125,10 +120,7 @@ def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]
         raise InputError(f"data: expected a table of {', '.join(DATA_FIELDS)}, got {data!r}")
     kind = scene_type(data)
     allowed = {"catalog": DATA_FIELDS, "folder": FOLDER_FIELDS, "teacher": TEACHER_FIELDS}[kind]
-    everything = {*DATA_FIELDS, *FOLDER_FIELDS, *TEACHER_FIELDS}
-    for key in data:
-        if key not in everything:
-            raise InputError(f"data.{key}: unknown key (known: {', '.join(sorted(everything))})")
+    check_keys(data, (*DATA_FIELDS, *FOLDER_FIELDS, *TEACHER_FIELDS), prefix="data.")
     data = {k: v for k, v in data.items() if k in allowed}  # keys of other scene types: module doc
     for key, value in data.items():
         if key in ("path", "model", "up"):
