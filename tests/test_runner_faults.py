@@ -303,3 +303,28 @@ def test_random_worker_kills_and_runner_sigterms_end_with_every_run_done_once(tm
 @pytest.mark.parametrize("seed", range(5))
 def test_fault_injection_many_rounds(tmp_path, seed):
     _fault_injection(tmp_path, rounds=8, seed=seed)
+
+
+def test_a_dead_worker_the_pool_misses_breaks_the_pool_after_the_grace(monkeypatch):
+    """CPython's process pool can miss a worker SIGKILLed while it held a queue lock and then wait
+    forever; `LocalExecutor.wait` breaks the pool itself once a worker has lain dead for the grace."""
+    import concurrent.futures as cf
+    import time
+    from types import SimpleNamespace
+
+    from splatbench.experiments import executors
+
+    monkeypatch.setattr(executors, "DEAD_WORKER_POLL", 0.05)
+    monkeypatch.setattr(executors, "DEAD_WORKER_GRACE", 0.3)
+    ex = executors.LocalExecutor.__new__(executors.LocalExecutor)
+    ex._dead_since = None
+    alive = SimpleNamespace(exitcode=None)
+    ex.pool = SimpleNamespace(_processes={1: alive})
+    fut = cf.Future()
+    fut.set_running_or_notify_cancel()
+    assert ex.wait([fut], timeout=0.5) == set()  # all alive: nothing done, nothing broken
+    ex.pool._processes[2] = SimpleNamespace(exitcode=-9)  # killed, unnoticed
+    t0 = time.monotonic()
+    done = ex.wait([fut], timeout=30)
+    assert done == {fut} and ex.broken(fut.exception())
+    assert 0.3 <= time.monotonic() - t0 < 5  # after the grace, long before the timeout
