@@ -217,3 +217,19 @@ def test_committed_report_is_its_numbers():
             assert row.status == "ok", row.error
             assert row.forward_verdict == "within bound" and row.grad_verdict == "within bound", (backend, workload)
     assert rows.loc[("reference", "garden-view0"), "forward_verdict"] == "within bound"
+
+
+@pytest.mark.slow  # two compare runs with the torch64 gradient oracle: ~1-2 min on 2 cores
+def test_the_origin_direction_bug_is_outside_the_bound_from_a_posed_camera():
+    """A rasterizer taking the SH view direction from the world origin (tests/dense_backends) agrees
+    with the oracle when the camera sits at the origin, and is caught by the default workload's random
+    pose (issue 20: compare once called it "within the float32 bound")."""
+    from tests.dense_backends import sh_origin
+
+    settings = CompareSettings(repeats=1, grad_oracle="torch64")
+    for posed, verdict in ((False, "within bound"), (True, "outside bound")):
+        result = run_compare(["drjit", sh_origin], [synthetic(40, WIDTH, HEIGHT, seed=3, random_pose=posed)],
+                             settings)
+        t = result_table(result).set_index("backend")
+        assert t.loc["drjit", "forward_verdict"] == "within bound"
+        assert t.iloc[1].forward_verdict == verdict, (posed, t.iloc[1].to_dict())
