@@ -36,7 +36,8 @@ KNOWN_UP_ELEVATION = 20.0
 
 def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0, up=DEFAULT_UP,
                    elevation_deg: float = 0.0, azimuth_deg: float = 0.0) -> Camera:
-    """A look-at camera that frames the central 98 % of the Gaussians, ``up`` [3] up in the image.
+    """A look-at camera that frames the central 98 % of the Gaussians, ``up`` [3] up in the image
+    (the sphere around them fits the narrower field of view).
 
     It looks along the first world axis of +z, +y that is not within 25° of ``up`` (+z
     for a y-up or y-down world, +y for a z-up one), made perpendicular to ``up`` and turned
@@ -61,7 +62,9 @@ def framing_camera(gaussians, width: int, height: int, fov_x_deg: float = 50.0, 
     center = (lo + hi) / 2
     sigma = float(np.percentile(np.exp(np.clip(gaussians.log_scales, -20, 20)).max(axis=1), 99))
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 3 * sigma, 1e-6)
-    distance = radius / np.tan(np.radians(fov_x_deg) / 2) * 1.2
+    # the framed sphere fits the narrower of the two fields of view (a tall object in a wide image)
+    tan_half = np.tan(np.radians(fov_x_deg) / 2) * min(1.0, height / width)
+    distance = radius / tan_half * 1.2
     if elevation_deg:
         e = np.radians(elevation_deg)
         forward = np.cos(e) * forward - np.sin(e) * up_
