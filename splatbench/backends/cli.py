@@ -69,7 +69,9 @@ def compare(backends: tuple[str, ...], synthetic: tuple[tuple[str, str], ...], s
     if not specs:
         specs = [parse_synthetic("2000", "128x128", seed, posed=True)]
     resolved = [get_backend(b) for b in backends]  # unknown names fail here, before any work
-    command = "splatbench " + shlex.join(sys.argv[1:]) if sys.argv and Path(sys.argv[0]).name == "splatbench" \
+    launched = sys.argv and (Path(sys.argv[0]).name == "splatbench"
+                             or Path(sys.argv[0]).parts[-2:] == ("splatbench", "__main__.py"))  # python -m splatbench
+    command = "splatbench " + shlex.join(sys.argv[1:]) if launched \
         else "splatbench compare " + shlex.join(_args(backends, synthetic, workloads, scenes, models))
     result = run_compare(resolved, specs, settings, progress=lambda line: click.echo(line, err=True),
                          command=command)

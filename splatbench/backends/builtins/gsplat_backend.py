@@ -164,12 +164,12 @@ def _render_cpu(means, scales, quats, opacities, sh, camera, degree, background)
     from gsplat.cuda import _torch_impl as gs
 
     W, H = camera.width, camera.height
-    viewmats = torch.as_tensor(camera.world_to_camera, dtype=torch.float32)[None]  # [1, 4, 4]
-    Ks = torch.as_tensor(camera.K, dtype=torch.float32)[None]                       # [1, 3, 3]
+    viewmats = torch.tensor(camera.world_to_camera, dtype=torch.float32)[None]  # [1, 4, 4]
+    Ks = torch.tensor(camera.K, dtype=torch.float32)[None]                       # [1, 3, 3]
     covars, _ = gs._quat_scale_to_covar_preci(quats, scales, compute_preci=False, triu=False)
     radii, means2d, depths, conics, _ = gs._fully_fused_projection(
         means, covars, viewmats, Ks, W, H, eps2d=EPS2D, near_plane=camera.near, far_plane=camera.far)
-    campos = torch.as_tensor(camera.center, dtype=torch.float32)
+    campos = torch.tensor(camera.center, dtype=torch.float32)
     colors = torch.clamp_min(gs._spherical_harmonics(degree, means - campos, sh) + 0.5, 0.0)  # [N, 3]
     features = torch.cat([colors[None], depths[..., None]], dim=-1)                              # [1, N, 4]
     tw, th = (W + TILE - 1) // TILE, (H + TILE - 1) // TILE
@@ -188,8 +188,8 @@ def _render_cuda(means, scales, quats, opacities, sh, camera, degree, background
 
     dev = torch.device("cuda")
     args = [x.to(dev) for x in (means, quats, scales, opacities, sh)]
-    viewmats = torch.as_tensor(camera.world_to_camera, dtype=torch.float32, device=dev)[None]
-    Ks = torch.as_tensor(camera.K, dtype=torch.float32, device=dev)[None]
+    viewmats = torch.tensor(camera.world_to_camera, dtype=torch.float32, device=dev)[None]
+    Ks = torch.tensor(camera.K, dtype=torch.float32, device=dev)[None]
     bg = torch.tensor(background, dtype=torch.float32, device=dev)[None]
     render, alphas, _ = rasterization(*args, viewmats, Ks, camera.width, camera.height, near_plane=camera.near,
                                       far_plane=camera.far, eps2d=EPS2D, sh_degree=degree, tile_size=TILE,
@@ -223,7 +223,7 @@ def make_gsplat_backend(device: str = "auto") -> Backend:
         # gsplat culls depth <= near itself; dropping those Gaussians first keeps its
         # projection from dividing by z ~ 0, whose 0·inf would put NaN in their (zero) gradients.
         with torch.no_grad():
-            Wc = torch.as_tensor(camera.world_to_camera, dtype=torch.float32, device=means.device)
+            Wc = torch.tensor(camera.world_to_camera, dtype=torch.float32, device=means.device)
             z = means @ Wc[2, :3] + Wc[2, 3]
             keep = torch.nonzero((z > camera.near) & (z < camera.far)).squeeze(1)
         rgbd, alpha = render(means[keep], log_scales[keep].exp(), quats[keep], torch.sigmoid(logits[keep]),

@@ -46,7 +46,7 @@ def _scene_inputs(means, log_scales, quats, opacity_logits, sh, camera):
     identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=quats.dtype).expand(n, 4)
     unit = torch.where(norm > 0, quats / torch.where(norm > 0, norm, torch.ones_like(norm)), identity)
     data = torch.cat([means, log_scales.exp(), unit[:, 1:], unit[:, :1]], dim=1)
-    W = torch.as_tensor(camera.world_to_camera, dtype=means.dtype)
+    W = torch.tensor(camera.world_to_camera, dtype=means.dtype)
     z = means @ W[2, :3] + W[2, 3]
     k = sh.shape[1]
     aux = torch.zeros(n, k, 3, dtype=means.dtype)

@@ -96,7 +96,7 @@ def screen(means, log_scales, quats, opacity_logits, camera, s: Settings) -> Scr
     import torch
 
     dt = means.dtype
-    W = torch.as_tensor(camera.world_to_camera, dtype=dt)
+    W = torch.tensor(camera.world_to_camera, dtype=dt)  # a copy: a Camera's arrays are read-only
     Wr, Wt = W[:3, :3], W[:3, 3]
     fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
     w_img, h_img = camera.width, camera.height
@@ -152,7 +152,7 @@ def eval_sh(sh, means, camera, degree: int):
     """Colours [N, 3] = max(SH(dir) + 0.5, 0) with dir = normalize(mean - camera centre)."""
     import torch
 
-    W = torch.as_tensor(camera.world_to_camera, dtype=means.dtype)
+    W = torch.tensor(camera.world_to_camera, dtype=means.dtype)
     centre = -W[:3, :3].T @ W[:3, 3]
     x, y, z = _unit_rows(means - centre, 0.0).unbind(1)
     basis = [torch.full_like(x, C0)]
