@@ -7,7 +7,7 @@ sweep it (docs/experiments.md has the full format)::
     kind = "train"                    # a registered run kind (splatbench.experiments.kinds)
     scenes = ["diffuse", "glossy",    # catalog names, dataset folders, teacher models:
               { name = "fox", path = "../shared/data/fox", downscale = 8 },
-              { name = "guitar", model = "pc_guitar.ply", views = 64, resolution = 128 }]
+              { name = "guitar", model = "../splatbench/data/models/pc_guitar.ply", views = 64, resolution = 128 }]
     seeds = [0, 1, 2]
     grid = "product"                  # or "one-at-a-time"
 

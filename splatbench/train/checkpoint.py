@@ -158,7 +158,7 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
         pt = p.with_suffix(".pt")
         hint = (f"; the checkpoint is the .pt file beside it: --resume {pt}" if p.suffix != ".pt" and pt.is_file()
                 else "; checkpoints are the checkpoints/iteration_<step>.pt files of a run's output folder")
-        refused = "Unsupported global" in str(exc)  # torch named a class or function it would not call
+        refused = "unsupported global" in str(exc).lower()  # torch named a class or function it would not call
         reason = ("it holds objects other than tensors and plain data (a checkpoint of an older splatbench, "
                   f"before {CHECKPOINT_FORMAT}, or not a splatbench checkpoint), refused without running them"
                   if refused else f"{type(exc).__name__}")

@@ -88,8 +88,8 @@ def initialize(name: str, dataset, settings: InitSettings) -> Initialization:
         have = "no point cloud" if dataset.points is None else f"{len(dataset.points)} point(s)"
         made = INITIALIZERS["random"](dataset, settings)
         note = (f"init: 'surface' needs the dataset's points, but {str(dataset.root)!r} has {have}: "
-                f"{len(made)} random points in the camera bounds instead (init=random says so; init=sfm "
-                f"triangulates points)")
+                f"started from {len(made)} random points in the camera bounds, as graphdeco does (set init=random "
+                f"to ask for that, or init=sfm to triangulate points)")
         (settings.say or (lambda line: None))(note)
         return Initialization(made, {"method": "random", "asked": "surface", "points": len(made)}, note)
     made = INITIALIZERS[name](dataset, settings)
