@@ -12,12 +12,18 @@ gradients), fewer probes fail and none that passed fails; then the search repeat
 no single alternative explains a failing basic probe, pairs of alternatives are tried on the basic
 probes. The probe scenes are tiny, so the search costs a few dozen small renders per axis.
 
-Root causes (`root_causes`). Each probe isolates one feature (its name) and exercises others (a
+Root causes (`root_causes`). The failing probes whose scene the backend draws (nearly) nothing of,
+where the oracle draws, are one defect of their own (a cull outside the vocabulary, a zero opacity:
+`evidence.undrawn`), whatever each probe isolates. Of the rest, each probe isolates one feature (its name) and exercises others (a
 scene with two Gaussians exercises the depth order, an anisotropic rotated one the quaternion order,
 a gradient of means the conic's gradient, ...: `exercises`). The defects are the smallest set of
 failing probes whose features account for every failing probe (ties: the set whose features the
 fewest passing probes exercise, then the earliest probes); each lists the failing probes that follow
-from it.
+from it. A probe isolating a convention axis that every scene exercises (the pixel centre, the
+activations, eps2d, alpha_min) links other probes to itself only when the evidence supports its cause
+(an alternative value of its axis halves its deviation); a root whose cause is not supported is
+reported as "unexplained: <what differs>" (`evidence.describe`: coverage, centroid, orientation,
+size, mirror image), not under the probe's usual cause.
 """
 
 from __future__ import annotations
@@ -31,9 +37,15 @@ import numpy as np
 
 from splatbench.backends.base import AXES, AXIS
 from splatbench.backends.conform.calls import Fault
-from splatbench.backends.conform.judges import JUDGES, Context
-from splatbench.backends.conform.oracle import projection
+from splatbench.backends.conform.evidence import coverage, describe, undrawn
+from splatbench.backends.conform.judges import JUDGES, Context, _backend_outputs
+from splatbench.backends.conform.oracle import oracle, projection
 from splatbench.backends.conform.probes import AXIS_PROBES, BASIC, Probe
+
+AXIS_OF: dict[str, str] = {}  # probe -> the first axis it isolates
+for _axis, _names in AXIS_PROBES.items():
+    for _name in _names:
+        AXIS_OF.setdefault(_name, _axis)
 from splatbench.backends.conform.results import ProbeResult
 from splatbench.backends.conform.scenes import ProbeScene
 
@@ -43,6 +55,8 @@ FAULT_CAUSE = "the backend failed on this probe's scene (see measured), so the c
 OK = ("pass", "warn", "skip")
 #: Features every probe scene exercises: a wrong pixel centre, activation, low-pass or skip changes any render.
 EVERYWHERE = ("pixel_centre", "scale_activation", "opacity_activation", "eps2d", "alpha_min")
+#: The basic probe every other one builds on: one plain Gaussian (a failure there can explain any other).
+CORE = "basic_centred"
 TAIL_D2 = 4.0  # a footprint's "tail": beyond 2 sigma, where a cutoff other than the declared one shows
 MAX_ROOTS = 3  # exhaustive cover search up to this size, greedy beyond
 
@@ -198,7 +212,7 @@ def exercises(probe: Probe, s: ProbeScene, conv: dict) -> frozenset[str]:
     """The features (named by the probe that isolates each) a probe's verdict depends on."""
     import reference
 
-    f = {probe.name, *EVERYWHERE}
+    f = {probe.name, *EVERYWHERE, CORE}
     cam = s.camera
     groups = set(probe.groups) if probe.kind == "gradient" else \
         {"log_scales", "quats"} if probe.kind == "direction" else set()
@@ -271,15 +285,27 @@ def _contributions(s: ProbeScene, proj) -> tuple[np.ndarray, np.ndarray]:
     return d2, proj.opacities[vis] * np.exp(-d2 / 2)
 
 
-def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], conv: dict) -> list[Defect]:
-    """The smallest set of failing probes whose features account for every failing probe; among sets of
-    that size, the one whose features the fewest passing probes exercise (a defect in a feature fails
-    the probes that use it), then the earliest."""
+def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], ctx: Context) -> list[Defect]:
+    """The defects behind the probes failing under ``ctx.conv`` (module docstring): the smallest set of
+    failing probes whose features account for every failing probe the backend draws something of; among sets of that size, the one whose features the
+    fewest passing probes exercise (a defect in a feature fails the probes that use it), then the earliest.
+    A probe isolating a convention axis reaches other probes through that feature only when the evidence
+    supports its cause (`_supported`); a root whose cause is not supported is "unexplained: <what differs>".
+    The probes whose scene the backend draws (nearly) nothing of join a root whose own feature they
+    exercise, else form one defect of their own (first when it is the largest)."""
+    conv = ctx.conv
     failing = [p for p in selected if results[p.name].status == "fail"]
     if not failing:
         return []
-    uses = {p.name: exercises(p, p.build(), conv) for p in selected if results[p.name].status in ("fail", "pass")}
-    names = [p.name for p in failing]
+    by_name = {p.name: p for p in selected}
+    empty = [p.name for p in failing if _undrawn(p, ctx)]
+    names = [p.name for p in failing if p.name not in empty]
+    uses = {p.name: set(exercises(p, p.build(), conv)) for p in selected
+            if results[p.name].status in ("fail", "pass")}
+    claimed = {n: _supported(by_name[n], results[n], ctx) for n in names}
+    weak = {f for f in EVERYWHERE if f in claimed and claimed[f] is not None}  # a cause the evidence does not back
+    for n, f in uses.items():
+        f -= weak - {n}
     passing = [n for n in uses if results[n].status == "pass"]
 
     def covers(root: str) -> set[str]:
@@ -295,19 +321,95 @@ def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], co
         if covering:
             chosen = list(min(covering, key=contradictions))  # min keeps the earliest of equals
             break
-    if chosen is None:  # greedy: the root covering most of what is left, earliest first
+    if not names:
+        chosen = []
+    elif chosen is None:  # greedy: the root covering most of what is left, earliest first
         chosen, left = [], set(names)
         while left:
             best = max(names, key=lambda r: (len(covers(r) & left), -names.index(r)))
             chosen.append(best)
             left -= covers(best)
+    # An empty scene goes with a root whose own feature it exercises (a Gaussian drawn only in the tile
+    # of its centre leaves a scene of off-image centres empty); the rest form a defect of their own.
+    specific = [r for r in chosen if r not in EVERYWHERE and r != CORE]
+    attached = {e for e in empty if any(r in uses[e] for r in specific)}
+    names += [e for e in empty if e in attached]
     defects, taken = [], set(chosen)
     for root in chosen:
         r = results[root]
         follows = tuple(n for n in names if n not in taken and root in uses[n])
         taken.update(follows)
-        defects.append(Defect(root, r.cause or "", r.deviation, r.tolerance, follows))
+        cause = claimed[root] if claimed[root] is not None else (r.cause or "")
+        defects.append(Defect(root, cause, r.deviation, r.tolerance, follows))
+    empty = [e for e in empty if e not in attached]
+    if CORE in empty:  # the single plain Gaussian is not drawn: everything else may follow from that
+        empty = [CORE, *(n for n in names + empty if n not in (CORE, *chosen))]
+        defects = []
+    if empty:
+        want = have = 0
+        for key in dict.fromkeys(by_name[n].build.__name__ for n in empty):
+            s = next(p for p in failing if p.build.__name__ == key).build()
+            w, h = coverage(_backend_outputs(s, key, ctx), oracle(key, s, conv), _has_alpha(ctx))
+            want, have = want + w, have + h
+        r = results[empty[0]]
+        blank = Defect(empty[0], f"{UNDRAWN_CAUSE} (on {len(empty)} failing probes: it draws {have} of the "
+                                 f"{want} pixels the oracle draws)", r.deviation, r.tolerance, tuple(empty[1:]))
+        # first when it accounts for at least as many failing probes as any other defect
+        largest = max((1 + len(d.follows) for d in defects), default=0)
+        defects = [blank, *defects] if len(empty) >= largest else [*defects, blank]
     return defects
+
+
+#: The cause of a defect whose probe scenes the backend leaves (nearly) empty.
+UNDRAWN_CAUSE = ("the backend draws nothing, or nearly nothing, where the oracle draws: a cull outside the "
+                 "convention vocabulary (e.g. of Gaussians large on screen), a zero opacity or a collapsed "
+                 "footprint, not the probes' own features")
+
+
+def _has_alpha(ctx: Context) -> bool:
+    return "alpha" in ctx.backend.info.outputs
+
+
+def _undrawn(probe: Probe, ctx: Context) -> bool:
+    """Whether the backend draws (nearly) nothing of ``probe``'s scene where the oracle draws."""
+    s = probe.build()
+    try:
+        got = _backend_outputs(s, probe.build.__name__, ctx)
+    except Fault:
+        return False
+    return undrawn(got, oracle(probe.build.__name__, s, ctx.conv), _has_alpha(ctx))
+
+
+def _supported(probe: Probe, result: ProbeResult, ctx: Context) -> str | None:
+    """None when the failing probe's own cause stands; else the cause the evidence supports instead.
+
+    A forward probe isolating a convention axis every scene exercises (`EVERYWHERE`: the likeliest to
+    be blamed for someone else's bug) names that axis's likely departure: the cause stands
+    only when some alternative value of the axis halves the probe's deviation (the oracle under it
+    explains the backend better than under the declared value). Otherwise, and for the basic probes
+    (whose cause defers to a diagnosis there is none of), "unexplained: <what differs>". Other forward
+    probes keep their cause, with what differs appended; gradient probes and faults keep theirs."""
+    if probe.kind not in ("forward", "approximation") or result.cause == FAULT_CAUSE or result.deviation is None:
+        return None
+    s = probe.build()
+    key = probe.build.__name__
+    try:
+        got = _backend_outputs(s, key, ctx)
+    except Fault:
+        return None
+    what = describe(got, oracle(key, s, ctx.conv), _has_alpha(ctx))
+    axis = AXIS_OF.get(probe.name) if probe.name in EVERYWHERE else None
+    if axis is None and probe.name not in BASIC:
+        return f"{result.cause}; what differs: {what}"
+    if axis is not None:
+        for value in (AXIS[axis].graphdeco, *AXIS[axis].alternatives):
+            if value == ctx.conv[axis]:
+                continue
+            alt = judge(probe, dataclasses.replace(ctx, conv={**ctx.conv, axis: value}))
+            if alt.deviation is not None and alt.deviation <= 0.5 * result.deviation:
+                return None
+        return f"unexplained: {what} (no value of `{axis}` reproduces it)"
+    return f"unexplained: {what}"
 
 
 def explained_by(findings: list[Finding]) -> dict[str, str]:
@@ -320,4 +422,4 @@ def explained_by(findings: list[Finding]) -> dict[str, str]:
 
 
 __all__ = ["Finding", "Defect", "fingerprint", "root_causes", "run_probes", "exercises", "explained_by",
-           "FAULT_CAUSE"]
+           "FAULT_CAUSE", "UNDRAWN_CAUSE"]
