@@ -27,7 +27,7 @@ import dataclasses
 
 from splatbench.backends.base import Backend
 from splatbench.backends.conform.calls import Fault, captured
-from splatbench.backends.conform.diagnose import (FAULT_CAUSE, Defect, Finding, explained_by, fingerprint,
+from splatbench.backends.conform.diagnose import (FAULT_CAUSE, UNDRAWN_CAUSE, Defect, Finding, explained_by, fingerprint,
                                                   root_causes, run_probes)
 from splatbench.backends.conform.judges import Context
 from splatbench.backends.conform.oracle import conventions_of
@@ -71,7 +71,7 @@ def backend_version(backend: Backend) -> str:
 
 
 __all__ = ["conform", "BackendFault", "ConformReport", "ProbeResult", "PROBES", "Probe", "STATUSES", "probe_names",
-           "Finding", "Defect", "FAULT_CAUSE", "backend_version"]
+           "Finding", "Defect", "FAULT_CAUSE", "UNDRAWN_CAUSE", "backend_version"]
 
 
 def conform(backend, *, device: str = "auto", probes: tuple[str, ...] | None = None,
