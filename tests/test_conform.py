@@ -345,7 +345,7 @@ def test_cli_fails_a_broken_backend_given_as_module_function_from_outside(tmp_pa
     # Diagnosed, not failed: the quaternion order explains both the forward and the gradient probe.
     assert status == {"quat_order": "explained", "pixel_centre": "pass", "grad_quats": "explained"}
     assert out["diagnosis"] == [{"axis": "quat_order", "expected": "wxyz", "found": "xyzw",
-                                 "explains": ["quat_order", "grad_quats"]}]
+                                 "explains": ["quat_order", "grad_quats"], "alike": []}]
     assert out["defects"] == [] and out["passed"] is False and out["backend"] == "my_rasterizer:render"
     explained = next(p for p in out["probes"] if p["name"] == "quat_order")
     assert explained["explained_by"] == "quat_order" and explained["deviation"] > explained["tolerance"]
@@ -454,3 +454,31 @@ def test_scenes_drawn_empty_are_one_defect_of_their_own():
     assert d.probe == "depth_order" and d.cause.startswith(UNDRAWN_CAUSE) and d.follows == ("quat_order",)
     assert "draws 0 of the" in d.cause
     assert next(r for r in report.results if r.name == "depth_order").cause == d.cause
+
+
+# LiteSplat's design (reports/conform_public/litesplat): a dense renderer differing from graphdeco on
+# five approximations at once, none of which alone (or in pairs) makes a basic probe pass.
+DENSE_DESIGN = dict(eps2d=0.0, jacobian_clamp="none", alpha_max=1.0, alpha_min=0.0, radius="none",
+                    transmittance_min=0.0, sort_key="distance")
+
+
+def test_several_conventions_at_once_are_found_when_nothing_is_declared():
+    """The greedy multi-axis step: the oracle itself under DENSE_DESIGN, declaring nothing, is diagnosed
+    with those conventions (alpha_max 1 and 0.999 alike on the probes), and no defect."""
+    from splatbench.backends.builtins.reference_backend import reference_render
+
+    design = BackendInfo(name="design", **DENSE_DESIGN)
+
+    def fn(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
+        out = reference_render(design, means, log_scales, quats, opacity_logits, sh, camera,
+                               sh_degree=sh_degree, background=background)
+        return tuple(torch.from_numpy(np.asarray(x, np.float32)) for x in (out.rgb, out.alpha, out.depth))
+
+    probes = ("basic_centred", "basic_overlap", "basic_offaxis", "depth_order", "eps2d", "jacobian_clamp",
+              "alpha_max", "alpha_min", "early_stop", "radius")
+    report = conform(_wrap(fn, gradients=False), probes=probes)
+    found = {d.axis: (d.found, *d.alike) for d in report.diagnosis}
+    assert not report.defects and not report.failed, (found, report.defects)
+    for axis in ("eps2d", "jacobian_clamp", "alpha_min", "sort_key"):
+        assert found[axis][0] == DENSE_DESIGN[axis], (axis, found)
+    assert 1.0 in found["alpha_max"], found

@@ -10,7 +10,10 @@ make a probe isolating their axis pass (a convention that differs always fails, 
 The best candidate is kept when, with every probe rerun against the oracle under it (outputs and
 gradients), fewer probes fail and none that passed fails; then the search repeats. When
 no single alternative explains a failing basic probe, pairs of alternatives are tried on the basic
-probes. The probe scenes are tiny, so the search costs a few dozen small renders per axis.
+probes; when still nothing, a greedy multi-axis step (`_greedy`: add the alternative that most
+reduces the failing forward probes' excess over their tolerances, repeat, at most GREEDY_AXES axes).
+Candidates explaining as many probes are told apart by that excess. The probe scenes are tiny, so
+the search costs a few dozen small renders per axis.
 
 Root causes (`root_causes`). The failing probes whose scene the backend draws (nearly) nothing of,
 where the oracle draws, are one defect of their own (a cull outside the vocabulary, a zero opacity:
@@ -38,7 +41,7 @@ import numpy as np
 from splatbench.backends.base import AXES, AXIS
 from splatbench.backends.conform.calls import Fault
 from splatbench.backends.conform.evidence import coverage, describe, undrawn
-from splatbench.backends.conform.judges import JUDGES, Context, _backend_outputs
+from splatbench.backends.conform.judges import JUDGES, Context, _backend_outputs, _compared, _pixel_diff
 from splatbench.backends.conform.oracle import oracle, projection
 from splatbench.backends.conform.probes import AXIS_PROBES, BASIC, Probe
 
@@ -59,6 +62,7 @@ EVERYWHERE = ("pixel_centre", "scale_activation", "opacity_activation", "eps2d",
 CORE = "basic_centred"
 TAIL_D2 = 4.0  # a footprint's "tail": beyond 2 sigma, where a cutoff other than the declared one shows
 MAX_ROOTS = 3  # exhaustive cover search up to this size, greedy beyond
+GREEDY_AXES = 6  # the most axes the greedy multi-axis search changes at once
 
 
 @dataclass(frozen=True)
@@ -70,6 +74,7 @@ class Finding:
     expected: Any
     found: Any
     explains: tuple[str, ...]
+    alike: tuple = ()  # other values of the axis the probes cannot tell from ``found`` (same verdicts)
 
 
 @dataclass(frozen=True)
@@ -116,16 +121,40 @@ def _candidates(conv: dict, changed: set[str]):
 def _explained(probes: list[Probe], ctx: Context, change: dict, *, forward_only: bool = False) -> list[str]:
     """The probes (all failing under ctx.conv) that pass, or only warn, under ctx.conv + change.
     ``forward_only``: judge the forward probes only (a cheap first look: no finite differences)."""
+    return _trial(probes, ctx, change, forward_only=forward_only)[0]
+
+
+def _trial(probes: list[Probe], ctx: Context, change: dict, *, forward_only: bool = False) -> tuple[list[str], float]:
+    """(`_explained`, the excess left: the sum over the judged probes of log(deviation / tolerance) where
+    above 1), the excess telling apart candidates that explain the same probes."""
     gradient_only = change == {"sh_view_direction": "detached"}  # the same forward: only gradients can tell
     trial = dataclasses.replace(ctx, conv={**ctx.conv, **change})
-    out = []
+    out, excess = [], 0.0
     for p in probes:
         gradient = p.kind in ("gradient", "direction")
         if (gradient and forward_only and not gradient_only) or (gradient_only and not gradient):
             continue
-        if judge(p, trial).status in OK:
+        r = judge(p, trial)
+        if r.status in OK:
             out.append(p.name)
-    return out
+        excess += _excess(p, r, trial)
+    return out, excess
+
+
+def _excess(probe: Probe, r: ProbeResult, ctx: Context) -> float:
+    """How far a probe is from passing: for forward probes the mean over pixels of log(difference /
+    tolerance) where above 1 (every pixel counts, so removing one of several differences shows even
+    where another sets the largest one); else log(deviation / tolerance); a fault: a large constant."""
+    if r.status in OK:
+        return 0.0
+    if r.deviation is None or r.tolerance is None or not r.tolerance > 0:
+        return 50.0
+    outputs = _compared(probe, ctx)
+    if probe.kind in ("forward", "approximation") and outputs:
+        s, key = probe.build(), probe.build.__name__
+        diff = _pixel_diff(_backend_outputs(s, key, ctx), oracle(key, s, ctx.conv), outputs)
+        return float(np.log(np.maximum(diff / r.tolerance, 1.0)).mean())
+    return float(np.log(max(r.deviation / r.tolerance, 1.0)))
 
 
 def _isolates(change: dict, failing: list[Probe], warned: list[Probe], ctx: Context) -> bool:
@@ -161,20 +190,23 @@ def fingerprint(selected: tuple[Probe, ...], ctx: Context,
                 if change in rejected:
                     continue
                 if stage is stages[0]:
-                    explains = _explained(failing, here, change, forward_only=True)
+                    explains, excess = _trial(failing, here, change, forward_only=True)
                 elif _isolates(change, failing, warned, here):
                     # A convention that differs fails (or warns in) the probes isolating its axis: one that
                     # does not make them pass cannot be it. Those that do are scored on outputs and gradients.
-                    explains = _explained(failing, here, change)
+                    explains, excess = _trial(failing, here, change)
                 else:
                     continue
                 if explains:
-                    scored.append((len(explains), change))
+                    scored.append(((len(explains), -excess), change))
             if not scored and stage is stages[0]:
                 scored = _pairs(failing, here, changed, rejected)
             if not scored:
+                scored = _greedy(failing, here, changed, rejected)
+            if not scored:
                 break
-            best = max(scored, key=lambda sc: sc[0])[1]  # first of the best: the vocabulary's order
+            # the most probes explained, then the least excess left; first of equals: the vocabulary's order
+            best = max(scored, key=lambda sc: sc[0])[1]
             trial_results = run_probes(selected, dataclasses.replace(ctx, conv={**conv, **best}))
             before, after = set(_failing(results)), set(_failing(trial_results))
             if len(after) >= len(before) or after - before:
@@ -185,7 +217,40 @@ def fingerprint(selected: tuple[Probe, ...], ctx: Context,
                 findings.append(Finding(axis, declared[axis], value, explains))
                 changed.add(axis)
             conv, results = {**conv, **best}, trial_results
+    if len(findings) >= 2:
+        conv, findings, results = _refine(selected, ctx, conv, findings, results)
     return conv, findings, results
+
+
+def _refine(selected: tuple[Probe, ...], ctx: Context, conv: dict, findings: list[Finding],
+            results: dict[str, ProbeResult]):
+    """One pass over the axes found, each set to the value of its axis that leaves the forward probes the
+    least excess with the other findings in place (a value found early, before the others, may be only
+    the nearest to the truth: 0.999 for a backend clamping at 1 while its cutoff still differed). Kept
+    when every probe rerun under it fails no more than before."""
+    forward = [p for p in selected if p.kind in ("forward", "approximation")]
+    here = dataclasses.replace(ctx, conv=conv)
+    left = _trial(forward, here, {}, forward_only=True)[1]
+    change: dict = {}
+    alike: dict[str, list] = {}
+    for fd in findings:
+        for value in (AXIS[fd.axis].graphdeco, *AXIS[fd.axis].alternatives):
+            if value not in (conv[fd.axis], ctx.conv[fd.axis]):
+                excess = _trial(forward, here, {**change, fd.axis: value}, forward_only=True)[1]
+                if excess < left:
+                    left, change = excess, {**change, fd.axis: value}
+                    alike[fd.axis] = []
+                elif excess == left:
+                    alike.setdefault(fd.axis, []).append(value)
+    findings = [dataclasses.replace(fd, alike=tuple(alike.get(fd.axis, ()))) for fd in findings]
+    if not change:
+        return conv, findings, results
+    trial_results = run_probes(selected, dataclasses.replace(ctx, conv={**conv, **change}))
+    before, after = set(_failing(results)), set(_failing(trial_results))
+    if len(after) > len(before) or after - before:
+        return conv, findings, results
+    return ({**conv, **change}, [dataclasses.replace(fd, found=change.get(fd.axis, fd.found)) for fd in findings],
+            trial_results)
 
 
 def _pairs(failing: list[Probe], ctx: Context, changed: set[str], rejected: list[dict]) -> list:
@@ -198,10 +263,46 @@ def _pairs(failing: list[Probe], ctx: Context, changed: set[str], rejected: list
         change = {**a, **b}
         if change in rejected or not _explained(failing[:1], ctx, change, forward_only=True):
             continue  # the first probe rules most pairs out
-        explains = _explained(failing, ctx, change, forward_only=True)
+        explains, excess = _trial(failing, ctx, change, forward_only=True)
         if explains:
-            scored.append((len(explains), change))
+            scored.append(((len(explains), -excess), change))
     return scored
+
+
+def _greedy(failing: list[Probe], ctx: Context, changed: set[str], rejected: list[dict]) -> list:
+    """Several axes at once, when no single alternative (nor pair) makes a failing probe pass: a dense
+    renderer differs from graphdeco on several approximations at once (no alpha skip, no clamp, no
+    cutoff, no early stop), each probe showing more than one. Greedy on the forward probes: add the
+    alternative that most reduces the excess left (`_excess`), repeat while it falls by a tenth or
+    more, at most GREEDY_AXES axes (each step a few dozen renders of the tiny failing scenes); then
+    one pass over the axes taken, each set to its value that leaves the least excess given the others."""
+    forward = [p for p in failing if p.kind in ("forward", "approximation")]
+    if not forward:
+        return []
+    change: dict = {}
+    left = _trial(forward, ctx, change, forward_only=True)[1]
+    while len(change) < GREEDY_AXES and left > 0:
+        best = None
+        for single in _candidates({**ctx.conv, **change}, changed | set(change)):
+            if single == {"sh_view_direction": "detached"}:
+                continue
+            excess = _trial(forward, ctx, {**change, **single}, forward_only=True)[1]
+            if excess < 0.9 * left and (best is None or excess < best[0]):
+                best = (excess, single)
+        if best is None:
+            break
+        left, change = best[0], {**change, **best[1]}
+    for axis in list(change):  # one pass of refinement: a value taken early may be bettered with the rest set
+        for value in (AXIS[axis].graphdeco, *AXIS[axis].alternatives):
+            if value != change[axis]:
+                excess = _trial(forward, ctx, {**change, axis: value}, forward_only=True)[1]
+                if excess < left:
+                    left, change = excess, {**change, axis: value}
+    change = {k: v for k, v in change.items() if v != ctx.conv[k]}
+    if len(change) < 2 or change in rejected:
+        return []
+    explains = _explained(forward, ctx, change, forward_only=True)
+    return [((len(explains), -left), change)] if explains else []
 
 
 # ----------------------------------------------------------------------------
