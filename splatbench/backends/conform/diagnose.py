@@ -433,7 +433,7 @@ def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], ct
     # An empty scene goes with a root whose own feature it exercises (a Gaussian drawn only in the tile
     # of its centre leaves a scene of off-image centres empty); the rest form a defect of their own.
     specific = [r for r in chosen if r not in EVERYWHERE and r != CORE]
-    attached = {e for e in empty if any(r in uses[e] for r in specific)}
+    attached = {e for e in empty if e != CORE and any(r in uses[e] for r in specific)}
     names += [e for e in empty if e in attached]
     defects, taken = [], set(chosen)
     for root in chosen:
@@ -444,7 +444,7 @@ def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], ct
         defects.append(Defect(root, cause, r.deviation, r.tolerance, follows))
     empty = [e for e in empty if e not in attached]
     if CORE in empty:  # the single plain Gaussian is not drawn: everything else may follow from that
-        empty = [CORE, *(n for n in names + empty if n not in (CORE, *chosen))]
+        empty = list(dict.fromkeys([CORE, *(n for n in [p.name for p in failing] if n != CORE)]))
         defects = []
     if empty:
         want = have = 0
@@ -488,8 +488,9 @@ def _supported(probe: Probe, result: ProbeResult, ctx: Context) -> str | None:
     be blamed for someone else's bug) names that axis's likely departure: the cause stands
     only when some alternative value of the axis halves the probe's deviation (the oracle under it
     explains the backend better than under the declared value). Otherwise, and for the basic probes
-    (whose cause defers to a diagnosis there is none of), "unexplained: <what differs>". Other forward
-    probes keep their cause, with what differs appended; gradient probes and faults keep theirs."""
+    (whose cause defers to a diagnosis there is none of), "unexplained: <what differs>"; so is
+    depth_order's when the alpha differs (no order changes it). Other forward probes keep their cause,
+    with what differs appended; gradient probes and faults keep theirs."""
     if probe.kind not in ("forward", "approximation") or result.cause == FAULT_CAUSE or result.deviation is None:
         return None
     s = probe.build()
@@ -500,6 +501,10 @@ def _supported(probe: Probe, result: ProbeResult, ctx: Context) -> str | None:
         return None
     what = describe(got, oracle(key, s, ctx.conv), _has_alpha(ctx))
     axis = AXIS_OF.get(probe.name) if probe.name in EVERYWHERE else None
+    if probe.name == "depth_order" and _has_alpha(ctx):
+        # alpha = 1 - prod(1 - a_i) does not depend on the order: a wrong order leaves it right
+        if float(np.abs(got[..., 3] - oracle(key, s, ctx.conv)[..., 3]).max()) > result.tolerance:
+            return f"unexplained: {what} (alpha differs too, which no compositing order changes)"
     if axis is None and probe.name not in BASIC:
         return f"{result.cause}; what differs: {what}"
     if axis is not None:

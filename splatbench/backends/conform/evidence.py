@@ -17,6 +17,9 @@ DRAWN_ALPHA = 0.05
 #: A scene is "(nearly) undrawn" when the backend draws under this fraction of the pixels the oracle
 #: draws: a cull or a zero opacity, not a shifted or reshaped footprint (which keeps most of them).
 UNDRAWN = 0.25
+#: ... judged only on scenes where the oracle draws at least this many pixels (a footprint of one or
+#: two pixels drops out under a half-pixel shift alone).
+UNDRAWN_MIN_PIXELS = 10
 _ANGLE_DEG = 3.0    # orientations closer than this are the same
 _SHIFT_PX = 0.1     # centroid shifts below this are not reported
 _RATIO = 1.1        # mass or size ratios within this of 1 are not reported
@@ -38,7 +41,7 @@ def coverage(got: np.ndarray, ref: np.ndarray, has_alpha: bool) -> tuple[int, in
 def undrawn(got: np.ndarray, ref: np.ndarray, has_alpha: bool) -> bool:
     """Whether the backend draws (nearly) nothing where the oracle draws (module constants)."""
     want, have = coverage(got, ref, has_alpha)
-    return want > 0 and have < UNDRAWN * want
+    return want >= UNDRAWN_MIN_PIXELS and have < UNDRAWN * want
 
 
 def _moments(w: np.ndarray):
