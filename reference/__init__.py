@@ -9,6 +9,8 @@ cannot share a bug. Clarity over speed: one pixel at a time.
     composite          mirrors splatbench.raster.composite
     render             mirrors splatbench.raster.render
     finite_difference_grad   central differences of a loss of `render`
+    band               the boundary band: pixels where float32 may take a discrete
+                       decision the other way (``render(band=True)``)
 
 Every op takes ``mode="matched"`` (the fast path's rules: cutoffs, clamps, early stop)
 or ``mode="exact"`` (the smooth function, for finite differences). ``render`` also takes

@@ -10,6 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from reference.band import pixel_band, sigma_slack
 from reference.project import MODES, _as_array, _as_choice, _as_scalar, _as_size
 
 # The bounding-box prefilter is padded by this relative amount (plus as much in
@@ -24,6 +25,8 @@ class Composite(NamedTuple):
     rgb: np.ndarray  # [H, W, 3] Σ T·α·c + T_final·background
     alpha: np.ndarray  # [H, W] 1 - T_final
     depth: np.ndarray  # [H, W] expected camera z, D / alpha where alpha > 0, else 0
+    band: np.ndarray | None = None  # [H, W] bool, the boundary band (reference.band); None unless asked
+    tie_slack: np.ndarray | None = None  # [H, W] how far depth ties may move the pixel (reference.band)
 
 
 def _half_mahalanobis(A, B, C, dx, dy):
@@ -58,7 +61,7 @@ def _blend(alphas, colors, depths, background, background_mode="weighted", norma
 def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, width, height, *,
               mode="matched", background=(0.0, 0.0, 0.0), alpha_min=1 / 255, alpha_max=0.99,
               transmittance_min=1e-4, pixel_offset=0.5, sort_keys=None, background_mode="weighted",
-              normalise_depth=True) -> Composite:
+              normalise_depth=True, errors=None) -> Composite:
     """Alpha-composite projected Gaussians (mirrors ``splatbench.raster.composite``).
 
     For every pixel centre p = (j + 0.5, i + 0.5), visible Gaussians in ascending depth
@@ -89,9 +92,12 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
             sampled (0.5: its centre; 0: integer coordinates); sort_keys [N], the compositing
             order (default: depths); background_mode "weighted" (by T_final), "added" (as is)
             or "ignored"; normalise_depth False returns D itself, not D / alpha.
+        errors: a `reference.band.ProjectionError` of the projection (matched mode only):
+            also return the boundary band and the tie slack.
 
     Returns:
-        `Composite` (rgb [H, W, 3], alpha [H, W], depth [H, W]).
+        `Composite` (rgb [H, W, 3], alpha [H, W], depth [H, W], band [H, W] bool and
+        tie_slack [H, W], both None unless ``errors`` is given).
     """
     sizes = {}
     means2d = _as_array("means2d", means2d, ("N", 2), sizes)
@@ -113,6 +119,8 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
     keys = depths if sort_keys is None else _as_array("sort_keys", sort_keys, ("N",), sizes)
     blend = dict(background_mode=_as_choice("background_mode", background_mode, BACKGROUND_MODES),
                  normalise_depth=bool(normalise_depth))
+    if errors is not None and exact:
+        raise ValueError("errors: the boundary band is a matched-mode notion (exact mode takes no decisions)")
 
     # Candidates: visible Gaussians by ascending depth, ties by ascending index.
     index = np.flatnonzero(visible)
@@ -138,11 +146,18 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
             rgb[i], alpha[i], depth[i] = _blend(o * np.exp(-sigma), c, z, background, **blend)
         return Composite(rgb, alpha, depth)
 
-    # Matched mode. Screen extent of each ellipse d² <= R², from Σ2D = inverse(conic).
+    # Matched mode. Screen extent of each ellipse d² <= R², from Σ2D = inverse(conic); for the
+    # band, of d² <= R² + 2 slack, where float32 may still keep a contribution.
+    band = tie_slack = None
+    box_r2 = r2
+    if errors is not None:
+        band = np.zeros((height, width), dtype=bool)
+        tie_slack = np.zeros((height, width))
+        box_r2 = r2 + 2 * sigma_slack(errors, conics, cutoff_sq)[index]
     with np.errstate(invalid="ignore", over="ignore"):
         det = A * C - B * B
-        rx = np.sqrt(r2 * C / det) * (1 + BOX_PAD) + BOX_PAD
-        ry = np.sqrt(r2 * A / det) * (1 + BOX_PAD) + BOX_PAD
+        rx = np.sqrt(box_r2 * C / det) * (1 + BOX_PAD) + BOX_PAD
+        ry = np.sqrt(box_r2 * A / det) * (1 + BOX_PAD) + BOX_PAD
     for i in range(height):
         py = i + pixel_offset
         row = np.flatnonzero(np.abs(py - my) <= ry)  # still in compositing order
@@ -150,14 +165,20 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
             cand = row[np.abs(px[j] - mx[row]) <= rx[row]]
             dx, dy = px[j] - mx[cand], py - my[cand]
             sigma = _half_mahalanobis(A[cand], B[cand], C[cand], dx, dy)
-            a = np.minimum(alpha_max, o[cand] * np.exp(-sigma))
+            a_raw = o[cand] * np.exp(-sigma)
+            a = np.minimum(alpha_max, a_raw)
             keep = (sigma <= 0.5 * r2[cand]) & (a >= alpha_min)  # the two skips
-            cand, a = cand[keep], a[keep]
+            every, cand, a = cand, cand[keep], a[keep]
             # Early stop: the first Gaussian whose T_next falls below transmittance_min
             # is dropped together with everything behind it.
             T_next = np.cumprod(1.0 - a)
             stop = np.flatnonzero(T_next < transmittance_min)
             n = stop[0] if stop.size else a.size
+            if band is not None:
+                band[i, j], tie_slack[i, j] = pixel_band(
+                    errors, index[every], dx, dy, A[every], B[every], C[every], sigma, 0.5 * r2[every], a_raw, keep,
+                    a, n, c[cand], z[cand],
+                    alpha_min=alpha_min, alpha_max=alpha_max, transmittance_min=transmittance_min)
             out = _blend(a[None, :n], c[cand[:n]], z[cand[:n]], background, **blend)
             rgb[i, j], alpha[i, j], depth[i, j] = out[0][0], out[1][0], out[2][0]
-    return Composite(rgb, alpha, depth)
+    return Composite(rgb, alpha, depth, band, tie_slack)

@@ -6,6 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from reference.band import projection_error
 from reference.composite import composite
 from reference.project import JACOBIAN_GUARD, _as_array, _as_choice, project
 from reference.sh import eval_sh, sh_degree_for
@@ -24,6 +25,8 @@ class RenderOutput(NamedTuple):
     depth: np.ndarray  # [H, W] expected camera z (0 where alpha == 0)
     radii: np.ndarray  # [N] int32 screen radius, 0 when culled
     visible: np.ndarray  # [N] bool
+    band: np.ndarray | None = None  # [H, W] bool, the boundary band (reference.band); None unless asked
+    tie_slack: np.ndarray | None = None  # [H, W] how far depth ties may move the pixel; None unless asked
 
 
 def camera_centre(world_to_camera):
@@ -46,7 +49,8 @@ def render(means, log_scales, quats, opacity_logits, sh, K, world_to_camera, wid
            antialiased=False, pixel_offset=0.5, quat_order="wxyz", scale_activation="exp",
            opacity_activation="sigmoid", jacobian_guard=JACOBIAN_GUARD, sh_view_direction="camera_to_mean",
            sh_dir_means=None, sh_basis="graphdeco", sh_max_degree=3, sh_degree_arg=True, colour_clamp="min0",
-           background_mode="weighted", sort_key="view_z", depth_mode="normalised") -> RenderOutput:
+           background_mode="weighted", sort_key="view_z", depth_mode="normalised",
+           band=False) -> RenderOutput:
     """Render Gaussians to an image (mirrors ``splatbench.raster.render``).
 
     Args:
@@ -56,7 +60,8 @@ def render(means, log_scales, quats, opacity_logits, sh, K, world_to_camera, wid
         width, height: image size.
         mode: "matched" (the fast path's rules) or "exact" (smooth; see `project`, `composite`).
         background: [3]. sh_degree: None = every band in ``sh``; a larger degree than
-            ``sh`` holds is a ValueError. Remaining keywords: see `project` and `composite`.
+            ``sh`` holds is a ValueError. band: also return the boundary band (matched mode;
+            `reference.band`). Remaining keywords: see `project` and `composite`.
 
     Convention alternatives (the defaults are graphdeco's; docs/backends.md lists them):
         sh_view_direction: "camera_to_mean" (normalize(mean - camera centre)), "mean_to_camera"
@@ -72,7 +77,8 @@ def render(means, log_scales, quats, opacity_logits, sh, K, world_to_camera, wid
             opacity_activation, jacobian_guard: see `project`.
 
     Returns:
-        `RenderOutput` (rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N], visible [N]).
+        `RenderOutput` (rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N], visible [N],
+        band [H, W] bool and tie_slack [H, W], both None unless ``band``).
     """
     proj = project(means, log_scales, quats, opacity_logits, K, world_to_camera, width, height,
                    mode=mode, eps2d=eps2d, near=near, far=far, radius=radius,
@@ -99,9 +105,13 @@ def render(means, log_scales, quats, opacity_logits, sh, K, world_to_camera, wid
     keys = {"view_z": proj.depths, "distance": distance, "world_z": means[:, 2],
             "index": np.arange(means.shape[0], dtype=np.float64)}[_as_choice("sort_key", sort_key, SORT_KEYS)]
     depth_of = distance if _as_choice("depth_mode", depth_mode, DEPTH_MODES) == "distance" else proj.depths
+    errors = None
+    if band:  # the boundary band (reference.band); its depth-tie test reads the compositing depths
+        errors = projection_error(means, log_scales, quats, opacity_logits, K, world_to_camera, proj.conics,
+                                  radius=radius, eps2d=eps2d, antialiased=antialiased)
     out = composite(proj.means2d, proj.conics, proj.opacities, colors, np.where(vis, depth_of, 0.0),
                     proj.cutoff_sq, vis, width, height, mode=mode, background=background,
                     alpha_min=alpha_min, alpha_max=alpha_max, transmittance_min=transmittance_min,
                     pixel_offset=pixel_offset, sort_keys=keys, background_mode=background_mode,
-                    normalise_depth=depth_mode != "unnormalised")
-    return RenderOutput(out.rgb, out.alpha, out.depth, proj.radii, proj.visible)
+                    normalise_depth=depth_mode != "unnormalised", errors=errors)
+    return RenderOutput(out.rgb, out.alpha, out.depth, proj.radii, proj.visible, out.band, out.tie_slack)

@@ -129,6 +129,9 @@ class Camera:
                          row [0, 0, 0, 1]); camera axes x right, y down, z forward
         near, far        clip depths along camera z, 0 < near < far
 
+    Frozen, and its array is read-only (a private checked copy): change a camera with
+    `dataclasses.replace` or its methods, never in place.
+
     Pixel (row i, column j) has its centre at ``(u, v) = (j + 0.5, i + 0.5)``.
 
     Example::
@@ -144,7 +147,7 @@ class Camera:
     fy: float
     cx: float
     cy: float
-    world_to_camera: np.ndarray
+    world_to_camera: np.ndarray  # [4, 4], read-only after construction
     near: float = 0.01
     far: float = 1e10
 
@@ -159,6 +162,7 @@ class Camera:
         set_(self, "cy", _finite_float("cy", self.cy))
         w2c = _matrix4("world_to_camera", self.world_to_camera).copy()
         _check_rigid("world_to_camera", w2c)
+        w2c.flags.writeable = False  # checked once: a later `cam.world_to_camera[0, 3] = nan` raises
         set_(self, "world_to_camera", w2c)
         near = _finite_float("near", self.near, positive=True)
         far = _finite_float("far", self.far, positive=True)

@@ -1,12 +1,23 @@
-"""Boundary checks for arrays: shape, dtype and finiteness, reported in one line."""
+"""Boundary checks, each reported in one line (`InputError`): arrays (shape, dtype,
+finiteness), SH degrees, image sizes, and mappings turned into frozen dataclasses
+(known keys with "did you mean", annotated value types)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import dataclasses
+import functools
+import math
+import operator
+import types
+import typing
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any, TypeVar
 
 import numpy as np
 
 from splatbench.errors import InputError
+
+T = TypeVar("T")
 
 # A dimension spec: an int (exact), None (any), or a letter naming a size that must
 # agree across fields (e.g. "N" for the number of Gaussians).
@@ -68,8 +79,6 @@ SH_BASES_OF_DEGREE = (1, 4, 9, 16)
 def check_sh_degree(name: str, value, *, allow_auto: bool = False) -> int | str:
     """An SH degree: an integer in 0..3 (bools rejected), or ``"auto"`` when ``allow_auto``;
     else one-line `InputError`. The one SH-degree check outside ``raster/``."""
-    import operator
-
     expected = "an int in 0..3 or 'auto'" if allow_auto else "an int in 0..3"
     if allow_auto and value == "auto":
         return "auto"
@@ -140,3 +149,112 @@ def check_image_size(width: int, height: int, *, field: str = "size", memory: bo
     problem = image_size_problem(width, height, memory=memory)
     if problem is not None:
         raise InputError(f"{field}: {problem}; choose a smaller image")
+
+
+# --------------------------------------------------------------------------- mappings
+def unknown_key_problem(key: str, known: Iterable[str]) -> str:
+    """The one wording of a key that names no field: ``unknown key (did you mean 'x'?)``
+    when one known name is close (difflib), else ``unknown key (known: a, b, ...)``."""
+    import difflib
+
+    names = sorted(known)
+    close = difflib.get_close_matches(key, names, n=1)
+    if close:
+        return f"unknown key (did you mean {close[0]!r}?)"
+    return f"unknown key (known: {', '.join(names) if names else 'none'})"
+
+
+def check_keys(keys: Iterable[str], known: Iterable[str], *, prefix: str = "", source: str = "") -> None:
+    """Raise a one-line `InputError` ``[SOURCE: ]PREFIXKEY: unknown key (...)`` for the first
+    of ``keys`` not in ``known`` (`unknown_key_problem`). ``prefix`` is the table's dotted
+    path (``"strategy_options."``); ``source`` names the file or flag (``"--set"``)."""
+    known = set(known)
+    for key in keys:
+        if key not in known:
+            where = f"{source}: " if source else ""
+            raise InputError(f"{where}{prefix}{key}: {unknown_key_problem(str(key), known)}")
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+#: Field type -> (test, wording) of `check_type`; a TOML value's types only.
+_TYPES: dict[Any, tuple[Callable[[Any], bool], str]] = {
+    bool: (lambda v: isinstance(v, bool), "true or false"),
+    int: (_is_int, "an int"),
+    float: (_is_number, "a finite number"),
+    str: (lambda v: isinstance(v, str), "a string"),
+    int | str: (lambda v: isinstance(v, str) or _is_int(v), "an int or 'auto'"),
+    float | str: (lambda v: isinstance(v, str) or _is_number(v), "a number or 'auto'"),
+    list[float]: (lambda v: isinstance(v, list) and all(map(_is_number, v)), "a list of numbers"),
+    list[float] | str: (lambda v: isinstance(v, str) or (isinstance(v, list) and all(map(_is_number, v))),
+                        "a list of numbers or 'auto'"),
+    dict[str, Any]: (lambda v: isinstance(v, dict), "a table"),
+}
+
+
+def check_type(name: str, value: Any, tp: Any) -> None:
+    """Raise a one-line `InputError` ``NAME: expected <type>, got <value>`` unless ``value``
+    is of the field type ``tp`` (bools are not numbers; numbers are finite; ``X | None``
+    also takes None)."""
+    optional = _optional_of(tp)
+    if optional is not None:
+        if value is None:
+            return
+        tp = optional
+    if tp not in _TYPES:  # pragma: no cover - a new field type must be added to _TYPES
+        raise TypeError(f"{name}: unsupported field type {tp}")
+    test, wording = _TYPES[tp]
+    if not test(value):
+        raise InputError(f"{name}: expected {wording}, got {value!r}")
+
+
+def coerce(value: Any, tp: Any) -> Any:
+    """``value`` widened to the field type ``tp`` where TOML cannot say it: an int where a
+    float is expected (alone or in a list) becomes a float; anything else is returned as is."""
+    floats = tp in (float, float | str, float | None)
+    if floats and _is_int(value):
+        return float(value)
+    if tp in (list[float], list[float] | str) and isinstance(value, list):
+        return [float(v) if _is_int(v) else v for v in value]
+    return value
+
+
+def dataclass_from_mapping(cls: type[T], data: Mapping[str, Any], *, base: Mapping[str, Any] | None = None,
+                           prefix: str = "", source: str = "") -> T:
+    """``cls(**base, **data)`` for a dataclass ``cls``, after the boundary checks: every key
+    names a field (`check_keys`, with "did you mean"), every value has its field's
+    annotated type (`check_type`, after `coerce`). Ranges are the class's own business
+    (its ``__post_init__``). Messages name ``PREFIXKEY`` (and ``source`` first)."""
+    hints = _field_types(cls)
+    check_keys(data, hints, prefix=prefix, source=source)
+    values = {}
+    for key, value in data.items():
+        value = coerce(value, hints[key])
+        if hints[key] in _TYPES or _optional_of(hints[key]) in _TYPES:  # other types: the class checks them
+            check_type(f"{source}: {prefix}{key}" if source else f"{prefix}{key}", value, hints[key])
+        values[key] = value
+    return cls(**{**(base or {}), **values})
+
+
+def _optional_of(tp: Any) -> Any:
+    """``X`` of ``X | None``, else None."""
+    if isinstance(tp, types.UnionType) and type(None) in tp.__args__:
+        return functools.reduce(operator.or_, [a for a in tp.__args__ if a is not type(None)])
+    return None
+
+
+def _field_types(cls: type) -> dict[str, Any]:
+    """Field name -> its evaluated annotation; None for every field where the annotations
+    cannot be evaluated (a class defined in a function that names local imports): its
+    values are then left to the class's own checks."""
+    try:
+        hints = typing.get_type_hints(cls)
+    except NameError:
+        hints = {}
+    return {f.name: hints.get(f.name) for f in dataclasses.fields(cls)}

@@ -6,7 +6,8 @@ figure with its Pareto front.
 both directions when the means come with half-widths ``time_half`` / ``quality_half``):
 a time metric across, a quality metric up; the Pareto-optimal cells (no other cell is
 both faster and better, on the means) are ringed and joined by a step line.
-`pareto_front` is the computation, shared with the report text.
+`pareto_front` is the computation, shared with the report text. `difference_figure`:
+a per-pixel error map on a log colour scale with its bar (the demo's garden check).
 """
 
 from __future__ import annotations
@@ -62,9 +63,13 @@ def pareto_figure(means: pd.DataFrame, scenes: Sequence[str], time: MetricSpec, 
         if "time_half" in sub.columns:
             ax.errorbar(sub.time, sub.quality, xerr=sub.time_half.fillna(0.0), yerr=sub.quality_half.fillna(0.0),
                         fmt="none", ecolor="tab:blue", elinewidth=0.8, capsize=2, alpha=0.7, zorder=2)
+        finite = [t for t in sub.time if math.isfinite(t)]
+        middle = (min(finite) + max(finite)) / 2 if finite else 0.0
         for _, r in sub.iterrows():
-            if math.isfinite(r.time) and math.isfinite(r.quality):
-                ax.annotate(r.cell, (r.time, r.quality), fontsize=6, xytext=(3, 3), textcoords="offset points")
+            if math.isfinite(r.time) and math.isfinite(r.quality):  # labels point inwards: never off the edge
+                right = r.time > middle
+                ax.annotate(r.cell, (r.time, r.quality), fontsize=6, xytext=(-3 if right else 3, 3),
+                            textcoords="offset points", ha="right" if right else "left")
         if idx:
             fx, fy = sub.time[idx].to_numpy(), sub.quality[idx].to_numpy()
             ax.step(fx, fy, where="post", color="tab:red", linewidth=1.0, zorder=2, label="Pareto front")
@@ -77,9 +82,34 @@ def pareto_figure(means: pd.DataFrame, scenes: Sequence[str], time: MetricSpec, 
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)  # titles and labels never clipped
     plt.close(fig)
     return fronts
 
 
-__all__ = ["pyplot", "panels", "pareto_front", "pareto_figure"]
+def difference_figure(error, path: Path, *, tolerance: float, title: str) -> Path:
+    """``error`` [H, W] (>= 0) on a log colour scale with its colour bar, from tolerance / 100
+    (and below, zeros included) to its maximum; the ``tolerance`` is marked on the bar."""
+    import numpy as np
+    from matplotlib.colors import LogNorm
+
+    plt = pyplot()
+    height, width = error.shape
+    low = tolerance / 100
+    high = max(float(error.max()), tolerance * 10)
+    fig, ax = plt.subplots(figsize=(6.4, 6.4 * height / width))
+    shown = ax.imshow(np.maximum(error, low), norm=LogNorm(vmin=low, vmax=high), cmap="magma",
+                      interpolation="nearest")
+    ax.set_axis_off()
+    ax.set_title(title, fontsize=9)
+    bar = fig.colorbar(shown, ax=ax, fraction=0.046 * height / width, pad=0.02)  # as tall as the image
+    bar.set_label(f"|difference|, max over RGB (cyan: the {tolerance:.0e} tolerance)", fontsize=7)
+    bar.ax.axhline(tolerance, color="cyan", linewidth=1.5)
+    bar.ax.tick_params(labelsize=7)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)
+    plt.close(fig)
+    return path
+
+
+__all__ = ["pyplot", "panels", "pareto_front", "pareto_figure", "difference_figure"]

@@ -13,6 +13,22 @@ from splatbench.errors import InputError
 #: The up direction assumed for a PLY that records none: -y, as COLMAP captures (and so
 #: graphdeco's models of them) have their world y axis pointing down.
 DEFAULT_UP = (0.0, -1.0, 0.0)
+#: `--up`'s axis names: +x, -x, +y, -y, +z, -z.
+AXES = {f"{sign}{axis}": tuple(value if a == axis else 0.0 for a in "xyz")
+         for axis in "xyz" for sign, value in (("+", 1.0), ("-", -1.0))}
+
+
+def parse_up(text: str) -> tuple[float, float, float]:
+    """``--up``: an axis (``+y``, ``-z``, ...) or ``X,Y,Z``; a unit vector."""
+    from splatbench.ply import ViewHints
+
+    try:
+        return ViewHints(up=AXES.get(text.strip().lower()) or text.split(",")).up
+    except InputError:
+        raise InputError(f"--up: expected one of {', '.join(AXES)} or X,Y,Z (3 finite numbers, not all zero), "
+                         f"got {text!r}") from None
+
+
 #: Elevation of the framing camera when the world's up is known (it then looks down onto
 #: the floor, as the scene rigs do); 0 when the up is assumed.
 KNOWN_UP_ELEVATION = 20.0

@@ -12,16 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.checks import SH_BASES_OF_DEGREE, as_float_array, check_sh_degree
+from splatbench.conventions import LOG_SCALE_CLIP, QUAT_MIN, SH_C0
 from splatbench.errors import InputError
 from splatbench.ply import ViewHints, read_ply, write_ply
 
-#: The degree-0 SH constant, ``1 / (2·sqrt(pi))``.
-SH_C0 = 0.28209479177387814
-#: ``scales = exp(clip(log_scales, -LOG_SCALE_CLIP, LOG_SCALE_CLIP))`` (conventions.md).
-LOG_SCALE_CLIP = 20.0
 
-
-QUAT_MIN = 1e-20  # docs/conventions.md: smaller quaternions count as zero
 
 
 def normalize_quats(quats: np.ndarray) -> np.ndarray:
@@ -79,11 +74,11 @@ class Gaussians:
         len(g), g.sh_degree, g.covariances().shape   # 2, 3, (2, 3, 3)
     """
 
-    means: np.ndarray
-    log_scales: np.ndarray
-    quats: np.ndarray
-    opacity_logits: np.ndarray
-    sh: np.ndarray
+    means: np.ndarray           # [N, 3]
+    log_scales: np.ndarray      # [N, 3]
+    quats: np.ndarray           # [N, 4] (w, x, y, z)
+    opacity_logits: np.ndarray  # [N]
+    sh: np.ndarray              # [N, K, 3]
 
     def __post_init__(self) -> None:
         sizes: dict[str, int] = {}

@@ -188,7 +188,7 @@ def read_ply_data(path: str | os.PathLike, name: str | None = None):
             header = PlyData._parse_header(stream)  # the header only: counts and property types
             check_ply_counts(header, available=os.fstat(stream.fileno()).st_size - stream.tell(), name=name)
             stream.seek(0)
-            return PlyData.read(stream, mmap=False)
+            return PlyData.read(stream, mmap="c")  # copy-on-write map: the columns are copied below
     except InputError:
         raise
     except FileNotFoundError:

@@ -34,27 +34,49 @@ def _save_pngs(tag: str, fast: np.ndarray, ref: np.ndarray) -> Path:
 
 
 def assert_images_close(tag: str, fast: np.ndarray, ref: np.ndarray, atol: float, *,
-                        max_outliers: int = 0) -> None:
-    """Assert |fast - ref| <= atol everywhere except at most ``max_outliers`` pixels.
+                        band: np.ndarray | None = None, slack: np.ndarray | None = None) -> None:
+    """Assert |fast - ref| <= atol + slack at every pixel outside ``band``.
 
-    ``max_outliers`` is the boundary band: pixels where a discrete decision (the
-    radius cutoff, alpha_min, the early stop, a depth tie) lands on the other side
-    in float32 than in float64 may differ by a whole contribution. Keep it small.
+    ``band`` [H, W] bool is the boundary band the oracle derives (`reference.band`): pixels
+    where some contribution lies within float32 error of a discrete decision (the radius
+    cutoff, alpha_min, the early stop) and float32 may add or drop a whole contribution.
+    ``slack`` [H, W] widens a pixel's bound by what a depth tie there can change.
+    Both None: |fast - ref| <= atol everywhere. Uses `splatbench.backends.compare_types.over_bound`.
     """
+    from splatbench.backends.compare_types import over_bound
+
     fast = np.asarray(fast, dtype=np.float64)
     ref = np.asarray(ref, dtype=np.float64)
     assert fast.shape == ref.shape, f"{tag}: shape {fast.shape} != {ref.shape}"
     assert np.isfinite(fast).all(), f"{tag}: fast output has non-finite values"
     err = np.abs(fast - ref)
     per_pixel = err.reshape(err.shape[0], err.shape[1], -1).max(-1) if err.ndim >= 2 else err
-    outliers = int((per_pixel > atol).sum())
-    if outliers > max_outliers:
+    outliers, outside = over_bound(per_pixel, band, slack, atol)
+    if outside:
         where = np.unravel_index(int(np.argmax(err)), err.shape)
         folder = _save_pngs(tag, fast.astype(np.float32), ref)
+        size = 0 if band is None else int(np.sum(band))
         raise AssertionError(
-            f"{tag}: {outliers} pixels exceed atol={atol:.2e} (allowed {max_outliers}); max |diff| "
+            f"{tag}: {outside} pixels exceed atol={atol:.2e} outside the boundary band ({outliers} in all; band "
+            f"{size} pixels); max |diff| "
             f"{err.max():.3e} at {tuple(int(i) for i in where)} (fast {fast[where]:.6g}, ref {ref[where]:.6g}); "
             f"images written to {folder}")
+
+
+def assert_render_close(tag: str, rgb, alpha, depth, ref, atol: float) -> None:
+    """`assert_images_close` on rgb, alpha and depth * alpha against ``ref`` (a `reference.RenderOutput`
+    rendered with ``band=True``): |error| <= atol (+ the tie slack) outside the boundary band.
+
+    Depth is compared as depth * alpha (the composited sum of T a z, the quantity the
+    rasterizer computes) scaled by the largest depth in the scene, because depth = sum / alpha
+    amplifies alpha's absolute error by 1 / alpha; the tie slack is in those units already.
+    """
+    assert ref.band is not None, f"{tag}: render the reference with band=True"
+    assert_images_close(f"{tag}-rgb", rgb, ref.rgb, atol, band=ref.band, slack=ref.tie_slack)
+    assert_images_close(f"{tag}-alpha", alpha, ref.alpha, atol, band=ref.band, slack=ref.tie_slack)
+    z_max = max(1.0, float(np.abs(ref.depth).max()))
+    assert_images_close(f"{tag}-depth", np.asarray(depth) * np.asarray(alpha), ref.depth * ref.alpha, atol * z_max,
+                        band=ref.band, slack=ref.tie_slack)
 
 
 @dataclass(frozen=True)

@@ -15,10 +15,11 @@ from click.testing import CliRunner
 
 from splatbench.metrics.machine import MachineInfo
 from splatbench.bench.raster import (CSV_COLUMNS, STANDARD_SYNTHETIC, RasterBenchResult, format_table, leak_warnings,
-                                     parse_synthetic, standard_suite)
+                                     standard_suite, target_of)
 from splatbench.metrics.timing import StageSplit
 from splatbench.cli import main
 from splatbench.errors import InputError
+from splatbench.workloads import GARDEN_SFM, parse_synthetic, parse_workload, workload_spec
 
 TINY = ["bench", "raster", "--synthetic", "200", "64x64", "--repeats", "1", "--device", "cpu"]
 
@@ -93,11 +94,21 @@ def test_bad_npz_reported_from_the_subprocess_in_one_line(tmp_path):
 def test_targets_attach_to_the_standard_synthetic_workloads_only():
     suite = standard_suite(seed=3)
     assert [(s.n, s.width, s.height) for s in suite[:-1]] == list(STANDARD_SYNTHETIC)
-    assert [s.target.fwd_bwd_ms for s in suite[:-1]] == [35.0, 450.0, 2000.0]
-    assert suite[-2].target.peak_rss_mb == 1500.0 and suite[0].target.peak_rss_mb is None
-    assert suite[-1].label == "garden-view0" and suite[-1].target is None
-    assert parse_synthetic("10000", "256X256", seed=9).target.fwd_bwd_ms == 35.0
-    assert parse_synthetic("10001", "256x256").target is None
+    assert [target_of(s).fwd_bwd_ms for s in suite[:-1]] == [35.0, 450.0, 2000.0]
+    assert target_of(suite[-2]).peak_rss_mb == 1500.0 and target_of(suite[0]).peak_rss_mb is None
+    assert suite[-1].label == "garden-view0" and target_of(suite[-1]) is None
+    assert target_of(parse_synthetic("10000", "256X256", seed=9)).fwd_bwd_ms == 35.0
+    assert target_of(parse_synthetic("10001", "256x256")) is None
+
+
+def test_the_command_line_and_experiment_scene_names_give_one_typed_spec():
+    assert workload_spec("synthetic-20000-256", 4) == parse_synthetic("20000", "256x256", seed=4)
+    assert workload_spec("synthetic-20000-320x200", 4) == parse_synthetic("20000", "320x200", seed=4)
+    garden, flag = workload_spec("garden", 4), parse_workload("garden")
+    assert (garden.kind, garden.path, garden.view) == (flag.kind, flag.path, flag.view) == ("npz", str(GARDEN_SFM), 0)
+    assert workload_spec("garden-v2", 0).view == 2
+    with pytest.raises(InputError, match="scene: unknown workload 'gardn'"):
+        workload_spec("gardn", 0)
 
 
 def test_table_marks_met_and_missed_targets():

@@ -377,3 +377,16 @@ def test_blender_nerfstudio_intrinsics():
     scaled[:3, :3] *= 2
     one_line_error(lambda: Camera.from_blender({"transform_matrix": scaled.tolist()}, 0.7, 80, 60),
                    "transform_matrix:", "orthonormal")
+
+
+def test_a_cameras_array_is_read_only_after_construction():
+    """A camera is checked once, at construction; writing into its matrix afterwards
+    (which would bypass the checks: a NaN there rendered an empty image) raises."""
+    given = np.eye(4)
+    cam = Camera(64, 48, 50.0, 50.0, 32.0, 24.0, given)
+    with pytest.raises(ValueError, match="read-only"):
+        cam.world_to_camera[0, 3] = float("nan")
+    given[0, 3] = 5.0  # the caller's array stays theirs: the camera holds a checked copy
+    assert cam.world_to_camera[0, 3] == 0.0
+    moved = cam.scaled(0.5)
+    assert not moved.world_to_camera.flags.writeable

@@ -44,7 +44,8 @@ def write_colmap(root, cams, names, *, model="PINHOLE", sparse="sparse/0", rng=N
         else:
             pose = cam.to_colmap()[1]
             params = {"SIMPLE_PINHOLE": [cam.fx, cam.cx, cam.cy],
-                      "OPENCV": [cam.fx, cam.fy, cam.cx, cam.cy, 0.1, 0, 0, 0]}[model]
+                      "OPENCV": [cam.fx, cam.fy, cam.cx, cam.cy, 0.1, 0, 0, 0],
+                      "FOV": [cam.fx, cam.fy, cam.cx, cam.cy, 0.5]}[model]
             pc = pycolmap.Camera(model=model, width=cam.width, height=cam.height, params=params)
         pc.camera_id = i + 1
         rec.add_camera_with_trivial_rig(pc)
@@ -185,10 +186,9 @@ def test_nerfstudio_transforms_json_with_shared_intrinsics_and_points(tmp_path):
     assert_same_cameras(ds.train.cameras, cams[1:8])
     np.testing.assert_array_equal(ds.points.xyz, [[1, 2, 3], [4, 5, 6]])
     np.testing.assert_array_equal(ds.points.rgb, [[10, 20, 30], [40, 50, 60]])
-    meta["k1"] = 0.05
+    meta["k4"] = 0.05  # distortion is undistorted on load (test_capture.py); a k4 under OPENCV is refused
     (tmp_path / "transforms.json").write_text(json.dumps(meta))
-    one_line_error(lambda: load_dataset(tmp_path), "transforms.json: frames[0]: camera_model:", "'OPENCV'",
-                   "with distortion")
+    one_line_error(lambda: load_dataset(tmp_path), "transforms.json: frames[0]: k4:", "OPENCV camera has no k4")
 
 
 # ------------------------------------------------------------------------- errors
@@ -231,14 +231,15 @@ def test_image_size_that_disagrees_with_its_camera(tmp_path):
 
 
 def test_unknown_camera_models_are_rejected_by_name(tmp_path):
-    write_colmap(tmp_path / "c", orbit_cameras(2), ["a.png", "b.png"], model="OPENCV")
-    one_line_error(lambda: load_dataset(tmp_path / "c"), "sparse/0/cameras.bin: camera 1 model:", "'OPENCV'",
+    # distorted models pycolmap undistorts load (test_capture.py); others are refused by name
+    write_colmap(tmp_path / "c", orbit_cameras(2), ["a.png", "b.png"], model="FOV")
+    one_line_error(lambda: load_dataset(tmp_path / "c"), "sparse/0/cameras.bin: camera 1:", "'FOV'",
                    "undistort")
     frame, angle = orbit_cameras(1)[0].to_blender()
     write_image(tmp_path / "b" / "r_0.png", np.random.default_rng(0))
     (tmp_path / "b" / "transforms.json").write_text(json.dumps(
-        {"camera_model": "OPENCV_FISHEYE", "camera_angle_x": angle, "frames": [{"file_path": "r_0.png", **frame}]}))
-    one_line_error(lambda: load_dataset(tmp_path / "b"), "camera_model:", "'OPENCV_FISHEYE'")
+        {"camera_model": "EQUIRECTANGULAR", "camera_angle_x": angle, "frames": [{"file_path": "r_0.png", **frame}]}))
+    one_line_error(lambda: load_dataset(tmp_path / "b"), "camera_model:", "'EQUIRECTANGULAR'")
 
 
 def test_argument_errors(tmp_path):

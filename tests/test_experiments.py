@@ -113,7 +113,7 @@ def test_grid_expands_in_documented_order_with_labels():
     first, last = runs[0], runs[-1]
     assert first.labels == {"x": 0.0, "opts.a": 1, "mode": "good"}
     assert last.labels == {"x": 1.5, "opts.a": 2, "mode": "bad"}
-    assert last.config == {"x": 1.5, "n": 2, "mode": "fail", "sleep": 0.5, "opts": {"a": 2, "b": "q"},
+    assert last.config == {"x": 1.5, "n": 2, "mode": "fail", "sleep": 0.5, "gate": "", "opts": {"a": 2, "b": "q"},
                            "scene": "beta", "seed": 1}
     assert first.config["mode"] == "ok" and first.config["sleep"] == 0.0  # the kind's defaults, resolved
     assert len({r.run_id for r in runs}) == len(runs)
@@ -141,7 +141,7 @@ def test_run_id_is_the_hash_of_the_full_resolved_config():
         """)
     assert expand(same)[0].run_id == run.run_id
     # Changing any single field (or scene, seed, kind) changes it.
-    changes = {"x": 0.25, "n": 3, "sleep": 0.1, "mode": "fail", "opts": {"a": 5, "b": "q"},
+    changes = {"x": 0.25, "n": 3, "sleep": 0.1, "gate": "g", "mode": "fail", "opts": {"a": 5, "b": "q"},
                "opts.b": None, "scene": "beta", "seed": 7}
     ids = {run.run_id}
     for key, value in changes.items():
@@ -183,14 +183,14 @@ def test_one_at_a_time_grid_and_table_valued_axis():
 
 # --------------------------------------------------------------------------- malformed files
 MALFORMED = {
-    "unknown top-level field": ('kind = "dummy"\nscenes = ["alpha"]\nsceens = ["beta"]\n', r"sceens: unknown field"),
+    "unknown top-level field": ('kind = "dummy"\nscenes = ["alpha"]\nsceens = ["beta"]\n', r"sceens: unknown key \(did you mean 'scenes'\?\)"),
     "empty axis": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nx = []\n', r"axes\.x: empty axis"),
     "empty variant": ('kind = "dummy"\nscenes = ["alpha"]\n[variants.v]\n', r"variants\.v: empty axis"),
     "unknown scene": ('kind = "dummy"\nscenes = ["alpha", "delta"]\n', r"scenes: unknown scene 'delta'"),
     "unknown config key in base": ('kind = "dummy"\nscenes = ["alpha"]\n[base]\nopts.c = 1\n',
-                                   r"base: opts\.c: unknown config field"),
+                                   r"base: opts\.c: unknown key"),
     "unknown config key in an axis": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nxx = [1, 2]\n',
-                                      r"axes\.xx = 1: xx: unknown config field"),
+                                      r"axes\.xx = 1: xx: unknown key"),
     "bad value in a variant": ('kind = "dummy"\nscenes = ["alpha"]\n[variants.v]\nok = {}\nno = { mode = "x" }\n',
                                r"variants\.v\.no: mode: expected 'ok', 'fail' or 'crash'"),
     "unknown kind": ('kind = "nope"\nscenes = ["alpha"]\n', r"kind: unknown run kind 'nope'"),
@@ -198,7 +198,7 @@ MALFORMED = {
     "reserved key": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nseed = [1, 2]\n', r"axes\.seed: 'seed' is set by"),
     "duplicate seed": ('kind = "dummy"\nscenes = ["alpha"]\nseeds = [1, 1]\n', r"seeds: duplicate value 1"),
     "unknown runner field": ('kind = "dummy"\nscenes = ["alpha"]\n[runner]\nthreads = 2\n',
-                             r"runner\.threads: unknown field"),
+                             r"runner\.threads: unknown key"),
     "bad scheduler": ('kind = "dummy"\nscenes = ["alpha"]\n[runner]\nscheduler = "127.0.0.1"\n',
                       r"runner\.scheduler: expected an address like tcp://HOST:PORT"),
     "invalid TOML": ('kind = "dummy"\nscenes = [\n', r"invalid TOML"),

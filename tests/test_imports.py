@@ -204,10 +204,7 @@ class Part(NamedTuple):
 
 #: Imports that run against the table today, each with its reason; the list only shrinks
 #: (`test_known_exceptions_still_occur` fails once one is gone).
-KNOWN_EXCEPTIONS: dict[tuple[str, str], str] = {
-    ("splatbench.backends.cli", "splatbench.bench.raster"):
-        "compare's --synthetic/--workload specs; workload naming gets one home in workloads.py (issue 22, item 4)",
-}
+KNOWN_EXCEPTIONS: dict[tuple[str, str], str] = {}
 
 
 def layer_table(path: Path = ARCHITECTURE) -> list[Part]:

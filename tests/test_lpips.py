@@ -96,6 +96,7 @@ def test_batches_tensors_and_identity():
 @pytest.mark.parametrize("pred,target,message", [
     (np.zeros((32, 32, 3)), np.zeros((32, 33, 3)), "one shape"),
     (np.zeros((8, 8, 3)), np.zeros((8, 8, 3)), "too small"),
+    (np.zeros((30, 40, 3)), np.zeros((30, 40, 3)), "too small"),  # AlexNet's pools need 31 px per side
     (np.full((32, 32, 3), np.nan), np.zeros((32, 32, 3)), "NaN"),
     (np.zeros((32, 32, 3)), np.full((32, 32, 3), 2.0), "expected [0, 1]"),
 ])

@@ -237,3 +237,41 @@ def test_outputs_get_the_umask_mode(tmp_path):
     mode = lambda p: stat.S_IMODE(p.stat().st_mode)  # noqa: E731
     assert (mode(png), mode(tmp_path / "a.ply"), mode(tmp_path / "dataset"), mode(png2)) == (0o644, 0o644, 0o755,
                                                                                             0o640)
+
+
+# --------------------------------------------------------------------------- unknown keys
+def _raises(call) -> str:
+    with pytest.raises(InputError) as info:
+        call()
+    return str(info.value)
+
+
+def test_a_misspelt_key_gets_one_wording_and_a_suggestion_everywhere():
+    """Every mapping checked against a dataclass's fields (train config and its strategy
+    options, rasterizer options, the raster and train run kinds, scene rigs, experiment
+    files) words an unknown key one way: ``FIELD: unknown key (did you mean 'x'?)``."""
+    from splatbench.experiments import raster_kind, train_kind
+    from splatbench.experiments.spec import parse_experiment
+    from splatbench.raster.options import RasterOptions
+    from splatbench.scenes.catalog import RigSpec
+    from splatbench.train.config import TrainConfig, apply_overrides
+
+    cases = {
+        "strategy 'default': strategy_options.grad_treshold: unknown key (did you mean 'grad_threshold'?)":
+            lambda: apply_overrides(TrainConfig(), ["strategy_options.grad_treshold=1e-4"]),
+        "--set: iteration: unknown key (did you mean 'iterations'?)":
+            lambda: apply_overrides(TrainConfig(), ["iteration=10"]),
+        "alpha_mn: unknown key (did you mean 'alpha_min'?)": lambda: RasterOptions.from_kwargs(alpha_mn=0.1),
+        "repeat: unknown key (did you mean 'repeats'?)":
+            lambda: raster_kind.validate({"scene": "garden", "repeat": 9}),
+        "data.resolutoin: unknown key (did you mean 'resolution'?)":
+            lambda: train_kind.validate({"scene": "glossy", "data": {"resolutoin": 64}}),
+        "rig: fov: unknown key (did you mean 'fov_deg'?)":
+            lambda: RigSpec.from_mapping({"kind": "orbit", "radius": 2.0, "fov": 40.0}),
+        "experiment: seed: unknown key (did you mean 'seeds'?)":
+            lambda: parse_experiment({"kind": "dummy", "scenes": ["alpha"], "seed": [0]}),
+    }
+    for message, call in cases.items():
+        assert _raises(call) == message
+    # nothing close: the known names instead
+    assert _raises(lambda: RasterOptions.from_kwargs(zzz=1)).startswith("zzz: unknown key (known: alpha_max, ")

@@ -104,7 +104,7 @@ def test_rasterize_rejects_non_finite_input_naming_the_field(scene, field):
     ({"alpha_min": 0.995}, "alpha_min: expected a value in (0, alpha_max)"),
     ({"radius": "5sigma"}, "radius: expected one of"),
     ({"eps2d": -1.0}, "eps2d: expected a finite value >= 0"),
-    ({"tile_szie": 16}, "tile_szie: unknown rasterizer option"),
+    ({"tile_szie": 16}, "tile_szie: unknown key (did you mean 'tile_size'?)"),
     ({"sh_degree": 4}, "sh_degree: expected an int in 0..3, got 4"),
     ({"background": (1, 2)}, "background: expected 3 values in [0, 1]"),
     ({"background": (2, 0, 0)}, "background: expected 3 values in [0, 1], got [2, 0, 0]"),
@@ -181,3 +181,21 @@ def test_gradients_do_not_depend_on_the_input_layout(scene):
     # Same float32 computation on the same values: identical bits (LLVM is deterministic).
     assert torch.equal(means_t.grad.float(), base[0].grad)
     assert all(torch.equal(a.grad, b.grad) for a, b in zip(other, base[1:]))
+
+
+def test_render_and_rasterize_check_the_camera_the_same_way(scene):
+    """One check (`check_view`) at both entry points: not a Camera, an image larger than
+    the memory available now (30000² x 256 B per pixel is 230 GB), planes near >= far."""
+    from splatbench.checks import image_size_problem
+
+    cases = [({}, {}, r"^camera: expected splatbench.Camera, got dict$"),
+             (scene.camera, {"near": 5.0, "far": 1.0}, r"^near, far: expected near < far")]
+    if image_size_problem(30_000, 30_000) is not None:  # always, but on a machine with 230 GB free
+        huge = Camera(30_000, 30_000, 3e4, 3e4, 1.5e4, 1.5e4, np.eye(4))
+        cases.append((huge, {}, r"^camera width, height: 30000x30000 needs about .* GiB"))
+    for camera, options, message in cases:
+        with pytest.raises(InputError, match=message) as by_render:
+            splatbench.render(scene.gaussians, camera, **options)
+        with pytest.raises(InputError) as by_rasterize:
+            splatbench.rasterize(*params(scene), camera, **options)
+        assert str(by_rasterize.value) == str(by_render.value)

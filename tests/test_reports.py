@@ -273,7 +273,7 @@ def test_train_kind_config_errors_and_defaults():
 
     kind = get_kind("train")
     base = {"scene": "diffuse", "seed": 0}
-    with pytest.raises(InputError, match=r"^iteration: unknown key 'iteration' \(did you mean 'iterations'\?\)$"):
+    with pytest.raises(InputError, match=r"^iteration: unknown key \(did you mean 'iterations'\?\)$"):
         kind.validate({**base, "iteration": 5})
     with pytest.raises(InputError, match=r"^dataset: set by the train kind"):
         kind.validate({**base, "dataset": "/tmp/x"})
@@ -354,7 +354,7 @@ def test_raster_kind_config_errors():
         kind.validate({**base, "tile_size": 12})
     with pytest.raises(InputError, match=r"^sh_degree: expected an int in 0\.\.3, got 4$"):
         kind.validate({**base, "sh_degree": 4})
-    with pytest.raises(InputError, match=r"^tile_siz: unknown key 'tile_siz' \(did you mean 'tile_size'\?\)$"):
+    with pytest.raises(InputError, match=r"^tile_siz: unknown key \(did you mean 'tile_size'\?\)$"):
         kind.validate({**base, "tile_siz": 8})
     assert kind.resolve({**base, "alpha_min": 1})["alpha_min"] == 1.0
 

@@ -35,14 +35,15 @@ scenes = ["alpha", "beta"]
 seeds = [0, 1, 2, 3]
 [base]
 sleep = {sleep}
+gate = "{gate}"
 [axes]
 x = [0.0, 1.5]
 """
 
 
-def experiment(tmp_path: Path, sleep: float) -> Path:
+def experiment(tmp_path: Path, sleep: float, gate: Path | str = "") -> Path:
     path = tmp_path / "sweep.toml"
-    path.write_text(SWEEP.format(sleep=sleep))
+    path.write_text(SWEEP.format(sleep=sleep, gate=gate))
     return path
 
 
@@ -61,13 +62,22 @@ def workers_of(pid: int, timeout: float = 60.0) -> list[psutil.Process]:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         try:
-            kids = [p for p in psutil.Process(pid).children(recursive=True) if "spawn_main" in " ".join(p.cmdline())]
+            kids = [p for p in psutil.Process(pid).children(recursive=True) if _is_worker(p)]
         except psutil.NoSuchProcess:
             return []
         if kids:
             return kids
         time.sleep(0.05)
     return []
+
+
+def _is_worker(proc: psutil.Process) -> bool:
+    """A live pool worker; a killed one not yet reaped (a zombie: no command line) or one
+    gone meanwhile is not."""
+    try:
+        return "spawn_main" in " ".join(proc.cmdline())
+    except psutil.Error:
+        return False
 
 
 def alive(procs: list[psutil.Process]) -> list[int]:
@@ -181,53 +191,99 @@ def test_sigterm_to_the_runner_stops_its_workers_and_releases_its_claims(tmp_pat
 
 
 # --------------------------------------------------------------------------- fault injection
+def _tree(pid: int) -> str:
+    """The runner's process tree, for a failure message."""
+    try:
+        kids = psutil.Process(pid).children(recursive=True)
+        return "; ".join(f"{p.pid} {'worker' if _is_worker(p) else 'other'}" for p in kids)
+    except psutil.NoSuchProcess:
+        return "(the runner is gone)"
+
+
+def _wait_for(what: str, condition, proc: subprocess.Popen, log: Path, timeout: float = 300.0):
+    """Poll ``condition`` until it returns something true; fail naming ``what`` after
+    ``timeout`` s or when the runner exits first. Generous: no verdict rests on speed."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        assert proc.poll() is None, (f"the runner exited ({proc.returncode}) before {what}", log.read_text()[-2000:])
+        time.sleep(0.05)
+    gate = sorted(p.name for p in (log.parent / "gate").iterdir())
+    raise AssertionError(f"timed out waiting for {what}: processes {_tree(proc.pid)}; gate {gate}; "
+                         f"log {log.read_text()[-2000:]}")
+
+
 def _fault_injection(tmp_path: Path, rounds: int, seed: int) -> None:
-    """Kill workers (SIGKILL) and the runner (SIGTERM) at random points, then finish:
-    every run is done exactly once -- a result, once written, is never replaced (no
-    run is redone) -- and nothing is corrupt."""
-    path = experiment(tmp_path, sleep=0.4)
+    """Kill workers (SIGKILL) mid-run and stop the runner (SIGTERM) mid-sweep, round after
+    round, then finish: every run is done exactly once -- a result, once written, is never
+    replaced (no run is redone) -- and nothing is corrupt.
+
+    The faults land mid-sweep by construction, not by timing: every run waits at a gate
+    (the dummy kind's ``gate``) for a token this test hands out, one per round, so a round
+    ends with at most one more run done, a worker is killed only while it is inside a run,
+    and the runner is stopped while runs are still blocked. Only the final, undisturbed
+    runner finds the gate open."""
+    gate = tmp_path / "gate"
+    gate.mkdir()
+    path = experiment(tmp_path, sleep=0.0, gate=gate)
     results, log = tmp_path / "results", tmp_path / "runner.log"
     folder = results / "sweep"
     ids = {r.run_id for r in expand(load_experiment(path))}
+    assert rounds < len(ids)  # one token a round: the grid cannot finish before the last runner
     rng = random.Random(seed)
     first_seen: dict[str, str] = {}
-    kills = terms = 0
+    kills = 0
 
-    def snapshot() -> None:
+    def snapshot() -> int:
         for p in result_files(folder):
             text = p.read_text()
             record = json.loads(text)  # always whole
             if record["status"] == "done":
                 first_seen.setdefault(p.stem, text)
+        return len(first_seen)
 
-    for _ in range(rounds):
-        proc = start(path, results, log)
-        end = time.monotonic() + rng.uniform(1.0, 4.0)
-        while proc.poll() is None and time.monotonic() < end:
+    def waiting(proc: subprocess.Popen) -> list[psutil.Process]:
+        """The runner's workers that are inside a run, blocked at the gate."""
+        marked = {int(p.name.split("-")[1]) for p in gate.glob("waiting-*")}
+        return [w for w in workers_of(proc.pid, timeout=0.1) if w.pid in marked]
+
+    procs: list[subprocess.Popen] = []
+    try:
+        for round_ in range(rounds):
+            proc = start(path, results, log)
+            procs.append(proc)
+            broken: set[int] = set()  # the workers of a pool broken by the kill (it terminates them all)
+            if round_ == 0 or rng.random() < 0.5:  # a worker dies mid-run (at least once)
+                victim = rng.choice(_wait_for("a run in flight", lambda: waiting(proc), proc, log))
+                broken = {w.pid for w in workers_of(proc.pid, timeout=0.1)}
+                victim.kill()
+                kills += 1
+            done = snapshot()
+            # the token goes to a run of a live pool: one of a broken pool could take it and die
+            _wait_for("a run in flight", lambda: [w for w in waiting(proc) if w.pid not in broken], proc, log)
+            (gate / f"token-{round_:03d}").touch()  # one run may finish
+            _wait_for("the released run's result", lambda: snapshot() > done, proc, log)
+            _wait_for("a run in flight again", lambda: waiting(proc), proc, log)
+            workers = workers_of(proc.pid, timeout=0.1)
+            assert proc.poll() is None, "the runner finished while its runs were held at the gate"
+            proc.send_signal(signal.SIGTERM)  # mid-sweep: every other run is held at the gate
+            proc.wait(timeout=60)
+            assert proc.returncode == 128 + signal.SIGTERM, (proc.returncode, log.read_text()[-2000:])
+            deadline = time.monotonic() + 10.0
+            while alive(workers) and time.monotonic() < deadline:
+                time.sleep(0.1)
+            assert not alive(workers), "a worker outlived its runner"
             snapshot()
-            if rng.random() < 0.08:  # now and then, a worker dies mid-run
-                kids = workers_of(proc.pid, timeout=0.5)
-                if kids:
-                    try:
-                        rng.choice(kids).kill()
-                        kills += 1
-                    except psutil.NoSuchProcess:
-                        pass
-            time.sleep(0.05)
-        workers = workers_of(proc.pid, timeout=0.1)
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            terms += 1
-        proc.wait(timeout=60)
-        # 128 + 15: stopped by its handler; -15: the signal came while Python was still importing
-        # (before the handler is installed, no worker exists yet): the default action, silent
-        assert proc.returncode in (0, 1, 128 + signal.SIGTERM, -signal.SIGTERM), (proc.returncode,
-                                                                                 log.read_text()[-2000:])
-        time.sleep(0.2)
-        assert not alive(workers), "a worker outlived its runner"
-        snapshot()
-    assert kills and terms, (kills, terms)  # the faults did happen
-    assert len(first_seen) < len(ids), "the faults should land mid-sweep"
+    finally:  # a failed check leaves no runner (its session: its workers too) blocked at the gate
+        for p in procs:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+    assert kills >= 1
+    assert len(first_seen) <= rounds < len(ids)  # by construction: one token a round
+    (gate / "open").touch()
     proc = start(path, results, log)  # undisturbed: finishes the grid (failed runs are retried)
     out, _ = proc.communicate(timeout=300)
     assert proc.returncode == 0, log.read_text()[-3000:]
@@ -247,3 +303,28 @@ def test_random_worker_kills_and_runner_sigterms_end_with_every_run_done_once(tm
 @pytest.mark.parametrize("seed", range(5))
 def test_fault_injection_many_rounds(tmp_path, seed):
     _fault_injection(tmp_path, rounds=8, seed=seed)
+
+
+def test_a_dead_worker_the_pool_misses_breaks_the_pool_after_the_grace(monkeypatch):
+    """CPython's process pool can miss a worker SIGKILLed while it held a queue lock and then wait
+    forever; `LocalExecutor.wait` breaks the pool itself once a worker has lain dead for the grace."""
+    import concurrent.futures as cf
+    import time
+    from types import SimpleNamespace
+
+    from splatbench.experiments import executors
+
+    monkeypatch.setattr(executors, "DEAD_WORKER_POLL", 0.05)
+    monkeypatch.setattr(executors, "DEAD_WORKER_GRACE", 0.3)
+    ex = executors.LocalExecutor.__new__(executors.LocalExecutor)
+    ex._dead_since = None
+    alive = SimpleNamespace(exitcode=None)
+    ex.pool = SimpleNamespace(_processes={1: alive})
+    fut = cf.Future()
+    fut.set_running_or_notify_cancel()
+    assert ex.wait([fut], timeout=0.5) == set()  # all alive: nothing done, nothing broken
+    ex.pool._processes[2] = SimpleNamespace(exitcode=-9)  # killed, unnoticed
+    t0 = time.monotonic()
+    done = ex.wait([fut], timeout=30)
+    assert done == {fut} and ex.broken(fut.exception())
+    assert 0.3 <= time.monotonic() - t0 < 5  # after the grace, long before the timeout

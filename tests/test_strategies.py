@@ -554,9 +554,9 @@ def test_none_is_a_no_op():
 
 @pytest.mark.parametrize("name, overrides, match", [
     ("nope", {}, "unknown name 'nope'"),
-    ("default", {"grad_thresh": 1e-4}, "unknown field 'grad_thresh'"),
-    ("mcmc", {"absgrad": True}, "unknown field 'absgrad'"),
-    ("none", {"seed": 1}, "unknown field 'seed'"),
+    ("default", {"grad_thresh": 1e-4}, r"strategy_options\.grad_thresh: unknown key \(did you mean 'grad_threshold'"),
+    ("mcmc", {"absgrad": True}, r"strategy_options\.absgrad: unknown key \(known: "),
+    ("none", {"seed": 1}, r"strategy_options\.seed: unknown key \(known: none\)"),
     ("default", {"refine_every": 0}, "refine_every"),
     ("mcmc", {"cap_max": "many"}, "cap_max"),
     ("default", {"grad_threshold": -1.0}, "grad_threshold"),

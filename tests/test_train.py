@@ -149,7 +149,7 @@ def test_config_toml_round_trip_and_overrides(tmp_path):
     assert parse_override("init = random") == ("init", "random")
     assert cfg.iterations == 123                                               # the original is untouched
     # the config is validated on construction: MCMC's options under another strategy fail at once
-    with pytest.raises(InputError, match=r"^strategy 'default': unknown field 'cap_max'"):
+    with pytest.raises(InputError, match=r"^strategy 'default': strategy_options\.cap_max: unknown key \(known: "):
         apply_overrides(cfg, ["strategy=default"])
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.iterations = 5  # frozen: change a copy with dataclasses.replace / apply_overrides
@@ -206,8 +206,6 @@ def test_bad_dataset_is_one_line_error_before_any_work(tmp_path, tiny_diffuse_di
     with pytest.raises(InputError, match="dataset: no dataset folder"):
         train(config(tmp_path))
     no_points = dataclasses.replace(load_dataset(tiny_diffuse_dir), points=None)
-    with pytest.raises(InputError, match="init: 'surface' needs the dataset's points"):
-        train(config(tmp_path, init="surface"), dataset=no_points)
     with pytest.raises(InputError, match="random_background"):
         train(config(tmp_path, random_background=True), dataset=no_points)
     assert counting.calls == 0
@@ -729,3 +727,16 @@ def test_a_model_pruned_to_nothing_trains_on_and_says_so(tmp_path, tiny_diffuse)
     assert r.num_gaussians == 0 and r.iterations == 12
     warning = [n for n in r.notes if n.startswith("warning: the model is empty")]
     assert len(warning) == 1 and "none left from step 4 on" in warning[0]
+
+
+def test_surface_init_without_points_starts_from_random_points_and_says_so(tiny_diffuse_dir):
+    """A capture without a point cloud (transforms.json) starts from random points, as graphdeco
+    does, with a note naming the folder; init=surface is the default, so refusing would stop every
+    such capture at the first command."""
+    from splatbench.train.initializers import InitSettings, initialize
+    no_points = dataclasses.replace(load_dataset(tiny_diffuse_dir), points=None)
+    said = []
+    init = initialize("surface", no_points, InitSettings(sh_degree=0, opacity=0.1, random_points=50, seed=0,
+                                                       say=said.append))
+    assert len(init.gaussians) == 50 and init.summary["method"] == "random" and init.summary["asked"] == "surface"
+    assert said == [init.note] and "needs the dataset's points" in init.note and "random points" in init.note

@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from splatbench.devices import device_option
+from splatbench.workloads import model_options
 
 
 @click.command()
@@ -26,6 +27,7 @@ from splatbench.devices import device_option
               help="Seed of the synthetic workloads, the cotangents and the finite-difference sample.")
 @click.option("--workload", "workloads", multiple=True, metavar="garden|FILE.npz",
               help="The bundled garden SfM view, or a workload npz (repeatable).")
+@model_options
 @click.option("--scene", "scenes", multiple=True, metavar="NAME",
               help="A workload by the experiment grids' name: synthetic-N-S, synthetic-N-WxH, garden, garden-vK "
                    "(repeatable).")
@@ -43,29 +45,32 @@ from splatbench.devices import device_option
 @click.option("--max-call-seconds", "max_call_s", default=60.0, show_default=True, type=float,
               help="Backends predicted to take longer per forward at full resolution are not timed.")
 def compare(backends: tuple[str, ...], synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[str, ...],
+            models: tuple[str, ...], up: str | None, model_views: int, model_size: str,
             scenes: tuple[str, ...], device: str, repeats: int, out: Path, error_scale: float | None,
             grad_oracle: str, fd_entries: int, max_call_s: float) -> None:
     """Compare rasterizers against the float64 oracle: errors, gradients, time, memory.
 
-    Without --synthetic, --workload or --scene, compares on `--synthetic 2000 128x128`.
+    Without --synthetic, --workload, --model or --scene, compares on `--synthetic 2000 128x128`.
+    Synthetic workloads are seen from a random camera pose (seeded by --seed), so that a
+    world-space mistake (a view direction from the world origin, W for its transpose) shows.
     """
     from splatbench.backends.compare import CompareSettings, run_compare
     from splatbench.backends.compare_report import findings, result_table, write_compare
     from splatbench.backends.registry import get_backend
-    from splatbench.bench.raster import parse_synthetic, parse_workload
-    from splatbench.workloads import build_workload
+    from splatbench.workloads import parse_models, parse_synthetic, parse_workload, workload_spec
 
     settings = CompareSettings(repeats=repeats, device=device, seed=seed, error_scale=error_scale,
                                grad_oracle=grad_oracle, fd_entries=fd_entries, max_call_s=max_call_s)
     settings.validate()
-    specs = [parse_synthetic(count, size, seed) for count, size in synthetic]
+    specs = [parse_synthetic(count, size, seed, posed=True) for count, size in synthetic]
     specs += [parse_workload(w) for w in workloads]
-    specs += [build_workload(name, seed) for name in scenes]
+    specs += parse_models(models, up, model_views, model_size)
+    specs += [workload_spec(name, seed) for name in scenes]
     if not specs:
-        specs = [parse_synthetic("2000", "128x128", seed)]
+        specs = [parse_synthetic("2000", "128x128", seed, posed=True)]
     resolved = [get_backend(b) for b in backends]  # unknown names fail here, before any work
     command = "splatbench " + shlex.join(sys.argv[1:]) if sys.argv and Path(sys.argv[0]).name == "splatbench" \
-        else "splatbench compare " + shlex.join(_args(backends, synthetic, workloads, scenes))
+        else "splatbench compare " + shlex.join(_args(backends, synthetic, workloads, scenes, models))
     result = run_compare(resolved, specs, settings, progress=lambda line: click.echo(line, err=True),
                          command=command)
     path = write_compare(result, out)
@@ -75,8 +80,9 @@ def compare(backends: tuple[str, ...], synthetic: tuple[tuple[str, str], ...], s
     click.echo(f"report: {path}")
 
 
-def _args(backends, synthetic, workloads, scenes) -> list[str]:
+def _args(backends, synthetic, workloads, scenes, models=()) -> list[str]:
     args = [a for b in backends for a in ("--backend", b)]
     args += [a for n, s in synthetic for a in ("--synthetic", n, s)]
     args += [a for w in workloads for a in ("--workload", w)]
+    args += [a for m in models for a in ("--model", m)]
     return args + [a for s in scenes for a in ("--scene", s)]

@@ -9,7 +9,10 @@ Per backend x workload (one `CompareRow`):
    ``error_scale``: the oracle is float64 NumPy, so large images are measured at a
    reduced resolution, as ``splatbench demo`` does): rgb, alpha and depth against
    `reference_render` in mode "matched" with the backend's declared conventions, and
-   in mode "exact" (the exact Gaussian mixture). Each oracle image is rendered once per
+   in mode "exact" (the exact Gaussian mixture). The verdict: within the float32 bound
+   (`FORWARD_ATOL`, widened by depth ties) at every pixel outside the boundary band the
+   matched oracle computes (`reference.band`: where float32 may take a discrete decision
+   the other way); the band's size is reported. Each oracle image is rendered once per
    workload (per distinct conventions) and reused across backends. Depth is compared
    as depth * alpha / z_max (the composited sum; depth = sum / alpha amplifies alpha's
    error by 1 / alpha), z_max = max(1, largest oracle depth).
@@ -37,10 +40,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
-from splatbench.backends.compare_types import (BOUNDARY_FRACTION, MAX_ORACLE_PIXELS, GradError, ImageError, Timing,
-                                               gradient_bound)
+from splatbench.backends.compare_types import MAX_ORACLE_PIXELS, GradError, ImageError, Timing, gradient_bound
 from splatbench.devices import torch_device
 from splatbench.errors import InputError, one_line
+from splatbench.workloads import Workload, WorkloadSpec
 
 if TYPE_CHECKING:
     from splatbench.backends.base import Backend
@@ -103,7 +106,8 @@ class CompareRow:
     verdict_mode: str                         # "matched", or "exact" for a backend declaring exact
     matched: dict[str, ImageError] = field(default_factory=dict)
     exact: dict[str, ImageError] = field(default_factory=dict)
-    band: int = 0                             # outliers allowed per output
+    band: int = 0                             # pixels in the boundary band of the verdict's oracle
+    tie_pixels: int = 0                       # pixels whose bound depth ties widen
     grad_oracle: str = ""
     grads: dict[str, GradError] = field(default_factory=dict)
     grad_bound: float = math.nan
@@ -116,7 +120,7 @@ class CompareRow:
         errors = self.exact if self.verdict_mode == "exact" else self.matched
         if not errors:
             return "n/a"
-        return "within bound" if all(e.outliers <= self.band for e in errors.values()) else "outside bound"
+        return "within bound" if all(e.outside_band == 0 for e in errors.values()) else "outside bound"
 
     @property
     def grad_verdict(self) -> str:
@@ -144,13 +148,13 @@ def auto_scale(width: int, height: int) -> float:
     return scale
 
 
-def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettings = CompareSettings(), *,
+def run_compare(backends: Sequence, workloads: Sequence[Workload | WorkloadSpec], settings: CompareSettings = CompareSettings(), *,
                 progress: Callable[[str], None] | None = None, command: str = "") -> CompareResult:
     """Compare ``backends`` on ``workloads`` (module doc).
 
     Args:
         backends: names, ``module:function`` strings, `Backend`s or callables (`get_backend`).
-        workloads: `splatbench.workloads.Workload`s, or `splatbench.bench.raster.WorkloadSpec`s.
+        workloads: `splatbench.workloads.Workload`s, or `splatbench.workloads.WorkloadSpec`s (built here).
         settings: `CompareSettings`. progress: called with one line per step.
         command: the command line, for the report.
 
@@ -187,8 +191,8 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
     rows: list[CompareRow] = []
     notes: list[str] = []
     for spec in workloads:
-        workload = spec.build() if hasattr(spec, "build") else spec
-        label = getattr(spec, "label", "") or workload.name
+        workload = spec.build() if isinstance(spec, WorkloadSpec) else spec
+        label = (spec.label if isinstance(spec, WorkloadSpec) else "") or workload.name
         camera = workload.camera
         scale = settings.error_scale or auto_scale(camera.width, camera.height)
         err_camera = camera if scale == 1 else camera.scaled(scale)
@@ -213,6 +217,7 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
         load_end = tuple(load_average())
         for b in resolved:
             m = measured[b.name]
+            band, ties = _band_size(images, b.info)
             timing = timings.get(b.name, Timing(note=m.untimed))
             errors = [m.error] if m.error else []
             if isinstance(timing, str):
@@ -223,12 +228,25 @@ def run_compare(backends: Sequence, workloads: Sequence, settings: CompareSettin
                 width=camera.width, height=camera.height, error_width=err_camera.width,
                 error_height=err_camera.height, device=settings.device, error="; ".join(errors),
                 verdict_mode="exact" if b.info.exact else "matched", matched=m.matched, exact=m.exact,
-                band=max(1, int(BOUNDARY_FRACTION * err_camera.width * err_camera.height)),
+                band=band, tie_pixels=ties,
                 grad_oracle=m.grad_oracle, grads=m.grads, grad_bound=m.grad_bound, timing=timing,
                 loadavg_start=load_start, loadavg_end=load_end))
     machine.loadavg_end = load_average()
     return CompareResult(tuple(rows), settings, machine, command, round(time.perf_counter() - t_start, 1),
                          tuple(notes))
+
+
+def _band_size(images, info) -> tuple[int, int]:
+    """(boundary band pixels, pixels with a tie slack) of the oracle ``info``'s verdict is against
+    (0, 0 for the exact oracle, or when the oracle could not render)."""
+    if info.exact:
+        return 0, 0
+    try:
+        oracle = images.matched(info)
+    except Exception:  # noqa: BLE001 - the row already says why the oracle failed
+        return 0, 0
+    band, slack = getattr(oracle, "band", None), getattr(oracle, "tie_slack", None)
+    return (0 if band is None else int(band.sum())), (0 if slack is None else int((slack > 0).sum()))
 
 
 @dataclass
@@ -300,7 +318,7 @@ def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: 
         m.error = f"gradient: {one_line(exc)}"
         return m
     verdict = m.exact if info.exact else m.matched
-    band = max(1, int(BOUNDARY_FRACTION * camera.width * camera.height))
+    band, _ = _band_size(images, info)
     m.grad_bound = gradient_bound(camera.width * camera.height, min(band, max(e.outliers for e in verdict.values())))
     say(f"{label}: {backend.name} gradients compared ({m.grad_oracle.split(' (')[0]})")
     return m

@@ -18,8 +18,8 @@ import numpy as np
 
 from splatbench.backends.base import OUTPUTS, Backend
 from splatbench.backends.builtins.reference_backend import GROUPS
-from splatbench.backends.compare_types import (DEPTH_ALPHA_MIN, FORWARD_ATOL, OFF_THRESHOLD, GradError, ImageError,
-                                               Timing)
+from splatbench.backends.compare_types import (DEPTH_ALPHA_MIN, OFF_THRESHOLD, GradError, ImageError, Timing,
+                                               over_bound)
 from splatbench.errors import InputError, one_line
 from splatbench.metrics.image import psnr
 
@@ -53,10 +53,12 @@ class OracleImages:
 
         g = self.workload.gaussians
         return reference_render(conventions, g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, self.camera,
-                                mode=mode)
+                                mode=mode, band=mode == "matched")
 
     def matched(self, info):
-        """The render with ``info``'s conventions (the exact one for a backend declaring ``exact``)."""
+        """The render with ``info``'s conventions (the exact one for a backend declaring ``exact``),
+        with its boundary band and tie slack (`reference.band`; none for the exact one, which
+        takes no discrete decisions)."""
         if info.exact:
             return self.exact
         key = tuple(sorted(info.reference_options().items()))
@@ -78,7 +80,8 @@ def _composited(out, z_max: float) -> dict[str, np.ndarray]:
 
 
 def image_errors(out, oracle, outputs: Sequence[str]) -> dict[str, ImageError]:
-    """`ImageError` per declared output of ``out`` (rgb, alpha, depth) against ``oracle``."""
+    """`ImageError` per declared output of ``out`` (rgb, alpha, depth) against ``oracle`` (a
+    `reference.RenderOutput`; its band and tie slack, where it has them, set the bound)."""
     z_max = max(1.0, float(np.abs(oracle.depth).max(initial=0.0)))
     mine = _composited(out, z_max)
     ref = _composited((oracle.rgb, oracle.alpha, oracle.depth), z_max)
@@ -90,8 +93,9 @@ def image_errors(out, oracle, outputs: Sequence[str]) -> dict[str, ImageError]:
         err[~np.isfinite(err)] = np.inf  # a NaN pixel is off by everything
         per_pixel = err.reshape(err.shape[0], err.shape[1], -1).max(-1)
         value = psnr(err, np.zeros_like(err), clamp=False)  # -inf when a pixel is non-finite
-        errors[name] = ImageError(float(err.max()), value, float(np.mean(per_pixel > OFF_THRESHOLD)),
-                                  int((per_pixel > FORWARD_ATOL).sum()))
+        # The tie slack is in the outputs' units (depth * alpha in camera z; / z_max >= 1 only shrinks it).
+        over, outside = over_bound(per_pixel, getattr(oracle, "band", None), getattr(oracle, "tie_slack", None))
+        errors[name] = ImageError(float(err.max()), value, float(np.mean(per_pixel > OFF_THRESHOLD)), over, outside)
     return errors
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from splatbench.devices import device_option
+from splatbench.workloads import model_options
 
 
 @click.group()
@@ -20,23 +21,26 @@ def bench() -> None:
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the synthetic workloads.")
 @click.option("--workload", "workloads", multiple=True, metavar="FILE.npz|garden",
               help="A workload npz, or 'garden' (bundled SfM capture, view 0) (repeatable).")
+@model_options
 @click.option("--repeats", default=5, show_default=True, type=int, help="Timed runs per measurement (median).")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=Path("out/bench"), show_default=True,
               help="Folder for raster.csv and raster.json.")
 @device_option
 @click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
               help="Rasterizer option (repeatable), e.g. tile_size=8.")
-def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[str, ...], repeats: int, out: Path,
-           device: str, options: tuple[str, ...]) -> None:
+def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[str, ...], models: tuple[str, ...],
+           up: str | None, model_views: int, model_size: str, repeats: int, out: Path, device: str,
+           options: tuple[str, ...]) -> None:
     """Time the rasterizer per workload (times, stages, memory).
 
-    Without --synthetic or --workload, runs the standard suite: synthetic 10000
+    Without --synthetic, --workload or --model, runs the standard suite: synthetic 10000
     256x256, 100000 512x512, 1000000 800x800, and the garden view. Each workload
     runs in its own subprocess so its peak RSS is its own.
     """
+    from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, run_suite, standard_suite,
+                                         write_csv, write_json)
     from splatbench.metrics.machine import load_average, machine_info
-    from splatbench.bench.raster import (BenchSettings, format_table, leak_warnings, parse_synthetic, parse_workload,
-                                         run_suite, standard_suite, write_csv, write_json)
+    from splatbench.workloads import parse_models, parse_synthetic, parse_workload
     from splatbench.checks import check_image_size
     from splatbench.overrides import parse_overrides
 
@@ -46,6 +50,7 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
     for spec in specs:  # before any workload runs (Dr.Jit's array limit, this machine's memory)
         check_image_size(spec.width, spec.height, field="--synthetic")
     specs += [parse_workload(w) for w in workloads]
+    specs += parse_models(models, up, model_views, model_size)
     if not specs:
         specs = standard_suite(seed)
 
@@ -94,8 +99,9 @@ def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmu
     from dataclasses import asdict
 
     from splatbench.bench.ab import run_ab
+    from splatbench.bench.raster import STANDARD_SYNTHETIC
     from splatbench.metrics.machine import machine_info
-    from splatbench.bench.raster import STANDARD_SYNTHETIC, parse_synthetic
+    from splatbench.workloads import parse_synthetic
 
     specs = [parse_synthetic(count, size) for count, size in synthetic]
     workloads = [(s.n, s.width, s.height) for s in specs] or list(STANDARD_SYNTHETIC)

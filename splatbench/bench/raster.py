@@ -35,8 +35,8 @@ from splatbench.metrics.machine import MachineInfo, resolve_device
 from splatbench.metrics.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
 from splatbench.metrics.timing import (StageSplit, forward_backward_with_init, forward_with_init, milliseconds,
                                      staged_runs, time_runs, torch_params)
-from splatbench.checks import parse_size
 from splatbench.errors import InputError, SplatbenchError
+from splatbench.workloads import GARDEN, WorkloadSpec, parse_synthetic, parse_workload
 
 
 #: FP32 operations per pixel-Gaussian evaluation of the forward compositing loop, counted
@@ -68,68 +68,13 @@ TARGETS: dict[tuple[int, int, int], Target] = {
     (1_000_000, 800, 800): Target(2000.0, 1500.0),
 }
 STANDARD_SYNTHETIC: tuple[tuple[int, int, int], ...] = tuple(TARGETS)
-GARDEN = "garden"  # `--workload garden`: the bundled SfM capture, view 0 (648x420, 138,766 Gaussians)
 
 
-@dataclass(frozen=True)
-class WorkloadSpec:
-    """A workload to build inside the benchmark process (cheap to pass between processes).
-
-    ``kind`` "synthetic": `splatbench.workloads.synthetic(n, width, height, seed)`;
-    ``kind`` "npz": `splatbench.workloads.load_npz(path, view=view)`.
-    """
-
-    kind: str
-    n: int = 0           # synthetic: number of Gaussians
-    width: int = 0       # synthetic: image width (pixels)
-    height: int = 0      # synthetic: image height (pixels)
-    seed: int = 0        # synthetic: random seed
-    path: str = ""       # npz: absolute path of the file
-    view: int = 0        # npz: camera index
-    label: str = ""      # name in the results ("" = the workload's own name)
-
-    def build(self):
-        """The `splatbench.workloads.Workload` (Gaussians and camera)."""
-        from splatbench.workloads import load_npz, synthetic
-
-        if self.kind == "synthetic":
-            return synthetic(self.n, self.width, self.height, self.seed)
-        if self.kind == "npz":
-            return load_npz(self.path, view=self.view)
-        raise InputError(f"workload kind: expected 'synthetic' or 'npz', got {self.kind!r}")
-
-    @property
-    def target(self) -> Target | None:
-        """The target of a standard synthetic workload (any seed); None for every other."""
-        if self.kind != "synthetic":
-            return None
-        return TARGETS.get((self.n, self.width, self.height))
-
-
-def parse_synthetic(count: str, size: str, seed: int = 0) -> WorkloadSpec:
-    """``--synthetic N WxH`` -> a synthetic `WorkloadSpec`."""
-    try:
-        n = int(count)
-    except ValueError:
-        raise InputError(f"--synthetic: expected a Gaussian count, got {count!r}") from None
-    if n < 1:
-        raise InputError(f"--synthetic: expected a Gaussian count >= 1, got {count!r}")
-    width, height = parse_size(size, "--synthetic")
-    return WorkloadSpec("synthetic", n=n, width=width, height=height, seed=seed)
-
-
-def parse_workload(arg: str) -> WorkloadSpec:
-    """``--workload FILE.npz|garden`` -> an npz `WorkloadSpec` (the file must exist)."""
-    if arg.lower() == GARDEN:
-        from splatbench.workloads import GARDEN_SFM
-
-        return WorkloadSpec("npz", path=str(GARDEN_SFM), view=0, label="garden-view0")
-    path = Path(arg).expanduser()
-    if not path.is_file():
-        raise InputError(f"--workload: no such file {arg!r}")
-    if path.suffix != ".npz":
-        raise InputError(f"--workload: expected a .npz file or 'garden', got {arg!r}")
-    return WorkloadSpec("npz", path=str(path.resolve()), view=0)
+def target_of(spec: WorkloadSpec) -> Target | None:
+    """The target of a standard synthetic workload (any seed); None for every other."""
+    if spec.kind != "synthetic":
+        return None
+    return TARGETS.get((spec.n, spec.width, spec.height))
 
 
 def standard_suite(seed: int = 0) -> list[WorkloadSpec]:
@@ -276,7 +221,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     peak = fp32_peak(device)
     mevals = round(evaluations / comp_s / 1e6, 3) if comp_s > 0 else 0.0
     fwd_bwd_ms = milliseconds(statistics.median(fwd_bwd_s))
-    target = spec.target
+    target = target_of(spec)
     meets = None
     if target is not None:
         meets = fwd_bwd_ms <= target.fwd_bwd_ms and (target.peak_rss_mb is None
@@ -318,7 +263,9 @@ def run_isolated(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResu
 
 def describe(spec: WorkloadSpec) -> str:
     if spec.kind == "synthetic":
-        return f"synthetic {spec.n} {spec.width}x{spec.height} (seed {spec.seed})"
+        return f"synthetic {spec.n} {spec.width}x{spec.height} (seed {spec.seed}{', posed' if spec.posed else ''})"
+    if spec.kind == "model":
+        return spec.label or f"{Path(spec.path).stem} view {spec.view} of {spec.views} at {spec.width}x{spec.height}"
     return spec.label or Path(spec.path).name
 
 

@@ -9,23 +9,8 @@ import numpy as np
 
 from splatbench.checks import check_image_size, check_sh_degree, parse_size
 from splatbench.errors import InputError
-from splatbench.framing import DEFAULT_UP, KNOWN_UP_ELEVATION, framing_camera
+from splatbench.framing import AXES, DEFAULT_UP, KNOWN_UP_ELEVATION, framing_camera, parse_up
 from splatbench.overrides import parse_overrides
-
-_AXES = {f"{sign}{axis}": tuple(value if a == axis else 0.0 for a in "xyz")
-         for axis in "xyz" for sign, value in (("+", 1.0), ("-", -1.0))}
-
-
-def parse_up(text: str) -> tuple[float, float, float]:
-    """``--up``: an axis (``+y``, ``-z``, ...) or ``X,Y,Z``; a unit vector."""
-    from splatbench.ply import ViewHints
-
-    try:
-        return ViewHints(up=_AXES.get(text.strip().lower()) or text.split(",")).up
-    except InputError:
-        raise InputError(f"--up: expected one of {', '.join(_AXES)} or X,Y,Z (3 finite numbers, not all zero), "
-                         f"got {text!r}") from None
-
 
 def parse_background(text: str) -> tuple[float, float, float]:
     """``--background``: ``R,G,B`` in [0, 1]."""
@@ -55,7 +40,7 @@ def dataset_camera(spec: str):
 
 def _axis_name(up) -> str:
     """``+y`` for (0, 1, 0), else the vector rounded to 3 decimals."""
-    for name, vector in _AXES.items():
+    for name, vector in AXES.items():
         if np.allclose(up, vector, atol=1e-9):
             return name
     return ",".join(f"{v:.3g}" for v in up)

@@ -13,17 +13,34 @@ Layouts:
 * **COLMAP** -- ``sparse/0/`` (or ``sparse/``, as ``image_undistorter`` writes it) with
   ``cameras``, ``images`` and ``points3D`` (``.bin`` or ``.txt``, read by pycolmap, with
   or without COLMAP 3.12's ``rigs``/``frames``), images under ``images/<name>``.
-  Cameras must be PINHOLE or SIMPLE_PINHOLE (undistorted). Registered images are
-  sorted by name. Split: ``split.json`` (``{"train": [names], "test": [names]}``,
+  PINHOLE / SIMPLE_PINHOLE cameras are used as they are; SIMPLE_RADIAL, RADIAL, OPENCV,
+  FULL_OPENCV and OPENCV_FISHEYE images are undistorted on load (below); any other model
+  is refused in one line. Registered images are sorted by name. Split: ``split.json`` (``{"train": [names], "test": [names]}``,
   written by splatbench) when present, else every ``test_every``-th image (``i %
   test_every == 0``) is a test view, as 3DGS's ``--eval`` does.
 * **Blender** -- ``transforms_train.json`` (+ ``transforms_test.json``; the given split)
   or a single nerfstudio ``transforms.json`` (every ``test_every``-th frame, sorted by
   file path, is a test view). ``file_path`` is relative to the folder, with or without
   its extension (NeRF synthetic's ``"./train/r_0"`` finds ``train/r_0.png``).
-  Intrinsics: nerfstudio's ``fl_x, fl_y, cx, cy, w, h`` (top level or per frame) or
-  ``camera_angle_x``; ``camera_model`` PINHOLE / SIMPLE_PINHOLE, or OPENCV with zero
-  distortion. Points from ``ply_file_path`` when given.
+  Intrinsics: nerfstudio's / instant-ngp's ``fl_x, fl_y, cx, cy, w, h`` (top level or per
+  frame) or ``camera_angle_x``; distortion ``k1 k2 k3 k4 p1 p2`` (top level or per frame)
+  with ``camera_model`` OPENCV (the default when coefficients are given, as instant-ngp
+  writes them: k1 k2 p1 p2, plus k3 as COLMAP's FULL_OPENCV; k4 has no OpenCV-model
+  meaning and is refused) or OPENCV_FISHEYE (k1..k4; p1 p2 refused). Keys splatbench does
+  not use (instant-ngp's ``aabb_scale``, ``sharpness``, ...) are ignored with a note.
+  Points from ``ply_file_path`` when given.
+
+Distortion: images whose camera has lens distortion are undistorted by pycolmap (COLMAP's
+undistorter: bilinear remap, cropped to the pixels that saw the scene) into a cache folder
+keyed by content, and returned with the PINHOLE intrinsics of the result
+(`splatbench.data.undistort`); a note says so. Downscaling (``downscale=N``): the
+images are resized by 1/N (PIL bicubic, as graphdeco's ``-r N``), or read from an
+``images_N/`` folder beside ``images/`` when one exists (graphdeco's and Mip-NeRF 360's
+copies; distorted captures are undistorted from the full images instead); the cameras
+are scaled to the result. A note is added when the images' long side exceeds 1,600 px
+at downscale 1 (graphdeco shrinks images wider than 1,600 px; splatbench keeps what it is given).
+
+Real captures are opaque: nothing is composited under RGB photos.
 
 Images are returned as stored (8-bit sRGB values / 255, float32); RGBA images are
 composited on ``background`` and their alpha kept in ``Split.alphas``. Depth maps are
@@ -36,7 +53,8 @@ naming the file and the field.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+import dataclasses
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,6 +62,7 @@ import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.data.colmap_bounds import check_colmap_binary, check_colmap_text
+from splatbench.data.undistort import Lens, check_lens
 from splatbench.errors import InputError
 from splatbench.ply import read_ply_data
 from splatbench.safeio import read_image_with_alpha, read_npy
@@ -107,17 +126,21 @@ class Dataset:
     points: PointCloud | None  # COLMAP points3D, or the Blender layout's ply_file_path; None if absent
     root: Path                 # the dataset folder
     layout: str                # "colmap" or "blender"
+    notes: tuple[str, ...] = ()  # what loading did that the user should know (undistortion, ignored keys)
 
 
 def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8, images_dir: str = "images",
-                 background: Sequence[float] = (0.0, 0.0, 0.0)) -> Dataset:
+                 background: Sequence[float] = (0.0, 0.0, 0.0), downscale: int = 1,
+                 say: Callable[[str], None] | None = None) -> Dataset:
     """Load a COLMAP or Blender dataset folder into typed train/test splits.
 
     ``layout``: ``"auto"`` (COLMAP when ``sparse/`` exists, else Blender), ``"colmap"``
     or ``"blender"``. ``test_every``: hold out every n-th view when the dataset gives no
     split (0: no test views). ``images_dir`` (COLMAP only): the image folder, e.g.
     ``"images_4"`` of Mip-NeRF 360; when it is not ``"images"`` the cameras are scaled to
-    the image size. ``background``: RGB in [0, 1] under RGBA images.
+    the image size. ``background``: RGB in [0, 1] under RGBA images. ``downscale``: an
+    int >= 1 dividing the image size (``images_N/`` is read when present). ``say`` gets
+    one line before anything slow (undistortion); the same lines are in ``Dataset.notes``.
     """
     root = Path(path)
     if not root.is_dir():
@@ -127,6 +150,8 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
         raise InputError(f"layout: expected one of {', '.join(LAYOUTS)}, got {layout!r}")
     if not (isinstance(test_every, int) and not isinstance(test_every, bool) and test_every >= 0):
         raise InputError(f"test_every: expected an int >= 0, got {test_every!r}")
+    if not (isinstance(downscale, int) and not isinstance(downscale, bool) and downscale >= 1):
+        raise InputError(f"downscale: expected an int >= 1, got {downscale!r}")
     bg = np.asarray(background, dtype=np.float32).reshape(-1)
     if bg.shape != (3,) or not np.all((bg >= 0) & (bg <= 1)):
         raise InputError(f"background: expected 3 values in [0, 1], got {list(background)}")
@@ -138,9 +163,90 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
         else:
             raise InputError(f"dataset: {str(root)!r} holds neither a COLMAP model (sparse/0/) "
                              f"nor Blender transforms (transforms_train.json or transforms.json)")
+    load = _Load(root, bg, downscale, say or (lambda line: None))
     if layout == "colmap":
-        return _load_colmap(root, test_every, images_dir, bg)
-    return _load_blender(root, test_every, bg)
+        dataset = _load_colmap(root, test_every, images_dir, load)
+    else:
+        dataset = _load_blender(root, test_every, load)
+    return dataclasses.replace(dataset, notes=tuple(load.finish_notes(dataset)))
+
+
+class _Load:
+    """What every loader shares: the options, the notes, and the views waiting for undistortion."""
+
+    def __init__(self, root: Path, bg: np.ndarray, downscale: int, say: Callable[[str], None]) -> None:
+        self.root, self.bg, self.downscale, self.say = root, bg, downscale, say
+        self.notes: list[str] = []
+        self.pending: list[tuple[list, int, str, Camera, Lens]] = []  # (views, index, rel, posed camera, lens)
+
+    def note(self, line: str) -> None:
+        if line not in self.notes:
+            self.notes.append(line)
+            self.say(line)
+
+    def image_dir(self, images_dir: str) -> str:
+        """``images_N`` instead of ``images`` when downscaling and the folder exists."""
+        alt = f"{images_dir}_{self.downscale}"
+        if self.downscale > 1 and images_dir == "images" and (self.root / alt).is_dir():
+            self.note(f"downscale {self.downscale}: reading {alt}/ (the capture's own downscaled copies, "
+                      f"as graphdeco reads them)")
+            return alt
+        return images_dir
+
+    def view(self, rel: str, camera: Camera, context: str, *, scale_ok: bool = False, resize: bool = True) -> tuple:
+        """(rel, camera, rgb, alpha) of an undistorted image: the camera fitted to the file
+        (scaled to it when ``scale_ok``), then both downscaled when ``resize``."""
+        rgb, alpha = _read_image(self.root, rel, self.bg, context)
+        camera = _fit_camera(camera, rgb, rel, scale_ok=scale_ok)
+        if not resize or self.downscale == 1:
+            return rel, camera, rgb, alpha
+        camera = camera.scaled(1 / self.downscale)
+        rgb = _resize(rgb, camera.width, camera.height)
+        alpha = None if alpha is None else _resize(alpha, camera.width, camera.height)
+        return rel, camera, rgb, alpha
+
+    def defer(self, views: list, rel: str, camera: Camera, lens: Lens) -> None:
+        """Leave a slot in ``views`` for an image to undistort (`finish` fills it)."""
+        views.append(None)
+        self.pending.append((views, len(views) - 1, rel, camera, lens))
+
+    def finish(self) -> None:
+        """Undistort every deferred view (one cached pycolmap pass) and fill its slot."""
+        if not self.pending:
+            return
+        from splatbench.data.undistort import undistort_views
+
+        models = sorted({p[4].model for p in self.pending})
+        done, folder, cached = undistort_views([(self.root / p[2], p[4]) for p in self.pending],
+                                               downscale=self.downscale, say=self.say)
+        first = done[0]
+        self.note(f"{len(done)} images with {'/'.join(models)} lens distortion undistorted by pycolmap (COLMAP's "
+                  f"undistorter, cropped to valid pixels: {first.width}x{first.height} PINHOLE"
+                  f"{f' after downscale {self.downscale}' if self.downscale > 1 else ''}); "
+                  f"{'reused' if cached else 'cached in'} {folder}")
+        for (views, i, rel, camera, _), u in zip(self.pending, done):
+            rgb, _ = _read_image(u.path.parent, u.path.name, self.bg, f"undistorted from {rel}")
+            views[i] = (rel, Camera(u.width, u.height, u.fx, u.fy, u.cx, u.cy, camera.world_to_camera,
+                                    camera.near, camera.far), rgb, None)
+        self.pending = []
+
+    def finish_notes(self, dataset: Dataset) -> list[str]:
+        views = dataset.train if len(dataset.train) else dataset.test
+        if self.downscale == 1 and len(views) and max(views.images.shape[1:3]) > 1600:
+            h, w = views.images.shape[1:3]
+            would = "would shrink these" if w > 1600 else "would keep these (it checks the width only)"
+            self.note(f"images are {w}x{h}: the long side exceeds 1600 px (graphdeco's train.py shrinks images wider "
+                      f"than 1600 px to 1600 and {would}); splatbench keeps them (data.downscale=N trains smaller)")
+        return self.notes
+
+
+def _resize(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """``image`` [H, W(, C)] float32 in [0, 1] resized by PIL bicubic (graphdeco's PIL resize), 8-bit."""
+    from PIL import Image
+
+    u8 = np.clip(np.rint(image * 255.0), 0, 255).astype(np.uint8)
+    out = np.asarray(Image.fromarray(u8).resize((width, height), Image.Resampling.BICUBIC))
+    return out.astype(np.float32) / 255.0
 
 
 # ------------------------------------------------------------------------- COLMAP
@@ -151,7 +257,7 @@ def _colmap_folder(root: Path) -> Path | None:
     return None
 
 
-def _load_colmap(root: Path, test_every: int, images_dir: str, bg: np.ndarray) -> Dataset:
+def _load_colmap(root: Path, test_every: int, images_dir: str, load: _Load) -> Dataset:
     from splatbench.interrupt import import_pycolmap
 
     pycolmap = import_pycolmap()
@@ -172,24 +278,36 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, bg: np.ndarray) -
     except Exception as exc:  # pycolmap raises ValueError/RuntimeError with a source location
         raise InputError(f"{sparse}: pycolmap cannot read the model ({str(exc).strip().splitlines()[0]})") from None
     rel_sparse = sparse.relative_to(root).as_posix()
+    lenses: dict[int, Lens] = {}
     for cam_id, cam in sorted(rec.cameras.items()):
         if cam.model_name not in PINHOLE_MODELS:
-            raise InputError(f"{rel_sparse}/cameras.{ext}: camera {cam_id} model: expected "
-                             f"{' or '.join(PINHOLE_MODELS)}, got {cam.model_name!r} (undistort the images first)")
+            lens = Lens(cam.model_name, int(cam.width), int(cam.height), tuple(float(p) for p in cam.params))
+            check_lens(lens, f"{rel_sparse}/cameras.{ext}: camera {cam_id}")
+            lenses[cam_id] = lens
     images = sorted((im for im in rec.images.values() if im.has_pose), key=lambda im: im.name)
     if not images:
         raise InputError(f"{rel_sparse}/images.{ext}: no registered images")
-    views = []
+    folder = load.image_dir(images_dir) if len(lenses) < len(rec.cameras) else images_dir
+    views: list = []
     for im in images:
-        try:
-            camera = Camera.from_colmap(rec.cameras[im.camera_id], im)
+        cam = rec.cameras[im.camera_id]
+        lens = lenses.get(im.camera_id)
+        try:  # the pose (and, for a pinhole camera, the intrinsics)
+            camera = Camera.from_colmap(cam if lens is None else pycolmap.undistort_camera(
+                pycolmap.UndistortCameraOptions(), cam), im)
         except InputError as exc:  # e.g. a truncated cameras.bin read as zero focal lengths
             raise InputError(f"{sparse / f'cameras.{ext}'}: camera {im.camera_id} of image {im.name!r}: {exc} "
                              f"(a damaged model? export it from COLMAP again)") from None
-        rel = f"{images_dir}/{im.name}"
-        rgb, alpha = _read_image(root, rel, bg, f"named by {rel_sparse}/images.{ext}")
-        camera = _fit_camera(camera, rgb, rel, scale_ok=images_dir != "images")
-        views.append((rel, camera, rgb, alpha))
+        if lens is not None:
+            rel = f"{images_dir}/{im.name}"
+            if not (root / rel).is_file():
+                raise InputError(f"{rel}: missing (named by {rel_sparse}/images.{ext})")
+            load.defer(views, rel, camera, lens)
+            continue
+        rel = f"{folder}/{im.name}"
+        views.append(load.view(rel, camera, f"named by {rel_sparse}/images.{ext}", scale_ok=folder != "images",
+                               resize=folder == images_dir))
+    load.finish()
     names = [im.name for im in images]
     split_file = root / "split.json"
     if split_file.is_file():
@@ -197,6 +315,9 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, bg: np.ndarray) -
     else:
         test_ids = list(range(0, len(names), test_every)) if test_every else []
         train_ids = sorted(set(range(len(names))) - set(test_ids))
+        if test_every:
+            load.note(f"no split.json: every {test_every}th image by sorted name is a test view ({len(test_ids)} "
+                      f"test, {len(train_ids)} train; as graphdeco's --eval)")
     points = None
     if rec.num_points3D():
         pts = [p for _, p in sorted(rec.points3D.items())]  # by point3D id
@@ -205,8 +326,8 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, bg: np.ndarray) -
                                 np.array([p.color for p in pts], dtype=np.uint8).reshape(-1, 3))
         except InputError as exc:
             raise InputError(f"{sparse / f'points3D.{ext}'}: {exc}") from None
-    return Dataset(root.resolve().name, _split(root, [views[i] for i in train_ids]),
-                   _split(root, [views[i] for i in test_ids]), points, root, "colmap")
+    return Dataset(root.resolve().name, _split(root, [views[i] for i in train_ids], load),
+                   _split(root, [views[i] for i in test_ids], load), points, root, "colmap")
 
 
 def _given_split(path: Path, names: list[str]) -> tuple[list[int], list[int]]:
@@ -239,29 +360,35 @@ def _fit_camera(camera: Camera, rgb: np.ndarray, rel: str, scale_ok: bool) -> Ca
 
 
 # ------------------------------------------------------------------------ Blender
-def _load_blender(root: Path, test_every: int, bg: np.ndarray) -> Dataset:
+def _load_blender(root: Path, test_every: int, load: _Load) -> Dataset:
     train_file, test_file, single = (root / "transforms_train.json", root / "transforms_test.json",
                                      root / "transforms.json")
     points = None
     if train_file.is_file():
         train_meta, test_meta = _read_json(train_file), _read_json(test_file) if test_file.is_file() else None
-        train = _blender_views(root, train_file.name, train_meta, bg)
-        test = _blender_views(root, test_file.name, test_meta, bg) if test_meta is not None else []
+        train = _blender_views(root, train_file.name, train_meta, load)
+        test = _blender_views(root, test_file.name, test_meta, load) if test_meta is not None else []
+        load.finish()
         for meta, file in ((train_meta, train_file), (test_meta, test_file)):
             if points is None and meta is not None and "ply_file_path" in meta:
                 points = _read_ply(root, file.name, meta["ply_file_path"])
     elif single.is_file():
         meta = _read_json(single)
-        views = _blender_views(root, single.name, meta, bg)
+        views = _blender_views(root, single.name, meta, load)
+        load.finish()
         order = sorted(range(len(views)), key=lambda i: views[i][0])
         views = [views[i] for i in order]
         train = [v for i, v in enumerate(views) if not (test_every and i % test_every == 0)]
         test = [v for i, v in enumerate(views) if test_every and i % test_every == 0]
+        if test_every and views:
+            load.note(f"{single.name} gives no split: every {test_every}th image by sorted name is a test view "
+                      f"({len(test)} test, {len(train)} train; as graphdeco's --eval)")
         if "ply_file_path" in meta:
             points = _read_ply(root, single.name, meta["ply_file_path"])
     else:
         raise InputError(f"{root / 'transforms_train.json'}: missing (nor is there a transforms.json)")
-    return Dataset(root.resolve().name, _split(root, train), _split(root, test), points, root, "blender")
+    return Dataset(root.resolve().name, _split(root, train, load), _split(root, test, load), points, root,
+                   "blender")
 
 
 def _read_json(path: Path) -> dict:
@@ -276,18 +403,23 @@ def _read_json(path: Path) -> dict:
     return data
 
 
-def _blender_views(root: Path, file: str, meta: dict, bg: np.ndarray) -> list:
+#: transforms.json keys read (top level or per frame); others are ignored with a note.
+_BLENDER_KEYS = frozenset({"frames", "file_path", "transform_matrix", "camera_angle_x", "camera_angle_y", "fl_x",
+                           "fl_y", "cx", "cy", "w", "h", "camera_model", "ply_file_path", *_DISTORTION_KEYS})
+
+
+def _blender_views(root: Path, file: str, meta: dict, load: _Load) -> list:
     shared = {k: v for k, v in meta.items() if k != "frames"}
-    views = []
+    ignored = set(shared) - _BLENDER_KEYS
+    views: list = []
     for k, frame in enumerate(meta["frames"]):
         where = f"{file}: frames[{k}]"
         if not isinstance(frame, dict) or "file_path" not in frame or "transform_matrix" not in frame:
             raise InputError(f"{where}: expected a dict with 'file_path' and 'transform_matrix'")
+        ignored |= set(frame) - _BLENDER_KEYS
         merged = {**shared, **frame}
-        _check_blender_model(where, merged)
         rel = _resolve_image(root, where, str(frame["file_path"]))
-        rgb, alpha = _read_image(root, rel, bg, f"named by {file}")
-        h, w = rgb.shape[:2]
+        w, h = _image_size(root, rel, f"named by {file}")
         if ("w" in merged or "h" in merged) and (merged.get("w"), merged.get("h")) != (w, h):
             raise InputError(f"{rel}: image size {w}x{h} disagrees with its camera "
                              f"{merged.get('w')}x{merged.get('h')} (w, h of {file})")
@@ -295,18 +427,67 @@ def _blender_views(root: Path, file: str, meta: dict, bg: np.ndarray) -> list:
             camera = Camera.from_blender(merged, merged.get("camera_angle_x"), w, h)
         except InputError as exc:
             raise InputError(f"{where}: {exc}") from None
-        views.append((rel, camera, rgb, alpha))
+        lens = _blender_lens(where, merged, camera)
+        if lens is not None:
+            load.defer(views, rel, camera, lens)
+            continue
+        parts = Path(rel).parts
+        folder = load.image_dir(parts[0]) if len(parts) > 1 else parts[0]
+        alt = Path(folder, *parts[1:]).as_posix()
+        views.append(load.view(alt, camera, f"named by {file}", scale_ok=alt != rel, resize=alt == rel))
+    if ignored:
+        load.note(f"{file}: ignored keys {', '.join(sorted(ignored))} (not used by splatbench)")
     return views
 
 
-def _check_blender_model(where: str, merged: dict) -> None:
-    model = merged.get("camera_model", "PINHOLE")
+def _blender_lens(where: str, merged: dict, camera: Camera) -> Lens | None:
+    """The frame's distorted camera as COLMAP names it, None when it has no distortion;
+    a one-line `InputError` for what COLMAP's models cannot express."""
+    coef = {}
+    for key in _DISTORTION_KEYS:
+        try:
+            coef[key] = float(merged.get(key, 0.0))
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: {key}: expected a number, got {merged.get(key)!r}") from None
+        if not np.isfinite(coef[key]):
+            raise InputError(f"{where}: {key}: expected a finite number, got {merged.get(key)!r}")
+    given = [k for k in _DISTORTION_KEYS if coef[k] != 0.0]
+    model = merged.get("camera_model", "OPENCV" if given else "PINHOLE")
+    pinhole = (camera.fx, camera.fy, camera.cx, camera.cy)
+    size = (camera.width, camera.height)
     if model in PINHOLE_MODELS:
-        return
-    if model == "OPENCV" and all(float(merged.get(k, 0.0)) == 0.0 for k in _DISTORTION_KEYS):
-        return
-    raise InputError(f"{where}: camera_model: expected PINHOLE, SIMPLE_PINHOLE or OPENCV without distortion, "
-                     f"got {model!r}" + (" with distortion" if model == "OPENCV" else ""))
+        if given:
+            raise InputError(f"{where}: camera_model {model} with distortion {', '.join(given)}: a pinhole camera "
+                             f"has none (set camera_model to OPENCV or OPENCV_FISHEYE, or remove the coefficients)")
+        return None
+    if model == "OPENCV":
+        if coef["k4"]:
+            raise InputError(f"{where}: k4: an OPENCV camera has no k4 term (COLMAP's and OpenCV's k4 divides, "
+                             f"nerfstudio's multiplies r^8); undistort the images first")
+        if not given:
+            return None
+        k1, k2, k3, p1, p2 = (coef[k] for k in ("k1", "k2", "k3", "p1", "p2"))
+        if k3:
+            return Lens("FULL_OPENCV", *size, (*pinhole, k1, k2, p1, p2, k3, 0.0, 0.0, 0.0))
+        return Lens("OPENCV", *size, (*pinhole, k1, k2, p1, p2))
+    if model == "OPENCV_FISHEYE":
+        if coef["p1"] or coef["p2"]:
+            raise InputError(f"{where}: p1, p2: an OPENCV_FISHEYE camera has no tangential terms")
+        return Lens("OPENCV_FISHEYE", *size, (*pinhole, coef["k1"], coef["k2"], coef["k3"], coef["k4"]))
+    raise InputError(f"{where}: camera_model: expected PINHOLE, SIMPLE_PINHOLE, OPENCV or OPENCV_FISHEYE, "
+                     f"got {model!r}")
+
+
+def _image_size(root: Path, rel: str, context: str) -> tuple[int, int]:
+    from PIL import Image
+
+    if not (root / rel).is_file():
+        raise InputError(f"{rel}: missing ({context})")
+    try:
+        with Image.open(root / rel) as im:
+            return im.size
+    except OSError as exc:
+        raise InputError(f"{rel}: cannot read the image ({exc})") from None
 
 
 def _resolve_image(root: Path, where: str, file_path: str) -> str:
@@ -360,7 +541,7 @@ def _depth_path(root: Path, rel: str) -> Path:
     return root / "depth" / inner.with_suffix(".npy")
 
 
-def _split(root: Path, views: list) -> Split:
+def _split(root: Path, views: list, load: _Load) -> Split:
     names = [v[0] for v in views]
     cameras = [v[1] for v in views]
     if not views:
@@ -375,7 +556,9 @@ def _split(root: Path, views: list) -> Split:
     if any(v[3] is not None for v in views):
         alphas = np.stack([v[3] if v[3] is not None else np.ones((h, w), np.float32) for v in views])
     depths = None
-    if (root / "depth").is_dir():
+    if (root / "depth").is_dir() and load.downscale > 1:
+        load.note(f"depth/: depth maps not loaded at downscale {load.downscale} (they are not resampled)")
+    elif (root / "depth").is_dir():
         maps = []
         for rel in names:
             path = _depth_path(root, rel)

@@ -21,6 +21,12 @@ from splatbench.experiments.grid import RunSpec
 from splatbench.experiments.workers import THREADS_ENV, init_worker, runner_id
 
 
+#: How often `LocalExecutor.wait` looks for dead workers, and how long one may lie dead before the
+#: pool counts as broken (a death the pool notices breaks it within milliseconds).
+DEAD_WORKER_POLL = 1.0
+DEAD_WORKER_GRACE = 10.0
+
+
 class LocalExecutor:
     """A spawn process pool with at most ``workers`` runs in flight."""
 
@@ -28,6 +34,7 @@ class LocalExecutor:
 
     def __init__(self, workers: int, threads: int):
         self.workers, self.threads = workers, threads
+        self._dead_since: float | None = None
         self.pool = self._new_pool()
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
@@ -42,8 +49,39 @@ class LocalExecutor:
         return self.pool.submit(execute_run, run, results_dir)
 
     def wait(self, futures, timeout: float | None = None) -> set:
-        done, _ = cf.wait(futures, timeout=timeout, return_when=cf.FIRST_COMPLETED)
-        return done
+        """The futures done within ``timeout`` s (at least one, unless it runs out). A worker found
+        dead for `DEAD_WORKER_GRACE` s while the pool has not noticed (CPython's pool can miss a
+        worker SIGKILLed while it held one of the pool's queue locks, and then waits forever) breaks
+        the pool here: its runs in flight end with `BrokenProcessPool`, as a noticed death does."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            step = DEAD_WORKER_POLL if deadline is None else max(0.0, min(DEAD_WORKER_POLL, deadline - time.monotonic()))
+            done, _ = cf.wait(futures, timeout=step, return_when=cf.FIRST_COMPLETED)
+            if done or (deadline is not None and time.monotonic() >= deadline):
+                return done
+            if self._dead_worker_unnoticed():
+                return self._break(futures)
+
+    def _dead_worker_unnoticed(self) -> bool:
+        dead = [p for p in (getattr(self.pool, "_processes", None) or {}).values() if p.exitcode is not None]
+        if not dead:
+            self._dead_since = None
+            return False
+        now = time.monotonic()
+        self._dead_since = self._dead_since or now
+        return now - self._dead_since >= DEAD_WORKER_GRACE
+
+    def _break(self, futures) -> set:
+        from concurrent.futures.process import BrokenProcessPool
+
+        self._dead_since = None
+        for fut in futures:
+            try:
+                fut.set_exception(BrokenProcessPool("a worker process died (killed or crashed) and the pool "
+                                                    "did not notice"))
+            except cf.InvalidStateError:  # finished or broken meanwhile
+                pass
+        return set(futures)
 
     @staticmethod
     def broken(exc: BaseException) -> bool:
@@ -62,7 +100,14 @@ class LocalExecutor:
             pass
 
     def restart(self) -> None:
+        """A new pool. The old one's workers are stopped, as CPython stops them when it notices a
+        broken pool itself (one may be blocked on a lock a killed worker held, and would otherwise
+        outlive the runner); its manager thread is not waited for."""
+        for proc in list((getattr(self.pool, "_processes", None) or {}).values()):
+            if proc.is_alive():
+                proc.kill()
         self._shutdown(wait=False, cancel_futures=True)
+        self._dead_since = None
         self.pool = self._new_pool()
 
     def close(self, cancel: bool = False) -> None:

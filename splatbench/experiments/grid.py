@@ -99,7 +99,7 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
     if scene_source is not None:
         known = scene_source()
         for scene in spec.scenes:
-            if scene not in known:
+            if scene not in known and scene not in spec.scene_sources:
                 raise InputError(f"{spec.source}: scenes: unknown scene {scene!r} "
                                  f"(known: {', '.join(sorted(known)) or 'none'})")
 
@@ -125,7 +125,7 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
             for _, _, settings, _ in cell:
                 flat_cell = override(flat_cell, settings)
             for seed in spec.seeds:
-                flat = {**flat_cell, "scene": scene, "seed": seed}
+                flat = {**flat_cell, **_source(spec, scene), "scene": scene, "seed": seed}
                 problem = check(flat)
                 if problem is not None:
                     raise InputError(f"{spec.source}: {_culprit(spec, cell, scene, seed, check)}: {problem}")
@@ -149,6 +149,11 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
     return runs
 
 
+def _source(spec: ExperimentSpec, scene: str) -> dict[str, Any]:
+    """A scene table's fields as flat ``data.*`` keys (they win over the base's)."""
+    return {f"data.{k}": v for k, v in spec.scene_sources.get(scene, {}).items()}
+
+
 def _label(resolved: Mapping[str, Any], path: str) -> Any:
     """A plain axis's label: the resolved config's value at its path (a sub-table as JSON)."""
     if path in resolved:
@@ -160,7 +165,7 @@ def _label(resolved: Mapping[str, Any], path: str) -> Any:
 
 def _culprit(spec: ExperimentSpec, cell, scene: str, seed: int, check) -> str:
     """Where in the file a rejected config comes from: base, one axis value, or the cell."""
-    base = {**spec.base, "scene": scene, "seed": seed}
+    base = {**spec.base, **_source(spec, scene), "scene": scene, "seed": seed}
     if check(base) is not None:
         return "base"
     for _, _, settings, where in cell:

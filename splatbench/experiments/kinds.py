@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from splatbench.checks import check_keys
 from splatbench.errors import InputError
 from splatbench.experiments.configs import flatten, override, unflatten
 from splatbench.experiments.kind_report import KindReport
@@ -112,6 +113,7 @@ DUMMY_DEFAULTS: dict[str, Any] = {
     "n": 3,          # curve length (>= 1)
     "mode": "ok",    # "ok", "fail" (raise) or "crash" (the worker process exits at once)
     "sleep": 0.0,    # seconds to sleep before computing
+    "gate": "",      # a folder: the run waits there for a token (see `_pass_gate`); "" = no gate
     "opts": {"a": 0, "b": "p"},  # a nested table, for dotted keys
 }
 DUMMY_SCENES = frozenset({"alpha", "beta", "gamma"})
@@ -119,9 +121,8 @@ DUMMY_SCENES = frozenset({"alpha", "beta", "gamma"})
 
 def _dummy_validate(config: dict[str, Any]) -> None:
     known = {**flatten(DUMMY_DEFAULTS), "scene": "", "seed": 0}
+    check_keys(flatten(config), known)
     for key, value in flatten(config).items():
-        if key not in known:
-            raise InputError(f"{key}: unknown config field (known: {', '.join(sorted(known))})")
         expected = type(known[key])
         ok = (isinstance(value, (int, float)) and not isinstance(value, bool)) if expected is float \
             else isinstance(value, expected) and not (expected is int and isinstance(value, bool))
@@ -142,11 +143,33 @@ def _dummy_resolve(config: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _pass_gate(gate: Path) -> None:
+    """Block until the test holding ``gate`` lets this run through: a file ``open`` there
+    lets every run pass; a file ``token-*`` lets one run pass (the run takes it by
+    renaming it). While waiting, the run marks itself ``waiting-<pid>``, so a test knows
+    a run is in flight in this process before it injects a fault."""
+    marker = gate / f"waiting-{os.getpid()}"
+    marker.touch()
+    while not (gate / "open").exists():
+        for token in sorted(gate.glob("token-*")):
+            try:
+                os.rename(token, gate / f"used-{os.getpid()}-{token.name}")
+            except FileNotFoundError:  # another run took it first
+                continue
+            marker.unlink(missing_ok=True)
+            return
+        time.sleep(0.02)
+    marker.unlink(missing_ok=True)
+
+
 def _dummy_run(config: dict[str, Any], workdir: Path) -> RunOutput:
-    """Deterministic numbers from the config; sleeps, raises or kills its process on demand."""
+    """Deterministic numbers from the config; sleeps, waits at a gate, raises or kills
+    its process on demand."""
     import numpy as np
 
     time.sleep(config["sleep"])
+    if config["gate"]:
+        _pass_gate(Path(config["gate"]))
     if config["mode"] == "fail":
         raise RuntimeError(f"dummy run told to fail (scene {config['scene']}, seed {config['seed']})")
     if config["mode"] == "crash":

@@ -74,12 +74,13 @@ import math
 import os
 import statistics
 import sys
+import typing
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from splatbench.checks import check_sh_degree
+from splatbench.checks import check_keys, check_sh_degree, check_type
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
@@ -153,21 +154,16 @@ METRICS: dict[str, str] = {
 # --------------------------------------------------------------------------- config
 def validate(config: dict[str, Any]) -> None:
     """One-line `InputError` naming the first bad field."""
-    import difflib
-
-    known = sorted({*DEFAULTS, "scene", "seed"})
+    check_keys(config, {*DEFAULTS, "scene", "seed"})
     for key, value in config.items():
-        if key not in known:
-            close = difflib.get_close_matches(key, known, n=1)
-            raise InputError(f"{key}: unknown key {key!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
         if isinstance(value, dict):
             raise InputError(f"{key}: expected a value, got a table")
     parse_workload_name(str(config.get("scene", "")))
     merged = {**DEFAULTS, **config}
     for key in OPTION_FIELDS:  # the value's type, from RasterOptions' annotation; its ranges: RasterOptions
-        _check_type(key, merged[key], _OPTION_TYPES[key])
-    _check_type("repeats", merged["repeats"], "int")
-    _check_type("error_scale", merged["error_scale"], "float")
+        check_type(key, merged[key], _OPTION_TYPES[key])
+    check_type("repeats", merged["repeats"], int)
+    check_type("error_scale", merged["error_scale"], float)
     check_sh_degree("sh_degree", merged["sh_degree"])
     if merged["repeats"] < MIN_PAIRS:
         raise InputError(f"repeats: expected at least {MIN_PAIRS} timed pairs (a bootstrap interval of the median "
@@ -177,28 +173,15 @@ def validate(config: dict[str, Any]) -> None:
     RasterOptions.from_kwargs(**{k: merged[k] for k in OPTION_FIELDS})  # names the bad option
 
 
-#: Option field -> its annotation in `RasterOptions` ("int", "float", "str", "bool").
-_OPTION_TYPES = {f.name: f.type for f in dataclasses.fields(RasterOptions) if f.name in OPTION_FIELDS}
-
-
-def _check_type(key: str, value: Any, kind: str) -> None:
-    """One-line `InputError` unless ``value`` is a ``kind`` ("int", "float": finite, "bool", "str")."""
-    if kind == "int" and (not isinstance(value, int) or isinstance(value, bool)):
-        raise InputError(f"{key}: expected an int, got {value!r}")
-    if kind == "float" and (not isinstance(value, (int, float)) or isinstance(value, bool)
-                            or not math.isfinite(value)):
-        raise InputError(f"{key}: expected a finite number, got {value!r}")
-    if kind == "bool" and not isinstance(value, bool):
-        raise InputError(f"{key}: expected true or false, got {value!r}")
-    if kind == "str" and not isinstance(value, str):
-        raise InputError(f"{key}: expected a string, got {value!r}")
+#: Option field -> its annotation in `RasterOptions` (int, float, str, bool).
+_OPTION_TYPES = {k: t for k, t in typing.get_type_hints(RasterOptions).items() if k in OPTION_FIELDS}
 
 
 def resolve(config: dict[str, Any]) -> dict[str, Any]:
     """Every field filled in; numbers normalised (``alpha_min = 1`` and ``1.0`` are one run);
     ``protocol`` (`PROTOCOL`) added."""
     out = {**DEFAULTS, **config, "protocol": PROTOCOL}
-    for key in (*(k for k, t in _OPTION_TYPES.items() if t == "float"), "error_scale"):
+    for key in (*(k for k, t in _OPTION_TYPES.items() if t is float), "error_scale"):
         out[key] = float(out[key])
     return out
 

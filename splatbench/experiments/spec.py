@@ -5,7 +5,9 @@ sweep it (docs/experiments.md has the full format)::
 
     name = "densification"            # results/<name>/ (default: the file's stem)
     kind = "train"                    # a registered run kind (splatbench.experiments.kinds)
-    scenes = ["diffuse", "glossy"]
+    scenes = ["diffuse", "glossy",    # catalog names, dataset folders, teacher models:
+              { name = "fox", path = "../shared/data/fox", downscale = 8 },
+              { name = "guitar", model = "pc_guitar.ply", views = 64, resolution = 128 }]
     seeds = [0, 1, 2]
     grid = "product"                  # or "one-at-a-time"
 
@@ -46,6 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from splatbench.checks import unknown_key_problem
 from splatbench.errors import InputError
 from splatbench.experiments.configs import FIELD_KEY, canonical_json, check_value, flatten
 
@@ -99,6 +102,8 @@ class ExperimentSpec:
     description: str = ""
     runner: RunnerDefaults = field(default_factory=RunnerDefaults)
     source: str = "experiment"
+    scene_sources: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)  # name -> its table's
+    #   ``data`` fields (``path``/``downscale`` or ``model``/``views``/``resolution``/``up``), paths absolute
 
     @property
     def dimensions(self) -> list[str]:
@@ -118,7 +123,7 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
 
     for key in data:
         if key not in TOP_LEVEL_FIELDS:
-            raise fail(key, f"unknown field (expected one of: {', '.join(TOP_LEVEL_FIELDS)})")
+            raise fail(key, unknown_key_problem(key, TOP_LEVEL_FIELDS))
 
     name = data.get("name", default_name)
     if not isinstance(name, str) or not _NAME.match(name):
@@ -133,12 +138,19 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
     if grid not in GRID_MODES:
         raise fail("grid", f"expected one of {', '.join(map(repr, GRID_MODES))}, got {grid!r}")
 
-    scenes = data.get("scenes")
-    if not isinstance(scenes, list) or not scenes:
-        raise fail("scenes", f"expected a non-empty list of scene names, got {scenes!r}")
-    for s in scenes:
-        if not isinstance(s, str) or not s:
-            raise fail("scenes", f"expected scene names (strings), got {s!r}")
+    entries = data.get("scenes")
+    if not isinstance(entries, list) or not entries:
+        raise fail("scenes", f"expected a non-empty list of scene names or tables, got {entries!r}")
+    scenes, scene_sources = [], {}
+    for i, s in enumerate(entries):
+        if isinstance(s, Mapping):
+            scene_name, fields = _scene_table(s, f"scenes[{i}]", fail, base_dir)
+            scenes.append(scene_name)
+            scene_sources[scene_name] = fields
+        elif isinstance(s, str) and s:
+            scenes.append(s)
+        else:
+            raise fail("scenes", f"expected scene names (strings) or tables, got {s!r}")
     _no_duplicates(scenes, "scenes", fail)
     seeds = data.get("seeds", [0])
     if not isinstance(seeds, list) or not seeds:
@@ -199,7 +211,54 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
 
     runner = _parse_runner(data.get("runner", {}), fail, source, base_dir)
     return ExperimentSpec(name=name, kind=kind, scenes=tuple(scenes), seeds=tuple(seeds), base=base, axes=axes,
-                          variants=variants, grid=grid, description=description, runner=runner, source=source)
+                          variants=variants, grid=grid, description=description, runner=runner, source=source,
+                          scene_sources=scene_sources)
+
+
+#: Keys of a scene table: a dataset folder or a teacher model (besides ``name``).
+FOLDER_SCENE_KEYS = ("path", "downscale")
+TEACHER_SCENE_KEYS = ("model", "views", "resolution", "up")
+
+
+def _scene_table(table: Mapping[str, Any], where: str, fail, base_dir: Path | None) -> tuple[str, dict[str, Any]]:
+    """``{ name, path, downscale }`` or ``{ name, model, views, resolution, up }`` -> (name, the
+    run's ``data`` fields); relative paths resolve against the experiment file's folder."""
+    name = table.get("name")
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise fail(f"{where}.name", f"expected a folder-safe scene name, got {name!r}")
+    where = f"scenes.{name}"
+    kind_keys = FOLDER_SCENE_KEYS if "path" in table else TEACHER_SCENE_KEYS if "model" in table else None
+    if kind_keys is None or ("path" in table and "model" in table):
+        raise fail(where, "expected exactly one of 'path' (a dataset folder) or 'model' (a 3DGS PLY rendered as a "
+                          "teacher scene)")
+    for key in table:
+        if key != "name" and key not in kind_keys:
+            raise fail(f"{where}.{key}", f"unknown key (a {'dataset folder' if 'path' in table else 'teacher'} "
+                                         f"scene takes: name, {', '.join(kind_keys)})")
+    fields: dict[str, Any] = {}
+    for key, value in table.items():
+        if key in ("path", "model"):
+            if not isinstance(value, str) or not value:
+                raise fail(f"{where}.{key}", f"expected a path, got {value!r}")
+            p = Path(value).expanduser()
+            if base_dir is not None and not p.is_absolute():
+                p = base_dir / p
+            p = p.resolve()
+            if key == "path" and not p.is_dir():
+                raise fail(f"{where}.path", f"{str(p)!r} is not a dataset folder")
+            if key == "model" and not p.is_file():
+                raise fail(f"{where}.model", f"{str(p)!r} is not a file (give a 3DGS PLY)")
+            fields[key] = str(p)
+        elif key == "up":
+            if not (isinstance(value, list) and len(value) == 3
+                    and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+                raise fail(f"{where}.up", f"expected 3 numbers, got {value!r}")
+            fields[key] = [float(v) for v in value]
+        elif key != "name":
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise fail(f"{where}.{key}", f"expected an int >= 1, got {value!r}")
+            fields[key] = value
+    return name, fields
 
 
 def _flatten_axes(table: Mapping[str, Any], prefix: str, fail) -> dict[str, list]:
@@ -229,7 +288,7 @@ def _parse_runner(table: Any, fail, source: str, base_dir: Path | None) -> Runne
         raise fail("runner", f"expected a table, got {table!r}")
     for key in table:
         if key not in RUNNER_FIELDS:
-            raise fail(f"runner.{key}", f"unknown field (expected one of: {', '.join(RUNNER_FIELDS)})")
+            raise fail(f"runner.{key}", unknown_key_problem(key, RUNNER_FIELDS))
     workers = table.get("workers")
     if workers is not None and (not isinstance(workers, int) or isinstance(workers, bool) or workers < 1):
         raise fail("runner.workers", f"expected an int >= 1, got {workers!r}")
@@ -266,4 +325,4 @@ def _no_duplicates(values: list, where: str, fail) -> None:
 
 
 __all__ = ["ExperimentSpec", "RunnerDefaults", "TOP_LEVEL_FIELDS", "RUNNER_FIELDS", "GRID_MODES", "EXECUTORS",
-           "RESERVED_KEYS", "parse_experiment", "check_scheduler"]
+           "RESERVED_KEYS", "FOLDER_SCENE_KEYS", "TEACHER_SCENE_KEYS", "parse_experiment", "check_scheduler"]

@@ -1,8 +1,15 @@
-"""The ``train`` run kind: one `splatbench.train.train` run on a rendered catalog scene.
+"""The ``train`` run kind: one `splatbench.train.train` run on a catalog scene, a dataset folder
+or a teacher scene.
 
 Config (the nested dict an experiment gives one run)::
 
     scene, seed          from the experiment's ``scenes`` / ``seeds`` (``seed`` is TrainConfig.seed)
+    data.path            a dataset folder (a scene table ``{ name, path, downscale }``)
+    data.downscale       its image size divided by N (TrainConfig.data.downscale; default 1)
+    data.model           a 3DGS PLY rendered as a teacher scene (``{ name, model, views,
+                         resolution, up }``; splatbench.experiments.teacher), with data.views
+                         (default 64), data.resolution (default 128) and data.up (default:
+                         the PLY's hint, else -y)
     data.resolution      dataset image width in pixels (default: the scene rig's)
     data.views           views rendered, every 8th held out for testing (default: the rig's total)
     data.spp             Mitsuba samples per pixel (default: the rig's)
@@ -11,6 +18,11 @@ Config (the nested dict an experiment gives one run)::
                          every run's test PSNR; docs/training.md)
     <any TrainConfig field> but ``dataset`` and ``out``, which are machine-specific:
                          the kind sets them (the dataset folder, the run's work folder)
+
+The ``data`` keys describe a scene: a key that does not apply to a run's scene type
+(``spp`` for a teacher, ``resolution`` for a dataset folder, ``downscale`` for a rendered
+scene) is left out of that run's resolved config, so a grid mixing the types can set
+``data.resolution`` in its base; a scene table's own keys win over the base's.
 
 `resolve` fills every default in -- TrainConfig's, the rig's for ``data``, and the
 strategy's own fields for ``strategy_options`` -- so a field written at its default
@@ -34,7 +46,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from splatbench.checks import check_image_size
+from splatbench.checks import check_image_size, check_keys
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
@@ -47,6 +59,10 @@ DATASETS_ENV = "SPLATBENCH_DATASETS"
 OWNED_FIELDS = ("dataset", "out")
 #: The ``data`` table: how the scene is rendered into a dataset.
 DATA_FIELDS = ("resolution", "views", "spp", "test_spp")
+#: ``data`` keys of a dataset folder and of a teacher scene.
+FOLDER_FIELDS = ("path", "downscale")
+TEACHER_FIELDS = ("model", "views", "resolution", "up")
+TEACHER_DEFAULTS = {"views": 64, "resolution": 128}
 
 #: Metric name -> meaning (every one comes from `splatbench.train.TrainResult`).
 METRICS: dict[str, str] = {
@@ -63,7 +79,8 @@ METRICS: dict[str, str] = {
     "peak_rss_mb": "peak resident memory of the worker process (MB)",
     "iterations": "steps run",
     "test_views": "views evaluated",
-    "dataset_hash": "content hash of the rendered dataset (scene files, settings, renderer)",
+    "dataset_hash": "content hash of the rendered dataset (scene files or teacher PLY, settings, renderer); "
+                    "None for a dataset folder",
     "cpu_seconds": "CPU seconds of the worker process (all threads) over the optimisation loop",
     "load_before": "1-minute load average when the run started (before warm-up)",
     "load_after": "1-minute load average after the final evaluation",
@@ -87,8 +104,6 @@ def _train_fields() -> tuple[str, ...]:
 def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]:
     """(scene, the ``data`` table, the TrainConfig fields) of a nested run config; one-line
     `InputError` naming the field for anything unknown."""
-    import difflib
-
     fields = _train_fields()
     known = sorted({*fields, "scene", "data"} - set(OWNED_FIELDS))
     for key in config:
@@ -96,19 +111,20 @@ def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]
             what = "the rendered scene" if key == "dataset" else "the run's folder"
             raise InputError(f"{key}: set by the train kind ({what}); choose the scene with 'scenes' and its "
                              f"rendering with data.resolution / data.views / data.spp / data.test_spp")
-        if key not in known:
-            close = difflib.get_close_matches(key, known, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise InputError(f"{key}: unknown key {key!r}{hint}")
+    check_keys(config, known)
     scene = config.get("scene")
     if not isinstance(scene, str) or not scene:
         raise InputError(f"scene: expected a scene name, got {scene!r}")
     data = config.get("data", {})
     if not isinstance(data, dict):
         raise InputError(f"data: expected a table of {', '.join(DATA_FIELDS)}, got {data!r}")
+    kind = scene_type(data)
+    allowed = {"catalog": DATA_FIELDS, "folder": FOLDER_FIELDS, "teacher": TEACHER_FIELDS}[kind]
+    check_keys(data, (*DATA_FIELDS, *FOLDER_FIELDS, *TEACHER_FIELDS), prefix="data.")
+    data = {k: v for k, v in data.items() if k in allowed}  # keys of other scene types: module doc
     for key, value in data.items():
-        if key not in DATA_FIELDS:
-            raise InputError(f"data.{key}: unknown key (known: {', '.join(DATA_FIELDS)})")
+        if key in ("path", "model", "up"):
+            continue
         if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
             raise InputError(f"data.{key}: expected an int >= 1, got {value!r}")
     if data.get("resolution") is not None:  # the width; checked as a square image (the rigs are square)
@@ -117,6 +133,11 @@ def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]
         raise InputError(f"data.views: expected at least 2 views (one is held out), got {data['views']}")
     train = {k: v for k, v in config.items() if k not in ("scene", "data")}
     return scene, data, train
+
+
+def scene_type(data: dict[str, Any]) -> str:
+    """"folder" (``data.path``), "teacher" (``data.model``) or "catalog"."""
+    return "folder" if "path" in data else "teacher" if "model" in data else "catalog"
 
 
 def _train_config(train: dict[str, Any]):
@@ -162,8 +183,10 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
     from splatbench.scenes.catalog import get_scene
 
     scene, data, train = _split(config)
+    kind = scene_type(data)
+    if kind == "folder":
+        train = {**train, "data": {"downscale": data.get("downscale") or 1}}
     cfg = _train_config(train)
-    rig = get_scene(scene).rig
     out = {k: v for k, v in cfg.to_dict().items() if k not in OWNED_FIELDS}
     if cfg.sh_degree != "auto":  # read only by sh_degree="auto": left out, so fixed-degree run ids are unchanged
         del out["sh_auto_lookahead"]
@@ -172,6 +195,15 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
             del out[name]
     out["strategy_options"] = _strategy_options(cfg)
     out["scene"] = scene
+    if kind == "folder":
+        out["data"] = {"path": data["path"], "downscale": cfg.downscale}
+        return out
+    if kind == "teacher":
+        out["data"] = {"model": data["model"], **{k: data.get(k) or v for k, v in TEACHER_DEFAULTS.items()}}
+        if data.get("up") is not None:
+            out["data"]["up"] = data["up"]
+        return out
+    rig = get_scene(scene).rig
     out["data"] = {
         "resolution": data.get("resolution") or int(rig.resolution[0]),
         "views": data.get("views") or int(rig.train_views + rig.test_views),
@@ -204,31 +236,70 @@ def dataset_folder(scene: str, data: dict[str, Any]) -> Path:
 
 
 def ensure_dataset(scene: str, data: dict[str, Any], *, progress: bool = False):
-    """Render (or find in the cache) the dataset of one run; `RenderedDataset`."""
+    """The dataset of one run (a resolved ``data`` table), rendered or found in the cache:
+    `RenderedDataset` for a catalog scene, `TeacherDataset` for a teacher; a dataset
+    folder is returned as it is (a `FolderDataset`)."""
+    kind = scene_type(data)
+    if kind == "folder":
+        return FolderDataset(Path(data["path"]), True, None, 0.0)
+    if kind == "teacher":
+        from splatbench.experiments.teacher import render_teacher
+
+        out = datasets_dir() / f"teacher-{scene}-{data['resolution']}-v{data['views']}"
+        return render_teacher(data["model"], out, views=data["views"], resolution=data["resolution"],
+                              up=data.get("up"), progress=progress)
     from splatbench.scenes.render import render_dataset
 
     return render_dataset(scene, dataset_folder(scene, data), resolution=data["resolution"], views=data["views"],
                           spp=data["spp"], test_spp=data.get("test_spp"), progress=progress)
 
 
+@dataclasses.dataclass(frozen=True)
+class FolderDataset:
+    """A user's dataset folder in a grid (nothing is rendered; ``hash`` None)."""
+
+    path: Path
+    cached: bool
+    hash: str | None
+    seconds: float
+
+
 def prepare(configs: list[dict[str, Any]]) -> None:
-    """Render every dataset the pending runs need, once, in the parent (cached), and
-    export the datasets folder to the workers."""
+    """Render every dataset the pending runs need, once, in the parent (cached), load
+    every dataset folder once (undistortion is cached then), and export the datasets
+    folder to the workers."""
     os.environ[DATASETS_ENV] = str(datasets_dir())
-    seen: set[tuple] = set()
+    seen: set[str] = set()
     for config in configs:
-        key = (config["scene"], tuple(sorted(config["data"].items())))
+        from splatbench.experiments.configs import canonical_json
+
+        key = canonical_json([config["scene"], config["data"]])
         if key in seen:
             continue
         seen.add(key)
         data = config["data"]
-        result = ensure_dataset(config["scene"], data, progress=sys.stderr.isatty())
-        how = "cached" if result.cached else f"rendered in {result.seconds:.1f} s"
-        spp = f"{data['spp']} spp" + (f" (test views {data['test_spp']})" if data.get("test_spp") else "")
-        print(f"dataset {config['scene']} {data['resolution']}px, {data['views']} views, {spp}: "
-              f"{how} ({result.path})", file=sys.stderr, flush=True)
+        kind = scene_type(data)
+        if kind == "folder":
+            from splatbench.data import load_dataset
+
+            ds = load_dataset(data["path"], downscale=data["downscale"],
+                              say=lambda line: print(line, file=sys.stderr, flush=True))
+            print(f"dataset {config['scene']}: {data['path']} (downscale {data['downscale']}: "
+                  f"{len(ds.train)} train, {len(ds.test)} test views)", file=sys.stderr, flush=True)
+            path = Path(data["path"])
+        else:
+            result = ensure_dataset(config["scene"], data, progress=sys.stderr.isatty())
+            how = "cached" if result.cached else f"rendered in {result.seconds:.1f} s"
+            if kind == "teacher":
+                what = f"teacher {data['model']} {data['resolution']}px, {data['views']} views, up {list(result.up)} " \
+                       f"({result.up_source})"
+            else:
+                what = f"{data['resolution']}px, {data['views']} views, {data['spp']} spp" + \
+                    (f" (test views {data['test_spp']})" if data.get("test_spp") else "")
+            print(f"dataset {config['scene']} {what}: {how} ({result.path})", file=sys.stderr, flush=True)
+            path = result.path
         if any(c.get("init") == "sfm" and c["scene"] == config["scene"] and c["data"] == data for c in configs):
-            _prepare_sfm(result.path)
+            _prepare_sfm(path)
 
 
 def _prepare_sfm(path: Path) -> None:
@@ -254,13 +325,15 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     limit_threads()
     scene, data, fields = _split(config)
     dataset = ensure_dataset(scene, data)
+    if scene_type(data) == "folder":
+        fields = {**fields, "data": {"downscale": data["downscale"]}}
     cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="config")
     result = train(cfg)  # validated on construction
     metrics = {
         "test_psnr": result.test_psnr, "test_ssim": result.test_ssim, "num_gaussians": result.num_gaussians,
         "train_seconds": result.train_seconds, "render_ms_per_view": result.render_ms_per_view,
         "sh_degree": result.sh_degree, "peak_rss_mb": result.peak_rss_mb, "iterations": result.iterations,
-        "test_views": result.test_views, "dataset_hash": dataset.hash[:16],
+        "test_views": result.test_views, "dataset_hash": dataset.hash[:16] if dataset.hash else None,
         "test_lpips": result.test_lpips, "lpips_net": result.lpips_net,
         "lpips_scale_inputs": int(result.lpips_scale_inputs), "cpu_seconds": result.cpu_seconds,
         **{k: result.load[k] for k in ("load_before", "load_after", "load_other", "cores")},
@@ -299,7 +372,7 @@ REPORT = KindReport(
 )
 
 TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scenes=scenes, prepare=prepare,
-                description="train 3DGS on a rendered catalog scene (splatbench.train)", report=REPORT)
+                description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT)
 
 __all__ = ["TRAIN", "REPORT", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "datasets_dir", "dataset_folder",
            "ensure_dataset"]

@@ -29,6 +29,10 @@ from splatbench.errors import InputError
 SHIFT = (-0.030, -0.088, -0.188)
 SCALE = (0.458, 0.448, 0.450)
 #: net name -> (checkpoint file, backbone key in it)
+#: Smallest image side each net takes. AlexNet: conv 11/4 pad 2 -> pool 3/2 -> conv 5 pad 2 -> pool
+#: 3/2 needs the second pool's input >= 3, i.e. floor((s - 7) / 4) + 1 >= 7, s >= 31. VGG-16: four
+#: 2/2 pools before relu5_3, s >= 16.
+MIN_SIDE = {"alex": 31, "vgg": 16}
 NETS = {"alex": ("alexnet.ckpt", "AlexNet_0"), "vgg": ("vgg16.ckpt", "VGG16_0")}
 #: VGG-16 features: convs per block (LPIPS taps relu1_2, relu2_2, relu3_3, relu4_3, relu5_3).
 VGG_BLOCKS = (2, 2, 3, 3, 3)
@@ -202,8 +206,8 @@ def lpips(pred, target, *, net: str = "alex", scale_inputs: bool = True) -> floa
     tensors or NumPy arrays, the same shape. ``pred`` is clamped to [0, 1] (a model's display
     image). ``net``: "alex" or "vgg". ``scale_inputs=True`` maps [0, 1] to [-1, 1] as the
     ``lpips`` package expects (gsplat, NerfBaselines); ``False`` feeds [0, 1] unscaled, as
-    graphdeco's ``metrics.py`` does (its published LPIPS-VGG figures use this). Images under
-    ~16 px per side are refused (AlexNet's first layers need them).
+    graphdeco's ``metrics.py`` does (its published LPIPS-VGG figures use this). Images smaller
+    than the net's receptive chain (`MIN_SIDE`: 31 px per side for AlexNet, 16 for VGG) are refused.
     """
     _check_net(net)
     p = (pred if isinstance(pred, torch.Tensor) else torch.from_numpy(np.asarray(pred))).detach().cpu()
@@ -212,8 +216,9 @@ def lpips(pred, target, *, net: str = "alex", scale_inputs: bool = True) -> floa
     if p.shape != t.shape or p.dim() not in (3, 4) or p.shape[-1] != 3:
         raise InputError(f"lpips: expected pred and target of one shape [H, W, 3] or [B, H, W, 3], "
                          f"got {tuple(p.shape)} and {tuple(t.shape)}")
-    if min(p.shape[-3:-1]) < 16:
-        raise InputError(f"lpips: images of {p.shape[-3]}x{p.shape[-2]} px are too small (at least 16 per side)")
+    if min(p.shape[-3:-1]) < MIN_SIDE[net]:
+        raise InputError(f"lpips: images of {p.shape[-3]}x{p.shape[-2]} px are too small for net={net!r} "
+                         f"(at least {MIN_SIDE[net]} px per side)")
     if not (torch.isfinite(p).all() and torch.isfinite(t).all()):
         raise InputError("lpips: pred or target has NaN or inf values")
     if t.min() < 0 or t.max() > 1:

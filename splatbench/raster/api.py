@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from splatbench.errors import InputError
 from splatbench.raster.device import dr, get_device
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import (check_background, check_clip_planes, check_sh_range, frame_to_numpy,
-                                       render_frame, resolve_sh_degree)
+from splatbench.raster.pipeline import (check_background, check_sh_range, check_view, frame_to_numpy, render_frame,
+                                       resolve_sh_degree)
+
+if TYPE_CHECKING:
+    from splatbench.cameras import Camera
+    from splatbench.gaussians import Gaussians
 
 
 @dataclass(frozen=True)
@@ -23,11 +28,11 @@ class RenderResult:
     pairs composited; sh_degree: the degree evaluated.
     """
 
-    rgb: np.ndarray
-    alpha: np.ndarray
-    depth: np.ndarray
-    radii: np.ndarray
-    visible: np.ndarray
+    rgb: np.ndarray      # [H, W, 3]
+    alpha: np.ndarray    # [H, W]
+    depth: np.ndarray    # [H, W]
+    radii: np.ndarray    # [N]
+    visible: np.ndarray  # [N]
     num_pairs: int
     sh_degree: int
 
@@ -37,8 +42,14 @@ def to_tensor(m, array: np.ndarray):
     return m.TensorXf(np.array(array, dtype=np.float32, order="C"))
 
 
-def render(gaussians, camera, *, sh_degree: int | None = None, background=(0.0, 0.0, 0.0),
-           **options) -> RenderResult:
+def render(
+    gaussians: Gaussians,          # N Gaussians, SH with K bases
+    camera: Camera,                # width W, height H
+    *,
+    sh_degree: int | None = None,
+    background=(0.0, 0.0, 0.0),
+    **options,
+) -> RenderResult:                 # rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N], visible [N]
     """Render ``gaussians`` seen from ``camera`` with the Dr.Jit tile rasterizer.
 
     Args:
@@ -57,17 +68,12 @@ def render(gaussians, camera, *, sh_degree: int | None = None, background=(0.0, 
         >>> res.rgb.shape, res.alpha.shape, res.radii.shape
         ((H, W, 3), (H, W), (N,))
     """
-    from splatbench.cameras import Camera
-    from splatbench.checks import check_image_size
     from splatbench.gaussians import Gaussians
 
     if not isinstance(gaussians, Gaussians):
         raise InputError(f"gaussians: expected splatbench.Gaussians, got {type(gaussians).__name__}")
-    if not isinstance(camera, Camera):
-        raise InputError(f"camera: expected splatbench.Camera, got {type(camera).__name__}")
     opts = RasterOptions.from_kwargs(**options)
-    check_clip_planes(camera, opts)
-    check_image_size(camera.width, camera.height, field="camera width, height")
+    check_view(camera, opts)
     degree = resolve_sh_degree(gaussians.sh.shape[1], sh_degree)
     if gaussians.sh.size:
         flat = int(np.argmax(np.abs(gaussians.sh)))

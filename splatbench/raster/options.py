@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields, replace
 
+from splatbench.checks import check_keys
 from splatbench.devices import check_device
 from splatbench.errors import InputError
 
@@ -52,8 +53,5 @@ class RasterOptions:
     @classmethod
     def from_kwargs(cls, base: RasterOptions | None = None, **kwargs) -> RasterOptions:
         """Build options from keyword arguments, naming any unknown one."""
-        known = {f.name for f in fields(cls)}
-        for key in kwargs:
-            if key not in known:
-                raise InputError(f"{key}: unknown rasterizer option (known: {', '.join(sorted(known))})")
+        check_keys(kwargs, (f.name for f in fields(cls)))
         return replace(base or cls(), **kwargs)

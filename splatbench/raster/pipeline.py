@@ -6,7 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from splatbench.checks import check_sh_degree
+from splatbench.checks import check_image_size, check_sh_degree
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES_OF_DEGREE
 from splatbench.raster.device import dr
@@ -74,6 +74,19 @@ def clip_planes(camera, options: RasterOptions) -> tuple[float, float]:
     near = camera.near if options.near is None else options.near
     far = camera.far if options.far is None else options.far
     return near, far
+
+
+def check_view(camera, options: RasterOptions) -> None:
+    """The one camera check of `render` and `rasterize`, before any work: ``camera`` is a
+    `splatbench.Camera` (whose fields were checked when it was built, and whose matrix is
+    read-only since), its image size fits Dr.Jit and the memory available now, and the
+    clip planes in effect have near < far. One-line `InputError` otherwise."""
+    from splatbench.cameras import Camera
+
+    if not isinstance(camera, Camera):
+        raise InputError(f"camera: expected splatbench.Camera, got {type(camera).__name__}")
+    check_image_size(camera.width, camera.height, field="camera width, height")
+    check_clip_planes(camera, options)
 
 
 def check_clip_planes(camera, options: RasterOptions) -> None:
@@ -170,4 +183,4 @@ def frame_to_numpy(frame: Frame, height: int, width: int) -> tuple[np.ndarray, n
 
 
 __all__ = ["Frame", "render_frame", "project_view", "frame_to_numpy", "resolve_sh_degree", "check_background",
-           "check_clip_planes", "Composite"]
+           "check_clip_planes", "check_view", "Composite"]

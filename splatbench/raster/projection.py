@@ -18,17 +18,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from splatbench.conventions import BIG_FACTOR, JACOBIAN_GUARD, LOG_SCALE_CLIP, QUAT_MIN
 from splatbench.raster.device import dr
 from splatbench.raster.options import RasterOptions
 
 #: The rasterizer's defaults: one source, `RasterOptions` (graphdeco's values).
 DEFAULTS = RasterOptions()
 
-# The oracle's names (reference/project.py), same values.
-LOG_SCALE_CLIP = 20.0        # exp(20)^2 * J^2 stays finite in float32 for any sane camera
-BIG_FACTOR = 1e4             # cull a Gaussian whose 2D std exceeds 1e4 image sizes
-JACOBIAN_GUARD = 0.3         # graphdeco's guard band (fraction of the half field of view)
-QUAT_MIN = 1e-20             # smaller quaternions count as zero: their gradient ~1/|q| overflows float32
 
 
 class Projection(NamedTuple):

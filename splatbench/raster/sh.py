@@ -6,15 +6,11 @@ so unused bands cost neither time nor gradient work.
 
 from __future__ import annotations
 
+from splatbench.conventions import SH_C0, SH_C1, SH_C2, SH_C3
 from splatbench.raster.device import dr
 from splatbench.raster.projection import array_namespace
 
-C0 = 0.28209479177387814
-C1 = 0.4886025119029199
-C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
-      0.5462742152960396)
-C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-      -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+C0, C1, C2, C3 = SH_C0, SH_C1, SH_C2, SH_C3
 
 
 def sh_basis(x, y, z, degree: int) -> list:

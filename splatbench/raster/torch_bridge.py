@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -24,9 +25,12 @@ from splatbench.errors import InputError
 from splatbench.raster.device import Device, dr, get_device
 from splatbench.raster.hooks import NO_HOOKS, Hooks
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import (SH_ABS_MAX, Frame, check_background, check_clip_planes, check_sh_range,
+from splatbench.raster.pipeline import (SH_ABS_MAX, Frame, check_background, check_view, check_sh_range,
                                        render_frame, resolve_sh_degree)
 from splatbench.checks import check_finite, check_shape
+
+if TYPE_CHECKING:
+    from splatbench.cameras import Camera
 
 PARAMS = ("means", "log_scales", "quats", "opacity_logits", "sh")
 
@@ -43,8 +47,8 @@ class RasterInfo:
     off (a frozen group costs no work in the compositing backward).
     """
 
-    radii: torch.Tensor
-    visible: torch.Tensor
+    radii: torch.Tensor    # [N] int32
+    visible: torch.Tensor  # [N] bool
     width: int
     height: int
     num_pairs: int
@@ -186,8 +190,19 @@ def _check(name: str, t, spec, sizes) -> float:
     return max(-lo, hi)
 
 
-def rasterize(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int | None = None,
-              background=None, absgrad: bool = False, **options):
+def rasterize(
+    means: torch.Tensor,           # [N, 3]
+    log_scales: torch.Tensor,      # [N, 3]
+    quats: torch.Tensor,           # [N, 4] (w, x, y, z)
+    opacity_logits: torch.Tensor,  # [N]
+    sh: torch.Tensor,              # [N, K, 3], K = (d+1)^2
+    camera: Camera,                # width W, height H
+    *,
+    sh_degree: int | None = None,
+    background=None,               # 3 values in [0, 1] (default black)
+    absgrad: bool = False,
+    **options,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, RasterInfo]:  # [H, W, 3], [H, W], [H, W], info
     """Differentiable 3DGS rasterization of torch tensors through the Dr.Jit pipeline.
 
     Args:
@@ -218,7 +233,7 @@ def rasterize_with_hooks(means, log_scales, quats, opacity_logits, sh, camera, h
     _check("opacity_logits", opacity_logits, ("N",), sizes)
     sh_largest = _check("sh", sh, ("N", None, 3), sizes)
     opts = RasterOptions.from_kwargs(**options)
-    check_clip_planes(camera, opts)
+    check_view(camera, opts)
     degree = resolve_sh_degree(sh.shape[1], sh_degree)
     if sh_largest > SH_ABS_MAX:  # only then find where (a full |sh| temporary)
         flat = int(sh.detach().abs().argmax())

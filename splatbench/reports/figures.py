@@ -74,7 +74,7 @@ def curves_figure(table: AxisTable, runs: pd.DataFrame, path: Path) -> Path | No
     fig.suptitle(f"{y_label} during training, by {table.axis} (mean over runs)", fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)  # titles and labels never clipped
     plt.close(fig)
     return path
 

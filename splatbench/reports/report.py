@@ -173,6 +173,12 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
     ]
     if spec.base:
         lines += ["Shared settings: " + ", ".join(f"`{k} = {display(v)}`" for k, v in spec.base.items()) + ".", ""]
+    if spec.scene_sources:  # dataset folders and teacher models: where their data comes from
+        lines += ["Scenes from files: " + "; ".join(
+            f"`{name}` " + ", ".join(f"{k} `{display(v)}`" for k, v in src.items())
+            for name, src in spec.scene_sources.items())
+            + " (a scene's own keys win over the shared `data.*`; `data` keys of another scene type do not apply "
+              "to it).", ""]
     timing = run_time(table)
     if timing:
         lines += [timing, ""]

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from splatbench.cameras import Camera
+from splatbench.checks import check_keys
 from splatbench.errors import InputError
 
 #: Camera placements a rig can ask for.
@@ -103,10 +104,7 @@ class RigSpec:
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any], source: str = "rig") -> RigSpec:
         """Validate a mapping of rig fields (the parsed TOML)."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise InputError(f"{source}: unknown key {unknown[0]!r} (known: {', '.join(sorted(known))})")
+        check_keys(sorted(data), (f.name for f in fields(cls)), source=source)
         if "kind" not in data or "radius" not in data:
             missing = "kind" if "kind" not in data else "radius"
             raise InputError(f"{source}: {missing}: required")

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from splatbench.checks import dataclass_from_mapping
 from splatbench.errors import InputError
 from splatbench.strategies.base import PARAM_GROUPS, Optimizers, Params, StepContext, Strategy, TopologyChange
 from splatbench.strategies.budget import BudgetState, BudgetStrategy
@@ -44,32 +45,18 @@ def make_strategy(name: str, **overrides) -> Strategy:
     """The strategy registered as ``name`` with ``overrides`` applied to its fields.
 
     Raises:
-        InputError: (one line) for an unknown name, an unknown field, or a bad value.
+        InputError: (one line) for an unknown name, an unknown field
+            (``strategy_options.KEY: unknown key (did you mean ...)``), or a bad value.
     """
     cls, preset = _lookup(name)
-    known = [f.name for f in dataclasses.fields(cls)]
-    for key in overrides:
-        if key not in known:
-            raise InputError(f"strategy {name!r}: unknown field {key!r} "
-                             f"(known: {', '.join(known) if known else 'none'})")
-    for key, value in overrides.items():
-        _check_type(name, cls, key, value)
-    return cls(**{**preset, **overrides})
+    return dataclass_from_mapping(cls, overrides, base=preset, prefix="strategy_options.",
+                                  source=f"strategy {name!r}")
 
 
 def _lookup(name: str) -> tuple[type, dict[str, object]]:
     if name not in STRATEGIES:
         raise InputError(f"strategy: unknown name {name!r} (expected one of: {', '.join(STRATEGIES)})")
     return STRATEGIES[name]
-
-
-def _check_type(name: str, cls: type, key: str, value: object) -> None:
-    default = next(f.default for f in dataclasses.fields(cls) if f.name == key)
-    ok = {bool: lambda v: isinstance(v, bool),
-          int: lambda v: isinstance(v, int) and not isinstance(v, bool),
-          float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool)}.get(type(default))
-    if ok is not None and not ok(value):
-        raise InputError(f"strategy {name!r}: field {key!r} expects {type(default).__name__}, got {value!r}")
 
 
 __all__ = [

@@ -13,7 +13,7 @@ import click
               help="TOML config (fields of TrainConfig; see docs/training.md).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
               help="Override a config field (repeatable), e.g. --set iterations=2000 --set sh_degree=auto "
-                   "--set strategy_options.cap_max=50000.")
+                   "--set strategy_options.cap_max=50000 --set data.downscale=8 (images / 8, or images_8/).")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default: the config's `out`, runs/train). One holding another run is refused "
                    "unless --resume continues one of its checkpoints or --force replaces it.")
@@ -26,7 +26,11 @@ import click
 @click.option("--quiet", is_flag=True, help="No progress bar (for sweeps).")
 def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], out: Path | None,
           resume: Path | None, force: bool, as_json: bool, quiet: bool) -> None:
-    """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender folder).
+    """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender / instant-ngp folder).
+
+    A capture whose cameras have lens distortion is undistorted by pycolmap first (cached
+    by content); that, the test split chosen and ignored keys are said in notes
+    (docs/training.md, "Real captures").
 
     Prints the test PSNR / SSIM, Gaussian count, SH degree and the PLY path; writes
     config.toml, point_cloud.ply and result.json under the output folder. A resumed run

@@ -33,13 +33,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from splatbench.checks import check_sh_degree
+from splatbench.checks import check_keys, check_sh_degree, check_type, coerce
 from splatbench.devices import check_device
 from splatbench.errors import InputError
 from splatbench.fsutil import read_text
 from splatbench.overrides import parse_override
 from splatbench.train.sh_schedule import MAX_LOOKAHEAD
 
+#: Keys of the ``data`` table.
+DATA_KEYS = ("downscale",)
 #: Learning-rate fields (Adam, one optimizer per parameter group); 0 freezes a group.
 LR_FIELDS = ("lr_means", "lr_means_final", "lr_log_scales", "lr_quats", "lr_opacity_logits", "lr_sh_dc",
              "lr_sh_rest")
@@ -54,6 +56,9 @@ class TrainConfig:
     out: str = "runs/train"           # output folder: point_cloud.ply, checkpoints/, config.toml, result.json
     layout: str = "auto"              # dataset layout: "auto", "colmap" or "blender"
     test_every: int = 8               # hold out every n-th view when the dataset gives no split
+    data: dict[str, Any] = field(default_factory=dict)  # how the dataset is loaded (`--set data.downscale=8`):
+                                      # downscale = N divides the image size (images_N/ when present;
+                                      # splatbench.data.load_dataset); DATA_KEYS
     seed: int = 0                     # seeds torch, numpy, the view order and random backgrounds
     # --- initialisation
     init: str = "surface"             # "surface" (the dataset's own points: true-surface samples of a rendered
@@ -124,7 +129,7 @@ class TrainConfig:
         `splatbench.strategies.make_strategy` (cheap: no data is touched). Returns self.
         """
         for f in dataclasses.fields(self):
-            _check_type(f.name, getattr(self, f.name), _field_types()[f.name])
+            check_type(f.name, getattr(self, f.name), _field_types()[f.name])
         if self.iterations < 1:
             raise InputError(f"iterations: expected an int >= 1, got {self.iterations}")
         for name in LR_FIELDS:
@@ -142,6 +147,11 @@ class TrainConfig:
             raise InputError(f"init: unknown initialisation {self.init!r} (expected one of: {', '.join(INITIALIZERS)})")
         if self.layout not in ("auto", "colmap", "blender"):
             raise InputError(f"layout: expected 'auto', 'colmap' or 'blender', got {self.layout!r}")
+        for key, value in self.data.items():
+            if key not in DATA_KEYS:
+                raise InputError(f"data.{key}: unknown key (known: {', '.join(DATA_KEYS)})")
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+                raise InputError(f"data.{key}: expected an int >= 1, got {value!r}")
         check_sh_degree("sh_degree", self.sh_degree, allow_auto=True)
         positive = ("sh_interval", "log_every", "init_random_points", "ssim_window")
         for name in positive:
@@ -220,6 +230,11 @@ class TrainConfig:
         return scale_step(self.sh_interval, self.iterations, self.schedule, interval=True)
 
     @property
+    def downscale(self) -> int:
+        """``data.downscale`` (1 when not set)."""
+        return int(self.data.get("downscale", 1))
+
+    @property
     def max_sh_degree(self) -> int:
         """The highest SH degree the run may use (3 under ``"auto"``)."""
         return 3 if self.sh_degree == "auto" else int(self.sh_degree)
@@ -239,13 +254,11 @@ class TrainConfig:
         """A config from a mapping; unknown keys and wrong types are `InputError`."""
         if not isinstance(data, dict):
             raise InputError(f"{source}: expected a table of fields, got {type(data).__name__}")
-        known = {f.name for f in dataclasses.fields(cls)}
-        for key in data:
-            if key not in known:
-                raise InputError(f"{source}: unknown key {key!r}{_suggest(key, known)}")
+        check_keys(data, (f.name for f in dataclasses.fields(cls)), source=source)
         types = _field_types()
-        values = {k: _coerce(k, v, types[k]) for k, v in data.items()}
-        return cls(**values)
+        for key, value in data.items():  # types before construction (whose checks assume them)
+            check_type(key, coerce(value, types[key]), types[key])
+        return cls(**{k: coerce(v, types[k]) for k, v in data.items()})
 
     @classmethod
     def from_toml(cls, text: str, *, source: str = "config") -> TrainConfig:
@@ -276,11 +289,12 @@ def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...])
     data = config.to_dict()
     for item in overrides:
         key, value = parse_override(item)
-        if key.startswith("strategy_options."):
+        table = key.split(".", 1)[0]
+        if "." in key and table in ("strategy_options", "data"):
             sub = key.split(".", 1)[1]
             if not sub:
-                raise InputError(f"--set: empty strategy option in {item!r}")
-            data["strategy_options"] = {**data["strategy_options"], sub: value}
+                raise InputError(f"--set: empty {table} key in {item!r}")
+            data[table] = {**data[table], sub: value}
         else:
             data[key] = value
     return TrainConfig.from_dict(data, source="--set")
@@ -297,62 +311,6 @@ def _plain(value: Any) -> Any:
     if isinstance(value, dict):
         return dict(value)
     return value
-
-
-def _suggest(key: str, known: set[str]) -> str:
-    import difflib
-
-    close = difflib.get_close_matches(key, sorted(known), n=1)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
-def _coerce(name: str, value: Any, tp: Any) -> Any:
-    """``value`` as the field's type: ints widen to float, a lone number to nothing else."""
-    if tp is float and isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    if tp in (list[float], list[float] | str) and isinstance(value, list):
-        return [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value]
-    if tp == (float | str) and isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    if tp == (int | str) and isinstance(value, float) and value.is_integer():
-        return value  # rejected by _check_type: a degree is an int
-    _check_type(name, value, tp)
-    return value
-
-
-def _check_type(name: str, value: Any, tp: Any) -> None:
-    ok: bool
-    if tp is bool:
-        ok = isinstance(value, bool)
-    elif tp is int:
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    elif tp is float:
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    elif tp is str:
-        ok = isinstance(value, str)
-    elif tp == (int | str):
-        ok = isinstance(value, str) or (isinstance(value, int) and not isinstance(value, bool))
-    elif tp == (float | str):
-        ok = isinstance(value, str) or (isinstance(value, (int, float)) and not isinstance(value, bool)
-                                        and math.isfinite(value))
-    elif tp == list[float]:
-        ok = isinstance(value, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                             and math.isfinite(v) for v in value)
-    elif tp == (list[float] | str):
-        ok = isinstance(value, str) or (isinstance(value, list) and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))
-    elif tp == dict[str, Any]:
-        ok = isinstance(value, dict)
-    else:  # pragma: no cover - a new field type must be added above
-        raise TypeError(f"TrainConfig.{name}: unsupported field type {tp}")
-    if not ok:
-        raise InputError(f"{name}: expected {_type_name(tp)}, got {value!r}")
-
-
-def _type_name(tp: Any) -> str:
-    return {bool: "true or false", int: "an int", float: "a finite number", str: "a string",
-            list[float]: "a list of numbers", dict[str, Any]: "a table",
-            list[float] | str: "a list of numbers or 'auto'", float | str: "a number or 'auto'"}.get(tp, "an int or 'auto'")
 
 
 __all__ = ["TrainConfig", "LR_FIELDS", "load_config", "save_config", "parse_override", "apply_overrides"]

@@ -82,6 +82,16 @@ def initialize(name: str, dataset, settings: InitSettings) -> Initialization:
     """The initial Gaussians of method ``name`` and their summary (`InputError` if unknown)."""
     if name not in INITIALIZERS:
         raise InputError(f"init: unknown initialisation {name!r} (expected one of: {', '.join(INITIALIZERS)})")
+    if name == "surface" and (dataset.points is None or len(dataset.points) < 2):
+        # A capture without a point cloud (a NeRF / instant-ngp transforms.json): graphdeco starts such
+        # scenes from random points too. Said in a note, never silently.
+        have = "no point cloud" if dataset.points is None else f"{len(dataset.points)} point(s)"
+        made = INITIALIZERS["random"](dataset, settings)
+        note = (f"init: 'surface' needs the dataset's points, but {str(dataset.root)!r} has {have}: "
+                f"{len(made)} random points in the camera bounds instead (init=random says so; init=sfm "
+                f"triangulates points)")
+        (settings.say or (lambda line: None))(note)
+        return Initialization(made, {"method": "random", "asked": "surface", "points": len(made)}, note)
     made = INITIALIZERS[name](dataset, settings)
     init = made if isinstance(made, Initialization) else Initialization(made)
     return Initialization(init.gaussians, {"method": name, "points": len(init.gaussians), **init.summary},

@@ -128,7 +128,7 @@ class Trainer:
             from splatbench.data.dataset import load_dataset
 
             dataset = load_dataset(config.dataset, layout=config.layout, test_every=config.test_every,
-                                   background=self._gt_background(config))
+                                   background=self._gt_background(config), downscale=config.downscale, say=say)
         self.dataset = dataset
         train = dataset.train
         if len(train) == 0:
@@ -477,8 +477,8 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         ev = trainer.evaluate(list(dict.fromkeys(final_lpips + curve_lpips)))
     except Interrupted as exc:
         raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
-    notes = resumed + ([trainer.init_note] if trainer.init_note else []) + [trainer.background_note] \
-        + ([lpips_note] if lpips_note else [])
+    notes = resumed + list(trainer.dataset.notes) + ([trainer.init_note] if trainer.init_note else []) \
+        + [trainer.background_note] + ([lpips_note] if lpips_note else [])
     if trainer.num_gaussians == 0:
         gone = next((h.step for h in history if h.num_gaussians == 0), trainer.step_index)
         notes.append(f"warning: the model is empty: every Gaussian was pruned (none left from step {gone} on), so it "

@@ -28,8 +28,8 @@ the forward where those matter.
 from __future__ import annotations
 
 from splatbench.backends.base import Backend, BackendInfo
+from splatbench.conventions import SH_C0
 
-SH_C0 = 0.28209479177387814
 ALPHA_MAX = 0.9999   # volprim_rf_basic: 1 - min(opacity * density, 0.9999)
 T_STOP = 0.01        # volprim_rf_basic: stops once max(throughput) <= 0.01
 

@@ -95,7 +95,7 @@ def _axes_to_keywords(opts: dict) -> dict:
 
 
 def reference_render(conventions, means, log_scales, quats, opacity_logits, sh, camera, *, mode="matched",
-                     sh_degree=None, background=None):
+                     sh_degree=None, background=None, band=False):
     """Render with the float64 oracle, following ``conventions`` (in ``mode="matched"``).
 
     Args:
@@ -110,17 +110,18 @@ def reference_render(conventions, means, log_scales, quats, opacity_logits, sh, 
         camera: `splatbench.Camera` (intrinsics, pose, size; near/far unless given).
         mode: "matched" (the conventions above) or "exact" (the exact Gaussian mixture).
         sh_degree: bands evaluated (None = all in ``sh``). background: RGB (None = black).
+        band: also the boundary band and tie slack (`reference.band`; matched mode).
 
     Returns:
         `reference.RenderOutput` (rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N],
-        visible [N]), float64 numpy.
+        visible [N], band [H, W] and tie_slack [H, W] or None), float64 numpy.
     """
     import reference
 
     kwargs = reference_kwargs(conventions, camera, mode, sh_degree, background)
     arrays = [_as_numpy(x) for x in (means, log_scales, quats, opacity_logits, sh)]
     try:
-        return reference.render(*arrays, **kwargs)
+        return reference.render(*arrays, band=band, **kwargs)
     except ValueError as exc:  # the oracle's own one-line messages name the field
         raise InputError(str(exc)) from None
 

@@ -17,9 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.cameras import Camera
+from splatbench.conventions import SH_C0
 
 GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
-C0 = 0.28209479177387814  # DC basis: sh0 = (colour - 0.5) / C0
+C0 = SH_C0  # DC basis: sh0 = (colour - 0.5) / C0
 
 
 @dataclass(frozen=True)

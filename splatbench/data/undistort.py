@@ -1,0 +1,182 @@
+"""Undistortion of captures whose cameras have lens distortion, by pycolmap (COLMAP's undistorter).
+
+A view with a distorted camera (`Lens`: a COLMAP camera model and its parameters) is
+remapped by ``pycolmap.undistort_image`` -- COLMAP's ``image_undistorter`` with its
+default options: bilinear warp, the output cropped to the pixels that saw the scene
+(no blank borders), square-pixel PINHOLE intrinsics from ``pycolmap.undistort_camera``.
+No remap is written here. The undistorted images (then downscaled, when asked) are
+cached as PNG under ``<cache>/undistorted/<key>/`` where ``key`` hashes every source
+image's bytes, every lens, the downscale and the versions of pycolmap and of this code,
+so a changed photo or coefficient makes a new folder and an unchanged capture is read
+back without pycolmap. The cache root is ``$SPLATBENCH_CACHE`` or ``~/.cache/splatbench``
+(the capture's own folder may be read-only).
+
+Models: ``SIMPLE_RADIAL``, ``RADIAL``, ``OPENCV``, ``FULL_OPENCV`` and ``OPENCV_FISHEYE``
+(`UNDISTORTED_MODELS`); any other is refused in one line by `check_lens`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from splatbench.errors import InputError
+from splatbench.fsutil import replace_dir
+
+#: COLMAP camera models with distortion that are undistorted on load.
+UNDISTORTED_MODELS = ("SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV", "OPENCV_FISHEYE")
+#: Bump when the cached images change for the same inputs.
+UNDISTORT_CACHE_VERSION = 1
+CACHE_ENV = "SPLATBENCH_CACHE"
+_MANIFEST = "manifest.json"
+
+
+@dataclass(frozen=True)
+class Lens:
+    """A camera with distortion, as COLMAP writes it: ``model`` and ``params`` in COLMAP's order
+    (e.g. OPENCV: fx, fy, cx, cy, k1, k2, p1, p2), for ``width`` x ``height`` images."""
+
+    model: str
+    width: int
+    height: int
+    params: tuple[float, ...]
+
+    def to_pycolmap(self):
+        from splatbench.interrupt import import_pycolmap
+
+        pycolmap = import_pycolmap()
+        return pycolmap.Camera(model=self.model, width=self.width, height=self.height, params=list(self.params))
+
+
+@dataclass(frozen=True)
+class Undistorted:
+    """One undistorted view: the PNG in the cache and its PINHOLE intrinsics (pixels)."""
+
+    path: Path
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+
+def check_lens(lens: Lens, where: str) -> None:
+    """Refuse, in one line naming ``where``, a model pycolmap is not asked to undistort here
+    or parameters that do not fit it."""
+    if lens.model not in UNDISTORTED_MODELS:
+        raise InputError(f"{where}: camera model {lens.model!r} cannot be undistorted here (supported: PINHOLE, "
+                         f"SIMPLE_PINHOLE, {', '.join(UNDISTORTED_MODELS)}); undistort the images with COLMAP's "
+                         f"image_undistorter first")
+    try:
+        cam = lens.to_pycolmap()
+        ok = len(cam.params) == len(lens.params)
+    except Exception as exc:  # pycolmap: wrong parameter count raises ValueError/RuntimeError
+        raise InputError(f"{where}: {lens.model} camera with parameters {list(lens.params)}: "
+                         f"pycolmap refuses it ({str(exc).strip().splitlines()[0]})") from None
+    if not ok or not all(np.isfinite(lens.params)):
+        raise InputError(f"{where}: {lens.model} expects {len(cam.params)} finite parameters, got {list(lens.params)}")
+
+
+def cache_root() -> Path:
+    """``$SPLATBENCH_CACHE``, else ``~/.cache/splatbench``."""
+    return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "splatbench")
+
+
+def undistort_views(sources: Sequence[tuple[Path, Lens]], *, downscale: int = 1,
+                    say: Callable[[str], None] | None = None) -> tuple[list[Undistorted], Path, bool]:
+    """Undistort every ``(image file, lens)`` with pycolmap, then downscale by ``downscale``
+    (PIL bicubic, as graphdeco resizes), cached by content. Returns ``(views in the given
+    order, the cache folder, whether it was reused)``. ``say`` gets one line before any work."""
+    from splatbench.interrupt import import_pycolmap
+    from splatbench.versions import package_version
+
+    say = say or (lambda line: None)
+    digests = []
+    for path, lens in sources:
+        try:
+            digests.append(hashlib.sha256(Path(path).read_bytes()).hexdigest())
+        except OSError as exc:
+            raise InputError(f"{path}: cannot read the image ({exc.strerror})") from None
+    inputs = {"format": UNDISTORT_CACHE_VERSION, "pycolmap": package_version("pycolmap"), "downscale": downscale,
+              "views": [[d, lens.model, lens.width, lens.height, list(lens.params)]
+                        for d, (_, lens) in zip(digests, sources)]}
+    key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:20]
+    out = cache_root() / "undistorted" / key
+    cached = _read_manifest(out, len(sources))
+    if cached is not None:
+        return cached, out, True
+    say(f"undistorting {len(sources)} images with pycolmap (COLMAP's undistorter; cached in {out})")
+    pycolmap = import_pycolmap()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{key}.run-", dir=out.parent))
+    try:
+        records = []
+        options = pycolmap.UndistortCameraOptions()  # COLMAP's defaults: crop to valid pixels
+        for k, (path, lens) in enumerate(sources):
+            rgb = _read_rgb8(Path(path), lens)
+            bitmap, cam = pycolmap.undistort_image(options, pycolmap.Bitmap.from_array(rgb), lens.to_pycolmap())
+            image = bitmap.to_array()
+            fx, fy, cx, cy = (float(p) for p in cam.params)
+            w, h = int(cam.width), int(cam.height)
+            if downscale > 1:
+                from PIL import Image
+
+                nw, nh = max(1, round(w / downscale)), max(1, round(h / downscale))
+                image = np.asarray(Image.fromarray(image).resize((nw, nh), Image.Resampling.BICUBIC))
+                sx, sy = nw / w, nh / h
+                fx, fy, cx, cy, w, h = fx * sx, fy * sy, cx * sx, cy * sy, nw, nh
+            name = f"{k:05d}.png"
+            from PIL import Image
+
+            Image.fromarray(np.ascontiguousarray(image)).save(tmp / name)
+            records.append({"file": name, "source": str(path), "width": w, "height": h,
+                            "fx": fx, "fy": fy, "cx": cx, "cy": cy})
+        (tmp / _MANIFEST).write_text(json.dumps({"key": key, "inputs": inputs, "views": records}, indent=1) + "\n",
+                                     encoding="utf-8")
+        replace_dir(tmp, out, accept_existing=lambda p: _read_manifest(p, len(sources)) is not None)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    views = _read_manifest(out, len(sources))
+    assert views is not None  # just written
+    return views, out, False
+
+
+def _read_rgb8(path: Path, lens: Lens) -> np.ndarray:
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            if im.mode in ("RGBA", "LA", "PA"):
+                raise InputError(f"{path}: an image with alpha cannot be undistorted here (its camera is "
+                                 f"{lens.model}); give RGB photos")
+            rgb = np.asarray(im.convert("RGB"))
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the image ({exc})") from None
+    if rgb.shape[:2] != (lens.height, lens.width):
+        raise InputError(f"{path}: image size {rgb.shape[1]}x{rgb.shape[0]} disagrees with its camera "
+                         f"{lens.width}x{lens.height}")
+    return np.ascontiguousarray(rgb)
+
+
+def _read_manifest(folder: Path, count: int) -> list[Undistorted] | None:
+    try:
+        data = json.loads((folder / _MANIFEST).read_text(encoding="utf-8"))
+        views = [Undistorted(folder / r["file"], int(r["width"]), int(r["height"]), float(r["fx"]), float(r["fy"]),
+                             float(r["cx"]), float(r["cy"])) for r in data["views"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if len(views) != count or not all(v.path.is_file() for v in views):
+        return None
+    return views
+
+
+__all__ = ["Lens", "Undistorted", "UNDISTORTED_MODELS", "CACHE_ENV", "check_lens", "cache_root", "undistort_views"]
