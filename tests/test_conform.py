@@ -462,6 +462,7 @@ DENSE_DESIGN = dict(eps2d=0.0, jacobian_clamp="none", alpha_max=1.0, alpha_min=0
                     transmittance_min=0.0, sort_key="distance")
 
 
+@pytest.mark.slow  # the greedy step renders a few hundred tiny oracle scenes: ~15 s on 2 loaded cores
 def test_several_conventions_at_once_are_found_when_nothing_is_declared():
     """The greedy multi-axis step: the oracle itself under DENSE_DESIGN, declaring nothing, is diagnosed
     with those conventions (alpha_max 1 and 0.999 alike on the probes), and no defect."""

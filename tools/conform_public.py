@@ -92,7 +92,7 @@ def _row(p: Package, r: dict) -> str:
             f'{diag} | {defects} |')
 
 
-def _short(cause: str, limit: int = 90) -> str:
+def _short(cause: str, limit: int = 110) -> str:
     """A defect's cause for a table cell: its first clause, at most ``limit`` characters, no pipes."""
     first = cause.split(" (on ")[0].split("; what differs")[0].replace("|", "/")
     return first if len(first) <= limit else first[:limit - 3].rstrip() + "..."
