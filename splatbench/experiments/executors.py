@@ -35,6 +35,7 @@ class LocalExecutor:
     def __init__(self, workers: int, threads: int):
         self.workers, self.threads = workers, threads
         self._dead_since: float | None = None
+        self.stalled = False  # set by `wait`, cleared by `restart`
         self.pool = self._new_pool()
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
@@ -49,10 +50,10 @@ class LocalExecutor:
         return self.pool.submit(execute_run, run, results_dir)
 
     def wait(self, futures, timeout: float | None = None) -> set:
-        """The futures done within ``timeout`` s (at least one, unless it runs out). A worker found
-        dead for `DEAD_WORKER_GRACE` s while the pool has not noticed (CPython's pool can miss a
-        worker SIGKILLed while it held one of the pool's queue locks, and then waits forever) breaks
-        the pool here: its runs in flight end with `BrokenProcessPool`, as a noticed death does."""
+        """The futures done within ``timeout`` s (at least one, unless it runs out, or the pool
+        `stalled`: a worker found dead for `DEAD_WORKER_GRACE` s that the pool has not noticed --
+        CPython's pool can miss a worker SIGKILLed while it held one of the pool's queue locks, and
+        then waits forever; the runner then treats the pool as broken and restarts it)."""
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             step = DEAD_WORKER_POLL if deadline is None else max(0.0, min(DEAD_WORKER_POLL, deadline - time.monotonic()))
@@ -60,7 +61,8 @@ class LocalExecutor:
             if done or (deadline is not None and time.monotonic() >= deadline):
                 return done
             if self._dead_worker_unnoticed():
-                return self._break(futures)
+                self.stalled = True  # the futures are the pool's to finish: never set them here (it races)
+                return set()
 
     def _dead_worker_unnoticed(self) -> bool:
         dead = [p for p in (getattr(self.pool, "_processes", None) or {}).values() if p.exitcode is not None]
@@ -70,18 +72,6 @@ class LocalExecutor:
         now = time.monotonic()
         self._dead_since = self._dead_since or now
         return now - self._dead_since >= DEAD_WORKER_GRACE
-
-    def _break(self, futures) -> set:
-        from concurrent.futures.process import BrokenProcessPool
-
-        self._dead_since = None
-        for fut in futures:
-            try:
-                fut.set_exception(BrokenProcessPool("a worker process died (killed or crashed) and the pool "
-                                                    "did not notice"))
-            except cf.InvalidStateError:  # finished or broken meanwhile
-                pass
-        return set(futures)
 
     @staticmethod
     def broken(exc: BaseException) -> bool:
@@ -107,7 +97,7 @@ class LocalExecutor:
             if proc.is_alive():
                 proc.kill()
         self._shutdown(wait=False, cancel_futures=True)
-        self._dead_since = None
+        self._dead_since, self.stalled = None, False
         self.pool = self._new_pool()
 
     def close(self, cancel: bool = False) -> None:

@@ -255,6 +255,7 @@ def _drive(pool, pending: list[RunSpec], results_dir: str, finish: Callable[[Run
                     suspects.append(run)
             else:
                 finish(_failed(run, one_line(exc)))
+        broke = broke or getattr(pool, "stalled", False)  # a dead worker the pool missed (executors.py)
         if broke:
             suspects.extend(inflight.values())  # empty when isolating
             inflight.clear()
