@@ -345,7 +345,7 @@ def test_cli_fails_a_broken_backend_given_as_module_function_from_outside(tmp_pa
     # Diagnosed, not failed: the quaternion order explains both the forward and the gradient probe.
     assert status == {"quat_order": "explained", "pixel_centre": "pass", "grad_quats": "explained"}
     assert out["diagnosis"] == [{"axis": "quat_order", "expected": "wxyz", "found": "xyzw",
-                                 "explains": ["quat_order", "grad_quats"]}]
+                                 "explains": ["quat_order", "grad_quats"], "alike": []}]
     assert out["defects"] == [] and out["passed"] is False and out["backend"] == "my_rasterizer:render"
     explained = next(p for p in out["probes"] if p["name"] == "quat_order")
     assert explained["explained_by"] == "quat_order" and explained["deviation"] > explained["tolerance"]
@@ -408,3 +408,78 @@ def test_json_names_the_loaded_version_and_keeps_the_backends_prints_out(monkeyp
 
         report = conform("gsplat", probes=("basic_centred",))
         assert report.version == gsplat.__version__ and report.passed
+
+
+def _ellipse(angle_deg: float, *, shift=(0.0, 0.0), size: int = 24) -> np.ndarray:
+    """A render [H, W, 5] whose alpha is one anisotropic Gaussian footprint at ``angle_deg``."""
+    a = np.radians(angle_deg)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    cov = rot @ np.diag([16.0, 2.0]) @ rot.T
+    ii, jj = np.mgrid[:size, :size] + 0.5
+    d = np.stack([jj - size / 2 - shift[0], ii - size / 2 - shift[1]], -1)
+    out = np.zeros((size, size, 5))
+    out[..., 3] = 0.9 * np.exp(-0.5 * np.einsum("hwi,ij,hwj->hw", d, np.linalg.inv(cov), d))
+    return out
+
+
+def test_what_differs_is_said_in_words():
+    """The evidence behind "unexplained: ...": a mirrored ellipse, a shifted one, an empty render."""
+    from splatbench.backends.conform.evidence import coverage, describe, undrawn
+
+    ref = _ellipse(30)
+    said = describe(_ellipse(-30), ref, True)
+    assert "orientation -30 deg, oracle 30 deg (mirrored)" in said and "centroid" not in said, said
+    said = describe(_ellipse(30, shift=(0.5, 0.0)), ref, True)
+    assert "centroid shifted by (+0.50, " in said and "orientation" not in said, said
+    empty = np.zeros_like(ref)
+    assert undrawn(empty, ref, True) and not undrawn(_ellipse(30, shift=(0.5, 0.0)), ref, True)
+    want, have = coverage(empty, ref, True)
+    assert want > 0 and have == 0
+
+
+def test_scenes_drawn_empty_are_one_defect_of_their_own():
+    """A backend that culls every scene of two Gaussians or more (a rule outside the vocabulary, like
+    metal-gauss's cull of Gaussians large on screen): one defect saying nothing is drawn, not a cause
+    of the probe that happens to come first (depth_order)."""
+    from splatbench.backends.conform import UNDRAWN_CAUSE
+
+    def culls_pairs(means, log_scales, quats, opacity_logits, sh, camera, **kwargs):
+        rgb, alpha, depth = dense().fn(means, log_scales, quats, opacity_logits, sh, camera, **kwargs)
+        keep = float(means.shape[0] < 2)
+        return rgb * keep, alpha * keep, depth * keep
+
+    report = conform(_wrap(culls_pairs), probes=("basic_centred", "depth_order", "quat_order"))
+    assert not report.diagnosis and len(report.defects) == 1, report.defects
+    d = report.defects[0]
+    assert d.probe == "depth_order" and d.cause.startswith(UNDRAWN_CAUSE) and d.follows == ("quat_order",)
+    assert "draws 0 of the" in d.cause
+    assert next(r for r in report.results if r.name == "depth_order").cause == d.cause
+
+
+# LiteSplat's design (reports/conform_public/litesplat): a dense renderer differing from graphdeco on
+# five approximations at once, none of which alone (or in pairs) makes a basic probe pass.
+DENSE_DESIGN = dict(eps2d=0.0, jacobian_clamp="none", alpha_max=1.0, alpha_min=0.0, radius="none",
+                    transmittance_min=0.0, sort_key="distance")
+
+
+@pytest.mark.slow  # the greedy step renders a few hundred tiny oracle scenes: ~15 s on 2 loaded cores
+def test_several_conventions_at_once_are_found_when_nothing_is_declared():
+    """The greedy multi-axis step: the oracle itself under DENSE_DESIGN, declaring nothing, is diagnosed
+    with those conventions (alpha_max 1 and 0.999 alike on the probes), and no defect."""
+    from splatbench.backends.builtins.reference_backend import reference_render
+
+    design = BackendInfo(name="design", **DENSE_DESIGN)
+
+    def fn(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
+        out = reference_render(design, means, log_scales, quats, opacity_logits, sh, camera,
+                               sh_degree=sh_degree, background=background)
+        return tuple(torch.from_numpy(np.asarray(x, np.float32)) for x in (out.rgb, out.alpha, out.depth))
+
+    probes = ("basic_centred", "basic_overlap", "basic_offaxis", "depth_order", "eps2d", "jacobian_clamp",
+              "alpha_max", "alpha_min", "early_stop", "radius")
+    report = conform(_wrap(fn, gradients=False), probes=probes)
+    found = {d.axis: (d.found, *d.alike) for d in report.diagnosis}
+    assert not report.defects and not report.failed, (found, report.defects)
+    for axis in ("eps2d", "jacobian_clamp", "alpha_min", "sort_key"):
+        assert found[axis][0] == DENSE_DESIGN[axis], (axis, found)
+    assert 1.0 in found["alpha_max"], found

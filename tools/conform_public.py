@@ -84,11 +84,18 @@ def run(p: Package) -> dict:
 def _row(p: Package, r: dict) -> str:
     s = r["summary"]
     counts = f'{s["pass"]} / {s["explained"]} / {s["warn"]} / {s["fail"]} / {s["skip"]}'
-    diag = "; ".join(f'`{d["axis"]}`: {d["found"]} (expected {d["expected"]}, explains {len(d["explains"])})'
-                     for d in r["diagnosis"]) or "none"
-    defects = "; ".join(f'`{d["probe"]}` (+{len(d.get("follows", []))} follow)' for d in r["defects"]) or "none"
+    diag = "; ".join(f'`{d["axis"]}`: {d["found"]}' + "".join(f" or {v}" for v in d.get("alike", []))
+                     + f' (expected {d["expected"]}, explains {len(d["explains"])})' for d in r["diagnosis"]) or "none"
+    defects = "; ".join(f'`{d["probe"]}` (+{len(d.get("follows", []))} follow): {_short(d["cause"])}'
+                        for d in r["defects"]) or "none"
     return (f'| [{p.name}]({p.name}/report.md) | {r["version"]} | `{p.spec}` | {r["exit_status"]} | {counts} | '
             f'{diag} | {defects} |')
+
+
+def _short(cause: str, limit: int = 110) -> str:
+    """A defect's cause for a table cell: its first clause, at most ``limit`` characters, no pipes."""
+    first = cause.split(" (on ")[0].split("; what differs")[0].replace("|", "/")
+    return first if len(first) <= limit else first[:limit - 3].rstrip() + "..."
 
 
 def table() -> str:

@@ -72,8 +72,11 @@ def main(argv: list[str]) -> None:
     for status in ("pass", "explained", "warn", "fail", "skip"):
         names = [r.name for r in rep.results if r.status == status]
         print(f"  {status} ({len(names)}): {' '.join(names)}")
-    print("  diagnosis:", "; ".join(f"{d.axis}: {d.found}" for d in rep.diagnosis) or "none")
+    print("  diagnosis:", "; ".join(f"{d.axis}: {d.found}" + "".join(f" or {v}" for v in d.alike)
+                                    for d in rep.diagnosis) or "none")
     print("  defects:", "; ".join(d.probe for d in rep.defects) or "none")
+    for d in rep.defects:
+        print(f"    {d.probe} (+{len(d.follows)} follow): {d.cause}")
 
 
 if __name__ == "__main__":

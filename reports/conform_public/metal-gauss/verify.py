@@ -30,6 +30,8 @@ def main(argv: list[str]) -> None:
     print("  diagnosis:", "; ".join(f"{d.axis}: {d.found} (explains {', '.join(d.explains)})"
                                     for d in rep.diagnosis) or "none")
     print("  defects:", "; ".join(d.probe for d in rep.defects) or "none")
+    for d in rep.defects:
+        print(f"    {d.probe} (+{len(d.follows)} follow): {d.cause}")
     for r in rep.results:
         if r.status == "warn":
             print(f"  warn {r.name}: {r.detail}")

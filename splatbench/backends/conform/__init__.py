@@ -27,7 +27,7 @@ import dataclasses
 
 from splatbench.backends.base import Backend
 from splatbench.backends.conform.calls import Fault, captured
-from splatbench.backends.conform.diagnose import (FAULT_CAUSE, Defect, Finding, explained_by, fingerprint,
+from splatbench.backends.conform.diagnose import (FAULT_CAUSE, UNDRAWN_CAUSE, Defect, Finding, explained_by, fingerprint,
                                                   root_causes, run_probes)
 from splatbench.backends.conform.judges import Context
 from splatbench.backends.conform.oracle import conventions_of
@@ -71,7 +71,7 @@ def backend_version(backend: Backend) -> str:
 
 
 __all__ = ["conform", "BackendFault", "ConformReport", "ProbeResult", "PROBES", "Probe", "STATUSES", "probe_names",
-           "Finding", "Defect", "FAULT_CAUSE", "backend_version"]
+           "Finding", "Defect", "FAULT_CAUSE", "UNDRAWN_CAUSE", "backend_version"]
 
 
 def conform(backend, *, device: str = "auto", probes: tuple[str, ...] | None = None,
@@ -114,8 +114,10 @@ def conform(backend, *, device: str = "auto", probes: tuple[str, ...] | None = N
         conv, findings, results = ctx.conv, [], declared_results
         if diagnose and any(r.status == "fail" for r in results.values()):
             conv, findings, results = fingerprint(selected, ctx, declared_results)
-        defects = root_causes(selected, results, conv)
+        defects = root_causes(selected, results, dataclasses.replace(ctx, conv=conv))
     why = explained_by(findings)
+    cause = {d.probe: d.cause for d in defects}  # a defect's cause as the evidence supports it
+    results = {n: dataclasses.replace(r, cause=cause[n]) if n in cause else r for n, r in results.items()}
     final = tuple(dataclasses.replace(declared_results[p.name], status="explained", explained_by=why[p.name])
                   if p.name in why else results[p.name] for p in selected)
     declared = {k: getattr(backend.info, k) for k in backend.info.declared}

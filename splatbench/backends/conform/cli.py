@@ -32,7 +32,8 @@ def format_table(report, seconds: float) -> str:
         lines.append("")
         lines.append("diagnosis: conventions that differ from the declaration")
     for d in report.diagnosis:
-        lines.append(f"  {d.axis}: {d.found} (declared or graphdeco: {d.expected}); explains "
+        alike = f" (or {', '.join(map(str, d.alike))}: the probes cannot tell)" if d.alike else ""
+        lines.append(f"  {d.axis}: {d.found}{alike} (declared or graphdeco: {d.expected}); explains "
                      f"{len(d.explains)} probe{'s' * (len(d.explains) != 1)}: {', '.join(d.explains)}")
     if report.defects:
         lines.append("")

@@ -10,14 +10,23 @@ make a probe isolating their axis pass (a convention that differs always fails, 
 The best candidate is kept when, with every probe rerun against the oracle under it (outputs and
 gradients), fewer probes fail and none that passed fails; then the search repeats. When
 no single alternative explains a failing basic probe, pairs of alternatives are tried on the basic
-probes. The probe scenes are tiny, so the search costs a few dozen small renders per axis.
+probes; when still nothing, a greedy multi-axis step (`_greedy`: add the alternative that most
+reduces the failing forward probes' excess over their tolerances, repeat, at most GREEDY_AXES axes).
+Candidates explaining as many probes are told apart by that excess. The probe scenes are tiny, so
+the search costs a few dozen small renders per axis.
 
-Root causes (`root_causes`). Each probe isolates one feature (its name) and exercises others (a
+Root causes (`root_causes`). The failing probes whose scene the backend draws (nearly) nothing of,
+where the oracle draws, are one defect of their own (a cull outside the vocabulary, a zero opacity:
+`evidence.undrawn`), whatever each probe isolates. Of the rest, each probe isolates one feature (its name) and exercises others (a
 scene with two Gaussians exercises the depth order, an anisotropic rotated one the quaternion order,
 a gradient of means the conic's gradient, ...: `exercises`). The defects are the smallest set of
 failing probes whose features account for every failing probe (ties: the set whose features the
 fewest passing probes exercise, then the earliest probes); each lists the failing probes that follow
-from it.
+from it. A probe isolating a convention axis that every scene exercises (the pixel centre, the
+activations, eps2d, alpha_min) links other probes to itself only when the evidence supports its cause
+(an alternative value of its axis halves its deviation); a root whose cause is not supported is
+reported as "unexplained: <what differs>" (`evidence.describe`: coverage, centroid, orientation,
+size, mirror image), not under the probe's usual cause.
 """
 
 from __future__ import annotations
@@ -31,9 +40,15 @@ import numpy as np
 
 from splatbench.backends.base import AXES, AXIS
 from splatbench.backends.conform.calls import Fault
-from splatbench.backends.conform.judges import JUDGES, Context
-from splatbench.backends.conform.oracle import projection
+from splatbench.backends.conform.evidence import coverage, describe, undrawn
+from splatbench.backends.conform.judges import JUDGES, Context, _backend_outputs, _compared, _pixel_diff
+from splatbench.backends.conform.oracle import oracle, projection
 from splatbench.backends.conform.probes import AXIS_PROBES, BASIC, Probe
+
+AXIS_OF: dict[str, str] = {}  # probe -> the first axis it isolates
+for _axis, _names in AXIS_PROBES.items():
+    for _name in _names:
+        AXIS_OF.setdefault(_name, _axis)
 from splatbench.backends.conform.results import ProbeResult
 from splatbench.backends.conform.scenes import ProbeScene
 
@@ -43,8 +58,11 @@ FAULT_CAUSE = "the backend failed on this probe's scene (see measured), so the c
 OK = ("pass", "warn", "skip")
 #: Features every probe scene exercises: a wrong pixel centre, activation, low-pass or skip changes any render.
 EVERYWHERE = ("pixel_centre", "scale_activation", "opacity_activation", "eps2d", "alpha_min")
+#: The basic probe every other one builds on: one plain Gaussian (a failure there can explain any other).
+CORE = "basic_centred"
 TAIL_D2 = 4.0  # a footprint's "tail": beyond 2 sigma, where a cutoff other than the declared one shows
 MAX_ROOTS = 3  # exhaustive cover search up to this size, greedy beyond
+GREEDY_AXES = 6  # the most axes the greedy multi-axis search changes at once
 
 
 @dataclass(frozen=True)
@@ -56,6 +74,7 @@ class Finding:
     expected: Any
     found: Any
     explains: tuple[str, ...]
+    alike: tuple = ()  # other values of the axis the probes cannot tell from ``found`` (same verdicts)
 
 
 @dataclass(frozen=True)
@@ -102,16 +121,40 @@ def _candidates(conv: dict, changed: set[str]):
 def _explained(probes: list[Probe], ctx: Context, change: dict, *, forward_only: bool = False) -> list[str]:
     """The probes (all failing under ctx.conv) that pass, or only warn, under ctx.conv + change.
     ``forward_only``: judge the forward probes only (a cheap first look: no finite differences)."""
+    return _trial(probes, ctx, change, forward_only=forward_only)[0]
+
+
+def _trial(probes: list[Probe], ctx: Context, change: dict, *, forward_only: bool = False) -> tuple[list[str], float]:
+    """(`_explained`, the excess left: the sum over the judged probes of log(deviation / tolerance) where
+    above 1), the excess telling apart candidates that explain the same probes."""
     gradient_only = change == {"sh_view_direction": "detached"}  # the same forward: only gradients can tell
     trial = dataclasses.replace(ctx, conv={**ctx.conv, **change})
-    out = []
+    out, excess = [], 0.0
     for p in probes:
         gradient = p.kind in ("gradient", "direction")
         if (gradient and forward_only and not gradient_only) or (gradient_only and not gradient):
             continue
-        if judge(p, trial).status in OK:
+        r = judge(p, trial)
+        if r.status in OK:
             out.append(p.name)
-    return out
+        excess += _excess(p, r, trial)
+    return out, excess
+
+
+def _excess(probe: Probe, r: ProbeResult, ctx: Context) -> float:
+    """How far a probe is from passing: for forward probes the mean over pixels of log(difference /
+    tolerance) where above 1 (every pixel counts, so removing one of several differences shows even
+    where another sets the largest one); else log(deviation / tolerance); a fault: a large constant."""
+    if r.status in OK:
+        return 0.0
+    if r.deviation is None or r.tolerance is None or not r.tolerance > 0:
+        return 50.0
+    outputs = _compared(probe, ctx)
+    if probe.kind in ("forward", "approximation") and outputs:
+        s, key = probe.build(), probe.build.__name__
+        diff = _pixel_diff(_backend_outputs(s, key, ctx), oracle(key, s, ctx.conv), outputs)
+        return float(np.log(np.maximum(diff / r.tolerance, 1.0)).mean())
+    return float(np.log(max(r.deviation / r.tolerance, 1.0)))
 
 
 def _isolates(change: dict, failing: list[Probe], warned: list[Probe], ctx: Context) -> bool:
@@ -147,20 +190,23 @@ def fingerprint(selected: tuple[Probe, ...], ctx: Context,
                 if change in rejected:
                     continue
                 if stage is stages[0]:
-                    explains = _explained(failing, here, change, forward_only=True)
+                    explains, excess = _trial(failing, here, change, forward_only=True)
                 elif _isolates(change, failing, warned, here):
                     # A convention that differs fails (or warns in) the probes isolating its axis: one that
                     # does not make them pass cannot be it. Those that do are scored on outputs and gradients.
-                    explains = _explained(failing, here, change)
+                    explains, excess = _trial(failing, here, change)
                 else:
                     continue
                 if explains:
-                    scored.append((len(explains), change))
+                    scored.append(((len(explains), -excess), change))
             if not scored and stage is stages[0]:
                 scored = _pairs(failing, here, changed, rejected)
             if not scored:
+                scored = _greedy(failing, here, changed, rejected)
+            if not scored:
                 break
-            best = max(scored, key=lambda sc: sc[0])[1]  # first of the best: the vocabulary's order
+            # the most probes explained, then the least excess left; first of equals: the vocabulary's order
+            best = max(scored, key=lambda sc: sc[0])[1]
             trial_results = run_probes(selected, dataclasses.replace(ctx, conv={**conv, **best}))
             before, after = set(_failing(results)), set(_failing(trial_results))
             if len(after) >= len(before) or after - before:
@@ -171,7 +217,40 @@ def fingerprint(selected: tuple[Probe, ...], ctx: Context,
                 findings.append(Finding(axis, declared[axis], value, explains))
                 changed.add(axis)
             conv, results = {**conv, **best}, trial_results
+    if len(findings) >= 2:
+        conv, findings, results = _refine(selected, ctx, conv, findings, results)
     return conv, findings, results
+
+
+def _refine(selected: tuple[Probe, ...], ctx: Context, conv: dict, findings: list[Finding],
+            results: dict[str, ProbeResult]):
+    """One pass over the axes found, each set to the value of its axis that leaves the forward probes the
+    least excess with the other findings in place (a value found early, before the others, may be only
+    the nearest to the truth: 0.999 for a backend clamping at 1 while its cutoff still differed). Kept
+    when every probe rerun under it fails no more than before."""
+    forward = [p for p in selected if p.kind in ("forward", "approximation")]
+    here = dataclasses.replace(ctx, conv=conv)
+    left = _trial(forward, here, {}, forward_only=True)[1]
+    change: dict = {}
+    alike: dict[str, list] = {}
+    for fd in findings:
+        for value in (AXIS[fd.axis].graphdeco, *AXIS[fd.axis].alternatives):
+            if value not in (conv[fd.axis], ctx.conv[fd.axis]):
+                excess = _trial(forward, here, {**change, fd.axis: value}, forward_only=True)[1]
+                if excess < left:
+                    left, change = excess, {**change, fd.axis: value}
+                    alike[fd.axis] = []
+                elif excess == left:
+                    alike.setdefault(fd.axis, []).append(value)
+    findings = [dataclasses.replace(fd, alike=tuple(alike.get(fd.axis, ()))) for fd in findings]
+    if not change:
+        return conv, findings, results
+    trial_results = run_probes(selected, dataclasses.replace(ctx, conv={**conv, **change}))
+    before, after = set(_failing(results)), set(_failing(trial_results))
+    if len(after) > len(before) or after - before:
+        return conv, findings, results
+    return ({**conv, **change}, [dataclasses.replace(fd, found=change.get(fd.axis, fd.found)) for fd in findings],
+            trial_results)
 
 
 def _pairs(failing: list[Probe], ctx: Context, changed: set[str], rejected: list[dict]) -> list:
@@ -184,10 +263,46 @@ def _pairs(failing: list[Probe], ctx: Context, changed: set[str], rejected: list
         change = {**a, **b}
         if change in rejected or not _explained(failing[:1], ctx, change, forward_only=True):
             continue  # the first probe rules most pairs out
-        explains = _explained(failing, ctx, change, forward_only=True)
+        explains, excess = _trial(failing, ctx, change, forward_only=True)
         if explains:
-            scored.append((len(explains), change))
+            scored.append(((len(explains), -excess), change))
     return scored
+
+
+def _greedy(failing: list[Probe], ctx: Context, changed: set[str], rejected: list[dict]) -> list:
+    """Several axes at once, when no single alternative (nor pair) makes a failing probe pass: a dense
+    renderer differs from graphdeco on several approximations at once (no alpha skip, no clamp, no
+    cutoff, no early stop), each probe showing more than one. Greedy on the forward probes: add the
+    alternative that most reduces the excess left (`_excess`), repeat while it falls by a tenth or
+    more, at most GREEDY_AXES axes (each step a few dozen renders of the tiny failing scenes); then
+    one pass over the axes taken, each set to its value that leaves the least excess given the others."""
+    forward = [p for p in failing if p.kind in ("forward", "approximation")]
+    if not forward:
+        return []
+    change: dict = {}
+    left = _trial(forward, ctx, change, forward_only=True)[1]
+    while len(change) < GREEDY_AXES and left > 0:
+        best = None
+        for single in _candidates({**ctx.conv, **change}, changed | set(change)):
+            if single == {"sh_view_direction": "detached"}:
+                continue
+            excess = _trial(forward, ctx, {**change, **single}, forward_only=True)[1]
+            if excess < 0.9 * left and (best is None or excess < best[0]):
+                best = (excess, single)
+        if best is None:
+            break
+        left, change = best[0], {**change, **best[1]}
+    for axis in list(change):  # one pass of refinement: a value taken early may be bettered with the rest set
+        for value in (AXIS[axis].graphdeco, *AXIS[axis].alternatives):
+            if value != change[axis]:
+                excess = _trial(forward, ctx, {**change, axis: value}, forward_only=True)[1]
+                if excess < left:
+                    left, change = excess, {**change, axis: value}
+    change = {k: v for k, v in change.items() if v != ctx.conv[k]}
+    if len(change) < 2 or change in rejected:
+        return []
+    explains = _explained(forward, ctx, change, forward_only=True)
+    return [((len(explains), -left), change)] if explains else []
 
 
 # ----------------------------------------------------------------------------
@@ -198,7 +313,7 @@ def exercises(probe: Probe, s: ProbeScene, conv: dict) -> frozenset[str]:
     """The features (named by the probe that isolates each) a probe's verdict depends on."""
     import reference
 
-    f = {probe.name, *EVERYWHERE}
+    f = {probe.name, *EVERYWHERE, CORE}
     cam = s.camera
     groups = set(probe.groups) if probe.kind == "gradient" else \
         {"log_scales", "quats"} if probe.kind == "direction" else set()
@@ -271,15 +386,27 @@ def _contributions(s: ProbeScene, proj) -> tuple[np.ndarray, np.ndarray]:
     return d2, proj.opacities[vis] * np.exp(-d2 / 2)
 
 
-def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], conv: dict) -> list[Defect]:
-    """The smallest set of failing probes whose features account for every failing probe; among sets of
-    that size, the one whose features the fewest passing probes exercise (a defect in a feature fails
-    the probes that use it), then the earliest."""
+def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], ctx: Context) -> list[Defect]:
+    """The defects behind the probes failing under ``ctx.conv`` (module docstring): the smallest set of
+    failing probes whose features account for every failing probe the backend draws something of; among sets of that size, the one whose features the
+    fewest passing probes exercise (a defect in a feature fails the probes that use it), then the earliest.
+    A probe isolating a convention axis reaches other probes through that feature only when the evidence
+    supports its cause (`_supported`); a root whose cause is not supported is "unexplained: <what differs>".
+    The probes whose scene the backend draws (nearly) nothing of join a root whose own feature they
+    exercise, else form one defect of their own (first when it is the largest)."""
+    conv = ctx.conv
     failing = [p for p in selected if results[p.name].status == "fail"]
     if not failing:
         return []
-    uses = {p.name: exercises(p, p.build(), conv) for p in selected if results[p.name].status in ("fail", "pass")}
-    names = [p.name for p in failing]
+    by_name = {p.name: p for p in selected}
+    empty = [p.name for p in failing if _undrawn(p, ctx)]
+    names = [p.name for p in failing if p.name not in empty]
+    uses = {p.name: set(exercises(p, p.build(), conv)) for p in selected
+            if results[p.name].status in ("fail", "pass")}
+    claimed = {n: _supported(by_name[n], results[n], ctx) for n in names}
+    weak = {f for f in EVERYWHERE if f in claimed and claimed[f] is not None}  # a cause the evidence does not back
+    for n, f in uses.items():
+        f -= weak - {n}
     passing = [n for n in uses if results[n].status == "pass"]
 
     def covers(root: str) -> set[str]:
@@ -295,19 +422,100 @@ def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], co
         if covering:
             chosen = list(min(covering, key=contradictions))  # min keeps the earliest of equals
             break
-    if chosen is None:  # greedy: the root covering most of what is left, earliest first
+    if not names:
+        chosen = []
+    elif chosen is None:  # greedy: the root covering most of what is left, earliest first
         chosen, left = [], set(names)
         while left:
             best = max(names, key=lambda r: (len(covers(r) & left), -names.index(r)))
             chosen.append(best)
             left -= covers(best)
+    # An empty scene goes with a root whose own feature it exercises (a Gaussian drawn only in the tile
+    # of its centre leaves a scene of off-image centres empty); the rest form a defect of their own.
+    specific = [r for r in chosen if r not in EVERYWHERE and r != CORE]
+    attached = {e for e in empty if e != CORE and any(r in uses[e] for r in specific)}
+    names += [e for e in empty if e in attached]
     defects, taken = [], set(chosen)
     for root in chosen:
         r = results[root]
         follows = tuple(n for n in names if n not in taken and root in uses[n])
         taken.update(follows)
-        defects.append(Defect(root, r.cause or "", r.deviation, r.tolerance, follows))
+        cause = claimed[root] if claimed[root] is not None else (r.cause or "")
+        defects.append(Defect(root, cause, r.deviation, r.tolerance, follows))
+    empty = [e for e in empty if e not in attached]
+    if CORE in empty:  # the single plain Gaussian is not drawn: everything else may follow from that
+        empty = list(dict.fromkeys([CORE, *(n for n in [p.name for p in failing] if n != CORE)]))
+        defects = []
+    if empty:
+        want = have = 0
+        for key in dict.fromkeys(by_name[n].build.__name__ for n in empty):
+            s = next(p for p in failing if p.build.__name__ == key).build()
+            w, h = coverage(_backend_outputs(s, key, ctx), oracle(key, s, conv), _has_alpha(ctx))
+            want, have = want + w, have + h
+        r = results[empty[0]]
+        blank = Defect(empty[0], f"{UNDRAWN_CAUSE} (on {len(empty)} failing probes: it draws {have} of the "
+                                 f"{want} pixels the oracle draws)", r.deviation, r.tolerance, tuple(empty[1:]))
+        # first when it accounts for at least as many failing probes as any other defect
+        largest = max((1 + len(d.follows) for d in defects), default=0)
+        defects = [blank, *defects] if len(empty) >= largest else [*defects, blank]
     return defects
+
+
+#: The cause of a defect whose probe scenes the backend leaves (nearly) empty.
+UNDRAWN_CAUSE = ("the backend draws nothing, or nearly nothing, where the oracle draws: a cull outside the "
+                 "convention vocabulary (e.g. of Gaussians large on screen), a zero opacity or a collapsed "
+                 "footprint, not the probes' own features")
+
+
+def _has_alpha(ctx: Context) -> bool:
+    return "alpha" in ctx.backend.info.outputs
+
+
+def _undrawn(probe: Probe, ctx: Context) -> bool:
+    """Whether the backend draws (nearly) nothing of ``probe``'s scene where the oracle draws."""
+    s = probe.build()
+    try:
+        got = _backend_outputs(s, probe.build.__name__, ctx)
+    except Fault:
+        return False
+    return undrawn(got, oracle(probe.build.__name__, s, ctx.conv), _has_alpha(ctx))
+
+
+def _supported(probe: Probe, result: ProbeResult, ctx: Context) -> str | None:
+    """None when the failing probe's own cause stands; else the cause the evidence supports instead.
+
+    A forward probe isolating a convention axis every scene exercises (`EVERYWHERE`: the likeliest to
+    be blamed for someone else's bug) names that axis's likely departure: the cause stands
+    only when some alternative value of the axis halves the probe's deviation (the oracle under it
+    explains the backend better than under the declared value). Otherwise, and for the basic probes
+    (whose cause defers to a diagnosis there is none of), "unexplained: <what differs>"; so is
+    depth_order's when the alpha differs (no order changes it). Other forward probes keep their cause,
+    with what differs appended; gradient probes and faults keep theirs."""
+    if probe.kind not in ("forward", "approximation") or result.cause == FAULT_CAUSE or result.deviation is None:
+        return None
+    s = probe.build()
+    key = probe.build.__name__
+    try:
+        got = _backend_outputs(s, key, ctx)
+    except Fault:
+        return None
+    what = describe(got, oracle(key, s, ctx.conv), _has_alpha(ctx))
+    axis = AXIS_OF.get(probe.name) if probe.name in EVERYWHERE else None
+    if probe.name == "depth_order" and _has_alpha(ctx):
+        # alpha = 1 - prod(1 - a_i) does not depend on the order: a wrong order leaves it right
+        if float(np.abs(got[..., 3] - oracle(key, s, ctx.conv)[..., 3]).max()) > result.tolerance:
+            return f"unexplained: {what} (alpha differs too, which no compositing order changes)"
+    if axis is None and probe.name not in BASIC:
+        return f"{result.cause}; what differs: {what}"
+    if axis is not None:
+        for value in (AXIS[axis].graphdeco, *AXIS[axis].alternatives):
+            if value == ctx.conv[axis]:
+                continue
+            alt = judge(probe, dataclasses.replace(ctx, conv={**ctx.conv, axis: value}))
+            if alt.deviation is not None and alt.deviation <= 0.5 * result.deviation:
+                return None
+        return f"unexplained: {what} (no value of `{axis}` reproduces it)"
+    return f"unexplained: {what}"
 
 
 def explained_by(findings: list[Finding]) -> dict[str, str]:
@@ -320,4 +528,4 @@ def explained_by(findings: list[Finding]) -> dict[str, str]:
 
 
 __all__ = ["Finding", "Defect", "fingerprint", "root_causes", "run_probes", "exercises", "explained_by",
-           "FAULT_CAUSE"]
+           "FAULT_CAUSE", "UNDRAWN_CAUSE"]

@@ -57,7 +57,8 @@ class ConformReport:
     def to_dict(self) -> dict:
         return {"backend": self.backend, "version": self.version, "description": self.description,
                 "device": self.device, "declared": self.declared, "passed": self.passed,
-                "diagnosis": [{"axis": d.axis, "expected": d.expected, "found": d.found, "explains": list(d.explains)}
+                "diagnosis": [{"axis": d.axis, "expected": d.expected, "found": d.found, "explains": list(d.explains),
+                               "alike": list(d.alike)}
                               for d in self.diagnosis],
                 "defects": [{"probe": d.probe, "cause": d.cause, "deviation": d.deviation, "tolerance": d.tolerance,
                              "follows": list(d.follows)} for d in self.defects],
