@@ -363,3 +363,16 @@ def test_scene_tables_are_checked_in_one_line(tmp_path):
     spec = parse({"name": "a", "path": "d", "downscale": 4})
     assert spec.name == "x" and spec.scenes == ("a",)
     assert spec.scene_sources["a"] == {"path": str((tmp_path / "d").resolve()), "downscale": 4}
+
+
+def test_a_model_trained_on_a_capture_records_the_up_its_cameras_share(tmp_path):
+    """A capture declares no up; the trained PLY records the one its cameras share (NeRF c2w
+    identity: image-up is world +y) with a note, so `splatbench render` draws it upright."""
+    from splatbench.ply import read_view_hints
+    from splatbench.train import TrainConfig, train
+
+    cap = _pinhole_capture(tmp_path / "cap", 9)
+    result = train(TrainConfig(dataset=str(cap), out=str(tmp_path / "run"), iterations=3, init="random",
+                               init_random_points=50, lpips_net="none"))
+    assert np.allclose(read_view_hints(result.ply_path).up, [0.0, 1.0, 0.0], atol=1e-9)
+    assert any(n.startswith("world up [0.0, 1.0, 0.0] estimated from the training cameras") for n in result.notes)

@@ -38,7 +38,7 @@ from splatbench.errors import InputError
 from splatbench.interrupt import Interrupted, deferred
 from splatbench.ply import ViewHints
 from splatbench.raster.torch_bridge import rasterize
-from splatbench.scenes.orientation import dataset_up
+from splatbench.scenes.orientation import dataset_up, rig_up
 from splatbench.strategies.base import StepContext
 from splatbench.train.config import TrainConfig, save_config
 from splatbench.train.initializers import InitSettings, initialize
@@ -155,8 +155,13 @@ class Trainer:
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
         self.gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
         self.background, self.background_note = resolve_background(config.background, train)
-        # recorded in the saved PLY for `splatbench render`; None for a dataset with no declared up
-        self.world_up = dataset_up(dataset.root, train.cameras)
+        # recorded in the saved PLY for `splatbench render`: a splatbench render's declared up, else
+        # (a capture) the up its cameras share (`rig_up`), said in a note
+        self.world_up, self.up_note = dataset_up(dataset.root, train.cameras), None
+        if self.world_up is None and len(train.cameras):
+            self.world_up = rig_up(train.cameras)
+            self.up_note = (f"world up {np.round(self.world_up, 3).tolist()} estimated from the training cameras "
+                            f"(recorded in the PLY for splatbench render; --up overrides it there)")
         self.generator = torch.Generator().manual_seed(config.seed)
         self._order: list[int] = []
         k = config.sh_auto_holdout_every if self.sh.auto else 0
@@ -478,7 +483,8 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     except Interrupted as exc:
         raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
     notes = resumed + list(trainer.dataset.notes) + ([trainer.init_note] if trainer.init_note else []) \
-        + [trainer.background_note] + ([lpips_note] if lpips_note else [])
+        + [trainer.background_note] + ([trainer.up_note] if trainer.up_note else []) \
+        + ([lpips_note] if lpips_note else [])
     if trainer.num_gaussians == 0:
         gone = next((h.step for h in history if h.num_gaussians == 0), trainer.step_index)
         notes.append(f"warning: the model is empty: every Gaussian was pruned (none left from step {gone} on), so it "
