@@ -287,7 +287,8 @@ def test_trained_sh0_model_saves_graphdecos_62_properties_and_reads_back_as_degr
 def test_saved_ply_records_the_datasets_up_and_the_background(tmp_path, tiny_diffuse):
     """A Mitsuba render declares its up (+y, the rig's): the PLY records it and the
     background trained on, for `splatbench render`; a dataset without a splatbench
-    manifest (the synthetic one) declares no up and records none."""
+    manifest (the synthetic one, as a capture) declares no up: the PLY records the one its
+    training cameras share (`rig_up`)."""
     from splatbench.ply import read_view_hints
 
     trainer = Trainer(config(tmp_path, background=[0.25, 0.5, 0.75]), dataset=tiny_diffuse)
@@ -296,7 +297,9 @@ def test_saved_ply_records_the_datasets_up_and_the_background(tmp_path, tiny_dif
     assert hints.background == tuple(np.float32([0.25, 0.5, 0.75]).tolist())  # the float32 tensor it rendered with
     synthetic = synthetic_dataset(tmp_path, view_dependent=False, views=8, n=20)
     hints = read_view_hints(Trainer(config(tmp_path), dataset=synthetic).save_ply(tmp_path / "synthetic.ply"))
-    assert hints.up is None and hints.background == (0.0, 0.0, 0.0)  # "auto" without empty pixels: black
+    from splatbench.scenes.orientation import rig_up
+    assert np.allclose(hints.up, rig_up(synthetic.train.cameras), atol=1e-6)
+    assert hints.background == (0.0, 0.0, 0.0)  # "auto" without empty pixels: black
 
 
 def test_auto_initial_opacity_is_the_strategys_reference_value(tmp_path, tiny_diffuse):
