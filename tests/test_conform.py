@@ -39,18 +39,14 @@ SCENES = {p.build.__name__: p.build for p in PROBES}
 # ----------------------------------------------------------------------------
 
 def _per_pixel(scene, **conv):
-    """Per pixel and Gaussian (depth order): Mahalanobis d^2, raw alpha o exp(-d^2 / 2), and opacity."""
+    """Per pixel and Gaussian (depth order): Mahalanobis d^2 and raw alpha o exp(-d^2 / 2) (conform's own
+    `_contributions` of the oracle's projection under ``conv``)."""
+    from splatbench.backends.conform.diagnose import _contributions
+
     c = scene.camera
     proj = reference.project(scene.means, scene.log_scales, scene.quats, scene.opacity_logits, c.K,
                              c.world_to_camera, c.width, c.height, near=c.near, far=c.far, **conv)
-    vis = np.flatnonzero(proj.visible)
-    vis = vis[np.argsort(proj.depths[vis], kind="stable")]
-    jj, ii = np.meshgrid(np.arange(c.width) + 0.5, np.arange(c.height) + 0.5)
-    dx = jj.reshape(-1, 1) - proj.means2d[vis, 0]
-    dy = ii.reshape(-1, 1) - proj.means2d[vis, 1]
-    A, B, C = proj.conics[vis].T
-    d2 = A * dx * dx + C * dy * dy + 2 * B * dx * dy
-    return d2, proj.opacities[vis] * np.exp(-d2 / 2)
+    return _contributions(scene, proj)
 
 
 @pytest.mark.parametrize("name", sorted(set(SCENES) - APPROXIMATIONS))
