@@ -112,7 +112,7 @@ def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=No
     tiles its box of half side ceil(3 sqrt(largest eigenvalue of Σ2D)) touches, with no per-pixel
     cutoff (a declared approximation, not a bug)."""
     dt = means.dtype
-    Wm = torch.as_tensor(camera.world_to_camera, dtype=dt)
+    Wm = torch.tensor(camera.world_to_camera, dtype=dt)  # a copy: Camera arrays are read-only
     Wr, Wt = Wm[:3, :3], Wm[:3, 3]
     t = means @ Wr.T + Wt
     z = t[:, 2]

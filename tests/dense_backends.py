@@ -57,7 +57,7 @@ def _sh_rgb(sh, d, degree):
 def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None, bug=None):
     """rgb [H, W, 3], alpha [H, W], depth [H, W]; inputs as in splatbench/backends/base.py."""
     dt = means.dtype
-    view = torch.as_tensor(camera.world_to_camera, dtype=dt)
+    view = torch.tensor(camera.world_to_camera, dtype=dt)  # a copy: Camera arrays are read-only
     R, tr = view[:3, :3], view[:3, 3]
     t = means @ R.T + tr
     keep = (t[:, 2] >= camera.near) & (t[:, 2] <= camera.far)

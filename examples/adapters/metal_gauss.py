@@ -47,7 +47,7 @@ def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=No
     means [N, 3]; log_scales [N, 3]; quats [N, 4] (w, x, y, z); opacity_logits [N]; sh [N, K, 3]."""
     dt, dev = means.dtype, means.device
     K = torch.tensor([[camera.fx, 0.0, camera.cx], [0.0, camera.fy, camera.cy], [0.0, 0.0, 1.0]], dtype=dt, device=dev)
-    viewmat = torch.as_tensor(camera.world_to_camera, dtype=dt, device=dev)
+    viewmat = torch.tensor(camera.world_to_camera, dtype=dt, device=dev)  # a copy: Camera arrays are read-only
     degree = int(round(math.sqrt(sh.shape[1]))) - 1 if sh_degree is None else int(sh_degree)
     bg = (0.0, 0.0, 0.0) if background is None else tuple(float(v) for v in background)
     rgb, alpha, _info = _mg_render(
