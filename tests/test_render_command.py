@@ -171,3 +171,10 @@ def test_framing_rig_circles_the_up_axis_at_one_elevation():
     horiz /= np.linalg.norm(horiz, axis=1)[:, None]
     cos = np.sum(horiz * np.roll(horiz, -1, axis=0), axis=1)
     assert np.allclose(cos, 0.0, atol=1e-9)  # 90 degrees apart for 4 views
+
+
+def test_a_bundled_models_name_renders_it(tmp_path):
+    """`splatbench render guitar` renders the bundled model, as `compare --model guitar` takes it."""
+    code, out, image = run("guitar", "--size", "48x32", "--out", tmp_path / "g.png")
+    assert code == 0, out
+    assert image.shape == (32, 48, 3) and image.max() > 50  # something drawn, on the recorded/default background

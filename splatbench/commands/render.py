@@ -11,6 +11,7 @@ from splatbench.checks import check_image_size, check_sh_degree, parse_size
 from splatbench.errors import InputError
 from splatbench.framing import AXES, DEFAULT_UP, KNOWN_UP_ELEVATION, framing_camera, parse_up
 from splatbench.overrides import parse_overrides
+from splatbench.workloads import BUNDLED_MODELS
 
 def parse_background(text: str) -> tuple[float, float, float]:
     """``--background``: ``R,G,B`` in [0, 1]."""
@@ -67,7 +68,7 @@ def _axis_name(up) -> str:
 @click.option("--option", "options", multiple=True, help="Rasterizer option key=value (repeatable), e.g. tile_size=8.")
 def render(source: Path, out: Path | None, view: int, size: str, up: str | None, elevation: float | None,
            camera_spec: str | None, background: str | None, sh_degree: int | None, options: tuple[str, ...]) -> None:
-    """Render SOURCE (a 3DGS .ply or a workload .npz) to a PNG and print its path.
+    """Render SOURCE (a 3DGS .ply, a bundled model: guitar or biker, or a workload .npz) to a PNG and print its path.
 
     A PLY is framed by a camera looking at the middle of its Gaussians, with the world's
     up (--up, or the one the PLY records) up in the image."""
@@ -83,6 +84,9 @@ def render(source: Path, out: Path | None, view: int, size: str, up: str | None,
                          "(the dataset's camera is placed already); leave it out")
     up_vector = parse_up(up) if up is not None else None
     rgb = parse_background(background) if background is not None else None
+    if not source.exists() and str(source).lower() in BUNDLED_MODELS:  # `render guitar`, as `compare --model`
+        out = out or Path(f"{str(source).lower()}.png")
+        source = BUNDLED_MODELS[str(source).lower()]
     out = out or source.with_suffix(".png")
     if out.is_dir():
         raise InputError(f"--out: {str(out)!r} is a folder; give the path of the PNG to write")
