@@ -82,29 +82,10 @@ def initialize(name: str, dataset, settings: InitSettings) -> Initialization:
     """The initial Gaussians of method ``name`` and their summary (`InputError` if unknown)."""
     if name not in INITIALIZERS:
         raise InputError(f"init: unknown initialisation {name!r} (expected one of: {', '.join(INITIALIZERS)})")
-    if name == "surface" and (dataset.points is None or len(dataset.points) < 2):
-        # A capture without a point cloud (a NeRF / instant-ngp transforms.json): graphdeco starts such
-        # scenes from random points too. Said in a note, never silently.
-        have = "no point cloud" if dataset.points is None else f"{len(dataset.points)} point(s)"
-        made = INITIALIZERS["random"](dataset, settings)
-        note = (f"init: 'surface' needs the dataset's points, but {str(dataset.root)!r} has {have}: "
-                f"started from {len(made)} random points in the camera bounds, as graphdeco does (set init=random "
-                f"to ask for that, or init=sfm to triangulate points)")
-        (settings.say or (lambda line: None))(note)
-        return Initialization(made, {"method": "random", "asked": "surface", "points": len(made)}, note)
     made = INITIALIZERS[name](dataset, settings)
     init = made if isinstance(made, Initialization) else Initialization(made)
     return Initialization(init.gaussians, {"method": name, "points": len(init.gaussians), **init.summary},
                           init.note)
-
-
-def _dataset_points(dataset, settings: InitSettings, method: str) -> Gaussians:
-    points = dataset.points
-    if points is None or len(points) < 2:
-        have = "no point cloud" if points is None else f"{len(points)} point(s)"
-        raise InputError(f"init: {method!r} needs the dataset's points, but {str(dataset.root)!r} has {have} "
-                         f"(use init=random)")
-    return from_points(points.xyz, points.rgb, sh_degree=settings.sh_degree, opacity=settings.opacity)
 
 
 @register_init("sfm")
@@ -132,9 +113,21 @@ def sfm(dataset, settings: InitSettings) -> Initialization:
 
 
 @register_init("surface")
-def surface(dataset, settings: InitSettings) -> Gaussians:
-    """The dataset's own points (true-surface samples of a rendered scene; a COLMAP folder's points3D)."""
-    return _dataset_points(dataset, settings, "surface")
+def surface(dataset, settings: InitSettings) -> Gaussians | Initialization:
+    """The dataset's own points (true-surface samples of a rendered scene; a COLMAP folder's points3D).
+
+    A capture without a point cloud (a NeRF / instant-ngp transforms.json) starts from random
+    points instead, as graphdeco does, said in a note (never silently)."""
+    points = dataset.points
+    if points is not None and len(points) >= 2:
+        return from_points(points.xyz, points.rgb, sh_degree=settings.sh_degree, opacity=settings.opacity)
+    have = "no point cloud" if points is None else f"{len(points)} point(s)"
+    made = random(dataset, settings)
+    note = (f"init: 'surface' needs the dataset's points, but {str(dataset.root)!r} has {have}: "
+            f"started from {len(made)} random points in the camera bounds, as graphdeco does (set init=random "
+            f"to ask for that, or init=sfm to triangulate points)")
+    (settings.say or (lambda line: None))(note)
+    return Initialization(made, {"method": "random", "asked": "surface"}, note)
 
 
 @register_init("random")
