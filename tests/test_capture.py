@@ -233,6 +233,34 @@ def test_grid_scenes_resolve_per_scene_type(tmp_path):
     assert runs["cap"]["iterations"] == runs["toy"]["iterations"] == 20
 
 
+def test_run_ids_of_user_data_follow_content_not_path(tmp_path):
+    """A committed report's run ids must hold in another clone: the same folder and model at
+    another path give the same ids; one changed byte of a model, or one more image, gives new
+    ones; splatbench's own SfM cache inside the folder does not change them."""
+    import shutil
+
+    from splatbench.experiments.grid import expand, load_experiment
+
+    first = {r.scene: r.run_id for r in expand(_mixed_grid(tmp_path / "a"))}
+    shutil.copytree(tmp_path / "a" / "exp", tmp_path / "b" / "moved")
+    moved = load_experiment(tmp_path / "b" / "moved" / "grid.toml")
+    assert {r.scene: r.run_id for r in expand(moved)} == first
+
+    (tmp_path / "b" / "moved" / "cap" / "sfm").mkdir()
+    (tmp_path / "b" / "moved" / "cap" / "sfm" / "model.bin").write_bytes(b"derived")
+    assert {r.scene: r.run_id for r in expand(load_experiment(moved.source))} == first
+
+    ply = tmp_path / "b" / "moved" / "toy.ply"
+    data = bytearray(ply.read_bytes())
+    data[-1] ^= 1
+    ply.write_bytes(bytes(data))
+    image = next((tmp_path / "b" / "moved" / "cap" / "images").iterdir())
+    shutil.copy(image, image.with_name("zz_extra" + image.suffix))
+    changed = {r.scene: r.run_id for r in expand(load_experiment(moved.source))}
+    assert changed["diffuse"] == first["diffuse"]
+    assert changed["toy"] != first["toy"] and changed["cap"] != first["cap"]
+
+
 @pytest.mark.slow
 def test_grid_over_catalog_folder_and_teacher_scenes_runs_and_reports(tmp_path, monkeypatch):
     from splatbench.experiments.runner import run_experiment

@@ -136,7 +136,7 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
                     except InputError as exc:
                         raise InputError(f"{spec.source}: {_culprit(spec, cell, scene, seed, check)}: {exc}") \
                             from None
-                rid = make_run_id(spec.kind, config)
+                rid = make_run_id(spec.kind, kind.identity(config) if kind.identity is not None else config)
                 if rid in seen:
                     continue
                 seen.add(rid)

@@ -6,6 +6,7 @@ know which kind it holds::
 
     validate(config) -> None                 raise a one-line InputError naming the dotted field
     resolve(config) -> dict                  optional: the config with every default filled in
+    identity(config) -> dict                 optional: what the run id hashes of a resolved config
     run(config, workdir) -> RunOutput        one run, in a worker process
     scenes() -> set[str]                     optional: known scene names (None: any name)
     prepare(configs) -> None                 optional: once, in the parent, before any run
@@ -14,7 +15,10 @@ know which kind it holds::
 axis values, plus ``scene`` and ``seed``. `resolve`'s output is what the run id
 hashes and what `run` receives, so a kind that fills in defaults makes
 ``sh_degree = 3`` written out and left to the default the same run, and makes a
-changed default a new run.
+changed default a new run. `identity` (default: the resolved config itself) lets a kind
+hash what a run depends on rather than where it was found: the train kind swaps a user's
+dataset folder or model path for its content hash, so a committed report's run ids hold in
+any clone.
 
 Workers find a kind by name in a fresh process, so a kind must be reachable by
 name there: a built-in (`BUILTIN_KINDS`, imported lazily) or ``"package.module:ATTR"``
@@ -66,6 +70,7 @@ class RunKind:
     validate: Callable[[dict[str, Any]], None]
     run: Callable[[dict[str, Any], Path], RunOutput]
     resolve: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+    identity: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     scenes: Callable[[], set[str]] | None = None
     prepare: Callable[[list[dict[str, Any]]], None] | None = None
     description: str = ""

@@ -26,7 +26,10 @@ scene) is left out of that run's resolved config, so a grid mixing the types can
 
 `resolve` fills every default in -- TrainConfig's, the rig's for ``data``, and the
 strategy's own fields for ``strategy_options`` -- so a field written at its default
-is the same run as one left out, and a changed default makes new runs.
+is the same run as one left out, and a changed default makes new runs. `identity`
+hashes a dataset folder's or a teacher model's content in place of its path
+(`splatbench.data.content`), so the run ids of a grid over a user's data are the same in
+every clone and change when the data does.
 
 Datasets are rendered once, in the parent, by `prepare` (Mitsuba, cached by content
 hash) into ``$SPLATBENCH_DATASETS`` (default ``./data/scenes``, made absolute and
@@ -47,6 +50,7 @@ from pathlib import Path
 from typing import Any
 
 from splatbench.checks import check_image_size, check_keys
+from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
@@ -215,6 +219,24 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def identity(config: dict[str, Any]) -> dict[str, Any]:
+    """What the run id hashes of a resolved config: ``data.path`` / ``data.model`` replaced by
+    ``data.content``, the hash of what the folder or file holds (module doc)."""
+    data = config.get("data", {})
+    key = "path" if "path" in data else "model" if "model" in data else None
+    if key is None:
+        return config
+    rest = {k: v for k, v in data.items() if k != key}
+    return {**config, "data": {**rest, "content": _content(str(Path(data[key]).absolute()))}}
+
+
+def _content(path: str) -> str:
+    if not Path(path).exists():
+        raise InputError(f"data: {path} does not exist (a scene table's path or model, relative to the "
+                         f"experiment file)")
+    return content_hash(path)
+
+
 def scenes() -> set[str]:
     """Every scene of the catalog (`splatbench.scenes.find_scenes`)."""
     from splatbench.scenes.catalog import find_scenes
@@ -371,7 +393,7 @@ REPORT = KindReport(
     timed=("train_seconds", "render_ms_per_view"),
 )
 
-TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, scenes=scenes, prepare=prepare,
+TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, identity=identity, scenes=scenes, prepare=prepare,
                 description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT)
 
 __all__ = ["TRAIN", "REPORT", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "datasets_dir", "dataset_folder",
