@@ -38,7 +38,7 @@ run() {  # run NAME COMMAND...: log the command, its output and its time; rememb
   [ $rc -eq 0 ] || failed+=("$name")
 }
 
-if ! $PY -c 'import sys, splatbench.raster.backend as b; sys.exit(0 if b.cuda_available() else 1)'; then
+if ! $PY -c 'import sys, splatbench.raster.device as d; sys.exit(0 if d.cuda_available() else 1)'; then
   echo "cuda_check: Dr.Jit finds no CUDA device here; nothing to check" >&2
   exit 2
 fi
