@@ -2,8 +2,8 @@
 
 The bounds (`FORWARD_ATOL`, `gradient_bound`, ...) are derived in the comments below;
 `ImageError`, `GradError` and `Timing` are one measurement each. Shared by
-`splatbench.backends.compare` (which runs a comparison), `compare_measure` (which
-measures) and `compare_report` (which writes it); imports none of them.
+`splatbench.compare.run` (which runs a comparison), `measure` (which measures) and
+`report` (which writes it); imports none of them.
 """
 
 from __future__ import annotations

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.backends.base import Backend
-from splatbench.backends.conform.calls import Fault, captured, outputs
-from splatbench.backends.conform.oracle import conventions_of, oracle
-from splatbench.backends.conform.probes import Probe
+from splatbench.conform.calls import Fault, captured, outputs
+from splatbench.conform.oracle import conventions_of, oracle
+from splatbench.conform.probes import Probe
 
 UPSCALE = 16  # probe images are 12 to 32 pixels wide: each pixel drawn as a 16x16 block
 

@@ -11,8 +11,8 @@ import tempfile
 import numpy as np
 
 from splatbench.backends.base import Backend
-from splatbench.backends.conform.oracle import stack
-from splatbench.backends.conform.scenes import GROUPS, ProbeScene
+from splatbench.conform.oracle import stack
+from splatbench.conform.scenes import GROUPS, ProbeScene
 
 COTANGENT_SEED = 1234
 OUTPUT_CHANNELS = {"rgb": slice(0, 3), "alpha": slice(3, 4), "depth": slice(4, 5)}

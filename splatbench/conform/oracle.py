@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from splatbench.backends.base import Backend
-from splatbench.backends.conform.scenes import GROUPS, ProbeScene
+from splatbench.conform.scenes import GROUPS, ProbeScene
 
 U32 = 2.0 ** -24
 U64 = 2.0 ** -53

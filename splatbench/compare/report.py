@@ -28,9 +28,9 @@ import pandas as pd
 
 from splatbench.backends.base import OUTPUTS
 from splatbench.backends.builtins.reference_backend import GROUPS
-from splatbench.backends.compare import CompareResult, CompareRow
-from splatbench.backends.compare_types import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD
-from splatbench.backends.compare_measure import spread
+from splatbench.compare.run import CompareResult, CompareRow
+from splatbench.compare.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD
+from splatbench.compare.measure import spread
 
 MODES = ("matched", "exact")
 STATS = ("max_abs", "psnr", "frac_off", "outliers", "outside_band")
@@ -257,7 +257,7 @@ def render_markdown(record: dict, table: pd.DataFrame, figures: list[Path], out:
         + ("**loaded** (1-min load above half the cores): absolute times are inflated by others' work."
            if table.loaded.any() else "not loaded."),
         "", "## Workloads", "", *[f"- {n}" for n in record["notes"]], "",
-        "## Findings", "", "Computed from `results.parquet` by `splatbench.backends.compare_report.findings`.", "",
+        "## Findings", "", "Computed from `results.parquet` by `splatbench.compare.report.findings`.", "",
         *[f"- {line}" for line in findings(table)], "",
         "## Forward error", "",
         f"Each cell: max abs / PSNR (dB, peak 1) / share of pixels off by more than {OFF_THRESHOLD:.0e}. Depth is "
