@@ -20,7 +20,7 @@ from click.testing import CliRunner
 
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench.backends import Backend, BackendInfo, get_backend
-from splatbench.backends.builtins.reference_backend import GROUPS
+from splatbench.backends.base import GROUPS
 from splatbench.compare.run import CompareSettings, auto_scale, run_compare
 from splatbench.compare.bounds import GRAD_TERM_OPS, U32, gradient_bound
 from splatbench.compare.report import (RUN_RECORD, findings, render_markdown, result_table, rewrite_report,

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-U32 = 2.0 ** -24  # float32 unit roundoff
+from splatbench.conventions import U32  # float32 unit roundoff
 
 # Forward bound, derived in tests/test_raster_parity.py: a pixel sums L <= ~150 terms
 # T_i a_i c_i, T_i a product of i factors (relative error <= i u) and a_i c_i ~20 float32

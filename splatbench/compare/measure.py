@@ -16,19 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from splatbench.backends.base import OUTPUTS, Backend
-from splatbench.backends.builtins.reference_backend import GROUPS
+from splatbench.backends.base import GROUPS, OUTPUTS, Backend, as_numpy
 from splatbench.compare.bounds import (DEPTH_ALPHA_MIN, OFF_THRESHOLD, GradError, ImageError, Timing,
                                                over_bound)
 from splatbench.errors import InputError, one_line
 from splatbench.metrics.image import psnr
-
-
-def as_numpy(x) -> np.ndarray:
-    """A torch tensor or array as a float64 numpy array on the host."""
-    if hasattr(x, "detach"):
-        x = x.detach().cpu().double().numpy()
-    return np.asarray(x, dtype=np.float64)
 
 
 def sync(device: str) -> None:

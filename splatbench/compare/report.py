@@ -25,10 +25,9 @@ from types import SimpleNamespace
 
 import pandas as pd
 
-from splatbench.backends.base import OUTPUTS
-from splatbench.backends.builtins.reference_backend import GROUPS
+from splatbench.backends.base import GROUPS, OUTPUTS
 from splatbench.compare.run import CompareResult, CompareRow
-from splatbench.compare.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD
+from splatbench.compare.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD, U32
 from splatbench.compare.measure import spread
 from splatbench.report_files import run_header, write_json, write_parquet, write_text
 
@@ -291,7 +290,7 @@ _outlier_cell(r), _band_cell(r), r.forward_verdict] for _, r in table.iterrows()
         f"**Bound**: one gradient entry sums a term per pixel, each ~{GRAD_TERM_OPS} float32 operations (relative "
         f"error {GRAD_TERM_OPS}u); cancellation under random cotangents amplifies that by at most sqrt(P) "
         f"(`tests/test_raster_grads.py`): {GRAD_TERM_OPS}·u·sqrt(P)"
-        + "".join(f"; {GRAD_TERM_OPS * 2.0 ** -24 * math.sqrt(w * h):.1e} at {w}x{h} ({name})" for name, w, h in
+        + "".join(f"; {GRAD_TERM_OPS * U32 * math.sqrt(w * h):.1e} at {w}x{h} ({name})" for name, w, h in
                   table[["workload", "error_width", "error_height"]].drop_duplicates().itertuples(index=False))
         + "; plus sqrt(b / P) for the b pixels over the forward bound (in the boundary band), each "
         "changing its terms by a whole contribution. A group whose oracle gradient is exactly 0 (the quaternions of "

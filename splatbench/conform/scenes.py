@@ -16,12 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from splatbench.backends.base import GROUPS
 from splatbench.cameras import Camera
 from splatbench.conventions import SH_C0
 from splatbench.scene_builders import logit, point_at, sh_dc, world_sigma
 from splatbench.workloads import random_unit_quats
-
-GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
 
 
 @dataclass(frozen=True)

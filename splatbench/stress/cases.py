@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from splatbench.backends.base import GROUPS
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
 from splatbench.gaussians import quat_to_rotmat
@@ -27,7 +28,7 @@ from splatbench.raster import RasterOptions
 from splatbench.scene_builders import camera_points, to_world, world_sigma
 from splatbench.workloads import random_unit_quats
 
-FIELDS = ("means", "log_scales", "quats", "opacity_logits", "sh")
+FIELDS = GROUPS  # StressCase's parameter fields, in rasterize's argument order
 
 SIZES = ((24, 20), (32, 24), (48, 40))          # (W, H) menu
 COUNTS = (1, 3, 12, 60)                          # N menu (the stacked category uses STACK)
