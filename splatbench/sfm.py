@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from splatbench.cameras import Camera
+from splatbench.data.undistort import cache_root
 from splatbench.errors import InputError
 from splatbench.fsutil import replace_dir
 from splatbench.safeio import read_npz
@@ -298,15 +299,22 @@ def sfm_inputs(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True) ->
     return inputs
 
 
+def sfm_cache_dir(inputs: dict[str, Any]) -> Path:
+    """Where `cached_sfm` keeps the SfM run of these `sfm_inputs`: ``<cache root>/sfm/<hash>``
+    (the cache root is ``$SPLATBENCH_CACHE``, else ``~/.cache/splatbench``)."""
+    return cache_root() / "sfm" / inputs["hash"][:20]
+
+
 def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True,
                say: Callable[[str], None] | None = None) -> tuple[SfmRun, bool]:
     """`run_sfm` (single-threaded, deterministic) on the training views, reused while its inputs are unchanged.
 
     The model, its points and a manifest (the `sfm_inputs` hash and the run's numbers)
-    live in ``<dataset>/sfm``. When the manifest's hash matches, the run is read back
-    (no pycolmap); otherwise SfM runs into a temporary sibling folder that replaces
-    ``<dataset>/sfm`` atomically (`splatbench.fsutil.replace_dir`), as the scene renders
-    are cached. Returns ``(run, cached)``; ``run.seconds`` is that of the original run.
+    live in `sfm_cache_dir` (``$SPLATBENCH_CACHE/sfm/<hash>``, beside the undistorted
+    images; never in the dataset folder, which is the user's and may be read-only). When
+    the manifest's hash matches, the run is read back (no pycolmap); otherwise SfM runs
+    into a temporary sibling folder that replaces that folder atomically
+    (`splatbench.fsutil.replace_dir`), as the scene renders are cached. Returns ``(run, cached)``; ``run.seconds`` is that of the original run.
     ``say`` gets one line before anything slow: ``SfM: reusing DIR`` or ``SfM: running
     pycolmap on N training views (cached in DIR)``.
 
@@ -319,16 +327,16 @@ def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True,
     from splatbench.scenes.render import MANIFEST, read_manifest
 
     ds = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
-    root = Path(ds.root)
-    out = root / SFM_DIR
     inputs = sfm_inputs(ds, seed=seed, known_intrinsics=known_intrinsics)
+    out = sfm_cache_dir(inputs)
+    out.parent.mkdir(parents=True, exist_ok=True)
     manifest = read_manifest(out)
     say = say or (lambda line: None)
     if manifest is not None and manifest.get("hash") == inputs["hash"] and (out / SFM_POINTS).is_file():
         say(f"SfM: reusing {out}")
         return _read_cached(out, manifest), True
     say(f"SfM: running pycolmap on {len(ds.train)} training views (cached in {out})")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{SFM_DIR}.run-", dir=root))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.run-", dir=out.parent))
     try:
         run = run_sfm(ds, seed=seed, single_thread=True, known_intrinsics=known_intrinsics, out=tmp / SFM_DIR)
         np.savez(tmp / SFM_DIR / SFM_POINTS, xyz=run.xyz, rgb=run.rgb)

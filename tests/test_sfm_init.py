@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +18,7 @@ import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench.data import load_dataset
 from splatbench.errors import InputError
 from splatbench.scenes.render import read_manifest
-from splatbench.sfm import SFM_DIR, cached_sfm, sfm_inputs
+from splatbench.sfm import SFM_DIR, cached_sfm, sfm_cache_dir, sfm_inputs
 from splatbench.train import TrainConfig, train
 from splatbench.train.initializers import InitSettings, initialize
 from tests.test_init import tiny  # noqa: F401 - the module-scoped tiny capture fixture
@@ -26,10 +27,21 @@ SETTINGS = InitSettings(sh_degree=0, opacity=0.1, random_points=10, seed=0)
 
 
 @pytest.fixture
-def capture(tiny, tmp_path):  # noqa: F811
-    """A private copy of the tiny capture (the cache writes into the dataset folder)."""
+def capture(tiny, tmp_path, monkeypatch):  # noqa: F811
+    """A private copy of the tiny capture, with a private cache root (where SfM runs are kept)."""
     path, _ = tiny
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
     return shutil.copytree(path, tmp_path / "tiny", ignore=shutil.ignore_patterns(SFM_DIR))
+
+
+def cache_of(capture) -> Path:
+    """The cache folder of the capture's SfM run, as it is now."""
+    return sfm_cache_dir(sfm_inputs(load_dataset(capture)))
+
+
+def untouched(capture) -> bool:
+    """Nothing written into the user's dataset folder (no sfm/, no hidden temporary folder)."""
+    return not (capture / SFM_DIR).exists() and not list(capture.glob(".*"))
 
 
 def test_sfm_init_sees_training_views_only_and_starts_from_the_aligned_points(capture):
@@ -41,10 +53,11 @@ def test_sfm_init_sees_training_views_only_and_starts_from_the_aligned_points(ca
     assert s["total"] == len(ds.train) == 12 and s["registered"] >= 0.9 * s["total"]
     # the alignment is good to 1 % of the rig radius (the bound of test_from_sfm_registers...)
     assert s["center_rmse_rel"] <= 0.01
-    manifest = read_manifest(capture / SFM_DIR)
+    assert untouched(capture)
+    manifest = read_manifest(cache_of(capture))
     assert sorted(manifest["inputs"]["views"]) == sorted(ds.train.names)        # the inputs: training views
     assert not set(manifest["registered_names"]) & set(ds.test.names)          # no test view was seen
-    with np.load(capture / SFM_DIR / "points.npz") as pts:
+    with np.load(cache_of(capture) / "points.npz") as pts:
         assert s["points"] == len(init.gaussians) == len(pts["xyz"]) >= 2
         np.testing.assert_array_equal(init.gaussians.means, pts["xyz"].astype(np.float32))
         # SH DC from the SfM colours: C0 sh0 + 0.5 = rgb / 255 (float32 rounding of the DC)
@@ -80,8 +93,11 @@ def test_sfm_is_reused_while_the_training_views_are_unchanged_and_rerun_when_one
     _, cached = cached_sfm(load_dataset(capture))
     assert not cached and calls == [1]
     train_image.write_bytes(original)
-    restored, cached = cached_sfm(load_dataset(capture))
-    assert not cached and restored.xyz.tobytes() == first.xyz.tobytes()
+    restored, cached = cached_sfm(load_dataset(capture))  # each version of the inputs keeps its own folder
+    assert cached and restored.xyz.tobytes() == first.xyz.tobytes() and calls == [1]
+    shutil.rmtree(cache_of(capture))  # rerun from scratch: SfM is deterministic, the same model
+    rerun, cached = cached_sfm(load_dataset(capture))
+    assert not cached and rerun.xyz.tobytes() == first.xyz.tobytes()
 
 
 def test_train_with_sfm_init_logs_points_and_registered_views(capture, tmp_path):
@@ -106,7 +122,8 @@ def test_a_dataset_sfm_cannot_register_is_one_line(capture, tmp_path, capfd):
         train(cfg)
     text = str(err.value)
     assert "\n" not in text and text.startswith("init: 'sfm' failed on") and "init=surface or init=random" in text
-    assert not (capture / SFM_DIR).exists() and not list(capture.glob(".sfm.run-*"))  # nothing half-written
+    cache = tmp_path / "cache" / "sfm"
+    assert untouched(capture) and not (cache.exists() and any(cache.iterdir()))  # nothing (half-)written
     # and COLMAP's own error log (glog lines such as "E20261123 ... sfm.cc:310] ...") stays quiet
     assert not re.search(r"^[EWF]\d{8} ", capfd.readouterr().err, re.M)
 
@@ -123,14 +140,15 @@ def test_train_says_sfm_as_it_starts_and_ends_before_the_progress_bar(capture, t
     real = sfm_module.run_sfm
     monkeypatch.setattr(sfm_module, "run_sfm", lambda *a, **k: events.append("run_sfm") or real(*a, **k))
     cached_sfm(load_dataset(capture), say=events.append)
-    assert events == [f"SfM: running pycolmap on 12 training views (cached in {capture / SFM_DIR})", "run_sfm"]
+    assert events == [f"SfM: running pycolmap on 12 training views (cached in {cache_of(capture)})", "run_sfm"]
 
     res = CliRunner().invoke(main, ["train", str(capture), "--out", str(tmp_path / "run"), "--set", "iterations=2",
                                     "--set", "init='sfm'", "--set", "strategy='none'", "--set", "sh_degree=0",
                                     "--set", "schedule='absolute'"])
     assert res.exit_code == 0, res.output
     lines = [line for line in res.stderr.splitlines() if line.strip()]
-    assert lines[0] == f"SfM: reusing {capture / SFM_DIR}" and events[-1] == "run_sfm"  # not rerun
+    assert lines[0] == f"SfM: reusing {cache_of(capture)}" and events[-1] == "run_sfm"  # not rerun
+    assert untouched(capture)
     assert lines[1].startswith("SfM: ") and "training views registered" in lines[1] and "cached in" in lines[1]
     assert any("train" in line and "it" in line for line in lines[2:])  # the progress bar comes after
     assert lines[1] not in res.stdout  # said once, as it happened, not again among the final notes

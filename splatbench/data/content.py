@@ -3,8 +3,8 @@
 ``content_hash(path) -> str`` ("sha256:<64 hex>") hashes a file's bytes, or for a folder every
 regular file under it (relative path, size and bytes, in sorted order), so that the same data
 gives the same run id in any clone, at any path, and changed data gives a new one. Left out of a
-folder: hidden entries (``.git``, ``.DS_Store``) and ``sfm/`` at its top, where splatbench caches
-the SfM model it makes (``init = "sfm"``), so that a run does not change its own inputs' identity.
+folder: hidden entries (``.git``, ``.DS_Store``) and ``sfm/`` at its top, where ``splatbench sfm``
+writes the model it makes by default, so that making one does not change the data's identity.
 """
 
 from __future__ import annotations

@@ -63,7 +63,7 @@ class TrainConfig:
     # --- initialisation
     init: str = "surface"             # "surface" (the dataset's own points: true-surface samples of a rendered
                                       # scene, points3D of a COLMAP folder), "sfm" (pycolmap SfM on the
-                                      # training views, cached in <dataset>/sfm), "random" (uniform in the
+                                      # training views, cached in $SPLATBENCH_CACHE/sfm), "random" (uniform in the
                                       # camera bounds); splatbench.train.initializers
     init_random_points: int = 100_000  # number of points of init="random" (3DGS's Blender default)
     init_opacity: float | str = "auto"  # initial opacity of every Gaussian in (0, 1), or "auto": the

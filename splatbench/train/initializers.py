@@ -13,7 +13,7 @@ Built in (every one seeded by `splatbench.init.from_points`: 3-NN scales, opacit
 * ``sfm`` -- pycolmap SfM on the **training** views only (SIFT, exhaustive matching,
   incremental mapping; `splatbench.sfm.run_sfm`), aligned to the dataset's frame by a
   similarity on the camera centres, starting from its sparse points and their colours
-  as 3DGS does on a real capture. The model is cached by content in ``<dataset>/sfm``
+  as 3DGS does on a real capture. The model is cached by content in ``$SPLATBENCH_CACHE/sfm/<hash>``
   (`splatbench.sfm.cached_sfm`): the same training images, cameras and seed reuse it.
   SfM's seed is ``settings.sfm_seed`` (0: one model per dataset, as a capture has one
   COLMAP model; the run's seed varies training only). A dataset SfM cannot register
