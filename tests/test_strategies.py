@@ -779,3 +779,18 @@ def test_reset_every_zero_means_never():
         params["log_scales"][5] = math.log(10.0)
     st.count[:], st.grad_accum[:] = 1, 0
     assert DefaultStrategy(reset_every=0).refine(params, opts, st, step=50_000, scene_extent=1.0).pruned == 0
+
+
+def test_a_scaled_schedule_that_never_refines_is_named():
+    """graphdeco's schedule scaled to 200 steps: refine window 3..100, every 100 (a sample
+    size, not scaled), so no refinement step falls in it; the run says so rather than
+    reporting 'default' densification that never densified. At 2000 steps it refines."""
+    from splatbench.train.config import TrainConfig
+
+    for name in ("default", "absgrad", "budget"):
+        short = TrainConfig(dataset="x", iterations=200, strategy=name).make_strategy()
+        assert "never refines in this run" in short.schedule_note(200) and "refine_every" in short.schedule_note(200)
+        assert TrainConfig(dataset="x", iterations=2000, strategy=name).make_strategy().schedule_note(2000) is None
+    fraction = TrainConfig(dataset="x", iterations=200, strategy="default",
+                           strategy_options={"refine_every": "5%"}).make_strategy()
+    assert fraction.schedule_note(200) is None

@@ -103,6 +103,12 @@ class Strategy(Protocol):
         check that no change falls in the final 10 % of the run."""
         ...
 
+    def schedule_note(self, iterations: int) -> str | None:
+        """A warning when this strategy, as scaled to a run of ``iterations`` steps, never does what
+        its name says (e.g. no refinement step falls in its refine window); None when it does.
+        Optional: the trainer reads it only where a strategy has it."""
+        ...
+
     def initialize_state(self, params: Params) -> object:
         """A fresh state object for ``params`` (e.g. gradient accumulators)."""
         ...

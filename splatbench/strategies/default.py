@@ -159,6 +159,15 @@ class DefaultStrategy:
             return TopologyChange(reset - 1, f"an opacity reset (every {self.reset_every}; {window})")
         return None
 
+    def schedule_note(self, iterations: int) -> str | None:
+        """A warning when no refinement step falls in the refine window of this run."""
+        if last_multiple(self.refine_every, self.refine_start, min(iterations, self.refine_stop - 1)) is not None:
+            return None
+        return (f"warning: strategy {self.name!r} never refines in this run: no multiple of refine_every "
+                f"{self.refine_every} falls in its refine window {self.refine_start}..{self.refine_stop} of "
+                f"{iterations} iterations; give strategy_options.refine_every a smaller value or a fraction of "
+                f"the run (\"5%\"), or train longer")
+
     def initialize_state(self, params: Params) -> DefaultState:
         n, device = params["means"].shape[0], params["means"].device
         gen = torch.Generator(device=device)

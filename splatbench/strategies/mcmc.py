@@ -97,6 +97,15 @@ class MCMCStrategy:
         return TopologyChange(it - 1, f"a relocation (refine window {self.refine_start}..{self.refine_stop}, "
                                       f"every {self.refine_every})")
 
+    def schedule_note(self, iterations: int) -> str | None:
+        """A warning when no refinement step falls in the refine window of this run."""
+        if last_multiple(self.refine_every, self.refine_start, min(iterations, self.refine_stop - 1)) is not None:
+            return None
+        return (f"warning: strategy {self.name!r} never refines in this run: no multiple of refine_every "
+                f"{self.refine_every} falls in its refine window {self.refine_start}..{self.refine_stop} of "
+                f"{iterations} iterations; give strategy_options.refine_every a smaller value or a fraction of "
+                f"the run (\"5%\"), or train longer")
+
     def initialize_state(self, params: Params) -> MCMCState:
         gen = torch.Generator(device=params["means"].device)
         gen.manual_seed(self.seed)

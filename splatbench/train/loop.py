@@ -485,6 +485,9 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     notes = resumed + list(trainer.dataset.notes) + ([trainer.init_note] if trainer.init_note else []) \
         + [trainer.background_note] + ([trainer.up_note] if trainer.up_note else []) \
         + ([lpips_note] if lpips_note else [])
+    schedule_note = getattr(trainer.strategy, "schedule_note", lambda _: None)(config.iterations)  # optional
+    if schedule_note:
+        notes.append(schedule_note)
     if trainer.num_gaussians == 0:
         gone = next((h.step for h in history if h.num_gaussians == 0), trainer.step_index)
         notes.append(f"warning: the model is empty: every Gaussian was pruned (none left from step {gone} on), so it "
