@@ -242,7 +242,7 @@ def test_one_at_a_time_rows_and_generic_kind(tmp_path):
     value alone; every numeric metric gets a column; a cell equal to the base is the base."""
     from splatbench.experiments.runner import run_experiment
 
-    spec = parse_experiment({"name": "oat", "kind": "dummy", "scenes": ["alpha"], "seeds": [0, 1],
+    spec = parse_experiment({"name": "oat", "kind": "tests.kinds_for_tests:DUMMY", "scenes": ["alpha"], "seeds": [0, 1],
                              "grid": "one-at-a-time", "base": {"x": 1.0},
                              "axes": {"x": [1.0, 2.0], "n": [5]}}, source="oat.toml")
     run_experiment(spec, workers=1, results_dir=tmp_path, progress=False)
@@ -467,7 +467,7 @@ def test_product_grid_rows_average_each_seed_first(tmp_path):
     from splatbench.experiments.runner import run_experiment
     from splatbench.metrics.stats import t_interval
 
-    spec = parse_experiment({"name": "prod", "kind": "dummy", "scenes": ["alpha"], "seeds": [0, 1, 2],
+    spec = parse_experiment({"name": "prod", "kind": "tests.kinds_for_tests:DUMMY", "scenes": ["alpha"], "seeds": [0, 1, 2],
                              "axes": {"x": [1.0, 2.0], "n": [3, 5]}}, source="prod.toml")
     run_experiment(spec, workers=1, results_dir=tmp_path, progress=False)
     report = build_report(spec, tmp_path)
