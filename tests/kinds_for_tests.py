@@ -82,9 +82,9 @@ def _pass_gate(gate: Path) -> None:
     marker.unlink(missing_ok=True)
 
 
-def _run(config: dict[str, Any], workdir: Path) -> RunOutput:
+def _run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
     """Deterministic numbers from the config; sleeps, waits at a gate, raises or kills
-    its process on demand."""
+    its process on demand. (No ``prepare``: ``prepared`` is None.)"""
     import numpy as np
 
     time.sleep(config["sleep"])
@@ -110,3 +110,27 @@ def _scenes() -> set[str]:
 #: Deterministic metrics computed from the config (see `DUMMY_DEFAULTS`).
 DUMMY = RunKind(name=KIND, validate=_validate, run=_run, resolve=_resolve, scenes=_scenes,
                 description="for tests: deterministic numbers, configurable sleep, gate and failure")
+
+
+# --------------------------------------------------------------------------- probe
+def _probe_validate(config: dict[str, Any]) -> None:
+    check_keys(flatten(config), {"scene": "", "seed": 0})
+
+
+def _probe_prepare(configs: list[dict[str, Any]]) -> dict[str, int]:
+    return {"runs": len(configs), "parent": os.getpid()}
+
+
+def _probe_run(config: dict[str, Any], workdir: Path, prepared: dict[str, int]) -> RunOutput:
+    """What reached the worker from the runner: its Dr.Jit thread budget, what ``prepare``
+    returned, and the ``SPLATBENCH_*`` variables of its environment."""
+    import drjit as dr
+
+    return RunOutput(metrics={"drjit_threads": dr.thread_count(), "prepared_runs": prepared["runs"],
+                              "prepared_parent": prepared["parent"], "pid": os.getpid(),
+                              "env": ",".join(sorted(k for k in os.environ if k.startswith("SPLATBENCH_")))})
+
+
+#: A kind that reports what its worker was handed (``kind = "tests.kinds_for_tests:PROBE"``).
+PROBE = RunKind(name="tests.kinds_for_tests:PROBE", validate=_probe_validate, run=_probe_run,
+                prepare=_probe_prepare, description="for tests: what a worker gets from the runner")

@@ -422,3 +422,22 @@ def test_dask_existing_scheduler_on_loopback_via_the_cli(tmp_path, uninterrupted
     folder = tmp_path / "results" / "sweep"
     assert_table_matches_files(folder, {r.run_id for r in expand(spec)})
     pd.testing.assert_frame_equal(deterministic(read_table(folder)), deterministic(expected))
+
+
+@pytest.mark.parametrize("executor", ["local", "dask"])
+def test_workers_get_their_budget_and_what_prepare_returned_with_each_run(tmp_path, executor):
+    """The runner hands each worker its Dr.Jit thread budget (CPUs // workers) and what
+    the kind's ``prepare`` returned in the runner, with the run: it adds no environment
+    variable (the workers' ``SPLATBENCH_*`` are the runner's own)."""
+    if executor == "dask":
+        pytest.importorskip("distributed")
+    spec = parse_experiment({"name": "probe", "kind": "tests.kinds_for_tests:PROBE", "scenes": ["s"],
+                             "seeds": [0, 1, 2]}, source="probe.toml")
+    summary = run_experiment(spec, workers=2, executor=executor, results_dir=tmp_path, progress=False)
+    assert (summary.done, summary.failed) == (3, 0)
+    table = read_table(tmp_path / "probe")
+    assert (table["metric.drjit_threads"] == max(1, (os.cpu_count() or 1) // 2)).all()
+    assert (table["metric.prepared_runs"] == 3).all() and (table["metric.prepared_parent"] == os.getpid()).all()
+    assert not (table["metric.pid"] == os.getpid()).any()  # the runs ran in workers
+    own = ",".join(sorted(k for k in os.environ if k.startswith("SPLATBENCH_")))
+    assert (table["metric.env"].fillna("") == own).all(), table["metric.env"].tolist()

@@ -1,6 +1,7 @@
 """The runner's executors: a local spawn process pool and a Dask client, one interface.
 
-Both submit `splatbench.experiments.execute.execute_run` and expose ``capacity``
+Both submit `splatbench.experiments.execute.execute_run` with a `RunContext` (the
+worker's thread budget, what the kind prepared) and expose ``capacity``
 (runs in flight at most), ``submit``, ``wait``, ``broken``, ``restart`` and
 ``close``; `splatbench.experiments.runner` drives them (the module docstring there
 says how each behaves when a worker dies).
@@ -16,9 +17,11 @@ import os
 import sys
 import time
 
-from splatbench.experiments.execute import execute_run
+from typing import Any
+
+from splatbench.experiments.execute import RunContext, execute_run
 from splatbench.experiments.grid import RunSpec
-from splatbench.experiments.workers import THREADS_ENV, init_worker, runner_id
+from splatbench.experiments.workers import init_worker, runner_id
 
 
 #: How often `LocalExecutor.wait` looks for dead workers, and how long one may lie dead before the
@@ -28,26 +31,28 @@ DEAD_WORKER_GRACE = 10.0
 
 
 class LocalExecutor:
-    """A spawn process pool with at most ``workers`` runs in flight."""
+    """A spawn process pool with at most ``workers`` runs in flight, each worker with
+    ``threads`` Dr.Jit threads; ``prepared``: what the kind's ``prepare`` returned."""
 
     name = "local"
 
-    def __init__(self, workers: int, threads: int):
-        self.workers, self.threads = workers, threads
+    def __init__(self, workers: int, threads: int, prepared: Any = None):
+        self.workers = workers
+        self.context = RunContext(threads=threads, prepared=prepared)
         self._dead_since: float | None = None
         self.stalled = False  # set by `wait`, cleared by `restart`
         self.pool = self._new_pool()
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
         return cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                      initializer=init_worker, initargs=(self.threads, runner_id()))
+                                      initializer=init_worker, initargs=(runner_id(),))
 
     @property
     def capacity(self) -> int:
         return self.workers
 
     def submit(self, run: RunSpec, results_dir: str):
-        return self.pool.submit(execute_run, run, results_dir)
+        return self.pool.submit(execute_run, run, results_dir, self.context)
 
     def wait(self, futures, timeout: float | None = None) -> set:
         """The futures done within ``timeout`` s (at least one, unless it runs out, or the pool
@@ -120,22 +125,23 @@ class LocalExecutor:
 
 
 class DaskExecutor:
-    """A `distributed.Client` on ``scheduler``, or on a loopback `LocalCluster`."""
+    """A `distributed.Client` on ``scheduler``, or on a loopback `LocalCluster` whose
+    workers get ``threads`` Dr.Jit threads each and die with this runner (a remote
+    scheduler's workers keep their own); ``prepared``: what the kind's ``prepare`` returned."""
 
     name = "dask"
 
-    def __init__(self, workers: int, threads: int, scheduler: str | None):
+    def __init__(self, workers: int, threads: int, scheduler: str | None, prepared: Any = None):
         from distributed import Client, LocalCluster
 
         self.cluster = None
-        self.runner = ""  # the workers of a cluster of our own die with this runner (`die_with_runner`)
         if scheduler is None:
-            self.runner = runner_id()
+            self.context = RunContext(runner=runner_id(), threads=threads, prepared=prepared)
             self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                        dashboard_address=None, silence_logs=logging.ERROR,
-                                        env={THREADS_ENV: str(threads)})
+                                        dashboard_address=None, silence_logs=logging.ERROR)
             self.client = Client(self.cluster)
         else:
+            self.context = RunContext(prepared=prepared)
             self.client = Client(scheduler)
         self.workers = workers
 
@@ -144,7 +150,7 @@ class DaskExecutor:
         return sys.maxsize  # the scheduler queues; a dying worker costs only its own task
 
     def submit(self, run: RunSpec, results_dir: str):
-        return self.client.submit(execute_run, run, results_dir, self.runner, key=f"run-{run.run_id}-{os.urandom(4).hex()}",
+        return self.client.submit(execute_run, run, results_dir, self.context, key=f"run-{run.run_id}-{os.urandom(4).hex()}",
                                   pure=False)
 
     def wait(self, futures, timeout: float | None = None) -> set:

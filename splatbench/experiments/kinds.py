@@ -7,15 +7,18 @@ kind it holds::
     validate(config) -> None                 raise a one-line InputError naming the dotted field
     resolve(config) -> dict                  optional: the config with every default filled in
     identity(config) -> dict                 optional: what the run id hashes of a resolved config
-    run(config, workdir) -> RunOutput        one run, in a worker process
+    run(config, workdir, prepared) -> RunOutput   one run, in a worker process
     scenes() -> set[str]                     optional: known scene names (None: any name)
-    prepare(configs) -> None                 optional: once, in the parent, before any run
+    prepare(configs) -> Any                  optional: once, in the parent, before any run;
+                                             what it returns is ``run``'s ``prepared``
 
 ``config`` is the nested dict of one run: the experiment's base, overridden by its
 axis values, plus ``scene`` and ``seed``. `resolve`'s output is what the run id
 hashes and what `run` receives, so a kind that fills in defaults makes
 ``sh_degree = 3`` written out and left to the default the same run, and makes a
-changed default a new run. `identity` (default: the resolved config itself) lets a kind
+changed default a new run. ``prepared`` is how the parent tells every worker what it
+settled (plain, picklable data, e.g. the folder it rendered datasets into; None for a
+kind without ``prepare``): it travels with each run, never through the environment. `identity` (default: the resolved config itself) lets a kind
 hash what a run depends on rather than where it was found: the train kind swaps a user's
 dataset folder or model path for its content hash, so a committed report's run ids hold in
 any clone.
@@ -62,11 +65,11 @@ class RunKind:
 
     name: str
     validate: Callable[[dict[str, Any]], None]
-    run: Callable[[dict[str, Any], Path], RunOutput]
+    run: Callable[[dict[str, Any], Path, Any], RunOutput]
     resolve: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     identity: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     scenes: Callable[[], set[str]] | None = None
-    prepare: Callable[[list[dict[str, Any]]], None] | None = None
+    prepare: Callable[[list[dict[str, Any]]], Any] | None = None
     description: str = ""
     #: What its reports show (None: every numeric metric, the first one compared).
     report: KindReport | None = None
