@@ -22,6 +22,7 @@ from typing import Any
 from splatbench.experiments.execute import RunContext, execute_run
 from splatbench.experiments.grid import RunSpec
 from splatbench.experiments.workers import init_worker, runner_id
+from splatbench.interrupt import children_spared_sigint, deferred
 
 
 #: How often `LocalExecutor.wait` looks for dead workers, and how long one may lie dead before the
@@ -132,18 +133,32 @@ class DaskExecutor:
     name = "dask"
 
     def __init__(self, workers: int, threads: int, scheduler: str | None, prepared: Any = None):
-        from distributed import Client, LocalCluster
-
-        self.cluster = None
-        if scheduler is None:
-            self.context = RunContext(runner=runner_id(), threads=threads, prepared=prepared)
-            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                        dashboard_address=None, silence_logs=logging.ERROR)
-            self.client = Client(self.cluster)
-        else:
-            self.context = RunContext(prepared=prepared)
-            self.client = Client(scheduler)
+        self.cluster = self.client = None
         self.workers = workers
+        try:
+            if scheduler is None:
+                self.context = RunContext(runner=runner_id(), threads=threads, prepared=prepared)
+                # Dask's threads (some start as it is imported) and the worker processes they start,
+                # now or on a restart, leave Ctrl-C to the runner, which closes the cluster; a stop
+                # signal is held until the cluster is whole, so that no half-started part is left.
+                # Its logs stay quiet: the runner reports every run's failure in one line, and a
+                # worker closed mid-heartbeat would log a traceback.
+                with deferred(), children_spared_sigint():
+                    from distributed import Client, LocalCluster
+
+                    self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                host="127.0.0.1", dashboard_address=None,
+                                                silence_logs=logging.CRITICAL)
+                    self.client = Client(self.cluster)
+            else:
+                from distributed import Client
+
+                self.context = RunContext(prepared=prepared)
+                self.client = Client(scheduler)
+        except BaseException:  # a stop signal (delivered as the block ends) or a failed start: nothing left behind
+            with deferred():
+                self.close(cancel=True)
+            raise
 
     @property
     def capacity(self) -> int:
@@ -170,6 +185,7 @@ class DaskExecutor:
         pass
 
     def close(self, cancel: bool = False) -> None:
-        self.client.close()
+        if self.client is not None:
+            self.client.close()
         if self.cluster is not None:
             self.cluster.close()

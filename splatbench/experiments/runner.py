@@ -178,13 +178,15 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
             bar.set_postfix(failed=failed, refresh=False)
             bar.update(1)
 
-    pool = LocalExecutor(workers, threads, prepared) if executor == "local" else \
-        DaskExecutor(workers, threads, scheduler, prepared)
+    pool = None
     try:
+        pool = LocalExecutor(workers, threads, prepared) if executor == "local" else \
+            DaskExecutor(workers, threads, scheduler, prepared)
         _drive(pool, pending, str(results_dir), finish, admit=admit, heartbeat=heartbeat)
     except BaseException as exc:
         with deferred():
-            pool.close(cancel=True)
+            if pool is not None:  # an executor that fails to start closes what it started itself
+                pool.close(cancel=True)
             stopped = len(claims)
             for claim in claims.values():
                 claim.release()
