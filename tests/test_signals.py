@@ -162,14 +162,16 @@ def _descendants(pid: int) -> list:
         return []
 
 
-@pytest.mark.parametrize("moment, after", [("workers starting", 0.0), ("workers starting", 0.5), ("runs in flight", 0.0)])
-def test_ctrl_c_stops_a_dask_run_with_one_line(tmp_path, moment, after):
-    """Ctrl-C in a terminal sends SIGINT to the whole process group: the runner, Dask's
-    worker processes and any still importing. The runner prints one line and exits 130;
+@pytest.mark.parametrize("executor, moment, after", [("dask", "workers starting", 0.0), ("dask", "workers starting", 0.5),
+                                                     ("dask", "runs in flight", 0.0), ("local", "runs in flight", 0.0)])
+def test_ctrl_c_stops_a_run_with_one_line(tmp_path, executor, moment, after):
+    """Ctrl-C in a terminal sends SIGINT to the whole process group: the runner, its
+    worker processes (Dask's or the local pool's) and any still importing. The runner prints one line and exits 130;
     no worker prints a KeyboardInterrupt or CancelledError traceback, none outlives it.
     The moments are found, not timed: the first worker process has appeared (it is still
     importing; ``after`` s later, most likely still importing); every worker holds a run,
-    waiting at a gate this test never opens."""
+    waiting at a gate this test never opens. (The local pool's start is not checked: its
+    semaphores can still be left behind there, and the resource tracker warns of them.)"""
     import psutil
 
     gate = tmp_path / "gate"
@@ -177,7 +179,7 @@ def test_ctrl_c_stops_a_dask_run_with_one_line(tmp_path, moment, after):
     grid = tmp_path / "grid.toml"
     grid.write_text(f'name = "ctrlc"\nkind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nseeds = [0, 1, 2, 3]\n'
                     f'[base]\ngate = "{gate}"\n')
-    cmd = [*SPLATBENCH, "run", str(grid), "--executor", "dask", "--workers", "2", "--results",
+    cmd = [*SPLATBENCH, "run", str(grid), "--executor", executor, "--workers", "2", "--results",
            str(tmp_path / "results"), "--no-progress"]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     deadline = time.monotonic() + 180

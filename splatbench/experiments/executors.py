@@ -16,7 +16,6 @@ import multiprocessing
 import os
 import sys
 import time
-
 from typing import Any
 
 from splatbench.experiments.execute import RunContext, execute_run
@@ -53,7 +52,11 @@ class LocalExecutor:
         return self.workers
 
     def submit(self, run: RunSpec, results_dir: str):
-        return self.pool.submit(execute_run, run, results_dir, self.context)
+        """Submit ``run``. The pool starts its workers here: they leave Ctrl-C to the runner from
+        their start, and a stop signal waits until the pool is whole again (one that cut a worker's
+        start in half left a worker printing a traceback and the pool's semaphores behind)."""
+        with deferred(), children_spared_sigint():
+            return self.pool.submit(execute_run, run, results_dir, self.context)
 
     def wait(self, futures, timeout: float | None = None) -> set:
         """The futures done within ``timeout`` s (at least one, unless it runs out, or the pool
@@ -142,12 +145,15 @@ class DaskExecutor:
                 # now or on a restart, leave Ctrl-C to the runner, which closes the cluster; a stop
                 # signal is held until the cluster is whole, so that no half-started part is left.
                 # Its logs stay quiet: the runner reports every run's failure in one line, and a
-                # worker closed mid-heartbeat would log a traceback.
+                # worker closed mid-heartbeat would log a traceback. No dashboard; the scheduler's
+                # own HTTP routes (health, metrics) take a free port on 127.0.0.1, not 8787, which
+                # another cluster may hold (Dask then warns on stderr).
                 with deferred(), children_spared_sigint():
                     from distributed import Client, LocalCluster
 
                     self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                                 host="127.0.0.1", dashboard_address=None,
+                                                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                                                 silence_logs=logging.CRITICAL)
                     self.client = Client(self.cluster)
             else:
