@@ -173,10 +173,10 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
     ]
     if spec.base:
         lines += ["Shared settings: " + ", ".join(f"`{k} = {display(v)}`" for k, v in spec.base.items()) + ".", ""]
-    if spec.scene_sources:  # dataset folders and teacher models: where their data comes from
-        lines += ["Scenes from files: " + "; ".join(
+    if spec.scene_tables:  # dataset folders and teacher models: where their data comes from, as the file says
+        lines += ["Scenes from files (paths relative to the experiment file; run ids hash their content): " + "; ".join(
             f"`{name}` " + ", ".join(f"{k} `{display(v)}`" for k, v in src.items())
-            for name, src in spec.scene_sources.items())
+            for name, src in spec.scene_tables.items())
             + " (a scene's own keys win over the shared `data.*`; `data` keys of another scene type do not apply "
               "to it).", ""]
     timing = run_time(table)
