@@ -27,7 +27,8 @@ Workers find a kind by name in a fresh process, so a kind must be reachable by
 name there: a built-in (`BUILTIN_KINDS`, imported lazily) or ``"package.module:ATTR"``
 naming a module-level `RunKind`. `register_kind` serves the current process only:
 the local executor's workers are spawned, and Dask's live in other processes, so
-neither sees a kind registered at run time.
+neither sees a kind registered at run time. ``tests/kinds_for_tests.py`` is a small
+complete kind (the one the runner's tests use).
 """
 
 from __future__ import annotations
