@@ -100,6 +100,31 @@ def deferred() -> Iterator[None]:
         raise Interrupted(signum)
 
 
+@contextmanager
+def children_spared_sigint() -> Iterator[None]:
+    """Block SIGINT in this thread while the block runs: the processes it starts (and
+    the threads, which start the processes Dask starts) inherit the blocked signal
+    across fork and exec, so a Ctrl-C sent to the whole process group (a terminal)
+    reaches this process alone, which stops them; none prints a ``KeyboardInterrupt``
+    traceback of its own, even in the middle of its imports. A SIGINT that arrives in
+    the block is delivered when it ends. Main thread only; elsewhere a no-op.
+
+    The standard library starts multiprocessing's resource tracker the same way, but
+    then *unblocks* SIGINT in the thread that started it, so the tracker is started
+    first, here, and a child started later from another thread keeps the mask."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 def pending() -> int | None:
     """The signal held by an enclosing `deferred` block, if one arrived."""
     return _state.pending
@@ -123,5 +148,5 @@ def import_pycolmap() -> ModuleType:
     return pycolmap
 
 
-__all__ = ["Interrupted", "STOP_SIGNALS", "stop_on_signals", "deferred", "pending", "restore_python_handlers",
-           "import_pycolmap"]
+__all__ = ["Interrupted", "STOP_SIGNALS", "stop_on_signals", "deferred", "children_spared_sigint", "pending",
+           "restore_python_handlers", "import_pycolmap"]

@@ -45,7 +45,7 @@ def test_render_a_ply_frames_its_gaussian(tmp_path):
 
 def test_report_of_a_finished_dummy_grid(tmp_path):
     exp = tmp_path / "sweep.toml"
-    exp.write_text('name = "sweep"\nkind = "dummy"\nscenes = ["alpha"]\nseeds = [0, 1]\n[axes]\nx = [0.0, 2.0]\n')
+    exp.write_text('name = "sweep"\nkind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nseeds = [0, 1]\n[axes]\nx = [0.0, 2.0]\n')
     code, out = invoke("run", exp, "--results", tmp_path / "results", "--workers", "1", "--no-progress")
     assert code == 0, out
     code, out = invoke("report", exp, "--results", tmp_path / "results", "--out", tmp_path / "report")
@@ -65,7 +65,7 @@ def test_report_never_replaces_a_report_with_fewer_finished_runs(tmp_path):
     runs than the report folder's results.parquet: refused the same way, naming --force, the
     folder byte-identical; --force replaces it."""
     exp = tmp_path / "sweep.toml"
-    exp.write_text('name = "sweep"\nkind = "dummy"\nscenes = ["alpha"]\nseeds = [0, 1]\n[axes]\nx = [0.0, 2.0]\n')
+    exp.write_text('name = "sweep"\nkind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nseeds = [0, 1]\n[axes]\nx = [0.0, 2.0]\n')
     results, report = tmp_path / "results", tmp_path / "report"
     code, out = invoke("report", exp, "--results", results, "--out", report)
     assert code == 2 and out.strip() == (f"splatbench: error: sweep: no finished run of the 4 in {results / 'sweep'}; "
@@ -121,7 +121,7 @@ def test_demo_checks_garden_runs_the_grid_and_writes_its_report(tmp_path):
     """`splatbench demo` pointed at a tiny grid (the dummy kind) and a 1/20-scale reference check:
     every step prints its line, writes its files, and a second invocation resumes (runs nothing)."""
     exp = tmp_path / "tiny.toml"
-    exp.write_text('name = "tinydemo"\nkind = "dummy"\nscenes = ["alpha"]\nseeds = [0]\n[axes]\nx = [0.0, 2.0]\n')
+    exp.write_text('name = "tinydemo"\nkind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nseeds = [0]\n[axes]\nx = [0.0, 2.0]\n')
     common = ["--experiment", exp, "--results", tmp_path / "results", "--report-dir", tmp_path / "report",
               "--workers", "1"]
     code, out = invoke("demo", *common, "--out", tmp_path / "out", "--scale", "0.05")
@@ -157,7 +157,7 @@ def test_demo_report_goes_under_out_by_default(tmp_path, monkeypatch):
     """Without --report-dir the report lands in out/<name>/report, never in the committed reports/
     (a fresh clone stays clean after `make demo`)."""
     exp = tmp_path / "tiny.toml"
-    exp.write_text('name = "tinydemo"\nkind = "dummy"\nscenes = ["alpha"]\nseeds = [0]\n[axes]\nx = [0.0]\n')
+    exp.write_text('name = "tinydemo"\nkind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nseeds = [0]\n[axes]\nx = [0.0]\n')
     monkeypatch.chdir(tmp_path)
     code, out = invoke("demo", "--experiment", exp, "--results", "results", "--workers", "1", "--no-garden")
     assert code == 0, out

@@ -1,7 +1,7 @@
 """Experiment runner: grid expansion and run ids, validation before anything runs,
 resume, failure recording, the results table, SIGKILL-and-resume, and Dask on loopback.
 
-Everything runs the test-only ``dummy`` kind (deterministic numbers from the config,
+Everything runs the dummy kind of `tests.kinds_for_tests` (deterministic numbers from the config,
 a configurable sleep, told to fail or crash on demand), so no rendering is involved.
 Network: the Dask test binds to 127.0.0.1 only.
 """
@@ -33,7 +33,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 SWEEP = """
 name = "sweep"
-kind = "dummy"
+kind = "tests.kinds_for_tests:DUMMY"
 scenes = ["alpha", "beta"]
 seeds = [0, 1, 2]
 [base]
@@ -90,7 +90,7 @@ def _missing(value) -> bool:
 # --------------------------------------------------------------------------- grid and run ids
 GRID = """
 name = "grid"
-kind = "dummy"
+kind = "tests.kinds_for_tests:DUMMY"
 scenes = ["alpha", "beta"]
 seeds = [0, 1]
 [base]
@@ -123,11 +123,11 @@ def test_grid_expands_in_documented_order_with_labels():
 
 def test_run_id_is_the_hash_of_the_full_resolved_config():
     run = expand(spec_of(GRID))[0]
-    assert run.run_id == make_run_id("dummy", run.config)
+    assert run.run_id == make_run_id("tests.kinds_for_tests:DUMMY", run.config)
     # Defaults written out, dotted keys in any of their forms, key order: the same run.
     same = spec_of("""
         name = "other-name"
-        kind = "dummy"
+        kind = "tests.kinds_for_tests:DUMMY"
         scenes = ["alpha"]
         seeds = [0]
         [base.opts]
@@ -150,7 +150,7 @@ def test_run_id_is_the_hash_of_the_full_resolved_config():
             config["opts"]["b"] = "z"
         else:
             config[key] = value
-        ids.add(make_run_id("dummy", config))
+        ids.add(make_run_id("tests.kinds_for_tests:DUMMY", config))
     ids.add(make_run_id("other-kind", run.config))
     assert len(ids) == len(changes) + 2
 
@@ -165,7 +165,7 @@ def test_adding_an_axis_value_adds_only_new_run_ids():
 
 def test_one_at_a_time_grid_and_table_valued_axis():
     spec = spec_of("""
-        kind = "dummy"
+        kind = "tests.kinds_for_tests:DUMMY"
         scenes = ["alpha"]
         grid = "one-at-a-time"
         [base]
@@ -183,25 +183,25 @@ def test_one_at_a_time_grid_and_table_valued_axis():
 
 # --------------------------------------------------------------------------- malformed files
 MALFORMED = {
-    "unknown top-level field": ('kind = "dummy"\nscenes = ["alpha"]\nsceens = ["beta"]\n', r"sceens: unknown key \(did you mean 'scenes'\?\)"),
-    "empty axis": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nx = []\n', r"axes\.x: empty axis"),
-    "empty variant": ('kind = "dummy"\nscenes = ["alpha"]\n[variants.v]\n', r"variants\.v: empty axis"),
-    "unknown scene": ('kind = "dummy"\nscenes = ["alpha", "delta"]\n', r"scenes: unknown scene 'delta'"),
-    "unknown config key in base": ('kind = "dummy"\nscenes = ["alpha"]\n[base]\nopts.c = 1\n',
+    "unknown top-level field": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nsceens = ["beta"]\n', r"sceens: unknown key \(did you mean 'scenes'\?\)"),
+    "empty axis": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nx = []\n', r"axes\.x: empty axis"),
+    "empty variant": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[variants.v]\n', r"variants\.v: empty axis"),
+    "unknown scene": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha", "delta"]\n', r"scenes: unknown scene 'delta'"),
+    "unknown config key in base": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[base]\nopts.c = 1\n',
                                    r"base: opts\.c: unknown key"),
-    "unknown config key in an axis": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nxx = [1, 2]\n',
+    "unknown config key in an axis": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nxx = [1, 2]\n',
                                       r"axes\.xx = 1: xx: unknown key"),
-    "bad value in a variant": ('kind = "dummy"\nscenes = ["alpha"]\n[variants.v]\nok = {}\nno = { mode = "x" }\n',
+    "bad value in a variant": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[variants.v]\nok = {}\nno = { mode = "x" }\n',
                                r"variants\.v\.no: mode: expected 'ok', 'fail' or 'crash'"),
     "unknown kind": ('kind = "nope"\nscenes = ["alpha"]\n', r"kind: unknown run kind 'nope'"),
-    "axis not a list": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nx = 3\n', r"axes\.x: expected a list"),
-    "reserved key": ('kind = "dummy"\nscenes = ["alpha"]\n[axes]\nseed = [1, 2]\n', r"axes\.seed: 'seed' is set by"),
-    "duplicate seed": ('kind = "dummy"\nscenes = ["alpha"]\nseeds = [1, 1]\n', r"seeds: duplicate value 1"),
-    "unknown runner field": ('kind = "dummy"\nscenes = ["alpha"]\n[runner]\nthreads = 2\n',
+    "axis not a list": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nx = 3\n', r"axes\.x: expected a list"),
+    "reserved key": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nseed = [1, 2]\n', r"axes\.seed: 'seed' is set by"),
+    "duplicate seed": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nseeds = [1, 1]\n', r"seeds: duplicate value 1"),
+    "unknown runner field": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[runner]\nthreads = 2\n',
                              r"runner\.threads: unknown key"),
-    "bad scheduler": ('kind = "dummy"\nscenes = ["alpha"]\n[runner]\nscheduler = "127.0.0.1"\n',
+    "bad scheduler": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[runner]\nscheduler = "127.0.0.1"\n',
                       r"runner\.scheduler: expected an address like tcp://HOST:PORT"),
-    "invalid TOML": ('kind = "dummy"\nscenes = [\n', r"invalid TOML"),
+    "invalid TOML": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = [\n', r"invalid TOML"),
 }
 
 
@@ -223,7 +223,7 @@ def test_malformed_experiment_is_one_line_error_before_anything_runs(tmp_path, c
 
 
 def test_known_scenes_callback_overrides_the_kinds(tmp_path):
-    path = write(tmp_path, 'kind = "dummy"\nscenes = ["mine"]\n')
+    path = write(tmp_path, 'kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["mine"]\n')
     assert load_experiment(path, known_scenes=lambda: {"mine"}).scenes == ("mine",)
     with pytest.raises(InputError, match="scenes: unknown scene 'mine'"):
         load_experiment(path)
@@ -238,7 +238,7 @@ def _main():
 # --------------------------------------------------------------------------- store
 def test_store_reads_only_whole_result_files(tmp_path):
     folder = tmp_path / "exp"
-    rec = RunRecord(run_id="0123456789abcdef", experiment="exp", kind="dummy", scene="alpha", seed=0, status="done",
+    rec = RunRecord(run_id="0123456789abcdef", experiment="exp", kind="tests.kinds_for_tests:DUMMY", scene="alpha", seed=0, status="done",
                     config={"x": 1.0, "scene": "alpha", "seed": 0}, metrics={"value": 2.5})
     write_record(tmp_path, rec)
     # A valid-looking record under a temporary name, a foreign file, a torn file: none is a result.
@@ -268,7 +268,7 @@ def test_table_columns_hold_mixed_types():
 def test_failed_runs_are_recorded_the_rest_complete_and_resume_skips_done(tmp_path):
     text = """
         name = "mixed"
-        kind = "dummy"
+        kind = "tests.kinds_for_tests:DUMMY"
         scenes = ["alpha"]
         seeds = [0, 1]
         [variants.mode]
@@ -301,7 +301,7 @@ def test_failed_runs_are_recorded_the_rest_complete_and_resume_skips_done(tmp_pa
 def test_a_run_that_kills_its_worker_is_recorded_and_the_rest_complete(tmp_path):
     spec = spec_of("""
         name = "crashy"
-        kind = "dummy"
+        kind = "tests.kinds_for_tests:DUMMY"
         scenes = ["alpha"]
         [variants.mode]
         good = {}
@@ -422,3 +422,22 @@ def test_dask_existing_scheduler_on_loopback_via_the_cli(tmp_path, uninterrupted
     folder = tmp_path / "results" / "sweep"
     assert_table_matches_files(folder, {r.run_id for r in expand(spec)})
     pd.testing.assert_frame_equal(deterministic(read_table(folder)), deterministic(expected))
+
+
+@pytest.mark.parametrize("executor", ["local", "dask"])
+def test_workers_get_their_budget_and_what_prepare_returned_with_each_run(tmp_path, executor):
+    """The runner hands each worker its Dr.Jit thread budget (CPUs // workers) and what
+    the kind's ``prepare`` returned in the runner, with the run: it adds no environment
+    variable (the workers' ``SPLATBENCH_*`` are the runner's own)."""
+    if executor == "dask":
+        pytest.importorskip("distributed")
+    spec = parse_experiment({"name": "probe", "kind": "tests.kinds_for_tests:PROBE", "scenes": ["s"],
+                             "seeds": [0, 1, 2]}, source="probe.toml")
+    summary = run_experiment(spec, workers=2, executor=executor, results_dir=tmp_path, progress=False)
+    assert (summary.done, summary.failed) == (3, 0)
+    table = read_table(tmp_path / "probe")
+    assert (table["metric.drjit_threads"] == max(1, (os.cpu_count() or 1) // 2)).all()
+    assert (table["metric.prepared_runs"] == 3).all() and (table["metric.prepared_parent"] == os.getpid()).all()
+    assert not (table["metric.pid"] == os.getpid()).any()  # the runs ran in workers
+    own = ",".join(sorted(k for k in os.environ if k.startswith("SPLATBENCH_")))
+    assert (table["metric.env"].fillna("") == own).all(), table["metric.env"].tolist()

@@ -124,7 +124,7 @@ def _checkpoint(path: Path) -> None:
 def _record(folder: Path) -> None:
     from splatbench.experiments.store import RunRecord
 
-    rec = RunRecord(run_id="0123456789abcdef", experiment="exp", kind="dummy", scene="alpha", seed=0, status="done",
+    rec = RunRecord(run_id="0123456789abcdef", experiment="exp", kind="tests.kinds_for_tests:DUMMY", scene="alpha", seed=0, status="done",
                     config={"x": 1.0, "nested": {"y": [1, 2]}, "scene": "alpha", "seed": 0},
                     labels={"x": "1.0"}, metrics={"value": 2.5, "n": 3}, curves={"step": [1, 2]}, seconds=0.5,
                     started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00", worker="h:1")

@@ -23,7 +23,7 @@ from splatbench.checks import DRJIT_MAX_ENTRIES, check_image_size, image_size_pr
 from splatbench.framing import framing_camera
 from splatbench.errors import InputError
 
-SWEEP = 'name = "sweep"\nkind = "dummy"\nscenes = ["alpha"]\nseeds = [0, 1]\n'
+SWEEP = 'name = "sweep"\nkind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nseeds = [0, 1]\n'
 
 
 def one_gaussian(sh_dc: float = 1.0) -> Gaussians:
@@ -269,7 +269,7 @@ def test_a_misspelt_key_gets_one_wording_and_a_suggestion_everywhere():
         "rig: fov: unknown key (did you mean 'fov_deg'?)":
             lambda: RigSpec.from_mapping({"kind": "orbit", "radius": 2.0, "fov": 40.0}),
         "experiment: seed: unknown key (did you mean 'seeds'?)":
-            lambda: parse_experiment({"kind": "dummy", "scenes": ["alpha"], "seed": [0]}),
+            lambda: parse_experiment({"kind": "tests.kinds_for_tests:DUMMY", "scenes": ["alpha"], "seed": [0]}),
     }
     for message, call in cases.items():
         assert _raises(call) == message

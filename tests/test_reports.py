@@ -242,7 +242,7 @@ def test_one_at_a_time_rows_and_generic_kind(tmp_path):
     value alone; every numeric metric gets a column; a cell equal to the base is the base."""
     from splatbench.experiments.runner import run_experiment
 
-    spec = parse_experiment({"name": "oat", "kind": "dummy", "scenes": ["alpha"], "seeds": [0, 1],
+    spec = parse_experiment({"name": "oat", "kind": "tests.kinds_for_tests:DUMMY", "scenes": ["alpha"], "seeds": [0, 1],
                              "grid": "one-at-a-time", "base": {"x": 1.0},
                              "axes": {"x": [1.0, 2.0], "n": [5]}}, source="oat.toml")
     run_experiment(spec, workers=1, results_dir=tmp_path, progress=False)
@@ -367,7 +367,7 @@ def test_raster_kind_run(tmp_path, monkeypatch):
     monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
     base = RASTER.resolve({"scene": "synthetic-300-32", "seed": 1, "error_scale": 0.5})
     assert base["repeats"] == 7
-    out = RASTER.run(base, tmp_path)
+    out = RASTER.run(base, tmp_path, None)
     m = out.metrics
     assert m["fwd_ms"] > 0 and m["fwd_bwd_ms"] > 0 and m["n"] == 300 and m["timed_pairs"] == 7
     assert all(len(out.curves[k]) == 7 for k in ("fwd_runs_ms", "default_fwd_bwd_runs_ms"))
@@ -385,13 +385,13 @@ def test_raster_kind_run(tmp_path, monkeypatch):
     assert list((tmp_path / "cache" / "reference").glob("*exact*.npy"))  # the exact model is cached
     # the defaults cut faint tails: farther from the exact mixture than from their own reference
     assert m["exact_max_abs"] > 10 * m["parity_max_abs"]
-    tiles = RASTER.run({**base, "tile_size": 4}, tmp_path).metrics
+    tiles = RASTER.run({**base, "tile_size": 4}, tmp_path, None).metrics
     assert tiles["exact_max_abs"] == pytest.approx(m["exact_max_abs"], abs=1e-6)  # tiles never change the image
     assert tiles["evaluations"] == tiles["pairs"] * 4 ** 2
     # a lower alpha_min keeps more of each Gaussian: closer to the exact model, not "error"
-    closer = RASTER.run({**base, "alpha_min": 1e-4}, tmp_path).metrics
+    closer = RASTER.run({**base, "alpha_min": 1e-4}, tmp_path, None).metrics
     assert closer["exact_mean_abs"] < m["exact_mean_abs"] and closer["exact_psnr"] > m["exact_psnr"]
-    coarse = RASTER.run({**base, "sh_degree": 0}, tmp_path).metrics
+    coarse = RASTER.run({**base, "sh_degree": 0}, tmp_path, None).metrics
     assert coarse["parity_max_abs"] < 1e-4 and math.isfinite(coarse["exact_psnr"])
     assert coarse["exact_psnr"] < m["exact_psnr"]   # dropping view dependence moves away from the model
     with pytest.raises(InputError, match=r"^repeats: expected at least 7 timed pairs"):
@@ -405,9 +405,11 @@ def test_train_kind_run(tmp_path, monkeypatch):
     monkeypatch.setenv("SPLATBENCH_DATASETS", str(tmp_path / "data"))
     config = TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 3, "log_every": 1, "sh_degree": 0,
                             "strategy": "none", "data": {"resolution": 32, "views": 8, "spp": 2}})
-    TRAIN.prepare([config])
+    prepared = TRAIN.prepare([config])
+    assert prepared.datasets == tmp_path / "data"  # the user's setting, read in the runner
     assert (dataset_folder("diffuse", config["data"]) / "manifest.json").is_file()
-    output = TRAIN.run(config, tmp_path / "work")
+    monkeypatch.delenv("SPLATBENCH_DATASETS")  # a worker finds the datasets by what prepare returned
+    output = TRAIN.run(config, tmp_path / "work", prepared)
     assert set(output.metrics) == set(METRICS)
     assert output.metrics["iterations"] == 3 and output.metrics["test_views"] == 1
     assert set(output.curves) == set(CURVE_KEYS) and output.curves["step"] == [0, 1, 2]
@@ -467,7 +469,7 @@ def test_product_grid_rows_average_each_seed_first(tmp_path):
     from splatbench.experiments.runner import run_experiment
     from splatbench.metrics.stats import t_interval
 
-    spec = parse_experiment({"name": "prod", "kind": "dummy", "scenes": ["alpha"], "seeds": [0, 1, 2],
+    spec = parse_experiment({"name": "prod", "kind": "tests.kinds_for_tests:DUMMY", "scenes": ["alpha"], "seeds": [0, 1, 2],
                              "axes": {"x": [1.0, 2.0], "n": [3, 5]}}, source="prod.toml")
     run_experiment(spec, workers=1, results_dir=tmp_path, progress=False)
     report = build_report(spec, tmp_path)
@@ -502,7 +504,7 @@ def test_a_new_kind_declares_its_report_in_one_place():
     declared = KindReport(metrics=(MetricSpec("loss", "loss", ".3f", "", "lower"),),
                           rules=FindingRules("loss", (Comparison("loss", "diff"),)))
     register_kind(RunKind(name="toy-report-kind", validate=lambda config: None,
-                          run=lambda config, workdir: RunOutput({"loss": 0.0}), report=declared))
+                          run=lambda config, workdir, prepared: RunOutput({"loss": 0.0}), report=declared))
     assert kind_report("toy-report-kind") is declared and kind_report("no-such-kind") is None
     table = pd.DataFrame({"metric.loss": [0.5], "metric.other": [1.0]})
     assert metric_specs("toy-report-kind", table) == declared.metrics      # its own metrics only

@@ -196,7 +196,7 @@ def test_a_damaged_result_file_is_reported_and_its_run_redone(tmp_path, capsys):
     from splatbench.experiments import parse_experiment, run_experiment
     from splatbench.experiments.store import read_records
 
-    spec = parse_experiment({"name": "g", "kind": "dummy", "scenes": ["alpha"], "seeds": [0, 1, 2, 3]},
+    spec = parse_experiment({"name": "g", "kind": "tests.kinds_for_tests:DUMMY", "scenes": ["alpha"], "seeds": [0, 1, 2, 3]},
                             source="g.toml")
     first = run_experiment(spec, workers=1, results_dir=tmp_path, progress=False)
     assert first.done == 4

@@ -2,7 +2,7 @@
 experiment, a runner killed (its workers die with it), SIGTERM to the runner, and
 a sweep whose workers and runner are killed at random points.
 
-Everything runs the test-only ``dummy`` kind, so no rendering is involved.
+Everything runs the dummy kind of `tests.kinds_for_tests`, so no rendering is involved.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ LINE = re.compile(r"^done (\d+), skipped (\d+) \(finished\), (\d+) claimed by an
 
 SWEEP = """
 name = "sweep"
-kind = "dummy"
+kind = "tests.kinds_for_tests:DUMMY"
 scenes = ["alpha", "beta"]
 seeds = [0, 1, 2, 3]
 [base]

@@ -8,7 +8,7 @@
 
 Modules: `configs` (dotted keys, canonical JSON), `spec` (file format), `grid`
 (expansion, run ids, `load_experiment`), `kinds`
-(run-kind registry, the test-only ``dummy``), `kind_report` (what a kind declares
+(run-kind registry), `kind_report` (what a kind declares
 about its reports, as plain data: `splatbench.reports` reads it), `store` (atomic per-run files, the
 parquet table), `runner` (drives the runs), `execute` (one run, worker side), `executors`
 (local and Dask), `claims` (per-run claims shared

@@ -1,14 +1,17 @@
 """The worker side of the runner: `execute_run` runs one `RunSpec` and writes its result.
 
 The executors (`splatbench.experiments.executors`) submit this top-level function to
-worker processes; it writes the run's result file atomically before returning its
-record, so a killed parent loses nothing that finished (see `runner`).
+worker processes, with a `RunContext`: everything the worker needs from the runner
+besides the run itself travels there, never through environment variables. It writes
+the run's result file atomically before returning its record, so a killed parent loses
+nothing that finished (see `runner`).
 """
 
 from __future__ import annotations
 
 import time
 import traceback
+from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
@@ -17,15 +20,28 @@ from splatbench.experiments.configs import plain
 from splatbench.experiments.grid import RunSpec
 from splatbench.experiments.kinds import check_output, get_kind
 from splatbench.experiments.store import WORK_DIR, RunRecord, experiment_dir, worker_name, write_record
-from splatbench.experiments.workers import die_with_runner
+from splatbench.experiments.workers import bound_threads, die_with_runner
 
 
-def execute_run(run: RunSpec, results_dir: str, runner: str = "") -> dict[str, Any]:
+@dataclass(frozen=True)
+class RunContext:
+    """What the runner hands a worker with every run of one invocation (never part of a run id).
+
+    runner: the runner's ``host:pid:start`` the worker must die with (`die_with_runner`;
+        "" for none); threads: the worker's Dr.Jit thread budget (None: leave it);
+    prepared: what the kind's ``prepare`` returned in the runner (plain, picklable data,
+        e.g. where the rendered datasets are; None without one), passed on to its ``run``.
+    """
+
+    runner: str = ""
+    threads: int | None = None
+    prepared: Any = None
+
+
+def execute_run(run: RunSpec, results_dir: str, context: RunContext = RunContext()) -> dict[str, Any]:
     """Run ``run`` in this process, write its result file atomically, return the record
-    (as a dict). A failing kind gives a ``failed`` record with a one-line error.
-    ``runner``: the runner's ``host:pid:start`` this process must die with
-    (`die_with_runner`; "" for none)."""
-    die_with_runner(runner)
+    (as a dict). A failing kind gives a ``failed`` record with a one-line error."""
+    die_with_runner(context.runner)
     started, t0 = datetime.now().astimezone(), time.perf_counter()
     workdir = experiment_dir(results_dir, run.experiment) / WORK_DIR / run.run_id
     record = RunRecord(run_id=run.run_id, experiment=run.experiment, kind=run.kind, scene=run.scene, seed=run.seed,
@@ -34,7 +50,8 @@ def execute_run(run: RunSpec, results_dir: str, runner: str = "") -> dict[str, A
     try:
         workdir.mkdir(parents=True, exist_ok=True)
         kind = get_kind(run.kind)
-        output = check_output(kind.run(plain(run.config), workdir), run.kind)
+        bound_threads(context.threads)
+        output = check_output(kind.run(plain(run.config), workdir, context.prepared), run.kind)
         record.metrics, record.curves = dict(output.metrics), output.curves
     except Exception as exc:  # noqa: BLE001 - every failure of a run is recorded, not raised
         record.status, record.error = "failed", one_line(exc)

@@ -1,6 +1,7 @@
 """The runner's executors: a local spawn process pool and a Dask client, one interface.
 
-Both submit `splatbench.experiments.execute.execute_run` and expose ``capacity``
+Both submit `splatbench.experiments.execute.execute_run` with a `RunContext` (the
+worker's thread budget, what the kind prepared) and expose ``capacity``
 (runs in flight at most), ``submit``, ``wait``, ``broken``, ``restart`` and
 ``close``; `splatbench.experiments.runner` drives them (the module docstring there
 says how each behaves when a worker dies).
@@ -15,10 +16,12 @@ import multiprocessing
 import os
 import sys
 import time
+from typing import Any
 
-from splatbench.experiments.execute import execute_run
+from splatbench.experiments.execute import RunContext, execute_run
 from splatbench.experiments.grid import RunSpec
-from splatbench.experiments.workers import THREADS_ENV, init_worker, runner_id
+from splatbench.experiments.workers import init_worker, runner_id
+from splatbench.interrupt import children_spared_sigint, deferred
 
 
 #: How often `LocalExecutor.wait` looks for dead workers, and how long one may lie dead before the
@@ -28,26 +31,32 @@ DEAD_WORKER_GRACE = 10.0
 
 
 class LocalExecutor:
-    """A spawn process pool with at most ``workers`` runs in flight."""
+    """A spawn process pool with at most ``workers`` runs in flight, each worker with
+    ``threads`` Dr.Jit threads; ``prepared``: what the kind's ``prepare`` returned."""
 
     name = "local"
 
-    def __init__(self, workers: int, threads: int):
-        self.workers, self.threads = workers, threads
+    def __init__(self, workers: int, threads: int, prepared: Any = None):
+        self.workers = workers
+        self.context = RunContext(threads=threads, prepared=prepared)
         self._dead_since: float | None = None
         self.stalled = False  # set by `wait`, cleared by `restart`
         self.pool = self._new_pool()
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
         return cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                      initializer=init_worker, initargs=(self.threads, runner_id()))
+                                      initializer=init_worker, initargs=(runner_id(),))
 
     @property
     def capacity(self) -> int:
         return self.workers
 
     def submit(self, run: RunSpec, results_dir: str):
-        return self.pool.submit(execute_run, run, results_dir)
+        """Submit ``run``. The pool starts its workers here: they leave Ctrl-C to the runner from
+        their start, and a stop signal waits until the pool is whole again (one that cut a worker's
+        start in half left a worker printing a traceback and the pool's semaphores behind)."""
+        with deferred(), children_spared_sigint():
+            return self.pool.submit(execute_run, run, results_dir, self.context)
 
     def wait(self, futures, timeout: float | None = None) -> set:
         """The futures done within ``timeout`` s (at least one, unless it runs out, or the pool
@@ -120,31 +129,49 @@ class LocalExecutor:
 
 
 class DaskExecutor:
-    """A `distributed.Client` on ``scheduler``, or on a loopback `LocalCluster`."""
+    """A `distributed.Client` on ``scheduler``, or on a loopback `LocalCluster` whose
+    workers get ``threads`` Dr.Jit threads each and die with this runner (a remote
+    scheduler's workers keep their own); ``prepared``: what the kind's ``prepare`` returned."""
 
     name = "dask"
 
-    def __init__(self, workers: int, threads: int, scheduler: str | None):
-        from distributed import Client, LocalCluster
-
-        self.cluster = None
-        self.runner = ""  # the workers of a cluster of our own die with this runner (`die_with_runner`)
-        if scheduler is None:
-            self.runner = runner_id()
-            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                        dashboard_address=None, silence_logs=logging.ERROR,
-                                        env={THREADS_ENV: str(threads)})
-            self.client = Client(self.cluster)
-        else:
-            self.client = Client(scheduler)
+    def __init__(self, workers: int, threads: int, scheduler: str | None, prepared: Any = None):
+        self.cluster = self.client = None
         self.workers = workers
+        try:
+            if scheduler is None:
+                self.context = RunContext(runner=runner_id(), threads=threads, prepared=prepared)
+                # Dask's threads (some start as it is imported) and the worker processes they start,
+                # now or on a restart, leave Ctrl-C to the runner, which closes the cluster; a stop
+                # signal is held until the cluster is whole, so that no half-started part is left.
+                # Its logs stay quiet: the runner reports every run's failure in one line, and a
+                # worker closed mid-heartbeat would log a traceback. No dashboard; the scheduler's
+                # own HTTP routes (health, metrics) take a free port on 127.0.0.1, not 8787, which
+                # another cluster may hold (Dask then warns on stderr).
+                with deferred(), children_spared_sigint():
+                    from distributed import Client, LocalCluster
+
+                    self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                host="127.0.0.1", dashboard_address=None,
+                                                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                                                silence_logs=logging.CRITICAL)
+                    self.client = Client(self.cluster)
+            else:
+                from distributed import Client
+
+                self.context = RunContext(prepared=prepared)
+                self.client = Client(scheduler)
+        except BaseException:  # a stop signal (delivered as the block ends) or a failed start: nothing left behind
+            with deferred():
+                self.close(cancel=True)
+            raise
 
     @property
     def capacity(self) -> int:
         return sys.maxsize  # the scheduler queues; a dying worker costs only its own task
 
     def submit(self, run: RunSpec, results_dir: str):
-        return self.client.submit(execute_run, run, results_dir, self.runner, key=f"run-{run.run_id}-{os.urandom(4).hex()}",
+        return self.client.submit(execute_run, run, results_dir, self.context, key=f"run-{run.run_id}-{os.urandom(4).hex()}",
                                   pure=False)
 
     def wait(self, futures, timeout: float | None = None) -> set:
@@ -164,6 +191,7 @@ class DaskExecutor:
         pass
 
     def close(self, cancel: bool = False) -> None:
-        self.client.close()
+        if self.client is not None:
+            self.client.close()
         if self.cluster is not None:
             self.cluster.close()

@@ -1,21 +1,24 @@
 """Run kinds: what one run of an experiment is.
 
 A `RunKind` is a small record of callables with one typed signature for every kind
-(training, rasterizer timing, the test-only ``dummy``); the runner never needs to
-know which kind it holds::
+(training, rasterizer timing, one of your own); the runner never needs to know which
+kind it holds::
 
     validate(config) -> None                 raise a one-line InputError naming the dotted field
     resolve(config) -> dict                  optional: the config with every default filled in
     identity(config) -> dict                 optional: what the run id hashes of a resolved config
-    run(config, workdir) -> RunOutput        one run, in a worker process
+    run(config, workdir, prepared) -> RunOutput   one run, in a worker process
     scenes() -> set[str]                     optional: known scene names (None: any name)
-    prepare(configs) -> None                 optional: once, in the parent, before any run
+    prepare(configs) -> Any                  optional: once, in the parent, before any run;
+                                             what it returns is ``run``'s ``prepared``
 
 ``config`` is the nested dict of one run: the experiment's base, overridden by its
 axis values, plus ``scene`` and ``seed``. `resolve`'s output is what the run id
 hashes and what `run` receives, so a kind that fills in defaults makes
 ``sh_degree = 3`` written out and left to the default the same run, and makes a
-changed default a new run. `identity` (default: the resolved config itself) lets a kind
+changed default a new run. ``prepared`` is how the parent tells every worker what it
+settled (plain, picklable data, e.g. the folder it rendered datasets into; None for a
+kind without ``prepare``): it travels with each run, never through the environment. `identity` (default: the resolved config itself) lets a kind
 hash what a run depends on rather than where it was found: the train kind swaps a user's
 dataset folder or model path for its content hash, so a committed report's run ids hold in
 any clone.
@@ -24,24 +27,19 @@ Workers find a kind by name in a fresh process, so a kind must be reachable by
 name there: a built-in (`BUILTIN_KINDS`, imported lazily) or ``"package.module:ATTR"``
 naming a module-level `RunKind`. `register_kind` serves the current process only:
 the local executor's workers are spawned, and Dask's live in other processes, so
-neither sees a kind registered at run time.
+neither sees a kind registered at run time. ``tests/kinds_for_tests.py`` is a small
+complete kind (the one the runner's tests use).
 """
 
 from __future__ import annotations
 
 import importlib
-import math
-import os
-import time
-import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from splatbench.checks import check_keys
 from splatbench.errors import InputError
-from splatbench.experiments.configs import flatten, override, unflatten
 from splatbench.experiments.kind_report import KindReport
 
 #: A table cell: what a metric may be.
@@ -68,11 +66,11 @@ class RunKind:
 
     name: str
     validate: Callable[[dict[str, Any]], None]
-    run: Callable[[dict[str, Any], Path], RunOutput]
+    run: Callable[[dict[str, Any], Path, Any], RunOutput]
     resolve: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     identity: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     scenes: Callable[[], set[str]] | None = None
-    prepare: Callable[[list[dict[str, Any]]], None] | None = None
+    prepare: Callable[[list[dict[str, Any]]], Any] | None = None
     description: str = ""
     #: What its reports show (None: every numeric metric, the first one compared).
     report: KindReport | None = None
@@ -80,7 +78,6 @@ class RunKind:
 
 #: Kinds known by name in every process: name -> "module:ATTR" (imported on first use).
 BUILTIN_KINDS: dict[str, str] = {
-    "dummy": "splatbench.experiments.kinds:DUMMY",
     "train": "splatbench.experiments.train_kind:TRAIN",
     "raster": "splatbench.experiments.raster_kind:RASTER",
 }
@@ -111,92 +108,6 @@ def get_kind(name: str) -> RunKind:
     return kind
 
 
-# --------------------------------------------------------------------------- dummy
-#: The dummy kind's fields and defaults (test-only).
-DUMMY_DEFAULTS: dict[str, Any] = {
-    "x": 0.0,        # a number folded into the metrics
-    "n": 3,          # curve length (>= 1)
-    "mode": "ok",    # "ok", "fail" (raise) or "crash" (the worker process exits at once)
-    "sleep": 0.0,    # seconds to sleep before computing
-    "gate": "",      # a folder: the run waits there for a token (see `_pass_gate`); "" = no gate
-    "opts": {"a": 0, "b": "p"},  # a nested table, for dotted keys
-}
-DUMMY_SCENES = frozenset({"alpha", "beta", "gamma"})
-
-
-def _dummy_validate(config: dict[str, Any]) -> None:
-    known = {**flatten(DUMMY_DEFAULTS), "scene": "", "seed": 0}
-    check_keys(flatten(config), known)
-    for key, value in flatten(config).items():
-        expected = type(known[key])
-        ok = (isinstance(value, (int, float)) and not isinstance(value, bool)) if expected is float \
-            else isinstance(value, expected) and not (expected is int and isinstance(value, bool))
-        if not ok:
-            raise InputError(f"{key}: expected {expected.__name__}, got {value!r}")
-    if config.get("mode", "ok") not in ("ok", "fail", "crash"):
-        raise InputError(f"mode: expected 'ok', 'fail' or 'crash', got {config['mode']!r}")
-    if not (math.isfinite(config.get("sleep", 0.0)) and config.get("sleep", 0.0) >= 0):
-        raise InputError(f"sleep: expected seconds >= 0, got {config['sleep']!r}")
-    if config.get("n", 1) < 1:
-        raise InputError(f"n: expected an int >= 1, got {config['n']!r}")
-
-
-def _dummy_resolve(config: dict[str, Any]) -> dict[str, Any]:
-    out = unflatten(override(flatten(DUMMY_DEFAULTS), flatten(config)))
-    out["x"] = float(out["x"])
-    out["sleep"] = float(out["sleep"])
-    return out
-
-
-def _pass_gate(gate: Path) -> None:
-    """Block until the test holding ``gate`` lets this run through: a file ``open`` there
-    lets every run pass; a file ``token-*`` lets one run pass (the run takes it by
-    renaming it). While waiting, the run marks itself ``waiting-<pid>``, so a test knows
-    a run is in flight in this process before it injects a fault."""
-    marker = gate / f"waiting-{os.getpid()}"
-    marker.touch()
-    while not (gate / "open").exists():
-        for token in sorted(gate.glob("token-*")):
-            try:
-                os.rename(token, gate / f"used-{os.getpid()}-{token.name}")
-            except FileNotFoundError:  # another run took it first
-                continue
-            marker.unlink(missing_ok=True)
-            return
-        time.sleep(0.02)
-    marker.unlink(missing_ok=True)
-
-
-def _dummy_run(config: dict[str, Any], workdir: Path) -> RunOutput:
-    """Deterministic numbers from the config; sleeps, waits at a gate, raises or kills
-    its process on demand."""
-    import numpy as np
-
-    time.sleep(config["sleep"])
-    if config["gate"]:
-        _pass_gate(Path(config["gate"]))
-    if config["mode"] == "fail":
-        raise RuntimeError(f"dummy run told to fail (scene {config['scene']}, seed {config['seed']})")
-    if config["mode"] == "crash":
-        os._exit(70)
-    tag = zlib.crc32(f"{config['scene']}/{config['opts']['b']}".encode())
-    rng = np.random.default_rng([config["seed"], tag, config["n"]])
-    curve = (config["x"] + rng.random(config["n"])).round(12)
-    (workdir / "note.txt").write_text(f"{config['scene']} {config['seed']}\n")
-    metrics = {"value": float(curve[-1]), "total": float(curve.sum()), "a_plus_seed": config["opts"]["a"] + config["seed"],
-               "scene_tag": f"{config['scene']}-{config['opts']['b']}", "positive": bool(curve[-1] > 0)}
-    return RunOutput(metrics=metrics, curves={"step": list(range(config["n"])), "value": curve.tolist()})
-
-
-def _dummy_scenes() -> set[str]:
-    return set(DUMMY_SCENES)
-
-
-#: Test-only kind: deterministic metrics computed from the config (see `DUMMY_DEFAULTS`).
-DUMMY = RunKind(name="dummy", validate=_dummy_validate, run=_dummy_run, resolve=_dummy_resolve,
-                scenes=_dummy_scenes, description="test-only: deterministic numbers, configurable sleep and failure")
-
-
 def check_output(output: Any, kind: str) -> RunOutput:
     """``output`` as a `RunOutput` whose metrics are plain Python scalars (NumPy scalars
     are converted); `TypeError` for anything else."""
@@ -215,4 +126,4 @@ def check_output(output: Any, kind: str) -> RunOutput:
 
 
 __all__ = ["RunKind", "RunOutput", "Scalar", "BUILTIN_KINDS", "register_kind", "get_kind",
-           "check_output", "DUMMY", "DUMMY_DEFAULTS", "DUMMY_SCENES"]
+           "check_output"]

@@ -84,7 +84,6 @@ from splatbench.checks import check_keys, check_sh_degree, check_type
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
-from splatbench.experiments.workers import limit_threads
 from splatbench.metrics.load import Load, own_share
 from splatbench.metrics.spec import MetricSpec
 from splatbench.raster.options import RasterOptions
@@ -264,8 +263,9 @@ def prepare(configs: list[dict[str, Any]]) -> None:
 
 
 # --------------------------------------------------------------------------- run
-def run(config: dict[str, Any], workdir: Path) -> RunOutput:
-    """Time the rasterizer on the workload with the run's options; measure its error."""
+def run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
+    """Time the rasterizer on the workload with the run's options; measure its error
+    (``prepared``: None; `prepare` leaves the exact-model renders in the cache)."""
     import torch
 
     import splatbench
@@ -274,7 +274,6 @@ def run(config: dict[str, Any], workdir: Path) -> RunOutput:
     from splatbench.metrics.stats import bootstrap_median_ratio
     from splatbench.metrics.image import psnr
 
-    limit_threads()
     own_share()  # a checkpoint of the own-load tracker: what ran before this run, then the warm-up
     workload = build_workload(config["scene"], config["seed"])
     degree = config["sh_degree"]

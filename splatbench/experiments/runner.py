@@ -6,7 +6,7 @@ an executor. Failed runs are *not* skipped: they run again on the next
 invocation (delete nothing; a new result replaces the old file).
 
 Both executors share one code path: the parent submits the top-level function
-`execute_run(run, results_dir)`, which runs the kind in a worker process and writes
+`execute_run(run, results_dir, context)`, which runs the kind in a worker process and writes
 that run's result file itself, atomically, before returning its record. A parent
 killed at any point therefore loses nothing that finished, and the next
 invocation resumes from the files. After every finished run the parent rewrites
@@ -32,9 +32,11 @@ Executors:
            a folder every worker sees (a shared file system); where it is not, the
            parent writes the returned record itself.
 
-Each worker process gets ``SPLATBENCH_WORKER_THREADS`` = max(1, CPUs // workers) in
-its environment (and torch's intra-op thread count set to it, where torch is
-loaded), so that parallel runs do not oversubscribe the machine.
+Each run reaches its worker with a `RunContext` (`splatbench.experiments.execute`):
+the worker's Dr.Jit thread budget, max(1, CPUs // workers), so that parallel runs
+do not oversubscribe the machine (a remote scheduler's workers keep their own), and
+what the kind's ``prepare`` returned in the parent (e.g. the train kind's datasets
+folder). The runner sets no environment variable for its workers.
 """
 
 from __future__ import annotations
@@ -125,8 +127,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
         return RunSummary(done=0, skipped=skipped, failed=0, total=len(runs), folder=folder)
 
     kind = get_kind(spec.kind)
-    if kind.prepare is not None:
-        kind.prepare([plain(r.config) for r in pending])
+    prepared = None if kind.prepare is None else kind.prepare([plain(r.config) for r in pending])
 
     threads = max(1, cpus // workers)
     done = failed = claimed = 0
@@ -177,12 +178,15 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
             bar.set_postfix(failed=failed, refresh=False)
             bar.update(1)
 
-    pool = LocalExecutor(workers, threads) if executor == "local" else DaskExecutor(workers, threads, scheduler)
+    pool = None
     try:
+        pool = LocalExecutor(workers, threads, prepared) if executor == "local" else \
+            DaskExecutor(workers, threads, scheduler, prepared)
         _drive(pool, pending, str(results_dir), finish, admit=admit, heartbeat=heartbeat)
     except BaseException as exc:
         with deferred():
-            pool.close(cancel=True)
+            if pool is not None:  # an executor that fails to start closes what it started itself
+                pool.close(cancel=True)
             stopped = len(claims)
             for claim in claims.values():
                 claim.release()

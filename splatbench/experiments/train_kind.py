@@ -32,9 +32,10 @@ hashes a dataset folder's or a teacher model's content in place of its path
 every clone and change when the data does.
 
 Datasets are rendered once, in the parent, by `prepare` (Mitsuba, cached by content
-hash) into ``$SPLATBENCH_DATASETS`` (default ``./data/scenes``, made absolute and
-exported to the workers) as ``<scene>-<W>-v<views>-s<spp>`` (``-t<test_spp>`` appended when
-the test views have their own spp). A worker calls
+hash) into ``$SPLATBENCH_DATASETS`` (default ``./data/scenes``), read once there and
+made absolute; `prepare` returns that folder (`Prepared`), which the runner hands every
+worker with its run. Datasets are named ``<scene>-<W>-v<views>-s<spp>`` (``-t<test_spp>``
+appended when the test views have their own spp). A worker calls
 `splatbench.scenes.render_dataset` again, which finds the cache (or renders, on a
 remote Dask worker that has no copy).
 
@@ -54,7 +55,6 @@ from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
-from splatbench.experiments.workers import limit_threads
 from splatbench.metrics.spec import MetricSpec
 
 #: Environment variable naming the folder of rendered datasets.
@@ -246,33 +246,44 @@ def scenes() -> set[str]:
 
 # --------------------------------------------------------------------------- datasets
 def datasets_dir() -> Path:
-    """``$SPLATBENCH_DATASETS``, else ``./data/scenes`` (absolute)."""
+    """``$SPLATBENCH_DATASETS``, else ``./data/scenes`` (absolute): the user's setting,
+    read in the runner (`prepare`), never in a worker."""
     return Path(os.environ.get(DATASETS_ENV) or Path("data") / "scenes").absolute()
 
 
-def dataset_folder(scene: str, data: dict[str, Any]) -> Path:
-    """Where the dataset of ``scene`` rendered with ``data`` (a resolved ``data`` table) lives."""
+@dataclasses.dataclass(frozen=True)
+class Prepared:
+    """What `prepare` settles in the runner for every worker: ``datasets``, the absolute
+    folder the rendered datasets are in."""
+
+    datasets: Path
+
+
+def dataset_folder(scene: str, data: dict[str, Any], root: Path | None = None) -> Path:
+    """Where the dataset of ``scene`` rendered with ``data`` (a resolved ``data`` table)
+    lives under ``root`` (None: `datasets_dir`)."""
     from splatbench.scenes.folders import dataset_name
 
-    return datasets_dir() / dataset_name(scene, data["resolution"], data["views"], data["spp"], data.get("test_spp"))
+    root = datasets_dir() if root is None else root
+    return root / dataset_name(scene, data["resolution"], data["views"], data["spp"], data.get("test_spp"))
 
 
-def ensure_dataset(scene: str, data: dict[str, Any], *, progress: bool = False):
-    """The dataset of one run (a resolved ``data`` table), rendered or found in the cache:
-    `RenderedDataset` for a catalog scene, `TeacherDataset` for a teacher; a dataset
-    folder is returned as it is (a `FolderDataset`)."""
+def ensure_dataset(scene: str, data: dict[str, Any], root: Path, *, progress: bool = False):
+    """The dataset of one run (a resolved ``data`` table), rendered under ``root`` or found
+    in the cache: `RenderedDataset` for a catalog scene, `TeacherDataset` for a teacher;
+    a dataset folder is returned as it is (a `FolderDataset`)."""
     kind = scene_type(data)
     if kind == "folder":
         return FolderDataset(Path(data["path"]), True, None, 0.0)
     if kind == "teacher":
         from splatbench.experiments.teacher import render_teacher
 
-        out = datasets_dir() / f"teacher-{scene}-{data['resolution']}-v{data['views']}"
+        out = root / f"teacher-{scene}-{data['resolution']}-v{data['views']}"
         return render_teacher(data["model"], out, views=data["views"], resolution=data["resolution"],
                               up=data.get("up"), progress=progress)
     from splatbench.scenes.render import render_dataset
 
-    return render_dataset(scene, dataset_folder(scene, data), resolution=data["resolution"], views=data["views"],
+    return render_dataset(scene, dataset_folder(scene, data, root), resolution=data["resolution"], views=data["views"],
                           spp=data["spp"], test_spp=data.get("test_spp"), progress=progress)
 
 
@@ -286,11 +297,11 @@ class FolderDataset:
     seconds: float
 
 
-def prepare(configs: list[dict[str, Any]]) -> None:
-    """Render every dataset the pending runs need, once, in the parent (cached), load
-    every dataset folder once (undistortion is cached then), and export the datasets
-    folder to the workers."""
-    os.environ[DATASETS_ENV] = str(datasets_dir())
+def prepare(configs: list[dict[str, Any]]) -> Prepared:
+    """Render every dataset the pending runs need, once, in the parent (cached), and load
+    every dataset folder once (undistortion is cached then); return the datasets folder
+    for the workers."""
+    prepared = Prepared(datasets=datasets_dir())
     seen: set[str] = set()
     for config in configs:
         from splatbench.experiments.configs import canonical_json
@@ -310,7 +321,7 @@ def prepare(configs: list[dict[str, Any]]) -> None:
                   f"{len(ds.train)} train, {len(ds.test)} test views)", file=sys.stderr, flush=True)
             path = Path(data["path"])
         else:
-            result = ensure_dataset(config["scene"], data, progress=sys.stderr.isatty())
+            result = ensure_dataset(config["scene"], data, prepared.datasets, progress=sys.stderr.isatty())
             how = "cached" if result.cached else f"rendered in {result.seconds:.1f} s"
             if kind == "teacher":
                 what = f"teacher {data['model']} {data['resolution']}px, {data['views']} views, up {list(result.up)} " \
@@ -322,6 +333,7 @@ def prepare(configs: list[dict[str, Any]]) -> None:
             path = result.path
         if any(c.get("init") == "sfm" and c["scene"] == config["scene"] and c["data"] == data for c in configs):
             _prepare_sfm(path)
+    return prepared
 
 
 def _prepare_sfm(path: Path) -> None:
@@ -340,13 +352,13 @@ def _prepare_sfm(path: Path) -> None:
 
 
 # --------------------------------------------------------------------------- run
-def run(config: dict[str, Any], workdir: Path) -> RunOutput:
-    """Train on the run's dataset, writing the run's files into ``workdir``."""
+def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
+    """Train on the run's dataset (found, or rendered on a worker that has no copy, under
+    ``prepared.datasets``), writing the run's files into ``workdir``."""
     from splatbench.train import TrainConfig, train
 
-    limit_threads()
     scene, data, fields = _split(config)
-    dataset = ensure_dataset(scene, data)
+    dataset = ensure_dataset(scene, data, prepared.datasets)
     if scene_type(data) == "folder":
         fields = {**fields, "data": {"downscale": data["downscale"]}}
     cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="config")
@@ -396,5 +408,5 @@ REPORT = KindReport(
 TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, identity=identity, scenes=scenes, prepare=prepare,
                 description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT)
 
-__all__ = ["TRAIN", "REPORT", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "datasets_dir", "dataset_folder",
-           "ensure_dataset"]
+__all__ = ["TRAIN", "REPORT", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
+           "dataset_folder", "ensure_dataset"]

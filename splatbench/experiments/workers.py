@@ -1,5 +1,8 @@
 """The runner's worker processes: their thread budget and a life tied to the runner's.
 
+The runner hands each worker what it needs with every run (`execute.RunContext`):
+nothing reaches a worker through environment variables the runner sets.
+
 A worker must never outlive its runner: a runner killed with SIGKILL (or stopped by
 SIGTERM) would otherwise leave workers that keep computing, adopted by init, and a
 prompt rerun would start the same runs beside them. `die_with_runner` arranges it.
@@ -17,18 +20,12 @@ import time
 
 from splatbench.experiments.claims import pid_alive, process_start
 
-THREADS_ENV = "SPLATBENCH_WORKER_THREADS"
 
-
-def init_worker(threads: int, runner: str = "") -> None:
-    """Pool initializer: bound the worker's threads (module doc), tie the worker's life
-    to the runner's (`die_with_runner`), leave Ctrl-C to the runner (which stops its
-    workers), and make the worker leave with `os._exit` once the pool shuts it down:
-    its results are on disk already, and the interpreter's teardown of torch and
-    Dr.Jit costs seconds per worker."""
-    os.environ[THREADS_ENV] = str(threads)
-    if "torch" in sys.modules:
-        sys.modules["torch"].set_num_threads(threads)
+def init_worker(runner: str = "") -> None:
+    """Pool initializer: tie the worker's life to the runner's (`die_with_runner`),
+    leave Ctrl-C to the runner (which stops its workers), and make the worker leave
+    with `os._exit` once the pool shuts it down: its results are on disk already, and
+    the interpreter's teardown of torch and Dr.Jit costs seconds per worker."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_runner(runner)
     atexit.register(fast_exit)  # registered last, so it runs first
@@ -80,20 +77,14 @@ def fast_exit() -> None:
     os._exit(0)
 
 
-def worker_threads() -> int | None:
-    """The runner's per-worker thread budget (``SPLATBENCH_WORKER_THREADS``), if set."""
-    value = os.environ.get(THREADS_ENV)
-    return int(value) if value and value.isdigit() and int(value) > 0 else None
-
-
-def limit_threads() -> None:
-    """Give Dr.Jit's thread pool the worker's budget, so parallel runs share the cores."""
-    threads = worker_threads()
+def bound_threads(threads: int | None) -> None:
+    """Give Dr.Jit's thread pool in this worker ``threads`` threads (None: leave it), so
+    parallel runs share the cores."""
     if threads is not None:
         import drjit as dr
 
-        dr.set_thread_count(threads)
+        if dr.thread_count() != threads:
+            dr.set_thread_count(threads)
 
 
-__all__ = ["THREADS_ENV", "init_worker", "die_with_runner", "runner_id", "fast_exit", "worker_threads",
-           "limit_threads"]
+__all__ = ["init_worker", "die_with_runner", "runner_id", "fast_exit", "bound_threads"]

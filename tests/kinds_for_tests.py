@@ -1,0 +1,136 @@
+"""A run kind for the runner's tests, and an example of writing one's own kind.
+
+An experiment names it as ``kind = "tests.kinds_for_tests:DUMMY"`` (`KIND`): workers
+import ``tests.kinds_for_tests`` by that name, so it is importable wherever the tests
+run the runner (the repository root on ``sys.path``: pytest puts it there, spawned
+and Dask worker processes inherit the parent's ``sys.path``, and a ``python -m`` run
+from the repository root has it as its working directory).
+
+The kind computes deterministic numbers from its config, and sleeps, waits at a gate,
+raises or kills its process on demand, so the runner's tests need no rendering.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+import zlib
+from pathlib import Path
+from typing import Any
+
+from splatbench.checks import check_keys
+from splatbench.errors import InputError
+from splatbench.experiments.configs import flatten, override, unflatten
+from splatbench.experiments.kinds import RunKind, RunOutput
+
+#: What an experiment file writes in ``kind = "..."``.
+KIND = "tests.kinds_for_tests:DUMMY"
+
+#: The dummy kind's fields and defaults.
+DUMMY_DEFAULTS: dict[str, Any] = {
+    "x": 0.0,        # a number folded into the metrics
+    "n": 3,          # curve length (>= 1)
+    "mode": "ok",    # "ok", "fail" (raise) or "crash" (the worker process exits at once)
+    "sleep": 0.0,    # seconds to sleep before computing
+    "gate": "",      # a folder: the run waits there for a token (see `_pass_gate`); "" = no gate
+    "opts": {"a": 0, "b": "p"},  # a nested table, for dotted keys
+}
+DUMMY_SCENES = frozenset({"alpha", "beta", "gamma"})
+
+
+def _validate(config: dict[str, Any]) -> None:
+    known = {**flatten(DUMMY_DEFAULTS), "scene": "", "seed": 0}
+    check_keys(flatten(config), known)
+    for key, value in flatten(config).items():
+        expected = type(known[key])
+        ok = (isinstance(value, (int, float)) and not isinstance(value, bool)) if expected is float \
+            else isinstance(value, expected) and not (expected is int and isinstance(value, bool))
+        if not ok:
+            raise InputError(f"{key}: expected {expected.__name__}, got {value!r}")
+    if config.get("mode", "ok") not in ("ok", "fail", "crash"):
+        raise InputError(f"mode: expected 'ok', 'fail' or 'crash', got {config['mode']!r}")
+    if not (math.isfinite(config.get("sleep", 0.0)) and config.get("sleep", 0.0) >= 0):
+        raise InputError(f"sleep: expected seconds >= 0, got {config['sleep']!r}")
+    if config.get("n", 1) < 1:
+        raise InputError(f"n: expected an int >= 1, got {config['n']!r}")
+
+
+def _resolve(config: dict[str, Any]) -> dict[str, Any]:
+    out = unflatten(override(flatten(DUMMY_DEFAULTS), flatten(config)))
+    out["x"] = float(out["x"])
+    out["sleep"] = float(out["sleep"])
+    return out
+
+
+def _pass_gate(gate: Path) -> None:
+    """Block until the test holding ``gate`` lets this run through: a file ``open`` there
+    lets every run pass; a file ``token-*`` lets one run pass (the run takes it by
+    renaming it). While waiting, the run marks itself ``waiting-<pid>``, so a test knows
+    a run is in flight in this process before it injects a fault."""
+    marker = gate / f"waiting-{os.getpid()}"
+    marker.touch()
+    while not (gate / "open").exists():
+        for token in sorted(gate.glob("token-*")):
+            try:
+                os.rename(token, gate / f"used-{os.getpid()}-{token.name}")
+            except FileNotFoundError:  # another run took it first
+                continue
+            marker.unlink(missing_ok=True)
+            return
+        time.sleep(0.02)
+    marker.unlink(missing_ok=True)
+
+
+def _run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
+    """Deterministic numbers from the config; sleeps, waits at a gate, raises or kills
+    its process on demand. (No ``prepare``: ``prepared`` is None.)"""
+    import numpy as np
+
+    time.sleep(config["sleep"])
+    if config["gate"]:
+        _pass_gate(Path(config["gate"]))
+    if config["mode"] == "fail":
+        raise RuntimeError(f"dummy run told to fail (scene {config['scene']}, seed {config['seed']})")
+    if config["mode"] == "crash":
+        os._exit(70)
+    tag = zlib.crc32(f"{config['scene']}/{config['opts']['b']}".encode())
+    rng = np.random.default_rng([config["seed"], tag, config["n"]])
+    curve = (config["x"] + rng.random(config["n"])).round(12)
+    (workdir / "note.txt").write_text(f"{config['scene']} {config['seed']}\n")
+    metrics = {"value": float(curve[-1]), "total": float(curve.sum()), "a_plus_seed": config["opts"]["a"] + config["seed"],
+               "scene_tag": f"{config['scene']}-{config['opts']['b']}", "positive": bool(curve[-1] > 0)}
+    return RunOutput(metrics=metrics, curves={"step": list(range(config["n"])), "value": curve.tolist()})
+
+
+def _scenes() -> set[str]:
+    return set(DUMMY_SCENES)
+
+
+#: Deterministic metrics computed from the config (see `DUMMY_DEFAULTS`).
+DUMMY = RunKind(name=KIND, validate=_validate, run=_run, resolve=_resolve, scenes=_scenes,
+                description="for tests: deterministic numbers, configurable sleep, gate and failure")
+
+
+# --------------------------------------------------------------------------- probe
+def _probe_validate(config: dict[str, Any]) -> None:
+    check_keys(flatten(config), {"scene": "", "seed": 0})
+
+
+def _probe_prepare(configs: list[dict[str, Any]]) -> dict[str, int]:
+    return {"runs": len(configs), "parent": os.getpid()}
+
+
+def _probe_run(config: dict[str, Any], workdir: Path, prepared: dict[str, int]) -> RunOutput:
+    """What reached the worker from the runner: its Dr.Jit thread budget, what ``prepare``
+    returned, and the ``SPLATBENCH_*`` variables of its environment."""
+    import drjit as dr
+
+    return RunOutput(metrics={"drjit_threads": dr.thread_count(), "prepared_runs": prepared["runs"],
+                              "prepared_parent": prepared["parent"], "pid": os.getpid(),
+                              "env": ",".join(sorted(k for k in os.environ if k.startswith("SPLATBENCH_")))})
+
+
+#: A kind that reports what its worker was handed (``kind = "tests.kinds_for_tests:PROBE"``).
+PROBE = RunKind(name="tests.kinds_for_tests:PROBE", validate=_probe_validate, run=_probe_run,
+                prepare=_probe_prepare, description="for tests: what a worker gets from the runner")
