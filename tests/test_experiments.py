@@ -441,3 +441,14 @@ def test_workers_get_their_budget_and_what_prepare_returned_with_each_run(tmp_pa
     assert not (table["metric.pid"] == os.getpid()).any()  # the runs ran in workers
     own = ",".join(sorted(k for k in os.environ if k.startswith("SPLATBENCH_")))
     assert (table["metric.env"].fillna("") == own).all(), table["metric.env"].tolist()
+
+
+def test_a_kind_written_before_prepared_existed_still_runs(tmp_path):
+    """`run(config, workdir)` (two parameters, the contract before `prepare`'s result was
+    passed on) is still called, without it; a three-parameter run gets it."""
+    from splatbench.experiments.execute import call_run
+
+    seen = []
+    call_run(lambda config, workdir: seen.append((config, workdir)), {"a": 1}, tmp_path, "prepared")
+    call_run(lambda config, workdir, prepared: seen.append(prepared), {"a": 1}, tmp_path, "prepared")
+    assert seen == [({"a": 1}, tmp_path), "prepared"]

@@ -9,10 +9,13 @@ nothing that finished (see `runner`).
 
 from __future__ import annotations
 
+import inspect
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime
+from pathlib import Path
 from typing import Any
 
 from splatbench.errors import one_line
@@ -38,6 +41,19 @@ class RunContext:
     prepared: Any = None
 
 
+def call_run(run: Callable[..., Any], config: dict[str, Any], workdir: Path, prepared: Any) -> Any:
+    """``run(config, workdir, prepared)``; a kind written before ``prepared`` existed (two
+    parameters) is called as ``run(config, workdir)``, so a user's kind keeps working."""
+    try:
+        params = inspect.signature(run).parameters.values()
+    except (TypeError, ValueError):  # no signature to read: call as documented
+        return run(config, workdir, prepared)
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    if len(positional) == 2 and not any(p.kind == p.VAR_POSITIONAL for p in params):
+        return run(config, workdir)
+    return run(config, workdir, prepared)
+
+
 def execute_run(run: RunSpec, results_dir: str, context: RunContext = RunContext()) -> dict[str, Any]:
     """Run ``run`` in this process, write its result file atomically, return the record
     (as a dict). A failing kind gives a ``failed`` record with a one-line error."""
@@ -51,7 +67,7 @@ def execute_run(run: RunSpec, results_dir: str, context: RunContext = RunContext
         workdir.mkdir(parents=True, exist_ok=True)
         kind = get_kind(run.kind)
         bound_threads(context.threads)
-        output = check_output(kind.run(plain(run.config), workdir, context.prepared), run.kind)
+        output = check_output(call_run(kind.run, plain(run.config), workdir, context.prepared), run.kind)
         record.metrics, record.curves = dict(output.metrics), output.curves
     except Exception as exc:  # noqa: BLE001 - every failure of a run is recorded, not raised
         record.status, record.error = "failed", one_line(exc)
