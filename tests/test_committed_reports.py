@@ -88,8 +88,9 @@ def test_committed_report_matches_its_parquet(name):
         assert axis.markdown() in text, f"reports/{name}: the `{axis.axis}` table differs from results.parquet"
         if axis.axis in report.findings:
             assert report.findings[axis.axis].markdown() in text, f"reports/{name}: `{axis.axis}` findings differ"
-    if "parity" in report.findings:
-        assert report.findings["parity"].markdown() in text
+    for name in ("parity", "settling"):  # the run findings: their own sections
+        if name in report.findings:
+            assert report.findings[name].markdown() in text, f"reports/{name}: the {name} finding differs"
     for line in text.splitlines():
         if line.startswith("![") and "](" in line:
             figure = folder / line.split("](", 1)[1].rstrip(")")

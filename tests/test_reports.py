@@ -541,3 +541,32 @@ def test_a_cell_whose_runs_all_failed_reports_a_dash(tmp_path):
     text = write_report(build_report(spec, tmp_path), tmp_path / "out" / spec.name).read_text()
     row = next(line for line in text.splitlines() if line.startswith(f"| {runs[0].scene} | `{dead}` |"))
     assert "| 0 | – |" in row and "## Failed runs" in text
+
+
+def _curves_table(rises: dict[str, list[float]], finals: dict[str, list[float]]):
+    import json
+
+    import pandas as pd
+
+    rows = []
+    for cell, values in rises.items():
+        for seed, (rise, final) in enumerate(zip(values, finals[cell])):
+            curves = {"eval_step": [1000, 1500, 2000], "eval_psnr": [final - 3.0, final - rise, final]}
+            rows.append({"run_id": f"{cell}{seed}", "status": "done", "scene": "s", "seed": seed, "axis.x": cell,
+                         "curves": json.dumps(curves)})
+    return pd.DataFrame(rows)
+
+
+def test_settling_names_a_gap_still_moving_and_passes_a_settled_one():
+    """B gains ~2 dB on A in the last interval while their final difference is known to
+    +-0.2 dB: not settled. Both rising alike (the gap fixed): settled, whatever the rise."""
+    from splatbench.reports.notes import settling_finding
+
+    moving = settling_finding(_curves_table({"a": [0.0, 0.1, -0.1], "b": [2.0, 2.1, 1.9]},
+                                            {"a": [20.0, 20.1, 19.9], "b": [25.0, 25.1, 24.9]}))
+    assert "**Not settled**" in moving.markdown() and "`x=b` gained 2.00 dB" in moving.markdown()
+    assert moving.claims[0].significant
+    steady = settling_finding(_curves_table({"a": [1.0, 1.1, 0.9], "b": [1.0, 0.9, 1.1]},
+                                            {"a": [20.0, 20.1, 19.9], "b": [25.0, 25.1, 24.9]}))
+    assert "Settled:" in steady.markdown() and not steady.claims[0].significant
+    assert "steps 1500→2000" in steady.markdown()

@@ -7,7 +7,8 @@ so the experiments never import the reports:
 * axis notes (`register_axis_note`): ``note(axis_table, runs, scenes) -> (lines, claims)``
   appended to each axis finding of the kind (train: `auto_sh_degree_note`);
 * run findings (`register_run_finding`): ``finding(runs) -> Finding | None`` over all
-  runs of the kind (raster: `parity_finding`);
+  runs of the kind (raster: `parity_finding`; train: `settling_finding`), each its own
+  section of the report;
 * metric notes (`register_metric_note`): ``note(runs) -> lines`` appended to the report's
   "Metrics" section (train: `lpips_note`, which LPIPS the column is).
 """
@@ -16,8 +17,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import json
+
 import pandas as pd
 
+from splatbench.metrics.stats import t_interval
 from splatbench.reports.findings import AxisNote, Claim, Finding
 from splatbench.reports.tables import AxisTable, done_runs
 
@@ -52,6 +56,69 @@ def auto_sh_degree_note(table: AxisTable, runs: pd.DataFrame, scenes: list[str])
         if parts:
             lines.append("- `auto` ended at SH degree " + ", ".join(parts) + ".")
     return lines, claims
+
+
+def settling_finding(runs: pd.DataFrame) -> Finding | None:
+    """Train kind: whether the differences between a scene's cells had settled when the runs
+    ended, from the curves' last evaluation interval (``eval_step`` / ``eval_psnr``).
+
+    Each cell's test PSNR change over that interval is listed (mean over seeds). The
+    differences are what a grid reports, so a scene is *not settled* when its fastest- and
+    slowest-rising cells' gap moved over the interval (paired over seeds: the 95 % t interval
+    of the change excludes 0) by more than the half-width of the 95 % interval of their final
+    difference: the reported difference then is what this run length gives, not where the two
+    converge (the report protocol asks for settled models; docs/reports.md)."""
+    from splatbench.metrics.stats import paired_difference
+
+    done = done_runs(runs)
+    if done.empty or "curves" not in done.columns:
+        return None
+    axes = [c for c in done.columns if c.startswith("axis.")]
+    rise: dict[tuple, dict[int, float]] = {}
+    final: dict[tuple, dict[int, float]] = {}
+    steps: set[tuple[int, int]] = set()
+    for _, row in done.iterrows():
+        try:
+            curves = json.loads(row["curves"]) if isinstance(row["curves"], str) else {}
+        except ValueError:
+            continue
+        step, psnr = curves.get("eval_step") or [], curves.get("eval_psnr") or []
+        if len(step) < 2 or len(psnr) != len(step) or None in psnr[-2:]:
+            continue
+        key = (row["scene"], ", ".join(f"{c[5:]}={row[c]}" for c in axes))
+        rise.setdefault(key, {})[int(row["seed"])] = float(psnr[-1]) - float(psnr[-2])
+        final.setdefault(key, {})[int(row["seed"])] = float(psnr[-1])
+        steps.add((int(step[-2]), int(step[-1])))
+    if not rise:
+        return None
+    parts = [f"{scene} `{label}` {t_interval(list(v.values())).estimate:+.2f} dB" for (scene, label), v in rise.items()]
+    span = ", ".join(f"{a}→{b}" for a, b in sorted(steps))
+    lines = [f"- Test PSNR change over the last evaluation interval (steps {span}), mean over seeds: "
+             + "; ".join(parts) + "."]
+    claims, moving = [], []
+    for scene in dict.fromkeys(k[0] for k in rise):
+        keys = sorted((k for k in rise if k[0] == scene), key=lambda k: t_interval(list(rise[k].values())).estimate)
+        if len(keys) < 2:
+            continue
+        slow, fast = keys[0], keys[-1]
+        change = paired_difference(rise[slow], rise[fast])  # how much `fast` gained on `slow` (> 0)
+        gap = paired_difference(final[slow], final[fast])
+        still = change.excludes(0.0) and gap.defined and abs(change.estimate) > gap.half_width
+        claims.append(Claim("settling", scene, fast[1], "test_psnr", "diff", change.estimate,
+                            f"{change.estimate:+.2f} dB", reference=slow[1], low=change.low, high=change.high,
+                            n=change.n, significant=still))
+        if still:
+            moving.append(f"on {scene}, `{fast[1]}` gained {change.estimate:.2f} dB [95 % CI {change.low:.2f}, "
+                          f"{change.high:.2f}] on `{slow[1]}` over that interval, more than the 95 % interval of their "
+                          f"final difference (±{gap.half_width:.2f} dB)")
+    if moving:
+        lines.append("- **Not settled**: " + "; ".join(moving) + ". The difference reported above is what this run "
+                     "length gives, not where the cells converge.")
+    elif claims:
+        lines.append("- Settled: on every scene the gap between the fastest- and slowest-rising cells moved over the "
+                     "last interval by no more than the 95 % interval of their final difference (or not beyond seed "
+                     "noise).")
+    return Finding("settling", lines, claims)
 
 
 def parity_finding(runs: pd.DataFrame) -> Finding | None:
@@ -99,7 +166,8 @@ MetricNote = Callable[[pd.DataFrame], list[str]]
 
 _AXIS_NOTES: dict[str, list[AxisNote]] = {"train": [auto_sh_degree_note]}
 _METRIC_NOTES: dict[str, list[MetricNote]] = {"train": [lpips_note]}
-_RUN_FINDINGS: dict[str, list[tuple[str, RunFinding]]] = {"raster": [("parity", parity_finding)]}
+_RUN_FINDINGS: dict[str, list[tuple[str, RunFinding]]] = {"raster": [("parity", parity_finding)],
+                                                           "train": [("settling", settling_finding)]}
 
 
 def register_axis_note(kind: str, note: AxisNote) -> AxisNote:
@@ -135,5 +203,5 @@ def run_findings(kind: str) -> tuple[tuple[str, RunFinding], ...]:
     return tuple(_RUN_FINDINGS.get(kind, ()))
 
 
-__all__ = ["RunFinding", "MetricNote", "auto_sh_degree_note", "parity_finding", "lpips_note", "register_axis_note",
+__all__ = ["RunFinding", "MetricNote", "auto_sh_degree_note", "parity_finding", "settling_finding", "lpips_note", "register_axis_note",
            "register_run_finding", "register_metric_note", "axis_notes", "run_findings", "metric_notes"]

@@ -196,8 +196,8 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
             rel = curve_paths[t.axis].relative_to(out).as_posix()
             lines += [f"![training curves by {t.axis}]({rel})", ""]
 
-    if "parity" in report.findings:
-        lines += ["## Parity", "", report.findings["parity"].markdown(), ""]
+    for name in (n for n in report.findings if n not in {t.axis for t in report.axes}):  # run findings
+        lines += [f"## {name.capitalize()}", "", report.findings[name].markdown(), ""]
 
     if pareto_path is not None:
         tq = kind_report(spec.kind).time_quality
