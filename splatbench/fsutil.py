@@ -114,3 +114,13 @@ def read_text(path: str | os.PathLike, what: str) -> str:
         raise InputError(f"{what}: cannot read {str(p)!r} ({exc.strerror})") from None
     except UnicodeDecodeError as exc:
         raise InputError(f"{what}: {str(p)!r} is not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
+
+
+#: Environment variable naming the root of splatbench's caches (undistorted images, SfM
+#: models, oracle renders); default ``~/.cache/splatbench``.
+CACHE_ENV = "SPLATBENCH_CACHE"
+
+
+def cache_root() -> Path:
+    """``$SPLATBENCH_CACHE``, else ``~/.cache/splatbench``: where derived data is cached by content."""
+    return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "splatbench")

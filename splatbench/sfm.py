@@ -37,9 +37,8 @@ from typing import Any
 import numpy as np
 
 from splatbench.cameras import Camera
-from splatbench.data.undistort import cache_root
 from splatbench.errors import InputError
-from splatbench.fsutil import replace_dir
+from splatbench.fsutil import cache_root, replace_dir
 from splatbench.safeio import read_npz
 
 #: Folder under the dataset that receives the model (``sfm/0/*.bin``) and the database.

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import shutil
 import tempfile
 from collections.abc import Callable, Sequence
@@ -29,13 +28,12 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.fsutil import replace_dir
+from splatbench.fsutil import cache_root, replace_dir
 
 #: COLMAP camera models with distortion that are undistorted on load.
 UNDISTORTED_MODELS = ("SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV", "OPENCV_FISHEYE")
 #: Bump when the cached images change for the same inputs.
 UNDISTORT_CACHE_VERSION = 1
-CACHE_ENV = "SPLATBENCH_CACHE"
 _MANIFEST = "manifest.json"
 
 
@@ -84,11 +82,6 @@ def check_lens(lens: Lens, where: str) -> None:
                          f"pycolmap refuses it ({str(exc).strip().splitlines()[0]})") from None
     if not ok or not all(np.isfinite(lens.params)):
         raise InputError(f"{where}: {lens.model} expects {len(cam.params)} finite parameters, got {list(lens.params)}")
-
-
-def cache_root() -> Path:
-    """``$SPLATBENCH_CACHE``, else ``~/.cache/splatbench``."""
-    return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "splatbench")
 
 
 def undistort_views(sources: Sequence[tuple[Path, Lens]], *, downscale: int = 1,
@@ -179,4 +172,4 @@ def _read_manifest(folder: Path, count: int) -> list[Undistorted] | None:
     return views
 
 
-__all__ = ["Lens", "Undistorted", "UNDISTORTED_MODELS", "CACHE_ENV", "check_lens", "cache_root", "undistort_views"]
+__all__ = ["Lens", "Undistorted", "UNDISTORTED_MODELS", "check_lens", "undistort_views"]

@@ -82,6 +82,7 @@ import numpy as np
 
 from splatbench.checks import check_keys, check_sh_degree, check_type
 from splatbench.errors import InputError
+from splatbench.fsutil import cache_root
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.metrics.load import Load, own_share
@@ -102,7 +103,6 @@ DEFAULTS: dict[str, Any] = {
 }
 #: Options with no counterpart in the reference (accelerations and placement only).
 FAST_ONLY = ("tile_size", "device")
-CACHE_ENV = "SPLATBENCH_CACHE"
 #: What a run measures, in the resolved config (so in the run id): 2 = error against the
 #: exact model and the median of per-pair time ratios (1, unnamed: error against the
 #: default-option reference, ratio of medians). Results measured otherwise are never reused.
@@ -193,8 +193,7 @@ def options_of(config: dict[str, Any]) -> dict[str, Any]:
 # --------------------------------------------------------------------------- reference
 def cache_dir() -> Path:
     """``$SPLATBENCH_CACHE/reference``, else ``~/.cache/splatbench/reference``."""
-    root = os.environ.get(CACHE_ENV)
-    return (Path(root) if root else Path.home() / ".cache" / "splatbench") / "reference"
+    return cache_root() / "reference"
 
 
 def _reference_sources() -> str:
