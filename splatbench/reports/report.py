@@ -10,9 +10,10 @@ so a report is never built from a stale table. What is written, under ``out``:
 
 * ``report.md``: a header (runs done / failed / not run, shared settings, run time),
   one section per axis (a table of mean ± 95 % t interval over seeds of each axis value, per
-  scene; the findings; the training curves), run time against quality with the Pareto
-  front, the metrics' meanings, and any failed runs.
-* ``figures/curves_<axis>.png``, ``figures/time_vs_error.png`` (train kind) or
+  scene; the findings; the training curves), each Pareto figure the kind declares (a cost
+  against quality, the cells on the front named), the metrics' meanings, and any failed runs.
+* ``figures/curves_<axis>.png``; the kind's Pareto figures (`KindReport.tradeoffs`):
+  ``figures/time_vs_error.png`` and ``figures/gaussians_vs_error.png`` (train kind) or
   ``figures/speed_vs_error.png`` (raster kind).
 * ``results.parquet``: the run table the report was built from (the engine's columns:
   ``run_id, scene, seed, status, ..., axis.*, config.*, metric.*, curves``).
@@ -30,6 +31,7 @@ import pandas as pd
 
 from splatbench.errors import InputError
 from splatbench.experiments.grid import expand
+from splatbench.experiments.kind_report import Tradeoff
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.experiments.store import TABLE_NAME, build_table, experiment_dir, read_records
 from splatbench.fsutil import atomic_write
@@ -59,8 +61,8 @@ class Report:
     spec: the experiment; table: one row per run of the grid that has a result (grid
     order; `splatbench.experiments.store` columns); total: runs in the grid;
     metrics: the metrics shown; axes: one `AxisTable` per axis; findings: axis name (or
-    "parity") -> `Finding`; fronts: scene -> Pareto-optimal cell labels (filled when
-    written).
+    "parity") -> `Finding`; fronts: Pareto figure stem -> scene -> Pareto-optimal cell
+    labels, cheapest first (filled when written).
     """
 
     spec: ExperimentSpec
@@ -69,7 +71,7 @@ class Report:
     metrics: tuple[MetricSpec, ...]
     axes: list[AxisTable]
     findings: dict[str, Finding]
-    fronts: dict[str, list[str]] = field(default_factory=dict)
+    fronts: dict[str, dict[str, list[str]]] = field(default_factory=dict)
 
     @property
     def done(self) -> int:
@@ -141,22 +143,34 @@ def write_report(report: Report, out: str | Path) -> Path:
         path = curves_figure(t, table, figures / f"curves_{_slug(t.axis)}.png")
         if path is not None:
             curve_paths[t.axis] = path
-    pareto_path = None
-    declared = kind_report(report.spec.kind)
-    tq = declared.time_quality if declared is not None else None
+    drawn: list[tuple[Tradeoff, Path]] = []
     specs = {m.name: m for m in report.metrics}
-    if tq is not None and tq.time in specs and tq.quality in specs and report.done:
-        means = cell_means(table, cell_labels(report.spec, table), tq.time, tq.quality)
-        pareto_path = figures / f"{tq.stem}.png"
-        report.fronts = pareto_figure(means, list(report.spec.scenes), specs[tq.time], specs[tq.quality],
-                                      pareto_path, tq.title)
-    text = render_markdown(report, curve_paths, pareto_path, out)
+    for tradeoff in drawable_tradeoffs(report):
+        means = cell_means(table, cell_labels(report.spec, table), tradeoff.cost, tradeoff.quality)
+        path = figures / f"{tradeoff.stem}.png"
+        report.fronts[tradeoff.stem] = pareto_figure(means, list(report.spec.scenes), specs[tradeoff.cost],
+                                                     specs[tradeoff.quality], path, tradeoff.title)
+        drawn.append((tradeoff, path))
+    text = render_markdown(report, curve_paths, drawn, out)
     atomic_write(out / REPORT_NAME, lambda temp: temp.write_text(text, encoding="utf-8"))
     return out / REPORT_NAME
 
 
+def drawable_tradeoffs(report: Report) -> list[Tradeoff]:
+    """The kind's Pareto figures whose two metrics the report shows (its results hold
+    them), when at least one run is done: any grid of the kind whose results have, say,
+    a Gaussian count gets that figure."""
+    declared = kind_report(report.spec.kind)
+    if declared is None or not report.done:
+        return []
+    shown = {m.name for m in report.metrics}
+    return [t for t in declared.tradeoffs if t.cost in shown and t.quality in shown]
+
+
 # --------------------------------------------------------------------------- markdown
-def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: Path | None, out: Path) -> str:
+def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: list[tuple[Tradeoff, Path]],
+                    out: Path) -> str:
+    """The report's text; ``tradeoffs``: each Pareto figure drawn, with its file."""
     spec, table = report.spec, report.table
     missing = report.total - len(table)
     dims = ", ".join(f"`{d}`" for d in spec.dimensions) or "no axes"
@@ -199,16 +213,16 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
     if "parity" in report.findings:
         lines += ["## Parity", "", report.findings["parity"].markdown(), ""]
 
-    if pareto_path is not None:
-        tq = kind_report(spec.kind).time_quality
-        specs = {m.name: m for m in report.metrics}
-        lines += [f"## {specs[tq.time].label} against {specs[tq.quality].label}", "",
-                  f"{tq.title}; bars are 95 % t intervals over seeds (none with one seed); ringed points are "
-                  f"Pareto-optimal on the means (no other cell is both faster and better).", "",
-                  f"![{tq.stem}]({pareto_path.relative_to(out).as_posix()})", ""]
-        for scene, front in report.fronts.items():
+    specs = {m.name: m for m in report.metrics}
+    for tradeoff, path in tradeoffs:
+        cost, quality = specs[tradeoff.cost], specs[tradeoff.quality]
+        lines += [f"## {cost.label} against {quality.label}", "",
+                  f"{tradeoff.title}; bars are 95 % t intervals over seeds (none with one seed); ringed points are "
+                  f"Pareto-optimal on the means (no other cell is both {tradeoff.cheaper} and better).", "",
+                  f"![{tradeoff.stem}]({path.relative_to(out).as_posix()})", ""]
+        for scene, front in report.fronts.get(tradeoff.stem, {}).items():
             if front:
-                lines.append(f"- Pareto front on {scene}, fastest first: " + " → ".join(f"`{c}`" for c in front))
+                lines.append(f"- Pareto front on {scene}, {tradeoff.order}: " + " → ".join(f"`{c}`" for c in front))
         lines.append("")
 
     meanings = metric_meanings(spec.kind)
@@ -275,5 +289,5 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in text)
 
 
-__all__ = ["Report", "build_report", "write_report", "reported_done", "grid_table", "render_markdown", "run_time", "duration",
-           "REPORT_NAME", "FIGURES"]
+__all__ = ["Report", "build_report", "write_report", "reported_done", "grid_table", "render_markdown",
+           "drawable_tradeoffs", "run_time", "duration", "REPORT_NAME", "FIGURES"]
