@@ -1,5 +1,5 @@
 """Figures shared by the report writers (the experiment reports, ``compare``):
-matplotlib on the Agg backend (PNG), side-by-side panels, and the time-against-quality
+matplotlib on the Agg backend (PNG), side-by-side panels, and the cost-against-quality
 figure with its Pareto front.
 
 `pareto_figure`: one panel per scene, one point per cell (with 95 % interval bars in
