@@ -221,8 +221,11 @@ def test_train_report_names_its_lpips_and_leaves_loaded_times_out(tmp_path):
             # seed 2's times are out (2 pairs), its PSNR and LPIPS in (3 pairs)
             assert vs == {("test_psnr", 3), ("test_lpips", 3), ("train_seconds", 2), ("num_gaussians", 3)}
             assert "1 run(s) timed while other processes loaded the machine are left out of the render / train time comparisons" in text
+            assert (f"Load: 1 of {len(runs)} runs timed while other processes loaded the machine (`metric.time_loaded`: "
+                    f"their times are left out of the time comparisons, their quality kept); others' estimated load "
+                    f"0.20–0.20 on 2 cores.") in text
         else:
-            assert "LPIPS" not in text and "timed under load" not in text
+            assert "LPIPS" not in text and "timed under load" not in text and "Load:" not in text
             assert vs == {("test_psnr", 3), ("train_seconds", 3), ("num_gaussians", 3)}
 
 

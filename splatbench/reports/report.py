@@ -193,7 +193,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
             for name, src in spec.scene_sources.items())
             + " (a scene's own keys win over the shared `data.*`; `data` keys of another scene type do not apply "
               "to it).", ""]
-    timing = run_time(table)
+    timing = " ".join(t for t in (run_time(table), load_facts(table)) if t)
     if timing:
         lines += [timing, ""]
     if missing:
@@ -273,6 +273,30 @@ def run_time(table: pd.DataFrame) -> str:
             f"(mean {duration(worker / len(done))} per run){span}.")
 
 
+def load_facts(table: pd.DataFrame) -> str:
+    """"Load: ..." -- how many done runs were timed while other processes loaded the
+    machine (``metric.time_loaded``, train; ``metric.loaded``, raster) and the range of the
+    others' estimated load (``metric.load_other``); "" for a table of grids run before
+    load was recorded."""
+    done = table[table.status == "done"] if len(table) else table
+    flag = next((c for c in ("metric.time_loaded", "metric.loaded") if c in done.columns), None)
+    if not len(done) or flag is None:
+        return ""
+    marked = int((pd.to_numeric(done[flag], errors="coerce").fillna(0) != 0).sum())
+    what = ("their times are left out of the time comparisons, their quality kept" if flag == "metric.time_loaded"
+            else "left out of every finding")
+    text = (f"Load: {marked} of {len(done)} runs timed while other processes loaded the machine "
+            f"(`{flag}`: {what})")
+    def column(name: str) -> pd.Series:
+        return pd.to_numeric(done[name], errors="coerce").dropna() if name in done.columns else pd.Series([])
+
+    other, cores = column("metric.load_other"), column("metric.cores")
+    if len(other):
+        on = f" on {int(cores.max())} cores" if len(cores) and cores.min() == cores.max() else ""
+        text += f"; others' estimated load {other.min():.2f}–{other.max():.2f}{on}"
+    return text + "."
+
+
 def duration(seconds: float) -> str:
     """``"42 s"``, ``"12 min 5 s"``, ``"3 h 20 min"``."""
     if not math.isfinite(seconds):
@@ -290,4 +314,4 @@ def _slug(text: str) -> str:
 
 
 __all__ = ["Report", "build_report", "write_report", "reported_done", "grid_table", "render_markdown",
-           "drawable_tradeoffs", "run_time", "duration", "REPORT_NAME", "FIGURES"]
+           "drawable_tradeoffs", "run_time", "load_facts", "duration", "REPORT_NAME", "FIGURES"]
