@@ -13,6 +13,7 @@ import dataclasses
 import json
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -317,6 +318,60 @@ def test_gaussians_pareto_figure_names_the_front(tmp_path):
         assert ("- Pareto front on diffuse, fewest Gaussians first: `densify=none` → `densify=absgrad` → "
                 "`densify=mcmc`") in text
         assert "no other cell is both smaller (fewer Gaussians) and better" in text
+
+
+def test_figure_labels_leave_out_the_axes_shared_prefix(tmp_path):
+    """The Pareto figures label points without the axes' shared dotted prefix
+    (``refine_stop=25%``); the report's text still names each front cell in full."""
+    from splatbench.reports.tables import cell_labels, shared_prefix
+
+    assert shared_prefix(["strategy_options.refine_stop", "strategy_options.reset_every"]) == "strategy_options."
+    assert shared_prefix(["a.b.c", "a.b.d"]) == "a.b." and shared_prefix(["a.x", "b.y"]) == ""
+    assert shared_prefix(["sh_degree"]) == "" and shared_prefix(["strategy_options.cap_max"]) == "strategy_options."
+    spec = parse_experiment({"name": "oatfake", "kind": "train", "scenes": ["diffuse"], "seeds": [0, 1],
+                             "grid": "one-at-a-time",
+                             "base": {"iterations": 100, "data": {"resolution": 32, "views": 8, "spp": 2},
+                                      "strategy_options": {"refine_stop": "50%", "grad_threshold": 2e-4}},
+                             "axes": {"strategy_options.refine_stop": ["25%", "50%"],
+                                      "strategy_options.grad_threshold": [2e-4, 4e-4]}}, source="oatfake.toml")
+    runs = expand(spec)
+    # more Gaussians, better PSNR, cell by cell: every cell is on the front
+    cells = {"base": (30_000, 26.0), "refine_stop=25%": (20_000, 25.0), "grad_threshold=0.0004": (25_000, 25.5)}
+    records = []
+    for run in runs:
+        short = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in run.labels.items()
+                          if v != {"strategy_options.refine_stop": "50%",
+                                   "strategy_options.grad_threshold": 2e-4}[k]) or "base"
+        count, psnr = cells[short]
+        metrics, curves = fake_metrics("diffuse", 0, run.seed)
+        metrics.update(test_psnr=psnr + 0.01 * run.seed, num_gaussians=count + run.seed)
+        records.append(RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene,
+                                 seed=run.seed, status="done", config=dict(run.config), labels=dict(run.labels),
+                                 metrics=metrics, curves=curves, error=None, seconds=1.0,
+                                 started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00",
+                                 worker="h:1"))
+        write_record(tmp_path, records[-1])
+    write_table(tmp_path / spec.name, records)
+    report = build_report(spec, tmp_path)
+    assert set(cell_labels(spec, report.table, short=True)) == set(cells)
+    text = write_report(report, tmp_path / "out").read_text()
+    front = ["strategy_options.refine_stop=25%", "strategy_options.grad_threshold=0.0004", "base"]
+    assert report.fronts["gaussians_vs_error"] == {"diffuse": front}
+    assert "fewest Gaussians first: " + " → ".join(f"`{c}`" for c in front) in text
+
+
+def test_scene_files_are_written_relative_to_the_checkout(tmp_path, monkeypatch):
+    """A teacher model or dataset folder (resolved to an absolute path by the spec) is named
+    in the report relative to the current folder when it lies below it: no machine-specific
+    path in a committed report. One outside it stays absolute; other values are unchanged."""
+    from splatbench.reports.report import relative_path
+
+    monkeypatch.chdir(tmp_path)
+    inside = tmp_path / "splatbench" / "data" / "models" / "pc_guitar.ply"
+    assert relative_path(str(inside)) == "splatbench/data/models/pc_guitar.ply"
+    outside = str(Path(tmp_path.anchor) / "elsewhere" / "model.ply")
+    assert relative_path(outside) == outside
+    assert relative_path(64) == 64 and relative_path("relative/dir") == "relative/dir"
 
 
 # --------------------------------------------------------------------------- kinds

@@ -145,11 +145,15 @@ def write_report(report: Report, out: str | Path) -> Path:
             curve_paths[t.axis] = path
     drawn: list[tuple[Tradeoff, Path]] = []
     specs = {m.name: m for m in report.metrics}
+    # points labelled without the axes' shared prefix (legible); the text names the cells in full
+    short, full = cell_labels(report.spec, table, short=True), cell_labels(report.spec, table)
+    to_full = dict(zip(short, full))
     for tradeoff in drawable_tradeoffs(report):
-        means = cell_means(table, cell_labels(report.spec, table), tradeoff.cost, tradeoff.quality)
+        means = cell_means(table, short, tradeoff.cost, tradeoff.quality)
         path = figures / f"{tradeoff.stem}.png"
-        report.fronts[tradeoff.stem] = pareto_figure(means, list(report.spec.scenes), specs[tradeoff.cost],
-                                                     specs[tradeoff.quality], path, tradeoff.title)
+        fronts = pareto_figure(means, list(report.spec.scenes), specs[tradeoff.cost], specs[tradeoff.quality],
+                               path, tradeoff.title)
+        report.fronts[tradeoff.stem] = {scene: [to_full[c] for c in cells] for scene, cells in fronts.items()}
         drawn.append((tradeoff, path))
     text = render_markdown(report, curve_paths, drawn, out)
     atomic_write(out / REPORT_NAME, lambda temp: temp.write_text(text, encoding="utf-8"))
@@ -189,7 +193,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
         lines += ["Shared settings: " + ", ".join(f"`{k} = {display(v)}`" for k, v in spec.base.items()) + ".", ""]
     if spec.scene_sources:  # dataset folders and teacher models: where their data comes from
         lines += ["Scenes from files: " + "; ".join(
-            f"`{name}` " + ", ".join(f"{k} `{display(v)}`" for k, v in src.items())
+            f"`{name}` " + ", ".join(f"{k} `{display(relative_path(v))}`" for k, v in src.items())
             for name, src in spec.scene_sources.items())
             + " (a scene's own keys win over the shared `data.*`; `data` keys of another scene type do not apply "
               "to it).", ""]
@@ -249,6 +253,18 @@ def source_path(spec: ExperimentSpec) -> str:
         return Path(spec.source).resolve().relative_to(Path.cwd().resolve()).as_posix()
     except (ValueError, OSError):
         return spec.source
+
+
+def relative_path(value):
+    """A scene table's value as written in the report: an absolute path (a dataset folder,
+    a teacher model: the spec resolves them) relative to the current folder when it lies
+    below it, as `source_path`; anything else unchanged."""
+    if not isinstance(value, str) or not Path(value).is_absolute():
+        return value
+    try:
+        return Path(value).resolve().relative_to(Path.cwd().resolve()).as_posix()
+    except (ValueError, OSError):
+        return value
 
 
 def metric_meanings(kind: str) -> dict[str, str]:
