@@ -303,6 +303,7 @@ def load_facts(table: pd.DataFrame) -> str:
             else "left out of every finding")
     text = (f"Load: {marked} of {len(done)} runs timed while other processes loaded the machine "
             f"(`{flag}`: {what})")
+
     def column(name: str) -> pd.Series:
         return pd.to_numeric(done[name], errors="coerce").dropna() if name in done.columns else pd.Series([])
 
