@@ -32,6 +32,19 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted(p.stem for p in (ROOT / "experiments").glob("*.toml"))
 
 
+def _load(name: str):
+    """The shipped experiment ``name``; skipped when it reads a user's data that is not beside the
+    checkout (experiments/real_capture.toml reads ../shared/data/fox, which is never bundled)."""
+    from splatbench.errors import InputError
+
+    try:
+        return load_experiment(ROOT / "experiments" / f"{name}.toml")
+    except InputError as exc:
+        if "is not a dataset folder" in str(exc) or "is not a file" in str(exc):
+            pytest.skip(f"experiments/{name}.toml reads data that is not here: {exc}")
+        raise
+
+
 def test_every_shipped_experiment_is_reported():
     missing = [name for name in SHIPPED if not (ROOT / "reports" / name / "report.md").is_file()
                and not (ROOT / "reports" / name / "PENDING.md").is_file()]
@@ -45,7 +58,7 @@ def test_a_pending_report_is_not_there_yet_and_its_grid_expands():
         folder = ROOT / "reports" / name
         assert not (folder / "report.md").is_file(), f"reports/{name} is reported now: delete reports/{name}/PENDING.md"
         assert f"make reports REPORTS={name}" in (folder / "PENDING.md").read_text(encoding="utf-8"), name
-        assert expand(load_experiment(ROOT / "experiments" / f"{name}.toml")), name
+        assert expand(_load(name)), name
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -55,7 +68,7 @@ def test_committed_report_matches_its_parquet(name):
         pending = (folder / "PENDING.md").is_file()
         pytest.skip(f"reports/{name} " + ("pending (PENDING.md)" if pending else
                                            "not committed (reported by the test above)"))
-    spec = load_experiment(ROOT / "experiments" / f"{name}.toml")
+    spec = _load(name)
     table = pd.read_parquet(folder / "results.parquet")
     runs = expand(spec)
     text = (folder / "report.md").read_text(encoding="utf-8")
@@ -88,7 +101,7 @@ def test_shipped_grids_follow_the_report_protocol(name):
     """Issue 11: every grid has >= 3 seeds; training grids (but the demo, which must fit
     `make demo`) run >= 2000 iterations at >= 128 px with the scaled schedule; raster
     grids time >= 7 alternated pairs."""
-    spec = load_experiment(ROOT / "experiments" / f"{name}.toml")
+    spec = _load(name)
     assert len(spec.seeds) >= 3, f"experiments/{name}.toml: {len(spec.seeds)} seed(s)"
     for run in expand(spec):
         if spec.kind == "train":

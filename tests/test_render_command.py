@@ -144,6 +144,14 @@ def test_camera_option_renders_from_a_datasets_test_view(tmp_path):
     assert image.shape == (16, 16, 3) and "note: up" not in out
     lum = image.sum(axis=2)
     assert lum[7:9, 7:9].min() == lum.max() > 600  # the 2x2 pixels around the centre (cx = cy = 8)
+    # --downscale sizes the dataset's camera as training at that downscale saw it: half the size,
+    # the axis still on the centre (cx = cy = 4)
+    code, out, image = run(tmp_path / "m.ply", "--camera", f"{folder}:1", "--downscale", 2, "--out", tmp_path / "h.png")
+    assert code == 0 and image.shape == (8, 8, 3) and "at downscale 2 (8x8)" in out, out
+    lum = image.sum(axis=2)
+    assert lum[3:5, 3:5].min() == lum.max()
+    code, out, _ = run(tmp_path / "m.ply", "--downscale", 2)
+    assert code == 2 and out.startswith("splatbench: error: --downscale: only with --camera"), out
     for view in ("2", "x", "-1", ""):   # out of range, not a number, negative, empty: VIEW named, not DATASET
         code, out, _ = run(tmp_path / "m.ply", "--camera", f"{folder}:{view}")
         assert code == 2 and out.strip() == (f"splatbench: error: --camera: view {view!r} is not a view index "

@@ -13,7 +13,6 @@ import dataclasses
 import json
 import math
 import re
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -358,20 +357,6 @@ def test_figure_labels_leave_out_the_axes_shared_prefix(tmp_path):
     front = ["strategy_options.refine_stop=25%", "strategy_options.grad_threshold=0.0004", "base"]
     assert report.fronts["gaussians_vs_error"] == {"diffuse": front}
     assert "fewest Gaussians first: " + " → ".join(f"`{c}`" for c in front) in text
-
-
-def test_scene_files_are_written_relative_to_the_checkout(tmp_path, monkeypatch):
-    """A teacher model or dataset folder (resolved to an absolute path by the spec) is named
-    in the report relative to the current folder when it lies below it: no machine-specific
-    path in a committed report. One outside it stays absolute; other values are unchanged."""
-    from splatbench.reports.report import relative_path
-
-    monkeypatch.chdir(tmp_path)
-    inside = tmp_path / "splatbench" / "data" / "models" / "pc_guitar.ply"
-    assert relative_path(str(inside)) == "splatbench/data/models/pc_guitar.ply"
-    outside = str(Path(tmp_path.anchor) / "elsewhere" / "model.ply")
-    assert relative_path(outside) == outside
-    assert relative_path(64) == 64 and relative_path("relative/dir") == "relative/dir"
 
 
 # --------------------------------------------------------------------------- kinds

@@ -23,14 +23,15 @@ def parse_background(text: str) -> tuple[float, float, float]:
         raise InputError(f"--background: expected R,G,B, 3 numbers in [0, 1], got {text!r}") from None
 
 
-def dataset_camera(spec: str):
-    """``--camera DATASET[:VIEW]``: test view VIEW (default 0) of a dataset folder (`Camera`)."""
+def dataset_camera(spec: str, downscale: int = 1):
+    """``--camera DATASET[:VIEW]``: test view VIEW (default 0) of a dataset folder, loaded at
+    ``downscale`` as `splatbench train --set data.downscale=N` loads it (`Camera`)."""
     from splatbench.data import load_dataset
 
     folder, sep, view = spec.rpartition(":")
     if not sep or not folder or Path(spec).is_dir():   # no VIEW (or a folder whose name holds ':')
         folder, view = spec, "0"
-    test = load_dataset(folder).test
+    test = load_dataset(folder, downscale=downscale).test
     if not len(test):
         raise InputError(f"--camera: {folder} has no test views")
     if not (view.isdigit() and int(view) < len(test)):
@@ -61,13 +62,16 @@ def _axis_name(up) -> str:
 @click.option("--camera", "camera_spec", default=None, metavar="DATASET[:VIEW]",
               help="Render a PLY from test view VIEW (default 0) of a dataset folder, at its size, instead of "
                    "the framing camera (--size, --up and --elevation then do not apply).")
+@click.option("--downscale", type=click.IntRange(min=1), default=None, metavar="N",
+              help="With --camera: load the dataset at 1/N of its image size, as `train --set data.downscale=N` "
+                   "does (default 1: full size).")
 @click.option("--background", "background", default=None, metavar="R,G,B",
               help="RGB in [0, 1] behind the splats. Default: the background the PLY records "
                    "(the one it was trained on), else black.")
 @click.option("--sh-degree", type=int, default=None, help="SH bands to evaluate (default: all).")
 @click.option("--option", "options", multiple=True, help="Rasterizer option key=value (repeatable), e.g. tile_size=8.")
 def render(source: Path, out: Path | None, view: int, size: str, up: str | None, elevation: float | None,
-           camera_spec: str | None, background: str | None, sh_degree: int | None, options: tuple[str, ...]) -> None:
+           camera_spec: str | None, downscale: int | None, background: str | None, sh_degree: int | None, options: tuple[str, ...]) -> None:
     """Render SOURCE (a 3DGS .ply, a bundled model: guitar or biker, or a workload .npz) to a PNG and print its path.
 
     A PLY is framed by a camera looking at the middle of its Gaussians, with the world's
@@ -82,6 +86,8 @@ def render(source: Path, out: Path | None, view: int, size: str, up: str | None,
     if camera_spec is not None and (up is not None or elevation is not None):
         raise InputError(f"{'--up' if up is not None else '--elevation'}: does not apply with --camera "
                          "(the dataset's camera is placed already); leave it out")
+    if downscale is not None and camera_spec is None:
+        raise InputError("--downscale: only with --camera DATASET[:VIEW] (it sizes the dataset's camera); leave it out")
     up_vector = parse_up(up) if up is not None else None
     rgb = parse_background(background) if background is not None else None
     if not source.exists() and str(source).lower() in BUNDLED_MODELS:  # `render guitar`, as `compare --model`
@@ -102,7 +108,9 @@ def render(source: Path, out: Path | None, view: int, size: str, up: str | None,
             rgb = hints.background
             notes.append(f"background {[round(c, 4) for c in rgb]} (recorded in the PLY)")
         if camera_spec is not None:
-            camera = dataset_camera(camera_spec)
+            camera = dataset_camera(camera_spec, downscale or 1)
+            notes.append(f"camera: test view of {camera_spec} at downscale {downscale or 1} "
+                         f"({camera.width}x{camera.height})")
         else:
             camera, note = _framing(gaussians, width, height, up_vector, hints.up, elevation)
             notes = [note, *notes] if note else notes

@@ -104,6 +104,8 @@ class ExperimentSpec:
     source: str = "experiment"
     scene_sources: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)  # name -> its table's
     #   ``data`` fields (``path``/``downscale`` or ``model``/``views``/``resolution``/``up``), paths absolute
+    scene_tables: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)  # name -> its table as written
+    #   (paths as the file gives them, relative to it): what a report shows, the same in every clone
 
     @property
     def dimensions(self) -> list[str]:
@@ -141,12 +143,13 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
     entries = data.get("scenes")
     if not isinstance(entries, list) or not entries:
         raise fail("scenes", f"expected a non-empty list of scene names or tables, got {entries!r}")
-    scenes, scene_sources = [], {}
+    scenes, scene_sources, scene_tables = [], {}, {}
     for i, s in enumerate(entries):
         if isinstance(s, Mapping):
             scene_name, fields = _scene_table(s, f"scenes[{i}]", fail, base_dir)
             scenes.append(scene_name)
             scene_sources[scene_name] = fields
+            scene_tables[scene_name] = {k: v for k, v in s.items() if k != "name"}
         elif isinstance(s, str) and s:
             scenes.append(s)
         else:
@@ -212,7 +215,7 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
     runner = _parse_runner(data.get("runner", {}), fail, source, base_dir)
     return ExperimentSpec(name=name, kind=kind, scenes=tuple(scenes), seeds=tuple(seeds), base=base, axes=axes,
                           variants=variants, grid=grid, description=description, runner=runner, source=source,
-                          scene_sources=scene_sources)
+                          scene_sources=scene_sources, scene_tables=scene_tables)
 
 
 #: Keys of a scene table: a dataset folder or a teacher model (besides ``name``).

@@ -191,10 +191,10 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     ]
     if spec.base:
         lines += ["Shared settings: " + ", ".join(f"`{k} = {display(v)}`" for k, v in spec.base.items()) + ".", ""]
-    if spec.scene_sources:  # dataset folders and teacher models: where their data comes from
-        lines += ["Scenes from files: " + "; ".join(
-            f"`{name}` " + ", ".join(f"{k} `{display(relative_path(v))}`" for k, v in src.items())
-            for name, src in spec.scene_sources.items())
+    if spec.scene_tables:  # dataset folders and teacher models: where their data comes from, as the file says
+        lines += ["Scenes from files (paths relative to the experiment file; run ids hash their content): " + "; ".join(
+            f"`{name}` " + ", ".join(f"{k} `{display(v)}`" for k, v in src.items())
+            for name, src in spec.scene_tables.items())
             + " (a scene's own keys win over the shared `data.*`; `data` keys of another scene type do not apply "
               "to it).", ""]
     timing = " ".join(t for t in (run_time(table), load_facts(table)) if t)
@@ -253,40 +253,6 @@ def source_path(spec: ExperimentSpec) -> str:
         return Path(spec.source).resolve().relative_to(Path.cwd().resolve()).as_posix()
     except (ValueError, OSError):
         return spec.source
-
-
-def relative_path(value):
-    """A scene table's value as written in the report: an absolute path (a dataset folder,
-    a teacher model: the spec resolves them) relative to the current folder when it lies
-    below it, as `source_path`; anything else unchanged."""
-    if not isinstance(value, str) or not Path(value).is_absolute():
-        return value
-    try:
-        return Path(value).resolve().relative_to(Path.cwd().resolve()).as_posix()
-    except (ValueError, OSError):
-        return value
-
-
-def metric_meanings(kind: str) -> dict[str, str]:
-    """The kind's metric documentation (name -> meaning), if it publishes one."""
-    declared = kind_report(kind)
-    return dict(declared.meanings) if declared is not None else {}
-
-
-def run_time(table: pd.DataFrame) -> str:
-    """"Run time: ..." from the done runs' worker seconds and start / finish times."""
-    done = table[table.status == "done"] if len(table) else table
-    if not len(done):
-        return ""
-    worker = float(pd.to_numeric(done.seconds, errors="coerce").sum())
-    try:
-        start = min(datetime.fromisoformat(s) for s in done.started if s)
-        end = max(datetime.fromisoformat(s) for s in done.finished if s)
-        span = f"; {duration((end - start).total_seconds())} from the first start to the last finish"
-    except ValueError:
-        span = ""
-    return (f"Run time: {duration(worker)} of worker time over {len(done)} runs "
-            f"(mean {duration(worker / len(done))} per run){span}.")
 
 
 def load_facts(table: pd.DataFrame) -> str:
