@@ -255,6 +255,28 @@ def source_path(spec: ExperimentSpec) -> str:
         return spec.source
 
 
+def metric_meanings(kind: str) -> dict[str, str]:
+    """The kind's metric documentation (name -> meaning), if it publishes one."""
+    declared = kind_report(kind)
+    return dict(declared.meanings) if declared is not None else {}
+
+
+def run_time(table: pd.DataFrame) -> str:
+    """"Run time: ..." from the done runs' worker seconds and start / finish times."""
+    done = table[table.status == "done"] if len(table) else table
+    if not len(done):
+        return ""
+    worker = float(pd.to_numeric(done.seconds, errors="coerce").sum())
+    try:
+        start = min(datetime.fromisoformat(s) for s in done.started if s)
+        end = max(datetime.fromisoformat(s) for s in done.finished if s)
+        span = f"; {duration((end - start).total_seconds())} from the first start to the last finish"
+    except ValueError:
+        span = ""
+    return (f"Run time: {duration(worker)} of worker time over {len(done)} runs "
+            f"(mean {duration(worker / len(done))} per run){span}.")
+
+
 def load_facts(table: pd.DataFrame) -> str:
     """"Load: ..." -- how many done runs were timed while other processes loaded the
     machine (``metric.time_loaded``, train; ``metric.loaded``, raster) and the range of the
