@@ -1,7 +1,7 @@
 """The `splatbench` command line.
 
 Layout, in one sentence: a command lives in the ``cli.py`` of the package whose work it
-runs (``bench``, ``backends`` (compare), ``backends.conform``, ``experiments`` (run),
+runs (``bench``, ``compare``, ``conform``, ``experiments`` (run),
 ``reports`` (report), ``scenes``, ``stress``, ``train``, ``validate``), and the three
 commands that run top-level modules or several packages (``demo``, ``render``, ``sfm``)
 live in ``splatbench/commands/<name>.py``. `COMMANDS` below is the one list of commands:
@@ -30,8 +30,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("splatbench.bench.cli:bench", "Benchmarks (raster: run time, memory, throughput)."),
     "scenes": ("splatbench.scenes.cli:scenes", "Mitsuba scene catalog: list scenes, render one into a dataset."),
     "sfm": ("splatbench.commands.sfm:sfm", "Structure from motion (pycolmap) on a dataset's training views."),
-    "compare": ("splatbench.backends.cli:compare", "Compare rasterizers against the float64 oracle."),
-    "conform": ("splatbench.backends.conform.cli:conform", "Check a rasterizer against 3DGS conventions (probe scenes)."),
+    "compare": ("splatbench.compare.cli:compare", "Compare rasterizers against the float64 oracle."),
+    "conform": ("splatbench.conform.cli:conform", "Check a rasterizer against 3DGS conventions (probe scenes)."),
     "validate": ("splatbench.validate.cli:validate", "Cross-check the rasterizer (mitsuba: ray-traced Gaussians)."),
     "run": ("splatbench.experiments.cli:run", "Run an experiment grid (resumable; local or Dask executor)."),
     "report": ("splatbench.reports.cli:report", "Write an experiment's report: tables, findings, figures."),

@@ -20,6 +20,10 @@ JACOBIAN_GUARD = 0.3
 #: gradient ~1/|q| would overflow float32.
 QUAT_MIN = 1e-20
 
+#: float32 unit roundoff, 2^-24: the unit of every derived float32 tolerance (compare's bounds,
+#: conform's; the oracle's boundary band keeps its own copy, ``reference.band.U``).
+U32 = 2.0 ** -24
+
 # Real spherical-harmonics constants and signs of graphdeco-inria 3DGS (utils/sh_utils.py).
 #: The degree-0 constant, ``1 / (2 sqrt(pi))``.
 SH_C0 = 0.28209479177387814
@@ -29,4 +33,4 @@ SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.092548
 SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
          -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
 
-__all__ = ["LOG_SCALE_CLIP", "BIG_FACTOR", "JACOBIAN_GUARD", "QUAT_MIN", "SH_C0", "SH_C1", "SH_C2", "SH_C3"]
+__all__ = ["LOG_SCALE_CLIP", "BIG_FACTOR", "JACOBIAN_GUARD", "QUAT_MIN", "U32", "SH_C0", "SH_C1", "SH_C2", "SH_C3"]

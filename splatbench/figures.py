@@ -9,6 +9,7 @@ metric up; the Pareto-optimal cells (no other cell is both cheaper and better, o
 means) are ringed and joined by a step line.
 `pareto_front` is the computation, shared with the report text. `difference_figure`:
 a per-pixel error map on a log colour scale with its bar (the demo's garden check).
+Every figure is written by `splatbench.report_files.save_figure`.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 import pandas as pd
 
 from splatbench.metrics.spec import MetricSpec
+from splatbench.report_files import save_figure
 
 
 def pyplot():
@@ -83,9 +85,7 @@ def pareto_figure(means: pd.DataFrame, scenes: Sequence[str], time: MetricSpec, 
         ax.grid(alpha=0.3)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)  # titles and labels never clipped
-    plt.close(fig)
+    save_figure(fig, path)
     return fronts
 
 
@@ -108,10 +108,7 @@ def difference_figure(error, path: Path, *, tolerance: float, title: str) -> Pat
     bar.set_label(f"|difference|, max over RGB (cyan: the {tolerance:.0e} tolerance)", fontsize=7)
     bar.ax.axhline(tolerance, color="cyan", linewidth=1.5)
     bar.ax.tick_params(labelsize=7)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 __all__ = ["pyplot", "panels", "pareto_front", "pareto_figure", "difference_figure"]

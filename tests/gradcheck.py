@@ -7,11 +7,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from splatbench.backends.compare_measure import Cotangents  # the one random-cotangent helper
+from splatbench.backends.base import GROUPS
+from splatbench.compare.measure import Cotangents  # the one random-cotangent helper
 from splatbench.raster.hooks import NO_HOOKS, Hooks
 from splatbench.raster.torch_bridge import rasterize_with_hooks
-
-GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
 
 
 @dataclass(frozen=True)

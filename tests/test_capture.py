@@ -388,6 +388,14 @@ def test_scene_tables_are_checked_in_one_line(tmp_path):
     with pytest.raises(InputError, match="scenes.a.views: unknown key"):
         (tmp_path / "d").mkdir()
         parse({"name": "a", "path": "d", "views": 3})
+    # a wrong model file and a zero up are named when the file is read, not when a run starts
+    (tmp_path / "t.json").write_text("{}")
+    with pytest.raises(InputError, match="x.toml: scenes.a.model: .* is not a PLY with a vertex element"):
+        parse({"name": "a", "model": "t.json"})
+    _small_ply(tmp_path / "m.ply")
+    with pytest.raises(InputError, match="x.toml: scenes.a.up: expected a non-zero direction"):
+        parse({"name": "a", "model": "m.ply", "up": [0, 0, 0]})
+    assert parse({"name": "a", "model": "m.ply", "up": [0, -1, 0]}).scene_sources["a"]["up"] == [0.0, -1.0, 0.0]
     spec = parse({"name": "a", "path": "d", "downscale": 4})
     assert spec.name == "x" and spec.scenes == ("a",)
     assert spec.scene_sources["a"] == {"path": str((tmp_path / "d").resolve()), "downscale": 4}

@@ -79,8 +79,8 @@ def test_auto_takes_cuda_only_where_the_backends_run(monkeypatch):
     import torch
 
     from splatbench.backends.base import BackendInfo
-    from splatbench.backends.compare import _device
-    from splatbench.backends.conform import conform
+    from splatbench.compare.run import _device
+    from splatbench.conform import conform
     from splatbench.backends.registry import get_backend
 
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)

@@ -20,10 +20,10 @@ from click.testing import CliRunner
 
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench.backends import Backend, BackendInfo, get_backend
-from splatbench.backends.builtins.reference_backend import GROUPS
-from splatbench.backends.compare import CompareSettings, auto_scale, run_compare
-from splatbench.backends.compare_types import GRAD_TERM_OPS, U32, gradient_bound
-from splatbench.backends.compare_report import (RUN_RECORD, findings, render_markdown, result_table, rewrite_report,
+from splatbench.backends.base import GROUPS
+from splatbench.compare.run import CompareSettings, auto_scale, run_compare
+from splatbench.compare.bounds import GRAD_TERM_OPS, U32, gradient_bound
+from splatbench.compare.report import (RUN_RECORD, findings, render_markdown, result_table, rewrite_report,
                                                 write_compare)
 from splatbench.workloads import synthetic
 
@@ -158,8 +158,8 @@ def test_torch64_gradient_oracle_agrees_with_finite_differences():
 
 
 def test_a_zero_oracle_gradient_has_no_relative_error():
-    from splatbench.backends.compare import CompareRow
-    from splatbench.backends.compare_measure import grad_error
+    from splatbench.compare.run import CompareRow
+    from splatbench.compare.measure import grad_error
 
     # isotropic Gaussians: the true quaternion gradient is exactly 0, float32 leaves roundoff
     zero = grad_error(np.full(8, 1e-12), np.zeros(8))

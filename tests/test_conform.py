@@ -20,9 +20,9 @@ from click.testing import CliRunner
 import reference
 from splatbench.backends import Backend, BackendInfo
 from splatbench.backends.base import AXIS
-from splatbench.backends.conform import FAULT_CAUSE, PROBES, conform
-from splatbench.backends.conform.oracle import conventions_of
-from splatbench.backends.conform.probes import AXIS_PROBES
+from splatbench.conform import FAULT_CAUSE, PROBES, conform
+from splatbench.conform.oracle import conventions_of
+from splatbench.conform.probes import AXIS_PROBES
 from splatbench.cli import main
 from tests import dense_backends
 from tests.assertions import one_line_error
@@ -41,7 +41,7 @@ SCENES = {p.build.__name__: p.build for p in PROBES}
 def _per_pixel(scene, **conv):
     """Per pixel and Gaussian (depth order): Mahalanobis d^2 and raw alpha o exp(-d^2 / 2) (conform's own
     `_contributions` of the oracle's projection under ``conv``)."""
-    from splatbench.backends.conform.diagnose import _contributions
+    from splatbench.conform.diagnose import _contributions
 
     c = scene.camera
     proj = reference.project(scene.means, scene.log_scales, scene.quats, scene.opacity_logits, c.K,
@@ -210,7 +210,7 @@ def test_the_vocabulary_is_checked_by_the_probes():
     """Every alternative of every axis renders in the oracle and changes some probe scene (so the
     fingerprint can find it), and each axis names the probes that isolate it."""
     from splatbench.backends.base import AXES
-    from splatbench.backends.conform.oracle import oracle
+    from splatbench.conform.oracle import oracle
 
     assert set(AXIS_PROBES) == {a.name for a in AXES}
     base = BackendInfo(name="graphdeco").reference_options()
@@ -420,7 +420,7 @@ def _ellipse(angle_deg: float, *, shift=(0.0, 0.0), size: int = 24) -> np.ndarra
 
 def test_what_differs_is_said_in_words():
     """The evidence behind "unexplained: ...": a mirrored ellipse, a shifted one, an empty render."""
-    from splatbench.backends.conform.evidence import coverage, describe, undrawn
+    from splatbench.conform.evidence import coverage, describe, undrawn
 
     ref = _ellipse(30)
     said = describe(_ellipse(-30), ref, True)
@@ -437,7 +437,7 @@ def test_scenes_drawn_empty_are_one_defect_of_their_own():
     """A backend that culls every scene of two Gaussians or more (a rule outside the vocabulary, like
     metal-gauss's cull of Gaussians large on screen): one defect saying nothing is drawn, not a cause
     of the probe that happens to come first (depth_order)."""
-    from splatbench.backends.conform import UNDRAWN_CAUSE
+    from splatbench.conform import UNDRAWN_CAUSE
 
     def culls_pairs(means, log_scales, quats, opacity_logits, sh, camera, **kwargs):
         rgb, alpha, depth = dense().fn(means, log_scales, quats, opacity_logits, sh, camera, **kwargs)

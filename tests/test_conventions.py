@@ -14,7 +14,7 @@ from splatbench import conventions, gaussians
 from splatbench.backends.builtins import torch_backend
 
 # reference/__init__ exports functions named like its modules (`project`), so look the modules up
-ORACLE_PROJECT, ORACLE_SH = (importlib.import_module(f"reference.{m}") for m in ("project", "sh"))
+ORACLE_PROJECT, ORACLE_SH, ORACLE_BAND = (importlib.import_module(f"reference.{m}") for m in ("project", "sh", "band"))
 
 # (name in splatbench.conventions, the oracle's module and name, the torch backend's name)
 COPIES = [
@@ -26,6 +26,7 @@ COPIES = [
     ("SH_C1", ORACLE_SH, "C1", "C1"),
     ("SH_C2", ORACLE_SH, "C2", "C2"),
     ("SH_C3", ORACLE_SH, "C3", "C3"),
+    ("U32", ORACLE_BAND, "U", None),  # float32 unit roundoff: the oracle's band, compare's and conform's bounds
 ]
 
 
@@ -44,6 +45,12 @@ def test_the_rasterizer_side_uses_the_one_definition():
         conventions.LOG_SCALE_CLIP, conventions.QUAT_MIN, conventions.JACOBIAN_GUARD, conventions.BIG_FACTOR)
     assert (sh.C0, sh.C1, sh.C2, sh.C3) == (conventions.SH_C0, conventions.SH_C1, conventions.SH_C2, conventions.SH_C3)
     assert gaussians.SH_C0 is conventions.SH_C0 and gaussians.QUAT_MIN is conventions.QUAT_MIN
+
+
+def test_u32_is_float32_unit_roundoff():
+    import numpy as np
+
+    assert conventions.U32 == np.finfo(np.float32).eps / 2 == 2.0 ** -24
 
 
 def test_sh_c0_is_its_closed_form():

@@ -266,8 +266,8 @@ def test_the_table_is_read():
     """The table has its rows, and every row's parts named under "also imports" exist."""
     parts = layer_table()
     names = {p.name for p in parts}
-    assert {"train", "bench", "experiments", "reports", "compare", "conform", "measurement", "plugins",
-            "rasterizer", "model", "foundation", "oracle"} <= names, names
+    assert {"train", "bench", "experiments", "reports", "compare", "conform", "stress", "validate", "measurement",
+            "plugins", "rasterizer", "model", "foundation", "oracle"} <= names, names
     assert all(a in names for p in parts for a in p.also), [(p.name, p.also) for p in parts]
 
 
@@ -291,8 +291,14 @@ def test_known_exceptions_still_occur():
 @pytest.mark.parametrize("importer, imported", [
     ("experiments", "reports"),   # a run kind declares its report as data
     ("train", "bench"),           # training measures with splatbench.metrics
-    ("compare", "train"), ("compare", "experiments"),
-    ("conform", "train"), ("conform", "experiments"),
+    ("compare", "train"), ("compare", "experiments"), ("compare", "reports"),
+    ("conform", "train"), ("conform", "experiments"), ("conform", "reports"),
+    ("stress", "train"), ("stress", "experiments"), ("stress", "reports"),
+    ("validate", "train"), ("validate", "experiments"), ("validate", "reports"),
+    # the verification applications are siblings: they share only lower levels
+    ("compare", "conform"), ("conform", "compare"), ("stress", "conform"), ("validate", "compare"),
+    # the plugin interface is below every application that calls it
+    ("plugins", "compare"), ("plugins", "conform"),
 ])
 def test_no_import_from(importer, imported):
     """The issue's must-show pairs, named: no module of ``importer`` imports ``imported``."""

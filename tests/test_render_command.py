@@ -150,6 +150,8 @@ def test_camera_option_renders_from_a_datasets_test_view(tmp_path):
     assert code == 0 and image.shape == (8, 8, 3) and "at downscale 2 (8x8)" in out, out
     lum = image.sum(axis=2)
     assert lum[3:5, 3:5].min() == lum.max()
+    code, out, _ = run(tmp_path / "m.ply", "--camera", f"{folder}:1", "--size", "100x100")  # the dataset sizes it
+    assert code == 2 and out.startswith("splatbench: error: --size: does not apply with --camera"), out
     code, out, _ = run(tmp_path / "m.ply", "--downscale", 2)
     assert code == 2 and out.startswith("splatbench: error: --downscale: only with --camera"), out
     for view in ("2", "x", "-1", ""):   # out of range, not a number, negative, empty: VIEW named, not DATASET

@@ -21,6 +21,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # this checkout's splatbench, as the conform runs below get it (PYTHONPATH)
+from splatbench.report_files import write_json, write_text  # noqa: E402
+
 REPORTS = ROOT / "reports" / "conform_public"
 SITES = ROOT / "out" / "conform_public"
 BEGIN, END = "<!-- BEGIN:table -->", "<!-- END:table -->"
@@ -75,9 +78,7 @@ def run(p: Package) -> dict:
     report = json.loads(proc.stdout)
     report["exit_status"] = proc.returncode
     report["install"] = install_command(p)
-    out = REPORTS / p.name
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "conform.json").write_text(json.dumps(report, indent=1) + "\n")
+    write_json(REPORTS / p.name / "conform.json", report, indent=1)
     return report
 
 
@@ -113,7 +114,7 @@ def write_table() -> None:
     text = readme.read_text()
     head, rest = text.split(BEGIN, 1)
     _, tail = rest.split(END, 1)
-    readme.write_text(f"{head}{BEGIN}\n{table()}\n{END}{tail}")
+    write_text(readme, f"{head}{BEGIN}\n{table()}\n{END}{tail}")
 
 
 def main(argv: list[str]) -> int:

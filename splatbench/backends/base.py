@@ -21,6 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol
 
+import numpy as np
+
 from splatbench.raster.options import RasterOptions
 
 # graphdeco-inria 3DGS's approximations, the defaults a backend with no metadata follows: the
@@ -28,6 +30,15 @@ from splatbench.raster.options import RasterOptions
 GRAPHDECO = {name: getattr(RasterOptions(), name) for name in ("alpha_min", "alpha_max", "transmittance_min",
                                                                "eps2d", "radius", "tile_size", "antialiased")}
 OUTPUTS = ("rgb", "alpha", "depth")
+GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")  # the parameter groups, in the signature's order
+
+
+def as_numpy(x) -> np.ndarray:
+    """A backend's input or output (a torch tensor, on any device, or an array) as a float64
+    numpy array on the host."""
+    if hasattr(x, "detach"):  # a torch tensor
+        x = x.detach().cpu().double().numpy()
+    return np.asarray(x, dtype=np.float64)
 
 
 @dataclass(frozen=True)

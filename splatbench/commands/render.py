@@ -52,7 +52,7 @@ def _axis_name(up) -> str:
 @click.argument("source", type=click.Path(path_type=Path))
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None, help="PNG to write (default: beside SOURCE).")
 @click.option("--view", default=0, show_default=True, help="Camera index of a workload with several views.")
-@click.option("--size", default="640x480", show_default=True, help="WxH of the framing camera used for a PLY.")
+@click.option("--size", default=None, metavar="WxH", help="WxH of the framing camera used for a PLY (default 640x480).")
 @click.option("--up", "up", default=None, metavar="AXIS|X,Y,Z",
               help="World up of a PLY (+y, -y, +z, -z, +x, -x or X,Y,Z). Default: the up the PLY records "
                    "(splatbench train writes it: +y for the Mitsuba scenes), else -y (COLMAP's y-down world).")
@@ -70,7 +70,7 @@ def _axis_name(up) -> str:
                    "(the one it was trained on), else black.")
 @click.option("--sh-degree", type=int, default=None, help="SH bands to evaluate (default: all).")
 @click.option("--option", "options", multiple=True, help="Rasterizer option key=value (repeatable), e.g. tile_size=8.")
-def render(source: Path, out: Path | None, view: int, size: str, up: str | None, elevation: float | None,
+def render(source: Path, out: Path | None, view: int, size: str | None, up: str | None, elevation: float | None,
            camera_spec: str | None, downscale: int | None, background: str | None, sh_degree: int | None, options: tuple[str, ...]) -> None:
     """Render SOURCE (a 3DGS .ply, a bundled model: guitar or biker, or a workload .npz) to a PNG and print its path.
 
@@ -83,9 +83,10 @@ def render(source: Path, out: Path | None, view: int, size: str, up: str | None,
 
     if sh_degree is not None:
         check_sh_degree("--sh-degree", sh_degree)
-    if camera_spec is not None and (up is not None or elevation is not None):
-        raise InputError(f"{'--up' if up is not None else '--elevation'}: does not apply with --camera "
-                         "(the dataset's camera is placed already); leave it out")
+    if camera_spec is not None and (up is not None or elevation is not None or size is not None):
+        given = "--up" if up is not None else "--elevation" if elevation is not None else "--size"
+        raise InputError(f"{given}: does not apply with --camera (the dataset's camera is placed and sized "
+                         f"already; --downscale N sizes it); leave it out")
     if downscale is not None and camera_spec is None:
         raise InputError("--downscale: only with --camera DATASET[:VIEW] (it sizes the dataset's camera); leave it out")
     up_vector = parse_up(up) if up is not None else None
@@ -98,7 +99,7 @@ def render(source: Path, out: Path | None, view: int, size: str, up: str | None,
         raise InputError(f"--out: {str(out)!r} is a folder; give the path of the PNG to write")
     notes: list[str] = []
     if source.suffix == ".ply":
-        width, height = parse_size(size, "--size")
+        width, height = parse_size(size or "640x480", "--size")
         check_image_size(width, height, field="--size")
         gaussians = splatbench.Gaussians.from_ply(source)
         if len(gaussians) == 0:
@@ -115,7 +116,8 @@ def render(source: Path, out: Path | None, view: int, size: str, up: str | None,
             camera, note = _framing(gaussians, width, height, up_vector, hints.up, elevation)
             notes = [note, *notes] if note else notes
     elif source.suffix == ".npz":
-        given = [o for o, v in (("--up", up), ("--elevation", elevation), ("--camera", camera_spec)) if v is not None]
+        given = [o for o, v in (("--up", up), ("--elevation", elevation), ("--camera", camera_spec), ("--size", size),
+                                ("--downscale", downscale)) if v is not None]
         if given:
             raise InputError(f"{given[0]}: only for a .ply (a workload .npz brings its own camera); leave it out")
         workload = load_npz(source, view=view)

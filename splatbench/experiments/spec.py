@@ -42,6 +42,7 @@ in `splatbench.experiments.configs`, shared by this module, the grid and the kin
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -223,6 +224,17 @@ FOLDER_SCENE_KEYS = ("path", "downscale")
 TEACHER_SCENE_KEYS = ("model", "views", "resolution", "up")
 
 
+def _looks_like_ply(path: Path) -> bool:
+    """Whether the file starts as a PLY with a ``vertex`` element (its header alone is read), so
+    that a wrong file is named when the experiment is read, not when its run starts."""
+    try:
+        with open(path, "rb") as stream:
+            head = stream.read(1 << 16)
+    except OSError:
+        return False
+    return head.startswith(b"ply") and b"element vertex " in head.split(b"end_header", 1)[0]
+
+
 def _scene_table(table: Mapping[str, Any], where: str, fail, base_dir: Path | None) -> tuple[str, dict[str, Any]]:
     """``{ name, path, downscale }`` or ``{ name, model, views, resolution, up }`` -> (name, the
     run's ``data`` fields); relative paths resolve against the experiment file's folder."""
@@ -251,11 +263,15 @@ def _scene_table(table: Mapping[str, Any], where: str, fail, base_dir: Path | No
                 raise fail(f"{where}.path", f"{str(p)!r} is not a dataset folder")
             if key == "model" and not p.is_file():
                 raise fail(f"{where}.model", f"{str(p)!r} is not a file (give a 3DGS PLY)")
+            if key == "model" and not _looks_like_ply(p):
+                raise fail(f"{where}.model", f"{str(p)!r} is not a PLY with a vertex element (give a 3DGS PLY)")
             fields[key] = str(p)
         elif key == "up":
             if not (isinstance(value, list) and len(value) == 3
                     and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
                 raise fail(f"{where}.up", f"expected 3 numbers, got {value!r}")
+            if not any(value) or not all(math.isfinite(v) for v in value):
+                raise fail(f"{where}.up", f"expected a non-zero direction of 3 finite numbers, got {value!r}")
             fields[key] = [float(v) for v in value]
         elif key != "name":
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:

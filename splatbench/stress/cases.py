@@ -6,7 +6,7 @@ Plain NumPy (``np.random.default_rng``), so the CLI needs no test dependency;
 ``tests/test_stress.py`` feeds the same builders from hypothesis strategies.
 
 Scenes are made in camera space (so they land in view) and moved to the world
-through the camera pose, as ``tests/scenes.py`` does. The camera's rotation is
+through the camera pose (`splatbench.scene_builders`). The camera's rotation is
 uniformly random; its centre, the image size, N and the rasterizer options come
 from small menus, because the rasterizer bakes these into its Dr.Jit kernels as
 literals (see docs/stress.md): free choices would recompile kernels in every case.
@@ -20,13 +20,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from splatbench.backends.base import GROUPS
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
 from splatbench.gaussians import quat_to_rotmat
 from splatbench.raster import RasterOptions
+from splatbench.scene_builders import camera_points, to_world, world_sigma
 from splatbench.workloads import random_unit_quats
 
-FIELDS = ("means", "log_scales", "quats", "opacity_logits", "sh")
+FIELDS = GROUPS  # StressCase's parameter fields, in rasterize's argument order
 
 SIZES = ((24, 20), (32, 24), (48, 40))          # (W, H) menu
 COUNTS = (1, 3, 12, 60)                          # N menu (the stacked category uses STACK)
@@ -77,11 +79,6 @@ class StressCase:
 class _View:
     camera: Camera
     cam_quat: np.ndarray  # unit quaternion of the world-to-camera rotation
-
-    def to_world(self, cam_pts: np.ndarray) -> np.ndarray:
-        """Camera-space points [M, 3] -> world (float64)."""
-        R, t = self.camera.rotation, self.camera.translation
-        return (cam_pts - t) @ R  # R^T (p - t), row-wise
 
     def aligned_quats(self, n: int) -> np.ndarray:
         """[n, 4] quaternions whose Gaussian axes are the camera axes (x, y, z) in world."""
@@ -144,13 +141,13 @@ def _in_view(rng: np.random.Generator, cam: Camera, n: int, depth=(2.0, 6.0), sp
     z = rng.uniform(*depth, n)
     u = rng.uniform(-spill * cam.width, (1 + spill) * cam.width, n)
     v = rng.uniform(-spill * cam.height, (1 + spill) * cam.height, n)
-    return np.stack([(u - cam.cx) * z / cam.fx, (v - cam.cy) * z / cam.fy, z], axis=1)
+    return camera_points(cam, u, v, z)
 
 
 def _pixel_log_scales(rng: np.random.Generator, cam: Camera, z: np.ndarray, sigma_px=(0.5, 6.0)) -> np.ndarray:
     """[n, 3] log-scales giving a 1-sigma screen size log-uniform on ``sigma_px`` pixels."""
     sigma = np.exp(rng.uniform(np.log(sigma_px[0]), np.log(sigma_px[1]), len(z)))
-    return np.log(sigma * z / cam.fx)[:, None] + 0.25 * rng.standard_normal((len(z), 3))
+    return np.log(world_sigma(cam, sigma, z))[:, None] + 0.25 * rng.standard_normal((len(z), 3))
 
 
 def _sh(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -168,7 +165,7 @@ def _subset(rng: np.random.Generator, n: int) -> np.ndarray:
 def _case(category: str, seed: int, view: _View, cam_pts: np.ndarray, log_scales: np.ndarray,
           quats: np.ndarray, logits: np.ndarray, sh: np.ndarray, **options) -> StressCase:
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-    return StressCase(category, seed, f32(view.to_world(cam_pts)), f32(log_scales), f32(quats), f32(logits),
+    return StressCase(category, seed, f32(to_world(view.camera, cam_pts)), f32(log_scales), f32(quats), f32(logits),
                       f32(sh), view.camera, RasterOptions(**options))
 
 
@@ -245,7 +242,7 @@ def needles(seed: int) -> StressCase:
     view = _view(rng)
     n = _count(rng)
     cam_pts = _in_view(rng, view.camera, n)
-    short = np.log(np.exp(rng.uniform(np.log(0.05), np.log(3.0), n)) * cam_pts[:, 2] / view.camera.fx)
+    short = np.log(world_sigma(view.camera, np.exp(rng.uniform(np.log(0.05), np.log(3.0), n)), cam_pts[:, 2]))
     ratio = np.log(10.0) * rng.uniform(0, 6, n)
     disc = rng.random(n) < 0.4
     s = np.repeat(short[:, None], 3, axis=1)

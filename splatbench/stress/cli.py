@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import click
 
 from splatbench.devices import device_option
+from splatbench.report_files import write_json
 from splatbench.stress.cases import CATEGORIES
 
 SHOWN_FAILURES = 5  # failing cases listed per category (all of them go to --json)
@@ -60,8 +60,7 @@ def stress(cases: int, seed: int, json_path: Path | None, categories: tuple[str,
     for line in format_report(report):
         click.echo(line)
     if json_path is not None:
-        json_path.parent.mkdir(parents=True, exist_ok=True)
-        json_path.write_text(json.dumps(report.to_dict(), indent=2) + "\n")
+        write_json(json_path, report.to_dict(), indent=2)
         click.echo(f"report: {json_path.resolve()}")
     if not report.ok:
         sys.exit(1)

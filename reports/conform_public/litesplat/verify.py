@@ -29,7 +29,7 @@ from litesplat.core import camera_model as cm  # noqa: E402
 
 import examples.adapters.litesplat as adapter  # noqa: E402
 from splatbench.backends import Backend  # noqa: E402
-from splatbench.backends.conform import conform  # noqa: E402
+from splatbench.conform import conform  # noqa: E402
 
 FIXES = {
     "rot": ("keras.ops.einsum('ij, bji -> bij', keras.ops.array(R), self.gaussians.get_rotations())",

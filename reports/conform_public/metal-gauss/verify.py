@@ -16,7 +16,7 @@ import metal_gauss.torch_ref as torch_ref
 
 import examples.adapters.metal_gauss as adapter
 from splatbench.backends import Backend
-from splatbench.backends.conform import conform
+from splatbench.conform import conform
 
 
 def main(argv: list[str]) -> None:

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+from splatbench.backends.base import GROUPS
 from splatbench.checks import check_finite, check_shape
 from splatbench.errors import InputError
 from splatbench.raster.pipeline import check_background, check_sh_range, resolve_sh_degree
 
-GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
 SPECS = (("N", 3), ("N", 3), ("N", 4), ("N",), ("N", None, 3))
 
 

@@ -16,10 +16,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from splatbench.backends.base import AXES, AXIS, GRAPHDECO, Backend, BackendInfo
+from splatbench.backends.base import AXES, AXIS, GRAPHDECO, GROUPS, Backend, BackendInfo, as_numpy
 from splatbench.errors import InputError
 
-GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
 MODES = ("matched", "exact")
 #: `reference.render` keywords a conventions mapping may set (near/far default to the camera's).
 REFERENCE_OPTIONS = ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius", "antialiased", "near", "far")
@@ -30,12 +29,6 @@ FAST_ONLY = ("tile_size", "device")
 #: Central-difference half step. In float64 the truncation error is O(eps^2) ~ 1e-12 and the
 #: rounding error ~ 1e-16 / eps ~ 1e-10 relative, both far below float32 roundoff.
 FD_EPS = 1e-6
-
-
-def _as_numpy(value) -> np.ndarray:
-    if hasattr(value, "detach"):  # a torch tensor
-        value = value.detach().cpu().double().numpy()
-    return np.asarray(value, dtype=np.float64)
 
 
 def _options(conventions, camera) -> dict:
@@ -119,7 +112,7 @@ def reference_render(conventions, means, log_scales, quats, opacity_logits, sh, 
     import reference
 
     kwargs = reference_kwargs(conventions, camera, mode, sh_degree, background)
-    arrays = [_as_numpy(x) for x in (means, log_scales, quats, opacity_logits, sh)]
+    arrays = [as_numpy(x) for x in (means, log_scales, quats, opacity_logits, sh)]
     try:
         return reference.render(*arrays, band=band, **kwargs)
     except ValueError as exc:  # the oracle's own one-line messages name the field
@@ -134,7 +127,7 @@ def reference_kwargs(conventions, camera, mode, sh_degree, background) -> dict:
     opts = _options(conventions, camera)
     if mode == "exact":  # the exact mixture: no approximation, graphdeco's conventions
         opts = {k: opts[k] for k in ("near", "far")}
-    bg = (0.0, 0.0, 0.0) if background is None else tuple(float(b) for b in _as_numpy(background).reshape(3))
+    bg = (0.0, 0.0, 0.0) if background is None else tuple(float(b) for b in as_numpy(background).reshape(3))
     return dict(K=camera.K, world_to_camera=camera.world_to_camera, width=camera.width, height=camera.height,
                 mode=mode, background=bg, sh_degree=sh_degree, **opts)
 
@@ -143,7 +136,7 @@ def _fd_vjp(params: dict, grad_outputs, which, render_kwargs: dict) -> list:
     """sum(v . outputs) differentiated by central differences, for the groups in ``which``."""
     import reference
 
-    v_rgb, v_alpha, v_depth = (np.zeros(()) if g is None else _as_numpy(g) for g in grad_outputs)
+    v_rgb, v_alpha, v_depth = (np.zeros(()) if g is None else as_numpy(g) for g in grad_outputs)
 
     def loss(out):
         return float((out.rgb * v_rgb).sum() + (out.alpha * v_alpha).sum() + (out.depth * v_depth).sum())
@@ -161,7 +154,7 @@ def _render_fn(mode: str, conventions: dict):
             out = reference_render(conventions, means, log_scales, quats, opacity_logits, sh, camera, mode=mode,
                                    sh_degree=sh_degree, background=background)
             inputs = (means, log_scales, quats, opacity_logits, sh)
-            ctx.params = {k: _as_numpy(x) for k, x in zip(GROUPS, inputs)}
+            ctx.params = {k: as_numpy(x) for k, x in zip(GROUPS, inputs)}
             ctx.dtypes = [getattr(x, "dtype", torch.float32) for x in inputs]
             ctx.camera, ctx.sh_degree, ctx.background = camera, sh_degree, background
             return tuple(torch.from_numpy(np.ascontiguousarray(x)) for x in (out.rgb, out.alpha, out.depth))

@@ -14,7 +14,9 @@ import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
-from splatbench.gaussians import SH_C0, Gaussians
+from splatbench.gaussians import Gaussians
+from splatbench.scene_builders import logit, point_at, sh_dc, to_world, world_sigma
+from splatbench.workloads import random_unit_quats
 from splatbench.validate.mitsuba.scene import OPTION_SETS, SWEEP_OPACITY, ComparisonMetrics, compare
 
 
@@ -60,12 +62,6 @@ def _camera(width: int, fov_x_deg: float = 50.0) -> Camera:
                           width=width, height=width, fov_x_deg=fov_x_deg)
 
 
-def _point_at(camera: Camera, u: float, v: float, depth: float) -> np.ndarray:
-    """The world point at camera depth ``depth`` seen at pixel position (u, v)."""
-    pc = np.array([(u - camera.cx) / camera.fx * depth, (v - camera.cy) / camera.fy * depth, depth])
-    return camera.camera_to_world[:3, :3] @ pc + camera.camera_to_world[:3, 3]
-
-
 def _colours(n: int, rng: np.random.Generator) -> np.ndarray:
     """[n, 3] saturated colours in [0.15, 0.95] (degree-0 SH values, not clipped)."""
     base = rng.uniform(0.15, 0.95, size=(n, 3))
@@ -77,11 +73,9 @@ def _gaussians(means, sigmas, colours, *, quats=None, sh_rest=None) -> Gaussians
     """Gaussians with given means [N, 3], per-axis sigmas [N, 3], degree-0 colours [N, 3]."""
     means = np.asarray(means, np.float64)
     n = len(means)
-    sh0 = (np.asarray(colours, np.float64) - 0.5) / SH_C0
-    sh = sh0[:, None, :] if sh_rest is None else np.concatenate([sh0[:, None, :], sh_rest], axis=1)
+    sh = sh_dc(colours) if sh_rest is None else np.concatenate([sh_dc(colours), sh_rest], axis=1)
     q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)) if quats is None else quats
-    logit = math.log(SWEEP_OPACITY / (1 - SWEEP_OPACITY))
-    return Gaussians(means, np.log(np.asarray(sigmas, np.float64)), q, np.full(n, logit), sh)
+    return Gaussians(means, np.log(np.asarray(sigmas, np.float64)), q, np.full(n, logit(SWEEP_OPACITY)), sh)
 
 
 def _grid(camera: Camera, rng: np.random.Generator, count: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -92,13 +86,8 @@ def _grid(camera: Camera, rng: np.random.Generator, count: int = 3) -> tuple[np.
     uu, vv = np.meshgrid(camera.cx + offsets, camera.cy + offsets)
     depths = _DISTANCE * (1.0 + np.linspace(-0.075, 0.075, count * count))
     rng.shuffle(depths)  # depth-separated, in no particular screen order
-    means = np.stack([_point_at(camera, u, v, z) for u, v, z in zip(uu.ravel(), vv.ravel(), depths)])
+    means = point_at(camera, uu.ravel(), vv.ravel(), depths)
     return means, depths
-
-
-def _random_quats(n: int, rng: np.random.Generator) -> np.ndarray:
-    q = rng.normal(size=(n, 4))
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def size_cases(width: int = 128, sizes_px: Sequence[float] | None = None, *, seed: int = 0,
@@ -114,7 +103,7 @@ def size_cases(width: int = 128, sizes_px: Sequence[float] | None = None, *, see
     for s in sizes:
         rng = np.random.default_rng(seed)
         means, depths = _grid(cam, rng)
-        sig = s * depths / cam.fx
+        sig = world_sigma(cam, s, depths)
         out.append(Case("size", "sigma_px", float(s), _gaussians(means, np.repeat(sig[:, None], 3, 1),
                                                                  _colours(len(means), rng)), cam, options))
     return out
@@ -127,10 +116,10 @@ def anisotropy_cases(width: int = 128, ratios: Sequence[float] = (1, 2, 4, 8, 16
     for ratio in ratios:
         rng = np.random.default_rng(seed)
         means, depths = _grid(cam, rng)
-        s = (width / 32) * depths / cam.fx
+        s = world_sigma(cam, width / 32, depths)
         sig = np.stack([s, s, s / ratio], axis=1)
         out.append(Case("anisotropy", "ratio", float(ratio),
-                        _gaussians(means, sig, _colours(len(means), rng), quats=_random_quats(len(means), rng)), cam))
+                        _gaussians(means, sig, _colours(len(means), rng), quats=random_unit_quats(rng, len(means))), cam))
     return out
 
 
@@ -147,7 +136,7 @@ def angle_cases(width: int = 128, angles_deg: Sequence[float] = (0, 10, 20, 30, 
         t = math.radians(angle)
         direction = np.array([math.sin(t) / math.sqrt(2), math.sin(t) / math.sqrt(2), math.cos(t)])
         mean_cam = direction * _DISTANCE
-        mean = cam.camera_to_world[:3, :3] @ mean_cam + cam.camera_to_world[:3, 3]
+        mean = to_world(cam, mean_cam)
         sig = 0.04 * _DISTANCE
         out.append(Case("angle", "field_angle_deg", float(angle),
                         _gaussians(mean[None], np.full((1, 3), sig), _colours(1, rng)), cam))
@@ -167,13 +156,13 @@ def overlap_cases(width: int = 128, gaps: Sequence[float] = (12, 6, 3, 1.5, 0.75
     out = []
     for gap in gaps:
         rng = np.random.default_rng(seed)
-        s = (width / 128) * 3.0 * _DISTANCE / cam.fx  # world sigma of 3 px (at 128) at the target depth
+        s = world_sigma(cam, (width / 128) * 3.0, _DISTANCE)  # world sigma of 3 px (at 128) at the target depth
         means, sigs = [], []
         for u, v in ((0.3, 0.3), (0.7, 0.3), (0.3, 0.7), (0.7, 0.7)):
             for k, factor in enumerate(rng.permutation([1.0, 1.5, 2.0])):
                 jitter = rng.uniform(-0.5, 0.5, 2) * s * cam.fx / _DISTANCE  # pixels
                 depth = _DISTANCE + (k - 1) * gap * s
-                means.append(_point_at(cam, u * width + jitter[0], v * width + jitter[1], depth))
+                means.append(point_at(cam, u * width + jitter[0], v * width + jitter[1], depth))
                 sigs.append(factor * s * depth / _DISTANCE)
         sigs_ = np.repeat(np.asarray(sigs)[:, None], 3, 1)
         out.append(Case("overlap", "gap_sigma", float(gap),
@@ -188,7 +177,7 @@ def sh_cases(width: int = 128, degrees: Sequence[int] = (0, 1, 2, 3), *, seed: i
     for degree in degrees:
         rng = np.random.default_rng(seed)
         means, depths = _grid(cam, rng)
-        sig = (width / 32) * depths / cam.fx
+        sig = world_sigma(cam, width / 32, depths)
         colours = _colours(len(means), rng)
         rest = rng.normal(0.0, 0.2, size=(len(means), 15, 3))[:, : (degree + 1) ** 2 - 1]
         out.append(Case("sh", "sh_degree", float(degree),

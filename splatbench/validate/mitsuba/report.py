@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
+from splatbench.report_files import save_figure, write_csv, write_text
 from splatbench.validate.mitsuba.cases import SweepRow
 from splatbench.validate.mitsuba.checks import Check
 from splatbench.validate.mitsuba.probe import ProbeRow
@@ -76,38 +76,26 @@ def write_report(rows: Sequence[SweepRow], out_dir: str | Path = DEFAULT_OUT, *,
     With ``probe`` rows, also ``intersection.csv`` and a section of ``table.md``; with
     ``checks``, a pass/fail section of ``table.md``.
     """
-    import matplotlib
+    from splatbench.figures import panels, pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    csv_path, md_path, plot_path = out / "table.csv", out / "table.md", out / "plot.png"
-    with open(csv_path, "w", newline="", encoding="utf-8") as fh:
-        writer = csv.DictWriter(fh, fieldnames=SweepRow.column_names())
-        writer.writeheader()
-        for r in rows:
-            writer.writerow({k: (_fmt(v) if isinstance(v, float) else v) for k, v in r.columns().items()})
+    csv_path = write_csv(out / "table.csv", SweepRow.column_names(),
+                         ({k: (_fmt(v) if isinstance(v, float) else v) for k, v in r.columns().items()} for r in rows))
     text = markdown_table(rows, width)
     extra = {}
     if probe:
-        probe_path = out / "intersection.csv"
-        with open(probe_path, "w", newline="", encoding="utf-8") as fh:
-            writer = csv.DictWriter(fh, fieldnames=list(ProbeRow.__dataclass_fields__))
-            writer.writeheader()
-            for r in probe:
-                writer.writerow(asdict(r))
-        extra["intersection"] = probe_path
+        extra["intersection"] = write_csv(out / "intersection.csv", [f.name for f in fields(ProbeRow)],
+                                          (asdict(r) for r in probe))
         text += "\n" + probe_markdown(probe)
     if checks:
         text += "\n## Checks\n\n" + "".join(f"- {'PASS' if c.passed else 'FAIL'} {c.name}: {c.detail}\n"
                                              for c in checks)
-    md_path.write_text(text, encoding="utf-8")
+    md_path = write_text(out / "table.md", text)
 
     sweeps = list(dict.fromkeys(r.sweep for r in rows))
-    fig, axes = plt.subplots(1, max(1, len(sweeps)), figsize=(4.2 * max(1, len(sweeps)), 3.6), squeeze=False)
-    for ax, name in zip(axes[0], sweeps):
+    fig, axes = panels(plt, max(1, len(sweeps)), 4.2, 3.6)
+    for ax, name in zip(axes, sweeps):
         ax2 = ax.twinx()
         for opt, style in (("matched", "-"), ("3dgs", ":")):
             sel = [r for r in rows if r.sweep == name and r.options == opt]
@@ -130,6 +118,5 @@ def write_report(rows: Sequence[SweepRow], out_dir: str | Path = DEFAULT_OUT, *,
         ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=7, loc="center left", framealpha=0.8)
     fig.suptitle(f"splat rasterizer vs Mitsuba volprim_rf (ray-traced Gaussians), {width}x{width}")
     fig.tight_layout()
-    fig.savefig(plot_path, dpi=110)
-    plt.close(fig)
+    plot_path = save_figure(fig, out / "plot.png")
     return ReportPaths(csv_path, md_path, plot_path, extra)

@@ -2,8 +2,8 @@
 
 The bounds (`FORWARD_ATOL`, `gradient_bound`, ...) are derived in the comments below;
 `ImageError`, `GradError` and `Timing` are one measurement each. Shared by
-`splatbench.backends.compare` (which runs a comparison), `compare_measure` (which
-measures) and `compare_report` (which writes it); imports none of them.
+`splatbench.compare.run` (which runs a comparison), `measure` (which measures) and
+`report` (which writes it); imports none of them.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-U32 = 2.0 ** -24  # float32 unit roundoff
+from splatbench.conventions import U32  # float32 unit roundoff
 
 # Forward bound, derived in tests/test_raster_parity.py: a pixel sums L <= ~150 terms
 # T_i a_i c_i, T_i a product of i factors (relative error <= i u) and a_i c_i ~20 float32

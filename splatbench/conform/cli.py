@@ -82,8 +82,8 @@ def conform(backend: str, as_json: bool, device: str, probes: tuple[str, ...], l
     status: 0 when nothing differs from the declaration and no defect remains, 1 otherwise,
     2 on bad input.
     """
-    from splatbench.backends.conform import PROBES
-    from splatbench.backends.conform import conform as run_conform
+    from splatbench.conform import PROBES
+    from splatbench.conform import conform as run_conform
 
     if list_probes:
         width = max(len(p.name) for p in PROBES)
@@ -94,7 +94,7 @@ def conform(backend: str, as_json: bool, device: str, probes: tuple[str, ...], l
     report = run_conform(backend, device=device, probes=probes or None, diagnose=not no_diagnose)
     seconds = time.perf_counter() - start
     if save_dir:
-        from splatbench.backends.conform.images import save_images
+        from splatbench.conform.images import save_images
         from splatbench.backends.registry import get_backend
 
         chosen = tuple(p for p in PROBES if p.name in {r.name for r in report.results})

@@ -20,17 +20,16 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict
-from datetime import datetime, timezone
 from pathlib import Path
 from types import SimpleNamespace
 
 import pandas as pd
 
-from splatbench.backends.base import OUTPUTS
-from splatbench.backends.builtins.reference_backend import GROUPS
-from splatbench.backends.compare import CompareResult, CompareRow
-from splatbench.backends.compare_types import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD
-from splatbench.backends.compare_measure import spread
+from splatbench.backends.base import GROUPS, OUTPUTS
+from splatbench.compare.run import CompareResult, CompareRow
+from splatbench.compare.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD, U32
+from splatbench.compare.measure import spread
+from splatbench.report_files import run_header, write_json, write_parquet, write_text
 
 MODES = ("matched", "exact")
 STATS = ("max_abs", "psnr", "frac_off", "outliers", "outside_band")
@@ -239,9 +238,8 @@ def _spread_cell(r, stage: str) -> str:
 def run_record(result: CompareResult) -> dict:
     """What the report needs besides the table (``run.json``): command, when, how long,
     machine, settings and the per-workload notes."""
-    return {"command": result.command or "run_compare(...)", "seconds": result.seconds,
-            "written": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            "machine": asdict(result.machine), "settings": asdict(result.settings), "notes": list(result.notes)}
+    return {**run_header(result.command or "run_compare(...)", result.seconds, result.machine),
+            "settings": asdict(result.settings), "notes": list(result.notes)}
 
 
 def render_markdown(record: dict, table: pd.DataFrame, figures: list[Path], out: Path) -> str:
@@ -257,7 +255,7 @@ def render_markdown(record: dict, table: pd.DataFrame, figures: list[Path], out:
         + ("**loaded** (1-min load above half the cores): absolute times are inflated by others' work."
            if table.loaded.any() else "not loaded."),
         "", "## Workloads", "", *[f"- {n}" for n in record["notes"]], "",
-        "## Findings", "", "Computed from `results.parquet` by `splatbench.backends.compare_report.findings`.", "",
+        "## Findings", "", "Computed from `results.parquet` by `splatbench.compare.report.findings`.", "",
         *[f"- {line}" for line in findings(table)], "",
         "## Forward error", "",
         f"Each cell: max abs / PSNR (dB, peak 1) / share of pixels off by more than {OFF_THRESHOLD:.0e}. Depth is "
@@ -292,7 +290,7 @@ _outlier_cell(r), _band_cell(r), r.forward_verdict] for _, r in table.iterrows()
         f"**Bound**: one gradient entry sums a term per pixel, each ~{GRAD_TERM_OPS} float32 operations (relative "
         f"error {GRAD_TERM_OPS}u); cancellation under random cotangents amplifies that by at most sqrt(P) "
         f"(`tests/test_raster_grads.py`): {GRAD_TERM_OPS}·u·sqrt(P)"
-        + "".join(f"; {GRAD_TERM_OPS * 2.0 ** -24 * math.sqrt(w * h):.1e} at {w}x{h} ({name})" for name, w, h in
+        + "".join(f"; {GRAD_TERM_OPS * U32 * math.sqrt(w * h):.1e} at {w}x{h} ({name})" for name, w, h in
                   table[["workload", "error_width", "error_height"]].drop_duplicates().itertuples(index=False))
         + "; plus sqrt(b / P) for the b pixels over the forward bound (in the boundary band), each "
         "changing its terms by a whole contribution. A group whose oracle gradient is exactly 0 (the quaternions of "
@@ -325,24 +323,16 @@ _outlier_cell(r), _band_cell(r), r.forward_verdict] for _, r in table.iterrows()
 def write_compare(result: CompareResult, out: str | Path) -> Path:
     """Write ``out``/results.parquet, ``out``/run.json, the figures and ``out``/report.md;
     returns report.md's path."""
-    from splatbench.fsutil import atomic_write
-
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    table = result_table(result)
-    atomic_write(out / "results.parquet", lambda temp: table.to_parquet(temp, index=False))
-    text = json.dumps(run_record(result), indent=1) + "\n"
-    atomic_write(out / RUN_RECORD, lambda temp: temp.write_text(text, encoding="utf-8"))
+    write_parquet(out / "results.parquet", result_table(result))
+    write_json(out / RUN_RECORD, run_record(result), indent=1)
     return rewrite_report(out)
 
 
 def rewrite_report(out: str | Path) -> Path:
     """(Re)write ``out``/report.md and its figures from ``out``/results.parquet and run.json."""
-    from splatbench.fsutil import atomic_write
-
     out = Path(out)
     table = pd.read_parquet(out / "results.parquet")
     record = json.loads((out / RUN_RECORD).read_text(encoding="utf-8"))
     figures = time_figures(table, out)
-    text = render_markdown(record, table, figures, out)
-    return atomic_write(out / "report.md", lambda temp: temp.write_text(text, encoding="utf-8"))
+    return write_text(out / "report.md", render_markdown(record, table, figures, out))

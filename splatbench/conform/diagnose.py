@@ -39,18 +39,18 @@ from typing import Any
 import numpy as np
 
 from splatbench.backends.base import AXES, AXIS
-from splatbench.backends.conform.calls import Fault
-from splatbench.backends.conform.evidence import coverage, describe, undrawn
-from splatbench.backends.conform.judges import JUDGES, Context, _backend_outputs, _compared, _pixel_diff
-from splatbench.backends.conform.oracle import oracle, projection
-from splatbench.backends.conform.probes import AXIS_PROBES, BASIC, Probe
+from splatbench.conform.calls import Fault
+from splatbench.conform.evidence import coverage, describe, undrawn
+from splatbench.conform.judges import JUDGES, Context, _backend_outputs, _compared, _pixel_diff
+from splatbench.conform.oracle import oracle, projection
+from splatbench.conform.probes import AXIS_PROBES, BASIC, Probe
 
 AXIS_OF: dict[str, str] = {}  # probe -> the first axis it isolates
 for _axis, _names in AXIS_PROBES.items():
     for _name in _names:
         AXIS_OF.setdefault(_name, _axis)
-from splatbench.backends.conform.results import ProbeResult
-from splatbench.backends.conform.scenes import ProbeScene
+from splatbench.conform.results import ProbeResult
+from splatbench.conform.scenes import ProbeScene
 
 #: The cause given when the backend fails on a probe's scene (raises, bad shape, NaN), where the
 #: probe's own convention cannot be judged.

@@ -1,7 +1,7 @@
 """Any rasterizers side by side against the float64 oracle (`splatbench compare`).
 
     run_compare(backends, workloads, settings=CompareSettings(), progress=None) -> CompareResult
-    write_compare(result, out) -> report.md        (`splatbench.backends.compare_report`)
+    write_compare(result, out) -> report.md        (`splatbench.compare.report`)
 
 Per backend x workload (one `CompareRow`):
 
@@ -21,7 +21,7 @@ Per backend x workload (one `CompareRow`):
    1 / alpha reason), per parameter group, as relative L2 error and cosine against
    the gradient oracle: ``torch64`` (float64 autograd) built with the backend's
    conventions, or central differences of the oracle on a sample of entries
-   (`splatbench.backends.compare_measure.GradOracle`).
+   (`splatbench.compare.measure.GradOracle`).
 3. **Time** at the workload's full resolution: one warm-up forward and forward+backward
    per backend (Dr.Jit compiles then), then ``repeats`` rounds in which the backends
    take turns (ABCABC...); median, quartiles, min and max; load average around it.
@@ -40,7 +40,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
-from splatbench.backends.compare_types import MAX_ORACLE_PIXELS, GradError, ImageError, Timing, gradient_bound
+from splatbench.compare.bounds import MAX_ORACLE_PIXELS, GradError, ImageError, Timing, gradient_bound
 from splatbench.devices import torch_device
 from splatbench.errors import InputError, one_line
 from splatbench.workloads import Workload, WorkloadSpec
@@ -161,7 +161,7 @@ def run_compare(backends: Sequence, workloads: Sequence[Workload | WorkloadSpec]
     Returns:
         `CompareResult`: one `CompareRow` per backend x workload, workload by workload.
     """
-    from splatbench.backends.compare_measure import FLOAT64_ORACLE, GradOracle, OracleImages, time_backends, \
+    from splatbench.compare.measure import FLOAT64_ORACLE, GradOracle, OracleImages, time_backends, \
         torch_inputs
     from splatbench.backends.registry import available, get_backend
     from splatbench.metrics.machine import load_average, machine_info
@@ -268,7 +268,7 @@ def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: 
     """Forward errors, gradient errors and the predicted full-resolution forward time of one backend."""
     import torch
 
-    from splatbench.backends.compare_measure import backend_vjp, compare_grads, image_errors, sync
+    from splatbench.compare.measure import backend_vjp, compare_grads, image_errors, sync
 
     info, camera = backend.info, images.camera
     m = _Accuracy()

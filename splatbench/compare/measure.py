@@ -1,4 +1,4 @@
-"""The measurements of `splatbench.backends.compare`: oracle images, image errors,
+"""The measurements of `splatbench.compare.run`: oracle images, image errors,
 random-cotangent VJPs, the gradient oracle, and interleaved timing.
 
 All images are numpy float64 on the host; backends get float32 torch tensors on the
@@ -16,19 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from splatbench.backends.base import OUTPUTS, Backend
-from splatbench.backends.builtins.reference_backend import GROUPS
-from splatbench.backends.compare_types import (DEPTH_ALPHA_MIN, OFF_THRESHOLD, GradError, ImageError, Timing,
+from splatbench.backends.base import GROUPS, OUTPUTS, Backend, as_numpy
+from splatbench.compare.bounds import (DEPTH_ALPHA_MIN, OFF_THRESHOLD, GradError, ImageError, Timing,
                                                over_bound)
 from splatbench.errors import InputError, one_line
 from splatbench.metrics.image import psnr
-
-
-def as_numpy(x) -> np.ndarray:
-    """A torch tensor or array as a float64 numpy array on the host."""
-    if hasattr(x, "detach"):
-        x = x.detach().cpu().double().numpy()
-    return np.asarray(x, dtype=np.float64)
 
 
 def sync(device: str) -> None:
@@ -329,7 +321,7 @@ def peak_rise(fn: Callable[[], None], device: str) -> tuple[float, str]:
 
 def time_backends(backends: Sequence[Backend], params: tuple, camera, device: str, repeats: int, *,
                   seed: int = 0, progress: Callable[[str], None] | None = None) -> dict[str, Timing | str]:
-    """Interleaved timing (module doc of `splatbench.backends.compare`): name -> `Timing`,
+    """Interleaved timing (module doc of `splatbench.compare.run`): name -> `Timing`,
     or a one-line error for a backend that raised."""
     v = Cotangents.random(seed, np.ones((camera.height, camera.width)), OUTPUTS)
     results: dict[str, Timing | str] = {}

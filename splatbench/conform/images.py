@@ -8,9 +8,11 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.backends.base import Backend
-from splatbench.backends.conform.calls import Fault, captured, outputs
-from splatbench.backends.conform.oracle import conventions_of, oracle
-from splatbench.backends.conform.probes import Probe
+from splatbench.conform.calls import Fault, captured, outputs
+from splatbench.conform.oracle import conventions_of, oracle
+from splatbench.conform.probes import Probe
+from splatbench.figures import pyplot
+from splatbench.report_files import save_figure
 
 UPSCALE = 16  # probe images are 12 to 32 pixels wide: each pixel drawn as a 16x16 block
 
@@ -20,11 +22,7 @@ def _big(image: np.ndarray) -> np.ndarray:
 
 
 def _difference_png(diff: np.ndarray, path: Path, title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(4.2, 3.4), dpi=100)
     im = ax.imshow(diff, cmap="magma", vmin=0.0, vmax=max(float(diff.max()), 1e-12), interpolation="nearest")
     ax.set_title(title, fontsize=8)
@@ -32,9 +30,7 @@ def _difference_png(diff: np.ndarray, path: Path, title: str) -> None:
     ax.set_yticks([])
     fig.colorbar(im, ax=ax, label="max |backend - oracle| over rgb, alpha")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
 
 
 def save_images(backend: Backend, probes: tuple[Probe, ...], directory: str | Path, device: str) -> list[Path]:

@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
-from splatbench.backends.conform.scenes import (GROUPS, ProbeScene, alpha_max, basic_centred, basic_offaxis,
+from splatbench.conform.scenes import (GROUPS, ProbeScene, alpha_max, basic_centred, basic_offaxis,
                                                 basic_overlap, alpha_min, background,
                                                 colour_clamp, conic,
                                                 depth_order, early_stop, eps2d, expected_depth, gradients,

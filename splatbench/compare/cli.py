@@ -1,7 +1,7 @@
 """`splatbench compare`: any rasterizers side by side against the float64 oracle.
 
 Writes ``DIR/report.md``, ``DIR/results.parquet`` and ``DIR/time_vs_error*.png``
-(default ``out/compare``; ``--out reports/compare`` refreshes the committed baseline); see `splatbench.backends.compare` for what is measured
+(default ``out/compare``; ``--out reports/compare`` refreshes the committed baseline); see `splatbench.compare.run` for what is measured
 and docs/backends.md ("compare") for how to read it.
 """
 
@@ -54,8 +54,8 @@ def compare(backends: tuple[str, ...], synthetic: tuple[tuple[str, str], ...], s
     Synthetic workloads are seen from a random camera pose (seeded by --seed), so that a
     world-space mistake (a view direction from the world origin, W for its transpose) shows.
     """
-    from splatbench.backends.compare import CompareSettings, run_compare
-    from splatbench.backends.compare_report import findings, result_table, write_compare
+    from splatbench.compare.run import CompareSettings, run_compare
+    from splatbench.compare.report import findings, result_table, write_compare
     from splatbench.backends.registry import get_backend
     from splatbench.workloads import parse_models, parse_synthetic, parse_workload, workload_spec
 

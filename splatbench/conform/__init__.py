@@ -1,6 +1,6 @@
 """`splatbench conform`: a conformance suite of small probe scenes for any rasterizer.
 
-    from splatbench.backends.conform import conform
+    from splatbench.conform import conform
     report = conform("drjit")                   # a Backend, a callable, or a get_backend spec
     report.passed, report.failed                # nothing differs and no defect / probes still failing
     report.diagnosis, report.defects            # conventions found to differ / root causes left
@@ -26,13 +26,13 @@ from __future__ import annotations
 import dataclasses
 
 from splatbench.backends.base import Backend
-from splatbench.backends.conform.calls import Fault, captured
-from splatbench.backends.conform.diagnose import (FAULT_CAUSE, UNDRAWN_CAUSE, Defect, Finding, explained_by, fingerprint,
+from splatbench.conform.calls import Fault, captured
+from splatbench.conform.diagnose import (FAULT_CAUSE, UNDRAWN_CAUSE, Defect, Finding, explained_by, fingerprint,
                                                   root_causes, run_probes)
-from splatbench.backends.conform.judges import Context
-from splatbench.backends.conform.oracle import conventions_of
-from splatbench.backends.conform.probes import PROBES, Probe, probe_names
-from splatbench.backends.conform.results import STATUSES, ConformReport, ProbeResult
+from splatbench.conform.judges import Context
+from splatbench.conform.oracle import conventions_of
+from splatbench.conform.probes import PROBES, Probe, probe_names
+from splatbench.conform.results import STATUSES, ConformReport, ProbeResult
 from splatbench.devices import check_device, torch_device
 from splatbench.errors import InputError
 
@@ -44,7 +44,7 @@ class BackendFault(InputError):
 def _preflight(backend: Backend, scene, device: str) -> None:
     """Call the backend once on a plain probe scene; a backend that cannot render it is one line
     (exit 2), not a fault repeated under every probe's cause."""
-    from splatbench.backends.conform.calls import outputs
+    from splatbench.conform.calls import outputs
 
     try:
         outputs(backend, scene, device)

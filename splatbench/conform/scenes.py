@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from splatbench.backends.base import GROUPS
 from splatbench.cameras import Camera
 from splatbench.conventions import SH_C0
-
-GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
-C0 = SH_C0  # DC basis: sh0 = (colour - 0.5) / C0
+from splatbench.scene_builders import logit, point_at, sh_dc, world_sigma
+from splatbench.workloads import random_unit_quats
 
 
 @dataclass(frozen=True)
@@ -43,39 +43,13 @@ class ProbeScene:
 
 
 # ----------------------------------------------------------------------------
-# Scene building blocks
+# Scene building blocks (those every verification application uses: `splatbench.scene_builders`)
 # ----------------------------------------------------------------------------
 
 def camera(width: int = 16, height: int = 16, **kw) -> Camera:
     """An oblique camera looking at the origin (world z is not camera z, world x is not camera x)."""
     return Camera.look_at(eye=[1.6, -1.1, -4.0], target=[0.0, 0.0, 0.0], up=[0.0, -1.0, 0.0],
                           width=width, height=height, fov_x_deg=60.0, **kw)
-
-
-def at(cam: Camera, u: float, v: float, z: float) -> np.ndarray:
-    """World point that projects to pixel coordinates (u, v) at camera depth z."""
-    p = np.array([z * (u - cam.cx) / cam.fx, z * (v - cam.cy) / cam.fy, z, 1.0])
-    return (cam.camera_to_world @ p)[:3]
-
-
-def world_scale(cam: Camera, sigma_px: float, z: float) -> float:
-    """World standard deviation that spans ``sigma_px`` pixels at depth z (before eps2d)."""
-    return sigma_px * z / cam.fx
-
-
-def unit_quats(seed: int, n: int) -> np.ndarray:
-    q = np.random.default_rng(seed).normal(size=(n, 4))
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
-
-
-def logit(o):
-    o = np.asarray(o, dtype=np.float64)
-    return np.log(o / (1.0 - o))
-
-
-def dc(colours) -> np.ndarray:
-    """SH [N, 1, 3] whose degree-0 colour is ``colours`` [N, 3]."""
-    return ((np.asarray(colours, dtype=np.float64) - 0.5) / C0)[:, None, :]
 
 
 def scene(cam: Camera, means, sigma_px, opacity, sh, *, z=None, quats=None, seed=0, background=None,
@@ -86,8 +60,8 @@ def scene(cam: Camera, means, sigma_px, opacity, sh, *, z=None, quats=None, seed
     n = means.shape[0]
     depth = (means @ cam.rotation.T + cam.translation)[:, 2] if z is None else np.asarray(z, dtype=np.float64)
     sig = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64).reshape(n, -1), (n, 3))
-    log_scales = np.log(sig * depth[:, None] / cam.fx)
-    quats = unit_quats(seed, n) if quats is None else np.asarray(quats, dtype=np.float64)
+    log_scales = np.log(world_sigma(cam, sig, depth[:, None]))
+    quats = random_unit_quats(np.random.default_rng(seed), n) if quats is None else np.asarray(quats, dtype=np.float64)
     f32 = lambda a: np.asarray(a, dtype=np.float32).astype(np.float64)  # noqa: E731
     return ProbeScene(f32(means), f32(log_scales), f32(quats), f32(logit(opacity)), f32(sh), cam,
                       background, sh_degree)
@@ -96,7 +70,7 @@ def scene(cam: Camera, means, sigma_px, opacity, sh, *, z=None, quats=None, seed
 def _grid(cam: Camera, cols: int, rows: int, z: float, margin: float = 3.5) -> np.ndarray:
     us = np.linspace(margin, cam.width - margin, cols)
     vs = np.linspace(margin, cam.height - margin, rows)
-    return np.array([at(cam, u + 0.17 * (i % 2), v, z + 0.3 * i) for i, (v, u) in
+    return np.array([point_at(cam, u + 0.17 * (i % 2), v, z + 0.3 * i) for i, (v, u) in
                      enumerate((v, u) for v in vs for u in us)])
 
 
@@ -120,9 +94,9 @@ def basic_centred() -> ProbeScene:
     # One anisotropic Gaussian near the image centre, degree-1 SH: pixel centre, activations,
     # rotation, SH basis all act on it, and nothing else (no sort, no background).
     cam = camera(12, 12)
-    means = np.array([at(cam, 6.2, 5.7, 4.0)])
+    means = np.array([point_at(cam, 6.2, 5.7, 4.0)])
     sh = np.zeros((1, 4, 3))
-    sh[0, 0] = (np.array([0.8, 0.5, 0.3]) - 0.5) / C0
+    sh[0, 0] = (np.array([0.8, 0.5, 0.3]) - 0.5) / SH_C0
     sh[0, 1:] = [[0.3, -0.2, 0.1], [-0.1, 0.25, 0.2], [0.2, 0.1, -0.3]]
     return scene(cam, means, [[2.4, 1.3, 1.8]], [0.33], sh, z=np.array([4.0]), seed=31)
 
@@ -134,8 +108,8 @@ def basic_overlap() -> ProbeScene:
     # from the camera centre (4.36 against 4.30), so a sort on distance gets the order wrong too.
     cam = camera(12, 12)
     z = np.array([4.3, 4.0])
-    means = np.array([at(cam, 5.5, 6.3, 4.3), at(cam, 1.5, 6.0, 4.0)])
-    return scene(cam, means, [2.6, 2.0], [0.32, 0.3], dc([(0.2, 0.3, 0.9), (0.9, 0.4, 0.1)]), z=z, seed=32,
+    means = np.array([point_at(cam, 5.5, 6.3, 4.3), point_at(cam, 1.5, 6.0, 4.0)])
+    return scene(cam, means, [2.6, 2.0], [0.32, 0.3], sh_dc([(0.2, 0.3, 0.9), (0.9, 0.4, 0.1)]), z=z, seed=32,
                  background=(0.1, 0.6, 0.3))
 
 
@@ -159,30 +133,30 @@ def depth_order() -> ProbeScene:
                          height=16, fov_x_deg=60.0)
     z = np.array([6.0, 3.2, 5.1, 4.0])
     uv = [(9.0, 7.0), (7.0, 9.5), (8.5, 8.0), (6.5, 7.5)]
-    means = np.array([at(cam, u, v, zi) for (u, v), zi in zip(uv, z)])
+    means = np.array([point_at(cam, u, v, zi) for (u, v), zi in zip(uv, z)])
     colours = [(0.9, 0.1, 0.1), (0.1, 0.9, 0.2), (0.1, 0.2, 0.9), (0.9, 0.8, 0.1)]
-    return scene(cam, means, [7.0, 6.5, 7.5, 6.0], [0.7, 0.6, 0.65, 0.55], dc(colours), z=z, seed=1)
+    return scene(cam, means, [7.0, 6.5, 7.5, 6.0], [0.7, 0.6, 0.65, 0.55], sh_dc(colours), z=z, seed=1)
 
 
 @functools.cache
 def pixel_centre() -> ProbeScene:
     cam = camera()
     z = np.array([4.0, 4.5])
-    means = np.array([at(cam, 7.3, 8.6, 4.0), at(cam, 11.8, 4.1, 4.5)])
-    return scene(cam, means, [1.3, 1.1], [0.32, 0.3], dc([(0.9, 0.6, 0.2), (0.2, 0.7, 0.9)]), z=z,
+    means = np.array([point_at(cam, 7.3, 8.6, 4.0), point_at(cam, 11.8, 4.1, 4.5)])
+    return scene(cam, means, [1.3, 1.1], [0.32, 0.3], sh_dc([(0.9, 0.6, 0.2), (0.2, 0.7, 0.9)]), z=z,
                  quats=[[1, 0, 0, 0]] * 2)
 
 
 def _anisotropic(quat_scale=None) -> ProbeScene:
     cam = camera()
     z = np.array([4.0, 4.6])
-    means = np.array([at(cam, 6.23, 7.1, 4.0), at(cam, 10.43, 9.3, 4.6)])
+    means = np.array([point_at(cam, 6.23, 7.1, 4.0), point_at(cam, 10.43, 9.3, 4.6)])
     quats = np.array([[0.82, 0.31, -0.42, 0.25], [0.35, -0.6, 0.2, 0.69]])
     quats /= np.linalg.norm(quats, axis=1, keepdims=True)
     if quat_scale is not None:
         quats = quats * np.asarray(quat_scale)[:, None]
     return scene(cam, means, [[4.0, 1.2, 2.0], [3.2, 2.4, 0.9]], [0.33, 0.3],
-                 dc([(0.9, 0.3, 0.2), (0.2, 0.5, 0.9)]), z=z, quats=quats)
+                 sh_dc([(0.9, 0.3, 0.2), (0.2, 0.5, 0.9)]), z=z, quats=quats)
 
 
 @functools.cache
@@ -199,16 +173,16 @@ def quat_norm() -> ProbeScene:
 def scale_activation() -> ProbeScene:
     cam = camera()
     z = np.array([4.0, 5.0])
-    means = np.array([at(cam, 6.0, 6.5, 4.0), at(cam, 10.5, 10.0, 5.0)])
-    return scene(cam, means, [1.6, 2.2], [0.3, 0.32], dc([(0.8, 0.3, 0.3), (0.3, 0.8, 0.4)]), z=z, seed=3)
+    means = np.array([point_at(cam, 6.0, 6.5, 4.0), point_at(cam, 10.5, 10.0, 5.0)])
+    return scene(cam, means, [1.6, 2.2], [0.3, 0.32], sh_dc([(0.8, 0.3, 0.3), (0.3, 0.8, 0.4)]), z=z, seed=3)
 
 
 @functools.cache
 def opacity_activation() -> ProbeScene:
     cam = camera()
     z = np.array([4.0, 4.4])
-    means = np.array([at(cam, 7.0, 6.0, 4.0), at(cam, 9.5, 10.0, 4.4)])
-    return scene(cam, means, [2.5, 2.2], [0.31, 0.18], dc([(0.8, 0.7, 0.2), (0.2, 0.4, 0.9)]), z=z, seed=4)
+    means = np.array([point_at(cam, 7.0, 6.0, 4.0), point_at(cam, 9.5, 10.0, 4.4)])
+    return scene(cam, means, [2.5, 2.2], [0.31, 0.18], sh_dc([(0.8, 0.7, 0.2), (0.2, 0.4, 0.9)]), z=z, seed=4)
 
 
 @functools.cache
@@ -216,8 +190,8 @@ def eps2d() -> ProbeScene:
     cam = camera()
     # Far below a pixel: the footprint is the eps2d low-pass alone (sigma ~ sqrt(0.3) px).
     z = np.array([4.0, 4.2])
-    means = np.array([at(cam, 5.5, 6.5, 4.0), at(cam, 10.5, 9.5, 4.2)])
-    return scene(cam, means, [0.01, 0.02], [0.6, 0.5], dc([(0.9, 0.9, 0.2), (0.2, 0.9, 0.9)]), z=z, seed=5)
+    means = np.array([point_at(cam, 5.5, 6.5, 4.0), point_at(cam, 10.5, 9.5, 4.2)])
+    return scene(cam, means, [0.01, 0.02], [0.6, 0.5], sh_dc([(0.9, 0.9, 0.2), (0.2, 0.9, 0.9)]), z=z, seed=5)
 
 
 @functools.cache
@@ -225,9 +199,9 @@ def jacobian_clamp() -> ProbeScene:
     cam = camera()
     # Centres beyond graphdeco's 1.3 x half-FoV limit (u < -0.15 W), footprints reaching into the image.
     z = np.array([4.0, 4.5])
-    means = np.array([at(cam, -0.45 * cam.width, 6.0, 4.0), at(cam, 1.45 * cam.width, 11.0, 4.5)])
+    means = np.array([point_at(cam, -0.45 * cam.width, 6.0, 4.0), point_at(cam, 1.45 * cam.width, 11.0, 4.5)])
     return scene(cam, means, [[9.0, 2.0, 8.0], [8.0, 3.0, 9.0]], [0.33, 0.3],
-                 dc([(0.9, 0.4, 0.2), (0.3, 0.5, 0.9)]), z=z, seed=6)
+                 sh_dc([(0.9, 0.4, 0.2), (0.3, 0.5, 0.9)]), z=z, seed=6)
 
 
 @functools.cache
@@ -235,9 +209,9 @@ def near_plane() -> ProbeScene:
     cam = camera(near=1.0)
     # In front of the camera but before camera.near (culled), behind the camera (culled), and a backdrop.
     z = np.array([0.6, -2.0, 4.0])
-    means = np.array([at(cam, 8.2, 7.6, 0.6), at(cam, 8.0, 8.0, -2.0), at(cam, 8.0, 8.0, 4.0)])
+    means = np.array([point_at(cam, 8.2, 7.6, 0.6), point_at(cam, 8.0, 8.0, -2.0), point_at(cam, 8.0, 8.0, 4.0)])
     return scene(cam, means, [2.0, 2.0, 7.0], [0.33, 0.33, 0.3],
-                 dc([(0.9, 0.1, 0.1), (0.1, 0.9, 0.1), (0.3, 0.3, 0.8)]), z=np.abs(z), seed=7)
+                 sh_dc([(0.9, 0.1, 0.1), (0.1, 0.9, 0.1), (0.3, 0.3, 0.8)]), z=np.abs(z), seed=7)
 
 
 @functools.cache
@@ -248,9 +222,9 @@ def alpha_max() -> ProbeScene:
     # T = 0.01. Opacity 0.998 rather than closer to 1: sigmoid'(logit) = o (1 - o) loses
     # u / (1 - o) relative precision in float32.
     z = np.array([4.0, 5.0])
-    means = np.array([at(cam, 8.14, 8.3, 4.0), at(cam, 8.5, 7.5, 5.0)])
+    means = np.array([point_at(cam, 8.14, 8.3, 4.0), point_at(cam, 8.5, 7.5, 5.0)])
     return scene(cam, means, [[30.0, 22.0, 26.0], [7.0, 5.0, 6.0]], [0.998, 0.5],
-                 dc([(0.9, 0.5, 0.2), (0.1, 0.6, 0.9)]), z=z,
+                 sh_dc([(0.9, 0.5, 0.2), (0.1, 0.6, 0.9)]), z=z,
                  seed=8)
 
 
@@ -260,8 +234,8 @@ def alpha_min() -> ProbeScene:
     # A faint wide Gaussian (opacity 0.003 < 1/255: skipped everywhere) and a faint one whose
     # alpha crosses 1/255 inside the image.
     z = np.array([4.0, 4.5])
-    means = np.array([at(cam, 8.0, 8.0, 4.0), at(cam, 9.3, 7.2, 4.5)])
-    return scene(cam, means, [8.0, 2.6], [0.003, 0.02], dc([(0.9, 0.9, 0.9), (0.9, 0.2, 0.6)]), z=z, seed=9)
+    means = np.array([point_at(cam, 8.0, 8.0, 4.0), point_at(cam, 9.3, 7.2, 4.5)])
+    return scene(cam, means, [8.0, 2.6], [0.003, 0.02], sh_dc([(0.9, 0.9, 0.9), (0.9, 0.2, 0.6)]), z=z, seed=9)
 
 
 def _sh_scene(degree: int, seed: int, *, sh_degree=None, full=False) -> ProbeScene:
@@ -308,9 +282,9 @@ def sh_viewdir_grad() -> ProbeScene:
     # view direction of the SH evaluation.
     cam = camera()
     z = np.array([3.0, 3.6, 4.2])
-    means = np.array([at(cam, 7.0, 7.5, 3.0), at(cam, 9.5, 8.0, 3.6), at(cam, 8.0, 9.5, 4.2)])
+    means = np.array([point_at(cam, 7.0, 7.5, 3.0), point_at(cam, 9.5, 8.0, 3.6), point_at(cam, 8.0, 9.5, 4.2)])
     sh = np.zeros((3, 4, 3))
-    sh[:, 0, :] = (0.9 - 0.5) / C0  # colours stay in (0.1, 1.7): the clamp at 0 never cuts the SH path
+    sh[:, 0, :] = (0.9 - 0.5) / SH_C0  # colours stay in (0.1, 1.7): the clamp at 0 never cuts the SH path
     sh[:, 1:, :] = np.random.default_rng(16).choice([-1.0, 1.0], size=(3, 3, 3)) * 0.9
     return scene(cam, means, [7.0, 6.5, 7.5], [0.45, 0.4, 0.5], sh, z=z, seed=16)
 
@@ -320,16 +294,16 @@ def colour_clamp() -> ProbeScene:
     cam = camera()
     # SH colours below 0 (clamped to 0) and above 1 (not clamped) in some channels.
     z = np.array([4.0, 4.5])
-    means = np.array([at(cam, 6.5, 7.0, 4.0), at(cam, 10.0, 9.5, 4.5)])
-    return scene(cam, means, [2.5, 3.0], [0.33, 0.3], dc([(-0.4, 0.6, 1.3), (1.4, -0.3, 0.5)]), z=z, seed=25)
+    means = np.array([point_at(cam, 6.5, 7.0, 4.0), point_at(cam, 10.0, 9.5, 4.5)])
+    return scene(cam, means, [2.5, 3.0], [0.33, 0.3], sh_dc([(-0.4, 0.6, 1.3), (1.4, -0.3, 0.5)]), z=z, seed=25)
 
 
 @functools.cache
 def background() -> ProbeScene:
     cam = camera()
     z = np.array([4.0, 4.5])
-    means = np.array([at(cam, 6.5, 7.0, 4.0), at(cam, 10.0, 9.5, 4.5)])
-    return scene(cam, means, [2.5, 3.0], [0.33, 0.3], dc([(0.9, 0.2, 0.2), (0.2, 0.2, 0.9)]), z=z, seed=17,
+    means = np.array([point_at(cam, 6.5, 7.0, 4.0), point_at(cam, 10.0, 9.5, 4.5)])
+    return scene(cam, means, [2.5, 3.0], [0.33, 0.3], sh_dc([(0.9, 0.2, 0.2), (0.2, 0.2, 0.9)]), z=z, seed=17,
                  background=(0.2, 0.5, 0.9))
 
 
@@ -338,8 +312,8 @@ def expected_depth() -> ProbeScene:
     cam = camera()
     # Translucent, at different depths, off the optical axis (distance != camera z).
     z = np.array([3.0, 5.0, 7.0])
-    means = np.array([at(cam, 4.5, 5.0, 3.0), at(cam, 10.5, 6.0, 5.0), at(cam, 8.0, 11.0, 7.0)])
-    return scene(cam, means, [3.0, 3.5, 3.0], [0.33, 0.3, 0.32], dc([(0.6, 0.6, 0.6)] * 3), z=z, seed=18)
+    means = np.array([point_at(cam, 4.5, 5.0, 3.0), point_at(cam, 10.5, 6.0, 5.0), point_at(cam, 8.0, 11.0, 7.0)])
+    return scene(cam, means, [3.0, 3.5, 3.0], [0.33, 0.3, 0.32], sh_dc([(0.6, 0.6, 0.6)] * 3), z=z, seed=18)
 
 
 @functools.cache
@@ -347,9 +321,9 @@ def intrinsics() -> ProbeScene:
     base = camera(24, 16)
     cam = Camera(24, 16, 19.0, 13.0, 10.3, 9.1, base.world_to_camera)
     z = np.array([4.0, 4.5, 5.0])
-    means = np.array([at(cam, 5.0, 5.0, 4.0), at(cam, 18.5, 6.0, 4.5), at(cam, 11.0, 12.0, 5.0)])
+    means = np.array([point_at(cam, 5.0, 5.0, 4.0), point_at(cam, 18.5, 6.0, 4.5), point_at(cam, 11.0, 12.0, 5.0)])
     return scene(cam, means, [1.6, 1.8, 2.0], [0.33, 0.3, 0.32],
-                 dc([(0.9, 0.3, 0.2), (0.2, 0.9, 0.3), (0.3, 0.2, 0.9)]), z=z, seed=19)
+                 sh_dc([(0.9, 0.3, 0.2), (0.2, 0.9, 0.3), (0.3, 0.2, 0.9)]), z=z, seed=19)
 
 
 @functools.cache
@@ -357,9 +331,9 @@ def tiles() -> ProbeScene:
     cam = camera(32, 32)
     # Centres on tile corners and edges (tiles of 16 and 8): each footprint spans several tiles.
     z = np.array([4.0, 4.3, 4.6])
-    means = np.array([at(cam, 16.0, 16.0, 4.0), at(cam, 8.0, 23.5, 4.3), at(cam, 24.5, 8.0, 4.6)])
+    means = np.array([point_at(cam, 16.0, 16.0, 4.0), point_at(cam, 8.0, 23.5, 4.3), point_at(cam, 24.5, 8.0, 4.6)])
     return scene(cam, means, [3.0, 2.5, 2.5], [0.33, 0.3, 0.32],
-                 dc([(0.9, 0.3, 0.2), (0.2, 0.9, 0.3), (0.3, 0.2, 0.9)]), z=z, seed=20)
+                 sh_dc([(0.9, 0.3, 0.2), (0.2, 0.9, 0.3), (0.3, 0.2, 0.9)]), z=z, seed=20)
 
 
 @functools.cache
@@ -369,7 +343,7 @@ def gradients() -> ProbeScene:
     # (no pixel near a cutoff, alpha_min or the early stop), SH degree 1. Opacity 0.5 is a
     # logit of exactly 0, where a sigmoid written with |x| loses its derivative.
     z = np.array([3.5, 4.0, 4.6])
-    means = np.array([at(cam, 7.0, 7.5, 3.5), at(cam, 9.0, 8.0, 4.0), at(cam, 8.0, 9.0, 4.6)])
+    means = np.array([point_at(cam, 7.0, 7.5, 3.5), point_at(cam, 9.0, 8.0, 4.0), point_at(cam, 8.0, 9.0, 4.6)])
     sh = _sh_band(1, 3, 21)
     return scene(cam, means, [[9.0, 6.0, 7.0], [7.0, 9.5, 6.0], [8.0, 8.0, 6.5]], [0.5, 0.45, 0.55], sh, z=z,
                  seed=21)
@@ -380,9 +354,9 @@ def conic() -> ProbeScene:
     cam = camera()
     # Elongated and rotated on screen, so all of A, B and C matter; wide enough to cover the image.
     z = np.array([4.0, 4.5])
-    means = np.array([at(cam, 7.5, 8.0, 4.0), at(cam, 8.5, 8.5, 4.5)])
+    means = np.array([point_at(cam, 7.5, 8.0, 4.0), point_at(cam, 8.5, 8.5, 4.5)])
     return scene(cam, means, [[12.0, 5.0, 6.0], [6.0, 11.0, 5.0]], [0.5, 0.45],
-                 dc([(0.9, 0.4, 0.2), (0.2, 0.5, 0.9)]), z=z, seed=22)
+                 sh_dc([(0.9, 0.4, 0.2), (0.2, 0.5, 0.9)]), z=z, seed=22)
 
 
 @functools.cache
@@ -391,9 +365,9 @@ def early_stop() -> ProbeScene:
     # Three near-opaque, very wide layers: T is 2e-4 to 6e-4 after two and below 2e-5 after the
     # third everywhere in the image (far from 1e-4), so the third is never composited.
     z = np.array([3.0, 4.0, 5.0])
-    means = np.array([at(cam, 8.0, 8.0, 3.0), at(cam, 8.3, 7.8, 4.0), at(cam, 7.7, 8.2, 5.0)])
+    means = np.array([point_at(cam, 8.0, 8.0, 3.0), point_at(cam, 8.3, 7.8, 4.0), point_at(cam, 7.7, 8.2, 5.0)])
     return scene(cam, means, [80.0, 80.0, 80.0], [0.985, 0.985, 0.985],
-                 dc([(0.9, 0.2, 0.2), (0.2, 0.9, 0.2), (0.2, 0.2, 0.9)]), z=z, seed=23)
+                 sh_dc([(0.9, 0.2, 0.2), (0.2, 0.9, 0.2), (0.2, 0.2, 0.9)]), z=z, seed=23)
 
 
 @functools.cache
@@ -403,5 +377,5 @@ def radius() -> ProbeScene:
     # ring of pixels out to 3.32 sigma; the 3-sigma box stops just short of the next 16-pixel tiles,
     # so a tile-granular rule (graphdeco's) draws part of that ring and not the rest.
     z = np.array([4.0])
-    means = np.array([at(cam, 3.71, 3.87, 4.0)])
-    return scene(cam, means, [3.95], [0.98], dc([(0.9, 0.8, 0.2)]), z=z, seed=24)
+    means = np.array([point_at(cam, 3.71, 3.87, 4.0)])
+    return scene(cam, means, [3.95], [0.98], sh_dc([(0.9, 0.8, 0.2)]), z=z, seed=24)

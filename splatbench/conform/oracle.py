@@ -35,9 +35,9 @@ from __future__ import annotations
 import numpy as np
 
 from splatbench.backends.base import Backend
-from splatbench.backends.conform.scenes import GROUPS, ProbeScene
+from splatbench.conform.scenes import GROUPS, ProbeScene
+from splatbench.conventions import U32
 
-U32 = 2.0 ** -24
 U64 = 2.0 ** -53
 FD_H = 1e-6
 MARGIN = 3.0

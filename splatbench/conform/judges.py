@@ -9,13 +9,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from splatbench.backends.base import Backend
-from splatbench.backends.conform.calls import OUTPUT_CHANNELS, cotangents, vjp
-from splatbench.backends.conform.calls import outputs as backend_outputs
-from splatbench.backends.conform.oracle import (conic_jacobian, forward_tolerance, gradient_gamma, oracle,
+from splatbench.conform.calls import OUTPUT_CHANNELS, cotangents, vjp
+from splatbench.conform.calls import outputs as backend_outputs
+from splatbench.conform.oracle import (conic_jacobian, forward_tolerance, gradient_gamma, oracle,
                                                 oracle_grad)
-from splatbench.backends.conform.probes import Probe
-from splatbench.backends.conform.results import ProbeResult
-from splatbench.backends.conform.scenes import ProbeScene
+from splatbench.conform.probes import Probe
+from splatbench.conform.results import ProbeResult
+from splatbench.conform.scenes import ProbeScene
 
 
 @dataclass(frozen=True)

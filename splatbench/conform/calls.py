@@ -10,9 +10,9 @@ import tempfile
 
 import numpy as np
 
-from splatbench.backends.base import Backend
-from splatbench.backends.conform.oracle import stack
-from splatbench.backends.conform.scenes import GROUPS, ProbeScene
+from splatbench.backends.base import Backend, as_numpy
+from splatbench.conform.oracle import stack
+from splatbench.conform.scenes import GROUPS, ProbeScene
 
 COTANGENT_SEED = 1234
 OUTPUT_CHANNELS = {"rgb": slice(0, 3), "alpha": slice(3, 4), "depth": slice(4, 5)}
@@ -80,17 +80,11 @@ def _render(backend: Backend, s: ProbeScene, params: list):
     return out
 
 
-def _numpy(x) -> np.ndarray:
-    if hasattr(x, "detach"):
-        x = x.detach().cpu().double().numpy()
-    return np.asarray(x, dtype=np.float64)
-
-
 def outputs(backend: Backend, s: ProbeScene, device: str) -> np.ndarray:
     import torch
 
     with torch.no_grad():
-        out = stack([_numpy(x) for x in _render(backend, s, _tensors(s, device, False))])
+        out = stack([as_numpy(x) for x in _render(backend, s, _tensors(s, device, False))])
     bad = ~np.isfinite(out)
     if bad.any():
         i, j, c = (int(k) for k in np.argwhere(bad)[0])
@@ -127,7 +121,7 @@ def vjp(backend: Backend, s: ProbeScene, v: np.ndarray, device: str) -> dict[str
         loss.backward()
     except Exception as exc:  # noqa: BLE001
         raise Fault(f"backward raised {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}") from None
-    grads = {k: np.zeros(p.shape) if p.grad is None else _numpy(p.grad) for k, p in zip(GROUPS, params)}
+    grads = {k: np.zeros(p.shape) if p.grad is None else as_numpy(p.grad) for k, p in zip(GROUPS, params)}
     for k, g in grads.items():
         if not np.isfinite(g).all():
             raise Fault(f"non-finite gradient of {k}")

@@ -1,0 +1,14 @@
+"""`splatbench compare`: any rasterizers side by side against the float64 oracle.
+
+A verification application beside `splatbench.conform`, `splatbench.stress` and
+`splatbench.validate`; it calls rasterizers through the plugin interface
+(`splatbench.backends`). Modules:
+
+    run       run_compare(backends, workloads, settings) -> CompareResult (what is measured)
+    bounds    the derived tolerances and the typed measurements (ImageError, GradError, Timing)
+    measure   oracle images, image errors, random-cotangent VJPs, interleaved timing
+    report    results.parquet, run.json, report.md and the figures (write_compare, rewrite_report)
+    cli       the command line
+
+The package imports none of them here, so ``splatbench compare --help`` loads nothing heavy.
+"""

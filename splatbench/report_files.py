@@ -1,0 +1,79 @@
+"""How a report's files land on disk: the one writer of the verification applications
+(compare, conform, stress, validate) and the shared figures.
+
+Every file is written whole or not at all (`splatbench.fsutil.atomic_write`: a
+temporary beside it, fsync'd, renamed into place with the umask's mode), so a report
+stopped half-way never leaves a truncated table beside an older markdown file.
+
+    write_text(path, text) -> Path             UTF-8 text (markdown)
+    write_json(path, data, indent=1) -> Path   JSON and a final newline
+    write_parquet(path, frame) -> Path         a pandas DataFrame, without its index
+    write_csv(path, columns, rows) -> Path     a header line, then one line per mapping in ``rows``
+    save_figure(fig, path, **kw) -> Path       a matplotlib figure (PNG at 110 dpi, nothing clipped), closed
+    run_header(command, seconds, machine)      where and how a run was made: {"command", "seconds",
+                                               "written", "machine"} (machine: `MachineInfo`, load included)
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from splatbench.fsutil import atomic_write
+from splatbench.metrics.machine import MachineInfo
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """``text`` into ``path`` (UTF-8), atomically; returns the path."""
+    return atomic_write(path, lambda temp: temp.write_text(text, encoding="utf-8"))
+
+
+def write_json(path: str | Path, data: Any, *, indent: int = 1) -> Path:
+    """``data`` as JSON (``indent``, then a newline) into ``path``, atomically; values JSON has
+    no type for (paths, numpy scalars) are written as their ``str``."""
+    return write_text(path, json.dumps(data, indent=indent, default=str) + "\n")
+
+
+def write_parquet(path: str | Path, frame) -> Path:
+    """The pandas DataFrame ``frame`` (without its index) into ``path``, atomically."""
+    return atomic_write(path, lambda temp: frame.to_parquet(temp, index=False))
+
+
+def write_csv(path: str | Path, columns: Sequence[str], rows: Iterable[Mapping[str, Any]]) -> Path:
+    """A CSV file: the header ``columns``, then one line per mapping in ``rows`` (its keys are
+    ``columns``), atomically."""
+    def write(temp: Path) -> None:
+        with open(temp, "w", newline="", encoding="utf-8") as fh:
+            writer = csv.DictWriter(fh, fieldnames=list(columns))
+            writer.writeheader()
+            writer.writerows(rows)
+
+    return atomic_write(path, write)
+
+
+def save_figure(fig, path: str | Path, *, dpi: int = 110) -> Path:
+    """Save the matplotlib figure ``fig`` to ``path`` (format from its suffix), atomically, with
+    a tight bounding box (titles and labels never clipped), then close it."""
+    import matplotlib.pyplot as plt  # only where a figure exists, so matplotlib is loaded already
+
+    path = Path(path)
+    try:
+        return atomic_write(path, lambda temp: fig.savefig(temp, format=path.suffix.lstrip(".") or "png", dpi=dpi,
+                                                           bbox_inches="tight", pad_inches=0.1))
+    finally:
+        plt.close(fig)
+
+
+def run_header(command: str, seconds: float, machine: MachineInfo) -> dict[str, Any]:
+    """The head of a run's record: the command that reproduces it, how long it took, when
+    the record was written (UTC) and the machine (CPU, versions, device, load averages)."""
+    return {"command": command, "seconds": seconds,
+            "written": datetime.now(timezone.utc).isoformat(timespec="seconds"), "machine": asdict(machine)}
+
+
+__all__ = ["write_text", "write_json", "write_parquet", "write_csv", "save_figure", "run_header"]

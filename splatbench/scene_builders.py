@@ -1,0 +1,58 @@
+"""Building blocks of hand-made scenes: Gaussians placed by where they land on screen and
+how large they look there.
+
+The verification applications each build their own scenes from these: conform's probe
+scenes (`splatbench.conform.scenes`), stress's degenerate cases (`splatbench.stress.cases`)
+and validate's sweeps (`splatbench.validate.mitsuba.cases`); the synthetic workloads' random
+rotations are `splatbench.workloads.random_unit_quats`.
+
+    camera_points(camera, u, v, depth) -> [..., 3]  camera-space points seen at pixel position (u, v)
+    to_world(camera, cam_pts [..., 3]) -> [..., 3]  camera space -> world (float64)
+    point_at(camera, u, v, depth) -> [..., 3]       the world points seen at (u, v) at camera depth
+    world_sigma(camera, sigma_px, depth)            the world standard deviation spanning sigma_px pixels
+    logit(opacity)                                  the stored opacity (a logit) of an opacity in (0, 1)
+    sh_dc(colours [N, 3]) -> [N, 1, 3]              SH whose degree-0 colour is ``colours``
+
+Pixel positions follow docs/conventions.md: pixel (i, j) is sampled at (j + 0.5, i + 0.5).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from splatbench.cameras import Camera
+from splatbench.conventions import SH_C0
+
+
+def camera_points(camera: Camera, u, v, depth) -> np.ndarray:
+    """Camera-space points [..., 3] that project to pixel position (``u``, ``v``) at camera z
+    ``depth`` (scalars or arrays of one shape, broadcast)."""
+    u, v, z = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (u, v, depth)))
+    return np.stack([(u - camera.cx) * z / camera.fx, (v - camera.cy) * z / camera.fy, z], axis=-1)
+
+
+def to_world(camera: Camera, cam_pts) -> np.ndarray:
+    """Camera-space points [..., 3] in world coordinates (float64): R^T (p - t)."""
+    return (np.asarray(cam_pts, dtype=np.float64) - camera.translation) @ camera.rotation
+
+
+def point_at(camera: Camera, u, v, depth) -> np.ndarray:
+    """The world points [..., 3] seen at pixel position (``u``, ``v``) at camera z ``depth``."""
+    return to_world(camera, camera_points(camera, u, v, depth))
+
+
+def world_sigma(camera: Camera, sigma_px, depth):
+    """The world standard deviation whose footprint spans ``sigma_px`` pixels at camera z
+    ``depth`` (before eps2d; along x, through fx)."""
+    return sigma_px * depth / camera.fx
+
+
+def logit(opacity) -> np.ndarray:
+    """log(o / (1 - o)): the stored opacity whose sigmoid is ``opacity`` (in (0, 1))."""
+    o = np.asarray(opacity, dtype=np.float64)
+    return np.log(o / (1.0 - o))
+
+
+def sh_dc(colours) -> np.ndarray:
+    """SH [N, 1, 3] whose degree-0 colour is ``colours`` [N, 3]: (colour - 0.5) / SH_C0."""
+    return ((np.asarray(colours, dtype=np.float64) - 0.5) / SH_C0)[:, None, :]
