@@ -1,11 +1,12 @@
 """Figures shared by the report writers (the experiment reports, ``compare``):
-matplotlib on the Agg backend (PNG), side-by-side panels, and the time-against-quality
+matplotlib on the Agg backend (PNG), side-by-side panels, and the cost-against-quality
 figure with its Pareto front.
 
 `pareto_figure`: one panel per scene, one point per cell (with 95 % interval bars in
 both directions when the means come with half-widths ``time_half`` / ``quality_half``):
-a time metric across, a quality metric up; the Pareto-optimal cells (no other cell is
-both faster and better, on the means) are ringed and joined by a step line.
+a cost metric across (a time, or the number of Gaussians; column ``time``), a quality
+metric up; the Pareto-optimal cells (no other cell is both cheaper and better, on the
+means) are ringed and joined by a step line.
 `pareto_front` is the computation, shared with the report text. `difference_figure`:
 a per-pixel error map on a log colour scale with its bar (the demo's garden check).
 Every figure is written by `splatbench.report_files.save_figure`.
@@ -53,7 +54,8 @@ def pareto_front(times: Sequence[float], quality: Sequence[float]) -> list[int]:
 
 def pareto_figure(means: pd.DataFrame, scenes: Sequence[str], time: MetricSpec, quality: MetricSpec, path: Path,
                   title: str) -> dict[str, list[str]]:
-    """Time against quality per scene, the Pareto front marked; returns scene -> front cells."""
+    """Cost (``means.time``, labelled by ``time``) against quality per scene, the Pareto
+    front marked; returns scene -> front cells, cheapest first."""
     plt = pyplot()
     fig, axes = panels(plt, len(scenes), 4.6, 3.8)
     fronts: dict[str, list[str]] = {}

@@ -106,11 +106,12 @@ def test_report_files(sh_report):
     folder = path.parent
     assert path.name == "report.md" and path.is_file()
     figures = sorted(p.name for p in (folder / "figures").glob("*.png"))
-    assert figures == ["curves_sh_degree.png", "time_vs_error.png"]
+    assert figures == ["curves_sh_degree.png", "gaussians_vs_error.png", "time_vs_error.png"]
     for name in figures:
         assert (folder / "figures" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     text = path.read_text()
-    assert "](figures/curves_sh_degree.png)" in text and "](figures/time_vs_error.png)" in text
+    for name in figures:
+        assert f"](figures/{name})" in text
     assert f"{len(runs)} runs of kind `train` ({len(runs) - 2} done, 1 failed, 1 not run)" in text
     assert "## Failed runs" in text and "RuntimeError: boom" in text
 
@@ -220,8 +221,11 @@ def test_train_report_names_its_lpips_and_leaves_loaded_times_out(tmp_path):
             # seed 2's times are out (2 pairs), its PSNR and LPIPS in (3 pairs)
             assert vs == {("test_psnr", 3), ("test_lpips", 3), ("train_seconds", 2), ("num_gaussians", 3)}
             assert "1 run(s) timed while other processes loaded the machine are left out of the render / train time comparisons" in text
+            assert (f"Load: 1 of {len(runs)} runs timed while other processes loaded the machine (`metric.time_loaded`: "
+                    f"their times are left out of the time comparisons, their quality kept); others' estimated load "
+                    f"0.20–0.20 on 2 cores.") in text
         else:
-            assert "LPIPS" not in text and "timed under load" not in text
+            assert "LPIPS" not in text and "timed under load" not in text and "Load:" not in text
             assert vs == {("test_psnr", 3), ("train_seconds", 3), ("num_gaussians", 3)}
 
 
@@ -264,6 +268,95 @@ def test_pareto_front():
     # time, quality: (1, 1) and (2, 3) and (4, 4) are optimal; (3, 2) is beaten by (2, 3).
     assert pareto_front([2, 1, 3, 4, float("nan")], [3, 1, 2, 4, 9]) == [1, 0, 3]
     assert pareto_front([1, 1], [2, 2]) == [0, 1]  # equal points dominate neither
+
+
+# Cell -> (final Gaussians, test PSNR) of `test_gaussians_pareto_figure_names_the_front`:
+# absgrad beats default on both (fewer and better); mcmc beats budget (as many, better).
+DENSIFY_CELLS = {"none": (20_000, 24.0), "default": (35_000, 26.0), "absgrad": (30_000, 26.5),
+                 "mcmc": (40_000, 27.0), "budget": (40_000, 26.8)}
+
+
+def test_gaussians_pareto_figure_names_the_front(tmp_path):
+    """Issue 23: a train grid whose results have a Gaussian count gets the figure of test
+    PSNR against the final number of Gaussians (means over 3 seeds, 95 % intervals), and
+    report.md names the cells on its front, fewest Gaussians first: here none -> absgrad ->
+    mcmc (default and budget are dominated). Results without a Gaussian count get no such
+    figure; the time figure is drawn either way."""
+    spec = parse_experiment({"name": "densfake", "kind": "train", "scenes": ["diffuse"], "seeds": [0, 1, 2],
+                             "base": {"iterations": 100, "data": {"resolution": 32, "views": 8, "spp": 2}},
+                             "variants": {"densify": {k: {"strategy": k} for k in DENSIFY_CELLS}}},
+                            source="densfake.toml")
+    runs = expand(spec)
+    for name, drop in (("with", False), ("without", True)):
+        records = []
+        for run in runs:
+            count, psnr = DENSIFY_CELLS[run.labels["densify"]]
+            metrics, curves = fake_metrics("diffuse", 0, run.seed)
+            # seed noise well inside the gaps between cells (0.2 dB, 2,000 Gaussians)
+            metrics.update(test_psnr=psnr + 0.01 * (run.seed - 1), num_gaussians=count + 10 * run.seed)
+            if drop:
+                del metrics["num_gaussians"]
+            records.append(RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene,
+                                     seed=run.seed, status="done", config=dict(run.config), labels=dict(run.labels),
+                                     metrics=metrics, curves=curves, error=None, seconds=1.0,
+                                     started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00",
+                                     worker="h:1"))
+            write_record(tmp_path / name, records[-1])
+        write_table(tmp_path / name / spec.name, records)
+        report = build_report(spec, tmp_path / name)
+        path = write_report(report, tmp_path / "out" / name)
+        text = path.read_text()
+        figure = path.parent / "figures" / "gaussians_vs_error.png"
+        assert (path.parent / "figures" / "time_vs_error.png").is_file()
+        if drop:
+            assert not figure.exists() and "gaussians_vs_error" not in text and "gaussians_vs_error" not in report.fronts
+            continue
+        assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert report.fronts["gaussians_vs_error"] == {"diffuse": ["densify=none", "densify=absgrad", "densify=mcmc"]}
+        assert "## Gaussians against test PSNR (dB)" in text and "](figures/gaussians_vs_error.png)" in text
+        assert ("- Pareto front on diffuse, fewest Gaussians first: `densify=none` → `densify=absgrad` → "
+                "`densify=mcmc`") in text
+        assert "no other cell is both smaller (fewer Gaussians) and better" in text
+
+
+def test_figure_labels_leave_out_the_axes_shared_prefix(tmp_path):
+    """The Pareto figures label points without the axes' shared dotted prefix
+    (``refine_stop=25%``); the report's text still names each front cell in full."""
+    from splatbench.reports.tables import cell_labels, shared_prefix
+
+    assert shared_prefix(["strategy_options.refine_stop", "strategy_options.reset_every"]) == "strategy_options."
+    assert shared_prefix(["a.b.c", "a.b.d"]) == "a.b." and shared_prefix(["a.x", "b.y"]) == ""
+    assert shared_prefix(["sh_degree"]) == "" and shared_prefix(["strategy_options.cap_max"]) == "strategy_options."
+    spec = parse_experiment({"name": "oatfake", "kind": "train", "scenes": ["diffuse"], "seeds": [0, 1],
+                             "grid": "one-at-a-time",
+                             "base": {"iterations": 100, "data": {"resolution": 32, "views": 8, "spp": 2},
+                                      "strategy_options": {"refine_stop": "50%", "grad_threshold": 2e-4}},
+                             "axes": {"strategy_options.refine_stop": ["25%", "50%"],
+                                      "strategy_options.grad_threshold": [2e-4, 4e-4]}}, source="oatfake.toml")
+    runs = expand(spec)
+    # more Gaussians, better PSNR, cell by cell: every cell is on the front
+    cells = {"base": (30_000, 26.0), "refine_stop=25%": (20_000, 25.0), "grad_threshold=0.0004": (25_000, 25.5)}
+    records = []
+    for run in runs:
+        short = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in run.labels.items()
+                          if v != {"strategy_options.refine_stop": "50%",
+                                   "strategy_options.grad_threshold": 2e-4}[k]) or "base"
+        count, psnr = cells[short]
+        metrics, curves = fake_metrics("diffuse", 0, run.seed)
+        metrics.update(test_psnr=psnr + 0.01 * run.seed, num_gaussians=count + run.seed)
+        records.append(RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene,
+                                 seed=run.seed, status="done", config=dict(run.config), labels=dict(run.labels),
+                                 metrics=metrics, curves=curves, error=None, seconds=1.0,
+                                 started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00",
+                                 worker="h:1"))
+        write_record(tmp_path, records[-1])
+    write_table(tmp_path / spec.name, records)
+    report = build_report(spec, tmp_path)
+    assert set(cell_labels(spec, report.table, short=True)) == set(cells)
+    text = write_report(report, tmp_path / "out").read_text()
+    front = ["strategy_options.refine_stop=25%", "strategy_options.grad_threshold=0.0004", "base"]
+    assert report.fronts["gaussians_vs_error"] == {"diffuse": front}
+    assert "fewest Gaussians first: " + " → ".join(f"`{c}`" for c in front) in text
 
 
 # --------------------------------------------------------------------------- kinds

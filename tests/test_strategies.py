@@ -636,6 +636,41 @@ def test_every_strategy_states_the_whole_protocol(name):
     assert all(hasattr(strategy, field) for field in strategy.run_fraction_fields)
     assert set(strategy.schedule_fields) <= set(strategy.run_fraction_fields)
 
+def _written_forms(value) -> set[str]:
+    """How a default may be written in a docstring: ``2e-4``, ``0.0002``, ``15,000``, ``0``, ``"multiplier"``."""
+    if isinstance(value, str):
+        return {f'"{value}"'}
+    if isinstance(value, bool):
+        return {str(value)}
+    forms = {repr(value), f"{value:g}", f"{value:,}"}
+    if isinstance(value, float):
+        forms.add(f"{value:.0e}".replace("e-0", "e-").replace("e+0", "e").replace("e+", "e"))
+    return forms
+
+
+@pytest.mark.parametrize("name", ["none", "default", "mcmc", "budget"])
+def test_every_strategy_cites_its_defaults(name):
+    """Issue 23: each strategy's docstring (its class's, or the class it extends, or their
+    modules') names every field with its default value (``field`` VALUE), beside its source.
+    A field added, or a default changed, without its docstring line fails here."""
+    import dataclasses
+    import re
+    import sys
+
+    from splatbench.strategies import STRATEGIES
+
+    cls = STRATEGIES[name][0]
+    docs = "\n".join((k.__doc__ or "") + (sys.modules[k.__module__].__doc__ or "")
+                     for k in cls.__mro__ if k.__module__.startswith("splatbench."))
+    docs = re.sub(r"\s+", " ", docs)
+    uncited = []
+    for f in dataclasses.fields(cls):
+        forms = _written_forms(f.default)
+        if not any(re.search(rf"``{f.name}`` (= )?{re.escape(v)}(?!\d|\.\d)", docs) for v in forms):
+            uncited.append(f"{f.name} = {f.default!r}")
+    assert not uncited, f"{cls.__name__}: defaults not cited in the docstring: {uncited}"
+
+
 
 @dataclass
 class CountingInfo(FakeInfo):

@@ -1,5 +1,6 @@
 """What a run kind declares about its reports, as plain data: metrics, findings rules,
-the time-against-quality figure, the metrics' meanings.
+the Pareto figures of a cost (time, the number of Gaussians) against quality, the
+metrics' meanings.
 
 A kind's module builds one `KindReport` and passes it to its `RunKind` (``report=``),
 so adding a kind touches that one file: the report code (`splatbench.reports`) reads
@@ -38,13 +39,20 @@ class FindingRules:
 
 
 @dataclass(frozen=True)
-class TimeQuality:
-    """The time-against-quality (Pareto) figure: its two metrics, file stem and title."""
+class Tradeoff:
+    """A Pareto figure: a cost metric across (lower is better), a quality metric up, one
+    point per grid cell; the report draws it when the results hold both metrics.
 
-    time: str      # metric on the x axis (e.g. "train_seconds")
+    cheaper: what a lower cost means, in words ("faster", "smaller"); order: how the
+    front's cells are listed, in words ("fastest first").
+    """
+
+    cost: str      # metric on the x axis (e.g. "train_seconds", "num_gaussians")
     quality: str   # metric on the y axis (e.g. "test_psnr")
     stem: str      # figure file stem under figures/
     title: str
+    cheaper: str = "faster"
+    order: str = "fastest first"
 
 
 @dataclass(frozen=True)
@@ -52,7 +60,7 @@ class KindReport:
     """A kind's report declarations.
 
     metrics: the table's metrics, in column order; rules: the findings' primary metric
-    and comparisons (None: no findings); time_quality: the Pareto figure (None: none);
+    and comparisons (None: no findings); tradeoffs: the Pareto figures, in report order;
     meanings: metric name -> meaning (the report's "Metrics" section); timed: metrics that
     are times: a run whose ``metric.time_loaded`` is 1 (timed while other processes
     loaded the machine) is left out of their comparisons only.
@@ -60,9 +68,9 @@ class KindReport:
 
     metrics: tuple[MetricSpec, ...]
     rules: FindingRules | None = None
-    time_quality: TimeQuality | None = None
+    tradeoffs: tuple[Tradeoff, ...] = ()
     meanings: Mapping[str, str] = field(default_factory=dict)
     timed: tuple[str, ...] = ()
 
 
-__all__ = ["Comparison", "FindingRules", "TimeQuality", "KindReport"]
+__all__ = ["Comparison", "FindingRules", "Tradeoff", "KindReport"]

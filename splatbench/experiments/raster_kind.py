@@ -82,8 +82,8 @@ import numpy as np
 
 from splatbench.checks import check_keys, check_sh_degree, check_type
 from splatbench.errors import InputError
+from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, Tradeoff
 from splatbench.fsutil import cache_root
-from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.metrics.load import Load, own_share
 from splatbench.metrics.spec import MetricSpec
@@ -351,8 +351,8 @@ REPORT = KindReport(
     ),
     rules=FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean", 1.0), Comparison("exact_psnr", "diff"),
                                        Comparison("pairs", "ratio"))),
-    time_quality=TimeQuality("fwd_bwd_rel", "exact_psnr", "speed_vs_error",
-                             "Rasterizer speed against error to the exact Gaussian mixture (mean over seeds)"),
+    tradeoffs=(Tradeoff("fwd_bwd_rel", "exact_psnr", "speed_vs_error",
+                        "Rasterizer speed against error to the exact Gaussian mixture (mean over seeds)"),),
     meanings=METRICS,
 )
 

@@ -53,7 +53,7 @@ from typing import Any
 from splatbench.checks import check_image_size, check_keys
 from splatbench.data.content import content_hash
 from splatbench.errors import InputError
-from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, TimeQuality
+from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, Tradeoff
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.metrics.spec import MetricSpec
 
@@ -384,11 +384,9 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
     return RunOutput(metrics=metrics, curves=curves)
 
 
-#: The ``train`` kind (``kind = "train"``).
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
     metrics=(
-
         MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher"),
         MetricSpec("test_ssim", "SSIM", ".4f", "", "higher"),
         MetricSpec("test_lpips", "LPIPS", ".4f", "", "lower"),
@@ -399,12 +397,16 @@ REPORT = KindReport(
     ),
     rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff"), Comparison("test_lpips", "diff"),
                                      Comparison("train_seconds", "ratio"), Comparison("num_gaussians", "ratio"))),
-    time_quality=TimeQuality("train_seconds", "test_psnr", "time_vs_error",
-                             "Training time against test PSNR per cell (mean over seeds)"),
+    tradeoffs=(Tradeoff("train_seconds", "test_psnr", "time_vs_error",
+                        "Training time against test PSNR per cell (mean over seeds)"),
+               Tradeoff("num_gaussians", "test_psnr", "gaussians_vs_error",
+                        "Final number of Gaussians against test PSNR per cell (mean over seeds)",
+                        cheaper="smaller (fewer Gaussians)", order="fewest Gaussians first")),
     meanings=METRICS,
     timed=("train_seconds", "render_ms_per_view"),
 )
 
+#: The ``train`` kind (``kind = "train"``).
 TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, identity=identity, scenes=scenes, prepare=prepare,
                 description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT)
 

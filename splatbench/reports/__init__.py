@@ -7,7 +7,7 @@
 Modules: `tables` (axis rows, mean ± 95 % interval, metric specs per kind), `findings`
 (claims computed from the tables: paired differences with intervals), `notes`
 (kind-specific findings, registered by kind name), `figures` (training curves, the
-cells of the time-against-error figure), `report` (assembly, markdown), `cli`
+cells of the Pareto figures), `report` (assembly, markdown), `cli`
 (``splatbench report``). Statistics are `splatbench.metrics.stats`. See docs/reports.md.
 """
 

@@ -1,5 +1,5 @@
 """Report figures (matplotlib, Agg backend, PNG): training curves, and the cell means
-the time-against-error figure draws.
+the Pareto figures (time or Gaussians against error) draw.
 
 * `curves_figure`: one panel per scene, one line per axis row: the mean over the
   row's runs of the test PSNR at each evaluation (``eval_step`` / ``eval_psnr`` in the
@@ -79,13 +79,14 @@ def curves_figure(table: AxisTable, runs: pd.DataFrame, path: Path) -> Path | No
     return path
 
 
-def cell_means(runs: pd.DataFrame, labels: pd.Series, time: str, quality: str) -> pd.DataFrame:
-    """Mean time and quality per (scene, cell label) over the done runs (one run per seed
-    in a cell), with the half-widths of their 95 % t intervals (``time_half``,
-    ``quality_half``; NaN with one seed)."""
+def cell_means(runs: pd.DataFrame, labels: pd.Series, cost: str, quality: str) -> pd.DataFrame:
+    """Mean cost (metric ``cost``: a time, the number of Gaussians) and quality per (scene,
+    cell label) over the done runs (one run per seed in a cell), with the half-widths of
+    their 95 % t intervals; columns ``time`` (the cost, as `pareto_figure` names its x),
+    ``quality``, ``time_half``, ``quality_half`` (NaN with one seed)."""
     done = done_runs(runs)
     frame = pd.DataFrame({"scene": done.scene, "cell": labels.loc[done.index],
-                          "time": pd.to_numeric(done[f"metric.{time}"], errors="coerce"),
+                          "time": pd.to_numeric(done[f"metric.{cost}"], errors="coerce"),
                           "quality": pd.to_numeric(done[f"metric.{quality}"], errors="coerce")})
     order = list(dict.fromkeys(frame.cell))
     records = []

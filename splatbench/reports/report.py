@@ -10,9 +10,10 @@ so a report is never built from a stale table. What is written, under ``out``:
 
 * ``report.md``: a header (runs done / failed / not run, shared settings, run time),
   one section per axis (a table of mean ± 95 % t interval over seeds of each axis value, per
-  scene; the findings; the training curves), run time against quality with the Pareto
-  front, the metrics' meanings, and any failed runs.
-* ``figures/curves_<axis>.png``, ``figures/time_vs_error.png`` (train kind) or
+  scene; the findings; the training curves), each Pareto figure the kind declares (a cost
+  against quality, the cells on the front named), the metrics' meanings, and any failed runs.
+* ``figures/curves_<axis>.png``; the kind's Pareto figures (`KindReport.tradeoffs`):
+  ``figures/time_vs_error.png`` and ``figures/gaussians_vs_error.png`` (train kind) or
   ``figures/speed_vs_error.png`` (raster kind).
 * ``results.parquet``: the run table the report was built from (the engine's columns:
   ``run_id, scene, seed, status, ..., axis.*, config.*, metric.*, curves``).
@@ -30,6 +31,7 @@ import pandas as pd
 
 from splatbench.errors import InputError
 from splatbench.experiments.grid import expand
+from splatbench.experiments.kind_report import Tradeoff
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.experiments.store import TABLE_NAME, build_table, experiment_dir, read_records
 from splatbench.fsutil import atomic_write
@@ -59,8 +61,8 @@ class Report:
     spec: the experiment; table: one row per run of the grid that has a result (grid
     order; `splatbench.experiments.store` columns); total: runs in the grid;
     metrics: the metrics shown; axes: one `AxisTable` per axis; findings: axis name (or
-    "parity") -> `Finding`; fronts: scene -> Pareto-optimal cell labels (filled when
-    written).
+    "parity") -> `Finding`; fronts: Pareto figure stem -> scene -> Pareto-optimal cell
+    labels, cheapest first (filled when written).
     """
 
     spec: ExperimentSpec
@@ -69,7 +71,7 @@ class Report:
     metrics: tuple[MetricSpec, ...]
     axes: list[AxisTable]
     findings: dict[str, Finding]
-    fronts: dict[str, list[str]] = field(default_factory=dict)
+    fronts: dict[str, dict[str, list[str]]] = field(default_factory=dict)
 
     @property
     def done(self) -> int:
@@ -141,22 +143,38 @@ def write_report(report: Report, out: str | Path) -> Path:
         path = curves_figure(t, table, figures / f"curves_{_slug(t.axis)}.png")
         if path is not None:
             curve_paths[t.axis] = path
-    pareto_path = None
-    declared = kind_report(report.spec.kind)
-    tq = declared.time_quality if declared is not None else None
+    drawn: list[tuple[Tradeoff, Path]] = []
     specs = {m.name: m for m in report.metrics}
-    if tq is not None and tq.time in specs and tq.quality in specs and report.done:
-        means = cell_means(table, cell_labels(report.spec, table), tq.time, tq.quality)
-        pareto_path = figures / f"{tq.stem}.png"
-        report.fronts = pareto_figure(means, list(report.spec.scenes), specs[tq.time], specs[tq.quality],
-                                      pareto_path, tq.title)
-    text = render_markdown(report, curve_paths, pareto_path, out)
+    # points labelled without the axes' shared prefix (legible); the text names the cells in full
+    short, full = cell_labels(report.spec, table, short=True), cell_labels(report.spec, table)
+    to_full = dict(zip(short, full))
+    for tradeoff in drawable_tradeoffs(report):
+        means = cell_means(table, short, tradeoff.cost, tradeoff.quality)
+        path = figures / f"{tradeoff.stem}.png"
+        fronts = pareto_figure(means, list(report.spec.scenes), specs[tradeoff.cost], specs[tradeoff.quality],
+                               path, tradeoff.title)
+        report.fronts[tradeoff.stem] = {scene: [to_full[c] for c in cells] for scene, cells in fronts.items()}
+        drawn.append((tradeoff, path))
+    text = render_markdown(report, curve_paths, drawn, out)
     atomic_write(out / REPORT_NAME, lambda temp: temp.write_text(text, encoding="utf-8"))
     return out / REPORT_NAME
 
 
+def drawable_tradeoffs(report: Report) -> list[Tradeoff]:
+    """The kind's Pareto figures whose two metrics the report shows (its results hold
+    them), when at least one run is done: any grid of the kind whose results have, say,
+    a Gaussian count gets that figure."""
+    declared = kind_report(report.spec.kind)
+    if declared is None or not report.done:
+        return []
+    shown = {m.name for m in report.metrics}
+    return [t for t in declared.tradeoffs if t.cost in shown and t.quality in shown]
+
+
 # --------------------------------------------------------------------------- markdown
-def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: Path | None, out: Path) -> str:
+def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: list[tuple[Tradeoff, Path]],
+                    out: Path) -> str:
+    """The report's text; ``tradeoffs``: each Pareto figure drawn, with its file."""
     spec, table = report.spec, report.table
     missing = report.total - len(table)
     dims = ", ".join(f"`{d}`" for d in spec.dimensions) or "no axes"
@@ -179,7 +197,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
             for name, src in spec.scene_tables.items())
             + " (a scene's own keys win over the shared `data.*`; `data` keys of another scene type do not apply "
               "to it).", ""]
-    timing = run_time(table)
+    timing = " ".join(t for t in (run_time(table), load_facts(table)) if t)
     if timing:
         lines += [timing, ""]
     if missing:
@@ -199,16 +217,16 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], pareto_path: P
     for name in (n for n in report.findings if n not in {t.axis for t in report.axes}):  # run findings
         lines += [f"## {name.capitalize()}", "", report.findings[name].markdown(), ""]
 
-    if pareto_path is not None:
-        tq = kind_report(spec.kind).time_quality
-        specs = {m.name: m for m in report.metrics}
-        lines += [f"## {specs[tq.time].label} against {specs[tq.quality].label}", "",
-                  f"{tq.title}; bars are 95 % t intervals over seeds (none with one seed); ringed points are "
-                  f"Pareto-optimal on the means (no other cell is both faster and better).", "",
-                  f"![{tq.stem}]({pareto_path.relative_to(out).as_posix()})", ""]
-        for scene, front in report.fronts.items():
+    specs = {m.name: m for m in report.metrics}
+    for tradeoff, path in tradeoffs:
+        cost, quality = specs[tradeoff.cost], specs[tradeoff.quality]
+        lines += [f"## {cost.label} against {quality.label}", "",
+                  f"{tradeoff.title}; bars are 95 % t intervals over seeds (none with one seed); ringed points are "
+                  f"Pareto-optimal on the means (no other cell is both {tradeoff.cheaper} and better).", "",
+                  f"![{tradeoff.stem}]({path.relative_to(out).as_posix()})", ""]
+        for scene, front in report.fronts.get(tradeoff.stem, {}).items():
             if front:
-                lines.append(f"- Pareto front on {scene}, fastest first: " + " → ".join(f"`{c}`" for c in front))
+                lines.append(f"- Pareto front on {scene}, {tradeoff.order}: " + " → ".join(f"`{c}`" for c in front))
         lines.append("")
 
     meanings = metric_meanings(spec.kind)
@@ -259,6 +277,31 @@ def run_time(table: pd.DataFrame) -> str:
             f"(mean {duration(worker / len(done))} per run){span}.")
 
 
+def load_facts(table: pd.DataFrame) -> str:
+    """"Load: ..." -- how many done runs were timed while other processes loaded the
+    machine (``metric.time_loaded``, train; ``metric.loaded``, raster) and the range of the
+    others' estimated load (``metric.load_other``); "" for a table of grids run before
+    load was recorded."""
+    done = table[table.status == "done"] if len(table) else table
+    flag = next((c for c in ("metric.time_loaded", "metric.loaded") if c in done.columns), None)
+    if not len(done) or flag is None:
+        return ""
+    marked = int((pd.to_numeric(done[flag], errors="coerce").fillna(0) != 0).sum())
+    what = ("their times are left out of the time comparisons, their quality kept" if flag == "metric.time_loaded"
+            else "left out of every finding")
+    text = (f"Load: {marked} of {len(done)} runs timed while other processes loaded the machine "
+            f"(`{flag}`: {what})")
+
+    def column(name: str) -> pd.Series:
+        return pd.to_numeric(done[name], errors="coerce").dropna() if name in done.columns else pd.Series([])
+
+    other, cores = column("metric.load_other"), column("metric.cores")
+    if len(other):
+        on = f" on {int(cores.max())} cores" if len(cores) and cores.min() == cores.max() else ""
+        text += f"; others' estimated load {other.min():.2f}–{other.max():.2f}{on}"
+    return text + "."
+
+
 def duration(seconds: float) -> str:
     """``"42 s"``, ``"12 min 5 s"``, ``"3 h 20 min"``."""
     if not math.isfinite(seconds):
@@ -275,5 +318,5 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in text)
 
 
-__all__ = ["Report", "build_report", "write_report", "reported_done", "grid_table", "render_markdown", "run_time", "duration",
-           "REPORT_NAME", "FIGURES"]
+__all__ = ["Report", "build_report", "write_report", "reported_done", "grid_table", "render_markdown",
+           "drawable_tradeoffs", "run_time", "load_facts", "duration", "REPORT_NAME", "FIGURES"]

@@ -243,23 +243,39 @@ def axis_table(spec: ExperimentSpec, axis: str, table: pd.DataFrame, metrics: Se
 
 
 # --------------------------------------------------------------------------- cells
-def cell_labels(spec: ExperimentSpec, table: pd.DataFrame) -> pd.Series:
+def shared_prefix(names: Sequence[str]) -> str:
+    """The dotted prefix every name shares (``"strategy_options."`` for
+    ``strategy_options.refine_stop`` and ``strategy_options.reset_every``), else ""."""
+    parts = [n.split(".")[:-1] for n in names]
+    common: list[str] = []
+    for level in zip(*parts) if parts else ():
+        if len(set(level)) != 1:
+            break
+        common.append(level[0])
+    return "".join(f"{c}." for c in common)
+
+
+def cell_labels(spec: ExperimentSpec, table: pd.DataFrame, short: bool = False) -> pd.Series:
     """A display label per run of ``table`` naming its grid cell (``sh_degree=3``;
-    ``densify=mcmc, ssim_lambda=0.2``; ``base`` for a one-at-a-time base)."""
+    ``densify=mcmc, ssim_lambda=0.2``; ``base`` for a one-at-a-time base). ``short``: the
+    axes' shared dotted prefix left out (``refine_stop=25%`` for
+    ``strategy_options.refine_stop=25%``; the figures' point labels)."""
     dims = spec.dimensions
     if not dims:
         return pd.Series(["all"] * len(table), index=table.index)
     cols = [f"axis.{d}" for d in dims]
+    prefix = shared_prefix(dims) if short else ""
+    names = [d[len(prefix):] for d in dims]
     if spec.grid == "one-at-a-time":
         base = {d: _json(v) for d, v in _base_labels(spec).items()}
 
         def label(row) -> str:
-            diff = [f"{d}={display(_decode(row[c]))}" for d, c in zip(dims, cols)
+            diff = [f"{n}={display(_decode(row[c]))}" for d, n, c in zip(dims, names, cols)
                     if _json(_decode(row[c])) != base.get(d, _json(None))]
             return ", ".join(diff) or "base"
     else:
         def label(row) -> str:
-            return ", ".join(f"{d}={display(_decode(row[c]))}" for d, c in zip(dims, cols))
+            return ", ".join(f"{n}={display(_decode(row[c]))}" for n, c in zip(names, cols))
     return table.apply(label, axis=1) if len(table) else pd.Series([], dtype=object)
 
 
@@ -282,5 +298,5 @@ def _json(value: Any) -> str:
     return json.dumps(value, sort_keys=True)
 
 
-__all__ = ["kind_report", "metric_specs", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
+__all__ = ["kind_report", "metric_specs", "shared_prefix", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
            "axis_table", "cell_labels", "done_runs"]

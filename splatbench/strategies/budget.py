@@ -104,8 +104,11 @@ class BudgetStrategy(DefaultStrategy):
 
     Every field of `DefaultStrategy` keeps its meaning and default (``grad_threshold``
     2e-4 is Taming's fixed qualifier); the budget fields follow taming-3dgs:
-    ``budget`` 20 with ``budget_mode = "multiplier"`` are its command-line defaults
-    (``--budget 20 --mode multiplier``); score weights are its ``score_coefficients``.
+    ``budget`` 20 and ``budget_mode`` "multiplier" are its command-line defaults
+    (``--budget 20 --mode multiplier``); the score weights ``score_grad`` 25,
+    ``score_opacity`` 100, ``score_radius`` 10 and ``score_volume`` 25 are its
+    ``score_coefficients`` (``grad_importance``, ``opac_importance``, ``radii_importance``,
+    ``scale_importance``, in its ``train.py``).
     """
 
     name: ClassVar[str] = "budget"  # type: ignore[misc]

@@ -101,6 +101,24 @@ class DefaultStrategy:
     radius since the last refinement exceeds ``max_screen_size`` px.
 
     The trainer must rasterize with ``absgrad=self.absgrad``.
+
+    Defaults and their sources (graphdeco-inria/gaussian-splatting's ``OptimizationParams``
+    and ``train.py``; gsplat 1.5.3's ``DefaultStrategy`` field in brackets; the full table
+    with the deliberate differences is in docs/training.md, "Defaults and their sources"):
+    ``refine_start`` 500 = ``densify_from_iter`` [``refine_start_iter``]; ``refine_stop``
+    15,000 = ``densify_until_iter`` [``refine_stop_iter``]; ``refine_every`` 100 =
+    ``densification_interval`` [``refine_every``]; ``grad_threshold`` 2e-4 =
+    ``densify_grad_threshold`` [``grow_grad2d``; 8e-4 for AbsGS, gsplat's suggested
+    value for ``absgrad``]; ``percent_dense`` 0.01 [``grow_scale3d``]; ``prune_opacity``
+    0.005 (``train.py``) [``prune_opa``]; ``max_world_size`` 0.1 (``densify_and_prune``)
+    [``prune_scale3d``]; ``max_screen_size`` 0, off (graphdeco's 20 px never fires: its
+    ``max_radii2D`` is cleared before it is read) [``refine_scale2d_stop_iter = 0``];
+    ``reset_every`` 3,000 = ``opacity_reset_interval`` [``reset_every``];
+    ``reset_value`` 0.01 (``reset_opacity``) [``2 * prune_opa``]; split into 2 children
+    at scale / 1.6 (``densify_and_split``, N = 2) [``ops.split``]; ``revised_opacity``
+    False [``revised_opacity``]; ``absgrad`` False [``absgrad``]. This project's
+    extensions: ``early_stop`` False (``early_stop_rel_tol`` 0.005, ``early_stop_patience``
+    2), and ``seed`` 0 for the split's children (the trainer passes the run's seed).
     """
 
     #: Scaled by ``TrainConfig.schedule = "scaled"`` (True: a period); refine_every is a

@@ -52,7 +52,20 @@ class MCMCState:
 
 @dataclass(frozen=True)
 class MCMCStrategy:
-    """3DGS-MCMC: relocate dead Gaussians, grow by ``growth`` up to ``cap_max``, noisy means."""
+    """3DGS-MCMC: relocate dead Gaussians, grow by ``growth`` up to ``cap_max``, noisy means.
+
+    Defaults and their sources (gsplat 1.5.3's ``MCMCStrategy`` field in brackets; the full
+    table in docs/training.md, "Defaults and their sources"): ``cap_max`` 1,000,000
+    [``cap_max``]; ``noise_lr`` 5e5 [``noise_lr``]; ``refine_start`` 500, ``refine_stop``
+    25,000, ``refine_every`` 100 [``refine_start_iter``, ``refine_stop_iter``,
+    ``refine_every``]; ``min_opacity`` 0.005 [``min_opacity``]; ``growth`` 0.05
+    [``_add_new_gs``: ``int(1.05 * n)``]; ``opacity_reg`` 0.01 and ``scale_reg`` 0.01
+    (3DGS-MCMC's training recipe; the loss terms are the trainer's in gsplat, not its
+    strategy's); initial opacity 0.5 (ubc-vision/3dgs-mcmc ``create_from_pcd``).
+    This project's extensions: ``early_stop`` False (``early_stop_rel_tol`` 0.005,
+    ``early_stop_patience`` 2), and ``seed`` 0 for the sampling and the noise (the trainer
+    passes the run's seed).
+    """
 
     name: ClassVar[str] = "mcmc"
     absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad

@@ -10,7 +10,9 @@ from splatbench.strategies.base import Optimizers, Params, StepContext, Topology
 
 @dataclass(frozen=True)
 class NoneStrategy:
-    """Leaves the Gaussians alone; every hook is a no-op."""
+    """Leaves the Gaussians alone; every hook is a no-op (no gsplat counterpart: a gsplat
+    trainer without a strategy). Its one default, the initial opacity 0.1
+    (``init_opacity = "auto"``), is graphdeco's ``create_from_pcd``."""
 
     name: ClassVar[str] = "none"
     absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad
