@@ -663,3 +663,26 @@ def test_settling_names_a_gap_still_moving_and_passes_a_settled_one():
                                             {"a": [20.0, 20.1, 19.9], "b": [25.0, 25.1, 24.9]}))
     assert "Settled:" in steady.markdown() and not steady.claims[0].significant
     assert "steps 1500→2000" in steady.markdown()
+
+
+def test_report_rebuild_rewrites_a_committed_report_from_its_own_parquet(tmp_path):
+    """`splatbench report --rebuild` needs no results folder: the committed sh_degree report
+    rebuilt from its parquet is the committed text; another grid's parquet is refused in one line."""
+    import shutil
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    from splatbench.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+    shutil.copytree(root / "reports" / "sh_degree", tmp_path / "r")
+    (tmp_path / "r" / "report.md").write_text("old")
+    res = CliRunner().invoke(main, ["report", str(root / "experiments" / "sh_degree.toml"), "--rebuild",
+                                    "--out", str(tmp_path / "r")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "r" / "report.md").read_text() == (root / "reports" / "sh_degree" / "report.md").read_text()
+    res = CliRunner().invoke(main, ["report", str(root / "experiments" / "loss_weighting.toml"), "--rebuild",
+                                    "--out", str(tmp_path / "r")])
+    assert res.exit_code == 2 and "does not hold the runs the grid makes now" in res.output
+    assert len(res.output.strip().splitlines()) == 1

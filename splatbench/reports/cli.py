@@ -15,7 +15,10 @@ import click
               help="Report folder (default: reports/<name>).")
 @click.option("--force", is_flag=True,
               help="Replace a report folder whose results.parquet holds more finished runs than the new report.")
-def report(experiment: Path, results: Path | None, out: Path | None, force: bool) -> None:
+@click.option("--rebuild", is_flag=True,
+              help="Rebuild the report from the report folder's own results.parquet (no results folder, nothing "
+                   "rerun): after a change to how reports are written. Its runs must be the grid's.")
+def report(experiment: Path, results: Path | None, out: Path | None, force: bool, rebuild: bool) -> None:
     """Write reports/<name>/report.md, figures/*.png and results.parquet from the
     results of EXPERIMENT.toml, and print the report's path.
 
@@ -23,7 +26,8 @@ def report(experiment: Path, results: Path | None, out: Path | None, force: bool
     a result are counted as "not run" in the report. Nothing is written, and the exit
     status is 2, when no run of the grid has finished, or when the report folder's
     results.parquet holds more finished runs than the new report would (a partial results
-    folder would shrink it: --force replaces it anyway).
+    folder would shrink it: --force replaces it anyway). --rebuild reads the report folder's
+    own results.parquet instead of the results folder.
     """
     from splatbench.errors import InputError
     from splatbench.experiments.grid import load_experiment
@@ -31,6 +35,12 @@ def report(experiment: Path, results: Path | None, out: Path | None, force: bool
     from splatbench.reports.report import build_report, reported_done, write_report
 
     spec = load_experiment(experiment)
+    if rebuild:
+        out = out or Path("reports") / spec.name
+        path = _rebuild(spec, out)
+        click.echo(f"{spec.name}: rebuilt from {out / TABLE_NAME}")
+        click.echo(str(path))
+        return
     rerun = f"splatbench run {experiment}" + (f" --results {results}" if results is not None else "")
     results = results or spec.runner.results or Path("results")
     out = out or Path("reports") / spec.name
@@ -49,3 +59,27 @@ def report(experiment: Path, results: Path | None, out: Path | None, force: bool
     click.echo(f"{spec.name}: {rep.done} done, {rep.failed} failed, {rep.total - len(rep.table)} not run "
                f"of {rep.total}")
     click.echo(str(path))
+
+
+def _rebuild(spec, out: Path) -> Path:
+    """Rewrite the report in ``out`` from its own ``results.parquet``; one `InputError` line
+    when there is none or its runs are not the grid's (the grid changed: run it again)."""
+    import pandas as pd
+
+    from splatbench.errors import InputError
+    from splatbench.experiments.grid import expand
+    from splatbench.experiments.store import TABLE_NAME
+    from splatbench.reports.report import report_from_table, write_report
+
+    table_path = out / TABLE_NAME
+    if not table_path.is_file():
+        raise InputError(f"--rebuild: {table_path} does not exist; report from a results folder instead")
+    try:
+        table = pd.read_parquet(table_path)
+    except Exception as exc:  # noqa: BLE001 - a damaged file from anywhere: one line
+        raise InputError(f"--rebuild: {table_path}: cannot read ({type(exc).__name__}: {exc})") from None
+    runs = expand(spec)
+    if "run_id" not in table.columns or list(table.run_id) != [r.run_id for r in runs]:
+        raise InputError(f"--rebuild: {table_path} does not hold the runs the grid makes now (the grid or its "
+                         f"defaults changed); run `splatbench run {spec.source}` and report from its results")
+    return write_report(report_from_table(spec, table, len(runs)), out)
