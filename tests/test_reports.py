@@ -57,6 +57,14 @@ def fake_metrics(scene: str, degree, seed: int) -> tuple[dict, dict]:
     return metrics, curves
 
 
+def done_record(spec, run, metrics: dict, curves) -> RunRecord:
+    """A finished train run's record with the given metrics and curves (fixed times, one worker)."""
+    return RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
+                     status="done", config=dict(run.config), labels=dict(run.labels), metrics=metrics, curves=curves,
+                     error=None, seconds=1.0, started="2026-01-01T00:00:00+00:00",
+                     finished="2026-01-01T00:00:01+00:00", worker="h:1")
+
+
 @pytest.fixture(scope="module")
 def sh_results(tmp_path_factory):
     """A results folder for `sh_spec`: every run done but one failed and one missing."""
@@ -204,11 +212,7 @@ def test_train_report_names_its_lpips_and_leaves_loaded_times_out(tmp_path):
             metrics, curves = fake_metrics(run.scene, run.labels["sh_degree"], run.seed)
             metrics["time_loaded"] = int(run is loaded_run)
             metrics = {k: v for k, v in metrics.items() if k not in drop}
-            records.append(RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene,
-                                     seed=run.seed, status="done", config=dict(run.config), labels=dict(run.labels),
-                                     metrics=metrics, curves=curves, error=None, seconds=1.0,
-                                     started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00",
-                                     worker="h:1"))
+            records.append(done_record(spec, run, metrics, curves))
             write_record(tmp_path / name, records[-1])
         write_table(tmp_path / name / spec.name, records)
         report = build_report(spec, tmp_path / name)
@@ -296,11 +300,7 @@ def test_gaussians_pareto_figure_names_the_front(tmp_path):
             metrics.update(test_psnr=psnr + 0.01 * (run.seed - 1), num_gaussians=count + 10 * run.seed)
             if drop:
                 del metrics["num_gaussians"]
-            records.append(RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene,
-                                     seed=run.seed, status="done", config=dict(run.config), labels=dict(run.labels),
-                                     metrics=metrics, curves=curves, error=None, seconds=1.0,
-                                     started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00",
-                                     worker="h:1"))
+            records.append(done_record(spec, run, metrics, curves))
             write_record(tmp_path / name, records[-1])
         write_table(tmp_path / name / spec.name, records)
         report = build_report(spec, tmp_path / name)
@@ -344,11 +344,7 @@ def test_figure_labels_leave_out_the_axes_shared_prefix(tmp_path):
         count, psnr = cells[short]
         metrics, curves = fake_metrics("diffuse", 0, run.seed)
         metrics.update(test_psnr=psnr + 0.01 * run.seed, num_gaussians=count + run.seed)
-        records.append(RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene,
-                                 seed=run.seed, status="done", config=dict(run.config), labels=dict(run.labels),
-                                 metrics=metrics, curves=curves, error=None, seconds=1.0,
-                                 started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00",
-                                 worker="h:1"))
+        records.append(done_record(spec, run, metrics, curves))
         write_record(tmp_path, records[-1])
     write_table(tmp_path / spec.name, records)
     report = build_report(spec, tmp_path)

@@ -125,3 +125,16 @@ class Strategy(Protocol):
         """Called after ``loss.backward()`` and ``optimizer.step()``: accumulate
         statistics and densify / prune / relocate in place."""
         ...
+
+
+def no_refinement_note(name: str, refine_every: int, refine_start: int, refine_stop: int,
+                       iterations: int) -> str | None:
+    """`Strategy.schedule_note` of a strategy that refines every ``refine_every`` steps after
+    ``refine_start`` and before ``refine_stop``: a warning when no such step falls in a run of
+    ``iterations`` steps, else None."""
+    if last_multiple(refine_every, refine_start, min(iterations, refine_stop - 1)) is not None:
+        return None
+    return (f"warning: strategy {name!r} never refines in this run: no multiple of refine_every {refine_every} "
+            f"falls in its refine window {refine_start}..{refine_stop} of {iterations} iterations; give "
+            f"strategy_options.refine_every a smaller value or a fraction of the run (\"5%\"), or train longer")
+

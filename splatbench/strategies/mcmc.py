@@ -25,7 +25,7 @@ import torch
 from splatbench.errors import InputError
 import splatbench.strategies.ops as ops
 from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, check_fields,
-                                       last_multiple)
+                                       last_multiple, no_refinement_note)
 from splatbench.strategies.default import LossPlateau
 
 
@@ -112,12 +112,7 @@ class MCMCStrategy:
 
     def schedule_note(self, iterations: int) -> str | None:
         """A warning when no refinement step falls in the refine window of this run."""
-        if last_multiple(self.refine_every, self.refine_start, min(iterations, self.refine_stop - 1)) is not None:
-            return None
-        return (f"warning: strategy {self.name!r} never refines in this run: no multiple of refine_every "
-                f"{self.refine_every} falls in its refine window {self.refine_start}..{self.refine_stop} of "
-                f"{iterations} iterations; give strategy_options.refine_every a smaller value or a fraction of "
-                f"the run (\"5%\"), or train longer")
+        return no_refinement_note(self.name, self.refine_every, self.refine_start, self.refine_stop, iterations)
 
     def initialize_state(self, params: Params) -> MCMCState:
         gen = torch.Generator(device=params["means"].device)
