@@ -398,6 +398,10 @@ def test_scene_tables_are_checked_in_one_line(tmp_path):
     assert parse({"name": "a", "model": "m.ply", "up": [0, -1, 0]}).scene_sources["a"]["up"] == [0.0, -1.0, 0.0]
     spec = parse({"name": "a", "path": "d", "downscale": 4})
     assert spec.name == "x" and spec.scenes == ("a",)
+    # a bare path where a table is needed: the table to write is named
+    from splatbench.experiments.grid import expand
+    with pytest.raises(InputError, match=r'unknown scene .*\{ name = "NAME", path = "\.\./d" \}'):
+        expand(parse("../d"))
     assert spec.scene_sources["a"] == {"path": str((tmp_path / "d").resolve()), "downscale": 4}
 
 

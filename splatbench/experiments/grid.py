@@ -100,8 +100,13 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
         known = scene_source()
         for scene in spec.scenes:
             if scene not in known and scene not in spec.scene_sources:
+                hint = ""
+                if "/" in scene or scene.endswith(".ply"):  # a path given where a table is needed
+                    key = "model" if scene.endswith(".ply") else "path"
+                    hint = (f"; a {'model' if key == 'model' else 'dataset folder'} is given as a table: "
+                            f'{{ name = "NAME", {key} = "{scene}" }}')
                 raise InputError(f"{spec.source}: scenes: unknown scene {scene!r} "
-                                 f"(known: {', '.join(sorted(known)) or 'none'})")
+                                 f"(known: {', '.join(sorted(known)) or 'none'}){hint}")
 
     dims = _choices(spec)
     variant_names = set(spec.variants)
