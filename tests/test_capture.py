@@ -402,6 +402,8 @@ def test_scene_tables_are_checked_in_one_line(tmp_path):
     from splatbench.experiments.grid import expand
     with pytest.raises(InputError, match=r'unknown scene .*\{ name = "NAME", path = "\.\./d" \}'):
         expand(parse("../d"))
+    with pytest.raises(InputError, match="scenes.diffuse: the name of a catalog scene"):
+        expand(parse({"name": "diffuse", "path": "d"}))
     assert spec.scene_sources["a"] == {"path": str((tmp_path / "d").resolve()), "downscale": 4}
 
 

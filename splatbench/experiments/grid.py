@@ -99,6 +99,9 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
     if scene_source is not None:
         known = scene_source()
         for scene in spec.scenes:
+            if scene in known and scene in spec.scene_sources:
+                raise InputError(f"{spec.source}: scenes.{scene}: the name of a catalog scene; give the table "
+                                 f"another name (its runs and results are told apart by it)")
             if scene not in known and scene not in spec.scene_sources:
                 hint = ""
                 if "/" in scene or scene.endswith(".ply"):  # a path given where a table is needed
