@@ -58,6 +58,21 @@ def auto_sh_degree_note(table: AxisTable, runs: pd.DataFrame, scenes: list[str])
     return lines, claims
 
 
+def _cell_label(done: pd.DataFrame, axes: list[str]):
+    """A row's cell as ``axis=value, ...``; in a one-at-a-time grid (every cell differs from the
+    most common one in at most one axis, with more than one axis) only the axis that differs,
+    or ``base``."""
+    common = {c: done[c].mode().iloc[0] for c in axes}
+
+    def moved(row) -> list[str]:
+        return [c for c in axes if row[c] != common[c]]
+
+    one_at_a_time = len(axes) > 1 and all(len(moved(row)) <= 1 for _, row in done.iterrows())
+    if one_at_a_time:
+        return lambda row: ", ".join(f"{c[5:]}={row[c]}" for c in moved(row)) or "base"
+    return lambda row: ", ".join(f"{c[5:]}={row[c]}" for c in axes)
+
+
 def settling_finding(runs: pd.DataFrame) -> Finding | None:
     """Train kind: whether the differences between a scene's cells had settled when the runs
     ended, from the curves' last evaluation interval (``eval_step`` / ``eval_psnr``).
@@ -74,6 +89,7 @@ def settling_finding(runs: pd.DataFrame) -> Finding | None:
     if done.empty or "curves" not in done.columns:
         return None
     axes = [c for c in done.columns if c.startswith("axis.")]
+    label = _cell_label(done, axes)
     rise: dict[tuple, dict[int, float]] = {}
     final: dict[tuple, dict[int, float]] = {}
     steps: set[tuple[int, int]] = set()
@@ -85,7 +101,7 @@ def settling_finding(runs: pd.DataFrame) -> Finding | None:
         step, psnr = curves.get("eval_step") or [], curves.get("eval_psnr") or []
         if len(step) < 2 or len(psnr) != len(step) or None in psnr[-2:]:
             continue
-        key = (row["scene"], ", ".join(f"{c[5:]}={row[c]}" for c in axes))
+        key = (row["scene"], label(row))
         rise.setdefault(key, {})[int(row["seed"])] = float(psnr[-1]) - float(psnr[-2])
         final.setdefault(key, {})[int(row["seed"])] = float(psnr[-1])
         steps.add((int(step[-2]), int(step[-1])))
