@@ -21,7 +21,7 @@ import json
 
 import pandas as pd
 
-from splatbench.metrics.stats import t_interval
+from splatbench.metrics.stats import paired_difference, t_interval
 from splatbench.reports.findings import AxisNote, Claim, Finding
 from splatbench.reports.tables import AxisTable, done_runs
 
@@ -83,8 +83,6 @@ def settling_finding(runs: pd.DataFrame) -> Finding | None:
     of the change excludes 0) by more than the half-width of the 95 % interval of their final
     difference: the reported difference then is what this run length gives, not where the two
     converge (the report protocol asks for settled models; docs/reports.md)."""
-    from splatbench.metrics.stats import paired_difference
-
     done = done_runs(runs)
     if done.empty or "curves" not in done.columns:
         return None
