@@ -326,12 +326,22 @@ def test_same_seed_and_config_give_the_same_ply_bytes(tmp_path, tiny_diffuse):
     assert len(Gaussians.from_ply(tmp_path / "a" / "point_cloud.ply")) != len(tiny_diffuse.points)  # densified
 
 
-def test_checkpoint_resumes_training_exactly(tmp_path, tiny_diffuse):
+#: Each strategy with state, refining on both sides of step 10 (MCMC: relocations and additions;
+#: budget: a count schedule of 2 refinements toward 1.5 x the initial points).
+CHECKPOINT_STRATEGIES = {
+    "default": {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "grad_threshold": 1e-5},
+    "mcmc": {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "cap_max": 10_000},
+    "budget": {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "grad_threshold": 1e-5, "budget": 1.5},
+}
+
+
+@pytest.mark.parametrize("strategy", sorted(CHECKPOINT_STRATEGIES))
+def test_checkpoint_resumes_training_exactly(tmp_path, tiny_diffuse, strategy):
     """20 steps straight against 10, a checkpoint, and 10 more in a fresh trainer: the same
     parameters bit for bit, with refinements on both sides of the checkpoint (the
-    strategy's accumulators and generator, Adam's moments and the view order resume)."""
-    opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "grad_threshold": 1e-5}
-    base = dict(iterations=20, strategy="default", strategy_options=opts, sh_degree=1, sh_interval=8)
+    strategy's accumulators, count schedule and generator, Adam's moments and the view order resume)."""
+    opts = CHECKPOINT_STRATEGIES[strategy]
+    base = dict(iterations=20, strategy=strategy, strategy_options=opts, sh_degree=1, sh_interval=8)
     straight = train(config(tmp_path, out=str(tmp_path / "straight"), **base), dataset=tiny_diffuse)
     first = train(config(tmp_path, out=str(tmp_path / "first"), checkpoint_every=10, **base), dataset=tiny_diffuse)
     assert Path(first.ply_path).read_bytes() == Path(straight.ply_path).read_bytes()

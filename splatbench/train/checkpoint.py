@@ -40,6 +40,7 @@ import torch
 
 from splatbench.errors import InputError
 from splatbench.strategies.base import PARAM_GROUPS
+from splatbench.strategies.budget import BudgetState
 from splatbench.strategies.default import DefaultState, LossPlateau, RefineStats
 from splatbench.strategies.mcmc import MCMCState, MCMCStats
 from splatbench.train.params import make_optimizers
@@ -49,7 +50,7 @@ from splatbench.train.sh_schedule import ShDecision, ShSchedule
 #: Bump when the checkpoint's content changes (2: plain data, read with weights_only=True).
 CHECKPOINT_FORMAT = "splatbench-checkpoint/2"
 #: The only classes a checkpoint may name; each is rebuilt from its fields, nothing is called.
-_CLASSES = {cls.__name__: cls for cls in (DefaultState, LossPlateau, RefineStats, MCMCState, MCMCStats,
+_CLASSES = {cls.__name__: cls for cls in (DefaultState, BudgetState, LossPlateau, RefineStats, MCMCState, MCMCStats,
                                           ShSchedule, ShDecision, HistoryPoint, EvalPoint)}
 _OBJECT, _TUPLE, _GENERATOR, _NUMPY_RNG = "__object__", "__tuple__", "__generator__", "__numpy_rng__"
 
