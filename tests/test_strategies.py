@@ -754,11 +754,33 @@ def test_budget_grows_to_its_targets_among_the_candidates_only():
         assert stats.pruned == 0 and target - 1 <= stats.num_gaussians <= target, (k, stats)
         assert grown == stats.num_gaussians - n <= int(cand.sum())
         assert_consistent(params, opts)
+    assert state.short == [] and strat.outcome_note(state) is None  # every target met
     # more Gaussians than the budget: no growth
     n = params["means"].shape[0]
     state.targets = [10]
     state.refinements = 0
     assert strat.refine(params, opts, state, step=9, scene_extent=1.0).num_gaussians == n
+
+
+def test_budget_says_when_too_few_candidates_leave_it_below_its_budget():
+    """Taming grows candidates only: with 6 of 60 passing the threshold, 60 -> 120 cannot be met.
+    Every refinement is recorded short and the run's note names the final count, the budget,
+    the threshold and the two ways out; once a later refinement meets its target, no note."""
+    params, opts, strat, state = budget_setup(budget=2.0)   # targets 86, 105, 116, 120
+    for k in range(4):
+        state.count[:] = 1
+        state.grad_accum[:] = 1e-4
+        state.grad_accum[:6] = 3e-4                      # 6 candidates (clone: the small half)
+        stats = strat.refine(params, opts, state, step=k, scene_extent=1.0)
+        assert stats.num_gaussians == 60 + 6 * (k + 1)   # all candidates grow, no more
+    assert [s[0] for s in state.short] == [1, 2, 3, 4] and state.short[-1] == (4, 120, 84)  # 78 + 6
+    note = strat.outcome_note(state)
+    assert note.startswith("warning: strategy 'budget' ended at 84 Gaussians, below its budget of 120")
+    assert "4 of 4 refinements" in note and "grad_threshold 0.0002" in note and "smaller budget" in note
+    # a last refinement whose target was within reach: the model met its budget, no note
+    state.targets, state.refinements = [5, 84], 1
+    strat.refine(params, opts, state, step=4, scene_extent=1.0)
+    assert strat.outcome_note(state) is None
 
 
 def test_budget_shares_headroom_by_candidates_and_draws_by_score():

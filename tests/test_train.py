@@ -367,6 +367,17 @@ def test_checkpoint_resumes_training_exactly(tmp_path, tiny_diffuse, strategy):
         train(config(tmp_path, out=str(tmp_path / "other"), **base), dataset=tiny_diffuse, resume=tmp_path / "missing.pt")
 
 
+def test_a_budget_run_below_its_budget_says_so_in_its_notes(tmp_path, tiny_diffuse):
+    """No Gaussian passes a threshold of 1 (NDC gradients are far smaller), so nothing grows and
+    the run's notes carry the strategy's warning (`BudgetStrategy.outcome_note`)."""
+    opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "grad_threshold": 1.0, "budget": 1.5}
+    result = train(config(tmp_path, strategy="budget", strategy_options=opts), dataset=tiny_diffuse)
+    n = len(tiny_diffuse.points)
+    assert result.num_gaussians <= n
+    assert any(note.startswith(f"warning: strategy 'budget' ended at {result.num_gaussians:,} Gaussians, below its "
+                               f"budget of {round(1.5 * n):,}") for note in result.notes), result.notes
+
+
 def test_frozen_groups_get_no_gradient_work(tmp_path, tiny_diffuse, counting):
     cfg = config(tmp_path, lr_quats=0.0, lr_means=0.0, lr_means_final=0.0, lr_sh_rest=0.0, sh_interval=1)
     with torch_threads(1):

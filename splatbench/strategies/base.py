@@ -109,6 +109,12 @@ class Strategy(Protocol):
         Optional: the trainer reads it only where a strategy has it."""
         ...
 
+    def outcome_note(self, state: object) -> str | None:
+        """A warning, read once a run ends, when this strategy did not do what its settings
+        ask (e.g. a budget strategy ended below its budget); None when it did. Optional, as
+        `schedule_note`."""
+        ...
+
     def initialize_state(self, params: Params) -> object:
         """A fresh state object for ``params`` (e.g. gradient accumulators)."""
         ...

@@ -96,6 +96,8 @@ class BudgetState(DefaultState):
 
     targets: list[int] = field(default_factory=list)  # target count after refinement k = 1..S
     refinements: int = 0                              # refinements made so far
+    # (k, target, count + candidates) of each refinement whose candidates could not meet its target
+    short: list[tuple[int, int, int]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -150,6 +152,20 @@ class BudgetStrategy(DefaultStrategy):
         state.targets = count_schedule(n0, self.final_count(n0), steps)
         return state
 
+    def outcome_note(self, state: BudgetState) -> str | None:
+        """A warning when the model ends below its budget because its last refinement had
+        too few candidates to meet its target (Taming grows only Gaussians whose averaged
+        gradient passes ``grad_threshold``); None when the last target was within reach."""
+        if not state.short or state.short[-1][0] != state.refinements or not state.targets:
+            return None
+        _, target, reach = state.short[-1]
+        end = state.last.num_gaussians if state.last is not None else reach
+        return (f"warning: strategy 'budget' ended at {end:,} Gaussians, below its budget of {state.targets[-1]:,}: "
+                f"at {len(state.short)} of {state.refinements} refinements fewer Gaussians passed grad_threshold "
+                f"{self.grad_threshold:g} than its count schedule asked for (the last: {reach:,} within reach of "
+                f"a target of {target:,}); Taming 3DGS grows only those, so a smaller budget or a lower "
+                f"strategy_options.grad_threshold meets it")
+
     def score(self, params: Params, state: DefaultState, avg_grad: torch.Tensor) -> torch.Tensor:
         """The per-Gaussian score [N] the draw is proportional to (module docstring)."""
         opacity = torch.sigmoid(params["opacity_logits"].detach()).to(avg_grad.device)
@@ -169,6 +185,8 @@ class BudgetStrategy(DefaultStrategy):
             return torch.zeros_like(clone_ok), torch.zeros_like(split_ok)
         target = state.targets[min(state.refinements, len(state.targets)) - 1]
         n_clone, n_split = int(clone_ok.sum()), int(split_ok.sum())
+        if n + n_clone + n_split < target:
+            state.short.append((state.refinements, target, n + n_clone + n_split))
         headroom = max(0, min(target, n + n_clone + n_split) - n)
         total = max(1, n_clone + n_split)
         score = self.score(params, state, avg)

@@ -488,6 +488,9 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     schedule_note = getattr(trainer.strategy, "schedule_note", lambda _: None)(config.iterations)  # optional
     if schedule_note:
         notes.append(schedule_note)
+    outcome_note = getattr(trainer.strategy, "outcome_note", lambda _: None)(trainer.state)  # optional
+    if outcome_note:
+        notes.append(outcome_note)
     if trainer.num_gaussians == 0:
         gone = next((h.step for h in history if h.num_gaussians == 0), trainer.step_index)
         notes.append(f"warning: the model is empty: every Gaussian was pruned (none left from step {gone} on), so it "
