@@ -31,7 +31,7 @@ KIND = "tests.kinds_for_tests:DUMMY"
 DUMMY_DEFAULTS: dict[str, Any] = {
     "x": 0.0,        # a number folded into the metrics
     "n": 3,          # curve length (>= 1)
-    "mode": "ok",    # "ok", "fail" (raise) or "crash" (the worker process exits at once)
+    "mode": "ok",    # "ok", "warn" (ok, with a warning), "fail" (raise) or "crash" (the worker exits at once)
     "sleep": 0.0,    # seconds to sleep before computing
     "gate": "",      # a folder: the run waits there for a token (see `_pass_gate`); "" = no gate
     "opts": {"a": 0, "b": "p"},  # a nested table, for dotted keys
@@ -48,8 +48,8 @@ def _validate(config: dict[str, Any]) -> None:
             else isinstance(value, expected) and not (expected is int and isinstance(value, bool))
         if not ok:
             raise InputError(f"{key}: expected {expected.__name__}, got {value!r}")
-    if config.get("mode", "ok") not in ("ok", "fail", "crash"):
-        raise InputError(f"mode: expected 'ok', 'fail' or 'crash', got {config['mode']!r}")
+    if config.get("mode", "ok") not in ("ok", "warn", "fail", "crash"):
+        raise InputError(f"mode: expected 'ok', 'warn', 'fail' or 'crash', got {config['mode']!r}")
     if not (math.isfinite(config.get("sleep", 0.0)) and config.get("sleep", 0.0) >= 0):
         raise InputError(f"sleep: expected seconds >= 0, got {config['sleep']!r}")
     if config.get("n", 1) < 1:
@@ -100,7 +100,9 @@ def _run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
     (workdir / "note.txt").write_text(f"{config['scene']} {config['seed']}\n")
     metrics = {"value": float(curve[-1]), "total": float(curve.sum()), "a_plus_seed": config["opts"]["a"] + config["seed"],
                "scene_tag": f"{config['scene']}-{config['opts']['b']}", "positive": bool(curve[-1] > 0)}
-    return RunOutput(metrics=metrics, curves={"step": list(range(config["n"])), "value": curve.tolist()})
+    warnings = (f"warning: dummy run told to warn (seed {config['seed']})",) if config["mode"] == "warn" else ()
+    return RunOutput(metrics=metrics, curves={"step": list(range(config["n"])), "value": curve.tolist()},
+                     warnings=warnings)
 
 
 def _scenes() -> set[str]:

@@ -192,7 +192,7 @@ MALFORMED = {
     "unknown config key in an axis": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nxx = [1, 2]\n',
                                       r"axes\.xx = 1: xx: unknown key"),
     "bad value in a variant": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[variants.v]\nok = {}\nno = { mode = "x" }\n',
-                               r"variants\.v\.no: mode: expected 'ok', 'fail' or 'crash'"),
+                               r"variants\.v\.no: mode: expected 'ok', 'warn', 'fail' or 'crash'"),
     "unknown kind": ('kind = "nope"\nscenes = ["alpha"]\n', r"kind: unknown run kind 'nope'"),
     "axis not a list": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nx = 3\n', r"axes\.x: expected a list"),
     "reserved key": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nseed = [1, 2]\n', r"axes\.seed: 'seed' is set by"),
@@ -296,6 +296,48 @@ def test_failed_runs_are_recorded_the_rest_complete_and_resume_skips_done(tmp_pa
     assert (second.done, second.skipped, second.failed, second.total) == (1, 2, 3, 6)
     assert {rid: result_path(results, "mixed", rid).stat().st_mtime_ns for rid in done_files} == done_files
     assert_table_matches_files(folder, {r.run_id for r in expand(spec2)})
+
+
+def test_a_runs_warnings_reach_its_file_the_table_and_the_report(tmp_path):
+    """What a run warned of (`RunOutput.warnings`) is never dropped by the grid: the run's
+    file, the table's ``warnings`` column and a "Warnings" section (with a pointer in the
+    header) carry it; a grid whose runs warned of nothing has neither."""
+    from splatbench.reports.report import build_report, write_report
+
+    text = """
+        name = "warned"
+        kind = "tests.kinds_for_tests:DUMMY"
+        scenes = ["alpha"]
+        seeds = [0, 1]
+        [variants.mode]
+        quiet = {}
+        loud = { mode = "warn" }
+        """
+    results = tmp_path / "results"
+    spec = spec_of(text)
+    assert run_experiment(spec, workers=1, results_dir=results, progress=False).done == 4
+    records = read_records(results / "warned")
+    for r in records.values():
+        expected = [f"warning: dummy run told to warn (seed {r.seed})"] if r.labels["mode"] == "loud" else []
+        assert r.warnings == expected
+    table = read_table(results / "warned")
+    assert table.columns[-2:].tolist() == ["warnings", "curves"]
+    assert sorted(json.loads(w) for w in table.warnings.dropna()) == [["warning: dummy run told to warn (seed 0)"],
+                                                                      ["warning: dummy run told to warn (seed 1)"]]
+    report = write_report(build_report(spec, results), tmp_path / "out").read_text()
+    assert "**Warnings:** 2 run(s) warned" in report and "## Warnings" in report
+    rows = [line for line in report.splitlines() if "dummy run told to warn" in line]
+    assert len(rows) == 2 and all("| alpha | `mode=loud` |" in row for row in rows)
+    quiet = spec_of(text.replace('loud = { mode = "warn" }', "").replace('name = "warned"', 'name = "quiet"'))
+    run_experiment(quiet, workers=1, results_dir=results, progress=False)
+    assert "Warnings" not in write_report(build_report(quiet, results), tmp_path / "out2").read_text()
+    # a stored record whose warnings are not strings is damaged (its run is redone), not trusted
+    path = result_path(results, "warned", next(iter(records)))
+    data = json.loads(path.read_text())
+    path.write_text(json.dumps({**data, "warnings": [3]}))
+    damaged: list = []
+    assert next(iter(records)) not in read_records(results / "warned", damaged)
+    assert "warnings: expected a list of strings" in damaged[0][1]
 
 
 def test_a_run_that_kills_its_worker_is_recorded_and_the_rest_complete(tmp_path):

@@ -54,10 +54,15 @@ class RunOutput:
         table column ``metric.<name>``.
     curves: any JSON-serialisable value (e.g. ``{"step": [...], "psnr": [...]}``), kept
         whole in the run's file and as one JSON string column ``curves``.
+    warnings: one line each, what the run's own tool warned of (a training run's notes
+        that start with ``warning:``, e.g. a budget not met); kept in the run's file, the
+        table's ``warnings`` column (JSON) and the report's "Warnings" section, so that a
+        grid never hides what a single run would have printed.
     """
 
     metrics: Mapping[str, Scalar]
     curves: Any = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -122,7 +127,10 @@ def check_output(output: Any, kind: str) -> RunOutput:
         if value is not None and not isinstance(value, (bool, int, float, str)):
             raise TypeError(f"run kind {kind!r}: metric {key!r} is a {type(value).__name__}, not a scalar")
         metrics[key] = value
-    return RunOutput(metrics=metrics, curves=output.curves)
+    warnings = tuple(output.warnings)
+    if not all(isinstance(w, str) for w in warnings):
+        raise TypeError(f"run kind {kind!r}: warnings must be strings, got {list(warnings)!r:.80}")
+    return RunOutput(metrics=metrics, curves=output.curves, warnings=tuple(" ".join(w.split()) for w in warnings))
 
 
 __all__ = ["RunKind", "RunOutput", "Scalar", "BUILTIN_KINDS", "register_kind", "get_kind",

@@ -17,7 +17,7 @@ Table columns: ``run_id, experiment, kind, scene, seed, status, error`` (the
 deterministic core), ``seconds, started, finished, worker`` (`VOLATILE_COLUMNS`:
 when and where it ran), then ``axis.<name>`` (the run's axis labels),
 ``config.<dotted.path>`` (every resolved config field but scene and seed),
-``metric.<name>`` and ``curves`` (JSON text). A column whose values mix types
+``metric.<name>``, ``warnings`` (JSON list, None for none) and ``curves`` (JSON text). A column whose values mix types
 (``sh_degree`` 0..3 and ``"auto"``) holds their JSON text; lists and tables too.
 """
 
@@ -59,7 +59,8 @@ class RunRecord:
     status: "done" or "failed"; error: one line (``ExcType: message``) when failed;
     traceback: the full traceback of a failure (file only, not in the table);
     config: the resolved nested config; labels: axis name -> label;
-    metrics: name -> scalar; curves: JSON value; seconds: run time in the worker;
+    metrics: name -> scalar; curves: JSON value; warnings: the run's one-line warnings
+    (`RunOutput.warnings`; absent from files written before them); seconds: run time in the worker;
     started, finished: ISO-8601 local times; worker: ``host:pid``.
     """
 
@@ -73,6 +74,7 @@ class RunRecord:
     labels: dict[str, Any] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
     curves: Any = None
+    warnings: list[str] = field(default_factory=list)
     error: str | None = None
     traceback: str | None = None
     seconds: float = 0.0
@@ -95,6 +97,7 @@ class RunRecord:
         row.update({f"config.{k}": v for k, v in flatten(self.config).items() if k not in ("scene", "seed")}
                    if self.config else {})
         row.update({f"metric.{k}": v for k, v in self.metrics.items()})
+        row["warnings"] = json.dumps(self.warnings) if self.warnings else None
         row["curves"] = None if self.curves is None else json.dumps(self.curves, sort_keys=True)
         return row
 
@@ -122,7 +125,7 @@ def write_record(results_dir: str | Path, record: RunRecord) -> Path:
 #: Field types of a stored record (`check_record`); None allowed where the default is None.
 _FIELD_TYPES: dict[str, tuple[type, ...]] = {
     "run_id": (str,), "experiment": (str,), "kind": (str,), "scene": (str,), "seed": (int,), "status": (str,),
-    "config": (dict,), "labels": (dict,), "metrics": (dict,), "error": (str, type(None)),
+    "config": (dict,), "labels": (dict,), "metrics": (dict,), "warnings": (list,), "error": (str, type(None)),
     "traceback": (str, type(None)), "seconds": (int, float), "started": (str,), "finished": (str,),
     "worker": (str,)}
 
@@ -146,6 +149,8 @@ def check_record(data: Any, name: str) -> RunRecord:
         value = data[key]
         if not isinstance(value, types) or isinstance(value, bool):
             raise ValueError(f"{key}: expected {' or '.join(t.__name__ for t in types)}, got {value!r:.60}")
+    if not all(isinstance(w, str) for w in data.get("warnings", [])):
+        raise ValueError(f"warnings: expected a list of strings, got {data['warnings']!r:.60}")
     record = RunRecord.from_dict(data)
     if record.status not in STATUSES:
         raise ValueError(f"status: expected one of {', '.join(STATUSES)}, got {record.status!r:.60}")
@@ -213,9 +218,9 @@ def build_table(records: Iterable[RunRecord]) -> pd.DataFrame:
     """One row per record, in the given order (module doc: columns)."""
     rows = [r.row() for r in records]
     fixed = [*CORE_COLUMNS, *VOLATILE_COLUMNS]
-    extra = sorted({k for row in rows for k in row} - set(fixed) - {"curves"},
+    extra = sorted({k for row in rows for k in row} - set(fixed) - {"warnings", "curves"},
                    key=lambda c: (("axis.", "config.", "metric.").index(c[:c.index(".") + 1]), c))
-    columns = [*fixed, *extra, "curves"]
+    columns = [*fixed, *extra, "warnings", "curves"]
     frame = pd.DataFrame({c: _column([row.get(c) for row in rows]) for c in columns}, columns=columns)
     return frame
 

@@ -381,7 +381,8 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
         "eval_step": [p["step"] for p in evaluations], "eval_psnr": [p["psnr"] for p in evaluations],
         "eval_ssim": [p["ssim"] for p in evaluations], "eval_lpips": [p["lpips"] for p in evaluations],
     }
-    return RunOutput(metrics=metrics, curves=curves)
+    warnings = tuple(note for note in result.notes if note.startswith("warning:"))
+    return RunOutput(metrics=metrics, curves=curves, warnings=warnings)
 
 
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).

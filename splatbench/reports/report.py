@@ -11,16 +11,18 @@ so a report is never built from a stale table. What is written, under ``out``:
 * ``report.md``: a header (runs done / failed / not run, shared settings, run time),
   one section per axis (a table of mean ± 95 % t interval over seeds of each axis value, per
   scene; the findings; the training curves), each Pareto figure the kind declares (a cost
-  against quality, the cells on the front named), the metrics' meanings, and any failed runs.
+  against quality, the cells on the front named), the metrics' meanings, the runs' warnings
+  (`RunOutput.warnings`, one row each) and any failed runs.
 * ``figures/curves_<axis>.png``; the kind's Pareto figures (`KindReport.tradeoffs`):
   ``figures/time_vs_error.png`` and ``figures/gaussians_vs_error.png`` (train kind) or
   ``figures/speed_vs_error.png`` (raster kind).
 * ``results.parquet``: the run table the report was built from (the engine's columns:
-  ``run_id, scene, seed, status, ..., axis.*, config.*, metric.*, curves``).
+  ``run_id, scene, seed, status, ..., axis.*, config.*, metric.*, warnings, curves``).
 """
 
 from __future__ import annotations
 
+import json
 import math
 import shutil
 from dataclasses import dataclass, field
@@ -203,6 +205,10 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     if missing:
         lines += [f"**Incomplete:** {missing} run(s) have no result yet; run `splatbench run {source_path(spec)}` "
                   f"(it resumes) and report again.", ""]
+    warned = run_warnings(table)
+    if warned:
+        lines += [f"**Warnings:** {len({w[0] for w in warned})} run(s) warned of something their numbers below do "
+                  f"not show; see \"Warnings\".", ""]
 
     for t in report.axes:
         how = ("each value pools every run with that value (all other axes' values, all seeds)"
@@ -237,6 +243,12 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
             lines += note(table)
         lines.append("")
 
+    if warned:
+        lines += ["## Warnings", "", "What each run's own tool warned of (the run's file keeps it too).", "",
+                  "| run | scene | cell | seed | warning |", "|---|---|---|---|---|"]
+        lines += [f"| `{rid}` | {scene} | {cell} | {seed} | {text.replace('|', '/')} |"
+                  for rid, scene, cell, seed, text in warned]
+        lines.append("")
     failed = table[table.status == "failed"] if len(table) else table
     if len(failed):
         lines += ["## Failed runs", "", "| run | scene | seed | error |", "|---|---|---|---|"]
@@ -244,6 +256,21 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
             lines.append(f"| `{r.run_id}` | {r.scene} | {r.seed} | {str(r.error).replace('|', '/')} |")
         lines.append("")
     return "\n".join(lines).rstrip() + "\n"
+
+
+def run_warnings(table: pd.DataFrame) -> list[tuple[str, str, str, int, str]]:
+    """``(run_id, scene, cell, seed, warning)`` for each warning of each run, in grid order
+    (the table's ``warnings`` column; a table from before that column has none)."""
+    if "warnings" not in table.columns or not len(table):
+        return []
+    axes = [c for c in table.columns if c.startswith("axis.")]
+    out = []
+    for _, r in table.iterrows():
+        if not isinstance(r.warnings, str):
+            continue
+        cell = ", ".join(f"`{c[5:]}={r[c]}`" for c in axes) or "–"
+        out += [(r.run_id, r.scene, cell, int(r.seed), " ".join(str(w).split())) for w in json.loads(r.warnings)]
+    return out
 
 
 def source_path(spec: ExperimentSpec) -> str:
