@@ -42,6 +42,7 @@ def report(experiment: Path, results: Path | None, out: Path | None, force: bool
         click.echo(str(path))
         return
     rerun = f"splatbench run {experiment}" + (f" --results {results}" if results is not None else "")
+    given_results, given_out = results, out
     results = results or spec.runner.results or Path("results")
     out = out or Path("reports") / spec.name
     rep = build_report(spec, results)
@@ -55,7 +56,7 @@ def report(experiment: Path, results: Path | None, out: Path | None, force: bool
         raise InputError(f"{out / TABLE_NAME}: holds {before} finished runs, the report from {folder} would "
                          f"hold {rep.done}; run the rest with `{rerun}`, or pass --force "
                          f"to replace it")
-    path = write_report(rep, out)
+    path = write_report(rep, out, results=given_results, out_option=given_out)
     click.echo(f"{spec.name}: {rep.done} done, {rep.failed} failed, {rep.total - len(rep.table)} not run "
                f"of {rep.total}")
     click.echo(str(path))
