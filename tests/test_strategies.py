@@ -783,6 +783,39 @@ def test_budget_says_when_too_few_candidates_leave_it_below_its_budget():
     assert strat.outcome_note(state) is None
 
 
+def test_budget_and_mcmc_say_when_their_budget_or_cap_is_below_the_initial_count():
+    """Neither prunes down to a count: a budget or cap under the initial count is never met and
+    the run says so (the multiplier mode's warning names final_count, the usual intent)."""
+    params, opts, strat, state = budget_setup(budget=0.5)    # 30 of 60, multiplier
+    for k in range(4):
+        strat.refine(params, opts, state, step=k, scene_extent=1.0)
+    note = strat.outcome_note(state)
+    assert note.startswith("warning: strategy 'budget': its budget of 30 is below the initial 60 Gaussians")
+    assert "budget_mode = \"final_count\"" in note and "ended at 60" in note
+    params, opts = make_params(60, seed=0, opacity=0.5)
+    mcmc = make_strategy("mcmc", cap_max=40)
+    note = mcmc.outcome_note(mcmc.initialize_state(params))
+    assert note.startswith("warning: strategy 'mcmc': cap_max 40 is below the initial 60 Gaussians")
+    assert make_strategy("mcmc", cap_max=60).outcome_note(mcmc.initialize_state(params)) is None
+
+
+def test_budget_notes_a_final_prune_below_its_budget_without_a_warning():
+    """The last refinement meets its target, then prunes transparent Gaussians in the same step
+    (Taming's order): a plain note with the numbers, not a warning (the rule worked as designed)."""
+    params, opts, strat, state = budget_setup(budget=80, budget_mode="final_count")
+    state.targets = [80]
+    with torch.no_grad():
+        params["opacity_logits"][:5] = -10.0               # opacity 4.5e-5 < prune_opacity 0.005
+    state.count[:] = 1
+    state.grad_accum[:] = 3e-4                            # every Gaussian a candidate
+    stats = strat.refine(params, opts, state, step=0, scene_extent=1.0)
+    assert stats.pruned >= 5 and stats.num_gaussians == 80 - stats.pruned
+    note = strat.outcome_note(state)
+    assert note == (f"strategy 'budget' ended at {80 - stats.pruned:,} Gaussians, {stats.pruned} below its budget of "
+                    f"80: its last refinement grew to 80 and pruned {stats.pruned} (opacity below prune_opacity, or "
+                    f"too large) in the same step, as Taming 3DGS does")
+
+
 def test_budget_shares_headroom_by_candidates_and_draws_by_score():
     """Headroom split clone : split = 20 : 10 (candidates 2 : 1); within the split group,
     Gaussians with a much larger score (opacity; the volume term, which would favour every

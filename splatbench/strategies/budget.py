@@ -98,6 +98,7 @@ class BudgetState(DefaultState):
     refinements: int = 0                              # refinements made so far
     # (k, target, count + candidates) of each refinement whose candidates could not meet its target
     short: list[tuple[int, int, int]] = field(default_factory=list)
+    initial: int = 0                                  # Gaussians at the start
 
 
 @dataclass(frozen=True)
@@ -150,21 +151,50 @@ class BudgetStrategy(DefaultStrategy):
         n0 = params["means"].shape[0]
         steps = refinement_count(self.refine_start, self.refine_stop, self.refine_every)
         state.targets = count_schedule(n0, self.final_count(n0), steps)
+        state.initial = n0
         return state
 
     def outcome_note(self, state: BudgetState) -> str | None:
-        """A warning when the model ends below its budget because its last refinement had
-        too few candidates to meet its target (Taming grows only Gaussians whose averaged
-        gradient passes ``grad_threshold``); None when the last target was within reach."""
-        if not state.short or state.short[-1][0] != state.refinements or not state.targets:
+        """How the run ended against its budget, when not at it:
+
+        - a warning when the budget is below the initial count (Taming grows toward a budget
+          and never prunes down to one);
+        - a warning when the last refinement had too few candidates to meet its target
+          (Taming grows only Gaussians whose averaged gradient passes ``grad_threshold``);
+        - a plain note when the last refinement met its target and then pruned below it in
+          the same step (Taming prunes right after growing), or when early_stop ended the
+          schedule before its last refinement;
+
+        None when the model ended at its budget, or the schedule made no refinement."""
+        if not state.targets:
             return None
-        _, target, reach = state.short[-1]
-        end = state.last.num_gaussians if state.last is not None else reach
-        return (f"warning: strategy 'budget' ended at {end:,} Gaussians, below its budget of {state.targets[-1]:,}: "
-                f"at {len(state.short)} of {state.refinements} refinements fewer Gaussians passed grad_threshold "
-                f"{self.grad_threshold:g} than its count schedule asked for (the last: {reach:,} within reach of "
-                f"a target of {target:,}); Taming 3DGS grows only those, so a smaller budget or a lower "
-                f"strategy_options.grad_threshold meets it")
+        budget = state.targets[-1]
+        end = state.last.num_gaussians if state.last is not None else state.initial
+        mode = (f" (budget_mode 'multiplier': {self.budget:g} x the initial {state.initial:,}; for a number of "
+                f"Gaussians set strategy_options.budget_mode = \"final_count\")"
+                if self.budget_mode == "multiplier" else "")
+        if budget < state.initial:
+            return (f"warning: strategy 'budget': its budget of {budget:,} is below the initial {state.initial:,} "
+                    f"Gaussians{mode}, and Taming 3DGS grows toward a budget but never prunes down to one, so the "
+                    f"model ended at {end:,}; give a budget above the initial count, or start from fewer points")
+        if state.short and state.short[-1][0] == state.refinements:
+            _, target, reach = state.short[-1]
+            return (f"warning: strategy 'budget' ended at {end:,} Gaussians, below its budget of {budget:,}{mode}: "
+                    f"at {len(state.short)} of {state.refinements} refinements fewer Gaussians passed grad_threshold "
+                    f"{self.grad_threshold:g} than its count schedule asked for (the last: {reach:,} within reach of "
+                    f"a target of {target:,}); Taming 3DGS grows only those, so a smaller budget or a lower "
+                    f"strategy_options.grad_threshold meets it")
+        if end < budget and state.refinements < len(state.targets):
+            return (f"strategy 'budget' ended at {end:,} Gaussians, below its budget of {budget:,}: it made "
+                    f"{state.refinements} of the {len(state.targets)} refinements its count schedule plans "
+                    f"(early_stop ended densification)")
+        if state.last is not None and end < budget and state.last.pruned > 0:
+            # (without pruning the last refinement ends at most 1 short: each of the clone and split
+            # shares of the headroom is floored, as in taming-3dgs; no note for that)
+            return (f"strategy 'budget' ended at {end:,} Gaussians, {budget - end:,} below its budget of {budget:,}: "
+                    f"its last refinement grew to {end + state.last.pruned:,} and pruned {state.last.pruned:,} "
+                    f"(opacity below prune_opacity, or too large) in the same step, as Taming 3DGS does")
+        return None
 
     def score(self, params: Params, state: DefaultState, avg_grad: torch.Tensor) -> torch.Tensor:
         """The per-Gaussian score [N] the draw is proportional to (module docstring)."""

@@ -48,6 +48,7 @@ class MCMCState:
     last: MCMCStats | None = None
     history: list[MCMCStats] = field(default_factory=list)
     last_noise: torch.Tensor | None = None  # [N, 3] the latest noise added to the means
+    initial: int = 0            # Gaussians at the start (`outcome_note`)
 
 
 @dataclass(frozen=True)
@@ -118,7 +119,16 @@ class MCMCStrategy:
         gen = torch.Generator(device=params["means"].device)
         gen.manual_seed(self.seed)
         plateau = LossPlateau(self.early_stop_rel_tol, self.early_stop_patience) if self.early_stop else None
-        return MCMCState(gen, plateau)
+        return MCMCState(gen, plateau, initial=int(params["means"].shape[0]))
+
+    def outcome_note(self, state: MCMCState) -> str | None:
+        """A warning when ``cap_max`` is below the initial count: MCMC adds up to its cap and
+        never removes, so such a cap is never met; None otherwise."""
+        if not 0 < self.cap_max < state.initial:
+            return None
+        return (f"warning: strategy 'mcmc': cap_max {self.cap_max:,} is below the initial {state.initial:,} "
+                f"Gaussians, and 3DGS-MCMC only relocates and adds, never removes, so the model kept "
+                f"{state.initial:,}; give cap_max at least the initial count, or start from fewer points")
 
     def regularization(self, params: Params, step: int) -> torch.Tensor:
         """opacity_reg x mean(sigmoid(opacity_logits)) + scale_reg x mean(exp(log_scales))."""
