@@ -315,7 +315,9 @@ def test_a_runs_warnings_reach_its_file_the_table_and_the_report(tmp_path):
         """
     results = tmp_path / "results"
     spec = spec_of(text)
-    assert run_experiment(spec, workers=1, results_dir=results, progress=False).done == 4
+    summary = run_experiment(spec, workers=1, results_dir=results, progress=False)
+    assert (summary.done, summary.warned) == (4, 2)
+    assert summary.line().startswith('done 4 (2 warned: see their report\'s "Warnings"), skipped 0')
     records = read_records(results / "warned")
     for r in records.values():
         expected = [f"warning: dummy run told to warn (seed {r.seed})"] if r.labels["mode"] == "loud" else []

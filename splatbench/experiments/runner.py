@@ -77,10 +77,12 @@ class RunSummary:
     total: int
     folder: Path
     claimed: int = 0
+    warned: int = 0  # of ``done``, runs that warned of something (`RunOutput.warnings`)
 
     def line(self) -> str:
-        return (f"done {self.done}, skipped {self.skipped} (finished), {self.claimed} claimed by another runner, "
-                f"failed {self.failed} of {self.total}")
+        warned = f" ({self.warned} warned: see their report's \"Warnings\")" if self.warned else ""
+        return (f"done {self.done}{warned}, skipped {self.skipped} (finished), {self.claimed} claimed by another "
+                f"runner, failed {self.failed} of {self.total}")
 
 
 # --------------------------------------------------------------------------- parent side
@@ -130,7 +132,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     prepared = None if kind.prepare is None else kind.prepare([plain(r.config) for r in pending])
 
     threads = max(1, cpus // workers)
-    done = failed = claimed = 0
+    done = failed = claimed = warned = 0
     claims: dict[str, RunClaim] = {}
     bar = _progress_bar(len(pending), spec.name, progress)
 
@@ -157,7 +159,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
             claim.touch()
 
     def finish(record: RunRecord) -> None:
-        nonlocal done, failed
+        nonlocal done, failed, warned
         with deferred():  # a record and its claim change together
             on_disk = read_record(result_path(results_dir, spec.name, record.run_id))
             if on_disk is None or on_disk.to_dict() != record.to_dict():
@@ -169,6 +171,12 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
             save_table(folder, ids)
         if record.status == "done":
             done += 1
+            if record.warnings:
+                warned += 1
+                if bar is not None:
+                    bar.write(f"{spec.name}: run {record.run_id} ({record.scene}, seed {record.seed}) warned: "
+                              f"{record.warnings[0]}" + (f" (and {len(record.warnings) - 1} more)"
+                                                         if len(record.warnings) > 1 else ""))
         else:
             failed += 1
             if bar is not None:
@@ -200,7 +208,8 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     finally:
         if bar is not None:
             bar.close()
-    return RunSummary(done=done, skipped=skipped, failed=failed, total=len(runs), folder=folder, claimed=claimed)
+    return RunSummary(done=done, skipped=skipped, failed=failed, total=len(runs), folder=folder, claimed=claimed,
+                      warned=warned)
 
 
 def _drive(pool, pending: list[RunSpec], results_dir: str, finish: Callable[[RunRecord], None], *,
