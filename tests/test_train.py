@@ -361,7 +361,7 @@ def test_checkpoint_resumes_training_exactly(tmp_path, tiny_diffuse, strategy):
     assert 0 < round(before, 3) < resumed.train_seconds
     assert (resumed.resumed_step, straight.resumed_step, first.resumed_step) == (10, None, None)
     # a different config is refused before any step, naming the field
-    with pytest.raises(InputError, match="resume: .* was written with seed=0, this run has seed=1"):
+    with pytest.raises(InputError, match="resume: .* was written with seed=0; this run has seed=1 "):
         train(config(tmp_path, out=str(tmp_path / "other"), seed=1, **base), dataset=tiny_diffuse, resume=checkpoint)
     with pytest.raises(InputError, match="resume: no such checkpoint"):
         train(config(tmp_path, out=str(tmp_path / "other"), **base), dataset=tiny_diffuse, resume=tmp_path / "missing.pt")
@@ -587,6 +587,19 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     assert again.exit_code == 0, again.output
     assert (tmp_path / "r" / "point_cloud.ply").read_bytes() == (tmp_path / "c" / "point_cloud.ply").read_bytes()
     assert json.loads(again.stdout)["notes"][0] == f"resumed from {checkpoint} at step 2 of 3"
+    # --resume alone continues with the checkpoint's own config: no DATASET, --config or --set
+    alone = runner.invoke(main, ["train", "--resume", str(checkpoint), "--json", "--quiet", "--out", str(tmp_path / "a")])
+    assert alone.exit_code == 0, alone.output
+    assert (tmp_path / "a" / "point_cloud.ply").read_bytes() == (tmp_path / "c" / "point_cloud.ply").read_bytes()
+    # a config that differs is refused naming every field that differs, and the way out
+    other = runner.invoke(main, ["train", "--set", "iterations=4", "--set", "seed=7", "--resume", str(checkpoint),
+                                 "--quiet", "--out", str(tmp_path / "d")])
+    assert other.exit_code == 2 and len(other.stderr.strip().splitlines()) == 1, other.stderr
+    assert f"was written with seed=0, iterations=3; this run has seed=7, iterations=4 (" in other.stderr, other.stderr
+    assert f"--resume {checkpoint} alone, with no --config or --set," in other.stderr
+    nothing = runner.invoke(main, ["train", "--quiet"])
+    assert nothing.exit_code == 2 and nothing.stderr.strip().startswith("splatbench: error: DATASET: give the "
+                                                                        "dataset folder"), nothing.stderr
     ply = checkpoint.with_suffix(".ply")   # the model beside it, given by mistake: pointed to the .pt
     wrong = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                  "--resume", str(ply), "--quiet", "--out", str(tmp_path / "w")])

@@ -175,6 +175,15 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     return state
 
 
+def checkpoint_config(path: str | Path) -> Any:
+    """The `TrainConfig` a checkpoint was written with (read as data, `read_checkpoint`):
+    what ``splatbench train --resume CKPT`` continues with when no --config is given."""
+    from splatbench.train.config import TrainConfig
+
+    saved = read_checkpoint(path)["config"]
+    return TrainConfig.from_dict(dict(saved), source=f"resume: {path}: config")
+
+
 def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
     """Put the state saved at ``path`` into ``trainer`` (built from the same config and
     dataset); return the checkpoint's ``extra``. One-line `InputError` on any mismatch
@@ -192,10 +201,12 @@ def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
 
 def _apply(trainer: Any, state: dict[str, Any], p: Path) -> dict[str, Any]:
     saved, now = state["config"], trainer.config.to_dict()
-    for key in now:
-        if key not in FREE_FIELDS and saved.get(key) != now[key]:
-            raise InputError(f"resume: {str(p)!r} was written with {key}={saved.get(key)!r}, this run has "
-                             f"{key}={now[key]!r} (resume with the checkpoint's config)")
+    differ = [key for key in now if key not in FREE_FIELDS and saved.get(key) != now[key]]
+    if differ:
+        raise InputError(f"resume: {str(p)!r} was written with "
+                         + ", ".join(f"{key}={saved.get(key)!r}" for key in differ) + "; this run has "
+                         + ", ".join(f"{key}={now[key]!r}" for key in differ)
+                         + f" (--resume {p} alone, with no --config or --set, continues with the checkpoint's own config)")
     if state["train_names"] != list(trainer.dataset.train.names):
         raise InputError(f"resume: {str(p)!r} was written on other training views than {str(trainer.dataset.root)!r}")
     params = {name: state["params"][name] for name in PARAM_GROUPS}

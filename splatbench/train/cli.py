@@ -1,4 +1,4 @@
-"""`splatbench train DATASET [--config FILE] [--set key=value ...] [--json] [--quiet] [--out DIR]`."""
+"""`splatbench train [DATASET] [--config FILE] [--set key=value ...] [--resume CKPT] [--json] [--quiet] [--out DIR]`."""
 
 from __future__ import annotations
 
@@ -8,12 +8,13 @@ import click
 
 
 @click.command()
-@click.argument("dataset", type=click.Path(path_type=Path))
+@click.argument("dataset", type=click.Path(path_type=Path), required=False)
 @click.option("--config", "config_file", type=click.Path(path_type=Path), default=None,
               help="TOML config (fields of TrainConfig; see docs/training.md).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
               help="Override a config field (repeatable), e.g. --set iterations=2000 --set sh_degree=auto "
-                   "--set strategy_options.cap_max=50000 --set data.downscale=8 (images / 8, or images_8/).")
+                   "--set strategy_options.cap_max=50000 --set data.downscale=8 (images / 8, or images_8/) "
+                   "--set checkpoint_every=500 (a checkpoint every 500 steps, for --resume).")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default: the config's `out`, runs/train). One holding another run is refused "
                    "unless --resume continues one of its checkpoints or --force replaces it.")
@@ -21,12 +22,15 @@ import click
               help="Train into an --out folder that holds an earlier run: its result.json, config.toml, "
                    "point_cloud.ply/.png and checkpoints are removed first (nothing else).")
 @click.option("--resume", type=click.Path(path_type=Path), default=None,
-              help="Continue exactly from a checkpoint (checkpoints/iteration_<step>.pt) of a run with this config.")
+              help="Continue exactly from a checkpoint (checkpoints/iteration_<step>.pt; written every "
+                   "checkpoint_every steps, and when a run is interrupted). Without --config the run continues "
+                   "with the checkpoint's own config (DATASET and --set may be left out).")
 @click.option("--json", "as_json", is_flag=True, help="Print the TrainResult as one JSON line at the end.")
 @click.option("--quiet", is_flag=True, help="No progress bar (for sweeps).")
 def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], out: Path | None,
           resume: Path | None, force: bool, as_json: bool, quiet: bool) -> None:
-    """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender / instant-ngp folder).
+    """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender / instant-ngp folder;
+    optional with --resume, or with a --config that names one).
 
     A capture whose cameras have lens distortion is undistorted by pycolmap first (cached
     by content); that, the test split chosen and ignored keys are said in notes
@@ -43,11 +47,19 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     checkpoints/) is refused in one line, exit 2, untouched, unless --resume names one of
     its own checkpoints or --force is given (splatbench.train.out_folder).
     """
+    from splatbench.errors import InputError
+    from splatbench.train.checkpoint import checkpoint_config
     from splatbench.train.config import TrainConfig, apply_overrides, load_config
 
-    config = load_config(config_file) if config_file is not None else TrainConfig()
-    config = apply_overrides(config, [f"dataset={_toml_str(str(dataset))}", *overrides]
-                             + ([f"out={_toml_str(str(out))}"] if out is not None else []))  # validated
+    if config_file is not None:
+        config = load_config(config_file)
+    else:  # an interrupted run continues as it was set up (the checkpoint holds its config, as data)
+        config = checkpoint_config(resume) if resume is not None else TrainConfig()
+    config = apply_overrides(config, ([f"dataset={_toml_str(str(dataset))}"] if dataset is not None else [])
+                             + [*overrides] + ([f"out={_toml_str(str(out))}"] if out is not None else []))  # validated
+    if not config.dataset:
+        raise InputError("DATASET: give the dataset folder (splatbench train DATASET), or a --config naming one, "
+                         "or --resume a checkpoint")
 
     from splatbench.train.checkpoint import resume_line
     from splatbench.train.loop import train as run
