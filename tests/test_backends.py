@@ -314,6 +314,51 @@ def test_gsplat_cpu_pieces_are_installed_only_during_a_call():
     assert ("nerfacc" in sys.modules) == had_nerfacc
 
 
+def deep_tile_scene(fillers: int):
+    """One 16x16 tile seen from the origin down +z: A (opacity 0.99) leaves T = 1e-2; B (0.995)
+    would take T to 5e-5 <= 1e-4, so every pixel stops there and B and everything behind it is
+    left out; ``fillers`` Gaussians of opacity 0.003 < 1/255 between them and C never contribute
+    but sit in the tile's list (gsplat culls no opacity), pushing C (0.5, green) past entry
+    25,600; C must not show. Arrays: means, log_scales, quats, opacity_logits, sh (float64)."""
+    from splatbench.cameras import Camera
+
+    rng = np.random.default_rng(0)
+    big = np.array([[0.0, 0.0, 2.0], [0.0, 0.0, 2.1], [0.0, 0.0, 3.0]])             # A, B, C
+    z = rng.uniform(2.2, 2.8, fillers)
+    means = np.concatenate([big, np.c_[rng.uniform(-0.3, 0.3, (fillers, 2)) * z[:, None], z]])
+    log_scales = np.concatenate([np.full((3, 3), np.log(20.0)), np.full((fillers, 3), np.log(0.01))])
+    opacity = np.concatenate([[0.99, 0.995, 0.5], np.full(fillers, 0.003)])
+    quats = np.tile([1.0, 0.0, 0.0, 0.0], (len(means), 1))
+    sh = np.zeros((len(means), 1, 3))
+    sh[:, 0, 0] = 1.0
+    sh[2, 0] = [-1.7, 1.7, -1.7]
+    arrays = (means, log_scales, quats, np.log(opacity / (1 - opacity)), sh)
+    return arrays, Camera(16, 16, 16.0, 16.0, 8.0, 8.0, np.eye(4))
+
+
+@needs_gsplat
+def test_gsplat_cpu_keeps_the_early_stop_in_a_tile_deeper_than_its_step():
+    """gsplat 1.5.3's PyTorch `_rasterize_to_pixels` walks a tile's list in steps of
+    ``batch_per_iter`` x 256 = 25,600 Gaussians and restarts each step from T = 1 - alpha with no
+    record of which pixels stopped, so a pixel that stopped in the first step composites what lies
+    behind the stop in the second (its CUDA kernel keeps the flag for the whole tile). Found on
+    the guitar model (a tile of 39,704; reports/compare_models); the backend walks every tile in
+    one step. With the fillers every pixel would otherwise differ by C's contribution (~6e-3 in
+    alpha, far outside the float32 bound; the band is empty: no decision here is near a threshold)."""
+    from splatbench.compare.measure import image_errors
+
+    backend = get_backend("gsplat")
+    for fillers in (0, 25_600):
+        arrays, camera = deep_tile_scene(fillers)
+        oracle = reference_render(backend.info, *arrays, camera, mode="matched", band=True)
+        with torch.no_grad():
+            out = backend(*[torch.tensor(a, dtype=torch.float32) for a in arrays], camera)
+        errors = image_errors(out, oracle, ["rgb", "alpha", "depth"])
+        assert int(oracle.band.sum()) == 0
+        assert all(e.outside_band == 0 for e in errors.values()), (fillers, errors)
+        assert abs(float(out[1][8, 8]) - oracle.alpha[8, 8]) < 1e-6  # A alone, then the stop
+
+
 def test_user_module_that_fails_on_import_gives_one_line(tmp_path, monkeypatch):
     (tmp_path / "broken_syntax_rast.py").write_text("def render(:\n", encoding="utf-8")
     (tmp_path / "raising_rast.py").write_text("raise RuntimeError('no licence server')\n", encoding="utf-8")

@@ -23,6 +23,16 @@ Conventions (read from gsplat 1.5.3's code, `cuda/_torch_impl.py` and
     (``sqrt(2 ln 255) = 3.329 < 3.33``), so the image is the alpha_min rule alone: the
     reference's ``radius="opacity"``.
   * depth: the fourth channel accumulates camera z and is divided by alpha ("ED").
+
+A bug of gsplat 1.5.3's PyTorch path, worked around on the CPU (`_render_cpu`): its
+`_rasterize_to_pixels` walks each tile's list in steps of ``batch_per_iter`` (100) x 256 =
+25,600 Gaussians and starts each step from ``T = 1 - alpha`` with no record of the pixels that
+had stopped (the kernel's ``done`` flag lives for one call), so a pixel that stopped in one step
+composites what lies behind the stop in the next; it also ends the walk after a step that
+contributed nothing. Its CUDA kernel keeps the flag for the whole tile. Here every tile is
+walked in one step (``batch_per_iter`` = the deepest tile's batches), as CUDA does. It showed
+on the guitar model, whose deepest tile holds 39,704 Gaussians at 128x128 (reports/compare_models:
+14-22 pixels outside the band before; `tests/test_backends.py`, the deep-tile case).
 """
 
 from __future__ import annotations
@@ -176,9 +186,12 @@ def _render_cpu(means, scales, quats, opacities, sh, camera, degree, background)
     _, isect_ids, flatten_ids = gs._isect_tiles(means2d, radii, depths, TILE, tw, th)
     offsets = gs._isect_offset_encode(isect_ids, 1, tw, th)                                      # [1, th, tw]
     bg = torch.tensor([*background, 0.0], dtype=torch.float32)[None]
+    # every tile in one step (`_one_step`): gsplat's stepping loses the early stop between steps
+    depth = torch.diff(torch.cat([offsets.flatten(), torch.tensor([len(flatten_ids)])]))
+    batches = max(1, -(-int(depth.max()) // (TILE * TILE))) if len(depth) else 1
     with _cpu_pieces():
         render, alphas = gs._rasterize_to_pixels(means2d, conics, features, opacities[None], W, H, TILE,
-                                                 offsets, flatten_ids, backgrounds=bg)
+                                                 offsets, flatten_ids, backgrounds=bg, batch_per_iter=batches)
     return render[0], alphas[0, ..., 0]
 
 
