@@ -230,7 +230,9 @@ def dataclass_from_mapping(cls: type[T], data: Mapping[str, Any], *, base: Mappi
     """``cls(**base, **data)`` for a dataclass ``cls``, after the boundary checks: every key
     names a field (`check_keys`, with "did you mean"), every value has its field's
     annotated type (`check_type`, after `coerce`). Ranges are the class's own business
-    (its ``__post_init__``). Messages name ``PREFIXKEY`` (and ``source`` first)."""
+    (its ``__post_init__``). Messages name ``PREFIXKEY`` (and ``source`` first), the class's
+    own too: its ``ClassName.field: ...`` becomes ``source: PREFIXfield: ...``, so that one
+    option has one name in every message (the one the user wrote)."""
     hints = _field_types(cls)
     check_keys(data, hints, prefix=prefix, source=source)
     values = {}
@@ -239,7 +241,15 @@ def dataclass_from_mapping(cls: type[T], data: Mapping[str, Any], *, base: Mappi
         if hints[key] in _TYPES or _optional_of(hints[key]) in _TYPES:  # other types: the class checks them
             check_type(f"{source}: {prefix}{key}" if source else f"{prefix}{key}", value, hints[key])
         values[key] = value
-    return cls(**{**(base or {}), **values})
+    try:
+        return cls(**{**(base or {}), **values})
+    except InputError as exc:
+        message = str(exc)
+        owner = next((c.__name__ for c in cls.__mro__ if message.startswith(f"{c.__name__}.")), None)
+        if owner is None or not prefix:
+            raise
+        named = prefix + message[len(owner) + 1:]
+        raise InputError(f"{source}: {named}" if source else named) from None
 
 
 def _optional_of(tp: Any) -> Any:

@@ -847,6 +847,18 @@ def test_budget_final_count_and_multiplier_and_bad_values():
             make_strategy("budget", **fields)
 
 
+def test_a_strategys_own_check_names_the_option_as_the_user_wrote_it():
+    """__post_init__ says ``BudgetStrategy.budget_mode``; through make_strategy (a config's
+    strategy_options) the message names ``strategy_options.budget_mode``, the same name the type
+    checks use, so one option has one name whatever check caught it."""
+    with pytest.raises(InputError) as err:
+        make_strategy("budget", budget_mode="final")
+    assert str(err.value).startswith("strategy 'budget': strategy_options.budget_mode: expected one of")
+    with pytest.raises(InputError) as err:
+        make_strategy("budget", reset_value=2.0)   # checked by the base class, DefaultStrategy
+    assert str(err.value).startswith("strategy 'budget': strategy_options.reset_value: expected a number in (0, 1)")
+
+
 def test_budget_score_is_median_normalised():
     from splatbench.strategies.budget import median_normalized
 
