@@ -209,7 +209,7 @@ def test_committed_report_is_its_numbers():
     figures = [COMMITTED / name for name in ("time_vs_error.png", "time_vs_error_fwd_bwd.png")]
     assert all(f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in figures)
     assert render_markdown(record, table, figures, COMMITTED) == text
-    assert set(table.workload) == {"synthetic-2000-128x128-s0", "garden-view0"}
+    assert set(table.workload) == {"synthetic-2000-128x128-s0-posed", "garden-view0"}  # posed: issue 20
     rows = table.set_index(["backend", "workload"])
     for backend in ("drjit", "torch", "gsplat"):
         for workload in set(table.workload):
