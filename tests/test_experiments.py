@@ -182,25 +182,32 @@ def test_one_at_a_time_grid_and_table_valued_axis():
 
 
 # --------------------------------------------------------------------------- malformed files
+#: The lines every dummy-kind case starts with.
+HEAD = 'kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n'
 MALFORMED = {
-    "unknown top-level field": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nsceens = ["beta"]\n', r"sceens: unknown key \(did you mean 'scenes'\?\)"),
-    "empty axis": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nx = []\n', r"axes\.x: empty axis"),
-    "empty variant": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[variants.v]\n', r"variants\.v: empty axis"),
+    "unknown top-level field": (HEAD + 'sceens = ["beta"]\n', r"sceens: unknown key \(did you mean 'scenes'\?\)"),
+    "empty axis": (HEAD + '[axes]\nx = []\n', r"axes\.x: empty axis"),
+    "empty variant": (HEAD + '[variants.v]\n', r"variants\.v: empty axis"),
     "unknown scene": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha", "delta"]\n', r"scenes: unknown scene 'delta'"),
-    "unknown config key in base": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[base]\nopts.c = 1\n',
+    "unknown config key in base": (HEAD + '[base]\nopts.c = 1\n',
                                    r"base: opts\.c: unknown key"),
-    "unknown config key in an axis": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nxx = [1, 2]\n',
+    "unknown config key in an axis": (HEAD + '[axes]\nxx = [1, 2]\n',
                                       r"axes\.xx = 1: xx: unknown key"),
-    "bad value in a variant": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[variants.v]\nok = {}\nno = { mode = "x" }\n',
+    "bad value in a variant": (HEAD + '[variants.v]\nok = {}\nno = { mode = "x" }\n',
                                r"variants\.v\.no: mode: expected 'ok', 'warn', 'fail' or 'crash'"),
     "unknown kind": ('kind = "nope"\nscenes = ["alpha"]\n', r"kind: unknown run kind 'nope'"),
-    "axis not a list": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nx = 3\n', r"axes\.x: expected a list"),
-    "reserved key": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[axes]\nseed = [1, 2]\n', r"axes\.seed: 'seed' is set by"),
-    "duplicate seed": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nseeds = [1, 1]\n', r"seeds: duplicate value 1"),
-    "unknown runner field": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[runner]\nthreads = 2\n',
+    "axis not a list": (HEAD + '[axes]\nx = 3\n', r"axes\.x: expected a list"),
+    "reserved key": (HEAD + '[axes]\nseed = [1, 2]\n', r"axes\.seed: 'seed' is set by"),
+    "duplicate seed": (HEAD + 'seeds = [1, 1]\n', r"seeds: duplicate value 1"),
+    "unknown runner field": (HEAD + '[runner]\nthreads = 2\n',
                              r"runner\.threads: unknown key"),
-    "bad scheduler": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\n[runner]\nscheduler = "127.0.0.1"\n',
+    "bad scheduler": (HEAD + '[runner]\nscheduler = "127.0.0.1"\n',
                       r"runner\.scheduler: expected an address like tcp://HOST:PORT"),
+    "a base value one variant cannot take": ('kind = "train"\nscenes = ["textured"]\n[base]\nlr_means = 0.0\n'
+                                             'lr_means_final = 0.0\n[variants.densify]\nnone = { strategy = "none" }\n'
+                                             'budget = { strategy = "budget" }\n',
+                                             r"variants\.densify\.budget: lr_means: 0 freezes the means, but strategy "
+                                             r"'budget'"),
     "invalid TOML": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = [\n', r"invalid TOML"),
 }
 

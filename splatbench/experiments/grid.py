@@ -136,7 +136,7 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
                 flat = {**flat_cell, **_source(spec, scene), "scene": scene, "seed": seed}
                 problem = check(flat)
                 if problem is not None:
-                    raise InputError(f"{spec.source}: {_culprit(spec, cell, scene, seed, check)}: {problem}")
+                    raise InputError(f"{spec.source}: {_culprit(spec, cell, scene, seed, check, problem)}: {problem}")
                 config = unflatten(flat)
                 if kind.resolve is not None:
                     try:
@@ -171,13 +171,20 @@ def _label(resolved: Mapping[str, Any], path: str) -> Any:
     return canonical_json(unflatten(sub)) if sub else None
 
 
-def _culprit(spec: ExperimentSpec, cell, scene: str, seed: int, check) -> str:
-    """Where in the file a rejected config comes from: base, one axis value, or the cell."""
+def _culprit(spec: ExperimentSpec, cell, scene: str, seed: int, check, problem: str | None = None) -> str:
+    """Where in the file a rejected config comes from: base, one axis value, or the cell. With
+    ``problem`` (the cell's own message), the base or a value is named only when it alone gives
+    that same problem: a base that fails otherwise by itself (a strategy it never runs with, say)
+    is not blamed for what one value brings."""
+    def fails(flat: dict[str, Any]) -> bool:
+        found = check(flat)
+        return found is not None and (problem is None or found == problem)
+
     base = {**spec.base, **_source(spec, scene), "scene": scene, "seed": seed}
-    if check(base) is not None:
+    if fails(base):
         return "base"
     for _, _, settings, where in cell:
-        if check(override(base, settings)) is not None:
+        if fails(override(base, settings)):
             return where
     return "combination " + ", ".join(where for *_, where in cell)
 
