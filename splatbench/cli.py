@@ -95,7 +95,24 @@ class LazyGroup(click.Group):
             # and Dr.Jit (seconds), so that a batch system's grace period is not spent on it
             sys.stdout.flush()
             sys.stderr.flush()
+            _release_semaphores()
             os._exit(exc.exit_status)
+
+
+def _release_semaphores() -> None:
+    """Unlink the named semaphores multiprocessing still holds (a stopped process pool's queue
+    locks) before a fast exit: the interpreter's teardown, which would, is skipped, and the
+    resource tracker would then print "There appear to be N leaked semaphore objects" after the
+    one line. Runs multiprocessing's own finalizers of exit priority >= 0 (where SemLock
+    registers its unlink), as its atexit function does first; `multiprocessing.util` has no
+    public form of it."""
+    util = sys.modules.get("multiprocessing.util")
+    if util is None:
+        return
+    try:
+        util._run_finalizers(0)
+    except Exception:  # noqa: BLE001 - best effort on the way out; the exit must happen
+        pass
 
 
 _OS_FIXES = {
