@@ -305,7 +305,7 @@ def test_failed_runs_are_recorded_the_rest_complete_and_resume_skips_done(tmp_pa
     assert_table_matches_files(folder, {r.run_id for r in expand(spec2)})
 
 
-def test_a_runs_warnings_reach_its_file_the_table_and_the_report(tmp_path):
+def test_a_runs_warnings_reach_its_file_the_table_and_the_report(tmp_path, capsys):
     """What a run warned of (`RunOutput.warnings`) is never dropped by the grid: the run's
     file, the table's ``warnings`` column and a "Warnings" section (with a pointer in the
     header) carry it; a grid whose runs warned of nothing has neither."""
@@ -325,6 +325,8 @@ def test_a_runs_warnings_reach_its_file_the_table_and_the_report(tmp_path):
     summary = run_experiment(spec, workers=1, results_dir=results, progress=False)
     assert (summary.done, summary.warned) == (4, 2)
     assert summary.line().startswith('done 4 (2 warned: see their report\'s "Warnings"), skipped 0')
+    said = [line for line in capsys.readouterr().err.splitlines() if " warned: " in line]  # without a bar too
+    assert len(said) == 2 and all("warning: dummy run told to warn" in line for line in said)
     records = read_records(results / "warned")
     for r in records.values():
         expected = [f"warning: dummy run told to warn (seed {r.seed})"] if r.labels["mode"] == "loud" else []

@@ -791,7 +791,7 @@ def test_budget_and_mcmc_say_when_their_budget_or_cap_is_below_the_initial_count
         strat.refine(params, opts, state, step=k, scene_extent=1.0)
     note = strat.outcome_note(state)
     assert note.startswith("warning: strategy 'budget': its budget of 30 is below the initial 60 Gaussians")
-    assert "budget_mode = \"final_count\"" in note and "ended at 60" in note
+    assert "strategy_options.budget_mode=final_count" in note and "ended at 60" in note
     params, opts = make_params(60, seed=0, opacity=0.5)
     mcmc = make_strategy("mcmc", cap_max=40)
     note = mcmc.outcome_note(mcmc.initialize_state(params))

@@ -591,6 +591,31 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     alone = runner.invoke(main, ["train", "--resume", str(checkpoint), "--json", "--quiet", "--out", str(tmp_path / "a")])
     assert alone.exit_code == 0, alone.output
     assert (tmp_path / "a" / "point_cloud.ply").read_bytes() == (tmp_path / "c" / "point_cloud.ply").read_bytes()
+    # ... in the folder the checkpoint sits in, wherever that folder has moved (not the config's `out`)
+    import os
+    import shutil
+
+    shutil.copytree(tmp_path / "c", tmp_path / "moved")
+    (tmp_path / "moved" / "point_cloud.ply").unlink()
+    moved = runner.invoke(main, ["train", "--resume", str(tmp_path / "moved" / "checkpoints" / "iteration_2.pt"),
+                                 "--quiet"])
+    assert moved.exit_code == 0, moved.output
+    assert (tmp_path / "moved" / "point_cloud.ply").read_bytes() == (tmp_path / "c" / "point_cloud.ply").read_bytes()
+    # a run started with a relative DATASET resumes from any working folder (paths are kept absolute)
+    cwd = os.getcwd()
+    try:
+        os.chdir(tiny_diffuse_dir.parent)
+        rel = runner.invoke(main, ["train", tiny_diffuse_dir.name, "--config", str(cfg), "--set", "iterations=3",
+                                   "--set", "checkpoint_every=2", "--quiet", "--out", str(tmp_path / "rel")])
+        assert rel.exit_code == 0, rel.output
+        os.chdir(tmp_path)  # somewhere else than where it started
+        (tmp_path / "rel" / "point_cloud.ply").unlink()
+        again_rel = runner.invoke(main, ["train", "--resume", str(tmp_path / "rel" / "checkpoints" / "iteration_2.pt"),
+                                         "--quiet"])
+        assert again_rel.exit_code == 0, again_rel.output
+    finally:
+        os.chdir(cwd)
+    assert (tmp_path / "rel" / "point_cloud.ply").read_bytes() == (tmp_path / "c" / "point_cloud.ply").read_bytes()
     # a config that differs is refused naming every field that differs, and the way out
     other = runner.invoke(main, ["train", "--set", "iterations=4", "--set", "seed=7", "--resume", str(checkpoint),
                                  "--quiet", "--out", str(tmp_path / "d")])

@@ -158,6 +158,13 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
         for claim in list(claims.values()):
             claim.touch()
 
+    def say(line: str) -> None:
+        """A run's failure or warning, on stderr as it finishes (above the bar, when there is one)."""
+        if bar is not None:
+            bar.write(line)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
     def finish(record: RunRecord) -> None:
         nonlocal done, failed, warned
         with deferred():  # a record and its claim change together
@@ -173,15 +180,12 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
             done += 1
             if record.warnings:
                 warned += 1
-                if bar is not None:
-                    bar.write(f"{spec.name}: run {record.run_id} ({record.scene}, seed {record.seed}) warned: "
-                              f"{record.warnings[0]}" + (f" (and {len(record.warnings) - 1} more)"
-                                                         if len(record.warnings) > 1 else ""))
+                say(f"{spec.name}: run {record.run_id} ({record.scene}, seed {record.seed}) warned: "
+                    f"{record.warnings[0]}" + (f" (and {len(record.warnings) - 1} more)"
+                                               if len(record.warnings) > 1 else ""))
         else:
             failed += 1
-            if bar is not None:
-                bar.write(f"{spec.name}: run {record.run_id} ({record.scene}, seed {record.seed}) failed: "
-                          f"{record.error}")
+            say(f"{spec.name}: run {record.run_id} ({record.scene}, seed {record.seed}) failed: {record.error}")
         if bar is not None:
             bar.set_postfix(failed=failed, refresh=False)
             bar.update(1)

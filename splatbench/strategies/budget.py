@@ -170,20 +170,20 @@ class BudgetStrategy(DefaultStrategy):
             return None
         budget = state.targets[-1]
         end = state.last.num_gaussians if state.last is not None else state.initial
-        mode = (f" (budget_mode 'multiplier': {self.budget:g} x the initial {state.initial:,}; for a number of "
-                f"Gaussians set strategy_options.budget_mode = \"final_count\")"
+        mode = (f"; budget_mode is 'multiplier', so the budget is {self.budget:g} x the initial {state.initial:,}: "
+                f"for a number of Gaussians set strategy_options.budget_mode=final_count"
                 if self.budget_mode == "multiplier" else "")
         if budget < state.initial:
             return (f"warning: strategy 'budget': its budget of {budget:,} is below the initial {state.initial:,} "
-                    f"Gaussians{mode}, and Taming 3DGS grows toward a budget but never prunes down to one, so the "
-                    f"model ended at {end:,}; give a budget above the initial count, or start from fewer points")
+                    f"Gaussians, and Taming 3DGS grows toward a budget but never prunes down to one, so the "
+                    f"model ended at {end:,}; give a budget above the initial count, or start from fewer points{mode}")
         if state.short and state.short[-1][0] == state.refinements:
             _, target, reach = state.short[-1]
-            return (f"warning: strategy 'budget' ended at {end:,} Gaussians, below its budget of {budget:,}{mode}: "
+            return (f"warning: strategy 'budget' ended at {end:,} Gaussians, below its budget of {budget:,}: "
                     f"at {len(state.short)} of {state.refinements} refinements fewer Gaussians passed grad_threshold "
                     f"{self.grad_threshold:g} than its count schedule asked for (the last: {reach:,} within reach of "
                     f"a target of {target:,}); Taming 3DGS grows only those, so a smaller budget or a lower "
-                    f"strategy_options.grad_threshold meets it")
+                    f"strategy_options.grad_threshold meets it{mode}")
         if end < budget and state.refinements < len(state.targets):
             return (f"strategy 'budget' ended at {end:,} Gaussians, below its budget of {budget:,}: it made "
                     f"{state.refinements} of the {len(state.targets)} refinements its count schedule plans "

@@ -124,7 +124,7 @@ class MCMCStrategy:
     def outcome_note(self, state: MCMCState) -> str | None:
         """A warning when ``cap_max`` is below the initial count: MCMC adds up to its cap and
         never removes, so such a cap is never met; None otherwise."""
-        if not 0 < self.cap_max < state.initial:
+        if self.cap_max >= state.initial:
             return None
         return (f"warning: strategy 'mcmc': cap_max {self.cap_max:,} is below the initial {state.initial:,} "
                 f"Gaussians, and 3DGS-MCMC only relocates and adds, never removes, so the model kept "

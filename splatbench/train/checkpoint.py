@@ -108,7 +108,7 @@ def _set_numpy_rng_state(state: dict[str, Any]) -> None:
     np.random.set_state((state[_NUMPY_RNG], np.asarray(state["keys"], dtype=np.uint32), int(state["pos"]),
                          int(state["has_gauss"]), float(state["cached"])))
 #: Config fields that may differ between the run that wrote a checkpoint and the one resuming it.
-FREE_FIELDS = ("out", "checkpoint_every")
+FREE_FIELDS = ("out", "checkpoint_every", "dataset")  # dataset: a path; the training views' names are checked
 
 
 def save_checkpoint(trainer: Any, path: str | Path, *, extra: dict[str, Any] | None = None) -> Path:

@@ -55,8 +55,15 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
         config = load_config(config_file)
     else:  # an interrupted run continues as it was set up (the checkpoint holds its config, as data)
         config = checkpoint_config(resume) if resume is not None else TrainConfig()
-    config = apply_overrides(config, ([f"dataset={_toml_str(str(dataset))}"] if dataset is not None else [])
-                             + [*overrides] + ([f"out={_toml_str(str(out))}"] if out is not None else []))  # validated
+    if resume is not None and out is None and config_file is None:
+        # it finishes where its checkpoint is (OUT/checkpoints/iteration_N.pt), wherever that run
+        # folder has moved since, not in the folder the checkpoint's config names
+        run_folder = Path(resume).resolve().parent
+        out = run_folder.parent if run_folder.name == "checkpoints" else None
+    # paths as absolute ones: a checkpoint's config is then valid from any working folder
+    config = apply_overrides(config, ([f"dataset={_toml_str(str(dataset.resolve()))}"] if dataset is not None else [])
+                             + [*overrides] + ([f"out={_toml_str(str(out.resolve()))}"] if out is not None
+                                               else []))  # validated
     if not config.dataset:
         raise InputError("DATASET: give the dataset folder (splatbench train DATASET), or a --config naming one, "
                          "or --resume a checkpoint")
@@ -66,7 +73,7 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     from splatbench.train.out_folder import claim_out
 
     removed = claim_out(config.out, resume=resume, force=force)
-    if removed and not quiet:
+    if removed:  # said even with --quiet: files were deleted
         click.echo(f"--force: removed {len(removed)} file(s) of the earlier run in {config.out}", err=True)
 
     bar = None
