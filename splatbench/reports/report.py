@@ -212,7 +212,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     if missing:
         lines += [f"**Incomplete:** {missing} run(s) have no result yet; run `splatbench run {source_path(spec)}{run_options}` "
                   f"(it resumes) and report again.", ""]
-    warned = run_warnings(table)
+    warned = run_warnings(spec, table)
     if warned:
         lines += [f"**Warnings:** {len({w[0] for w in warned})} run(s) warned of something their numbers below do "
                   f"not show; see \"Warnings\".", ""]
@@ -265,18 +265,17 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     return "\n".join(lines).rstrip() + "\n"
 
 
-def run_warnings(table: pd.DataFrame) -> list[tuple[str, str, str, int, str]]:
+def run_warnings(spec: ExperimentSpec, table: pd.DataFrame) -> list[tuple[str, str, str, int, str]]:
     """``(run_id, scene, cell, seed, warning)`` for each warning of each run, in grid order
-    (the table's ``warnings`` column; a table from before that column has none)."""
+    (the table's ``warnings`` column; a table from before that column has none); the cell as
+    `cell_labels` names it."""
     if "warnings" not in table.columns or not len(table):
         return []
-    axes = [c for c in table.columns if c.startswith("axis.")]
     out = []
-    for _, r in table.iterrows():
-        if not isinstance(r.warnings, str):
-            continue
-        cell = ", ".join(f"`{c[5:]}={r[c]}`" for c in axes) or "–"
-        out += [(r.run_id, r.scene, cell, int(r.seed), " ".join(str(w).split())) for w in json.loads(r.warnings)]
+    for (_, r), cell in zip(table.iterrows(), cell_labels(spec, table)):
+        if isinstance(r.warnings, str):
+            out += [(r.run_id, r.scene, f"`{cell}`", int(r.seed), " ".join(str(w).split()))
+                    for w in json.loads(r.warnings)]
     return out
 
 
