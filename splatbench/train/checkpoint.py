@@ -146,16 +146,20 @@ def resume_line(path: str | Path, step: int, iterations: int) -> str:
     return f"resumed from {path} at step {step} of {iterations}"
 
 
-def read_checkpoint(path: str | Path) -> dict[str, Any]:
+def read_checkpoint(path: str | Path, *, mmap: bool = False) -> dict[str, Any]:
     """The state saved at ``path`` with its objects rebuilt (`_CLASSES` only), read as data
     (``weights_only=True``): nothing in the file is executed. A missing, damaged, foreign
-    or older-format file is a one-line `InputError`."""
+    or older-format file is a one-line `InputError`. ``mmap``: tensors stay in the file until
+    read (for a caller that wants the config alone, not a second copy of the model)."""
     p = Path(path)
     try:
-        state = torch.load(p, map_location="cpu", weights_only=True)  # tensors and plain containers only
+        # tensors and plain containers only
+        state = torch.load(p, map_location="cpu", weights_only=True, mmap=mmap)
     except FileNotFoundError:
         raise InputError(f"resume: no such checkpoint {str(p)!r}") from None
     except Exception as exc:  # noqa: BLE001 - a refused global, a damaged zip: a bad file, nothing executed
+        if mmap:  # a file mmap cannot map (not a zip): the plain read names what is wrong with it
+            return read_checkpoint(p)
         pt = p.with_suffix(".pt")
         hint = (f"; the checkpoint is the .pt file beside it: --resume {pt}" if p.suffix != ".pt" and pt.is_file()
                 else "; checkpoints are the checkpoints/iteration_<step>.pt files of a run's output folder")
@@ -180,7 +184,7 @@ def checkpoint_config(path: str | Path) -> Any:
     what ``splatbench train --resume CKPT`` continues with when no --config is given."""
     from splatbench.train.config import TrainConfig
 
-    saved = read_checkpoint(path)["config"]
+    saved = read_checkpoint(path, mmap=True)["config"]  # the parameters are read once, by the resume itself
     return TrainConfig.from_dict(dict(saved), source=f"resume: {path}: config")
 
 
