@@ -215,9 +215,10 @@ class BudgetStrategy(DefaultStrategy):
             return torch.zeros_like(clone_ok), torch.zeros_like(split_ok)
         target = state.targets[min(state.refinements, len(state.targets)) - 1]
         n_clone, n_split = int(clone_ok.sum()), int(split_ok.sum())
-        if n + n_clone + n_split < target:
-            state.short.append((state.refinements, target, n + n_clone + n_split))
-        headroom = max(0, min(target, n + n_clone + n_split) - n)
+        reach = n + n_clone + n_split  # the most this refinement can grow to
+        if reach < target:
+            state.short.append((state.refinements, target, reach))
+        headroom = max(0, min(target, reach) - n)
         total = max(1, n_clone + n_split)
         score = self.score(params, state, avg)
         picks = []

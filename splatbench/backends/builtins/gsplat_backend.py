@@ -186,7 +186,7 @@ def _render_cpu(means, scales, quats, opacities, sh, camera, degree, background)
     _, isect_ids, flatten_ids = gs._isect_tiles(means2d, radii, depths, TILE, tw, th)
     offsets = gs._isect_offset_encode(isect_ids, 1, tw, th)                                      # [1, th, tw]
     bg = torch.tensor([*background, 0.0], dtype=torch.float32)[None]
-    # every tile in one step (`_one_step`): gsplat's stepping loses the early stop between steps
+    # every tile in one step: gsplat's stepping loses the early stop between steps (module doc)
     depth = torch.diff(torch.cat([offsets.flatten(), torch.tensor([len(flatten_ids)])]))
     batches = max(1, -(-int(depth.max()) // (TILE * TILE))) if len(depth) else 1
     with _cpu_pieces():
