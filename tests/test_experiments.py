@@ -272,16 +272,21 @@ def test_table_columns_hold_mixed_types():
 
 
 # --------------------------------------------------------------------------- runner
-def test_failed_runs_are_recorded_the_rest_complete_and_resume_skips_done(tmp_path):
-    text = """
-        name = "mixed"
+def mode_grid(name: str, plain: str, other: str, mode: str) -> str:
+    """A dummy-kind grid over seeds 0 and 1 with two cells: ``plain`` and ``other`` (``mode``)."""
+    return f"""
+        name = "{name}"
         kind = "tests.kinds_for_tests:DUMMY"
         scenes = ["alpha"]
         seeds = [0, 1]
         [variants.mode]
-        good = {}
-        bad = { mode = "fail" }
+        {plain} = {{}}
+        {other} = {{ mode = "{mode}" }}
         """
+
+
+def test_failed_runs_are_recorded_the_rest_complete_and_resume_skips_done(tmp_path):
+    text = mode_grid("mixed", "good", "bad", "fail")
     results = tmp_path / "results"
     spec = spec_of(text)
     first = run_experiment(spec, workers=2, results_dir=results, progress=False)
@@ -311,15 +316,7 @@ def test_a_runs_warnings_reach_its_file_the_table_and_the_report(tmp_path, capsy
     header) carry it; a grid whose runs warned of nothing has neither."""
     from splatbench.reports.report import build_report, write_report
 
-    text = """
-        name = "warned"
-        kind = "tests.kinds_for_tests:DUMMY"
-        scenes = ["alpha"]
-        seeds = [0, 1]
-        [variants.mode]
-        quiet = {}
-        loud = { mode = "warn" }
-        """
+    text = mode_grid("warned", "quiet", "loud", "warn")
     results = tmp_path / "results"
     spec = spec_of(text)
     summary = run_experiment(spec, workers=1, results_dir=results, progress=False)
