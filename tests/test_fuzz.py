@@ -10,6 +10,10 @@ so a run is reproducible and its figures are those of docs/robustness.md:
     python -m pytest tests/test_fuzz.py -q -m slow            # 10 N per reader
     SPLATBENCH_FUZZ_STATS=fuzz.json python -m pytest tests/test_fuzz.py -q -m "slow or not slow"
 
+Captures from others (transforms.json in the instant-ngp and NeRF-synthetic forms, COLMAP
+text models) also get structure-aware cases (`tests/structured_fuzzing.py`): per mutation
+class, `STRUCTURED_CASES` cases in the default suite and 10 times as many in the slow one.
+
 Whatever the campaign found is kept as a regression case in tests/test_robustness.py.
 """
 
@@ -142,7 +146,10 @@ def _finite_gaussians(g) -> None:
 
 
 def _valid_dataset(ds) -> None:
+    from tests.structured_fuzzing import inside
+
     for split in (ds.train, ds.test):
+        assert all(inside(ds.root, name) for name in split.names), split.names  # nothing read from outside
         assert split.images.dtype == np.float32 and np.isfinite(split.images).all()
         assert split.images.size == 0 or (split.images.min() >= 0 and split.images.max() <= 1)
         for cam in split.cameras:
@@ -348,3 +355,45 @@ def test_fuzz(name, tmp_path):
 @pytest.mark.parametrize("name", sorted(READERS))
 def test_fuzz_slow(name, tmp_path):
     campaign(name, tmp_path, 10 * READERS[name].cases)
+
+
+# ------------------------------------------------------------- structure-aware: captures from others
+
+#: Cases per mutation class (tests/structured_fuzzing.py) in the default suite; the slow suite runs 10x.
+#: 15 classes for each transforms.json form and 13 for COLMAP text: 344 cases, 3440 in the slow suite.
+STRUCTURED_CASES = 8
+
+
+def structured_campaign(kind: str, tmp_path: Path, per_class: int) -> None:
+    from tests import structured_fuzzing as sf
+
+    seed = tmp_path / "seed"
+    sf.SEEDS[kind](seed)
+    _valid_dataset(_load(seed))  # the seed itself loads and passes the check
+    total = sum(len(b) for b in _files(seed).values())
+    for klass in sf.CLASSES[kind]:
+        for number in range(per_class):
+            what = sf.mutate(kind, klass, number, seed, tmp_path / "case")
+            try:
+                run_case(f"{kind}: {klass}", lambda: _load(tmp_path / "case" / "capture"), _valid_dataset,
+                         2 * total)
+            except BaseException as exc:  # name the case that reproduces it
+                raise AssertionError(f"{sf.describe(kind, klass, number)}: {what}: {type(exc).__name__}: "
+                                     f"{str(exc)[:300]}") from exc
+
+
+@pytest.fixture
+def _cache(tmp_path, monkeypatch):
+    """Undistorted images of the cases go to a temporary cache, not ~/.cache."""
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+
+
+@pytest.mark.parametrize("kind", ["ngp", "blender", "colmap-text"])
+def test_fuzz_structured(kind, tmp_path, _cache):
+    structured_campaign(kind, tmp_path, STRUCTURED_CASES)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["ngp", "blender", "colmap-text"])
+def test_fuzz_structured_slow(kind, tmp_path, _cache):
+    structured_campaign(kind, tmp_path, 10 * STRUCTURED_CASES)

@@ -339,3 +339,162 @@ def test_found_a_npy_header_length_numpy_would_allocate(tmp_path):
     finally:
         tracemalloc.stop()
     assert peak < 16 * 2**20, peak
+
+
+# --------------------------------------------------------------- what the structure-aware campaign found
+# (tests/structured_fuzzing.py; one test per bug class, each on the seed capture the campaign mutates)
+def _ngp(tmp_path: Path, **frame0) -> Path:
+    from tests.structured_fuzzing import ngp_seed
+
+    root = tmp_path / "cap"
+    ngp_seed(root)
+    meta = json.loads((root / "transforms.json").read_text())
+    meta["frames"][0].update(frame0)
+    (root / "transforms.json").write_text(json.dumps(meta))
+    return root
+
+
+@pytest.mark.parametrize("file_path", ["", ".", "./", "/", " "])
+def test_found_an_empty_file_path(tmp_path, file_path):
+    """file_path "" / "." / "/": was `ValueError: PosixPath('.') has an empty name` from
+    Path.with_name (issue 29 item 9); now one line naming the frame and the field."""
+    from splatbench.data import load_dataset
+
+    root = _ngp(tmp_path, file_path=file_path)
+    one_line_error(lambda: load_dataset(root), "transforms.json: frames[0]", "file_path")
+
+
+@pytest.mark.parametrize("file_path", ["../outside.png", "images/../../outside.png", "OUTSIDE", "~/outside.png"])
+def test_found_a_file_path_that_leaves_the_capture(tmp_path, file_path):
+    """An absolute path outside the capture was `ValueError ... is not in the subpath` from
+    Path.relative_to; a `../` path was read from outside the folder (a capture from others
+    could make splatbench read any image on the machine into a run). Both are refused."""
+    from splatbench.data import load_dataset
+    from tests.test_fuzz import _png
+
+    _png(tmp_path / "outside.png")
+    root = _ngp(tmp_path, file_path=str(tmp_path / "outside.png") if file_path == "OUTSIDE" else file_path)
+    one_line_error(lambda: load_dataset(root), "frames[0]: file_path", "leaves the capture folder")
+
+
+def test_a_symlink_inside_the_capture_is_followed(tmp_path, monkeypatch):
+    """The policy's other side: an image folder that is a symlink (images kept on another
+    disk) loads; the names stay the capture's own."""
+    from splatbench.data import load_dataset
+
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    root = _ngp(tmp_path)
+    (root / "images").rename(tmp_path / "elsewhere")
+    (root / "images").symlink_to(tmp_path / "elsewhere", target_is_directory=True)
+    ds = load_dataset(root, test_every=2)
+    assert ds.train.names == ["images/0001.png", "images/0003.png"]
+
+
+def test_found_a_file_path_longer_than_the_file_system_allows(tmp_path):
+    """A 300-character name: was `OSError: [Errno 36] File name too long` from Path.is_file."""
+    from splatbench.data import load_dataset
+
+    root = _ngp(tmp_path, file_path="x" * 300)
+    one_line_error(lambda: load_dataset(root), "frames[0]: file_path", "File name too long")
+
+
+@pytest.mark.parametrize("value", [None, [], {}, 5, ""])
+def test_found_a_ply_file_path_of_the_wrong_type(tmp_path, value):
+    """ply_file_path null / [] / 5: was `TypeError: unsupported operand type(s) for /`."""
+    from splatbench.data import load_dataset
+
+    root = _ngp(tmp_path)
+    meta = json.loads((root / "transforms.json").read_text())
+    meta["ply_file_path"] = value
+    (root / "transforms.json").write_text(json.dumps(meta))
+    one_line_error(lambda: load_dataset(root), "transforms.json: ply_file_path")
+
+
+@pytest.mark.parametrize("text,message", [
+    ('{"deep": ' + "[" * 100_000 + "]" * 100_000 + ', "frames": []}', "nested too deeply"),  # was RecursionError
+    ('{"w": 1' + "0" * 400 + ', "frames": []}', "beyond float64's range"),                  # was OverflowError
+    ('{"w": 1' + "0" * 400 + '.5, "frames": []}', "beyond float64's range"),                 # read as inf
+    ('{"frames": [], "frames": [{"file_path": "images/0000.png"}]}', "key 'frames' is given twice"),  # last won
+    ('[{"frames": []}]', "expected a JSON object"),
+    ('{"frames": []}', "frames: the list is empty"),                                         # loaded nothing
+])
+def test_found_json_a_lenient_reader_takes_in(tmp_path, text, message):
+    """JSON that is valid but not a capture: nesting deeper than the parser's recursion, a
+    number beyond float64, a key given twice (json.loads kept the last silently), no frames."""
+    from splatbench.data import load_dataset
+
+    root = _ngp(tmp_path)
+    (root / "transforms.json").write_text(text)
+    one_line_error(lambda: load_dataset(root), "transforms.json", message)
+
+
+def test_a_byte_order_mark_is_read_as_utf8(tmp_path, monkeypatch):
+    """Windows editors write a UTF-8 byte-order mark; it was refused as invalid JSON."""
+    from splatbench.data import load_dataset
+
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    root = _ngp(tmp_path)
+    (root / "transforms.json").write_bytes(b"\xef\xbb\xbf" + (root / "transforms.json").read_bytes())
+    assert len(load_dataset(root, test_every=2).train) == 2
+
+
+def test_found_a_duplicated_frame(tmp_path, monkeypatch):
+    """A frame given twice (same image) was loaded twice: one photo weighed double in training,
+    or sat in train and test at once. Within a file: refused; across transforms_train.json and
+    transforms_test.json: a note says the test scores measure fitting."""
+    from splatbench.data import load_dataset
+    from tests.structured_fuzzing import blender_seed
+
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    root = _ngp(tmp_path)
+    meta = json.loads((root / "transforms.json").read_text())
+    meta["frames"].append({**meta["frames"][1], "transform_matrix": meta["frames"][2]["transform_matrix"]})
+    (root / "transforms.json").write_text(json.dumps(meta))
+    one_line_error(lambda: load_dataset(root), "frames[4]", "images/0001.png", "as frames[1] does")
+    blender = tmp_path / "blender"
+    blender_seed(blender)
+    train = json.loads((blender / "transforms_train.json").read_text())
+    test = json.loads((blender / "transforms_test.json").read_text())
+    test["frames"].append(train["frames"][0])
+    (blender / "transforms_test.json").write_text(json.dumps(test))
+    ds = load_dataset(blender)
+    assert any("1 images are both training and test views (train/r_0.png" in n for n in ds.notes), ds.notes
+
+
+def _colmap_text(tmp_path: Path) -> Path:
+    from tests.structured_fuzzing import colmap_text_seed
+
+    colmap_text_seed(tmp_path / "ds")
+    return tmp_path / "ds"
+
+
+@pytest.mark.parametrize("name", ["../outside.png", "../../outside.png"])
+def test_found_a_colmap_image_name_that_leaves_the_image_folder(tmp_path, name):
+    """images.txt naming "../outside.png": was read from beside the image folder (or from
+    outside the capture)."""
+    from splatbench.data import load_dataset
+    from tests.test_fuzz import _png
+
+    root = _colmap_text(tmp_path)
+    _png(root / "outside.png")
+    _png(tmp_path / "outside.png")
+    images = root / "sparse" / "0" / "images.txt"
+    images.write_text(images.read_text().replace(" v1.png", f" {name}"))
+    one_line_error(lambda: load_dataset(root), "images.txt: image 2", "name", "leaves the capture folder")
+
+
+def test_found_two_colmap_images_of_one_name(tmp_path):
+    """Two image records (ids 2 and 99) naming v1.png in a model without rigs.txt / frames.txt
+    (COLMAP before 3.12) were both loaded: one photo twice. (With frames.txt pycolmap refuses
+    image 99, which no frame holds.)"""
+    from splatbench.data import load_dataset
+
+    root = _colmap_text(tmp_path)
+    for name in ("rigs.txt", "frames.txt"):
+        (root / "sparse" / "0" / name).unlink()
+    images = root / "sparse" / "0" / "images.txt"
+    lines = images.read_text().split("\n")
+    i = next(k for k, line in enumerate(lines) if line.endswith(" v1.png"))
+    lines[i + 2:i + 2] = ["99" + lines[i][1:], lines[i + 1]]
+    images.write_text("\n".join(lines))
+    one_line_error(lambda: load_dataset(root), "images.txt: image", "name 'v1.png' is also the name of image")

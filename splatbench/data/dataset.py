@@ -52,8 +52,10 @@ naming the file and the field.
 
 from __future__ import annotations
 
-import json
 import dataclasses
+import json
+import math
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -287,6 +289,14 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, load: _Load) -> D
     images = sorted((im for im in rec.images.values() if im.has_pose), key=lambda im: im.name)
     if not images:
         raise InputError(f"{rel_sparse}/images.{ext}: no registered images")
+    named: dict[str, int] = {}
+    for im in images:
+        where = f"{rel_sparse}/images.{ext}: image {im.image_id}"
+        _inside(root / images_dir, where, "name", im.name, f"image names are relative to {images_dir}/")
+        if im.name in named:
+            raise InputError(f"{where}: name {im.name!r} is also the name of image {named[im.name]} (two records "
+                             f"of one photo; keep one)")
+        named[im.name] = im.image_id
     folder = load.image_dir(images_dir) if len(lenses) < len(rec.cameras) else images_dir
     views: list = []
     for im in images:
@@ -365,10 +375,15 @@ def _load_blender(root: Path, test_every: int, load: _Load) -> Dataset:
                                      root / "transforms.json")
     points = None
     if train_file.is_file():
-        train_meta, test_meta = _read_json(train_file), _read_json(test_file) if test_file.is_file() else None
+        train_meta, test_meta = _read_json(train_file), _read_json(test_file, frames_required=False) if test_file.is_file() else None
         train = _blender_views(root, train_file.name, train_meta, load)
         test = _blender_views(root, test_file.name, test_meta, load) if test_meta is not None else []
         load.finish()
+        both = sorted({v[0] for v in train} & {v[0] for v in test})
+        if both:
+            load.note(f"{len(both)} images are both training and test views ({', '.join(both[:3])}"
+                      f"{', ...' if len(both) > 3 else ''}, named by {train_file.name} and {test_file.name}): "
+                      f"their test scores measure fitting, not novel views")
         for meta, file in ((train_meta, train_file), (test_meta, test_file)):
             if points is None and meta is not None and "ply_file_path" in meta:
                 points = _read_ply(root, file.name, meta["ply_file_path"])
@@ -391,16 +406,56 @@ def _load_blender(root: Path, test_every: int, load: _Load) -> Dataset:
                    "blender")
 
 
-def _read_json(path: Path) -> dict:
+def _read_json(path: Path, *, frames_required: bool = True) -> dict:
+    """The JSON object of a transforms file: UTF-8 (a byte-order mark allowed), each key once,
+    every number within float range, ``frames`` a list (non-empty when ``frames_required``)."""
+    def pairs(items: list[tuple[str, object]]) -> dict:
+        out: dict = {}
+        for key, value in items:
+            if key in out:
+                raise InputError(f"{path.name}: key {key!r} is given twice in one object (which one is meant? "
+                                 f"keep one)")
+            out[key] = value
+        return out
+
+    def number(text: str) -> float:
+        value = float(text)
+        if not math.isfinite(value):  # 1e400: beyond float64, not "Infinity" (written as a word)
+            raise InputError(f"{path.name}: number {text[:40]!r}{'...' if len(text) > 40 else ''} is beyond "
+                             f"float64's range")
+        return value
+
+    def integer(text: str) -> int | float:
+        if len(text.lstrip("-")) > 308:  # beyond float64's range: no field splatbench reads can hold it
+            raise InputError(f"{path.name}: integer of {len(text)} digits is beyond float64's range")
+        return int(text)
+
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json.loads(path.read_bytes().decode("utf-8-sig"), object_pairs_hook=pairs, parse_float=number,
+                          parse_int=integer)
     except OSError as exc:
         raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path.name}: not UTF-8 text (byte {exc.start}); save it as UTF-8 JSON") from None
+    except RecursionError:
+        raise InputError(f"{path.name}: JSON nested too deeply to be a transforms file") from None
+    except InputError:
+        raise
     except ValueError as exc:
-        raise InputError(f"{path.name}: invalid JSON ({exc})") from None
-    if not isinstance(data, dict) or not isinstance(data.get("frames"), list):
-        raise InputError(f"{path.name}: frames: expected a list of frames")
+        raise InputError(f"{path.name}: invalid JSON ({str(exc).splitlines()[0]})") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{path.name}: expected a JSON object with a 'frames' list, got a {type(data).__name__}")
+    if not isinstance(data.get("frames"), list):
+        raise InputError(f"{path.name}: frames: expected a list of frames, got {_short(data.get('frames'))}")
+    if frames_required and not data["frames"]:
+        raise InputError(f"{path.name}: frames: the list is empty (a capture needs at least one view)")
     return data
+
+
+def _short(value: object) -> str:
+    """``repr(value)`` cut to 60 characters, for one-line messages about values from a file."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 #: transforms.json keys read (top level or per frame); others are ignored with a note.
@@ -412,13 +467,18 @@ def _blender_views(root: Path, file: str, meta: dict, load: _Load) -> list:
     shared = {k: v for k, v in meta.items() if k != "frames"}
     ignored = set(shared) - _BLENDER_KEYS
     views: list = []
+    seen: dict[str, int] = {}  # image -> the frame that named it first
     for k, frame in enumerate(meta["frames"]):
         where = f"{file}: frames[{k}]"
         if not isinstance(frame, dict) or "file_path" not in frame or "transform_matrix" not in frame:
             raise InputError(f"{where}: expected a dict with 'file_path' and 'transform_matrix'")
         ignored |= set(frame) - _BLENDER_KEYS
         merged = {**shared, **frame}
-        rel = _resolve_image(root, where, str(frame["file_path"]))
+        rel = _resolve_image(root, where, frame["file_path"])
+        if rel in seen:
+            raise InputError(f"{where}: file_path {frame['file_path']!r} names {rel}, as frames[{seen[rel]}] does "
+                             f"(a duplicated frame; keep one)")
+        seen[rel] = k
         w, h = _image_size(root, rel, f"named by {file}")
         if ("w" in merged or "h" in merged) and (merged.get("w"), merged.get("h")) != (w, h):
             raise InputError(f"{rel}: image size {w}x{h} disagrees with its camera "
@@ -490,18 +550,41 @@ def _image_size(root: Path, rel: str, context: str) -> tuple[int, int]:
         raise InputError(f"{rel}: cannot read the image ({exc})") from None
 
 
-def _resolve_image(root: Path, where: str, file_path: str) -> str:
-    candidate = Path(file_path)
+def _inside(root: Path, where: str, field: str, value: object, fix: str) -> Path:
+    """``value`` as a relative path inside ``root``: a non-empty string, not absolute, no
+    ``..`` that leaves the folder, no NUL; one `InputError` line naming ``where`` and
+    ``field`` otherwise. (Symlinks inside the folder are followed: a capture may keep its
+    images on another disk.)"""
+    if not isinstance(value, str) or not value.strip():
+        raise InputError(f"{where}: {field}: expected a path relative to the capture folder, got {_short(value)}")
+    if "\0" in value or len(value) > 4096:
+        raise InputError(f"{where}: {field}: {_short(value)} is not a file path")
+    norm = os.path.normpath(value)
+    if os.path.isabs(value) or value.startswith("~") or norm == ".." or norm.startswith("../"):
+        raise InputError(f"{where}: {field}: {_short(value)} leaves the capture folder {str(root)!r} "
+                         f"(files of a capture are read from inside it only; {fix})")
+    if norm == ".":
+        raise InputError(f"{where}: {field}: {_short(value)} names the capture folder, not a file")
+    return Path(norm)
+
+
+def _resolve_image(root: Path, where: str, file_path: object) -> str:
+    candidate = _inside(root, where, "file_path", file_path, "copy the images into the capture folder and name "
+                        "them relative to it")
     tries = [candidate] if candidate.suffix.lower() in (".png", ".jpg", ".jpeg", ".exr") else []
     tries += [candidate.with_name(candidate.name + ".png"), candidate]
     for t in tries:
-        if (root / t).is_file():
-            return (root / t).relative_to(root).as_posix()
-    raise InputError(f"{where}: file_path {file_path!r}: no such image (tried "
+        try:
+            if (root / t).is_file():
+                return t.as_posix()
+        except OSError as exc:  # e.g. a name longer than the file system allows
+            raise InputError(f"{where}: file_path {_short(file_path)}: {exc.strerror}") from None
+    raise InputError(f"{where}: file_path {_short(file_path)}: no such image (tried "
                      f"{', '.join(sorted({t.as_posix() for t in tries}))})")
 
 
-def _read_ply(root: Path, file: str, rel: str) -> PointCloud:
+def _read_ply(root: Path, file: str, value: object) -> PointCloud:
+    rel = _inside(root, file, "ply_file_path", value, "copy the point cloud into the capture folder").as_posix()
     path = root / rel
     if not path.is_file():
         raise InputError(f"{file}: ply_file_path: {rel!r} does not exist")
