@@ -25,6 +25,7 @@ import json
 import math
 import os
 import random
+import re
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -108,6 +109,19 @@ def colmap_text_seed(folder: Path) -> None:
     sparse = folder / "sparse" / "0"
     sparse.mkdir(parents=True)
     rec.write_text(str(sparse))
+
+
+def capture_seed(source: Path, frames: int) -> Callable[[Path], None]:
+    """A real instant-ngp capture's ``transforms.json`` (every key and value as it is) cut to
+    its first ``frames`` frames, with their photos: a seed built from data others made."""
+    def build(folder: Path) -> None:
+        meta = json.loads((source / "transforms.json").read_text())
+        meta["frames"] = meta["frames"][:frames]
+        for frame in meta["frames"]:
+            (folder / frame["file_path"]).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(source / frame["file_path"], folder / frame["file_path"])
+        (folder / "transforms.json").write_text(json.dumps(meta, indent=1))
+    return build
 
 
 SEEDS: dict[str, Callable[[Path], None]] = {"ngp": ngp_seed, "blender": blender_seed, "colmap-text": colmap_text_seed}
@@ -285,7 +299,7 @@ def m_missing_frames(c: Case) -> str:
     else:
         frame = c.rng.choice(doc["frames"])
         for p in sorted(c.folder.rglob("*")):
-            if p.is_file() and p.suffix == ".png" and Path(frame["file_path"]).stem == p.stem \
+            if p.is_file() and p.suffix in (".png", ".jpg") and Path(frame["file_path"]).stem == p.stem \
                     and Path(frame["file_path"]).parent.name == p.parent.name:
                 p.unlink()
         return f"{rel}: the image of {frame['file_path']!r} deleted"
@@ -328,7 +342,7 @@ def m_symlink(c: Case) -> str:
     rel = c.pick_json()
     doc = c.load(rel)
     frame_path = c.rng.choice(doc["frames"])["file_path"]
-    images = sorted(p for p in c.folder.rglob("*.png") if p.is_file())
+    images = sorted(p for p in c.folder.rglob("*") if p.suffix in (".png", ".jpg") and p.is_file())
     target = c.rng.choice(images)
     how = c.rng.choice(["image out", "folder out", "json out", "loop", "dangling", "image out"])
     if how == "image out":
@@ -393,9 +407,11 @@ def m_syntax(c: Case) -> str:
         text = text.replace('"frames":', f'"deep": {"[" * depth}{"]" * depth}, "frames":', 1)
     elif how == "list root":
         text = f"[{text}]"
-    elif how == "huge literal":
-        text = text.replace('"transform_matrix": [\n  [\n   1', '"transform_matrix": [\n  [\n   1' + "0" * 5000, 1) \
-            if c.rng.random() < 0.5 else text.replace("1.0", "1" + "0" * 400 + ".0", 1)
+    elif how == "huge literal":  # an integer of 5000 digits (beyond Python's int-string limit) or 401
+        numbers = list(re.finditer(r"(?<=[\s\[:])-?\d+(\.\d+)?(?=[,\s\]}])", text))
+        m = c.rng.choice(numbers)
+        digits = c.rng.choice([5000, 400, 309])
+        text = text[:m.start()] + "1" + "0" * digits + c.rng.choice(["", ".0", ".5"]) + text[m.end():]
     elif how == "comment":
         text = "// written by hand\n" + text
     else:
@@ -675,7 +691,7 @@ COLMAP_CLASSES: dict[str, Callable[[Case], str]] = {
     "truncated": c_truncated,
 }
 
-CLASSES = {"ngp": JSON_CLASSES, "blender": JSON_CLASSES, "colmap-text": COLMAP_CLASSES}
+CLASSES = {"ngp": JSON_CLASSES, "blender": JSON_CLASSES, "colmap-text": COLMAP_CLASSES, "fox": JSON_CLASSES}
 
 
 def seed_files(kind: str, folder: Path) -> list[str]:

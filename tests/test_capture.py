@@ -418,3 +418,32 @@ def test_a_model_trained_on_a_capture_records_the_up_its_cameras_share(tmp_path)
                                init_random_points=50, lpips_net="none"))
     assert np.allclose(read_view_hints(result.ply_path).up, [0.0, 1.0, 0.0], atol=1e-9)
     assert any(n.startswith("world up [0.0, 1.0, 0.0] estimated from the training cameras") for n in result.notes)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not FOX.is_dir(), reason="needs ../shared/data/fox (NVIDIA non-commercial licence, not bundled)")
+def test_fox_transforms_mutated_loads_or_is_one_line(tmp_path, monkeypatch):
+    """The structure-aware fuzz cases (tests/structured_fuzzing.py) on a real capture: the
+    fox's transforms.json (its own keys and values, cut to its first 4 frames, with their
+    photos; copied to tmp_path, never written in place), 4 cases per mutation class, at
+    downscale 8. Each case loads and passes the dataset check or is one InputError line."""
+    from tests import structured_fuzzing as sf
+    from tests.fuzzing import run_case
+    from tests.test_fuzz import _valid_dataset
+
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    seed = tmp_path / "seed"
+    sf.capture_seed(FOX, 4)(seed)
+    _valid_dataset(load_dataset(seed, test_every=2, downscale=8))
+    outcomes: dict[str, int] = {}
+    for klass in sf.JSON_CLASSES:
+        for number in range(4):
+            what = sf.mutate("fox", klass, number, seed, tmp_path / "case")
+            try:
+                outcome = run_case(f"fox: {klass}", lambda: load_dataset(tmp_path / "case" / "capture", test_every=2,
+                                                                         downscale=8), _valid_dataset, 2**24)
+            except BaseException as exc:
+                raise AssertionError(f"{sf.describe('fox', klass, number)}: {what}: {type(exc).__name__}: "
+                                     f"{str(exc)[:300]}") from exc
+            outcomes[outcome] = outcomes.get(outcome, 0) + 1
+    assert sum(outcomes.values()) == 4 * len(sf.JSON_CLASSES) and outcomes.get("ok", 0) > 0, outcomes

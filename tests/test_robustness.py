@@ -498,3 +498,56 @@ def test_found_two_colmap_images_of_one_name(tmp_path):
     lines[i + 2:i + 2] = ["99" + lines[i][1:], lines[i + 1]]
     images.write_text("\n".join(lines))
     one_line_error(lambda: load_dataset(root), "images.txt: image", "name 'v1.png' is also the name of image")
+
+
+def test_found_a_negative_colmap_camera_size_that_hung_undistortion(tmp_path, monkeypatch):
+    """cameras.txt giving the OPENCV camera height -6: pycolmap reads it as 2^64 - 6 and
+    undistort_camera walked that many border pixels (the case never ended). Now the size is
+    checked before any pycolmap computation, and a distorted camera's size against its photo
+    before undistortion."""
+    from splatbench.data import load_dataset
+
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    root = _colmap_text(tmp_path)
+    cameras = root / "sparse" / "0" / "cameras.txt"
+    text = cameras.read_text()
+    cameras.write_text(text.replace("2 OPENCV 6 4 ", "2 OPENCV 6 -6 "))
+    one_line_error(lambda: load_dataset(root), "cameras.txt: camera 2: width, height")
+    cameras.write_text(text.replace("2 OPENCV 6 4 ", "2 OPENCV 30000 20000 "))
+    one_line_error(lambda: load_dataset(root), "images/v0.png: image size 6x4 disagrees with its camera 30000x20000")
+
+
+@pytest.mark.parametrize("value", [True, "0.1"])
+def test_found_a_distortion_coefficient_that_is_not_a_number(tmp_path, value):
+    """p1 = true was read as float(True) = 1.0 (a strong distortion nobody gave); "0.1" as 0.1."""
+    from splatbench.data import load_dataset
+
+    root = _ngp(tmp_path)
+    meta = json.loads((root / "transforms.json").read_text())
+    meta["p1"] = value
+    (root / "transforms.json").write_text(json.dumps(meta))
+    one_line_error(lambda: load_dataset(root), "transforms.json: frames[0]: p1: expected a number")
+
+
+def test_found_distortion_coefficients_that_leave_a_pixel(tmp_path, monkeypatch):
+    """k1 = 1e10: COLMAP's undistorter cropped each 6x4 photo to 1x1, which loaded as a dataset
+    of one-pixel views. Now refused, naming the coefficients."""
+    from splatbench.data import load_dataset
+
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    root = _ngp(tmp_path)
+    meta = json.loads((root / "transforms.json").read_text())
+    meta["k1"] = 1e10
+    (root / "transforms.json").write_text(json.dumps(meta))
+    one_line_error(lambda: load_dataset(root), "images/0000.png: undistorting its OPENCV camera", "keeps 1x1 of 6x4",
+                   "implausible distortion coefficients")
+
+
+def test_found_top_level_keys_in_a_frame_ignored_silently(tmp_path, monkeypatch):
+    """A frame's ply_file_path (read at the top level only) was dropped without a word."""
+    from splatbench.data import load_dataset
+
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    root = _ngp(tmp_path, ply_file_path="mine.ply")
+    ds = load_dataset(root, test_every=2)
+    assert any("ignored keys" in n and "frames[].ply_file_path" in n for n in ds.notes), ds.notes

@@ -63,6 +63,7 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
+from splatbench.checks import check_image_size
 from splatbench.data.colmap_bounds import check_colmap_binary, check_colmap_text
 from splatbench.data.undistort import Lens, check_lens
 from splatbench.errors import InputError
@@ -221,6 +222,15 @@ class _Load:
         models = sorted({p[4].model for p in self.pending})
         done, folder, cached = undistort_views([(self.root / p[2], p[4]) for p in self.pending],
                                                downscale=self.downscale, say=self.say)
+        for (_, _, rel, _, lens), u in zip(self.pending, done):
+            # COLMAP's undistorter crops to the pixels that saw the scene: a real lens keeps most of them
+            # (the fox's OPENCV lens: 96 %); coefficients that leave under a quarter of a side describe
+            # no lens, and the views would be trained at a few pixels
+            kept_w, kept_h = u.width * self.downscale / lens.width, u.height * self.downscale / lens.height
+            if min(kept_w, kept_h) < 0.25:
+                raise InputError(f"{rel}: undistorting its {lens.model} camera {list(lens.params)[4:]} keeps "
+                                 f"{u.width * self.downscale}x{u.height * self.downscale} of {lens.width}x"
+                                 f"{lens.height} pixels (implausible distortion coefficients; check them)")
         first = done[0]
         self.note(f"{len(done)} images with {'/'.join(models)} lens distortion undistorted by pycolmap (COLMAP's "
                   f"undistorter, cropped to valid pixels: {first.width}x{first.height} PINHOLE"
@@ -282,6 +292,9 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, load: _Load) -> D
     rel_sparse = sparse.relative_to(root).as_posix()
     lenses: dict[int, Lens] = {}
     for cam_id, cam in sorted(rec.cameras.items()):
+        # pycolmap reads "-6" as 2^64 - 6: undistort_camera would walk that many border pixels
+        check_image_size(int(cam.width), int(cam.height), field=f"{rel_sparse}/cameras.{ext}: camera {cam_id}: "
+                         f"width, height", memory=False)
         if cam.model_name not in PINHOLE_MODELS:
             lens = Lens(cam.model_name, int(cam.width), int(cam.height), tuple(float(p) for p in cam.params))
             check_lens(lens, f"{rel_sparse}/cameras.{ext}: camera {cam_id}")
@@ -302,6 +315,12 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, load: _Load) -> D
     for im in images:
         cam = rec.cameras[im.camera_id]
         lens = lenses.get(im.camera_id)
+        if lens is not None:  # the photo's size first: undistort_camera's work grows with the camera's size
+            rel = f"{images_dir}/{im.name}"
+            size = _image_size(root, rel, f"named by {rel_sparse}/images.{ext}")
+            if size != (lens.width, lens.height):
+                raise InputError(f"{rel}: image size {size[0]}x{size[1]} disagrees with its camera "
+                                 f"{lens.width}x{lens.height} (camera {im.camera_id} of {rel_sparse}/cameras.{ext})")
         try:  # the pose (and, for a pinhole camera, the intrinsics)
             camera = Camera.from_colmap(cam if lens is None else pycolmap.undistort_camera(
                 pycolmap.UndistortCameraOptions(), cam), im)
@@ -375,7 +394,8 @@ def _load_blender(root: Path, test_every: int, load: _Load) -> Dataset:
                                      root / "transforms.json")
     points = None
     if train_file.is_file():
-        train_meta, test_meta = _read_json(train_file), _read_json(test_file, frames_required=False) if test_file.is_file() else None
+        train_meta = _read_json(train_file)
+        test_meta = _read_json(test_file, frames_required=False) if test_file.is_file() else None
         train = _blender_views(root, train_file.name, train_meta, load)
         test = _blender_views(root, test_file.name, test_meta, load) if test_meta is not None else []
         load.finish()
@@ -472,12 +492,13 @@ def _blender_views(root: Path, file: str, meta: dict, load: _Load) -> list:
         where = f"{file}: frames[{k}]"
         if not isinstance(frame, dict) or "file_path" not in frame or "transform_matrix" not in frame:
             raise InputError(f"{where}: expected a dict with 'file_path' and 'transform_matrix'")
-        ignored |= set(frame) - _BLENDER_KEYS
+        ignored |= set(frame) - _BLENDER_KEYS  # and what is read at the top level only:
+        ignored |= {f"frames[].{key}" for key in ("frames", "ply_file_path") if key in frame}
         merged = {**shared, **frame}
         rel = _resolve_image(root, where, frame["file_path"])
         if rel in seen:
-            raise InputError(f"{where}: file_path {frame['file_path']!r} names {rel}, as frames[{seen[rel]}] does "
-                             f"(a duplicated frame; keep one)")
+            raise InputError(f"{where}: file_path {_short(frame['file_path'])} names {rel}, as frames[{seen[rel]}] "
+                             f"does (a duplicated frame; keep one)")
         seen[rel] = k
         w, h = _image_size(root, rel, f"named by {file}")
         if ("w" in merged or "h" in merged) and (merged.get("w"), merged.get("h")) != (w, h):
@@ -506,6 +527,8 @@ def _blender_lens(where: str, merged: dict, camera: Camera) -> Lens | None:
     coef = {}
     for key in _DISTORTION_KEYS:
         try:
+            if isinstance(merged.get(key), (bool, str)):  # float(True) is 1.0, float("0.1") 0.1: not numbers
+                raise TypeError
             coef[key] = float(merged.get(key, 0.0))
         except (TypeError, ValueError):
             raise InputError(f"{where}: {key}: expected a number, got {merged.get(key)!r}") from None
@@ -546,7 +569,7 @@ def _image_size(root: Path, rel: str, context: str) -> tuple[int, int]:
     try:
         with Image.open(root / rel) as im:
             return im.size
-    except OSError as exc:
+    except (OSError, Image.DecompressionBombError) as exc:
         raise InputError(f"{rel}: cannot read the image ({exc})") from None
 
 
