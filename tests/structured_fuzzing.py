@@ -737,3 +737,36 @@ __all__ = ["SEEDS", "CLASSES", "JSON_CLASSES", "COLMAP_CLASSES", "mutate", "insi
 
 def describe(kind: str, klass: str, number: int) -> str:
     return f"structured case ({kind!r}, {klass!r}, {number})"
+
+
+def table(stats: dict[str, dict[str, int]]) -> str:
+    """The markdown table of docs/robustness.md ("Captures from others") from the outcome
+    counts that ``SPLATBENCH_FUZZ_STATS=fuzz.json pytest tests/test_fuzz.py -k structured``
+    writes: one row per mutation class, one column per seed capture."""
+    kinds = [("ngp", "instant-ngp `transforms.json`"), ("blender", "NeRF-synthetic `transforms_{train,test}.json`"),
+             ("colmap-text", "COLMAP text model")]
+    names = list(JSON_CLASSES) + [k for k in COLMAP_CLASSES if k not in JSON_CLASSES]
+    rows = ["| mutation class | " + " | ".join(label for _, label in kinds) + " |", "|---" * (len(kinds) + 1) + "|"]
+    totals = {kind: {} for kind, _ in kinds}
+    for klass in names:
+        cells = []
+        for kind, _ in kinds:
+            counts = stats.get(f"{kind}: {klass}")
+            if not counts:
+                cells.append("–")
+                continue
+            for outcome, n in counts.items():
+                totals[kind][outcome] = totals[kind].get(outcome, 0) + n
+            cells.append(f"{sum(counts.values())}: {counts.get('ok', 0)} load, {counts.get('InputError', 0)} InputError"
+                         + "".join(f", {n} {o}" for o, n in sorted(counts.items()) if o not in ("ok", "InputError")))
+        rows.append(f"| {klass} | " + " | ".join(cells) + " |")
+    rows.append("| **all** | " + " | ".join(
+        f"**{sum(t.values())}: {t.get('ok', 0)} load, {t.get('InputError', 0)} InputError**" for t in totals.values())
+        + " |")
+    return "\n".join(rows)
+
+
+if __name__ == "__main__":  # python -m tests.structured_fuzzing fuzz.json
+    import sys
+
+    print(table(json.loads(Path(sys.argv[1]).read_text())))

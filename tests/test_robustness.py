@@ -391,18 +391,24 @@ def test_a_symlink_inside_the_capture_is_followed(tmp_path, monkeypatch):
 
 
 def test_found_a_file_path_longer_than_the_file_system_allows(tmp_path):
-    """A 300-character name: was `OSError: [Errno 36] File name too long` from Path.is_file."""
+    """A 300-character name: was `OSError: [Errno 36] File name too long` from Path.is_file,
+    in transforms.json (file_path) and in images.txt (an image name)."""
     from splatbench.data import load_dataset
 
     root = _ngp(tmp_path, file_path="x" * 300)
-    one_line_error(lambda: load_dataset(root), "frames[0]: file_path", "File name too long")
+    one_line_error(lambda: load_dataset(root), "frames[0]: file_path", "longer than file systems allow")
+    root = _colmap_text(tmp_path)
+    images = root / "sparse" / "0" / "images.txt"
+    images.write_text(images.read_text().replace(" v1.png", " " + "x" * 300 + ".png"))
+    one_line_error(lambda: load_dataset(root), "images.txt: image 2: name", "longer than file systems allow")
 
 
 @pytest.mark.parametrize("value", [None, [], {}, 5, ""])
-def test_found_a_ply_file_path_of_the_wrong_type(tmp_path, value):
+def test_found_a_ply_file_path_of_the_wrong_type(tmp_path, monkeypatch, value):
     """ply_file_path null / [] / 5: was `TypeError: unsupported operand type(s) for /`."""
     from splatbench.data import load_dataset
 
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
     root = _ngp(tmp_path)
     meta = json.loads((root / "transforms.json").read_text())
     meta["ply_file_path"] = value

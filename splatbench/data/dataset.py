@@ -13,9 +13,11 @@ Layouts:
 * **COLMAP** -- ``sparse/0/`` (or ``sparse/``, as ``image_undistorter`` writes it) with
   ``cameras``, ``images`` and ``points3D`` (``.bin`` or ``.txt``, read by pycolmap, with
   or without COLMAP 3.12's ``rigs``/``frames``), images under ``images/<name>``.
-  PINHOLE / SIMPLE_PINHOLE cameras are used as they are; SIMPLE_RADIAL, RADIAL, OPENCV,
-  FULL_OPENCV and OPENCV_FISHEYE images are undistorted on load (below); any other model
-  is refused in one line. Registered images are sorted by name. Split: ``split.json`` (``{"train": [names], "test": [names]}``,
+  Image names stay inside the image folder and name one image each; camera sizes are
+  checked before pycolmap works on them. PINHOLE / SIMPLE_PINHOLE cameras are used as
+  they are; SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV and OPENCV_FISHEYE images are
+  undistorted on load (below); any other model is refused in one line. Registered images
+  are sorted by name. Split: ``split.json`` (``{"train": [names], "test": [names]}``,
   written by splatbench) when present, else every ``test_every``-th image (``i %
   test_every == 0``) is a test view, as 3DGS's ``--eval`` does.
 * **Blender** -- ``transforms_train.json`` (+ ``transforms_test.json``; the given split)
@@ -28,7 +30,12 @@ Layouts:
   writes them: k1 k2 p1 p2, plus k3 as COLMAP's FULL_OPENCV; k4 has no OpenCV-model
   meaning and is refused) or OPENCV_FISHEYE (k1..k4; p1 p2 refused). Keys splatbench does
   not use (instant-ngp's ``aabb_scale``, ``sharpness``, ...) are ignored with a note.
-  Points from ``ply_file_path`` when given.
+  Points from ``ply_file_path`` when given. ``file_path`` and ``ply_file_path`` must be
+  non-empty relative paths that stay inside the folder (no absolute path, no ``..`` above
+  it; symlinks inside the folder are followed, so images may live on another disk); a
+  frame naming the image of an earlier frame is refused (an image in both
+  ``transforms_train.json`` and ``transforms_test.json`` gets a note); a file holding a key
+  twice, a number beyond float64 or no frames is refused; a UTF-8 byte-order mark is read.
 
 Distortion: images whose camera has lens distortion are undistorted by pycolmap (COLMAP's
 undistorter: bilinear remap, cropped to the pixels that saw the scene) into a cache folder
@@ -224,8 +231,8 @@ class _Load:
                                                downscale=self.downscale, say=self.say)
         for (_, _, rel, _, lens), u in zip(self.pending, done):
             # COLMAP's undistorter crops to the pixels that saw the scene: a real lens keeps most of them
-            # (the fox's OPENCV lens: 96 %); coefficients that leave under a quarter of a side describe
-            # no lens, and the views would be trained at a few pixels
+            # (the fox's OPENCV lens: about 98 % of each side at downscale 8); coefficients that leave
+            # under a quarter of a side describe no lens, and the views would be trained at a few pixels
             kept_w, kept_h = u.width * self.downscale / lens.width, u.height * self.downscale / lens.height
             if min(kept_w, kept_h) < 0.25:
                 raise InputError(f"{rel}: undistorting its {lens.model} camera {list(lens.params)[4:]} keeps "
@@ -583,6 +590,8 @@ def _inside(root: Path, where: str, field: str, value: object, fix: str) -> Path
     if "\0" in value or len(value) > 4096:
         raise InputError(f"{where}: {field}: {_short(value)} is not a file path")
     norm = os.path.normpath(value)
+    if any(len(part.encode("utf-8", "surrogatepass")) > 255 for part in norm.split("/")):
+        raise InputError(f"{where}: {field}: {_short(value)} has a name longer than file systems allow (255 bytes)")
     if os.path.isabs(value) or value.startswith("~") or norm == ".." or norm.startswith("../"):
         raise InputError(f"{where}: {field}: {_short(value)} leaves the capture folder {str(root)!r} "
                          f"(files of a capture are read from inside it only; {fix})")
