@@ -557,3 +557,18 @@ def test_found_top_level_keys_in_a_frame_ignored_silently(tmp_path, monkeypatch)
     root = _ngp(tmp_path, ply_file_path="mine.ply")
     ds = load_dataset(root, test_every=2)
     assert any("ignored keys" in n and "frames[].ply_file_path" in n for n in ds.notes), ds.notes
+
+
+def test_found_a_colmap_text_file_cut_mid_number(tmp_path, monkeypatch):
+    """cameras.txt cut inside its last number: p2 = -0.0003 (written -0.00029999...) read as
+    -0.00, silently. A number cut short is still a number, so the load goes on, but a note
+    names the file: COLMAP ends every line with a newline."""
+    from splatbench.data import load_dataset
+
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
+    root = _colmap_text(tmp_path)
+    cameras = root / "sparse" / "0" / "cameras.txt"
+    data = cameras.read_bytes()
+    cameras.write_bytes(data[:data.rindex(b" -0.0002") + len(b" -0.00")])
+    ds = load_dataset(root, test_every=2)  # the seed's split: the two OPENCV views are the test views
+    assert any("sparse/0/cameras.txt: its last line has no newline" in n and "-0.00'" in n for n in ds.notes), ds.notes

@@ -292,6 +292,12 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, load: _Load) -> D
         check_colmap_binary(sparse)  # every count against the bytes that follow, before pycolmap allocates
     else:
         check_colmap_text(sparse)
+        for part in ("cameras", "images", "points3D"):  # COLMAP ends every line with a newline
+            data = (sparse / f"{part}.txt").read_bytes()
+            if data and not data.endswith(b"\n"):
+                last = data.rstrip().rsplit(b"\n", 1)[-1].decode("utf-8", "replace")
+                load.note(f"{sparse.relative_to(root).as_posix()}/{part}.txt: its last line has no newline (a "
+                          f"truncated copy? it reads {last[-40:]!r})")
     try:
         rec = pycolmap.Reconstruction(str(sparse))
     except Exception as exc:  # pycolmap raises ValueError/RuntimeError with a source location
