@@ -486,7 +486,7 @@ def test_found_a_colmap_image_name_that_leaves_the_image_folder(tmp_path, name):
     _png(tmp_path / "outside.png")
     images = root / "sparse" / "0" / "images.txt"
     images.write_text(images.read_text().replace(" v1.png", f" {name}"))
-    one_line_error(lambda: load_dataset(root), "images.txt: image 2", "name", "leaves the capture folder")
+    one_line_error(lambda: load_dataset(root), "images.txt: image 2", "name", "leaves the image folder")
 
 
 def test_found_two_colmap_images_of_one_name(tmp_path):

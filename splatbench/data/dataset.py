@@ -318,7 +318,8 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, load: _Load) -> D
     named: dict[str, int] = {}
     for im in images:
         where = f"{rel_sparse}/images.{ext}: image {im.image_id}"
-        _inside(root / images_dir, where, "name", im.name, f"image names are relative to {images_dir}/")
+        _inside(root / images_dir, where, "name", im.name, f"image names are relative to {images_dir}/",
+                folder="the image folder")
         if im.name in named:
             raise InputError(f"{where}: name {im.name!r} is also the name of image {named[im.name]} (two records "
                              f"of one photo; keep one)")
@@ -586,7 +587,7 @@ def _image_size(root: Path, rel: str, context: str) -> tuple[int, int]:
         raise InputError(f"{rel}: cannot read the image ({exc})") from None
 
 
-def _inside(root: Path, where: str, field: str, value: object, fix: str) -> Path:
+def _inside(root: Path, where: str, field: str, value: object, fix: str, folder: str = "the capture folder") -> Path:
     """``value`` as a relative path inside ``root``: a non-empty string, not absolute, no
     ``..`` that leaves the folder, no NUL; one `InputError` line naming ``where`` and
     ``field`` otherwise. (Symlinks inside the folder are followed: a capture may keep its
@@ -599,10 +600,10 @@ def _inside(root: Path, where: str, field: str, value: object, fix: str) -> Path
     if any(len(part.encode("utf-8", "surrogatepass")) > 255 for part in norm.split("/")):
         raise InputError(f"{where}: {field}: {_short(value)} has a name longer than file systems allow (255 bytes)")
     if os.path.isabs(value) or value.startswith("~") or norm == ".." or norm.startswith("../"):
-        raise InputError(f"{where}: {field}: {_short(value)} leaves the capture folder {str(root)!r} "
+        raise InputError(f"{where}: {field}: {_short(value)} leaves {folder} {str(root)!r} "
                          f"(files of a capture are read from inside it only; {fix})")
     if norm == ".":
-        raise InputError(f"{where}: {field}: {_short(value)} names the capture folder, not a file")
+        raise InputError(f"{where}: {field}: {_short(value)} names {folder}, not a file")
     return Path(norm)
 
 
