@@ -17,7 +17,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from splatbench.raster.device import dr
-from splatbench.raster.binning import Bins, TileGrid, ellipse_meets_rect, support_radius_sq, tile_pixel_offsets
+from splatbench.raster.binning import Bins, TileGrid, ellipse_meets_rect, tile_pixel_offsets
 from splatbench.raster.records import Records, load_records
 
 # Each lane shades a PIXEL_BLOCK x PIXEL_BLOCK block of pixels: one load of a record
@@ -78,22 +78,22 @@ def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
     return Lanes(px, py, inside, image_index, start, end, lanes_per_tile)
 
 
-def lanes_for(m, rec: Records, bins: Bins, alpha_min: float) -> Lanes:
+def lanes_for(m, rec: Records, bins: Bins) -> Lanes:
     """The compositing lanes with their per-block lists (`block_lists`)."""
     lanes = make_lanes(m, bins.grid, bins)
     if bins.num_pairs == 0:
         return lanes
-    return block_lists(m, rec, bins, lanes, alpha_min)
+    return block_lists(m, rec, bins, lanes)
 
 
-def block_masks(m, rec: Records, bins: Bins, block: int, alpha_min: float) -> list:
+def block_masks(m, rec: Records, bins: Bins, block: int) -> list:
     """Words of [P] UInt32: bit b % 32 of word b // 32 is set when pair p's ellipse
     meets block b of its tile (blocks row-major, as `make_lanes` orders a
     tile's lanes); blocks wholly outside the image never get a bit."""
     grid = bins.grid
     side = grid.tile_size // block
     geo, _ = load_records(m, rec, bins.gaussian_ids)
-    r2 = support_radius_sq(geo.cutoff_sq, geo.opacity, alpha_min)
+    r2 = dr.gather(m.Float, bins.support_sq, bins.gaussian_ids)  # binning's, computed once
     tx, ty = bins.tiles % grid.tiles_x, bins.tiles // grid.tiles_x
     words = [dr.zeros(m.UInt32, bins.num_pairs) for _ in range(-(-side * side // 32))]
     for b in range(side * side):
@@ -107,7 +107,7 @@ def block_masks(m, rec: Records, bins: Bins, block: int, alpha_min: float) -> li
     return words
 
 
-def block_lists(m, rec: Records, bins: Bins, lanes, alpha_min: float):
+def block_lists(m, rec: Records, bins: Bins, lanes):
     """`Lanes` whose [start, end) index their own list ``pairs`` (UInt32 sorted pair
     positions, depth order) instead of the tile's range.
 
@@ -116,7 +116,7 @@ def block_lists(m, rec: Records, bins: Bins, lanes, alpha_min: float):
     UInt32 = m.UInt32
     L = lanes.lanes_per_tile
     block = bins.grid.tile_size // int(round(L ** 0.5))
-    words = block_masks(m, rec, bins, block, alpha_min)
+    words = block_masks(m, rec, bins, block)
     dr.eval(words)
     # Which bit of which word each lane reads (lane = tile * L + b).
     b = dr.arange(UInt32, dr.width(lanes.start)) % L

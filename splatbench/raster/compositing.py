@@ -337,7 +337,7 @@ class _CompositeOp(dr.CustomOp):
         self.n = dr.width(opacities)
         self.records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
         dr.eval(self.records)
-        self.lanes = lanes_for(m, self.records, self.bins, cfg.alpha_min)
+        self.lanes = lanes_for(m, self.records, self.bins)
         fwd = _forward_loop(m, self.records, self.bins.gaussian_ids, self.lanes, cfg)
         dr.eval(fwd)
         self.fwd = fwd
@@ -443,7 +443,7 @@ def composite_loop_ad(proj: Projection, colors, bins: Bins, settings: CompositeS
     hand-written backward (test-only: slower; checks `_CompositeOp`)."""
     m = array_namespace(proj.opacities)
     records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq))
-    lanes = lanes_for(m, records, bins, settings.alpha_min)
+    lanes = lanes_for(m, records, bins)
     # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
     # count (the longest tile list, rounded up to a power of two); -1 is wrong here.
     bound = next_power_of_two(max(bins.max_list_length, 1))

@@ -28,19 +28,23 @@ from splatbench.raster.pipeline import project_view
 class WorkStats:
     """Work of one compositing pass over one view (counts; early termination ignored).
 
-    box_pairs: Gaussian-tile pairs of the cutoff bounding boxes (binning before its
-    ellipse-tile test); pairs: the Gaussian-tile pairs kept; tile_evaluations:
-    pairs x tile_size^2, what compositing would evaluate if every lane walked its whole
-    tile list; block_evaluations: the sum over lanes of PIXEL_BLOCK^2 x the length of
-    the lane's own list (`blocks.block_lists`), i.e. (block, Gaussian) pairs whose block
-    meets the support, x 16; performed: pixel-Gaussian evaluations compositing does,
-    per tile lanes x PIXEL_BLOCK^2 x the longest of its lanes' lists (the lanes of a tile
-    share a SIMD packet, which runs until its longest list ends); inside_cutoff:
-    (pixel, Gaussian) evaluations with the pixel centre inside the cutoff ellipse,
-    q = 2 sigma <= R^2; useful: those that also pass alpha >= alpha_min, i.e. the
+    cutoff_box_pairs: Gaussian-tile pairs of the cutoff bounding boxes (`Projection.extents`),
+    i.e. before any culling; cutoff_evaluations: cutoff_box_pairs x tile_size^2, what
+    compositing would evaluate without culling; box_pairs: pairs of the support boxes
+    (`binning.support_extents`), what binning's ellipse-tile test sees; pairs: the
+    Gaussian-tile pairs kept; tile_evaluations: pairs x tile_size^2, what compositing would
+    evaluate if every lane walked its whole tile list; block_evaluations: the sum over lanes
+    of PIXEL_BLOCK^2 x the length of the lane's own list (`blocks.block_lists`), i.e.
+    (block, Gaussian) pairs whose block meets the support, x 16; performed: pixel-Gaussian
+    evaluations compositing does, per tile lanes x PIXEL_BLOCK^2 x the longest of its lanes'
+    lists (the lanes of a tile share a SIMD packet, which runs until its longest list ends);
+    inside_cutoff: (pixel, Gaussian) evaluations with the pixel centre inside the cutoff
+    ellipse, q = 2 sigma <= R^2; useful: those that also pass alpha >= alpha_min, i.e. the
     Gaussian's support, where it can change the pixel.
     """
 
+    cutoff_box_pairs: int
+    cutoff_evaluations: int
     box_pairs: int
     pairs: int
     tile_evaluations: int
@@ -68,26 +72,28 @@ def work_stats(gaussians, camera, **options) -> WorkStats:
     opts = RasterOptions.from_kwargs(**options)
     m = get_device(opts.device).t
     if len(gaussians) == 0:
-        return WorkStats(0, 0, 0, 0, 0, 0, 0)
+        return WorkStats(0, 0, 0, 0, 0, 0, 0, 0, 0)
     with dr.suspend_grad():
         proj = project_view(to_tensor(m, gaussians.means), to_tensor(m, gaussians.log_scales),
                             to_tensor(m, gaussians.quats), to_tensor(m, gaussians.opacity_logits), camera, opts)
         grid = TileGrid(camera.width, camera.height, opts.tile_size)
         bins = bin_gaussians(proj, grid, opts.alpha_min)
+        area = opts.tile_size ** 2
         if bins.num_pairs == 0:
-            return WorkStats(bins.box_pairs, 0, 0, 0, 0, 0, 0)
+            return WorkStats(bins.cutoff_box_pairs, bins.cutoff_box_pairs * area, bins.box_pairs, 0, 0, 0, 0, 0, 0)
         zero = dr.zeros(m.Array3f, dr.width(proj.depths))
         records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, zero, proj.depths,
                                          proj.cutoff_sq))
         counts = _count(m, records, bins, CompositeSettings(opts.alpha_min, opts.alpha_max,
                                                              opts.transmittance_min, (0.0, 0.0, 0.0)))
-    return WorkStats(bins.box_pairs, bins.num_pairs, bins.num_pairs * opts.tile_size ** 2, *counts)
+    return WorkStats(bins.cutoff_box_pairs, bins.cutoff_box_pairs * area, bins.box_pairs, bins.num_pairs,
+                     bins.num_pairs * area, *counts)
 
 
 def _count(m, records, bins, cfg: CompositeSettings) -> tuple[int, int, int, int]:
     """(block_evaluations, performed, inside_cutoff, useful), walking the lanes' own lists."""
     UInt32 = m.UInt32
-    lanes = lanes_for(m, records, bins, cfg.alpha_min)
+    lanes = lanes_for(m, records, bins)
     K = len(lanes.px)
 
     def body(i, inside, useful):
