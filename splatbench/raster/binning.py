@@ -6,8 +6,7 @@ pairs some pixel centre of the tile can accept, in two conservative steps:
 1. Each Gaussian's **support**, the ellipse of pixels the compositing loop can accept:
    q = 2 sigma <= min(R^2, 2 ln(opacity / alpha_min)) (`support_radius_sq`, computed once
    per Gaussian and kept in `Bins.support_sq`), and the tight bounding box of that ellipse
-   (`support_extents`): a faint Gaussian's box is far smaller than its cutoff box, and a
-   Gaussian whose opacity is below alpha_min has none.
+   (`support_extents`): a faint Gaussian's box is far smaller than its cutoff box.
 2. The tiles of that box that the ellipse meets (`ellipse_meets_rect`, tested at the
    tile's pixel-centre rectangle).
 
@@ -150,8 +149,8 @@ def tile_pixel_offsets(grid: TileGrid, tx, ty, u, v, block: int | None = None, b
 
 
 def support_extents(conics, r2, cutoff_extents):
-    """(rx, ry, some) [N]: half-extents in pixels of a box holding every pixel centre the
-    compositing loop can accept, and whether it can accept any.
+    """(rx, ry) [N]: half-extents in pixels of a box holding every pixel centre the
+    compositing loop can accept.
 
     The support is q = (A dx^2 + 2B dx dy + C dy^2) <= r2 (``r2``: `support_radius_sq`);
     its exact bounding box has half-extents sqrt(r2 C / det), sqrt(r2 A / det) with
@@ -160,11 +159,18 @@ def support_extents(conics, r2, cutoff_extents):
     errs by at most Q_REL_SLACK s, s = 0.5 (A dx^2 + C dy^2) + |B dx dy|, and
     s <= 0.75 tr |d|^2 <= 1.5 sigma tr^2 / det (|B| <= tr / 2, sigma >= 0.5 (det / tr) |d|^2),
     so an accepted pixel (2 sigma_computed <= r2) has exact q <= r2 / (1 - 2e); det itself
-    is off by less than e det. The box of r2 / (1 - 4e) holds both. Where that widening
-    is too large (e > `MAX_WIDENING`: an ill-conditioned conic) or det <= 0 in float32,
-    the Gaussian keeps its cutoff box (``cutoff_extents``, `Projection.extents`) unchanged.
-    Otherwise the box never exceeds the cutoff box, and r2 < 0 (opacity below alpha_min)
-    means no pixel: sigma_computed >= sigma (1 - 2e) >= 0 > r2 / 2.
+    is off by less than e det. The box of r2 / (1 - 4e) holds both, and every tile that
+    `ellipse_meets_rect` keeps (its slack stays below 1.5 e q). Where that widening is too
+    large (e > `MAX_WIDENING`: an ill-conditioned conic) or det <= 0 in float32, the
+    Gaussian keeps its cutoff box (``cutoff_extents``, `Projection.extents`) unchanged;
+    the box never exceeds it.
+
+    r2 < 0 (opacity below alpha_min) gives a box of zero size: the one tile holding the
+    mean, which the ellipse test keeps when its pixel centres surround the mean. No pixel
+    accepts such a Gaussian (sigma_computed >= sigma (1 - 2e) >= 0), so dropping that pair
+    too would leave the image unchanged, but not the gradients' last bits: the lanes of a
+    tile add into shared per-pair slots in (iteration, lane) order, and removing an entry
+    from one lane's list shifts which of its adds come first.
     """
     a, b, c = dr.detach(conics.x), dr.detach(conics.y), dr.detach(conics.z)
     det = a * c - b * b
@@ -177,7 +183,7 @@ def support_extents(conics, r2, cutoff_extents):
     rx_cut, ry_cut = dr.detach(cutoff_extents.x), dr.detach(cutoff_extents.y)
     rx = dr.select(well, dr.minimum(dr.sqrt(r2_wide * c * inv_det), rx_cut), rx_cut)
     ry = dr.select(well, dr.minimum(dr.sqrt(r2_wide * a * inv_det), ry_cut), ry_cut)
-    return rx, ry, ~(well & (r2 < 0))
+    return rx, ry
 
 
 def tile_box(grid: TileGrid, u, v, rx, ry):
@@ -231,9 +237,9 @@ def bin_gaussians(proj: Projection, grid: TileGrid, alpha_min: float, timer=None
     u, v = dr.detach(proj.means2d.x), dr.detach(proj.means2d.y)
     n = dr.width(u)
     r2 = support_radius_sq(proj.cutoff_sq, proj.opacities, alpha_min)
-    rx, ry, some = support_extents(proj.conics, r2, proj.extents)
+    rx, ry = support_extents(proj.conics, r2, proj.extents)
     x0, y0, span_x, span_y = tile_box(grid, u, v, rx, ry)
-    box_counts = dr.select(proj.visible & some, span_x * span_y, 0)
+    box_counts = dr.select(proj.visible, span_x * span_y, 0)
     _, _, cut_x, cut_y = tile_box(grid, u, v, dr.detach(proj.extents.x), dr.detach(proj.extents.y))
     cutoff_counts = dr.select(proj.visible, m.UInt64(cut_x * cut_y), 0)  # 64-bit: a count, never a size
     dr.eval(box_counts, x0, y0, span_x, r2, cutoff_counts)
