@@ -12,11 +12,12 @@ threshold.
 The backward pass is a `dr.CustomOp` that walks each lane's list back to front,
 recovering transmittance by division (alpha <= alpha_max < 1 keeps it
 invertible). Gradients are accumulated per (tile, Gaussian) pair, then reduced
-per Gaussian in a fixed order, so results are bit-reproducible. On LLVM the lanes of
-a tile add into one slot per pair (`ReduceMode.Expand`: per-thread copies, and a
-tile never spans two threads); that mode exists only on LLVM, so elsewhere (CUDA)
-each lane writes a slot of its own and the reduction sums a pair's lane slots in
-lane order: no atomics, the same result every run (see `lane_slots`). Dr.Jit's own AD
+per Gaussian in a fixed order, so results are bit-reproducible at every tile size. On
+LLVM the lanes of one SIMD packet add into one slot per pair (`ReduceMode.Expand`:
+per-thread copies, and a packet never spans two threads; a tile wider than a packet has
+a slot per packet); that mode exists only on LLVM, so elsewhere (CUDA) each lane writes a
+slot of its own; the reduction sums a pair's slots in order: no atomics, the same result
+every run (see `reduction.lane_group`). Dr.Jit's own AD
 through the forward loop (`composite_loop_ad`) is kept as a test-only
 second backward that checks the hand-written one.
 
