@@ -51,9 +51,9 @@ def pair_at(m, lanes: Lanes, i):
     return i if lanes.pairs is None else dr.gather(m.UInt32, lanes.pairs, i)
 
 
-def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
+def make_lanes(m, grid: TileGrid, bins: Bins, pixel_block: int = PIXEL_BLOCK) -> Lanes:
     ts = grid.tile_size
-    block = min(PIXEL_BLOCK, ts)
+    block = min(pixel_block, ts)
     side = ts // block                      # lanes per tile side
     lanes_per_tile = side * side
     lane = dr.arange(m.UInt32, grid.num_tiles * lanes_per_tile)
@@ -78,9 +78,11 @@ def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
     return Lanes(px, py, inside, image_index, start, end, lanes_per_tile)
 
 
-def lanes_for(m, rec: Records, bins: Bins) -> Lanes:
-    """The compositing lanes with their per-block lists (`block_lists`)."""
-    lanes = make_lanes(m, bins.grid, bins)
+def lanes_for(m, rec: Records, bins: Bins, pixel_block: int = PIXEL_BLOCK) -> Lanes:
+    """The compositing lanes with their per-block lists (`block_lists`); ``pixel_block``:
+    the side of a lane's block (a power of two; other than `PIXEL_BLOCK` only in
+    tools/lane_packing.py, which counts what another block size would do)."""
+    lanes = make_lanes(m, bins.grid, bins, pixel_block)
     if bins.num_pairs == 0:
         return lanes
     return block_lists(m, rec, bins, lanes)
