@@ -8,8 +8,10 @@
 A lane shades a B x B block of pixels and walks its own list (`splatbench.raster.blocks`);
 the lanes of a SIMD packet (16 with AVX-512) run until the longest list among them ends,
 so a packet costs 16 x B^2 x its longest list. For each (tile_size, B) this prints that
-cost with the lanes in tile order (what the rasterizer does; B = 4 is `work_stats`'
-`performed`), with a tile's lanes sorted by list length (packets stay inside a tile),
+cost with the lanes as the rasterizer lays them out (tile by tile; within a tile of
+more lanes than a packet, sorted by list length: `blocks.sort_lanes_by_length`; for
+B = 4 this is `work_stats`' `performed`), with every tile's lanes sorted by list length
+exactly (packets stay inside a tile),
 and with all lanes sorted by length (packets mix tiles), beside the list entries x B^2
 (no idle lane at all) and the useful evaluations (`work_stats(...).useful`, which no
 layout changes). It says nothing about time: smaller blocks share each record load among
@@ -70,7 +72,7 @@ def main(argv: list[str]) -> int:
     g, cam = workload.gaussians, workload.camera
     useful = work_stats(g, cam, device="cpu").useful
     print(f"{workload.name} {width}x{height}: useful evaluations {useful:,}")
-    print("tile  B  | entries x B^2 | tile order      | sorted in tile  | sorted overall")
+    print("tile  B  | entries x B^2   | as rasterized   | sorted in tile  | sorted overall")
     for tile_size, block in LAYOUTS:
         lengths = list_lengths(g, cam, tile_size, block)
         pixels = block * block

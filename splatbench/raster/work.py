@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.raster.api import to_tensor
-from splatbench.raster.device import dr, get_device
+from splatbench.raster.device import dr, get_device, packet_width
 from splatbench.raster.binning import TileGrid, bin_gaussians
 # The compositing loop's own lanes, lists, per-pixel test and record loads, so that
 # the counts are of exactly the decisions it makes.
@@ -36,8 +36,9 @@ class WorkStats:
     evaluate if every lane walked its whole tile list; block_evaluations: the sum over lanes
     of PIXEL_BLOCK^2 x the length of the lane's own list (`blocks.block_lists`), i.e.
     (block, Gaussian) pairs whose block meets the support, x 16; performed: pixel-Gaussian
-    evaluations compositing does, per tile lanes x PIXEL_BLOCK^2 x the longest of its lanes'
-    lists (the lanes of a tile share a SIMD packet, which runs until its longest list ends);
+    evaluations compositing does, per SIMD packet its lanes x PIXEL_BLOCK^2 x the longest of
+    their lists (a packet runs until its longest list ends; on LLVM a packet is
+    min(lanes per tile, packet width) lanes of one tile, elsewhere counted as a whole tile);
     inside_cutoff: (pixel, Gaussian) evaluations with the pixel centre inside the cutoff
     ellipse, q = 2 sigma <= R^2; useful: those that also pass alpha >= alpha_min, i.e. the
     Gaussian's support, where it can change the pixel.
@@ -95,6 +96,9 @@ def _count(m, records, bins, cfg: CompositeSettings) -> tuple[int, int, int, int
     UInt32 = m.UInt32
     lanes = lanes_for(m, records, bins)
     K = len(lanes.px)
+    # The lanes that run together: a SIMD packet of one tile on LLVM, else a whole tile.
+    width = packet_width(m)
+    packet = min(lanes.lanes_per_tile, width) if width > 1 else lanes.lanes_per_tile
 
     def body(i, inside, useful):
         geo, _ = load_records(m, records, dr.gather(UInt32, bins.gaussian_ids, pair_at(m, lanes, i)))
@@ -109,9 +113,9 @@ def _count(m, records, bins, cfg: CompositeSettings) -> tuple[int, int, int, int
     _, inside, useful = dr.while_loop((UInt32(lanes.start), zero, UInt32(zero)), lambda i, *_: i < lanes.end, body,
                                       mode="symbolic")
     length = lanes.end - lanes.start
-    longest = dr.block_reduce(dr.ReduceOp.Max, length, lanes.lanes_per_tile)  # per tile
+    longest = dr.block_reduce(dr.ReduceOp.Max, length, packet)  # per SIMD packet
 
     def total(x, scale: int) -> int:
         return int(np.sum(x.numpy(), dtype=np.int64)) * scale
 
-    return (total(length, K), total(longest, lanes.lanes_per_tile * K), total(inside, 1), total(useful, 1))
+    return (total(length, K), total(longest, packet * K), total(inside, 1), total(useful, 1))
