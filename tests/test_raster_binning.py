@@ -179,3 +179,27 @@ def test_backward_is_bit_reproducible(tile_size):
                     np.testing.assert_array_equal(again.grads[k], first.grads[k], err_msg=f"{k} at {size}")
     finally:
         dr.set_thread_count(threads)
+
+
+@pytest.mark.parametrize("digit_bits", [None, 8, 13])
+def test_argsort_bits_is_a_stable_argsort(digit_bits):
+    """Every digit width binning sorts with (11 bits on LLVM, 8 as on CUDA, a wider single
+    pass) gives numpy's stable argsort, ties included."""
+    from splatbench.raster.binning import argsort_bits
+
+    m = get_device("cpu").t
+    rng = np.random.default_rng(digit_bits or 0)
+    keys = rng.integers(0, 1 << 26, 20_000, dtype=np.uint32)
+    keys[::3] = keys[1::3][: len(keys[::3])]  # ties
+    np.testing.assert_array_equal(argsort_bits(m.UInt32(keys), 26, digit_bits).numpy(),
+                                  np.argsort(keys, kind="stable"))
+
+
+@pytest.mark.parametrize("num_tiles", [1, 475, 1 << 21])
+def test_tile_order_is_stable(num_tiles):
+    from splatbench.raster.binning import tile_order
+
+    m = get_device("cpu").t
+    tiles = np.random.default_rng(num_tiles).integers(0, num_tiles, 50_000, dtype=np.uint32)
+    np.testing.assert_array_equal(tile_order(m, m.UInt32(tiles), num_tiles).numpy(),
+                                  np.argsort(tiles, kind="stable"))

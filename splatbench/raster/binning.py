@@ -18,7 +18,8 @@ changes the cutoff R^2 itself (and so the image).
 
 The sort is linear: the Gaussians are sorted by depth once (N keys, not P pairs), their
 pairs are generated in that order, and one stable counting sort by tile
-(`dr.detail.block_mkperm`) puts the pairs in (tile, depth) order. No gradients flow
+(`dr.detail.block_mkperm`; 8-bit radix passes on CUDA, where only small bucket counts
+sort stably) puts the pairs in (tile, depth) order. No gradients flow
 through binning.
 """
 
@@ -202,21 +203,46 @@ def tile_box(grid: TileGrid, u, v, rx, ry):
     return x0, y0, dr.select(x1 > x0, x1 - x0, 0), dr.select(y1 > y0, y1 - y0, 0)
 
 
-def argsort_bits(key, bits: int, radix_bits: int = 11):
+#: The widest single pass of `block_mkperm` over pair tiles on LLVM, where it is stable at
+#: any bucket count (its histograms cost 4 bytes per bucket per block).
+MAX_LLVM_TILE_PASS_BITS = 20
+
+
+def radix_bits(m) -> int:
+    """Digit width of a stable LSD radix pass, as Dr.Jit's own sort picks it: 11 bits on
+    LLVM; 8 elsewhere, because on CUDA `dr.detail.block_mkperm` is stable only in its
+    shared-memory "tiny" variant (up to 512 buckets), and an unstable pass would break
+    the order the earlier passes made."""
+    return 11 if m.__name__.startswith("drjit.llvm") else 8
+
+
+def argsort_bits(key, bits: int, digit_bits: int | None = None):
     """``dr.argsort(key)`` for a UInt32 or UInt64 ``key`` [n] whose values are below 2^bits:
-    the same stable LSD radix sort (`dr.detail.block_mkperm`, 11-bit digits as Dr.Jit's own
-    sort uses on the CPU), but only over the digits that can be non-zero."""
+    the same stable LSD radix sort (`dr.detail.block_mkperm` over `radix_bits` digits, or
+    ``digit_bits`` where the caller knows a wider pass is stable), but only over the digits
+    that can be non-zero."""
     m = array_namespace(key)
     Key = type(key)
     n = dr.width(key)
+    width = digit_bits or radix_bits(m)
     index = dr.arange(m.UInt32, n)
-    for shift in range(0, bits, radix_bits):
-        digit = m.UInt32((key >> shift) & Key((1 << radix_bits) - 1))
+    shifts = list(range(0, max(bits, 1), width))
+    for k, shift in enumerate(shifts):
+        digit = m.UInt32((key >> shift) & Key((1 << width) - 1))
         dr.eval(digit, key)
-        perm = dr.detail.block_mkperm(digit, n, 1 << radix_bits)
-        key = dr.gather(Key, key, perm)
-        index = dr.gather(m.UInt32, index, perm)
+        perm = dr.detail.block_mkperm(digit, n, 1 << width)
+        if k + 1 < len(shifts):
+            key = dr.gather(Key, key, perm)
+        index = dr.gather(m.UInt32, index, perm) if k else perm
     return index
+
+
+def tile_order(m, tile, num_tiles: int):
+    """Stable argsort of the pairs' tile ids [P] (< num_tiles): one counting sort on
+    LLVM (one `block_mkperm` pass over every tile), 8-bit passes elsewhere."""
+    bits = max(num_tiles - 1, 1).bit_length()
+    llvm = m.__name__.startswith("drjit.llvm")
+    return argsort_bits(tile, bits, bits if llvm and bits <= MAX_LLVM_TILE_PASS_BITS else None)
 
 
 def _empty_bins(m, grid: TileGrid, n: int, r2, box_pairs: int, cutoff_box_pairs: int) -> Bins:
@@ -318,9 +344,9 @@ def bin_gaussians(proj: Projection, grid: TileGrid, alpha_min: float, timer=None
     dr.scatter(run_end, idx + 1, gid, (idx + 1 == count) | (nxt != rank))
     counts = run_end - offsets
     dr.eval(gid, offsets, counts)
-    # One stable counting sort by tile: within a tile the pairs keep the depth order they
-    # were generated in.
-    order = dr.detail.block_mkperm(tile, num_pairs, 1 << max(grid.num_tiles - 1, 1).bit_length())
+    # A stable sort by tile (one counting sort on LLVM): within a tile the pairs keep the
+    # depth order they were generated in.
+    order = tile_order(m, tile, grid.num_tiles)
     gaussian_ids = dr.gather(UInt32, gid, order)
     sorted_tile = dr.gather(UInt32, tile, order)
     dr.eval(order, gaussian_ids, sorted_tile)
