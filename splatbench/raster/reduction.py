@@ -86,10 +86,10 @@ def reduce_pairs(m, bins: Bins, pair: dict, n: int, slots_per_pair: int = 1) -> 
     With ``slots_per_pair`` S > 1, pair p's records sit at slots p * S .. p * S + S - 1
     and are summed in that order.
 
-    The pairs of Gaussian g sit at Gaussian-major positions offsets[g] ..
-    offsets[g] + counts[g], i.e. at sorted positions inverse_order[j]; each Gaussian
-    lane sums its own pairs in ascending order, so the result does not depend on
-    thread scheduling.
+    The pairs of Gaussian g sit at generation positions offsets[g] .. offsets[g] + counts[g]
+    (binning generates them Gaussian by Gaussian, in ascending tile order), i.e. at sorted
+    positions inverse_order[j]; each Gaussian lane sums its own pairs in that order, so the
+    result does not depend on thread scheduling.
     """
     Float, UInt32 = m.Float, m.UInt32
     inverse = dr.zeros(UInt32, bins.num_pairs)
