@@ -294,8 +294,10 @@ def run_suite(specs: list[WorkloadSpec], settings: BenchSettings,
 
 # ----------------------------------------------------------------------------- reporting
 
-TABLE_HEADER = ("workload", "N", "WxH", "fwd ms", "fwd+bwd ms", "stages ms pre/bin(cull+sort)/comp/bcomp/bpre/other",
-                "pairs cutoff box/support box/kept", "Mevals uncull./performed/useful (useful share)", "Mevals/s", "share of FP32 peak", "peak RSS MB 1st/all", "target", "met")
+TABLE_HEADER = ("workload", "N", "WxH", "fwd ms", "fwd+bwd ms",
+                "stages ms pre/bin(cull+sort)/comp/bcomp/bpre/other", "pairs cutoff box/support box/kept",
+                "Mevals uncull./performed/useful (useful share)", "Mevals/s", "share of FP32 peak",
+                "peak RSS MB 1st/all", "target", "met")
 
 
 def _fmt_ms(x: float) -> str:

@@ -13,8 +13,8 @@ pairs some pixel centre of the tile can accept, in two conservative steps:
 Both steps widen by a float32 slack derived below, so they can only keep a pair that
 every pixel skips, never drop one a pixel accepts; and the support box holds every tile
 the ellipse test keeps, so the pairs, their order, the images and the gradients are
-exactly those of testing every tile of the cutoff box (tests/test_raster_binning.py). This is not ``radius="opacity"``, which
-changes the cutoff R^2 itself (and so the image).
+exactly those of testing every tile of the cutoff box (tests/test_raster_binning.py).
+This is not ``radius="opacity"``, which changes the cutoff R^2 itself (and so the image).
 
 The sort is linear: the Gaussians are sorted by depth once (N keys, not P pairs), their
 pairs are generated in that order, and one stable counting sort by tile
