@@ -27,7 +27,8 @@ PIXEL_BLOCK = 4
 
 
 class Lanes(NamedTuple):
-    """Compositing lanes in tile order; each lane shades K = block^2 pixels.
+    """Compositing lanes in tile order (within a tile wider than a SIMD packet, by list
+    length: `sort_lanes_by_length`); each lane shades K = block^2 pixels.
 
     px, py, inside, image_index: lists of K arrays (pixel centres, whether the
     pixel exists, its row-major index); start, end: the lane's range in its list.
