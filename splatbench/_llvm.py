@@ -143,6 +143,54 @@ def require() -> None:
         raise _missing
 
 
+#: The narrowest SIMD packet Dr.Jit's LLVM backend runs (SSE4.2 and NEON: 4 lanes; it
+#: refuses to start without one).
+MIN_PACKET_WIDTH = 4
+
+
+def packet_width(features: str | None = None) -> int:
+    """The SIMD packet width (lanes) of Dr.Jit's LLVM backend on this CPU, decided as
+    Dr.Jit 1.5 decides it (drjit-core ``llvm_core.cpp``) from LLVM's host CPU features:
+    16 with ``+avx512vl``, 8 with ``+avx``, else 4 (always 4 on Apple silicon).
+
+    ``features``: LLVM's feature string; None reads it from the libLLVM in
+    ``DRJIT_LIBLLVM_PATH`` (``LLVMGetHostCPUFeatures``). Where it cannot be read, returns
+    `MIN_PACKET_WIDTH`: a caller that groups lanes by packet stays correct with a
+    narrower width than the true one, never with a wider one.
+    """
+    if features is None:
+        if sys.platform == "darwin" and os.uname().machine == "arm64":
+            return MIN_PACKET_WIDTH
+        features = _host_cpu_features()
+    if "+avx512vl" in features:
+        return 16
+    if "+avx" in features:
+        return 8
+    return MIN_PACKET_WIDTH
+
+
+def _host_cpu_features() -> str:
+    """LLVM's host CPU feature string ("" where it cannot be read)."""
+    import ctypes  # a late import: only the rasterizer's reduction asks, once
+
+    path = os.environ.get(ENV_VAR, "")
+    if not os.path.isfile(path):
+        return ""
+    try:
+        lib = ctypes.CDLL(path)
+        lib.LLVMGetHostCPUFeatures.restype = ctypes.c_void_p
+        lib.LLVMDisposeMessage.argtypes = [ctypes.c_void_p]
+        raw = lib.LLVMGetHostCPUFeatures()
+    except (OSError, AttributeError):
+        return ""
+    if not raw:
+        return ""
+    try:
+        return (ctypes.cast(raw, ctypes.c_char_p).value or b"").decode("ascii", "replace")
+    finally:
+        lib.LLVMDisposeMessage(raw)
+
+
 def _main(argv: list[str]) -> int:
     """``--check``: exit 0 and print the library when usable, else print why and exit 1."""
     try:

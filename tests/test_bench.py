@@ -47,7 +47,10 @@ def test_bench_raster_tiny_workload_writes_documented_csv_and_json(tmp_path):
     # the work counts (splatbench.raster.work_stats) are ordered, and the peak was measured
     useful, inside = int(row["useful_evaluations"]), int(row["inside_cutoff_evaluations"])
     assert 0 < useful <= inside <= int(row["block_evaluations"]) <= int(row["evaluations"])
-    assert int(row["box_pairs"]) >= pairs
+    assert int(row["cutoff_box_pairs"]) >= int(row["box_pairs"]) >= pairs  # culled in two steps
+    assert int(row["cutoff_evaluations"]) == int(row["cutoff_box_pairs"]) * 16 ** 2 >= int(row["evaluations"])
+    assert float(row["binning_ms"]) == pytest.approx(float(row["binning_cull_ms"]) + float(row["binning_sort_ms"]),
+                                                     abs=2e-3)  # medians of sums vs sums of medians: 1 run here
     assert float(row["first_run_peak_rss_mb"]) >= float(row["setup_rss_mb"])  # the whole process so far
     assert float(row["useful_share"]) == pytest.approx(useful / int(row["evaluations"]), abs=1e-4)  # 4 places
     assert float(row["peak_gflops"]) > 0 and 0 < float(row["share_of_peak"])
@@ -112,12 +115,13 @@ def test_the_command_line_and_experiment_scene_names_give_one_typed_spec():
 
 
 def test_table_marks_met_and_missed_targets():
-    stages = StageSplit(1.0, 2.0, 3.0, 4.0, 5.0, 0.5, 15.5)
+    stages = StageSplit(1.0, 2.0, 3.0, 4.0, 5.0, 0.5, 15.5, binning_cull_ms=1.5, binning_sort_ms=0.5)
     base = RasterBenchResult(
         name="synthetic-10000-256x256-s0", n=10_000, width=256, height=256, sh_degree=3, device="cpu",
         tile_size=16, repeats=5, fwd_ms=10.0, fwd_bwd_ms=30.0, stages=stages, pairs=1000, visible=900,
         evaluations=256_000, mevals_per_s=85.3, box_pairs=1200, block_evaluations=120_000,
-        inside_cutoff_evaluations=70_000, useful_evaluations=64_000, useful_share=0.25, peak_gflops=80.0,
+        inside_cutoff_evaluations=70_000, useful_evaluations=64_000, useful_share=0.25, cutoff_box_pairs=2000,
+        cutoff_evaluations=512_000, cutoff_useful_share=0.125, peak_gflops=80.0,
         share_of_peak=0.048, base_rss_mb=350.0, setup_rss_mb=360.0, peak_rss_mb=400.0,
         first_run_peak_rss_mb=380.0,
         rss_reset=True, retained_mb_per_run=0.0, target_fwd_bwd_ms=35.0, target_peak_rss_mb=None, meets_target=True)
@@ -125,8 +129,10 @@ def test_table_marks_met_and_missed_targets():
                           replace(base, name="other", target_fwd_bwd_ms=None, meets_target=None)]).splitlines()
     assert len(lines) == 5  # header, rule, three rows
     assert lines[2].endswith("35 ms  yes") and lines[3].endswith("35 ms   NO") and lines[4].endswith("-    -")
-    assert "1.0/2.0/3.0/4.0/5.0/0.5" in lines[2]
-    assert "0.3/0.1" in lines[2] and "4.8 % of 80.0 GFLOP/s" in lines[2]  # Mevals performed/useful, % of peak
+    assert "1.0/2.0(1.5+0.5)/3.0/4.0/5.0/0.5" in lines[2]  # binning as cull + sort
+    assert "2,000/1,200/1,000" in lines[2]  # pairs of the cutoff boxes, the support boxes, kept
+    # Mevals without culling/performed/useful (useful share), % of peak
+    assert "0.5/0.3/0.1 (25.0 %)" in lines[2] and "4.8 % of 80.0 GFLOP/s" in lines[2]
     assert leak_warnings([base]) == []
     (warning,) = leak_warnings([base, replace(base, name="leaky", retained_mb_per_run=40.0)])
     assert warning.startswith("warning: leaky: RSS grew 40.0 MB per run")

@@ -1,7 +1,7 @@
 """The per-lane-slot gradient reduction (the CUDA path), exercised on LLVM.
 
-`reduction.lane_slots` picks it wherever Dr.Jit's LLVM-only Expand mode is
-unavailable. No GPU is needed to check its arithmetic: forcing it on LLVM must give
+`reduction.lane_group` picks it (a group of one lane) wherever Dr.Jit's LLVM-only
+Expand mode is unavailable. No GPU is needed to check its arithmetic: forcing it on LLVM must give
 the gradients of the default path up to float32 summation order.
 """
 
@@ -32,7 +32,7 @@ def test_per_lane_slots_match_the_shared_slot(seed, monkeypatch):
     c = workload.camera
     v = Cotangents.standard_normal(seed, c.height, c.width)
     shared = fast_vjp(workload, v, background=background, device="cpu")
-    monkeypatch.setattr(reduction, "lane_slots", lambda m: True)
+    monkeypatch.setattr(reduction, "lane_group", lambda m: 1)
     per_lane = fast_vjp(workload, v, background=background, device="cpu")
     again = fast_vjp(workload, v, background=background, device="cpu")
     np.testing.assert_array_equal(shared.rgb, per_lane.rgb)  # the forward pass is the same
@@ -42,8 +42,19 @@ def test_per_lane_slots_match_the_shared_slot(seed, monkeypatch):
         np.testing.assert_array_equal(per_lane.grads[k], again.grads[k])  # reproducible
 
 
-def test_lane_slots_only_off_llvm():
+def test_lanes_share_a_slot_per_packet_on_llvm_only():
     import drjit.llvm.ad as llvm
 
-    assert reduction.lane_slots(llvm) is False
-    assert reduction.lane_slots(type("cuda", (), {"__name__": "drjit.cuda.ad"})) is True
+    from splatbench import _llvm
+
+    assert reduction.lane_group(llvm) == _llvm.packet_width() >= _llvm.MIN_PACKET_WIDTH
+    assert reduction.lane_group(type("cuda", (), {"__name__": "drjit.cuda.ad"})) == 1
+
+
+@pytest.mark.parametrize("features, width", [("+sse4.2,+avx,+avx2,+avx512f,+avx512vl", 16),
+                                             ("+sse4.2,+avx,+avx2,+avx512f,-avx512vl", 8),
+                                             ("+sse4.2,-avx,-avx2", 4), ("+neon", 4), ("", 4)])
+def test_packet_width_follows_drjits_rule(features, width):
+    from splatbench import _llvm
+
+    assert _llvm.packet_width(features) == width

@@ -127,11 +127,14 @@ class RasterBenchResult:
     visible: int                      # Gaussians that survived culling
     evaluations: int                  # pixel-Gaussian evaluations compositing performs per pass (work_stats)
     mevals_per_s: float               # evaluations / forward compositing seconds / 10^6
-    box_pairs: int                    # pairs of the cutoff bounding boxes, before the ellipse-tile test
+    box_pairs: int                    # pairs of the support bounding boxes, before the ellipse-tile test
     block_evaluations: int            # 16 x (4x4 block, Gaussian) pairs whose block meets the support
     inside_cutoff_evaluations: int    # (pixel, Gaussian) with the pixel centre inside the cutoff ellipse
     useful_evaluations: int           # ... that also pass alpha >= alpha_min: inside the support
     useful_share: float               # useful_evaluations / evaluations
+    cutoff_box_pairs: int             # pairs of the cutoff bounding boxes: before any culling
+    cutoff_evaluations: int           # cutoff_box_pairs x tile_size^2: evaluations without culling
+    cutoff_useful_share: float        # useful_evaluations / cutoff_evaluations: the share without culling
     peak_gflops: float                # measured FP32 FMA peak of the device (splatbench.bench.peak)
     share_of_peak: float              # mevals_per_s * FLOPS_PER_EVALUATION / peak (see docs/benchmarks.md)
     base_rss_mb: float                # peak RSS after imports (interpreter, torch, Dr.Jit)
@@ -232,7 +235,10 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
         fwd_bwd_ms=fwd_bwd_ms, stages=stages, pairs=stats.num_pairs, visible=int(stats.visible.sum()),
         evaluations=evaluations, mevals_per_s=mevals, box_pairs=work.box_pairs,
         block_evaluations=work.block_evaluations, inside_cutoff_evaluations=work.inside_cutoff,
-        useful_evaluations=work.useful, useful_share=round(work.useful_share, 4), peak_gflops=peak.gflops,
+        useful_evaluations=work.useful, useful_share=round(work.useful_share, 4),
+        cutoff_box_pairs=work.cutoff_box_pairs, cutoff_evaluations=work.cutoff_evaluations,
+        cutoff_useful_share=round(work.useful / work.cutoff_evaluations, 4) if work.cutoff_evaluations else 0.0,
+        peak_gflops=peak.gflops,
         share_of_peak=round(mevals * 1e6 * FLOPS_PER_EVALUATION / (peak.gflops * 1e9), 4),
         base_rss_mb=round(base_rss, 1), setup_rss_mb=round(setup_rss, 1), peak_rss_mb=round(peak_rss, 1),
         first_run_peak_rss_mb=round(first_run_peak, 1),
@@ -288,8 +294,10 @@ def run_suite(specs: list[WorkloadSpec], settings: BenchSettings,
 
 # ----------------------------------------------------------------------------- reporting
 
-TABLE_HEADER = ("workload", "N", "WxH", "fwd ms", "fwd+bwd ms", "stages ms pre/bin/comp/bcomp/bpre/other",
-                "pairs", "Mevals performed/useful", "Mevals/s", "share of FP32 peak", "peak RSS MB 1st/all", "target", "met")
+TABLE_HEADER = ("workload", "N", "WxH", "fwd ms", "fwd+bwd ms",
+                "stages ms pre/bin(cull+sort)/comp/bcomp/bpre/other", "pairs cutoff box/support box/kept",
+                "Mevals uncull./performed/useful (useful share)", "Mevals/s", "share of FP32 peak",
+                "peak RSS MB 1st/all", "target", "met")
 
 
 def _fmt_ms(x: float) -> str:
@@ -300,8 +308,9 @@ def table_rows(results: list[RasterBenchResult]) -> list[tuple[str, ...]]:
     rows = []
     for r in results:
         s = r.stages
-        split = "/".join(_fmt_ms(v) for v in (s.preprocess_ms, s.binning_ms, s.compositing_ms,
-                                              s.backward_compositing_ms, s.backward_preprocess_ms, s.other_ms))
+        binning = f"{_fmt_ms(s.binning_ms)}({_fmt_ms(s.binning_cull_ms)}+{_fmt_ms(s.binning_sort_ms)})"
+        split = "/".join([_fmt_ms(s.preprocess_ms), binning] + [_fmt_ms(v) for v in (
+            s.compositing_ms, s.backward_compositing_ms, s.backward_preprocess_ms, s.other_ms)])
         target = "-"
         if r.target_fwd_bwd_ms is not None:
             target = f"{r.target_fwd_bwd_ms:.0f} ms"
@@ -309,7 +318,9 @@ def table_rows(results: list[RasterBenchResult]) -> list[tuple[str, ...]]:
                 target += f", {r.target_peak_rss_mb:.0f} MB"
         met = "-" if r.meets_target is None else ("yes" if r.meets_target else "NO")
         rows.append((r.name, f"{r.n:,}", f"{r.width}x{r.height}", _fmt_ms(r.fwd_ms), _fmt_ms(r.fwd_bwd_ms), split,
-                     f"{r.pairs:,}", f"{r.evaluations / 1e6:.1f}/{r.useful_evaluations / 1e6:.1f}",
+                     f"{r.cutoff_box_pairs:,}/{r.box_pairs:,}/{r.pairs:,}",
+                     f"{r.cutoff_evaluations / 1e6:.1f}/{r.evaluations / 1e6:.1f}/{r.useful_evaluations / 1e6:.1f}"
+                     f" ({100 * r.useful_share:.1f} %)",
                      f"{r.mevals_per_s:.0f}", f"{100 * r.share_of_peak:.1f} % of {r.peak_gflops:.1f} GFLOP/s",
                      f"{r.first_run_peak_rss_mb:.0f}/{r.peak_rss_mb:.0f}", target, met))
     return rows

@@ -140,7 +140,8 @@ METRICS: dict[str, str] = {
     "parity_max_abs": "largest |render - float64 reference with the same options| (implementation error)",
     "pairs": "Gaussian-tile pairs composited (full resolution)",
     "evaluations": "pixel-Gaussian evaluations compositing performs per view (`splatbench.raster.work_stats`: "
-                   "per tile, its lanes' blocks x the longest block list; early stop ignored; full resolution)",
+                   "per SIMD packet of a tile's lanes, its lanes' blocks x the longest block list; early stop "
+                   "ignored; full resolution)",
     "useful_evaluations": "of those, the evaluations inside the Gaussian's support (within the cutoff and "
                           "alpha >= alpha_min), where it can change the pixel",
     "visible": "Gaussians that survived culling (full resolution)",

@@ -25,12 +25,14 @@ class StageSplit:
     also holds torch's backward up to the rasterizer and the cotangent copies."""
 
     preprocess_ms: float            # projection, covariances, SH colours
-    binning_ms: float               # Gaussian-tile pairs: count, expand, sort, tile ranges
+    binning_ms: float               # Gaussian-tile pairs: binning_cull_ms + binning_sort_ms
     compositing_ms: float           # forward alpha compositing (+ image-order gather, depth)
     backward_compositing_ms: float  # hand-written backward of compositing, per-Gaussian reduction
     backward_preprocess_ms: float   # Dr.Jit AD through SH, projection and activations
     other_ms: float                 # total minus the five stages (output/gradient copies to torch)
     total_ms: float                 # median wall time of these timed runs
+    binning_cull_ms: float = 0.0    # support boxes, their tiles, the ellipse-tile test
+    binning_sort_ms: float = 0.0    # counting sort by tile (depth order within), tile ranges
 
 
 
@@ -121,6 +123,7 @@ def staged_runs(fn: Callable[..., RunStats], repeats: int) -> StageSplit:
         for s in STAGES:
             per_stage[s].append(timer.seconds.get(s, 0.0))
         others.append(total - sum(timer.seconds.get(s, 0.0) for s in STAGES))
+    per_stage["binning"] = [c + s for c, s in zip(per_stage["binning_cull"], per_stage["binning_sort"])]
     ms = {f"{s}_ms": milliseconds(statistics.median(v)) for s, v in per_stage.items()}
     return StageSplit(**ms, other_ms=milliseconds(statistics.median(others)), total_ms=milliseconds(statistics.median(totals)))
 

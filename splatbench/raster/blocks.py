@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from splatbench.raster.device import dr
-from splatbench.raster.binning import Bins, TileGrid, ellipse_meets_rect, support_radius_sq, tile_pixel_offsets
+from splatbench.raster.device import dr, packet_width
+from splatbench.raster.binning import Bins, TileGrid, ellipse_meets_rect, tile_pixel_offsets
 from splatbench.raster.records import Records, load_records
 
 # Each lane shades a PIXEL_BLOCK x PIXEL_BLOCK block of pixels: one load of a record
@@ -27,7 +27,8 @@ PIXEL_BLOCK = 4
 
 
 class Lanes(NamedTuple):
-    """Compositing lanes in tile order; each lane shades K = block^2 pixels.
+    """Compositing lanes in tile order (within a tile wider than a SIMD packet, by list
+    length: `sort_lanes_by_length`); each lane shades K = block^2 pixels.
 
     px, py, inside, image_index: lists of K arrays (pixel centres, whether the
     pixel exists, its row-major index); start, end: the lane's range in its list.
@@ -51,9 +52,9 @@ def pair_at(m, lanes: Lanes, i):
     return i if lanes.pairs is None else dr.gather(m.UInt32, lanes.pairs, i)
 
 
-def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
+def make_lanes(m, grid: TileGrid, bins: Bins, pixel_block: int = PIXEL_BLOCK) -> Lanes:
     ts = grid.tile_size
-    block = min(PIXEL_BLOCK, ts)
+    block = min(pixel_block, ts)
     side = ts // block                      # lanes per tile side
     lanes_per_tile = side * side
     lane = dr.arange(m.UInt32, grid.num_tiles * lanes_per_tile)
@@ -78,22 +79,24 @@ def make_lanes(m, grid: TileGrid, bins: Bins) -> Lanes:
     return Lanes(px, py, inside, image_index, start, end, lanes_per_tile)
 
 
-def lanes_for(m, rec: Records, bins: Bins, alpha_min: float) -> Lanes:
-    """The compositing lanes with their per-block lists (`block_lists`)."""
-    lanes = make_lanes(m, bins.grid, bins)
+def lanes_for(m, rec: Records, bins: Bins, pixel_block: int = PIXEL_BLOCK) -> Lanes:
+    """The compositing lanes with their per-block lists (`block_lists`); ``pixel_block``:
+    the side of a lane's block (a power of two; other than `PIXEL_BLOCK` only in
+    tools/lane_packing.py, which counts what another block size would do)."""
+    lanes = make_lanes(m, bins.grid, bins, pixel_block)
     if bins.num_pairs == 0:
         return lanes
-    return block_lists(m, rec, bins, lanes, alpha_min)
+    return block_lists(m, rec, bins, lanes)
 
 
-def block_masks(m, rec: Records, bins: Bins, block: int, alpha_min: float) -> list:
+def block_masks(m, rec: Records, bins: Bins, block: int) -> list:
     """Words of [P] UInt32: bit b % 32 of word b // 32 is set when pair p's ellipse
     meets block b of its tile (blocks row-major, as `make_lanes` orders a
     tile's lanes); blocks wholly outside the image never get a bit."""
     grid = bins.grid
     side = grid.tile_size // block
     geo, _ = load_records(m, rec, bins.gaussian_ids)
-    r2 = support_radius_sq(geo.cutoff_sq, geo.opacity, alpha_min)
+    r2 = dr.gather(m.Float, bins.support_sq, bins.gaussian_ids)  # binning's, computed once
     tx, ty = bins.tiles % grid.tiles_x, bins.tiles // grid.tiles_x
     words = [dr.zeros(m.UInt32, bins.num_pairs) for _ in range(-(-side * side // 32))]
     for b in range(side * side):
@@ -107,22 +110,29 @@ def block_masks(m, rec: Records, bins: Bins, block: int, alpha_min: float) -> li
     return words
 
 
-def block_lists(m, rec: Records, bins: Bins, lanes, alpha_min: float):
+def block_lists(m, rec: Records, bins: Bins, lanes):
     """`Lanes` whose [start, end) index their own list ``pairs`` (UInt32 sorted pair
     positions, depth order) instead of the tile's range.
+
+    Where a tile has more lanes than a SIMD packet (LLVM, e.g. tile_size 32: 64 lanes in
+    four 16-lane packets), a tile's lanes are sorted by the length of their lists
+    (`sort_lanes_by_length`) first, so each packet holds lanes of similar lengths and
+    waits less for its longest one. Lanes never leave their tile's packets, which the
+    deterministic gradient reduction needs (`reduction.lane_group`); a tile of one packet
+    keeps make_lanes' order.
 
     ``rec``: the packed `Records` of the Gaussians.
     """
     UInt32 = m.UInt32
     L = lanes.lanes_per_tile
     block = bins.grid.tile_size // int(round(L ** 0.5))
-    words = block_masks(m, rec, bins, block, alpha_min)
+    words = block_masks(m, rec, bins, block)
     dr.eval(words)
-    # Which bit of which word each lane reads (lane = tile * L + b).
-    b = dr.arange(UInt32, dr.width(lanes.start)) % L
-    word_of, shift = b // 32, b % 32
+    lane_block = dr.arange(UInt32, dr.width(lanes.start)) % L  # lane = tile * L + block, make_lanes' order
 
-    def hit(i):
+    def hit(i, lane_block):
+        """Whether entry i of the tile's range has the bit of the lane's block."""
+        word_of, shift = lane_block // 32, lane_block % 32
         word = dr.gather(UInt32, words[0], i)
         for k in range(1, len(words)):
             word = dr.select(word_of == k, dr.gather(UInt32, words[k], i), word)
@@ -131,19 +141,21 @@ def block_lists(m, rec: Records, bins: Bins, lanes, alpha_min: float):
     # Pass 1: each lane walks its tile's range and counts its entries (lanes with no
     # pixel in the image have an empty range, make_lanes' rule, so they count none).
     def count_body(i, n):
-        return i + 1, n + dr.select(hit(i), 1, 0)
+        return i + 1, n + dr.select(hit(i, lane_block), 1, 0)
 
     zero = dr.zeros(UInt32, dr.width(lanes.start))
     _, counts = dr.while_loop((UInt32(lanes.start), zero), lambda i, n: i < lanes.end, count_body,
                               mode="symbolic")
     dr.eval(counts)
+    if 1 < packet_width(m) < L:
+        lanes, counts, lane_block = sort_lanes_by_length(m, lanes, counts, lane_block)
     starts = dr.prefix_sum(counts)  # exclusive
     total = int(dr.sum(counts)[0])
     pairs = dr.zeros(UInt32, max(total, 1))
 
     # Pass 2: the same walk writes each entry in depth order.
     def fill_body(i, pos):
-        h = hit(i)
+        h = hit(i, lane_block)
         dr.scatter(pairs, i, pos, h)
         return i + 1, pos + dr.select(h, 1, 0)
 
@@ -151,3 +163,27 @@ def block_lists(m, rec: Records, bins: Bins, lanes, alpha_min: float):
     end = starts + counts
     dr.eval(pairs, end)
     return lanes._replace(start=starts, end=end, pairs=pairs)
+
+
+#: The most buckets the lane sort uses (a power of two): longer lists share the last one.
+MAX_LENGTH_BUCKETS = 1 << 16
+
+
+def sort_lanes_by_length(m, lanes: Lanes, counts, lane_block):
+    """(lanes, counts, lane_block) with each tile's lanes in ascending order of their list
+    length (stable; lengths past `MAX_LENGTH_BUCKETS` - 1 count as that): a permutation
+    within each tile's run of lanes, carrying every per-lane array with it."""
+    UInt32 = m.UInt32
+    buckets = min(1 << int(dr.max(counts)[0]).bit_length(), MAX_LENGTH_BUCKETS)
+    key = dr.minimum(counts, buckets - 1)
+    perm = dr.detail.block_mkperm(UInt32(key), lanes.lanes_per_tile, buckets)
+
+    def permuted(values):
+        return [dr.gather(type(v), v, perm) for v in values]
+
+    moved = lanes._replace(px=permuted(lanes.px), py=permuted(lanes.py), inside=permuted(lanes.inside),
+                           image_index=permuted(lanes.image_index), start=dr.gather(UInt32, lanes.start, perm),
+                           end=dr.gather(UInt32, lanes.end, perm))
+    counts, lane_block = dr.gather(UInt32, counts, perm), dr.gather(UInt32, lane_block, perm)
+    dr.eval(moved.px, moved.py, moved.inside, moved.image_index, moved.start, moved.end, counts, lane_block)
+    return moved, counts, lane_block

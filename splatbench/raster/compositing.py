@@ -12,11 +12,12 @@ threshold.
 The backward pass is a `dr.CustomOp` that walks each lane's list back to front,
 recovering transmittance by division (alpha <= alpha_max < 1 keeps it
 invertible). Gradients are accumulated per (tile, Gaussian) pair, then reduced
-per Gaussian in a fixed order, so results are bit-reproducible. On LLVM the lanes of
-a tile add into one slot per pair (`ReduceMode.Expand`: per-thread copies, and a
-tile never spans two threads); that mode exists only on LLVM, so elsewhere (CUDA)
-each lane writes a slot of its own and the reduction sums a pair's lane slots in
-lane order: no atomics, the same result every run (see `lane_slots`). Dr.Jit's own AD
+per Gaussian in a fixed order, so results are bit-reproducible at every tile size. On
+LLVM the lanes of one SIMD packet add into one slot per pair (`ReduceMode.Expand`:
+per-thread copies, and a packet never spans two threads; a tile wider than a packet has
+a slot per packet); that mode exists only on LLVM, so elsewhere (CUDA) each lane writes a
+slot of its own; the reduction sums a pair's slots in order: no atomics, the same result
+every run (see `reduction.lane_group`). Dr.Jit's own AD
 through the forward loop (`composite_loop_ad`) is kept as a test-only
 second backward that checks the hand-written one.
 
@@ -337,7 +338,7 @@ class _CompositeOp(dr.CustomOp):
         self.n = dr.width(opacities)
         self.records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
         dr.eval(self.records)
-        self.lanes = lanes_for(m, self.records, self.bins, cfg.alpha_min)
+        self.lanes = lanes_for(m, self.records, self.bins)
         fwd = _forward_loop(m, self.records, self.bins.gaussian_ids, self.lanes, cfg)
         dr.eval(fwd)
         self.fwd = fwd
@@ -443,7 +444,7 @@ def composite_loop_ad(proj: Projection, colors, bins: Bins, settings: CompositeS
     hand-written backward (test-only: slower; checks `_CompositeOp`)."""
     m = array_namespace(proj.opacities)
     records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq))
-    lanes = lanes_for(m, records, bins, settings.alpha_min)
+    lanes = lanes_for(m, records, bins)
     # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
     # count (the longest tile list, rounded up to a power of two); -1 is wrong here.
     bound = next_power_of_two(max(bins.max_list_length, 1))

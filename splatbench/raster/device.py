@@ -32,6 +32,17 @@ def cuda_available() -> bool:
 
 
 @lru_cache(maxsize=None)
+def _llvm_packet_width() -> int:
+    return _llvm.packet_width()
+
+
+def packet_width(m: ModuleType) -> int:
+    """SIMD lanes per packet of the array namespace ``m``'s backend: Dr.Jit's LLVM packet
+    width on this CPU (`_llvm.packet_width`), 1 otherwise (a CUDA thread is one lane)."""
+    return _llvm_packet_width() if m.__name__.startswith("drjit.llvm") else 1
+
+
+@lru_cache(maxsize=None)
 def get_device(device: str = "auto") -> Device:
     """The `Device` for ``device`` ("cpu", "cuda" or "auto": CUDA when available)."""
     if check_device(device) == "auto":

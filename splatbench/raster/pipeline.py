@@ -131,9 +131,10 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
     dr.eval(*proj, colors)
     if timer is not None:
         timer.mark("preprocess")
-    bins = bin_gaussians(proj, TileGrid(camera.width, camera.height, options.tile_size), float(options.alpha_min))
+    bins = bin_gaussians(proj, TileGrid(camera.width, camera.height, options.tile_size), float(options.alpha_min),
+                         timer)
     if timer is not None:
-        timer.mark("binning")
+        timer.mark("binning_sort")
     settings = CompositeSettings.from_options(options, background)
     if hooks.loop_ad:
         out, state = composite_loop_ad(proj, colors, bins, settings)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from splatbench.raster.device import dr
+from splatbench.raster.device import dr, packet_width
 from splatbench.raster.binning import Bins
 from splatbench.raster.blocks import Lanes
 from splatbench.raster.records import COL, COLOUR_GRAD_KEYS, GEO, GEO_GRAD_KEYS
@@ -29,54 +29,67 @@ def bucket(n: int) -> int:
     return -(-n // p) * p
 
 
-def lane_slots(m) -> bool:
-    """Whether each lane of a tile accumulates into a slot of its own (True except on
-    LLVM, whose Expand mode makes the shared slot deterministic). Per-lane slots cost
-    lanes_per_tile (16 at the default sizes) times the per-pair buffer memory."""
-    return not m.__name__.startswith("drjit.llvm")
+def lane_group(m) -> int:
+    """How many consecutive lanes of a tile share one accumulator slot per pair: a SIMD
+    packet's worth on LLVM (`device.packet_width`), where ``ReduceMode.Expand`` adds the
+    lanes of one packet in a fixed order into a per-thread copy; 1 elsewhere (CUDA), where
+    each lane writes a slot of its own without atomics.
+
+    Why a packet and not a tile: Dr.Jit's LLVM backend splits a launch into blocks of
+    whole packets, but not of whole tiles (with two threads and a few packets, a block
+    is half of them), and two threads adding into one slot, or one thread adding two
+    blocks in either order, rounds differently from run to run. A tile wider than a
+    packet (tile_size 32 with 16-lane packets: 64 lanes) therefore gets one slot per
+    packet, summed in packet order by the reduction."""
+    return packet_width(m)
 
 
 class PairBuffers(NamedTuple):
-    """Per-pair gradient accumulators, `PAIR_GROUPS` name -> Float buffer. Slot p
-    belongs to one (tile, Gaussian) pair, so only the lanes of one tile ever add into it.
-    Expand (LLVM): per-thread copies, non-atomic updates; still deterministic: a slot is
-    only written by the lanes of one tile, and a tile never spans two threads. Per-lane
-    slots (CUDA, `lane_slots`): each slot is written once, by one lane, without atomics."""
+    """Per-pair gradient accumulators, `PAIR_GROUPS` name -> Float buffer of S slots per
+    pair (S = lanes_per_tile / `lane_group`, at least 1). Slot (p, s) belongs to one
+    (tile, Gaussian) pair and one group of consecutive lanes of that tile: on LLVM the
+    lanes of one SIMD packet, which add into it with ``ReduceMode.Expand`` (per-thread
+    copies, non-atomic, in a fixed lane order: a packet never spans two threads); elsewhere
+    (CUDA) one lane, which writes it once, without atomics. Either way no slot's value
+    depends on thread scheduling."""
 
     groups: dict
-    slots_per_pair: int  # L: lanes per tile with per-lane slots, else 1
-    sub_slot: object     # UInt32 lane % L with per-lane slots, else None
+    slots_per_pair: int  # S
+    sub_slot: object     # UInt32 (lane % lanes_per_tile) // lane_group: the lane's slot of a pair
+    expand: bool         # True: several lanes add into a slot (LLVM); False: one lane writes it
 
     @classmethod
     def allocate(cls, m, bins: Bins, lanes: Lanes, keys) -> PairBuffers:
         cap = bucket(bins.num_pairs)  # slots past num_pairs stay zero and are never read
-        per_lane = lane_slots(m)
-        L = lanes.lanes_per_tile if per_lane else 1
-        groups = {name: dr.zeros(m.Float, size * cap * L) for name, (size, group) in PAIR_GROUPS.items()
-                  if any(key in keys for key in group)}
-        sub_slot = dr.arange(m.UInt32, dr.width(lanes.start)) % L if per_lane else None
-        return cls(groups, L, sub_slot)
+        L = lanes.lanes_per_tile
+        group = min(lane_group(m), L)
+        S = L // group  # powers of two
+        groups = {name: dr.zeros(m.Float, size * cap * S) for name, (size, group_keys) in PAIR_GROUPS.items()
+                  if any(key in keys for key in group_keys)}
+        sub_slot = (dr.arange(m.UInt32, dr.width(lanes.start)) % L) // group
+        return cls(groups, S, sub_slot, group > 1)
 
     def add(self, m, p, sums: dict, active) -> None:
         """Add one step's terms (``sums``: key -> Float, summed over a lane's pixels) into pair slot ``p``."""
         for name, buffer in self.groups.items():
             values = m.ArrayXf([sums[key] if key in sums else 0.0 for key in PAIR_GROUPS[name][1]])
-            if self.sub_slot is not None:
-                dr.scatter(buffer, values, p * self.slots_per_pair + self.sub_slot, active)
+            slot = p * self.slots_per_pair + self.sub_slot
+            if self.expand:
+                dr.scatter_add(buffer, values, slot, active, mode=dr.ReduceMode.Expand)
             else:
-                dr.scatter_add(buffer, values, p, active, mode=dr.ReduceMode.Expand)
+                dr.scatter(buffer, values, slot, active)
 
 
 def reduce_pairs(m, bins: Bins, pair: dict, n: int, slots_per_pair: int = 1) -> dict:
     """Sum per-pair gradient records per Gaussian, deterministically.
 
-    With ``slots_per_pair`` L > 1 (per-lane slots), pair p's records sit at slots
-    p * L .. p * L + L - 1 and are summed in that order.
+    With ``slots_per_pair`` S > 1, pair p's records sit at slots p * S .. p * S + S - 1
+    and are summed in that order.
 
-    The pairs of Gaussian g sit at Gaussian-major positions offsets[g] ..
-    offsets[g] + counts[g], i.e. at sorted positions inverse_order[j]; each Gaussian
-    lane sums its own pairs in ascending order, so the result does not depend on
-    thread scheduling.
+    The pairs of Gaussian g sit at generation positions offsets[g] .. offsets[g] + counts[g]
+    (binning generates them Gaussian by Gaussian, in ascending tile order), i.e. at sorted
+    positions inverse_order[j]; each Gaussian lane sums its own pairs in that order, so the
+    result does not depend on thread scheduling.
     """
     Float, UInt32 = m.Float, m.UInt32
     inverse = dr.zeros(UInt32, bins.num_pairs)

@@ -7,7 +7,9 @@ from collections import defaultdict
 
 from splatbench.raster.device import dr
 
-STAGES = ("preprocess", "binning", "compositing", "backward_compositing", "backward_preprocess")
+#: Binning is charged as two stages: culling (support boxes, expansion, ellipse-tile
+#: test) and sorting (counting sort by tile, ranges); `StageSplit.binning_ms` is their sum.
+STAGES = ("preprocess", "binning_cull", "binning_sort", "compositing", "backward_compositing", "backward_preprocess")
 
 
 class StageTimer:

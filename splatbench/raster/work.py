@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.raster.api import to_tensor
-from splatbench.raster.device import dr, get_device
+from splatbench.raster.device import dr, get_device, packet_width
 from splatbench.raster.binning import TileGrid, bin_gaussians
 # The compositing loop's own lanes, lists, per-pixel test and record loads, so that
 # the counts are of exactly the decisions it makes.
@@ -28,19 +28,24 @@ from splatbench.raster.pipeline import project_view
 class WorkStats:
     """Work of one compositing pass over one view (counts; early termination ignored).
 
-    box_pairs: Gaussian-tile pairs of the cutoff bounding boxes (binning before its
-    ellipse-tile test); pairs: the Gaussian-tile pairs kept; tile_evaluations:
-    pairs x tile_size^2, what compositing would evaluate if every lane walked its whole
-    tile list; block_evaluations: the sum over lanes of PIXEL_BLOCK^2 x the length of
-    the lane's own list (`blocks.block_lists`), i.e. (block, Gaussian) pairs whose block
-    meets the support, x 16; performed: pixel-Gaussian evaluations compositing does,
-    per tile lanes x PIXEL_BLOCK^2 x the longest of its lanes' lists (the lanes of a tile
-    share a SIMD packet, which runs until its longest list ends); inside_cutoff:
-    (pixel, Gaussian) evaluations with the pixel centre inside the cutoff ellipse,
-    q = 2 sigma <= R^2; useful: those that also pass alpha >= alpha_min, i.e. the
+    cutoff_box_pairs: Gaussian-tile pairs of the cutoff bounding boxes (`Projection.extents`),
+    i.e. before any culling; cutoff_evaluations: cutoff_box_pairs x tile_size^2, what
+    compositing would evaluate without culling; box_pairs: pairs of the support boxes
+    (`binning.support_extents`), what binning's ellipse-tile test sees; pairs: the
+    Gaussian-tile pairs kept; tile_evaluations: pairs x tile_size^2, what compositing would
+    evaluate if every lane walked its whole tile list; block_evaluations: the sum over lanes
+    of PIXEL_BLOCK^2 x the length of the lane's own list (`blocks.block_lists`), i.e.
+    (block, Gaussian) pairs whose block meets the support, x 16; performed: pixel-Gaussian
+    evaluations compositing does, per SIMD packet its lanes x PIXEL_BLOCK^2 x the longest of
+    their lists (a packet runs until its longest list ends; on LLVM a packet is
+    min(lanes per tile, packet width) lanes of one tile, elsewhere counted as a whole tile);
+    inside_cutoff: (pixel, Gaussian) evaluations with the pixel centre inside the cutoff
+    ellipse, q = 2 sigma <= R^2; useful: those that also pass alpha >= alpha_min, i.e. the
     Gaussian's support, where it can change the pixel.
     """
 
+    cutoff_box_pairs: int
+    cutoff_evaluations: int
     box_pairs: int
     pairs: int
     tile_evaluations: int
@@ -68,27 +73,32 @@ def work_stats(gaussians, camera, **options) -> WorkStats:
     opts = RasterOptions.from_kwargs(**options)
     m = get_device(opts.device).t
     if len(gaussians) == 0:
-        return WorkStats(0, 0, 0, 0, 0, 0, 0)
+        return WorkStats(0, 0, 0, 0, 0, 0, 0, 0, 0)
     with dr.suspend_grad():
         proj = project_view(to_tensor(m, gaussians.means), to_tensor(m, gaussians.log_scales),
                             to_tensor(m, gaussians.quats), to_tensor(m, gaussians.opacity_logits), camera, opts)
         grid = TileGrid(camera.width, camera.height, opts.tile_size)
         bins = bin_gaussians(proj, grid, opts.alpha_min)
+        area = opts.tile_size ** 2
         if bins.num_pairs == 0:
-            return WorkStats(bins.box_pairs, 0, 0, 0, 0, 0, 0)
+            return WorkStats(bins.cutoff_box_pairs, bins.cutoff_box_pairs * area, bins.box_pairs, 0, 0, 0, 0, 0, 0)
         zero = dr.zeros(m.Array3f, dr.width(proj.depths))
         records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, zero, proj.depths,
                                          proj.cutoff_sq))
         counts = _count(m, records, bins, CompositeSettings(opts.alpha_min, opts.alpha_max,
                                                              opts.transmittance_min, (0.0, 0.0, 0.0)))
-    return WorkStats(bins.box_pairs, bins.num_pairs, bins.num_pairs * opts.tile_size ** 2, *counts)
+    return WorkStats(bins.cutoff_box_pairs, bins.cutoff_box_pairs * area, bins.box_pairs, bins.num_pairs,
+                     bins.num_pairs * area, *counts)
 
 
 def _count(m, records, bins, cfg: CompositeSettings) -> tuple[int, int, int, int]:
     """(block_evaluations, performed, inside_cutoff, useful), walking the lanes' own lists."""
     UInt32 = m.UInt32
-    lanes = lanes_for(m, records, bins, cfg.alpha_min)
+    lanes = lanes_for(m, records, bins)
     K = len(lanes.px)
+    # The lanes that run together: a SIMD packet of one tile on LLVM, else a whole tile.
+    width = packet_width(m)
+    packet = min(lanes.lanes_per_tile, width) if width > 1 else lanes.lanes_per_tile
 
     def body(i, inside, useful):
         geo, _ = load_records(m, records, dr.gather(UInt32, bins.gaussian_ids, pair_at(m, lanes, i)))
@@ -103,9 +113,9 @@ def _count(m, records, bins, cfg: CompositeSettings) -> tuple[int, int, int, int
     _, inside, useful = dr.while_loop((UInt32(lanes.start), zero, UInt32(zero)), lambda i, *_: i < lanes.end, body,
                                       mode="symbolic")
     length = lanes.end - lanes.start
-    longest = dr.block_reduce(dr.ReduceOp.Max, length, lanes.lanes_per_tile)  # per tile
+    longest = dr.block_reduce(dr.ReduceOp.Max, length, packet)  # per SIMD packet
 
     def total(x, scale: int) -> int:
         return int(np.sum(x.numpy(), dtype=np.int64)) * scale
 
-    return (total(length, K), total(longest, lanes.lanes_per_tile * K), total(inside, 1), total(useful, 1))
+    return (total(length, K), total(longest, packet * K), total(inside, 1), total(useful, 1))
