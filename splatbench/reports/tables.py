@@ -155,11 +155,15 @@ class Stat:
         return t_quantile(self.n) * self.std / math.sqrt(self.n)
 
     def text(self, fmt: str) -> str:
-        """``"27.31 ± 0.42"`` (mean ± 95 % half-width), the mean alone for one seed, "–" for none."""
+        """``"27.31 ± 0.42"`` (mean ± 95 % half-width), the mean alone for one seed, "–" for none,
+        ``"41.26 (no spread)"`` when the half-width is zero at ``fmt``'s precision: the seeds did
+        not vary the value, so there is no interval to show (never ``± 0.00``)."""
         if self.n == 0 or math.isnan(self.mean):
             return "–"
         if self.n < 2 or math.isnan(self.std):
             return format(self.mean, fmt)
+        if float(format(self.half_width, fmt)) == 0.0:
+            return f"{format(self.mean, fmt)} (no spread)"
         return f"{format(self.mean, fmt)} ± {format(self.half_width, fmt)}"
 
 
