@@ -265,7 +265,8 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     for tradeoff, path in tradeoffs:
         cost, quality = specs[tradeoff.cost], specs[tradeoff.quality]
         lines += [f"## {cost.label} against {quality.label}", ""]
-        _, left = timed_runs(report, tradeoff)
+        trusted, left = timed_runs(report, tradeoff)
+        shown = cell_labels(spec, trusted) if len(trusted) else pd.Series([], dtype=object)
         is_time = declared is not None and tradeoff.cost in declared.timed
         if path is None:
             lines += [f"Not drawn: all {len(left)} done runs were timed while other processes loaded the machine; "
@@ -284,7 +285,10 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
             lines.append("- These runs did not record the machine's load (run before it was recorded): their times "
                          "may come from a loaded machine, so this front is no evidence of speed.")
         for scene, front in report.fronts.get(tradeoff.stem, {}).items():
-            if front:
+            cells = set(shown[trusted.scene == scene]) if len(trusted) else set()
+            if len(cells) == 1 and len(left):
+                lines.append(f"- On {scene} only `{next(iter(cells))}` has a trusted time: no front.")
+            elif front:
                 lines.append(f"- Pareto front on {scene}, {tradeoff.order}: " + " → ".join(f"`{c}`" for c in front))
         lines.append("")
 
