@@ -264,7 +264,7 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "- **Evaluation**: the test views at steps 500, 1,000, 1,500, 2,000" in header
     assert "rendered scenes at 32 px wide by Mitsuba, 2 spp" in header
     assert "LPIPS v0.1, AlexNet backbone, inputs scaled to [-1, 1]" in header
-    assert "not the initial points (init = surface: the same points for every seed)" in header
+    assert "not the initial points of init = surface (the same points for every seed)" in header
 
     # a config that names its protocol (a preset added to TrainConfig) is shown as named
     from splatbench.reports.protocol import protocol_lines

@@ -71,7 +71,7 @@ def seed_varies(config: dict[str, Any]) -> tuple[list[str], list[str]]:
     elif config.get("init_seeded") or config.get("init_jitter") or config.get("init_subsample"):
         varies.append(f"the initial points (init = {init}, seeded)")
     elif init is not None:
-        fixed.append(f"the initial points (init = {init}: the same points for every seed)")
+        fixed.append(f"the initial points of init = {init}")
     fixed.append("the dataset (rendered or read once per scene)")
     return varies, fixed
 
@@ -152,8 +152,8 @@ def _resolution(done: pd.DataFrame) -> str:
 def _metrics(done: pd.DataFrame) -> str:
     from splatbench.metrics.perceptual import convention  # late: the reports start without torch
 
-    text = ("PSNR of the model's display image clamped to [0, 1] against the target (float, not uint8), SSIM "
-            "with an 11-pixel Gaussian window (σ 1.5)")
+    text = ("PSNR of the model's image clamped to [0, 1] against the target, on float images (the prediction "
+            "is not quantized to uint8), SSIM with an 11-pixel Gaussian window (σ 1.5)")
     if "metric.lpips_net" in done.columns:
         kinds = sorted({(str(n), bool(s)) for n, s in zip(done["metric.lpips_net"], done["metric.lpips_scale_inputs"])
                         if isinstance(n, str) and n})
@@ -174,6 +174,9 @@ def _seeds(done: pd.DataFrame) -> str:
         v, f = seed_varies(config)
         varies += [x for x in v if x not in varies]
         fixed += [x for x in f if x not in fixed]
+    inits = [f[len("the initial points of init = "):] for f in fixed if f.startswith("the initial points of init")]
+    fixed = ([f"the initial points of init = {' / '.join(inits)} (the same points for every seed)"] if inits else []) \
+        + [f for f in fixed if not f.startswith("the initial points of init")]
     where = ("; not " + ", not ".join(fixed)) if fixed else ""
     return (f"{', '.join(map(str, seeds))}, paired across cells. A seed varies {', '.join(varies)}{where}: an "
             f"interval covers what these vary, not a rerun's other sources (a different start, another "
