@@ -5,7 +5,9 @@ from and how it is written); the text is rendered from the claims, so a test can
 recompute every number from ``results.parquet`` and find its text in the report. Per
 axis:
 
-* **best**: per scene, the row with the best mean of the kind's primary metric;
+* **best**: per scene, the row with the best mean of the kind's primary metric, named only
+  when its paired lead over the runner-up is significant and at least the comparison's
+  minimum effect (claim ``best``); otherwise "no single best" (claim ``no best``);
 * **vs**: every other row against the reference row (the one-at-a-time base, else the
   axis's first value), per scene, for each of the kind's comparisons, **paired over
   seeds** (`splatbench.metrics.stats`): ``diff`` is the mean of ``b_s - a_s`` with
@@ -13,7 +15,13 @@ axis:
   ``mean`` is the row's own mean (for a metric that is already relative to the base,
   like the raster kind's time ratio) with its t interval. When the interval contains
   the null value (0 for a difference, 1 for a ratio or a relative metric) the text
-  says "no significant difference"; with one seed it says no interval can be computed;
+  says "no significant difference"; when it excludes it by less than the comparison's
+  ``min_effect``, "no practical difference"; when the seeds did not vary the result (a
+  half-width of zero at the precision written, `no_spread`), "no interval" and nothing
+  is significant; with one seed it says no interval can be computed. Where the kind
+  declares its curves (`KindReport.settling`), a primary-metric comparison whose cells
+  had not settled is marked **not settled** (`splatbench.reports.settling`), and the
+  kind's confound counts (`KindReport.confounds`) that differ are named ("Also changed");
 * **count**: how many such comparisons the table makes (each at 95 %, no correction
   for multiplicity);
 * kind-specific notes appended to it (`splatbench.reports.notes`, registered by kind
