@@ -253,6 +253,16 @@ def test_a_finding_names_what_else_a_setting_changed(tmp_path):
     _, text = results(tmp_path / "old", spec_of(), lambda run: (metrics_of(30.0 + run.seed * 0.1), flat_curves(30.0)))
     assert "Also changed" not in text and "was not recorded by these runs" in text
 
+    # ... and names what the configs schedule: graphdeco's resets every 3,000 of 30,000 steps, scaled to
+    # 2,000 (every 200), fire only inside the refine window: 2 below 500 (25 %), 7 below 1,500 (75 %)
+    stops = parse_experiment({"name": "stops", "kind": "train", "scenes": ["glossy"], "seeds": [0, 1, 2],
+                              "base": {"iterations": 2000, "data": {"resolution": 32, "views": 8, "spp": 2}},
+                              "axes": {"strategy_options.refine_stop": ["25%", "75%"]}}, source="stops.toml")
+    _, text = results(tmp_path / "stops", stops, lambda run: (metrics_of(30.0 + run.seed * 0.1 + (
+        0.5 if run.labels["strategy_options.refine_stop"] == "75%" else 0.0)), flat_curves(30.0)))
+    assert "Also changed: glossy: opacity resets 7 instead of 2 (planned), refinements 14 instead of 4 (planned)" in text
+    assert "Opacity resets fire only inside the refine window" in text
+
 
 # --------------------------------------------------------------------------- protocol
 def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):

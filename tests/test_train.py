@@ -373,7 +373,7 @@ def test_result_records_what_the_strategy_did(tmp_path, tiny_diffuse):
     it = 5, 10, 15; reset at it = 6, 12, inside the refine window only); the totals must add up to
     the final count (a split replaces one Gaussian by two); result.json keeps them, and a result
     written before they were recorded reads back with None."""
-    from splatbench.strategies import TopologyCounts
+    from splatbench.strategies import TopologyCounts, planned_counts
 
     opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "grad_threshold": 1e-5, "reset_every": 6}
     r = train(config(tmp_path, strategy="default", strategy_options=opts), dataset=tiny_diffuse)
@@ -382,6 +382,9 @@ def test_result_records_what_the_strategy_did(tmp_path, tiny_diffuse):
     assert t.cloned + t.split > 0  # the low threshold grows the model
     assert len(tiny_diffuse.points) + t.cloned + t.split - t.pruned == r.num_gaussians
     assert 0 <= t.pruned_size <= t.pruned
+    # what the schedule plans (what a report names for runs that did not record it) is what happened
+    planned = planned_counts(config(tmp_path, strategy="default", strategy_options=opts).make_strategy(), 20)
+    assert (planned.refinements, planned.opacity_resets) == (t.refinements, t.opacity_resets)
     saved = json.loads((tmp_path / "run" / "result.json").read_text())
     assert saved["topology"]["opacity_resets"] == 2 and TrainResult.from_dict(saved).topology == t
     del saved["topology"]
@@ -394,6 +397,8 @@ def test_result_records_what_the_strategy_did(tmp_path, tiny_diffuse):
     mcmc = train(config(tmp_path, out=str(tmp_path / "mcmc"), strategy="mcmc",
                         strategy_options=CHECKPOINT_STRATEGIES["mcmc"]), dataset=tiny_diffuse)
     assert mcmc.topology.refinements == 3 and mcmc.topology.opacity_resets == 0  # it = 5, 10, 15
+    assert planned_counts(config(tmp_path, strategy="mcmc", strategy_options=CHECKPOINT_STRATEGIES["mcmc"])
+                          .make_strategy(), 20).refinements == 3
     assert len(tiny_diffuse.points) + mcmc.topology.added == mcmc.num_gaussians
     none = train(config(tmp_path, out=str(tmp_path / "none")), dataset=tiny_diffuse)
     assert none.topology == TopologyCounts()

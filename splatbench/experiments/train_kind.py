@@ -406,6 +406,21 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
     return RunOutput(metrics=metrics, curves=curves, warnings=warnings)
 
 
+def planned(config: dict[str, Any]) -> dict[str, float]:
+    """The refinements and opacity resets a run's resolved config schedules (its strategy's
+    ``planned_counts``, scaled as the run scales it): what a report names for runs that did
+    not record their counts; {} for a config that no longer validates."""
+    from splatbench.strategies import planned_counts
+
+    try:
+        _, _, train = _split(config)
+        cfg = _train_config(train)
+        counts = planned_counts(cfg.make_strategy(), cfg.iterations)
+    except InputError:
+        return {}
+    return {"opacity_resets": counts.opacity_resets, "refinements": counts.refinements}
+
+
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
     metrics=(
@@ -437,7 +452,8 @@ REPORT = KindReport(
 
 #: The ``train`` kind (``kind = "train"``).
 TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, identity=identity, scenes=scenes, prepare=prepare,
-                description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT)
+                description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT,
+                planned=planned)
 
 __all__ = ["TRAIN", "REPORT", "METRICS", "MIN_EFFECT", "TOPOLOGY_METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
            "dataset_folder", "ensure_dataset"]

@@ -368,7 +368,7 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
             line = f"  - `{row.label}`: " + "; ".join(parts)
             if moving:
                 line += f". **Not settled** ({'; '.join(moving)})"
-            also = confounds(scenes, ref, row, usable, declared)
+            also = confounds(scenes, ref, row, usable, declared, kind)
             if also:
                 line += f". Also changed: {also}"
             lines.append(line)
@@ -402,7 +402,8 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
                          f"computed (n = 1): none of them is a significant difference; add seeds to the grid.")
     if declared is not None and declared.confounds and others and not _recorded(usable, declared):
         lines.append("- What else each setting changed (" + ", ".join(m.label for m in declared.confounds[:5])
-                     + ") was not recorded by these runs (run before it was); rerun the grid to see it.")
+                     + ") was not recorded by these runs (run before it was); \"(planned)\" counts are what their "
+                       "configs schedule; rerun the grid to see the rest.")
     if excluded:
         lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
                      f"these findings (marked in the table's `loaded` column).")
@@ -428,29 +429,64 @@ def _recorded(runs: pd.DataFrame, declared) -> bool:
     return any(c in runs.columns and pd.to_numeric(runs[c], errors="coerce").notna().any() for c in cols)
 
 
-def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, declared) -> str:
+def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, declared, kind: str = "") -> str:
     """What else ``row`` changed against ``ref`` (the kind's confound counts, mean over seeds,
     per scene): each count that differs by more than `CONFOUND_SHARE` of the larger, e.g.
-    ``textured: opacity resets 7 instead of 4``; "" when none differs or none was recorded."""
+    ``textured: opacity resets 7 instead of 4``; "" when none differs. Runs that did not record
+    a count (grids run before it was) give the count their config schedules, where the kind
+    can say it (`RunKind.planned`), written "(planned)"."""
     if declared is None or not declared.confounds:
         return ""
+    plan = _planner(kind)
     parts = []
     for scene in scenes:
         moved = []
         for m in declared.confounds:
+            sel_a = runs[(runs.scene == scene) & runs.run_id.isin(ref.run_ids)]
+            sel_b = runs[(runs.scene == scene) & runs.run_id.isin(row.run_ids)]
             col = f"metric.{m.name}"
-            if col not in runs.columns:
-                continue
-            a = seed_values(runs[(runs.scene == scene) & runs.run_id.isin(ref.run_ids)], m.name)
-            b = seed_values(runs[(runs.scene == scene) & runs.run_id.isin(row.run_ids)], m.name)
+            a = seed_values(sel_a, m.name) if col in runs.columns else {}
+            b = seed_values(sel_b, m.name) if col in runs.columns else {}
+            how = ""
+            if not a and not b and plan is not None:
+                a, b, how = plan(sel_a, m.name), plan(sel_b, m.name), " (planned)"
             if not a or not b:
                 continue
             ma, mb = sum(a.values()) / len(a), sum(b.values()) / len(b)
             if abs(mb - ma) > CONFOUND_SHARE * max(abs(ma), abs(mb)):
-                moved.append(f"{m.label} {_count(mb)} instead of {_count(ma)}")
+                moved.append(f"{m.label} {_count(mb)} instead of {_count(ma)}{how}")
         if moved:
             parts.append(f"{scene}: " + ", ".join(moved))
     return "; ".join(parts) + (" (mean over seeds)" if parts else "")
+
+
+def _planner(kind: str) -> Callable[[pd.DataFrame, str], dict[int, float]] | None:
+    """``plan(runs, metric) -> seed -> count`` from each run's recorded config through the kind's
+    `RunKind.planned`; None for a kind without one."""
+    from splatbench.experiments.configs import unflatten
+    from splatbench.experiments.kinds import get_kind
+    from splatbench.reports.tables import decode
+
+    try:
+        planned = get_kind(kind).planned if kind else None
+    except InputError:
+        return None
+    if planned is None:
+        return None
+
+    def plan(runs: pd.DataFrame, metric: str) -> dict[int, float]:
+        out: dict[int, list[float]] = {}
+        cols = [c for c in runs.columns if c.startswith("config.")]
+        for _, r in runs.iterrows():
+            flat = {c[len("config."):]: decode(r[c]) for c in cols}
+            config = {**unflatten({k: v for k, v in flat.items() if v is not None}), "scene": r.scene,
+                      "seed": int(r.seed)}
+            value = planned(config).get(metric)
+            if value is not None:
+                out.setdefault(int(r.seed), []).append(float(value))
+        return {k: sum(v) / len(v) for k, v in out.items()}
+
+    return plan
 
 
 #: A confound count is named when the row's mean differs from the reference's by more than this share.

@@ -70,6 +70,13 @@ def topology_counts(state: object) -> TopologyCounts:
     return TopologyCounts()
 
 
+def planned_counts(strategy: Strategy, iterations: int) -> TopologyCounts:
+    """The refinements and opacity resets ``strategy``'s schedule makes in a run of
+    ``iterations`` steps (its optional ``planned_counts``; none for a strategy without one)."""
+    planned = getattr(strategy, "planned_counts", None)
+    return planned(iterations) if planned is not None else TopologyCounts()
+
+
 def _lookup(name: str) -> tuple[type, dict[str, object]]:
     if name not in STRATEGIES:
         raise InputError(f"strategy: unknown name {name!r} (expected one of: {', '.join(STRATEGIES)})")
@@ -79,5 +86,5 @@ def _lookup(name: str) -> tuple[type, dict[str, object]]:
 __all__ = [
     "PARAM_GROUPS", "STRATEGIES", "BudgetState", "BudgetStrategy", "DefaultState", "DefaultStrategy", "MCMCState", "MCMCStats", "MCMCStrategy",
     "NoneStrategy", "Optimizers", "Params", "RefineStats", "StepContext", "Strategy", "TopologyChange", "TopologyCounts",
-    "make_strategy", "strategy_fields", "topology_counts",
+    "make_strategy", "planned_counts", "strategy_fields", "topology_counts",
 ]

@@ -85,6 +85,13 @@ def last_multiple(period: int, lo: int, hi: int) -> int | None:
     return m if m > lo else None
 
 
+def multiples(period: int, lo: int, hi: int) -> int:
+    """How many multiples of ``period`` lie in ``(lo, hi]`` (0 for a period < 1)."""
+    if period < 1 or hi <= lo:
+        return 0
+    return hi // period - lo // period
+
+
 def check_fields(obj, positive_ints: tuple[str, ...], nonneg: tuple[str, ...]) -> None:
     """One-line `InputError` naming ``Class.field`` unless each ``positive_ints`` field is an
     int >= 1 and each ``nonneg`` field a finite number >= 0 (strategies' ``__post_init__``)."""

@@ -20,8 +20,8 @@ import torch
 
 from splatbench.errors import InputError
 import splatbench.strategies.ops as ops
-from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, check_fields,
-                                       last_multiple, no_refinement_note)
+from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, TopologyCounts,
+                                       check_fields, last_multiple, multiples, no_refinement_note)
 
 
 class RefineStats(NamedTuple):
@@ -182,6 +182,14 @@ class DefaultStrategy:
     def schedule_note(self, iterations: int) -> str | None:
         """A warning when no refinement step falls in the refine window of this run."""
         return no_refinement_note(self.name, self.refine_every, self.refine_start, self.refine_stop, iterations)
+
+    def planned_counts(self, iterations: int) -> TopologyCounts:
+        """The refinements and opacity resets this schedule makes in a run of ``iterations``
+        steps (`post_backward`'s conditions; an early stop makes fewer): what a report names
+        when the runs did not record them."""
+        hi = min(iterations, self.refine_stop - 1)  # completed iterations it = step + 1 < refine_stop
+        return TopologyCounts(refinements=multiples(self.refine_every, self.refine_start, hi),
+                              opacity_resets=multiples(self.reset_every, 0, hi))
 
     def initialize_state(self, params: Params) -> DefaultState:
         n, device = params["means"].shape[0], params["means"].device
