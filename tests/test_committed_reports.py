@@ -20,6 +20,7 @@ experiment file must expand, and the marker must go when the report arrives.
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pandas as pd
@@ -95,6 +96,37 @@ def test_committed_report_matches_its_parquet(name):
         if line.startswith("![") and "](" in line:
             figure = folder / line.split("](", 1)[1].rstrip(")")
             assert figure.is_file() and figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", figure
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_the_readme_line_of_an_unsettled_report_says_so(name):
+    """Issue 29 (6): a report whose headline comparisons had not settled (a cell's test curve still
+    moving over the last quarter, `splatbench.reports.settling`) is marked "not settled" in the
+    README's table line too, and no README line prints an interval of ±0.00."""
+    folder = ROOT / "reports" / name
+    if not (folder / "report.md").is_file() or (folder / "STALE.md").is_file():
+        pytest.skip(f"reports/{name} has no current report")
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    rows = [line for line in readme.splitlines() if line.startswith(f"| [`reports/{name}`]")]
+    assert len(rows) == 1, f"README: expected one table line for reports/{name}"
+    spec = _load(name)
+    report = report_from_table(spec, pd.read_parquet(folder / "results.parquet"), len(expand(spec)))
+    unsettled = [c for f in report.findings.values() for c in f.claims
+                 if c.kind in ("vs", "best") and c.metric == "test_psnr" and c.settled is False]
+    if unsettled:
+        assert "not settled" in rows[0].lower(), f"README: reports/{name} is not settled; its line must say so"
+    assert "±0.00" not in rows[0] and "± 0.00" not in rows[0]
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_no_committed_report_prints_an_interval_of_zero(name):
+    """Issue 29: an interval of ±0.00 is never printed (seeds that varied nothing give no interval)."""
+    path = ROOT / "reports" / name / "report.md"
+    if not path.is_file():
+        pytest.skip(f"reports/{name} not committed")
+    text = path.read_text(encoding="utf-8")
+    zero = re.search(r"±\s*0\.0*(?!\d)|\[95 % CI ([+-]?[0-9.]+), \1\]", text)  # ± 0.00; an interval [a, a]
+    assert zero is None, f"reports/{name} prints {zero.group(0)!r}"
 
 
 @pytest.mark.parametrize("name", SHIPPED)

@@ -367,6 +367,43 @@ def test_checkpoint_resumes_training_exactly(tmp_path, tiny_diffuse, strategy):
         train(config(tmp_path, out=str(tmp_path / "other"), **base), dataset=tiny_diffuse, resume=tmp_path / "missing.pt")
 
 
+def test_result_records_what_the_strategy_did(tmp_path, tiny_diffuse):
+    """`TrainResult.topology`: refinements, opacity resets and the cloned / split / pruned totals
+    (what a report names as a setting's confounds). The schedule fixes the first two (refine at
+    it = 5, 10, 15; reset at it = 6, 12, inside the refine window only); the totals must add up to
+    the final count (a split replaces one Gaussian by two); result.json keeps them, and a result
+    written before they were recorded reads back with None."""
+    from splatbench.strategies import TopologyCounts, planned_counts
+
+    opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "grad_threshold": 1e-5, "reset_every": 6}
+    r = train(config(tmp_path, strategy="default", strategy_options=opts), dataset=tiny_diffuse)
+    t = r.topology
+    assert (t.refinements, t.opacity_resets, t.relocated, t.added) == (3, 2, 0, 0)
+    assert t.cloned + t.split > 0  # the low threshold grows the model
+    assert len(tiny_diffuse.points) + t.cloned + t.split - t.pruned == r.num_gaussians
+    assert 0 <= t.pruned_size <= t.pruned
+    # what the schedule plans (what a report names for runs that did not record it) is what happened
+    planned = planned_counts(config(tmp_path, strategy="default", strategy_options=opts).make_strategy(), 20)
+    assert (planned.refinements, planned.opacity_resets) == (t.refinements, t.opacity_resets)
+    saved = json.loads((tmp_path / "run" / "result.json").read_text())
+    assert saved["topology"]["opacity_resets"] == 2 and TrainResult.from_dict(saved).topology == t
+    del saved["topology"]
+    assert TrainResult.from_dict(saved).topology is None
+    # reset_every = 0: no resets, and no size pruning either (it waits for the first reset)
+    never = train(config(tmp_path, out=str(tmp_path / "never"), strategy="default",
+                         strategy_options={**opts, "reset_every": 0}), dataset=tiny_diffuse)
+    assert never.topology.opacity_resets == 0 and never.topology.pruned_size == 0
+    # MCMC relocates and adds (refine_start 4 < it < 16, every 5); no strategy changes nothing
+    mcmc = train(config(tmp_path, out=str(tmp_path / "mcmc"), strategy="mcmc",
+                        strategy_options=CHECKPOINT_STRATEGIES["mcmc"]), dataset=tiny_diffuse)
+    assert mcmc.topology.refinements == 3 and mcmc.topology.opacity_resets == 0  # it = 5, 10, 15
+    assert planned_counts(config(tmp_path, strategy="mcmc", strategy_options=CHECKPOINT_STRATEGIES["mcmc"])
+                          .make_strategy(), 20).refinements == 3
+    assert len(tiny_diffuse.points) + mcmc.topology.added == mcmc.num_gaussians
+    none = train(config(tmp_path, out=str(tmp_path / "none")), dataset=tiny_diffuse)
+    assert none.topology == TopologyCounts()
+
+
 def test_a_budget_run_below_its_budget_says_so_in_its_notes(tmp_path, tiny_diffuse):
     """No Gaussian passes a threshold of 1 (NDC gradients are far smaller), so nothing grows and
     the run's notes carry the strategy's warning (`BudgetStrategy.outcome_note`)."""

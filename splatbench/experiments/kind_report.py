@@ -22,12 +22,18 @@ class Comparison:
     """How one metric of a row is set against the reference row.
 
     how: "diff", "ratio" or "mean" (`splatbench.reports.findings`); null: the value that
-    means "no difference" for a "mean" comparison (None: no significance statement).
+    means "no difference" for a "mean" comparison (None: no significance statement);
+    min_effect: the smallest difference that matters in practice, in the comparison's
+    units (a difference in the metric's unit for "diff" and "mean"; a relative change for
+    "ratio": 0.05 means ×1.05 or ×1/1.05). A significant difference smaller than it reads
+    "no practical difference"; None: no practical threshold (significance alone). An
+    experiment file may set its own (``[report] min_effect = { test_psnr = 0.2 }``).
     """
 
     metric: str
     how: str
     null: float | None = None
+    min_effect: float | None = None
 
 
 @dataclass(frozen=True)
@@ -56,6 +62,19 @@ class Tradeoff:
 
 
 @dataclass(frozen=True)
+class SettlingCurves:
+    """The curves (keys of a run's ``curves``) whose last quarter decides whether a cell had
+    settled (`splatbench.reports.settling`): the test curve of ``metric`` (steps and values)
+    and, where recorded, the training-view curve of the same quantity (overfitting)."""
+
+    metric: str
+    test_step: str
+    test_value: str
+    train_step: str = ""
+    train_value: str = ""
+
+
+@dataclass(frozen=True)
 class KindReport:
     """A kind's report declarations.
 
@@ -71,6 +90,8 @@ class KindReport:
     tradeoffs: tuple[Tradeoff, ...] = ()
     meanings: Mapping[str, str] = field(default_factory=dict)
     timed: tuple[str, ...] = ()
+    settling: SettlingCurves | None = None
+    confounds: tuple[MetricSpec, ...] = ()
 
 
-__all__ = ["Comparison", "FindingRules", "Tradeoff", "KindReport"]
+__all__ = ["Comparison", "FindingRules", "Tradeoff", "SettlingCurves", "KindReport"]

@@ -79,6 +79,10 @@ class RunKind:
     description: str = ""
     #: What its reports show (None: every numeric metric, the first one compared).
     report: KindReport | None = None
+    #: ``planned(config) -> {metric: number}``: the confound counts a run's config fixes in
+    #: advance (e.g. opacity resets), which a report names for runs that did not record them
+    #: (`KindReport.confounds`); None: none.
+    planned: Callable[[dict[str, Any]], dict[str, float]] | None = None
 
 
 #: Kinds known by name in every process: name -> "module:ATTR" (imported on first use).

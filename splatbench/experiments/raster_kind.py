@@ -350,8 +350,10 @@ REPORT = KindReport(
         MetricSpec("useful_evaluations", "evaluations useful", ".3g", "", ""),
         MetricSpec("loaded", "loaded (fraction of runs)", ".2f", "", "", False),
     ),
-    rules=FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean", 1.0), Comparison("exact_psnr", "diff"),
-                                       Comparison("pairs", "ratio"))),
+    # minimum effects (docs/reports.md): a 5 % speed change, 0.1 dB of error to the exact model, 5 % pairs
+    rules=FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean", 1.0, min_effect=0.05),
+                                       Comparison("exact_psnr", "diff", min_effect=0.1),
+                                       Comparison("pairs", "ratio", min_effect=0.05))),
     tradeoffs=(Tradeoff("fwd_bwd_rel", "exact_psnr", "speed_vs_error",
                         "Rasterizer speed against error to the exact Gaussian mixture (mean over seeds)"),),
     meanings=METRICS,

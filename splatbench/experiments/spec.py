@@ -24,6 +24,9 @@ sweep it (docs/experiments.md has the full format)::
     [runner]                          # defaults of `splatbench run` (the command line wins)
     workers = 2
 
+    [report]                          # how `splatbench report` reads the results (changes no run)
+    min_effect = { test_psnr = 0.2 }  # the smallest difference that matters (docs/reports.md)
+
 Dotted keys: a config is held *flat*, as ``dotted.path -> value``. A TOML sub-table
 (``[base.raster]``), a TOML dotted key (``raster.tile_size = 8``) and a quoted key
 with dots (``"raster.tile_size" = 8``) all name the same field ``raster.tile_size``;
@@ -54,7 +57,8 @@ from splatbench.errors import InputError
 from splatbench.experiments.configs import FIELD_KEY, canonical_json, check_value, flatten
 
 #: Fields an experiment file may hold at its top level.
-TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "base", "axes", "variants", "runner")
+TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "base", "axes", "variants", "runner",
+                    "report")
 #: Fields of its ``[runner]`` table.
 RUNNER_FIELDS = ("workers", "executor", "scheduler", "results")
 #: How axes combine: every combination, or each value alone against the base.
@@ -107,6 +111,8 @@ class ExperimentSpec:
     #   ``data`` fields (``path``/``downscale`` or ``model``/``views``/``resolution``/``up``), paths absolute
     scene_tables: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)  # name -> its table as written
     #   (paths as the file gives them, relative to it): what a report shows, the same in every clone
+    min_effect: Mapping[str, float] = field(default_factory=dict)  # ``[report] min_effect``: metric -> the
+    #   smallest difference that matters (overrides the kind's; docs/reports.md, "Minimum effects")
 
     @property
     def dimensions(self) -> list[str]:
@@ -214,9 +220,29 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
                 raise fail(where, f"{path!r} is set by the top-level 'scenes' / 'seeds', not here")
 
     runner = _parse_runner(data.get("runner", {}), fail, source, base_dir)
+    min_effect = _parse_report(data.get("report", {}), fail)
     return ExperimentSpec(name=name, kind=kind, scenes=tuple(scenes), seeds=tuple(seeds), base=base, axes=axes,
                           variants=variants, grid=grid, description=description, runner=runner, source=source,
-                          scene_sources=scene_sources, scene_tables=scene_tables)
+                          scene_sources=scene_sources, scene_tables=scene_tables, min_effect=min_effect)
+
+
+def _parse_report(table: Any, fail) -> dict[str, float]:
+    """The ``[report]`` table: ``min_effect = { metric = number >= 0, ... }`` (the metric names are
+    checked against the kind's comparisons when the report is built)."""
+    if not isinstance(table, Mapping):
+        raise fail("report", f"expected a table, got {table!r}")
+    for key in table:
+        if key != "min_effect":
+            raise fail(f"report.{key}", unknown_key_problem(key, ("min_effect",)))
+    given = table.get("min_effect", {})
+    if not isinstance(given, Mapping):
+        raise fail("report.min_effect", f"expected a table of metric = number, got {given!r}")
+    out: dict[str, float] = {}
+    for metric, value in given.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < math.inf:
+            raise fail(f"report.min_effect.{metric}", f"expected a number >= 0, got {value!r}")
+        out[str(metric)] = float(value)
+    return out
 
 
 #: Keys of a scene table: a dataset folder or a teacher model (besides ``name``).

@@ -53,7 +53,7 @@ from typing import Any
 from splatbench.checks import check_image_size, check_keys
 from splatbench.data.content import content_hash
 from splatbench.errors import InputError
-from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, Tradeoff
+from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, SettlingCurves, Tradeoff
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.metrics.spec import MetricSpec
 
@@ -92,8 +92,28 @@ METRICS: dict[str, str] = {
                   "splatbench.metrics.load)",
     "cores": "usable CPU cores",
     "time_loaded": "1 when load_other exceeded cores / 2: the run's times are not trusted and are left out of the "
-                   "time comparisons of the findings (quality metrics are kept)",
+                   "time comparisons and Pareto fronts of the findings (quality metrics are kept)",
+    "refinements": "refinement steps the strategy made (densify / prune; MCMC: relocate / add)",
+    "opacity_resets": "opacity resets the strategy made",
+    "cloned": "Gaussians cloned, summed over the refinements",
+    "split": "Gaussians split (each replaced by two children), summed over the refinements",
+    "pruned": "Gaussians pruned, summed over the refinements",
+    "pruned_size": "of those pruned, the ones removed for their size (none while size pruning is off: "
+                   "reset_every = 0 turns it off)",
+    "relocated": "MCMC: dead Gaussians relocated, summed over the refinements",
+    "added": "MCMC: Gaussians added, summed over the refinements",
 }
+#: What a run records of what its strategy did besides its settings' names (`TopologyCounts`); None in
+#: the metrics of a result written before they were recorded.
+TOPOLOGY_METRICS = ("refinements", "opacity_resets", "cloned", "split", "pruned", "pruned_size", "relocated", "added")
+#: The smallest differences that matter in practice (docs/reports.md, "Minimum effects"): below them a
+#: significant difference reads "no practical difference". PSNR 0.1 dB; SSIM and LPIPS the same share
+#: (~6 %) of graphdeco's published 7K -> 30K gain as 0.1 dB is of its PSNR gain (3DGS paper Table 1,
+#: mean over Mip-NeRF 360, Tanks&Temples, Deep Blending: +1.73 dB, +0.049 SSIM, -0.079 LPIPS); times
+#: and Gaussian counts as relative changes (10 %, 5 %). An experiment file's ``[report] min_effect``
+#: overrides them.
+MIN_EFFECT: dict[str, float] = {"test_psnr": 0.1, "test_ssim": 0.003, "test_lpips": 0.005,
+                                "train_seconds": 0.10, "num_gaussians": 0.05}
 #: Keys of the curves: the training history (every ``log_every`` steps) and the test evaluations.
 CURVE_KEYS = ("step", "loss", "psnr", "num_gaussians", "eval_step", "eval_psnr", "eval_ssim", "eval_lpips")
 
@@ -372,6 +392,7 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
         "lpips_scale_inputs": int(result.lpips_scale_inputs), "cpu_seconds": result.cpu_seconds,
         **{k: result.load[k] for k in ("load_before", "load_after", "load_other", "cores")},
         "time_loaded": int(result.load["loaded"]),
+        **{k: (getattr(result.topology, k) if result.topology is not None else None) for k in TOPOLOGY_METRICS},
     }
     rows = result.to_dict()  # NaN / inf already None there (the one JSON-safety rule of a result)
     history, evaluations = rows["history"], rows["evaluations"]
@@ -385,6 +406,21 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
     return RunOutput(metrics=metrics, curves=curves, warnings=warnings)
 
 
+def planned(config: dict[str, Any]) -> dict[str, float]:
+    """The refinements and opacity resets a run's resolved config schedules (its strategy's
+    ``planned_counts``, scaled as the run scales it): what a report names for runs that did
+    not record their counts; {} for a config that no longer validates."""
+    from splatbench.strategies import planned_counts
+
+    try:
+        _, _, train = _split(config)
+        cfg = _train_config(train)
+        counts = planned_counts(cfg.make_strategy(), cfg.iterations)
+    except InputError:
+        return {}
+    return {"opacity_resets": counts.opacity_resets, "refinements": counts.refinements}
+
+
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
     metrics=(
@@ -396,8 +432,10 @@ REPORT = KindReport(
         MetricSpec("render_ms_per_view", "render (ms/view)", ".1f", "ms", "lower"),
         MetricSpec("time_loaded", "timed under load (fraction of runs)", ".2f", "", "", False),
     ),
-    rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff"), Comparison("test_lpips", "diff"),
-                                     Comparison("train_seconds", "ratio"), Comparison("num_gaussians", "ratio"))),
+    rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff", min_effect=MIN_EFFECT["test_psnr"]),
+                                     Comparison("test_lpips", "diff", min_effect=MIN_EFFECT["test_lpips"]),
+                                     Comparison("train_seconds", "ratio", min_effect=MIN_EFFECT["train_seconds"]),
+                                     Comparison("num_gaussians", "ratio", min_effect=MIN_EFFECT["num_gaussians"]))),
     tradeoffs=(Tradeoff("train_seconds", "test_psnr", "time_vs_error",
                         "Training time against test PSNR per cell (mean over seeds)"),
                Tradeoff("num_gaussians", "test_psnr", "gaussians_vs_error",
@@ -405,11 +443,17 @@ REPORT = KindReport(
                         cheaper="smaller (fewer Gaussians)", order="fewest Gaussians first")),
     meanings=METRICS,
     timed=("train_seconds", "render_ms_per_view"),
+    settling=SettlingCurves("test_psnr", "eval_step", "eval_psnr", "step", "psnr"),
+    confounds=(MetricSpec("opacity_resets", "opacity resets", ".0f"), MetricSpec("refinements", "refinements", ".0f"),
+               MetricSpec("cloned", "cloned", ".0f"), MetricSpec("split", "split", ".0f"),
+               MetricSpec("pruned", "pruned", ".0f"), MetricSpec("pruned_size", "pruned for size", ".0f"),
+               MetricSpec("relocated", "relocated", ".0f"), MetricSpec("added", "added", ".0f")),
 )
 
 #: The ``train`` kind (``kind = "train"``).
 TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, identity=identity, scenes=scenes, prepare=prepare,
-                description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT)
+                description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT,
+                planned=planned)
 
-__all__ = ["TRAIN", "REPORT", "METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
+__all__ = ["TRAIN", "REPORT", "METRICS", "MIN_EFFECT", "TOPOLOGY_METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
            "dataset_folder", "ensure_dataset"]

@@ -1,8 +1,12 @@
 """Statistics of the reports: 95 % intervals over seeds, paired differences, and a
 bootstrap interval of a median ratio.
 
-Seeds are the unit of replication: a seed fixes a run's initialisation, view order
-and backgrounds, so run ``s`` of one grid cell pairs with run ``s`` of another.
+Seeds are the unit of replication: run ``s`` of one grid cell pairs with run ``s`` of
+another. An interval covers only what a seed varies (the train kind: torch / numpy state,
+view order, random backgrounds, the strategy's draws, random initial points -- not the
+points of ``init = surface`` nor the rendered dataset; each train report's header lists it
+from the runs' configs, docs/reports.md "What an interval covers"). Where the seeds varied
+nothing the report prints no interval (`splatbench.reports.findings.no_spread`).
 
 * `t_interval`: the mean of n values with Student's t interval,
   ``mean ± t_{0.975, n-1} · s / sqrt(n)`` (s: sample standard deviation, ddof 1). It

@@ -6,7 +6,9 @@
 
 Modules: `tables` (axis rows, mean ± 95 % interval, metric specs per kind), `findings`
 (claims computed from the tables: paired differences with intervals), `notes`
-(kind-specific findings, registered by kind name), `figures` (training curves, the
+(kind-specific findings, registered by kind name), `settling` (whether a cell's curves had
+flattened: the last quarter's slope), `protocol` (a train report's header from its runs'
+configs), `figures` (training curves, the
 cells of the Pareto figures), `report` (assembly, markdown), `cli`
 (``splatbench report``). Statistics are `splatbench.metrics.stats`. See docs/reports.md.
 """

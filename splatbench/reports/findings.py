@@ -5,7 +5,9 @@ from and how it is written); the text is rendered from the claims, so a test can
 recompute every number from ``results.parquet`` and find its text in the report. Per
 axis:
 
-* **best**: per scene, the row with the best mean of the kind's primary metric;
+* **best**: per scene, the row with the best mean of the kind's primary metric, named only
+  when its paired lead over the runner-up is significant and at least the comparison's
+  minimum effect (claim ``best``); otherwise "no single best" (claim ``no best``);
 * **vs**: every other row against the reference row (the one-at-a-time base, else the
   axis's first value), per scene, for each of the kind's comparisons, **paired over
   seeds** (`splatbench.metrics.stats`): ``diff`` is the mean of ``b_s - a_s`` with
@@ -13,7 +15,13 @@ axis:
   ``mean`` is the row's own mean (for a metric that is already relative to the base,
   like the raster kind's time ratio) with its t interval. When the interval contains
   the null value (0 for a difference, 1 for a ratio or a relative metric) the text
-  says "no significant difference"; with one seed it says no interval can be computed;
+  says "no significant difference"; when it excludes it by less than the comparison's
+  ``min_effect``, "no practical difference"; when the seeds did not vary the result (a
+  half-width of zero at the precision written, `no_spread`), "no interval" and nothing
+  is significant; with one seed it says no interval can be computed. Where the kind
+  declares its curves (`KindReport.settling`), a primary-metric comparison whose cells
+  had not settled is marked **not settled** (`splatbench.reports.settling`), and the
+  kind's confound counts (`KindReport.confounds`) that differ are named ("Also changed");
 * **count**: how many such comparisons the table makes (each at 95 %, no correction
   for multiplicity);
 * kind-specific notes appended to it (`splatbench.reports.notes`, registered by kind
@@ -27,32 +35,49 @@ kind's ``timed`` metrics only: their quality metrics do not depend on the load.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import pandas as pd
 
+from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
+from splatbench.reports.settling import CellSettling, cell_settling, difference_settled, drift
 from splatbench.reports.tables import AxisTable, Row, done_runs, kind_report, seed_values
 
 
-def rules_for(kind: str, metrics: tuple[MetricSpec, ...]) -> FindingRules | None:
-    """The kind's rules, restricted to metrics present; another kind compares its first metric."""
+def rules_for(kind: str, metrics: tuple[MetricSpec, ...], min_effect: Mapping[str, float] | None = None
+              ) -> FindingRules | None:
+    """The kind's rules, restricted to metrics present; another kind compares its first metric.
+    ``min_effect`` (an experiment file's ``[report] min_effect``) replaces the kind's minimum
+    effects by metric name; a name the kind does not compare is a one-line `InputError`."""
     names = {m.name for m in metrics}
     declared = kind_report(kind)
     if declared is not None:
         r = declared.rules
         if r is None:
             return None
+        rules = FindingRules(r.primary, tuple(c for c in r.comparisons if c.metric in names))
+        compared = [c.metric for c in r.comparisons]
         if r.primary not in names:
             return None
-        return FindingRules(r.primary, tuple(c for c in r.comparisons if c.metric in names))
-    if not metrics:
+    elif not metrics:
         return None
-    return FindingRules(metrics[0].name, (Comparison(metrics[0].name, "diff"),))
+    else:
+        rules = FindingRules(metrics[0].name, (Comparison(metrics[0].name, "diff"),))
+        compared = [metrics[0].name]
+    for metric in (min_effect or {}):
+        if metric not in compared:
+            raise InputError(f"report.min_effect.{metric}: not a metric the {kind!r} findings compare "
+                             f"(expected one of: {', '.join(compared)})")
+    if min_effect:
+        rules = FindingRules(rules.primary, tuple(dataclasses.replace(c, min_effect=min_effect[c.metric])
+                                                  if c.metric in min_effect else c for c in rules.comparisons))
+    return rules
 
 
 @dataclass(frozen=True)
@@ -64,7 +89,11 @@ class Claim:
     row; reference: the row compared against ("vs"); metric; how: "mean", "diff",
     "ratio", "count" or "max"; value: the number; low / high: its 95 % interval (NaN
     when none); n: seeds (pairs) it comes from; significant: the interval excludes the
-    null value (False when there is no interval); text: how it is written.
+    null value (False when there is no interval, and when the seeds did not vary the
+    result: `no_spread`); practical: significant and at least the comparison's minimum
+    effect (False below it; equal to ``significant`` when the comparison has none);
+    settled: both cells' curves had flattened and the difference stopped moving
+    (`splatbench.reports.settling`; None: not judged); text: how it is written.
     """
 
     kind: str
@@ -79,6 +108,8 @@ class Claim:
     high: float = math.nan
     n: int = 0
     significant: bool = False
+    practical: bool = False
+    settled: bool | None = None
 
 
 @dataclass
@@ -113,15 +144,62 @@ def _bound(value: float, how: str, spec: MetricSpec) -> str:
     return format(value, spec.fmt)
 
 
-def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None) -> str:
+def no_spread(iv: Interval, how: str, spec: MetricSpec) -> bool:
+    """True when the interval is defined but its half-width is zero at the precision the report
+    writes (``±0.00``): the seeds did not vary the result, so the interval is no evidence of
+    anything (a rerun varies more than these seeds did; docs/reports.md)."""
+    if not iv.defined:
+        return False
+    fmt = ".3f" if how == "ratio" else spec.fmt
+    return float(format(iv.half_width, fmt)) == 0.0
+
+
+def practical(iv: Interval, how: str, null: float | None, min_effect: float | None, fmt: str = "") -> bool:
+    """True when the estimate, at the precision the report writes it (``fmt``), is at least
+    ``min_effect`` from the null value (a relative change for a ratio: ``r >= 1 + min_effect``
+    or ``1 / r >= 1 + min_effect``); True when there is no minimum effect. A printed +0.10 dB
+    is never "below the 0.1 dB minimum effect"."""
+    if min_effect is None or not math.isfinite(iv.estimate):
+        return min_effect is None
+    if how == "ratio":  # judged at the precision the report writes (×1.050 is 5 %)
+        if iv.estimate <= 0:
+            return False
+        up = iv.estimate if iv.estimate >= 1 else 1.0 / iv.estimate
+        return float(f"{up:.3f}") - 1.0 >= min_effect - 1e-12
+    return abs(float(format(iv.estimate - (null or 0.0), fmt or ".6g"))) >= min_effect - 1e-12
+
+
+def fmt_min_effect(min_effect: float, how: str, spec: MetricSpec) -> str:
+    """``0.1 dB``, ``5 %`` (a ratio)."""
+    if how == "ratio":
+        return f"{100 * min_effect:g} %"
+    return f"{min_effect:g}" + (f" {spec.unit}" if spec.unit else "")
+
+
+def judge(iv: Interval, how: str, null: float | None, spec: MetricSpec, min_effect: float | None = None
+          ) -> tuple[bool, bool]:
+    """(significant, practical) of an interval (`Claim`)."""
+    significant = null is not None and iv.excludes(null) and not no_spread(iv, how, spec)
+    return significant, significant and practical(iv, how, null, min_effect, spec.fmt)
+
+
+def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None, min_effect: float | None = None
+                 ) -> str:
     """``+0.42 dB [95 % CI +0.10, +0.74]``, with ", no significant difference" when the
-    interval contains ``null``, or ``(1 seed: no interval)``."""
+    interval contains ``null``, ", no practical difference (below the 0.1 dB minimum effect)"
+    when it excludes it but the estimate is smaller than ``min_effect``, ``(1 seed: no
+    interval)``, or ``(seeds did not vary the result: no interval)`` when its half-width is
+    zero at the report's precision (never ``±0.00``)."""
     text = fmt_number(iv.estimate, how, spec)
     if not iv.defined:
         return f"{text} ({iv.n} seed{'s' if iv.n != 1 else ''}: no interval)"
+    if no_spread(iv, how, spec):
+        return f"{text} (seeds did not vary the result: no interval)"
     text += f" [95 % CI {_bound(iv.low, how, spec)}, {_bound(iv.high, how, spec)}]"
     if null is not None and not iv.excludes(null):
         text += ", no significant difference"
+    elif null is not None and not practical(iv, how, null, min_effect, spec.fmt):
+        text += f", no practical difference (below the {fmt_min_effect(min_effect, how, spec)} minimum effect)"
     return text
 
 
@@ -151,10 +229,12 @@ def usable_runs(runs: pd.DataFrame) -> pd.DataFrame:
 AxisNote = Callable[[AxisTable, pd.DataFrame, list[str]], tuple[list[str], list["Claim"]]]
 
 
-def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequence[AxisNote] = ()) -> Finding | None:
+def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequence[AxisNote] = (),
+                 min_effect: Mapping[str, float] | None = None) -> Finding | None:
     """The finding of one axis (None when the kind has no rules or nothing is done),
-    with the lines and claims of ``notes`` appended."""
-    rules = rules_for(kind, table.metrics)
+    with the lines and claims of ``notes`` appended; ``min_effect``: the experiment file's
+    minimum effects by metric (`rules_for`)."""
+    rules = rules_for(kind, table.metrics, min_effect)
     if rules is None or table.frame.empty:
         return None
     specs = {m.name: m for m in table.metrics}
@@ -173,23 +253,76 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
     else:
         timed_usable = usable
 
+    def selected(scene: str, row: Row, pool: pd.DataFrame) -> pd.DataFrame:
+        return pool[(pool.scene == scene) & pool.run_id.isin(row.run_ids)]
+
     def values(scene: str, row: Row, metric: str) -> dict[int, float]:
-        pool = timed_usable if metric in timed else usable
-        sel = pool[(pool.scene == scene) & pool.run_id.isin(row.run_ids)]
+        sel = selected(scene, row, timed_usable if metric in timed else usable)
         return seed_values(sel, metric) if len(sel) else {}
+
+    primary_comp = next((c for c in rules.comparisons if c.metric == primary.name), Comparison(primary.name, "diff"))
+    settling = declared.settling if declared is not None else None
+    settle_effect = (primary_comp.min_effect if settling is not None and settling.metric == primary.name
+                     else None)
+    settle_cache: dict[tuple[str, str], CellSettling | None] = {}
+
+    def settle(scene: str, row: Row) -> CellSettling | None:
+        """The row's curves at ``scene`` over the last quarter (None: not judged)."""
+        if settle_effect is None:
+            return None
+        key = (scene, row.label)
+        if key not in settle_cache:
+            settle_cache[key] = cell_settling(selected(scene, row, usable), settling, settle_effect)
+        return settle_cache[key]
+
+    def unsettled(scene: str, a: Row, b: Row, diff: float) -> str:
+        """"" when the difference ``b - a`` at ``scene`` is settled or not judged, else why not."""
+        sa, sb = settle(scene, a), settle(scene, b)
+        if sa is None or sb is None:
+            return ""
+        moving = [f"`{r.label}` {c.test:+.2f}" for r, c in ((b, sb), (a, sa)) if not c.settled]
+        if moving:
+            return ", ".join(moving) + f" {primary.unit} / 1,000 steps over the last quarter"
+        if not difference_settled(sa, sb, diff):
+            return f"the difference moved {drift(sa, sb):+.2f} {primary.unit} over the last quarter"
+        return ""
 
     claims: list[Claim] = []
     lines: list[str] = []
     best_parts = []
+    unit_text = fmt_min_effect(primary_comp.min_effect, primary_comp.how, primary) \
+        if primary_comp.min_effect is not None else None
     for scene in scenes:
         means = [(t_interval(list(values(scene, row, primary.name).values())), row) for row in table.rows]
-        means = [(iv, row) for iv, row in means if iv.n > 0]
+        means = sorted(((iv, row) for iv, row in means if iv.n > 0), key=lambda m: -sign * m[0].estimate)
         if not means:
             continue
-        iv, row = max(means, key=lambda m: sign * m[0].estimate)
-        text = fmt_number(iv.estimate, "mean", primary)
-        claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, text, n=iv.n))
-        best_parts.append(f"{scene} `{row.label}` ({text})")
+        iv, row = means[0]
+        mean_text = fmt_number(iv.estimate, "mean", primary)
+        if len(means) == 1:
+            claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, mean_text, n=iv.n))
+            best_parts.append(f"{scene} `{row.label}` ({mean_text}; the only cell)")
+            continue
+        runner = means[1][1]
+        how = "ratio" if primary_comp.how == "ratio" else "diff"
+        null = 1.0 if how == "ratio" else 0.0
+        lead = (paired_ratio if how == "ratio" else paired_difference)(values(scene, runner, primary.name),
+                                                                       values(scene, row, primary.name))
+        significant, is_practical = judge(lead, how, null, primary, primary_comp.min_effect)
+        lead_text = fmt_interval(lead, how, primary, null, primary_comp.min_effect)
+        why = unsettled(scene, runner, row, lead.estimate - null)
+        settled = None if settle(scene, row) is None else not why
+        if significant and is_practical:
+            text = f"{scene} `{row.label}` ({mean_text}; {lead_text} over `{runner.label}`)"
+            if why:
+                text += f", **not settled** ({why})"
+            claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, text, runner.label,
+                                lead.low, lead.high, lead.n, significant, is_practical, settled))
+        else:
+            text = (f"{scene}: no single best (`{row.label}`, {mean_text}, leads `{runner.label}` by {lead_text})")
+            claims.append(Claim("no best", scene, row.label, primary.name, how, lead.estimate, text, runner.label,
+                                lead.low, lead.high, lead.n, significant, is_practical, settled))
+        best_parts.append(text)
     if not best_parts:
         if excluded:
             return Finding(table.axis, [f"- No findings: all {excluded} done run(s) were timed while the load average "
@@ -197,8 +330,10 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
                                         f"quiet machine (docs/reports.md, \"Quiet numbers\")."], [])
         return None
     word = "best" if primary.better != "lower" else "lowest"
-    lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds): "
-                 + ", ".join(best_parts) + ".")
+    rule = ("named only where it beats the runner-up by a significant paired difference"
+            + (f" of at least {unit_text}" if unit_text else ""))
+    lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds; {rule}): "
+                 + "; ".join(best_parts) + ".")
 
     ref = reference_row(table)
     others = [r for r in table.rows if r.label != ref.label]
@@ -207,6 +342,7 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
         lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
         for row in others:
             parts = []
+            moving = []
             for comp in rules.comparisons:
                 spec = specs[comp.metric]
                 texts = []
@@ -216,14 +352,26 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
                     if iv.n == 0:
                         texts.append("–")
                         continue
-                    text = fmt_interval(iv, comp.how, spec, null)
-                    significant = null is not None and iv.excludes(null)
+                    text = fmt_interval(iv, comp.how, spec, null, comp.min_effect)
+                    significant, is_practical = judge(iv, comp.how, null, spec, comp.min_effect)
+                    settled = None
+                    if comp.metric == primary.name:
+                        why = unsettled(scene, ref, row, iv.estimate - (null or 0.0))
+                        settled = None if settle(scene, row) is None or settle(scene, ref) is None else not why
+                        if why:
+                            moving.append(f"{scene}: {why}")
                     claims.append(Claim("vs", scene, row.label, comp.metric, comp.how, iv.estimate, text, ref.label,
-                                        iv.low, iv.high, iv.n, significant))
+                                        iv.low, iv.high, iv.n, significant, is_practical, settled))
                     texts.append(text)
                     count += 1
                 parts.append(f"{_name(spec)} {' / '.join(texts)}")
-            lines.append(f"  - `{row.label}`: " + "; ".join(parts))
+            line = f"  - `{row.label}`: " + "; ".join(parts)
+            if moving:
+                line += f". **Not settled** ({'; '.join(moving)})"
+            also = confounds(scenes, ref, row, usable, declared, kind)
+            if also:
+                line += f". Also changed: {also}"
+            lines.append(line)
     self_parts = []
     for comp in rules.comparisons:
         if comp.how != "mean" or comp.null is None:
@@ -231,9 +379,10 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
         for scene in scenes:  # the reference row's own value: the defaults timed against themselves
             iv = t_interval(list(values(scene, ref, comp.metric).values()))
             if iv.n:
-                text = fmt_interval(iv, "mean", specs[comp.metric], comp.null)
+                text = fmt_interval(iv, "mean", specs[comp.metric], comp.null, comp.min_effect)
+                significant, is_practical = judge(iv, "mean", comp.null, specs[comp.metric], comp.min_effect)
                 claims.append(Claim("self", scene, ref.label, comp.metric, "mean", iv.estimate, text, ref.label,
-                                    iv.low, iv.high, iv.n, iv.excludes(comp.null)))
+                                    iv.low, iv.high, iv.n, significant, is_practical))
                 self_parts.append(f"{scene} {text}")
     if self_parts:
         lines.append(f"- `{ref.label}` against itself (the same options timed as both sides of each pair; the "
@@ -242,15 +391,26 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
         claims.append(Claim("count", "", "", "", "count", float(count), str(count)))
         seeds = max((c.n for c in claims if c.kind == "vs"), default=0)
         if seeds >= 2:
+            effects = [f"{_name(specs[c.metric])} {fmt_min_effect(c.min_effect, c.how, specs[c.metric])}"
+                       for c in rules.comparisons if c.min_effect is not None]
             lines.append(f"- This table makes {count} comparisons, each with its own 95 % interval (Student's t "
                          f"over seeds; no correction for multiple comparisons, so about 1 in 20 intervals misses "
-                         f"by chance).")
+                         f"by chance)." + (f" Minimum effects (smaller significant differences read \"no practical "
+                                           f"difference\"): {', '.join(effects)}." if effects else ""))
         else:
             lines.append(f"- This table makes {count} comparisons, but with one seed per cell no interval can be "
                          f"computed (n = 1): none of them is a significant difference; add seeds to the grid.")
+    if declared is not None and declared.confounds and others and not _recorded(usable, declared):
+        lines.append("- What else each setting changed (" + ", ".join(m.label for m in declared.confounds[:5])
+                     + ") was not recorded by these runs (run before it was); \"(planned)\" counts are what their "
+                       "configs schedule; rerun the grid to see the rest.")
     if excluded:
         lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
                      f"these findings (marked in the table's `loaded` column).")
+    if timed & set(specs) and not any(c in runs.columns for c in ("metric.time_loaded", "metric.loaded")):
+        lines.append(f"- These runs did not record the machine's load (run before it was recorded): the "
+                     f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons may come "
+                     f"from a loaded machine and are no evidence of speed.")
     if untimed:
         lines.append(f"- {untimed} run(s) timed while other processes loaded the machine are left out of the "
                      f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons (marked in "
@@ -263,10 +423,85 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
     return Finding(table.axis, lines, claims)
 
 
+def _recorded(runs: pd.DataFrame, declared) -> bool:
+    """Whether the runs recorded the kind's confound counts (a table from before has no such columns)."""
+    cols = [f"metric.{m.name}" for m in declared.confounds]
+    return any(c in runs.columns and pd.to_numeric(runs[c], errors="coerce").notna().any() for c in cols)
+
+
+def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, declared, kind: str = "") -> str:
+    """What else ``row`` changed against ``ref`` (the kind's confound counts, mean over seeds,
+    per scene): each count that differs by more than `CONFOUND_SHARE` of the larger, e.g.
+    ``textured: opacity resets 7 instead of 4``; "" when none differs. Runs that did not record
+    a count (grids run before it was) give the count their config schedules, where the kind
+    can say it (`RunKind.planned`), written "(planned)"."""
+    if declared is None or not declared.confounds:
+        return ""
+    plan = _planner(kind)
+    parts = []
+    for scene in scenes:
+        moved = []
+        for m in declared.confounds:
+            sel_a = runs[(runs.scene == scene) & runs.run_id.isin(ref.run_ids)]
+            sel_b = runs[(runs.scene == scene) & runs.run_id.isin(row.run_ids)]
+            col = f"metric.{m.name}"
+            a = seed_values(sel_a, m.name) if col in runs.columns else {}
+            b = seed_values(sel_b, m.name) if col in runs.columns else {}
+            how = ""
+            if not a and not b and plan is not None:
+                a, b, how = plan(sel_a, m.name), plan(sel_b, m.name), " (planned)"
+            if not a or not b:
+                continue
+            ma, mb = sum(a.values()) / len(a), sum(b.values()) / len(b)
+            if abs(mb - ma) > CONFOUND_SHARE * max(abs(ma), abs(mb)):
+                moved.append(f"{m.label} {_count(mb)} instead of {_count(ma)}{how}")
+        if moved:
+            parts.append(f"{scene}: " + ", ".join(moved))
+    return "; ".join(parts) + (" (mean over seeds)" if parts else "")
+
+
+def _planner(kind: str) -> Callable[[pd.DataFrame, str], dict[int, float]] | None:
+    """``plan(runs, metric) -> seed -> count`` from each run's recorded config through the kind's
+    `RunKind.planned`; None for a kind without one."""
+    from splatbench.experiments.configs import unflatten
+    from splatbench.experiments.kinds import get_kind
+    from splatbench.reports.tables import decode
+
+    try:
+        planned = get_kind(kind).planned if kind else None
+    except InputError:
+        return None
+    if planned is None:
+        return None
+
+    def plan(runs: pd.DataFrame, metric: str) -> dict[int, float]:
+        out: dict[int, list[float]] = {}
+        cols = [c for c in runs.columns if c.startswith("config.")]
+        for _, r in runs.iterrows():
+            flat = {c[len("config."):]: decode(r[c]) for c in cols}
+            config = {**unflatten({k: v for k, v in flat.items() if v is not None}), "scene": r.scene,
+                      "seed": int(r.seed)}
+            value = planned(config).get(metric)
+            if value is not None:
+                out.setdefault(int(r.seed), []).append(float(value))
+        return {k: sum(v) / len(v) for k, v in out.items()}
+
+    return plan
+
+
+#: A confound count is named when the row's mean differs from the reference's by more than this share.
+CONFOUND_SHARE = 0.05
+
+
+def _count(value: float) -> str:
+    return f"{value:,.0f}" if abs(value - round(value)) < 1e-9 or abs(value) >= 100 else f"{value:,.1f}"
+
+
 def _name(spec: MetricSpec) -> str:
     """A metric's label without its unit: "test PSNR (dB)" -> "test PSNR"."""
     return spec.label.split(" (")[0]
 
 
 __all__ = ["Claim", "Finding", "AxisNote", "axis_finding", "rules_for", "fmt_number", "fmt_interval", "paired",
-           "reference_row", "usable_runs"]
+           "reference_row", "usable_runs", "no_spread", "practical", "judge", "fmt_min_effect", "confounds",
+           "CONFOUND_SHARE"]

@@ -6,27 +6,30 @@ so the experiments never import the reports:
 
 * axis notes (`register_axis_note`): ``note(axis_table, runs, scenes) -> (lines, claims)``
   appended to each axis finding of the kind (train: `auto_sh_degree_note`);
-* run findings (`register_run_finding`): ``finding(runs) -> Finding | None`` over all
+* run findings (`register_run_finding`): ``finding(runs, min_effect) -> Finding | None`` over all
   runs of the kind (raster: `parity_finding`; train: `settling_finding`), each its own
   section of the report;
+* header notes (`register_header_note`): ``note(runs) -> lines`` in the report's header
+  (train: `splatbench.reports.protocol.protocol_lines`, the protocol its runs followed);
 * metric notes (`register_metric_note`): ``note(runs) -> lines`` appended to the report's
   "Metrics" section (train: `lpips_note`, which LPIPS the column is).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import json
+from collections.abc import Callable, Mapping
 
 import pandas as pd
 
-from splatbench.metrics.stats import paired_difference, t_interval
 from splatbench.reports.findings import AxisNote, Claim, Finding
-from splatbench.reports.tables import AxisTable, done_runs
+from splatbench.reports.protocol import protocol_lines
+from splatbench.reports.settling import CellSettling, cell_settling
+from splatbench.reports.tables import AxisTable, done_runs, kind_report
 
-#: A finding over all runs of a kind: ``finding(runs) -> Finding | None``.
-RunFinding = Callable[[pd.DataFrame], "Finding | None"]
+#: A finding over all runs of a kind: ``finding(runs, min_effect) -> Finding | None`` (``min_effect``: the
+#: experiment file's ``[report] min_effect``, metric -> number).
+RunFinding = Callable[[pd.DataFrame, "Mapping[str, float] | None"], "Finding | None"]
 
 
 def auto_sh_degree_note(table: AxisTable, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
@@ -58,6 +61,44 @@ def auto_sh_degree_note(table: AxisTable, runs: pd.DataFrame, scenes: list[str])
     return lines, claims
 
 
+#: Strategies whose opacity resets gate size pruning and fire only inside the refine window
+#: (`splatbench.strategies.default.DefaultStrategy` and its subclasses).
+_RESETTING = ("default", "absgrad", "budget")
+
+
+def schedule_confound_note(table: AxisTable, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
+    """Train kind: what a densification-schedule setting changes besides itself, read from the
+    runs' configs (so it holds for grids run before the counts were recorded):
+    ``reset_every = 0`` also turns off size pruning (DefaultStrategy prunes by size only after
+    the first reset), and ``refine_stop`` also changes the number of opacity resets (they fire
+    only inside the refine window)."""
+    done = done_runs(runs)
+    col = f"config.{table.axis}" if not table.axis.startswith("config.") else table.axis
+    if "config.strategy" not in done.columns or col not in done.columns:
+        return [], []
+    resetting = done[done["config.strategy"].isin(_RESETTING)]
+    lines = []
+    if table.axis == "strategy_options.reset_every":
+        zero = [r for r in table.rows if _decoded(r.value) == 0 and resetting.run_id.isin(r.run_ids).any()]
+        for r in zero:
+            lines.append(f"- `{r.label}` (no opacity resets) also turns off size pruning: the default strategy prunes "
+                         f"Gaussians larger than `max_world_size` × the scene extent only after its first opacity "
+                         f"reset (splatbench/strategies/default.py), so this cell changes two things, not one.")
+    if table.axis == "strategy_options.refine_stop" and len(resetting):
+        lines.append("- Opacity resets fire only inside the refine window (as in graphdeco), so `refine_stop` also "
+                     "changes how many resets a run makes (`metric.opacity_resets` where recorded).")
+    return lines, []
+
+
+def _decoded(value):
+    if isinstance(value, str):
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
+    return value
+
+
 def _cell_label(done: pd.DataFrame, axes: list[str]):
     """A row's cell as ``axis=value, ...``; in a one-at-a-time grid (every cell differs from the
     most common one in at most one axis, with more than one axis) only the axis that differs,
@@ -73,69 +114,61 @@ def _cell_label(done: pd.DataFrame, axes: list[str]):
     return lambda row: ", ".join(f"{c[5:]}={row[c]}" for c in axes)
 
 
-def settling_finding(runs: pd.DataFrame) -> Finding | None:
-    """Train kind: whether the differences between a scene's cells had settled when the runs
-    ended, from the curves' last evaluation interval (``eval_step`` / ``eval_psnr``).
-
-    Each cell's test PSNR change over that interval is listed (mean over seeds). The
-    differences are what a grid reports, so a scene is *not settled* when its fastest- and
-    slowest-rising cells' gap moved over the interval (paired over seeds: the 95 % t interval
-    of the change excludes 0) by more than the half-width of the 95 % interval of their final
-    difference: the reported difference then is what this run length gives, not where the two
-    converge (the report protocol asks for settled models; docs/reports.md)."""
+def settling_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None) -> Finding | None:
+    """Train kind: whether each cell had settled when its runs ended (`splatbench.reports.settling`):
+    the slope of its test curve over the last quarter of the run (mean over seeds, per 1,000
+    steps) against the threshold, the minimum effect of test PSNR (0.1 dB, or the experiment
+    file's) per 1,000 steps; and, where the training-view PSNR is recorded, whether the test
+    curve is flat or falling while the training curve still rises (overfitting, not
+    convergence). One claim per cell: ``significant`` is True when it is *not* settled."""
+    declared = kind_report("train")
     done = done_runs(runs)
-    if done.empty or "curves" not in done.columns:
+    keys = declared.settling if declared is not None else None
+    if done.empty or "curves" not in done.columns or keys is None:
+        return None
+    effect = dict(min_effect or {}).get(keys.metric)
+    if effect is None:
+        effect = next((c.min_effect for c in declared.rules.comparisons if c.metric == keys.metric), None)
+    if effect is None:
         return None
     axes = [c for c in done.columns if c.startswith("axis.")]
-    label = _cell_label(done, axes)
-    rise: dict[tuple, dict[int, float]] = {}
-    final: dict[tuple, dict[int, float]] = {}
-    steps: set[tuple[int, int]] = set()
-    for _, row in done.iterrows():
-        try:
-            curves = json.loads(row["curves"]) if isinstance(row["curves"], str) else {}
-        except ValueError:
-            continue
-        step, psnr = curves.get("eval_step") or [], curves.get("eval_psnr") or []
-        if len(step) < 2 or len(psnr) != len(step) or None in psnr[-2:]:
-            continue
-        key = (row["scene"], label(row))
-        rise.setdefault(key, {})[int(row["seed"])] = float(psnr[-1]) - float(psnr[-2])
-        final.setdefault(key, {})[int(row["seed"])] = float(psnr[-1])
-        steps.add((int(step[-2]), int(step[-1])))
-    if not rise:
+    label = _cell_label(done, axes) if axes else (lambda row: "all")
+    labels = done.apply(label, axis=1) if len(done) else pd.Series([], dtype=object)
+    cells: dict[tuple[str, str], CellSettling] = {}
+    for (scene, cell), group in done.groupby([done.scene, labels], sort=False):
+        c = cell_settling(group, keys, effect)
+        if c is not None:
+            cells[(scene, cell)] = c
+    if not cells:
         return None
-    parts = [f"{scene} `{label}` {t_interval(list(v.values())).estimate:+.2f} dB" for (scene, label), v in rise.items()]
-    span = ", ".join(f"{a}→{b}" for a, b in sorted(steps))
-    lines = [f"- Test PSNR change over the last evaluation interval (steps {span}), mean over seeds: "
-             + "; ".join(parts) + "."]
-    claims, moving = [], []
-    for scene in dict.fromkeys(k[0] for k in rise):
-        keys = sorted((k for k in rise if k[0] == scene), key=lambda k: t_interval(list(rise[k].values())).estimate)
-        if len(keys) < 2:
-            continue
-        slow, fast = keys[0], keys[-1]
-        change = paired_difference(rise[slow], rise[fast])  # how much `fast` gained on `slow` (> 0)
-        gap = paired_difference(final[slow], final[fast])
-        still = change.excludes(0.0) and gap.defined and abs(change.estimate) > gap.half_width
-        claims.append(Claim("settling", scene, fast[1], "test_psnr", "diff", change.estimate,
-                            f"{change.estimate:+.2f} dB", reference=slow[1], low=change.low, high=change.high,
-                            n=change.n, significant=still))
-        if still:
-            moving.append(f"on {scene}, `{fast[1]}` gained {change.estimate:.2f} dB [95 % CI {change.low:.2f}, "
-                          f"{change.high:.2f}] on `{slow[1]}` over that interval, more than the 95 % interval of their "
-                          f"final difference (±{gap.half_width:.2f} dB)")
+    windows = sorted({(c.start, c.end) for c in cells.values()})
+    span = ", ".join(f"{a}→{b}" for a, b in windows)
+    threshold = f"{effect:g} dB per 1,000 steps"
+    lines = [f"- Test PSNR slope over the last quarter of the run (steps {span}; least squares, mean over seeds; "
+             f"a cell is settled below {threshold}, the minimum effect per 1,000 steps: docs/reports.md), with the "
+             f"training-view PSNR's slope where recorded: "
+             + "; ".join(f"{scene} `{cell}` {c.describe()}" for (scene, cell), c in cells.items()) + "."]
+    claims = []
+    for (scene, cell), c in cells.items():
+        claims.append(Claim("settling", scene, cell, keys.metric, "slope", c.test, f"{c.test:+.2f} dB / 1,000 steps",
+                            n=len(c.per_seed), significant=not c.settled, settled=c.settled))
+    moving = [f"{scene} `{cell}` ({c.test:+.2f})" for (scene, cell), c in cells.items() if not c.settled]
+    overfit = [f"{scene} `{cell}` (test {c.test:+.2f}, train {c.train:+.2f})" for (scene, cell), c in cells.items()
+               if c.overfitting]
     if moving:
-        lines.append("- **Not settled**: " + "; ".join(moving) + ". The difference reported above is what this run "
-                     "length gives, not where the cells converge.")
-    elif claims:
-        lines.append("- Settled: on every scene the gap between the fastest- and slowest-rising cells moved over the "
-                     "last interval by no more than the 95 % interval of their final difference (or not beyond seed "
-                     "noise).")
+        lines.append(f"- **Not settled**: {len(moving)} of {len(cells)} cells still moved by {threshold} or more over "
+                     f"the last quarter: " + ", ".join(moving) + ". Their differences above are what this run length "
+                     "gives, not where the cells converge (each such comparison is marked **not settled**).")
+    else:
+        lines.append(f"- Settled: every cell's test curve moved by less than {threshold} over the last quarter.")
+    if overfit:
+        lines.append("- **Overfitting**: the test curve is flat or falling while the training-view PSNR still rises "
+                     f"(by {threshold} or more beyond the test curve's slope): " + ", ".join(overfit)
+                     + ". Such a cell has stopped generalising; it has not converged.")
     return Finding("settling", lines, claims)
 
 
-def parity_finding(runs: pd.DataFrame) -> Finding | None:
+def parity_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None) -> Finding | None:
     """Raster kind: the largest implementation error against the matched reference."""
     col = "metric.parity_max_abs"
     done = done_runs(runs)
@@ -177,9 +210,12 @@ def lpips_note(runs: pd.DataFrame) -> list[str]:
 
 #: A note of a report's "Metrics" section: ``note(runs) -> lines``.
 MetricNote = Callable[[pd.DataFrame], list[str]]
+#: Lines of a report's header (the protocol its runs followed): ``note(runs) -> lines``.
+HeaderNote = Callable[[pd.DataFrame], list[str]]
 
-_AXIS_NOTES: dict[str, list[AxisNote]] = {"train": [auto_sh_degree_note]}
+_AXIS_NOTES: dict[str, list[AxisNote]] = {"train": [auto_sh_degree_note, schedule_confound_note]}
 _METRIC_NOTES: dict[str, list[MetricNote]] = {"train": [lpips_note]}
+_HEADER_NOTES: dict[str, list[HeaderNote]] = {"train": [protocol_lines]}
 _RUN_FINDINGS: dict[str, list[tuple[str, RunFinding]]] = {"raster": [("parity", parity_finding)],
                                                            "train": [("settling", settling_finding)]}
 
@@ -191,7 +227,7 @@ def register_axis_note(kind: str, note: AxisNote) -> AxisNote:
 
 
 def register_run_finding(kind: str, name: str, finding: RunFinding) -> RunFinding:
-    """Add the finding ``name`` (``finding(runs)``) to the reports of the kind called ``kind``."""
+    """Add the finding ``name`` (``finding(runs, min_effect)``) to the reports of the kind called ``kind``."""
     _RUN_FINDINGS.setdefault(kind, []).append((name, finding))
     return finding
 
@@ -200,6 +236,17 @@ def register_metric_note(kind: str, note: MetricNote) -> MetricNote:
     """Append ``note``'s lines to the "Metrics" section of the reports of ``kind``."""
     _METRIC_NOTES.setdefault(kind, []).append(note)
     return note
+
+
+def register_header_note(kind: str, note: HeaderNote) -> HeaderNote:
+    """Add ``note``'s lines to the header of the reports of ``kind`` (e.g. its protocol)."""
+    _HEADER_NOTES.setdefault(kind, []).append(note)
+    return note
+
+
+def header_notes(kind: str) -> tuple[HeaderNote, ...]:
+    """The header notes registered for ``kind``."""
+    return tuple(_HEADER_NOTES.get(kind, ()))
 
 
 def metric_notes(kind: str) -> tuple[MetricNote, ...]:
@@ -217,5 +264,5 @@ def run_findings(kind: str) -> tuple[tuple[str, RunFinding], ...]:
     return tuple(_RUN_FINDINGS.get(kind, ()))
 
 
-__all__ = ["RunFinding", "MetricNote", "auto_sh_degree_note", "parity_finding", "settling_finding", "lpips_note", "register_axis_note",
+__all__ = ["RunFinding", "MetricNote", "HeaderNote", "schedule_confound_note", "register_header_note", "header_notes", "auto_sh_degree_note", "parity_finding", "settling_finding", "lpips_note", "register_axis_note",
            "register_run_finding", "register_metric_note", "axis_notes", "run_findings", "metric_notes"]

@@ -41,7 +41,7 @@ from splatbench.figures import pareto_figure
 from splatbench.metrics.spec import MetricSpec
 from splatbench.reports.figures import cell_means, curves_figure
 from splatbench.reports.findings import Finding, axis_finding
-from splatbench.reports.notes import axis_notes, metric_notes, run_findings
+from splatbench.reports.notes import axis_notes, header_notes, metric_notes, run_findings
 from splatbench.reports.tables import AxisTable, axis_table, cell_labels, display, kind_report, metric_specs
 
 REPORT_NAME = "report.md"
@@ -53,7 +53,9 @@ def interval_note(max_seeds: int) -> str:
         return ("Mean over seeds; one seed per cell, so no interval can be computed (n = 1): differences between "
                 "rows cannot be told from seed-to-seed noise")
     return ("Mean ± half-width of the 95 % Student's t interval over seeds (n − 1 degrees of freedom; a seed's "
-            "runs are averaged first); a cell with one seed shows its mean alone")
+            "runs are averaged first); a cell with one seed shows its mean alone, and \"(no spread)\" marks a cell "
+            "whose seeds did not vary it at the precision shown (no interval: see the protocol above for what a "
+            "seed varies)")
 
 
 @dataclass
@@ -104,11 +106,11 @@ def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int) -> 
     axes = [axis_table(spec, axis, table, metrics) for axis in spec.dimensions]
     findings: dict[str, Finding] = {}
     for t in axes:
-        f = axis_finding(t, spec.kind, table, axis_notes(spec.kind))
+        f = axis_finding(t, spec.kind, table, axis_notes(spec.kind), spec.min_effect)
         if f is not None:
             findings[t.axis] = f
     for name, make in run_findings(spec.kind):
-        f = make(table)
+        f = make(table, spec.min_effect)
         if f is not None:
             findings[name] = f
     return Report(spec, table, total, metrics, axes, findings)
@@ -148,13 +150,18 @@ def write_report(report: Report, out: str | Path, *, results: str | Path | None 
         path = curves_figure(t, table, figures / f"curves_{_slug(t.axis)}.png")
         if path is not None:
             curve_paths[t.axis] = path
-    drawn: list[tuple[Tradeoff, Path]] = []
+    drawn: list[tuple[Tradeoff, Path | None]] = []
     specs = {m.name: m for m in report.metrics}
     # points labelled without the axes' shared prefix (legible); the text names the cells in full
     short, full = cell_labels(report.spec, table, short=True), cell_labels(report.spec, table)
     to_full = dict(zip(short, full))
     for tradeoff in drawable_tradeoffs(report):
-        means = cell_means(table, short, tradeoff.cost, tradeoff.quality)
+        trusted, _ = timed_runs(report, tradeoff)
+        if not len(trusted):
+            report.fronts[tradeoff.stem] = {}
+            drawn.append((tradeoff, None))
+            continue
+        means = cell_means(trusted, short, tradeoff.cost, tradeoff.quality)
         path = figures / f"{tradeoff.stem}.png"
         fronts = pareto_figure(means, list(report.spec.scenes), specs[tradeoff.cost], specs[tradeoff.quality],
                                path, tradeoff.title)
@@ -165,6 +172,25 @@ def write_report(report: Report, out: str | Path, *, results: str | Path | None 
     text = render_markdown(report, curve_paths, drawn, out, options, run_options)
     atomic_write(out / REPORT_NAME, lambda temp: temp.write_text(text, encoding="utf-8"))
     return out / REPORT_NAME
+
+
+def timed_runs(report: Report, tradeoff: Tradeoff) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(The runs a Pareto figure may use, the done runs it leaves out): a run marked ``loaded``
+    (raster) never, and for a cost the kind declares timed, never a run timed while other processes
+    loaded the machine (``metric.time_loaded``): its time is not evidence (docs/reports.md)."""
+    from splatbench.reports.findings import usable_runs
+
+    done = report.table[report.table.status == "done"] if len(report.table) else report.table
+    usable = usable_runs(report.table)
+    declared = kind_report(report.spec.kind)
+    if declared is not None and tradeoff.cost in declared.timed and "metric.time_loaded" in usable.columns:
+        usable = usable[pd.to_numeric(usable["metric.time_loaded"], errors="coerce").fillna(0) == 0]
+    return usable, done[~done.run_id.isin(set(usable.run_id))]
+
+
+def load_recorded(table: pd.DataFrame) -> bool:
+    """Whether the runs recorded the machine's load (``metric.time_loaded`` or ``metric.loaded``)."""
+    return any(c in table.columns for c in ("metric.time_loaded", "metric.loaded"))
 
 
 def drawable_tradeoffs(report: Report) -> list[Tradeoff]:
@@ -179,11 +205,11 @@ def drawable_tradeoffs(report: Report) -> list[Tradeoff]:
 
 
 # --------------------------------------------------------------------------- markdown
-def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: list[tuple[Tradeoff, Path]],
+def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: list[tuple[Tradeoff, Path | None]],
                     out: Path, options: str = "", run_options: str = "") -> str:
     """The report's text; ``tradeoffs``: each Pareto figure drawn, with its file; ``options`` /
     ``run_options``: the report's / the run command's options beyond the experiment file
-    (`write_report`)."""
+    (`write_report`); a figure's file is None where every run was left out (`timed_runs`)."""
     spec, table = report.spec, report.table
     missing = report.total - len(table)
     dims = ", ".join(f"`{d}`" for d in spec.dimensions) or "no axes"
@@ -206,6 +232,10 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
             for name, src in spec.scene_tables.items())
             + " (a scene's own keys win over the shared `data.*`; `data` keys of another scene type do not apply "
               "to it).", ""]
+    for note in header_notes(spec.kind):
+        more = note(table)
+        if more:
+            lines += [*more, ""]
     timing = " ".join(t for t in (run_time(table), load_facts(table)) if t)
     if timing:
         lines += [timing, ""]
@@ -231,14 +261,34 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
         lines += [f"## {name.capitalize()}", "", report.findings[name].markdown(), ""]
 
     specs = {m.name: m for m in report.metrics}
+    declared = kind_report(spec.kind)
     for tradeoff, path in tradeoffs:
         cost, quality = specs[tradeoff.cost], specs[tradeoff.quality]
-        lines += [f"## {cost.label} against {quality.label}", "",
-                  f"{tradeoff.title}; bars are 95 % t intervals over seeds (none with one seed); ringed points are "
+        lines += [f"## {cost.label} against {quality.label}", ""]
+        trusted, left = timed_runs(report, tradeoff)
+        shown = cell_labels(spec, trusted) if len(trusted) else pd.Series([], dtype=object)
+        is_time = declared is not None and tradeoff.cost in declared.timed
+        if path is None:
+            lines += [f"Not drawn: all {len(left)} done runs were timed while other processes loaded the machine; "
+                      f"their times are no evidence (rerun on a quiet machine: docs/reports.md, \"Quiet numbers\").",
+                      ""]
+            continue
+        lines += [f"{tradeoff.title}; bars are 95 % t intervals over seeds (none with one seed); ringed points are "
                   f"Pareto-optimal on the means (no other cell is both {tradeoff.cheaper} and better).", "",
                   f"![{tradeoff.stem}]({path.relative_to(out).as_posix()})", ""]
+        if len(left):
+            labels = cell_labels(spec, table)
+            cells = ", ".join(dict.fromkeys(f"{sc} `{labels[i]}`" for i, sc in left.scene.items()))
+            lines.append(f"- Left out of this figure and its front: {len(left)} run(s) timed while other processes "
+                         f"loaded the machine ({cells}); a cell none of whose runs is left has no point.")
+        if is_time and not load_recorded(table):
+            lines.append("- These runs did not record the machine's load (run before it was recorded): their times "
+                         "may come from a loaded machine, so this front is no evidence of speed.")
         for scene, front in report.fronts.get(tradeoff.stem, {}).items():
-            if front:
+            cells = set(shown[trusted.scene == scene]) if len(trusted) else set()
+            if len(cells) == 1 and len(left):
+                lines.append(f"- On {scene} only `{next(iter(cells))}` has a trusted time: no front.")
+            elif front:
                 lines.append(f"- Pareto front on {scene}, {tradeoff.order}: " + " → ".join(f"`{c}`" for c in front))
         lines.append("")
 
@@ -352,4 +402,5 @@ def _slug(text: str) -> str:
 
 
 __all__ = ["Report", "build_report", "write_report", "reported_done", "grid_table", "render_markdown",
-           "drawable_tradeoffs", "run_time", "load_facts", "duration", "REPORT_NAME", "FIGURES"]
+           "drawable_tradeoffs", "timed_runs", "load_recorded", "run_time", "load_facts", "duration", "REPORT_NAME",
+           "FIGURES"]

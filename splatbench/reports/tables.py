@@ -155,11 +155,15 @@ class Stat:
         return t_quantile(self.n) * self.std / math.sqrt(self.n)
 
     def text(self, fmt: str) -> str:
-        """``"27.31 ± 0.42"`` (mean ± 95 % half-width), the mean alone for one seed, "–" for none."""
+        """``"27.31 ± 0.42"`` (mean ± 95 % half-width), the mean alone for one seed, "–" for none,
+        ``"41.26 (no spread)"`` when the half-width is zero at ``fmt``'s precision: the seeds did
+        not vary the value, so there is no interval to show (never ``± 0.00``)."""
         if self.n == 0 or math.isnan(self.mean):
             return "–"
         if self.n < 2 or math.isnan(self.std):
             return format(self.mean, fmt)
+        if float(format(self.half_width, fmt)) == 0.0:
+            return f"{format(self.mean, fmt)} (no spread)"
         return f"{format(self.mean, fmt)} ± {format(self.half_width, fmt)}"
 
 
@@ -270,16 +274,16 @@ def cell_labels(spec: ExperimentSpec, table: pd.DataFrame, short: bool = False) 
         base = {d: _json(v) for d, v in _base_labels(spec).items()}
 
         def label(row) -> str:
-            diff = [f"{n}={display(_decode(row[c]))}" for d, n, c in zip(dims, names, cols)
-                    if _json(_decode(row[c])) != base.get(d, _json(None))]
+            diff = [f"{n}={display(decode(row[c]))}" for d, n, c in zip(dims, names, cols)
+                    if _json(decode(row[c])) != base.get(d, _json(None))]
             return ", ".join(diff) or "base"
     else:
         def label(row) -> str:
-            return ", ".join(f"{n}={display(_decode(row[c]))}" for n, c in zip(names, cols))
+            return ", ".join(f"{n}={display(decode(row[c]))}" for n, c in zip(names, cols))
     return table.apply(label, axis=1) if len(table) else pd.Series([], dtype=object)
 
 
-def _decode(value: Any) -> Any:
+def decode(value: Any) -> Any:
     """A table cell back to a value: JSON text of a mixed column is decoded, NaN is None."""
     if value is None or (isinstance(value, float) and math.isnan(value)) or value is pd.NA:
         return None
@@ -299,4 +303,4 @@ def _json(value: Any) -> str:
 
 
 __all__ = ["kind_report", "metric_specs", "shared_prefix", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
-           "axis_table", "cell_labels", "done_runs"]
+           "axis_table", "cell_labels", "done_runs", "decode"]

@@ -19,7 +19,8 @@ import dataclasses
 
 from splatbench.checks import dataclass_from_mapping
 from splatbench.errors import InputError
-from splatbench.strategies.base import PARAM_GROUPS, Optimizers, Params, StepContext, Strategy, TopologyChange
+from splatbench.strategies.base import (PARAM_GROUPS, Optimizers, Params, StepContext, Strategy, TopologyChange,
+                                       TopologyCounts)
 from splatbench.strategies.budget import BudgetState, BudgetStrategy
 from splatbench.strategies.default import DefaultState, DefaultStrategy, RefineStats
 from splatbench.strategies.mcmc import MCMCState, MCMCStats, MCMCStrategy
@@ -53,6 +54,29 @@ def make_strategy(name: str, **overrides) -> Strategy:
                                   source=f"strategy {name!r}")
 
 
+def topology_counts(state: object) -> TopologyCounts:
+    """What the strategy whose state is ``state`` did to the Gaussians so far (`TopologyCounts`):
+    the refinement histories of `DefaultState` (and `BudgetState`) and `MCMCState`, the opacity
+    resets; all zero for the `none` strategy (no state)."""
+    if isinstance(state, DefaultState):
+        h = state.history
+        return TopologyCounts(refinements=len(h), opacity_resets=int(getattr(state, "resets", 0)),
+                              cloned=sum(r.cloned for r in h), split=sum(r.split for r in h),
+                              pruned=sum(r.pruned for r in h), pruned_size=sum(r.pruned_size for r in h))
+    if isinstance(state, MCMCState):
+        h = state.history
+        return TopologyCounts(refinements=len(h), relocated=sum(r.relocated for r in h),
+                              added=sum(r.added for r in h))
+    return TopologyCounts()
+
+
+def planned_counts(strategy: Strategy, iterations: int) -> TopologyCounts:
+    """The refinements and opacity resets ``strategy``'s schedule makes in a run of
+    ``iterations`` steps (its optional ``planned_counts``; none for a strategy without one)."""
+    planned = getattr(strategy, "planned_counts", None)
+    return planned(iterations) if planned is not None else TopologyCounts()
+
+
 def _lookup(name: str) -> tuple[type, dict[str, object]]:
     if name not in STRATEGIES:
         raise InputError(f"strategy: unknown name {name!r} (expected one of: {', '.join(STRATEGIES)})")
@@ -61,6 +85,6 @@ def _lookup(name: str) -> tuple[type, dict[str, object]]:
 
 __all__ = [
     "PARAM_GROUPS", "STRATEGIES", "BudgetState", "BudgetStrategy", "DefaultState", "DefaultStrategy", "MCMCState", "MCMCStats", "MCMCStrategy",
-    "NoneStrategy", "Optimizers", "Params", "RefineStats", "StepContext", "Strategy", "TopologyChange", "make_strategy",
-    "strategy_fields",
+    "NoneStrategy", "Optimizers", "Params", "RefineStats", "StepContext", "Strategy", "TopologyChange", "TopologyCounts",
+    "make_strategy", "planned_counts", "strategy_fields", "topology_counts",
 ]

@@ -55,12 +55,41 @@ class TopologyChange(NamedTuple):
                 # "refinement (refine window 500..15000, every 100)"
 
 
+@dataclass(frozen=True)
+class TopologyCounts:
+    """What a strategy did to the set of Gaussians over a run, besides what its settings name:
+    what a report names when a setting also changed these (docs/reports.md, "Confounds").
+
+    refinements: refinement steps made (densify / prune, or MCMC relocate / add);
+    opacity_resets: opacity resets; cloned / split / pruned: totals over the refinements
+    (split counts the Gaussians replaced by two children); pruned_size: of ``pruned``, those
+    removed for their size (none when size pruning is off: ``reset_every = 0`` turns it off);
+    relocated / added: MCMC's totals.
+    """
+
+    refinements: int = 0
+    opacity_resets: int = 0
+    cloned: int = 0
+    split: int = 0
+    pruned: int = 0
+    pruned_size: int = 0
+    relocated: int = 0
+    added: int = 0
+
+
 def last_multiple(period: int, lo: int, hi: int) -> int | None:
     """The largest multiple of ``period`` in ``(lo, hi]`` (None if there is none)."""
     if hi <= lo or period < 1:
         return None
     m = (hi // period) * period
     return m if m > lo else None
+
+
+def multiples(period: int, lo: int, hi: int) -> int:
+    """How many multiples of ``period`` lie in ``(lo, hi]`` (0 for a period < 1)."""
+    if period < 1 or hi <= lo:
+        return 0
+    return hi // period - lo // period
 
 
 def check_fields(obj, positive_ints: tuple[str, ...], nonneg: tuple[str, ...]) -> None:

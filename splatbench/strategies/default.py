@@ -20,8 +20,8 @@ import torch
 
 from splatbench.errors import InputError
 import splatbench.strategies.ops as ops
-from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, check_fields,
-                                       last_multiple, no_refinement_note)
+from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, TopologyCounts,
+                                       check_fields, last_multiple, multiples, no_refinement_note)
 
 
 class RefineStats(NamedTuple):
@@ -32,6 +32,7 @@ class RefineStats(NamedTuple):
     split: int    # Gaussians replaced by two children (large, high gradient)
     pruned: int   # Gaussians removed after growing (transparent or too large)
     num_gaussians: int  # N after the refinement
+    pruned_size: int = 0  # of `pruned`, those removed for their size alone (not transparent)
 
 
 @dataclass
@@ -84,6 +85,7 @@ class DefaultState:
     stopped: bool = False      # densification stopped early
     last: RefineStats | None = None  # the latest refinement
     history: list[RefineStats] = field(default_factory=list)
+    resets: int = 0            # opacity resets made so far
 
 
 @dataclass(frozen=True)
@@ -181,6 +183,14 @@ class DefaultStrategy:
         """A warning when no refinement step falls in the refine window of this run."""
         return no_refinement_note(self.name, self.refine_every, self.refine_start, self.refine_stop, iterations)
 
+    def planned_counts(self, iterations: int) -> TopologyCounts:
+        """The refinements and opacity resets this schedule makes in a run of ``iterations``
+        steps (`post_backward`'s conditions; an early stop makes fewer): what a report names
+        when the runs did not record them."""
+        hi = min(iterations, self.refine_stop - 1)  # completed iterations it = step + 1 < refine_stop
+        return TopologyCounts(refinements=multiples(self.refine_every, self.refine_start, hi),
+                              opacity_resets=multiples(self.reset_every, 0, hi))
+
     def initialize_state(self, params: Params) -> DefaultState:
         n, device = params["means"].shape[0], params["means"].device
         gen = torch.Generator(device=device)
@@ -209,6 +219,7 @@ class DefaultStrategy:
             self.refine(params, optimizers, state, ctx.step, ctx.scene_extent)
         if self.reset_every > 0 and it % self.reset_every == 0:
             ops.reset_opacity(params, optimizers, self.reset_value)
+            state.resets += 1
             if state.plateau is not None:
                 state.plateau.forget()
 
@@ -272,17 +283,20 @@ class DefaultStrategy:
                             revised_opacity=self.revised_opacity)
         big = buffers["big_screen"]
         prune = torch.sigmoid(params["opacity_logits"].detach()).to(device) < self.prune_opacity
+        n_size = 0
         if size_prune:
-            prune |= big
+            by_size = big.clone()
             if self.max_world_size > 0:
-                prune |= torch.exp(params["log_scales"].detach()).amax(dim=-1).to(device) \
+                by_size |= torch.exp(params["log_scales"].detach()).amax(dim=-1).to(device) \
                     > self.max_world_size * scene_extent
+            n_size = int((by_size & ~prune).sum())
+            prune |= by_size
         n_prune = ops.remove(params, optimizers, prune)
         m = params["means"].shape[0]
         state.grad_accum = torch.zeros(m, device=device)
         state.count = torch.zeros(m, device=device)
         state.max_radii = torch.zeros(m, device=device)
-        stats = RefineStats(step, n_clone, n_split, n_prune, m)
+        stats = RefineStats(step, n_clone, n_split, n_prune, m, n_size)
         state.last = stats
         state.history.append(stats)
         return stats

@@ -24,8 +24,8 @@ import torch
 
 from splatbench.errors import InputError
 import splatbench.strategies.ops as ops
-from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, check_fields,
-                                       last_multiple, no_refinement_note)
+from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, TopologyCounts,
+                                       check_fields, last_multiple, multiples, no_refinement_note)
 from splatbench.strategies.default import LossPlateau
 
 
@@ -110,6 +110,12 @@ class MCMCStrategy:
             return None
         return TopologyChange(it - 1, f"a relocation (refine window {self.refine_start}..{self.refine_stop}, "
                                       f"every {self.refine_every})")
+
+    def planned_counts(self, iterations: int) -> TopologyCounts:
+        """The relocation / addition steps this schedule makes in a run of ``iterations`` steps
+        (an early stop makes fewer); MCMC never resets opacities."""
+        return TopologyCounts(refinements=multiples(self.refine_every, self.refine_start,
+                                                    min(iterations, self.refine_stop - 1)))
 
     def schedule_note(self, iterations: int) -> str | None:
         """A warning when no refinement step falls in the refine window of this run."""

@@ -39,6 +39,7 @@ from splatbench.interrupt import Interrupted, deferred
 from splatbench.ply import ViewHints
 from splatbench.raster.torch_bridge import rasterize
 from splatbench.scenes.orientation import dataset_up, rig_up
+from splatbench.strategies import topology_counts
 from splatbench.strategies.base import StepContext
 from splatbench.train.config import TrainConfig, save_config
 from splatbench.train.initializers import InitSettings, initialize
@@ -510,7 +511,8 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,
         test_views=ev.views, history=history, evaluations=evaluations,
         sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary,
-        warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step)
+        warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step,
+        topology=topology_counts(trainer.state))
     (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
     return result
 

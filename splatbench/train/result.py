@@ -7,6 +7,8 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import NamedTuple
 
+from splatbench.strategies.base import TopologyCounts
+
 
 class HistoryPoint(NamedTuple):
     """Training progress at one logged step."""
@@ -60,6 +62,9 @@ class TrainResult:
                                         # own_cpu, own_before, load_other, cores, loaded)
     resumed_step: int | None = None     # --resume: the checkpoint's step (its earlier steps' loop time, timed by the
                                         # run that wrote it, is in train_seconds); None: not resumed
+    topology: TopologyCounts | None = None  # what the strategy did besides its settings' names: refinements,
+                                        # opacity resets, cloned / split / pruned, MCMC relocated / added
+                                        # (None: a result written before they were recorded)
 
     def to_dict(self) -> dict:
         """JSON-ready dict; NaN / inf become None; history rows become objects."""
@@ -74,8 +79,10 @@ class TrainResult:
 
     @classmethod
     def from_dict(cls, data: dict) -> TrainResult:
+        topology = data.get("topology")
         return cls(**{**data, "history": [HistoryPoint(**p) for p in data.get("history", [])],
-                      "evaluations": [EvalPoint(**p) for p in data.get("evaluations", [])]})
+                      "evaluations": [EvalPoint(**p) for p in data.get("evaluations", [])],
+                      "topology": TopologyCounts(**topology) if isinstance(topology, dict) else None})
 
 
 def _finite(value):

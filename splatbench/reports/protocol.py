@@ -1,0 +1,186 @@
+"""The protocol a train report's runs followed, stated in its header from what the runs
+recorded (their resolved ``config.*`` columns and metrics), never from prose.
+
+`protocol_lines(table)`: one markdown list of the fields that change a 3DGS number
+(PROTOCOL.md; NerfBaselines): the named protocol, the schedule (iterations, scaled or
+absolute steps, learning rates), the evaluation steps, the split, the resolution and how it
+was made, the background, the metrics' conventions, the initialisation, and the seeds and
+what they vary. A field that differs between runs is listed with each value. A config
+without a ``protocol`` field (every run before the named presets) reads as today's quick
+scaled protocol.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from typing import Any
+
+import pandas as pd
+
+from splatbench.reports.tables import done_runs
+
+#: What the runs' protocol is called when their config names none (`TrainConfig.protocol` absent).
+DEFAULT_PROTOCOL = "quick (graphdeco's 30,000-step schedule scaled to the run's length)"
+
+
+def _values(done: pd.DataFrame, column: str) -> list[Any]:
+    """The distinct values of a column over the done runs (NaN / NA as None), in order."""
+    if column not in done.columns:
+        return []
+    out: list[Any] = []
+    for v in done[column]:
+        if v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v)):
+            v = None
+        elif hasattr(v, "item"):
+            v = v.item()
+        if v not in out:
+            out.append(v)
+    return out
+
+
+def _one(done: pd.DataFrame, column: str, show: Callable[[Any], str] = str) -> str | None:
+    """The column's value as written, ``a / b`` when runs differ; None when absent or all None."""
+    values = [v for v in _values(done, column) if v is not None]
+    if not values:
+        return None
+    return " / ".join(show(v) for v in values) + (" (differs by cell)" if len(values) > 1 else "")
+
+
+def _g(v: Any) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def seed_varies(config: dict[str, Any]) -> tuple[list[str], list[str]]:
+    """(What a run's seed varies, what it does not) for one run's resolved config (flat
+    ``config.*`` keys without the prefix): `splatbench.train` seeds torch and numpy, the
+    view order, random backgrounds, the strategy's draws (its ``seed`` field is the run's)
+    and a random initialisation; the initial points of ``init = surface`` / ``sfm`` and the
+    rendered dataset do not move with it (as recorded: a config field that seeds them, when
+    one exists, is read here too)."""
+    varies = ["torch / numpy random state", "training-view order"]
+    fixed = []
+    if config.get("random_background"):
+        varies.append("random backgrounds")
+    if config.get("strategy") not in (None, "none") and config.get("strategy_options.seed") is not None:
+        varies.append("the strategy's random draws (split children, MCMC relocation and noise)")
+    init = config.get("init")
+    if init == "random":
+        varies.append("the random initial points")
+    elif config.get("init_seeded") or config.get("init_jitter") or config.get("init_subsample"):
+        varies.append(f"the initial points (init = {init}, seeded)")
+    elif init is not None:
+        fixed.append(f"the initial points of init = {init}")
+    fixed.append("the dataset (rendered or read once per scene)")
+    return varies, fixed
+
+
+def protocol_lines(table: pd.DataFrame) -> list[str]:
+    """The header's protocol list of a train report (module doc); [] without config columns."""
+    done = done_runs(table)
+    if done.empty or "config.iterations" not in done.columns:
+        return []
+    lines = []
+    protocol = _one(done, "config.protocol") or DEFAULT_PROTOCOL
+    lines.append(f"- **Protocol**: {protocol}.")
+    iters = _one(done, "config.iterations", lambda v: f"{int(v):,}")
+    schedules = _values(done, "config.schedule")
+    how = {"scaled": "graphdeco's 30,000-step schedule scaled to the run (refine window, opacity resets, SH steps "
+                     "times iterations / 30,000)",
+           "absolute": "schedule steps as written"}
+    sched = " / ".join(how.get(s, str(s)) for s in schedules if s is not None) or "not recorded"
+    lr = _one(done, "config.lr_means", _g)
+    lr_final = _one(done, "config.lr_means_final", _g)
+    lrs = (f"; learning rates not scaled: positions {lr} → {lr_final} × scene extent, decayed over the run's "
+           f"iterations, the other groups constant" if lr and lr_final else "")
+    lines.append(f"- **Schedule**: {iters} iterations, {sched}{lrs}.")
+    evals = _eval_steps(done)
+    lines.append(f"- **Evaluation**: the test views at steps {evals}; the reported numbers are the last step's."
+                 if evals else "- **Evaluation**: the test views at the end.")
+    test_every = _one(done, "config.test_every")
+    views = _one(done, "config.data.views")
+    split = f"every {test_every}th view held out for testing (where the dataset gives no split of its own)" \
+        if test_every else "the dataset's own split"
+    lines.append(f"- **Split**: {split}" + (f"; {views} views" if views else "") + ".")
+    lines.append(f"- **Resolution**: {_resolution(done)}.")
+    bg = _one(done, "config.background", lambda v: "auto (the mean colour of the pixels the dataset marks empty, "
+              "black where it marks none)" if v == "auto" else str(v))
+    rnd = _values(done, "config.random_background")
+    lines.append(f"- **Background**: {bg or 'not recorded'}" + ("; a random background per training step"
+                                                              if True in rnd else "") + ".")
+    lines.append(f"- **Metrics**: {_metrics(done)}.")
+    init = _one(done, "config.init")
+    pts = _one(done, "config.init_random_points", lambda v: f"{int(v):,}")
+    lines.append(f"- **Initialisation**: {init or 'not recorded'}"
+                 + (f" ({pts} points where random)" if init and "random" in init and pts else "") + ".")
+    lines.append(f"- **Seeds**: {_seeds(done)}")
+    return ["**Protocol** (from the runs' recorded configs):", "", *lines]
+
+
+def _eval_steps(done: pd.DataFrame) -> str:
+    steps: list[int] = []
+    for raw in done.get("curves", pd.Series([], dtype=object)):
+        try:
+            c = json.loads(raw) if isinstance(raw, str) else {}
+        except ValueError:
+            continue
+        for s in c.get("eval_step") or []:
+            if s not in steps:
+                steps.append(int(s))
+    return ", ".join(f"{s:,}" for s in sorted(steps))
+
+
+def _resolution(done: pd.DataFrame) -> str:
+    parts = []
+    if "config.data.model" in done.columns and done["config.data.model"].notna().any():
+        res = _one(done[done["config.data.model"].notna()], "config.data.resolution")
+        parts.append(f"teacher scenes rendered from their PLY at {res} px wide (splatbench.experiments.teacher)")
+    if "config.data.spp" in done.columns and done["config.data.spp"].notna().any():
+        sel = done[done["config.data.spp"].notna()]
+        res, spp = _one(sel, "config.data.resolution"), _one(sel, "config.data.spp")
+        test_spp = _one(sel, "config.data.test_spp")
+        parts.append(f"rendered scenes at {res} px wide by Mitsuba, {spp} spp"
+                     + (f" ({test_spp} spp for the test views)" if test_spp and test_spp != spp else ""))
+    if "config.data.downscale" in done.columns and done["config.data.downscale"].notna().any():
+        down = _one(done[done["config.data.downscale"].notna()], "config.data.downscale")
+        parts.append(f"captures at 1/{down} of their size (the capture's images_{down}/ where it has them, else "
+                     f"resized on load)")
+    return "; ".join(parts) or "not recorded"
+
+
+def _metrics(done: pd.DataFrame) -> str:
+    from splatbench.metrics.perceptual import convention  # late: the reports start without torch
+
+    text = ("PSNR of the model's image clamped to [0, 1] against the target, on float images (the prediction "
+            "is not quantized to uint8), SSIM with an 11-pixel Gaussian window (σ 1.5)")
+    if "metric.lpips_net" in done.columns:
+        kinds = sorted({(str(n), bool(s)) for n, s in zip(done["metric.lpips_net"], done["metric.lpips_scale_inputs"])
+                        if isinstance(n, str) and n})
+        if kinds:
+            text += "; " + " / ".join(convention(*k) for k in kinds)
+    else:
+        text += "; LPIPS not recorded"
+    return text
+
+
+def _seeds(done: pd.DataFrame) -> str:
+    seeds = sorted({int(s) for s in done.seed})
+    varies: list[str] = []
+    fixed: list[str] = []
+    cols = [c for c in done.columns if c.startswith("config.")]
+    for _, row in done.iterrows():
+        config = {c[len("config."):]: (None if row[c] is pd.NA else row[c]) for c in cols}
+        v, f = seed_varies(config)
+        varies += [x for x in v if x not in varies]
+        fixed += [x for x in f if x not in fixed]
+    inits = [f[len("the initial points of init = "):] for f in fixed if f.startswith("the initial points of init")]
+    fixed = ([f"the initial points of init = {' / '.join(inits)} (the same points for every seed)"] if inits else []) \
+        + [f for f in fixed if not f.startswith("the initial points of init")]
+    where = ("; not " + ", not ".join(fixed)) if fixed else ""
+    return (f"{', '.join(map(str, seeds))}, paired across cells. A seed varies {', '.join(varies)}{where}: an "
+            f"interval covers what these vary, not a rerun's other sources (a different start, another "
+            f"scene) (docs/reports.md, \"What an interval covers\").")
+
+
+__all__ = ["DEFAULT_PROTOCOL", "protocol_lines", "seed_varies"]

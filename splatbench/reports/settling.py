@@ -1,0 +1,161 @@
+"""Whether a cell's curves had flattened when its runs ended ("settled"), and whether a
+paired difference still moved: the rule every training finding is marked with.
+
+A kind names its curves in its `KindReport` (``settling``: the test and train curve keys
+and the metric they measure); the rule (docs/reports.md, "Settled"):
+
+* **the last quarter** of a run: the curve points at steps >= ``end - end / 4`` (``end`` the
+  last evaluated step); where that holds fewer than two points, the last two;
+* **slope**: the least-squares slope of the test curve over those points, per seed, then the
+  mean over seeds (a row's runs of one seed averaged first), in units per 1,000 steps;
+* **a cell is settled** when ``|slope| < min_effect`` per `SETTLE_STEPS` (1,000) steps: 1,000
+  more steps at that slope -- half the quick protocol's run again, and the slope only falls
+  as the learning rate decays -- would move it by less than the minimum effect (0.1 dB PSNR
+  by default: 0.1 dB per 1,000 steps). A falling curve is not settled either;
+* **overfitting**: the test curve is flat or falling (slope below the threshold) while the
+  training-view curve, where recorded, still rises faster than the test curve by at least
+  the threshold: the cell fits its training views, it has not converged;
+* **a difference is settled** when both its cells are and the paired difference moved over
+  the last quarter by less than `DRIFT_SHARE` (a quarter) of its final size (of the minimum
+  effect, for a difference smaller than that).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from splatbench.experiments.kind_report import SettlingCurves
+
+#: Share of the run, at its end, whose slope decides.
+LAST_SHARE = 0.25
+#: The slope threshold is the minimum effect per this many steps.
+SETTLE_STEPS = 1000
+#: A paired difference is settled when it moved over the last quarter by less than this share of its size.
+DRIFT_SHARE = 0.25
+
+
+@dataclass(frozen=True)
+class Slope:
+    """One curve's least-squares slope over the last quarter of a run (per 1,000 steps),
+    the window it is fitted on (first and last step) and the value at the window's end."""
+
+    slope: float
+    start: int
+    end: int
+    last: float
+
+
+def last_quarter_slope(steps, values, end: int | None = None) -> Slope | None:
+    """`Slope` of the finite points of one curve over the last quarter of a run that ends at
+    ``end`` (default: the curve's last step); None with fewer than two points."""
+    pts = [(float(s), float(v)) for s, v in zip(steps or [], values or [])
+           if s is not None and v is not None and math.isfinite(float(v))]
+    if len(pts) < 2:
+        return None
+    end = pts[-1][0] if end is None else float(end)
+    lo = end - LAST_SHARE * end
+    sel = [p for p in pts if lo <= p[0] <= end]
+    if len(sel) < 2:
+        sel = [p for p in pts if p[0] <= end][-2:]
+    if len(sel) < 2 or sel[-1][0] == sel[0][0]:
+        return None
+    x, y = np.array([p[0] for p in sel]), np.array([p[1] for p in sel])
+    slope = float(np.polyfit(x, y, 1)[0]) * SETTLE_STEPS
+    return Slope(slope, int(sel[0][0]), int(sel[-1][0]), float(sel[-1][1]))
+
+
+@dataclass(frozen=True)
+class CellSettling:
+    """The curves of one cell (or row) at one scene over the last quarter.
+
+    test / train: slope per 1,000 steps, mean over seeds (train None when not recorded);
+    start / end: the test window (steps; the widest over the seeds); per_seed: seed -> test
+    slope; threshold: the settled threshold (the minimum effect per 1,000 steps).
+    """
+
+    test: float
+    train: float | None
+    start: int
+    end: int
+    per_seed: dict[int, float]
+    threshold: float
+
+    @property
+    def settled(self) -> bool:
+        return abs(self.test) < self.threshold
+
+    @property
+    def overfitting(self) -> bool:
+        return self.train is not None and self.test < self.threshold and self.train - self.test >= self.threshold
+
+    def describe(self, unit: str = "dB") -> str:
+        """``+0.42 dB / 1,000 steps (train +0.90)``."""
+        train = f" (train {self.train:+.2f})" if self.train is not None else ""
+        return f"{self.test:+.2f} {unit} / 1,000 steps{train}"
+
+
+def _curves(value) -> dict | None:
+    if not isinstance(value, str):
+        return None
+    try:
+        parsed = json.loads(value)
+    except ValueError:
+        return None
+    return parsed if isinstance(parsed, dict) else None
+
+
+def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -> CellSettling | None:
+    """`CellSettling` of the done runs ``runs`` (one cell or row at one scene; a seed's runs
+    averaged first); None when no run has two points of the test curve."""
+    if "curves" not in runs.columns:
+        return None
+    test: dict[int, list[float]] = {}
+    train: dict[int, list[float]] = {}
+    starts, ends = [], []
+    for seed, raw in zip(runs.seed, runs.curves):
+        c = _curves(raw)
+        if c is None:
+            continue
+        s = last_quarter_slope(c.get(keys.test_step), c.get(keys.test_value))
+        if s is None:
+            continue
+        test.setdefault(int(seed), []).append(s.slope)
+        starts.append(s.start)
+        ends.append(s.end)
+        if keys.train_step and keys.train_value and c.get(keys.train_value):
+            t = last_quarter_slope(c.get(keys.train_step), c.get(keys.train_value), end=s.end)
+            if t is not None:
+                train.setdefault(int(seed), []).append(t.slope)
+    if not test:
+        return None
+    per_seed = {k: float(np.mean(v)) for k, v in sorted(test.items())}
+    train_mean = float(np.mean([np.mean(v) for v in train.values()])) if train else None
+    return CellSettling(float(np.mean(list(per_seed.values()))), train_mean, min(starts), max(ends), per_seed,
+                        min_effect)
+
+
+def drift(a: CellSettling, b: CellSettling) -> float:
+    """How far the paired difference ``b - a`` moved over the last quarter (in the curve's unit):
+    the mean over the seeds both have of the slope difference times the window."""
+    seeds = sorted(set(a.per_seed) & set(b.per_seed))
+    if not seeds:
+        return math.nan
+    window = (max(a.end, b.end) - min(a.start, b.start)) / SETTLE_STEPS
+    return float(np.mean([b.per_seed[s] - a.per_seed[s] for s in seeds])) * window
+
+
+def difference_settled(a: CellSettling, b: CellSettling, diff: float) -> bool:
+    """Both cells settled and the difference moved by less than `DRIFT_SHARE` of its size
+    (``|diff|``, at least the minimum effect: a difference below it has no size to keep)."""
+    moved = drift(a, b)
+    size = max(abs(diff), a.threshold)  # the threshold is the minimum effect per 1,000 steps
+    return a.settled and b.settled and math.isfinite(moved) and abs(moved) < DRIFT_SHARE * size
+
+
+__all__ = ["LAST_SHARE", "SETTLE_STEPS", "DRIFT_SHARE", "Slope", "CellSettling", "last_quarter_slope",
+           "cell_settling", "drift", "difference_settled"]

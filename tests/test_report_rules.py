@@ -1,0 +1,286 @@
+"""The rules that decide how a report labels a difference (issue 29, items 4-6): the minimum
+effect ("no practical difference"), "best" only with a significant and practical lead, no
+interval printed from seeds that varied nothing, loaded times out of the Pareto fronts,
+settled curves, the confounds a setting brings along, and the protocol in the header.
+
+Each test builds a results folder by hand (the real grid of a small train experiment, with
+made-up metrics and curves), as tests/test_reports.py does, so they run in seconds.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from splatbench.errors import InputError
+from splatbench.experiments import RunRecord, expand, parse_experiment
+from splatbench.experiments.store import write_record, write_table
+from splatbench.metrics.stats import Interval
+from splatbench.reports import build_report, write_report
+from splatbench.reports.findings import fmt_interval, judge
+from splatbench.reports.notes import settling_finding
+from splatbench.reports.settling import cell_settling, last_quarter_slope
+from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
+from splatbench.metrics.spec import MetricSpec
+
+PSNR = MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher")
+
+
+def spec_of(extra: dict | None = None):
+    return parse_experiment({"name": "rules", "kind": "train", "scenes": ["glossy"], "seeds": [0, 1, 2],
+                             "base": {"iterations": 2000, "data": {"resolution": 32, "views": 8, "spp": 2}},
+                             "axes": {"sh_degree": [0, 3]}, **(extra or {})}, source="rules.toml")
+
+
+def metrics_of(psnr: float, seconds: float = 10.0, loaded: int = 0, **more) -> dict:
+    return {"test_psnr": psnr, "test_ssim": 0.8, "num_gaussians": 1000, "train_seconds": seconds,
+            "render_ms_per_view": 5.0, "sh_degree": 0, "peak_rss_mb": 500.0, "iterations": 2000, "test_views": 1,
+            "dataset_hash": "0" * 16, "test_lpips": 0.2, "lpips_net": "alex", "lpips_scale_inputs": 1,
+            "cpu_seconds": 15.0, "load_before": 0.5, "load_after": 1.5, "load_other": 0.2, "cores": 2,
+            "time_loaded": loaded, **more}
+
+
+def flat_curves(final: float, rise: float = 0.0, train_rise: float = 0.0) -> dict:
+    """Test evaluations at 500..2000 ending at ``final``, rising by ``rise`` over the last 500
+    steps (the last quarter); the training-view PSNR rising by ``train_rise`` over it."""
+    steps = list(range(0, 2000, 100)) + [1999]
+    return {"eval_step": [500, 1000, 1500, 2000], "eval_psnr": [final - 2.0, final - 1.0, final - rise, final],
+            "step": steps, "psnr": [final + 1.0 + train_rise * max(0.0, (s - 1500) / 500.0) for s in steps],
+            "loss": [0.1] * len(steps), "num_gaussians": [1000] * len(steps)}
+
+
+def results(tmp_path, spec, make) -> tuple:
+    """Write a results folder; ``make(run) -> (metrics, curves)``; the report built from it."""
+    records = []
+    for run in expand(spec):
+        metrics, curves = make(run)
+        rec = RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
+                        status="done", config=dict(run.config), labels=dict(run.labels), metrics=metrics,
+                        curves=curves, error=None, seconds=1.0, started="2026-01-01T00:00:00+00:00",
+                        finished="2026-01-01T00:00:01+00:00", worker="h:1")
+        write_record(tmp_path / "res", rec)
+        records.append(rec)
+    write_table(tmp_path / "res" / spec.name, records)
+    report = build_report(spec, tmp_path / "res")
+    text = write_report(report, tmp_path / "out").read_text()
+    return report, text
+
+
+# --------------------------------------------------------------------------- minimum effect
+def test_a_small_significant_difference_is_no_practical_difference():
+    # +0.05 dB known to +-0.01: significant, below the 0.1 dB minimum effect
+    tight = Interval(0.05, 0.04, 0.06, 3, "paired t")
+    assert judge(tight, "diff", 0.0, PSNR, 0.1) == (True, False)
+    text = fmt_interval(tight, "diff", PSNR, 0.0, 0.1)
+    assert text.endswith("no practical difference (below the 0.1 dB minimum effect)")
+    # the same interval with a 0.01 dB minimum effect, and a 0.5 dB difference, are both practical
+    assert judge(tight, "diff", 0.0, PSNR, 0.01) == (True, True)
+    assert judge(Interval(0.5, 0.4, 0.6, 3, "paired t"), "diff", 0.0, PSNR, 0.1) == (True, True)
+    # judged as printed: +0.0951 is written +0.10, never "below the 0.1 dB minimum effect"
+    assert judge(Interval(0.0951, 0.06, 0.13, 3, "paired t"), "diff", 0.0, PSNR, 0.1) == (True, True)
+    # ratios: ×1.03 is below 5 %, ×0.90 (1 / 0.90 = ×1.11) is not
+    gaussians = MetricSpec("num_gaussians", "Gaussians", ".0f")
+    assert judge(Interval(1.03, 1.02, 1.04, 3, "t"), "ratio", 1.0, gaussians, 0.05) == (True, False)
+    assert judge(Interval(0.90, 0.89, 0.91, 3, "t"), "ratio", 1.0, gaussians, 0.05) == (True, True)
+
+
+def _lead(delta: float):
+    """SH 3 ahead of SH 0 by ``delta`` dB on every seed, plus a little seeded noise."""
+    def make(run):
+        rng = np.random.default_rng(run.seed)
+        psnr = 30.0 + rng.normal(0, 0.5) + (delta + rng.normal(0, 0.004) if run.labels["sh_degree"] == 3 else 0.0)
+        return metrics_of(psnr), flat_curves(psnr)
+    return make
+
+
+def test_best_needs_a_significant_and_practical_lead(tmp_path):
+    report, text = results(tmp_path, spec_of(), _lead(0.05))
+    claims = report.findings["sh_degree"].claims
+    assert not [c for c in claims if c.kind == "best"]
+    lead = next(c for c in claims if c.kind == "no best")
+    assert lead.significant and not lead.practical and lead.label == "3"
+    assert "glossy: no single best (`3`" in text and "no practical difference" in text
+    vs = next(c for c in claims if c.kind == "vs" and c.metric == "test_psnr")
+    assert vs.significant and not vs.practical and "no practical difference (below the 0.1 dB" in vs.text
+
+    # the experiment file's own minimum effect: 0.01 dB makes the same lead a best
+    report, text = results(tmp_path / "b", spec_of({"report": {"min_effect": {"test_psnr": 0.01}}}), _lead(0.05))
+    best = [c for c in report.findings["sh_degree"].claims if c.kind == "best"]
+    assert [(c.scene, c.label, c.reference) for c in best] == [("glossy", "3", "0")]
+    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
+    assert "of at least 0.01 dB" in text and vs.practical and "no practical difference" not in vs.text
+
+    # a 0.5 dB lead is named best under the default minimum effect
+    report, _ = results(tmp_path / "c", spec_of(), _lead(0.5))
+    assert [c.label for c in report.findings["sh_degree"].claims if c.kind == "best"] == ["3"]
+
+
+def test_a_minimum_effect_for_a_metric_the_findings_do_not_compare_is_refused(tmp_path):
+    with pytest.raises(InputError, match=r"report\.min_effect\.test_ssim: not a metric"):
+        results(tmp_path, spec_of({"report": {"min_effect": {"test_ssim": 0.01}}}), _lead(0.5))
+    with pytest.raises(InputError, match=r"report\.min_effect\.test_psnr: expected a number >= 0"):
+        spec_of({"report": {"min_effect": {"test_psnr": -1}}})
+    with pytest.raises(InputError, match=r"report\.minimum"):
+        spec_of({"report": {"minimum": 1}})
+
+
+# --------------------------------------------------------------------------- no spread
+def test_seeds_that_vary_nothing_print_no_interval(tmp_path):
+    """Every seed gives the same PSNR (what init = surface did to biker): the table says
+    "(no spread)", a 0.02 dB difference is not called significant, and no ±0.00 is printed."""
+    def make(run):
+        psnr = 41.2613 + (0.02 if run.labels["sh_degree"] == 3 else 0.0)
+        return metrics_of(psnr), flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of(), make)
+    assert "± 0.00 " not in text and "±0.00" not in text and "± 0.00|" not in text.replace(" |", "|")
+    assert "41.26 (no spread)" in text and "41.28 (no spread)" in text
+    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
+    assert vs.text == "+0.02 dB (seeds did not vary the result: no interval)" and not vs.significant
+    assert not [c for c in report.findings["sh_degree"].claims if c.kind == "best"]
+
+
+# --------------------------------------------------------------------------- loaded times
+def test_a_loaded_runs_time_never_enters_the_pareto_front(tmp_path):
+    """SH 0 is fastest, but every one of its runs was timed under load: the time front is SH 3
+    alone, and the report names what it left out; the Gaussians front keeps SH 0."""
+    def make(run):
+        zero = run.labels["sh_degree"] == 0
+        psnr = 30.0 + (0.0 if zero else 1.0) + 0.01 * run.seed
+        return metrics_of(psnr, seconds=5.0 if zero else 20.0, loaded=int(zero)), flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of(), make)
+    assert report.fronts["time_vs_error"] == {"glossy": ["sh_degree=3"]}
+    assert "Left out of this figure and its front: 3 run(s) timed while other processes loaded the machine " \
+           "(glossy `sh_degree=0`)" in text
+    assert report.fronts["gaussians_vs_error"]["glossy"][0] == "sh_degree=3"  # 1000 each: the better one
+    time_vs = [c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "train_seconds"]
+    assert time_vs == []  # no pair of trusted times: no time comparison at all
+
+
+# --------------------------------------------------------------------------- settling
+def test_last_quarter_slope_is_per_thousand_steps():
+    s = last_quarter_slope([500, 1000, 1500, 2000], [20.0, 21.0, 21.5, 21.7])
+    assert (s.start, s.end) == (1500, 2000) and s.slope == pytest.approx(0.4)  # 0.2 dB over 500 steps
+    # one point in the last quarter: the last two are used
+    s = last_quarter_slope([1000, 2000], [20.0, 20.3])
+    assert (s.start, s.end) == (1000, 2000) and s.slope == pytest.approx(0.3)
+    assert last_quarter_slope([2000], [20.0]) is None
+
+
+def _settle_table(rises: dict[str, float], train_rises: dict[str, float] | None = None) -> pd.DataFrame:
+    import json
+
+    rows = []
+    for cell, rise in rises.items():
+        for seed in range(3):
+            curves = flat_curves(30.0 + seed * 0.1, rise + 0.005 * seed, (train_rises or {}).get(cell, rise))
+            rows.append({"run_id": f"{cell}{seed}", "status": "done", "scene": "s", "seed": seed, "axis.x": cell,
+                         "curves": json.dumps(curves)})
+    return pd.DataFrame(rows)
+
+
+def test_a_rising_last_quarter_is_not_settled_and_a_flat_one_is():
+    # 0.10 dB over the last 500 steps is 0.2 dB / 1,000 steps: above the 0.1 threshold
+    f = settling_finding(_settle_table({"a": 0.01, "b": 0.10}))
+    by = {c.label: c for c in f.claims}
+    assert by["x=a"].settled and not by["x=b"].settled
+    assert "**Not settled**: 1 of 2 cells" in f.markdown() and "s `x=b` (+0.21)" in f.markdown()
+    f = settling_finding(_settle_table({"a": 0.01, "b": -0.01}))
+    assert all(c.settled for c in f.claims) and "Settled: every cell" in f.markdown()
+    # a falling curve is not settled either
+    assert not settling_finding(_settle_table({"a": -0.2})).claims[0].settled
+    # the experiment file's minimum effect moves the threshold: 0.5 dB / 1,000 steps settles b
+    assert all(c.settled for c in settling_finding(_settle_table({"a": 0.01, "b": 0.10}), {"test_psnr": 0.5}).claims)
+
+
+def test_a_flat_test_curve_beside_a_rising_train_curve_is_overfitting():
+    f = settling_finding(_settle_table({"default": 0.0, "mcmc": 0.0}, {"default": 1.0, "mcmc": 0.0}))
+    assert "**Overfitting**" in f.markdown() and "`x=default`" in f.markdown().split("**Overfitting**")[1]
+    assert "`x=mcmc`" not in f.markdown().split("**Overfitting**")[1]
+
+
+def test_an_unsettled_difference_is_marked_in_the_axis_finding(tmp_path):
+    def make(run):
+        three = run.labels["sh_degree"] == 3
+        psnr = 30.0 + (1.0 + 0.02 * run.seed ** 2 if three else 0.0) + 0.01 * run.seed
+        return metrics_of(psnr), flat_curves(psnr, rise=0.5 if three else 0.0)
+
+    report, text = results(tmp_path, spec_of(), make)
+    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
+    assert vs.significant and vs.practical and vs.settled is False
+    assert "**Not settled** (glossy: `3` +1.00 dB / 1,000 steps over the last quarter)" in text
+    best = next(c for c in report.findings["sh_degree"].claims if c.kind == "best")
+    assert best.settled is False and "**not settled**" in best.text
+
+    report, _ = results(tmp_path / "b", spec_of(), lambda run: (metrics_of(30.0 + run.seed * 0.01 + (
+        1.0 + 0.02 * run.seed ** 2 if run.labels["sh_degree"] == 3 else 0.0)), flat_curves(30.0)))
+    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
+    assert vs.settled is True
+
+
+def test_a_cell_drifting_apart_late_is_not_settled():
+    """Both cells flat by the threshold, but the difference moved by more than a quarter of
+    its size over the last quarter."""
+    from splatbench.reports.settling import difference_settled
+
+    keys = TRAIN_REPORT.settling
+    a = cell_settling(_settle_table({"a": 0.0}), keys, 0.1)
+    b = cell_settling(_settle_table({"b": 0.03}), keys, 0.1)
+    assert a.test == pytest.approx(0.01) and b.test == pytest.approx(0.07) and a.settled and b.settled
+    # the difference moved (0.07 - 0.01) dB / 1,000 steps x 500 steps = 0.03 dB over the last quarter
+    assert not difference_settled(a, b, 0.1)    # more than a quarter of 0.1 dB
+    assert difference_settled(a, b, 1.0)        # less than a quarter of 1 dB
+
+
+# --------------------------------------------------------------------------- confounds
+def test_a_finding_names_what_else_a_setting_changed(tmp_path):
+    def make(run):
+        three = run.labels["sh_degree"] == 3
+        psnr = 30.0 + (1.0 if three else 0.0) + 0.01 * run.seed
+        counts = {"refinements": 10, "opacity_resets": 7 if three else 4, "cloned": 500, "split": 300,
+                  "pruned": 100, "pruned_size": 0, "relocated": 0, "added": 0}
+        return metrics_of(psnr, **counts), flat_curves(psnr)
+
+    _, text = results(tmp_path, spec_of(), make)
+    assert "Also changed: glossy: opacity resets 7 instead of 4 (mean over seeds)" in text
+    assert "was not recorded by these runs" not in text
+
+    # a table from before the counts were recorded still reports, and says so
+    _, text = results(tmp_path / "old", spec_of(), lambda run: (metrics_of(30.0 + run.seed * 0.1), flat_curves(30.0)))
+    assert "Also changed" not in text and "was not recorded by these runs" in text
+
+    # ... and names what the configs schedule: graphdeco's resets every 3,000 of 30,000 steps, scaled to
+    # 2,000 (every 200), fire only inside the refine window: 2 below 500 (25 %), 7 below 1,500 (75 %)
+    stops = parse_experiment({"name": "stops", "kind": "train", "scenes": ["glossy"], "seeds": [0, 1, 2],
+                              "base": {"iterations": 2000, "data": {"resolution": 32, "views": 8, "spp": 2}},
+                              "axes": {"strategy_options.refine_stop": ["25%", "75%"]}}, source="stops.toml")
+    _, text = results(tmp_path / "stops", stops, lambda run: (metrics_of(30.0 + run.seed * 0.1 + (
+        0.5 if run.labels["strategy_options.refine_stop"] == "75%" else 0.0)), flat_curves(30.0)))
+    assert "Also changed: glossy: opacity resets 7 instead of 2 (planned), refinements 14 instead of 4 (planned)" in text
+    assert "Opacity resets fire only inside the refine window" in text
+
+
+# --------------------------------------------------------------------------- protocol
+def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
+    _, text = results(tmp_path, spec_of(), _lead(0.5))
+    header = text.split("## sh_degree")[0]
+    assert "- **Protocol**: quick (graphdeco's 30,000-step schedule scaled" in header
+    assert "- **Schedule**: 2,000 iterations, graphdeco's 30,000-step schedule scaled to the run" in header
+    assert "learning rates not scaled: positions 0.00016 → 1.6e-06 × scene extent" in header
+    assert "- **Evaluation**: the test views at steps 500, 1,000, 1,500, 2,000" in header
+    assert "rendered scenes at 32 px wide by Mitsuba, 2 spp" in header
+    assert "LPIPS v0.1, AlexNet backbone, inputs scaled to [-1, 1]" in header
+    assert "not the initial points of init = surface (the same points for every seed)" in header
+
+    # a config that names its protocol (a preset added to TrainConfig) is shown as named
+    from splatbench.reports.protocol import protocol_lines
+
+    table = pd.read_parquet(tmp_path / "out" / "results.parquet")
+    table["config.protocol"] = "graphdeco-30k"
+    assert "- **Protocol**: graphdeco-30k." in protocol_lines(table)
+    table["config.init"] = "random"
+    assert "the random initial points" in "\n".join(protocol_lines(table))
