@@ -24,6 +24,10 @@ from splatbench.strategies.base import (Optimizers, Params, StepContext, Topolog
                                        last_multiple, no_refinement_note)
 
 
+#: `DefaultStrategy.outcome_note` warns when one refinement's size prune removes this fraction of the model.
+SIZE_PRUNE_WARNING = 0.5
+
+
 class RefineStats(NamedTuple):
     """What one refinement did (counted on the set before it)."""
 
@@ -32,6 +36,7 @@ class RefineStats(NamedTuple):
     split: int    # Gaussians replaced by two children (large, high gradient)
     pruned: int   # Gaussians removed after growing (transparent or too large)
     num_gaussians: int  # N after the refinement
+    pruned_size: int = 0  # of ``pruned``, those removed as too large only (world or screen size), not transparent
 
 
 @dataclass
@@ -84,6 +89,7 @@ class DefaultState:
     stopped: bool = False      # densification stopped early
     last: RefineStats | None = None  # the latest refinement
     history: list[RefineStats] = field(default_factory=list)
+    scene_extent: float = 0.0  # the extent the refinements measured sizes against
 
 
 @dataclass(frozen=True)
@@ -181,6 +187,30 @@ class DefaultStrategy:
         """A warning when no refinement step falls in the refine window of this run."""
         return no_refinement_note(self.name, self.refine_every, self.refine_start, self.refine_stop, iterations)
 
+    def outcome_note(self, state: DefaultState) -> str | None:
+        """A warning when one refinement's size prune removed at least half of the model
+        (`SIZE_PRUNE_WARNING`); None otherwise.
+
+        The world-size rule (max scale > ``max_world_size`` x scene extent, from the first
+        opacity reset on) is graphdeco's and gsplat's, and the scene extent is 1.1 x the
+        spread of the camera centres. Where the scene lies far beyond the cameras (a
+        forward-facing capture: ``far``'s backdrop is 150 units away, the extent 1.38) or the
+        start is sparse (a few SfM points: 3-NN scales of a large fraction of the scene), every
+        Gaussian counts as too big, and a short run (whose first reset comes after one or two
+        refinements under ``schedule = "scaled"``) loses the model at once."""
+        worst = max((h for h in state.history if h.pruned_size), default=None,
+                    key=lambda h: h.pruned_size / max(1, h.num_gaussians + h.pruned))
+        if worst is None:
+            return None
+        before = worst.num_gaussians + worst.pruned
+        if worst.pruned_size < SIZE_PRUNE_WARNING * before:
+            return None
+        return (f"warning: strategy '{self.name}': the size prune removed {worst.pruned_size:,} of {before:,} Gaussians "
+                f"at step {worst.step + 1} (max scale > max_world_size {self.max_world_size:g} x the scene extent "
+                f"{state.scene_extent:.3g}, from the first opacity reset on, as graphdeco and gsplat): the extent "
+                f"comes from the camera spread, so a scene far beyond the cameras or a sparse start counts as too "
+                f"big; strategy_options.max_world_size=0 turns the rule off")
+
     def initialize_state(self, params: Params) -> DefaultState:
         n, device = params["means"].shape[0], params["means"].device
         gen = torch.Generator(device=device)
@@ -271,18 +301,21 @@ class DefaultStrategy:
         n_split = ops.split(params, optimizers, split_mask, n=2, generator=state.generator, buffers=buffers,
                             revised_opacity=self.revised_opacity)
         big = buffers["big_screen"]
-        prune = torch.sigmoid(params["opacity_logits"].detach()).to(device) < self.prune_opacity
+        transparent = torch.sigmoid(params["opacity_logits"].detach()).to(device) < self.prune_opacity
+        prune = transparent.clone()
         if size_prune:
             prune |= big
             if self.max_world_size > 0:
                 prune |= torch.exp(params["log_scales"].detach()).amax(dim=-1).to(device) \
                     > self.max_world_size * scene_extent
+        n_size = int((prune & ~transparent).sum())
         n_prune = ops.remove(params, optimizers, prune)
         m = params["means"].shape[0]
         state.grad_accum = torch.zeros(m, device=device)
         state.count = torch.zeros(m, device=device)
         state.max_radii = torch.zeros(m, device=device)
-        stats = RefineStats(step, n_clone, n_split, n_prune, m)
+        stats = RefineStats(step, n_clone, n_split, n_prune, m, n_size)
+        state.scene_extent = float(scene_extent)
         state.last = stats
         state.history.append(stats)
         return stats
