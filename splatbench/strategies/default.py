@@ -25,7 +25,7 @@ from splatbench.strategies.base import (Optimizers, Params, StepContext, Topolog
 
 
 #: `DefaultStrategy.outcome_note` warns when one refinement's size prune removes this fraction of the model.
-SIZE_PRUNE_WARNING = 0.5
+SIZE_PRUNE_WARNING = 0.25
 
 
 class RefineStats(NamedTuple):
@@ -188,7 +188,7 @@ class DefaultStrategy:
         return no_refinement_note(self.name, self.refine_every, self.refine_start, self.refine_stop, iterations)
 
     def outcome_note(self, state: DefaultState) -> str | None:
-        """A warning when one refinement's size prune removed at least half of the model
+        """A warning when one refinement's size prune removed at least a quarter of the model
         (`SIZE_PRUNE_WARNING`); None otherwise.
 
         The world-size rule (max scale > ``max_world_size`` x scene extent, from the first
