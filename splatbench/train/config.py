@@ -59,7 +59,8 @@ class TrainConfig:
     data: dict[str, Any] = field(default_factory=dict)  # how the dataset is loaded (`--set data.downscale=8`):
                                       # downscale = N divides the image size (images_N/ when present;
                                       # splatbench.data.load_dataset); DATA_KEYS
-    seed: int = 0                     # seeds torch, numpy, the view order and random backgrounds
+    seed: int = 0                     # seeds torch, numpy, the view order, random backgrounds and the start
+                                      # (init="random"'s draws, init_jitter)
     # --- initialisation
     init: str = "auto"                # "auto" (the dataset's points when it has them, else "sfm"; never random
                                       # unless asked), "surface" (the dataset's own points: true-surface samples
