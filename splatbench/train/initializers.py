@@ -177,13 +177,14 @@ def sfm(dataset, settings: InitSettings) -> Initialization:
 
     root = str(dataset.root)
     say = settings.say or (lambda line: None)
+    has_points = dataset.points is not None and len(dataset.points) >= 2
+    way_out = "use init=surface or init=random" if has_points else "use init=random"
     try:
         run, cached = cached_sfm(dataset, seed=settings.sfm_seed, poses=settings.sfm_poses, say=say)
     except InputError as exc:
-        raise InputError(f"init: 'sfm' failed on {root!r}: {exc} (use init=surface or init=random)") from None
+        raise InputError(f"init: 'sfm' failed on {root!r}: {exc} ({way_out})") from None
     if len(run.xyz) < 2:
-        raise InputError(f"init: 'sfm' on {root!r} triangulated {len(run.xyz)} point(s), need 2 (use init=surface "
-                         f"or init=random)")
+        raise InputError(f"init: 'sfm' on {root!r} triangulated {len(run.xyz)} point(s), need 2 ({way_out})")
     gaussians, jitter = _from_given(run.xyz, run.rgb, settings)
     summary = {"poses": run.poses, "registered": run.registered, "total": run.total,
                "center_rmse_rel": run.center_rmse_rel, "sfm_seconds": round(run.seconds, 3), "cached": cached,
