@@ -1,13 +1,23 @@
-"""Structure from motion with pycolmap on a dataset's training views, aligned to its true frame.
+"""Structure from motion with pycolmap on a dataset's training views, in its true frame.
 
-The pipeline is the one 3DGS users run (COLMAP): SIFT features, exhaustive matching,
-incremental mapping. It sees the *training* images only, on the CPU. Several models
-can come back (views that do not connect); the largest (most registered images) is
-kept. Its frame is arbitrary, so a similarity transform (`umeyama`, least squares on
-the camera centres of the registered views) maps it onto the dataset's ground-truth
-frame; the residual is the camera-centre RMSE reported beside the number of
-registered views. The aligned model is written as COLMAP binaries to
-``<dataset>/sfm/0/{cameras,images,points3D}.bin`` (with ``<dataset>/sfm/database.db``).
+The pipeline is the one 3DGS users run (COLMAP): SIFT features and exhaustive matching
+on the *training* images only, as the dataset serves them (undistorted and downscaled as
+loaded, written to a scratch folder, so they match the dataset's PINHOLE cameras), on the
+CPU. Then, by ``poses``:
+
+* ``"known"`` -- the dataset's poses and intrinsics are given to COLMAP's point
+  triangulator (``pycolmap.triangulate_points``) and held fixed: only points are
+  estimated, as practitioners do for a capture with known poses (instant-ngp's
+  ``transforms.json``, a rendered scene). Fails only when too few features match.
+* ``"estimated"`` -- incremental mapping (poses estimated); several models can come back
+  (views that do not connect) and the largest (most registered images) is kept. Its frame
+  is arbitrary, so a similarity transform (`umeyama`, least squares on the camera centres
+  of the registered views) maps it onto the dataset's frame; the residual is the
+  camera-centre RMSE reported beside the number of registered views.
+
+The model is written as COLMAP binaries to ``<out>/0/{cameras,images,points3D}.bin``
+(image names: the dataset's), with ``<out>/database.db``; `cached_sfm` keeps it in the
+cache, never in the dataset folder.
 
 Determinism: ``single_thread=True`` runs extraction, matching and mapping on one
 thread with ``pycolmap.set_random_seed(seed)`` and the mapper's ``random_seed``, so
@@ -98,42 +108,74 @@ def umeyama(src: np.ndarray, dst: np.ndarray) -> Similarity:
     return Similarity(scale, rot, mu_b - scale * rot @ mu_a)
 
 
+#: `axes_meeting_point`: the smallest eigenvalue of mean(I - a a^T) over the optical axes a
+#: below which the axes count as parallel (about 13 degrees of spread: sin^2 ~ 0.05).
+PARALLEL_AXES = 0.05
+
+
+def axes_meeting_point(cameras: Sequence[Camera]) -> np.ndarray | None:
+    """The point nearest every optical axis (least squares), [3] float64, or None.
+
+    With ``a_i`` the viewing directions and ``c_i`` the centres, the point minimises
+    ``sum_i |(I - a_i a_i^T)(x - c_i)|^2``. None when the axes are nearly parallel (the
+    smallest eigenvalue of ``mean(I - a a^T)`` is below `PARALLEL_AXES`: a forward-facing
+    rig, where the point is ill-defined) or when it lies behind most cameras (an
+    outward-looking rig).
+    """
+    if len(cameras) < 2:
+        raise InputError(f"cameras: a meeting point of optical axes needs at least 2 cameras, got {len(cameras)}")
+    centres = np.stack([c.center for c in cameras]).astype(np.float64)
+    axes = np.stack([c.rotation[2] for c in cameras]).astype(np.float64)  # camera z (viewing direction), world
+    proj = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]
+    lhs = proj.sum(0)
+    if np.linalg.eigvalsh(lhs / len(cameras))[0] <= PARALLEL_AXES:
+        return None
+    meet = np.linalg.solve(lhs, np.einsum("nij,nj->i", proj, centres))
+    in_front = np.einsum("ni,ni->n", meet[None] - centres, axes) > 0
+    return meet if in_front.mean() > 0.5 else None
+
+
 def rig_radius(cameras: Sequence[Camera]) -> float:
     """The radius of a camera rig: median distance from the centres to where the optical axes meet.
 
-    The meeting point is the least-squares point nearest to every optical axis. When the
-    axes are nearly parallel (a forward-facing rig: the point is ill-defined), the RMS
-    distance of the centres from their centroid is returned instead.
+    The meeting point is `axes_meeting_point`. When it is undefined (a forward-facing or
+    outward-looking rig), the RMS distance of the centres from their centroid is returned instead.
     """
     if len(cameras) < 2:
         raise InputError(f"cameras: a rig radius needs at least 2 cameras, got {len(cameras)}")
     centres = np.stack([c.center for c in cameras])
-    axes = np.stack([c.rotation[2] for c in cameras])  # camera z (viewing direction) in world axes
-    proj = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]
-    lhs = proj.sum(0)
-    if np.linalg.eigvalsh(lhs / len(cameras))[0] > 0.05:
-        meet = np.linalg.solve(lhs, np.einsum("nij,nj->i", proj, centres))
+    meet = axes_meeting_point(cameras)
+    if meet is not None:
         return float(np.median(np.linalg.norm(centres - meet, axis=1)))
     return float(np.sqrt(np.mean(np.sum((centres - centres.mean(0)) ** 2, axis=1))))
 
 
 # --------------------------------------------------------------------------- run
+#: How SfM gets its camera poses (`cached_sfm`'s ``poses``): "known" = the dataset's,
+#: fixed, points triangulated (`triangulate`); "estimated" = incremental mapping, then
+#: aligned to the dataset's frame (`run_sfm`).
+POSE_MODES = ("known", "estimated")
+
+
 @dataclass(frozen=True)
 class SfmRun:
-    """The largest SfM model of a dataset's training views, aligned to the true frame.
+    """The SfM points of a dataset's training views, in the dataset's (true) frame.
 
     Fields::
 
-        registered     training views registered in the kept model
+        registered     training views in the kept model (poses "known": views that see at
+                       least one triangulated point)
         total          training views given to SfM
-        center_rmse    RMSE of the registered camera centres after alignment (world units)
+        center_rmse    RMSE of the registered camera centres after alignment (world units;
+                       poses "known": what triangulation left of the given centres, ~0)
         rig_radius     `rig_radius` of the true training cameras (world units)
         xyz, rgb       [M, 3] float64 points (true frame), [M, 3] uint8 colours
-        alignment      `Similarity` from the model's frame to the true frame
-        model_path     folder of the aligned model (cameras.bin, images.bin, points3D.bin)
-        models         number of models the mapper returned
+        alignment      `Similarity` from the model's frame to the true frame (identity for known poses)
+        model_path     folder of the model (cameras.bin, images.bin, points3D.bin)
+        models         number of models the mapper returned (1 for known poses)
         registered_names  names (relative to the dataset root) of the registered views
-        seconds        wall time of extraction + matching + mapping + alignment
+        seconds        wall time of extraction + matching + mapping/triangulation + alignment
+        poses          "estimated" (incremental mapping + alignment) or "known" (triangulation)
     """
 
     registered: int
@@ -147,6 +189,7 @@ class SfmRun:
     models: int
     registered_names: list[str]
     seconds: float
+    poses: str = "estimated"
 
     @property
     def center_rmse_rel(self) -> float:
@@ -154,16 +197,77 @@ class SfmRun:
         return self.center_rmse / self.rig_radius
 
 
+def _load(dataset: Any) -> Any:
+    from splatbench.data import Dataset, load_dataset
+
+    return dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
+
+
+def _write_views(train: Any, folder: Path) -> list[str]:
+    """The training images as the dataset serves them (undistorted, downscaled, 8-bit) as
+    PNGs ``<k>.png`` in ``folder``: what SfM sees, matching the dataset's PINHOLE cameras."""
+    from PIL import Image
+
+    folder.mkdir(parents=True, exist_ok=True)
+    names = []
+    for k, image in enumerate(train.images):
+        name = f"{k:05d}.png"
+        Image.fromarray(np.clip(np.rint(image * 255.0), 0, 255).astype(np.uint8)).save(folder / name)
+        names.append(name)
+    return names
+
+
+def _extract_and_match(pycolmap: Any, train: Any, tmp: Path, *, threads: int,
+                       known_intrinsics: bool) -> tuple[Path, Path, list[str]]:
+    """SIFT on the served training views and exhaustive matching into ``tmp/database.db``;
+    with ``known_intrinsics`` every view's database camera is the dataset's PINHOLE one
+    (one COLMAP camera per view), else one shared PINHOLE camera for COLMAP to estimate."""
+    images = tmp / "images"
+    names = _write_views(train, images)
+    database = tmp / "database.db"
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = "PINHOLE"
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = threads
+    extraction.use_gpu = False
+    mode = pycolmap.CameraMode.PER_IMAGE if known_intrinsics else pycolmap.CameraMode.SINGLE
+    pycolmap.extract_features(database, images, image_names=names, camera_mode=mode, reader_options=reader,
+                              extraction_options=extraction, device=pycolmap.Device.cpu)
+    if known_intrinsics:
+        by_name = dict(zip(names, train.cameras))
+        db = pycolmap.Database.open(database)
+        try:
+            for im in db.read_all_images():
+                cam = by_name[im.name]
+                db.update_camera(pycolmap.Camera(model="PINHOLE", width=cam.width, height=cam.height,
+                                                 params=[cam.fx, cam.fy, cam.cx, cam.cy], camera_id=im.camera_id))
+        finally:
+            db.close()
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = threads
+    matching.use_gpu = False
+    pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
+    return database, images, names
+
+
 def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_intrinsics: bool = True,
-            out: str | Path | None = None, verbose: bool = False) -> SfmRun:
-    """SIFT + exhaustive matching + incremental mapping on the training views of ``dataset``.
+            poses: str = "estimated", out: str | Path | None = None, verbose: bool = False) -> SfmRun:
+    """SfM on the training views of ``dataset``: SIFT, exhaustive matching, then either
+    incremental mapping aligned to the true frame (``poses="estimated"``) or triangulation
+    with the dataset's poses fixed (``poses="known"``, `pycolmap.triangulate_points`).
+
+    SfM sees the training images as the dataset serves them (`_write_views`: undistorted
+    and downscaled as loaded, so they match the dataset's PINHOLE cameras), never the
+    files in the capture folder.
 
     Args:
         dataset: a `splatbench.data.Dataset` or a dataset folder (any layout
             `load_dataset` reads); its training cameras are the ground truth.
         seed: random seed of pycolmap (RANSAC, mapper).
         single_thread: one thread everywhere (deterministic); False uses all cores.
-        known_intrinsics: give COLMAP the true PINHOLE intrinsics, fixed (see module doc).
+        known_intrinsics: give COLMAP the true PINHOLE intrinsics, fixed (see module doc);
+            always True with ``poses="known"``.
+        poses: "estimated" or "known" (`POSE_MODES`).
         out: output folder; default ``<dataset>/sfm``. Replaced atomically.
         verbose: keep COLMAP's INFO log on stderr (default: fatal messages only; a failure is an InputError).
 
@@ -171,24 +275,25 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
         `SfmRun` (the model is written to ``<out>/0``).
 
     Raises:
-        InputError: fewer than 3 training views, or no model with 3 registered views.
+        InputError: fewer than 3 training views; no model with 3 registered views
+            (estimated poses); no point triangulated (known poses).
     """
     from splatbench.interrupt import import_pycolmap
 
     pycolmap = import_pycolmap()
-
-    from splatbench.data import Dataset, load_dataset
-
-    ds = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
+    ds = _load(dataset)
     if not (isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0):
         raise InputError(f"seed: expected an int >= 0, got {seed!r}")
+    if poses not in POSE_MODES:
+        raise InputError(f"poses: expected one of {', '.join(POSE_MODES)}, got {poses!r}")
+    if poses == "known" and not known_intrinsics:
+        raise InputError("known_intrinsics: triangulating with known poses uses the known intrinsics too")
     train = ds.train
     if len(train) < 3:
         raise InputError(f"dataset: SfM needs at least 3 training views, got {len(train)}")
     root = Path(ds.root)
     out_dir = Path(out) if out is not None else root / SFM_DIR
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    truth = dict(zip(train.names, train.cameras))
     threads = 1 if single_thread else -1
     t0 = time.perf_counter()
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
@@ -196,56 +301,37 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
     if not verbose:
         pycolmap.logging.minloglevel = 3  # fatal only: a failure is our one-line InputError
     try:
-        database = tmp / "database.db"
         pycolmap.set_random_seed(seed)
-        reader = pycolmap.ImageReaderOptions()
-        reader.camera_model = "PINHOLE"
-        if known_intrinsics:
-            cam0 = train.cameras[0]
-            reader.camera_params = ",".join(repr(float(v)) for v in (cam0.fx, cam0.fy, cam0.cx, cam0.cy))
-        extraction = pycolmap.FeatureExtractionOptions()
-        extraction.num_threads = threads
-        extraction.use_gpu = False
-        pycolmap.extract_features(database, root, image_names=list(train.names),
-                                  camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader,
-                                  extraction_options=extraction, device=pycolmap.Device.cpu)
-        matching = pycolmap.FeatureMatchingOptions()
-        matching.num_threads = threads
-        matching.use_gpu = False
-        pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
-        options = pycolmap.IncrementalPipelineOptions()
-        options.num_threads = threads
-        options.random_seed = seed
-        options.mapper.num_threads = threads
-        options.mapper.random_seed = seed
-        options.triangulation.random_seed = seed
-        options.ba_refine_focal_length = not known_intrinsics
-        options.ba_refine_principal_point = False
-        options.ba_refine_extra_params = False
-        options.mapper.abs_pose_refine_focal_length = not known_intrinsics
-        options.mapper.abs_pose_refine_extra_params = False
-        models = pycolmap.incremental_mapping(database, root, tmp / "models", options=options)
-        if not models:
-            raise InputError(f"{root}: SfM registered no model (too few matches between the training views)")
-        rec = max(models.values(), key=lambda r: (r.num_reg_images(), r.num_points3D()))
-        registered = sorted((im for im in rec.images.values() if im.has_pose), key=lambda im: im.name)
-        names = [im.name for im in registered]
-        if len(registered) < 3:
+        database, images, names = _extract_and_match(pycolmap, train, tmp, threads=threads,
+                                                     known_intrinsics=known_intrinsics)
+        to_dataset = dict(zip(names, train.names))
+        if poses == "known":
+            rec, models = _triangulate(pycolmap, train, database, images, names, tmp, seed, threads), 1
+        else:
+            rec, models = _map(pycolmap, database, images, tmp, seed, threads, known_intrinsics, root)
+        registered = sorted((im for im in rec.images.values() if im.has_pose
+                             and (poses == "estimated" or im.num_points3D > 0)), key=lambda im: im.name)
+        if poses == "estimated" and len(registered) < 3:
             raise InputError(f"{root}: the largest SfM model has {len(registered)} registered views (need 3)")
-        unknown = [n for n in names if n not in truth]
-        if unknown:
-            raise InputError(f"{root}: SfM registered {unknown[0]!r}, which is not a training view")
+        if poses == "known" and rec.num_points3D() == 0:
+            raise InputError(f"{root}: SfM with the known poses triangulated no point (too few matches between "
+                             f"the training views)")
+        truth = dict(zip(names, train.cameras))
         est = np.stack([np.asarray(im.projection_center(), np.float64) for im in registered])
-        gt = np.stack([truth[n].center for n in names])
-        sim = umeyama(est, gt)
-        rec.transform(sim.to_pycolmap())
+        gt = np.stack([truth[im.name].center for im in registered])
+        sim = umeyama(est, gt) if poses == "estimated" else Similarity(1.0, np.eye(3), np.zeros(3))
+        if poses == "estimated":
+            rec.transform(sim.to_pycolmap())
         aligned = np.stack([np.asarray(rec.image(im.image_id).projection_center(), np.float64)
                             for im in registered])
         rmse = float(np.sqrt(np.mean(np.sum((aligned - gt) ** 2, axis=1))))
+        for im in rec.images.values():  # the model names the dataset's views, not SfM's copies
+            im.name = to_dataset[im.name]
         model_dir = tmp / "0"
         model_dir.mkdir()
         rec.write_binary(str(model_dir))
-        shutil.rmtree(tmp / "models", ignore_errors=True)
+        for scratch in ("models", "triangulated", "images"):
+            shutil.rmtree(tmp / scratch, ignore_errors=True)
         points = [p for _, p in sorted(rec.points3D.items())]
         xyz = np.array([p.xyz for p in points], np.float64).reshape(-1, 3)
         rgb = np.array([p.color for p in points], np.uint8).reshape(-1, 3)
@@ -256,43 +342,94 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
     return SfmRun(len(registered), len(train), rmse, rig_radius(train.cameras), xyz, rgb, sim, out_dir / "0",
-                  len(models), names, seconds)
+                  models, [im.name for im in registered], seconds, poses)
+
+
+def _map(pycolmap: Any, database: Path, images: Path, tmp: Path, seed: int, threads: int, known_intrinsics: bool,
+         root: Path) -> tuple[Any, int]:
+    """Incremental mapping; the largest model (most registered views) and the number of models."""
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = threads
+    options.random_seed = seed
+    options.mapper.num_threads = threads
+    options.mapper.random_seed = seed
+    options.triangulation.random_seed = seed
+    options.ba_refine_focal_length = not known_intrinsics
+    options.ba_refine_principal_point = False
+    options.ba_refine_extra_params = False
+    options.mapper.abs_pose_refine_focal_length = not known_intrinsics
+    options.mapper.abs_pose_refine_extra_params = False
+    models = pycolmap.incremental_mapping(database, images, tmp / "models", options=options)
+    if not models:
+        raise InputError(f"{root}: SfM registered no model (too few matches between the training views)")
+    return max(models.values(), key=lambda r: (r.num_reg_images(), r.num_points3D())), len(models)
+
+
+def _triangulate(pycolmap: Any, train: Any, database: Path, images: Path, names: list[str], tmp: Path, seed: int,
+                 threads: int) -> Any:
+    """COLMAP's point_triangulator: a reconstruction with the dataset's cameras and poses
+    (the database's image and camera ids), its matches triangulated with the poses and
+    intrinsics held fixed (bundle adjustment moves the points only)."""
+    by_name = dict(zip(names, train.cameras))
+    rec = pycolmap.Reconstruction()
+    db = pycolmap.Database.open(database)
+    try:
+        db_images = sorted(db.read_all_images(), key=lambda im: im.image_id)
+        db_cameras = {c.camera_id: c for c in db.read_all_cameras()}
+    finally:
+        db.close()
+    for im in db_images:
+        cam = by_name[im.name]
+        rec.add_camera_with_trivial_rig(db_cameras[im.camera_id])
+        w2c = np.asarray(cam.world_to_camera, np.float64)
+        pose = pycolmap.Rigid3d(pycolmap.Rotation3d(w2c[:3, :3]), w2c[:3, 3].reshape(3, 1))
+        rec.add_image_with_trivial_frame(pycolmap.Image(name=im.name, camera_id=im.camera_id, image_id=im.image_id),
+                                         pose)
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = threads
+    options.random_seed = seed
+    options.triangulation.random_seed = seed
+    options.mapper.num_threads = threads
+    options.mapper.random_seed = seed
+    (tmp / "triangulated").mkdir()
+    out = pycolmap.triangulate_points(rec, database, images, tmp / "triangulated", options=options,
+                                      refine_intrinsics=False)
+    out.extract_colors_for_all_images(str(images))
+    return out
 
 
 
 
 # ------------------------------------------------------------------- content cache
 #: Bump when `run_sfm`'s output changes for the same inputs (invalidates cached models).
-SFM_CACHE_VERSION = 1
+#: 2: SfM sees the served (undistorted, downscaled) training images; poses "known" added.
+SFM_CACHE_VERSION = 2
 #: The cached run's points beside the model (its numbers are in the folder's manifest.json).
 SFM_POINTS = "points.npz"
 
 
-def sfm_inputs(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True) -> dict[str, Any]:
-    """What a cached SfM run depends on: every training image's bytes (sha256) and true
-    camera (the alignment target; the intrinsics COLMAP is given), the options, and the
-    versions of pycolmap and of this code. Test views are not inputs."""
+def sfm_inputs(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True, poses: str = "estimated"
+               ) -> dict[str, Any]:
+    """What a cached SfM run depends on: every training image as the dataset serves it
+    (sha256 of its 8-bit pixels, which SfM sees) and its true camera (the alignment target;
+    the intrinsics COLMAP is given; the known poses), the options, and the versions of
+    pycolmap and of this code. Test views are not inputs."""
     import hashlib
     import json
     from importlib import metadata
 
-    from splatbench.data import Dataset, load_dataset
-
-    ds = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
-    root = Path(ds.root)
+    ds = _load(dataset)
     views = {}
-    for name, cam in zip(ds.train.names, ds.train.cameras):
-        try:
-            digest = hashlib.sha256((root / name).read_bytes()).hexdigest()
-        except OSError as exc:
-            raise InputError(f"{root / name}: cannot read the training image for SfM ({exc.strerror})") from None
-        views[name] = {"sha256": digest, "camera": [cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy,
-                                                    *np.asarray(cam.world_to_camera, np.float64).ravel().tolist()]}
+    for name, cam, image in zip(ds.train.names, ds.train.cameras, ds.train.images):
+        pixels = np.clip(np.rint(image * 255.0), 0, 255).astype(np.uint8)
+        views[name] = {"sha256": hashlib.sha256(pixels.tobytes() + str(pixels.shape).encode()).hexdigest(),
+                       "camera": [cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy,
+                                  *np.asarray(cam.world_to_camera, np.float64).ravel().tolist()]}
     try:
         pycolmap_version = metadata.version("pycolmap")
     except metadata.PackageNotFoundError:
         pycolmap_version = "unknown"
-    inputs = {"format": SFM_CACHE_VERSION, "seed": seed, "known_intrinsics": known_intrinsics,
+    inputs = {"format": SFM_CACHE_VERSION, "seed": seed, "known_intrinsics": known_intrinsics, "poses": poses,
               "single_thread": True, "pycolmap": pycolmap_version, "views": views}
     inputs["hash"] = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
     return inputs
@@ -304,7 +441,7 @@ def sfm_cache_dir(inputs: dict[str, Any]) -> Path:
     return cache_root() / "sfm" / inputs["hash"][:20]
 
 
-def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True,
+def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True, poses: str = "estimated",
                say: Callable[[str], None] | None = None) -> tuple[SfmRun, bool]:
     """`run_sfm` (single-threaded, deterministic) on the training views, reused while its inputs are unchanged.
 
@@ -322,11 +459,10 @@ def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True,
     """
     import json
 
-    from splatbench.data import Dataset, load_dataset
     from splatbench.scenes.render import MANIFEST, read_manifest
 
-    ds = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
-    inputs = sfm_inputs(ds, seed=seed, known_intrinsics=known_intrinsics)
+    ds = _load(dataset)
+    inputs = sfm_inputs(ds, seed=seed, known_intrinsics=known_intrinsics, poses=poses)
     out = sfm_cache_dir(inputs)
     out.parent.mkdir(parents=True, exist_ok=True)
     manifest = read_manifest(out)
@@ -334,15 +470,17 @@ def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True,
     if manifest is not None and manifest.get("hash") == inputs["hash"] and (out / SFM_POINTS).is_file():
         say(f"SfM: reusing {out}")
         return _read_cached(out, manifest), True
-    say(f"SfM: running pycolmap on {len(ds.train)} training views (cached in {out})")
+    how = "triangulating with the known poses" if poses == "known" else "incremental mapping"
+    say(f"SfM: running pycolmap ({how}) on {len(ds.train)} training views (cached in {out})")
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.run-", dir=out.parent))
     try:
-        run = run_sfm(ds, seed=seed, single_thread=True, known_intrinsics=known_intrinsics, out=tmp / SFM_DIR)
+        run = run_sfm(ds, seed=seed, single_thread=True, known_intrinsics=known_intrinsics, poses=poses,
+                      out=tmp / SFM_DIR)
         np.savez(tmp / SFM_DIR / SFM_POINTS, xyz=run.xyz, rgb=run.rgb)
         record = {"hash": inputs["hash"], "inputs": {k: v for k, v in inputs.items() if k != "hash"},
                   "registered": run.registered, "total": run.total, "center_rmse": run.center_rmse,
                   "rig_radius": run.rig_radius, "models": run.models, "registered_names": run.registered_names,
-                  "seconds": run.seconds, "scale": run.alignment.scale,
+                  "seconds": run.seconds, "scale": run.alignment.scale, "poses": run.poses,
                   "rotation": run.alignment.rotation.tolist(), "translation": run.alignment.translation.tolist()}
         (tmp / SFM_DIR / MANIFEST).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
         replace_dir(tmp / SFM_DIR, out,
@@ -360,7 +498,8 @@ def _read_cached(folder: Path, manifest: dict[str, Any]) -> SfmRun:
         return SfmRun(int(m["registered"]), int(m["total"]), float(m["center_rmse"]), float(m["rig_radius"]),
                       xyz, rgb, Similarity(float(m["scale"]), np.asarray(m["rotation"], np.float64),
                                            np.asarray(m["translation"], np.float64)),
-                      folder / "0", int(m["models"]), list(m["registered_names"]), float(m["seconds"]))
+                      folder / "0", int(m["models"]), list(m["registered_names"]), float(m["seconds"]),
+                      str(m.get("poses", "estimated")))
     except (OSError, KeyError, ValueError, TypeError) as exc:
         raise InputError(f"{folder}: unreadable cached SfM model ({type(exc).__name__}: {exc}); delete the "
                          f"folder to rerun SfM") from None

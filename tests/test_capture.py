@@ -353,7 +353,7 @@ def test_opencv_capture_trains_like_the_same_scene_rendered_pinhole(tmp_path, mo
         exact = render(teacher, cam).rgb
         floor.append(np.mean((exact[2:-2, 2:-2] - gt[2:-2, 2:-2]) ** 2))
     p_r = -10 * np.log10(np.mean(floor))
-    settings = dict(iterations=300)  # init "surface": the same points3D for both
+    settings = dict(iterations=300)  # init "auto": the same points3D (jittered alike, seed 0) for both
     p_pin = train(TrainConfig(dataset=str(pin), out=str(tmp_path / "run-pin"), **settings)).test_psnr
     p_dist = train(TrainConfig(dataset=str(cap), out=str(tmp_path / "run-dist"), **settings)).test_psnr
     p_pred = -10 * np.log10(10 ** (-p_pin / 10) + 10 ** (-p_r / 10))

@@ -34,9 +34,9 @@ def capture(tiny, tmp_path, monkeypatch):  # noqa: F811
     return shutil.copytree(path, tmp_path / "tiny", ignore=shutil.ignore_patterns(SFM_DIR))
 
 
-def cache_of(capture) -> Path:
-    """The cache folder of the capture's SfM run, as it is now."""
-    return sfm_cache_dir(sfm_inputs(load_dataset(capture)))
+def cache_of(capture, poses: str = "known") -> Path:
+    """The cache folder of the capture's SfM run (init="sfm"'s known poses by default), as it is now."""
+    return sfm_cache_dir(sfm_inputs(load_dataset(capture), poses=poses))
 
 
 def untouched(capture) -> bool:
@@ -63,7 +63,9 @@ def test_sfm_init_sees_training_views_only_and_starts_from_the_aligned_points(ca
         # SH DC from the SfM colours: C0 sh0 + 0.5 = rgb / 255 (float32 rounding of the DC)
         rgb = 0.28209479177387814 * init.gaussians.sh[:, 0].astype(np.float64) + 0.5
         np.testing.assert_allclose(rgb, pts["rgb"] / 255.0, atol=1e-6)
-    assert init.note.startswith(f"SfM: {s['points']} points, {s['registered']}/12 training views registered")
+    assert s["poses"] == "known" and s["center_rmse_rel"] < 1e-6  # the dataset's poses, held fixed
+    assert init.note.startswith(f"SfM: {s['points']} points triangulated with the dataset's poses, seen by "
+                                f"{s['registered']}/12 training views")
 
 
 def test_sfm_is_reused_while_the_training_views_are_unchanged_and_rerun_when_one_changes(capture, monkeypatch):
@@ -95,7 +97,7 @@ def test_sfm_is_reused_while_the_training_views_are_unchanged_and_rerun_when_one
     train_image.write_bytes(original)
     restored, cached = cached_sfm(load_dataset(capture))  # each version of the inputs keeps its own folder
     assert cached and restored.xyz.tobytes() == first.xyz.tobytes() and calls == [1]
-    shutil.rmtree(cache_of(capture))  # rerun from scratch: SfM is deterministic, the same model
+    shutil.rmtree(cache_of(capture, "estimated"))  # rerun from scratch: SfM is deterministic, the same model
     rerun, cached = cached_sfm(load_dataset(capture))
     assert not cached and rerun.xyz.tobytes() == first.xyz.tobytes()
 
@@ -106,7 +108,8 @@ def test_train_with_sfm_init_logs_points_and_registered_views(capture, tmp_path)
     result = train(cfg)
     assert result.init["method"] == "sfm" and result.init["points"] == result.num_gaussians
     note = next(n for n in result.notes if n.startswith("SfM: "))
-    assert f"{result.init['points']} points, {result.init['registered']}/12 training views registered" in note
+    assert f"{result.init['points']} points triangulated with the dataset's poses, seen by " \
+        f"{result.init['registered']}/12 training views" in note
     saved = json.loads((tmp_path / "run" / "result.json").read_text())
     assert saved["init"]["registered"] == result.init["registered"] and note in saved["notes"]
 
@@ -139,8 +142,9 @@ def test_train_says_sfm_as_it_starts_and_ends_before_the_progress_bar(capture, t
     events: list[str] = []
     real = sfm_module.run_sfm
     monkeypatch.setattr(sfm_module, "run_sfm", lambda *a, **k: events.append("run_sfm") or real(*a, **k))
-    cached_sfm(load_dataset(capture), say=events.append)
-    assert events == [f"SfM: running pycolmap on 12 training views (cached in {cache_of(capture)})", "run_sfm"]
+    cached_sfm(load_dataset(capture), poses="known", say=events.append)
+    assert events == [f"SfM: running pycolmap (triangulating with the known poses) on 12 training views (cached "
+                      f"in {cache_of(capture)})", "run_sfm"]
 
     res = CliRunner().invoke(main, ["train", str(capture), "--out", str(tmp_path / "run"), "--set", "iterations=2",
                                     "--set", "init='sfm'", "--set", "strategy='none'", "--set", "sh_degree=0",
@@ -149,6 +153,33 @@ def test_train_says_sfm_as_it_starts_and_ends_before_the_progress_bar(capture, t
     lines = [line for line in res.stderr.splitlines() if line.strip()]
     assert lines[0] == f"SfM: reusing {cache_of(capture)}" and events[-1] == "run_sfm"  # not rerun
     assert untouched(capture)
-    assert lines[1].startswith("SfM: ") and "training views registered" in lines[1] and "cached in" in lines[1]
+    assert lines[1].startswith("SfM: ") and "training views" in lines[1] and "cached in" in lines[1]
     assert any("train" in line and "it" in line for line in lines[2:])  # the progress bar comes after
     assert lines[1] not in res.stdout  # said once, as it happened, not again among the final notes
+
+
+def test_known_poses_keep_the_cameras_and_triangulate_points_onto_their_features(capture):
+    """init="sfm" with the dataset's poses (COLMAP's point triangulator): the model's cameras
+    are the dataset's to rounding, and every point, seen by the TRUE cameras, lands on the
+    keypoints it was triangulated from. COLMAP keeps a point only when its reprojection error
+    is under 4 px in every view (IncrementalTriangulatorOptions' default filter), and SIFT
+    keypoints on a clean render are good to a fraction of a pixel, so the median is under 1 px;
+    a wrong pose or intrinsics (e.g. the raw images with the undistorted camera) misses by more."""
+    import pycolmap
+
+    ds = load_dataset(capture)
+    run, cached = cached_sfm(ds, poses="known")
+    assert not cached and run.poses == "known" and run.models == 1 and len(run.xyz) >= 100
+    assert run.total == 12 and run.registered == 12 and run.center_rmse < 1e-6 * run.rig_radius
+    assert untouched(capture)
+    rec = pycolmap.Reconstruction(str(run.model_path))
+    truth = dict(zip(ds.train.names, ds.train.cameras))
+    assert sorted(im.name for im in rec.images.values()) == sorted(ds.train.names)  # the dataset's names
+    errors = []
+    for _, point in sorted(rec.points3D.items()):
+        for el in point.track.elements:
+            image = rec.image(el.image_id)
+            uv, z = truth[image.name].project(np.asarray(point.xyz)[None])
+            assert z[0] > 0
+            errors.append(np.linalg.norm(uv[0] - image.points2D[el.point2D_idx].xy))
+    assert np.median(errors) < 1.0 and np.max(errors) < 4.0 + 1e-6, (np.median(errors), np.max(errors))

@@ -291,6 +291,31 @@ def test_default_prune_counts():
     assert off.refine(p3, o3, s3, step=5000, scene_extent=extent).pruned == 0
 
 
+def test_a_sparse_start_is_emptied_by_the_world_size_prune_and_the_run_says_why():
+    """Issue 29: why the default strategy empties a sparse model. On `far` (a forward-facing rig,
+    scene extent 1.38 from the camera spread, backdrop 150 units away), SfM's 27 points have 3-NN
+    scales of about 0.5 (median 0.595 at step 100, 0.501 at step 200 after two splits), all above
+    0.1 x 1.38: the first refinement after the first opacity reset (graphdeco's and gsplat's rule;
+    step 200 of a scaled 2000-step run) removes every one. The same set-up here: 30 Gaussians of
+    scale 0.5, extent 1.38, opaque (0.5 >> the 0.005 opacity threshold), no gradient (nothing grows)."""
+    extent = 1.38
+    params, opts = make_params(30, opacity=0.5, log_scale=math.log(0.5))
+    strat = DefaultStrategy(reset_every=200, refine_start=33, refine_stop=1000)  # graphdeco's, scaled to 2000
+    state = strat.initialize_state(params)
+    before_reset = strat.refine(params, opts, state, step=99, scene_extent=extent)
+    assert before_reset.pruned == 0 and strat.outcome_note(state) is None  # no size prune before the reset
+    after = strat.refine(params, opts, state, step=299, scene_extent=extent)
+    assert (after.pruned, after.pruned_size, after.num_gaussians) == (30, 30, 0)
+    note = strat.outcome_note(state)
+    assert note.startswith("warning: strategy 'default': the size prune removed 30 of 30 Gaussians at step 300")
+    assert "scene extent 1.38" in note and "max_world_size=0" in note
+    # the rule is the cause: without it the same Gaussians stay
+    keep = DefaultStrategy(reset_every=200, refine_start=33, refine_stop=1000, max_world_size=0)
+    p2, o2 = make_params(30, opacity=0.5, log_scale=math.log(0.5))
+    s2 = keep.initialize_state(p2)
+    assert keep.refine(p2, o2, s2, step=299, scene_extent=extent).pruned == 0 and keep.outcome_note(s2) is None
+
+
 def test_default_strategy_has_screen_size_pruning_off_as_graphdeco_and_gsplat_do():
     """graphdeco clears max_radii2D while densifying, before its 20-px test reads it, and
     gsplat's default refine_scale2d_stop is 0: neither prunes by screen size. The same

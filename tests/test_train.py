@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import re
 import shutil
 from pathlib import Path
@@ -165,6 +166,10 @@ BAD_CONFIGS = [
     (["strategy=densest"], "strategy"),
     (["strategy_options.no_such_field=1"], "no_such_field"),
     (["init=poisson"], "init"),
+    (["init_region=sky"], "init_region"),
+    (["init_extent=0"], "init_extent"),
+    (["init_jitter=-0.1"], "init_jitter"),
+    (["init_sfm_poses=guessed"], "init_sfm_poses"),
     (["sh_degree=4"], "sh_degree"),
     (["sh_degree=high"], "sh_degree"),
     (["sh_auto_lookahead=3"], "sh_auto_lookahead"),   # 0..2: after band 1, at most bands 2 and 3
@@ -828,14 +833,161 @@ def test_a_model_pruned_to_nothing_trains_on_and_says_so(tmp_path, tiny_diffuse)
     assert len(warning) == 1 and "none left from step 4 on" in warning[0]
 
 
-def test_surface_init_without_points_starts_from_random_points_and_says_so(tiny_diffuse_dir):
-    """A capture without a point cloud (transforms.json) starts from random points, as graphdeco
-    does, with a note naming the folder; init=surface is the default, so refusing would stop every
-    such capture at the first command."""
+def test_surface_init_without_points_is_one_line_naming_the_ways_out(tiny_diffuse_dir):
+    """init=surface means the dataset's points: a capture without any (transforms.json) is refused
+    in one line naming auto / sfm / random, never silently started from random points."""
     from splatbench.train.initializers import InitSettings, initialize
     no_points = dataclasses.replace(load_dataset(tiny_diffuse_dir), points=None)
+    with pytest.raises(InputError) as err:
+        initialize("surface", no_points, InitSettings(sh_degree=0, opacity=0.1, random_points=50, seed=0))
+    text = str(err.value)
+    assert "\n" not in text and "needs the dataset's points" in text and "init=auto" in text and "init=random" in text
+
+
+def test_auto_init_starts_from_the_dataset_points_or_else_sfm_with_known_poses(tiny_diffuse, monkeypatch):
+    """The default: the dataset's own points when it has them; else SfM with the dataset's poses
+    (never random); the summary says what ran and that auto chose it, a note says why."""
+    import splatbench.sfm as sfm_module
+    from splatbench.sfm import SfmRun, Similarity
+    from splatbench.train.initializers import InitSettings, initialize
+
+    assert TrainConfig().init == "auto" and TrainConfig().init_sfm_poses == "known"
+    settings = InitSettings(sh_degree=0, opacity=0.1, random_points=50, seed=0)
+    have = initialize("auto", tiny_diffuse, settings)
+    assert have.summary["method"] == "surface" and have.summary["asked"] == "auto"
+    np.testing.assert_array_equal(have.gaussians.means, tiny_diffuse.points.xyz.astype(np.float32))  # jitter 0
+    assert have.note.startswith("init auto: surface (the dataset's own points")
+    calls = []
+    xyz = np.random.default_rng(0).normal(size=(40, 3))
+
+    def fake(dataset, **kw):  # what SfM returns is tested in tests/test_sfm_init.py; here, what auto asks
+        calls.append(kw["poses"])
+        return SfmRun(7, 7, 0.0, 1.0, xyz, np.zeros((40, 3), np.uint8), Similarity(1.0, np.eye(3), np.zeros(3)),
+                      Path("m/0"), 1, [], 0.1, kw["poses"]), True
+
+    monkeypatch.setattr(sfm_module, "cached_sfm", fake)
+    none = initialize("auto", dataclasses.replace(tiny_diffuse, points=None), settings)
+    assert calls == ["known"] and none.summary["method"] == "sfm" and none.summary["asked"] == "auto"
+    assert none.summary["poses"] == "known" and len(none.gaussians) == 40
+    assert none.note.startswith("init auto: sfm (SfM with known poses: the dataset has no point cloud")
+
+
+def _starts(tmp_path, dataset, **fields):
+    """The initial means [N, 3] of a Trainer built with ``fields`` (nothing trained)."""
+    return Trainer(config(tmp_path, **fields), dataset=dataset).params["means"].detach().numpy().copy()
+
+
+def test_seeds_vary_the_default_start_of_a_rendered_scene(tmp_path, tiny_diffuse):
+    """Issue 29 item 3: a seed varies what a rerun varies, the start included. Under the default
+    init (a rendered scene: its surface points) two seeds start from different points, the same
+    seed from the same points; the jitter is a fraction of each point's neighbour spacing, so the
+    cloud stays where the surfaces are."""
+    from splatbench.init import knn_mean_sq_dist
+
+    a0, a0_again, a1 = (_starts(tmp_path, tiny_diffuse, seed=s) for s in (0, 0, 1))
+    np.testing.assert_array_equal(a0, a0_again)
+    moved = np.linalg.norm(a0 - a1, axis=1)
+    assert (moved > 0).mean() > 0.99
+    given = tiny_diffuse.points.xyz
+    spacing = np.sqrt(knn_mean_sq_dist(given))
+    # each coordinate moves by N(0, (0.5 spacing)^2): |offset| / spacing is 0.5 x a chi with 3 degrees of
+    # freedom (mean 0.5 x 1.596 = 0.80); two seeds differ by sqrt(2) x that. Its mean over 1500 points is
+    # within 0.05 of 1.128 (the chi's standard deviation is 0.67, /sqrt(1500) x sqrt(2) x 0.5 ~ 0.012)
+    assert abs(np.mean(moved / spacing) - 0.5 * math.sqrt(2) * 1.5958) < 0.05
+    assert np.abs(a0 - given).max() < 6 * 0.5 * spacing.max()  # never beyond 6 standard deviations
+    plain = _starts(tmp_path, tiny_diffuse, seed=1, init_jitter=0.0)  # 0: the points as given, any seed
+    np.testing.assert_array_equal(plain, given.astype(np.float32))
+    r0, r0_again, r1 = (_starts(tmp_path, tiny_diffuse, seed=s, init="random", init_random_points=300)
+                        for s in (0, 0, 1))
+    np.testing.assert_array_equal(r0, r0_again)
+    assert not np.allclose(r0, r1)
+
+
+def _rig(eyes, target, size=(64, 48), fov=50.0):
+    return [Camera.look_at(e, target, [0, 1, 0], size[0], size[1], fov) for e in eyes]
+
+
+def _posed(cams, root=Path("."), layout="colmap") -> Dataset:
+    images = np.zeros((len(cams), cams[0].height, cams[0].width, 3), np.float32)
+    split = Split(images, cams, None, [f"v{i}.png" for i in range(len(cams))])
+    return Dataset("rig", split, Split(images[:0], [], None, []), None, root, layout)
+
+
+def test_random_init_samples_where_the_inward_cameras_look(tmp_path):
+    """Cameras on a ring of radius 4 around (5, 1, -2), looking at it (the scene is there, not
+    in the box of the camera centres, which surrounds it only by chance of the ring). auto picks
+    the convergence ball: centred on the meeting point, radius 4 tan(half the narrower fov)."""
+    from splatbench.train.initializers import InitSettings, initialize, random_region
+
+    target = np.array([5.0, 1.0, -2.0])
+    eyes = [target + 4 * np.array([math.cos(a), 0.3, math.sin(a)]) / math.hypot(1, 0.3)
+            for a in np.linspace(0, math.pi, 9)]  # a half ring: the centres' box misses the target
+    ds = _posed(_rig(eyes, target))
+    cams = ds.train.cameras
+    region = random_region(ds, "auto")
+    half_fov = math.atan(0.5 * cams[0].height / cams[0].fy)  # 48 px high: the narrower
+    assert region.chosen == "convergence" and region.shape == "ball"
+    np.testing.assert_allclose(region.center, target, atol=1e-9)
+    assert abs(region.size - 4 * math.tan(half_fov)) < 1e-9 and "convergence" in region.note
+    init = initialize("random", ds, InitSettings(sh_degree=0, opacity=0.1, random_points=4000, seed=3))
+    pts = init.gaussians.means.astype(np.float64)
+    dist = np.linalg.norm(pts - target, axis=1)
+    assert dist.max() <= region.size * (1 + 1e-6)
+    # uniform in the ball: the fraction within half the radius is 1/8 (binomial sd 0.0052 at n = 4000)
+    assert abs(np.mean(dist < region.size / 2) - 0.125) < 0.025
+    assert init.summary["region"] == "convergence" and init.summary["method"] == "random"
+    # the ball lies in each view: in front of every camera, and inside its image but for the rim
+    # of the ball nearer the camera (the ball's tangent cone has half-angle asin(tan h) > h: at
+    # h = 25.6 deg a few per cent of the volume lies outside the cone of half-angle h)
+    for cam in cams:
+        uv, z = cam.project(pts)
+        inside = (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] <= cam.width) & (uv[:, 1] <= cam.height)
+        assert (z > 0).all() and inside.mean() > 0.95, inside.mean()
+    # gsplat's cube: +-3 scene scales around the centroid of the centres
+    from splatbench.train.params import scene_extent
+
+    cube = random_region(ds, "camera_cube")
+    centres = np.stack([c.center for c in cams])
+    np.testing.assert_allclose(cube.center, centres.mean(0))
+    assert cube.shape == "cube" and abs(cube.size - 3 * scene_extent(cams)) < 1e-9
+    assert abs(random_region(ds, "camera_cube", extent=2.0).size - 2 * scene_extent(cams)) < 1e-9
+    nerf = random_region(ds, "nerf_synthetic")
+    assert nerf.shape == "cube" and nerf.size == 1.3 and not nerf.center.any()
+
+
+def test_random_init_on_a_nerf_synthetic_layout_is_graphdecos_box(tmp_path):
+    """transforms_train.json with cameras on a sphere of radius 4 looking at the origin: graphdeco's
+    [-1.3, 1.3]^3 (auto says so); the same rig in a COLMAP folder gets the convergence ball."""
+    from splatbench.train.initializers import InitSettings, initialize, random_region
+
+    rng = np.random.default_rng(0)
+    dirs = rng.normal(size=(20, 3))
+    dirs[:, 1] = np.abs(dirs[:, 1])
+    eyes = 4.03 * dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    (tmp_path / "transforms_train.json").write_text("{}")
+    ds = _posed(_rig(eyes, np.zeros(3), size=(32, 32), fov=39.6), tmp_path, "blender")
+    region = random_region(ds, "auto")
+    assert region.chosen == "nerf_synthetic" and "graphdeco" in region.note
+    init = initialize("random", ds, InitSettings(sh_degree=0, opacity=0.1, random_points=2000, seed=0))
+    pts = init.gaussians.means
+    assert np.abs(pts).max() <= 1.3 + 1e-6 and np.abs(pts).max() > 1.2  # fills the box
+    assert random_region(_posed(ds.train.cameras, tmp_path, "colmap"), "auto").chosen == "convergence"
+
+
+def test_random_init_on_a_forward_facing_rig_says_no_region_contains_the_scene(tmp_path):
+    """Cameras on a small patch all looking down -z (the `far` scene's kind of rig): no meeting
+    point, so convergence is refused in one line, and auto falls back to gsplat's cube with a
+    warning that names the problem (never silently)."""
+    from splatbench.train.initializers import InitSettings, initialize, random_region
+
+    eyes = [np.array([x, y, 0.0]) for x in (-0.3, 0.0, 0.3) for y in (-0.2, 0.2)]
+    cams = [Camera.look_at(e, e + np.array([0.02 * e[0], 0.0, -1.0]), [0, 1, 0], 64, 48, 55) for e in eyes]
+    ds = _posed(cams)
+    with pytest.raises(InputError) as err:
+        random_region(ds, "convergence")
+    assert "\n" not in str(err.value) and "forward-facing" in str(err.value)
     said = []
-    init = initialize("surface", no_points, InitSettings(sh_degree=0, opacity=0.1, random_points=50, seed=0,
-                                                       say=said.append))
-    assert len(init.gaussians) == 50 and init.summary["method"] == "random" and init.summary["asked"] == "surface"
-    assert said == [init.note] and "needs the dataset's points" in init.note and "random points" in init.note
+    init = initialize("random", ds, InitSettings(sh_degree=0, opacity=0.1, random_points=100, seed=0,
+                                                say=said.append))
+    assert init.summary["region"] == "camera_cube"
+    assert init.note.startswith("warning:") and "forward-facing" in init.note and said == [init.note]

@@ -14,9 +14,13 @@ import click
               help="'one': single-threaded and deterministic; 'all': every core.")
 @click.option("--estimate-intrinsics", is_flag=True,
               help="Let COLMAP estimate the (shared PINHOLE) intrinsics instead of using the dataset's.")
+@click.option("--poses", type=click.Choice(["estimated", "known"]), default="estimated", show_default=True,
+              help="'estimated': incremental mapping, aligned to the dataset's cameras; 'known': triangulate with "
+                   "the dataset's poses held fixed (what init=sfm does).")
 @click.option("--verbose", is_flag=True, help="Show COLMAP's log.")
-def sfm(dataset: Path, seed: int, threads: str, estimate_intrinsics: bool, verbose: bool) -> None:
-    """SIFT, exhaustive matching and incremental mapping on DATASET's training views.
+def sfm(dataset: Path, seed: int, threads: str, estimate_intrinsics: bool, poses: str, verbose: bool) -> None:
+    """SIFT, exhaustive matching and incremental mapping (or, --poses known, triangulation with
+    the dataset's poses) on DATASET's training views as the dataset serves them (undistorted).
 
     Keeps the largest model, aligns it to the dataset's cameras with a similarity
     transform on the camera centres, writes it to DATASET/sfm/0/*.bin, and prints the
@@ -25,7 +29,7 @@ def sfm(dataset: Path, seed: int, threads: str, estimate_intrinsics: bool, verbo
     from splatbench.sfm import run_sfm
 
     run = run_sfm(dataset, seed=seed, single_thread=threads == "one", known_intrinsics=not estimate_intrinsics,
-                  verbose=verbose)
+                  poses=poses, verbose=verbose)
     click.echo(f"registered: {run.registered}/{run.total} training views ({run.registered / run.total:.1%}; "
                f"largest of {run.models} model{'s' if run.models != 1 else ''})")
     click.echo(f"camera-centre RMSE: {run.center_rmse:.4g} ({run.center_rmse_rel:.3%} of the rig radius "

@@ -351,23 +351,30 @@ def prepare(configs: list[dict[str, Any]]) -> Prepared:
                     (f" (test views {data['test_spp']})" if data.get("test_spp") else "")
             print(f"dataset {config['scene']} {what}: {how} ({result.path})", file=sys.stderr, flush=True)
             path = result.path
-        if any(c.get("init") == "sfm" and c["scene"] == config["scene"] and c["data"] == data for c in configs):
-            _prepare_sfm(path)
+        no_points = kind == "folder" and ds.points is None  # init="auto" triangulates those (SfM, known poses)
+        needs = sorted({(c.get("init_sfm_poses", "known"), c.get("layout", "auto"), c.get("test_every", 8))
+                        for c in configs if c["scene"] == config["scene"] and c["data"] == data
+                        and (c.get("init") == "sfm" or (c.get("init") == "auto" and no_points))})
+        for poses, layout, test_every in needs:
+            _prepare_sfm(path, data.get("downscale") or 1, poses, layout, test_every)
     return prepared
 
 
-def _prepare_sfm(path: Path) -> None:
-    """Run (or find cached) the SfM of a dataset that init="sfm" runs need, once, before
-    the workers start (so two workers never run it at once). A failure is printed; each
+def _prepare_sfm(path: Path, downscale: int, poses: str, layout: str, test_every: int) -> None:
+    """Run (or find cached) the SfM of a dataset that init="sfm" (or "auto" on a folder
+    without points) runs need, once, before the workers start (so two workers never run it
+    at once), on the training views as those runs load them. A failure is printed; each
     such run then fails with the same one line."""
+    from splatbench.data import load_dataset
     from splatbench.sfm import cached_sfm
 
     try:
-        run, cached = cached_sfm(path)
+        ds = load_dataset(path, layout=layout, test_every=test_every, downscale=downscale)
+        run, cached = cached_sfm(ds, poses=poses)
     except InputError as exc:
         print(f"SfM of {path}: {exc}", file=sys.stderr, flush=True)
         return
-    print(f"SfM of {path}: {len(run.xyz)} points, {run.registered}/{run.total} training views registered "
+    print(f"SfM of {path} ({poses} poses): {len(run.xyz)} points, {run.registered}/{run.total} training views "
           f"({'cached' if cached else f'ran in {run.seconds:.1f} s'})", file=sys.stderr, flush=True)
 
 

@@ -24,6 +24,10 @@ from splatbench.strategies.base import (Optimizers, Params, StepContext, Topolog
                                        check_fields, last_multiple, multiples, no_refinement_note)
 
 
+#: `DefaultStrategy.outcome_note` warns when one refinement's size prune removes this fraction of the model.
+SIZE_PRUNE_WARNING = 0.25
+
+
 class RefineStats(NamedTuple):
     """What one refinement did (counted on the set before it)."""
 
@@ -86,6 +90,7 @@ class DefaultState:
     last: RefineStats | None = None  # the latest refinement
     history: list[RefineStats] = field(default_factory=list)
     resets: int = 0            # opacity resets made so far
+    scene_extent: float = 0.0  # the extent the refinements measured sizes against
 
 
 @dataclass(frozen=True)
@@ -190,6 +195,30 @@ class DefaultStrategy:
         hi = min(iterations, self.refine_stop - 1)  # completed iterations it = step + 1 < refine_stop
         return TopologyCounts(refinements=multiples(self.refine_every, self.refine_start, hi),
                               opacity_resets=multiples(self.reset_every, 0, hi))
+
+    def outcome_note(self, state: DefaultState) -> str | None:
+        """A warning when one refinement's size prune removed at least a quarter of the model
+        (`SIZE_PRUNE_WARNING`); None otherwise.
+
+        The world-size rule (max scale > ``max_world_size`` x scene extent, from the first
+        opacity reset on) is graphdeco's and gsplat's, and the scene extent is 1.1 x the
+        spread of the camera centres. Where the scene lies far beyond the cameras (a
+        forward-facing capture: ``far``'s backdrop is 150 units away, the extent 1.38) or the
+        start is sparse (a few SfM points: 3-NN scales of a large fraction of the scene), every
+        Gaussian counts as too big, and a short run (whose first reset comes after one or two
+        refinements under ``schedule = "scaled"``) loses the model at once."""
+        worst = max((h for h in state.history if h.pruned_size), default=None,
+                    key=lambda h: h.pruned_size / max(1, h.num_gaussians + h.pruned))
+        if worst is None:
+            return None
+        before = worst.num_gaussians + worst.pruned
+        if worst.pruned_size < SIZE_PRUNE_WARNING * before:
+            return None
+        return (f"warning: strategy '{self.name}': the size prune removed {worst.pruned_size:,} of {before:,} Gaussians "
+                f"at step {worst.step + 1} (max scale > max_world_size {self.max_world_size:g} x the scene extent "
+                f"{state.scene_extent:.3g}, from the first opacity reset on, as graphdeco and gsplat): the extent "
+                f"comes from the camera spread, so a scene far beyond the cameras or a sparse start counts as too "
+                f"big; strategy_options.max_world_size=0 turns the rule off")
 
     def initialize_state(self, params: Params) -> DefaultState:
         n, device = params["means"].shape[0], params["means"].device
@@ -297,6 +326,7 @@ class DefaultStrategy:
         state.count = torch.zeros(m, device=device)
         state.max_radii = torch.zeros(m, device=device)
         stats = RefineStats(step, n_clone, n_split, n_prune, m, n_size)
+        state.scene_extent = float(scene_extent)
         state.last = stats
         state.history.append(stats)
         return stats

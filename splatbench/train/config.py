@@ -59,13 +59,24 @@ class TrainConfig:
     data: dict[str, Any] = field(default_factory=dict)  # how the dataset is loaded (`--set data.downscale=8`):
                                       # downscale = N divides the image size (images_N/ when present;
                                       # splatbench.data.load_dataset); DATA_KEYS
-    seed: int = 0                     # seeds torch, numpy, the view order and random backgrounds
+    seed: int = 0                     # seeds torch, numpy, the view order, random backgrounds and the start
+                                      # (init="random"'s draws, init_jitter)
     # --- initialisation
-    init: str = "surface"             # "surface" (the dataset's own points: true-surface samples of a rendered
-                                      # scene, points3D of a COLMAP folder), "sfm" (pycolmap SfM on the
-                                      # training views, cached in $SPLATBENCH_CACHE/sfm), "random" (uniform in the
-                                      # camera bounds); splatbench.train.initializers
-    init_random_points: int = 100_000  # number of points of init="random" (3DGS's Blender default)
+    init: str = "auto"                # "auto" (the dataset's points when it has them, else "sfm"; never random
+                                      # unless asked), "surface" (the dataset's own points: true-surface samples
+                                      # of a rendered scene, points3D of a COLMAP folder), "sfm" (pycolmap on the
+                                      # training views, cached in $SPLATBENCH_CACHE/sfm), "random" (uniform in
+                                      # init_region); splatbench.train.initializers, docs/training.md
+    init_random_points: int = 100_000  # number of points of init="random" (graphdeco's NeRF-synthetic count)
+    init_region: str = "auto"         # where init="random" samples: "convergence" (a ball where the optical axes
+                                      # meet), "camera_cube" (gsplat: +-init_extent scene scales around the
+                                      # cameras), "nerf_synthetic" ([-1.3, 1.3]^3, graphdeco's Blender box) or
+                                      # "auto" (initializers.REGIONS says which and where each fails)
+    init_extent: float = 3.0          # init_region="camera_cube": half-side in scene scales (gsplat's init_extent)
+    init_jitter: float = 0.5          # surface / sfm points: each moved by a normal draw of this x its neighbour
+                                      # spacing, seeded by `seed` (so seeds vary the start); 0 = as given
+    init_sfm_poses: str = "known"     # init="sfm": "known" (triangulate with the dataset's poses, fixed) or
+                                      # "estimated" (incremental mapping, aligned to the dataset's frame)
     init_opacity: float | str = "auto"  # initial opacity of every Gaussian in (0, 1), or "auto": the
                                       # strategy's reference value (default/none 0.1 as graphdeco, mcmc 0.5
                                       # as 3DGS-MCMC); docs/training.md#defaults-and-their-sources
@@ -145,6 +156,18 @@ class TrainConfig:
 
         if self.init not in INITIALIZERS:
             raise InputError(f"init: unknown initialisation {self.init!r} (expected one of: {', '.join(INITIALIZERS)})")
+        from splatbench.sfm import POSE_MODES
+        from splatbench.train.initializers import REGIONS
+
+        if self.init_region not in REGIONS:
+            raise InputError(f"init_region: expected one of {', '.join(REGIONS)}, got {self.init_region!r}")
+        if self.init_sfm_poses not in POSE_MODES:
+            raise InputError(f"init_sfm_poses: expected one of {', '.join(POSE_MODES)}, got {self.init_sfm_poses!r}")
+        if not (math.isfinite(self.init_extent) and self.init_extent > 0):
+            raise InputError(f"init_extent: expected a number > 0, got {self.init_extent!r}")
+        if not (math.isfinite(self.init_jitter) and self.init_jitter >= 0):
+            raise InputError(f"init_jitter: expected a number >= 0 (0 = the points as given), got "
+                             f"{self.init_jitter!r}")
         if self.layout not in ("auto", "colmap", "blender"):
             raise InputError(f"layout: expected 'auto', 'colmap' or 'blender', got {self.layout!r}")
         for key, value in self.data.items():

@@ -139,8 +139,10 @@ class Trainer:
                              "background cannot be composited under the ground truth")
         torch.manual_seed(config.seed)
         np.random.seed(config.seed % 2**32)
-        init = initialize(config.init, dataset, InitSettings(config.max_sh_degree, config.initial_opacity,
-                                                             config.init_random_points, config.seed, say=say))
+        init = initialize(config.init, dataset, InitSettings(
+            config.max_sh_degree, config.initial_opacity, config.init_random_points, config.seed, say=say,
+            region=config.init_region, extent=config.init_extent, jitter=config.init_jitter,
+            sfm_poses=config.init_sfm_poses))
         gaussians, self.init_summary, self.init_note = init.gaussians, init.summary, init.note
         self.extent = scene_extent(train.cameras)
         self.lrs = lr_groups(config)
