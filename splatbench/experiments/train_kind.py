@@ -94,7 +94,9 @@ METRICS: dict[str, str] = {
     "time_loaded": "1 when load_other exceeded cores / 2: the run's times are not trusted and are left out of the "
                    "time comparisons of the findings (quality metrics are kept)",
 }
-#: Keys of the curves: the training history (every ``log_every`` steps) and the test evaluations.
+#: Keys of the curves: the training history (every ``log_every`` steps) and the test evaluations; a run
+#: with full step evaluations (a graphdeco protocol, or eval_steps) adds ``step_evaluations``, the list of
+#: `splatbench.train.StepEvaluation` as objects.
 CURVE_KEYS = ("step", "loss", "psnr", "num_gaussians", "eval_step", "eval_psnr", "eval_ssim", "eval_lpips")
 
 
@@ -194,7 +196,8 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
     out = {k: v for k, v in cfg.to_dict().items() if k not in OWNED_FIELDS}
     if cfg.sh_degree != "auto":  # read only by sh_degree="auto": left out, so fixed-degree run ids are unchanged
         del out["sh_auto_lookahead"]
-    for name, default in (("lpips_net", "alex"), ("lpips_scale_inputs", True)):
+    for name, default in (("lpips_net", "alex"), ("lpips_scale_inputs", True), ("protocol", "quick"),
+                          ("eval_steps", [])):
         if out[name] == default:  # added after the first grids: at the default left out, so their run ids hold
             del out[name]
     out["strategy_options"] = _strategy_options(cfg)
@@ -381,6 +384,8 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
         "eval_step": [p["step"] for p in evaluations], "eval_psnr": [p["psnr"] for p in evaluations],
         "eval_ssim": [p["ssim"] for p in evaluations], "eval_lpips": [p["lpips"] for p in evaluations],
     }
+    if rows["step_evaluations"]:  # a protocol's 7K / 30K columns (only runs that make them: earlier curves unchanged)
+        curves["step_evaluations"] = rows["step_evaluations"]
     warnings = tuple(note for note in result.notes if note.startswith("warning:"))
     return RunOutput(metrics=metrics, curves=curves, warnings=warnings)
 

@@ -46,7 +46,7 @@ from splatbench.train.losses import photometric_loss
 from splatbench.metrics.image import psnr, ssim_metric
 from splatbench.train.params import (ExponentialLR, gaussians_from_params, make_optimizers, params_from_gaussians,
                                      refreeze, scene_extent, set_lr)
-from splatbench.train.result import EvalPoint, HistoryPoint, TrainResult
+from splatbench.train.result import EvalPoint, HistoryPoint, StepEvaluation, TrainResult
 from splatbench.train.sh_schedule import BandMeasure, ShSchedule
 
 
@@ -145,7 +145,8 @@ class Trainer:
         self.lrs = lr_groups(config)
         self.params = params_from_gaussians(gaussians, self.lrs)
         self.optimizers = make_optimizers(self.params, self.lrs, config.adam_eps)
-        self.means_lr = ExponentialLR(config.lr_means, config.lr_means_final, config.iterations, self.extent)
+        # decays over the protocol's schedule (30,000 steps under graphdeco's, however early the run stops)
+        self.means_lr = ExponentialLR(config.lr_means, config.lr_means_final, config.schedule_length, self.extent)
         self.state = self.strategy.initialize_state(self.params)
         self.absgrad = bool(self.strategy.absgrad)  # declared by the Strategy protocol
         self.sh = ShSchedule(config.sh_degree, config.sh_steps, min_gain_db=config.sh_auto_min_gain_db,
@@ -355,6 +356,17 @@ def lpips_plan(config: TrainConfig, test) -> tuple[list[tuple[str, bool]], list[
     return [(config.lpips_net, config.lpips_scale_inputs)], [CURVE_LPIPS], ""
 
 
+def step_lpips(final: list[tuple[str, bool]]) -> list[tuple[str, bool]]:
+    """The LPIPS of a full step evaluation: the final net in both input conventions
+    (none when the final evaluation computes none)."""
+    return [(final[0][0], True), (final[0][0], False)] if final else []
+
+
+def _step_evaluation(step: int, ev: Evaluation, net: str, num_gaussians: int, seconds: float) -> StepEvaluation:
+    return StepEvaluation(step, ev.psnr, ev.ssim, net if net else "", ev.lpips.get((net, True)),
+                          ev.lpips.get((net, False)), num_gaussians, round(seconds, 3), ev.views)
+
+
 def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None = None,
           dataset=None, resume: str | Path | None = None, say: Callable[[str], None] | None = None) -> TrainResult:
     """Train 3DGS on ``config.dataset`` and return the measured `TrainResult`.
@@ -427,6 +439,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                                       "initialising)") from None
     history: list[HistoryPoint] = []
     evaluations: list[EvalPoint] = []
+    step_evaluations: list[StepEvaluation] = []
     loop_seconds = cpu_seconds = 0.0
     resumed: list[str] = []
     resumed_step = None
@@ -435,14 +448,18 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         resumed_step = trainer.step_index
         resumed.append(resume_line(resume, trainer.step_index, config.iterations))
         history, evaluations = list(extra.get("history", [])), list(extra.get("evaluations", []))
+        step_evaluations = list(extra.get("step_evaluations", []))
         loop_seconds = float(extra.get("loop_seconds", 0.0))
         cpu_seconds = float(extra.get("cpu_seconds", 0.0))
     save_config(config, out / "config.toml")
     final_lpips, curve_lpips, lpips_note = lpips_plan(config, trainer.dataset.test)
+    full_steps = set(config.evaluation_steps)  # the protocol's 7K / 30K columns (splatbench.train.protocol)
+    full_lpips = step_lpips(final_lpips) if full_steps else []
+    net = final_lpips[0][0] if final_lpips else ""
 
     def state() -> dict:
         return {"history": history, "evaluations": evaluations, "loop_seconds": loop_seconds,
-                "cpu_seconds": cpu_seconds}
+                "cpu_seconds": cpu_seconds, "step_evaluations": step_evaluations}
 
     status = None
     load = Load.start()
@@ -461,10 +478,13 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                 history.append(HistoryPoint(status.step, status.loss, status.psnr, status.num_gaussians))
             if progress is not None:
                 progress(status)
-            if config.eval_every and done % config.eval_every == 0 and done < config.iterations:
-                ev = trainer.evaluate(curve_lpips)
+            full = done in full_steps and done < config.iterations  # the last step's is the final evaluation
+            if full or (config.eval_every and done % config.eval_every == 0 and done < config.iterations):
+                ev = trainer.evaluate(list(dict.fromkeys(full_lpips + curve_lpips)) if full else curve_lpips)
                 if ev.psnr is not None:
                     evaluations.append(EvalPoint(done, ev.psnr, ev.ssim, ev.lpips.get(CURVE_LPIPS)))
+                    if full:
+                        step_evaluations.append(_step_evaluation(done, ev, net, trainer.num_gaussians, loop_seconds))
             if config.checkpoint_every and done % config.checkpoint_every == 0:
                 _save_checkpoint(trainer, out, state())
         t0, c0 = time.perf_counter(), process_cpu_seconds()
@@ -479,7 +499,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                                       f"{trainer.step_index} of {config.iterations} steps; resume with "
                                       f"--resume {path.with_suffix('.pt')})") from None
     try:
-        ev = trainer.evaluate(list(dict.fromkeys(final_lpips + curve_lpips)))
+        ev = trainer.evaluate(list(dict.fromkeys(final_lpips + full_lpips + curve_lpips)))
     except Interrupted as exc:
         raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
     notes = resumed + list(trainer.dataset.notes) + ([trainer.init_note] if trainer.init_note else []) \
@@ -500,6 +520,9 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         notes.append("no test views: test metrics are None")
     else:
         evaluations.append(EvalPoint(trainer.step_index, ev.psnr, ev.ssim, ev.lpips.get(CURVE_LPIPS)))
+        if full_steps:
+            step_evaluations.append(_step_evaluation(trainer.step_index, ev, net, trainer.num_gaussians,
+                                                     loop_seconds))
     result = TrainResult(
         test_psnr=ev.psnr, test_ssim=ev.ssim, test_lpips=ev.lpips.get(final_lpips[0]) if final_lpips else None,
         lpips_net=final_lpips[0][0] if final_lpips else "", lpips_scale_inputs=config.lpips_scale_inputs,
@@ -510,7 +533,8 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,
         test_views=ev.views, history=history, evaluations=evaluations,
         sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary,
-        warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step)
+        warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step, protocol=config.protocol,
+        step_evaluations=step_evaluations)
     (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
     return result
 
