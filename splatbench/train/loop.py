@@ -97,13 +97,16 @@ def resolve_background(background: list[float] | str, split) -> tuple[torch.Tens
     if not isinstance(background, str):
         return torch.tensor(background, dtype=torch.float32), f"background {list(background)} (config)"
     empty = None
-    if split.alphas is not None:
-        empty, how = split.alphas == 0, "alpha 0"
+    if split.alpha_pixels is not None:
+        empty, how = split.alpha_pixels == 0, "alpha 0"  # 8-bit 0 is exactly alpha 0
     elif split.depths is not None:
         empty, how = split.depths == 0, "depth 0 (nothing hit)"
     if empty is None or not empty.any():
         return torch.zeros(3), "background auto: black (the dataset marks no empty pixels)"
-    colour = split.images[empty].astype(np.float64).mean(axis=0)
+    # the empty pixels of each view in turn (one float view at a time), in the order of a boolean
+    # index over the whole stack, so the mean is the same sum as before
+    pixels = np.concatenate([split.image(i)[empty[i]] for i in range(len(split))])
+    colour = pixels.astype(np.float64).mean(axis=0)
     rgb = [round(float(c), 4) for c in colour]
     return torch.tensor(rgb, dtype=torch.float32), \
         f"background auto: {rgb}, the mean of {int(empty.sum())} training pixels with {how}"
@@ -133,7 +136,7 @@ class Trainer:
         train = dataset.train
         if len(train) == 0:
             raise InputError(f"dataset: {str(dataset.root)!r} has no training views")
-        if config.random_background and train.alphas is None:
+        if config.random_background and train.alpha_pixels is None:
             raise InputError("random_background: the dataset's images have no alpha channel, so a random "
                              "background cannot be composited under the ground truth")
         torch.manual_seed(config.seed)
@@ -151,8 +154,7 @@ class Trainer:
         self.absgrad = bool(self.strategy.absgrad)  # declared by the Strategy protocol
         self.sh = ShSchedule(config.sh_degree, config.sh_steps, min_gain_db=config.sh_auto_min_gain_db,
                              lookahead=config.sh_auto_lookahead)
-        self.images = torch.from_numpy(np.ascontiguousarray(train.images, dtype=np.float32))
-        self.alphas = None if train.alphas is None else torch.from_numpy(np.asarray(train.alphas, np.float32))
+        # the training views stay as the dataset holds them (8-bit); each step converts its own (`target`)
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
         self.gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
         self.background, self.background_note = resolve_background(config.background, train)
@@ -205,11 +207,16 @@ class Trainer:
 
     def _next_view(self) -> int:
         if not self._order:
-            views = torch.randperm(len(self.images), generator=self.generator).tolist()
+            views = torch.randperm(len(self.dataset.train), generator=self.generator).tolist()
             if self.holdout and not self.sh.settled:
                 views = [v for v in views if v not in self.holdout]
             self._order = views
         return self._order.pop()
+
+    def target(self, view: int) -> torch.Tensor:
+        """Training view ``view`` as float32 [H, W, 3] (converted from the dataset's 8-bit
+        pixels for this step only; `splatbench.data.Split.image`)."""
+        return torch.from_numpy(self.dataset.train.image(view))
 
     # ------------------------------------------------------------------ one step
     def step(self) -> StepStatus:
@@ -222,13 +229,15 @@ class Trainer:
         set_lr(self.optimizers["means"], lr)
         view = self._next_view()
         camera = self.dataset.train.cameras[view]
-        target = self.images[view]
+        target = self.target(view)
         if cfg.random_background:
             bg = torch.rand(3, generator=self.generator)
         else:
             bg = self.background
-        if self.alphas is not None and bool((bg != self.gt_background).any()):
-            target = target + (bg - self.gt_background) * (1 - self.alphas[view])[..., None]
+        alphas = self.dataset.train.alpha_pixels
+        if alphas is not None and bool((bg != self.gt_background).any()):
+            alpha = torch.from_numpy(self.dataset.train.alpha(view))
+            target = target + (bg - self.gt_background) * (1 - alpha)[..., None]
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
         t1 = time.perf_counter()
@@ -300,7 +309,8 @@ class Trainer:
         for i in idx:
             with_band, _, _, info = self._render(cams[i], degree, self.background.tolist())
             without, _, _, _ = self._render(cams[i], baseline, self.background.tolist())
-            gains.append(psnr(with_band, self.images[i]) - psnr(without, self.images[i]))
+            target = self.target(i)
+            gains.append(psnr(with_band, target) - psnr(without, target))
             visible += info.visible.float()
         w = torch.sigmoid(self.params["opacity_logits"]) * visible
         lo, hi = (baseline + 1) ** 2 - 1, (degree + 1) ** 2 - 1  # rows of bands baseline+1..degree in sh_rest
@@ -325,7 +335,7 @@ class Trainer:
             t0 = time.perf_counter()
             rgb, _, _, _ = self._render(camera, self.sh.degree, self.background.tolist())
             seconds += time.perf_counter() - t0
-            gt = torch.from_numpy(np.ascontiguousarray(test.images[i], dtype=np.float32))
+            gt = torch.from_numpy(test.image(i))  # one view as float at a time
             psnrs.append(psnr(rgb, gt))
             ssims.append(ssim_metric(rgb, gt, self.config.ssim_window))
             for (net, scaled), values in lps.items():
@@ -350,7 +360,7 @@ def lpips_plan(config: TrainConfig, test) -> tuple[list[tuple[str, bool]], list[
         weights_path(config.lpips_net), weights_path(CURVE_LPIPS[0])
     except InputError as exc:
         return [], [], f"LPIPS skipped: {exc}"
-    height, width = np.asarray(test.images[0]).shape[:2]
+    height, width = test.image_size
     if min(height, width) < 16:
         return [], [], f"LPIPS skipped: test images of {width}x{height} px are under 16 px on a side"
     return [(config.lpips_net, config.lpips_scale_inputs)], [CURVE_LPIPS], ""
