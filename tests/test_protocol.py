@@ -79,7 +79,8 @@ def test_the_7k_check_is_the_30k_run_stopped_there(tmp_path, tiny_diffuse):
     assert Path(short.ply_path).read_bytes() == at_10.read_bytes()
     quick_short = train(config(tmp_path, out=str(tmp_path / "q10"), iterations=10), dataset=tiny_diffuse)
     train(config(tmp_path, out=str(tmp_path / "q20"), iterations=20, checkpoint_every=10), dataset=tiny_diffuse)
-    assert Path(quick_short.ply_path).read_bytes() != (tmp_path / "q20" / "checkpoints" / "iteration_10.ply").read_bytes()
+    quick_at_10 = tmp_path / "q20" / "checkpoints" / "iteration_10.ply"
+    assert Path(quick_short.ply_path).read_bytes() != quick_at_10.read_bytes()
 
 
 def test_step_evaluations_record_every_column_and_survive_a_resume(tmp_path, tiny_diffuse):
