@@ -23,7 +23,12 @@ Blender-layout dataset (issue 29 item 1, branch h/init), this tool registers the
 ``splatbench train --resume``, which does not know that name.
 
 Cost on two cores (issue 30, 9af4c7d): about 1 s per step, so about 8 h of loop, plus two full
-evaluations (200 views, VGG LPIPS twice) and a test curve point every `EVAL_EVERY` steps.
+evaluations and a test-curve point (render + AlexNet LPIPS, ~0.6 CPU-s per view) every `EVAL_EVERY`
+steps. The full evaluations are dominated by VGG LPIPS: one 800x800 pair takes about 13 CPU-s (one
+torch thread, measured here under load: 40 s wall), so 200 views x 2 conventions x 2 steps is about
+2.9 CPU-hours, and one call adds about 1.3 GB to the peak resident memory (measured alone: 249 ->
+1,519 MB), so the run may peak near 3.3 GB (not measured). ``--set torch_threads=0`` gives torch
+every core (training too).
 A checkpoint is written every `CHECKPOINT_EVERY` steps and when the run is stopped (SIGINT /
 SIGTERM), so ``--resume`` loses at most that many steps; each checkpoint (PLY + state) is a few
 hundred MB at 300k Gaussians: delete old ones as the run goes if the disk is short.
