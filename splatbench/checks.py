@@ -192,6 +192,7 @@ _TYPES: dict[Any, tuple[Callable[[Any], bool], str]] = {
     int | str: (lambda v: isinstance(v, str) or _is_int(v), "an int or 'auto'"),
     float | str: (lambda v: isinstance(v, str) or _is_number(v), "a number or 'auto'"),
     list[float]: (lambda v: isinstance(v, list) and all(map(_is_number, v)), "a list of numbers"),
+    list[int]: (lambda v: isinstance(v, list) and all(map(_is_int, v)), "a list of ints"),
     list[float] | str: (lambda v: isinstance(v, str) or (isinstance(v, list) and all(map(_is_number, v))),
                         "a list of numbers or 'auto'"),
     dict[str, Any]: (lambda v: isinstance(v, dict), "a table"),

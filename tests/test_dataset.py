@@ -248,3 +248,69 @@ def test_argument_errors(tmp_path):
     one_line_error(lambda: load_dataset(tmp_path, test_every=-1), "test_every:")
     one_line_error(lambda: load_dataset(tmp_path, background=(2, 0, 0)), "background:")
     one_line_error(lambda: load_dataset(tmp_path, layout="blender"), "transforms_train.json: missing")
+
+
+def _loaded_as_before(arr: np.ndarray, bg: np.ndarray, downscale: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """What the loader returned before images were held as 8-bit (splatbench 9af4c7d,
+    `_read_image` and `_resize`, written out here): float32 / 255, RGBA composited on
+    ``bg`` at load; downscaled by quantising the composited float to 8 bits, PIL bicubic, / 255."""
+    data = arr.astype(np.float32) / 255.0
+    rgb, alpha = (data, None) if arr.shape[2] == 3 else \
+        (data[..., :3] * data[..., 3][..., None] + bg * (1 - data[..., 3][..., None]), data[..., 3])
+    if downscale == 1:
+        return rgb, alpha
+
+    def resize(image):
+        u8 = np.clip(np.rint(image * 255.0), 0, 255).astype(np.uint8)
+        size = (image.shape[1] // downscale, image.shape[0] // downscale)
+        return np.asarray(Image.fromarray(u8).resize(size, Image.Resampling.BICUBIC)).astype(np.float32) / 255.0
+
+    return resize(rgb), None if alpha is None else resize(alpha)
+
+
+def test_8bit_pixels_convert_to_the_same_floats_as_loading_them_as_float(tmp_path):
+    """The loader holds 8-bit pixels and converts a view when it is read (Split.image):
+    bit-identical to converting (and compositing, and downscaling) at load time as before,
+    for RGBA (alpha 0, 255 and between), RGB PNG and JPEG, a split that mixes RGBA and RGB
+    views, at downscale 1 and 2, on a background that is neither black nor white. The
+    pixels are held as uint8 (a quarter of float32's memory)."""
+    rng = np.random.default_rng(7)
+    cams = orbit_cameras(6, 20, 20)
+    kinds = {"train": [("png", 4), ("png", 4), ("png", 3)], "test": [("jpg", 3), ("png", 4), ("png", 4)]}
+    arrays = {}
+    for split, files in kinds.items():
+        frames = []
+        for k, (ext, channels) in enumerate(files):
+            i = len(arrays)
+            frame, angle = cams[i].to_blender()
+            frames.append({"file_path": f"./{split}/r_{k}.{ext}", "transform_matrix": frame["transform_matrix"]})
+            pixels = rng.integers(0, 256, (20, 20, channels), dtype=np.uint8)
+            if channels == 4:
+                pixels[:5, :, 3], pixels[5:10, :, 3] = 0, 255  # empty and opaque rows beside partial alpha
+            path = tmp_path / split / f"r_{k}.{ext}"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            Image.fromarray(pixels).save(path, **({"quality": 90} if ext == "jpg" else {}))
+            arrays[(split, k)] = np.asarray(Image.open(path))  # what the file decodes to (JPEG is lossy)
+        (tmp_path / f"transforms_{split}.json").write_text(json.dumps({"camera_angle_x": angle, "frames": frames}))
+    bg = np.array([0.3, 0.6, 0.9], np.float32)
+    for downscale in (1, 2):
+        ds = load_dataset(tmp_path, background=tuple(float(c) for c in bg), downscale=downscale)
+        for name, split in (("train", ds.train), ("test", ds.test)):
+            assert split.pixels.dtype == np.uint8 and split.alpha_pixels.dtype == np.uint8
+            for k in range(3):
+                want_rgb, want_alpha = _loaded_as_before(arrays[(name, k)], bg, downscale)
+                assert split.image(k).dtype == np.float32
+                assert split.image(k).tobytes() == want_rgb.tobytes(), (downscale, name, k)
+                want_alpha = np.ones(want_rgb.shape[:2], np.float32) if want_alpha is None else want_alpha
+                assert split.alpha(k).tobytes() == want_alpha.tobytes(), (downscale, name, k)
+            assert split.images.tobytes() == np.stack([split.image(k) for k in range(3)]).tobytes()
+    # an RGB-only dataset holds no alphas and composites nothing
+    rgb_only = tmp_path / "rgb"
+    (rgb_only / "train").mkdir(parents=True)
+    frame, angle = cams[0].to_blender()
+    pixels = write_image(rgb_only / "train" / "r_0.png", rng, 20, 20)
+    (rgb_only / "transforms_train.json").write_text(json.dumps(
+        {"camera_angle_x": angle, "frames": [{"file_path": "./train/r_0", "transform_matrix": frame["transform_matrix"]}]}))
+    split = load_dataset(rgb_only).train
+    assert split.alpha_pixels is None and split.composite is None and split.alpha(0) is None
+    assert split.image(0).tobytes() == (pixels.astype(np.float32) / 255.0).tobytes()

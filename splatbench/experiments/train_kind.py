@@ -114,7 +114,9 @@ TOPOLOGY_METRICS = ("refinements", "opacity_resets", "cloned", "split", "pruned"
 #: overrides them.
 MIN_EFFECT: dict[str, float] = {"test_psnr": 0.1, "test_ssim": 0.003, "test_lpips": 0.005,
                                 "train_seconds": 0.10, "num_gaussians": 0.05}
-#: Keys of the curves: the training history (every ``log_every`` steps) and the test evaluations.
+#: Keys of the curves: the training history (every ``log_every`` steps) and the test evaluations; a run
+#: with full step evaluations (a graphdeco protocol, or eval_steps) adds ``step_evaluations``, the list of
+#: `splatbench.train.StepEvaluation` as objects.
 CURVE_KEYS = ("step", "loss", "psnr", "num_gaussians", "eval_step", "eval_psnr", "eval_ssim", "eval_lpips")
 
 
@@ -214,7 +216,8 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
     out = {k: v for k, v in cfg.to_dict().items() if k not in OWNED_FIELDS}
     if cfg.sh_degree != "auto":  # read only by sh_degree="auto": left out, so fixed-degree run ids are unchanged
         del out["sh_auto_lookahead"]
-    for name, default in (("lpips_net", "alex"), ("lpips_scale_inputs", True)):
+    for name, default in (("lpips_net", "alex"), ("lpips_scale_inputs", True), ("protocol", "quick"),
+                          ("eval_steps", [])):
         if out[name] == default:  # added after the first grids: at the default left out, so their run ids hold
             del out[name]
     out["strategy_options"] = _strategy_options(cfg)
@@ -409,6 +412,8 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
         "eval_step": [p["step"] for p in evaluations], "eval_psnr": [p["psnr"] for p in evaluations],
         "eval_ssim": [p["ssim"] for p in evaluations], "eval_lpips": [p["lpips"] for p in evaluations],
     }
+    if rows["step_evaluations"]:  # a protocol's 7K / 30K columns (only runs that make them: earlier curves unchanged)
+        curves["step_evaluations"] = rows["step_evaluations"]
     warnings = tuple(note for note in result.notes if note.startswith("warning:"))
     return RunOutput(metrics=metrics, curves=curves, warnings=warnings)
 

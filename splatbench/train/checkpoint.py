@@ -44,14 +44,15 @@ from splatbench.strategies.budget import BudgetState
 from splatbench.strategies.default import DefaultState, LossPlateau, RefineStats
 from splatbench.strategies.mcmc import MCMCState, MCMCStats
 from splatbench.train.params import make_optimizers
-from splatbench.train.result import EvalPoint, HistoryPoint
+from splatbench.train.result import EvalPoint, HistoryPoint, StepEvaluation
 from splatbench.train.sh_schedule import ShDecision, ShSchedule
 
 #: Bump when the checkpoint's content changes (2: plain data, read with weights_only=True).
 CHECKPOINT_FORMAT = "splatbench-checkpoint/2"
 #: The only classes a checkpoint may name; each is rebuilt from its fields, nothing is called.
 _CLASSES = {cls.__name__: cls for cls in (DefaultState, BudgetState, LossPlateau, RefineStats, MCMCState, MCMCStats,
-                                          ShSchedule, ShDecision, HistoryPoint, EvalPoint)}
+                                          ShSchedule, ShDecision, HistoryPoint, EvalPoint,
+                                          StepEvaluation)}
 _OBJECT, _TUPLE, _GENERATOR, _NUMPY_RNG = "__object__", "__tuple__", "__generator__", "__numpy_rng__"
 
 
@@ -205,7 +206,8 @@ def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
 
 def _apply(trainer: Any, state: dict[str, Any], p: Path) -> dict[str, Any]:
     saved, now = state["config"], trainer.config.to_dict()
-    differ = [key for key in now if key not in FREE_FIELDS and saved.get(key) != now[key]]
+    defaults = type(trainer.config)().to_dict()  # a field added since the checkpoint was written: its default
+    differ = [key for key in now if key not in FREE_FIELDS and saved.get(key, defaults[key]) != now[key]]
     if differ:
         raise InputError(f"resume: {str(p)!r} was written with "
                          + ", ".join(f"{key}={saved.get(key)!r}" for key in differ) + "; this run has "

@@ -14,7 +14,8 @@ import click
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
               help="Override a config field (repeatable), e.g. --set iterations=2000 --set sh_degree=auto "
                    "--set strategy_options.cap_max=50000 --set data.downscale=8 (images / 8, or images_8/) "
-                   "--set checkpoint_every=500 (a checkpoint every 500 steps, for --resume).")
+                   "--set checkpoint_every=500 (a checkpoint every 500 steps, for --resume) "
+                   "--set protocol=graphdeco-30k (graphdeco's schedule unscaled, evaluated at 7,000 and 30,000).")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default: the config's `out`, runs/train). One holding another run is refused "
                    "unless --resume continues one of its checkpoints or --force replaces it.")
@@ -113,6 +114,11 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
                f"{'' if result.resumed_step is None else ' in all'} "
                f"({result.iterations / max(result.train_seconds, 1e-9):.2f} it/s), render "
                f"{fmt(result.render_ms_per_view, '.1f')} ms/view, peak RSS {result.peak_rss_mb:.0f} MB")
+    for e in result.step_evaluations:  # the protocol's columns (graphdeco-30k: 7,000 and 30,000 steps)
+        click.echo(f"protocol {result.protocol}, step {e.step}: test PSNR {fmt(e.psnr, '.2f')} dB, SSIM "
+                   f"{fmt(e.ssim, '.4f')}, LPIPS {e.lpips_net or 'n/a'} {fmt(e.lpips_scaled, '.4f')} (inputs in [-1, 1]) / "
+                   f"{fmt(e.lpips_unscaled, '.4f')} ([0, 1] unscaled), {e.num_gaussians} Gaussians, "
+                   f"{e.train_seconds:.1f} s")
     if _load_line(result):
         click.echo(_load_line(result))
     for note in (n for n in result.notes if n not in shown):

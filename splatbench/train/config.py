@@ -14,7 +14,11 @@ read or rendered; ``dataclasses.replace`` or `apply_overrides` make a changed co
 Schedules (refinement window, opacity reset, SH steps) are written in graphdeco's
 30,000-iteration steps and scaled to ``iterations`` by default (``schedule =
 "scaled"``); ``schedule = "absolute"`` takes them as written
-(`splatbench.train.schedule`).
+(`splatbench.train.schedule`). ``protocol`` names how the schedule is laid out and where
+the run is evaluated: ``"quick"`` (over the run's own ``iterations``), or graphdeco's
+unscaled 30,000-step schedule evaluated at 7,000 and 30,000 steps (``"graphdeco-30k"``)
+or stopped at 7,000 (``"graphdeco-7k"``); choosing a protocol without ``iterations``
+takes the protocol's (`splatbench.train.protocol`).
 
 Example::
 
@@ -81,7 +85,12 @@ class TrainConfig:
                                       # strategy's reference value (default/none 0.1 as graphdeco, mcmc 0.5
                                       # as 3DGS-MCMC); docs/training.md#defaults-and-their-sources
     # --- schedule
-    iterations: int = 30_000          # optimisation steps, one training view each
+    protocol: str = "quick"           # "quick": the schedule laid over `iterations` (scaled, below);
+                                      # "graphdeco-30k": graphdeco's 30,000-step schedule unscaled, evaluated
+                                      # in full at 7,000 and 30,000; "graphdeco-7k": that schedule stopped at
+                                      # 7,000 (splatbench.train.protocol; docs/training.md#protocols)
+    iterations: int = 30_000          # optimisation steps, one training view each (a protocol's own when it
+                                      # is given without iterations)
     schedule: str = "scaled"          # how the step fields below and in strategy_options (refine_start,
                                       # refine_stop, reset_every, sh_interval) are read: "scaled" = in steps
                                       # of graphdeco's 30,000-iteration run, times iterations / 30,000
@@ -116,6 +125,9 @@ class TrainConfig:
     strategy_options: dict[str, Any] = field(default_factory=dict)  # fields of the strategy's dataclass
     # --- evaluation, logging, checkpoints
     eval_every: int = 0               # evaluate on the test views every this many steps (0 = only at the end)
+    eval_steps: list[int] = field(default_factory=list)  # steps of a full test evaluation (PSNR, SSIM, LPIPS of
+                                      # lpips_net in both input conventions, Gaussians; TrainResult.
+                                      # step_evaluations), besides the protocol's and the end
     lpips_net: str = "alex"           # LPIPS v0.1 of the final test evaluation: "alex" (gsplat, NerfBaselines),
                                       # "vgg" (graphdeco's metrics.py; ~20x AlexNet's time) or "none"; the
                                       # eval_every evaluations use AlexNet (splatbench.metrics.lpips)
@@ -143,6 +155,13 @@ class TrainConfig:
             check_type(f.name, getattr(self, f.name), _field_types()[f.name])
         if self.iterations < 1:
             raise InputError(f"iterations: expected an int >= 1, got {self.iterations}")
+        from splatbench.train.protocol import get_protocol
+
+        protocol = get_protocol(self.protocol)
+        protocol.check_iterations(self.iterations)
+        for step in self.eval_steps:
+            if not 1 <= step <= self.iterations:
+                raise InputError(f"eval_steps: expected steps in 1..{self.iterations} (iterations), got {step}")
         for name in LR_FIELDS:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
@@ -211,7 +230,8 @@ class TrainConfig:
         if self.schedule not in SCHEDULES:
             raise InputError(f"schedule: expected one of {', '.join(map(repr, SCHEDULES))}, got {self.schedule!r}")
         strategy = self.make_strategy()
-        check_final_window(strategy, self.iterations, self.schedule)
+        if protocol.final_window_check:
+            check_final_window(strategy, self.iterations, self.schedule)
         if self.lr_means == 0 and strategy.reads_mean_gradients:
             # frozen means have no screen-space gradient (the rasterizer's backward skips it), and this
             # strategy declares that it reads it (the Strategy protocol's reads_mean_gradients)
@@ -225,8 +245,9 @@ class TrainConfig:
     def make_strategy(self, *, scaled: bool = True):
         """The densification strategy this config names (`InputError` if unknown). A
         strategy with a ``seed`` field gets the run's ``seed`` unless the options set one.
-        ``scaled``: its schedule fields in this run's steps (``schedule``); False: as written.
-        Step fields written as a fraction of the run ("25%", "1/4") are in run steps either way."""
+        ``scaled``: its schedule fields in this run's steps (``schedule``, laid over
+        `schedule_length`); False: as written. Step fields written as a fraction of the run
+        ("25%", "1/4": of `schedule_length`) are in run steps either way."""
         from splatbench.strategies import STRATEGIES, make_strategy, strategy_fields
         from splatbench.train.schedule import resolve_run_fractions, scaled_strategy
 
@@ -234,9 +255,25 @@ class TrainConfig:
         if "seed" in strategy_fields(self.strategy) and "seed" not in options:
             options["seed"] = self.seed
         options, fixed = resolve_run_fractions(STRATEGIES[self.strategy][0].run_fraction_fields, options,
-                                               self.iterations)
+                                               self.schedule_length)
         strategy = make_strategy(self.strategy, **options)
-        return scaled_strategy(strategy, self.iterations, self.schedule, fixed=fixed) if scaled else strategy
+        return scaled_strategy(strategy, self.schedule_length, self.schedule, fixed=fixed) if scaled else strategy
+
+    @property
+    def schedule_length(self) -> int:
+        """The steps the schedules and the position learning-rate decay are laid over:
+        ``iterations`` under the quick protocol, 30,000 under graphdeco's (however
+        early the run stops)."""
+        from splatbench.train.protocol import get_protocol
+
+        return get_protocol(self.protocol).schedule_length or self.iterations
+
+    @property
+    def evaluation_steps(self) -> list[int]:
+        """Steps of a full test evaluation (`splatbench.train.protocol.evaluation_steps`)."""
+        from splatbench.train.protocol import evaluation_steps
+
+        return evaluation_steps(self.protocol, self.eval_steps, self.iterations)
 
     @property
     def initial_opacity(self) -> float:
@@ -250,7 +287,7 @@ class TrainConfig:
         """``sh_interval`` in this run's steps (scaled under ``schedule = "scaled"``)."""
         from splatbench.train.schedule import scale_step
 
-        return scale_step(self.sh_interval, self.iterations, self.schedule, interval=True)
+        return scale_step(self.sh_interval, self.schedule_length, self.schedule, interval=True)
 
     @property
     def downscale(self) -> int:
@@ -281,7 +318,10 @@ class TrainConfig:
         types = _field_types()
         for key, value in data.items():  # types before construction (whose checks assume them)
             check_type(key, coerce(value, types[key]), types[key])
-        return cls(**{k: coerce(v, types[k]) for k, v in data.items()})
+        data = {k: coerce(v, types[k]) for k, v in data.items()}
+        if "protocol" in data and "iterations" not in data:
+            data["iterations"] = _protocol_iterations(data["protocol"], cls.iterations)
+        return cls(**data)
 
     @classmethod
     def from_toml(cls, text: str, *, source: str = "config") -> TrainConfig:
@@ -310,8 +350,10 @@ def save_config(config: TrainConfig, path: str | Path) -> Path:
 def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...]) -> TrainConfig:
     """A copy of ``config`` with ``key=value`` overrides applied (types coerced)."""
     data = config.to_dict()
+    keys = set()
     for item in overrides:
         key, value = parse_override(item)
+        keys.add(key)
         table = key.split(".", 1)[0]
         if "." in key and table in ("strategy_options", "data"):
             sub = key.split(".", 1)[1]
@@ -320,10 +362,21 @@ def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...])
             data[table] = {**data[table], sub: value}
         else:
             data[key] = value
+    if "protocol" in keys and "iterations" not in keys and data["protocol"] != config.protocol:
+        data["iterations"] = _protocol_iterations(data["protocol"], config.iterations)  # the protocol's length
     return TrainConfig.from_dict(data, source="--set")
 
 
 # ---------------------------------------------------------------------- helpers
+def _protocol_iterations(name: Any, otherwise: int) -> int:
+    """The iterations protocol ``name`` runs when none are given (``otherwise`` when it
+    sets none, or is not a protocol: validation names that)."""
+    from splatbench.train.protocol import PROTOCOLS
+
+    protocol = PROTOCOLS.get(name) if isinstance(name, str) else None
+    return otherwise if protocol is None or protocol.iterations is None else protocol.iterations
+
+
 def _field_types() -> dict[str, Any]:
     return typing.get_type_hints(TrainConfig)
 

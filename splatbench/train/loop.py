@@ -47,7 +47,7 @@ from splatbench.train.losses import photometric_loss
 from splatbench.metrics.image import psnr, ssim_metric
 from splatbench.train.params import (ExponentialLR, gaussians_from_params, make_optimizers, params_from_gaussians,
                                      refreeze, scene_extent, set_lr)
-from splatbench.train.result import EvalPoint, HistoryPoint, TrainResult
+from splatbench.train.result import EvalPoint, HistoryPoint, StepEvaluation, TrainResult
 from splatbench.train.sh_schedule import BandMeasure, ShSchedule
 
 
@@ -98,13 +98,16 @@ def resolve_background(background: list[float] | str, split) -> tuple[torch.Tens
     if not isinstance(background, str):
         return torch.tensor(background, dtype=torch.float32), f"background {list(background)} (config)"
     empty = None
-    if split.alphas is not None:
-        empty, how = split.alphas == 0, "alpha 0"
+    if split.alpha_pixels is not None:
+        empty, how = split.alpha_pixels == 0, "alpha 0"  # 8-bit 0 is exactly alpha 0
     elif split.depths is not None:
         empty, how = split.depths == 0, "depth 0 (nothing hit)"
     if empty is None or not empty.any():
         return torch.zeros(3), "background auto: black (the dataset marks no empty pixels)"
-    colour = split.images[empty].astype(np.float64).mean(axis=0)
+    # the empty pixels of each view in turn (one float view at a time), in the order of a boolean
+    # index over the whole stack, so the mean is the same sum as before
+    pixels = np.concatenate([split.image(i)[empty[i]] for i in range(len(split))])
+    colour = pixels.astype(np.float64).mean(axis=0)
     rgb = [round(float(c), 4) for c in colour]
     return torch.tensor(rgb, dtype=torch.float32), \
         f"background auto: {rgb}, the mean of {int(empty.sum())} training pixels with {how}"
@@ -134,7 +137,7 @@ class Trainer:
         train = dataset.train
         if len(train) == 0:
             raise InputError(f"dataset: {str(dataset.root)!r} has no training views")
-        if config.random_background and train.alphas is None:
+        if config.random_background and train.alpha_pixels is None:
             raise InputError("random_background: the dataset's images have no alpha channel, so a random "
                              "background cannot be composited under the ground truth")
         torch.manual_seed(config.seed)
@@ -148,13 +151,13 @@ class Trainer:
         self.lrs = lr_groups(config)
         self.params = params_from_gaussians(gaussians, self.lrs)
         self.optimizers = make_optimizers(self.params, self.lrs, config.adam_eps)
-        self.means_lr = ExponentialLR(config.lr_means, config.lr_means_final, config.iterations, self.extent)
+        # decays over the protocol's schedule (30,000 steps under graphdeco's, however early the run stops)
+        self.means_lr = ExponentialLR(config.lr_means, config.lr_means_final, config.schedule_length, self.extent)
         self.state = self.strategy.initialize_state(self.params)
         self.absgrad = bool(self.strategy.absgrad)  # declared by the Strategy protocol
         self.sh = ShSchedule(config.sh_degree, config.sh_steps, min_gain_db=config.sh_auto_min_gain_db,
                              lookahead=config.sh_auto_lookahead)
-        self.images = torch.from_numpy(np.ascontiguousarray(train.images, dtype=np.float32))
-        self.alphas = None if train.alphas is None else torch.from_numpy(np.asarray(train.alphas, np.float32))
+        # the training views stay as the dataset holds them (8-bit); each step converts its own (`target`)
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
         self.gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
         self.background, self.background_note = resolve_background(config.background, train)
@@ -207,11 +210,16 @@ class Trainer:
 
     def _next_view(self) -> int:
         if not self._order:
-            views = torch.randperm(len(self.images), generator=self.generator).tolist()
+            views = torch.randperm(len(self.dataset.train), generator=self.generator).tolist()
             if self.holdout and not self.sh.settled:
                 views = [v for v in views if v not in self.holdout]
             self._order = views
         return self._order.pop()
+
+    def target(self, view: int) -> torch.Tensor:
+        """Training view ``view`` as float32 [H, W, 3] (converted from the dataset's 8-bit
+        pixels for this step only; `splatbench.data.Split.image`)."""
+        return torch.from_numpy(self.dataset.train.image(view))
 
     # ------------------------------------------------------------------ one step
     def step(self) -> StepStatus:
@@ -224,13 +232,15 @@ class Trainer:
         set_lr(self.optimizers["means"], lr)
         view = self._next_view()
         camera = self.dataset.train.cameras[view]
-        target = self.images[view]
+        target = self.target(view)
         if cfg.random_background:
             bg = torch.rand(3, generator=self.generator)
         else:
             bg = self.background
-        if self.alphas is not None and bool((bg != self.gt_background).any()):
-            target = target + (bg - self.gt_background) * (1 - self.alphas[view])[..., None]
+        alphas = self.dataset.train.alpha_pixels
+        if alphas is not None and bool((bg != self.gt_background).any()):
+            alpha = torch.from_numpy(self.dataset.train.alpha(view))
+            target = target + (bg - self.gt_background) * (1 - alpha)[..., None]
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
         t1 = time.perf_counter()
@@ -302,7 +312,8 @@ class Trainer:
         for i in idx:
             with_band, _, _, info = self._render(cams[i], degree, self.background.tolist())
             without, _, _, _ = self._render(cams[i], baseline, self.background.tolist())
-            gains.append(psnr(with_band, self.images[i]) - psnr(without, self.images[i]))
+            target = self.target(i)
+            gains.append(psnr(with_band, target) - psnr(without, target))
             visible += info.visible.float()
         w = torch.sigmoid(self.params["opacity_logits"]) * visible
         lo, hi = (baseline + 1) ** 2 - 1, (degree + 1) ** 2 - 1  # rows of bands baseline+1..degree in sh_rest
@@ -327,7 +338,7 @@ class Trainer:
             t0 = time.perf_counter()
             rgb, _, _, _ = self._render(camera, self.sh.degree, self.background.tolist())
             seconds += time.perf_counter() - t0
-            gt = torch.from_numpy(np.ascontiguousarray(test.images[i], dtype=np.float32))
+            gt = torch.from_numpy(test.image(i))  # one view as float at a time
             psnrs.append(psnr(rgb, gt))
             ssims.append(ssim_metric(rgb, gt, self.config.ssim_window))
             for (net, scaled), values in lps.items():
@@ -352,10 +363,21 @@ def lpips_plan(config: TrainConfig, test) -> tuple[list[tuple[str, bool]], list[
         weights_path(config.lpips_net), weights_path(CURVE_LPIPS[0])
     except InputError as exc:
         return [], [], f"LPIPS skipped: {exc}"
-    height, width = np.asarray(test.images[0]).shape[:2]
+    height, width = test.image_size
     if min(height, width) < 16:
         return [], [], f"LPIPS skipped: test images of {width}x{height} px are under 16 px on a side"
     return [(config.lpips_net, config.lpips_scale_inputs)], [CURVE_LPIPS], ""
+
+
+def step_lpips(final: list[tuple[str, bool]]) -> list[tuple[str, bool]]:
+    """The LPIPS of a full step evaluation: the final net in both input conventions
+    (none when the final evaluation computes none)."""
+    return [(final[0][0], True), (final[0][0], False)] if final else []
+
+
+def _step_evaluation(step: int, ev: Evaluation, net: str, num_gaussians: int, seconds: float) -> StepEvaluation:
+    return StepEvaluation(step, ev.psnr, ev.ssim, net if net else "", ev.lpips.get((net, True)),
+                          ev.lpips.get((net, False)), num_gaussians, round(seconds, 3), ev.views)
 
 
 def train(config: TrainConfig, *, progress: Callable[[StepStatus], None] | None = None,
@@ -430,6 +452,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                                       "initialising)") from None
     history: list[HistoryPoint] = []
     evaluations: list[EvalPoint] = []
+    step_evaluations: list[StepEvaluation] = []
     loop_seconds = cpu_seconds = 0.0
     resumed: list[str] = []
     resumed_step = None
@@ -438,14 +461,18 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         resumed_step = trainer.step_index
         resumed.append(resume_line(resume, trainer.step_index, config.iterations))
         history, evaluations = list(extra.get("history", [])), list(extra.get("evaluations", []))
+        step_evaluations = list(extra.get("step_evaluations", []))
         loop_seconds = float(extra.get("loop_seconds", 0.0))
         cpu_seconds = float(extra.get("cpu_seconds", 0.0))
     save_config(config, out / "config.toml")
     final_lpips, curve_lpips, lpips_note = lpips_plan(config, trainer.dataset.test)
+    full_steps = set(config.evaluation_steps)  # the protocol's 7K / 30K columns (splatbench.train.protocol)
+    full_lpips = step_lpips(final_lpips) if full_steps else []
+    net = final_lpips[0][0] if final_lpips else ""
 
     def state() -> dict:
         return {"history": history, "evaluations": evaluations, "loop_seconds": loop_seconds,
-                "cpu_seconds": cpu_seconds}
+                "cpu_seconds": cpu_seconds, "step_evaluations": step_evaluations}
 
     status = None
     load = Load.start()
@@ -464,10 +491,13 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                 history.append(HistoryPoint(status.step, status.loss, status.psnr, status.num_gaussians))
             if progress is not None:
                 progress(status)
-            if config.eval_every and done % config.eval_every == 0 and done < config.iterations:
-                ev = trainer.evaluate(curve_lpips)
+            full = done in full_steps and done < config.iterations  # the last step's is the final evaluation
+            if full or (config.eval_every and done % config.eval_every == 0 and done < config.iterations):
+                ev = trainer.evaluate(list(dict.fromkeys(full_lpips + curve_lpips)) if full else curve_lpips)
                 if ev.psnr is not None:
                     evaluations.append(EvalPoint(done, ev.psnr, ev.ssim, ev.lpips.get(CURVE_LPIPS)))
+                    if full:
+                        step_evaluations.append(_step_evaluation(done, ev, net, trainer.num_gaussians, loop_seconds))
             if config.checkpoint_every and done % config.checkpoint_every == 0:
                 _save_checkpoint(trainer, out, state())
         t0, c0 = time.perf_counter(), process_cpu_seconds()
@@ -482,7 +512,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                                       f"{trainer.step_index} of {config.iterations} steps; resume with "
                                       f"--resume {path.with_suffix('.pt')})") from None
     try:
-        ev = trainer.evaluate(list(dict.fromkeys(final_lpips + curve_lpips)))
+        ev = trainer.evaluate(list(dict.fromkeys(final_lpips + full_lpips + curve_lpips)))
     except Interrupted as exc:
         raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
     notes = resumed + list(trainer.dataset.notes) + ([trainer.init_note] if trainer.init_note else []) \
@@ -503,6 +533,9 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         notes.append("no test views: test metrics are None")
     else:
         evaluations.append(EvalPoint(trainer.step_index, ev.psnr, ev.ssim, ev.lpips.get(CURVE_LPIPS)))
+        if full_steps:
+            step_evaluations.append(_step_evaluation(trainer.step_index, ev, net, trainer.num_gaussians,
+                                                     loop_seconds))
     result = TrainResult(
         test_psnr=ev.psnr, test_ssim=ev.ssim, test_lpips=ev.lpips.get(final_lpips[0]) if final_lpips else None,
         lpips_net=final_lpips[0][0] if final_lpips else "", lpips_scale_inputs=config.lpips_scale_inputs,
@@ -513,8 +546,8 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,
         test_views=ev.views, history=history, evaluations=evaluations,
         sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary,
-        warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step,
-        topology=topology_counts(trainer.state))
+        warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step, protocol=config.protocol,
+        step_evaluations=step_evaluations, topology=topology_counts(trainer.state))
     (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
     return result
 

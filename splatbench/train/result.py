@@ -28,6 +28,21 @@ class EvalPoint(NamedTuple):
     lpips: float | None = None  # mean test LPIPS v0.1, AlexNet, inputs scaled (None: not computed)
 
 
+class StepEvaluation(NamedTuple):
+    """The full test evaluation at one step of `TrainConfig.evaluation_steps` (a protocol's
+    7K / 30K columns): every metric a report sets beside a published one."""
+
+    step: int                     # steps completed when evaluated
+    psnr: float                   # mean test PSNR (dB)
+    ssim: float                   # mean test SSIM (kornia, window ssim_window)
+    lpips_net: str                # LPIPS v0.1 backbone of the two values below ("" when LPIPS was not computed)
+    lpips_scaled: float | None    # mean LPIPS, inputs scaled to [-1, 1] (the lpips package, gsplat, NerfBaselines)
+    lpips_unscaled: float | None  # mean LPIPS, [0, 1] inputs unscaled (graphdeco's metrics.py, the 3DGS paper)
+    num_gaussians: int            # N at that step
+    train_seconds: float          # optimisation-loop wall time up to that step (as TrainResult.train_seconds)
+    views: int                    # test views evaluated
+
+
 @dataclass
 class TrainResult:
     """One run. Metrics are means over the test views; None where there are no test views."""
@@ -62,6 +77,9 @@ class TrainResult:
                                         # own_cpu, own_before, load_other, cores, loaded)
     resumed_step: int | None = None     # --resume: the checkpoint's step (its earlier steps' loop time, timed by the
                                         # run that wrote it, is in train_seconds); None: not resumed
+    protocol: str = "quick"             # TrainConfig.protocol (splatbench.train.protocol)
+    step_evaluations: list[StepEvaluation] = field(default_factory=list)  # at TrainConfig.evaluation_steps
+                                        # (graphdeco-30k: 7,000 and 30,000), the last one the final model's
     topology: TopologyCounts | None = None  # what the strategy did besides its settings' names: refinements,
                                         # opacity resets, cloned / split / pruned, MCMC relocated / added
                                         # (None: a result written before they were recorded)
@@ -71,6 +89,7 @@ class TrainResult:
         data = asdict(self)
         data["history"] = [p._asdict() for p in self.history]
         data["evaluations"] = [p._asdict() for p in self.evaluations]
+        data["step_evaluations"] = [p._asdict() for p in self.step_evaluations]
         return _finite(data)
 
     def to_json(self, *, indent: int | None = None) -> str:
@@ -82,7 +101,12 @@ class TrainResult:
         topology = data.get("topology")
         return cls(**{**data, "history": [HistoryPoint(**p) for p in data.get("history", [])],
                       "evaluations": [EvalPoint(**p) for p in data.get("evaluations", [])],
+                      "step_evaluations": [StepEvaluation(**p) for p in data.get("step_evaluations", [])],
                       "topology": TopologyCounts(**topology) if isinstance(topology, dict) else None})
+
+    def at_step(self, step: int) -> StepEvaluation | None:
+        """The full test evaluation after ``step`` steps (None when the run made none there)."""
+        return next((e for e in self.step_evaluations if e.step == step), None)
 
 
 def _finite(value):
@@ -95,4 +119,4 @@ def _finite(value):
     return value
 
 
-__all__ = ["TrainResult", "HistoryPoint", "EvalPoint"]
+__all__ = ["TrainResult", "HistoryPoint", "EvalPoint", "StepEvaluation"]
