@@ -77,6 +77,7 @@ def test_report_puts_the_paper_beside_the_run_and_says_whether_it_is_within_half
     text = path.read_text()
     assert "Not the paper's protocol" not in text
     assert "`graphdeco-30k`" in text and "100 views" in text and "200 views" in text
+    assert "evaluated after 7,000 and 30,000 steps of one run" in text
     assert "| test PSNR (dB) | 35.78 (30K) | 32.91 | 35.41 |" in text
     assert "| difference to the paper (dB) |  |  | -0.37 |" in text
     assert "| LPIPS, [0, 1] unscaled (graphdeco) | not per scene | 0.0530 | 0.0520 |" in text

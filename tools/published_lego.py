@@ -122,7 +122,7 @@ def report_markdown(result: TrainResult, config: TrainConfig, *, command: str, t
               f"**Protocol.** `{config.protocol}`: graphdeco-inria's 30,000-step schedule unscaled (refine 500..15,000 "
               f"every 100, opacity reset every 3,000, one SH band more every 1,000, position learning rate "
               f"{config.lr_means:.1e} -> {config.lr_means_final:.1e} x scene extent over 30,000 steps); the test split "
-              f"evaluated after {', '.join(f'{e.step:,}' for e in cols) or 'no step'} steps of one run "
+              f"evaluated after {_and([f'{e.step:,}' for e in cols]) or 'no step'} steps of one run "
               f"(the paper's 7K / 30K columns are checkpoints of one 30K run). Seed {config.seed}, strategy "
               f"`{result.strategy}`, SH degree {result.sh_degree}.", "",
               f"**Data.** `transforms_train.json` ({_f(train_views, 'd')} views) for training, `transforms_test.json` "
@@ -185,6 +185,10 @@ def report_markdown(result: TrainResult, config: TrainConfig, *, command: str, t
     return "\n".join(lines)
 
 
+def _and(items: list[str]) -> str:
+    return " and ".join(items) if len(items) <= 2 else ", ".join(items[:-1]) + " and " + items[-1]
+
+
 def _net_name(net: str) -> str:
     return {"vgg": "VGG", "alex": "AlexNet", "": "n/a"}.get(net, net)
 
@@ -211,7 +215,7 @@ def _hours(seconds: float) -> str:
 def _load_line(load: dict) -> str:
     if not load:
         return "not recorded."
-    flag = " **loaded: times not trusted**" if load.get("loaded") else ""
+    flag = "; **loaded: times not trusted**" if load.get("loaded") else ""
     return (f"1-minute load {load.get('load_before', 0):.2f} -> {load.get('load_after', 0):.2f}, others' "
             f"{load.get('load_other', 0):.2f} on {load.get('cores', '?')} cores{flag}.")
 

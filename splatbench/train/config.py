@@ -17,8 +17,10 @@ Schedules (refinement window, opacity reset, SH steps) are written in graphdeco'
 (`splatbench.train.schedule`). ``protocol`` names how the schedule is laid out and where
 the run is evaluated: ``"quick"`` (over the run's own ``iterations``), or graphdeco's
 unscaled 30,000-step schedule evaluated at 7,000 and 30,000 steps (``"graphdeco-30k"``)
-or stopped at 7,000 (``"graphdeco-7k"``); choosing a protocol without ``iterations``
-takes the protocol's (`splatbench.train.protocol`).
+or stopped at 7,000 (``"graphdeco-7k"``); a protocol chosen without ``iterations`` in a
+TOML file, a grid or ``--set`` brings its own (`TrainConfig.from_dict`, `apply_overrides`;
+the constructor takes ``iterations`` as given: ``TrainConfig(protocol="graphdeco-7k",
+iterations=7000)``); `splatbench.train.protocol`.
 
 Example::
 
