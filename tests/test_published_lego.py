@@ -1,19 +1,23 @@
-"""tools/published_lego.py (issue 29 item 7): the paper's settings as a config, graphdeco's
-NeRF-synthetic initialisation, and the report written from a run's result -- here a
+"""tools/published_lego.py (issue 29 item 7): the paper's settings as a config (graphdeco's
+NeRF-synthetic initialisation through the built-in ``init = "random"``, so a bare ``splatbench
+train --resume`` continues the run), and the report written from a run's result -- here a
 synthetic result (no training), so every number in the report can be checked against it."""
 
 from __future__ import annotations
 
 import importlib.util
 import json
+import math
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from splatbench.train import TrainResult
-from splatbench.train.initializers import InitSettings
+from PIL import Image
+
+from splatbench.train import TrainConfig, TrainResult
+from splatbench.train.initializers import INITIALIZERS, InitSettings, initialize, random_region
 from splatbench.train.result import EvalPoint, StepEvaluation
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -40,8 +44,9 @@ def fake_result(psnr_30k: float, *, iterations: int = 30_000) -> TrainResult:
         ply_path="/somewhere/run/point_cloud.ply", render_ms_per_view=812.0, peak_rss_mb=2400.0, strategy="default",
         scene_extent=4.4, test_views=200,
         evaluations=[EvalPoint(2500, 30.1, 0.9, 0.08), EvalPoint(7000, cols[0].psnr, cols[0].ssim, 0.05)],
-        notes=["background [1.0, 1.0, 1.0] (config)"], init={"method": "paper-cube", "points": 100_000,
-                                                            "region": [-1.3, 1.3]},
+        notes=["background [1.0, 1.0, 1.0] (config)"], init={"method": "random", "points": 100_000,
+                                                            "region": "nerf_synthetic", "region_shape": "cube",
+                                                            "region_center": [0.0, 0.0, 0.0], "region_size": 1.3},
         load={"load_before": 0.1, "load_after": 0.2, "load_other": 0.0, "cores": 2, "loaded": False},
         lpips_net="vgg", lpips_scale_inputs=False, protocol="graphdeco-30k", step_evaluations=cols)
 
@@ -50,22 +55,85 @@ def test_paper_config_is_graphdecos_30k_protocol_on_white(tool, tmp_path):
     cfg = tool.paper_config(tmp_path / "lego", tmp_path / "run")
     assert (cfg.protocol, cfg.iterations, cfg.schedule_length, cfg.evaluation_steps) == \
         ("graphdeco-30k", 30_000, 30_000, [7000, 30_000])
-    assert cfg.background == [1.0, 1.0, 1.0] and cfg.init == "paper-cube" and cfg.init_random_points == 100_000
+    assert cfg.background == [1.0, 1.0, 1.0] and cfg.init_random_points == 100_000
+    assert (cfg.init, cfg.init_region, cfg.initial_opacity) == ("random", "nerf_synthetic", 0.1)
     assert (cfg.lpips_net, cfg.lpips_scale_inputs, cfg.layout) == ("vgg", False, "blender")
     smoke = tool.paper_config(tmp_path / "lego", tmp_path / "run", tool.SMOKE)
     assert (smoke.iterations, smoke.evaluation_steps, smoke.downscale) == (300, [100, 300], 4)
 
 
-def test_paper_cube_is_graphdecos_nerf_synthetic_initialisation(tool):
-    from splatbench.train.initializers import INITIALIZERS
+def test_the_tool_adds_no_initializer_so_a_bare_resume_reads_its_config(tool, tmp_path):
+    """A checkpoint holds the config as data (`checkpoint_config` is `TrainConfig.from_dict`):
+    it names only built-in initializers, and loading the tool registers none."""
+    before = dict(INITIALIZERS)
+    spec = importlib.util.spec_from_file_location("published_lego_again", ROOT / "tools" / "published_lego.py")
+    spec.loader.exec_module(importlib.util.module_from_spec(spec))
+    assert INITIALIZERS == before
+    cfg = tool.paper_config(tmp_path / "lego", tmp_path / "run")
+    assert INITIALIZERS[cfg.init].__module__ == "splatbench.train.initializers"  # built in
+    assert TrainConfig.from_dict(cfg.to_dict()) == cfg
 
-    made = INITIALIZERS["paper-cube"](None, InitSettings(sh_degree=3, opacity=0.1, random_points=5000, seed=3))
-    g = made.gaussians
-    assert len(g) == 5000 and made.summary["region"] == [-1.3, 1.3]
-    assert np.abs(g.means).max() <= 1.3 and np.abs(g.means).max() > 1.29  # fills the cube
-    colour = 0.5 + 0.28209479177387814 * g.sh[:, 0]
-    assert colour.min() >= 0.5 and colour.max() <= 0.5 + 0.2821 / 255  # SH2RGB(U[0, 1) / 255): grey
+
+def _blender_folder(root: Path, centre=(0.0, 0.0, 0.0), radius: float = 4.031, n: int = 12) -> Path:
+    """A NeRF-synthetic-style folder (transforms_{train,test}.json, "./train/r_i" paths, 8x8 RGBA
+    PNGs, camera_angle_x only): cameras on the upper half of a sphere of ``radius`` (lego's rig:
+    4.03) around ``centre``, looking at it. The camera-to-world matrices are written by hand in
+    Blender's axes (x right, y up, looking down -z), not through splatbench's `Camera`."""
+    rng = np.random.default_rng(5)
+    for split, count in (("train", n), ("test", 2)):
+        frames = []
+        for i in range(count):
+            d = rng.normal(size=3)
+            d[2] = abs(d[2]) + 0.2  # Blender's z is up: above the ground plane, as lego's rig
+            back = d / np.linalg.norm(d)  # the camera looks down -back, at the centre
+            right = np.cross([0.0, 0.0, 1.0], back)
+            right /= np.linalg.norm(right)
+            c2w = np.eye(4)
+            c2w[:3, 0], c2w[:3, 1], c2w[:3, 2] = right, np.cross(back, right), back
+            c2w[:3, 3] = np.asarray(centre) + radius * back
+            frames.append({"file_path": f"./{split}/r_{i}", "rotation": 0.012566, "transform_matrix": c2w.tolist()})
+            (root / split).mkdir(parents=True, exist_ok=True)
+            Image.fromarray(rng.integers(0, 256, (8, 8, 4), dtype=np.uint8)).save(root / split / f"r_{i}.png")
+        (root / f"transforms_{split}.json").write_text(json.dumps({"camera_angle_x": 0.6911, "frames": frames}))
+    return root
+
+
+def test_region_auto_picks_graphdecos_box_on_a_nerf_synthetic_folder(tool, tmp_path):
+    """Loaded from disk as lego is (its axis conventions included): ``auto`` picks the box the
+    tool sets explicitly; the same rig moved off the origin gets the convergence ball instead.
+    The tool's initializer then fills [-1.3, 1.3]^3 with graphdeco's opacity and 3-NN scales."""
+    from splatbench.data import load_dataset
+    from splatbench.init import knn_mean_sq_dist
+
+    ds = load_dataset(_blender_folder(tmp_path / "lego"), background=(1.0, 1.0, 1.0))
+    assert ds.layout == "blender" and ds.points is None
+    region = random_region(ds, "auto")
+    assert (region.chosen, region.shape, region.size) == ("nerf_synthetic", "cube", 1.3) and not region.center.any()
+    moved = load_dataset(_blender_folder(tmp_path / "moved", centre=(3.0, 0.0, 0.0)))
+    off = random_region(moved, "auto")
+    assert off.chosen == "convergence"
+    np.testing.assert_allclose(off.center, [3.0, 0.0, 0.0], atol=1e-6)
+
+    cfg = tool.paper_config(tmp_path / "lego", tmp_path / "run", ["init_random_points=3000"])
+    made = initialize(cfg.init, ds, InitSettings(sh_degree=cfg.sh_degree, opacity=cfg.initial_opacity,
+                                                 random_points=cfg.init_random_points, seed=cfg.seed,
+                                                 region=cfg.init_region))
+    g, summary = made.gaussians, made.summary
+    assert (summary["method"], summary["region"], summary["points"]) == ("random", "nerf_synthetic", 3000)
+    means = g.means.astype(np.float64)
+    assert np.abs(means).max() <= 1.3 + 1e-6 and np.abs(means).max() > 1.29  # fills the box
+    # uniform: the fraction in the inner half-size cube is 1/8 (binomial sd 0.006 at n = 3000)
+    assert abs(np.mean(np.abs(means).max(axis=1) < 0.65) - 0.125) < 0.03
     assert np.allclose(1 / (1 + np.exp(-g.opacity_logits)), 0.1)
+    # create_from_pcd's scales: log sqrt of the mean squared 3-NN distance, on all three axes
+    # (float32 storage: 1e-5 relative)
+    expect = np.log(np.sqrt(np.maximum(knn_mean_sq_dist(means), 1e-7)))
+    np.testing.assert_allclose(g.log_scales, np.repeat(expect[:, None], 3, axis=1), atol=1e-5)
+    # colours uniform in [0, 1) per channel (graphdeco's are one grey, the tool's doc says so):
+    # the DC colour C0 sh0 + 0.5 spans the range, mean 1/2 (sd of the mean 0.29 / sqrt(9000) = 0.003)
+    colour = 0.5 + 0.28209479177387814 * g.sh[:, 0].astype(np.float64)
+    assert colour.min() >= -1e-6 and colour.max() <= 1 + 1e-6 and colour.min() < 0.01 and colour.max() > 0.99
+    assert abs(colour.mean() - 0.5) < 0.015 and math.isclose(np.abs(g.sh[:, 1:]).max(), 0.0)
 
 
 def test_report_puts_the_paper_beside_the_run_and_says_whether_it_is_within_half_a_db(tool, tmp_path):

@@ -11,16 +11,29 @@ The paper's settings (Kerbl et al. 2023, Table 2 and graphdeco-inria's ``train.p
 evaluated after 7,000 and 30,000 steps of that one run), the given split (100 views of
 ``transforms_train.json`` / 200 of ``transforms_test.json``; ``transforms_val.json`` unused, as
 graphdeco's ``--eval`` leaves it), 800x800 RGBA composited on white, white background in training
-and evaluation, 100,000 initial points uniform in [-1.3, 1.3]^3 with graphdeco's colours
-(``SH2RGB(U[0, 1) / 255)``, grey to 0.2 %), SH degree 3, the default densification. LPIPS is
-VGG (the paper's) in both input conventions; ``test_lpips`` is graphdeco's ([0, 1] unscaled).
+and evaluation, 100,000 initial points uniform in [-1.3, 1.3]^3, SH degree 3, the default
+densification. LPIPS is VGG (the paper's) in both input conventions; ``test_lpips`` is
+graphdeco's ([0, 1] unscaled).
 
-The initial points: graphdeco's ``readNerfSyntheticInfo`` draws them in [-1.3, 1.3]^3 (a
-NeRF-synthetic scene sits inside that cube). Until ``init = random`` samples that region for a
-Blender-layout dataset (issue 29 item 1, branch h/init), this tool registers the initializer
-`paper_cube` itself (`register_init`, the plug-in hook); a run records ``init.method =
-"paper-cube"`` and its region. ``--resume`` therefore goes through this tool, not the bare
-``splatbench train --resume``, which does not know that name.
+The initial points are the built-in ``init = "random"`` with ``init_region = "nerf_synthetic"``
+(set explicitly; ``auto`` picks the same box on lego: the axes meet at the origin, rig radius
+4.03) and ``init_random_points = 100000``, so the run's checkpoints hold nothing this tool
+adds: ``splatbench train --resume OUT/checkpoints/iteration_N.pt`` continues a lego run as
+``--resume`` here does. Against graphdeco's ``readNerfSyntheticInfo`` + ``create_from_pcd``:
+
+* the same: 100,000 points uniform in [-1.3, 1.3]^3; one isotropic Gaussian per point with
+  scale sqrt(mean squared distance to its 3 nearest other points, clamped at 1e-7) (graphdeco:
+  simple-knn's ``distCUDA2`` in float32; here scipy's k-d tree in float64), identity rotation,
+  opacity 0.1, SH DC from the point colour (``RGB2SH``), higher bands zero.
+* the colours differ. graphdeco draws ``shs = U[0, 1) / 255``, writes ``SH2RGB(shs) * 255``
+  (127.50..127.78) to ``points3d.ply`` as uint8, which truncates every value to 127, and reads
+  that PLY back: every point starts at 127/255 grey (SH DC -0.00695 on each channel). Here
+  the colours are uniform in [0, 1) per channel (SH DC from them). What this changes at 30K
+  is not measured.
+* the draws differ: graphdeco's come from ``np.random`` seeded 0 (``safe_state``), stored in
+  float32, and are drawn once per dataset folder (``points3d.ply`` is written there and read
+  by every later run); here they come from ``numpy.random.default_rng(seed)``, so the start
+  varies with the run's seed.
 
 Cost on two cores (issue 30, 9af4c7d): about 1 s per step, so about 8 h of loop, plus two full
 evaluations and a test-curve point (render + AlexNet LPIPS, ~0.6 CPU-s per view) every `EVAL_EVERY`
@@ -46,48 +59,31 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # this checkout's splatbench
-import numpy as np  # noqa: E402
-
 from splatbench.errors import InputError  # noqa: E402
 from splatbench.interrupt import Interrupted, stop_on_signals  # noqa: E402
 from splatbench.report_files import save_figure, write_csv, write_json, write_text  # noqa: E402
 from splatbench.train import TrainConfig, TrainResult, apply_overrides  # noqa: E402
-from splatbench.train.initializers import Initialization, register_init  # noqa: E402
+from splatbench.train.initializers import NERF_SYNTHETIC_HALF  # noqa: E402
 
 #: The 3DGS paper's lego test PSNR at 30K (Kerbl et al. 2023, Table 2; the table gives PSNR only).
 PAPER_PSNR_30K = 35.78
 #: How close a reproduction has to come (issue 29 item 7).
 TOLERANCE_DB = 0.5
-#: graphdeco's NeRF-synthetic initialisation: this many points uniform in [-HALF, HALF]^3.
-PAPER_POINTS, HALF = 100_000, 1.3
-INIT_NAME = "paper-cube"
+#: graphdeco's NeRF-synthetic initialisation: this many points uniform in [-1.3, 1.3]^3.
+PAPER_POINTS = 100_000
 EVAL_EVERY = 2500          # test-curve points (AlexNet LPIPS); the 7K and 30K evaluations are full
 CHECKPOINT_EVERY = 2500
 REPORT_DIR = ROOT / "reports" / "published_lego"
 SMOKE = ["iterations=300", "eval_steps=[100]", "eval_every=100", "data.downscale=4", "checkpoint_every=100"]
 
 
-@register_init(INIT_NAME)
-def paper_cube(dataset, settings) -> Initialization:
-    """graphdeco's ``readNerfSyntheticInfo`` points: ``settings.random_points`` uniform in
-    [-1.3, 1.3]^3 (numpy seeded by the run's seed), colours ``SH2RGB(U[0, 1) / 255)``."""
-    from splatbench.init import from_points
-
-    rng = np.random.default_rng(settings.seed)
-    xyz = rng.random((settings.random_points, 3)) * (2 * HALF) - HALF
-    rgb = 0.5 + 0.28209479177387814 * rng.random((settings.random_points, 3)) / 255.0  # SH2RGB(shs / 255)
-    gaussians = from_points(xyz, rgb, sh_degree=settings.sh_degree, opacity=settings.opacity)
-    return Initialization(gaussians, {"region": [-HALF, HALF]},
-                          f"init: {settings.random_points} points uniform in [-{HALF}, {HALF}]^3 (graphdeco's "
-                          f"NeRF-synthetic initialisation)")
-
-
 def paper_config(dataset: str | Path, out: str | Path, overrides: list[str] = ()) -> TrainConfig:
     """The paper's settings (module doc) on ``dataset``, writing into ``out``, then ``overrides``."""
     base = TrainConfig(dataset=str(Path(dataset).resolve()), out=str(Path(out).resolve()), layout="blender",
-                       protocol="graphdeco-30k", iterations=30_000, init=INIT_NAME, init_random_points=PAPER_POINTS,
-                       background=[1.0, 1.0, 1.0], sh_degree=3, strategy="default", lpips_net="vgg",
-                       lpips_scale_inputs=False, eval_every=EVAL_EVERY, checkpoint_every=CHECKPOINT_EVERY)
+                       protocol="graphdeco-30k", iterations=30_000, init="random", init_region="nerf_synthetic",
+                       init_random_points=PAPER_POINTS, background=[1.0, 1.0, 1.0], sh_degree=3, strategy="default",
+                       lpips_net="vgg", lpips_scale_inputs=False, eval_every=EVAL_EVERY,
+                       checkpoint_every=CHECKPOINT_EVERY)
     return apply_overrides(base, list(overrides))
 
 
@@ -129,7 +125,7 @@ def report_markdown(result: TrainResult, config: TrainConfig, *, command: str, t
               f"({result.test_views} views) for testing, `transforms_val.json` unused (graphdeco's `--eval`); "
               f"RGBA composited on white, white background in training and evaluation"
               f"{'' if config.downscale == 1 else f'; images downscaled {config.downscale}x (PIL bicubic)'}.", "",
-              f"**Initialisation.** {_init_line(result)}", "",
+              f"**Initialisation.** {_init_line(result, config)}", "",
               "**Metrics.** Means over the test views of PSNR and SSIM (splatbench's: float32 renders against the "
               "float32 composited targets; graphdeco's `metrics.py` reads 8-bit PNGs of both) and LPIPS v0.1 "
               f"({_net_name(final.lpips_net if final else '')}) in both input "
@@ -199,13 +195,16 @@ def _resumed(result: TrainResult) -> str:
     return f" (resumed at step {result.resumed_step:,}; earlier steps timed by the run that wrote the checkpoint)"
 
 
-def _init_line(result: TrainResult) -> str:
+def _init_line(result: TrainResult, config: TrainConfig) -> str:
     init = result.init or {}
-    if init.get("method") == INIT_NAME:
-        lo, hi = init.get("region", [-HALF, HALF])
-        return (f"{init.get('points', 0):,} points uniform in [{lo}, {hi}]^3, colours SH2RGB(U[0, 1) / 255) "
-                f"(graphdeco's `readNerfSyntheticInfo`), opacity 0.1, 3-NN scales.")
-    return f"`{init.get('method', '?')}` ({init.get('points', '?')} points): NOT the paper's initialisation."
+    points = init.get("points", "?")
+    if not (init.get("method") == "random" and init.get("region") == "nerf_synthetic" and points == PAPER_POINTS):
+        return f"`{init.get('method', '?')}` ({points} points): NOT the paper's initialisation."
+    return (f"{points:,} points uniform in [-{NERF_SYNTHETIC_HALF}, {NERF_SYNTHETIC_HALF}]^3 (graphdeco's "
+            f"`readNerfSyntheticInfo` box; `init = \"random\"`, `init_region = \"nerf_synthetic\"`), opacity "
+            f"{config.initial_opacity:g}, 3-NN scales (graphdeco's `create_from_pcd`); colours uniform in [0, 1) "
+            f"per channel, where graphdeco's are all 127/255 grey (its 8-bit `points3d.ply`): not measured "
+            f"what that changes.")
 
 
 def _hours(seconds: float) -> str:
