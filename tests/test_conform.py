@@ -89,6 +89,11 @@ def test_no_pixel_sits_near_a_discrete_decision(name):
     basis = reference.sh_basis(dirs, degree)
     colour = np.einsum("nk,nkc->nc", basis, s.sh[:, :basis.shape[1]]) + 0.5
     assert np.abs(colour).min() > 0.05, name
+    # The oracle's own band (reference/band.py) agrees: no pixel in it, no Gaussian in the gradient band.
+    from splatbench.conform.oracle import gradient_band
+
+    grad_band, widen = gradient_band(name, s, conventions_of(dense()))
+    assert not grad_band.any() and widen == 0.0, name
 
 
 def test_the_depth_probe_defeats_the_classic_wrong_sort_keys():
