@@ -216,3 +216,4 @@ def dense(bug: str | None = None, *, tile_box: bool = False) -> Backend:
 
 # One broken backend as a module attribute, for `splatbench conform tests.broken_backends:dense_sort_strided`.
 dense_sort_strided = dense("sort_strided")
+dense_conic_b_grad_half = dense("conic_b_grad_half")  # the pytest plugin's one-bug backend (tests/test_pytest_plugin.py)

@@ -16,15 +16,23 @@ the snapshot was), a regression (farther), or a convention change (neither, or e
 convention conform's diagnosis finds). Modules:
 
     scenes      the scene set, versioned       files     the snapshot format (write, read, verify)
-    measure     rendering a scene, tolerances  check     the verdicts
+    measure     rendering a scene, tolerances  checking  the verdicts (`check`)
     cli         the two commands               pytest_plugin   ``pytest --splatbench-backend``
 """
 
 from __future__ import annotations
 
-from splatbench.regress.check import CheckReport, QuantityResult, check
-from splatbench.regress.files import SNAPSHOT_FORMAT, read_snapshot, snapshot
-from splatbench.regress.scenes import SCENE_SET_VERSION, SCENE_SETS, scene_set
+import importlib
 
-__all__ = ["snapshot", "check", "CheckReport", "QuantityResult", "read_snapshot", "scene_set", "SCENE_SETS",
-           "SCENE_SET_VERSION", "SNAPSHOT_FORMAT"]
+# Loaded on first use: the pytest plugin (`pytest_plugin`, registered for every pytest run once
+# splatbench is installed) imports this package, and must not load torch or Dr.Jit when it is not asked.
+_PUBLIC = {"snapshot": "files", "read_snapshot": "files", "SNAPSHOT_FORMAT": "files", "check": "checking",
+           "CheckReport": "checking", "QuantityResult": "checking", "scene_set": "scenes", "SCENE_SETS": "scenes",
+           "SCENE_SET_VERSION": "scenes"}
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name: str):
+    if name in _PUBLIC:
+        return getattr(importlib.import_module(f"splatbench.regress.{_PUBLIC[name]}"), name)
+    raise AttributeError(f"module 'splatbench.regress' has no attribute {name!r}")
