@@ -48,7 +48,7 @@ def test_the_downstream_example_catches_a_gradient_change_and_reports_its_fix(tm
     regressed = [line for line in bad.stdout.splitlines() if ": regression: " in line]
     assert any("::grad_log_scales: regression" in line for line in regressed)
     assert not any("::rgb:" in line or "::grad_sh:" in line for line in regressed)  # the forward did not move
-    assert "conform: defect conic_B" in bad.stdout
+    assert "conform on the backend now: defect conic_B" in bad.stdout
 
     # The buggy release was snapshotted; the fix moves toward the oracle: exit 0, reported as improvements.
     again = _run(project, "splatbench", "snapshot", "toy_splat:render", "--out", "snapshots", "--scenes", "small",

@@ -89,6 +89,7 @@ class CheckReport:
     results: tuple[QuantityResult, ...]
     seconds: float = 0.0
     notes: tuple[str, ...] = field(default=())
+    conform: str = ""  # what conform says of the backend now (run when something regressed), one clause
 
     @property
     def changed(self) -> tuple[QuantityResult, ...]:
@@ -114,6 +115,7 @@ class CheckReport:
     def to_dict(self) -> dict:
         return {"backend": self.backend, "version": self.version, "against": self.against,
                 "snapshot_backend": self.snapshot_backend, "scene_set": self.scene_set, "status": self.status,
+                "conform": self.conform,
                 "passed": self.passed, "summary": self.counts(), "notes": list(self.notes),
                 "seconds": round(self.seconds, 2), "quantities": [asdict(r) for r in self.results]}
 
@@ -167,6 +169,7 @@ def check(backend, against: str | Path, *, device: str = "auto", scenes: tuple[s
             continue
         results += _judge_scene(backend, scene, arrays, values, wanted, declared_change)
         say(f"{scene.name}: {sum(r.scene == scene.name and r.status != 'unchanged' for r in results)} changed")
+    cause = ""
     if diagnose and any(not r.passed and r.difference is not None for r in results):
         cause = _conform_cause(backend, device)
         results = [r if r.passed or r.difference is None else _with_cause(r, cause) for r in results]
@@ -176,7 +179,7 @@ def check(backend, against: str | Path, *, device: str = "auto", scenes: tuple[s
 
     return CheckReport(backend.name, backend_version(backend), str(against),
                        f"{before.get('name')} {before.get('version')}", snap.manifest["scene_set"], tuple(results),
-                       time.perf_counter() - start, tuple(notes))
+                       time.perf_counter() - start, tuple(notes), cause)
 
 
 def _render(backend, scene, device, arrays):

@@ -67,19 +67,33 @@ def check(backend: str, against: Path, as_json: bool, save_dir: Path | None, sce
     sys.exit(report.exit_code)
 
 
+SHOWN = 12  # rows printed per verdict (the largest changes first); --json has them all
+
+
 def format_report(report) -> str:
+    """The changed quantities by verdict (the largest first, `SHOWN` of each), what conform says once,
+    and one summary line."""
     counts = report.counts()
     lines = [f"check {report.backend} {report.version} against {report.against} (snapshot of "
              f"{report.snapshot_backend}; scene set {report.scene_set}, {len({r.scene for r in report.results})} "
              f"scenes, {len(report.results)} quantities)"]
     lines += [f"note: {n}" for n in report.notes]
+    suffix = f"; {report.conform}" if report.conform else ""
     for status in ("regression", "convention change", "improvement"):
         rows = [r for r in report.results if r.status == status]
-        if rows:
-            lines.append("")
-            lines.append({"regression": "REGRESSIONS", "convention change": "CONVENTION CHANGES",
-                          "improvement": "improvements"}[status] + f" ({len(rows)}):")
-            lines += [f"  {r.line()}" for r in rows]
+        if not rows:
+            continue
+        rows.sort(key=lambda r: -(r.difference / r.tolerance) if r.difference is not None and r.tolerance else
+                  -float("inf"))
+        lines.append("")
+        lines.append({"regression": "REGRESSIONS", "convention change": "CONVENTION CHANGES",
+                      "improvement": "improvements"}[status] + f" ({len(rows)}, the largest first):")
+        lines += [f"  {r.line().removesuffix(suffix)}" for r in rows[:SHOWN]]
+        if len(rows) > SHOWN:
+            lines.append(f"  ... and {len(rows) - SHOWN} more (--json lists every quantity)")
+    if report.conform:
+        lines.append("")
+        lines.append(f"{report.conform.replace('conform: ', 'conform on the backend now: ', 1)}")
     lines.append("")
     lines.append(f"{report.backend}: {report.status}: {counts['unchanged']} unchanged, {counts['improvement']} "
                  f"improved, {counts['regression']} regressed, {counts['convention change']} convention changes "
