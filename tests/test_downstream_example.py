@@ -1,7 +1,7 @@
 """examples/downstream/, used as its maintainer would (a copy, its folder on the path): a snapshot, a
 one-line change to a gradient that `splatbench check` fails naming it, and the fix reported as an
 improvement toward the oracle; its own test with the plugin's fixture. The small scene set keeps it
-to about a minute on 2 cores (the toy is dense: every Gaussian at every pixel)."""
+to under two minutes on 2 loaded cores (the toy is dense: every Gaussian at every pixel)."""
 
 from __future__ import annotations
 
@@ -42,20 +42,22 @@ def test_the_downstream_example_catches_a_gradient_change_and_reports_its_fix(tm
                 "--quiet")
     assert snap.returncode == 0, snap.stderr
     _edit(project, LINE, BUG)  # the one-line change: the same value, half the gradient of B
-    bad = _run(project, "splatbench", "check", "toy_splat:render", "--against", "snapshots", "--quiet")
+    # --no-diagnose: conform's naming of the cause is checked in tests/test_regress.py (it costs ~25 s)
+    bad = _run(project, "splatbench", "check", "toy_splat:render", "--against", "snapshots", "--quiet",
+               "--no-diagnose")
     assert bad.returncode == 1, bad.stdout + bad.stderr
     assert "REGRESSIONS" in bad.stdout and "moved away from the oracle" in bad.stdout
     regressed = [line for line in bad.stdout.splitlines() if ": regression: " in line]
     assert any("::grad_log_scales: regression" in line for line in regressed)
     assert not any("::rgb:" in line or "::grad_sh:" in line for line in regressed)  # the forward did not move
-    assert "conform on the backend now: defect conic_B" in bad.stdout
 
     # The buggy release was snapshotted; the fix moves toward the oracle: exit 0, reported as improvements.
     again = _run(project, "splatbench", "snapshot", "toy_splat:render", "--out", "snapshots", "--scenes", "small",
                  "--quiet")
     assert again.returncode == 0, again.stderr
     _edit(project, BUG, LINE)
-    fixed = _run(project, "splatbench", "check", "toy_splat:render", "--against", "snapshots", "--quiet")
+    fixed = _run(project, "splatbench", "check", "toy_splat:render", "--against", "snapshots", "--quiet",
+                 "--no-diagnose")
     assert fixed.returncode == 0, fixed.stdout + fixed.stderr
     assert "toy-splat: improved:" in fixed.stdout and "moved toward the oracle" in fixed.stdout
     assert "0 regressed" in fixed.stdout
