@@ -195,9 +195,7 @@ def _with_cause(r: QuantityResult, cause: str) -> QuantityResult:
 
 
 def _judge_scene(backend, scene, arrays, values, wanted, declared_change) -> list[QuantityResult]:
-    from splatbench.compare.measure import entry_band
-    from splatbench.regress.measure import (GRAD_PREFIX, Band, gradient_difference, gradient_scale,
-                                            gradient_tolerance, output_difference)
+    from splatbench.regress.measure import GRAD_PREFIX, Band, gradient_difference, gradient_tolerance, output_difference
 
     band = Band(*(arrays[k] for k in ("band", "tie_slack", "grad_band", "grad_weight")))
     band = Band(band.band.astype(bool), band.tie_slack, band.grad_band.astype(bool), band.grad_weight)
@@ -211,9 +209,7 @@ def _judge_scene(backend, scene, arrays, values, wanted, declared_change) -> lis
                                             f"outputs={list(backend.info.outputs)}, gradients={backend.info.gradients})"))
             continue
         if q.startswith(GRAD_PREFIX):
-            outside = ~entry_band(band.grad_band, arrays[q].size)
-            rest, inside, where = gradient_difference(values[q], arrays[q], band,
-                                                      gradient_scale(q, arrays, outside))
+            rest, inside, where = gradient_difference(q, values[q], arrays[q], band, arrays)
             tol, band_tol = gradient_tolerance(scene, band)
             n_band = int(band.grad_band.sum())
             note = f"gradient band of {n_band} Gaussians: {inside:.2e} (budget {band_tol:g})" if n_band else ""

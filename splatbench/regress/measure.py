@@ -198,15 +198,17 @@ def gradient_scale(q: str, ref: dict[str, np.ndarray], outside: np.ndarray | Non
     return float(np.linalg.norm(g))
 
 
-def gradient_difference(got: np.ndarray, ref: np.ndarray, band: Band, floor: float = 0.0) -> tuple[float, float, str]:
-    """(relative L2 difference outside the gradient band, inside it, where the largest entry difference
-    outside it is: Gaussian and component); ``floor``: of the denominator (`gradient_scale`)."""
+def gradient_difference(q: str, got: np.ndarray, ref: np.ndarray, band: Band, ref_all: dict[str, np.ndarray]
+                        ) -> tuple[float, float, str]:
+    """(relative L2 difference of quantity ``q`` outside the gradient band, inside it, where the largest
+    entry difference outside it is: Gaussian and component); ``ref_all``: every reference quantity, for
+    the denominator's floor (`gradient_scale`)."""
     from splatbench.compare.measure import entry_band
 
     a, b = got.reshape(-1), ref.reshape(-1)
     inside = entry_band(band.grad_band, a.size)
-    rest = relative(a[~inside], b[~inside], floor)
-    in_band = relative(a[inside], b[inside]) if inside.any() else 0.0
+    rest = relative(a[~inside], b[~inside], gradient_scale(q, ref_all, ~inside))
+    in_band = relative(a[inside], b[inside], gradient_scale(q, ref_all, inside)) if inside.any() else 0.0
     diff = np.where(inside, 0.0, np.abs(a - b))
     k = int(np.argmax(diff))
     per = a.size // max(1, band.grad_band.size)

@@ -182,9 +182,8 @@ def splatbench_scene(request):
 
         from splatbench.backends.registry import get_backend
         from splatbench.compare.bounds import BAND_BUDGET, gradient_bound
-        from splatbench.compare.measure import entry_band
-        from splatbench.regress.measure import (GRAD_PREFIX, bands, oracle, oracle_gradients, output_excess,
-                                                relative, render)
+        from splatbench.regress.measure import (GRAD_PREFIX, bands, gradient_difference, oracle, oracle_gradients,
+                                                output_excess, render)
         from splatbench.regress.scenes import Scene
 
         state = getattr(request.config, _STATE_KEY, None)
@@ -210,10 +209,8 @@ def splatbench_scene(request):
             return
         bound = gradient_bound(camera.width * camera.height, 0, band.grad_weight)
         for q in (q for q in got if q.startswith(GRAD_PREFIX)):
-            inside = entry_band(band.grad_band, got[q].size)
-            a, w = got[q].reshape(-1), grads[q].reshape(-1)
-            rest = relative(a[~inside], w[~inside])
-            if rest > bound or (inside.any() and relative(a[inside], w[inside]) > BAND_BUDGET):
+            rest, in_band, _ = gradient_difference(q, got[q], grads[q], band, grads)
+            if rest > bound or in_band > BAND_BUDGET:
                 raise AssertionError(f"{q}: relative L2 {rest:.2e} against the oracle outside the gradient band "
                                      f"({int(band.grad_band.sum())} Gaussians), bound {bound:.1e}")
 
