@@ -161,3 +161,19 @@ def test_cli_json_and_images(torch_snapshot, tmp_path):
     assert {q["status"] for q in data["quantities"]} <= {"unchanged", "regression", "improvement",
                                                          "convention change"}
     assert not (tmp_path / "img").exists() or not any((tmp_path / "img").iterdir())  # no output changed
+
+
+def test_rotation_gradients_of_isotropic_gaussians_are_measured_against_the_covariance_scale():
+    """An isotropic Gaussian's quats gradient is exactly 0 (float32 leaves noise of the covariance's
+    scale): inside the gradient band and out, it is measured against log_scales' gradient, so noise
+    reads as noise (a full drjit check against a torch snapshot hit this on garden)."""
+    from splatbench.regress.measure import Band, gradient_difference
+
+    n = 4
+    band = Band(np.zeros((2, 2), bool), np.zeros((2, 2)), np.array([False, True, False, True]), np.zeros((2, 2)))
+    ref = {"grad_quats": np.zeros((n, 4)), "grad_log_scales": np.ones((n, 3))}
+    noise = np.full((n, 4), 1e-9)
+    rest, inside, _ = gradient_difference("grad_quats", noise, ref["grad_quats"], band, ref)
+    assert rest < 1e-8 and inside < 1e-8
+    rest, inside, _ = gradient_difference("grad_means", noise[:, :3], np.zeros((n, 3)), band, ref)
+    assert rest == inside == float("inf")  # other groups have no floor: a gradient where there was none
