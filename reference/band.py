@@ -22,6 +22,21 @@ rasterizer performs (the inputs rounded to float32 included). Being worst cases 
 overestimate the actual error (typically by 10-100x): the band holds every pixel that
 float32 *could* decide differently, so outside it a rasterizer's error is rounding only.
 
+The gradient band carries the band over to gradients (``render(band=True)``: ``grad_band``
+[N] bool, ``grad_weight`` [H, W]). A Gaussian's gradient sums its per-pixel terms. Where
+float32 may add or drop contribution k (a band pixel), k's own term there changes by a whole
+term, and every other term at that pixel by a relative a_k at most (the transmittance behind k
+changes by the factor 1 - a_k; the colour behind those in front by T_k a_k c_k); at an early
+stop float32 may take differently, the contribution at the stop changes whole and every
+other term by T there (about transmittance_min: the terms from the stop on are weighted by it); a depth swap changes the pair's terms whole and the others' by T a_i a_j.
+One decision changes the gradient and not the image: the alpha_max clamp (alpha is continuous
+across it, its derivative jumps to 0). So the gradient band is the Gaussians whose own term
+some decision may change whole (the flipped, stopped, swapped and clamp-borderline ones: a
+handful on a real model), and ``grad_weight`` the relative change every other term at that
+pixel may take, which widens the other Gaussians' bound instead (as the tie slack widens the
+forward bound). Outside the gradient band a Gaussian's gradient differs from the float64 one
+by rounding and those weighted changes only.
+
 Not in the band: per-Gaussian culling (near/far plane, the image border, the huge-Gaussian
 cull), which flips a Gaussian only within float32 error of the near plane or the border,
 where its contributions are already at the cutoff or off the image.
@@ -134,9 +149,27 @@ def sigma_slack(err: ProjectionError, conics, cutoff_sq) -> np.ndarray:
     return np.where(np.isfinite(slack), slack, np.inf)
 
 
+class PixelBand(NamedTuple):
+    """One pixel's verdict (`pixel_bands`)."""
+
+    in_band: bool  # float32 may add or drop a whole contribution here
+    tie_slack: float  # how far swapping near-tied contributions moves the pixel (0 in the band)
+    grad_own: np.ndarray  # [M] bool: candidates whose own gradient term here float32 may compute under another decision
+    grad_weight: float  # how much (relative) such a decision changes every other candidate's gradient term here
+
+
 def pixel_band(err: ProjectionError, cand, dx, dy, A, B, C, sigma, half_r2, alpha_raw, keep, alphas,
                stop, colors, depths, *, alpha_min, alpha_max, transmittance_min) -> tuple[bool, float]:
-    """Whether one pixel is in the band (module doc), and how much depth ties widen its bound.
+    """`pixel_bands` without the gradient band: (in the band, tie slack)."""
+    out = pixel_bands(err, cand, dx, dy, A, B, C, sigma, half_r2, alpha_raw, keep, alphas, stop, colors, depths,
+                      alpha_min=alpha_min, alpha_max=alpha_max, transmittance_min=transmittance_min)
+    return out.in_band, out.tie_slack
+
+
+def pixel_bands(err: ProjectionError, cand, dx, dy, A, B, C, sigma, half_r2, alpha_raw, keep, alphas,
+                stop, colors, depths, *, alpha_min, alpha_max, transmittance_min) -> PixelBand:
+    """Whether one pixel is in the band (module doc), how much depth ties widen its bound, and its
+    part of the gradient band.
 
     Args:
         err: `projection_error` of the render. cand [M]: Gaussian indices of the candidates
@@ -147,11 +180,17 @@ def pixel_band(err: ProjectionError, cand, dx, dy, A, B, C, sigma, half_r2, alph
         alpha_min, alpha_max, transmittance_min: the thresholds.
 
     Returns:
-        (in the band, tie slack): the slack bounds how far swapping the near-tied
-        contributions moves the pixel: any of rgb, alpha, or depth * alpha (camera z units).
+        `PixelBand`: the tie slack bounds how far swapping the near-tied contributions moves the
+        pixel: any of rgb, alpha, or depth * alpha (camera z units). grad_own marks the
+        contributions a decision here may add, drop, reorder or unclamp (their own gradient term
+        here changes by a whole term); grad_weight bounds the relative change that decision makes
+        to every other contribution's term here: a_k for an added or dropped contribution k (the
+        transmittance behind it changes by the factor 1 - a_k, the colour behind those in front by
+        T_k a_k c_k), the transmittance T at an early stop, T a_i a_j for a swap of i and j.
     """
+    nothing = np.zeros(cand.size, dtype=bool)
     if cand.size == 0:
-        return False, 0.0
+        return PixelBand(False, 0.0, nothing, 0.0)
     qx, qy = A * dx + B * dy, B * dx + C * dy
     sigma_abs = 0.5 * (np.abs(A) * dx * dx + np.abs(C) * dy * dy) + np.abs(B * dx * dy)
     # First order: ∂sigma/∂d = Q d against the mean's error; δQ = -Q δSigma Q gives
@@ -162,25 +201,38 @@ def pixel_band(err: ProjectionError, cand, dx, dy, A, B, C, sigma, half_r2, alph
     with np.errstate(divide="ignore"):
         cut_margin = sigma - half_r2
         log_alpha = np.log(alpha_raw / alpha_min)
+        log_clamp = np.log(alpha_raw / alpha_max)
     cut_unsure = np.abs(cut_margin) <= d_sigma + err.cutoff_abs[cand]
     alpha_unsure = (np.abs(log_alpha) <= d_alpha) & (alpha_min <= alpha_max)
     cut_in = (cut_margin < 0) | cut_unsure
     alpha_in = (log_alpha > 0) | alpha_unsure
-    if np.any((cut_unsure | alpha_unsure) & cut_in & alpha_in):
-        return True, 0.0  # a contribution float32 may keep or skip
+    may_keep = cut_in & alpha_in
+    flip = (cut_unsure | alpha_unsure) & may_keep  # a contribution float32 may keep or skip
+    # The alpha_max clamp: alpha is continuous across it, its derivative is not (gradient band only).
+    own = flip | (may_keep & (np.abs(log_clamp) <= d_alpha) & (alpha_max < 1))
+    weight = float(np.minimum(alpha_raw[flip], alpha_max).max(initial=0.0))
     if alphas.size == 0:
-        return False, 0.0
-    kept = cand[keep]
+        return PixelBand(bool(flip.any()), 0.0, own, weight)
+    kept, kept_at = cand[keep], np.flatnonzero(keep)
     # Early stop: 1 - a has relative error (a δa + u) / (1 - a) (δa = 0 when alpha_max clamps
     # it), the product one u per factor; compared with transmittance_min in log space.
     da = np.where(alpha_raw[keep] >= alpha_max, U, d_alpha[keep])
     last = min(stop + 1, alphas.size)  # the contributions composited, and the one that stopped it
     a = alphas[:last]
+    T_before = np.concatenate([[1.0], np.cumprod(1 - a)])
     with np.errstate(divide="ignore"):
         eps_t = np.cumsum((a * da[:last] + U) / (1 - a) + U)
-        log_t = np.log(np.cumprod(1 - a) / transmittance_min) if transmittance_min > 0 else np.full(last, np.inf)
-    if np.any(np.abs(log_t) <= eps_t):
-        return True, 0.0
+        log_t = np.log(T_before[1:] / transmittance_min) if transmittance_min > 0 else np.full(last, np.inf)
+    stop_unsure = np.flatnonzero(np.abs(log_t) <= eps_t)
+    if stop_unsure.size:
+        # float32 may stop before the first unsure contribution m, or composite past it: m's own term
+        # changes whole; every term from m on is weighted by T <= T_before[m] (about transmittance_min),
+        # so the others change by that much relative to the pixel's terms.
+        m = stop_unsure[0]
+        own[kept_at[m]] = True
+        weight = max(weight, float(T_before[m]))
+    if flip.any() or stop_unsure.size:
+        return PixelBand(True, 0.0, own, weight)
     # Depth order: adjacent contributions whose z may swap in float32 (unless their means are
     # bitwise equal: then float32 computes the same z for both and breaks the tie the same way).
     # A swap is no whole contribution: T (a_i c_i + (1 - a_i) a_j c_j) against the other order
@@ -191,7 +243,9 @@ def pixel_band(err: ProjectionError, cand, dx, dy, A, B, C, sigma, half_r2, alph
         close = (np.diff(depths[:last]) <= dz[1:] + dz[:-1]) & (ids[1:] != ids[:-1])
         if np.any(close):
             k = np.flatnonzero(close)
-            T = np.concatenate([[1.0], np.cumprod(1 - a)])[k]
+            T = T_before[k]
             dc = np.maximum(np.abs(colors[k + 1] - colors[k]).max(axis=1), np.abs(depths[k + 1] - depths[k]))
-            return False, float(np.sum(T * a[k] * a[k + 1] * dc))
-    return False, 0.0
+            own[kept_at[k]] = own[kept_at[k + 1]] = True
+            weight = max(weight, float(np.max(T * a[k] * a[k + 1])))
+            return PixelBand(False, float(np.sum(T * a[k] * a[k + 1] * dc)), own, weight)
+    return PixelBand(False, 0.0, own, weight)

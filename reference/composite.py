@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from reference.band import pixel_band, sigma_slack
+from reference.band import pixel_bands, sigma_slack
 from reference.project import MODES, _as_array, _as_choice, _as_scalar, _as_size
 
 # The bounding-box prefilter is padded by this relative amount (plus as much in
@@ -27,6 +27,8 @@ class Composite(NamedTuple):
     depth: np.ndarray  # [H, W] expected camera z, D / alpha where alpha > 0, else 0
     band: np.ndarray | None = None  # [H, W] bool, the boundary band (reference.band); None unless asked
     tie_slack: np.ndarray | None = None  # [H, W] how far depth ties may move the pixel (reference.band)
+    grad_band: np.ndarray | None = None  # [N] bool, the Gaussians in the gradient band (reference.band)
+    grad_weight: np.ndarray | None = None  # [H, W] relative change of the other gradient terms (reference.band)
 
 
 def _half_mahalanobis(A, B, C, dx, dy):
@@ -148,11 +150,13 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
 
     # Matched mode. Screen extent of each ellipse d² <= R², from Σ2D = inverse(conic); for the
     # band, of d² <= R² + 2 slack, where float32 may still keep a contribution.
-    band = tie_slack = None
+    band = tie_slack = grad_band = grad_weight = None
     box_r2 = r2
     if errors is not None:
         band = np.zeros((height, width), dtype=bool)
         tie_slack = np.zeros((height, width))
+        grad_band = np.zeros(len(visible), dtype=bool)
+        grad_weight = np.zeros((height, width))
         box_r2 = r2 + 2 * sigma_slack(errors, conics, cutoff_sq)[index]
     with np.errstate(invalid="ignore", over="ignore"):
         det = A * C - B * B
@@ -175,10 +179,12 @@ def composite(means2d, conics, opacities, colors, depths, cutoff_sq, visible, wi
             stop = np.flatnonzero(T_next < transmittance_min)
             n = stop[0] if stop.size else a.size
             if band is not None:
-                band[i, j], tie_slack[i, j] = pixel_band(
+                here = pixel_bands(
                     errors, index[every], dx, dy, A[every], B[every], C[every], sigma, 0.5 * r2[every], a_raw, keep,
                     a, n, c[cand], z[cand],
                     alpha_min=alpha_min, alpha_max=alpha_max, transmittance_min=transmittance_min)
+                band[i, j], tie_slack[i, j], grad_weight[i, j] = here.in_band, here.tie_slack, here.grad_weight
+                grad_band[index[every[here.grad_own]]] = True
             out = _blend(a[None, :n], c[cand[:n]], z[cand[:n]], background, **blend)
             rgb[i, j], alpha[i, j], depth[i, j] = out[0][0], out[1][0], out[2][0]
-    return Composite(rgb, alpha, depth, band, tie_slack)
+    return Composite(rgb, alpha, depth, band, tie_slack, grad_band, grad_weight)

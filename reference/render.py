@@ -27,6 +27,8 @@ class RenderOutput(NamedTuple):
     visible: np.ndarray  # [N] bool
     band: np.ndarray | None = None  # [H, W] bool, the boundary band (reference.band); None unless asked
     tie_slack: np.ndarray | None = None  # [H, W] how far depth ties may move the pixel; None unless asked
+    grad_band: np.ndarray | None = None  # [N] bool, the Gaussians in the gradient band; None unless asked
+    grad_weight: np.ndarray | None = None  # [H, W] relative change of the other gradient terms; None unless asked
 
 
 def camera_centre(world_to_camera):
@@ -78,7 +80,10 @@ def render(means, log_scales, quats, opacity_logits, sh, K, world_to_camera, wid
 
     Returns:
         `RenderOutput` (rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N], visible [N],
-        band [H, W] bool and tie_slack [H, W], both None unless ``band``).
+        band [H, W] bool and tie_slack [H, W], grad_band [N] bool, the Gaussians whose own
+        gradient float32 may compute under another decision, and grad_weight [H, W], how much
+        (relative) a decision there changes the other gradient terms (`reference.band`), all
+        None unless ``band``).
     """
     proj = project(means, log_scales, quats, opacity_logits, K, world_to_camera, width, height,
                    mode=mode, eps2d=eps2d, near=near, far=far, radius=radius,
@@ -114,4 +119,5 @@ def render(means, log_scales, quats, opacity_logits, sh, K, world_to_camera, wid
                     alpha_min=alpha_min, alpha_max=alpha_max, transmittance_min=transmittance_min,
                     pixel_offset=pixel_offset, sort_keys=keys, background_mode=background_mode,
                     normalise_depth=depth_mode != "unnormalised", errors=errors)
-    return RenderOutput(out.rgb, out.alpha, out.depth, proj.radii, proj.visible, out.band, out.tie_slack)
+    return RenderOutput(out.rgb, out.alpha, out.depth, proj.radii, proj.visible, out.band, out.tie_slack,
+                        out.grad_band, out.grad_weight)

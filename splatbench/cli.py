@@ -32,6 +32,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sfm": ("splatbench.commands.sfm:sfm", "Structure from motion (pycolmap) on a dataset's training views."),
     "compare": ("splatbench.compare.cli:compare", "Compare rasterizers against the float64 oracle."),
     "conform": ("splatbench.conform.cli:conform", "Check a rasterizer against 3DGS conventions (probe scenes)."),
+    "snapshot": ("splatbench.regress.cli:snapshot", "Store a rasterizer's outputs and gradients on a fixed scene set."),
+    "check": ("splatbench.regress.cli:check", "Check a rasterizer against its snapshot: what moved, toward or away from the oracle."),
     "validate": ("splatbench.validate.cli:validate", "Cross-check the rasterizer (mitsuba: ray-traced Gaussians)."),
     "run": ("splatbench.experiments.cli:run", "Run an experiment grid (resumable; local or Dask executor)."),
     "report": ("splatbench.reports.cli:report", "Write an experiment's report: tables, findings, figures."),

@@ -19,6 +19,7 @@ BUGS: dict[str, tuple[str, str]] = {
     "sort_strided": ("depth_order", "sorts on a strided view of the camera points read as contiguous"),
     "sort_world_z": ("depth_order", "sorts on world z instead of camera z"),
     "sort_index": ("depth_order", "composites in input order"),
+    "sort_camera_x": ("depth_order", "sorts on camera-space x instead of camera z (depth)"),
     "alpha_clamp_0999_fwd": ("alpha_max", "clamps alpha at 0.999 in the forward, 0.99 in the backward"),
     "alpha_clamp_0999_bwd": ("alpha_max_grad", "clamps alpha at 0.99 in the forward, 0.999 in the backward"),
     "conic_b_grad_half": ("conic_B", "halves the gradient of the off-diagonal conic term"),
@@ -179,6 +180,8 @@ def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=No
         key = means[idx, 2].detach()
     elif bug == "sort_index":
         key = torch.arange(len(idx), dtype=dt)
+    elif bug == "sort_camera_x":
+        key = t[:, 0].detach()
     else:
         key = z.detach()
     order = torch.sort(key, stable=True).indices
@@ -213,3 +216,4 @@ def dense(bug: str | None = None, *, tile_box: bool = False) -> Backend:
 
 # One broken backend as a module attribute, for `splatbench conform tests.broken_backends:dense_sort_strided`.
 dense_sort_strided = dense("sort_strided")
+dense_conic_b_grad_half = dense("conic_b_grad_half")  # the pytest plugin's one-bug backend (tests/test_pytest_plugin.py)

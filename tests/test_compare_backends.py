@@ -233,3 +233,27 @@ def test_the_origin_direction_bug_is_outside_the_bound_from_a_posed_camera():
         t = result_table(result).set_index("backend")
         assert t.loc["drjit", "forward_verdict"] == "within bound"
         assert t.iloc[1].forward_verdict == verdict, (posed, t.iloc[1].to_dict())
+
+
+def test_the_gradient_band_is_judged_apart_and_a_gradient_bug_is_still_outside():
+    """The gradient verdict holds the Gaussians outside the gradient band (reference/band.py) to the
+    tight bound and budgets the band apart: drjit and torch within it where the band is not empty;
+    one gradient bug (the conic's B gradient halved, tests/gradient_bugs.py) outside it."""
+    from tests.gradient_bugs import conic_b_half
+
+    settings = CompareSettings(repeats=1, device="cpu", error_scale=1.0)
+    result = run_compare(["drjit", "torch", conic_b_half], [synthetic(300, 64, 64, seed=1, random_pose=True)],
+                         settings)
+    rows = {r.backend: r for r in result.rows}
+    assert all(not r.error for r in rows.values()), [r.error for r in rows.values()]
+    assert rows["drjit"].grad_band > 0  # this workload has Gaussians at a decision: the band is exercised
+    for name in ("drjit", "torch"):
+        r = rows[name]
+        assert r.grad_verdict == "within bound", {g: (e.rest_rel_l2, r.grad_bound) for g, e in r.grads.items()}
+        assert all(e.band_gaussians == r.grad_band for e in r.grads.values())
+    bad = rows["torch[conic_b_half]"]
+    assert bad.grad_verdict == "outside bound"
+    assert bad.grads["log_scales"].rest_rel_l2 > 10 * bad.grad_bound
+    assert bad.grads["sh"].within(bad.grad_bound)  # the bug touches the covariance only
+    table = result_table(result)
+    assert "grad_band" in table.columns and "grad_quats_rest_rel_l2" in table.columns

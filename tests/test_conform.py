@@ -20,7 +20,7 @@ from click.testing import CliRunner
 import reference
 from splatbench.backends import Backend, BackendInfo
 from splatbench.backends.base import AXIS
-from splatbench.conform import FAULT_CAUSE, PROBES, conform
+from splatbench.conform import FAULT_CAUSE, FAULT_DEFECT, PROBES, conform
 from splatbench.conform.oracle import conventions_of
 from splatbench.conform.probes import AXIS_PROBES
 from splatbench.cli import main
@@ -89,6 +89,11 @@ def test_no_pixel_sits_near_a_discrete_decision(name):
     basis = reference.sh_basis(dirs, degree)
     colour = np.einsum("nk,nkc->nc", basis, s.sh[:, :basis.shape[1]]) + 0.5
     assert np.abs(colour).min() > 0.05, name
+    # The oracle's own band (reference/band.py) agrees: no pixel in it, no Gaussian in the gradient band.
+    from splatbench.conform.oracle import gradient_band
+
+    grad_band, widen = gradient_band(name, s, conventions_of(dense()))
+    assert not grad_band.any() and widen == 0.0, name
 
 
 def test_the_depth_probe_defeats_the_classic_wrong_sort_keys():
@@ -152,7 +157,7 @@ def _assert_one_root_cause(report, probe: str, what: str) -> None:
 # Two broken backends whose failure spreads to other probes, checked in the default suite; every one
 # of BUGS is checked by the slow test below (each new convention costs a full set of finite
 # differences, 5-30 s on 2 loaded cores).
-FAST_BUGS = ("conic_b_grad_half", "tile_centre_only")
+FAST_BUGS = ("conic_b_grad_half", "tile_centre_only", "sort_camera_x")
 
 
 @pytest.mark.parametrize("bug", [pytest.param(b, marks=() if b in FAST_BUGS else pytest.mark.slow)
@@ -262,14 +267,31 @@ def test_faults_fail_the_probe_in_one_line():
     def two_outputs(*args, **kwargs):
         return dense()(*args, **kwargs)[:2]
 
-    # A backend that cannot render a plain scene is stopped before the probes, in one line
-    # (not 33 failures each blamed on its probe's convention).
-    expect = {raises: "backend raised RuntimeError: kernel launch failed", wrong_shape: "rgb: shape [24, 16, 3]",
-              nan: "non-finite rgb at pixel (row 0, col 0)",
-              two_outputs: "backend returned a tuple of 2, expected the 3 outputs (rgb, alpha, depth)"}
+    # A backend wired up wrong (other than three outputs of the right shapes, a signature conform cannot
+    # call) is stopped before the probes, in one line (not 33 failures each blamed on its probe's convention).
+    def two_positional(means, camera):
+        return dense()(means, camera)
+
+    expect = {wrong_shape: "rgb: shape [24, 16, 3]",
+              two_outputs: "backend returned a tuple of 2, expected the 3 outputs (rgb, alpha, depth)",
+              two_positional: "its signature (means, camera) cannot be called as fn(means, log_scales"}
     for fn, message in expect.items():
         msg = one_line_error(lambda: conform(_wrap(fn), probes=("intrinsics",)), "cannot be checked", message)
         assert "docs/backends.md" in msg
+
+    # A backend that raises, or returns NaN, on valid input has a defect: every probe still runs, each fault
+    # is one defect (its exception and the last frame of its traceback), and the report fails (exit 1).
+    for fn, message in ((raises, "backend raised RuntimeError: kernel launch failed (at "),
+                        (nan, "non-finite rgb at pixel (row 0, col 0)")):
+        report = conform(_wrap(fn), probes=("intrinsics", "depth_order", "grad_means"))
+        assert not report.passed and len(report.results) == 3 and all(r.status == "fail" for r in report.results)
+        assert report.defects[0].probe == "intrinsics", report.defects
+        assert report.defects[0].cause.startswith(f"{FAULT_DEFECT}: {message}"), report.defects[0].cause
+        assert "depth_order" in report.defects[0].follows  # the same fault: one defect
+        assert all(d.cause.startswith(FAULT_DEFECT) for d in report.defects)  # NaN gradients: a fault of their own
+        assert {n for d in report.defects for n in (d.probe, *d.follows)} == {"intrinsics", "depth_order", "grad_means"}
+    where = conform(_wrap(raises), probes=("intrinsics",)).defects[0].cause
+    assert f"test_conform.py:" in where and "in raises)" in where and "\n" not in where
 
     # One that fails only on some probe's scene fails that probe, with the fault as its cause.
     def raises_on_six(means, *args, **kwargs):
@@ -279,7 +301,9 @@ def test_faults_fail_the_probe_in_one_line():
 
     report = conform(_wrap(raises_on_six))
     faulted = [r for r in report.results if r.detail.startswith("backend raised RuntimeError: too many Gaussians")]
-    assert faulted and all(r.status == "fail" and r.cause == FAULT_CAUSE for r in faulted)
+    assert faulted and all(r.status == "fail" and (r.cause == FAULT_CAUSE or r.cause.startswith(FAULT_DEFECT))
+                           for r in faulted)
+    assert [d.probe for d in report.defects if d.cause.startswith(FAULT_DEFECT)] == [faulted[0].name]
 
 
 def test_an_empty_render_is_said_to_be_one():
@@ -479,3 +503,26 @@ def test_several_conventions_at_once_are_found_when_nothing_is_declared():
     for axis in ("eps2d", "jacobian_clamp", "alpha_min", "sort_key"):
         assert found[axis][0] == DENSE_DESIGN[axis], (axis, found)
     assert 1.0 in found["alpha_max"], found
+
+
+def test_cli_reports_a_backend_that_raises_on_valid_input_as_a_defect(tmp_path, monkeypatch):
+    """A third-party rasterizer raising UnboundLocalError on conform's plain preflight scene (as a real torch
+    path from PyPI does) is a finding about the backend: exit 1, every probe run, the exception and its
+    place named in one line; exit 2 stays for what the user got wrong (here: a module that does not import)."""
+    (tmp_path / "crashy.py").write_text(textwrap.dedent('''
+        def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
+            if means.shape[0] > 100:
+                scale = 1.0
+            return scale * means
+    '''))
+    (tmp_path / "broken_import.py").write_text("import no_such_dependency_xyz\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    runner = CliRunner()
+    result = runner.invoke(main, ["conform", "crashy:render", "--probe", "basic_centred", "--probe", "depth_order"])
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output
+    line = next(x for x in result.output.splitlines() if x.startswith("  basic_centred: "))
+    assert "backend raised UnboundLocalError" in line and "crashy.py:5 in render)" in line, line
+    assert "also fails because of it: depth_order" in line
+    bad = runner.invoke(main, ["conform", "broken_import:render"])
+    assert bad.exit_code == 2 and "cannot import module" in bad.output, bad.output

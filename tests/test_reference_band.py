@@ -92,3 +92,29 @@ def test_projection_error_grows_with_distance_from_the_origin():
     far = projection_error(means + 1000.0, scales, quats, logits, K, moved, proj.conics)
     assert far.mean_px[0] > 100 * near.mean_px[0] and far.depth[0] > 100 * near.depth[0]
     assert all(np.isfinite(field).all() for field in near[:-1])
+
+
+# ----------------------------------------------------------------------------- the gradient band
+def test_gradient_band_holds_the_flipped_contribution_and_weights_the_others_by_its_alpha():
+    # Two Gaussians over CENTRE: a plain one in front, and behind it one whose alpha sits at alpha_min.
+    # Only the borderline one's own term may change whole; the front one's terms change by a relative
+    # a_k <= 1/255 (the colour behind it), which is the pixel's weight.
+    factor = 1 + 1e-9
+    out = _composite([0.5, ALPHA_MIN * factor], [1.0, 2.0], [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                     _errors(2, opacity_rel=1e-6 - 3 * U))
+    assert out.band[CENTRE]
+    assert out.grad_band.tolist() == [False, True]
+    assert out.grad_weight[CENTRE] == pytest.approx(ALPHA_MIN * factor)
+    far = _composite([0.5, ALPHA_MIN * 1.01], [1.0, 2.0], [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                     _errors(2, opacity_rel=1e-6 - 3 * U))
+    assert not far.grad_band.any() and far.grad_weight.max() == 0
+
+
+def test_gradient_band_holds_a_swappable_pair_and_a_clamp_borderline_gaussian():
+    red, green = [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]
+    tie = _composite([0.5, 0.8, 0.3], [3.0, 3.0 + 1e-9, 5.0], [red, green, red], _errors(3, depth=1e-7))
+    assert tie.grad_band.tolist() == [True, True, False]
+    assert tie.grad_weight[CENTRE] == pytest.approx(0.5 * 0.8)
+    # alpha at the 0.99 clamp: the image is continuous across it, the derivative is not (gradient only)
+    clamp = _composite([0.99 * (1 + 1e-9)], [2.0], [red], _errors(1, opacity_rel=1e-6))
+    assert not clamp.band.any() and clamp.grad_band.tolist() == [True] and clamp.grad_weight.max() == 0

@@ -140,16 +140,41 @@ def backend_vjp(backend: Backend, params: tuple, camera, v: Cotangents) -> dict[
     return {k: (as_numpy(p.grad) if p.grad is not None else np.zeros(p.shape)) for k, p in zip(GROUPS, leaves)}
 
 
-def grad_error(a: np.ndarray, b: np.ndarray) -> GradError:
-    """`GradError` of gradient ``a`` against the oracle's ``b`` (any shapes with the same size)."""
+def grad_error(a: np.ndarray, b: np.ndarray, band: np.ndarray | None = None) -> GradError:
+    """`GradError` of gradient ``a`` against the oracle's ``b`` (any shapes with the same size);
+    ``band``: [same size] bool, the entries of the gradient band (`reference.band`), measured apart."""
     a, b = np.ravel(a).astype(np.float64), np.ravel(b).astype(np.float64)
     if not np.isfinite(a).all():
-        return GradError(math.inf, math.nan, math.inf, float(np.linalg.norm(b)))
+        return GradError(math.inf, math.nan, math.inf, float(np.linalg.norm(b)), math.inf, math.inf,
+                         0 if band is None else int(np.count_nonzero(band)))
     na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
     if nb == 0.0:
         return GradError(0.0, 1.0, na, nb) if na == 0.0 else GradError(math.nan, math.nan, na, nb)
     cosine = float(a @ b) / (na * nb) if na > 0 else 0.0
-    return GradError(float(np.linalg.norm(a - b)) / nb, cosine, na, nb)
+    rest = band_rel = math.nan
+    if band is not None:
+        band = np.ravel(band).astype(bool)
+        out, inside = ~band, band
+        rest = _rel(a[out], b[out])
+        band_rel = _rel(a[inside], b[inside]) if inside.any() else 0.0
+    return GradError(float(np.linalg.norm(a - b)) / nb, cosine, na, nb, rest, band_rel,
+                     0 if band is None else int(np.count_nonzero(band)))
+
+
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    """|a - b| / |b|; 0 when both are 0, inf when only b is."""
+    num, den = float(np.linalg.norm(a - b)), float(np.linalg.norm(b))
+    return num / den if den > 0 else (0.0 if num == 0 else math.inf)
+
+
+def entry_band(grad_band: np.ndarray | None, size: int, idx: np.ndarray | None = None) -> np.ndarray | None:
+    """The gradient band per entry of a group of ``size`` entries (``idx``: only those flat entries),
+    from the band per Gaussian [N] (None: no band)."""
+    if grad_band is None:
+        return None
+    per = size // len(grad_band)
+    flat = np.repeat(np.asarray(grad_band, dtype=bool), per)
+    return flat if idx is None else flat[idx]
 
 
 # ----------------------------------------------------------------------------- gradient oracle
@@ -238,10 +263,21 @@ class GradOracle:
         return out
 
 
-def compare_grads(grads: dict[str, np.ndarray], ref: dict) -> dict[str, GradError]:
-    """`GradError` per group of a backend's gradients against `GradOracle.reference` values."""
-    return {k: grad_error(grads[k].ravel() if idx is None else grads[k].ravel()[idx], values)
-            for k, (idx, values) in ref.items()}
+def compare_grads(grads: dict[str, np.ndarray], ref: dict, grad_band: np.ndarray | None = None) -> dict[str, GradError]:
+    """`GradError` per group of a backend's gradients against `GradOracle.reference` values;
+    ``grad_band`` [N] bool: the Gaussians of the gradient band, measured apart."""
+    import dataclasses
+
+    out = {}
+    for k, (idx, values) in ref.items():
+        band = entry_band(grad_band, grads[k].size, idx)
+        e = grad_error(grads[k].ravel() if idx is None else grads[k].ravel()[idx], values, band)
+        if band is not None:  # counted in Gaussians, not entries
+            per = grads[k].size // len(grad_band)
+            drawn = np.unique((np.arange(grads[k].size) if idx is None else np.asarray(idx))[band] // per)
+            e = dataclasses.replace(e, band_gaussians=int(drawn.size))
+        out[k] = e
+    return out
 
 
 # ----------------------------------------------------------------------------- timing

@@ -107,6 +107,7 @@ class CompareRow:
     matched: dict[str, ImageError] = field(default_factory=dict)
     exact: dict[str, ImageError] = field(default_factory=dict)
     band: int = 0                             # pixels in the boundary band of the verdict's oracle
+    grad_band: int = 0                        # Gaussians in its gradient band (reported apart from the rest)
     tie_pixels: int = 0                       # pixels whose bound depth ties widen
     grad_oracle: str = ""
     grads: dict[str, GradError] = field(default_factory=dict)
@@ -124,10 +125,10 @@ class CompareRow:
 
     @property
     def grad_verdict(self) -> str:
-        judged = [g.rel_l2 for g in self.grads.values() if not math.isnan(g.rel_l2)]
+        judged = [g for g in self.grads.values() if not math.isnan(g.rel_l2)]
         if not judged:
             return "n/a"
-        return "within bound" if all(e <= self.grad_bound for e in judged) else "outside bound"
+        return "within bound" if all(g.within(self.grad_bound) for g in judged) else "outside bound"
 
 
 @dataclass(frozen=True)
@@ -217,7 +218,7 @@ def run_compare(backends: Sequence, workloads: Sequence[Workload | WorkloadSpec]
         load_end = tuple(load_average())
         for b in resolved:
             m = measured[b.name]
-            band, ties = _band_size(images, b.info)
+            band, ties, grad_band = _band_size(images, b.info)
             timing = timings.get(b.name, Timing(note=m.untimed))
             errors = [m.error] if m.error else []
             if isinstance(timing, str):
@@ -228,7 +229,7 @@ def run_compare(backends: Sequence, workloads: Sequence[Workload | WorkloadSpec]
                 width=camera.width, height=camera.height, error_width=err_camera.width,
                 error_height=err_camera.height, device=settings.device, error="; ".join(errors),
                 verdict_mode="exact" if b.info.exact else "matched", matched=m.matched, exact=m.exact,
-                band=band, tie_pixels=ties,
+                band=band, tie_pixels=ties, grad_band=grad_band,
                 grad_oracle=m.grad_oracle, grads=m.grads, grad_bound=m.grad_bound, timing=timing,
                 loadavg_start=load_start, loadavg_end=load_end))
     machine.loadavg_end = load_average()
@@ -236,17 +237,19 @@ def run_compare(backends: Sequence, workloads: Sequence[Workload | WorkloadSpec]
                          tuple(notes))
 
 
-def _band_size(images, info) -> tuple[int, int]:
-    """(boundary band pixels, pixels with a tie slack) of the oracle ``info``'s verdict is against
-    (0, 0 for the exact oracle, or when the oracle could not render)."""
+def _band_size(images, info) -> tuple[int, int, int]:
+    """(boundary band pixels, pixels with a tie slack, Gaussians in the gradient band) of the oracle
+    ``info``'s verdict is against (zeros for the exact oracle, or when the oracle could not render)."""
     if info.exact:
-        return 0, 0
+        return 0, 0, 0
     try:
         oracle = images.matched(info)
     except Exception:  # noqa: BLE001 - the row already says why the oracle failed
-        return 0, 0
+        return 0, 0, 0
     band, slack = getattr(oracle, "band", None), getattr(oracle, "tie_slack", None)
-    return (0 if band is None else int(band.sum())), (0 if slack is None else int((slack > 0).sum()))
+    gb = getattr(oracle, "grad_band", None)
+    return ((0 if band is None else int(band.sum())), (0 if slack is None else int((slack > 0).sum())),
+            (0 if gb is None else int(gb.sum())))
 
 
 @dataclass
@@ -312,13 +315,16 @@ def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: 
     except Exception as exc:  # noqa: BLE001
         m.grad_oracle = f"not compared: gradient oracle failed ({one_line(exc)})"
         return m
+    matched = None if info.exact else images.matched(info)
+    grad_band = getattr(matched, "grad_band", None)
     try:
-        m.grads = compare_grads(backend_vjp(backend, params, camera, v), ref)
+        m.grads = compare_grads(backend_vjp(backend, params, camera, v), ref, grad_band)
     except Exception as exc:  # noqa: BLE001
         m.error = f"gradient: {one_line(exc)}"
         return m
     verdict = m.exact if info.exact else m.matched
-    band, _ = _band_size(images, info)
-    m.grad_bound = gradient_bound(camera.width * camera.height, min(band, max(e.outliers for e in verdict.values())))
+    band, _, _ = _band_size(images, info)
+    m.grad_bound = gradient_bound(camera.width * camera.height, min(band, max(e.outliers for e in verdict.values())),
+                                  getattr(matched, "grad_weight", None))
     say(f"{label}: {backend.name} gradients compared ({m.grad_oracle.split(' (')[0]})")
     return m

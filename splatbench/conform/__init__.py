@@ -27,7 +27,7 @@ import dataclasses
 
 from splatbench.backends.base import Backend
 from splatbench.conform.calls import Fault, captured
-from splatbench.conform.diagnose import (FAULT_CAUSE, UNDRAWN_CAUSE, Defect, Finding, explained_by, fingerprint,
+from splatbench.conform.diagnose import (FAULT_CAUSE, FAULT_DEFECT, UNDRAWN_CAUSE, Defect, Finding, explained_by, fingerprint,
                                                   root_causes, run_probes)
 from splatbench.conform.judges import Context
 from splatbench.conform.oracle import conventions_of
@@ -38,20 +38,27 @@ from splatbench.errors import InputError
 
 
 class BackendFault(InputError):
-    """The backend cannot be run at all (it raises, or returns the wrong outputs, on a plain scene)."""
+    """The backend cannot be checked at all: its signature cannot take conform's call, or it returns other
+    than three outputs of the right shapes (the user wired it up wrong; exit 2)."""
 
 
 def _preflight(backend: Backend, scene, device: str) -> None:
-    """Call the backend once on a plain probe scene; a backend that cannot render it is one line
-    (exit 2), not a fault repeated under every probe's cause."""
-    from splatbench.conform.calls import outputs
+    """Check the backend's signature and call it once on a plain probe scene. What says the user wired
+    it up wrong (a signature conform cannot call, other than three outputs of the right shapes) is one
+    line (exit 2), not a fault repeated under every probe's cause. A backend that raises or returns NaN
+    here is not stopped: that is a finding about the backend, reported as a defect of each probe it
+    fails on (with its exception and the last frame of its traceback), while every other probe runs."""
+    from splatbench.conform.calls import check_signature, outputs
 
     try:
+        check_signature(backend)
         outputs(backend, scene, device)
     except Fault as fault:
-        raise BackendFault(f"backend {backend.name!r} cannot be checked: {fault} (conform calls "
-                           f"fn(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree, background) "
-                           f"-> (rgb [H, W, 3], alpha [H, W], depth [H, W]); see docs/backends.md)") from None
+        if fault.usage:
+            raise BackendFault(f"backend {backend.name!r} cannot be checked: {fault} (conform calls "
+                               f"fn(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree, "
+                               f"background) -> (rgb [H, W, 3], alpha [H, W], depth [H, W]); see "
+                               f"docs/backends.md)") from None
 
 
 def backend_version(backend: Backend) -> str:
@@ -71,7 +78,7 @@ def backend_version(backend: Backend) -> str:
 
 
 __all__ = ["conform", "BackendFault", "ConformReport", "ProbeResult", "PROBES", "Probe", "STATUSES", "probe_names",
-           "Finding", "Defect", "FAULT_CAUSE", "UNDRAWN_CAUSE", "backend_version"]
+           "Finding", "Defect", "FAULT_CAUSE", "FAULT_DEFECT", "UNDRAWN_CAUSE", "backend_version"]
 
 
 def conform(backend, *, device: str = "auto", probes: tuple[str, ...] | None = None,

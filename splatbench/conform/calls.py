@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import contextlib
+import inspect
 import io
 import os
 import sys
 import tempfile
+import traceback
 
 import numpy as np
 
@@ -53,7 +55,44 @@ def captured():
 
 
 class Fault(Exception):
-    """The backend misbehaved (raised, wrong shape, NaN): the probe fails with this one line."""
+    """The backend misbehaved (raised, wrong shape, NaN): the probe fails with this one line.
+
+    ``usage``: the fault says the backend was wired up wrong (its signature cannot take conform's call,
+    it returns other than three outputs of the right shapes), not that it computes something wrong:
+    conform stops on it (exit 2) instead of reporting it as a defect of every probe."""
+
+    def __init__(self, message: str, *, usage: bool = False):
+        super().__init__(message)
+        self.usage = usage
+
+
+def last_frame(exc: BaseException) -> str:
+    """" (at FILE:LINE in FUNCTION)" of the innermost frame of ``exc``'s traceback ("" when it has none)."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    if not frames:
+        return ""
+    f = frames[-1]
+    return f" (at {f.filename}:{f.lineno} in {f.name})"
+
+
+def raised(exc: BaseException, what: str = "backend raised") -> str:
+    """``"backend raised ExcType: first line (at FILE:LINE in FUNCTION)"``: a backend's exception in one line."""
+    first = (str(exc).strip().splitlines() or [""])[0]
+    return f"{what} {type(exc).__name__}: {first}".rstrip(": ") + last_frame(exc)
+
+
+def check_signature(backend: Backend) -> None:
+    """Raise a usage `Fault` when the backend's function cannot be called as conform calls it:
+    fn(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=, background=)."""
+    try:
+        sig = inspect.signature(backend.fn)
+    except (TypeError, ValueError):  # no signature to read (a C function): the call itself will tell
+        return
+    try:
+        sig.bind(*([None] * 6), sh_degree=None, background=None)
+    except TypeError as exc:
+        raise Fault(f"its signature {sig} cannot be called as fn(means, log_scales, quats, opacity_logits, sh, "
+                    f"camera, *, sh_degree=, background=) ({exc})", usage=True) from None
 
 
 def _tensors(s: ProbeScene, device: str, grad: bool) -> list:
@@ -67,16 +106,15 @@ def _render(backend: Backend, s: ProbeScene, params: list):
     try:
         out = backend(*params, s.camera, sh_degree=s.sh_degree, background=s.background)
     except Exception as exc:  # noqa: BLE001 - any failure of user code is a probe failure, reported in one line
-        first = (str(exc).strip().splitlines() or [""])[0]
-        raise Fault(f"backend raised {type(exc).__name__}: {first}") from None
+        raise Fault(raised(exc)) from None
     if not isinstance(out, (tuple, list)) or len(out) != 3:
         what = f"{type(out).__name__} of {len(out)}" if isinstance(out, (tuple, list)) else type(out).__name__
-        raise Fault(f"backend returned a {what}, expected the 3 outputs (rgb, alpha, depth)")
+        raise Fault(f"backend returned a {what}, expected the 3 outputs (rgb, alpha, depth)", usage=True)
     H, W = s.camera.height, s.camera.width
     for name, x, shape in zip(("rgb", "alpha", "depth"), out, ((H, W, 3), (H, W), (H, W))):
         got = tuple(getattr(x, "shape", ()))
         if got != shape:
-            raise Fault(f"{name}: shape {list(got)}, expected {list(shape)} (H={H}, W={W})")
+            raise Fault(f"{name}: shape {list(got)}, expected {list(shape)} (H={H}, W={W})", usage=True)
     return out
 
 
@@ -120,7 +158,7 @@ def vjp(backend: Backend, s: ProbeScene, v: np.ndarray, device: str) -> dict[str
     try:
         loss.backward()
     except Exception as exc:  # noqa: BLE001
-        raise Fault(f"backward raised {type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}") from None
+        raise Fault(raised(exc, "backward raised")) from None
     grads = {k: np.zeros(p.shape) if p.grad is None else as_numpy(p.grad) for k, p in zip(GROUPS, params)}
     for k, g in grads.items():
         if not np.isfinite(g).all():

@@ -55,9 +55,16 @@ from splatbench.conform.scenes import ProbeScene
 #: The cause given when the backend fails on a probe's scene (raises, bad shape, NaN), where the
 #: probe's own convention cannot be judged.
 FAULT_CAUSE = "the backend failed on this probe's scene (see measured), so the convention could not be judged"
+#: The cause of a defect grouping the probes on whose valid scenes the backend fails the same way.
+FAULT_DEFECT = "the backend fails on a valid scene"
 OK = ("pass", "warn", "skip")
 #: Features every probe scene exercises: a wrong pixel centre, activation, low-pass or skip changes any render.
 EVERYWHERE = ("pixel_centre", "scale_activation", "opacity_activation", "eps2d", "alpha_min")
+#: Probes isolating a convention axis whose cause must be backed by the evidence (`_supported`) before they
+#: account for other failures: the EVERYWHERE ones, and expected_depth, whose depth output every scene of two
+#: or more Gaussians changes when they are composited in the wrong order (a sort on camera x, say) -- a wrong
+#: order is no wrong depth formula, and only a value of the `depth` axis reproducing the backend says it is.
+AXIS_CHECKED = (*EVERYWHERE, "expected_depth")
 #: The basic probe every other one builds on: one plain Gaussian (a failure there can explain any other).
 CORE = "basic_centred"
 TAIL_D2 = 4.0  # a footprint's "tail": beyond 2 sigma, where a cutoff other than the declared one shows
@@ -180,7 +187,8 @@ def fingerprint(selected: tuple[Probe, ...], ctx: Context,
     for stage in stages:
         rejected: list[dict] = []
         while True:
-            failing = [by_name[n] for n in _failing(results, stage)]
+            # a probe the backend faults on (raises, NaN) says nothing of conventions: no candidate can explain it
+            failing = [by_name[n] for n in _failing(results, stage) if results[n].cause != FAULT_CAUSE]
             if not failing:
                 break
             here = dataclasses.replace(ctx, conv=conv)
@@ -396,15 +404,18 @@ def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], ct
     exercise, else form one defect of their own (first when it is the largest)."""
     conv = ctx.conv
     failing = [p for p in selected if results[p.name].status == "fail"]
+    faulted = [p for p in failing if results[p.name].cause == FAULT_CAUSE]
+    failing = [p for p in failing if results[p.name].cause != FAULT_CAUSE]
+    faults = _fault_defects(faulted, results)
     if not failing:
-        return []
+        return faults
     by_name = {p.name: p for p in selected}
     empty = [p.name for p in failing if _undrawn(p, ctx)]
     names = [p.name for p in failing if p.name not in empty]
     uses = {p.name: set(exercises(p, p.build(), conv)) for p in selected
             if results[p.name].status in ("fail", "pass")}
     claimed = {n: _supported(by_name[n], results[n], ctx) for n in names}
-    weak = {f for f in EVERYWHERE if f in claimed and claimed[f] is not None}  # a cause the evidence does not back
+    weak = {f for f in AXIS_CHECKED if f in claimed and claimed[f] is not None}  # a cause the evidence does not back
     for n, f in uses.items():
         f -= weak - {n}
     passing = [n for n in uses if results[n].status == "pass"]
@@ -458,7 +469,17 @@ def root_causes(selected: tuple[Probe, ...], results: dict[str, ProbeResult], ct
         # first when it accounts for at least as many failing probes as any other defect
         largest = max((1 + len(d.follows) for d in defects), default=0)
         defects = [blank, *defects] if len(empty) >= largest else [*defects, blank]
-    return defects
+    return faults + defects
+
+
+def _fault_defects(faulted: list[Probe], results: dict[str, ProbeResult]) -> list[Defect]:
+    """One defect per distinct fault (the same exception at the same place), rooted at the first probe it
+    fails, with the others following: a backend that raises on valid input has a defect where it raises."""
+    groups: dict[str, list[str]] = {}
+    for p in faulted:
+        groups.setdefault(results[p.name].detail, []).append(p.name)
+    return [Defect(names[0], f"{FAULT_DEFECT}: {detail}", None, None, tuple(names[1:]))
+            for detail, names in groups.items()]
 
 
 #: The cause of a defect whose probe scenes the backend leaves (nearly) empty.
@@ -500,7 +521,7 @@ def _supported(probe: Probe, result: ProbeResult, ctx: Context) -> str | None:
     except Fault:
         return None
     what = describe(got, oracle(key, s, ctx.conv), _has_alpha(ctx))
-    axis = AXIS_OF.get(probe.name) if probe.name in EVERYWHERE else None
+    axis = AXIS_OF.get(probe.name) if probe.name in AXIS_CHECKED else None
     if probe.name == "depth_order" and _has_alpha(ctx):
         # alpha = 1 - prod(1 - a_i) does not depend on the order: a wrong order leaves it right
         if float(np.abs(got[..., 3] - oracle(key, s, ctx.conv)[..., 3]).max()) > result.tolerance:
@@ -528,4 +549,4 @@ def explained_by(findings: list[Finding]) -> dict[str, str]:
 
 
 __all__ = ["Finding", "Defect", "fingerprint", "root_causes", "run_probes", "exercises", "explained_by",
-           "FAULT_CAUSE", "UNDRAWN_CAUSE"]
+           "FAULT_CAUSE", "FAULT_DEFECT", "UNDRAWN_CAUSE"]

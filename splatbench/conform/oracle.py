@@ -113,6 +113,24 @@ def oracle(name: str, s: ProbeScene, conv: dict) -> np.ndarray:
     return _CACHE[key]
 
 
+def gradient_band(name: str, s: ProbeScene, conv: dict) -> tuple[np.ndarray, float]:
+    """(the Gaussians of the probe scene's gradient band [N] bool, the relative widening of the other
+    entries' bound sqrt(sum_p w_p^2 / P)) (`reference.band`; cached). Every probe scene keeps its pixels
+    away from discrete decisions, so both are empty on conform's own scenes; a scene that does not is
+    judged outside its band, as compare judges a real model."""
+    key = _key(name, conv, "grad_band")
+    if key not in _CACHE:
+        import reference
+
+        kwargs = _kwargs(s, conv)
+        if conv.get("sh_view_direction") == "detached":
+            kwargs["sh_dir_means"] = s.means
+        out = reference.render(*(s.params()[k] for k in GROUPS), band=True, **kwargs)
+        P = s.camera.width * s.camera.height
+        _CACHE[key] = (out.grad_band, float(np.sqrt(np.square(out.grad_weight).sum() / P)))
+    return _CACHE[key]
+
+
 def fd_jacobian(name: str, s: ProbeScene, conv: dict, group: str) -> np.ndarray:
     """d outputs / d each entry of ``group`` by central differences: [n_entries, H, W, 5] (cached)."""
     conv = effective(name, s, conv)

@@ -285,6 +285,8 @@ def make_torch_matching(info: BackendInfo, dtype: str = "float64") -> Backend:
         raise InputError(f"backend: the torch backend follows graphdeco's {other[0]}, not {info.name!r}'s "
                          f"{info.convention(other[0])!r}")
     radius = info.convention("radius")
+    if radius == "none":  # no cutoff renders as the opacity rule (as `BackendInfo.reference_options` says why)
+        radius = "opacity"
     if radius not in ("3sigma", "opacity"):
         raise InputError(f"backend: the torch backend cannot match radius {radius!r} of {info.name!r}")
-    return make_torch_backend(dtype, **{k: info.convention(k) for k in Settings._fields})
+    return make_torch_backend(dtype, **{**{k: info.convention(k) for k in Settings._fields}, "radius": radius})

@@ -1,0 +1,108 @@
+"""The scene set a snapshot is taken on: fixed, deterministic, versioned.
+
+``full`` (the default): every scene of conform's probes (tiny scenes, each isolating one
+convention), two synthetic workloads seen from random camera poses (so world-space mistakes
+show), the bundled garden SfM view at 1/8 resolution, and a real trained model (the bundled
+PlayCanvas guitar, 64x64, framed 20 degrees from above). ``small``: the probe scenes and the
+synthetic workloads only, for dense toy backends that cannot render ~100k Gaussians.
+
+`SCENE_SET_VERSION` is stored in every snapshot and checked: any change to a scene (its
+Gaussians, camera, size, cotangent seed) or to the list must bump it, so that a snapshot is
+never compared with other scenes.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from splatbench.backends.base import GROUPS
+from splatbench.cameras import Camera
+from splatbench.errors import InputError
+
+#: Bump on any change to a scene or to the list (the snapshot records it; check refuses another).
+SCENE_SET_VERSION = 1
+SCENE_SETS = ("full", "small")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One scene: the five parameter groups (float32 values in float64 arrays), the camera, the SH
+    degree (None = every band given) and the background (None = black). ``seed``: of its cotangents."""
+
+    name: str
+    means: np.ndarray
+    log_scales: np.ndarray
+    quats: np.ndarray
+    opacity_logits: np.ndarray
+    sh: np.ndarray
+    camera: Camera
+    sh_degree: int | None = None
+    background: tuple[float, float, float] | None = None
+
+    @property
+    def n(self) -> int:
+        return int(self.means.shape[0])
+
+    @property
+    def seed(self) -> int:
+        return zlib.crc32(self.name.encode())
+
+    def params(self) -> dict[str, np.ndarray]:
+        return {k: getattr(self, k) for k in GROUPS}
+
+
+def _f32(x) -> np.ndarray:
+    return np.asarray(np.asarray(x, dtype=np.float32), dtype=np.float64)
+
+
+def _from_gaussians(name: str, g, camera: Camera) -> Scene:
+    return Scene(name, _f32(g.means), _f32(g.log_scales), _f32(g.quats), _f32(g.opacity_logits), _f32(g.sh), camera)
+
+
+def _probe_scenes() -> list[Scene]:
+    from splatbench.conform.probes import PROBES
+
+    out, seen = [], set()
+    for p in PROBES:
+        key = p.build.__name__
+        if key in seen:
+            continue
+        seen.add(key)
+        s = p.build()
+        out.append(Scene(f"probe-{key}", _f32(s.means), _f32(s.log_scales), _f32(s.quats), _f32(s.opacity_logits),
+                         _f32(s.sh), s.camera, s.sh_degree, s.background))
+    return out
+
+
+def _synthetic_scenes() -> list[Scene]:
+    from splatbench.workloads import synthetic
+
+    return [_from_gaussians(w.name, w.gaussians, w.camera)
+            for w in (synthetic(300, 64, 64, seed=1, random_pose=True), synthetic(300, 48, 64, seed=2, random_pose=True))]
+
+
+def _garden() -> Scene:
+    from splatbench.workloads import GARDEN_SFM, load_npz
+
+    w = load_npz(GARDEN_SFM, view=0)
+    return _from_gaussians("garden-view0-x0.125", w.gaussians, w.camera.scaled(0.125))
+
+
+def _real_model() -> Scene:
+    from splatbench.workloads import model_workload
+
+    w = model_workload("guitar", 0, 3, 64, 64)
+    return _from_gaussians("guitar-view0-64x64", w.gaussians, w.camera)
+
+
+def scene_set(name: str = "full") -> list[Scene]:
+    """The scenes of set ``name`` ("full" or "small"), in a fixed order (built fresh each call)."""
+    if name not in SCENE_SETS:
+        raise InputError(f"--scenes: expected one of {list(SCENE_SETS)}, got {name!r}")
+    scenes = _probe_scenes() + _synthetic_scenes()
+    if name == "full":
+        scenes += [_garden(), _real_model()]
+    return scenes

@@ -1,0 +1,66 @@
+"""examples/downstream/, used as its maintainer would (a copy, its folder on the path): a snapshot, a
+one-line change to a gradient that `splatbench check` fails naming it, and the fix reported as an
+improvement toward the oracle; its own test with the plugin's fixture. The small scene set keeps it
+to under two minutes on 2 loaded cores (the toy is dense: every Gaussian at every pixel)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLE = REPO / "examples" / "downstream"
+LINE = "    B = -b / det  # the conic's off-diagonal term\n"
+BUG = "    B = 0.5 * (-b / det) + 0.5 * (-b / det).detach()  # the conic's off-diagonal term\n"
+
+
+def _run(folder: Path, *args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": f"{folder}{os.pathsep}{REPO}"}
+    return subprocess.run([sys.executable, "-m", *args], cwd=folder, env=env, capture_output=True, text=True,
+                          timeout=900)
+
+
+def _edit(folder: Path, old: str, new: str) -> None:
+    path = folder / "toy_splat" / "rasterizer.py"
+    text = path.read_text()
+    assert text.count(old) == 1
+    path.write_text(text.replace(old, new))
+
+
+def test_the_downstream_example_catches_a_gradient_change_and_reports_its_fix(tmp_path):
+    project = tmp_path / "toy"
+    shutil.copytree(EXAMPLE, project, ignore=shutil.ignore_patterns("__pycache__"))
+    assert (project / "pyproject.toml").is_file() and (project / ".github" / "workflows" / "splatbench.yml").is_file()
+    workflow = (project / ".github" / "workflows" / "splatbench.yml").read_text()
+    assert "pip install splatbench" in workflow and "--splatbench-backend toy_splat:render" in workflow
+    assert "splatbench check toy_splat:render --against snapshots" in workflow
+
+    snap = _run(project, "splatbench", "snapshot", "toy_splat:render", "--out", "snapshots", "--scenes", "small",
+                "--quiet")
+    assert snap.returncode == 0, snap.stderr
+    _edit(project, LINE, BUG)  # the one-line change: the same value, half the gradient of B
+    # --no-diagnose: conform's naming of the cause is checked in tests/test_regress.py (it costs ~25 s)
+    bad = _run(project, "splatbench", "check", "toy_splat:render", "--against", "snapshots", "--quiet",
+               "--no-diagnose")
+    assert bad.returncode == 1, bad.stdout + bad.stderr
+    assert "REGRESSIONS" in bad.stdout and "moved away from the oracle" in bad.stdout
+    regressed = [line for line in bad.stdout.splitlines() if ": regression: " in line]
+    assert any("::grad_log_scales: regression" in line for line in regressed)
+    assert not any("::rgb:" in line or "::grad_sh:" in line for line in regressed)  # the forward did not move
+
+    # The buggy release was snapshotted; the fix moves toward the oracle: exit 0, reported as improvements.
+    again = _run(project, "splatbench", "snapshot", "toy_splat:render", "--out", "snapshots", "--scenes", "small",
+                 "--quiet")
+    assert again.returncode == 0, again.stderr
+    _edit(project, BUG, LINE)
+    fixed = _run(project, "splatbench", "check", "toy_splat:render", "--against", "snapshots", "--quiet",
+                 "--no-diagnose")
+    assert fixed.returncode == 0, fixed.stdout + fixed.stderr
+    assert "toy-splat: improved:" in fixed.stdout and "moved toward the oracle" in fixed.stdout
+    assert "0 regressed" in fixed.stdout
+
+    own = _run(project, "pytest", "-p", "splatbench.regress.pytest_plugin", "-p", "no:cacheprovider", "-q")
+    assert own.returncode == 0 and "1 passed" in own.stdout, own.stdout + own.stderr

@@ -1,0 +1,179 @@
+"""`splatbench snapshot` and `splatbench check` (splatbench/regress): deterministic snapshots,
+derived tolerances, improvement / regression / convention-change verdicts, bad input in one line.
+
+Most tests run on three scenes of the set (a probe scene with gradients, the depth-order probe
+and a synthetic workload from a random pose) by narrowing `scene_set`, to stay quick; the must-show
+command on the full set is run by hand (docs/regression.md)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import textwrap
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import splatbench  # noqa: F401 - configures libLLVM before drjit loads
+from splatbench.cli import main
+from splatbench.errors import InputError
+from splatbench.regress import check, snapshot
+from splatbench.regress import files as regress_files
+from splatbench.regress import scenes as regress_scenes
+from splatbench.regress.files import MANIFEST, read_snapshot, write_npz
+from tests.gradient_bugs import conic_b_half
+
+FEW = ("probe-depth_order", "probe-gradients", "synthetic-300-64x64-s1-posed")  # in the set's order
+
+
+@pytest.fixture(scope="module")
+def few_scenes():
+    full = regress_scenes.scene_set
+
+    def narrowed(name="full"):
+        return [s for s in full(name) if s.name in FEW]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(regress_scenes, "scene_set", narrowed)
+        mp.setattr(regress_files, "scene_set", narrowed)
+        yield
+
+
+@pytest.fixture(scope="module")
+def torch_snapshot(tmp_path_factory, few_scenes):
+    out = tmp_path_factory.mktemp("snap") / "torch"
+    snapshot("torch", out, scenes="small")
+    return out
+
+
+def test_a_snapshot_is_deterministic_and_documented(torch_snapshot, tmp_path):
+    again = snapshot("torch", tmp_path / "again", scenes="small")
+    files = sorted(p.relative_to(torch_snapshot) for p in torch_snapshot.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(again) for p in again.rglob("*") if p.is_file())
+    for f in files:  # byte for byte: no timestamps, sorted members
+        assert (torch_snapshot / f).read_bytes() == (again / f).read_bytes(), f
+    manifest = json.loads((torch_snapshot / MANIFEST).read_text())
+    assert manifest["scene_set_version"] == regress_scenes.SCENE_SET_VERSION
+    assert [s["name"] for s in manifest["scenes"]] == list(FEW)
+    assert manifest["backend"]["name"] == "torch" and "torch" in manifest["versions"]
+    # plain npy members: numpy reads them without pickle
+    with np.load(torch_snapshot / "scenes" / "probe-gradients.npz", allow_pickle=False) as z:
+        assert {"rgb", "alpha", "depth", "grad_means", "grad_sh", "band", "grad_band"} <= set(z.files)
+
+
+def test_check_of_the_same_code_and_of_another_correct_backend_is_unchanged(torch_snapshot):
+    same = check("torch", torch_snapshot, diagnose=False)
+    assert same.exit_code == 0 and same.status == "unchanged"
+    assert all(r.difference == 0.0 for r in same.results)  # the same float32 code: bit for bit
+    other = check("drjit", torch_snapshot, diagnose=False)  # another float32 rasterizer: what the band allows
+    assert other.exit_code == 0, [r.line() for r in other.changed]
+    assert len(other.results) == 3 * 8
+
+
+def test_a_gradient_bug_is_a_regression_named_and_moved_away_from_the_oracle(torch_snapshot):
+    report = check(conic_b_half, torch_snapshot)
+    assert report.exit_code == 1 and report.status == "regressed"
+    bad = {r.quantity for r in report.results if r.status == "regression"}
+    assert {"grad_log_scales", "grad_quats"} <= bad
+    assert not bad & {"rgb", "alpha", "depth", "grad_sh", "grad_opacity_logits"}  # the forward is the same
+    r = next(r for r in report.results if r.status == "regression" and r.quantity == "grad_log_scales")
+    assert r.oracle_now > r.oracle_before + 1 and "moved away from the oracle" in r.line()
+    assert "conform: defect conic_B" in r.cause
+
+
+def test_moving_toward_the_oracle_is_an_improvement_and_passes(tmp_path, few_scenes):
+    snap = snapshot(conic_b_half, tmp_path / "buggy", scenes="small")
+    report = check("torch", snap, diagnose=False)
+    assert report.exit_code == 0 and report.status == "improved"
+    better = [r for r in report.results if r.status == "improvement"]
+    assert {r.quantity for r in better} >= {"grad_log_scales", "grad_quats"}
+    assert all(r.oracle_now < r.oracle_before for r in better)
+
+
+@pytest.mark.parametrize("damage, message", [
+    ("missing", "no snapshot folder"),
+    ("tampered_npz", "SHA-256 is not the one snapshot.json records"),
+    ("shape", "has shape"),
+    ("version", "scene set version 0"),
+    ("json", "not valid JSON"),
+    ("path", "names the file"),
+])
+def test_bad_snapshots_are_one_line_never_a_pass(torch_snapshot, tmp_path, damage, message):
+    snap = tmp_path / "s"
+    shutil.copytree(torch_snapshot, snap)
+    manifest = json.loads((snap / MANIFEST).read_text())
+    if damage == "missing":
+        shutil.rmtree(snap)
+    elif damage == "tampered_npz":
+        path = snap / "scenes" / "probe-gradients.npz"
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        arrays["grad_means"] = arrays["grad_means"] * 1.01
+        write_npz(path, arrays)
+    elif damage == "shape":  # a consistent file (re-hashed) whose counts disagree with the scene
+        path = snap / "scenes" / "probe-gradients.npz"
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        arrays["grad_means"] = arrays["grad_means"][:-1]
+        write_npz(path, arrays)
+        manifest["scenes"][1]["sha256"] = regress_files.sha256(path)
+        (snap / MANIFEST).write_text(json.dumps(manifest))
+    elif damage == "version":
+        manifest["scene_set_version"] = 0
+        (snap / MANIFEST).write_text(json.dumps(manifest))
+    elif damage == "json":
+        (snap / MANIFEST).write_text("{not json")
+    elif damage == "path":
+        manifest["scenes"][0]["file"] = "../../etc/passwd"
+        (snap / MANIFEST).write_text(json.dumps(manifest))
+    out = CliRunner().invoke(main, ["check", "torch", "--against", str(snap), "--quiet"])
+    lines = [x for x in out.output.splitlines() if x.strip()]
+    assert out.exit_code == 2 and len(lines) == 1 and lines[0].startswith("splatbench: error: "), out.output
+    assert message in lines[0], lines[0]
+
+
+def test_a_backend_that_raises_fails_the_check_in_one_line_per_quantity(torch_snapshot, tmp_path, monkeypatch):
+    (tmp_path / "crashy.py").write_text(textwrap.dedent('''
+        def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
+            if means.shape[0] > 10 ** 6:
+                scale = 1.0
+            return scale * means
+    '''))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    out = CliRunner().invoke(main, ["check", "crashy:render", "--against", str(torch_snapshot), "--quiet",
+                                    "--no-diagnose"])
+    assert out.exit_code == 1 and "Traceback" not in out.output, out.output
+    assert "backend raised UnboundLocalError" in out.output and "crashy.py:5 in render)" in out.output
+    taken = CliRunner().invoke(main, ["snapshot", "crashy:render", "--out", str(tmp_path / "x"), "--quiet"])
+    lines = [x for x in taken.output.splitlines() if x.strip()]
+    assert taken.exit_code == 2 and len(lines) == 1 and "fails on scene" in lines[0], taken.output
+    nope = CliRunner().invoke(main, ["check", "no_such_module_xyz:render", "--against", str(torch_snapshot)])
+    assert nope.exit_code == 2 and "cannot import module" in nope.output
+
+
+def test_cli_json_and_images(torch_snapshot, tmp_path):
+    out = CliRunner().invoke(main, ["check", "tests.gradient_bugs:conic_b_half", "--against", str(torch_snapshot),
+                                    "--json", "--no-diagnose", "--save-images", str(tmp_path / "img")])
+    assert out.exit_code == 1, out.output
+    data = json.loads(out.output)
+    assert data["status"] == "regressed" and data["summary"]["regression"] > 0
+    assert {q["status"] for q in data["quantities"]} <= {"unchanged", "regression", "improvement",
+                                                         "convention change"}
+    assert not (tmp_path / "img").exists() or not any((tmp_path / "img").iterdir())  # no output changed
+
+
+def test_rotation_gradients_of_isotropic_gaussians_are_measured_against_the_covariance_scale():
+    """An isotropic Gaussian's quats gradient is exactly 0 (float32 leaves noise of the covariance's
+    scale): inside the gradient band and out, it is measured against log_scales' gradient, so noise
+    reads as noise (a full drjit check against a torch snapshot hit this on garden)."""
+    from splatbench.regress.measure import Band, gradient_difference
+
+    n = 4
+    band = Band(np.zeros((2, 2), bool), np.zeros((2, 2)), np.array([False, True, False, True]), np.zeros((2, 2)))
+    ref = {"grad_quats": np.zeros((n, 4)), "grad_log_scales": np.ones((n, 3))}
+    noise = np.full((n, 4), 1e-9)
+    rest, inside, _ = gradient_difference("grad_quats", noise, ref["grad_quats"], band, ref)
+    assert rest < 1e-8 and inside < 1e-8
+    rest, inside, _ = gradient_difference("grad_means", noise[:, :3], np.zeros((n, 3)), band, ref)
+    assert rest == inside == float("inf")  # other groups have no floor: a gradient where there was none
