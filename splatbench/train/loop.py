@@ -24,6 +24,7 @@ params, schedule, sh_schedule, losses, dssim, metrics, checkpoint, result).
 
 from __future__ import annotations
 
+import inspect
 import time
 from collections.abc import Callable, Sequence
 from contextlib import contextmanager
@@ -45,6 +46,7 @@ from splatbench.train.config import TrainConfig, save_config
 from splatbench.train.initializers import InitSettings, initialize
 from splatbench.train.losses import photometric_loss
 from splatbench.metrics.image import psnr, ssim_metric
+from splatbench.train.protocol import get_protocol
 from splatbench.train.params import (ExponentialLR, gaussians_from_params, make_optimizers, params_from_gaussians,
                                      refreeze, scene_extent, set_lr)
 from splatbench.train.result import EvalPoint, HistoryPoint, StepEvaluation, TrainResult
@@ -437,6 +439,18 @@ def _save_checkpoint(trainer: Trainer, out: Path, extra: dict) -> Path:
     return path
 
 
+def _schedule_note(strategy, config: TrainConfig) -> str | None:
+    """The strategy's `schedule_note` for this run (optional), with the protocol's advice
+    where the method takes an ``advice`` (a named protocol: only its full length keeps it)."""
+    note = getattr(strategy, "schedule_note", None)
+    if note is None:
+        return None
+    advice = get_protocol(config.protocol).schedule_advice
+    if advice is not None and "advice" in inspect.signature(note).parameters:
+        return note(config.iterations, advice=advice)
+    return note(config.iterations)
+
+
 def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     from splatbench.metrics.load import Load, process_cpu_seconds
     from splatbench.metrics.memory import peak_rss_mb
@@ -518,9 +532,12 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     notes = resumed + list(trainer.dataset.notes) + ([trainer.init_note] if trainer.init_note else []) \
         + [trainer.background_note] + ([trainer.up_note] if trainer.up_note else []) \
         + ([lpips_note] if lpips_note else [])
-    schedule_note = getattr(trainer.strategy, "schedule_note", lambda _: None)(config.iterations)  # optional
+    schedule_note = _schedule_note(trainer.strategy, config)
     if schedule_note:
         notes.append(schedule_note)
+    early_note = get_protocol(config.protocol).early_stop_note(config.iterations)
+    if early_note:
+        notes.append(early_note)
     outcome_note = getattr(trainer.strategy, "outcome_note", lambda _: None)(trainer.state)  # optional
     if outcome_note:
         notes.append(outcome_note)
