@@ -1029,3 +1029,18 @@ def test_auto_init_note_separates_its_choice_from_the_sfm_result(tiny_diffuse, m
     init = initialize("auto", dataclasses.replace(tiny_diffuse, points=None),
                       InitSettings(sh_degree=0, opacity=0.1, random_points=50, seed=0, say=said.append))
     assert said == [init.note] and "init=random for random points); SfM: 40 points" in init.note
+
+
+def test_train_help_lists_the_protocols_inits_and_random_regions():
+    """`splatbench train --help` names every choice of protocol, init and init_region (the
+    help is written out, so that --help does not import torch: this keeps it in step)."""
+    from splatbench.cli import main
+    from splatbench.train.initializers import INITIALIZERS, REGIONS
+    from splatbench.train.protocol import PROTOCOLS
+
+    text = " ".join(CliRunner().invoke(main, ["train", "--help"]).output.split())
+    for label, names in (("protocol:", PROTOCOLS), ("init:", ("auto", "surface", "sfm", "random")),
+                         ("init_region (init=random):", REGIONS)):
+        listed = text.split(label, 1)[1].split(";")[0].split(". ")[0]
+        assert all(re.search(rf"\b{re.escape(n)}\b", listed) for n in names), (label, listed)
+    assert set(INITIALIZERS) >= {"auto", "surface", "sfm", "random"}
