@@ -93,6 +93,7 @@ class InitSettings:
     extent: float = 3.0   # init="random", region "camera_cube": half-side in scene scales (gsplat's init_extent)
     jitter: float = 0.0   # surface / sfm: seeded displacement of each point, in units of its neighbour spacing
     sfm_poses: str = "known"  # init="sfm": "known" (triangulate with the dataset's poses) or "estimated"
+    say_note: bool = True  # `initialize` says the note too (False: a resumed run, whose model is its checkpoint's)
 
 
 @dataclass(frozen=True)
@@ -131,7 +132,7 @@ def initialize(name: str, dataset, settings: InitSettings) -> Initialization:
         raise InputError(f"init: unknown initialisation {name!r} (expected one of: {', '.join(INITIALIZERS)})")
     made = INITIALIZERS[name](dataset, settings)
     init = made if isinstance(made, Initialization) else Initialization(made)
-    if init.note and settings.say is not None:  # said as soon as the start is made, before training
+    if init.note and settings.say is not None and settings.say_note:  # said as soon as the start is made, before training
         settings.say(init.note)
     return Initialization(init.gaussians, {"method": name, "points": len(init.gaussians), **init.summary},
                           init.note)

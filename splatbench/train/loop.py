@@ -125,7 +125,10 @@ class Trainer:
     """A training run in progress. ``Trainer(config)`` validates everything and sets up
     (no rendering); `step` runs one iteration; `evaluate` measures the test split."""
 
-    def __init__(self, config: TrainConfig, *, dataset=None, say: Callable[[str], None] | None = None) -> None:
+    def __init__(self, config: TrainConfig, *, dataset=None, say: Callable[[str], None] | None = None,
+                 resuming: bool = False) -> None:
+        # ``say``: set-up lines as they happen; the start made (init's note) only when not
+        # ``resuming`` (a resumed run's model is its checkpoint's; the note stays among its notes)
         self.config = config  # validated on construction
         self.strategy = config.make_strategy()
         if dataset is None:
@@ -147,7 +150,7 @@ class Trainer:
         init = initialize(config.init, dataset, InitSettings(
             config.max_sh_degree, config.initial_opacity, config.init_random_points, config.seed, say=say,
             region=config.init_region, extent=config.init_extent, jitter=config.init_jitter,
-            sfm_poses=config.init_sfm_poses))
+            sfm_poses=config.init_sfm_poses, say_note=not resuming))
         gaussians, self.init_summary, self.init_note = init.gaussians, init.summary, init.note
         self.extent = scene_extent(train.cameras)
         self.lrs = lr_groups(config)
@@ -460,7 +463,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     if out.exists() and not out.is_dir():
         raise InputError(f"out: {str(out)!r} is a file, not a folder; choose another output folder")
     try:
-        trainer = Trainer(config, dataset=dataset, say=say)
+        trainer = Trainer(config, dataset=dataset, say=say, resuming=resume is not None)
     except Interrupted as exc:
         raise Interrupted(exc.signum, "nothing kept: training had not started (loading the dataset, "
                                       "initialising)") from None
