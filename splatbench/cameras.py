@@ -62,7 +62,8 @@ def _positive_int(name: str, value: Any) -> int:
 
 
 def _finite_float(name: str, value: Any, positive: bool = False) -> float:
-    if isinstance(value, (bool, np.bool_)):
+    # float(True) is 1.0 and np.asarray("0.5", float64) is 0.5: a flag or a string is not a number
+    if value is None or isinstance(value, (bool, np.bool_, str, bytes)):
         raise InputError(f"{name}: expected a finite number, got {value!r}")
     try:
         out = float(np.asarray(value, dtype=np.float64).reshape(()))
@@ -102,6 +103,10 @@ def _matrix4(name: str, value: Any) -> np.ndarray:
     if hasattr(value, "matrix") and not isinstance(value, np.ndarray):
         value = value.matrix  # mi.Transform4f / Transform4d
         value = value() if callable(value) else value
+    if value is None:  # np.array(None, float64) is nan, of shape []
+        raise InputError(f"{name}: expected shape [4, 4], got null")
+    if isinstance(value, (list, tuple)):  # nested lists (JSON): "1.5" or true would convert silently
+        _refuse_non_numbers(name, value)
     try:
         array = np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -109,6 +114,16 @@ def _matrix4(name: str, value: Any) -> np.ndarray:
     if array.size == 16:  # Dr.Jit's dynamic variants give [4, 4, 1]
         array = array.reshape(4, 4)
     return as_float_array(name, array, (4, 4), {}, dtype=np.float64)
+
+
+def _refuse_non_numbers(name: str, value: Any) -> None:
+    """A one-line `InputError` naming the first entry of nested lists that is a string, a
+    boolean or null (each of which NumPy would turn into a number or nan)."""
+    if isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            _refuse_non_numbers(f"{name}[{i}]", item)
+    elif value is None or isinstance(value, (bool, np.bool_, str, bytes)):
+        raise InputError(f"{name}: expected a number, got {'null' if value is None else repr(value)}")
 
 
 def _scalar(value: Any) -> float:

@@ -106,6 +106,30 @@ def _pinhole_capture(root: Path, n: int, size=(32, 24)) -> Path:
     return root
 
 
+@pytest.mark.parametrize("edit, message", [
+    (lambda m: m.update(fl_x="30.0"), "transforms.json: fl_x: expected a number, got '30.0'"),
+    (lambda m: m.update(w=True), "transforms.json: w: expected a number, got True"),  # True is an int in Python
+    (lambda m: m.update(camera_angle_y="0.7"), "transforms.json: camera_angle_y: expected a number, got '0.7'"),
+    (lambda m: m.update(k1=None), "transforms.json: k1: expected a number, got null"),
+    (lambda m: m["frames"][0].update(cy="12"), "transforms.json: frames[0]: cy: expected a number, got '12'"),
+    (lambda m: m["frames"][1]["transform_matrix"][0].__setitem__(3, "0.1"),
+     "transforms.json: frames[1]: transform_matrix[0][3]: expected a number, got '0.1'"),
+    (lambda m: m["frames"][0]["transform_matrix"][2].__setitem__(2, False),
+     "transforms.json: frames[0]: transform_matrix[2][2]: expected a number, got False"),
+    (lambda m: m["frames"][0].update(transform_matrix=None),
+     "transforms.json: frames[0]: transform_matrix: expected shape [4, 4], got null"),
+])
+def test_a_string_flag_or_null_where_transforms_json_wants_a_number_is_one_line(tmp_path, edit, message):
+    """Nothing a user gives is reinterpreted: "30.0" is not read as 30.0, nor true as 1."""
+    root = _pinhole_capture(tmp_path / "cap", 3)
+    meta = json.loads((root / "transforms.json").read_text())
+    edit(meta)
+    (root / "transforms.json").write_text(json.dumps(meta))
+    with pytest.raises(InputError) as exc:
+        load_dataset(root, test_every=0)
+    assert str(exc.value) == message
+
+
 def test_downscale_scales_cameras_and_prefers_images_n(tmp_path):
     root = _pinhole_capture(tmp_path / "cap", 17)
     ds = load_dataset(root, downscale=2)

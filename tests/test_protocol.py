@@ -150,3 +150,34 @@ def test_evaluation_steps_are_those_reached_and_the_end():
     assert evaluation_steps("graphdeco-30k", [], 300) == [300]              # stopped early: the end only
     assert evaluation_steps("graphdeco-30k", [100], 300) == [100, 300]
     assert evaluation_steps("quick", [], 2000) == [] and evaluation_steps("quick", [500], 2000) == [500, 2000]
+
+
+def test_a_short_graphdeco_run_is_advised_to_run_full_length_and_told_its_columns_are_not_the_papers():
+    """Under a named protocol the schedule is graphdeco's as written: a run too short to refine
+    is advised to run the protocol's length (not to change refine_every, which would leave
+    the protocol); a run stopped early is told its last evaluation is no published column,
+    while a column it did reach (the 30K run's 7,000 steps) still is."""
+    from splatbench.train.loop import _schedule_note
+
+    short = apply_overrides(TrainConfig(), ["protocol=graphdeco-7k", "iterations=50"])
+    note = _schedule_note(short.make_strategy(), short)
+    assert note.startswith("warning: strategy 'default' never refines in this run")
+    assert "run the protocol's full length (iterations=7000" in note and "smaller value" not in note
+    quick = apply_overrides(TrainConfig(), ["iterations=200"])
+    assert "give strategy_options.refine_every a smaller value" in _schedule_note(quick.make_strategy(), quick)
+
+    assert PROTOCOLS["graphdeco-7k"].early_stop_note(50) == (
+        "protocol 'graphdeco-7k' stopped early, after 50 of its 7000 steps: its step evaluation at 50 is not the "
+        "3DGS paper's 7K column (run all 7000 steps for that)")
+    assert PROTOCOLS["graphdeco-30k"].early_stop_note(10_000) == (
+        "protocol 'graphdeco-30k' stopped early, after 10000 of its 30000 steps: its step evaluation at 10000 is "
+        "not the 3DGS paper's 30K column (run all 30000 steps for that); its step-7000 evaluation is the 7K column's")
+    assert "7K and 30K columns" in PROTOCOLS["graphdeco-30k"].early_stop_note(300)
+    assert PROTOCOLS["graphdeco-7k"].early_stop_note(7000) is None and PROTOCOLS["quick"].early_stop_note(5) is None
+
+
+def test_a_graphdeco_run_stopped_early_says_so_among_its_notes(tmp_path, tiny_diffuse):
+    res = train(TrainConfig(protocol="graphdeco-7k", iterations=3, strategy="default", sh_degree=0,
+                            out=str(tmp_path / "r")), dataset=tiny_diffuse)
+    assert any(n.startswith("protocol 'graphdeco-7k' stopped early, after 3 of its 7000 steps") for n in res.notes)
+    assert any("never refines" in n and "run the protocol's full length" in n for n in res.notes)

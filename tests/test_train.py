@@ -991,3 +991,56 @@ def test_random_init_on_a_forward_facing_rig_says_no_region_contains_the_scene(t
                                                 say=said.append))
     assert init.summary["region"] == "camera_cube"
     assert init.note.startswith("warning:") and "forward-facing" in init.note and said == [init.note]
+
+
+def test_train_says_the_init_choice_live_before_the_bar_and_only_once(tmp_path, tiny_diffuse_dir):
+    """`init_region auto: ...` / `init auto: ...` go to stderr as the start is made (ahead of the
+    progress bar), with --json too, and are not printed again among the final notes."""
+    from click.testing import CliRunner
+
+    from splatbench.cli import main
+
+    for extra in (["--json"], []):
+        res = CliRunner().invoke(main, ["train", str(tiny_diffuse_dir), "--out", str(tmp_path / f"r{len(extra)}"),
+                                        "--set", "init='random'", "--set", "iterations=2", "--set", "sh_degree=0",
+                                        "--set", "strategy='none'", *extra])
+        assert res.exit_code == 0, res.output
+        err = [line for line in res.stderr.splitlines() if line.strip()]
+        said = [i for i, line in enumerate(err) if line.startswith("init_region auto: ")]
+        bar = next(i for i, line in enumerate(err) if line.startswith("train"))
+        assert len(said) == 1 and said[0] < bar, res.stderr
+        if extra:  # still among the result's notes
+            assert err[said[0]] in json.loads(res.stdout)["notes"]
+        else:  # not printed again at the end
+            assert "init_region auto" not in res.stdout
+
+
+def test_auto_init_note_separates_its_choice_from_the_sfm_result(tiny_diffuse, monkeypatch):
+    """init=auto falling back to SfM: one note, said once, "...random points); SfM: ..."."""
+    import splatbench.sfm as sfm_module
+    from splatbench.sfm import SfmRun, Similarity
+    from splatbench.train.initializers import InitSettings, initialize
+
+    xyz = np.random.default_rng(0).normal(size=(40, 3))
+    monkeypatch.setattr(sfm_module, "cached_sfm", lambda dataset, **kw: (SfmRun(
+        7, 7, 0.0, 1.0, xyz, np.zeros((40, 3), np.uint8), Similarity(1.0, np.eye(3), np.zeros(3)), Path("m/0"), 1, [],
+        0.1, kw["poses"]), True))
+    said: list[str] = []
+    init = initialize("auto", dataclasses.replace(tiny_diffuse, points=None),
+                      InitSettings(sh_degree=0, opacity=0.1, random_points=50, seed=0, say=said.append))
+    assert said == [init.note] and "init=random for random points); SfM: 40 points" in init.note
+
+
+def test_train_help_lists_the_protocols_inits_and_random_regions():
+    """`splatbench train --help` names every choice of protocol, init and init_region (the
+    help is written out, so that --help does not import torch: this keeps it in step)."""
+    from splatbench.cli import main
+    from splatbench.train.initializers import INITIALIZERS, REGIONS
+    from splatbench.train.protocol import PROTOCOLS
+
+    text = " ".join(CliRunner().invoke(main, ["train", "--help"]).output.split())
+    for label, names in (("protocol:", PROTOCOLS), ("init:", ("auto", "surface", "sfm", "random")),
+                         ("init_region (init=random):", REGIONS)):
+        listed = text.split(label, 1)[1].split(";")[0].split(". ")[0]
+        assert all(re.search(rf"\b{re.escape(n)}\b", listed) for n in names), (label, listed)
+    assert set(INITIALIZERS) >= {"auto", "surface", "sfm", "random"}

@@ -558,6 +558,9 @@ def _short(value: object) -> str:
 _BLENDER_KEYS = frozenset({"frames", "file_path", "transform_matrix", "camera_angle_x", "camera_angle_y", "fl_x",
                            "fl_y", "cx", "cy", "w", "h", "camera_model", "ply_file_path", *_DISTORTION_KEYS})
 
+#: the numeric scalars among them (JSON numbers only: "1375.52", true or null are refused)
+_BLENDER_NUMBERS = ("camera_angle_x", "camera_angle_y", "fl_x", "fl_y", "cx", "cy", "w", "h", *_DISTORTION_KEYS)
+
 
 def _blender_views(root: Path, file: str, meta: dict, load: _Load) -> list:
     shared = {k: v for k, v in meta.items() if k != "frames"}
@@ -576,6 +579,10 @@ def _blender_views(root: Path, file: str, meta: dict, load: _Load) -> list:
             raise InputError(f"{where}: file_path {_short(frame['file_path'])} names {rel}, as frames[{seen[rel]}] "
                              f"does (a duplicated frame; keep one)")
         seen[rel] = k
+        for key in _BLENDER_NUMBERS:  # at the boundary: a string or flag is never read as a number
+            if key in merged and (merged[key] is None or isinstance(merged[key], (bool, str, list, dict))):
+                raise InputError(f"{where if key in frame else file}: {key}: expected a number, got "
+                                 f"{'null' if merged[key] is None else _short(merged[key])}")
         w, h = _image_size(root, rel, f"named by {file}")
         if ("w" in merged or "h" in merged) and (merged.get("w"), merged.get("h")) != (w, h):
             raise InputError(f"{rel}: image size {w}x{h} disagrees with its camera "

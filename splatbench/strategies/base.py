@@ -132,10 +132,13 @@ class Strategy(Protocol):
         check that no change falls in the final 10 % of the run."""
         ...
 
-    def schedule_note(self, iterations: int) -> str | None:
+    def schedule_note(self, iterations: int, advice: str | None = None) -> str | None:
         """A warning when this strategy, as scaled to a run of ``iterations`` steps, never does what
         its name says (e.g. no refinement step falls in its refine window); None when it does.
-        Optional: the trainer reads it only where a strategy has it."""
+        ``advice``: what to do about it instead of the strategy's own (a named protocol fixes
+        the schedule, so only its full length keeps it). Optional, as is ``advice``: the
+        trainer reads it only where a strategy has it, and passes ``advice`` only where the
+        method takes it."""
         ...
 
     def outcome_note(self, state: object) -> str | None:
@@ -162,14 +165,19 @@ class Strategy(Protocol):
         ...
 
 
+#: What `no_refinement_note` advises by default: the run's own schedule may change.
+REFINE_ADVICE = 'give strategy_options.refine_every a smaller value or a fraction of the run ("5%"), or train longer'
+
+
 def no_refinement_note(name: str, refine_every: int, refine_start: int, refine_stop: int,
-                       iterations: int) -> str | None:
+                       iterations: int, advice: str | None = None) -> str | None:
     """`Strategy.schedule_note` of a strategy that refines every ``refine_every`` steps after
     ``refine_start`` and before ``refine_stop``: a warning when no such step falls in a run of
-    ``iterations`` steps, else None."""
+    ``iterations`` steps, else None. ``advice``: the fix it ends with (default
+    `REFINE_ADVICE`; a named protocol gives its own, which keeps the protocol)."""
     if last_multiple(refine_every, refine_start, min(iterations, refine_stop - 1)) is not None:
         return None
     return (f"warning: strategy {name!r} never refines in this run: no multiple of refine_every {refine_every} "
-            f"falls in its refine window {refine_start}..{refine_stop} of {iterations} iterations; give "
-            f"strategy_options.refine_every a smaller value or a fraction of the run (\"5%\"), or train longer")
+            f"falls in its refine window {refine_start}..{refine_stop} of {iterations} iterations; "
+            f"{advice or REFINE_ADVICE}")
 

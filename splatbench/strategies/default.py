@@ -184,9 +184,10 @@ class DefaultStrategy:
             return TopologyChange(reset - 1, f"an opacity reset (every {self.reset_every}; {window})")
         return None
 
-    def schedule_note(self, iterations: int) -> str | None:
+    def schedule_note(self, iterations: int, advice: str | None = None) -> str | None:
         """A warning when no refinement step falls in the refine window of this run."""
-        return no_refinement_note(self.name, self.refine_every, self.refine_start, self.refine_stop, iterations)
+        return no_refinement_note(self.name, self.refine_every, self.refine_start, self.refine_stop, iterations,
+                                  advice)
 
     def planned_counts(self, iterations: int) -> TopologyCounts:
         """The refinements and opacity resets this schedule makes in a run of ``iterations``

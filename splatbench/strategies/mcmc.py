@@ -117,9 +117,10 @@ class MCMCStrategy:
         return TopologyCounts(refinements=multiples(self.refine_every, self.refine_start,
                                                     min(iterations, self.refine_stop - 1)))
 
-    def schedule_note(self, iterations: int) -> str | None:
+    def schedule_note(self, iterations: int, advice: str | None = None) -> str | None:
         """A warning when no refinement step falls in the refine window of this run."""
-        return no_refinement_note(self.name, self.refine_every, self.refine_start, self.refine_stop, iterations)
+        return no_refinement_note(self.name, self.refine_every, self.refine_start, self.refine_stop, iterations,
+                                  advice)
 
     def initialize_state(self, params: Params) -> MCMCState:
         gen = torch.Generator(device=params["means"].device)

@@ -15,7 +15,11 @@ import click
               help="Override a config field (repeatable), e.g. --set iterations=2000 --set sh_degree=auto "
                    "--set strategy_options.cap_max=50000 --set data.downscale=8 (images / 8, or images_8/) "
                    "--set checkpoint_every=500 (a checkpoint every 500 steps, for --resume) "
-                   "--set protocol=graphdeco-30k (graphdeco's schedule unscaled, evaluated at 7,000 and 30,000).")
+                   "--set protocol=graphdeco-30k (graphdeco's schedule unscaled, evaluated at 7,000 and 30,000). "
+                   "protocol: quick (the default: the schedule scaled to iterations), graphdeco-7k, graphdeco-30k. "
+                   "init: auto (the default: the dataset's points, else SfM), surface (the dataset's points), "
+                   "sfm (pycolmap), random; init_region (init=random): auto, convergence, camera_cube, "
+                   "nerf_synthetic.")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default: the config's `out`, runs/train). One holding another run is refused "
                    "unless --resume continues one of its checkpoints or --force replaces it.")
@@ -41,7 +45,9 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     config.toml, point_cloud.ply and result.json under the output folder. A resumed run
     says so in one line, ``resumed from CKPT at step N of M``; init=sfm says
     ``SfM: running pycolmap on N training views (cached in DIR)`` or ``SfM: reusing DIR``
-    before SfM starts and its result as it ends. These lines go to stderr as they happen,
+    before SfM starts and its result as it ends; the start made (``init auto: sfm (...)``,
+    ``init_region auto: convergence (...)``) is said once it is made, before the progress
+    bar. These lines go to stderr as they happen,
     unless --quiet, and are always among the result's notes (so in --json and result.json).
 
     An output folder that already holds a run (result.json, point_cloud.ply or

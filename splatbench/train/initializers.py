@@ -93,6 +93,7 @@ class InitSettings:
     extent: float = 3.0   # init="random", region "camera_cube": half-side in scene scales (gsplat's init_extent)
     jitter: float = 0.0   # surface / sfm: seeded displacement of each point, in units of its neighbour spacing
     sfm_poses: str = "known"  # init="sfm": "known" (triangulate with the dataset's poses) or "estimated"
+    say_note: bool = True  # `initialize` says the note too (False: a resumed run, whose model is its checkpoint's)
 
 
 @dataclass(frozen=True)
@@ -124,11 +125,15 @@ def register_init(name: str) -> Callable[[Initializer], Initializer]:
 
 
 def initialize(name: str, dataset, settings: InitSettings) -> Initialization:
-    """The initial Gaussians of method ``name`` and their summary (`InputError` if unknown)."""
+    """The initial Gaussians of method ``name`` and their summary (`InputError` if unknown).
+    Its note (which start ``auto`` chose, the SfM result, the random region) goes to
+    ``settings.say`` once, as soon as it is made; initializers say only progress lines."""
     if name not in INITIALIZERS:
         raise InputError(f"init: unknown initialisation {name!r} (expected one of: {', '.join(INITIALIZERS)})")
     made = INITIALIZERS[name](dataset, settings)
     init = made if isinstance(made, Initialization) else Initialization(made)
+    if init.note and settings.say is not None and settings.say_note:  # said as soon as the start is made, before training
+        settings.say(init.note)
     return Initialization(init.gaussians, {"method": name, "points": len(init.gaussians), **init.summary},
                           init.note)
 
@@ -166,7 +171,7 @@ def auto(dataset, settings: InitSettings) -> Initialization:
     jittered = f", jittered by {settings.jitter:g} x their spacing with seed {settings.seed}" if settings.jitter else ""
     note = f"init auto: {method} ({why}; {len(init.gaussians)} points{jittered}; init=random for random points)"
     lines = [note] + ([init.note] if init.note else [])
-    return Initialization(init.gaussians, {**init.summary, "method": method, "asked": "auto"}, " ".join(lines))
+    return Initialization(init.gaussians, {**init.summary, "method": method, "asked": "auto"}, "; ".join(lines))
 
 
 @register_init("sfm")
@@ -196,7 +201,6 @@ def sfm(dataset, settings: InitSettings) -> Initialization:
         note = (f"SfM: {len(run.xyz)} points, {run.registered}/{run.total} training views registered (camera-centre "
                 f"RMSE {run.center_rmse_rel:.2%} of the rig radius; {'cached' if cached else 'ran'} in "
                 f"{run.model_path.parent})")
-    say(note)  # as soon as SfM is done, not only among the run's notes at the end
     return Initialization(gaussians, summary, note)
 
 
@@ -300,8 +304,6 @@ def random(dataset, settings: InitSettings) -> Initialization:
     gaussians = from_points(xyz, rgb, sh_degree=settings.sh_degree, opacity=settings.opacity)
     summary = {"region": region.chosen, "region_shape": region.shape,
                "region_center": [round(float(v), 6) for v in region.center], "region_size": round(region.size, 6)}
-    if region.note and region.note.startswith("warning"):
-        (settings.say or (lambda line: None))(region.note)
     return Initialization(gaussians, summary, region.note)
 
 

@@ -24,6 +24,7 @@ params, schedule, sh_schedule, losses, dssim, metrics, checkpoint, result).
 
 from __future__ import annotations
 
+import inspect
 import time
 from collections.abc import Callable, Sequence
 from contextlib import contextmanager
@@ -45,6 +46,7 @@ from splatbench.train.config import TrainConfig, save_config
 from splatbench.train.initializers import InitSettings, initialize
 from splatbench.train.losses import photometric_loss
 from splatbench.metrics.image import psnr, ssim_metric
+from splatbench.train.protocol import get_protocol
 from splatbench.train.params import (ExponentialLR, gaussians_from_params, make_optimizers, params_from_gaussians,
                                      refreeze, scene_extent, set_lr)
 from splatbench.train.result import EvalPoint, HistoryPoint, StepEvaluation, TrainResult
@@ -123,7 +125,10 @@ class Trainer:
     """A training run in progress. ``Trainer(config)`` validates everything and sets up
     (no rendering); `step` runs one iteration; `evaluate` measures the test split."""
 
-    def __init__(self, config: TrainConfig, *, dataset=None, say: Callable[[str], None] | None = None) -> None:
+    def __init__(self, config: TrainConfig, *, dataset=None, say: Callable[[str], None] | None = None,
+                 resuming: bool = False) -> None:
+        # ``say``: set-up lines as they happen; the start made (init's note) only when not
+        # ``resuming`` (a resumed run's model is its checkpoint's; the note stays among its notes)
         self.config = config  # validated on construction
         self.strategy = config.make_strategy()
         if dataset is None:
@@ -145,7 +150,7 @@ class Trainer:
         init = initialize(config.init, dataset, InitSettings(
             config.max_sh_degree, config.initial_opacity, config.init_random_points, config.seed, say=say,
             region=config.init_region, extent=config.init_extent, jitter=config.init_jitter,
-            sfm_poses=config.init_sfm_poses))
+            sfm_poses=config.init_sfm_poses, say_note=not resuming))
         gaussians, self.init_summary, self.init_note = init.gaussians, init.summary, init.note
         self.extent = scene_extent(train.cameras)
         self.lrs = lr_groups(config)
@@ -437,6 +442,18 @@ def _save_checkpoint(trainer: Trainer, out: Path, extra: dict) -> Path:
     return path
 
 
+def _schedule_note(strategy, config: TrainConfig) -> str | None:
+    """The strategy's `schedule_note` for this run (optional), with the protocol's advice
+    where the method takes an ``advice`` (a named protocol: only its full length keeps it)."""
+    note = getattr(strategy, "schedule_note", None)
+    if note is None:
+        return None
+    advice = get_protocol(config.protocol).schedule_advice
+    if advice is not None and "advice" in inspect.signature(note).parameters:
+        return note(config.iterations, advice=advice)
+    return note(config.iterations)
+
+
 def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     from splatbench.metrics.load import Load, process_cpu_seconds
     from splatbench.metrics.memory import peak_rss_mb
@@ -446,7 +463,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     if out.exists() and not out.is_dir():
         raise InputError(f"out: {str(out)!r} is a file, not a folder; choose another output folder")
     try:
-        trainer = Trainer(config, dataset=dataset, say=say)
+        trainer = Trainer(config, dataset=dataset, say=say, resuming=resume is not None)
     except Interrupted as exc:
         raise Interrupted(exc.signum, "nothing kept: training had not started (loading the dataset, "
                                       "initialising)") from None
@@ -518,9 +535,12 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     notes = resumed + list(trainer.dataset.notes) + ([trainer.init_note] if trainer.init_note else []) \
         + [trainer.background_note] + ([trainer.up_note] if trainer.up_note else []) \
         + ([lpips_note] if lpips_note else [])
-    schedule_note = getattr(trainer.strategy, "schedule_note", lambda _: None)(config.iterations)  # optional
+    schedule_note = _schedule_note(trainer.strategy, config)
     if schedule_note:
         notes.append(schedule_note)
+    early_note = get_protocol(config.protocol).early_stop_note(config.iterations)
+    if early_note:
+        notes.append(early_note)
     outcome_note = getattr(trainer.strategy, "outcome_note", lambda _: None)(trainer.state)  # optional
     if outcome_note:
         notes.append(outcome_note)

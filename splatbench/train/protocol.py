@@ -60,6 +60,32 @@ class Protocol:
             raise InputError(f"iterations: protocol {self.name!r} runs {self.iterations} steps of graphdeco's "
                              f"{GRAPHDECO_ITERATIONS}-step schedule (fewer only to stop it early), got {iterations}")
 
+    @property
+    def schedule_advice(self) -> str | None:
+        """What a warning about the schedule (a strategy that never refines in the run)
+        advises under this protocol: its full length, the one fix that keeps its
+        schedule as written; None under ``quick`` (the strategy's own advice: change the
+        schedule, or train longer)."""
+        if self.iterations is None:
+            return None
+        return (f"run the protocol's full length (iterations={self.iterations}, its default): its schedule is "
+                f"graphdeco's as written, so changing refine_every would leave protocol {self.name!r}")
+
+    def early_stop_note(self, iterations: int) -> str | None:
+        """A note when a run of ``iterations`` steps stops this protocol before its length:
+        its last evaluation is then not the published column it would stand beside; the
+        columns it did reach (graphdeco-30k stopped after 7,000 steps: the 7K) still are.
+        None when the run is full length or the protocol has no length (``quick``)."""
+        if self.iterations is None or iterations >= self.iterations:
+            return None
+        missed = [s for s in self.eval_steps if s > iterations]
+        reached = [s for s in self.eval_steps if s <= iterations]
+        column = " and ".join(f"{s // 1000}K" for s in missed) + (" columns" if len(missed) > 1 else " column")
+        kept = "".join(f"; its step-{s} evaluation is the {s // 1000}K column's" for s in reached)
+        return (f"protocol {self.name!r} stopped early, after {iterations} of its {self.iterations} steps: its "
+                f"step evaluation at {iterations} is not the 3DGS paper's {column} (run all {self.iterations} "
+                f"steps for that){kept}")
+
 
 #: Protocol name -> `Protocol`.
 PROTOCOLS: dict[str, Protocol] = {
