@@ -373,3 +373,20 @@ def test_no_cutoff_is_matched_by_the_opacity_rule():
     exactly where the alpha_min skip drops a contribution anyway; the reference has no "none"."""
     assert BackendInfo(name="dense", radius="none").reference_options()["radius"] == "opacity"
     assert BackendInfo(name="plain").reference_options()["radius"] == "3sigma"
+
+
+def test_registry_module_path_calls_a_factory(tmp_path, monkeypatch):
+    """``module:callable`` naming a factory (annotated ``-> Backend`` or marked
+    ``splatbench_backend_factory``) is called, as for an entry point; a render function is wrapped."""
+    b = registry.get_backend("splatbench.backends.builtins.drjit_backend:make_drjit_backend")
+    assert isinstance(b, Backend) and b.info.name == "drjit"
+    (tmp_path / "user_factories.py").write_text(
+        "from splatbench.backends import Backend, BackendInfo\n"
+        "def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):\n"
+        "    raise AssertionError('not called here')\n"
+        "def marked():\n    return Backend(render, BackendInfo(name='marked'))\n"
+        "marked.splatbench_backend_factory = True\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert registry.get_backend("user_factories:marked").info.name == "marked"
+    plain = registry.get_backend("user_factories:render")
+    assert plain.fn.__name__ == "render" and plain.info.name == "user_factories:render"

@@ -62,3 +62,38 @@ def test_bad_input_is_a_one_line_usage_error(tmp_path):
         assert out.returncode == 4, out.stdout + out.stderr
         lines = [x for x in out.stderr.splitlines() if x.strip()]
         assert len(lines) == 1 and message in lines[0] and "Traceback" not in out.stderr, out.stderr
+
+
+def test_a_builtin_by_path_is_its_factory_and_an_uncallable_spec_is_one_usage_line(tmp_path):
+    """The documented path of a built-in (a factory annotated -> Backend) loads as its name does
+    (configure succeeds: --collect-only lists every probe); a function whose signature cannot take
+    conform's call is one usage line at configure (exit 4), never a traceback per item."""
+    from splatbench.conform.probes import PROBES
+
+    spec = "splatbench.backends.builtins.drjit_backend:make_drjit_backend"
+    ok = _pytest(tmp_path, "--splatbench-backend", spec, "--collect-only")
+    assert ok.returncode == 0, ok.stdout[-2000:] + ok.stderr
+    listed = set(re.findall(r"^::splatbench/conform/(\w+)$", ok.stdout, re.M))
+    assert listed == {p.name for p in PROBES}, ok.stdout[-2000:]
+    (tmp_path / "wrong_sig.py").write_text("def render(means, camera):\n    return None\n")
+    bad = _pytest(tmp_path, "--splatbench-backend", "wrong_sig:render")
+    lines = [x for x in bad.stderr.splitlines() if x.strip()]
+    assert bad.returncode == 4 and len(lines) == 1 and "cannot be called as fn(" in lines[0], bad.stdout + bad.stderr
+    assert "Traceback" not in bad.stdout + bad.stderr
+
+
+def test_a_tampered_snapshot_is_one_usage_line_at_configure(tmp_path):
+    """One byte changed in one scene file: the plugin verifies every file's SHA-256 once when it
+    configures and stops with pytest's usage error (exit 4), before collecting or running an item."""
+    from splatbench.regress import snapshot
+
+    snap = snapshot("torch", tmp_path / "snap", scenes="small")
+    path = sorted((snap / "scenes").glob("*.npz"))[-1]
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0x01
+    path.write_bytes(bytes(data))
+    out = _pytest(tmp_path, "--splatbench-backend", "torch", "--splatbench-against", str(snap))
+    lines = [x for x in out.stderr.splitlines() if x.strip()]
+    assert out.returncode == 4, out.stdout[-2000:] + out.stderr
+    assert len(lines) == 1 and path.name in lines[0] and "SHA-256" in lines[0], out.stderr
+    assert "Traceback" not in out.stdout + out.stderr and "passed" not in out.stdout and "failed" not in out.stdout

@@ -3,6 +3,7 @@
     get_backend("drjit")                # a built-in
     get_backend("mypkg")                # an entry point in group "splatbench.backends"
     get_backend("mypkg.rast:render")    # user code: a Backend, or a callable
+    get_backend("splatbench.backends.builtins.drjit_backend:make_drjit_backend")   # a factory, called
     as_backend(my_function)             # wrap a callable (graphdeco conventions, nothing declared)
 
 A callable may carry its metadata as an attribute ``backend_info`` (a `BackendInfo`).
@@ -11,6 +12,7 @@ A callable may carry its metadata as an attribute ``backend_info`` (a `BackendIn
 from __future__ import annotations
 
 import importlib
+import inspect
 from importlib import metadata
 
 from splatbench.backends.base import Backend, BackendInfo
@@ -95,11 +97,24 @@ def get_backend(spec) -> Backend:
             obj = ep.load()
             return as_backend(obj() if _is_factory(obj) else obj, spec)
     if ":" in spec:
-        return as_backend(_load(spec, spec), spec)
+        obj = _load(spec, spec)
+        return as_backend(obj() if _is_factory(obj) else obj, spec)
     raise InputError(f"backend: unknown backend {spec!r} (known: {', '.join(available())}; "
                      f"or give user code as module:function)")
 
 
 def _is_factory(obj) -> bool:
-    """An entry point may name a zero-argument factory (marked ``splatbench_backend_factory``)."""
-    return bool(getattr(obj, "splatbench_backend_factory", False))
+    """An entry point or ``module:callable`` may name a factory callable without arguments, returning
+    a `Backend`: marked ``splatbench_backend_factory = True``, or annotated ``-> Backend`` (as the
+    built-ins' ``make_*_backend`` are), so that a built-in's documented path works as its name."""
+    if isinstance(obj, Backend) or not callable(obj):
+        return False
+    if getattr(obj, "splatbench_backend_factory", False):
+        return True
+    try:
+        ret = inspect.signature(obj).return_annotation
+    except (TypeError, ValueError):
+        return False
+    if isinstance(ret, str):  # `from __future__ import annotations`: the annotation's text
+        return ret.rsplit(".", 1)[-1] == "Backend"
+    return isinstance(ret, type) and issubclass(ret, Backend)

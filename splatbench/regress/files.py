@@ -172,6 +172,8 @@ class Snapshot:
         rec = self.record(scene.name)
         path = self.folder / rec["file"]
         where = f"snapshot {str(self.folder)!r}: {rec['file']}"
+        if not path.is_file():
+            raise InputError(f"{where}: missing; the snapshot is incomplete: take the snapshot again")
         if sha256(path) != rec["sha256"]:
             raise InputError(f"{where}: its SHA-256 is not the one snapshot.json records: the file was changed "
                              f"after the snapshot was taken; take the snapshot again")
@@ -192,6 +194,13 @@ class Snapshot:
         if extra:
             raise InputError(f"{where}: unexpected array {extra[0]!r}")
         return arrays
+
+
+    def verify(self) -> None:
+        """Check every scene file against the manifest (SHA-256, readable npz, shapes, finite values):
+        one `InputError` line naming the first bad file, before any rendering."""
+        for scene in scene_set(self.manifest["scene_set"]):
+            self.arrays(scene)
 
 
 def read_snapshot(folder: str | Path, scenes: list[Scene] | None = None) -> Snapshot:

@@ -54,13 +54,20 @@ class _State:
         from splatbench.errors import SplatbenchError
 
         self.spec, self.against, self.device = spec, against, device
+        from splatbench.conform.calls import Fault, check_signature
+
         try:
             self.backend = get_backend(spec)
+            try:  # a spec that cannot take conform's call is wired up wrong: once here, not per item
+                check_signature(self.backend)
+            except Fault as fault:
+                raise pytest.UsageError(f"splatbench: --splatbench-backend {spec}: {fault}") from None
             self.snapshot = None
             if against:
                 from splatbench.regress.files import read_snapshot
 
                 self.snapshot = read_snapshot(against)
+                self.snapshot.verify()  # every file's SHA-256 and arrays, once, not per item
         except SplatbenchError as exc:
             raise pytest.UsageError(f"splatbench: {exc}") from None
         self._conform = None
