@@ -35,7 +35,12 @@ def test_the_downstream_example_catches_a_gradient_change_and_reports_its_fix(tm
     shutil.copytree(EXAMPLE, project, ignore=shutil.ignore_patterns("__pycache__"))
     assert (project / "pyproject.toml").is_file() and (project / ".github" / "workflows" / "splatbench.yml").is_file()
     workflow = (project / ".github" / "workflows" / "splatbench.yml").read_text()
-    assert "pip install splatbench" in workflow and "--splatbench-backend toy_splat:render" in workflow
+    assert "--splatbench-backend toy_splat:render" in workflow
+    # splatbench is not on PyPI: installed from its git repository; apt's lists are fetched first;
+    # no snapshot is shipped, so the workflow stops on its absence in one line
+    assert "pip install splatbench" not in workflow and "git+https://" in workflow
+    assert workflow.index("sudo apt-get update") < workflow.index("sudo apt-get install")
+    assert not (project / "snapshots").exists() and "test -f snapshots/snapshot.json" in workflow
     assert "splatbench check toy_splat:render --against snapshots" in workflow
 
     snap = _run(project, "splatbench", "snapshot", "toy_splat:render", "--out", "snapshots", "--scenes", "small",
