@@ -48,7 +48,12 @@ def torch_snapshot(tmp_path_factory, few_scenes):
 
 
 def test_a_snapshot_is_deterministic_and_documented(torch_snapshot, tmp_path):
+    import torch
+
+    threads, deterministic = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
     again = snapshot("torch", tmp_path / "again", scenes="small")
+    # one torch thread and deterministic algorithms only while it renders: the caller's settings come back
+    assert (torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()) == (threads, deterministic)
     files = sorted(p.relative_to(torch_snapshot) for p in torch_snapshot.rglob("*") if p.is_file())
     assert files == sorted(p.relative_to(again) for p in again.rglob("*") if p.is_file())
     for f in files:  # byte for byte: no timestamps, sorted members
@@ -161,6 +166,19 @@ def test_cli_json_and_images(torch_snapshot, tmp_path):
     assert {q["status"] for q in data["quantities"]} <= {"unchanged", "regression", "improvement",
                                                          "convention change"}
     assert not (tmp_path / "img").exists() or not any((tmp_path / "img").iterdir())  # no output changed
+
+
+def test_a_check_failing_on_convention_changes_alone_is_not_called_regressed():
+    from splatbench.regress.checking import CheckReport, QuantityResult
+    from splatbench.regress.cli import format_report
+
+    moved = QuantityResult("s", "rgb", "convention change", 1.0, 0.1)
+    report = CheckReport("b", "1", "snap", "b", "small", (moved, QuantityResult("s", "alpha", "unchanged", 0.0, 0.1)))
+    assert report.exit_code == 1 and report.status == "convention changed"
+    assert format_report(report).splitlines()[-1].startswith("b: convention changed: 1 unchanged, 0 improved, "
+                                                              "0 regressed, 1 convention changes")
+    worse = CheckReport("b", "1", "snap", "b", "small", (moved, QuantityResult("s", "alpha", "regression", 1.0, 0.1)))
+    assert worse.status == "regressed"
 
 
 def test_rotation_gradients_of_isotropic_gaussians_are_measured_against_the_covariance_scale():

@@ -3,7 +3,8 @@
     from splatbench.regress import snapshot, check
     snapshot("mypkg.rast:render", "snap/")          # outputs and gradients on a versioned scene set
     report = check("mypkg.rast:render", "snap/")    # the same quantities now, against the snapshot
-    report.status, report.exit_code, report.changed # "unchanged" / "improved" / "regressed"; 0 or 1
+    report.status, report.exit_code, report.changed # "unchanged" / "improved" / "regressed" /
+                                                    # "convention changed"; 0 or 1
 
 A snapshot (`files`: NumPy ``.npz`` + JSON, no pickle, deterministic) holds, per scene of a
 fixed, versioned set (`scenes`: conform's probe scenes, synthetic workloads from random poses,

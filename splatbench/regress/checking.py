@@ -108,8 +108,8 @@ class CheckReport:
 
     @property
     def status(self) -> str:
-        if not self.passed:
-            return "regressed"
+        if not self.passed:  # a failing check with no regression failed on convention changes alone
+            return "regressed" if any(r.status == "regression" for r in self.results) else "convention changed"
         return "improved" if any(r.status == "improvement" for r in self.results) else "unchanged"
 
     def to_dict(self) -> dict:
