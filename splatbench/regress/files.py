@@ -14,13 +14,15 @@ shape). Each npz holds one float64 array per quantity (``rgb`` [H, W, 3], ``alph
 ``depth`` [H, W], ``grad_<group>`` shaped like the group) and the oracle's bands
 (``band`` [H, W] bool, ``tie_slack`` [H, W], ``grad_band`` [N] bool, ``grad_weight`` [H, W]).
 Plain NumPy ``.npy`` members in a zip (readable by ``numpy.load(..., allow_pickle=False)``),
-written with fixed timestamps: two snapshots of the same code are byte for byte equal.
+written with fixed timestamps, and rendered with torch on one thread and its deterministic
+algorithms: two snapshots of the same code on the same machine are byte for byte equal.
 Nothing is unpickled when read; every member's shape is checked against the file's size
 (`splatbench.safeio.read_npz`), against the JSON and against the scene it claims to be.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
@@ -123,21 +125,22 @@ def snapshot(backend, out: str | Path, *, scenes: str = "full", device: str = "a
     try:
         (tmp / "scenes").mkdir()
         records = []
-        for scene in scene_set(scenes):
-            try:
-                values = render(backend, scene, device)
-            except Fault as fault:
-                raise InputError(f"backend {backend.name!r} fails on scene {scene.name!r}: {fault}; a snapshot is "
-                                 f"only taken of a backend that renders every scene") from None
-            b = bands(backend.info, scene)
-            arrays = {**values, "band": b.band, "tie_slack": b.tie_slack, "grad_band": b.grad_band,
-                      "grad_weight": b.grad_weight}
-            path = tmp / "scenes" / f"{scene.name}.npz"
-            write_npz(path, arrays)
-            records.append({"name": scene.name, "file": f"scenes/{scene.name}.npz", "sha256": sha256(path),
-                            "n": scene.n, "width": scene.camera.width, "height": scene.camera.height,
-                            "quantities": {q: list(values[q].shape) for q in quantities(backend)}})
-            say(f"{scene.name}: {len(values)} quantities")
+        with _deterministic_torch():
+            for scene in scene_set(scenes):
+                try:
+                    values = render(backend, scene, device)
+                except Fault as fault:
+                    raise InputError(f"backend {backend.name!r} fails on scene {scene.name!r}: {fault}; a snapshot is "
+                                     f"only taken of a backend that renders every scene") from None
+                b = bands(backend.info, scene)
+                arrays = {**values, "band": b.band, "tie_slack": b.tie_slack, "grad_band": b.grad_band,
+                          "grad_weight": b.grad_weight}
+                path = tmp / "scenes" / f"{scene.name}.npz"
+                write_npz(path, arrays)
+                records.append({"name": scene.name, "file": f"scenes/{scene.name}.npz", "sha256": sha256(path),
+                                "n": scene.n, "width": scene.camera.width, "height": scene.camera.height,
+                                "quantities": {q: list(values[q].shape) for q in quantities(backend)}})
+                say(f"{scene.name}: {len(values)} quantities")
         manifest = {"format": SNAPSHOT_FORMAT, "format_version": FORMAT_VERSION, "scene_set": scenes,
                     "scene_set_version": SCENE_SET_VERSION, "backend": backend_record(backend, spec),
                     "versions": _versions(), "device": device, "scenes": records}
@@ -149,6 +152,24 @@ def snapshot(backend, out: str | Path, *, scenes: str = "full", device: str = "a
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return out
+
+
+@contextlib.contextmanager
+def _deterministic_torch():
+    """Torch on one thread with deterministic algorithms while a snapshot renders (restored after):
+    a multi-threaded CPU reduction (gsplat's PyTorch path) sums in a varying order, which moves a
+    float32 result by ~1e-7 between runs, and a snapshot is a function of the code alone."""
+    import torch  # a snapshot's inputs are torch tensors (measure.render): torch is loaded anyway
+
+    threads, deterministic = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
+    warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
+    torch.set_num_threads(1)
+    torch.use_deterministic_algorithms(True, warn_only=True)  # an op without a deterministic kernel still runs
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(deterministic, warn_only=warn_only)
+        torch.set_num_threads(threads)
 
 
 @dataclass(frozen=True)
