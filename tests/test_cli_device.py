@@ -20,6 +20,8 @@ DEVICE_COMMANDS = {
     "conform": ["conform", "torch"],
     "bench raster": ["bench", "raster"],
     "bench train": ["bench", "train"],
+    "snapshot": ["snapshot", "torch", "--out", "."],
+    "check": ["check", "torch", "--against", "."],
 }
 EXPECTED = "splatbench: error: --device: expected 'auto', 'cpu' or 'cuda', got 'tpu'"
 

@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from tests.test_pytest_plugin import plugin_args  # the installed entry point, or -p on a bare tree
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "downstream"
 LINE = "    B = -b / det  # the conic's off-diagonal term\n"
@@ -67,5 +69,5 @@ def test_the_downstream_example_catches_a_gradient_change_and_reports_its_fix(tm
     assert "toy-splat: improved:" in fixed.stdout and "moved toward the oracle" in fixed.stdout
     assert "0 regressed" in fixed.stdout
 
-    own = _run(project, "pytest", "-p", "splatbench.regress.pytest_plugin", "-p", "no:cacheprovider", "-q")
+    own = _run(project, "pytest", *plugin_args(), "-p", "no:cacheprovider", "-q")
     assert own.returncode == 0 and "1 passed" in own.stdout, own.stdout + own.stderr

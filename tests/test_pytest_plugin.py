@@ -14,9 +14,19 @@ REPO = Path(__file__).resolve().parents[1]
 PLUGIN = "splatbench.regress.pytest_plugin"
 
 
+def plugin_args() -> list[str]:
+    """``-p PLUGIN`` where splatbench is not installed with its pytest11 entry point (a bare source
+    tree on PYTHONPATH); nothing where it is (`make setup`'s editable install, as CI runs): pytest
+    then loads the entry point itself, and naming the module again would register it twice."""
+    from importlib.metadata import entry_points
+
+    installed = any(ep.name == "splatbench" and ep.value == PLUGIN for ep in entry_points(group="pytest11"))
+    return [] if installed else ["-p", PLUGIN]
+
+
 def _pytest(folder: Path, *args: str, timeout: int = 600) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run([sys.executable, "-m", "pytest", "-p", PLUGIN, "-p", "no:cacheprovider", "-q", *args],
+    return subprocess.run([sys.executable, "-m", "pytest", *plugin_args(), "-p", "no:cacheprovider", "-q", *args],
                           cwd=folder, env=env, capture_output=True, text=True, timeout=timeout)
 
 

@@ -463,8 +463,9 @@ def test_public_api():
         assert hasattr(reference, name), name
     assert reference.Projection._fields == ("means2d", "conics", "depths", "opacities",
                                             "cutoff_sq", "radii", "visible")
-    assert reference.RenderOutput._fields == ("rgb", "alpha", "depth", "radii", "visible", "band", "tie_slack")
-    assert reference.Composite._fields == ("rgb", "alpha", "depth", "band", "tie_slack")
+    assert reference.RenderOutput._fields == ("rgb", "alpha", "depth", "radii", "visible", "band", "tie_slack",
+                                              "grad_band", "grad_weight")
+    assert reference.Composite._fields == ("rgb", "alpha", "depth", "band", "tie_slack", "grad_band", "grad_weight")
 
 
 def test_reference_imports_nothing_from_splatbench():

@@ -139,18 +139,18 @@ def test_bad_snapshots_are_one_line_never_a_pass(torch_snapshot, tmp_path, damag
 
 
 def test_a_backend_that_raises_fails_the_check_in_one_line_per_quantity(torch_snapshot, tmp_path, monkeypatch):
-    (tmp_path / "crashy.py").write_text(textwrap.dedent('''
+    (tmp_path / "crashy_check_backend.py").write_text(textwrap.dedent('''
         def render(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
             if means.shape[0] > 10 ** 6:
                 scale = 1.0
             return scale * means
     '''))
     monkeypatch.syspath_prepend(str(tmp_path))
-    out = CliRunner().invoke(main, ["check", "crashy:render", "--against", str(torch_snapshot), "--quiet",
+    out = CliRunner().invoke(main, ["check", "crashy_check_backend:render", "--against", str(torch_snapshot), "--quiet",
                                     "--no-diagnose"])
     assert out.exit_code == 1 and "Traceback" not in out.output, out.output
-    assert "backend raised UnboundLocalError" in out.output and "crashy.py:5 in render)" in out.output
-    taken = CliRunner().invoke(main, ["snapshot", "crashy:render", "--out", str(tmp_path / "x"), "--quiet"])
+    assert "backend raised UnboundLocalError" in out.output and "crashy_check_backend.py:5 in render)" in out.output
+    taken = CliRunner().invoke(main, ["snapshot", "crashy_check_backend:render", "--out", str(tmp_path / "x"), "--quiet"])
     lines = [x for x in taken.output.splitlines() if x.strip()]
     assert taken.exit_code == 2 and len(lines) == 1 and "fails on scene" in lines[0], taken.output
     nope = CliRunner().invoke(main, ["check", "no_such_module_xyz:render", "--against", str(torch_snapshot)])

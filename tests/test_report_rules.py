@@ -274,7 +274,8 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "- **Evaluation**: the test views at steps 500, 1,000, 1,500, 2,000" in header
     assert "rendered scenes at 32 px wide by Mitsuba, 2 spp" in header
     assert "LPIPS v0.1, AlexNet backbone, inputs scaled to [-1, 1]" in header
-    assert "not the initial points of init = surface (the same points for every seed)" in header
+    # the default start (init = auto: the scene's points) is jittered with the seed (init_jitter 0.5)
+    assert "the initial points (init = auto, seeded)" in header
 
     # a config that names its protocol (a preset added to TrainConfig) is shown as named
     from splatbench.reports.protocol import protocol_lines
@@ -284,3 +285,6 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "- **Protocol**: graphdeco-30k." in protocol_lines(table)
     table["config.init"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
+    # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so
+    table["config.init"], table["config.init_jitter"] = "surface", 0.0
+    assert "not the initial points of init = surface" in "\n".join(protocol_lines(table))
