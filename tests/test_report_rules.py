@@ -288,3 +288,72 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so
     table["config.init"], table["config.init_jitter"] = "surface", 0.0
     assert "not the initial points of init = surface" in "\n".join(protocol_lines(table))
+
+
+# --------------------------------------------------------------------------- best at comparable size
+def _bigger_lead(share: float):
+    """SH 3 ahead of SH 0 by 0.5 dB on every seed, with ``share`` more Gaussians (plus seeded noise)."""
+    def make(run):
+        rng = np.random.default_rng(run.seed)
+        three = run.labels["sh_degree"] == 3
+        psnr = 30.0 + rng.normal(0, 0.5) + (0.5 + rng.normal(0, 0.004) if three else 0.0)
+        count = round(10000 * (1.0 + rng.normal(0, 0.01)) * ((1.0 + share) if three else 1.0))
+        return metrics_of(psnr, num_gaussians=count), flat_curves(psnr)
+    return make
+
+
+def test_best_is_not_named_between_models_of_different_sizes(tmp_path):
+    """A 0.5 dB lead is named best at 3 % more Gaussians (below the 5 % minimum effect) or with
+    fewer, but at 20 % more it is "no single best at comparable size", with the size ratio as a
+    claim whose number is the paired geometric-mean ratio of the runs' counts."""
+    report, text = results(tmp_path / "a", spec_of(), _bigger_lead(0.03))
+    assert [c.label for c in report.findings["sh_degree"].claims if c.kind == "best"] == ["3"]
+    assert "with no more than 5 % more Gaussians" in text
+
+    report, text = results(tmp_path / "b", spec_of(), _bigger_lead(-0.3))  # the leader is smaller: named
+    assert [c.label for c in report.findings["sh_degree"].claims if c.kind == "best"] == ["3"]
+
+    report, text = results(tmp_path / "c", spec_of(), _bigger_lead(0.2))
+    claims = report.findings["sh_degree"].claims
+    assert not [c for c in claims if c.kind == "best"]
+    lead = next(c for c in claims if c.kind == "no best")
+    assert (lead.label, lead.reference) == ("3", "0") and lead.significant and lead.practical
+    size = next(c for c in claims if c.kind == "size")
+    assert size.metric == "num_gaussians" and size.value == pytest.approx(1.2, rel=0.01) and size.low > 1.05
+    assert "glossy: no single best at comparable size (`3`" in text
+    assert f"at {size.text} the Gaussians, more than the 5 % minimum effect" in lead.text and lead.text in text
+    assert "both on this table's Gaussians/quality Pareto front" in text  # smaller-worse and larger-better
+
+    # the experiment file's own minimum effect for the Gaussians (25 %) lets the same lead be named
+    report, _ = results(tmp_path / "d", spec_of({"report": {"min_effect": {"num_gaussians": 0.25}}}),
+                        _bigger_lead(0.2))
+    assert [c.label for c in report.findings["sh_degree"].claims if c.kind == "best"] == ["3"]
+
+
+def test_the_raster_kind_declares_no_size_for_its_best():
+    from splatbench.experiments.raster_kind import REPORT as RASTER_REPORT
+
+    assert TRAIN_REPORT.rules.size == "num_gaussians" and RASTER_REPORT.rules.size is None
+
+
+# --------------------------------------------------------------------------- loaded times in the table
+def test_a_time_timed_under_load_prints_no_number_in_the_table(tmp_path):
+    """Every SH 0 run was timed under load: its time cells read "— (loaded)". One SH 3 run (seed 2)
+    was: its cells average the other two seeds and say one run was left out. Quality is kept."""
+    def make(run):
+        zero = run.labels["sh_degree"] == 0
+        psnr = 30.0 + (0.0 if zero else 1.0) + 0.01 * run.seed
+        loaded = int(zero or run.seed == 2)
+        seconds = 1000.0 if loaded else 10.0 + run.seed  # a loaded run's time would move the mean a lot
+        return metrics_of(psnr, seconds=seconds, loaded=loaded), flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of(), make)
+    rows = {line.split(" | ")[1]: line.split(" | ") for line in text.splitlines() if line.startswith("| glossy |")}
+    heads = next(line for line in text.splitlines() if line.startswith("| scene |")).split(" | ")
+    t, r, q = heads.index("train time (s)"), heads.index("render (ms/view)"), heads.index("test PSNR (dB)")
+    assert rows["`0`"][t] == "— (loaded)" and rows["`0`"][r] == "— (loaded)"
+    assert rows["`0`"][q].startswith("30.01 ± ")  # quality kept: the mean of 30.00, 30.01, 30.02
+    # seeds 0 and 1 only: 10.0 and 11.0 -> 10.5 (the loaded 1000 s would make it 340.3)
+    assert rows["`3`"][t].startswith("10.5 ± ") and rows["`3`"][t].endswith("(1 loaded run left out)")
+    table = next(a for a in report.axes if a.axis == "sh_degree")
+    assert table.stat("glossy", "3", "train_seconds").n == 2 and table.stat("glossy", "0", "train_seconds").n == 0

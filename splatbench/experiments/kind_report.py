@@ -38,10 +38,15 @@ class Comparison:
 
 @dataclass(frozen=True)
 class FindingRules:
-    """A kind's primary metric (best-of) and its comparisons."""
+    """A kind's primary metric (best-of) and its comparisons.
+
+    size: a metric counting the model's size (the train kind's ``num_gaussians``; None: the kind
+    records none): the best-of names a cell only when it is not larger than the runner-up by more
+    than that metric's comparison's minimum effect (docs/reports.md, "Best")."""
 
     primary: str
     comparisons: tuple[Comparison, ...]
+    size: str | None = None
 
 
 @dataclass(frozen=True)

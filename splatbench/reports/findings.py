@@ -7,7 +7,11 @@ axis:
 
 * **best**: per scene, the row with the best mean of the kind's primary metric, named only
   when its paired lead over the runner-up is significant and at least the comparison's
-  minimum effect (claim ``best``); otherwise "no single best" (claim ``no best``);
+  minimum effect (claim ``best``) and, for a kind that declares a size metric
+  (`FindingRules.size`: the train kind's Gaussian count), the leader is not larger than the
+  runner-up by more than that metric's minimum effect (geometric mean of the paired ratio);
+  otherwise "no single best" (claim ``no best``; "at comparable size" with a ``size`` claim
+  when only the size kept it from being named);
 * **vs**: every other row against the reference row (the one-at-a-time base, else the
   axis's first value), per scene, for each of the kind's comparisons, **paired over
   seeds** (`splatbench.metrics.stats`): ``diff`` is the mean of ``b_s - a_s`` with
@@ -44,10 +48,11 @@ import pandas as pd
 
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules
+from splatbench.figures import pareto_front
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
 from splatbench.reports.settling import CellSettling, cell_settling, difference_settled, drift
-from splatbench.reports.tables import AxisTable, Row, done_runs, kind_report, seed_values
+from splatbench.reports.tables import AxisTable, Row, done_runs, kind_report, loaded_runs, seed_values
 
 
 def rules_for(kind: str, metrics: tuple[MetricSpec, ...], min_effect: Mapping[str, float] | None = None
@@ -61,7 +66,8 @@ def rules_for(kind: str, metrics: tuple[MetricSpec, ...], min_effect: Mapping[st
         r = declared.rules
         if r is None:
             return None
-        rules = FindingRules(r.primary, tuple(c for c in r.comparisons if c.metric in names))
+        rules = FindingRules(r.primary, tuple(c for c in r.comparisons if c.metric in names),
+                             r.size if r.size in names else None)
         compared = [c.metric for c in r.comparisons]
         if r.primary not in names:
             return None
@@ -76,7 +82,8 @@ def rules_for(kind: str, metrics: tuple[MetricSpec, ...], min_effect: Mapping[st
                              f"(expected one of: {', '.join(compared)})")
     if min_effect:
         rules = FindingRules(rules.primary, tuple(dataclasses.replace(c, min_effect=min_effect[c.metric])
-                                                  if c.metric in min_effect else c for c in rules.comparisons))
+                                                  if c.metric in min_effect else c for c in rules.comparisons),
+                             rules.size)
     return rules
 
 
@@ -84,8 +91,9 @@ def rules_for(kind: str, metrics: tuple[MetricSpec, ...], min_effect: Mapping[st
 class Claim:
     """One number of a finding.
 
-    kind: "best", "vs", "self" (the reference row's own relative metric), "count", "auto" or
-    "parity"; scene ("" for all); label: the
+    kind: "best", "no best", "size" (the leader's size against the runner-up's, where it kept
+    a lead from being named best), "vs", "self" (the reference row's own relative metric),
+    "count", "auto" or "parity"; scene ("" for all); label: the
     row; reference: the row compared against ("vs"); metric; how: "mean", "diff",
     "ratio", "count" or "max"; value: the number; low / high: its 95 % interval (NaN
     when none); n: seeds (pairs) it comes from; significant: the interval excludes the
@@ -247,7 +255,7 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
     timed = set(declared.timed) if declared is not None else set()
     untimed = 0
     if timed and "metric.time_loaded" in usable.columns:
-        loaded = pd.to_numeric(usable["metric.time_loaded"], errors="coerce").fillna(0) != 0
+        loaded = loaded_runs(usable)
         untimed = int(loaded.sum())
         timed_usable = usable[~loaded]
     else:
@@ -261,6 +269,8 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
         return seed_values(sel, metric) if len(sel) else {}
 
     primary_comp = next((c for c in rules.comparisons if c.metric == primary.name), Comparison(primary.name, "diff"))
+    size_spec = specs.get(rules.size) if rules.size else None
+    size_effect = next((c.min_effect for c in rules.comparisons if c.metric == rules.size), None) or 0.0
     settling = declared.settling if declared is not None else None
     settle_effect = (primary_comp.min_effect if settling is not None and settling.metric == primary.name
                      else None)
@@ -312,7 +322,29 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
         lead_text = fmt_interval(lead, how, primary, null, primary_comp.min_effect)
         why = unsettled(scene, runner, row, lead.estimate - null)
         settled = None if settle(scene, row) is None else not why
-        if significant and is_practical:
+        larger = None  # the leader's size against the runner-up's, where it is larger by the minimum effect
+        if significant and is_practical and size_spec is not None:
+            ratio = paired_ratio(values(scene, runner, size_spec.name), values(scene, row, size_spec.name))
+            if ratio.n and math.isfinite(ratio.estimate) and ratio.estimate > 1.0 \
+                    and practical(ratio, "ratio", 1.0, size_effect):
+                larger = ratio
+        if larger is not None:
+            size_text = fmt_interval(larger, "ratio", size_spec, None)
+            front = _on_front(table, scene, size_spec, primary, (row, runner))
+            text = (f"{scene}: no single best at comparable size (`{row.label}`, {mean_text}, leads "
+                    f"`{runner.label}` by {lead_text} at {size_text} the {_name(size_spec)}, more than the "
+                    f"{fmt_min_effect(size_effect, 'ratio', size_spec)} minimum effect"
+                    + ("; both on this table's Gaussians/quality Pareto front" if front else "") + ")")
+            if size_spec.name != "num_gaussians":
+                text = text.replace("Gaussians/quality", f"{_name(size_spec)}/quality")
+            if why:
+                text += f", **not settled** ({why})"
+            claims.append(Claim("no best", scene, row.label, primary.name, how, lead.estimate, text, runner.label,
+                                lead.low, lead.high, lead.n, significant, is_practical, settled))
+            claims.append(Claim("size", scene, row.label, size_spec.name, "ratio", larger.estimate, size_text,
+                                runner.label, larger.low, larger.high, larger.n, *judge(larger, "ratio", 1.0,
+                                                                                           size_spec, size_effect)))
+        elif significant and is_practical:
             text = f"{scene} `{row.label}` ({mean_text}; {lead_text} over `{runner.label}`)"
             if why:
                 text += f", **not settled** ({why})"
@@ -331,7 +363,9 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
         return None
     word = "best" if primary.better != "lower" else "lowest"
     rule = ("named only where it beats the runner-up by a significant paired difference"
-            + (f" of at least {unit_text}" if unit_text else ""))
+            + (f" of at least {unit_text}" if unit_text else "")
+            + (f" with no more than {fmt_min_effect(size_effect, 'ratio', size_spec)} more {_name(size_spec)}"
+               if size_spec is not None else ""))
     lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds; {rule}): "
                  + "; ".join(best_parts) + ".")
 
@@ -421,6 +455,16 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
         lines += more_lines
         claims += more_claims
     return Finding(table.axis, lines, claims)
+
+
+def _on_front(table: AxisTable, scene: str, size: MetricSpec, quality: MetricSpec, rows: Sequence[Row]) -> bool:
+    """Whether every one of ``rows`` is on the Pareto front of ``table``'s rows at ``scene`` on the
+    means (no other row both smaller in ``size`` and better in ``quality``; `splatbench.figures`)."""
+    at = table.frame[table.frame.scene == scene]
+    sign = -1.0 if quality.better == "lower" else 1.0
+    front = pareto_front(list(at[f"{size.name}.mean"]), [sign * q for q in at[f"{quality.name}.mean"]])
+    labels = {at.iloc[i].label for i in front}
+    return all(r.label in labels for r in rows)
 
 
 def _recorded(runs: pd.DataFrame, declared) -> bool:

@@ -42,7 +42,8 @@ from splatbench.metrics.spec import MetricSpec
 from splatbench.reports.figures import cell_means, curves_figure
 from splatbench.reports.findings import Finding, axis_finding
 from splatbench.reports.notes import axis_notes, header_notes, metric_notes, run_findings
-from splatbench.reports.tables import AxisTable, axis_table, cell_labels, display, kind_report, metric_specs
+from splatbench.reports.tables import (AxisTable, axis_table, cell_labels, display, kind_report, loaded_runs,
+                                       metric_specs)
 
 REPORT_NAME = "report.md"
 FIGURES = "figures"
@@ -184,7 +185,7 @@ def timed_runs(report: Report, tradeoff: Tradeoff) -> tuple[pd.DataFrame, pd.Dat
     usable = usable_runs(report.table)
     declared = kind_report(report.spec.kind)
     if declared is not None and tradeoff.cost in declared.timed and "metric.time_loaded" in usable.columns:
-        usable = usable[pd.to_numeric(usable["metric.time_loaded"], errors="coerce").fillna(0) == 0]
+        usable = usable[~loaded_runs(usable)]
     return usable, done[~done.run_id.isin(set(usable.run_id))]
 
 

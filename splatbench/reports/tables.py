@@ -191,7 +191,8 @@ class AxisTable:
 
     frame: one row per (scene, row label) in grid order, columns ``scene``, ``label``,
     ``runs`` (done runs pooled), then ``<metric>.mean``, ``<metric>.std``, ``<metric>.n``
-    (statistics of the per-seed values, module doc). per_seed: (scene, label, metric)
+    (statistics of the per-seed values, module doc) and ``<metric>.loaded`` (runs timed under
+    load left out of a time metric; 0 for the others). per_seed: (scene, label, metric)
     -> seed -> value, what the findings pair.
     """
 
@@ -216,10 +217,29 @@ class AxisTable:
         lines = ["| " + " | ".join(heads) + " |", "|" + "|".join(["---"] * 3 + ["---:"] * len(self.metrics)) + "|"]
         for _, r in self.frame.iterrows():
             cells = [r.scene, f"`{r.label}`", str(int(r.runs))]
-            cells += [Stat(r[f"{m.name}.mean"], r[f"{m.name}.std"] if m.interval else math.nan,
-                           int(r[f"{m.name}.n"])).text(m.fmt) for m in self.metrics]
+            cells += [_cell(r, m) for m in self.metrics]
             lines.append("| " + " | ".join(cells) + " |")
         return "\n".join(lines)
+
+
+def _cell(r: pd.Series, m: MetricSpec) -> str:
+    """One table cell: `Stat.text`; a time none of whose runs was timed on a quiet machine reads
+    "— (loaded)", and one that left some out says how many (``<metric>.loaded``, `axis_table`)."""
+    text = Stat(r[f"{m.name}.mean"], r[f"{m.name}.std"] if m.interval else math.nan, int(r[f"{m.name}.n"])).text(m.fmt)
+    left = int(r.get(f"{m.name}.loaded", 0) or 0)
+    if not left:
+        return text
+    if int(r[f"{m.name}.n"]) == 0:
+        return "— (loaded)"
+    return f"{text} ({left} loaded run{'s' if left != 1 else ''} left out)"
+
+
+def loaded_runs(runs: pd.DataFrame) -> pd.Series:
+    """True per run timed while other processes loaded the machine (``metric.time_loaded`` is 1;
+    False for every run where the column is absent: runs from before it was recorded)."""
+    if "metric.time_loaded" not in runs.columns:
+        return pd.Series(False, index=runs.index)
+    return pd.to_numeric(runs["metric.time_loaded"], errors="coerce").fillna(0) != 0
 
 
 def done_runs(table: pd.DataFrame) -> pd.DataFrame:
@@ -227,8 +247,12 @@ def done_runs(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def axis_table(spec: ExperimentSpec, axis: str, table: pd.DataFrame, metrics: Sequence[MetricSpec]) -> AxisTable:
-    """The `AxisTable` of ``axis`` over the done runs of ``table``."""
+    """The `AxisTable` of ``axis`` over the done runs of ``table``. The kind's time metrics
+    (`KindReport.timed`) pool only the runs not timed under load (`loaded_runs`): column
+    ``<metric>.loaded`` counts those left out (docs/reports.md, "Loaded times")."""
     rows = axis_rows(spec, axis)
+    declared = kind_report(spec.kind)
+    timed = set(declared.timed) if declared is not None else set()
     done = done_runs(table)
     records = []
     per_seed: dict[tuple[str, str, str], dict[int, float]] = {}
@@ -237,11 +261,14 @@ def axis_table(spec: ExperimentSpec, axis: str, table: pd.DataFrame, metrics: Se
         for row in rows:
             runs = at_scene[at_scene.run_id.isin(row.run_ids)]
             rec: dict[str, Any] = {"scene": scene, "label": row.label, "runs": len(runs)}
+            loaded = loaded_runs(runs)
             for m in metrics:
-                values = seed_values(runs, m.name)
+                left = int(loaded.sum()) if m.name in timed else 0
+                values = seed_values(runs[~loaded] if left else runs, m.name)
                 per_seed[(scene, row.label, m.name)] = values
                 s = stat(values)
-                rec.update({f"{m.name}.mean": s.mean, f"{m.name}.std": s.std, f"{m.name}.n": s.n})
+                rec.update({f"{m.name}.mean": s.mean, f"{m.name}.std": s.std, f"{m.name}.n": s.n,
+                            f"{m.name}.loaded": left})
             records.append(rec)
     return AxisTable(axis, rows, tuple(metrics), pd.DataFrame.from_records(records), per_seed)
 
@@ -303,4 +330,4 @@ def _json(value: Any) -> str:
 
 
 __all__ = ["kind_report", "metric_specs", "shared_prefix", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
-           "axis_table", "cell_labels", "done_runs", "decode"]
+           "axis_table", "cell_labels", "done_runs", "loaded_runs", "decode"]
