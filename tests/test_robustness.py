@@ -532,7 +532,8 @@ def test_found_a_distortion_coefficient_that_is_not_a_number(tmp_path, value):
     meta = json.loads((root / "transforms.json").read_text())
     meta["p1"] = value
     (root / "transforms.json").write_text(json.dumps(meta))
-    one_line_error(lambda: load_dataset(root), "transforms.json: frames[0]: p1: expected a number")
+    # p1 is written at the top level, so the line names it there (a frame's own key is named by its frame)
+    one_line_error(lambda: load_dataset(root), "transforms.json: p1: expected a number")
 
 
 def test_found_distortion_coefficients_that_leave_a_pixel(tmp_path, monkeypatch):
