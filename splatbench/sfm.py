@@ -345,15 +345,22 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
                   models, [im.name for im in registered], seconds, poses)
 
 
-def _map(pycolmap: Any, database: Path, images: Path, tmp: Path, seed: int, threads: int, known_intrinsics: bool,
-         root: Path) -> tuple[Any, int]:
-    """Incremental mapping; the largest model (most registered views) and the number of models."""
+def _pipeline_options(pycolmap: Any, seed: int, threads: int) -> Any:
+    """COLMAP's incremental pipeline options with every seed and thread count set (mapping and
+    triangulation alike: the same seed and threads give the same model)."""
     options = pycolmap.IncrementalPipelineOptions()
     options.num_threads = threads
     options.random_seed = seed
     options.mapper.num_threads = threads
     options.mapper.random_seed = seed
     options.triangulation.random_seed = seed
+    return options
+
+
+def _map(pycolmap: Any, database: Path, images: Path, tmp: Path, seed: int, threads: int, known_intrinsics: bool,
+         root: Path) -> tuple[Any, int]:
+    """Incremental mapping; the largest model (most registered views) and the number of models."""
+    options = _pipeline_options(pycolmap, seed, threads)
     options.ba_refine_focal_length = not known_intrinsics
     options.ba_refine_principal_point = False
     options.ba_refine_extra_params = False
@@ -385,12 +392,7 @@ def _triangulate(pycolmap: Any, train: Any, database: Path, images: Path, names:
         pose = pycolmap.Rigid3d(pycolmap.Rotation3d(w2c[:3, :3]), w2c[:3, 3].reshape(3, 1))
         rec.add_image_with_trivial_frame(pycolmap.Image(name=im.name, camera_id=im.camera_id, image_id=im.image_id),
                                          pose)
-    options = pycolmap.IncrementalPipelineOptions()
-    options.num_threads = threads
-    options.random_seed = seed
-    options.triangulation.random_seed = seed
-    options.mapper.num_threads = threads
-    options.mapper.random_seed = seed
+    options = _pipeline_options(pycolmap, seed, threads)
     (tmp / "triangulated").mkdir()
     out = pycolmap.triangulate_points(rec, database, images, tmp / "triangulated", options=options,
                                       refine_intrinsics=False)
