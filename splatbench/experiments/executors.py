@@ -21,7 +21,7 @@ from typing import Any
 from splatbench.experiments.execute import RunContext, execute_run
 from splatbench.experiments.grid import RunSpec
 from splatbench.experiments.workers import init_worker, runner_id
-from splatbench.interrupt import children_spared_sigint, deferred
+from splatbench.interrupt import children_spared_sigint, deferred, start_quiet_resource_tracker
 
 
 #: How often `LocalExecutor.wait` looks for dead workers, and how long one may lie dead before the
@@ -44,6 +44,7 @@ class LocalExecutor:
         self.pool = self._new_pool()
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
+        start_quiet_resource_tracker()  # before the pool's queues register their semaphores with it
         return cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
                                       initializer=init_worker, initargs=(runner_id(),))
 
