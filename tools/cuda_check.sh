@@ -3,7 +3,8 @@
 #   1. the rasterizer's parity and gradient tests on Dr.Jit's CUDA backend (the `drjit-cuda` cases
 #      that skip on a CPU-only machine);
 #   2. `splatbench bench raster` and `splatbench bench train` on CUDA;
-#   3. a training run of the diffuse scene on CUDA (128², 2000 iterations): it/s and test PSNR;
+#   3. training runs of the diffuse scene on CUDA (128²): the default strategy for 2000 iterations
+#      (it/s and test PSNR), MCMC for 600 with a checkpoint at 300, and a resume from it;
 #   4. `splatbench compare` of drjit, torch and gsplat (fused CUDA kernels) on CUDA against the
 #      float64 oracle, when gsplat's CUDA extension builds.
 # Every step runs even when one before it failed; the exit status says whether any failed. gsplat's
@@ -70,6 +71,9 @@ fi
 if want bench; then
   run bench-raster $SB bench raster --device cuda --repeats 9 --out "$out/bench"
   run bench-train $SB bench train --device cuda --iterations 200 --warmup 20 --out "$out/bench"
+  # NeRF-synthetic size (800x800, 300k Gaussians): what one step of lego's 30K schedule costs here
+  run bench-train-800 $SB bench train --device cuda --size 800 --gaussians 300000 --iterations 100 --warmup 10 \
+    --out "$out/bench_800"
 fi
 if want train; then
   if [ -z "$data" ]; then
@@ -79,6 +83,10 @@ if want train; then
   # The Blender layout of the rendered dataset: the COLMAP one would need pycolmap on the GPU machine.
   run train-diffuse $SB train "$data" --set device=cuda --set layout=blender --set iterations=2000 \
     --out "$out/train_diffuse" --quiet --json
+  # MCMC's draws on the CUDA device, a checkpoint, and a resume from it on CUDA
+  run train-mcmc $SB train "$data" --set device=cuda --set layout=blender --set strategy=mcmc \
+    --set iterations=600 --set checkpoint_every=300 --out "$out/train_mcmc" --quiet --json
+  run train-resume $SB train --resume "$out/train_mcmc/checkpoints/iteration_300.pt" --quiet --json
 fi
 if want compare; then
   if [ "$built" = 0 ]; then

@@ -186,6 +186,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     from splatbench import Gaussians
     from splatbench.bench.peak import fp32_peak
     from splatbench.raster.options import RasterOptions
+    from splatbench.raster.torch_bridge import parameter_device
     from splatbench.raster.work import work_stats
 
     options = settings.raster_options()
@@ -195,7 +196,8 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
 
     workload = spec.build()
     name, camera = spec.label or workload.name, workload.camera
-    params = torch_params(workload.gaussians)
+    # the parameters live where a training loop keeps them: torch's CUDA device on CUDA
+    params = tuple(p.to(parameter_device(device)) for p in torch_params(workload.gaussians))
     n = len(workload.gaussians)
     del workload
     gc.collect()
@@ -218,7 +220,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     gc.collect()
     retained = (current_rss_mb() - rss_warm) / (3 * settings.repeats)
 
-    work = work_stats(Gaussians(*(p.numpy() for p in params)), camera, **options)
+    work = work_stats(Gaussians(*(p.cpu().numpy() for p in params)), camera, **options)
     evaluations = work.performed
     comp_s = stages.compositing_ms / 1e3
     peak = fp32_peak(device)

@@ -186,9 +186,9 @@ def _check_net(net: str) -> str:
 
 
 @functools.lru_cache(maxsize=None)
-def model(net: str) -> LPIPSNet:
-    """The LPIPS network for ``net``, loaded once per process."""
-    return LPIPSNet(net, load_weights(net)).eval()
+def model(net: str, device: str = "cpu") -> LPIPSNet:
+    """The LPIPS network for ``net`` on torch ``device``, loaded once per process and device."""
+    return LPIPSNet(net, load_weights(net)).eval().to(device)
 
 
 def convention(net: str, scale_inputs: bool) -> str:
@@ -203,15 +203,17 @@ def lpips(pred, target, *, net: str = "alex", scale_inputs: bool = True) -> floa
     """LPIPS v0.1 distance (lower is more similar) of images in [0, 1].
 
     ``pred``, ``target``: [H, W, 3] -> float, or [B, H, W, 3] -> [B] float64 array; torch
-    tensors or NumPy arrays, the same shape. ``pred`` is clamped to [0, 1] (a model's display
+    tensors or NumPy arrays, the same shape; computed on ``pred``'s device. ``pred`` is clamped to [0, 1] (a model's display
     image). ``net``: "alex" or "vgg". ``scale_inputs=True`` maps [0, 1] to [-1, 1] as the
     ``lpips`` package expects (gsplat, NerfBaselines); ``False`` feeds [0, 1] unscaled, as
     graphdeco's ``metrics.py`` does (its published LPIPS-VGG figures use this). Images smaller
     than the net's receptive chain (`MIN_SIDE`: 31 px per side for AlexNet, 16 for VGG) are refused.
     """
     _check_net(net)
-    p = (pred if isinstance(pred, torch.Tensor) else torch.from_numpy(np.asarray(pred))).detach().cpu()
-    t = (target if isinstance(target, torch.Tensor) else torch.from_numpy(np.asarray(target))).detach().cpu()
+    # computed where ``pred`` lies (a CUDA render stays on the GPU); arrays on the CPU
+    device = pred.device if isinstance(pred, torch.Tensor) else torch.device("cpu")
+    p = (pred if isinstance(pred, torch.Tensor) else torch.from_numpy(np.asarray(pred))).detach().to(device)
+    t = (target if isinstance(target, torch.Tensor) else torch.from_numpy(np.asarray(target))).detach().to(device)
     single = p.dim() == 3
     if p.shape != t.shape or p.dim() not in (3, 4) or p.shape[-1] != 3:
         raise InputError(f"lpips: expected pred and target of one shape [H, W, 3] or [B, H, W, 3], "
@@ -230,7 +232,7 @@ def lpips(pred, target, *, net: str = "alex", scale_inputs: bool = True) -> floa
     if scale_inputs:
         p, t = p * 2 - 1, t * 2 - 1
     with torch.no_grad():
-        d = model(net)(p.contiguous(), t.contiguous()).double().numpy()
+        d = model(net, str(device))(p.contiguous(), t.contiguous()).double().cpu().numpy()
     return float(d[0]) if single else d
 
 

@@ -56,6 +56,16 @@ def torch_params(gaussians) -> tuple:
                            gaussians.sh))
 
 
+def _device_sync(tensors: tuple) -> Callable[[], None]:
+    """A wait for torch's queued CUDA work when ``tensors`` live on a CUDA device (the bridge
+    waits for Dr.Jit; torch's own copies of the gradients run on its stream), else nothing."""
+    import torch
+
+    if any(t.is_cuda for t in tensors):
+        return torch.cuda.synchronize
+    return lambda: None
+
+
 def forward_with_init(params: tuple, camera, options: dict) -> Callable[[], RunStats]:
     """Forward only: `splatbench.rasterize` under ``torch.no_grad()`` on inputs that
     need no gradient (so Dr.Jit records no AD graph, as in `splatbench.render`)."""
@@ -64,10 +74,12 @@ def forward_with_init(params: tuple, camera, options: dict) -> Callable[[], RunS
     from splatbench.raster.torch_bridge import rasterize
 
     inputs = tuple(p.detach() for p in params)
+    sync = _device_sync(inputs)
 
     def forward() -> RunStats:
         with torch.no_grad():
             _, _, _, info = rasterize(*inputs, camera, **options)
+        sync()
         return RunStats(info.num_pairs, info.visible, info.sh_degree)
 
     return forward
@@ -80,6 +92,7 @@ def forward_backward_with_init(params: tuple, camera, options: dict) -> Callable
     from splatbench.raster.torch_bridge import rasterize_with_hooks
 
     leaves = tuple(p.detach().requires_grad_(True) for p in params)
+    sync = _device_sync(leaves)
 
     def forward_backward(timer=None) -> RunStats:
         if timer is not None:
@@ -88,6 +101,7 @@ def forward_backward_with_init(params: tuple, camera, options: dict) -> Callable
         if timer is not None:
             timer.mark("other")  # outputs copied to torch, RasterInfo
         rgb.sum().backward()
+        sync()
         if timer is not None:
             timer.mark("other")  # gradients copied to torch
         for p in leaves:

@@ -204,6 +204,30 @@ def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
                          f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") from None
 
 
+def _to_device(value: Any, device: torch.device) -> Any:
+    """``value`` (a decoded strategy state) with its tensors moved to ``device``, in place for
+    objects; a generator saved on another device is a one-line error (its state does not carry over)."""
+    if isinstance(value, torch.Tensor):
+        return value.to(device)
+    if isinstance(value, torch.Generator):
+        if value.device.type != device.type:
+            raise InputError(f"resume: the checkpoint's strategy drew on {value.device.type}; this run trains on "
+                             f"{device.type} (resume with the device it was written on: --set device=...)")
+        return value
+    if isinstance(value, list):
+        return [_to_device(v, device) for v in value]
+    if isinstance(value, tuple) and hasattr(value, "_fields"):
+        return type(value)(*(_to_device(v, device) for v in value))
+    if isinstance(value, tuple):
+        return tuple(_to_device(v, device) for v in value)
+    if isinstance(value, dict):
+        return {k: _to_device(v, device) for k, v in value.items()}
+    if hasattr(value, "__dict__") and not isinstance(value, type):
+        for k, v in vars(value).items():
+            setattr(value, k, _to_device(v, device))
+    return value
+
+
 def _apply(trainer: Any, state: dict[str, Any], p: Path) -> dict[str, Any]:
     saved, now = state["config"], trainer.config.to_dict()
     defaults = type(trainer.config)().to_dict()  # a field added since the checkpoint was written: its default
@@ -219,12 +243,13 @@ def _apply(trainer: Any, state: dict[str, Any], p: Path) -> dict[str, Any]:
     for name, value in params.items():
         if not isinstance(value, torch.Tensor) or not torch.isfinite(value).all():
             raise InputError(f"resume: {str(p)!r}: params.{name}: expected a finite tensor")
-    trainer.params = {name: torch.nn.Parameter(params[name], requires_grad=trainer.lrs[name] > 0)
+    device = trainer.device  # read onto the CPU (`read_checkpoint`); the run's tensors live here
+    trainer.params = {name: torch.nn.Parameter(params[name].to(device), requires_grad=trainer.lrs[name] > 0)
                       for name in PARAM_GROUPS}
     trainer.optimizers = make_optimizers(trainer.params, trainer.lrs, trainer.config.adam_eps)
     for name in PARAM_GROUPS:
-        trainer.optimizers[name].load_state_dict(state["optimizers"][name])
-    trainer.state = state["strategy_state"]
+        trainer.optimizers[name].load_state_dict(state["optimizers"][name])  # moments follow their tensor
+    trainer.state = _to_device(state["strategy_state"], device)
     trainer.sh = state["sh"]
     trainer._order = [int(i) for i in state["order"]]
     trainer.generator.set_state(state["generator"])

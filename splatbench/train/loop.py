@@ -38,7 +38,7 @@ import torch
 from splatbench.errors import InputError
 from splatbench.interrupt import Interrupted, deferred
 from splatbench.ply import ViewHints
-from splatbench.raster.torch_bridge import rasterize
+from splatbench.raster.torch_bridge import parameter_device, rasterize
 from splatbench.scenes.orientation import dataset_up, rig_up
 from splatbench.strategies import topology_counts
 from splatbench.strategies.base import StepContext
@@ -154,7 +154,10 @@ class Trainer:
         gaussians, self.init_summary, self.init_note = init.gaussians, init.summary, init.note
         self.extent = scene_extent(train.cameras)
         self.lrs = lr_groups(config)
-        self.params = params_from_gaussians(gaussians, self.lrs)
+        # parameters, Adam's moments, the strategy's state, targets and the loss live where the
+        # rasterizer runs (torch's CUDA device on CUDA): no host round trip per step
+        self.device = parameter_device(config.device)
+        self.params = params_from_gaussians(gaussians, self.lrs, self.device)
         self.optimizers = make_optimizers(self.params, self.lrs, config.adam_eps)
         # decays over the protocol's schedule (30,000 steps under graphdeco's, however early the run stops)
         self.means_lr = ExponentialLR(config.lr_means, config.lr_means_final, config.schedule_length, self.extent)
@@ -164,8 +167,9 @@ class Trainer:
                              lookahead=config.sh_auto_lookahead)
         # the training views stay as the dataset holds them (8-bit); each step converts its own (`target`)
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
-        self.gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
+        self.gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32, device=self.device)
         self.background, self.background_note = resolve_background(config.background, train)
+        self.background = self.background.to(self.device)
         # recorded in the saved PLY for `splatbench render`: a splatbench render's declared up, else
         # (a capture) the up its cameras share (`rig_up`), said in a note
         self.world_up, self.up_note = dataset_up(dataset.root, train.cameras), None
@@ -224,7 +228,7 @@ class Trainer:
     def target(self, view: int) -> torch.Tensor:
         """Training view ``view`` as float32 [H, W, 3] (converted from the dataset's 8-bit
         pixels for this step only; `splatbench.data.Split.image`)."""
-        return torch.from_numpy(self.dataset.train.image(view))
+        return torch.from_numpy(self.dataset.train.image(view)).to(self.device)
 
     # ------------------------------------------------------------------ one step
     def step(self) -> StepStatus:
@@ -239,12 +243,12 @@ class Trainer:
         camera = self.dataset.train.cameras[view]
         target = self.target(view)
         if cfg.random_background:
-            bg = torch.rand(3, generator=self.generator)
+            bg = torch.rand(3, generator=self.generator).to(self.device)  # the CPU stream on every device
         else:
             bg = self.background
         alphas = self.dataset.train.alpha_pixels
         if alphas is not None and bool((bg != self.gt_background).any()):
-            alpha = torch.from_numpy(self.dataset.train.alpha(view))
+            alpha = torch.from_numpy(self.dataset.train.alpha(view)).to(self.device)
             target = target + (bg - self.gt_background) * (1 - alpha)[..., None]
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
@@ -313,13 +317,13 @@ class Trainer:
             idx = list(range(len(cams)))
         else:
             idx = sorted({int(i) for i in np.linspace(0, len(cams) - 1, k).round()})
-        gains, visible = [], torch.zeros(self.num_gaussians)
+        gains, visible = [], torch.zeros(self.num_gaussians, device=self.device)
         for i in idx:
             with_band, _, _, info = self._render(cams[i], degree, self.background.tolist())
             without, _, _, _ = self._render(cams[i], baseline, self.background.tolist())
             target = self.target(i)
             gains.append(psnr(with_band, target) - psnr(without, target))
-            visible += info.visible.float()
+            visible += info.visible.to(self.device).float()
         w = torch.sigmoid(self.params["opacity_logits"]) * visible
         lo, hi = (baseline + 1) ** 2 - 1, (degree + 1) ** 2 - 1  # rows of bands baseline+1..degree in sh_rest
         e_band = (w[:, None, None] * self.params["sh_rest"][:, lo:hi] ** 2).sum()
@@ -343,7 +347,7 @@ class Trainer:
             t0 = time.perf_counter()
             rgb, _, _, _ = self._render(camera, self.sh.degree, self.background.tolist())
             seconds += time.perf_counter() - t0
-            gt = torch.from_numpy(test.image(i))  # one view as float at a time
+            gt = torch.from_numpy(test.image(i)).to(self.device)  # one view as float at a time
             psnrs.append(psnr(rgb, gt))
             ssims.append(ssim_metric(rgb, gt, self.config.ssim_window))
             for (net, scaled), values in lps.items():

@@ -18,8 +18,10 @@ from splatbench.gaussians import Gaussians
 from splatbench.strategies.base import PARAM_GROUPS, Optimizers, Params
 
 
-def params_from_gaussians(gaussians: Gaussians, lrs: dict[str, float]) -> Params:
-    """Torch leaf tensors per group (float32, CPU); groups with ``lrs[name] == 0`` are frozen."""
+def params_from_gaussians(gaussians: Gaussians, lrs: dict[str, float],
+                          device: torch.device | str = "cpu") -> Params:
+    """Torch leaf tensors per group (float32, on torch ``device``); groups with ``lrs[name] == 0``
+    are frozen."""
     sh = torch.from_numpy(np.array(gaussians.sh, dtype=np.float32))
     arrays = {
         "means": torch.from_numpy(np.array(gaussians.means, dtype=np.float32)),
@@ -29,7 +31,7 @@ def params_from_gaussians(gaussians: Gaussians, lrs: dict[str, float]) -> Params
         "sh_dc": sh[:, :1].contiguous(),
         "sh_rest": sh[:, 1:].contiguous(),
     }
-    return {name: torch.nn.Parameter(arrays[name], requires_grad=lrs[name] > 0) for name in PARAM_GROUPS}
+    return {name: torch.nn.Parameter(arrays[name].to(device), requires_grad=lrs[name] > 0) for name in PARAM_GROUPS}
 
 
 def gaussians_from_params(params: Params, sh_degree: int | None = None) -> Gaussians:
@@ -37,9 +39,8 @@ def gaussians_from_params(params: Params, sh_degree: int | None = None) -> Gauss
     sh = torch.cat([params["sh_dc"], params["sh_rest"]], dim=1).detach()
     if sh_degree is not None:
         sh = sh[:, : (sh_degree + 1) ** 2]
-    return Gaussians(means=params["means"].detach().numpy(), log_scales=params["log_scales"].detach().numpy(),
-                     quats=params["quats"].detach().numpy(),
-                     opacity_logits=params["opacity_logits"].detach().numpy(), sh=sh.numpy())
+    host = {name: params[name].detach().cpu().numpy() for name in ("means", "log_scales", "quats", "opacity_logits")}
+    return Gaussians(**host, sh=sh.cpu().numpy())
 
 
 def make_optimizers(params: Params, lrs: dict[str, float], eps: float) -> Optimizers:
