@@ -3,10 +3,10 @@
 #   1. the rasterizer's parity and gradient tests on Dr.Jit's CUDA backend (the `drjit-cuda` cases
 #      that skip on a CPU-only machine);
 #   2. `splatbench bench raster` and `splatbench bench train` on CUDA;
-#   3. training runs of the diffuse scene on CUDA (128²): the default strategy for 2000 iterations
-#      (it/s and test PSNR), MCMC for 600 with a checkpoint at 300, and a resume from it;
-#   4. `splatbench compare` of drjit, torch and gsplat (fused CUDA kernels) on CUDA against the
-#      float64 oracle, when gsplat's CUDA extension builds.
+#   3. `splatbench compare` of drjit, torch and gsplat (fused CUDA kernels) on CUDA against the
+#      float64 oracle (gradients too: the oracle runs on the CPU), when gsplat's CUDA extension builds;
+#   4. training runs of the diffuse scene on CUDA (128²): the default strategy for 2000 iterations
+#      (it/s and test PSNR), MCMC for 600 with a checkpoint at 300, and a resume from it.
 # Every step runs even when one before it failed; the exit status says whether any failed. gsplat's
 # extension compiles (nvcc, minutes) beside the untimed tests and is finished before anything is timed.
 #
@@ -16,7 +16,7 @@
 #                     rendered here when not given (needs Mitsuba)
 # Environment: PYTHON (default: python3) with splatbench and its dependencies importable;
 #              SPLATBENCH (default: "$PYTHON -m splatbench");
-#              STEPS (default: "tests bench train compare"): the steps to run, in that order;
+#              STEPS (default: "tests bench compare train"): the steps to run, in that order;
 #              COMPARE (default: "--synthetic 10000 256x256 --scene garden"): compare's workloads and options
 #              (the float64 oracle runs on the CPU: minutes per workload, more with finite differences).
 set -uo pipefail
@@ -24,7 +24,7 @@ out=${1:?usage: tools/cuda_check.sh OUTDIR [DIFFUSE_DATASET]}
 data=${2:-}
 PY=${PYTHON:-python3}
 SB=${SPLATBENCH:-"$PY -m splatbench"}
-STEPS=" ${STEPS:-tests bench train compare} "
+STEPS=" ${STEPS:-tests bench compare train} "
 mkdir -p "$out"
 failed=()
 want() { [[ $STEPS == *" $1 "* ]]; }
@@ -75,6 +75,17 @@ if want bench; then
   run bench-train-800 $SB bench train --device cuda --size 800 --gaussians 300000 --iterations 100 --warmup 10 \
     --out "$out/bench_800"
 fi
+if want compare; then
+  if [ "$built" = 0 ]; then
+    # shellcheck disable=SC2086  # COMPARE is a list of words
+    run compare $SB compare --device cuda --backend drjit --backend torch --backend gsplat \
+      ${COMPARE:---synthetic 10000 256x256 --scene garden --repeats 3} --out "$out/compare"
+  else
+    echo "== compare: skipped, gsplat's CUDA extension did not build (see $out/gsplat_build.log)"
+    failed+=("gsplat-build")
+  fi
+fi
+
 if want train; then
   if [ -z "$data" ]; then
     data="$out/diffuse-128"
@@ -88,17 +99,6 @@ if want train; then
     --set iterations=600 --set checkpoint_every=300 --out "$out/train_mcmc" --quiet --json
   run train-resume $SB train --resume "$out/train_mcmc/checkpoints/iteration_300.pt" --quiet --json
 fi
-if want compare; then
-  if [ "$built" = 0 ]; then
-    # shellcheck disable=SC2086  # COMPARE is a list of words
-    run compare $SB compare --device cuda --backend drjit --backend torch --backend gsplat \
-      ${COMPARE:---synthetic 10000 256x256 --scene garden} --out "$out/compare"
-  else
-    echo "== compare: skipped, gsplat's CUDA extension did not build (see $out/gsplat_build.log)"
-    failed+=("gsplat-build")
-  fi
-fi
-
 if [ ${#failed[@]} -gt 0 ]; then
   echo "cuda_check: failed: ${failed[*]}"
   exit 1
