@@ -273,7 +273,7 @@ class SfmResult:
         total         training views given to SfM
         center_rmse   RMSE of the registered camera centres after the similarity
                       alignment, in world units (`center_rmse_rel`: over the rig radius)
-        model_path    folder of the aligned COLMAP model (``<dataset>/sfm/0``)
+        model_path    folder of the aligned COLMAP model (in the content cache, `splatbench.sfm.sfm_cache_dir`)
         rig_radius    radius of the true training rig (`splatbench.sfm.rig_radius`)
     """
 
@@ -296,8 +296,11 @@ def from_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, sh_degr
 
     `splatbench.sfm.run_sfm` does the work (pycolmap SIFT, exhaustive matching,
     incremental mapping, CPU only; largest model; similarity alignment on camera
-    centres) and writes the aligned model to ``<dataset>/sfm/0``. ``single_thread=True``
-    with a fixed ``seed`` is deterministic. Points keep their SfM colours.
+    centres); the aligned model lives in the content cache (`splatbench.sfm.cached_sfm`, which
+    reuses an earlier run of the same inputs), never in the dataset folder.
+    ``single_thread=True`` with a fixed ``seed`` is deterministic; ``single_thread=False`` is
+    not, so it is not cached and refused here (`run_sfm` with an ``out`` folder runs it).
+    Points keep their SfM colours.
 
     Args:
         dataset: a `splatbench.data.Dataset` or a dataset folder.

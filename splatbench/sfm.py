@@ -37,6 +37,7 @@ Example::
 from __future__ import annotations
 
 import shutil
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
@@ -51,7 +52,7 @@ from splatbench.errors import InputError
 from splatbench.fsutil import cache_root, replace_dir
 from splatbench.safeio import read_npz
 
-#: Folder under the dataset that receives the model (``sfm/0/*.bin``) and the database.
+#: Name of the folder (inside `out`, or a cache folder) that receives the model (``sfm/0/*.bin``) and the database.
 SFM_DIR = "sfm"
 
 
@@ -268,7 +269,10 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
         known_intrinsics: give COLMAP the true PINHOLE intrinsics, fixed (see module doc);
             always True with ``poses="known"``.
         poses: "estimated" or "known" (`POSE_MODES`).
-        out: output folder; default ``<dataset>/sfm``. Replaced atomically.
+        out: output folder, replaced atomically. None: the content cache (`cached_sfm`, which
+            reuses an earlier run of the same inputs), never the dataset folder, which is the
+            user's and may be read-only; a multi-threaded run (not deterministic, so not
+            cached) needs an ``out``.
         verbose: keep COLMAP's INFO log on stderr (default: fatal messages only; a failure is an InputError).
 
     Returns:
@@ -291,8 +295,14 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
     train = ds.train
     if len(train) < 3:
         raise InputError(f"dataset: SfM needs at least 3 training views, got {len(train)}")
+    if out is None:
+        if not single_thread:
+            raise InputError("out: a multi-threaded SfM run is not deterministic, so it is not cached: give an "
+                             "output folder (nothing is written into the dataset folder)")
+        return cached_sfm(ds, seed=seed, known_intrinsics=known_intrinsics, poses=poses,
+                          say=(lambda line: print(line, file=sys.stderr)) if verbose else None)[0]
     root = Path(ds.root)
-    out_dir = Path(out) if out is not None else root / SFM_DIR
+    out_dir = Path(out)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     threads = 1 if single_thread else -1
     t0 = time.perf_counter()

@@ -216,18 +216,22 @@ def test_umeyama_and_rig_radius_errors():
 
 
 # ----------------------------------------------------------------------------- from_sfm
-def test_from_sfm_registers_and_aligns_the_tiny_capture(tiny):
-    """>= 90 % registered, camera centres within 1 % of the rig radius, model written, deterministic."""
+def test_from_sfm_registers_and_aligns_the_tiny_capture(tiny, tmp_path, monkeypatch):
+    """>= 90 % registered, camera centres within 1 % of the rig radius, the model in the content
+    cache (never in the dataset folder, which is the user's), deterministic."""
     import pycolmap
 
     from splatbench.cli import main
     from splatbench.data import load_dataset
 
+    monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
     path, _ = tiny
+    before = sorted(p.relative_to(path) for p in path.rglob("*"))
     result = from_sfm(path, seed=0)
     assert result.total == 12 and result.registered >= 0.9 * result.total
     assert result.center_rmse_rel <= 0.01, result
-    assert result.model_path == path / "sfm" / "0"
+    assert result.model_path.is_relative_to(tmp_path / "cache" / "sfm"), result.model_path
+    assert sorted(p.relative_to(path) for p in path.rglob("*")) == before  # nothing written into the capture
     rec = pycolmap.Reconstruction(str(result.model_path))
     assert rec.num_reg_images() == result.registered and rec.num_points3D() == len(result.gaussians)
     np.testing.assert_allclose(result.gaussians.means,
@@ -249,11 +253,19 @@ def test_from_sfm_registers_and_aligns_the_tiny_capture(tiny):
     tolerance = 0.01 * result.rig_radius * fx / np.percentile(depths, 5) + 1.0
     assert np.median(errors) < tolerance, (np.median(errors), tolerance)
     np.testing.assert_allclose(result.gaussians.opacities, 0.1, rtol=1e-6)
-    # the command prints the same numbers and, single-threaded with the same seed, the same model
+    # the command reuses the cached run and prints the same numbers; run again into --out,
+    # single-threaded with the same seed, it gives the same model
     out = CliRunner().invoke(main, ["sfm", str(path), "--seed", "0"])
     assert out.exit_code == 0, out.output
     assert f"registered: {result.registered}/12" in out.output and "of the rig radius" in out.output
-    again = pycolmap.Reconstruction(str(result.model_path))
+    assert "SfM: reusing" in out.output and str(result.model_path) in out.output
+    fresh = tmp_path / "fresh"
+    out = CliRunner().invoke(main, ["sfm", str(path), "--seed", "0", "--out", str(fresh)])
+    assert out.exit_code == 0, out.output
+    assert f"registered: {result.registered}/12" in out.output
+    refused = CliRunner().invoke(main, ["sfm", str(path), "--threads", "all"])
+    assert refused.exit_code == 2 and "--threads all: give --out DIR" in refused.output, refused.output
+    again = pycolmap.Reconstruction(str(fresh / "0"))
     np.testing.assert_array_equal(np.array([p.xyz for _, p in sorted(again.points3D.items())]),
                                   np.array([p.xyz for _, p in sorted(rec.points3D.items())]))
 
