@@ -1,5 +1,5 @@
 """How a report's files land on disk: the one writer of the verification applications
-(compare, conform, stress, validate) and the shared figures.
+(compare, conform, stress, validate), the benchmarks and the shared figures.
 
 Every file is written whole or not at all (`splatbench.fsutil.atomic_write`: a
 temporary beside it, fsync'd, renamed into place with the umask's mode), so a report
@@ -8,7 +8,7 @@ stopped half-way never leaves a truncated table beside an older markdown file.
     write_text(path, text) -> Path             UTF-8 text (markdown)
     write_json(path, data, indent=1) -> Path   JSON and a final newline
     write_parquet(path, frame) -> Path         a pandas DataFrame, without its index
-    write_csv(path, columns, rows) -> Path     a header line, then one line per mapping in ``rows``
+    write_csv(path, columns, rows) -> Path     a header line, then one line per mapping in ``rows`` (LF endings)
     save_figure(fig, path, **kw) -> Path       a matplotlib figure (PNG at 110 dpi, nothing clipped), closed
     run_header(command, seconds, machine)      where and how a run was made: {"command", "seconds",
                                                "written", "machine"} (machine: `MachineInfo`, load included)
@@ -49,7 +49,7 @@ def write_csv(path: str | Path, columns: Sequence[str], rows: Iterable[Mapping[s
     ``columns``), atomically."""
     def write(temp: Path) -> None:
         with open(temp, "w", newline="", encoding="utf-8") as fh:
-            writer = csv.DictWriter(fh, fieldnames=list(columns))
+            writer = csv.DictWriter(fh, fieldnames=list(columns), lineterminator="\n")
             writer.writeheader()
             writer.writerows(rows)
 

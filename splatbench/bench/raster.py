@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Callable
 
-from splatbench.bench.files import write_csv_rows, write_results_json
+from splatbench import report_files
 from splatbench.metrics.machine import MachineInfo, resolve_device
 from splatbench.metrics.memory import current_rss_mb, peak_rss_mb, reset_peak_rss
 from splatbench.metrics.timing import (StageSplit, forward_backward_with_init, forward_with_init, milliseconds,
@@ -348,13 +348,16 @@ def leak_warnings(results: list[RasterBenchResult], threshold_mb: float = 1.0) -
 
 
 def write_csv(results: list[RasterBenchResult], path: Path) -> Path:
-    return write_csv_rows((csv_row(r) for r in results), CSV_COLUMNS, path)
+    """One CSV line per result under the header `CSV_COLUMNS`, atomically."""
+    return report_files.write_csv(path, CSV_COLUMNS, ({c: row[c] for c in CSV_COLUMNS}
+                                                      for row in (csv_row(r) for r in results)))
 
 
 def write_json(results: list[RasterBenchResult], machine: MachineInfo, settings: BenchSettings,
                path: Path) -> Path:
     """``{"machine": MachineInfo, "settings": BenchSettings, "results": [RasterBenchResult]}``."""
-    return write_results_json(results, machine, settings, path)
+    return report_files.write_json(path, {"machine": asdict(machine), "settings": asdict(settings),
+                                         "results": [asdict(r) for r in results]}, indent=2)
 
 
 # ----------------------------------------------------------------------------- subprocess entry

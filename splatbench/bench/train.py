@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from splatbench.bench.files import write_csv_rows, write_results_json
+from splatbench import report_files
 from splatbench.errors import InputError
 
 #: The standard sizes (square images, pixels) reported by ``splatbench bench train``.
@@ -169,12 +169,15 @@ def format_table(results: list[TrainBenchResult]) -> str:
 
 
 def write_csv(results: list[TrainBenchResult], path: Path) -> Path:
-    return write_csv_rows((asdict(r) for r in results), CSV_COLUMNS, path)
+    """One CSV line per result under the header `CSV_COLUMNS`, atomically."""
+    return report_files.write_csv(path, CSV_COLUMNS, ({c: row[c] for c in CSV_COLUMNS}
+                                                      for row in (asdict(r) for r in results)))
 
 
 def write_json(results: list[TrainBenchResult], machine, settings: TrainBenchSettings, path: Path) -> Path:
     """``{"machine": MachineInfo, "settings": TrainBenchSettings, "results": [TrainBenchResult]}``."""
-    return write_results_json(results, machine, settings, path)
+    return report_files.write_json(path, {"machine": asdict(machine), "settings": asdict(settings),
+                                         "results": [asdict(r) for r in results]}, indent=2)
 
 
 __all__ = ["TrainBenchSettings", "TrainBenchResult", "STANDARD_SIZES", "synthetic_scene", "run_size",
