@@ -37,13 +37,13 @@ DEFAULT_ALPHA_MIN = 0.00392156862745098  # 1/255 as a TOML file writes it (the s
 
 # ----------------------------------------------------------------------------- the config
 def test_raster_keys_are_set_one_at_a_time_and_round_trip_through_toml(tmp_path):
-    cfg = apply_overrides(TrainConfig(), ["raster.alpha_min=0.01", "raster.tile_size=8", "raster.radius=opacity",
+    cfg = apply_overrides(TrainConfig(), ["raster.alpha_min=0.008", "raster.tile_size=8", "raster.radius=opacity",
                                           "raster.eps2d=1", "raster.near=0.05"])
-    assert cfg.raster == RasterOptions(alpha_min=0.01, tile_size=8, radius="opacity", eps2d=1.0, near=0.05)
+    assert cfg.raster == RasterOptions(alpha_min=0.008, tile_size=8, radius="opacity", eps2d=1.0, near=0.05)
     assert isinstance(cfg.raster.eps2d, float)                   # an int widens where a float is declared
     path = save_config(cfg, tmp_path / "c.toml")
     text = path.read_text(encoding="utf-8")
-    assert "[raster]" in text and "alpha_min = 0.01" in text and "device" not in text.split("[raster]")[1]
+    assert "[raster]" in text and "alpha_min = 0.008" in text and "device" not in text.split("[raster]")[1]
     assert load_config(path) == cfg
     # a dotted key edits one option; the others (from the file) stay
     again = apply_overrides(load_config(path), ["raster.tile_size=4"])
@@ -72,10 +72,10 @@ def test_the_device_is_set_once_by_device():
     """``raster.device`` is not a setting: it always equals ``TrainConfig.device``."""
     with pytest.raises(InputError, match=r"^raster\.device: the rasterizer runs on the run's `device`"):
         apply_overrides(TrainConfig(), ["raster.device=cuda"])
-    cfg = TrainConfig(device="cpu", raster=RasterOptions(alpha_min=0.02))
-    assert cfg.raster == RasterOptions(alpha_min=0.02, device="cpu")
+    cfg = TrainConfig(device="cpu", raster=RasterOptions(alpha_min=0.008))
+    assert cfg.raster == RasterOptions(alpha_min=0.008, device="cpu")
     assert dataclasses.replace(cfg, device="auto").raster.device == "auto"   # moved together
-    assert apply_overrides(cfg, ["device=auto"]).raster == RasterOptions(alpha_min=0.02, device="auto")
+    assert apply_overrides(cfg, ["device=auto"]).raster == RasterOptions(alpha_min=0.008, device="auto")
     assert "device" not in cfg.to_dict()["raster"]
     with pytest.raises(InputError, match=r"^raster: expected RasterOptions"):
         TrainConfig(raster={"alpha_min": 0.02})                   # the constructor takes the typed record
@@ -116,25 +116,47 @@ def test_every_render_of_a_run_uses_the_configs_raster_options(tmp_path, monkeyp
 
 
 def test_alpha_min_reaches_the_kernel_and_changes_the_training_step(tmp_path):
-    """Every initial Gaussian has opacity 0.1 (strategy "none": graphdeco's initial opacity), so
-    alpha = opacity x G <= 0.1 everywhere: with alpha_min = 0.5 compositing skips every
-    contribution and the render is the background alone; with the default 1/255 it is not,
-    so the first step's loss differs."""
+    """Every initial Gaussian has opacity 0.1 (strategy "none": graphdeco's initial opacity), and
+    alpha = opacity x G: with alpha_min = 0.09 compositing keeps only the cores where G > 0.9,
+    so the render shows much less of each Gaussian than with the default 1/255 (more
+    background), and the first step's loss differs."""
     ds = synthetic_dataset(tmp_path, view_dependent=False)
     camera = ds.train.cameras[0]
     losses, renders = {}, {}
-    for alpha_min in (RasterOptions().alpha_min, 0.5):
+    default = RasterOptions().alpha_min
+    for alpha_min in (default, 0.09):
         cfg = config(tmp_path, iterations=2, device="cpu", raster=RasterOptions(alpha_min=alpha_min))
         with torch_threads(1):
             trainer = Trainer(cfg, dataset=ds)
             assert cfg.initial_opacity == pytest.approx(0.1)
             with torch.no_grad():
-                renders[alpha_min] = trainer._render(camera, 0, trainer.background.tolist())[0]
+                renders[alpha_min] = trainer._render(camera, 0, trainer.background.tolist())[1]  # alpha [H, W]
             losses[alpha_min] = trainer.step().loss
-    background = torch.as_tensor(trainer.background, dtype=torch.float32).expand_as(renders[0.5])
-    assert torch.equal(renders[0.5], background)
-    assert not torch.allclose(renders[RasterOptions().alpha_min], background, atol=1e-3)
-    assert losses[0.5] != losses[RasterOptions().alpha_min]
+    # coverage: a Gaussian's footprint above alpha 1/255 reaches G = 1/25.5 (2.5 sigma), above
+    # 0.09 only G = 0.9 (0.46 sigma): far less of the image is covered
+    assert float(renders[0.09].sum()) < 0.5 * float(renders[default].sum())
+    assert losses[0.09] != losses[default]
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["strategy=none", "raster.alpha_min=0.1"],
+     "raster.alpha_min: 0.1 is at or above the initial opacity 0.1 (init_opacity)"),
+    (["iterations=2000", "raster.alpha_min=0.01"],
+     "raster.alpha_min: 0.01 is at or above the opacity reset value 0.01 of strategy 'default'"),
+])
+def test_an_alpha_min_that_would_stop_training_is_refused(overrides, message):
+    """alpha = opacity x G never exceeds the opacity: a Gaussian at or below alpha_min is skipped
+    on every pixel and gets no gradient. Refused when that is every Gaussian: at the start, or
+    after graphdeco's opacity reset (to 0.01; a 60-step smoke run of this grid with alpha_min
+    0.01 stopped learning at the first reset and rendered the background alone from then on)."""
+    with pytest.raises(InputError) as info:
+        apply_overrides(TrainConfig(), overrides)
+    assert str(info.value).startswith(message) and "\n" not in str(info.value)
+    # the ways out the message names are accepted
+    apply_overrides(TrainConfig(), [*overrides, "strategy_options.reset_every=0"] if "iterations=2000" in overrides
+                    else [*overrides, "init_opacity=0.2"])
+    apply_overrides(TrainConfig(), ["iterations=2000", "raster.alpha_min=0.01", "strategy_options.reset_value=0.02"])
+    apply_overrides(TrainConfig(), ["iterations=2000", "raster.alpha_min=0.01", "strategy=mcmc"])  # no resets
 
 
 def test_cli_train_records_the_raster_options(tmp_path, tiny_diffuse_dir):  # noqa: F811 (the fixture)
@@ -171,25 +193,25 @@ def test_a_config_without_raster_options_keeps_its_run_id():
     assert TRAIN.identity(resolved) == before
     assert _id(base) == make_run_id("train", before)
     assert _id({**base, "raster": {"alpha_min": DEFAULT_ALPHA_MIN, "tile_size": 16, "radius": "3sigma"}}) == _id(base)
-    changed = TRAIN.identity(TRAIN.resolve({**base, "raster": {"alpha_min": 0.01}}))
-    assert changed == {**before, "raster": {"alpha_min": 0.01}}
-    assert _id({**base, "raster": {"alpha_min": 0.01}}) != _id(base)
+    changed = TRAIN.identity(TRAIN.resolve({**base, "raster": {"alpha_min": 0.008}}))
+    assert changed == {**before, "raster": {"alpha_min": 0.008}}
+    assert _id({**base, "raster": {"alpha_min": 0.008}}) != _id(base)
 
 
 def test_a_grid_sweeps_raster_options_and_its_rows_carry_them():
     spec = {"name": "t", "kind": "train", "scenes": ["diffuse"], "seeds": [0], "base": {"iterations": 2000},
-            "axes": {"raster": {"alpha_min": [DEFAULT_ALPHA_MIN, 0.01], "tile_size": [16, 8]}}}
+            "axes": {"raster": {"alpha_min": [DEFAULT_ALPHA_MIN, 0.008], "tile_size": [16, 8]}}}
     runs = expand(parse_experiment(spec))
     assert [tuple(r.labels.values()) for r in runs] == [(DEFAULT_ALPHA_MIN, 16), (DEFAULT_ALPHA_MIN, 8),
-                                                        (0.01, 16), (0.01, 8)]
+                                                        (0.008, 16), (0.008, 8)]
     plain = expand(parse_experiment({k: v for k, v in spec.items() if k != "axes"}))
     assert runs[0].run_id == plain[0].run_id                      # the default cell is the grid's plain run
     assert len({r.run_id for r in runs}) == 4
     record = RunRecord(run_id=runs[3].run_id, experiment="t", kind="train", scene="diffuse", seed=0, status="done",
                        config=runs[3].config, labels=dict(runs[3].labels))
     row = record.row()
-    assert row["config.raster.alpha_min"] == 0.01 and row["config.raster.tile_size"] == 8
-    assert row["axis.raster.alpha_min"] == 0.01
+    assert row["config.raster.alpha_min"] == 0.008 and row["config.raster.tile_size"] == 8
+    assert row["axis.raster.alpha_min"] == 0.008
     assert flatten(runs[0].config)["raster.alpha_min"] == DEFAULT_ALPHA_MIN   # every row, the defaults too
 
 
@@ -198,6 +220,11 @@ def test_a_grid_sweeps_raster_options_and_its_rows_carry_them():
                                                   "'alpha_min'?)"),
     ("axis", {"axes": {"raster.tile_size": [16, 12]}}, "x.toml: axes.raster.tile_size = 12: raster.tile_size: "
                                                        "expected a power of two in [1, 64], got 12"),
+    ("dead run", {"axes": {"raster.alpha_min": [0.005, 0.01]}},
+     "x.toml: axes.raster.alpha_min = 0.01: raster.alpha_min: 0.01 is at or above the opacity reset value 0.01 of "
+     "strategy 'default': after its first opacity reset every Gaussian would be skipped (alpha = opacity x G never "
+     "exceeds the opacity) and get no gradient, so training could not recover; lower raster.alpha_min, or raise "
+     "strategy_options.reset_value, or set strategy_options.reset_every = 0 (no resets)"),
 ])
 def test_a_grid_names_a_bad_raster_key_in_one_line(where, table, message):
     spec = {"name": "t", "kind": "train", "scenes": ["diffuse"], "seeds": [0], "base": {"iterations": 2000}}
@@ -212,6 +239,6 @@ def test_the_shipped_raster_options_grid_sweeps_alpha_min_and_the_tile_size():
     spec = load_experiment(ROOT / "experiments" / "train_raster_options.toml")
     runs = expand(spec)
     cells = {(r.config["raster"]["alpha_min"], r.config["raster"]["tile_size"]) for r in runs}
-    assert cells == {(a, t) for a in (DEFAULT_ALPHA_MIN, 0.01, 0.02) for t in (16, 8)}
+    assert cells == {(a, t) for a in (DEFAULT_ALPHA_MIN, 0.005, 0.008) for t in (16, 8)}
     assert len(spec.scenes) == 2 and len(runs) == 2 * 6 * 3
     assert all(r.config.get("protocol", "quick") == "quick" and r.config["data"]["resolution"] == 128 for r in runs)

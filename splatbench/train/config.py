@@ -10,7 +10,9 @@ the strategy options (``strategy_options.cap_max=50000``), the dataset's loading
 table of a TOML file). Every mistake -- unknown
 key, wrong type, negative learning rate, zero iterations, unknown strategy or
 initialisation, a densification schedule whose last topology change falls in the
-final 10 % of the run -- is a one-line `InputError` naming the field, raised by
+final 10 % of the run, a ``raster.alpha_min`` at or above the initial opacity or the
+strategy's opacity reset value (every Gaussian would be skipped, with no gradient, from
+then on) -- is a one-line `InputError` naming the field, raised by
 `TrainConfig.validate` when the (frozen) config is constructed, before any data is
 read or rendered; ``dataclasses.replace`` or `apply_overrides` make a changed copy.
 
@@ -259,6 +261,7 @@ class TrainConfig:
         strategy = self.make_strategy()
         if protocol.final_window_check:
             check_final_window(strategy, self.iterations, self.schedule)
+        self._check_alpha_min(strategy)
         if self.lr_means == 0 and strategy.reads_mean_gradients:
             # frozen means have no screen-space gradient (the rasterizer's backward skips it), and this
             # strategy declares that it reads it (the Strategy protocol's reads_mean_gradients)
@@ -268,6 +271,28 @@ class TrainConfig:
             raise InputError(f"lr_means: 0 freezes the means, but strategy {self.strategy!r} densifies from their "
                              f"screen-space gradients (use a positive lr_means, or strategy={' or '.join(free)})")
         return self
+
+    def _check_alpha_min(self, strategy) -> None:
+        """A run that cannot train: alpha = opacity x G never exceeds the opacity (G <= 1), and
+        compositing skips alpha below ``raster.alpha_min`` with no gradient, so a Gaussian whose
+        opacity is at or below it is skipped on every pixel and can never grow back. That is every
+        Gaussian at the start when the initial opacity is, and after the strategy's first opacity
+        reset (``reset_value``, graphdeco's 0.01) when the reset value is."""
+        from splatbench.strategies import planned_counts
+
+        alpha_min = self.raster.alpha_min
+        if self.initial_opacity <= alpha_min:
+            raise InputError(f"raster.alpha_min: {alpha_min!r} is at or above the initial opacity "
+                             f"{self.initial_opacity!r} (init_opacity), and alpha = opacity x G never exceeds the "
+                             f"opacity: every Gaussian would be skipped and get no gradient; lower raster.alpha_min "
+                             f"or raise init_opacity")
+        reset = getattr(strategy, "reset_value", None)
+        if reset is not None and reset <= alpha_min and planned_counts(strategy, self.iterations).opacity_resets:
+            raise InputError(f"raster.alpha_min: {alpha_min!r} is at or above the opacity reset value {reset!r} of "
+                             f"strategy {self.strategy!r}: after its first opacity reset every Gaussian would be skipped "
+                             f"(alpha = opacity x G never exceeds the opacity) and get no gradient, so training could "
+                             f"not recover; lower raster.alpha_min, or raise strategy_options.reset_value, or set "
+                             f"strategy_options.reset_every = 0 (no resets)")
 
     def make_strategy(self, *, scaled: bool = True):
         """The densification strategy this config names (`InputError` if unknown). A
