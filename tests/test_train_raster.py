@@ -1,6 +1,6 @@
 """Training takes the rasterizer's options (issue 31 §2): ``TrainConfig.raster``.
 
-``--set raster.alpha_min=0.01`` / a ``[raster]`` table / a grid's ``raster.*`` keys become one
+``--set raster.alpha_min=0.005`` / a ``[raster]`` table / a grid's ``raster.*`` keys become one
 `RasterOptions`, checked once (unknown keys, types, ranges: one line naming ``raster.KEY``);
 every render of a run (training step, warm-up, SH probe, evaluation) uses it; the run records
 it (config.toml, result.json, ``--json``; a grid's records and table rows); and the run ids of

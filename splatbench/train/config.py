@@ -5,7 +5,7 @@ The config is a flat dataclass (one comment per field) that reads and writes TOM
 strings whose value is parsed as a TOML literal (``3e-4``, ``true``, ``[1, 1, 1]``,
 ``"auto"``) and falls back to a bare string (``strategy=mcmc``); a dotted key edits
 the strategy options (``strategy_options.cap_max=50000``), the dataset's loading
-(``data.downscale=8``) or the rasterizer's options (``raster.alpha_min=0.01``,
+(``data.downscale=8``) or the rasterizer's options (``raster.alpha_min=0.005``,
 ``raster.tile_size=8``, ``raster.radius=opacity``: `RasterOptions`, the ``[raster]``
 table of a TOML file). Every mistake -- unknown
 key, wrong type, negative learning rate, zero iterations, unknown strategy or
@@ -155,7 +155,7 @@ class TrainConfig:
                                       # device setting (raster.device follows it)
     raster: RasterOptions = field(default_factory=RasterOptions)  # the rasterizer's options for every render
                                       # of the run (training steps, warm-up, SH probes, evaluation):
-                                      # `--set raster.alpha_min=0.01`, a [raster] table; RASTER_KEYS.
+                                      # `--set raster.alpha_min=0.005`, a [raster] table; RASTER_KEYS.
                                       # Its device is always `device` (set on construction, never here)
     torch_threads: int = 1            # torch intra-op threads during the run (0 = torch's default); the
                                       # rasterizer has its own thread pool, and small torch ops (loss, Adam)
