@@ -65,7 +65,7 @@ golden: setup
 
 # Run the shipped experiments (resumable: finished runs are skipped) and write
 # reports/<name>/; a failed run is listed in its report and makes the target fail.
-REPORTS ?= raster_speed_vs_error sh_degree sh_degree_spp128 sh_degree_clean_test sh_degree_spp128_clean_test loss_weighting densification initialization densification_schedules real_capture teacher_scenes
+REPORTS ?= raster_speed_vs_error sh_degree sh_degree_spp128 sh_degree_clean_test sh_degree_spp128_clean_test loss_weighting densification initialization densification_schedules real_capture teacher_scenes train_raster_options
 reports: setup
 	@status=0; for e in $(REPORTS); do \
 	  $(VENV)/bin/splatbench run experiments/$$e.toml || status=1; \

@@ -232,8 +232,8 @@ def dataclass_from_mapping(cls: type[T], data: Mapping[str, Any], *, base: Mappi
     names a field (`check_keys`, with "did you mean"), every value has its field's
     annotated type (`check_type`, after `coerce`). Ranges are the class's own business
     (its ``__post_init__``). Messages name ``PREFIXKEY`` (and ``source`` first), the class's
-    own too: its ``ClassName.field: ...`` becomes ``source: PREFIXfield: ...``, so that one
-    option has one name in every message (the one the user wrote)."""
+    own too: its ``ClassName.field: ...`` or ``field: ...`` becomes ``source: PREFIXfield: ...``,
+    so that one option has one name in every message (the one the user wrote)."""
     hints = _field_types(cls)
     check_keys(data, hints, prefix=prefix, source=source)
     values = {}
@@ -247,9 +247,12 @@ def dataclass_from_mapping(cls: type[T], data: Mapping[str, Any], *, base: Mappi
     except InputError as exc:
         message = str(exc)
         owner = next((c.__name__ for c in cls.__mro__ if message.startswith(f"{c.__name__}.")), None)
-        if owner is None or not prefix:
+        if owner is not None and prefix:
+            named = prefix + message[len(owner) + 1:]
+        elif prefix and message.split(":", 1)[0] in hints:  # a bare ``field: ...``
+            named = prefix + message
+        else:
             raise
-        named = prefix + message[len(owner) + 1:]
         raise InputError(f"{source}: {named}" if source else named) from None
 
 

@@ -470,7 +470,9 @@ def test_raster_kind_config_errors():
         kind.validate({**base, "sh_degree": 4})
     with pytest.raises(InputError, match=r"^tile_siz: unknown key \(did you mean 'tile_size'\?\)$"):
         kind.validate({**base, "tile_siz": 8})
-    assert kind.resolve({**base, "alpha_min": 1})["alpha_min"] == 1.0
+    # numbers normalised: an int where RasterOptions declares a float is that float (one run id)
+    one = kind.resolve({**base, "eps2d": 1})
+    assert one["eps2d"] == 1.0 and isinstance(one["eps2d"], float) and one == kind.resolve({**base, "eps2d": 1.0})
 
 
 def test_raster_kind_run(tmp_path, monkeypatch):

@@ -824,10 +824,14 @@ def test_frozen_means_check_follows_the_strategys_declaration(monkeypatch):
 def test_a_model_pruned_to_nothing_trains_on_and_says_so(tmp_path, tiny_diffuse):
     # every Gaussian starts below the prune threshold (opacity 0.001 < 0.005), so the first
     # refinement (step 4) removes them all; the run must go on (an empty model steps: empty
-    # gradients) and its result must say that the model is empty and from when
+    # gradients) and its result must say that the model is empty and from when. alpha_min is
+    # lowered below that opacity (at the default 1/255 > 0.001 the config is refused: nothing
+    # would render or get a gradient)
+    from splatbench.raster.options import RasterOptions
+
     opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 8}
     r = train(config(tmp_path, iterations=12, strategy="default", strategy_options=opts, init_opacity=0.001,
-                     log_every=1), dataset=tiny_diffuse)
+                     log_every=1, raster=RasterOptions(alpha_min=5e-4)), dataset=tiny_diffuse)
     assert r.num_gaussians == 0 and r.iterations == 12
     warning = [n for n in r.notes if n.startswith("warning: the model is empty")]
     assert len(warning) == 1 and "none left from step 4 on" in warning[0]

@@ -9,12 +9,14 @@ Scene names are workloads (`splatbench.workloads.parse_workload_name`)::
     garden               the bundled Mip-NeRF 360 garden SfM capture, view 0 (648x420,
     garden-vK              138,766 Gaussians), or view K; the run's seed changes nothing
 
-Config (flat; defaults in `DEFAULTS`): the rasterizer options ``tile_size``,
+Config (flat; defaults in `DEFAULTS`): the rasterizer options, every `RasterOptions`
+field but ``near`` and ``far`` (the workload's camera sets those): ``tile_size``,
 ``alpha_min``, ``alpha_max``, ``transmittance_min``, ``eps2d``, ``radius``,
-``antialiased``, ``sh_degree`` (0..3, the bands evaluated) and ``device``; and how
-to measure: ``repeats`` (timed pairs, at least 7) and ``error_scale`` (the
-resolution factor of the error measurement, so that the float64 reference stays
-affordable).
+``antialiased`` and ``device`` (`RASTER_FIELDS`, read from the dataclass, so a new option
+is a config field here without an edit); ``sh_degree`` (0..3, the bands evaluated); and
+how to measure (`MEASUREMENT`): ``repeats`` (timed pairs, at least 7) and
+``error_scale`` (the resolution factor of the error measurement, so that the float64
+reference stays affordable).
 
 One run:
 
@@ -74,7 +76,6 @@ import math
 import os
 import statistics
 import sys
-import typing
 from pathlib import Path
 from typing import Any
 
@@ -90,17 +91,21 @@ from splatbench.metrics.spec import MetricSpec
 from splatbench.raster.options import RasterOptions
 from splatbench.workloads import build_workload, parse_workload_name
 
-#: Fields passed to the rasterizer as `RasterOptions` (sh_degree goes separately).
-OPTION_FIELDS = ("tile_size", "alpha_min", "alpha_max", "transmittance_min", "eps2d", "radius", "antialiased",
-                 "device")
-#: Config fields and defaults: the rasterizer's own (`RasterOptions`' field defaults, graphdeco-inria
-#: 3DGS's; see its field comments), then the measurement's.
-DEFAULTS: dict[str, Any] = {
-    **{f.name: f.default for f in dataclasses.fields(RasterOptions) if f.name in OPTION_FIELDS},
+#: `RasterOptions` fields a workload's camera sets (never in a raster run's config).
+CAMERA_FIELDS = ("near", "far")
+#: Config fields passed to the rasterizer as `RasterOptions`: every field of the dataclass but
+#: `CAMERA_FIELDS` (sh_degree goes separately).
+RASTER_FIELDS = tuple(f.name for f in dataclasses.fields(RasterOptions) if f.name not in CAMERA_FIELDS)
+#: The other config fields and their defaults: what is rendered and how it is measured.
+MEASUREMENT: dict[str, Any] = {
     "sh_degree": 3,              # SH bands evaluated (the workloads hold degree 3)
     "repeats": 7,                # timed A B pairs (run's options, defaults), at least MIN_PAIRS
     "error_scale": 0.5,          # resolution factor of the error measurement (0 < s <= 1)
 }
+#: Config fields and defaults: `RasterOptions`' (graphdeco-inria 3DGS's; see its field comments),
+#: then the measurement's.
+DEFAULTS: dict[str, Any] = {**{k: v for k, v in RasterOptions().to_dict().items() if k in RASTER_FIELDS},
+                            **MEASUREMENT}
 #: Options with no counterpart in the reference (accelerations and placement only).
 FAST_ONLY = ("tile_size", "device")
 #: What a run measures, in the resolved config (so in the run id): 2 = error against the
@@ -159,9 +164,8 @@ def validate(config: dict[str, Any]) -> None:
         if isinstance(value, dict):
             raise InputError(f"{key}: expected a value, got a table")
     parse_workload_name(str(config.get("scene", "")))
+    options_of(config)  # types and ranges of the options, naming the bad one (RasterOptions.from_dict)
     merged = {**DEFAULTS, **config}
-    for key in OPTION_FIELDS:  # the value's type, from RasterOptions' annotation; its ranges: RasterOptions
-        check_type(key, merged[key], _OPTION_TYPES[key])
     check_type("repeats", merged["repeats"], int)
     check_type("error_scale", merged["error_scale"], float)
     check_sh_degree("sh_degree", merged["sh_degree"])
@@ -170,25 +174,19 @@ def validate(config: dict[str, Any]) -> None:
                          f"ratio needs several), got {merged['repeats']}")
     if not 0 < merged["error_scale"] <= 1:
         raise InputError(f"error_scale: expected a factor in (0, 1], got {merged['error_scale']!r}")
-    RasterOptions.from_kwargs(**{k: merged[k] for k in OPTION_FIELDS})  # names the bad option
-
-
-#: Option field -> its annotation in `RasterOptions` (int, float, str, bool).
-_OPTION_TYPES = {k: t for k, t in typing.get_type_hints(RasterOptions).items() if k in OPTION_FIELDS}
 
 
 def resolve(config: dict[str, Any]) -> dict[str, Any]:
     """Every field filled in; numbers normalised (``alpha_min = 1`` and ``1.0`` are one run);
     ``protocol`` (`PROTOCOL`) added."""
-    out = {**DEFAULTS, **config, "protocol": PROTOCOL}
-    for key in (*(k for k, t in _OPTION_TYPES.items() if t is float), "error_scale"):
-        out[key] = float(out[key])
+    out = {**DEFAULTS, **config, **options_of(config).to_dict(), "protocol": PROTOCOL}
+    out["error_scale"] = float(out["error_scale"])
     return out
 
 
-def options_of(config: dict[str, Any]) -> dict[str, Any]:
-    """The `RasterOptions` keyword arguments of a resolved config."""
-    return {k: config[k] for k in OPTION_FIELDS}
+def options_of(config: dict[str, Any]) -> RasterOptions:
+    """The `RasterOptions` of a config's `RASTER_FIELDS` (the defaults for those it leaves out)."""
+    return RasterOptions.from_dict({k: v for k, v in config.items() if k in RASTER_FIELDS})
 
 
 # --------------------------------------------------------------------------- reference
@@ -277,8 +275,8 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
     own_share()  # a checkpoint of the own-load tracker: what ran before this run, then the warm-up
     workload = build_workload(config["scene"], config["seed"])
     degree = config["sh_degree"]
-    options = options_of(config)
-    defaults = {**{k: DEFAULTS[k] for k in OPTION_FIELDS}, "device": options["device"]}
+    options = options_of(config).to_dict()
+    defaults = RasterOptions(device=options["device"]).to_dict()
     full = torch_params(workload.gaussians)
     params = (*full[:4], full[4][:, : (degree + 1) ** 2].contiguous())
     closures = {}
@@ -363,5 +361,5 @@ RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, pre
                  description="time the rasterizer under options against the defaults; error against the exact model",
                  report=REPORT)
 
-__all__ = ["RASTER", "REPORT", "DEFAULTS", "METRICS", "OPTION_FIELDS", "reference_render", "exact_model", "cache_dir",
-           "MIN_PAIRS", "PROTOCOL"]
+__all__ = ["RASTER", "REPORT", "DEFAULTS", "METRICS", "RASTER_FIELDS", "MEASUREMENT", "reference_render",
+           "exact_model", "cache_dir", "MIN_PAIRS", "PROTOCOL"]

@@ -16,6 +16,9 @@ Config (the nested dict an experiment gives one run)::
     data.test_spp        samples per pixel of the held-out views (default: data.spp); more
                          samples make cleaner test targets (their noise is a floor under
                          every run's test PSNR; docs/training.md)
+    raster.<option>      the rasterizer's options for every render of the run
+                         (TrainConfig.raster: ``raster.alpha_min``, ``raster.tile_size``,
+                         ``raster.radius``, ...; RASTER_KEYS of splatbench.train.config)
     <any TrainConfig field> but ``dataset`` and ``out``, which are machine-specific:
                          the kind sets them (the dataset folder, the run's work folder)
 
@@ -29,7 +32,10 @@ strategy's own fields for ``strategy_options`` -- so a field written at its defa
 is the same run as one left out, and a changed default makes new runs. `identity`
 hashes a dataset folder's or a teacher model's content in place of its path
 (`splatbench.data.content`), so the run ids of a grid over a user's data are the same in
-every clone and change when the data does.
+every clone and change when the data does. It also leaves out the ``raster`` options at
+their defaults (the whole table when every one is): the resolved config, its records and its
+table rows (``config.raster.*``) carry every option, while a run that sets none keeps the
+id it had before training took raster options (the committed results are keyed by them).
 
 Datasets are rendered once, in the parent, by `prepare` (Mitsuba, cached by content
 hash) into ``$SPLATBENCH_DATASETS`` (default ``./data/scenes``), read once there and
@@ -244,13 +250,28 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
 
 def identity(config: dict[str, Any]) -> dict[str, Any]:
     """What the run id hashes of a resolved config: ``data.path`` / ``data.model`` replaced by
-    ``data.content``, the hash of what the folder or file holds (module doc)."""
+    ``data.content``, the hash of what the folder or file holds (module doc); the ``raster``
+    options at their defaults left out, and the table with them when all are (a run that sets
+    none has the id it had before training took raster options)."""
+    config = _raster_identity(config)
     data = config.get("data", {})
     key = "path" if "path" in data else "model" if "model" in data else None
     if key is None:
         return config
     rest = {k: v for k, v in data.items() if k != key}
     return {**config, "data": {**rest, "content": _content(str(Path(data[key]).absolute()))}}
+
+
+def _raster_identity(config: dict[str, Any]) -> dict[str, Any]:
+    """``config`` with only the ``raster`` options that differ from `RasterOptions`' defaults."""
+    if "raster" not in config:
+        return config
+    from splatbench.raster.options import RasterOptions
+
+    defaults = RasterOptions().to_dict()
+    changed = {k: v for k, v in config["raster"].items() if k not in defaults or v != defaults[k]}
+    rest = {k: v for k, v in config.items() if k != "raster"}
+    return {**rest, "raster": changed} if changed else rest
 
 
 def _content(path: str) -> str:

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any
 
-from splatbench.checks import check_keys
+from splatbench.checks import check_keys, dataclass_from_mapping
 from splatbench.devices import check_device
 from splatbench.errors import InputError
 
@@ -55,3 +57,20 @@ class RasterOptions:
         """Build options from keyword arguments, naming any unknown one."""
         check_keys(kwargs, (f.name for f in fields(cls)))
         return replace(base or cls(), **kwargs)
+
+    @classmethod
+    def from_dict(cls, table: Mapping[str, Any], *, base: RasterOptions | None = None, prefix: str = "",
+                  source: str = "") -> RasterOptions:
+        """Options from a table of field values as a user writes them (a TOML table, ``--set
+        raster.KEY=VALUE``, an experiment's config), ``base``'s (default: the defaults) for the
+        rest. Every key names a field, every value has its field's type (an int where a float is
+        expected is that float), then the ranges above; each mistake is one `InputError` line
+        naming ``PREFIXKEY`` (``raster.alpha_min``) as the user wrote it, an unknown key with the
+        field it is close to or the list of fields (`splatbench.checks.dataclass_from_mapping`)."""
+        return dataclass_from_mapping(cls, table, base=None if base is None else asdict(base), prefix=prefix,
+                                      source=source)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every field as a plain TOML value; ``near`` / ``far`` left out while None (the
+        camera's: TOML has no null), so ``from_dict(o.to_dict()) == o``."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}

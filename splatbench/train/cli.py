@@ -14,6 +14,8 @@ import click
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
               help="Override a config field (repeatable), e.g. --set iterations=2000 --set sh_degree=auto "
                    "--set strategy_options.cap_max=50000 --set data.downscale=8 (images / 8, or images_8/) "
+                   "--set raster.tile_size=8 --set raster.alpha_min=0.005 (the rasterizer's options of every render; "
+                   "the device is --set device=...) "
                    "--set checkpoint_every=500 (a checkpoint every 500 steps, for --resume) "
                    "--set protocol=graphdeco-30k (graphdeco's schedule unscaled, evaluated at 7,000 and 30,000). "
                    "protocol: quick (the default: the schedule scaled to iterations), graphdeco-7k, graphdeco-30k. "

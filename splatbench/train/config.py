@@ -4,12 +4,23 @@ The config is a flat dataclass (one comment per field) that reads and writes TOM
 (`tomllib` / `tomli_w`, never ``eval``). Command-line overrides are ``key=value``
 strings whose value is parsed as a TOML literal (``3e-4``, ``true``, ``[1, 1, 1]``,
 ``"auto"``) and falls back to a bare string (``strategy=mcmc``); a dotted key edits
-the strategy options (``strategy_options.cap_max=50000``). Every mistake -- unknown
+the strategy options (``strategy_options.cap_max=50000``), the dataset's loading
+(``data.downscale=8``) or the rasterizer's options (``raster.alpha_min=0.005``,
+``raster.tile_size=8``, ``raster.radius=opacity``: `RasterOptions`, the ``[raster]``
+table of a TOML file). Every mistake -- unknown
 key, wrong type, negative learning rate, zero iterations, unknown strategy or
 initialisation, a densification schedule whose last topology change falls in the
-final 10 % of the run -- is a one-line `InputError` naming the field, raised by
+final 10 % of the run, a ``raster.alpha_min`` at or above the initial opacity or the
+strategy's opacity reset value (every Gaussian would be skipped, with no gradient, from
+then on) -- is a one-line `InputError` naming the field, raised by
 `TrainConfig.validate` when the (frozen) config is constructed, before any data is
 read or rendered; ``dataclasses.replace`` or `apply_overrides` make a changed copy.
+
+The device is set once, by ``device``: ``raster.device`` is not a setting (a ``[raster]``
+table or ``--set`` that names it is an error naming ``device``), and the constructor makes
+``config.raster.device`` equal ``config.device``, so that ``config.raster`` is exactly the
+`RasterOptions` of every render of the run, and ``replace(config, device="cuda")`` moves
+both.
 
 Schedules (refinement window, opacity reset, SH steps) are written in graphdeco's
 30,000-iteration steps and scaled to ``iterations`` by default (``schedule =
@@ -44,10 +55,13 @@ from splatbench.devices import check_device
 from splatbench.errors import InputError
 from splatbench.fsutil import read_text
 from splatbench.overrides import parse_override
+from splatbench.raster.options import RasterOptions
 from splatbench.train.sh_schedule import MAX_LOOKAHEAD
 
 #: Keys of the ``data`` table.
 DATA_KEYS = ("downscale",)
+#: Keys of the ``raster`` table: every `RasterOptions` field but ``device`` (``TrainConfig.device``).
+RASTER_KEYS = tuple(f.name for f in dataclasses.fields(RasterOptions) if f.name != "device")
 #: Learning-rate fields (Adam, one optimizer per parameter group); 0 freezes a group.
 LR_FIELDS = ("lr_means", "lr_means_final", "lr_log_scales", "lr_quats", "lr_opacity_logits", "lr_sh_dc",
              "lr_sh_rest")
@@ -137,13 +151,21 @@ class TrainConfig:
                                       # false: [0, 1] unscaled, as graphdeco's metrics.py does
     log_every: int = 100              # record (step, loss, PSNR, N) in the history every this many steps
     checkpoint_every: int = 0         # write checkpoints/iteration_<step>.ply every this many steps (0 = off)
-    device: str = "auto"              # rasterizer backend: "cpu" (Dr.Jit LLVM), "cuda" or "auto"
+    device: str = "auto"              # rasterizer backend: "cpu" (Dr.Jit LLVM), "cuda" or "auto"; the one
+                                      # device setting (raster.device follows it)
+    raster: RasterOptions = field(default_factory=RasterOptions)  # the rasterizer's options for every render
+                                      # of the run (training steps, warm-up, SH probes, evaluation):
+                                      # `--set raster.alpha_min=0.005`, a [raster] table; RASTER_KEYS.
+                                      # Its device is always `device` (set on construction, never here)
     torch_threads: int = 1            # torch intra-op threads during the run (0 = torch's default); the
                                       # rasterizer has its own thread pool, and small torch ops (loss, Adam)
                                       # are fastest without oversubscribing the cores
 
     # ------------------------------------------------------------------ checks
     def __post_init__(self) -> None:
+        if isinstance(self.raster, RasterOptions) and self.raster.device != self.device and \
+                isinstance(self.device, str):  # `device` is the one device setting (module doc)
+            object.__setattr__(self, "raster", dataclasses.replace(self.raster, device=self.device))
         self.validate()  # a TrainConfig that exists is valid; change one with dataclasses.replace
 
     def validate(self) -> TrainConfig:
@@ -154,6 +176,11 @@ class TrainConfig:
         `splatbench.strategies.make_strategy` (cheap: no data is touched). Returns self.
         """
         for f in dataclasses.fields(self):
+            if f.name == "raster":  # a typed record, checked by its own constructor
+                if not isinstance(self.raster, RasterOptions):
+                    raise InputError(f"raster: expected RasterOptions (in TOML a [raster] table of "
+                                     f"{', '.join(RASTER_KEYS)}), got {self.raster!r}")
+                continue
             check_type(f.name, getattr(self, f.name), _field_types()[f.name])
         if self.iterations < 1:
             raise InputError(f"iterations: expected an int >= 1, got {self.iterations}")
@@ -234,6 +261,7 @@ class TrainConfig:
         strategy = self.make_strategy()
         if protocol.final_window_check:
             check_final_window(strategy, self.iterations, self.schedule)
+        self._check_alpha_min(strategy)
         if self.lr_means == 0 and strategy.reads_mean_gradients:
             # frozen means have no screen-space gradient (the rasterizer's backward skips it), and this
             # strategy declares that it reads it (the Strategy protocol's reads_mean_gradients)
@@ -243,6 +271,28 @@ class TrainConfig:
             raise InputError(f"lr_means: 0 freezes the means, but strategy {self.strategy!r} densifies from their "
                              f"screen-space gradients (use a positive lr_means, or strategy={' or '.join(free)})")
         return self
+
+    def _check_alpha_min(self, strategy) -> None:
+        """A run that cannot train: alpha = opacity x G never exceeds the opacity (G <= 1), and
+        compositing skips alpha below ``raster.alpha_min`` with no gradient, so a Gaussian whose
+        opacity is at or below it is skipped on every pixel and can never grow back. That is every
+        Gaussian at the start when the initial opacity is, and after the strategy's first opacity
+        reset (``reset_value``, graphdeco's 0.01) when the reset value is."""
+        from splatbench.strategies import planned_counts
+
+        alpha_min = self.raster.alpha_min
+        if self.initial_opacity <= alpha_min:
+            raise InputError(f"raster.alpha_min: {alpha_min!r} is at or above the initial opacity "
+                             f"{self.initial_opacity!r} (init_opacity), and alpha = opacity x G never exceeds the "
+                             f"opacity: every Gaussian would be skipped and get no gradient; lower raster.alpha_min "
+                             f"or raise init_opacity")
+        reset = getattr(strategy, "reset_value", None)
+        if reset is not None and reset <= alpha_min and planned_counts(strategy, self.iterations).opacity_resets:
+            raise InputError(f"raster.alpha_min: {alpha_min!r} is at or above the opacity reset value {reset!r} of "
+                             f"strategy {self.strategy!r}: after its first opacity reset every Gaussian would be skipped "
+                             f"(alpha = opacity x G never exceeds the opacity) and get no gradient, so training could "
+                             f"not recover; lower raster.alpha_min, or raise strategy_options.reset_value, or set "
+                             f"strategy_options.reset_every = 0 (no resets)")
 
     def make_strategy(self, *, scaled: bool = True):
         """The densification strategy this config names (`InputError` if unknown). A
@@ -303,8 +353,11 @@ class TrainConfig:
 
     # ------------------------------------------------------------------ TOML
     def to_dict(self) -> dict[str, Any]:
-        """Plain TOML-ready values (lists and dicts copied)."""
-        return {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)}
+        """Plain TOML-ready values (lists and dicts copied; ``raster`` as the table of
+        `RASTER_KEYS`, ``near`` / ``far`` left out while they are the camera's)."""
+        out = {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)}
+        out["raster"] = {k: v for k, v in self.raster.to_dict().items() if k != "device"}
+        return out
 
     def to_toml(self) -> str:
         import tomli_w
@@ -318,9 +371,13 @@ class TrainConfig:
             raise InputError(f"{source}: expected a table of fields, got {type(data).__name__}")
         check_keys(data, (f.name for f in dataclasses.fields(cls)), source=source)
         types = _field_types()
+        data = dict(data)
+        if "raster" in data:
+            data["raster"] = raster_options(data["raster"])
         for key, value in data.items():  # types before construction (whose checks assume them)
-            check_type(key, coerce(value, types[key]), types[key])
-        data = {k: coerce(v, types[k]) for k, v in data.items()}
+            if key != "raster":
+                check_type(key, coerce(value, types[key]), types[key])
+        data = {k: v if k == "raster" else coerce(v, types[k]) for k, v in data.items()}
         if "protocol" in data and "iterations" not in data:
             data["iterations"] = _protocol_iterations(data["protocol"], cls.iterations)
         return cls(**data)
@@ -357,7 +414,7 @@ def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...])
         key, value = parse_override(item)
         keys.add(key)
         table = key.split(".", 1)[0]
-        if "." in key and table in ("strategy_options", "data"):
+        if "." in key and table in ("strategy_options", "data", "raster"):
             sub = key.split(".", 1)[1]
             if not sub:
                 raise InputError(f"--set: empty {table} key in {item!r}")
@@ -370,6 +427,21 @@ def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...])
 
 
 # ---------------------------------------------------------------------- helpers
+def raster_options(table: Any) -> RasterOptions:
+    """The `RasterOptions` of a ``raster`` table (`RASTER_KEYS`; a `RasterOptions` as it
+    is). One `InputError` line naming ``raster.KEY`` for an unknown key (with the keys it
+    may be), a wrong type or range, and for ``raster.device`` (the device is ``device``)."""
+    if isinstance(table, RasterOptions):
+        return table
+    if not isinstance(table, dict):
+        raise InputError(f"raster: expected a table of rasterizer options ({', '.join(RASTER_KEYS)}), got {table!r}")
+    if "device" in table:
+        raise InputError("raster.device: the rasterizer runs on the run's `device` (set device=cpu, cuda or auto, "
+                         "e.g. --set device=cuda), not a raster option")
+    check_keys(table, RASTER_KEYS, prefix="raster.")
+    return RasterOptions.from_dict(table, prefix="raster.")
+
+
 def _protocol_iterations(name: Any, otherwise: int) -> int:
     """The iterations protocol ``name`` runs when none are given (``otherwise`` when it
     sets none, or is not a protocol: validation names that)."""
@@ -391,4 +463,5 @@ def _plain(value: Any) -> Any:
     return value
 
 
-__all__ = ["TrainConfig", "LR_FIELDS", "load_config", "save_config", "parse_override", "apply_overrides"]
+__all__ = ["TrainConfig", "LR_FIELDS", "RASTER_KEYS", "raster_options", "load_config", "save_config", "parse_override",
+           "apply_overrides"]

@@ -184,7 +184,7 @@ class Trainer:
         self.holdout = [i for i in range(len(train)) if i % k == k // 2] if k and len(train) >= 2 * k else []
         self.step_index = 0
         self.times = StepTimes()
-        self.raster_options = {"device": config.device}
+        self.raster_options = config.raster.to_dict()  # TrainConfig.raster (its device: config.device)
 
     @staticmethod
     def _gt_background(config: TrainConfig) -> list[float]:
@@ -571,6 +571,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         test_views=ev.views, history=history, evaluations=evaluations,
         sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary,
         warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step, protocol=config.protocol,
+        raster=config.raster.to_dict(),
         step_evaluations=step_evaluations, topology=topology_counts(trainer.state))
     (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
     return result

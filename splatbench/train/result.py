@@ -78,6 +78,9 @@ class TrainResult:
     resumed_step: int | None = None     # --resume: the checkpoint's step (its earlier steps' loop time, timed by the
                                         # run that wrote it, is in train_seconds); None: not resumed
     protocol: str = "quick"             # TrainConfig.protocol (splatbench.train.protocol)
+    raster: dict = field(default_factory=dict)  # the rasterizer options of every render of the run
+                                        # (TrainConfig.raster as `RasterOptions.to_dict`, device included;
+                                        # {}: a result written before training took raster options)
     step_evaluations: list[StepEvaluation] = field(default_factory=list)  # at TrainConfig.evaluation_steps
                                         # (graphdeco-30k: 7,000 and 30,000), the last one the final model's
     topology: TopologyCounts | None = None  # what the strategy did besides its settings' names: refinements,

@@ -1,0 +1,244 @@
+"""Training takes the rasterizer's options (issue 31 §2): ``TrainConfig.raster``.
+
+``--set raster.alpha_min=0.005`` / a ``[raster]`` table / a grid's ``raster.*`` keys become one
+`RasterOptions`, checked once (unknown keys, types, ranges: one line naming ``raster.KEY``);
+every render of a run (training step, warm-up, SH probe, evaluation) uses it; the run records
+it (config.toml, result.json, ``--json``; a grid's records and table rows); and the run ids of
+configs that set no raster option are the ids they had before (committed results are keyed by
+them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import json
+from pathlib import Path
+
+import pytest
+import torch
+from click.testing import CliRunner
+
+from splatbench.errors import InputError
+from splatbench.experiments.configs import flatten
+from splatbench.experiments.grid import expand, load_experiment, make_run_id
+from splatbench.experiments.spec import parse_experiment
+from splatbench.experiments.store import RunRecord
+from splatbench.experiments.train_kind import TRAIN
+from splatbench.raster.options import RasterOptions
+from splatbench.train import TrainConfig, apply_overrides, load_config, save_config, train
+from splatbench.train.config import RASTER_KEYS
+from splatbench.train.loop import Trainer, torch_threads
+from tests.test_train import config, synthetic_dataset, tiny_diffuse_dir  # noqa: F401 (a fixture)
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_ALPHA_MIN = 0.00392156862745098  # 1/255 as a TOML file writes it (the same float64)
+
+
+# ----------------------------------------------------------------------------- the config
+def test_raster_keys_are_set_one_at_a_time_and_round_trip_through_toml(tmp_path):
+    cfg = apply_overrides(TrainConfig(), ["raster.alpha_min=0.008", "raster.tile_size=8", "raster.radius=opacity",
+                                          "raster.eps2d=1", "raster.near=0.05"])
+    assert cfg.raster == RasterOptions(alpha_min=0.008, tile_size=8, radius="opacity", eps2d=1.0, near=0.05)
+    assert isinstance(cfg.raster.eps2d, float)                   # an int widens where a float is declared
+    path = save_config(cfg, tmp_path / "c.toml")
+    text = path.read_text(encoding="utf-8")
+    assert "[raster]" in text and "alpha_min = 0.008" in text and "device" not in text.split("[raster]")[1]
+    assert load_config(path) == cfg
+    # a dotted key edits one option; the others (from the file) stay
+    again = apply_overrides(load_config(path), ["raster.tile_size=4"])
+    assert again.raster == dataclasses.replace(cfg.raster, tile_size=4)
+    assert TrainConfig().raster == RasterOptions()               # nothing set: graphdeco's defaults
+
+
+@pytest.mark.parametrize("override, message", [
+    ("raster.alpha_mn=0.1", "raster.alpha_mn: unknown key (did you mean 'alpha_min'?)"),
+    ("raster.bogus=1", "raster.bogus: unknown key (known: alpha_max, alpha_min, antialiased, eps2d, far, near, "
+                       "radius, tile_size, transmittance_min)"),
+    ("raster.tile_size=12", "raster.tile_size: expected a power of two in [1, 64], got 12"),
+    ("raster.tile_size=8.0", "raster.tile_size: expected an int, got 8.0"),
+    ("raster.alpha_min=x", "raster.alpha_min: expected a finite number, got 'x'"),
+    ("raster.alpha_min=0.995", "raster.alpha_min: expected a value in (0, alpha_max), got 0.995"),
+    ("raster.radius=4sigma", "raster.radius: expected one of ('3sigma', 'opacity'), got '4sigma'"),
+    ("raster=3", "raster: expected a table of rasterizer options (" + ", ".join(RASTER_KEYS) + "), got 3"),
+])
+def test_a_bad_raster_key_is_one_line_naming_it(override, message):
+    with pytest.raises(InputError) as info:
+        apply_overrides(TrainConfig(), [override])
+    assert str(info.value) == message
+
+
+def test_the_device_is_set_once_by_device():
+    """``raster.device`` is not a setting: it always equals ``TrainConfig.device``."""
+    with pytest.raises(InputError, match=r"^raster\.device: the rasterizer runs on the run's `device`"):
+        apply_overrides(TrainConfig(), ["raster.device=cuda"])
+    cfg = TrainConfig(device="cpu", raster=RasterOptions(alpha_min=0.008))
+    assert cfg.raster == RasterOptions(alpha_min=0.008, device="cpu")
+    assert dataclasses.replace(cfg, device="auto").raster.device == "auto"   # moved together
+    assert apply_overrides(cfg, ["device=auto"]).raster == RasterOptions(alpha_min=0.008, device="auto")
+    assert "device" not in cfg.to_dict()["raster"]
+    with pytest.raises(InputError, match=r"^raster: expected RasterOptions"):
+        TrainConfig(raster={"alpha_min": 0.02})                   # the constructor takes the typed record
+
+
+# ----------------------------------------------------------------------------- the trainer
+class OptionsSpy:
+    """Stands in for `splatbench.rasterize` in the trainer: records, per call, the trainer
+    method that rendered and the `RasterOptions` it passed."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, RasterOptions]] = []
+
+    def __call__(self, *args, **kwargs):
+        from splatbench.raster.torch_bridge import rasterize
+
+        names = {f.name for f in dataclasses.fields(RasterOptions)}
+        caller = inspect.stack()[2].function  # rasterize <- Trainer._render <- the render's purpose
+        self.calls.append((caller, RasterOptions.from_kwargs(**{k: v for k, v in kwargs.items() if k in names})))
+        return rasterize(*args, **kwargs)
+
+
+def test_every_render_of_a_run_uses_the_configs_raster_options(tmp_path, monkeypatch):
+    spy = OptionsSpy()
+    monkeypatch.setattr("splatbench.train.loop.rasterize", spy)
+    options = RasterOptions(alpha_min=0.02, tile_size=8, radius="opacity")
+    # auto SH (a probe every 2 steps), an evaluation every 3 steps and the final one
+    cfg = config(tmp_path, iterations=6, sh_degree="auto", sh_interval=2, sh_auto_probe_views=2, eval_every=3,
+                 lpips_net="none", device="cpu", raster=options)
+    result = train(cfg, dataset=synthetic_dataset(tmp_path, view_dependent=True))
+    callers = {caller for caller, _ in spy.calls}
+    assert {"step", "warm_up", "probe_band", "evaluate"} <= callers, callers
+    assert all(opts == dataclasses.replace(options, device="cpu") for _, opts in spy.calls)
+    # the run records them: result.json / --json and config.toml
+    assert result.raster == {**options.to_dict(), "device": "cpu"}
+    assert json.loads((tmp_path / "run" / "result.json").read_text())["raster"]["tile_size"] == 8
+    assert load_config(tmp_path / "run" / "config.toml").raster == cfg.raster
+
+
+def test_alpha_min_reaches_the_kernel_and_changes_the_training_step(tmp_path):
+    """Every initial Gaussian has opacity 0.1 (strategy "none": graphdeco's initial opacity), and
+    alpha = opacity x G: with alpha_min = 0.09 compositing keeps only the cores where G > 0.9,
+    so the render shows much less of each Gaussian than with the default 1/255 (more
+    background), and the first step's loss differs."""
+    ds = synthetic_dataset(tmp_path, view_dependent=False)
+    camera = ds.train.cameras[0]
+    losses, renders = {}, {}
+    default = RasterOptions().alpha_min
+    for alpha_min in (default, 0.09):
+        cfg = config(tmp_path, iterations=2, device="cpu", raster=RasterOptions(alpha_min=alpha_min))
+        with torch_threads(1):
+            trainer = Trainer(cfg, dataset=ds)
+            assert cfg.initial_opacity == pytest.approx(0.1)
+            with torch.no_grad():
+                renders[alpha_min] = trainer._render(camera, 0, trainer.background.tolist())[1]  # alpha [H, W]
+            losses[alpha_min] = trainer.step().loss
+    # coverage: a Gaussian's footprint above alpha 1/255 reaches G = 1/25.5 (2.5 sigma), above
+    # 0.09 only G = 0.9 (0.46 sigma): far less of the image is covered
+    assert float(renders[0.09].sum()) < 0.5 * float(renders[default].sum())
+    assert losses[0.09] != losses[default]
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["strategy=none", "raster.alpha_min=0.1"],
+     "raster.alpha_min: 0.1 is at or above the initial opacity 0.1 (init_opacity)"),
+    (["iterations=2000", "raster.alpha_min=0.01"],
+     "raster.alpha_min: 0.01 is at or above the opacity reset value 0.01 of strategy 'default'"),
+])
+def test_an_alpha_min_that_would_stop_training_is_refused(overrides, message):
+    """alpha = opacity x G never exceeds the opacity: a Gaussian at or below alpha_min is skipped
+    on every pixel and gets no gradient. Refused when that is every Gaussian: at the start, or
+    after graphdeco's opacity reset (to 0.01; a 60-step smoke run of this grid with alpha_min
+    0.01 stopped learning at the first reset and rendered the background alone from then on)."""
+    with pytest.raises(InputError) as info:
+        apply_overrides(TrainConfig(), overrides)
+    assert str(info.value).startswith(message) and "\n" not in str(info.value)
+    # the ways out the message names are accepted
+    apply_overrides(TrainConfig(), [*overrides, "strategy_options.reset_every=0"] if "iterations=2000" in overrides
+                    else [*overrides, "init_opacity=0.2"])
+    apply_overrides(TrainConfig(), ["iterations=2000", "raster.alpha_min=0.01", "strategy_options.reset_value=0.02"])
+    apply_overrides(TrainConfig(), ["iterations=2000", "raster.alpha_min=0.01", "strategy=mcmc"])  # no resets
+
+
+def test_cli_train_records_the_raster_options(tmp_path, tiny_diffuse_dir):  # noqa: F811 (the fixture)
+    from splatbench.cli import main
+
+    runner = CliRunner()
+    out = tmp_path / "o"
+    res = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "raster.alpha_min=0.01", "--set",
+                               "raster.tile_size=8", "--set", "iterations=3", "--set", "strategy=none", "--set",
+                               "lpips_net=none", "--json", "--quiet", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout.strip().splitlines()[-1])
+    assert data["raster"]["alpha_min"] == 0.01 and data["raster"]["tile_size"] == 8
+    assert load_config(out / "config.toml").raster == RasterOptions(alpha_min=0.01, tile_size=8)
+    bad = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "raster.alpah_min=0.01", "--quiet"])
+    assert bad.exit_code == 2
+    assert bad.stderr.strip().splitlines() == [bad.stderr.strip()]
+    assert "raster.alpah_min: unknown key (did you mean 'alpha_min'?)" in bad.stderr
+
+
+# ----------------------------------------------------------------------------- grids and run ids
+def _id(config: dict) -> str:
+    return make_run_id("train", TRAIN.identity(TRAIN.resolve(config)))
+
+
+def test_a_config_without_raster_options_keeps_its_run_id():
+    """The id hashes what it hashed before training took raster options: the resolved config
+    without a ``raster`` table. Options written at their defaults are the same run; a set one
+    is a new run, hashed as that option alone."""
+    base = {"scene": "diffuse", "seed": 0, "iterations": 2000}
+    resolved = TRAIN.resolve(base)
+    assert resolved["raster"] == {k: v for k, v in RasterOptions().to_dict().items() if k != "device"}
+    before = {k: v for k, v in resolved.items() if k != "raster"}   # the resolved config as it was
+    assert TRAIN.identity(resolved) == before
+    assert _id(base) == make_run_id("train", before)
+    assert _id({**base, "raster": {"alpha_min": DEFAULT_ALPHA_MIN, "tile_size": 16, "radius": "3sigma"}}) == _id(base)
+    changed = TRAIN.identity(TRAIN.resolve({**base, "raster": {"alpha_min": 0.008}}))
+    assert changed == {**before, "raster": {"alpha_min": 0.008}}
+    assert _id({**base, "raster": {"alpha_min": 0.008}}) != _id(base)
+
+
+def test_a_grid_sweeps_raster_options_and_its_rows_carry_them():
+    spec = {"name": "t", "kind": "train", "scenes": ["diffuse"], "seeds": [0], "base": {"iterations": 2000},
+            "axes": {"raster": {"alpha_min": [DEFAULT_ALPHA_MIN, 0.008], "tile_size": [16, 8]}}}
+    runs = expand(parse_experiment(spec))
+    assert [tuple(r.labels.values()) for r in runs] == [(DEFAULT_ALPHA_MIN, 16), (DEFAULT_ALPHA_MIN, 8),
+                                                        (0.008, 16), (0.008, 8)]
+    plain = expand(parse_experiment({k: v for k, v in spec.items() if k != "axes"}))
+    assert runs[0].run_id == plain[0].run_id                      # the default cell is the grid's plain run
+    assert len({r.run_id for r in runs}) == 4
+    record = RunRecord(run_id=runs[3].run_id, experiment="t", kind="train", scene="diffuse", seed=0, status="done",
+                       config=runs[3].config, labels=dict(runs[3].labels))
+    row = record.row()
+    assert row["config.raster.alpha_min"] == 0.008 and row["config.raster.tile_size"] == 8
+    assert row["axis.raster.alpha_min"] == 0.008
+    assert flatten(runs[0].config)["raster.alpha_min"] == DEFAULT_ALPHA_MIN   # every row, the defaults too
+
+
+@pytest.mark.parametrize("where, table, message", [
+    ("base", {"base": {"raster.alpah_min": 0.1}}, "x.toml: base: raster.alpah_min: unknown key (did you mean "
+                                                  "'alpha_min'?)"),
+    ("axis", {"axes": {"raster.tile_size": [16, 12]}}, "x.toml: axes.raster.tile_size = 12: raster.tile_size: "
+                                                       "expected a power of two in [1, 64], got 12"),
+    ("dead run", {"axes": {"raster.alpha_min": [0.005, 0.01]}},
+     "x.toml: axes.raster.alpha_min = 0.01: raster.alpha_min: 0.01 is at or above the opacity reset value 0.01 of "
+     "strategy 'default': after its first opacity reset every Gaussian would be skipped (alpha = opacity x G never "
+     "exceeds the opacity) and get no gradient, so training could not recover; lower raster.alpha_min, or raise "
+     "strategy_options.reset_value, or set strategy_options.reset_every = 0 (no resets)"),
+])
+def test_a_grid_names_a_bad_raster_key_in_one_line(where, table, message):
+    spec = {"name": "t", "kind": "train", "scenes": ["diffuse"], "seeds": [0], "base": {"iterations": 2000}}
+    for key, value in table.items():
+        spec[key] = {**spec.get(key, {}), **value}
+    with pytest.raises(InputError) as info:
+        expand(parse_experiment(spec, source="x.toml"))
+    assert str(info.value) == message
+
+
+def test_the_shipped_raster_options_grid_sweeps_alpha_min_and_the_tile_size():
+    spec = load_experiment(ROOT / "experiments" / "train_raster_options.toml")
+    runs = expand(spec)
+    cells = {(r.config["raster"]["alpha_min"], r.config["raster"]["tile_size"]) for r in runs}
+    assert cells == {(a, t) for a in (DEFAULT_ALPHA_MIN, 0.005, 0.008) for t in (16, 8)}
+    assert len(spec.scenes) == 2 and len(runs) == 2 * 6 * 3
+    assert all(r.config.get("protocol", "quick") == "quick" and r.config["data"]["resolution"] == 128 for r in runs)
