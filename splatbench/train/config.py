@@ -261,7 +261,7 @@ class TrainConfig:
         strategy = self.make_strategy()
         if protocol.final_window_check:
             check_final_window(strategy, self.iterations, self.schedule)
-        self._check_alpha_min(strategy)
+        self._check_alpha_min()
         if self.lr_means == 0 and strategy.reads_mean_gradients:
             # frozen means have no screen-space gradient (the rasterizer's backward skips it), and this
             # strategy declares that it reads it (the Strategy protocol's reads_mean_gradients)
@@ -272,27 +272,37 @@ class TrainConfig:
                              f"screen-space gradients (use a positive lr_means, or strategy={' or '.join(free)})")
         return self
 
-    def _check_alpha_min(self, strategy) -> None:
+    def _check_alpha_min(self) -> None:
         """A run that cannot train: alpha = opacity x G never exceeds the opacity (G <= 1), and
         compositing skips alpha below ``raster.alpha_min`` with no gradient, so a Gaussian whose
         opacity is at or below it is skipped on every pixel and can never grow back. That is every
-        Gaussian at the start when the initial opacity is, and after the strategy's first opacity
-        reset (``reset_value``, graphdeco's 0.01) when the reset value is."""
-        from splatbench.strategies import planned_counts
-
+        Gaussian at the start when the initial opacity is (refused); after each opacity reset when
+        the strategy's reset value is (a run that may be asked for on purpose: `warnings`)."""
         alpha_min = self.raster.alpha_min
         if self.initial_opacity <= alpha_min:
             raise InputError(f"raster.alpha_min: {alpha_min!r} is at or above the initial opacity "
                              f"{self.initial_opacity!r} (init_opacity), and alpha = opacity x G never exceeds the "
                              f"opacity: every Gaussian would be skipped and get no gradient; lower raster.alpha_min "
                              f"or raise init_opacity")
-        reset = getattr(strategy, "reset_value", None)
+
+    def warnings(self) -> list[str]:
+        """One line per setting that runs but likely defeats training (said before the first
+        step and kept among the result's notes): an ``raster.alpha_min`` at or above the
+        strategy's opacity reset value (graphdeco's 0.01) in a run with resets. After each reset
+        alpha = opacity x G <= the reset value, so compositing skips every Gaussian and gives it
+        no gradient; the model renders the background until nothing is left to recover."""
+        from splatbench.strategies import planned_counts
+
+        out = []
+        strategy = self.make_strategy()
+        alpha_min, reset = self.raster.alpha_min, getattr(strategy, "reset_value", None)
         if reset is not None and reset <= alpha_min and planned_counts(strategy, self.iterations).opacity_resets:
-            raise InputError(f"raster.alpha_min: {alpha_min!r} is at or above the opacity reset value {reset!r} of "
-                             f"strategy {self.strategy!r}: after its first opacity reset every Gaussian would be skipped "
-                             f"(alpha = opacity x G never exceeds the opacity) and get no gradient, so training could "
-                             f"not recover; lower raster.alpha_min, or raise strategy_options.reset_value, or set "
-                             f"strategy_options.reset_every = 0 (no resets)")
+            out.append(f"warning: raster.alpha_min={alpha_min!r} is at or above the opacity reset value {reset!r} of "
+                       f"strategy {self.strategy!r}: after each opacity reset every Gaussian is skipped (alpha = "
+                       f"opacity x G never exceeds the opacity) and gets no gradient, so training cannot recover; "
+                       f"lower raster.alpha_min, raise strategy_options.reset_value, or set "
+                       f"strategy_options.reset_every = 0 (no resets)")
+        return out
 
     def make_strategy(self, *, scaled: bool = True):
         """The densification strategy this config names (`InputError` if unknown). A

@@ -495,6 +495,9 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         return {"history": history, "evaluations": evaluations, "loop_seconds": loop_seconds,
                 "cpu_seconds": cpu_seconds, "step_evaluations": step_evaluations}
 
+    config_warnings = config.warnings()
+    for line in config_warnings:
+        (say or (lambda _: None))(line)
     status = None
     load = Load.start()
     try:
@@ -536,7 +539,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         ev = trainer.evaluate(list(dict.fromkeys(final_lpips + full_lpips + curve_lpips)))
     except Interrupted as exc:
         raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
-    notes = resumed + list(trainer.dataset.notes) + ([trainer.init_note] if trainer.init_note else []) \
+    notes = resumed + config_warnings + list(trainer.dataset.notes) + ([trainer.init_note] if trainer.init_note else []) \
         + [trainer.background_note] + ([trainer.up_note] if trainer.up_note else []) \
         + ([lpips_note] if lpips_note else [])
     schedule_note = _schedule_note(trainer.strategy, config)
