@@ -45,3 +45,40 @@ def test_grad_agreement_detects_scale_and_direction():
     assert compare.grad_agreement(b, b).rel_l2 == 0.0
     assert compare.grad_agreement(1.1 * b, b).rel_l2 == pytest.approx(0.1)
     assert compare.grad_agreement(-b, b).cosine == pytest.approx(-1.0)
+
+
+def test_the_gradient_oracle_runs_on_float64_cpu_copies():
+    """compare's float64 oracle takes CPU float64 copies of the parameters whatever device the
+    compared backends use (on CUDA, ``torch64`` refused CUDA tensors and compare fell back to
+    finite differences): the copies hold the same values, and ``torch64``'s gradients on them
+    equal its gradients on the float32 originals to float32 rounding."""
+    import torch
+
+    from splatbench.compare.measure import Cotangents, GradOracle, OracleImages, backend_vjp, torch_inputs
+    from splatbench.backends.registry import get_backend
+    from splatbench.workloads import synthetic
+
+    workload = synthetic(200, 32, 32, 0)
+    params = torch_inputs(workload, "cpu")
+    images = OracleImages(workload, workload.camera)
+    oracle = GradOracle("torch64", images, params, seed=0, entries=8)
+    assert all(p.device.type == "cpu" and p.dtype == torch.float64 for p in oracle.params)
+    assert all(torch.equal(a.double(), b) for a, b in zip(params, oracle.params))
+    backend = get_backend("torch64")
+    v = Cotangents.random(0, np.ones((32, 32)), ("rgb", "alpha", "depth"))
+    on_copies = backend_vjp(backend, oracle.params, workload.camera, v)
+    on_originals = backend_vjp(backend, params, workload.camera, v)
+    for name in on_copies:
+        np.testing.assert_allclose(on_copies[name], on_originals[name], rtol=1e-5, atol=1e-7)
+
+
+def test_parameter_device_follows_the_rasterizer_and_torch():
+    """Training keeps its tensors where the rasterizer runs when torch can hold them there."""
+    import torch
+
+    from splatbench.raster.torch_bridge import parameter_device
+
+    assert parameter_device("cpu") == torch.device("cpu")
+    expected = "cuda" if (torch.cuda.is_available() and __import__("splatbench.raster.device", fromlist=["x"])
+                          .cuda_available()) else "cpu"
+    assert parameter_device("auto").type == expected

@@ -194,8 +194,11 @@ class GradOracle:
 
     def __init__(self, spec: str, images: OracleImages, params: tuple, *, seed: int, entries: int):
         # the oracle runs on the CPU whatever device the compared backends use (``torch64``
-        # declares the CPU alone): on CUDA it fell back to finite differences, minutes per backend
-        params = tuple(p.detach().cpu() for p in params)
+        # declares the CPU alone; on CUDA it fell back to finite differences, minutes per backend),
+        # on float64 copies of the same float32 values, so its gradients are float64 throughout
+        import torch
+
+        params = tuple(p.detach().to("cpu", torch.float64) for p in params)
         self.spec, self.images, self.params, self.seed, self.entries = spec, images, params, seed, entries
         self._cache: dict[tuple, tuple[str, Cotangents, dict]] = {}
         self._backend: Backend | None = None

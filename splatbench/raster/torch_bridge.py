@@ -75,8 +75,8 @@ def parameter_device(device: str) -> torch.device:
     """Where a caller that renders on ``device`` ("cpu", "cuda", "auto") should keep its torch
     parameters and optimizer state: torch's CUDA device when the rasterizer runs on CUDA and
     this torch has CUDA (no host copy per call: on an H200 the 1M / 800² forward+backward took
-    174.7 ms with CPU parameters and 12.6 ms with CUDA ones, reports/cuda/README.md), else the
-    CPU. A CPU-only torch beside Dr.Jit's CUDA keeps CPU parameters and copies each call."""
+    231.9 ms with CPU parameters and 16.4 ms with CUDA ones in one process, and a training step
+    at 256² ran x2.77 faster, reports/cuda/README.md 2026-11-28), else the CPU. A CPU-only torch beside Dr.Jit's CUDA keeps CPU parameters and copies each call."""
     if torch_device(get_device(device)).type == "cuda" and torch.cuda.is_available():
         return torch.device("cuda")
     return torch.device("cpu")

@@ -157,6 +157,8 @@ class Trainer:
         # parameters, Adam's moments, the strategy's state, targets and the loss live where the
         # rasterizer runs (torch's CUDA device on CUDA): no host round trip per step
         self.device = parameter_device(config.device)
+        # the step's stage times wait for the GPU's queued work at each boundary (on the CPU: nothing)
+        self._sync = torch.cuda.synchronize if self.device.type == "cuda" else (lambda: None)
         self.params = params_from_gaussians(gaussians, self.lrs, self.device)
         self.optimizers = make_optimizers(self.params, self.lrs, config.adam_eps)
         # decays over the protocol's schedule (30,000 steps under graphdeco's, however early the run stops)
@@ -233,7 +235,7 @@ class Trainer:
     # ------------------------------------------------------------------ one step
     def step(self) -> StepStatus:
         """Run one optimisation step and return its status."""
-        cfg, t = self.config, self.times
+        cfg, t, sync = self.config, self.times, self._sync
         t0 = time.perf_counter()
         step = self.step_index
         degree = self.sh.update(step, self.probe_band)
@@ -252,29 +254,37 @@ class Trainer:
             target = target + (bg - self.gt_background) * (1 - alpha)[..., None]
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
+        sync()
         t1 = time.perf_counter()
         rgb, _, _, info = self._render(camera, degree, bg.tolist())
+        sync()
         t2 = time.perf_counter()
         image = rgb.detach().requires_grad_(rgb.requires_grad)
         loss = photometric_loss(image, target, cfg.ssim_lambda, cfg.ssim_window)
+        sync()
         t3 = time.perf_counter()
         reg = self.strategy.regularization(self.params, step)
         ctx = StepContext(step=step, info=info, scene_extent=self.extent, means_lr=lr, loss=float(loss.detach()))
         self.strategy.pre_backward(self.params, self.optimizers, self.state, ctx)
+        sync()
         t4 = time.perf_counter()
         if rgb.requires_grad:
             loss.backward()
         if isinstance(reg, torch.Tensor) and reg.requires_grad:
             reg.backward()
+        sync()
         t5 = time.perf_counter()
         if rgb.requires_grad:
             rgb.backward(image.grad)
+        sync()
         t6 = time.perf_counter()
         for opt in self.optimizers.values():
             opt.step()
+        sync()
         t7 = time.perf_counter()
         self.strategy.post_backward(self.params, self.optimizers, self.state, ctx)
         refreeze(self.params, self.lrs)
+        sync()
         t8 = time.perf_counter()
         self.step_index += 1
         t.raster_forward += t2 - t1
