@@ -20,7 +20,7 @@ from splatbench.cameras import Camera  # noqa: E402
 from splatbench.errors import InputError, SplatbenchError  # noqa: E402
 from splatbench.gaussians import Gaussians  # noqa: E402
 
-__version__ = "0.1.0"
+from splatbench.versions import SPLATBENCH_VERSION as __version__  # noqa: E402
 
 # The rasterizer (Dr.Jit, and torch for `rasterize`) loads on first use, so that
 # `import splatbench`, the CLI and experiment workers start without paying for it.

@@ -18,7 +18,10 @@ test runs in well under a second. Edges:
   module, else ``a.b`` (the package ``__init__``); relative imports are resolved first;
 * importing a submodule also runs its parents' ``__init__``; that implicit step is
   not an edge (it is the same for every submodule and cannot be avoided), but an
-  explicit ``from a.b import name`` of something defined in ``a/b/__init__.py`` is.
+  explicit ``from a.b import name`` of something defined in ``a/b/__init__.py`` is;
+* a string that is exactly a package module's dotted name (``"splatbench.raster"``, or
+  ``"splatbench.commands.sfm:sfm"``) is an edge to that module: it is there to be
+  imported by name (a lazy export, a registry).
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ class Import(NamedTuple):
     line: int
     target: str
     main: bool  # written under the module's ``if __name__ == "__main__":`` block
+    by_string: bool = False  # a string naming the module (`STRING_IMPORT`), imported by name later
 
 
 def import_edges(name: str, path: Path, modules: dict[str, Path]) -> list[Import]:
@@ -62,6 +66,7 @@ def import_edges(name: str, path: Path, modules: dict[str, Path]) -> list[Import
     out: list[Import] = []
     for node in ast.walk(tree):
         targets: list[str | None] = []
+        by_string = False
         if isinstance(node, ast.Import):
             targets = [_known_prefix(alias.name, modules) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -73,9 +78,21 @@ def import_edges(name: str, path: Path, modules: dict[str, Path]) -> list[Import
             for alias in node.names:
                 full = f"{base}.{alias.name}"
                 targets.append(full if full in modules else _known_prefix(base, modules))
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and STRING_IMPORT.match(node.value) \
+                and node.value.split(":")[0] in modules:
+            # a module named by a string for a late `importlib.import_module` (a lazy export, a
+            # command or kind registry): the same dependency, written where a reader does not look
+            targets = [node.value.split(":")[0]]
+            by_string = True
         # `from splatbench.x import y` inside x's own package __init__ is no cycle
-        out += [Import(node.lineno, t, node.lineno in main_lines) for t in targets if t is not None and t != name]
+        out += [Import(node.lineno, t, node.lineno in main_lines, by_string) for t in targets
+                if t is not None and t != name]
     return sorted(set(out))
+
+
+#: A string that names a package module (``splatbench.a.b``, or ``splatbench.a.b:attr`` as the
+#: command and kind registries write them): counted as an import of that module.
+STRING_IMPORT = re.compile(rf"^{PACKAGE}(\.[A-Za-z_]\w*)+(:[A-Za-z_]\w*)?$")
 
 
 def _is_main_block(node: ast.stmt) -> bool:
@@ -84,8 +101,11 @@ def _is_main_block(node: ast.stmt) -> bool:
 
 
 def imports_of(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
-    """The package modules that ``name`` (at ``path``) imports, anywhere in its body."""
-    return {i.target for i in import_edges(name, path, modules)}
+    """The package modules that ``name`` (at ``path``) imports by statement, anywhere in its
+    body: the cycle graph. A registry that names its plugins by string while they import its
+    base types is the plugin pattern (entry points work the same way), not a cycle; the layer
+    check counts those strings too."""
+    return {i.target for i in import_edges(name, path, modules) if not i.by_string}
 
 
 def _known_prefix(dotted: str, modules: dict[str, Path]) -> str | None:
@@ -313,8 +333,8 @@ def test_no_import_from(importer, imported):
 
 
 def test_the_checker_sees_a_break(tmp_path):
-    """The checker itself: a late import against the table, one under TYPE_CHECKING, and one
-    in a ``__main__`` block (the entry layer: allowed) on a small table."""
+    """The checker itself: a late import against the table, one under TYPE_CHECKING, one in a
+    ``__main__`` block (the entry layer: allowed) and modules named by strings on a small table."""
     pkg = tmp_path / PACKAGE
     (pkg / "low").mkdir(parents=True)
     (pkg / "__init__.py").write_text("")
@@ -324,13 +344,21 @@ def test_the_checker_sees_a_break(tmp_path):
     (pkg / "low" / "b.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import splatbench.high\n")
     (pkg / "low" / "c.py").write_text("if __name__ == '__main__':\n    from splatbench import top\n")
     (pkg / "high.py").write_text("from splatbench.low import a\n")
+    # a lazy export by string (as the package facade's `_LAZY` was, to splatbench.raster), a
+    # registry entry, and strings that only look like module names (a custom op's name, prose)
+    (pkg / "low" / "d.py").write_text('LAZY = {"thing": "splatbench.high"}\n'
+                                      'COMMANDS = {"go": "splatbench.top:go"}\n'
+                                      'NAME = "splatbench.composite"\nDOC = "see splatbench.high for more"\n')
     doc = tmp_path / "arch.md"
     doc.write_text("| Level | Part | Modules | Also imports | Rule |\n|---|---|---|---|---|\n"
                    "| 3 | top | `splatbench.top` | | anything |\n"
                    "| 2 | high | `splatbench.high` | | above low |\n"
                    "| 1 | low | `splatbench`, `splatbench.low` | | nothing above |\n")
     found = sorted((m, t) for m, t, _ in violations(pkg, doc))
-    assert found == [("splatbench.low.a", "splatbench.high"), ("splatbench.low.b", "splatbench.high")]
+    assert found == [("splatbench.low.a", "splatbench.high"), ("splatbench.low.b", "splatbench.high"),
+                     ("splatbench.low.d", "splatbench.high"), ("splatbench.low.d", "splatbench.top")]
+    assert "splatbench.low.d" not in import_graph(pkg)["splatbench.high"] and \
+        import_graph(pkg)["splatbench.low.d"] == set()  # string edges are layer edges, not cycle edges
     message = violations(pkg, doc)[0][2]
     assert message.startswith("splatbench/low/a.py:2 imports splatbench.high (high, level 2)") and \
         message.endswith("Rule: nothing above")

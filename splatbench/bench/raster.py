@@ -183,7 +183,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     stage timer. The RSS fields describe this process: run it in a fresh one
     (`run_isolated`) for them to be this workload's.
     """
-    from splatbench import Gaussians
+    from splatbench.gaussians import Gaussians
     from splatbench.bench.peak import fp32_peak
     from splatbench.raster.options import RasterOptions
     from splatbench.raster.torch_bridge import parameter_device

@@ -100,10 +100,10 @@ def synthetic_scene(size: int, n: int, views: int, seed: int):
     """(dataset, truth): ``n`` random Gaussians in a ball of radius ~1, SH degree 3,
     rendered from ``views`` orbit cameras at ``size`` x ``size``; the dataset's points
     are the true centres plus noise (sigma 0.03) with their DC colours."""
-    import splatbench
     from splatbench.cameras import Camera
     from splatbench.data.dataset import Dataset, PointCloud, Split
     from splatbench.gaussians import SH_C0, Gaussians
+    from splatbench.raster import render
     from splatbench.workloads import random_unit_quats
 
     rng = np.random.default_rng(seed)
@@ -117,7 +117,7 @@ def synthetic_scene(size: int, n: int, views: int, seed: int):
         eye = [3.0 * np.cos(a), -1.0 + 0.5 * (i % 3), 3.0 * np.sin(a)]
         cams.append(Camera.look_at(eye=eye, target=[0, 0, 0], up=[0, -1, 0], width=size, height=size,
                                    fov_x_deg=45))
-    images = np.stack([np.clip(splatbench.render(truth, c).rgb, 0, 1) for c in cams]).astype(np.float32)
+    images = np.stack([np.clip(render(truth, c).rgb, 0, 1) for c in cams]).astype(np.float32)
     split = Split(images, cams, None, [f"view{i}.png" for i in range(views)])
     empty = Split(np.zeros((0, size, size, 3), np.float32), [], None, [])
     xyz = means + rng.normal(size=means.shape) * 0.03

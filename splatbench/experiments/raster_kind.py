@@ -266,11 +266,11 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
     (``prepared``: None; `prepare` leaves the exact-model renders in the cache)."""
     import torch
 
-    import splatbench
     from splatbench.metrics.machine import resolve_device
     from splatbench.metrics.timing import forward_backward_with_init, forward_with_init, time_runs, torch_params
     from splatbench.metrics.stats import bootstrap_median_ratio
     from splatbench.metrics.image import psnr
+    from splatbench.raster import render
 
     own_share()  # a checkpoint of the own-load tracker: what ran before this run, then the warm-up
     workload = build_workload(config["scene"], config["seed"])
@@ -303,7 +303,7 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
     work = splatbench.raster.work_stats(workload.gaussians, workload.camera, **options)
     scale = config["error_scale"]
     small = workload.camera if scale == 1 else workload.camera.scaled(scale)
-    fast = splatbench.render(workload.gaussians, small, sh_degree=degree, **options).rgb.astype(np.float64)
+    fast = render(workload.gaussians, small, sh_degree=degree, **options).rgb.astype(np.float64)
     exact = exact_model(config["scene"], config["seed"], scale)
     matched = reference_render(workload, scale, sh_degree=degree, **options)
     err = np.abs(fast - exact)

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 from types import ModuleType
 
-import splatbench  # noqa: F401  (configures libLLVM before drjit loads)
 import drjit as dr
 
 from splatbench import _llvm

@@ -14,13 +14,14 @@ def make_drjit_backend(**options) -> Backend:
     The declared approximations are the options actually used, so a backend made with
     ``radius="opacity"`` is compared against the reference with that rule.
     """
-    import splatbench
+    from splatbench.raster import rasterize
     from splatbench.raster.device import cuda_available
     from splatbench.raster.options import RasterOptions
+    from splatbench.versions import SPLATBENCH_VERSION
 
     opts = RasterOptions.from_kwargs(**options)
     info = BackendInfo(
-        name="drjit", version=splatbench.__version__,
+        name="drjit", version=SPLATBENCH_VERSION,
         devices=("cpu", "cuda") if cuda_available() else ("cpu",),
         alpha_min=opts.alpha_min, alpha_max=opts.alpha_max, transmittance_min=opts.transmittance_min,
         eps2d=opts.eps2d, radius=opts.radius, tile_size=opts.tile_size, antialiased=opts.antialiased,
@@ -29,8 +30,8 @@ def make_drjit_backend(**options) -> Backend:
                                             "near", "far", "radius", "antialiased", "device")}
 
     def drjit(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
-        rgb, alpha, depth, _ = splatbench.rasterize(means, log_scales, quats, opacity_logits, sh, camera,
-                                                    sh_degree=sh_degree, background=background, **kwargs)
+        rgb, alpha, depth, _ = rasterize(means, log_scales, quats, opacity_logits, sh, camera,
+                                         sh_degree=sh_degree, background=background, **kwargs)
         return rgb, alpha, depth
 
     return Backend(drjit, info)

@@ -183,13 +183,13 @@ def make_reference_backend(mode: str = "matched", **conventions) -> Backend:
     if mode not in MODES:
         raise InputError(f"mode: expected one of {list(MODES)}, got {mode!r}")
     import reference  # noqa: F401  (fails early if the package is missing)
-    import splatbench
+    from splatbench.versions import SPLATBENCH_VERSION
 
     unknown = sorted(set(conventions) - set(REFERENCE_OPTIONS))
     if unknown:
         raise InputError(f"{unknown[0]}: not a reference option (known: {', '.join(REFERENCE_OPTIONS)})")
     if mode == "exact":
-        info = BackendInfo(name="reference-exact", version=splatbench.__version__, dtype="float64",
+        info = BackendInfo(name="reference-exact", version=SPLATBENCH_VERSION, dtype="float64",
                            slow_gradients=True, alpha_min=0.0, alpha_max=1.0, transmittance_min=0.0, eps2d=0.3,
                            radius="none", tile_size=0, antialiased=False, exact=True,
                            description="float64 NumPy oracle, exact Gaussian mixture (eps2d 0.3 low-pass kept; "
@@ -197,7 +197,7 @@ def make_reference_backend(mode: str = "matched", **conventions) -> Backend:
     else:
         merged = {k: conventions.get(k, GRAPHDECO[k]) for k in ("alpha_min", "alpha_max", "transmittance_min",
                                                                 "eps2d", "radius", "antialiased")}
-        info = BackendInfo(name="reference", version=splatbench.__version__, dtype="float64",
+        info = BackendInfo(name="reference", version=SPLATBENCH_VERSION, dtype="float64",
                            slow_gradients=True, tile_size=0, **merged,
                            description="float64 NumPy oracle (reference/), matched to graphdeco's conventions, "
                                        "one pixel at a time; gradients by central finite differences")
