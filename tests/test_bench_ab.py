@@ -4,12 +4,13 @@ only the protocol (alternation, medians, the quiet-machine rule, clean-up)."""
 from __future__ import annotations
 
 import math
-
-import pytest
 import subprocess
 import time
 from contextlib import contextmanager
 from pathlib import Path
+
+import numpy as np
+import pytest
 
 from click.testing import CliRunner
 
@@ -82,6 +83,9 @@ def test_alternating_runs_against_head_and_clean_up(monkeypatch):
     assert len(r.old_seconds) == len(r.new_seconds) == 5 and min(r.old_seconds + r.new_seconds) > 0
     # before the workers, before each of the 5 pairs, after the last; the workers reported their CPU time
     assert len(r.loads) == 7 and r.own_cpu > 0 and r.ratio is None and "withheld" in r.note
+    # the same rasterizer on both sides, from the same workload file: the same bits
+    assert r.identical is True and set(r.max_abs_diff) == {"rgb", "means", "log_scales", "quats", "opacity_logits",
+                                                             "sh"} and max(r.max_abs_diff.values()) == 0.0
     trees = subprocess.run(["git", "-C", str(REPO), "worktree", "list"], capture_output=True, text=True).stdout
     assert len(made) == 1 and "splatbench-ab-" in made[0] and made[0] not in trees  # it is gone
 
@@ -112,3 +116,29 @@ def test_own_load_before_the_section_is_not_counted_as_others():
     assert lo.other == pytest.approx(max(1.2 - 0.9, 1.5 - own_30), rel=1e-12)
     assert not lo.loaded(2)
     assert Load(cpu0=0.0, wall0=0.0, samples=((0.0, 1.2),), own_cpu=0.0).loaded(2)
+
+
+def test_outputs_that_differ_are_named(tmp_path):
+    """`compare_outputs` says which output moved and by how much; a missing or reshaped one is NaN."""
+    rgb = np.zeros((4, 4, 3), np.float32)
+    np.savez(tmp_path / "a.npz", rgb=rgb, means=np.ones((3, 3), np.float32))
+    np.savez(tmp_path / "b.npz", rgb=rgb + np.float32(2.0 ** -20), means=np.ones((3, 3), np.float32))
+    same, diffs = ab.compare_outputs(tmp_path / "a.npz", tmp_path / "b.npz")
+    assert not same and diffs == {"rgb": 2.0 ** -20, "means": 0.0}
+    np.savez(tmp_path / "c.npz", rgb=rgb[:2])
+    same, diffs = ab.compare_outputs(tmp_path / "a.npz", tmp_path / "c.npz")
+    assert not same and np.isnan(diffs["rgb"]) and np.isnan(diffs["means"])
+    line = ab.format_result(ab.AbResult("w", "HEAD", [0.1] * 5, [0.1] * 5, 0.1, 0.1, identical=False,
+                                        max_abs_diff={"rgb": 1e-6, "sh": 3e-5}))
+    assert line.endswith("outputs differ: largest |old - new| 3e-05 (sh; rgb 1e-06)")
+
+
+def test_a_model_workload_is_timed_on_both_sides(monkeypatch):
+    """A view of a real trained model (the bundled guitar, small) goes through the same file to both sides."""
+    from splatbench.workloads import parse_model
+
+    monkeypatch.setattr(load_rule, "QUIET_SHARE", -1.0)
+    spec = parse_model("guitar", views=3, size="48x32")[0]
+    (r,) = ab.run_ab(REPO, "HEAD", [spec], repeats=5, warmup=1)
+    assert r.workload.startswith("guitar") or "guitar" in r.workload, r.workload
+    assert r.identical is True and len(r.new_seconds) == 5

@@ -13,9 +13,12 @@ report) is subtracted by `splatbench.metrics.load.Load`, the rule the ``raster``
 kind uses too. Otherwise the ratio is withheld (`AbResult.ratio` is None) and
 `AbResult.note` says why. docs/benchmarks.md shows the command.
 
-The worker is a script that uses only `splatbench.workloads.synthetic` and
-`splatbench.rasterize`, which both trees provide: it must not import this module,
-which the old tree may not have.
+The workload (synthetic, an npz such as the bundled garden, or a view of a trained
+model) is built once, here, and saved with `splatbench.workloads.save_npz`; both
+workers read it with `load_npz` and time `splatbench.rasterize`, which both trees
+provide (the worker must not import this module, which the old tree may not have).
+Each side also writes its image and gradients of d(sum rgb) once, untimed; the result
+says whether they are bit-identical and, if not, the largest difference.
 """
 
 from __future__ import annotations
@@ -39,25 +42,29 @@ from splatbench.errors import InputError, SplatbenchError
 WORKER = r"""
 import json, sys, time
 spec = json.loads(sys.argv[1])
-import drjit as dr, torch
+import drjit as dr, numpy as np, torch
 import splatbench
-from splatbench.workloads import synthetic
+from splatbench.workloads import load_npz
 dr.set_thread_count(spec["threads"]); torch.set_num_threads(spec["threads"])
-w = synthetic(spec["n"], spec["width"], spec["height"], spec["seed"])
+w = load_npz(spec["npz"])
 g = w.gaussians
-leaves = [torch.tensor(getattr(g, k)).requires_grad_(True)
-          for k in ("means", "log_scales", "quats", "opacity_logits", "sh")]
+names = ("means", "log_scales", "quats", "opacity_logits", "sh")
+leaves = [torch.tensor(getattr(g, k)).requires_grad_(True) for k in names]
 
-def run():
+def run(save=None):
     t0 = time.perf_counter()
     rgb, _, _, _ = splatbench.rasterize(*leaves, w.camera, device="cpu")
     rgb.sum().backward()
+    seconds = time.perf_counter() - t0
+    if save:
+        np.savez(save, rgb=rgb.detach().numpy(), **{k: p.grad.numpy() for k, p in zip(names, leaves)})
     for p in leaves:
         p.grad = None
-    return time.perf_counter() - t0
+    return seconds
 
 for _ in range(spec["warmup"]):
     run()
+run(spec["outputs"])  # the image and gradients of d(sum rgb), untimed, for the comparison of the two sides
 def cpu():
     return time.process_time()  # all threads, ns resolution (os.times counts 10 ms ticks)
 
@@ -94,6 +101,9 @@ class AbResult:
     # sensitive to neighbours than wall time with --threads 1 (with more, idle Dr.Jit workers spin and count).
     old_cpu_median: float = 0.0
     new_cpu_median: float = 0.0
+    # The two sides' image [H, W, 3] and gradients of d(sum rgb) (all five groups), compared once
+    identical: bool | None = None    # every value bit-identical (None: not compared)
+    max_abs_diff: dict = field(default_factory=dict)  # output -> largest |old - new| ("rgb", "means", ...)
 
 
 @contextmanager
@@ -160,30 +170,40 @@ class Worker:
         self.stderr.close()
 
 
-def run_ab(repo: Path, against: str, workloads: list[tuple[int, int, int]], *, repeats: int = 5,
+def run_ab(repo: Path, against: str, workloads: list, *, repeats: int = 5,
            warmup: int = 2, threads: int = 2, seed: int = 0, progress=None) -> list[AbResult]:
-    """Time each synthetic workload (n, width, height) old vs new, alternating.
+    """Time each workload old vs new, alternating, and compare the two sides' outputs.
 
     Args:
         repo: a checkout of this repository (the new side is the tree this module
-            was imported from). against: the old commit. repeats: timed runs per
+            was imported from). against: the old commit. workloads: `WorkloadSpec`s, or
+            ``(n, width, height)`` for a synthetic one of ``seed``. repeats: timed runs per
             side (>= 5 for a reported median). warmup: untimed runs per side first.
     """
+    from splatbench.workloads import WorkloadSpec, save_npz
+
     if repeats < 5:
         raise InputError(f"--repeats: expected >= 5 timed runs per side, got {repeats}")
     new_tree = Path(__file__).resolve().parents[2]
     results = []
-    with old_tree(repo, against) as old:
-        for n, width, height in workloads:
-            spec = {"n": n, "width": width, "height": height, "seed": seed, "threads": threads, "warmup": warmup}
-            label = f"{n} {width}x{height}"
+    specs = [w if isinstance(w, WorkloadSpec) else WorkloadSpec("synthetic", n=w[0], width=w[1], height=w[2], seed=seed)
+             for w in workloads]
+    with old_tree(repo, against) as old, tempfile.TemporaryDirectory(prefix="splatbench-ab-io-") as io:
+        for k_spec, ws in enumerate(specs):
+            workload = ws.build()
+            label = ws.label or (f"{ws.n} {ws.width}x{ws.height}" if ws.kind == "synthetic" else workload.name)
+            npz = Path(io) / f"workload{k_spec}.npz"
+            save_npz(workload, npz)
+            del workload
+            outputs = [Path(io) / f"outputs{k_spec}-{side}.npz" for side in ("old", "new")]
+            spec = {"npz": str(npz), "threads": threads, "warmup": warmup}
             if progress:
                 progress(f"{label}: building and warming up both sides ...")
             sides = []
             load = Load.start(cpu=0.0)  # before the workers exist: all their CPU time is the benchmark's own
             try:
-                sides.append(Worker(old, spec))
-                sides.append(Worker(new_tree, spec))
+                sides.append(Worker(old, {**spec, "outputs": str(outputs[0])}))
+                sides.append(Worker(new_tree, {**spec, "outputs": str(outputs[1])}))
                 old_s, new_s = [], []
                 for k in range(repeats):
                     load = load.sample()
@@ -195,9 +215,27 @@ def run_ab(repo: Path, against: str, workloads: list[tuple[int, int, int]], *, r
                 for w in sides:
                     w.close()
             result = summarize(label, against, old_s, new_s, load)
+            identical, diffs = compare_outputs(*outputs)
             results.append(dataclasses.replace(result, old_cpu_median=statistics.median(sides[0].cpu_runs),
-                                               new_cpu_median=statistics.median(sides[1].cpu_runs)))
+                                               new_cpu_median=statistics.median(sides[1].cpu_runs),
+                                               identical=identical, max_abs_diff=diffs))
     return results
+
+
+def compare_outputs(old: Path, new: Path) -> tuple[bool, dict[str, float]]:
+    """(bit-identical, output -> largest |old - new|) of the two sides' saved image and gradients."""
+    import numpy as np
+
+    with np.load(old) as a, np.load(new) as b:
+        keys = sorted(set(a.files) | set(b.files))
+        diffs, same = {}, True
+        for k in keys:
+            if k not in a.files or k not in b.files or a[k].shape != b[k].shape:
+                diffs[k], same = float("nan"), False
+                continue
+            same = same and bool(np.array_equal(a[k], b[k]))
+            diffs[k] = float(np.max(np.abs(a[k].astype(np.float64) - b[k].astype(np.float64)))) if a[k].size else 0.0
+    return same, diffs
 
 
 def summarize(label: str, against: str, old_s: list[float], new_s: list[float], load: Load,
@@ -216,7 +254,15 @@ def summarize(label: str, against: str, old_s: list[float], new_s: list[float], 
 
 def format_result(r: AbResult) -> str:
     ratio = f"{r.ratio:.2f}x" if r.ratio is not None else r.note
+    if r.identical is None:
+        outputs = ""
+    elif r.identical:
+        outputs = "; image and gradients bit-identical"
+    else:
+        worst = max(r.max_abs_diff, key=lambda k: r.max_abs_diff[k])
+        outputs = (f"; outputs differ: largest |old - new| {r.max_abs_diff[worst]:.3g} ({worst}; rgb "
+                   f"{r.max_abs_diff.get('rgb', float('nan')):.3g})")
     return (f"{r.workload}: old {r.against} median {r.old_median * 1e3:.1f} ms, new median "
             f"{r.new_median * 1e3:.1f} ms over {len(r.new_seconds)} alternating runs each; load {r.loads}, own "
             f"{r.own_cpu:.2f} cores, others {r.load_other:.2f}; CPU per run old {r.old_cpu_median * 1e3:.1f} ms, new "
-            f"{r.new_cpu_median * 1e3:.1f} ms; {ratio}")
+            f"{r.new_cpu_median * 1e3:.1f} ms; {ratio}{outputs}")

@@ -80,20 +80,28 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
 @bench.command("ab")
 @click.option("--against", required=True, metavar="COMMIT", help="The old commit to time against (e.g. c11f838).")
 @click.option("--synthetic", "synthetic", nargs=2, multiple=True, metavar="N WxH",
-              help="A synthetic workload (repeatable). Default: 10000 256x256, 100000 512x512, 1000000 800x800.")
+              help="A synthetic workload (repeatable). Default (no workload given): 10000 256x256, 100000 512x512, "
+                   "1000000 800x800.")
+@click.option("--workload", "workloads", multiple=True, metavar="FILE.npz|garden",
+              help="A workload npz, or 'garden' (bundled SfM capture, view 0) (repeatable).")
+@model_options
 @click.option("--repeats", default=5, show_default=True, type=int, help="Timed runs per side (median; >= 5).")
 @click.option("--warmup", default=2, show_default=True, type=int, help="Untimed runs per side first.")
 @click.option("--threads", default=2, show_default=True, type=int, help="Dr.Jit and torch threads per side.")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=Path("out/bench"), show_default=True,
               help="Folder for ab.json.")
-def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmup: int, threads: int,
+def ab(against: str, synthetic: tuple[tuple[str, str], ...], workloads: tuple[str, ...], models: tuple[str, ...],
+       up: str | None, model_views: int, model_size: str, repeats: int, warmup: int, threads: int,
        out: Path) -> None:
-    """Forward+backward of this checkout against COMMIT, timed in alternation (CPU).
+    """Forward+backward of this checkout against COMMIT, timed in alternation (CPU),
+    with the two sides' images and gradients compared.
 
     The old commit is checked out into a temporary git worktree; each side runs in
-    its own process. The ratio old/new of the medians is printed only when the load
-    of other processes (the load average minus the workers' own share) stayed at or
-    below half the cores (see docs/benchmarks.md).
+    its own process on the same workload file. The ratio old/new of the medians is
+    printed only when the load of other processes (the load average minus the
+    workers' own share) stayed at or below half the cores (see docs/benchmarks.md).
+    Each line also says whether the image and the gradients of d(sum rgb) are
+    bit-identical, or their largest difference.
     """
     import json
     from dataclasses import asdict
@@ -101,10 +109,12 @@ def ab(against: str, synthetic: tuple[tuple[str, str], ...], repeats: int, warmu
     from splatbench.bench.ab import run_ab
     from splatbench.bench.raster import STANDARD_SYNTHETIC
     from splatbench.metrics.machine import machine_info
-    from splatbench.workloads import parse_synthetic
+    from splatbench.workloads import parse_models, parse_synthetic, parse_workload
 
     specs = [parse_synthetic(count, size) for count, size in synthetic]
-    workloads = [(s.n, s.width, s.height) for s in specs] or list(STANDARD_SYNTHETIC)
+    specs += [parse_workload(w) for w in workloads]
+    specs += parse_models(models, up, model_views, model_size)
+    workloads = specs or [parse_synthetic(str(n), f"{w}x{h}") for n, w, h in STANDARD_SYNTHETIC]
     machine = machine_info("cpu")
     click.echo(f"bench ab: against {against}, {len(workloads)} workload(s), {repeats} runs per side, "
                f"{threads} threads, load average {machine.loadavg_start}", err=True)
