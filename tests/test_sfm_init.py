@@ -17,12 +17,14 @@ from PIL import Image
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench.data import load_dataset
 from splatbench.errors import InputError
-from splatbench.scenes.render import read_manifest
-from splatbench.sfm import SFM_DIR, cached_sfm, sfm_cache_dir, sfm_inputs
+from splatbench.fsutil import read_manifest
+from splatbench.sfm import cached_sfm, sfm_cache_dir, sfm_inputs
 from splatbench.train import TrainConfig, train
 from splatbench.train.initializers import InitSettings, initialize
 from tests.test_init import tiny  # noqa: F401 - the module-scoped tiny capture fixture
 
+#: The folder older versions wrote the model into, inside the dataset folder (never again).
+OLD_SFM_DIR = "sfm"
 SETTINGS = InitSettings(sh_degree=0, opacity=0.1, random_points=10, seed=0)
 
 
@@ -31,7 +33,7 @@ def capture(tiny, tmp_path, monkeypatch):  # noqa: F811
     """A private copy of the tiny capture, with a private cache root (where SfM runs are kept)."""
     path, _ = tiny
     monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
-    return shutil.copytree(path, tmp_path / "tiny", ignore=shutil.ignore_patterns(SFM_DIR))
+    return shutil.copytree(path, tmp_path / "tiny", ignore=shutil.ignore_patterns(OLD_SFM_DIR))
 
 
 def cache_of(capture, poses: str = "known") -> Path:
@@ -41,7 +43,7 @@ def cache_of(capture, poses: str = "known") -> Path:
 
 def untouched(capture) -> bool:
     """Nothing written into the user's dataset folder (no sfm/, no hidden temporary folder)."""
-    return not (capture / SFM_DIR).exists() and not list(capture.glob(".*"))
+    return not (capture / OLD_SFM_DIR).exists() and not list(capture.glob(".*"))
 
 
 def test_sfm_init_sees_training_views_only_and_starts_from_the_aligned_points(capture):
