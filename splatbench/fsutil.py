@@ -1,11 +1,11 @@
 """Filesystem helpers: put finished files and folders in place atomically, with the
 permissions an ordinary ``open`` / ``mkdir`` would have given them.
 
-`tempfile.mkstemp` and `tempfile.mkdtemp` create 0600 files and 0700 folders
-whatever the umask; renamed into place as they are, a result would be unreadable to
-the rest of a group. `replace_file` and `replace_dir` first give the temporary its
-umask mode (0644 / 0755 under umask 022). `atomic_write` writes one file through a
-fsync'd temporary ``.<name>.<pid>.<random>.tmp`` beside it (the result store, the reports).
+`atomic_write` writes one file through a fsync'd temporary ``.<name>.<pid>.<random>.tmp``
+beside it, created by an ordinary ``open`` (the result store, the reports, PNGs, PLYs).
+`tempfile.mkdtemp` creates 0700 folders whatever the umask; renamed into place as they
+are, a result would be unreadable to the rest of a group, so `replace_dir` first gives
+the temporary folder its umask mode (0755 under umask 022).
 
 Folders derived from content (rendered datasets, SfM models, undistorted images, teacher
 scenes, regression snapshots) are built the same way everywhere::
@@ -53,12 +53,6 @@ def umask_mode(path: str | os.PathLike) -> None:
     """Give ``path`` the mode a new file (0666) or folder (0777) gets under the umask."""
     base = 0o777 if os.path.isdir(path) else 0o666
     os.chmod(path, base & ~current_umask())
-
-
-def replace_file(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
-    """`os.replace` the finished temporary file ``tmp`` onto ``path``, with the umask mode."""
-    umask_mode(tmp)
-    os.replace(tmp, path)
 
 
 def replace_dir(tmp: Path, out: Path, *, accept_existing: Callable[[Path], bool] = lambda path: False) -> None:
