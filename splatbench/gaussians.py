@@ -7,7 +7,7 @@ SH degree d in 0..3). Activations follow ``docs/conventions.md``.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -178,3 +178,8 @@ class Gaussians:
         """Write a graphdeco-inria 3DGS ``.ply`` atomically (see `splatbench.ply.write_ply`);
         ``hints`` (`splatbench.ply.ViewHints`: up, background) go into its header comments."""
         write_ply(self, path, hints)
+
+
+#: The five parameter groups, in `Gaussians`' field order: the order of `rasterize`'s and every
+#: backend's arguments.
+GROUPS: tuple[str, ...] = tuple(f.name for f in fields(Gaussians))

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from splatbench.fsutil import replace_file
+from splatbench.fsutil import atomic_write
 
 
 def to_uint8(rgb: np.ndarray) -> np.ndarray:
@@ -17,17 +15,8 @@ def to_uint8(rgb: np.ndarray) -> np.ndarray:
 
 
 def save_png(image: np.ndarray, path: str | Path) -> Path:
-    """Write ``image`` ([H, W, 3] or [H, W], floats in [0, 1]) as PNG; returns the path."""
+    """Write ``image`` ([H, W, 3] or [H, W], floats in [0, 1]) as PNG, atomically
+    (`splatbench.fsutil.atomic_write`); returns the path."""
     from PIL import Image
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        Image.fromarray(to_uint8(image)).save(tmp, format="PNG")
-        replace_file(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return atomic_write(path, lambda temp: Image.fromarray(to_uint8(image)).save(temp, format="PNG"))

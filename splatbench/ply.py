@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import os
 import re
-import tempfile
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -37,7 +36,7 @@ import numpy as np
 
 from splatbench.checks import SH_BASES_OF_DEGREE
 from splatbench.errors import InputError
-from splatbench.fsutil import replace_file
+from splatbench.fsutil import atomic_write
 from splatbench.safeio import check_count
 
 _BASE_HEAD = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
@@ -151,28 +150,19 @@ def to_vertex_array(gaussians: PlyArrays) -> np.ndarray:
 
 
 def write_ply(gaussians: PlyArrays, path: str | os.PathLike, hints: ViewHints | None = None) -> None:
-    """Write ``gaussians`` (`PlyArrays` or a `Gaussians`) to ``path`` atomically (temporary
-    file, then `os.replace`); the header records its SH degree and ``hints`` (`ViewHints`)."""
+    """Write ``gaussians`` (`PlyArrays` or a `Gaussians`) to ``path`` atomically
+    (`splatbench.fsutil.atomic_write`); the header records its SH degree and ``hints`` (`ViewHints`)."""
     from plyfile import PlyData, PlyElement
 
-    path = os.fspath(path)
     element = PlyElement.describe(to_vertex_array(gaussians), "vertex")
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".ply", dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as stream:
-            PlyData([element], text=False, byte_order="<",
-                    comments=[f"{_DEGREE_COMMENT}{SH_BASES_OF_DEGREE.index(gaussians.sh.shape[1])}",
-                              *(hints.comments() if hints is not None else [])]).write(stream)
-            stream.flush()
-            os.fsync(stream.fileno())
-        replace_file(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    comments = [f"{_DEGREE_COMMENT}{SH_BASES_OF_DEGREE.index(gaussians.sh.shape[1])}",
+                *(hints.comments() if hints is not None else [])]
+
+    def write(temp) -> None:
+        with open(temp, "wb") as stream:
+            PlyData([element], text=False, byte_order="<", comments=comments).write(stream)
+
+    atomic_write(path, write)
 
 
 def read_ply_data(path: str | os.PathLike, name: str | None = None):

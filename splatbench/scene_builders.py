@@ -4,8 +4,10 @@ how large they look there.
 The verification applications each build their own scenes from these: conform's probe
 scenes (`splatbench.conform.scenes`), stress's degenerate cases (`splatbench.stress.cases`)
 and validate's sweeps (`splatbench.validate.mitsuba.cases`); the synthetic workloads' random
-rotations are `splatbench.workloads.random_unit_quats`.
+rotations are `splatbench.workloads.random_unit_quats`. What they hand a rasterizer is a
+`RenderInput` (regress's scenes and stress's cases add their name or category to it).
 
+    RenderInput(means, log_scales, quats, opacity_logits, sh, camera, background=None, sh_degree=None)
     camera_points(camera, u, v, depth) -> [..., 3]  camera-space points seen at pixel position (u, v)
     to_world(camera, cam_pts [..., 3]) -> [..., 3]  camera space -> world (float64)
     point_at(camera, u, v, depth) -> [..., 3]       the world points seen at (u, v) at camera depth
@@ -18,10 +20,42 @@ Pixel positions follow docs/conventions.md: pixel (i, j) is sampled at (j + 0.5,
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.conventions import SH_C0
+from splatbench.gaussians import GROUPS
+
+
+@dataclass(frozen=True)
+class RenderInput:
+    """The inputs of one render, as the verification applications hand them to a rasterizer.
+
+    means [N, 3], log_scales [N, 3], quats [N, 4] (w, x, y, z), opacity_logits [N],
+    sh [N, K, 3]: the five parameter groups as given (not checked or converted, unlike
+    `splatbench.Gaussians`: a stress case holds NaNs on purpose); ``camera``; the
+    ``background`` (None = black) and the SH degree evaluated (None = every band in ``sh``).
+    """
+
+    means: np.ndarray
+    log_scales: np.ndarray
+    quats: np.ndarray
+    opacity_logits: np.ndarray
+    sh: np.ndarray
+    camera: Camera
+    background: tuple[float, float, float] | None = None
+    sh_degree: int | None = None
+
+    @property
+    def n(self) -> int:
+        """The number of Gaussians N."""
+        return int(self.means.shape[0])
+
+    def params(self) -> dict[str, np.ndarray]:
+        """The five groups by name, in `GROUPS` order (a rasterizer's argument order)."""
+        return {k: getattr(self, k) for k in GROUPS}
 
 
 def camera_points(camera: Camera, u, v, depth) -> np.ndarray:

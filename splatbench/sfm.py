@@ -36,9 +36,9 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -49,12 +49,8 @@ import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
-from splatbench.fsutil import cache_root, replace_dir
+from splatbench.fsutil import building_dir, cache_root, manifest_hash, read_manifest, write_manifest
 from splatbench.safeio import read_npz
-
-#: Name of the folder (inside `out`, or a cache folder) that receives the model (``sfm/0/*.bin``) and the database.
-SFM_DIR = "sfm"
-
 
 # ----------------------------------------------------------------- alignment maths
 @dataclass(frozen=True)
@@ -282,31 +278,42 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
         InputError: fewer than 3 training views; no model with 3 registered views
             (estimated poses); no point triangulated (known poses).
     """
-    from splatbench.interrupt import import_pycolmap
-
-    pycolmap = import_pycolmap()
     ds = _load(dataset)
-    if not (isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0):
-        raise InputError(f"seed: expected an int >= 0, got {seed!r}")
-    if poses not in POSE_MODES:
-        raise InputError(f"poses: expected one of {', '.join(POSE_MODES)}, got {poses!r}")
-    if poses == "known" and not known_intrinsics:
-        raise InputError("known_intrinsics: triangulating with known poses uses the known intrinsics too")
-    train = ds.train
-    if len(train) < 3:
-        raise InputError(f"dataset: SfM needs at least 3 training views, got {len(train)}")
+    _check_sfm_options(ds, seed=seed, known_intrinsics=known_intrinsics, poses=poses)
     if out is None:
         if not single_thread:
             raise InputError("out: a multi-threaded SfM run is not deterministic, so it is not cached: give an "
                              "output folder (nothing is written into the dataset folder)")
         return cached_sfm(ds, seed=seed, known_intrinsics=known_intrinsics, poses=poses,
                           say=(lambda line: print(line, file=sys.stderr)) if verbose else None)[0]
-    root = Path(ds.root)
     out_dir = Path(out)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    threads = 1 if single_thread else -1
+    with building_dir(out_dir) as tmp:
+        run = _sfm_into(tmp, ds, seed=seed, threads=1 if single_thread else -1, known_intrinsics=known_intrinsics,
+                        poses=poses, verbose=verbose)
+    return dataclasses.replace(run, model_path=out_dir / "0")
+
+
+def _check_sfm_options(ds: Any, *, seed: int, known_intrinsics: bool, poses: str) -> None:
+    if not (isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0):
+        raise InputError(f"seed: expected an int >= 0, got {seed!r}")
+    if poses not in POSE_MODES:
+        raise InputError(f"poses: expected one of {', '.join(POSE_MODES)}, got {poses!r}")
+    if poses == "known" and not known_intrinsics:
+        raise InputError("known_intrinsics: triangulating with known poses uses the known intrinsics too")
+    if len(ds.train) < 3:
+        raise InputError(f"dataset: SfM needs at least 3 training views, got {len(ds.train)}")
+
+
+def _sfm_into(tmp: Path, ds: Any, *, seed: int, threads: int, known_intrinsics: bool, poses: str,
+              verbose: bool) -> SfmRun:
+    """`run_sfm`'s work (options checked) into the empty folder ``tmp``: the model in ``tmp/0``,
+    the database beside it; the scratch folders removed."""
+    from splatbench.interrupt import import_pycolmap
+
+    pycolmap = import_pycolmap()
+    root = Path(ds.root)
+    train = ds.train
     t0 = time.perf_counter()
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
     log_level = pycolmap.logging.minloglevel
     if not verbose:
         pycolmap.logging.minloglevel = 3  # fatal only: a failure is our one-line InputError
@@ -346,12 +353,9 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
         xyz = np.array([p.xyz for p in points], np.float64).reshape(-1, 3)
         rgb = np.array([p.color for p in points], np.uint8).reshape(-1, 3)
         seconds = time.perf_counter() - t0
-        replace_dir(tmp, out_dir)
     finally:
         pycolmap.logging.minloglevel = log_level
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
-    return SfmRun(len(registered), len(train), rmse, rig_radius(train.cameras), xyz, rgb, sim, out_dir / "0",
+    return SfmRun(len(registered), len(train), rmse, rig_radius(train.cameras), xyz, rgb, sim, model_dir,
                   models, [im.name for im in registered], seconds, poses)
 
 
@@ -462,43 +466,39 @@ def cached_sfm(dataset: Any, *, seed: int = 0, known_intrinsics: bool = True, po
     images; never in the dataset folder, which is the user's and may be read-only). When
     the manifest's hash matches, the run is read back (no pycolmap); otherwise SfM runs
     into a temporary sibling folder that replaces that folder atomically
-    (`splatbench.fsutil.replace_dir`), as the scene renders are cached. Returns ``(run, cached)``; ``run.seconds`` is that of the original run.
+    (`splatbench.fsutil.building_dir`), as every content-keyed folder is built. Returns
+    ``(run, cached)``; ``run.seconds`` is that of the original run.
     ``say`` gets one line before anything slow: ``SfM: reusing DIR`` or ``SfM: running
     pycolmap on N training views (cached in DIR)``.
 
     Raises:
         InputError: the dataset cannot be read, or SfM registers no usable model.
     """
-    import json
-
-    from splatbench.scenes.render import MANIFEST, read_manifest
-
     ds = _load(dataset)
     inputs = sfm_inputs(ds, seed=seed, known_intrinsics=known_intrinsics, poses=poses)
     out = sfm_cache_dir(inputs)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    manifest = read_manifest(out)
     say = say or (lambda line: None)
-    if manifest is not None and manifest.get("hash") == inputs["hash"] and (out / SFM_POINTS).is_file():
+
+    def current(folder: Path) -> bool:
+        return manifest_hash(folder) == inputs["hash"] and (folder / SFM_POINTS).is_file()
+
+    if current(out):
         say(f"SfM: reusing {out}")
-        return _read_cached(out, manifest), True
+        return _read_cached(out, read_manifest(out) or {}), True
+    _check_sfm_options(ds, seed=seed, known_intrinsics=known_intrinsics, poses=poses)
     how = "triangulating with the known poses" if poses == "known" else "incremental mapping"
     say(f"SfM: running pycolmap ({how}) on {len(ds.train)} training views (cached in {out})")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.run-", dir=out.parent))
-    try:
-        run = run_sfm(ds, seed=seed, single_thread=True, known_intrinsics=known_intrinsics, poses=poses,
-                      out=tmp / SFM_DIR)
-        np.savez(tmp / SFM_DIR / SFM_POINTS, xyz=run.xyz, rgb=run.rgb)
-        record = {"hash": inputs["hash"], "inputs": {k: v for k, v in inputs.items() if k != "hash"},
-                  "registered": run.registered, "total": run.total, "center_rmse": run.center_rmse,
-                  "rig_radius": run.rig_radius, "models": run.models, "registered_names": run.registered_names,
-                  "seconds": run.seconds, "scale": run.alignment.scale, "poses": run.poses,
-                  "rotation": run.alignment.rotation.tolist(), "translation": run.alignment.translation.tolist()}
-        (tmp / SFM_DIR / MANIFEST).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
-        replace_dir(tmp / SFM_DIR, out,
-                    accept_existing=lambda path: (read_manifest(path) or {}).get("hash") == inputs["hash"])
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    with building_dir(out, accept_existing=current) as tmp:
+        run = _sfm_into(tmp, ds, seed=seed, threads=1, known_intrinsics=known_intrinsics, poses=poses,
+                        verbose=False)
+        np.savez(tmp / SFM_POINTS, xyz=run.xyz, rgb=run.rgb)
+        write_manifest(tmp, {"hash": inputs["hash"], "inputs": {k: v for k, v in inputs.items() if k != "hash"},
+                             "registered": run.registered, "total": run.total, "center_rmse": run.center_rmse,
+                             "rig_radius": run.rig_radius, "models": run.models,
+                             "registered_names": run.registered_names, "seconds": run.seconds,
+                             "scale": run.alignment.scale, "poses": run.poses,
+                             "rotation": run.alignment.rotation.tolist(),
+                             "translation": run.alignment.translation.tolist()})
     return _read_cached(out, read_manifest(out) or {}), False
 
 

@@ -17,12 +17,14 @@ from PIL import Image
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench.data import load_dataset
 from splatbench.errors import InputError
-from splatbench.scenes.render import read_manifest
-from splatbench.sfm import SFM_DIR, cached_sfm, sfm_cache_dir, sfm_inputs
+from splatbench.fsutil import read_manifest
+from splatbench.sfm import cached_sfm, sfm_cache_dir, sfm_inputs
 from splatbench.train import TrainConfig, train
 from splatbench.train.initializers import InitSettings, initialize
 from tests.test_init import tiny  # noqa: F401 - the module-scoped tiny capture fixture
 
+#: The folder older versions wrote the model into, inside the dataset folder (never again).
+OLD_SFM_DIR = "sfm"
 SETTINGS = InitSettings(sh_degree=0, opacity=0.1, random_points=10, seed=0)
 
 
@@ -31,7 +33,7 @@ def capture(tiny, tmp_path, monkeypatch):  # noqa: F811
     """A private copy of the tiny capture, with a private cache root (where SfM runs are kept)."""
     path, _ = tiny
     monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
-    return shutil.copytree(path, tmp_path / "tiny", ignore=shutil.ignore_patterns(SFM_DIR))
+    return shutil.copytree(path, tmp_path / "tiny", ignore=shutil.ignore_patterns(OLD_SFM_DIR))
 
 
 def cache_of(capture, poses: str = "known") -> Path:
@@ -41,7 +43,7 @@ def cache_of(capture, poses: str = "known") -> Path:
 
 def untouched(capture) -> bool:
     """Nothing written into the user's dataset folder (no sfm/, no hidden temporary folder)."""
-    return not (capture / SFM_DIR).exists() and not list(capture.glob(".*"))
+    return not (capture / OLD_SFM_DIR).exists() and not list(capture.glob(".*"))
 
 
 def test_sfm_init_sees_training_views_only_and_starts_from_the_aligned_points(capture):
@@ -76,8 +78,8 @@ def test_sfm_is_reused_while_the_training_views_are_unchanged_and_rerun_when_one
     calls = []
     import splatbench.sfm as sfm_module
 
-    real = sfm_module.run_sfm
-    monkeypatch.setattr(sfm_module, "run_sfm", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = sfm_module._sfm_into  # where pycolmap runs (run_sfm and cached_sfm alike)
+    monkeypatch.setattr(sfm_module, "_sfm_into", lambda *a, **k: calls.append(1) or real(*a, **k))
     again, cached = cached_sfm(ds)
     assert cached and calls == []
     assert again.xyz.tobytes() == first.xyz.tobytes() and again.registered == first.registered
@@ -140,18 +142,18 @@ def test_train_says_sfm_as_it_starts_and_ends_before_the_progress_bar(capture, t
     from splatbench.cli import main
 
     events: list[str] = []
-    real = sfm_module.run_sfm
-    monkeypatch.setattr(sfm_module, "run_sfm", lambda *a, **k: events.append("run_sfm") or real(*a, **k))
+    real = sfm_module._sfm_into  # where pycolmap runs
+    monkeypatch.setattr(sfm_module, "_sfm_into", lambda *a, **k: events.append("pycolmap") or real(*a, **k))
     cached_sfm(load_dataset(capture), poses="known", say=events.append)
     assert events == [f"SfM: running pycolmap (triangulating with the known poses) on 12 training views (cached "
-                      f"in {cache_of(capture)})", "run_sfm"]
+                      f"in {cache_of(capture)})", "pycolmap"]
 
     res = CliRunner().invoke(main, ["train", str(capture), "--out", str(tmp_path / "run"), "--set", "iterations=2",
                                     "--set", "init='sfm'", "--set", "strategy='none'", "--set", "sh_degree=0",
                                     "--set", "schedule='absolute'"])
     assert res.exit_code == 0, res.output
     lines = [line for line in res.stderr.splitlines() if line.strip()]
-    assert lines[0] == f"SfM: reusing {cache_of(capture)}" and events[-1] == "run_sfm"  # not rerun
+    assert lines[0] == f"SfM: reusing {cache_of(capture)}" and events[-1] == "pycolmap"  # not rerun
     assert untouched(capture)
     assert lines[1].startswith("SfM: ") and "training views" in lines[1] and "cached in" in lines[1]
     assert any("train" in line and "it" in line for line in lines[2:])  # the progress bar comes after

@@ -23,6 +23,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from splatbench.gaussians import GROUPS  # noqa: F401 - the backend signature's parameter groups, in its order
 from splatbench.raster.options import RasterOptions
 
 # graphdeco-inria 3DGS's approximations, the defaults a backend with no metadata follows: the
@@ -30,7 +31,6 @@ from splatbench.raster.options import RasterOptions
 GRAPHDECO = {name: getattr(RasterOptions(), name) for name in ("alpha_min", "alpha_max", "transmittance_min",
                                                                "eps2d", "radius", "tile_size", "antialiased")}
 OUTPUTS = ("rgb", "alpha", "depth")
-GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")  # the parameter groups, in the signature's order
 
 
 def as_numpy(x) -> np.ndarray:

@@ -103,10 +103,9 @@ def ab(against: str, synthetic: tuple[tuple[str, str], ...], workloads: tuple[st
     Each line also says whether the image and the gradients of d(sum rgb) are
     bit-identical, or their largest difference.
     """
-    import json
     from dataclasses import asdict
 
-    from splatbench.bench.ab import run_ab
+    from splatbench.bench.ab import format_result, run_ab
     from splatbench.bench.raster import STANDARD_SYNTHETIC
     from splatbench.metrics.machine import machine_info
     from splatbench.workloads import parse_models, parse_synthetic, parse_workload
@@ -120,13 +119,18 @@ def ab(against: str, synthetic: tuple[tuple[str, str], ...], workloads: tuple[st
                f"{threads} threads, load average {machine.loadavg_start}", err=True)
     results = run_ab(Path(__file__).resolve().parents[2], against, workloads, repeats=repeats, warmup=warmup,
                      threads=threads, progress=lambda line: click.echo(line, err=True))
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "ab.json").write_text(json.dumps({"machine": asdict(machine), "results": [asdict(r) for r in results]},
-                                            indent=2))
-    from splatbench.bench.ab import format_result
-    for r in results:
-        click.echo(format_result(r))
-    click.echo(f"wrote {out / 'ab.json'}")
+    _save_ab(out / "ab.json", {"machine": asdict(machine), "results": [asdict(r) for r in results]},
+             [format_result(r) for r in results])
+
+
+def _save_ab(path: Path, record: dict, lines: list[str]) -> None:
+    """An A/B comparison's record as JSON in ``path`` (atomically), then its result lines and where it went."""
+    from splatbench.report_files import write_json
+
+    write_json(path, record, indent=2)
+    for line in lines:
+        click.echo(line)
+    click.echo(f"wrote {path}")
 
 
 @bench.command("ab-train")
@@ -148,7 +152,6 @@ def ab_train(against: str, sizes: tuple[int, ...], gaussians: int, block: int, p
     load of other processes (the load average minus the workers' own share) stayed at
     or below half the cores, the rule of bench ab (docs/benchmarks.md, docs/training.md).
     """
-    import json
     from dataclasses import asdict
 
     from splatbench.bench.ab_train import AbTrainSettings, format_train_result, run_ab_train
@@ -163,12 +166,8 @@ def ab_train(against: str, sizes: tuple[int, ...], gaussians: int, block: int, p
                f"{machine.loadavg_start}", err=True)
     results = run_ab_train(Path(__file__).resolve().parents[2], against, settings,
                            progress=lambda line: click.echo(line, err=True))
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "ab_train.json").write_text(json.dumps({"machine": asdict(machine), "settings": asdict(settings),
-                                                   "results": [asdict(r) for r in results]}, indent=2))
-    for r in results:
-        click.echo(format_train_result(r))
-    click.echo(f"wrote {out / 'ab_train.json'}")
+    record = {"machine": asdict(machine), "settings": asdict(settings), "results": [asdict(r) for r in results]}
+    _save_ab(out / "ab_train.json", record, [format_train_result(r) for r in results])
 
 
 @bench.command("train")

@@ -14,7 +14,8 @@ import numpy as np
 
 from splatbench.backends.base import Backend, as_numpy
 from splatbench.conform.oracle import stack
-from splatbench.conform.scenes import GROUPS, ProbeScene
+from splatbench.gaussians import GROUPS
+from splatbench.scene_builders import RenderInput
 
 COTANGENT_SEED = 1234
 OUTPUT_CHANNELS = {"rgb": slice(0, 3), "alpha": slice(3, 4), "depth": slice(4, 5)}
@@ -95,13 +96,15 @@ def check_signature(backend: Backend) -> None:
                     f"camera, *, sh_degree=, background=) ({exc})", usage=True) from None
 
 
-def _tensors(s: ProbeScene, device: str, grad: bool) -> list:
+def param_tensors(s: RenderInput, device: str, grad: bool) -> list:
+    """The five parameter groups of ``s`` as float32 torch tensors on ``device``, in a backend's argument
+    order, leaves that require grad when ``grad``."""
     import torch
 
     return [torch.tensor(getattr(s, k), dtype=torch.float32, device=device, requires_grad=grad) for k in GROUPS]
 
 
-def _render(backend: Backend, s: ProbeScene, params: list):
+def _render(backend: Backend, s: RenderInput, params: list):
     """The backend's (rgb, alpha, depth) as given, after checks of shape and values."""
     try:
         out = backend(*params, s.camera, sh_degree=s.sh_degree, background=s.background)
@@ -118,11 +121,11 @@ def _render(backend: Backend, s: ProbeScene, params: list):
     return out
 
 
-def outputs(backend: Backend, s: ProbeScene, device: str) -> np.ndarray:
+def outputs(backend: Backend, s: RenderInput, device: str) -> np.ndarray:
     import torch
 
     with torch.no_grad():
-        out = stack([as_numpy(x) for x in _render(backend, s, _tensors(s, device, False))])
+        out = stack([as_numpy(x) for x in _render(backend, s, param_tensors(s, device, False))])
     bad = ~np.isfinite(out)
     if bad.any():
         i, j, c = (int(k) for k in np.argwhere(bad)[0])
@@ -134,7 +137,7 @@ def _channel_name(c: int) -> str:
     return ("rgb", "rgb", "rgb", "alpha", "depth")[c]
 
 
-def cotangents(s: ProbeScene, outputs: tuple[str, ...]) -> np.ndarray:
+def cotangents(s: RenderInput, outputs: tuple[str, ...]) -> np.ndarray:
     """Seeded normal cotangents [H, W, 5]; zero for outputs the backend does not produce."""
     v = np.random.default_rng(COTANGENT_SEED).standard_normal((s.camera.height, s.camera.width, 5))
     for name, sl in OUTPUT_CHANNELS.items():
@@ -143,10 +146,10 @@ def cotangents(s: ProbeScene, outputs: tuple[str, ...]) -> np.ndarray:
     return v
 
 
-def vjp(backend: Backend, s: ProbeScene, v: np.ndarray, device: str) -> dict[str, np.ndarray]:
+def vjp(backend: Backend, s: RenderInput, v: np.ndarray, device: str) -> dict[str, np.ndarray]:
     import torch
 
-    params = _tensors(s, device, True)
+    params = param_tensors(s, device, True)
     out = _render(backend, s, params)
     if not all(isinstance(x, torch.Tensor) for x in out) or not any(x.requires_grad for x in out):
         if all(isinstance(x, torch.Tensor) and not x.detach().any() for x in out):

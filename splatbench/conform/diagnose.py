@@ -50,7 +50,7 @@ for _axis, _names in AXIS_PROBES.items():
     for _name in _names:
         AXIS_OF.setdefault(_name, _axis)
 from splatbench.conform.results import ProbeResult
-from splatbench.conform.scenes import ProbeScene
+from splatbench.scene_builders import RenderInput
 
 #: The cause given when the backend fails on a probe's scene (raises, bad shape, NaN), where the
 #: probe's own convention cannot be judged.
@@ -317,7 +317,7 @@ def _greedy(failing: list[Probe], ctx: Context, changed: set[str], rejected: lis
 # Root causes of what no convention explains
 # ----------------------------------------------------------------------------
 
-def exercises(probe: Probe, s: ProbeScene, conv: dict) -> frozenset[str]:
+def exercises(probe: Probe, s: RenderInput, conv: dict) -> frozenset[str]:
     """The features (named by the probe that isolates each) a probe's verdict depends on."""
     import reference
 
@@ -381,7 +381,7 @@ def exercises(probe: Probe, s: ProbeScene, conv: dict) -> frozenset[str]:
     return frozenset(f)
 
 
-def _contributions(s: ProbeScene, proj) -> tuple[np.ndarray, np.ndarray]:
+def _contributions(s: RenderInput, proj) -> tuple[np.ndarray, np.ndarray]:
     """Per pixel and visible Gaussian (depth order): Mahalanobis d^2 [P, M] and raw alpha o exp(-d^2 / 2)."""
     c = s.camera
     vis = np.flatnonzero(proj.visible)

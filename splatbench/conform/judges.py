@@ -15,7 +15,7 @@ from splatbench.conform.oracle import (conic_jacobian, forward_tolerance, gradie
                                                 oracle_grad)
 from splatbench.conform.probes import Probe
 from splatbench.conform.results import ProbeResult
-from splatbench.conform.scenes import ProbeScene
+from splatbench.scene_builders import RenderInput
 
 
 @dataclass(frozen=True)
@@ -27,7 +27,7 @@ class Context:
     outs: dict = field(default_factory=dict)  # scene name -> the backend's outputs [H, W, 5] (one render per scene)
 
 
-def _backend_outputs(s: ProbeScene, name: str, ctx: Context) -> np.ndarray:
+def _backend_outputs(s: RenderInput, name: str, ctx: Context) -> np.ndarray:
     if name not in ctx.outs:
         ctx.outs[name] = backend_outputs(ctx.backend, s, ctx.device)
     return ctx.outs[name]
@@ -91,7 +91,7 @@ def _compared(probe: Probe, ctx: Context) -> tuple[str, ...]:
     return tuple(o for o in probe.outputs if o in ctx.backend.info.outputs)
 
 
-def _judge_forward(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
+def _judge_forward(probe: Probe, s: RenderInput, ctx: Context) -> ProbeResult:
     outputs = _compared(probe, ctx)
     if not outputs:
         return _skip(probe, f"the backend does not produce {', '.join(probe.outputs)}")
@@ -108,7 +108,7 @@ def _judge_forward(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
                        None if ok else probe.cause)
 
 
-def _judge_approximation(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
+def _judge_approximation(probe: Probe, s: RenderInput, ctx: Context) -> ProbeResult:
     outputs = _compared(probe, ctx)
     atol, source = forward_tolerance(s, ctx.conv)
     got = _backend_outputs(s, probe.build.__name__, ctx)
@@ -153,14 +153,14 @@ def _rel(got: np.ndarray, want: np.ndarray, bound: np.ndarray) -> tuple[float, f
     return float(np.linalg.norm(got - want)) / scale, float(np.linalg.norm(bound)) / scale
 
 
-def _backend_grads(probe: Probe, s: ProbeScene, ctx: Context, v: np.ndarray) -> dict[str, np.ndarray]:
+def _backend_grads(probe: Probe, s: RenderInput, ctx: Context, v: np.ndarray) -> dict[str, np.ndarray]:
     key = probe.build.__name__
     if key not in ctx.vjps:
         ctx.vjps[key] = vjp(ctx.backend, s, v, ctx.device)
     return ctx.vjps[key]
 
 
-def _judge_gradient(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
+def _judge_gradient(probe: Probe, s: RenderInput, ctx: Context) -> ProbeResult:
     if not ctx.backend.info.gradients:
         return _skip(probe, "the backend declares no gradients")
     v = cotangents(s, ctx.backend.info.outputs)
@@ -182,7 +182,7 @@ def _judge_gradient(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
                        detail, probe.cause if failed else None)
 
 
-def _judge_direction(probe: Probe, s: ProbeScene, ctx: Context) -> ProbeResult:
+def _judge_direction(probe: Probe, s: RenderInput, ctx: Context) -> ProbeResult:
     if not ctx.backend.info.gradients:
         return _skip(probe, "the backend declares no gradients")
     name, n = probe.build.__name__, s.means.shape[0]

@@ -35,7 +35,8 @@ from __future__ import annotations
 import numpy as np
 
 from splatbench.backends.base import Backend
-from splatbench.conform.scenes import GROUPS, ProbeScene
+from splatbench.gaussians import GROUPS
+from splatbench.scene_builders import RenderInput
 from splatbench.conventions import U32
 
 U64 = 2.0 ** -53
@@ -61,13 +62,13 @@ def stack(out) -> np.ndarray:
     return np.concatenate([rgb, alpha[..., None], depth[..., None]], axis=-1)
 
 
-def _kwargs(s: ProbeScene, conv: dict) -> dict:
+def _kwargs(s: RenderInput, conv: dict) -> dict:
     from splatbench.backends.builtins.reference_backend import reference_kwargs
 
     return reference_kwargs(conv, s.camera, "matched", s.sh_degree, s.background)
 
 
-def _oracle_params(s: ProbeScene, conv: dict, params: dict | None = None) -> np.ndarray:
+def _oracle_params(s: RenderInput, conv: dict, params: dict | None = None) -> np.ndarray:
     import reference
 
     p = s.params() if params is None else params
@@ -82,7 +83,7 @@ def _oracle_params(s: ProbeScene, conv: dict, params: dict | None = None) -> np.
 _GRAPHDECO_CONV: dict = {}
 
 
-def effective(name: str, s: ProbeScene, conv: dict) -> dict:
+def effective(name: str, s: RenderInput, conv: dict) -> dict:
     """``conv`` with every convention that changes nothing in this scene's render set back to graphdeco's.
 
     Used as the cache key of the finite differences: a convention that leaves the render bitwise
@@ -105,7 +106,7 @@ def effective(name: str, s: ProbeScene, conv: dict) -> dict:
     return _CACHE[key]
 
 
-def oracle(name: str, s: ProbeScene, conv: dict) -> np.ndarray:
+def oracle(name: str, s: RenderInput, conv: dict) -> np.ndarray:
     """The float64 oracle's outputs [H, W, 5] (rgb, alpha, depth) of a probe scene (cached)."""
     key = _key(name, conv, "render")
     if key not in _CACHE:
@@ -113,7 +114,7 @@ def oracle(name: str, s: ProbeScene, conv: dict) -> np.ndarray:
     return _CACHE[key]
 
 
-def gradient_band(name: str, s: ProbeScene, conv: dict) -> tuple[np.ndarray, float]:
+def gradient_band(name: str, s: RenderInput, conv: dict) -> tuple[np.ndarray, float]:
     """(the Gaussians of the probe scene's gradient band [N] bool, the relative widening of the other
     entries' bound sqrt(sum_p w_p^2 / P)) (`reference.band`; cached). Every probe scene keeps its pixels
     away from discrete decisions, so both are empty on conform's own scenes; a scene that does not is
@@ -131,7 +132,7 @@ def gradient_band(name: str, s: ProbeScene, conv: dict) -> tuple[np.ndarray, flo
     return _CACHE[key]
 
 
-def fd_jacobian(name: str, s: ProbeScene, conv: dict, group: str) -> np.ndarray:
+def fd_jacobian(name: str, s: RenderInput, conv: dict, group: str) -> np.ndarray:
     """d outputs / d each entry of ``group`` by central differences: [n_entries, H, W, 5] (cached)."""
     conv = effective(name, s, conv)
     key = _key(name, conv, "fd", group)
@@ -155,7 +156,7 @@ PROJECT_KEYWORDS = ("eps2d", "near", "far", "radius", "alpha_min", "antialiased"
                     "opacity_activation", "jacobian_guard")
 
 
-def projection(s: ProbeScene, conv: dict, params: dict | None = None):
+def projection(s: RenderInput, conv: dict, params: dict | None = None):
     import reference
 
     p = s.params() if params is None else params
@@ -165,7 +166,7 @@ def projection(s: ProbeScene, conv: dict, params: dict | None = None):
                              c.width, c.height, **{k: kwargs[k] for k in PROJECT_KEYWORDS})
 
 
-def _scene_constants(s: ProbeScene, conv: dict) -> tuple[int, float, float]:
+def _scene_constants(s: RenderInput, conv: dict) -> tuple[int, float, float]:
     """L (Gaussians drawn), kappa (largest 2D condition number), a bound on max|colour|."""
     proj = projection(s, conv)
     A, B, C = proj.conics[proj.visible].T
@@ -177,7 +178,7 @@ def _scene_constants(s: ProbeScene, conv: dict) -> tuple[int, float, float]:
     return int(proj.visible.sum()), kappa, max(out_max, colour_bound)
 
 
-def forward_tolerance(s: ProbeScene, conv: dict) -> tuple[float, str]:
+def forward_tolerance(s: RenderInput, conv: dict) -> tuple[float, str]:
     L, kappa, c_max = _scene_constants(s, conv)
     atol = MARGIN * ((2 * L + 20) * c_max + 6 * kappa) * U32
     return atol, (f"3 ((2 L + 20) max|c| + 6 kappa) u with L={L}, max|c|={c_max:.2g}, kappa={kappa:.3g}, "
@@ -185,7 +186,7 @@ def forward_tolerance(s: ProbeScene, conv: dict) -> tuple[float, str]:
 
 
 
-def gradient_gamma(s: ProbeScene, conv: dict) -> tuple[float, str]:
+def gradient_gamma(s: RenderInput, conv: dict) -> tuple[float, str]:
     L, kappa, _ = _scene_constants(s, conv)
     P = s.camera.width * s.camera.height
     gamma = MARGIN * (P + 2 * L + 20 + 6 * kappa) * U32
@@ -193,7 +194,7 @@ def gradient_gamma(s: ProbeScene, conv: dict) -> tuple[float, str]:
                    f"sum_p |...| for opacity_logits) + FD rounding] / |g_oracle|, P={P}, L={L}, kappa={kappa:.3g}")
 
 
-def oracle_grad(name: str, s: ProbeScene, conv: dict, group: str, v: np.ndarray, gamma: float):
+def oracle_grad(name: str, s: RenderInput, conv: dict, group: str, v: np.ndarray, gamma: float):
     """The oracle's gradient of sum(v . outputs) for ``group`` [n] and the per-entry error bound [n]."""
     J = fd_jacobian(name, s, conv, group)
     terms = (J * v[None]).reshape(J.shape[0], -1)
@@ -205,7 +206,7 @@ def oracle_grad(name: str, s: ProbeScene, conv: dict, group: str, v: np.ndarray,
     return terms.sum(1), rel * np.abs(terms).sum(1) + rounding
 
 
-def conic_jacobian(name: str, s: ProbeScene, conv: dict) -> np.ndarray:
+def conic_jacobian(name: str, s: RenderInput, conv: dict) -> np.ndarray:
     """d (A, B, C) / d (log_scales, quats) per Gaussian: [N, 3, 7], central differences (cached)."""
     conv = effective(name, s, conv)
     key = _key(name, conv, "conic")

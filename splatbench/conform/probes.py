@@ -17,14 +17,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
-from splatbench.conform.scenes import (GROUPS, ProbeScene, alpha_max, basic_centred, basic_offaxis,
-                                                basic_overlap, alpha_min, background,
-                                                colour_clamp, conic,
-                                                depth_order, early_stop, eps2d, expected_depth, gradients,
-                                                intrinsics, jacobian_clamp, near_plane, opacity_activation,
-                                                pixel_centre, quat_norm, quat_order, radius, scale_activation,
-                                                sh_degree1, sh_degree2, sh_degree3, sh_degree_arg, sh_viewdir,
-                                                sh_viewdir_grad, tiles)
+from splatbench.conform.scenes import (alpha_max, alpha_min, background, basic_centred, basic_offaxis, basic_overlap,
+                                       colour_clamp, conic, depth_order, early_stop, eps2d, expected_depth,
+                                       gradients, intrinsics, jacobian_clamp, near_plane, opacity_activation,
+                                       pixel_centre, quat_norm, quat_order, radius, scale_activation, sh_degree1,
+                                       sh_degree2, sh_degree3, sh_degree_arg, sh_viewdir, sh_viewdir_grad, tiles)
+from splatbench.gaussians import GROUPS
+from splatbench.scene_builders import RenderInput
 
 KINDS = ("forward", "gradient", "direction", "approximation")
 
@@ -34,7 +33,7 @@ class Probe:
     """One conformance probe.
 
     name: short id; checks: what it isolates (one line); kind: one of KINDS; cause: the
-    most likely cause of a failure (one sentence); build: () -> ProbeScene (deterministic).
+    most likely cause of a failure (one sentence); build: () -> RenderInput (deterministic).
     outputs: outputs compared (forward kinds). groups: parameter groups compared (gradient).
     conic_term: 0, 1, 2 for A, B, C (direction). alternatives: for approximation probes,
     convention overrides a backend may follow instead of its declared ones, with a warning.
@@ -44,7 +43,7 @@ class Probe:
     checks: str
     kind: str
     cause: str
-    build: Callable[[], ProbeScene]
+    build: Callable[[], RenderInput]
     outputs: tuple[str, ...] = ("rgb", "alpha", "depth")
     groups: tuple[str, ...] = ()
     conic_term: int | None = None

@@ -12,34 +12,13 @@ convention but has no radius cutoff, no tiles and no early termination passes th
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
 
 import numpy as np
 
-from splatbench.backends.base import GROUPS
 from splatbench.cameras import Camera
 from splatbench.conventions import SH_C0
-from splatbench.scene_builders import logit, point_at, sh_dc, world_sigma
+from splatbench.scene_builders import RenderInput, logit, point_at, sh_dc, world_sigma
 from splatbench.workloads import random_unit_quats
-
-
-@dataclass(frozen=True)
-class ProbeScene:
-    """Inputs of one render: means [N, 3], log_scales [N, 3], quats [N, 4] (w, x, y, z),
-    opacity_logits [N], sh [N, K, 3] (float32 values held in float64 arrays), the camera,
-    the background (None = black) and the SH degree (None = every band in ``sh``)."""
-
-    means: np.ndarray
-    log_scales: np.ndarray
-    quats: np.ndarray
-    opacity_logits: np.ndarray
-    sh: np.ndarray
-    camera: Camera
-    background: tuple[float, float, float] | None = None
-    sh_degree: int | None = None
-
-    def params(self) -> dict[str, np.ndarray]:
-        return {k: getattr(self, k) for k in GROUPS}
 
 
 # ----------------------------------------------------------------------------
@@ -53,9 +32,10 @@ def camera(width: int = 16, height: int = 16, **kw) -> Camera:
 
 
 def scene(cam: Camera, means, sigma_px, opacity, sh, *, z=None, quats=None, seed=0, background=None,
-          sh_degree=None) -> ProbeScene:
-    """A `ProbeScene` from screen-space sizes: sigma_px [N] or [N, 3] pixels at each Gaussian's depth
-    (per axis for anisotropic ones), opacity [N] in (0, 1); values rounded to float32."""
+          sh_degree=None) -> RenderInput:
+    """A probe scene (`RenderInput`) from screen-space sizes: sigma_px [N] or [N, 3] pixels at each
+    Gaussian's depth (per axis for anisotropic ones), opacity [N] in (0, 1); values rounded to float32
+    (held in float64 arrays)."""
     means = np.asarray(means, dtype=np.float64)
     n = means.shape[0]
     depth = (means @ cam.rotation.T + cam.translation)[:, 2] if z is None else np.asarray(z, dtype=np.float64)
@@ -63,7 +43,7 @@ def scene(cam: Camera, means, sigma_px, opacity, sh, *, z=None, quats=None, seed
     log_scales = np.log(world_sigma(cam, sig, depth[:, None]))
     quats = random_unit_quats(np.random.default_rng(seed), n) if quats is None else np.asarray(quats, dtype=np.float64)
     f32 = lambda a: np.asarray(a, dtype=np.float32).astype(np.float64)  # noqa: E731
-    return ProbeScene(f32(means), f32(log_scales), f32(quats), f32(logit(opacity)), f32(sh), cam,
+    return RenderInput(f32(means), f32(log_scales), f32(quats), f32(logit(opacity)), f32(sh), cam,
                       background, sh_degree)
 
 
@@ -90,7 +70,7 @@ def _sh_band(degree: int, n: int, seed: int, *, only_band: bool = True) -> np.nd
 # ----------------------------------------------------------------------------
 
 @functools.cache
-def basic_centred() -> ProbeScene:
+def basic_centred() -> RenderInput:
     # One anisotropic Gaussian near the image centre, degree-1 SH: pixel centre, activations,
     # rotation, SH basis all act on it, and nothing else (no sort, no background).
     cam = camera(12, 12)
@@ -102,7 +82,7 @@ def basic_centred() -> ProbeScene:
 
 
 @functools.cache
-def basic_overlap() -> ProbeScene:
+def basic_overlap() -> RenderInput:
     # Two overlapping translucent Gaussians over a coloured background: compositing order, transmittance
     # and the background's weight. Listed far first; the nearer in camera z (off axis) is the farther
     # from the camera centre (4.36 against 4.30), so a sort on distance gets the order wrong too.
@@ -114,7 +94,7 @@ def basic_overlap() -> ProbeScene:
 
 
 @functools.cache
-def basic_offaxis() -> ProbeScene:
+def basic_offaxis() -> RenderInput:
     # A camera far from the world origin, looking away from it, degree-1 SH on three Gaussians: the SH
     # view direction, world vs camera axes.
     cam = Camera.look_at(eye=[4.0, -3.0, -2.0], target=[5.0, -1.5, 2.0], up=[0.0, -1.0, 0.0], width=12,
@@ -126,7 +106,7 @@ def basic_offaxis() -> ProbeScene:
 
 
 @functools.cache
-def depth_order() -> ProbeScene:
+def depth_order() -> RenderInput:
     # The camera looks along world x: listed far to near (index order is wrong), and world z
     # and a strided read of the camera points [x0 y0 z0 x1 ...] give two other wrong orders.
     cam = Camera.look_at(eye=[-4.0, -1.1, 1.6], target=[0.0, 0.0, 0.0], up=[0.0, -1.0, 0.0], width=16,
@@ -139,7 +119,7 @@ def depth_order() -> ProbeScene:
 
 
 @functools.cache
-def pixel_centre() -> ProbeScene:
+def pixel_centre() -> RenderInput:
     cam = camera()
     z = np.array([4.0, 4.5])
     means = np.array([point_at(cam, 7.3, 8.6, 4.0), point_at(cam, 11.8, 4.1, 4.5)])
@@ -147,7 +127,7 @@ def pixel_centre() -> ProbeScene:
                  quats=[[1, 0, 0, 0]] * 2)
 
 
-def _anisotropic(quat_scale=None) -> ProbeScene:
+def _anisotropic(quat_scale=None) -> RenderInput:
     cam = camera()
     z = np.array([4.0, 4.6])
     means = np.array([point_at(cam, 6.23, 7.1, 4.0), point_at(cam, 10.43, 9.3, 4.6)])
@@ -160,17 +140,17 @@ def _anisotropic(quat_scale=None) -> ProbeScene:
 
 
 @functools.cache
-def quat_order() -> ProbeScene:
+def quat_order() -> RenderInput:
     return _anisotropic()
 
 
 @functools.cache
-def quat_norm() -> ProbeScene:
+def quat_norm() -> RenderInput:
     return _anisotropic(quat_scale=[2.7, 0.45])
 
 
 @functools.cache
-def scale_activation() -> ProbeScene:
+def scale_activation() -> RenderInput:
     cam = camera()
     z = np.array([4.0, 5.0])
     means = np.array([point_at(cam, 6.0, 6.5, 4.0), point_at(cam, 10.5, 10.0, 5.0)])
@@ -178,7 +158,7 @@ def scale_activation() -> ProbeScene:
 
 
 @functools.cache
-def opacity_activation() -> ProbeScene:
+def opacity_activation() -> RenderInput:
     cam = camera()
     z = np.array([4.0, 4.4])
     means = np.array([point_at(cam, 7.0, 6.0, 4.0), point_at(cam, 9.5, 10.0, 4.4)])
@@ -186,7 +166,7 @@ def opacity_activation() -> ProbeScene:
 
 
 @functools.cache
-def eps2d() -> ProbeScene:
+def eps2d() -> RenderInput:
     cam = camera()
     # Far below a pixel: the footprint is the eps2d low-pass alone (sigma ~ sqrt(0.3) px).
     z = np.array([4.0, 4.2])
@@ -195,7 +175,7 @@ def eps2d() -> ProbeScene:
 
 
 @functools.cache
-def jacobian_clamp() -> ProbeScene:
+def jacobian_clamp() -> RenderInput:
     cam = camera()
     # Centres beyond graphdeco's 1.3 x half-FoV limit (u < -0.15 W), footprints reaching into the image.
     z = np.array([4.0, 4.5])
@@ -205,7 +185,7 @@ def jacobian_clamp() -> ProbeScene:
 
 
 @functools.cache
-def near_plane() -> ProbeScene:
+def near_plane() -> RenderInput:
     cam = camera(near=1.0)
     # In front of the camera but before camera.near (culled), behind the camera (culled), and a backdrop.
     z = np.array([0.6, -2.0, 4.0])
@@ -215,7 +195,7 @@ def near_plane() -> ProbeScene:
 
 
 @functools.cache
-def alpha_max() -> ProbeScene:
+def alpha_max() -> RenderInput:
     cam = camera()
     # An opaque, very wide Gaussian: its raw alpha exceeds 0.99 (clamped) near its centre and
     # stays below 0.999 (gsplat's clamp) everywhere; a translucent one behind it shows through
@@ -229,7 +209,7 @@ def alpha_max() -> ProbeScene:
 
 
 @functools.cache
-def alpha_min() -> ProbeScene:
+def alpha_min() -> RenderInput:
     cam = camera()
     # A faint wide Gaussian (opacity 0.003 < 1/255: skipped everywhere) and a faint one whose
     # alpha crosses 1/255 inside the image.
@@ -238,7 +218,7 @@ def alpha_min() -> ProbeScene:
     return scene(cam, means, [8.0, 2.6], [0.003, 0.02], sh_dc([(0.9, 0.9, 0.9), (0.9, 0.2, 0.6)]), z=z, seed=9)
 
 
-def _sh_scene(degree: int, seed: int, *, sh_degree=None, full=False) -> ProbeScene:
+def _sh_scene(degree: int, seed: int, *, sh_degree=None, full=False) -> RenderInput:
     cam = camera()
     means = _grid(cam, 3, 2, 4.0)
     return scene(cam, means, [1.4] * 6, [0.33] * 6, _sh_band(degree, 6, seed, only_band=not full), seed=seed,
@@ -246,27 +226,27 @@ def _sh_scene(degree: int, seed: int, *, sh_degree=None, full=False) -> ProbeSce
 
 
 @functools.cache
-def sh_degree1() -> ProbeScene:
+def sh_degree1() -> RenderInput:
     return _sh_scene(1, 11)
 
 
 @functools.cache
-def sh_degree2() -> ProbeScene:
+def sh_degree2() -> RenderInput:
     return _sh_scene(2, 12)
 
 
 @functools.cache
-def sh_degree3() -> ProbeScene:
+def sh_degree3() -> RenderInput:
     return _sh_scene(3, 13)
 
 
 @functools.cache
-def sh_degree_arg() -> ProbeScene:
+def sh_degree_arg() -> RenderInput:
     return _sh_scene(3, 14, sh_degree=1, full=True)
 
 
 @functools.cache
-def sh_viewdir() -> ProbeScene:
+def sh_viewdir() -> RenderInput:
     # Degree 1 only, camera far from the world origin: mean - camera centre, not mean - origin.
     cam = Camera.look_at(eye=[5.0, -2.0, -3.0], target=[4.0, -1.0, 1.0], up=[0.0, -1.0, 0.0], width=16,
                          height=16, fov_x_deg=60.0)
@@ -277,7 +257,7 @@ def sh_viewdir() -> ProbeScene:
 
 
 @functools.cache
-def sh_viewdir_grad() -> ProbeScene:
+def sh_viewdir_grad() -> RenderInput:
     # Strong degree-1 colour on wide Gaussians: a good share of d/dmeans flows through the
     # view direction of the SH evaluation.
     cam = camera()
@@ -290,7 +270,7 @@ def sh_viewdir_grad() -> ProbeScene:
 
 
 @functools.cache
-def colour_clamp() -> ProbeScene:
+def colour_clamp() -> RenderInput:
     cam = camera()
     # SH colours below 0 (clamped to 0) and above 1 (not clamped) in some channels.
     z = np.array([4.0, 4.5])
@@ -299,7 +279,7 @@ def colour_clamp() -> ProbeScene:
 
 
 @functools.cache
-def background() -> ProbeScene:
+def background() -> RenderInput:
     cam = camera()
     z = np.array([4.0, 4.5])
     means = np.array([point_at(cam, 6.5, 7.0, 4.0), point_at(cam, 10.0, 9.5, 4.5)])
@@ -308,7 +288,7 @@ def background() -> ProbeScene:
 
 
 @functools.cache
-def expected_depth() -> ProbeScene:
+def expected_depth() -> RenderInput:
     cam = camera()
     # Translucent, at different depths, off the optical axis (distance != camera z).
     z = np.array([3.0, 5.0, 7.0])
@@ -317,7 +297,7 @@ def expected_depth() -> ProbeScene:
 
 
 @functools.cache
-def intrinsics() -> ProbeScene:
+def intrinsics() -> RenderInput:
     base = camera(24, 16)
     cam = Camera(24, 16, 19.0, 13.0, 10.3, 9.1, base.world_to_camera)
     z = np.array([4.0, 4.5, 5.0])
@@ -327,7 +307,7 @@ def intrinsics() -> ProbeScene:
 
 
 @functools.cache
-def tiles() -> ProbeScene:
+def tiles() -> RenderInput:
     cam = camera(32, 32)
     # Centres on tile corners and edges (tiles of 16 and 8): each footprint spans several tiles.
     z = np.array([4.0, 4.3, 4.6])
@@ -337,7 +317,7 @@ def tiles() -> ProbeScene:
 
 
 @functools.cache
-def gradients() -> ProbeScene:
+def gradients() -> RenderInput:
     cam = camera()
     # Three wide, overlapping, anisotropic Gaussians covering the image within 3 sigma
     # (no pixel near a cutoff, alpha_min or the early stop), SH degree 1. Opacity 0.5 is a
@@ -350,7 +330,7 @@ def gradients() -> ProbeScene:
 
 
 @functools.cache
-def conic() -> ProbeScene:
+def conic() -> RenderInput:
     cam = camera()
     # Elongated and rotated on screen, so all of A, B and C matter; wide enough to cover the image.
     z = np.array([4.0, 4.5])
@@ -360,7 +340,7 @@ def conic() -> ProbeScene:
 
 
 @functools.cache
-def early_stop() -> ProbeScene:
+def early_stop() -> RenderInput:
     cam = camera()
     # Three near-opaque, very wide layers: T is 2e-4 to 6e-4 after two and below 2e-5 after the
     # third everywhere in the image (far from 1e-4), so the third is never composited.
@@ -371,7 +351,7 @@ def early_stop() -> ProbeScene:
 
 
 @functools.cache
-def radius() -> ProbeScene:
+def radius() -> RenderInput:
     cam = camera(32, 32)
     # Opacity 0.98: alpha is still 0.011 > 1/255 at 3 sigma (12 px), so the radius rule decides a
     # ring of pixels out to 3.32 sigma; the 3-sigma box stops just short of the next 16-pixel tiles,

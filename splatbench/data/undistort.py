@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import shutil
-import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,13 +26,12 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.fsutil import cache_root, replace_dir
+from splatbench.fsutil import building_dir, cache_root, read_manifest, write_manifest
 
 #: COLMAP camera models with distortion that are undistorted on load.
 UNDISTORTED_MODELS = ("SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV", "OPENCV_FISHEYE")
 #: Bump when the cached images change for the same inputs.
 UNDISTORT_CACHE_VERSION = 1
-_MANIFEST = "manifest.json"
 
 
 @dataclass(frozen=True)
@@ -109,9 +106,7 @@ def undistort_views(sources: Sequence[tuple[Path, Lens]], *, downscale: int = 1,
         return cached, out, True
     say(f"undistorting {len(sources)} images with pycolmap (COLMAP's undistorter; cached in {out})")
     pycolmap = import_pycolmap()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{key}.run-", dir=out.parent))
-    try:
+    with building_dir(out, accept_existing=lambda p: _read_manifest(p, len(sources)) is not None) as tmp:
         records = []
         options = pycolmap.UndistortCameraOptions()  # COLMAP's defaults: crop to valid pixels
         for k, (path, lens) in enumerate(sources):
@@ -133,11 +128,7 @@ def undistort_views(sources: Sequence[tuple[Path, Lens]], *, downscale: int = 1,
             Image.fromarray(np.ascontiguousarray(image)).save(tmp / name)
             records.append({"file": name, "source": str(path), "width": w, "height": h,
                             "fx": fx, "fy": fy, "cx": cx, "cy": cy})
-        (tmp / _MANIFEST).write_text(json.dumps({"key": key, "inputs": inputs, "views": records}, indent=1) + "\n",
-                                     encoding="utf-8")
-        replace_dir(tmp, out, accept_existing=lambda p: _read_manifest(p, len(sources)) is not None)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        write_manifest(tmp, {"key": key, "inputs": inputs, "views": records})
     views = _read_manifest(out, len(sources))
     assert views is not None  # just written
     return views, out, False
@@ -161,11 +152,11 @@ def _read_rgb8(path: Path, lens: Lens) -> np.ndarray:
 
 
 def _read_manifest(folder: Path, count: int) -> list[Undistorted] | None:
+    """The views a finished cache folder holds (``count`` of them, every file there); None otherwise."""
     try:
-        data = json.loads((folder / _MANIFEST).read_text(encoding="utf-8"))
         views = [Undistorted(folder / r["file"], int(r["width"]), int(r["height"]), float(r["fx"]), float(r["fy"]),
-                             float(r["cx"]), float(r["cy"])) for r in data["views"]]
-    except (OSError, ValueError, KeyError, TypeError):
+                             float(r["cx"]), float(r["cy"])) for r in (read_manifest(folder) or {})["views"]]
+    except (ValueError, KeyError, TypeError):
         return None
     if len(views) != count or not all(v.path.is_file() for v in views):
         return None

@@ -73,7 +73,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import os
 import statistics
 import sys
 from pathlib import Path
@@ -84,7 +83,7 @@ import numpy as np
 from splatbench.checks import check_keys, check_sh_degree, check_type
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, Tradeoff
-from splatbench.fsutil import cache_root
+from splatbench.fsutil import atomic_write, cache_root
 from splatbench.experiments.kinds import RunKind, RunOutput
 from splatbench.metrics.load import Load, own_share
 from splatbench.metrics.spec import MetricSpec
@@ -239,11 +238,12 @@ def exact_model(scene: str, seed: int, scale: float) -> np.ndarray:
     g, cam = w.gaussians, (w.camera if scale == 1 else w.camera.scaled(scale))
     out = oracle(None, g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, cam, mode="exact")
     rgb = np.asarray(out.rgb, dtype=np.float64)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temp = path.parent / f".{path.name}.{os.getpid()}.tmp"
-    with open(temp, "wb") as fh:
-        np.save(fh, rgb)
-    os.replace(temp, path)
+
+    def write(temp: Path) -> None:
+        with open(temp, "wb") as fh:  # a file object: np.save would add ".npy" to the temporary's name
+            np.save(fh, rgb)
+
+    atomic_write(path, write)
     return rgb
 
 

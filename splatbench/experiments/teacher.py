@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +35,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.fsutil import replace_dir
+from splatbench.fsutil import building_dir, manifest_hash, read_manifest, write_manifest
 
 #: Bump when a teacher dataset changes for the same inputs.
 TEACHER_VERSION = 1
@@ -91,8 +89,6 @@ def render_teacher(model: str | Path, out: str | Path, *, views: int = 64, resol
                    up: Sequence[float] | None = None, progress: bool = False) -> TeacherDataset:
     """Render the teacher ``model`` (a 3DGS PLY) on a framing rig into the dataset folder ``out``
     (reused when its manifest's hash matches). One-line `InputError` for a bad model or setting."""
-    from splatbench.scenes.render import MANIFEST, read_manifest
-
     if not (isinstance(views, int) and not isinstance(views, bool) and views >= 2):
         raise InputError(f"views: expected an int >= 2 (one is held out), got {views!r}")
     if not (isinstance(resolution, int) and not isinstance(resolution, bool) and resolution >= 8):
@@ -102,22 +98,16 @@ def render_teacher(model: str | Path, out: str | Path, *, views: int = 64, resol
         raise InputError(f"model: {str(model)!r} is not a file (give a 3DGS PLY)")
     up_, up_source = teacher_up(model, up)
     inputs = teacher_inputs(model, views=views, resolution=resolution, up=up_)
-    manifest = read_manifest(out)
-    if manifest is not None and manifest.get("hash") == inputs["hash"]:
-        return TeacherDataset(out, True, inputs["hash"], up_, up_source, float(manifest.get("seconds", 0.0)))
+    if manifest_hash(out) == inputs["hash"]:
+        seconds = float((read_manifest(out) or {}).get("seconds", 0.0))
+        return TeacherDataset(out, True, inputs["hash"], up_, up_source, seconds)
     t0 = time.perf_counter()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.render-", dir=out.parent))
-    try:
+    with building_dir(out, accept_existing=lambda p: manifest_hash(p) == inputs["hash"]) as tmp:
         _render_into(model, tmp, views, resolution, up_, progress)
         seconds = round(time.perf_counter() - t0, 3)
-        record = {"format": "splatbench-teacher/1", "hash": inputs["hash"], "model": str(model),
-                  "inputs": {k: v for k, v in inputs.items() if k != "hash"}, "up_source": up_source,
-                  "seconds": seconds}
-        (tmp / MANIFEST).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
-        replace_dir(tmp, out, accept_existing=lambda p: (read_manifest(p) or {}).get("hash") == inputs["hash"])
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        write_manifest(tmp, {"format": "splatbench-teacher/1", "hash": inputs["hash"], "model": str(model),
+                             "inputs": {k: v for k, v in inputs.items() if k != "hash"}, "up_source": up_source,
+                             "seconds": seconds})
     return TeacherDataset(out, False, inputs["hash"], up_, up_source, seconds)
 
 

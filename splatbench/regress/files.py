@@ -26,9 +26,7 @@ import contextlib
 import hashlib
 import io
 import json
-import shutil
 import sys
-import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +35,7 @@ import numpy as np
 
 from splatbench.backends.base import Backend
 from splatbench.errors import InputError
+from splatbench.fsutil import building_dir
 from splatbench.regress.scenes import SCENE_SET_VERSION, Scene, scene_set
 
 SNAPSHOT_FORMAT = "splatbench-snapshot"
@@ -120,9 +119,7 @@ def snapshot(backend, out: str | Path, *, scenes: str = "full", device: str = "a
         check_signature(backend)
     except Fault as fault:
         raise InputError(f"backend {backend.name!r}: {fault}") from None
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
-    try:
+    with building_dir(out) as tmp:
         (tmp / "scenes").mkdir()
         records = []
         with _deterministic_torch():
@@ -146,11 +143,6 @@ def snapshot(backend, out: str | Path, *, scenes: str = "full", device: str = "a
                     "versions": _versions(), "device": device, "scenes": records}
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=1, sort_keys=True, default=str) + "\n",
                                     encoding="utf-8")
-        from splatbench.fsutil import replace_dir
-
-        replace_dir(tmp, out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return out
 
 

@@ -49,12 +49,6 @@ def cotangents(scene: Scene, alpha: np.ndarray, outputs: tuple[str, ...]) -> dic
     return {k: (v[k] if k in outputs else np.zeros_like(v[k])) for k in OUTPUTS}
 
 
-def _tensors(scene: Scene, device: str, grad: bool) -> list:
-    import torch
-
-    return [torch.tensor(getattr(scene, k), dtype=torch.float32, device=device, requires_grad=grad) for k in GROUPS]
-
-
 def render(backend: Backend, scene: Scene, device: str = "cpu", alpha_for_cotangents: np.ndarray | None = None
            ) -> dict[str, np.ndarray]:
     """Every quantity of ``backend`` on ``scene`` (float64 numpy). ``alpha_for_cotangents``: the alpha
@@ -63,7 +57,7 @@ def render(backend: Backend, scene: Scene, device: str = "cpu", alpha_for_cotang
     last frame of its traceback)."""
     import torch
 
-    from splatbench.conform.calls import Fault, raised
+    from splatbench.conform.calls import Fault, param_tensors, raised
 
     want = quantities(backend)
     outs = tuple(o for o in OUTPUTS if o in want)
@@ -78,7 +72,7 @@ def render(backend: Backend, scene: Scene, device: str = "cpu", alpha_for_cotang
         return out
 
     with torch.no_grad():
-        first = call(_tensors(scene, device, False))
+        first = call(param_tensors(scene, device, False))
     result = {}
     H, W = scene.camera.height, scene.camera.width
     for name, x, shape in zip(OUTPUTS, first, ((H, W, 3), (H, W), (H, W))):
@@ -93,7 +87,7 @@ def render(backend: Backend, scene: Scene, device: str = "cpu", alpha_for_cotang
         return result
     alpha = result.get("alpha") if alpha_for_cotangents is None else alpha_for_cotangents
     v = cotangents(scene, np.ones((H, W)) if alpha is None else alpha, outs)
-    params = _tensors(scene, device, True)
+    params = param_tensors(scene, device, True)
     out = call(params)
     try:
         loss = sum((x.double() * torch.as_tensor(v[k].reshape(x.shape), device=x.device)).sum()

@@ -199,8 +199,8 @@ def splatbench_scene(request):
         b = get_backend(backend) if backend is not None else state.backend
         f64 = lambda x: np.asarray(np.asarray(x.detach().cpu() if hasattr(x, "detach") else x,  # noqa: E731
                                               dtype=np.float32), dtype=np.float64)
-        scene = Scene("user", f64(means), f64(log_scales), f64(quats), f64(opacity_logits), f64(sh), camera,
-                      sh_degree, None if background is None else tuple(float(v) for v in background))
+        scene = Scene(f64(means), f64(log_scales), f64(quats), f64(opacity_logits), f64(sh), camera,
+                      None if background is None else tuple(float(v) for v in background), sh_degree, name="user")
         got = render(b, scene, "cpu")
         band = bands(b.info, scene)
         ref = oracle(b.info, scene, band=False)

@@ -18,40 +18,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from splatbench.backends.base import GROUPS
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
+from splatbench.scene_builders import RenderInput
 
 #: Bump on any change to a scene or to the list (the snapshot records it; check refuses another).
 SCENE_SET_VERSION = 1
 SCENE_SETS = ("full", "small")
 
 
-@dataclass(frozen=True)
-class Scene:
-    """One scene: the five parameter groups (float32 values in float64 arrays), the camera, the SH
-    degree (None = every band given) and the background (None = black). ``seed``: of its cotangents."""
+@dataclass(frozen=True, kw_only=True)
+class Scene(RenderInput):
+    """One scene: a `RenderInput` (the five parameter groups as float32 values in float64 arrays,
+    the camera, background, SH degree) with its ``name`` (keyword); ``seed``: of its cotangents."""
 
     name: str
-    means: np.ndarray
-    log_scales: np.ndarray
-    quats: np.ndarray
-    opacity_logits: np.ndarray
-    sh: np.ndarray
-    camera: Camera
-    sh_degree: int | None = None
-    background: tuple[float, float, float] | None = None
-
-    @property
-    def n(self) -> int:
-        return int(self.means.shape[0])
 
     @property
     def seed(self) -> int:
         return zlib.crc32(self.name.encode())
-
-    def params(self) -> dict[str, np.ndarray]:
-        return {k: getattr(self, k) for k in GROUPS}
 
 
 def _f32(x) -> np.ndarray:
@@ -59,7 +44,8 @@ def _f32(x) -> np.ndarray:
 
 
 def _from_gaussians(name: str, g, camera: Camera) -> Scene:
-    return Scene(name, _f32(g.means), _f32(g.log_scales), _f32(g.quats), _f32(g.opacity_logits), _f32(g.sh), camera)
+    return Scene(_f32(g.means), _f32(g.log_scales), _f32(g.quats), _f32(g.opacity_logits), _f32(g.sh), camera,
+                 name=name)
 
 
 def _probe_scenes() -> list[Scene]:
@@ -72,8 +58,8 @@ def _probe_scenes() -> list[Scene]:
             continue
         seen.add(key)
         s = p.build()
-        out.append(Scene(f"probe-{key}", _f32(s.means), _f32(s.log_scales), _f32(s.quats), _f32(s.opacity_logits),
-                         _f32(s.sh), s.camera, s.sh_degree, s.background))
+        out.append(Scene(_f32(s.means), _f32(s.log_scales), _f32(s.quats), _f32(s.opacity_logits), _f32(s.sh),
+                         s.camera, s.background, s.sh_degree, name=f"probe-{key}"))
     return out
 
 

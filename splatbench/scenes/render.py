@@ -51,9 +51,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import re
-import shutil
-import tempfile
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -64,7 +61,7 @@ import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
-from splatbench.fsutil import replace_dir
+from splatbench.fsutil import MANIFEST, building_dir, json_text, manifest_hash, read_manifest, write_manifest
 from splatbench.mitsuba_loader import MITSUBA_VARIANT, mitsuba
 from splatbench.scenes.catalog import SceneSpec, get_scene, parse_resolution
 from splatbench.scenes.folders import default_out, describe_replaced
@@ -72,7 +69,6 @@ from splatbench.versions import package_version
 
 #: Bump when the renderer's output changes for the same inputs (invalidates caches).
 RENDERER_VERSION = 1
-MANIFEST = "manifest.json"
 DATASET_FORMAT = "splatbench-dataset/1"
 #: Largest number of samples (pixels × spp) in one Mitsuba launch; more are split into passes.
 MAX_SAMPLES_PER_PASS = 1 << 22
@@ -253,15 +249,6 @@ class RenderedDataset:
     replaced: str = ""  # one line saying what an overwritten dataset held (`describe_replaced`); "" if none
 
 
-def read_manifest(folder: str | Path) -> dict | None:
-    """The folder's ``manifest.json`` as a dict, or None when there is none (or it is unreadable)."""
-    try:
-        data = json.loads((Path(folder) / MANIFEST).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return data if isinstance(data, dict) else None
-
-
 def render_dataset(scene: SceneSpec | str | Path, out: str | Path | None = None, *, resolution: Any = None,
                    views: int | None = None, spp: int | None = None, test_spp: int | None = None,
                    force: bool = False, progress: bool = True,
@@ -287,21 +274,14 @@ def render_dataset(scene: SceneSpec | str | Path, out: str | Path | None = None,
         raise InputError(f"--out: {str(out)!r} exists and is not a splatbench dataset (no {MANIFEST}); "
                          f"refusing to replace it")
     replaced = "" if existing is None else describe_replaced(out, existing, {**plan.inputs(), "hash": digest})
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
-    try:
+    # keep a folder someone else finished meanwhile if it is the same render
+    with building_dir(out, accept_existing=lambda path: manifest_hash(path) == digest) as tmp:
         t0 = time.perf_counter()
         _render_into(plan, tmp, progress)
         seconds = time.perf_counter() - t0
-        manifest = {"format": DATASET_FORMAT, "hash": digest, **plan.inputs(), "scene_folder": str(plan.scene.folder),
-                    "train": n_train, "test": n_test,
-                    "render_seconds": round(seconds, 3), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-        _write_json(tmp / MANIFEST, manifest)
-        # keep a folder someone else finished meanwhile if it is the same render
-        replace_dir(tmp, out, accept_existing=lambda path: (read_manifest(path) or {}).get("hash") == digest)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
+        write_manifest(tmp, {"format": DATASET_FORMAT, "hash": digest, **plan.inputs(),
+                             "scene_folder": str(plan.scene.folder), "train": n_train, "test": n_test,
+                             "render_seconds": round(seconds, 3), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
     return RenderedDataset(out, False, seconds, n_train, n_test, digest, replaced)
 
 
@@ -397,14 +377,9 @@ def _write_blender(path: Path, plan: RenderPlan, ids: list[int]) -> None:
                        "ply_file_path": "points3D.ply", "frames": frames})
 
 
-_NUMBER_LIST = re.compile(r"\[\s*([-+0-9.eE]+(?:,\s*[-+0-9.eE]+)*)\s*\]")
-
-
 def _write_json(path: Path, data: Any) -> None:
-    """Indented JSON with lists of numbers (matrix rows, resolutions) kept on one line."""
-    text = json.dumps(data, indent=1)
-    text = _NUMBER_LIST.sub(lambda m: "[" + ", ".join(x.strip() for x in m.group(1).split(",")) + "]", text)
-    path.write_text(text + "\n", encoding="utf-8")
+    """Indented JSON with lists of numbers (matrix rows, resolutions) kept on one line (`json_text`)."""
+    path.write_text(json_text(data), encoding="utf-8")
 
 
 def _sha256(data: bytes) -> str:

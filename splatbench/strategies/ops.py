@@ -258,6 +258,18 @@ def _copy_corrected(params: Params, sources: torch.Tensor, min_opacity: float
     return torch.logit(new_o), torch.log(new_s)
 
 
+def _with_corrected_sources(name: str, p: torch.Tensor, sources: torch.Tensor, logits: torch.Tensor,
+                            log_scales: torch.Tensor) -> torch.Tensor:
+    """A copy of parameter group ``name`` whose ``sources`` rows hold the corrected opacity logits
+    or log scales of `_copy_corrected` (the other groups' rows unchanged)."""
+    p = p.clone()
+    if name == "opacity_logits":
+        p[sources] = logits
+    elif name == "log_scales":
+        p[sources] = log_scales
+    return p
+
+
 @torch.no_grad()
 def relocate(params: Params, optimizers: Optimizers, dead_mask: torch.Tensor, *, min_opacity: float = 0.005,
              generator: torch.Generator | None = None, buffers: Buffers | None = None) -> int:
@@ -276,11 +288,7 @@ def relocate(params: Params, optimizers: Optimizers, dead_mask: torch.Tensor, *,
     touched = torch.cat([sources, dead])
 
     def move(name: str, p: torch.Tensor) -> torch.Tensor:
-        p = p.clone()
-        if name == "opacity_logits":
-            p[sources] = logits
-        elif name == "log_scales":
-            p[sources] = log_scales
+        p = _with_corrected_sources(name, p, sources, logits, log_scales)
         p[dead] = p[sources]
         return p
 
@@ -308,11 +316,7 @@ def sample_add(params: Params, optimizers: Optimizers, n: int, *, min_opacity: f
     logits, log_scales = _copy_corrected(params, sources, min_opacity)
 
     def grow(name: str, p: torch.Tensor) -> torch.Tensor:
-        p = p.clone()
-        if name == "opacity_logits":
-            p[sources] = logits
-        elif name == "log_scales":
-            p[sources] = log_scales
+        p = _with_corrected_sources(name, p, sources, logits, log_scales)
         return torch.cat([p, p[sources]])
 
     def grow_moment(v: torch.Tensor) -> torch.Tensor:

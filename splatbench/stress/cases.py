@@ -20,12 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from splatbench.backends.base import GROUPS
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
-from splatbench.gaussians import quat_to_rotmat
+from splatbench.gaussians import GROUPS, quat_to_rotmat
 from splatbench.raster import RasterOptions
-from splatbench.scene_builders import camera_points, to_world, world_sigma
+from splatbench.scene_builders import RenderInput, camera_points, to_world, world_sigma
 from splatbench.workloads import random_unit_quats
 
 FIELDS = GROUPS  # StressCase's parameter fields, in rasterize's argument order
@@ -39,34 +38,19 @@ FAR_CENTRES = ((1e4, 0.0, 0.0), (0.0, -1e4, 0.0), (-6e3, 8e3, 0.0))  # |c| = 1e4
 NEAR = 0.01                                      # the camera's near plane (Camera's default)
 
 
-@dataclass(frozen=True)
-class StressCase:
-    """One stress scene: the five raw parameter groups, a camera and rasterizer options.
-
-    means [N, 3], log_scales [N, 3], quats [N, 4], opacity_logits [N], sh [N, K, 3]
-    (float32); ``nonfinite_field`` names the group holding a NaN/Inf (the case must be
-    rejected with an error naming it), None when every value is finite.
+@dataclass(frozen=True, kw_only=True)
+class StressCase(RenderInput):
+    """One stress scene: a `RenderInput` (the five raw parameter groups, float32: means [N, 3],
+    log_scales [N, 3], quats [N, 4], opacity_logits [N], sh [N, K, 3]; a camera; background and
+    SH degree left at None: black, every band), with, by keyword, its ``category`` and ``seed``,
+    the rasterizer ``options``, and ``nonfinite_field``: the group holding a NaN/Inf (the case
+    must be rejected with an error naming it), None when every value is finite.
     """
 
     category: str
     seed: int
-    means: np.ndarray
-    log_scales: np.ndarray
-    quats: np.ndarray
-    opacity_logits: np.ndarray
-    sh: np.ndarray
-    camera: Camera
     options: RasterOptions = RasterOptions()
     nonfinite_field: str | None = None
-
-    @property
-    def n(self) -> int:
-        return int(self.means.shape[0])
-
-    @property
-    def params(self) -> tuple[np.ndarray, ...]:
-        """The five groups in `rasterize`'s argument order."""
-        return tuple(getattr(self, f) for f in FIELDS)
 
     @property
     def label(self) -> str:
@@ -165,8 +149,8 @@ def _subset(rng: np.random.Generator, n: int) -> np.ndarray:
 def _case(category: str, seed: int, view: _View, cam_pts: np.ndarray, log_scales: np.ndarray,
           quats: np.ndarray, logits: np.ndarray, sh: np.ndarray, **options) -> StressCase:
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-    return StressCase(category, seed, f32(to_world(view.camera, cam_pts)), f32(log_scales), f32(quats), f32(logits),
-                      f32(sh), view.camera, RasterOptions(**options))
+    return StressCase(f32(to_world(view.camera, cam_pts)), f32(log_scales), f32(quats), f32(logits), f32(sh),
+                      view.camera, category=category, seed=seed, options=RasterOptions(**options))
 
 
 def _base(category: str, seed: int, rng: np.random.Generator, n: int | None = None, centres=CENTRES,

@@ -146,7 +146,7 @@ def run_case(case: StressCase, *, device: str | None = None) -> CaseResult:
     start = time.perf_counter()
     base = CaseResult(case.category, case.seed, case.n)
     options = case.options if device is None else dataclasses.replace(case.options, device=device)
-    params = [torch.tensor(a, requires_grad=True) for a in case.params]
+    params = [torch.tensor(a, requires_grad=True) for a in case.params().values()]
     try:
         rgb, alpha, depth, info = rasterize(*params, case.camera, **dataclasses.asdict(options))
         outputs = {"rgb": rgb, "alpha": alpha, "depth": depth}
