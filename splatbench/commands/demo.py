@@ -97,6 +97,9 @@ def demo(experiment: Path | None, results: Path, report_dir: Path | None, worker
     summary = run_experiment(spec, workers=workers if workers is not None else spec.runner.workers,
                              executor="local", results_dir=results, progress=True, check=False)
     click.echo(f"{spec.name}: {summary.line()} in {time.perf_counter() - t0:.0f} s (results in {summary.folder})")
+    if spec.check is not None:
+        click.echo(f"{spec.name}: its [check] (the headline at {spec.check.protocol}) is not run by the demo; "
+                   f"`splatbench run {path}` runs it, and the report says \"not run\" until then")
 
     report = build_report(spec, results)
     report_path = write_report(report, report_dir or Path("out") / spec.name / "report")

@@ -34,13 +34,14 @@ from dataclasses import dataclass
 import pandas as pd
 
 from splatbench.experiments.grid import check_cells
+from splatbench.experiments.kind_report import Comparison
 from splatbench.experiments.kinds import get_kind
 from splatbench.experiments.spec import CheckSpec, ExperimentSpec
 from splatbench.experiments.store import build_table, experiment_dir, read_records
 from splatbench.metrics.spec import MetricSpec
 from splatbench.reports.findings import Claim, fmt_interval, fmt_min_effect, fmt_number, judge, paired, rules_for, usable_runs
 from splatbench.reports.settling import cell_settling, unsettled_reason
-from splatbench.reports.tables import Stat, cell_labels, kind_report, seed_values, stat
+from splatbench.reports.tables import Stat, cell_labels, kind_report, metric_specs, seed_values, stat
 
 #: The check's runs beside a report (the grid's are ``results.parquet``).
 CHECK_TABLE_NAME = "check.parquet"
@@ -48,11 +49,18 @@ CHECK_TABLE_NAME = "check.parquet"
 VERDICTS = ("holds", "does not hold", "not run", "incomplete")
 
 
-def check_name(protocol: str) -> str:
-    """What the check is called: ``"7K check"`` at ``graphdeco-7k`` (``"30K check"`` at
-    ``graphdeco-30k``); ``"check at NAME"`` for a protocol whose name gives no step count."""
+def protocol_title(protocol: str) -> str:
+    """How the report names a protocol in the check's title: ``"7K"`` for ``graphdeco-7k``
+    (``"30K"`` for ``graphdeco-30k``), else the name in backquotes."""
     m = re.search(r"(\d+)k$", protocol)
-    return f"{m.group(1)}K check" if m else f"check at {protocol}"
+    return f"{m.group(1)}K" if m else f"`{protocol}`"
+
+
+def check_name(protocol: str) -> str:
+    """What the check is called: ``"7K check"`` at ``graphdeco-7k``; ``"check at NAME"`` for a
+    protocol whose name gives no step count."""
+    title = protocol_title(protocol)
+    return f"{title} check" if not title.startswith("`") else f"check at {protocol}"
 
 
 @dataclass(frozen=True)
@@ -120,19 +128,20 @@ def check_result(spec: ExperimentSpec, table: pd.DataFrame, checked: pd.DataFram
     (`check_table`; None or empty: not run); None for an experiment without a ``[check]`` or
     a kind without findings rules."""
     check = spec.check
-    declared = kind_report(spec.kind)
-    if check is None or declared is None or declared.rules is None:
+    metrics = metric_specs(spec.kind, table)
+    rules = rules_for(spec.kind, metrics, spec.min_effect) if check is not None else None
+    if rules is None:
         return None
-    rules = rules_for(spec.kind, declared.metrics, spec.min_effect)
-    metric = next(m for m in declared.metrics if m.name == rules.primary)
-    comp = next(c for c in rules.comparisons if c.metric == metric.name)
+    declared = kind_report(spec.kind)
+    metric = next(m for m in metrics if m.name == rules.primary)
+    comp = next((c for c in rules.comparisons if c.metric == metric.name), Comparison(metric.name, "diff"))
     checked = checked if checked is not None else pd.DataFrame(columns=["run_id", "status"])
     quick = check_cells(spec, at_protocol=False)
     rerun = check_cells(spec)
     labels = tuple(cell_labels(spec, pd.DataFrame([{f"axis.{k}": v for k, v in r.labels.items()}
                                                    for r in (quick[0][0], quick[1][0])])))
-    settling = declared.settling if declared.settling is not None and declared.settling.metric == metric.name \
-        else None
+    settling = declared.settling if declared is not None and declared.settling is not None \
+        and declared.settling.metric == metric.name else None
 
     def side(runs: pd.DataFrame, cells, protocol: str) -> CheckSide:
         ids = [{r.run_id for r in cell} for cell in cells]
@@ -211,7 +220,7 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
     the ``splatbench run ...`` that runs the check."""
     c, m = result.check, result.metric
     a, b = result.labels
-    title = result.name.replace(" check", "")
+    title = protocol_title(c.protocol)
     seeds = ", ".join(map(str, result.seeds))
     lines = [f"## Headline at the {title} protocol", "",
              f"The headline comparison, `{b}` against `{a}` on {c.scene}, every seed ({seeds}), under the grid's "
@@ -219,8 +228,9 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
              f"`{run_command}` runs it after the grid's runs (docs/reports.md, \"The 7K check\"). "
              f"{_name(m)[:1].upper()}{_name(m)[1:]} paired over seeds with its 95 % t interval, the minimum "
              f"effect and the settled rule on "
-             f"each protocol's own test curves, as in the findings above; the check's runs are in "
-             f"`{CHECK_TABLE_NAME}` beside this file.", "",
+             f"each protocol's own test curves, as in the findings above"
+             + (f"; the check's runs are in `{CHECK_TABLE_NAME}` beside this file." if len(result.table) else "."),
+             "",
              f"| protocol | runs done | `{a}` | `{b}` | `{b}` − `{a}`, paired | settled |",
              "|---|---:|---:|---:|---|---|"]
     for side, name in ((result.grid, f"`{result.grid.protocol}` (the grid's)"),
@@ -254,12 +264,12 @@ def header_line(result: CheckResult) -> str:
         and result.rerun.settled is False else ""
     return (f"**{result.headline}** (`{b}` against `{a}` on {result.check.scene}, rerun at protocol "
             f"`{result.check.protocol}`{unsettled}; section \"Headline at the "
-            f"{result.name.replace(' check', '')} protocol\").")
+            f"{protocol_title(result.check.protocol)} protocol\").")
 
 
 def _name(spec: MetricSpec) -> str:
     return spec.label.split(" (")[0]
 
 
-__all__ = ["CHECK_TABLE_NAME", "VERDICTS", "CheckSide", "CheckResult", "check_name", "check_table", "check_result",
+__all__ = ["CHECK_TABLE_NAME", "VERDICTS", "CheckSide", "CheckResult", "check_name", "protocol_title", "check_table", "check_result",
            "check_lines", "header_line"]
