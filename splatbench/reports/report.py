@@ -255,7 +255,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
             lines += [*more, ""]
     if report.check is not None:
         lines += [header_line(report.check), ""]
-    elif _has_protocols(spec.kind):
+    elif spec.check is None and _has_protocols(spec.kind):
         lines += ["**7K check: none declared** (the experiment file has no `[check]`: its headline is not rerun at "
                   "graphdeco's 7K protocol; docs/reports.md, \"The 7K check\").", ""]
     timing = " ".join(t for t in (run_time(table), load_facts(table)) if t)
