@@ -177,6 +177,10 @@ def test_shipped_grids_follow_the_report_protocol(name):
                 assert run.config["iterations"] >= 2000 and _short_side(spec, run.config["data"]) >= 128, run.labels
         elif spec.kind == "raster":
             assert run.config["repeats"] >= 7
+    if spec.check is not None:  # issue 29 (2): the headline's two cells at graphdeco's 7K column, every seed
+        checks = check_runs(spec)
+        assert len(checks) == 2 * len(spec.seeds) and {r.seed for r in checks} == set(spec.seeds)
+        assert {(r.config["protocol"], r.config["iterations"]) for r in checks} == {("graphdeco-7k", 7000)}
 
 
 def _short_side(spec, data: dict) -> float:

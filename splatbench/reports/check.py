@@ -168,7 +168,7 @@ def check_result(spec: ExperimentSpec, table: pd.DataFrame, checked: pd.DataFram
     grid_protocol = _recorded_protocol(table, {r.run_id for c in quick for r in c})
     grid_side = side(table, quick, grid_protocol)
     rerun_side = side(checked, rerun, check.protocol)
-    verdict, reason = _verdict(grid_side, rerun_side, labels, metric, comp.how, comp.min_effect)
+    verdict, reason = _verdict(grid_side, rerun_side, labels, metric, comp)
     kind = get_kind(spec.kind)
     described = kind.protocols.describe(check.protocol) if kind.protocols is not None else check.protocol
     return CheckResult(check, tuple(spec.seeds), labels, described, metric, grid_side, rerun_side, verdict, reason,
@@ -184,9 +184,10 @@ def _recorded_protocol(table: pd.DataFrame, ids: set[str]) -> str:
     return " / ".join(sorted(values)) or "quick"
 
 
-def _verdict(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str], metric: MetricSpec, how: str,
-             min_effect: float | None) -> tuple[str, str]:
+def _verdict(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str], metric: MetricSpec,
+             comp: Comparison) -> tuple[str, str]:
     """(verdict, the sentence that gives it) (module doc)."""
+    how, min_effect = comp.how, comp.min_effect
     at = f"`{rerun.protocol}`"
     if rerun.done == 0:
         failed = f" ({rerun.failed} failed)" if rerun.failed else ""
@@ -201,7 +202,7 @@ def _verdict(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str], metric:
     g, r = grid.claim, rerun.claim
     compared = f"`{labels[1]}` against `{labels[0]}` on {r.scene}"
     quick = f"the grid's protocol ({grid.protocol}) gives {g.text}"
-    null = 1.0 if how == "ratio" else 0.0
+    null = 1.0 if how == "ratio" else (comp.null or 0.0) if how == "mean" else 0.0  # `findings.paired`'s
     if g.practical and r.practical:
         if (g.value - null) * (r.value - null) > 0:
             effect = f" and at least the {fmt_min_effect(min_effect, how, metric)} minimum effect" \
