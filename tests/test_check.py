@@ -116,6 +116,9 @@ cells = [{}, { strategy_options.reset_every = 0 }]
     assert {r.config["iterations"] for r in (*base, *never)} == {7000}
     grid = {r.run_id for r in expand(spec)}
     assert all(r.run_id in grid for cell in check_cells(spec, at_protocol=False) for r in cell)
+    # a number names the axis value it equals (TOML's 50.0 is the axis's 50)
+    other = spec_of(text.replace("{ strategy_options.reset_every = 0 }", "{ strategy_options.refine_every = 50.0 }"))
+    assert [r.config["strategy_options"]["refine_every"] for r in check_cells(other)[1]] == [50] * 3
 
 
 @pytest.mark.parametrize("check, message", [

@@ -30,7 +30,7 @@ from typing import Any
 from splatbench.errors import InputError
 from splatbench.experiments.configs import canonical_json, flatten, override, unflatten
 from splatbench.experiments.kinds import get_kind
-from splatbench.experiments.spec import ExperimentSpec, parse_experiment
+from splatbench.experiments.spec import ExperimentSpec, parse_experiment, same_value
 from splatbench.fsutil import read_text
 
 
@@ -200,8 +200,7 @@ def check_cells(spec: ExperimentSpec, *, at_protocol: bool = True) -> tuple[list
     for values in spec.check.cells:
         cell = []
         for name, value in values.items():  # the choice whose label is the value (spec.py checked it is one)
-            label, settings, where = next((lab, s, w) for lab, s, w in dims[name]
-                                          if canonical_json(lab) == canonical_json(value))
+            label, settings, where = next((lab, s, w) for lab, s, w in dims[name] if same_value(value, lab))
             cell.append((name, label, settings, where))
         out.append([make(cell, spec.check.scene, seed) for seed in spec.seeds])
     a, b = out

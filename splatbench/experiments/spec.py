@@ -283,7 +283,7 @@ def _parse_check(table: Any, fail, scenes: list[str], axes: Mapping[str, tuple[A
         values = _cell_values(cell, dims, where, fail)
         for dim, value in values.items():
             known = list(axes[dim]) if dim in axes else list(variants[dim])
-            if canonical_json(value) not in {canonical_json(v) for v in known}:
+            if not any(same_value(value, v) for v in known):
                 raise fail(f"{where}.{dim}", f"{value!r} is not a value of the grid's "
                                             f"{'axis' if dim in axes else 'variant'} {dim!r} "
                                             f"({', '.join(map(repr, known))})")
@@ -298,6 +298,17 @@ def _parse_check(table: Any, fail, scenes: list[str], axes: Mapping[str, tuple[A
     if canonical_json(parsed[0]) == canonical_json(parsed[1]):
         raise fail("check.cells", "the two cells are the same cell")
     return CheckSpec(protocol=protocol, scene=scene, cells=(parsed[0], parsed[1]))
+
+
+def same_value(a: Any, b: Any) -> bool:
+    """Whether a check cell's value names the axis value ``b``: numbers by value (``0`` names an
+    axis's ``0.0``, as TOML writes either), anything else as canonical JSON."""
+    def number(v: Any) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    if number(a) and number(b):
+        return float(a) == float(b)
+    return canonical_json(a) == canonical_json(b)
 
 
 def _cell_values(cell: Mapping[str, Any], dims: list[str], where: str, fail, prefix: str = "") -> dict[str, Any]:
@@ -460,4 +471,4 @@ def _no_duplicates(values: list, where: str, fail) -> None:
 
 
 __all__ = ["ExperimentSpec", "CheckSpec", "RunnerDefaults", "TOP_LEVEL_FIELDS", "RUNNER_FIELDS", "CHECK_FIELDS", "GRID_MODES", "EXECUTORS",
-           "RESERVED_KEYS", "FOLDER_SCENE_KEYS", "TEACHER_SCENE_KEYS", "parse_experiment", "check_scheduler"]
+           "RESERVED_KEYS", "FOLDER_SCENE_KEYS", "TEACHER_SCENE_KEYS", "parse_experiment", "check_scheduler", "same_value"]
