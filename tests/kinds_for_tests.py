@@ -22,7 +22,7 @@ from typing import Any
 from splatbench.checks import check_keys
 from splatbench.errors import InputError
 from splatbench.experiments.configs import flatten, override, unflatten
-from splatbench.experiments.kinds import RunKind, RunOutput
+from splatbench.experiments.kinds import KindProtocols, RunKind, RunOutput
 
 #: What an experiment file writes in ``kind = "..."``.
 KIND = "tests.kinds_for_tests:DUMMY"
@@ -109,9 +109,21 @@ def _scenes() -> set[str]:
     return set(DUMMY_SCENES)
 
 
+#: The dummy kind's one protocol (an experiment's ``[check]``): its curves 7 points long.
+DUMMY_PROTOCOL = "long"
+
+
+def _with_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:
+    """The cell under the dummy protocol ``"long"``: ``n = 7`` (a new run id); one-line error otherwise."""
+    if name != DUMMY_PROTOCOL:
+        raise InputError(f"protocol: expected {DUMMY_PROTOCOL!r}, got {name!r}")
+    return {**config, "n": 7}
+
+
 #: Deterministic metrics computed from the config (see `DUMMY_DEFAULTS`).
 DUMMY = RunKind(name=KIND, validate=_validate, run=_run, resolve=_resolve, scenes=_scenes,
-                description="for tests: deterministic numbers, configurable sleep, gate and failure")
+                description="for tests: deterministic numbers, configurable sleep, gate and failure",
+                protocols=KindProtocols(_with_protocol, lambda name: "curves 7 points long"))
 
 
 # --------------------------------------------------------------------------- probe

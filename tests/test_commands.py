@@ -124,7 +124,8 @@ def test_demo_checks_garden_runs_the_grid_and_writes_its_report(tmp_path):
     """`splatbench demo` pointed at a tiny grid (the dummy kind) and a 1/20-scale reference check:
     every step prints its line, writes its files, and a second invocation resumes (runs nothing)."""
     exp = tmp_path / "tiny.toml"
-    exp.write_text('name = "tinydemo"\nkind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nseeds = [0]\n[axes]\nx = [0.0, 2.0]\n')
+    exp.write_text('name = "tinydemo"\nkind = "tests.kinds_for_tests:DUMMY"\nscenes = ["alpha"]\nseeds = [0]\n[axes]\nx = [0.0, 2.0]\n'
+                   '[check]\nprotocol = "long"\nscene = "alpha"\ncells = [{ x = 0.0 }, { x = 2.0 }]\n')
     common = ["--experiment", exp, "--results", tmp_path / "results", "--report-dir", tmp_path / "report",
               "--workers", "1"]
     code, out = invoke("demo", *common, "--out", tmp_path / "out", "--scale", "0.05")
@@ -150,6 +151,10 @@ def test_demo_checks_garden_runs_the_grid_and_writes_its_report(tmp_path):
     report = tmp_path / "report" / "report.md"
     assert lines[-1] == f"report: {report.resolve()}"
     assert "| alpha | `2` |" in report.read_text() and (tmp_path / "report" / "results.parquet").is_file()
+    # not the file's [check] (beyond the demo's 15 minutes for the real one): the report says so
+    assert "**check at long: not run**" in report.read_text()
+    assert f"tinydemo: its [check] (the headline at long) is not run by the demo; `splatbench run {exp}` runs it" \
+        in out
     # resumable: nothing left to run
     code, out = invoke("demo", *common, "--no-garden")
     assert code == 0, out

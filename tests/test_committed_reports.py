@@ -26,8 +26,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from splatbench.experiments import expand, load_experiment
+from splatbench.experiments import check_runs, expand, load_experiment
 from splatbench.reports import report_from_table
+from splatbench.reports.check import CHECK_TABLE_NAME, check_lines, header_line
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted(p.stem for p in (ROOT / "experiments").glob("*.toml"))
@@ -89,9 +90,21 @@ def test_committed_report_matches_its_parquet(name):
         assert axis.markdown() in text, f"reports/{name}: the `{axis.axis}` table differs from results.parquet"
         if axis.axis in report.findings:
             assert report.findings[axis.axis].markdown() in text, f"reports/{name}: `{axis.axis}` findings differ"
-    for name in ("parity", "settling"):  # the run findings: their own sections
-        if name in report.findings:
-            assert report.findings[name].markdown() in text, f"reports/{name}: the {name} finding differs"
+    for finding in ("parity", "settling"):  # the run findings: their own sections
+        if finding in report.findings:
+            assert report.findings[finding].markdown() in text, f"reports/{name}: the {finding} finding differs"
+    if spec.kind == "train":  # issue 29: the header names the protocol and the headline's 7K check
+        assert "- **Protocol**: " in text, f"reports/{name}: no protocol in the header"
+        if spec.check is None:
+            assert "**7K check: none declared**" in text, f"reports/{name}: the header does not name the 7K check"
+    if spec.check is not None:  # the check's section is what check.parquet gives (none there: "not run")
+        checked = pd.read_parquet(folder / CHECK_TABLE_NAME) if (folder / CHECK_TABLE_NAME).is_file() else None
+        if checked is not None:
+            assert set(checked.run_id) <= {r.run_id for r in check_runs(spec)}, f"reports/{name}: stale check.parquet"
+        check = report_from_table(spec, table, len(runs), checked).check
+        assert header_line(check) in text, f"reports/{name}: the header's 7K check differs from {CHECK_TABLE_NAME}"
+        for line in check_lines(check, f"splatbench run experiments/{name}.toml"):
+            assert line in text, f"reports/{name}: the 7K check's section differs: {line[:80]!r}"
     for line in text.splitlines():
         if line.startswith("![") and "](" in line:
             figure = folder / line.split("](", 1)[1].rstrip(")")
@@ -119,6 +132,27 @@ def test_the_readme_line_of_an_unsettled_report_says_so(name):
 
 
 @pytest.mark.parametrize("name", SHIPPED)
+def test_the_readme_line_of_a_training_report_names_its_7k_check(name):
+    """Issue 29 (2): the README's line of a current training report repeats its 7K check's verdict
+    ("7K check: holds", "does not hold", "not run", "incomplete"), or says none is declared."""
+    folder = ROOT / "reports" / name
+    if not (folder / "report.md").is_file() or (folder / "STALE.md").is_file():
+        pytest.skip(f"reports/{name} has no current report")
+    spec = _load(name)
+    if spec.kind != "train":
+        pytest.skip(f"reports/{name} is not a training report")
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    rows = [line for line in readme.splitlines() if line.startswith(f"| [`reports/{name}`]")]
+    assert len(rows) == 1, f"README: expected one table line for reports/{name}"
+    if spec.check is None:
+        assert "7K check: none declared" in rows[0], f"README: reports/{name}'s line must name its 7K check"
+        return
+    checked = pd.read_parquet(folder / CHECK_TABLE_NAME) if (folder / CHECK_TABLE_NAME).is_file() else None
+    check = report_from_table(spec, pd.read_parquet(folder / "results.parquet"), len(expand(spec)), checked).check
+    assert check.headline in rows[0], f"README: reports/{name}'s line must say {check.headline!r}"
+
+
+@pytest.mark.parametrize("name", SHIPPED)
 def test_no_committed_report_prints_an_interval_of_zero(name):
     """Issue 29: an interval of ±0.00 is never printed (seeds that varied nothing give no interval)."""
     path = ROOT / "reports" / name / "report.md"
@@ -143,6 +177,10 @@ def test_shipped_grids_follow_the_report_protocol(name):
                 assert run.config["iterations"] >= 2000 and _short_side(spec, run.config["data"]) >= 128, run.labels
         elif spec.kind == "raster":
             assert run.config["repeats"] >= 7
+    if spec.check is not None:  # issue 29 (2): the headline's two cells at graphdeco's 7K column, every seed
+        checks = check_runs(spec)
+        assert len(checks) == 2 * len(spec.seeds) and {r.seed for r in checks} == set(spec.seeds)
+        assert {(r.config["protocol"], r.config["iterations"]) for r in checks} == {("graphdeco-7k", 7000)}
 
 
 def _short_side(spec, data: dict) -> float:

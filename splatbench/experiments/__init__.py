@@ -2,6 +2,7 @@
 
     spec = load_experiment("experiments/sh_degree.toml")   # ExperimentSpec, fully checked
     runs = expand(spec)                                      # list[RunSpec], deterministic order
+    checks = check_runs(spec)                                # its [check]: the headline at another protocol
     summary = run_experiment(spec, workers=2, executor="local", results_dir="results")
     summary.line()        # "done 12, skipped 0 (finished), 0 claimed by another runner, failed 0 of 12"
     table = read_table("results/sh_degree")                  # pandas DataFrame, one row per run
@@ -19,12 +20,12 @@ See docs/experiments.md.
 
 from splatbench.experiments.configs import canonical_json
 from splatbench.experiments.execute import execute_run
-from splatbench.experiments.grid import RunSpec, expand, load_experiment, make_run_id
-from splatbench.experiments.kinds import RunKind, RunOutput, get_kind, register_kind
+from splatbench.experiments.grid import RunSpec, check_cells, check_runs, expand, load_experiment, make_run_id
+from splatbench.experiments.kinds import KindProtocols, RunKind, RunOutput, get_kind, register_kind
 from splatbench.experiments.runner import RunSummary, run_experiment
-from splatbench.experiments.spec import ExperimentSpec, RunnerDefaults, parse_experiment
+from splatbench.experiments.spec import CheckSpec, ExperimentSpec, RunnerDefaults, parse_experiment
 from splatbench.experiments.store import RunRecord, read_records, read_table
 
-__all__ = ["ExperimentSpec", "RunnerDefaults", "load_experiment", "parse_experiment", "RunSpec", "expand",
-           "make_run_id", "canonical_json", "RunKind", "RunOutput", "get_kind", "register_kind", "RunSummary",
+__all__ = ["ExperimentSpec", "CheckSpec", "RunnerDefaults", "load_experiment", "parse_experiment", "RunSpec", "expand",
+           "check_cells", "check_runs", "make_run_id", "canonical_json", "RunKind", "RunOutput", "KindProtocols", "get_kind", "register_kind", "RunSummary",
            "run_experiment", "execute_run", "RunRecord", "read_records", "read_table"]

@@ -19,15 +19,19 @@ import click
 @click.option("--results", type=click.Path(path_type=Path, file_okay=False), default=None,
               help="Results folder (default: [runner] results, else ./results).")
 @click.option("--dry-run", is_flag=True, help="List the runs and whether each is done; run nothing.")
+@click.option("--check/--no-check", default=True, show_default=True,
+              help="Also run the file's [check] (its headline at another protocol, after the grid's runs).")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
 def run(experiment: Path, workers: int | None, executor: str | None, scheduler: str | None, results: Path | None,
-        dry_run: bool, progress: bool) -> None:
+        dry_run: bool, check: bool, progress: bool) -> None:
     """Run every pending run of EXPERIMENT.toml and print "done D, skipped S (finished),
     C claimed by another runner, failed F of T".
 
     Runs whose result says done are skipped, so an interrupted sweep resumes where it
     stopped; failed runs are tried again; runs another live runner holds are left to
-    it. Exits with status 1 when a run failed.
+    it. A file with a [check] table also runs the check's runs (its headline comparison
+    at another protocol; docs/reports.md, "The 7K check") after the grid's, unless
+    --no-check. Exits with status 1 when a run failed.
     """
     from splatbench.experiments.runner import run_experiment
     from splatbench.experiments.grid import load_experiment
@@ -38,26 +42,28 @@ def run(experiment: Path, workers: int | None, executor: str | None, scheduler: 
     results = results or spec.runner.results or Path("results")
     workers = workers if workers is not None else spec.runner.workers
     if dry_run:
-        _dry_run(spec, results)
+        _dry_run(spec, results, check)
         return
     summary = run_experiment(spec, workers=workers, executor=executor, scheduler=scheduler, results_dir=results,
-                             progress=progress)
+                             progress=progress, check=check)
     click.echo(summary.line())
     if summary.failed:
         sys.exit(1)
 
 
-def _dry_run(spec, results: Path) -> None:
-    from splatbench.experiments.grid import expand
+def _dry_run(spec, results: Path, check: bool) -> None:
+    from splatbench.experiments.grid import check_runs, expand
     from splatbench.experiments.store import experiment_dir, read_records
 
     runs = expand(spec)
+    checks = check_runs(spec) if check else []
     records = read_records(experiment_dir(results, spec.name))
-    for r in runs:
+    for r, tag in [*((r, "") for r in runs), *((r, f"  check: protocol={spec.check.protocol}") for r in checks)]:
         status = records[r.run_id].status if r.run_id in records else "pending"
         labels = " ".join(f"{k}={v}" for k, v in r.labels.items())
-        click.echo(f"{r.run_id}  {status:<7}  {r.scene}  seed={r.seed}  {labels}".rstrip())
-    click.echo(f"{len(runs)} runs in {experiment_dir(results, spec.name)}")
+        click.echo(f"{r.run_id}  {status:<7}  {r.scene}  seed={r.seed}  {labels}{tag}".rstrip())
+    click.echo(f"{len(runs) + len(checks)} runs in {experiment_dir(results, spec.name)}"
+               + (f" ({len(checks)} of them the check)" if checks else ""))
 
 
 if __name__ == "__main__":  # python -m splatbench.experiments.cli EXPERIMENT.toml ...

@@ -30,7 +30,7 @@ from typing import Any
 from splatbench.errors import InputError
 from splatbench.experiments.configs import canonical_json, flatten, override, unflatten
 from splatbench.experiments.kinds import get_kind
-from splatbench.experiments.spec import ExperimentSpec, parse_experiment
+from splatbench.experiments.spec import ExperimentSpec, parse_experiment, same_value
 from splatbench.fsutil import read_text
 
 
@@ -112,6 +112,26 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
                                  f"(known: {', '.join(sorted(known)) or 'none'}){hint}")
 
     dims = _choices(spec)
+    make = _run_maker(spec, kind)
+    runs: list[RunSpec] = []
+    seen: set[str] = set()
+    for scene in spec.scenes:
+        for cell in _cells(spec, dims):
+            for seed in spec.seeds:
+                run = make(cell, scene, seed)
+                if run.run_id in seen:
+                    continue
+                seen.add(run.run_id)
+                runs.append(run)
+    return runs
+
+
+def _run_maker(spec: ExperimentSpec, kind, protocol: str | None = None
+               ) -> Callable[[list[tuple[str, Any, dict[str, Any], str]], str, int], RunSpec]:
+    """``make(cell, scene, seed) -> RunSpec``: one run of a cell (as `_cells` lists them), its
+    config checked by the kind (one `InputError` line naming where in the file a bad value comes
+    from), resolved and named by its run id; under ``protocol`` (an experiment's ``[check]``),
+    the kind's `KindProtocols.apply` rewrites the cell's config first."""
     variant_names = set(spec.variants)
     checked: dict[str, str | None] = {}
 
@@ -125,36 +145,81 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
                 checked[key] = str(exc)
         return checked[key]
 
-    runs: list[RunSpec] = []
-    seen: set[str] = set()
-    for scene in spec.scenes:
-        for cell in _cells(spec, dims):
-            flat_cell = dict(spec.base)
-            for _, _, settings, _ in cell:
-                flat_cell = override(flat_cell, settings)
-            for seed in spec.seeds:
-                flat = {**flat_cell, **_source(spec, scene), "scene": scene, "seed": seed}
-                problem = check(flat)
-                if problem is not None:
-                    raise InputError(f"{spec.source}: {_culprit(spec, cell, scene, seed, check, problem)}: {problem}")
-                config = unflatten(flat)
-                if kind.resolve is not None:
-                    try:
-                        config = kind.resolve(config)
-                    except InputError as exc:
-                        raise InputError(f"{spec.source}: {_culprit(spec, cell, scene, seed, check)}: {exc}") \
-                            from None
-                rid = make_run_id(spec.kind, kind.identity(config) if kind.identity is not None else config)
-                if rid in seen:
-                    continue
-                seen.add(rid)
-                resolved = flatten(config) if config else {}
-                chosen = {name: label for name, label, _, _ in cell}
-                labels = {name: (chosen.get(name) if name in variant_names else _label(resolved, name))
-                          for name in spec.dimensions}
-                runs.append(RunSpec(experiment=spec.name, kind=spec.kind, scene=scene, seed=seed, config=config,
-                                    run_id=rid, labels=labels))
-    return runs
+    def make(cell, scene: str, seed: int) -> RunSpec:
+        flat = dict(spec.base)
+        for _, _, settings, _ in cell:
+            flat = override(flat, settings)
+        flat = {**flat, **_source(spec, scene), "scene": scene, "seed": seed}
+        if protocol is not None:
+            try:
+                flat = flatten(kind.protocols.apply(unflatten(flat), protocol))
+            except InputError as exc:
+                raise InputError(f"{spec.source}: check.{exc}") from None
+        problem = check(flat)
+        if problem is not None:
+            where = "check" if protocol is not None else _culprit(spec, cell, scene, seed, check, problem)
+            raise InputError(f"{spec.source}: {where}: {problem}")
+        config = unflatten(flat)
+        if kind.resolve is not None:
+            try:
+                config = kind.resolve(config)
+            except InputError as exc:
+                where = "check" if protocol is not None else _culprit(spec, cell, scene, seed, check)
+                raise InputError(f"{spec.source}: {where}: {exc}") from None
+        rid = make_run_id(spec.kind, kind.identity(config) if kind.identity is not None else config)
+        resolved = flatten(config) if config else {}
+        chosen = {name: label for name, label, _, _ in cell}
+        labels = {name: (chosen.get(name) if name in variant_names else _label(resolved, name))
+                  for name in spec.dimensions}
+        return RunSpec(experiment=spec.name, kind=spec.kind, scene=scene, seed=seed, config=config, run_id=rid,
+                       labels=labels)
+
+    return make
+
+
+def check_cells(spec: ExperimentSpec, *, at_protocol: bool = True) -> tuple[list[RunSpec], list[RunSpec]]:
+    """The runs of the experiment's ``[check]`` (`CheckSpec`), one list per cell (reference
+    first), one run per seed, at its scene: under the check's protocol (the kind's
+    `KindProtocols.apply`: their own run ids, since their configs differ), or with
+    ``at_protocol=False`` as the grid runs those cells (the grid's own runs of them: the
+    quick side of the comparison). ``([], [])`` for an experiment without a check. One
+    `InputError` line for a kind without protocols, a protocol it does not know, or a check
+    whose runs are the grid's (a protocol the grid already runs)."""
+    if spec.check is None:
+        return [], []
+    try:
+        kind = get_kind(spec.kind)
+    except InputError as exc:
+        raise InputError(f"{spec.source}: {exc}") from None
+    if kind.protocols is None:
+        raise InputError(f"{spec.source}: check: run kind {spec.kind!r} has no protocols to check a headline at "
+                         f"(remove the [check] table)")
+    dims = dict(_choices(spec))
+    make = _run_maker(spec, kind, spec.check.protocol if at_protocol else None)
+    out: list[list[RunSpec]] = []
+    for values in spec.check.cells:
+        cell = []
+        for name, value in values.items():  # the choice whose label is the value (spec.py checked it is one)
+            label, settings, where = next((lab, s, w) for lab, s, w in dims[name] if same_value(value, lab))
+            cell.append((name, label, settings, where))
+        out.append([make(cell, spec.check.scene, seed) for seed in spec.seeds])
+    a, b = out
+    if {r.run_id for r in a} == {r.run_id for r in b}:
+        raise InputError(f"{spec.source}: check.cells: both cells are the same runs (a value equal to the base is "
+                         f"the base)")
+    if at_protocol:
+        grid = {r.run_id for r in expand(spec)}
+        if any(r.run_id in grid for r in (*a, *b)):
+            raise InputError(f"{spec.source}: check.protocol: the grid already runs {spec.check.protocol!r}; a check "
+                             f"reruns its headline at another protocol")
+    return a, b
+
+
+def check_runs(spec: ExperimentSpec) -> list[RunSpec]:
+    """Every run of the experiment's ``[check]`` (`check_cells` under its protocol): the
+    reference cell's seeds, then the other's; [] without a check."""
+    a, b = check_cells(spec)
+    return [*a, *b]
 
 
 def _source(spec: ExperimentSpec, scene: str) -> dict[str, Any]:
@@ -206,8 +271,10 @@ def load_experiment(path: str | Path, *, known_scenes: Callable[[], set[str]] | 
 def check_experiment(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None = None) -> None:
     """Check the kind exists, every scene is known (``known_scenes``, else the kind's
     ``scenes``; neither: any name) and every run's config passes the kind's
-    ``validate``, by expanding the grid. Raises one `InputError` line; runs nothing."""
+    ``validate``, by expanding the grid and its check. Raises one `InputError` line; runs
+    nothing."""
     expand(spec, known_scenes=known_scenes)
+    check_runs(spec)
 
 
-__all__ = ["RunSpec", "expand", "make_run_id", "load_experiment", "check_experiment"]
+__all__ = ["RunSpec", "expand", "check_cells", "check_runs", "make_run_id", "load_experiment", "check_experiment"]

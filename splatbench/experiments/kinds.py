@@ -11,6 +11,8 @@ kind it holds::
     scenes() -> set[str]                     optional: known scene names (None: any name)
     prepare(configs) -> Any                  optional: once, in the parent, before any run;
                                              what it returns is ``run``'s ``prepared``
+    protocols                                optional `KindProtocols`: a cell rerun under a named
+                                             protocol (an experiment's ``[check]``)
 
 ``config`` is the nested dict of one run: the experiment's base, overridden by its
 axis values, plus ``scene`` and ``seed``. `resolve`'s output is what the run id
@@ -66,6 +68,22 @@ class RunOutput:
 
 
 @dataclass(frozen=True)
+class KindProtocols:
+    """How a kind reruns a cell of a grid under a named protocol: what an experiment's
+    ``[check]`` runs (docs/reports.md, "The 7K check").
+
+    apply(config, name) -> config: a run's nested, unresolved config under protocol ``name``
+        (the train kind: ``protocol = name``, the protocol's own length and test-curve
+        spacing); a one-line `InputError` for a name it does not know, or one a check cannot
+        run at.
+    describe(name) -> str: the protocol in words, for the report (what it stands beside).
+    """
+
+    apply: Callable[[dict[str, Any], str], dict[str, Any]]
+    describe: Callable[[str], str]
+
+
+@dataclass(frozen=True)
 class RunKind:
     """One kind of run (see the module doc for each callable's contract)."""
 
@@ -83,6 +101,9 @@ class RunKind:
     #: advance (e.g. opacity resets), which a report names for runs that did not record them
     #: (`KindReport.confounds`); None: none.
     planned: Callable[[dict[str, Any]], dict[str, float]] | None = None
+    #: How a cell is rerun under a named protocol (an experiment's ``[check]``); None: the kind has
+    #: no protocols, and an experiment of it with a ``[check]`` is refused.
+    protocols: KindProtocols | None = None
 
 
 #: Kinds known by name in every process: name -> "module:ATTR" (imported on first use).
@@ -137,5 +158,5 @@ def check_output(output: Any, kind: str) -> RunOutput:
     return RunOutput(metrics=metrics, curves=output.curves, warnings=tuple(" ".join(w.split()) for w in warnings))
 
 
-__all__ = ["RunKind", "RunOutput", "Scalar", "BUILTIN_KINDS", "register_kind", "get_kind",
+__all__ = ["RunKind", "RunOutput", "KindProtocols", "Scalar", "BUILTIN_KINDS", "register_kind", "get_kind",
            "check_output"]

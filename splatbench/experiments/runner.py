@@ -1,6 +1,8 @@
 """The runner: execute an experiment's pending runs in parallel, resumably.
 
-`run_experiment` expands the grid (every config checked before anything runs),
+`run_experiment` expands the grid (every config checked before anything runs) and,
+after the grid's runs, the runs of the experiment's ``[check]`` (its headline at another
+protocol, `splatbench.experiments.grid.check_runs`; ``check=False`` leaves them out),
 skips the runs whose result file already says ``done``, and submits the rest to
 an executor. Failed runs are *not* skipped: they run again on the next
 invocation (delete nothing; a new result replaces the old file).
@@ -55,7 +57,7 @@ from splatbench.errors import InputError, one_line
 from splatbench.experiments.claims import HEARTBEAT_EVERY, RunClaim, remove_stale_claim_temps, try_claim
 from splatbench.experiments.configs import plain
 from splatbench.experiments.executors import DaskExecutor, LocalExecutor
-from splatbench.experiments.grid import RunSpec, expand
+from splatbench.experiments.grid import RunSpec, check_runs, expand
 from splatbench.experiments.kinds import get_kind
 from splatbench.experiments.spec import EXECUTORS, ExperimentSpec, check_scheduler
 from splatbench.experiments.store import (RunRecord, experiment_dir, read_record, read_records, remove_stale_temps,
@@ -88,13 +90,15 @@ class RunSummary:
 # --------------------------------------------------------------------------- parent side
 def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor: str = "local",
                    scheduler: str | None = None, results_dir: str | Path, progress: bool = True,
-                   known_scenes: Callable[[], set[str]] | None = None) -> RunSummary:
+                   known_scenes: Callable[[], set[str]] | None = None, check: bool = True) -> RunSummary:
     """Run every pending run of ``spec``; return the counts.
 
     workers: parallel runs (None: one per CPU); executor: "local" or "dask";
     scheduler: Dask scheduler address (dask only; None: a loopback LocalCluster);
-    results_dir: folder holding ``<experiment>/``; progress: a tqdm bar on stderr.
-    The grid is expanded and checked before any executor starts (`InputError`).
+    results_dir: folder holding ``<experiment>/``; progress: a tqdm bar on stderr;
+    check: also run the experiment's ``[check]`` (after the grid's runs, in the same folder,
+    each under its own run id; counted in the summary). The grid and the check are expanded
+    and checked before any executor starts (`InputError`).
     """
     if executor not in EXECUTORS:
         raise InputError(f"executor: expected one of {', '.join(EXECUTORS)}, got {executor!r}")
@@ -108,6 +112,8 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
         raise InputError(f"workers: expected an int >= 1, got {workers!r}")
 
     runs = expand(spec, known_scenes=known_scenes)
+    checks = check_runs(spec) if check else []
+    runs = [*runs, *checks]
     results_dir = Path(results_dir).absolute()  # workers may run elsewhere (another cwd, a Dask host)
     folder = experiment_dir(results_dir, spec.name)
     folder.mkdir(parents=True, exist_ok=True)
@@ -123,7 +129,9 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     for path, reason in damaged:  # the run is pending: its new result replaces the file
         log(f"{spec.name}: damaged result file {path.name} ({reason}); its run is redone")
     save_table(folder, ids)
-    log(f"{spec.name}: {len(runs)} runs, {skipped} already done, {len(pending)} to run "
+    of_check = (f" ({len(checks)} of them the check at {spec.check.protocol})" if checks else
+                f" (the check at {spec.check.protocol} left out)" if spec.check is not None else "")
+    log(f"{spec.name}: {len(runs)} runs{of_check}, {skipped} already done, {len(pending)} to run "
         f"({executor}, {workers} worker{'s' * (workers != 1)}); results in {folder}")
     if not pending:
         return RunSummary(done=0, skipped=skipped, failed=0, total=len(runs), folder=folder)

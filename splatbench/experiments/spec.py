@@ -27,6 +27,11 @@ sweep it (docs/experiments.md has the full format)::
     [report]                          # how `splatbench report` reads the results (changes no run)
     min_effect = { test_psnr = 0.2 }  # the smallest difference that matters (docs/reports.md)
 
+    [check]                           # the headline rerun at the field's protocol (docs/reports.md,
+    protocol = "graphdeco-7k"         # "The 7K check"): two cells of the grid, one of its scenes,
+    scene = "textured"                # every seed; `splatbench run` runs them after the grid
+    cells = [{ densify = "none" }, { densify = "mcmc" }]   # reference first: one value per axis
+
 Dotted keys: a config is held *flat*, as ``dotted.path -> value``. A TOML sub-table
 (``[base.raster]``), a TOML dotted key (``raster.tile_size = 8``) and a quoted key
 with dots (``"raster.tile_size" = 8``) all name the same field ``raster.tile_size``;
@@ -58,7 +63,9 @@ from splatbench.experiments.configs import FIELD_KEY, canonical_json, check_valu
 
 #: Fields an experiment file may hold at its top level.
 TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "base", "axes", "variants", "runner",
-                    "report")
+                    "report", "check")
+#: Fields of its ``[check]`` table.
+CHECK_FIELDS = ("protocol", "scene", "cells")
 #: Fields of its ``[runner]`` table.
 RUNNER_FIELDS = ("workers", "executor", "scheduler", "results")
 #: How axes combine: every combination, or each value alone against the base.
@@ -84,6 +91,23 @@ class RunnerDefaults:
     executor: str | None = None
     scheduler: str | None = None
     results: Path | None = None
+
+
+@dataclass(frozen=True)
+class CheckSpec:
+    """The ``[check]`` table: the grid's headline comparison rerun under another protocol
+    (docs/reports.md, "The 7K check").
+
+    protocol: the protocol's name (the kind applies it: `KindProtocols`); scene: one of the
+    grid's scenes; cells: (reference, compared), each ``dimension -> value`` (a plain axis's
+    value, a variant's label) naming one cell of the grid: every dimension of a product grid,
+    at most one of a one-at-a-time grid (none: its base). The check's difference is
+    compared minus reference, paired over every seed of the grid.
+    """
+
+    protocol: str
+    scene: str
+    cells: tuple[Mapping[str, Any], Mapping[str, Any]]
 
 
 @dataclass(frozen=True)
@@ -113,6 +137,7 @@ class ExperimentSpec:
     #   (paths as the file gives them, relative to it): what a report shows, the same in every clone
     min_effect: Mapping[str, float] = field(default_factory=dict)  # ``[report] min_effect``: metric -> the
     #   smallest difference that matters (overrides the kind's; docs/reports.md, "Minimum effects")
+    check: CheckSpec | None = None  # ``[check]``: the headline at another protocol (None: none declared)
 
     @property
     def dimensions(self) -> list[str]:
@@ -221,9 +246,85 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
 
     runner = _parse_runner(data.get("runner", {}), fail, source, base_dir)
     min_effect = _parse_report(data.get("report", {}), fail)
+    check = _parse_check(data["check"], fail, scenes, axes, variants, grid) if "check" in data else None
     return ExperimentSpec(name=name, kind=kind, scenes=tuple(scenes), seeds=tuple(seeds), base=base, axes=axes,
                           variants=variants, grid=grid, description=description, runner=runner, source=source,
-                          scene_sources=scene_sources, scene_tables=scene_tables, min_effect=min_effect)
+                          scene_sources=scene_sources, scene_tables=scene_tables, min_effect=min_effect,
+                          check=check)
+
+
+def _parse_check(table: Any, fail, scenes: list[str], axes: Mapping[str, tuple[Any, ...]],
+                 variants: Mapping[str, Mapping[str, Any]], grid: str) -> CheckSpec:
+    """The ``[check]`` table (`CheckSpec`): its structure, its scene among the grid's, and each
+    cell a cell of the grid (its values the axes'; whether the kind knows the protocol is
+    checked when the check's runs are made, `splatbench.experiments.grid.check_runs`)."""
+    if not isinstance(table, Mapping):
+        raise fail("check", f"expected a table with {', '.join(CHECK_FIELDS)}, got {table!r}")
+    for key in table:
+        if key not in CHECK_FIELDS:
+            raise fail(f"check.{key}", unknown_key_problem(key, CHECK_FIELDS))
+    for key in CHECK_FIELDS:
+        if key not in table:
+            raise fail(f"check.{key}", "missing (a check names a protocol, one of the grid's scenes and two cells)")
+    protocol, scene, cells = table["protocol"], table["scene"], table["cells"]
+    if not isinstance(protocol, str) or not protocol:
+        raise fail("check.protocol", f"expected a protocol's name (e.g. 'graphdeco-7k'), got {protocol!r}")
+    if scene not in scenes:
+        raise fail("check.scene", f"expected one of the grid's scenes ({', '.join(scenes)}), got {scene!r}")
+    if not isinstance(cells, list) or len(cells) != 2:
+        raise fail("check.cells", f"expected two cells, reference first (e.g. [{{ sh_degree = 0 }}, "
+                                  f"{{ sh_degree = 3 }}]), got {cells!r}")
+    dims = [*axes, *variants]
+    parsed = []
+    for i, cell in enumerate(cells):
+        where = f"check.cells[{i}]"
+        if not isinstance(cell, Mapping):
+            raise fail(where, f"expected a table of axis = value, got {cell!r}")
+        values = _cell_values(cell, dims, where, fail)
+        for dim, value in values.items():
+            known = list(axes[dim]) if dim in axes else list(variants[dim])
+            if not any(same_value(value, v) for v in known):
+                raise fail(f"{where}.{dim}", f"{value!r} is not a value of the grid's "
+                                            f"{'axis' if dim in axes else 'variant'} {dim!r} "
+                                            f"({', '.join(map(repr, known))})")
+        if grid == "product" and set(values) != set(dims):
+            missing = [d for d in dims if d not in values]
+            raise fail(where, f"names no value of {', '.join(map(repr, missing))} (a cell of a product grid "
+                              f"names one value of every axis)")
+        if grid == "one-at-a-time" and len(values) > 1:
+            raise fail(where, f"names {len(values)} axes; a cell of a one-at-a-time grid is its base ({{}}) or one "
+                              f"axis value alone")
+        parsed.append(values)
+    if canonical_json(parsed[0]) == canonical_json(parsed[1]):
+        raise fail("check.cells", "the two cells are the same cell")
+    return CheckSpec(protocol=protocol, scene=scene, cells=(parsed[0], parsed[1]))
+
+
+def same_value(a: Any, b: Any) -> bool:
+    """Whether a check cell's value names the axis value ``b``: numbers by value (``0`` names an
+    axis's ``0.0``, as TOML writes either), anything else as canonical JSON."""
+    def number(v: Any) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    if number(a) and number(b):
+        return float(a) == float(b)
+    return canonical_json(a) == canonical_json(b)
+
+
+def _cell_values(cell: Mapping[str, Any], dims: list[str], where: str, fail, prefix: str = "") -> dict[str, Any]:
+    """A check cell's ``dimension -> value``: a key (dotted or nested, as TOML writes
+    ``strategy_options.reset_every``) that is a dimension takes its value whole (an axis value
+    may be a table); any other key must lead to one."""
+    out: dict[str, Any] = {}
+    for key, value in cell.items():
+        path = f"{prefix}{key}"
+        if path in dims:
+            out[path] = value
+        elif isinstance(value, Mapping) and any(d.startswith(path + ".") for d in dims):
+            out.update(_cell_values(value, dims, where, fail, path + "."))
+        else:
+            raise fail(f"{where}.{path}", f"not an axis of the grid (its axes: {', '.join(dims) or 'none'})")
+    return out
 
 
 def _parse_report(table: Any, fail) -> dict[str, float]:
@@ -369,5 +470,5 @@ def _no_duplicates(values: list, where: str, fail) -> None:
         seen.add(key)
 
 
-__all__ = ["ExperimentSpec", "RunnerDefaults", "TOP_LEVEL_FIELDS", "RUNNER_FIELDS", "GRID_MODES", "EXECUTORS",
-           "RESERVED_KEYS", "FOLDER_SCENE_KEYS", "TEACHER_SCENE_KEYS", "parse_experiment", "check_scheduler"]
+__all__ = ["ExperimentSpec", "CheckSpec", "RunnerDefaults", "TOP_LEVEL_FIELDS", "RUNNER_FIELDS", "CHECK_FIELDS", "GRID_MODES", "EXECUTORS",
+           "RESERVED_KEYS", "FOLDER_SCENE_KEYS", "TEACHER_SCENE_KEYS", "parse_experiment", "check_scheduler", "same_value"]

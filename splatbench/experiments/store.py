@@ -3,7 +3,7 @@
 Layout, under a results folder::
 
     <experiment>/<run_id>.json      one `RunRecord` per run (done or failed)
-    <experiment>/results.parquet    the table: one row per run of the grid, grid order
+    <experiment>/results.parquet    the table: one row per run of the grid, grid order (then its check's)
     <experiment>/work/<run_id>/     the run's own working folder (kinds' artifacts)
 
 Every file is written atomically (`splatbench.fsutil.atomic_write`): a temporary

@@ -60,7 +60,7 @@ from splatbench.checks import check_image_size, check_keys
 from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, SettlingCurves, Tradeoff
-from splatbench.experiments.kinds import RunKind, RunOutput
+from splatbench.experiments.kinds import KindProtocols, RunKind, RunOutput
 from splatbench.metrics.spec import MetricSpec
 
 #: Environment variable naming the folder of rendered datasets.
@@ -454,6 +454,33 @@ def planned(config: dict[str, Any]) -> dict[str, float]:
     return {"opacity_resets": counts.opacity_resets, "refinements": counts.refinements}
 
 
+def with_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:
+    """``config`` (a run's nested, unresolved config) under protocol ``name``: what an experiment's
+    ``[check]`` runs. ``protocol = name``; ``iterations`` left out, so the protocol brings its own
+    length (7,000 for graphdeco-7k); ``eval_every`` the protocol's `curve_every` (700 for
+    graphdeco-7k: no point on an opacity reset). Every other field as the cell has it. One-line
+    `InputError` for an unknown name or one without a length of its own (``quick``: the grid's)."""
+    from splatbench.train.protocol import get_protocol  # late: splatbench.train imports torch
+
+    protocol = get_protocol(name)
+    if protocol.curve_every is None:
+        raise InputError(f"protocol: {name!r} is laid over the grid's own iterations; a check reruns the "
+                         f"headline at a protocol of its own length (graphdeco-7k, graphdeco-30k)")
+    out = {k: v for k, v in config.items() if k not in ("iterations", "eval_every")}
+    return {**out, "protocol": name, "eval_every": protocol.curve_every}
+
+
+def describe_protocol(name: str) -> str:
+    """The protocol ``name`` in words, for a report (`splatbench.train.protocol`)."""
+    from splatbench.train.protocol import GRAPHDECO_ITERATIONS, get_protocol  # late: torch
+
+    p = get_protocol(name)
+    if p.iterations is None:
+        return f"graphdeco's step fields scaled to the run's iterations, learning rates not: {p.stands_beside}"
+    return (f"graphdeco's {GRAPHDECO_ITERATIONS:,}-step schedule as written (step fields and the position "
+            f"learning-rate decay unscaled), run {p.iterations:,} steps and evaluated there: {p.stands_beside}")
+
+
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
     metrics=(
@@ -487,7 +514,7 @@ REPORT = KindReport(
 #: The ``train`` kind (``kind = "train"``).
 TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, identity=identity, scenes=scenes, prepare=prepare,
                 description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT,
-                planned=planned)
+                planned=planned, protocols=KindProtocols(with_protocol, describe_protocol))
 
 __all__ = ["TRAIN", "REPORT", "METRICS", "MIN_EFFECT", "TOPOLOGY_METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
            "dataset_folder", "ensure_dataset"]

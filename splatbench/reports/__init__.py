@@ -8,7 +8,8 @@ Modules: `tables` (axis rows, mean ± 95 % interval, metric specs per kind), `fi
 (claims computed from the tables: paired differences with intervals), `notes`
 (kind-specific findings, registered by kind name), `settling` (whether a cell's curves had
 flattened: the last quarter's slope), `protocol` (a train report's header from its runs'
-configs), `figures` (training curves, the
+configs), `check` (the 7K check: the headline's two cells rerun at graphdeco's protocol, its
+verdict), `figures` (training curves, the
 cells of the Pareto figures), `report` (assembly, markdown), `cli`
 (``splatbench report``). Statistics are `splatbench.metrics.stats`. See docs/reports.md.
 """

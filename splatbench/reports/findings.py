@@ -51,7 +51,7 @@ from splatbench.experiments.kind_report import Comparison, FindingRules
 from splatbench.figures import pareto_front
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
-from splatbench.reports.settling import CellSettling, cell_settling, difference_settled, drift
+from splatbench.reports.settling import CellSettling, cell_settling, unsettled_reason
 from splatbench.reports.tables import AxisTable, Row, done_runs, kind_report, loaded_runs, seed_values
 
 
@@ -287,15 +287,7 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
 
     def unsettled(scene: str, a: Row, b: Row, diff: float) -> str:
         """"" when the difference ``b - a`` at ``scene`` is settled or not judged, else why not."""
-        sa, sb = settle(scene, a), settle(scene, b)
-        if sa is None or sb is None:
-            return ""
-        moving = [f"`{r.label}` {c.test:+.2f}" for r, c in ((b, sb), (a, sa)) if not c.settled]
-        if moving:
-            return ", ".join(moving) + f" {primary.unit} / 1,000 steps over the last quarter"
-        if not difference_settled(sa, sb, diff):
-            return f"the difference moved {drift(sa, sb):+.2f} {primary.unit} over the last quarter"
-        return ""
+        return unsettled_reason(settle(scene, a), settle(scene, b), (a.label, b.label), diff, primary.unit)
 
     claims: list[Claim] = []
     lines: list[str] = []

@@ -18,6 +18,9 @@ so a report is never built from a stale table. What is written, under ``out``:
   ``figures/speed_vs_error.png`` (raster kind).
 * ``results.parquet``: the run table the report was built from (the engine's columns:
   ``run_id, scene, seed, status, ..., axis.*, config.*, metric.*, warnings, curves``).
+* ``check.parquet``: the runs of the experiment's ``[check]`` that have a result, in the same
+  columns (the section "Headline at the 7K protocol", `splatbench.reports.check`); absent when
+  none has.
 """
 
 from __future__ import annotations
@@ -34,11 +37,13 @@ import pandas as pd
 from splatbench.errors import InputError
 from splatbench.experiments.grid import expand
 from splatbench.experiments.kind_report import Tradeoff
+from splatbench.experiments.kinds import get_kind
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.experiments.store import TABLE_NAME, build_table, experiment_dir, read_records
 from splatbench.fsutil import atomic_write
 from splatbench.figures import pareto_figure
 from splatbench.metrics.spec import MetricSpec
+from splatbench.reports.check import CHECK_TABLE_NAME, CheckResult, check_lines, check_result, check_table, header_line
 from splatbench.reports.figures import cell_means, curves_figure
 from splatbench.reports.findings import Finding, axis_finding
 from splatbench.reports.notes import axis_notes, header_notes, metric_notes, run_findings
@@ -67,7 +72,8 @@ class Report:
     order; `splatbench.experiments.store` columns); total: runs in the grid;
     metrics: the metrics shown; axes: one `AxisTable` per axis; findings: axis name (or
     "parity") -> `Finding`; fronts: Pareto figure stem -> scene -> Pareto-optimal cell
-    labels, cheapest first (filled when written).
+    labels, cheapest first (filled when written); check: the experiment's ``[check]``, its
+    headline at another protocol (None: the file declares none).
     """
 
     spec: ExperimentSpec
@@ -77,6 +83,7 @@ class Report:
     axes: list[AxisTable]
     findings: dict[str, Finding]
     fronts: dict[str, dict[str, list[str]]] = field(default_factory=dict)
+    check: CheckResult | None = None
 
     @property
     def done(self) -> int:
@@ -95,14 +102,17 @@ def grid_table(spec: ExperimentSpec, results_dir: str | Path) -> tuple[pd.DataFr
 
 
 def build_report(spec: ExperimentSpec, results_dir: str | Path) -> Report:
-    """Tables and findings of ``spec``'s results under ``results_dir`` (nothing written)."""
+    """Tables and findings of ``spec``'s results under ``results_dir`` (nothing written), and
+    its check's (`splatbench.reports.check`)."""
     table, total = grid_table(spec, results_dir)
-    return report_from_table(spec, table, total)
+    return report_from_table(spec, table, total, check_table(spec, results_dir))
 
 
-def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int) -> Report:
+def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int,
+                      checked: pd.DataFrame | None = None) -> Report:
     """Tables and findings of a run table (`grid_table`'s, or a report's ``results.parquet``
-    read back) of ``spec``'s grid of ``total`` runs."""
+    read back) of ``spec``'s grid of ``total`` runs; ``checked``: the runs of its ``[check]``
+    that have a result (`check_table`, or a report's ``check.parquet``; None: none)."""
     metrics = metric_specs(spec.kind, table)
     axes = [axis_table(spec, axis, table, metrics) for axis in spec.dimensions]
     findings: dict[str, Finding] = {}
@@ -114,14 +124,15 @@ def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int) -> 
         f = make(table, spec.min_effect)
         if f is not None:
             findings[name] = f
-    return Report(spec, table, total, metrics, axes, findings)
+    return Report(spec, table, total, metrics, axes, findings, check=check_result(spec, table, checked))
 
 
-def reported_done(out: str | Path) -> int | None:
-    """Runs with status ``done`` in the report folder ``out``'s ``results.parquet``; None
-    when ``out`` holds no report table (what `splatbench report` compares before it
-    replaces a report, so that a partial results folder cannot shrink a baseline)."""
-    path = Path(out) / TABLE_NAME
+def reported_done(out: str | Path, name: str = TABLE_NAME) -> int | None:
+    """Runs with status ``done`` in the report folder ``out``'s ``results.parquet`` (``name``:
+    ``check.parquet``, its check's); None when ``out`` holds no such table (what `splatbench
+    report` compares before it replaces a report, so that a partial results folder cannot
+    shrink a baseline)."""
+    path = Path(out) / name
     if not path.is_file():
         return None
     try:
@@ -145,6 +156,11 @@ def write_report(report: Report, out: str | Path, *, results: str | Path | None 
     figures.mkdir(parents=True, exist_ok=True)
     table = report.table
     atomic_write(out / TABLE_NAME, lambda temp: table.to_parquet(temp, index=False))
+    checked = report.check.table if report.check is not None else None
+    if checked is not None and len(checked):
+        atomic_write(out / CHECK_TABLE_NAME, lambda temp: checked.to_parquet(temp, index=False))
+    else:  # the folder describes this report: no check runs, no check table
+        (out / CHECK_TABLE_NAME).unlink(missing_ok=True)
 
     curve_paths: dict[str, Path] = {}
     for t in report.axes:
@@ -237,6 +253,11 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
         more = note(table)
         if more:
             lines += [*more, ""]
+    if report.check is not None:
+        lines += [header_line(report.check), ""]
+    elif spec.check is None and _has_protocols(spec.kind):
+        lines += ["**7K check: none declared** (the experiment file has no `[check]`: its headline is not rerun at "
+                  "graphdeco's 7K protocol; docs/reports.md, \"The 7K check\").", ""]
     timing = " ".join(t for t in (run_time(table), load_facts(table)) if t)
     if timing:
         lines += [timing, ""]
@@ -260,6 +281,9 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
 
     for name in (n for n in report.findings if n not in {t.axis for t in report.axes}):  # run findings
         lines += [f"## {name.capitalize()}", "", report.findings[name].markdown(), ""]
+
+    if report.check is not None:
+        lines += check_lines(report.check, f"splatbench run {source_path(spec)}{run_options}")
 
     specs = {m.name: m for m in report.metrics}
     declared = kind_report(spec.kind)
@@ -314,6 +338,14 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
             lines.append(f"| `{r.run_id}` | {r.scene} | {r.seed} | {str(r.error).replace('|', '/')} |")
         lines.append("")
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _has_protocols(kind: str) -> bool:
+    """Whether the run kind ``kind`` can rerun a cell under a protocol (a ``[check]`` applies to it)."""
+    try:
+        return get_kind(kind).protocols is not None
+    except InputError:
+        return False
 
 
 def run_warnings(spec: ExperimentSpec, table: pd.DataFrame) -> list[tuple[str, str, str, int, str]]:

@@ -157,5 +157,20 @@ def difference_settled(a: CellSettling, b: CellSettling, diff: float) -> bool:
     return a.settled and b.settled and math.isfinite(moved) and abs(moved) < DRIFT_SHARE * size
 
 
+def unsettled_reason(a: CellSettling | None, b: CellSettling | None, labels: tuple[str, str], diff: float,
+                     unit: str) -> str:
+    """Why the difference ``b - a`` (cells labelled ``labels``, a first) is not settled: the cells
+    whose own curves still moved (``b`` first), else how far the difference moved over the last
+    quarter; "" when it is settled, or not judged (a cell without a curve)."""
+    if a is None or b is None:
+        return ""
+    moving = [f"`{label}` {c.test:+.2f}" for label, c in ((labels[1], b), (labels[0], a)) if not c.settled]
+    if moving:
+        return ", ".join(moving) + f" {unit} / 1,000 steps over the last quarter"
+    if not difference_settled(a, b, diff):
+        return f"the difference moved {drift(a, b):+.2f} {unit} over the last quarter"
+    return ""
+
+
 __all__ = ["LAST_SHARE", "SETTLE_STEPS", "DRIFT_SHARE", "Slope", "CellSettling", "last_quarter_slope",
-           "cell_settling", "drift", "difference_settled"]
+           "cell_settling", "drift", "difference_settled", "unsettled_reason"]

@@ -43,6 +43,7 @@ Example::
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import tomllib
 import typing
@@ -461,7 +462,11 @@ def _protocol_iterations(name: Any, otherwise: int) -> int:
     return otherwise if protocol is None or protocol.iterations is None else protocol.iterations
 
 
+@functools.cache
 def _field_types() -> dict[str, Any]:
+    """TrainConfig's field types, resolved once per process: `typing.get_type_hints` compiles every
+    annotation string again on each call, and validation asks for them once per field, which made
+    expanding a training grid cost about 0.1 s per run (read only; never mutated)."""
     return typing.get_type_hints(TrainConfig)
 
 

@@ -21,6 +21,13 @@
     to the first 7,000 steps of a ``graphdeco-30k`` run of the same seed): the paper's
     7K column at under a quarter of the cost.
 
+A grid's check (an experiment's ``[check]``: its headline rerun at a graphdeco protocol,
+docs/reports.md "The 7K check") evaluates the test views every `Protocol.curve_every` steps:
+700 under ``graphdeco-7k`` (ten points, the last the 7K column) and 2,500 under
+``graphdeco-30k``, spacings on which no point falls on an opacity reset (every 3,000 steps
+inside the refine window, 500..15,000): a point there would measure the model in the step
+its opacities were clamped, not the model (1,000 or 500 would put one on 3,000 and 6,000).
+
 Under a graphdeco protocol ``iterations`` defaults to the protocol's length and may be
 set lower only to stop the same schedule early (a smoke test: the result records the
 step it stopped at), never higher; the final-10 % check of `splatbench.train.schedule`
@@ -53,6 +60,8 @@ class Protocol:
     eval_steps: tuple[int, ...]   # steps of a full test evaluation (`TrainResult.step_evaluations`), besides the end
     final_window_check: bool      # the last topology change must precede the final 10 % of the run
     stands_beside: str            # the published numbers it is comparable with
+    curve_every: int | None = None  # test-curve spacing of a grid's check at this protocol (`eval_every`; None:
+    #                               # no check runs at it): no point on an opacity reset's step (module doc)
 
     def check_iterations(self, iterations: int) -> None:
         """One-line `InputError` when ``iterations`` exceeds the protocol's length."""
@@ -92,9 +101,9 @@ PROTOCOLS: dict[str, Protocol] = {
     "quick": Protocol("quick", None, None, (), True,
                       "no published column (graphdeco's step fields scaled to the run, learning rates not)"),
     "graphdeco-30k": Protocol("graphdeco-30k", GRAPHDECO_ITERATIONS, GRAPHDECO_ITERATIONS, (7_000, 30_000), False,
-                              "the 3DGS paper's 7K and 30K columns (Kerbl et al. 2023, Tables 1 and 2)"),
+                              "the 3DGS paper's 7K and 30K columns (Kerbl et al. 2023, Tables 1 and 2)", 2_500),
     "graphdeco-7k": Protocol("graphdeco-7k", GRAPHDECO_ITERATIONS, 7_000, (7_000,), False,
-                             "the 3DGS paper's 7K column (Kerbl et al. 2023, Table 1)"),
+                             "the 3DGS paper's 7K column (Kerbl et al. 2023, Table 1)", 700),
 }
 
 

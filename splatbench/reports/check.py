@@ -1,0 +1,276 @@
+"""The 7K check: an experiment's headline comparison rerun at the field's protocol.
+
+An experiment's ``[check]`` (`splatbench.experiments.CheckSpec`) names two cells of its grid,
+one of its scenes and a protocol, e.g. ``graphdeco-7k`` (graphdeco's 30,000-step schedule as
+written, stopped and evaluated after 7,000 steps: the 3DGS paper's 7K column);
+``splatbench run`` runs those two cells at that scene for every seed under that protocol
+(`splatbench.experiments.check_runs`). `check_result` sets the paired difference of the
+check's runs beside the same difference from the grid's own runs of those cells, with the
+statistics of every finding (`splatbench.reports.findings.paired`, `fmt_interval`, `judge`:
+the paired t interval over seeds, the minimum effect) and the settled rule on each side's own
+test curves (`splatbench.reports.settling`), and gives one verdict (`VERDICTS`):
+
+* **holds**: every run of both sides is done, and both protocols give a significant difference
+  of at least the minimum effect with the same sign, or neither gives a practical difference
+  (a "no difference" headline holds too);
+* **does not hold**: the sign flips, or one protocol gives a practical difference and the
+  other does not;
+* **not run**: none of the check's runs has a result (the report is written all the same);
+* **incomplete**: some of the check's runs, or of the grid's runs of the two cells, have no
+  finished result (no verdict from part of the seeds).
+
+Whether the check's cells had settled is stated beside the verdict and does not change it: at
+graphdeco's 7K column a model is mid-schedule (its refinement runs to 15,000 steps and its
+last opacity reset was 1,000 steps earlier), which is the column it stands beside.
+The check's runs are kept beside the report as ``check.parquet`` (`CHECK_TABLE_NAME`), the
+grid's as ``results.parquet``.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import pandas as pd
+
+from splatbench.experiments.grid import check_cells
+from splatbench.experiments.kind_report import Comparison
+from splatbench.experiments.kinds import get_kind
+from splatbench.experiments.spec import CheckSpec, ExperimentSpec
+from splatbench.experiments.store import build_table, experiment_dir, read_records
+from splatbench.metrics.spec import MetricSpec
+from splatbench.reports.findings import Claim, fmt_interval, fmt_min_effect, fmt_number, judge, paired, rules_for, usable_runs
+from splatbench.reports.settling import cell_settling, unsettled_reason
+from splatbench.reports.tables import Stat, cell_labels, kind_report, metric_specs, seed_values, stat
+
+#: The check's runs beside a report (the grid's are ``results.parquet``).
+CHECK_TABLE_NAME = "check.parquet"
+#: What a check can conclude (module doc).
+VERDICTS = ("holds", "does not hold", "not run", "incomplete")
+
+
+def protocol_title(protocol: str) -> str:
+    """How the report names a protocol in the check's title: ``"7K"`` for ``graphdeco-7k``
+    (``"30K"`` for ``graphdeco-30k``), else the name in backquotes."""
+    m = re.search(r"(\d+)k$", protocol)
+    return f"{m.group(1)}K" if m else f"`{protocol}`"
+
+
+def check_name(protocol: str) -> str:
+    """What the check is called: ``"7K check"`` at ``graphdeco-7k``; ``"check at NAME"`` for a
+    protocol whose name gives no step count."""
+    title = protocol_title(protocol)
+    return f"{title} check" if not title.startswith("`") else f"check at {protocol}"
+
+
+@dataclass(frozen=True)
+class CheckSide:
+    """One protocol's side of the check, at the check's scene.
+
+    protocol: its name as the runs recorded it; done / failed / total: runs of the two cells
+    (every seed); stats: each cell's mean ± interval of the primary metric over seeds; claim:
+    the paired difference, second cell minus first (None without a pair of done runs);
+    settled: both cells' curves had flattened and the difference stopped moving (None: not
+    judged); why: why not, where not ("" otherwise).
+    """
+
+    protocol: str
+    done: int
+    failed: int
+    total: int
+    stats: tuple[Stat, Stat]
+    claim: Claim | None
+    settled: bool | None
+    why: str
+
+    @property
+    def complete(self) -> bool:
+        return self.done == self.total and self.claim is not None
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """The check of one report (module doc): the seeds, the cells' labels (reference first), what its
+    protocol stands beside (``described``), the grid's side and the rerun's, the verdict with
+    the sentence that gives it, and the check's runs that have a result (``table``)."""
+
+    check: CheckSpec
+    seeds: tuple[int, ...]
+    labels: tuple[str, str]
+    described: str
+    metric: MetricSpec
+    grid: CheckSide
+    rerun: CheckSide
+    verdict: str
+    reason: str
+    table: pd.DataFrame
+
+    @property
+    def name(self) -> str:
+        return check_name(self.check.protocol)
+
+    @property
+    def headline(self) -> str:
+        """``"7K check: holds"``: the words the README's line of the report repeats."""
+        return f"{self.name}: {self.verdict}"
+
+
+def check_table(spec: ExperimentSpec, results_dir) -> pd.DataFrame:
+    """The check's runs that have a result file under ``results_dir`` (the experiment's folder),
+    in check order (`splatbench.experiments.check_runs`); empty without a check."""
+    a, b = check_cells(spec)
+    records = read_records(experiment_dir(results_dir, spec.name))
+    return build_table([records[r.run_id] for r in (*a, *b) if r.run_id in records])
+
+
+def check_result(spec: ExperimentSpec, table: pd.DataFrame, checked: pd.DataFrame | None) -> CheckResult | None:
+    """The check of ``spec`` from the grid's run table ``table`` and the check's ``checked``
+    (`check_table`; None or empty: not run); None for an experiment without a ``[check]`` or
+    a kind without findings rules."""
+    check = spec.check
+    metrics = metric_specs(spec.kind, table)
+    rules = rules_for(spec.kind, metrics, spec.min_effect) if check is not None else None
+    if rules is None:
+        return None
+    declared = kind_report(spec.kind)
+    metric = next(m for m in metrics if m.name == rules.primary)
+    comp = next((c for c in rules.comparisons if c.metric == metric.name), Comparison(metric.name, "diff"))
+    checked = checked if checked is not None else pd.DataFrame(columns=["run_id", "status"])
+    quick = check_cells(spec, at_protocol=False)
+    rerun = check_cells(spec)
+    labels = tuple(cell_labels(spec, pd.DataFrame([{f"axis.{k}": v for k, v in r.labels.items()}
+                                                   for r in (quick[0][0], quick[1][0])])))
+    settling = declared.settling if declared is not None and declared.settling is not None \
+        and declared.settling.metric == metric.name else None
+
+    def side(runs: pd.DataFrame, cells, protocol: str) -> CheckSide:
+        ids = [{r.run_id for r in cell} for cell in cells]
+        total = sum(len(c) for c in cells)
+        mine = runs[runs.run_id.isin(ids[0] | ids[1])] if len(runs) else runs
+        done, failed = int((mine.status == "done").sum()), int((mine.status == "failed").sum())
+        usable = usable_runs(mine) if len(mine) else mine
+        pick = [usable[usable.run_id.isin(i)] if len(usable) else usable for i in ids]
+        values = [seed_values(p, metric.name) if len(p) else {} for p in pick]
+        iv, null = paired(values[0], values[1], comp)
+        claim = None
+        settled, why = None, ""
+        if iv.n:
+            if settling is not None and comp.min_effect is not None:
+                sa, sb = (cell_settling(p, settling, comp.min_effect) if len(p) else None for p in pick)
+                why = unsettled_reason(sa, sb, labels, iv.estimate - (null or 0.0), metric.unit)
+                settled = None if sa is None or sb is None else not why
+            text = fmt_interval(iv, comp.how, metric, null, comp.min_effect)
+            significant, practical = judge(iv, comp.how, null, metric, comp.min_effect)
+            claim = Claim("check", check.scene, labels[1], metric.name, comp.how, iv.estimate, text, labels[0],
+                          iv.low, iv.high, iv.n, significant, practical, settled)
+        return CheckSide(protocol, done, failed, total, (stat(values[0]), stat(values[1])), claim, settled, why)
+
+    grid_protocol = _recorded_protocol(table, {r.run_id for c in quick for r in c})
+    grid_side = side(table, quick, grid_protocol)
+    rerun_side = side(checked, rerun, check.protocol)
+    verdict, reason = _verdict(grid_side, rerun_side, labels, metric, comp)
+    kind = get_kind(spec.kind)
+    described = kind.protocols.describe(check.protocol) if kind.protocols is not None else check.protocol
+    return CheckResult(check, tuple(spec.seeds), labels, described, metric, grid_side, rerun_side, verdict, reason,
+                       checked if len(checked) else build_table([]))
+
+
+def _recorded_protocol(table: pd.DataFrame, ids: set[str]) -> str:
+    """The protocol the grid's runs of the check's cells recorded (``config.protocol``; a config
+    without one is the quick protocol, `splatbench.reports.protocol`)."""
+    if not len(table) or "config.protocol" not in table.columns:
+        return "quick"
+    values = {v for v in table[table.run_id.isin(ids)]["config.protocol"] if isinstance(v, str) and v}
+    return " / ".join(sorted(values)) or "quick"
+
+
+def _verdict(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str], metric: MetricSpec,
+             comp: Comparison) -> tuple[str, str]:
+    """(verdict, the sentence that gives it) (module doc)."""
+    how, min_effect = comp.how, comp.min_effect
+    at = f"`{rerun.protocol}`"
+    if rerun.done == 0:
+        failed = f" ({rerun.failed} failed)" if rerun.failed else ""
+        return "not run", f"none of its {rerun.total} runs has a finished result{failed}"
+    if not rerun.complete:
+        return "incomplete", (f"{rerun.done} of its {rerun.total} runs are done"
+                              + (f" ({rerun.failed} failed)" if rerun.failed else "") + "; no verdict from part of "
+                                                                                         "the seeds")
+    if not grid.complete:
+        return "incomplete", (f"{grid.done} of the grid's {grid.total} runs of these two cells at "
+                              f"{rerun.claim.scene} are done; no verdict from part of the seeds")
+    g, r = grid.claim, rerun.claim
+    compared = f"`{labels[1]}` against `{labels[0]}` on {r.scene}"
+    quick = f"the grid's protocol ({grid.protocol}) gives {g.text}"
+    null = 1.0 if how == "ratio" else (comp.null or 0.0) if how == "mean" else 0.0  # `findings.paired`'s
+    if g.practical and r.practical:
+        if (g.value - null) * (r.value - null) > 0:
+            effect = f" and at least the {fmt_min_effect(min_effect, how, metric)} minimum effect" \
+                if min_effect is not None else ""
+            return "holds", (f"at {at}, {compared}: {r.text}; the same sign as under the grid's protocol "
+                             f"({fmt_number(g.value, how, metric)}), significant{effect}")
+        return "does not hold", (f"at {at}, {compared}: {r.text}, the opposite sign of the grid's protocol "
+                                 f"({fmt_number(g.value, how, metric)})")
+    if not g.practical and not r.practical:
+        return "holds", f"neither protocol gives a practical difference: {quick}; {at} gives {r.text}"
+    return "does not hold", f"at {at}, {compared}: {r.text}, where {quick}"  # one of the two is practical
+
+
+def check_lines(result: CheckResult, run_command: str) -> list[str]:
+    """The report's section "Headline at the 7K protocol" (title included); ``run_command``:
+    the ``splatbench run ...`` that runs the check."""
+    c, m = result.check, result.metric
+    a, b = result.labels
+    title = protocol_title(c.protocol)
+    seeds = ", ".join(map(str, result.seeds))
+    lines = [f"## Headline at the {title} protocol", "",
+             f"The headline comparison, `{b}` against `{a}` on {c.scene}, every seed ({seeds}), under the grid's "
+             f"protocol and rerun at `{c.protocol}`: {result.described}. Declared in the experiment file's `[check]`; "
+             f"`{run_command}` runs it after the grid's runs (docs/reports.md, \"The 7K check\"). "
+             f"{_name(m)[:1].upper()}{_name(m)[1:]} paired over seeds with its 95 % t interval, the minimum "
+             f"effect and the settled rule on "
+             f"each protocol's own test curves, as in the findings above"
+             + (f"; the check's runs are in `{CHECK_TABLE_NAME}` beside this file." if len(result.table) else "."),
+             "",
+             f"| protocol | runs done | `{a}` | `{b}` | `{b}` − `{a}`, paired | settled |",
+             "|---|---:|---:|---:|---|---|"]
+    for side, name in ((result.grid, f"`{result.grid.protocol}` (the grid's)"),
+                       (result.rerun, f"`{result.rerun.protocol}`")):
+        runs = f"{side.done} of {side.total}" + (f" ({side.failed} failed)" if side.failed else "")
+        diff = side.claim.text if side.claim is not None else "–"
+        settled = "–" if side.settled is None else "yes" if side.settled else f"no: {side.why}"
+        lines.append(f"| {name} | {runs} | {side.stats[0].text(m.fmt)} | {side.stats[1].text(m.fmt)} | {diff} "
+                     f"| {settled} |")
+    lines += ["", f"Cells: {_name(m)} ({m.unit}), mean over seeds ± the half-width of its 95 % t interval."
+              if m.unit else f"Cells: {_name(m)}, mean over seeds ± the half-width of its 95 % t interval.", ""]
+    sentence = f"**{result.headline}**: {result.reason}"
+    if result.verdict in ("holds", "does not hold") and result.rerun.settled is False:
+        sentence += f"; **not settled** at `{c.protocol}` ({result.rerun.why})"
+    if result.verdict in ("not run", "incomplete"):
+        sentence += f". Run `{run_command}` (finished runs are skipped) and report again"
+    lines += [sentence + ".", ""]
+    failed = result.table[result.table.status == "failed"] if len(result.table) else result.table
+    if len(failed):
+        lines += ["Failed runs of the check:", ""]
+        lines += [f"- `{r.run_id}` ({r.scene}, seed {r.seed}): {' '.join(str(r.error).split())}"
+                  for _, r in failed.iterrows()]
+        lines.append("")
+    return lines
+
+
+def header_line(result: CheckResult) -> str:
+    """The report header's line naming the check and its verdict."""
+    a, b = result.labels
+    unsettled = ", not settled there" if result.verdict in ("holds", "does not hold") \
+        and result.rerun.settled is False else ""
+    return (f"**{result.headline}** (`{b}` against `{a}` on {result.check.scene}, rerun at protocol "
+            f"`{result.check.protocol}`{unsettled}; section \"Headline at the "
+            f"{protocol_title(result.check.protocol)} protocol\").")
+
+
+def _name(spec: MetricSpec) -> str:
+    return spec.label.split(" (")[0]
+
+
+__all__ = ["CHECK_TABLE_NAME", "VERDICTS", "CheckSide", "CheckResult", "check_name", "protocol_title", "check_table", "check_result",
+           "check_lines", "header_line"]

@@ -1,0 +1,366 @@
+"""The 7K check (issue 29, item 2): a grid's ``[check]`` reruns its headline's two cells at one
+scene, every seed, under graphdeco's 7K protocol; `splatbench run` runs those runs too, under
+their own run ids, and `splatbench report` sets their paired difference beside the grid's with
+a verdict ("holds", "does not hold", "not run", "incomplete").
+
+Planning is checked on the train kind itself (expansion renders nothing); running on the dummy
+kind of `tests.kinds_for_tests` (its protocol "long"); the report on made-up train records
+written as the engine writes them (as tests/test_reports.py does), so the file runs in seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from splatbench.errors import InputError
+from splatbench.experiments import check_cells, check_runs, expand, parse_experiment, run_experiment
+from splatbench.experiments.grid import check_experiment
+from splatbench.experiments.store import RunRecord, read_records, write_record
+from splatbench.metrics.stats import paired_difference
+from splatbench.reports import build_report, write_report
+from splatbench.reports.check import CHECK_TABLE_NAME
+from splatbench.reports.report import report_from_table
+
+TRAIN_GRID = """
+name = "shcheck"
+kind = "train"
+scenes = ["diffuse", "glossy"]
+seeds = [0, 1, 2]
+[base]
+iterations = 100
+eval_every = 50
+log_every = 10
+data.resolution = 32
+data.views = 8
+data.spp = 2
+[axes]
+sh_degree = [0, 1, 3]
+ssim_lambda = [0.2, 0.5]
+[check]
+protocol = "graphdeco-7k"
+scene = "glossy"
+cells = [{ sh_degree = 0, ssim_lambda = 0.2 }, { sh_degree = 3, ssim_lambda = 0.2 }]
+"""
+
+
+def spec_of(text: str, **changes):
+    data = tomllib.loads(text)
+    for key, value in changes.items():
+        if value is None:
+            data.pop(key, None)
+        else:
+            data[key] = value
+    spec = parse_experiment(data, source="x.toml", default_name="x")
+    check_experiment(spec)
+    return spec
+
+
+# --------------------------------------------------------------------------- planning
+def test_check_runs_are_the_two_cells_at_the_protocol():
+    spec = spec_of(TRAIN_GRID)
+    a, b = check_cells(spec)
+    runs = check_runs(spec)
+    assert [r.run_id for r in runs] == [r.run_id for r in (*a, *b)]
+    # every seed of the two cells, only the check's scene
+    assert [(r.scene, r.seed, r.labels["sh_degree"], r.labels["ssim_lambda"]) for r in runs] == \
+        [("glossy", s, d, 0.2) for d in (0, 3) for s in (0, 1, 2)]
+    for r in runs:
+        c = r.config
+        # the protocol overrides the grid's length and curve: graphdeco's 7K column, a point every 700 steps
+        assert (c["protocol"], c["iterations"], c["eval_every"]) == ("graphdeco-7k", 7000, 700)
+        assert c["schedule"] == "scaled" and c["strategy_options"]["reset_every"] == 3000  # graphdeco's, as written
+        # everything else is the grid's cell
+        assert (c["log_every"], c["data"]) == (10, {"resolution": 32, "views": 8, "spp": 2})
+        assert c["ssim_lambda"] == 0.2 and c["sh_degree"] == r.labels["sh_degree"]
+    # own run ids; the grid's are those of the same file without [check] (existing results are found)
+    grid = expand(spec)
+    assert not {r.run_id for r in runs} & {r.run_id for r in grid}
+    assert [r.run_id for r in grid] == [r.run_id for r in expand(spec_of(TRAIN_GRID, check=None))]
+    assert len({r.run_id for r in runs}) == 6
+    # the grid's side of the comparison: the grid's own runs of those cells
+    by_id = {r.run_id: r for r in grid}
+    for cell in check_cells(spec, at_protocol=False):
+        for r in cell:
+            assert r.run_id in by_id and by_id[r.run_id].config == r.config and r.config["iterations"] == 100
+
+
+def test_check_of_a_one_at_a_time_grid_takes_its_base_and_nested_keys():
+    text = """
+name = "sched"
+kind = "train"
+scenes = ["textured"]
+seeds = [0, 1, 2]
+grid = "one-at-a-time"
+[base]
+iterations = 2000
+data.resolution = 32
+strategy_options.reset_every = "10%"
+[axes]
+strategy_options.reset_every = ["10%", 0]
+strategy_options.refine_every = [50, 100]
+[check]
+protocol = "graphdeco-7k"
+scene = "textured"
+cells = [{}, { strategy_options.reset_every = 0 }]
+"""
+    spec = spec_of(text)
+    base, never = check_cells(spec)
+    assert [r.config["strategy_options"]["reset_every"] for r in base] == ["10%"] * 3  # 3,000 of graphdeco's 30,000
+    assert [r.config["strategy_options"]["reset_every"] for r in never] == [0] * 3
+    assert {r.config["iterations"] for r in (*base, *never)} == {7000}
+    grid = {r.run_id for r in expand(spec)}
+    assert all(r.run_id in grid for cell in check_cells(spec, at_protocol=False) for r in cell)
+    # a number names the axis value it equals (TOML's 50.0 is the axis's 50)
+    other = spec_of(text.replace("{ strategy_options.reset_every = 0 }", "{ strategy_options.refine_every = 50.0 }"))
+    assert [r.config["strategy_options"]["refine_every"] for r in check_cells(other)[1]] == [50] * 3
+
+
+@pytest.mark.parametrize("check, message", [
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh_degree": 0, "ssim_lambda": 0.2}]},
+     "check.cells: expected two cells"),
+    ({"protocol": "graphdeco-7k", "scene": "textured", "cells": [{}, {}]},
+     "check.scene: expected one of the grid's scenes (diffuse, glossy), got 'textured'"),
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh_degree": 0, "ssim_lambda": 0.2},
+                                                              {"sh_degree": 2, "ssim_lambda": 0.2}]},
+     "check.cells[1].sh_degree: 2 is not a value of the grid's axis 'sh_degree'"),
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh_degree": 0}, {"sh_degree": 3}]},
+     "check.cells[0]: names no value of 'ssim_lambda'"),
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh_degree": 0, "ssim_lambda": 0.2, "lr": 1},
+                                                              {"sh_degree": 3, "ssim_lambda": 0.2}]},
+     "check.cells[0].lr: not an axis of the grid"),
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh_degree": 3, "ssim_lambda": 0.2}] * 2},
+     "check.cells: the two cells are the same cell"),
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{}, {}], "seeds": [0]},
+     "check.seeds: unknown key"),
+    ({"protocol": "quick", "scene": "glossy", "cells": [{"sh_degree": 0, "ssim_lambda": 0.2},
+                                                       {"sh_degree": 3, "ssim_lambda": 0.2}]},
+     "check.protocol: 'quick' is laid over the grid's own iterations"),
+    ({"protocol": "graphdeco-9k", "scene": "glossy", "cells": [{"sh_degree": 0, "ssim_lambda": 0.2},
+                                                              {"sh_degree": 3, "ssim_lambda": 0.2}]},
+     "check.protocol: expected one of 'quick', 'graphdeco-30k', 'graphdeco-7k', got 'graphdeco-9k'"),
+])
+def test_a_bad_check_is_one_line_before_anything_runs(check, message):
+    with pytest.raises(InputError) as err:
+        spec_of(TRAIN_GRID, check=check)
+    assert message in str(err.value) and "\n" not in str(err.value)
+    assert str(err.value).startswith("x.toml: check")
+
+
+def test_a_check_at_the_grids_own_protocol_or_of_a_kind_without_protocols_is_refused():
+    with pytest.raises(InputError, match=r"check.protocol: the grid already runs 'graphdeco-7k'"):
+        spec_of(TRAIN_GRID.replace("iterations = 100\neval_every = 50", 'protocol = "graphdeco-7k"\neval_every = 700'))
+    raster = """
+name = "r"
+kind = "raster"
+scenes = ["synthetic-100-32"]
+seeds = [0, 1, 2]
+[axes]
+tile_size = [8, 16]
+[check]
+protocol = "graphdeco-7k"
+scene = "synthetic-100-32"
+cells = [{ tile_size = 8 }, { tile_size = 16 }]
+"""
+    with pytest.raises(InputError, match=r"check: run kind 'raster' has no protocols"):
+        spec_of(raster)
+
+
+# --------------------------------------------------------------------------- running
+DUMMY_GRID = """
+name = "dcheck"
+kind = "tests.kinds_for_tests:DUMMY"
+scenes = ["alpha", "beta"]
+seeds = [0, 1]
+[axes]
+x = [0.0, 1.5, 3.0]
+[check]
+protocol = "long"
+scene = "beta"
+cells = [{ x = 0.0 }, { x = 3.0 }]
+"""
+
+
+def test_run_runs_the_check_after_the_grid_and_resumes(tmp_path):
+    spec = spec_of(DUMMY_GRID)
+    grid, checks = expand(spec), check_runs(spec)
+    summary = run_experiment(spec, workers=2, results_dir=tmp_path, progress=False, check=False)
+    assert (summary.done, summary.total) == (len(grid), 12)
+    assert set(read_records(tmp_path / "dcheck")) == {r.run_id for r in grid}
+    summary = run_experiment(spec, workers=2, results_dir=tmp_path, progress=False)
+    assert (summary.done, summary.skipped, summary.total) == (4, 12, 16)  # only the check's 4 runs ran
+    records = read_records(tmp_path / "dcheck")
+    for r in checks:  # each under its own id, with the protocol's config (curves 7 points long)
+        rec = records[r.run_id]
+        assert rec.status == "done" and rec.scene == "beta" and len(rec.curves["value"]) == 7
+        assert rec.labels == {"x": r.config["x"]} and r.config["x"] in (0.0, 3.0)
+    summary = run_experiment(spec, workers=2, results_dir=tmp_path, progress=False)
+    assert (summary.done, summary.skipped) == (0, 16)
+
+    from splatbench.experiments.cli import run as run_command
+
+    path = tmp_path / "dcheck.toml"
+    path.write_text(DUMMY_GRID)
+    out = CliRunner().invoke(run_command, [str(path), "--results", str(tmp_path), "--dry-run"])
+    assert out.exit_code == 0, out.output
+    lines = out.output.splitlines()
+    assert sum("check: protocol=long" in line for line in lines) == 4 and "16 runs in" in lines[-1]
+    assert all(line.split()[1] == "done" for line in lines[:-1])
+    out = CliRunner().invoke(run_command, [str(path), "--results", str(tmp_path), "--dry-run", "--no-check"])
+    assert "check:" not in out.output and "12 runs in" in out.output
+
+
+# --------------------------------------------------------------------------- the report
+SH_GRID = """
+name = "shfake"
+kind = "train"
+scenes = ["diffuse", "glossy"]
+seeds = [0, 1, 2]
+[base]
+iterations = 100
+eval_every = 50
+data.resolution = 32
+data.views = 8
+data.spp = 2
+[axes]
+sh_degree = [0, 3]
+[check]
+protocol = "graphdeco-7k"
+scene = "glossy"
+cells = [{ sh_degree = 0 }, { sh_degree = 3 }]
+"""
+
+
+def record(spec, run, psnr: float, slope: float = 0.0) -> RunRecord:
+    """A finished train run ending at ``psnr`` whose test curve rises ``slope`` dB per 1,000 steps."""
+    end = run.config["iterations"]
+    every = run.config["eval_every"]
+    steps = list(range(every, end + 1, every))
+    curve = [psnr - slope * (end - s) / 1000 for s in steps]
+    metrics = {"test_psnr": psnr, "test_ssim": 0.9, "test_lpips": 0.1, "num_gaussians": 1000,
+               "train_seconds": 10.0, "render_ms_per_view": 5.0, "time_loaded": 0, "lpips_net": "alex",
+               "lpips_scale_inputs": 1}
+    curves = {"step": steps, "psnr": curve, "loss": [0.1] * len(steps), "num_gaussians": [1000] * len(steps),
+              "eval_step": steps, "eval_psnr": curve, "eval_ssim": [0.9] * len(steps)}
+    return RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
+                     status="done", config=dict(run.config), labels=dict(run.labels), metrics=metrics, curves=curves,
+                     seconds=1.0, started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00",
+                     worker="h:1")
+
+
+def grid_results(root, spec, gain: float = 0.5):
+    """The grid done: SH 3 over SH 0 by ``gain`` dB on glossy, seed noise ±0.05 dB, flat curves."""
+    rng = np.random.default_rng(0)
+    for run in expand(spec):
+        d = run.labels["sh_degree"]
+        write_record(root, record(spec, run, 26.0 + (gain if d == 3 and run.scene == "glossy" else 0.0)
+                                  + rng.normal(0, 0.05)))
+
+
+def check_results(root, spec, gain: float, slope: float = 0.0, skip: int = 0):
+    """The check's runs done (but the last ``skip``): SH 3 over SH 0 by ``gain`` dB."""
+    rng = np.random.default_rng(1)
+    runs = check_runs(spec)
+    for run in runs[:len(runs) - skip]:
+        d = run.labels["sh_degree"]
+        write_record(root, record(spec, run, 28.0 + (gain if d == 3 else 0.0) + rng.normal(0, 0.05),
+                                  slope if d == 3 else 0.0))
+
+
+def test_report_says_not_run_without_the_checks_results(tmp_path):
+    spec = spec_of(SH_GRID)
+    grid_results(tmp_path / "results", spec)
+    report = build_report(spec, tmp_path / "results")
+    out = tmp_path / "report"
+    text = write_report(report, out).read_text()
+    assert report.check.verdict == "not run" and report.check.headline == "7K check: not run"
+    assert report.check.rerun.claim is None and report.check.grid.claim.practical
+    assert "## Headline at the 7K protocol" in text
+    assert ("**7K check: not run** (`sh_degree=3` against `sh_degree=0` on glossy, rerun at protocol "
+            "`graphdeco-7k`") in text  # the header
+    assert ("**7K check: not run**: none of its 6 runs has a finished result. Run `splatbench run x.toml` "
+            "(finished runs are skipped) and report again.") in text
+    assert "| `graphdeco-7k` | 0 of 6 | – | – | – | – |" in text
+    assert "the 3DGS paper's 7K column" in text and not (out / CHECK_TABLE_NAME).exists()
+    # a grid without [check] names none
+    plain = write_report(build_report(spec_of(SH_GRID, check=None), tmp_path / "results"), tmp_path / "plain")
+    assert "**7K check: none declared**" in plain.read_text() and "## Headline at" not in plain.read_text()
+
+
+@pytest.mark.parametrize("gain, slope, verdict", [
+    (0.6, 0.0, "holds"),            # same sign, significant, above 0.1 dB
+    (0.6, 0.5, "holds"),            # holds, but SH 3's 7K curve still rises 0.5 dB / 1,000 steps: not settled
+    (-0.4, 0.0, "does not hold"),   # the sign flips
+    (0.03, 0.0, "does not hold"),   # no practical difference at 7K
+])
+def test_report_gives_a_verdict_with_the_checks_results(tmp_path, gain, slope, verdict):
+    spec = spec_of(SH_GRID)
+    root = tmp_path / "results"
+    grid_results(root, spec)
+    check_results(root, spec, gain, slope)
+    report = build_report(spec, root)
+    out = tmp_path / "report"
+    text = write_report(report, out).read_text()
+    check = report.check
+    assert check.verdict == verdict and f"**7K check: {verdict}**: " in text
+    # the numbers are those of the check's own runs, written beside the report, paired over seeds
+    table = pd.read_parquet(out / CHECK_TABLE_NAME)
+    assert list(table.run_id) == [r.run_id for r in check_runs(spec)]
+    per = {d: dict(zip(g.seed, g["metric.test_psnr"])) for d, g in table.groupby("axis.sh_degree")}
+    iv = paired_difference(per[0], per[3])
+    claim = check.rerun.claim
+    assert claim.n == 3 and claim.value == pytest.approx(iv.estimate) and claim.low == pytest.approx(iv.low)
+    assert abs(claim.value - gain) < 0.15 and claim.text in text
+    assert check.rerun.settled is (slope == 0.0)
+    assert ("**not settled** at `graphdeco-7k` (`sh_degree=3` +0.50 dB / 1,000 steps" in text) is (slope > 0)
+    # the grid's side is the grid's runs of the same two cells (iterations 100), not the check's
+    assert check.grid.protocol == "quick" and check.grid.claim.value == pytest.approx(0.5, abs=0.15)
+    # rebuilt from the report folder alone, the section is the same
+    rebuilt = report_from_table(spec, pd.read_parquet(out / "results.parquet"), len(expand(spec)), table)
+    assert rebuilt.check == dataclasses.replace(check, table=rebuilt.check.table)
+
+
+def test_report_of_part_of_the_check_gives_no_verdict(tmp_path):
+    spec = spec_of(SH_GRID)
+    grid_results(tmp_path, spec)
+    check_results(tmp_path, spec, 0.6, skip=2)
+    report = build_report(spec, tmp_path)
+    assert report.check.verdict == "incomplete" and report.check.rerun.done == 4
+    text = write_report(report, tmp_path / "report").read_text()
+    assert "**7K check: incomplete**: 4 of its 6 runs are done; no verdict from part of the seeds." in text
+
+
+def test_report_command_keeps_the_check_beside_the_report_and_rebuilds_it(tmp_path):
+    """`splatbench report` writes check.parquet, refuses to replace it from a results folder that
+    lacks the check's runs (a report never shrinks), and --rebuild rewrites the same report from
+    the folder's two tables."""
+    from splatbench.experiments import load_experiment
+    from splatbench.reports.cli import report as report_command
+
+    path = tmp_path / "shfake.toml"
+    path.write_text(SH_GRID)
+    spec = load_experiment(path)
+    full, partial, out = tmp_path / "full", tmp_path / "partial", tmp_path / "out"
+    grid_results(full, spec)
+    check_results(full, spec, 0.6)
+    grid_results(partial, spec)
+    run = CliRunner().invoke(report_command, [str(path), "--results", str(full), "--out", str(out)])
+    assert run.exit_code == 0, run.output
+    assert "shfake: 12 done, 0 failed, 0 not run of 12; 7K check: holds (6 of its 6 runs done)" in run.output
+    text = (out / "report.md").read_text()
+    run = CliRunner().invoke(report_command, [str(path), "--results", str(partial), "--out", str(out)])
+    assert isinstance(run.exception, InputError)  # the command line prints it in one line, exit status 2
+    assert f"{out / CHECK_TABLE_NAME}: holds 6 finished runs, the report from {partial / 'shfake'} would hold 0" \
+        in str(run.exception)
+    assert (out / "report.md").read_text() == text
+    run = CliRunner().invoke(report_command, [str(path), "--out", str(out), "--rebuild"])
+    assert run.exit_code == 0, run.output
+    rebuilt = (out / "report.md").read_text()
+    assert rebuilt.replace(f" --results {full} --out {out}", "").replace(f" --results {full}", "") \
+        == text.replace(f" --results {full} --out {out}", "").replace(f" --results {full}", "")
+    assert "**7K check: holds**: " in rebuilt
