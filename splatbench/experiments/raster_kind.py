@@ -270,7 +270,7 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
     from splatbench.metrics.timing import forward_backward_with_init, forward_with_init, time_runs, torch_params
     from splatbench.metrics.stats import bootstrap_median_ratio
     from splatbench.metrics.image import psnr
-    from splatbench.raster import render
+    from splatbench.raster import render, work_stats
 
     own_share()  # a checkpoint of the own-load tracker: what ran before this run, then the warm-up
     workload = build_workload(config["scene"], config["seed"])
@@ -300,7 +300,7 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
     fwd_rel = bootstrap_median_ratio(times["fwd"], times["default_fwd"])
     fwd_bwd_rel = bootstrap_median_ratio(times["fwd_bwd"], times["default_fwd_bwd"])
 
-    work = splatbench.raster.work_stats(workload.gaussians, workload.camera, **options)
+    work = work_stats(workload.gaussians, workload.camera, **options)
     scale = config["error_scale"]
     small = workload.camera if scale == 1 else workload.camera.scaled(scale)
     fast = render(workload.gaussians, small, sh_degree=degree, **options).rgb.astype(np.float64)
