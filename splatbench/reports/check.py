@@ -11,10 +11,11 @@ the paired t interval over seeds, the minimum effect) and the settled rule on ea
 test curves (`splatbench.reports.settling`), and gives one verdict (`VERDICTS`):
 
 * **holds**: every run of both sides is done, and both protocols give a significant difference
-  of at least the minimum effect with the same sign, or neither gives a practical difference
-  (a "no difference" headline holds too);
-* **does not hold**: the sign flips, or one protocol gives a practical difference and the
-  other does not;
+  of at least the minimum effect with the same sign; or, for a headline of no practical
+  difference, the check's interval lies within the minimum effect either side of no difference
+  (an interval too wide to tell is not "holds");
+* **does not hold**: the sign flips, one protocol gives a practical difference and the other
+  does not, or a no-difference headline's check interval reaches beyond the minimum effect;
 * **not run**: none of the check's runs has a result (the report is written all the same);
 * **incomplete**: some of the check's runs, or of the grid's runs of the two cells, have no
   finished result (no verdict from part of the seeds).
@@ -28,6 +29,7 @@ grid's as ``results.parquet``.
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -39,7 +41,9 @@ from splatbench.experiments.kinds import get_kind
 from splatbench.experiments.spec import CheckSpec, ExperimentSpec
 from splatbench.experiments.store import build_table, experiment_dir, read_records
 from splatbench.metrics.spec import MetricSpec
-from splatbench.reports.findings import Claim, fmt_interval, fmt_min_effect, fmt_number, judge, paired, rules_for, usable_runs
+from splatbench.metrics.stats import Interval
+from splatbench.reports.findings import (Claim, fmt_interval, fmt_min_effect, fmt_number, judge, no_spread, paired,
+                                         rules_for, usable_runs)
 from splatbench.reports.settling import cell_settling, unsettled_reason
 from splatbench.reports.tables import Stat, cell_labels, kind_report, metric_specs, seed_values, stat
 
@@ -175,6 +179,10 @@ def check_result(spec: ExperimentSpec, table: pd.DataFrame, checked: pd.DataFram
                        checked if len(checked) else build_table([]))
 
 
+def _interval(claim: Claim) -> Interval:
+    return Interval(claim.value, claim.low, claim.high, claim.n, "paired t")
+
+
 def _recorded_protocol(table: pd.DataFrame, ids: set[str]) -> str:
     """The protocol the grid's runs of the check's cells recorded (``config.protocol``; a config
     without one is the quick protocol, `splatbench.reports.protocol`)."""
@@ -211,9 +219,19 @@ def _verdict(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str], metric:
                              f"({fmt_number(g.value, how, metric)}), significant{effect}")
         return "does not hold", (f"at {at}, {compared}: {r.text}, the opposite sign of the grid's protocol "
                                  f"({fmt_number(g.value, how, metric)})")
-    if not g.practical and not r.practical:
-        return "holds", f"neither protocol gives a practical difference: {quick}; {at} gives {r.text}"
-    return "does not hold", f"at {at}, {compared}: {r.text}, where {quick}"  # one of the two is practical
+    if g.practical or r.practical:  # one of the two only
+        return "does not hold", f"at {at}, {compared}: {r.text}, where {quick}"
+    # a headline of no practical difference holds only where the check's interval rules one out
+    if min_effect is None or not math.isfinite(r.low) or no_spread(_interval(r), how, metric):
+        return "does not hold", (f"at {at}, {compared}: {r.text}, where {quick}: without an interval and a minimum "
+                                 f"effect the check cannot show that there is no practical difference")
+    lo, hi = (1 / (1 + min_effect), 1 + min_effect) if how == "ratio" else (null - min_effect, null + min_effect)
+    bound = fmt_min_effect(min_effect, how, metric)
+    if lo < r.low and r.high < hi:
+        return "holds", (f"neither protocol gives a practical difference: {quick}; {at} gives {r.text}, its "
+                         f"interval within the {bound} minimum effect either side")
+    return "does not hold", (f"at {at}, {compared}: {r.text}, where {quick}; the {at} interval reaches beyond the "
+                             f"{bound} minimum effect, so it does not show that there is no practical difference")
 
 
 def check_lines(result: CheckResult, run_command: str) -> list[str]:
