@@ -283,6 +283,13 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     table = pd.read_parquet(tmp_path / "out" / "results.parquet")
     table["config.protocol"] = "graphdeco-30k"
     assert "- **Protocol**: graphdeco-30k." in protocol_lines(table)
+    # its schedule is graphdeco's as written, not scaled to the runs' length (nor their LR decay)
+    schedule = next(line for line in protocol_lines(table) if line.startswith("- **Schedule**"))
+    assert "graphdeco's 30,000-step schedule as written" in schedule and "over 30,000 steps, not scaled" in schedule \
+        and "scaled to the run (" not in schedule
+    # the header names the scenes and says that one rendered scene falls short of the evidence rule
+    assert "- **Scenes**: 1: glossy (rendered by Mitsuba); 0 real; a finding here holds on this scene only" \
+        in "\n".join(protocol_lines(table))
     table["config.init"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so

@@ -94,7 +94,13 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
     lr_final = _one(done, "config.lr_means_final", _g)
     lrs = (f"; learning rates not scaled: positions {lr} → {lr_final} × scene extent, decayed over the run's "
            f"iterations, the other groups constant" if lr and lr_final else "")
-    lines.append(f"- **Schedule**: {iters} iterations, {sched}{lrs}.")
+    if protocol in ("quick", DEFAULT_PROTOCOL):
+        lines.append(f"- **Schedule**: {iters} iterations, {sched}{lrs}.")
+    else:  # a graphdeco protocol: its schedule as written, whatever length the runs stopped at
+        lines.append(f"- **Schedule**: {iters} iterations of graphdeco's 30,000-step schedule as written (refine "
+                     f"window, opacity resets, SH steps and the position learning-rate decay "
+                     f"{(lr + ' → ' + lr_final + ' × scene extent ') if lr and lr_final else ''}over 30,000 steps, "
+                     f"not scaled to the run).")
     evals = _eval_steps(done)
     lines.append(f"- **Evaluation**: the test views at steps {evals}; the reported numbers are the last step's."
                  if evals else "- **Evaluation**: the test views at the end.")
