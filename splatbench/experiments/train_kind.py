@@ -478,7 +478,9 @@ def describe_protocol(name: str) -> str:
     if p.iterations is None:
         return f"graphdeco's step fields scaled to the run's iterations, learning rates not: {p.stands_beside}"
     return (f"graphdeco's {GRAPHDECO_ITERATIONS:,}-step schedule as written (step fields and the position "
-            f"learning-rate decay unscaled), run {p.iterations:,} steps and evaluated there: {p.stands_beside}")
+            f"learning-rate decay unscaled), run {p.iterations:,} steps and evaluated there, the step(s) of "
+            f"{p.stands_beside}; on another scene, resolution or metric convention its numbers are not "
+            f"comparable to the paper's, only the schedule is")
 
 
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).

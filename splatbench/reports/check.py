@@ -234,6 +234,17 @@ def _verdict(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str], metric:
                              f"{bound} minimum effect, so it does not show that there is no practical difference")
 
 
+def _cell(side: CheckSide, k: int, metric: MetricSpec, seeds: int) -> str:
+    """One cell's mean ± interval; with only some of its runs done, the mean of those seeds alone,
+    marked, and no interval (a part of the seeds is not the cell)."""
+    st = side.stats[k]
+    if side.done >= side.total:
+        return st.text(metric.fmt)
+    if st.n == 0:
+        return "–"
+    return f"{format(st.mean, metric.fmt)} ({st.n} of {seeds} seeds; no interval)"
+
+
 def check_lines(result: CheckResult, run_command: str) -> list[str]:
     """The report's section "Headline at the 7K protocol" (title included); ``run_command``:
     the ``splatbench run ...`` that runs the check."""
@@ -257,8 +268,8 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
         runs = f"{side.done} of {side.total}" + (f" ({side.failed} failed)" if side.failed else "")
         diff = side.claim.text if side.claim is not None else "–"
         settled = "–" if side.settled is None else "yes" if side.settled else f"no: {side.why}"
-        lines.append(f"| {name} | {runs} | {side.stats[0].text(m.fmt)} | {side.stats[1].text(m.fmt)} | {diff} "
-                     f"| {settled} |")
+        lines.append(f"| {name} | {runs} | {_cell(side, 0, m, len(result.seeds))} | "
+                     f"{_cell(side, 1, m, len(result.seeds))} | {diff} | {settled} |")
     lines += ["", f"Cells: {_name(m)} ({m.unit}), mean over seeds ± the half-width of its 95 % t interval."
               if m.unit else f"Cells: {_name(m)}, mean over seeds ± the half-width of its 95 % t interval.", ""]
     sentence = f"**{result.headline}**: {result.reason}"
