@@ -196,7 +196,12 @@ def test_findings_numbers_match_parquet(sh_report):
             assert ("no significant difference" in c.text) == (iv.defined and not c.significant)
             assert ("no practical difference" in c.text) == (c.significant and not c.practical)
         elif c.kind == "count":
-            assert c.value == sum(1 for x in claims if x.kind == "vs") == 3 * len(SCENES) * 4
+            # every printed interval: the paired comparisons against the reference, and the leader's
+            # lead over the runner-up with its size against it (one "no best" and one "size" per scene)
+            leads = sum(1 for x in claims if x.kind in ("best", "no best", "size") and x.reference
+                        and math.isfinite(x.low))
+            assert sum(1 for x in claims if x.kind == "vs") == 3 * len(SCENES) * 4 and leads >= len(SCENES)
+            assert c.value == 3 * len(SCENES) * 4 + leads
             assert f"This table makes {int(c.value)} comparisons" in text
         elif c.kind == "auto":
             done = table[(table.status == "done") & (table.scene == c.scene)]

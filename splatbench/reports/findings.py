@@ -363,7 +363,9 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
 
     ref = reference_row(table)
     others = [r for r in table.rows if r.label != ref.label]
-    count = 0
+    # the leader's paired lead over the runner-up (and its size against it) printed above count too
+    count = sum(1 for c in claims if c.kind in ("best", "no best", "size") and c.reference and c.n >= 2
+                and math.isfinite(c.low))
     if others and rules.comparisons:
         lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
         for row in others:
