@@ -25,7 +25,7 @@ def test_each_kind_of_file_round_trips(tmp_path):
     frame = pd.DataFrame({"x": [1.5, 2.5], "name": ["a", "b"]})
     pd.testing.assert_frame_equal(pd.read_parquet(write_parquet(out / "t.parquet", frame)), frame)
     csv = write_csv(out / "t.csv", ["x", "name"], ({"x": x, "name": n} for x, n in [(1, "a"), (2, "b,c")]))
-    assert csv.read_bytes() == b'x,name\r\n1,a\r\n2,"b,c"\r\n'
+    assert csv.read_bytes() == b'x,name\n1,a\n2,"b,c"\n'  # LF line endings (POSIX text)
     assert _leftovers(out) == []
 
 
@@ -39,7 +39,7 @@ def test_a_write_that_fails_leaves_the_older_file(tmp_path):
 
     with pytest.raises(RuntimeError, match="half-way"):
         write_csv(path, ["x"], rows())
-    assert path.read_bytes() == b"x\r\n1\r\n"
+    assert path.read_bytes() == b"x\n1\n"
     assert _leftovers(tmp_path) == []
 
 
