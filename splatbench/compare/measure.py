@@ -21,14 +21,7 @@ from splatbench.compare.bounds import (DEPTH_ALPHA_MIN, OFF_THRESHOLD, GradError
                                                over_bound)
 from splatbench.errors import InputError, one_line
 from splatbench.metrics.image import psnr
-
-
-def sync(device: str) -> None:
-    """Wait for queued GPU work (a no-op on the CPU, where outputs are ready on return)."""
-    if device == "cuda":
-        import torch
-
-        torch.cuda.synchronize()
+from splatbench.metrics.timing import device_sync
 
 
 # ----------------------------------------------------------------------------- oracle
@@ -301,15 +294,16 @@ def _closures(backend: Backend, params: tuple, camera, v: Cotangents, device: st
 
     inputs = tuple(p.detach() for p in params)
     leaves = tuple(p.detach().clone().requires_grad_(True) for p in params)
+    sync = device_sync(device)
 
     def forward() -> None:
         with torch.no_grad():
             backend(*inputs, camera)
-        sync(device)
+        sync()
 
     def forward_backward() -> None:
         v.loss(*backend(*leaves, camera)).backward()
-        sync(device)
+        sync()
         for p in leaves:
             p.grad = None  # as an optimizer's zero_grad(set_to_none=True) would
 

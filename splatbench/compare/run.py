@@ -271,7 +271,8 @@ def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: 
     """Forward errors, gradient errors and the predicted full-resolution forward time of one backend."""
     import torch
 
-    from splatbench.compare.measure import backend_vjp, compare_grads, image_errors, sync
+    from splatbench.compare.measure import backend_vjp, compare_grads, image_errors
+    from splatbench.metrics.timing import device_sync
 
     info, camera = backend.info, images.camera
     m = _Accuracy()
@@ -289,7 +290,7 @@ def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: 
             t0 = time.perf_counter()
             with torch.no_grad():
                 out = backend(*params, camera)
-            sync(settings.device)
+            device_sync(settings.device)()
             seconds = min(seconds, time.perf_counter() - t0)
             if seconds / scale ** 2 <= settings.max_call_s:
                 break

@@ -56,14 +56,19 @@ def torch_params(gaussians) -> tuple:
                            gaussians.sh))
 
 
-def _device_sync(tensors: tuple) -> Callable[[], None]:
-    """A wait for torch's queued CUDA work when ``tensors`` live on a CUDA device (the bridge
-    waits for Dr.Jit; torch's own copies of the gradients run on its stream), else nothing."""
-    import torch
+def device_sync(device) -> Callable[[], None]:
+    """A wait for the queued GPU work on ``device`` (a name such as "cuda", or a torch device):
+    ``torch.cuda.synchronize`` on CUDA (the bridge waits for Dr.Jit, but torch's own kernels and
+    copies run on its stream); on the CPU nothing, where outputs are ready on return."""
+    if str(device).startswith("cuda"):
+        import torch
 
-    if any(t.is_cuda for t in tensors):
         return torch.cuda.synchronize
-    return lambda: None
+    return _ready
+
+
+def _ready() -> None:
+    """Nothing to wait for (`device_sync` on the CPU)."""
 
 
 def forward_with_init(params: tuple, camera, options: dict) -> Callable[[], RunStats]:
@@ -74,7 +79,7 @@ def forward_with_init(params: tuple, camera, options: dict) -> Callable[[], RunS
     from splatbench.raster.torch_bridge import rasterize
 
     inputs = tuple(p.detach() for p in params)
-    sync = _device_sync(inputs)
+    sync = device_sync(inputs[0].device)
 
     def forward() -> RunStats:
         with torch.no_grad():
@@ -92,7 +97,7 @@ def forward_backward_with_init(params: tuple, camera, options: dict) -> Callable
     from splatbench.raster.torch_bridge import rasterize_with_hooks
 
     leaves = tuple(p.detach().requires_grad_(True) for p in params)
-    sync = _device_sync(leaves)
+    sync = device_sync(leaves[0].device)
 
     def forward_backward(timer=None) -> RunStats:
         if timer is not None:

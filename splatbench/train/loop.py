@@ -46,6 +46,7 @@ from splatbench.train.config import TrainConfig, save_config
 from splatbench.train.initializers import InitSettings, initialize
 from splatbench.train.losses import photometric_loss
 from splatbench.metrics.image import psnr, ssim_metric
+from splatbench.metrics.timing import device_sync
 from splatbench.train.protocol import get_protocol
 from splatbench.train.params import (ExponentialLR, gaussians_from_params, make_optimizers, params_from_gaussians,
                                      refreeze, scene_extent, set_lr)
@@ -158,7 +159,7 @@ class Trainer:
         # rasterizer runs (torch's CUDA device on CUDA): no host round trip per step
         self.device = parameter_device(config.device)
         # the step's stage times wait for the GPU's queued work at each boundary (on the CPU: nothing)
-        self._sync = torch.cuda.synchronize if self.device.type == "cuda" else (lambda: None)
+        self._sync = device_sync(self.device)
         self.params = params_from_gaussians(gaussians, self.lrs, self.device)
         self.optimizers = make_optimizers(self.params, self.lrs, config.adam_eps)
         # decays over the protocol's schedule (30,000 steps under graphdeco's, however early the run stops)
@@ -506,8 +507,9 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                 "cpu_seconds": cpu_seconds, "step_evaluations": step_evaluations}
 
     config_warnings = config.warnings()
-    for line in config_warnings:
-        (say or (lambda _: None))(line)
+    if say is not None:
+        for line in config_warnings:
+            say(line)
     status = None
     load = Load.start()
     try:
