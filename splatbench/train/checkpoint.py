@@ -74,29 +74,37 @@ def _encode(value: Any) -> Any:
     raise TypeError(f"checkpoint: cannot store a {type(value).__qualname__} as data (add it to _CLASSES)")
 
 
-def _decode(value: Any) -> Any:
-    """The inverse of `_encode`; a name outside `_CLASSES` is a `ValueError` (a bad file)."""
+def _decode(value: Any, device: torch.device | None = None) -> Any:
+    """The inverse of `_encode`; a name outside `_CLASSES` is a `ValueError` (a bad file).
+    ``device``: where the run's tensors live (they are read onto the CPU); a generator saved on
+    another kind of device is a one-line `InputError` (its state does not carry over)."""
+    if isinstance(value, torch.Tensor):
+        return value if device is None else value.to(device)
     if isinstance(value, list):
-        return [_decode(v) for v in value]
+        return [_decode(v, device) for v in value]
     if not isinstance(value, dict):
         return value
     if _GENERATOR in value:
-        gen = torch.Generator(device=str(value["device"]))
+        saved = torch.device(str(value["device"]))
+        if device is not None and saved.type != device.type:
+            raise InputError(f"resume: the checkpoint's strategy drew on {saved.type}; this run trains on "
+                             f"{device.type} (resume with the device it was written on: --set device=...)")
+        gen = torch.Generator(device=saved)
         gen.set_state(value[_GENERATOR])
         return gen
     if _TUPLE in value:
-        return tuple(_decode(v) for v in value[_TUPLE])
+        return tuple(_decode(v, device) for v in value[_TUPLE])
     if _OBJECT in value:
         cls = _CLASSES.get(value[_OBJECT]) if isinstance(value[_OBJECT], str) else None
         if cls is None or not isinstance(value.get("fields"), dict):
             raise ValueError(f"unknown object {value[_OBJECT]!r}")
-        fields = {k: _decode(v) for k, v in value["fields"].items()}
+        fields = {k: _decode(v, device) for k, v in value["fields"].items()}
         if issubclass(cls, tuple):
             return cls(**fields)
         obj = object.__new__(cls)
         obj.__dict__.update(fields)
         return obj
-    return {k: _decode(v) for k, v in value.items()}
+    return {k: _decode(v, device) for k, v in value.items()}
 
 
 def _numpy_rng_state() -> dict[str, Any]:
@@ -147,11 +155,12 @@ def resume_line(path: str | Path, step: int, iterations: int) -> str:
     return f"resumed from {path} at step {step} of {iterations}"
 
 
-def read_checkpoint(path: str | Path, *, mmap: bool = False) -> dict[str, Any]:
+def read_checkpoint(path: str | Path, *, mmap: bool = False, device: torch.device | None = None) -> dict[str, Any]:
     """The state saved at ``path`` with its objects rebuilt (`_CLASSES` only), read as data
     (``weights_only=True``): nothing in the file is executed. A missing, damaged, foreign
     or older-format file is a one-line `InputError`. ``mmap``: tensors stay in the file until
-    read (for a caller that wants the config alone, not a second copy of the model)."""
+    read (for a caller that wants the config alone, not a second copy of the model).
+    ``device``: where the strategy state's tensors go (the rest stays on the CPU)."""
     p = Path(path)
     try:
         # tensors and plain containers only
@@ -160,7 +169,7 @@ def read_checkpoint(path: str | Path, *, mmap: bool = False) -> dict[str, Any]:
         raise InputError(f"resume: no such checkpoint {str(p)!r}") from None
     except Exception as exc:  # noqa: BLE001 - a refused global, a damaged zip: a bad file, nothing executed
         if mmap:  # a file mmap cannot map (not a zip): the plain read names what is wrong with it
-            return read_checkpoint(p)
+            return read_checkpoint(p, device=device)
         pt = p.with_suffix(".pt")
         hint = (f"; the checkpoint is the .pt file beside it: --resume {pt}" if p.suffix != ".pt" and pt.is_file()
                 else "; checkpoints are the checkpoints/iteration_<step>.pt files of a run's output folder")
@@ -173,7 +182,9 @@ def read_checkpoint(path: str | Path, *, mmap: bool = False) -> dict[str, Any]:
         raise InputError(f"resume: {str(p)!r} is not a {CHECKPOINT_FORMAT} checkpoint")
     try:
         for key in ("strategy_state", "sh", "extra"):
-            state[key] = _decode(state[key])
+            state[key] = _decode(state[key], device if key == "strategy_state" else None)
+    except InputError:
+        raise
     except Exception as exc:  # noqa: BLE001 - unknown names, missing keys, bad generator states
         raise InputError(f"resume: {str(p)!r} is a damaged {CHECKPOINT_FORMAT} checkpoint "
                          f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") from None
@@ -194,7 +205,7 @@ def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
     dataset); return the checkpoint's ``extra``. One-line `InputError` on any mismatch
     or damage; the file is read as data (`read_checkpoint`)."""
     p = Path(path)
-    state = read_checkpoint(p)
+    state = read_checkpoint(p, device=trainer.device)
     try:
         return _apply(trainer, state, p)
     except InputError:
@@ -202,30 +213,6 @@ def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
     except Exception as exc:  # noqa: BLE001 - missing keys, wrong types or shapes: a damaged checkpoint
         raise InputError(f"resume: {str(p)!r} is a damaged {CHECKPOINT_FORMAT} checkpoint "
                          f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") from None
-
-
-def _to_device(value: Any, device: torch.device) -> Any:
-    """``value`` (a decoded strategy state) with its tensors moved to ``device``, in place for
-    objects; a generator saved on another device is a one-line error (its state does not carry over)."""
-    if isinstance(value, torch.Tensor):
-        return value.to(device)
-    if isinstance(value, torch.Generator):
-        if value.device.type != device.type:
-            raise InputError(f"resume: the checkpoint's strategy drew on {value.device.type}; this run trains on "
-                             f"{device.type} (resume with the device it was written on: --set device=...)")
-        return value
-    if isinstance(value, list):
-        return [_to_device(v, device) for v in value]
-    if isinstance(value, tuple) and hasattr(value, "_fields"):
-        return type(value)(*(_to_device(v, device) for v in value))
-    if isinstance(value, tuple):
-        return tuple(_to_device(v, device) for v in value)
-    if isinstance(value, dict):
-        return {k: _to_device(v, device) for k, v in value.items()}
-    if hasattr(value, "__dict__") and not isinstance(value, type):
-        for k, v in vars(value).items():
-            setattr(value, k, _to_device(v, device))
-    return value
 
 
 def _apply(trainer: Any, state: dict[str, Any], p: Path) -> dict[str, Any]:
@@ -243,13 +230,13 @@ def _apply(trainer: Any, state: dict[str, Any], p: Path) -> dict[str, Any]:
     for name, value in params.items():
         if not isinstance(value, torch.Tensor) or not torch.isfinite(value).all():
             raise InputError(f"resume: {str(p)!r}: params.{name}: expected a finite tensor")
-    device = trainer.device  # read onto the CPU (`read_checkpoint`); the run's tensors live here
+    device = trainer.device  # the parameters are read onto the CPU (`read_checkpoint`); the run's live here
     trainer.params = {name: torch.nn.Parameter(params[name].to(device), requires_grad=trainer.lrs[name] > 0)
                       for name in PARAM_GROUPS}
     trainer.optimizers = make_optimizers(trainer.params, trainer.lrs, trainer.config.adam_eps)
     for name in PARAM_GROUPS:
         trainer.optimizers[name].load_state_dict(state["optimizers"][name])  # moments follow their tensor
-    trainer.state = _to_device(state["strategy_state"], device)
+    trainer.state = state["strategy_state"]  # on ``device`` (`read_checkpoint`)
     trainer.sh = state["sh"]
     trainer._order = [int(i) for i in state["order"]]
     trainer.generator.set_state(state["generator"])
