@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import dataclasses
 import shutil
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -248,7 +247,8 @@ def _extract_and_match(pycolmap: Any, train: Any, tmp: Path, *, threads: int,
 
 
 def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_intrinsics: bool = True,
-            poses: str = "estimated", out: str | Path | None = None, verbose: bool = False) -> SfmRun:
+            poses: str = "estimated", out: str | Path | None = None, verbose: bool = False,
+            say: Callable[[str], None] | None = None) -> SfmRun:
     """SfM on the training views of ``dataset``: SIFT, exhaustive matching, then either
     incremental mapping aligned to the true frame (``poses="estimated"``) or triangulation
     with the dataset's poses fixed (``poses="known"``, `pycolmap.triangulate_points`).
@@ -270,6 +270,7 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
             user's and may be read-only; a multi-threaded run (not deterministic, so not
             cached) needs an ``out``.
         verbose: keep COLMAP's INFO log on stderr (default: fatal messages only; a failure is an InputError).
+        say: with ``out`` None, the cache's one line (`cached_sfm`: reusing, or running into it).
 
     Returns:
         `SfmRun` (the model is written to ``<out>/0``).
@@ -284,8 +285,7 @@ def run_sfm(dataset: Any, *, seed: int = 0, single_thread: bool = True, known_in
         if not single_thread:
             raise InputError("out: a multi-threaded SfM run is not deterministic, so it is not cached: give an "
                              "output folder (nothing is written into the dataset folder)")
-        return cached_sfm(ds, seed=seed, known_intrinsics=known_intrinsics, poses=poses,
-                          say=(lambda line: print(line, file=sys.stderr)) if verbose else None)[0]
+        return cached_sfm(ds, seed=seed, known_intrinsics=known_intrinsics, poses=poses, say=say)[0]
     out_dir = Path(out)
     with building_dir(out_dir) as tmp:
         run = _sfm_into(tmp, ds, seed=seed, threads=1 if single_thread else -1, known_intrinsics=known_intrinsics,

@@ -32,18 +32,13 @@ def sfm(dataset: Path, seed: int, threads: str, estimate_intrinsics: bool, poses
     camera-centre RMSE (absolute and over the rig radius) and where the model is.
     """
     from splatbench.errors import InputError
-    from splatbench.sfm import cached_sfm, run_sfm
+    from splatbench.sfm import run_sfm
 
-    single = threads == "one"
-    if out is None and not single:
+    if out is None and threads == "all":  # run_sfm refuses it too; this names the command's options
         raise InputError("--threads all: give --out DIR (a multi-threaded run is not deterministic, so it is not "
                          "cached; nothing is written into the dataset folder)")
-    if out is None:
-        run, _ = cached_sfm(dataset, seed=seed, known_intrinsics=not estimate_intrinsics, poses=poses,
-                            say=lambda line: click.echo(line, err=True))
-    else:
-        run = run_sfm(dataset, seed=seed, single_thread=single, known_intrinsics=not estimate_intrinsics,
-                      poses=poses, out=out, verbose=verbose)
+    run = run_sfm(dataset, seed=seed, single_thread=threads == "one", known_intrinsics=not estimate_intrinsics,
+                  poses=poses, out=out, verbose=verbose, say=lambda line: click.echo(line, err=True))
     click.echo(f"registered: {run.registered}/{run.total} training views ({run.registered / run.total:.1%}; "
                f"largest of {run.models} model{'s' if run.models != 1 else ''})")
     click.echo(f"camera-centre RMSE: {run.center_rmse:.4g} ({run.center_rmse_rel:.3%} of the rig radius "
