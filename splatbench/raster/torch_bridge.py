@@ -76,7 +76,8 @@ def parameter_device(device: str) -> torch.device:
     parameters and optimizer state: torch's CUDA device when the rasterizer runs on CUDA and
     this torch has CUDA (no host copy per call: on an H200 the 1M / 800² forward+backward took
     231.9 ms with CPU parameters and 16.4 ms with CUDA ones in one process, and a training step
-    at 256² ran x2.77 faster, reports/cuda/README.md 2026-11-28), else the CPU. A CPU-only torch beside Dr.Jit's CUDA keeps CPU parameters and copies each call."""
+    at 256² ran x2.77 faster, reports/cuda/README.md 2026-11-28), else the CPU. A CPU-only
+    torch beside Dr.Jit's CUDA keeps CPU parameters and copies each call."""
     if torch_device(get_device(device)).type == "cuda" and torch.cuda.is_available():
         return torch.device("cuda")
     return torch.device("cpu")

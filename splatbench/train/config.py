@@ -10,11 +10,13 @@ the strategy options (``strategy_options.cap_max=50000``), the dataset's loading
 table of a TOML file). Every mistake -- unknown
 key, wrong type, negative learning rate, zero iterations, unknown strategy or
 initialisation, a densification schedule whose last topology change falls in the
-final 10 % of the run, a ``raster.alpha_min`` at or above the initial opacity or the
-strategy's opacity reset value (every Gaussian would be skipped, with no gradient, from
-then on) -- is a one-line `InputError` naming the field, raised by
+final 10 % of the run, a ``raster.alpha_min`` at or above the initial opacity (every
+Gaussian would be skipped, with no gradient, from the start) -- is a one-line `InputError`
+naming the field, raised by
 `TrainConfig.validate` when the (frozen) config is constructed, before any data is
-read or rendered; ``dataclasses.replace`` or `apply_overrides` make a changed copy.
+read or rendered; ``dataclasses.replace`` or `apply_overrides` make a changed copy. A
+setting that runs but likely defeats training (``raster.alpha_min`` at or above the
+strategy's opacity reset value) is a line of `TrainConfig.warnings`, said before training.
 
 The device is set once, by ``device``: ``raster.device`` is not a setting (a ``[raster]``
 table or ``--set`` that names it is an error naming ``device``), and the constructor makes
