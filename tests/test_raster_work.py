@@ -53,7 +53,7 @@ def dense_useful(gaussians, camera, opts: RasterOptions) -> int:
         geo = GeoRecord(*(dr.gather(m.Float, f, g) for f in fields))
         px = m.Float(pix % camera.width) + 0.5
         py = m.Float(pix // camera.width) + 0.5
-        cfg = CompositeSettings(opts.alpha_min, opts.alpha_max, opts.transmittance_min, (0.0, 0.0, 0.0))
+        cfg = CompositeSettings.from_options(opts)
         _, contributes, *_ = _alpha_at(geo, px, py, cfg, dr.gather(m.Bool, proj.visible, g))
         return int(dr.count(contributes)[0])
 

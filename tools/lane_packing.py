@@ -25,12 +25,11 @@ import sys
 import numpy as np
 
 from splatbench.raster.api import to_tensor
-from splatbench.raster.binning import TileGrid, bin_gaussians
 from splatbench.raster.blocks import lanes_for
+from splatbench.raster.compositing import splat_records
 from splatbench.raster.device import dr, get_device
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import project_view
-from splatbench.raster.records import Splats, pack_records
+from splatbench.raster.pipeline import bin_view, project_view
 from splatbench.raster.work import work_stats
 from splatbench.workloads import model_workload, synthetic
 
@@ -45,11 +44,7 @@ def list_lengths(gaussians, camera, tile_size: int, block: int) -> np.ndarray:
     with dr.suspend_grad():
         proj = project_view(*(to_tensor(m, getattr(gaussians, k)) for k in
                               ("means", "log_scales", "quats", "opacity_logits")), camera, opts)
-        bins = bin_gaussians(proj, TileGrid(camera.width, camera.height, tile_size), opts.alpha_min)
-        zero = dr.zeros(m.Array3f, dr.width(proj.depths))
-        records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, zero, proj.depths,
-                                         proj.cutoff_sq))
-        lanes = lanes_for(m, records, bins, block)
+        lanes = lanes_for(m, splat_records(proj), bin_view(proj, camera, opts), block)
         return (lanes.end - lanes.start).numpy().astype(np.int64)
 
 

@@ -414,6 +414,15 @@ class CompositeState:
         self.abs_grad_means2d = None
 
 
+def splat_records(proj: Projection, colors=None) -> Records:
+    """``proj``'s Gaussians packed as the compositing loop reads them (`records.pack_records`);
+    ``colors``: [N, 3] Array3f, None for black (the work counts and lane studies read only the
+    geometry)."""
+    m = array_namespace(proj.opacities)
+    colors = dr.zeros(m.Array3f, dr.width(proj.depths)) if colors is None else colors
+    return pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq))
+
+
 def composite(proj: Projection, colors, bins: Bins, settings: CompositeSettings, *,
               absgrad: bool = False) -> tuple[Composite, CompositeState]:
     """Alpha-composite screen-space Gaussians (mirrors `reference.composite`, matched mode):
@@ -443,7 +452,7 @@ def composite_loop_ad(proj: Projection, colors, bins: Bins, settings: CompositeS
     """`composite` differentiated by Dr.Jit's AD through the forward loop instead of the
     hand-written backward (test-only: slower; checks `_CompositeOp`)."""
     m = array_namespace(proj.opacities)
-    records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq))
+    records = splat_records(proj, colors)
     lanes = lanes_for(m, records, bins)
     # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
     # count (the longest tile list, rounded up to a power of two); -1 is wrong here.

@@ -106,6 +106,13 @@ def project_view(means, log_scales, quats, opacity_logits, camera, options: Rast
                    radius=options.radius, alpha_min=options.alpha_min, antialiased=options.antialiased)
 
 
+def bin_view(proj: Projection, camera, options: RasterOptions, timer=None) -> Bins:
+    """`bin_gaussians` of ``proj`` on ``camera``'s tiles of ``options.tile_size`` pixels, with
+    ``options.alpha_min``: the one binning of a view (`render_frame`, `work.work_stats`)."""
+    return bin_gaussians(proj, TileGrid(camera.width, camera.height, options.tile_size), float(options.alpha_min),
+                         timer)
+
+
 def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int,
                  background: tuple[float, float, float], options: RasterOptions,
                  absgrad: bool = False, hooks: Hooks = NO_HOOKS) -> Frame:
@@ -131,8 +138,7 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
     dr.eval(*proj, colors)
     if timer is not None:
         timer.mark("preprocess")
-    bins = bin_gaussians(proj, TileGrid(camera.width, camera.height, options.tile_size), float(options.alpha_min),
-                         timer)
+    bins = bin_view(proj, camera, options, timer)
     if timer is not None:
         timer.mark("binning_sort")
     settings = CompositeSettings.from_options(options, background)
@@ -183,5 +189,5 @@ def frame_to_numpy(frame: Frame, height: int, width: int) -> tuple[np.ndarray, n
     return rgb, alpha, depth
 
 
-__all__ = ["Frame", "render_frame", "project_view", "frame_to_numpy", "resolve_sh_degree", "check_background",
+__all__ = ["Frame", "render_frame", "project_view", "bin_view", "frame_to_numpy", "resolve_sh_degree", "check_background",
            "check_clip_planes", "check_view", "Composite"]

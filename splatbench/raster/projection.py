@@ -28,24 +28,19 @@ DEFAULTS = RasterOptions()
 
 
 class Projection(NamedTuple):
-    """Screen-space Gaussians (Dr.Jit arrays, all of width N).
-
-    means2d [N, 2] pixel coordinates (origin at the image's top-left corner);
-    conics [N, 3] (A, B, C) = (xx, xy, yy) of the inverse 2D covariance;
-    depths [N] camera z; opacities [N] (after antialiasing compensation);
-    cutoff_sq [N] R^2 in Mahalanobis units (detached); extents [N, 2] (rx, ry) of
-    the cutoff ellipse's bounding box in pixels (detached); radii [N] int32,
-    0 when culled; visible [N] bool.
+    """Screen-space Gaussians: Dr.Jit arrays of one module (``drjit.llvm.ad`` or ``drjit.cuda.ad``),
+    all of width N, a field [N, 2] being an ``Array2f`` of two [N] columns. Gradients flow
+    to the first four fields; the others are detached.
     """
 
-    means2d: object
-    conics: object
-    depths: object
-    opacities: object
-    cutoff_sq: object
-    extents: object
-    radii: object
-    visible: object
+    means2d: object    # Array2f, [N, 2] float32: pixel coordinates (origin at the image's top-left corner)
+    conics: object     # Array3f, [N, 3] float32: (A, B, C) = (xx, xy, yy) of the inverse 2D covariance
+    depths: object     # Float, [N] float32: camera z
+    opacities: object  # Float, [N] float32: after the antialiasing compensation
+    cutoff_sq: object  # Float, [N] float32: R^2 in Mahalanobis units (detached)
+    extents: object    # Array2f, [N, 2] float32: (rx, ry) of the cutoff ellipse's bounding box, pixels (detached)
+    radii: object      # Int32, [N] int32: 0 when culled
+    visible: object    # Bool, [N] bool
 
 
 def array_namespace(x):
@@ -141,7 +136,7 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width:
         width, height: image size in pixels.
 
     Returns:
-        `Projection` (see its docstring for shapes).
+        `Projection` (its fields name their shapes).
     """
     m = array_namespace(means.array)
     Float = m.Float
