@@ -122,9 +122,14 @@ def camera_constants(m, K: np.ndarray, world_to_camera: np.ndarray) -> dict:
     }
 
 
-def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width: int, height: int,
-            *, eps2d: float = DEFAULTS.eps2d, near: float = 0.01, far: float = 1e10, radius: str = DEFAULTS.radius,
-            alpha_min: float = DEFAULTS.alpha_min, antialiased: bool = DEFAULTS.antialiased) -> Projection:
+def clip_planes(camera, options: RasterOptions) -> tuple[float, float]:
+    """The near and far planes in effect: the options', else the camera's."""
+    near = camera.near if options.near is None else options.near
+    far = camera.far if options.far is None else options.far
+    return near, far
+
+
+def project(means, log_scales, quats, opacity_logits, camera, options: RasterOptions = DEFAULTS) -> Projection:
     """Project Gaussians to the screen (mirrors `reference.project`, matched mode).
 
     Args:
@@ -132,12 +137,17 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width:
         log_scales: [N, 3] tensor, log of the axis scales.
         quats: [N, 4] tensor, (w, x, y, z), any length.
         opacity_logits: [N] tensor or flat array.
-        K: [3, 3] intrinsics (numpy). world_to_camera: [4, 4] (numpy, OpenCV axes).
-        width, height: image size in pixels.
+        camera: `splatbench.Camera`: intrinsics K, world_to_camera (OpenCV axes), width W and
+            height H in pixels, and the near and far planes unless ``options`` sets them.
+        options: `RasterOptions`; projection reads eps2d, near, far, radius, alpha_min and
+            antialiased.
 
     Returns:
         `Projection` (its fields name their shapes).
     """
+    K, world_to_camera, width, height = camera.K, camera.world_to_camera, camera.width, camera.height
+    near, far = clip_planes(camera, options)
+    eps2d, radius, alpha_min, antialiased = options.eps2d, options.radius, options.alpha_min, options.antialiased
     m = array_namespace(means.array)
     Float = m.Float
     mx, my, mz = columns(means, 3)  # also read for the SH view direction: no permute

@@ -14,13 +14,14 @@ import numpy as np
 
 from splatbench.raster.api import to_tensor
 from splatbench.raster.device import dr, get_device, packet_width
-# The compositing loop's own stages, lanes, lists, per-pixel test and record loads, so
-# that the counts are of exactly the decisions it makes.
+# The rasterizer's own stages, lanes, lists, per-pixel test and record loads, so that
+# the counts are of exactly the decisions compositing makes.
+from splatbench.raster.binning import bin_gaussians
 from splatbench.raster.blocks import lanes_for, pair_at
 from splatbench.raster.compositing import CompositeSettings, _alpha_at, _half_mahalanobis, splat_records
-from splatbench.raster.records import load_records
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import bin_view, project_view
+from splatbench.raster.projection import project
+from splatbench.raster.records import load_records
 
 
 @dataclass(frozen=True)
@@ -74,9 +75,9 @@ def work_stats(gaussians, camera, **options) -> WorkStats:
     if len(gaussians) == 0:
         return WorkStats(0, 0, 0, 0, 0, 0, 0, 0, 0)
     with dr.suspend_grad():
-        proj = project_view(to_tensor(m, gaussians.means), to_tensor(m, gaussians.log_scales),
-                            to_tensor(m, gaussians.quats), to_tensor(m, gaussians.opacity_logits), camera, opts)
-        bins = bin_view(proj, camera, opts)
+        proj = project(to_tensor(m, gaussians.means), to_tensor(m, gaussians.log_scales),
+                       to_tensor(m, gaussians.quats), to_tensor(m, gaussians.opacity_logits), camera, opts)
+        bins = bin_gaussians(proj, camera, opts)
         area = opts.tile_size ** 2
         if bins.num_pairs == 0:
             return WorkStats(bins.cutoff_box_pairs, bins.cutoff_box_pairs * area, bins.box_pairs, 0, 0, 0, 0, 0, 0)
