@@ -1,5 +1,6 @@
 """How a report's files land on disk: the one writer of the verification applications
-(compare, conform, stress, validate), the benchmarks and the shared figures.
+(compare, conform, stress, validate), the benchmarks and the shared figures; and the one
+writer of a Markdown table (`markdown_table`), which every report's tables go through.
 
 Every file is written whole or not at all (`splatbench.fsutil.atomic_write`: a
 temporary beside it, fsync'd, renamed into place with the umask's mode), so a report
@@ -12,6 +13,7 @@ stopped half-way never leaves a truncated table beside an older markdown file.
     save_figure(fig, path, **kw) -> Path       a matplotlib figure (PNG at 110 dpi, nothing clipped), closed
     run_header(command, seconds, machine)      where and how a run was made: {"command", "seconds",
                                                "written", "machine"} (machine: `MachineInfo`, load included)
+    markdown_table(header, rows, align=None)   the one writer of a Markdown table (every report's tables)
 """
 
 from __future__ import annotations
@@ -76,4 +78,39 @@ def run_header(command: str, seconds: float, machine: MachineInfo) -> dict[str, 
             "written": datetime.now(timezone.utc).isoformat(timespec="seconds"), "machine": asdict(machine)}
 
 
-__all__ = ["write_text", "write_json", "write_parquet", "write_csv", "save_figure", "run_header"]
+_DELIMITERS = {"-": "---", "l": ":---", "r": "---:", "c": ":---:"}
+
+
+def markdown_table(header: Sequence[object], rows: Iterable[Sequence[object]], *, align: str | None = None) -> str:
+    """A GitHub-flavoured Markdown table: the header line, the delimiter line, then one line per
+    row, joined by newlines (no final newline, so it drops into a list of lines).
+
+    Every cell is ``str(cell)`` with each ``|`` escaped as ``\\|`` (an unescaped one would split the
+    cell, even inside a code span) and each line break turned into a space (a row is one line).
+    ``align``: one letter per column, ``-`` (none: ``---``), ``l`` (``:---``), ``r`` (``---:``) or
+    ``c`` (``:---:``); None: none for every column. A row whose length is not the header's, or an
+    ``align`` of another length or letter, raises ValueError (a bug of the caller, not of the data).
+    """
+    header = [_table_cell(h) for h in header]
+    align = "-" * len(header) if align is None else align
+    if len(align) != len(header) or set(align) - set(_DELIMITERS):
+        raise ValueError(f"markdown_table: align {align!r} must be {len(header)} of the letters "
+                         f"{''.join(_DELIMITERS)}")
+    lines = [_table_line(header), "|" + "|".join(_DELIMITERS[a] for a in align) + "|"]
+    for row in rows:
+        cells = [_table_cell(c) for c in row]
+        if len(cells) != len(header):
+            raise ValueError(f"markdown_table: a row of {len(cells)} cells under {len(header)} columns: {cells}")
+        lines.append(_table_line(cells))
+    return "\n".join(lines)
+
+
+def _table_cell(value: object) -> str:
+    return " ".join(str(value).replace("|", "\\|").splitlines())
+
+
+def _table_line(cells: Sequence[str]) -> str:
+    return "| " + " | ".join(cells) + " |"
+
+
+__all__ = ["write_text", "write_json", "write_parquet", "write_csv", "save_figure", "run_header", "markdown_table"]

@@ -190,7 +190,7 @@ def sfm_camera(arrays: dict, view: int) -> Camera:
 
 
 def _from_sfm(name: str, arrays: dict, view: int) -> Workload:
-    from splatbench.init import from_points
+    from splatbench.initial_gaussians import from_points
 
     gaussians = from_points(arrays["means3d"], arrays["colors"])
     return Workload(f"{name}-view{view}", gaussians, sfm_camera(arrays, view))

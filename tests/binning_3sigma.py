@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from splatbench.raster.binning import Bins, TileGrid, ellipse_meets_rect, support_radius_sq, tile_pixel_offsets
 from splatbench.raster.device import dr
+from splatbench.raster.options import RasterOptions
 from splatbench.raster.projection import Projection, array_namespace
 
 
@@ -25,9 +26,11 @@ def argsort_key(key, bits: int, radix_bits: int = 11):
     return index
 
 
-def bin_gaussians_3sigma(proj: Projection, grid: TileGrid, alpha_min: float, timer=None) -> Bins:
+def bin_gaussians_3sigma(proj: Projection, camera, options: RasterOptions, timer=None) -> Bins:
     """Assign each visible Gaussian to the tiles of its cutoff box that its support
     ellipse (`support_radius_sq`) meets, sorted by (tile, depth)."""
+    grid = TileGrid(camera.width, camera.height, options.tile_size)
+    alpha_min = float(options.alpha_min)
     m = array_namespace(proj.depths)
     UInt32, UInt64, Float = m.UInt32, m.UInt64, m.Float
     ts = float(grid.tile_size)

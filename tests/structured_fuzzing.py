@@ -746,7 +746,9 @@ def table(stats: dict[str, dict[str, int]]) -> str:
     kinds = [("ngp", "instant-ngp `transforms.json`"), ("blender", "NeRF-synthetic `transforms_{train,test}.json`"),
              ("colmap-text", "COLMAP text model")]
     names = list(JSON_CLASSES) + [k for k in COLMAP_CLASSES if k not in JSON_CLASSES]
-    rows = ["| mutation class | " + " | ".join(label for _, label in kinds) + " |", "|---" * (len(kinds) + 1) + "|"]
+    from splatbench.report_files import markdown_table
+
+    rows = []
     totals = {kind: {} for kind, _ in kinds}
     for klass in names:
         cells = []
@@ -759,11 +761,10 @@ def table(stats: dict[str, dict[str, int]]) -> str:
                 totals[kind][outcome] = totals[kind].get(outcome, 0) + n
             cells.append(f"{sum(counts.values())}: {counts.get('ok', 0)} load, {counts.get('InputError', 0)} InputError"
                          + "".join(f", {n} {o}" for o, n in sorted(counts.items()) if o not in ("ok", "InputError")))
-        rows.append(f"| {klass} | " + " | ".join(cells) + " |")
-    rows.append("| **all** | " + " | ".join(
-        f"**{sum(t.values())}: {t.get('ok', 0)} load, {t.get('InputError', 0)} InputError**" for t in totals.values())
-        + " |")
-    return "\n".join(rows)
+        rows.append([klass, *cells])
+    rows.append(["**all**", *(f"**{sum(t.values())}: {t.get('ok', 0)} load, {t.get('InputError', 0)} InputError**"
+                              for t in totals.values())])
+    return markdown_table(["mutation class", *(label for _, label in kinds)], rows)
 
 
 if __name__ == "__main__":  # python -m tests.structured_fuzzing fuzz.json

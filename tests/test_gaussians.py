@@ -252,7 +252,7 @@ def test_sh_degree_is_checked_by_one_function_everywhere(value):
     TrainConfig and the raster run kind: the same one-line message from each."""
     from splatbench.checks import check_sh_degree
     from splatbench.experiments.raster_kind import validate as validate_raster_config
-    from splatbench.init import from_points
+    from splatbench.initial_gaussians import from_points
     from splatbench.train import TrainConfig
     from splatbench.workloads import synthetic
 

@@ -15,9 +15,10 @@ import pytest
 from splatbench import Camera, Gaussians
 from splatbench.raster import pipeline
 from splatbench.raster.api import to_tensor
-from splatbench.raster.binning import MAX_WIDENING, TileGrid, bin_gaussians, support_extents
+from splatbench.raster.binning import MAX_WIDENING, bin_gaussians, support_extents
 from splatbench.raster.device import dr, get_device
 from splatbench.raster.options import RasterOptions
+from splatbench.raster.projection import project
 from splatbench.raster.work import work_stats
 from splatbench.workloads import Workload, model_workload, synthetic
 from tests.binning_3sigma import bin_gaussians_3sigma
@@ -98,9 +99,9 @@ def bins_of(workload: Workload, binner, tile_size: int = 16):
     g, cam = workload.gaussians, workload.camera
     opts = RasterOptions(device="cpu", tile_size=tile_size)
     with dr.suspend_grad():
-        proj = pipeline.project_view(*(to_tensor(m, getattr(g, k)) for k in
-                                       ("means", "log_scales", "quats", "opacity_logits")), cam, opts)
-        bins = binner(proj, TileGrid(cam.width, cam.height, tile_size), opts.alpha_min)
+        proj = project(*(to_tensor(m, getattr(g, k)) for k in ("means", "log_scales", "quats", "opacity_logits")),
+                       cam, opts)
+        bins = binner(proj, cam, opts)
         return bins, proj
 
 

@@ -20,7 +20,7 @@ from splatbench.raster.device import dr, get_device
 from splatbench.raster.compositing import CompositeSettings, _alpha_at
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.records import GeoRecord
-from splatbench.raster.pipeline import project_view
+from splatbench.raster.projection import project
 from splatbench.raster.work import work_stats
 from splatbench.workloads import synthetic
 
@@ -43,8 +43,8 @@ def dense_useful(gaussians, camera, opts: RasterOptions) -> int:
     whole image, ignoring tiles entirely."""
     m = get_device("cpu").t
     with dr.suspend_grad():
-        proj = project_view(*(to_tensor(m, getattr(gaussians, k)) for k in
-                              ("means", "log_scales", "quats", "opacity_logits")), camera, opts)
+        proj = project(*(to_tensor(m, getattr(gaussians, k)) for k in
+                         ("means", "log_scales", "quats", "opacity_logits")), camera, opts)
         n, size = len(gaussians), camera.width * camera.height
         idx = dr.arange(m.UInt32, n * size)
         g, pix = idx // size, idx % size
@@ -53,7 +53,7 @@ def dense_useful(gaussians, camera, opts: RasterOptions) -> int:
         geo = GeoRecord(*(dr.gather(m.Float, f, g) for f in fields))
         px = m.Float(pix % camera.width) + 0.5
         py = m.Float(pix // camera.width) + 0.5
-        cfg = CompositeSettings(opts.alpha_min, opts.alpha_max, opts.transmittance_min, (0.0, 0.0, 0.0))
+        cfg = CompositeSettings.from_options(opts)
         _, contributes, *_ = _alpha_at(geo, px, py, cfg, dr.gather(m.Bool, proj.visible, g))
         return int(dr.count(contributes)[0])
 

@@ -4,12 +4,14 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pandas as pd
 import pytest
 
 from splatbench.metrics.machine import machine_info
-from splatbench.report_files import run_header, save_figure, write_csv, write_json, write_parquet, write_text
+from splatbench.report_files import (markdown_table, run_header, save_figure, write_csv, write_json, write_parquet,
+                                     write_text)
 
 
 def _leftovers(folder):
@@ -62,3 +64,28 @@ def test_run_header_names_the_command_time_and_machine():
     assert header["written"].endswith("+00:00")  # UTC
     assert {"cpu_count", "cpu_model", "device", "loadavg_start", "loadavg_end"} <= set(header["machine"])
     json.dumps(header)  # JSON-ready
+
+
+def test_markdown_table_aligns_and_escapes():
+    text = markdown_table(["name", "value"], [["a", 1.5], ["b", None]], align="-r")
+    assert text == "| name | value |\n|---|---:|\n| a | 1.5 |\n| b | None |"  # no final newline
+    assert markdown_table(["x"], [], align="c") == "| x |\n|:---:|"
+    assert markdown_table(["x", "y"], [], align="lr").splitlines()[1] == "|:---|---:|"
+
+
+def test_a_pipe_or_line_break_in_a_cell_stays_in_its_cell():
+    # A bare `|` would split the cell (GitHub splits even inside a code span); a line break would end the row.
+    text = markdown_table(["run", "error"], [["`a|b`", "x | y\nsecond line"]])
+    rows = text.splitlines()
+    assert len(rows) == 3 and rows[2] == "| `a\\|b` | x \\| y second line |"
+    # every row has as many unescaped separators as the header
+    assert {len(re.findall(r"(?<!\\)\|", row)) for row in rows} == {3}
+
+
+def test_markdown_table_refuses_a_ragged_row_or_a_bad_alignment():
+    with pytest.raises(ValueError, match="a row of 1 cells under 2 columns"):
+        markdown_table(["a", "b"], [["only one"]])
+    with pytest.raises(ValueError, match="align"):
+        markdown_table(["a", "b"], [], align="r")
+    with pytest.raises(ValueError, match="align"):
+        markdown_table(["a"], [], align="x")

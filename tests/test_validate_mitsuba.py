@@ -144,5 +144,5 @@ def test_report_of_the_committed_rows_is_byte_identical(tmp_path):
     paths = vm.write_report(rows, tmp_path, width=128)
     assert paths.csv.read_bytes() == (committed / "table.csv").read_bytes()
     table = paths.markdown.read_text(encoding="utf-8")  # no probe or checks given: the table alone
-    assert table == vm.markdown_table(rows, 128) and (committed / "table.md").read_text(encoding="utf-8").startswith(
+    assert table == vm.sweep_markdown(rows, 128) and (committed / "table.md").read_text(encoding="utf-8").startswith(
         table)

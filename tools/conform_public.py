@@ -22,7 +22,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # this checkout's splatbench, as the conform runs below get it (PYTHONPATH)
-from splatbench.report_files import write_json, write_text  # noqa: E402
+from splatbench.report_files import markdown_table, write_json, write_text  # noqa: E402
 
 REPORTS = ROOT / "reports" / "conform_public"
 SITES = ROOT / "out" / "conform_public"
@@ -82,31 +82,27 @@ def run(p: Package) -> dict:
     return report
 
 
-def _row(p: Package, r: dict) -> str:
+def _row(p: Package, r: dict) -> list[str]:
     s = r["summary"]
     counts = f'{s["pass"]} / {s["explained"]} / {s["warn"]} / {s["fail"]} / {s["skip"]}'
     diag = "; ".join(f'`{d["axis"]}`: {d["found"]}' + "".join(f" or {v}" for v in d.get("alike", []))
                      + f' (expected {d["expected"]}, explains {len(d["explains"])})' for d in r["diagnosis"]) or "none"
     defects = "; ".join(f'`{d["probe"]}` (+{len(d.get("follows", []))} follow): {_short(d["cause"])}'
                         for d in r["defects"]) or "none"
-    return (f'| [{p.name}]({p.name}/report.md) | {r["version"]} | `{p.spec}` | {r["exit_status"]} | {counts} | '
-            f'{diag} | {defects} |')
+    return [f"[{p.name}]({p.name}/report.md)", r["version"], f"`{p.spec}`", r["exit_status"], counts, diag, defects]
 
 
 def _short(cause: str, limit: int = 110) -> str:
-    """A defect's cause for a table cell: its first clause, at most ``limit`` characters, no pipes."""
-    first = cause.split(" (on ")[0].split("; what differs")[0].replace("|", "/")
+    """A defect's cause for a table cell: its first clause, at most ``limit`` characters."""
+    first = cause.split(" (on ")[0].split("; what differs")[0]
     return first if len(first) <= limit else first[:limit - 3].rstrip() + "..."
 
 
 def table() -> str:
-    rows = ["| package | version | conform spec | exit | pass / explained / warn / fail / skip | diagnosis | defects |",
-            "|---|---|---|---|---|---|---|"]
-    for p in PACKAGES:
-        f = REPORTS / p.name / "conform.json"
-        if f.exists():
-            rows.append(_row(p, json.loads(f.read_text())))
-    return "\n".join(rows)
+    return markdown_table(["package", "version", "conform spec", "exit", "pass / explained / warn / fail / skip",
+                           "diagnosis", "defects"],
+                          [_row(p, json.loads(f.read_text())) for p in PACKAGES
+                           if (f := REPORTS / p.name / "conform.json").exists()])
 
 
 def write_table() -> None:

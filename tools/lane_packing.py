@@ -25,12 +25,12 @@ import sys
 import numpy as np
 
 from splatbench.raster.api import to_tensor
-from splatbench.raster.binning import TileGrid, bin_gaussians
 from splatbench.raster.blocks import lanes_for
+from splatbench.raster.compositing import splat_records
 from splatbench.raster.device import dr, get_device
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import project_view
-from splatbench.raster.records import Splats, pack_records
+from splatbench.raster.binning import bin_gaussians
+from splatbench.raster.projection import project
 from splatbench.raster.work import work_stats
 from splatbench.workloads import model_workload, synthetic
 
@@ -43,13 +43,9 @@ def list_lengths(gaussians, camera, tile_size: int, block: int) -> np.ndarray:
     m = get_device("cpu").t
     opts = RasterOptions(device="cpu", tile_size=tile_size)
     with dr.suspend_grad():
-        proj = project_view(*(to_tensor(m, getattr(gaussians, k)) for k in
-                              ("means", "log_scales", "quats", "opacity_logits")), camera, opts)
-        bins = bin_gaussians(proj, TileGrid(camera.width, camera.height, tile_size), opts.alpha_min)
-        zero = dr.zeros(m.Array3f, dr.width(proj.depths))
-        records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, zero, proj.depths,
-                                         proj.cutoff_sq))
-        lanes = lanes_for(m, records, bins, block)
+        proj = project(*(to_tensor(m, getattr(gaussians, k)) for k in
+                         ("means", "log_scales", "quats", "opacity_logits")), camera, opts)
+        lanes = lanes_for(m, splat_records(proj), bin_gaussians(proj, camera, opts), block)
         return (lanes.end - lanes.start).numpy().astype(np.int64)
 
 

@@ -61,7 +61,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # this checkout's splatbench
 from splatbench.errors import InputError  # noqa: E402
 from splatbench.interrupt import Interrupted, stop_on_signals  # noqa: E402
-from splatbench.report_files import save_figure, write_csv, write_json, write_text  # noqa: E402
+from splatbench.report_files import markdown_table, save_figure, write_csv, write_json, write_text  # noqa: E402
 from splatbench.train import TrainConfig, TrainResult, apply_overrides  # noqa: E402
 from splatbench.train.initializers import NERF_SYNTHETIC_HALF  # noqa: E402
 
@@ -132,22 +132,17 @@ def report_markdown(result: TrainResult, config: TrainConfig, *, command: str, t
               "conventions: scaled to [-1, 1] (the `lpips` package's) and [0, 1] unscaled (graphdeco's "
               "`metrics.py`, the paper's; graphdeco-inria/gaussian-splatting#1239).", "",
               f"**Command.** `{command}`", ""]
-    lines += ["| | paper (Kerbl et al. 2023, Table 2) | " + " | ".join(f"ours, {e.step:,} steps" for e in cols) + " |",
-              "|---|---:|" + "---:|" * len(cols)]
     paper_col = {30_000: PAPER_PSNR_30K}
-
-    def row(label, values, paper=""):
-        lines.append(f"| {label} | {paper} | " + " | ".join(values) + " |")
-
-    row("test PSNR (dB)", [_f(e.psnr, ".2f") for e in cols], f"{PAPER_PSNR_30K:.2f} (30K)")
-    row("difference to the paper (dB)",
-        [_f(e.psnr - paper_col[e.step], "+.2f") if e.step in paper_col else "" for e in cols])
-    row("SSIM", [_f(e.ssim, ".4f") for e in cols], "not per scene")
-    row("LPIPS, [0, 1] unscaled (graphdeco)", [_f(e.lpips_unscaled, ".4f") for e in cols], "not per scene")
-    row("LPIPS, [-1, 1] (lpips package)", [_f(e.lpips_scaled, ".4f") for e in cols], "")
-    row("Gaussians", [f"{e.num_gaussians:,}" for e in cols], "")
-    row("loop time", [_hours(e.train_seconds) for e in cols], "")
-    lines.append("")
+    rows = [["test PSNR (dB)", f"{PAPER_PSNR_30K:.2f} (30K)", *(_f(e.psnr, ".2f") for e in cols)],
+            ["difference to the paper (dB)", "",
+             *(_f(e.psnr - paper_col[e.step], "+.2f") if e.step in paper_col else "" for e in cols)],
+            ["SSIM", "not per scene", *(_f(e.ssim, ".4f") for e in cols)],
+            ["LPIPS, [0, 1] unscaled (graphdeco)", "not per scene", *(_f(e.lpips_unscaled, ".4f") for e in cols)],
+            ["LPIPS, [-1, 1] (lpips package)", "", *(_f(e.lpips_scaled, ".4f") for e in cols)],
+            ["Gaussians", "", *(f"{e.num_gaussians:,}" for e in cols)],
+            ["loop time", "", *(_hours(e.train_seconds) for e in cols)]]
+    lines += [markdown_table(["", "paper (Kerbl et al. 2023, Table 2)", *(f"ours, {e.step:,} steps" for e in cols)],
+                             rows, align="-r" + "r" * len(cols)), ""]
     at_30k = result.at_step(30_000)
     if at_30k is not None and paper_length:
         gap = at_30k.psnr - PAPER_PSNR_30K
@@ -172,9 +167,9 @@ def report_markdown(result: TrainResult, config: TrainConfig, *, command: str, t
         lines += ["## Test curve", "",
                   "Mean test PSNR / SSIM and LPIPS (AlexNet, inputs in [-1, 1]: the cheap curve metric) every "
                   f"{config.eval_every or 'n/a'} steps and at each full evaluation; `curve.csv`, `curve.png`.", "",
-                  "| step | PSNR (dB) | SSIM | LPIPS (AlexNet) |", "|---:|---:|---:|---:|"]
-        lines += [f"| {p.step:,} | {p.psnr:.2f} | {p.ssim:.4f} | {_f(p.lpips, '.4f')} |" for p in result.evaluations]
-        lines.append("")
+                  markdown_table(["step", "PSNR (dB)", "SSIM", "LPIPS (AlexNet)"],
+                                 ([f"{p.step:,}", f"{p.psnr:.2f}", f"{p.ssim:.4f}", _f(p.lpips, ".4f")]
+                                  for p in result.evaluations), align="rrrr"), ""]
     notes = [n for n in result.notes if n]
     if notes:
         lines += ["## Notes of the run", ""] + [f"- {n}" for n in notes] + [""]

@@ -19,12 +19,17 @@ means "not declared" and is taken to be graphdeco's value.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 import numpy as np
 
 from splatbench.gaussians import GROUPS  # noqa: F401 - the backend signature's parameter groups, in its order
 from splatbench.raster.options import RasterOptions
+
+if TYPE_CHECKING:
+    import torch
+
+    from splatbench.cameras import Camera
 
 # graphdeco-inria 3DGS's approximations, the defaults a backend with no metadata follows: the
 # rasterizer's own defaults (`RasterOptions`, whose field comments give graphdeco's sources).
@@ -87,8 +92,12 @@ CONVENTIONS = {**GRAPHDECO, **{a.name: a.graphdeco for a in AXES}}
 
 
 class RasterFn(Protocol):
-    def __call__(self, means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int | None = None,
-                 background=None) -> tuple[Any, Any, Any]: ...
+    """A backend function: the signature of this module's docstring (`Backend.__call__`'s)."""
+
+    def __call__(self, means: torch.Tensor, log_scales: torch.Tensor, quats: torch.Tensor,
+                 opacity_logits: torch.Tensor, sh: torch.Tensor, camera: Camera, *, sh_degree: int | None = None,
+                 background: tuple[float, float, float] | None = None,
+                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]: ...
 
 
 @dataclass(frozen=True)
@@ -186,6 +195,25 @@ class Backend:
     def name(self) -> str:
         return self.info.name
 
-    def __call__(self, means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
+    def __call__(
+        self,
+        means: torch.Tensor,           # [N, 3] float32, world positions
+        log_scales: torch.Tensor,      # [N, 3] float32
+        quats: torch.Tensor,           # [N, 4] float32 (w, x, y, z), not necessarily unit
+        opacity_logits: torch.Tensor,  # [N] float32
+        sh: torch.Tensor,              # [N, K, 3] float32, K = (d + 1)^2
+        camera: Camera,                # width W, height H
+        *,
+        sh_degree: int | None = None,  # SH bands to evaluate (default: all in ``sh``)
+        background: tuple[float, float, float] | None = None,  # RGB in [0, 1] (default black)
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:  # rgb [H, W, 3], alpha [H, W], depth [H, W]
+        """Render one view with ``fn`` (the signature of this module's docstring).
+
+        Returns:
+            rgb [H, W, 3], alpha [H, W], depth [H, W] torch tensors of ``info.dtype`` (float32, or
+            float64 for a float64 backend such as the oracle); depth is the expected camera z, 0
+            where alpha is 0. Differentiable by torch autograd when ``info.gradients``; an output
+            not in ``info.outputs`` is zeros.
+        """
         return self.fn(means, log_scales, quats, opacity_logits, sh, camera, sh_degree=sh_degree,
                        background=background)

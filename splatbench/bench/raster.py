@@ -376,7 +376,7 @@ def main(argv: list[str] | None = None) -> int:
         payload, code = {"result": asdict(result)}, 0
     except SplatbenchError as exc:
         payload, code = {"error": str(exc), "type": type(exc).__name__}, 2
-    args.result.write_text(json.dumps(payload))
+    report_files.write_json(args.result, payload)
     return code
 
 

@@ -31,7 +31,7 @@ from splatbench.backends.base import GROUPS, OUTPUTS
 from splatbench.compare.run import CompareResult, CompareRow
 from splatbench.compare.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD, U32
 from splatbench.compare.measure import spread
-from splatbench.report_files import run_header, write_json, write_parquet, write_text
+from splatbench.report_files import markdown_table, run_header, write_json, write_parquet, write_text
 
 MODES = ("matched", "exact")
 STATS = ("max_abs", "psnr", "frac_off", "outliers", "outside_band")
@@ -202,12 +202,6 @@ def _num(x, fmt: str) -> str:
     return format(x, fmt)
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
-
-
 def _error_cells(r, mode: str) -> list[str]:
     return ["–" if math.isnan(r[f"{mode}_{o}_max_abs"]) else
             f"{_num(r[f'{mode}_{o}_max_abs'], '.1e')} / {_num(r[f'{mode}_{o}_psnr'], '.1f')} / "
@@ -295,7 +289,7 @@ def _gradient_section(table: pd.DataFrame) -> list[str]:
         f"**Bound**: one gradient entry sums a term per pixel, each ~{GRAD_TERM_OPS} float32 operations (relative "
         f"error {GRAD_TERM_OPS}u); cancellation under random cotangents amplifies that by at most sqrt(P) "
         f"(`tests/test_raster_grads.py`): {GRAD_TERM_OPS}·u·sqrt(P){sizes}{band}{zero}", "",
-        _table(head, rows), ""]
+        markdown_table(head, rows), ""]
 
 
 def render_markdown(record: dict, table: pd.DataFrame, figures: list[Path], out: Path) -> str:
@@ -328,16 +322,16 @@ def render_markdown(record: dict, table: pd.DataFrame, figures: list[Path], out:
         "when no pixel outside the band exceeds it. Against the matched oracle (the exact one, which has no band, "
         "for a backend declaring `exact`).", "",
         "### Against the oracle with each backend's declared conventions (\"matched\")", "",
-        _table(["workload", "backend", "rgb", "alpha", "depth", "pixels over bound / outside band",
-                "boundary band (share); ties", "verdict"],
-               [[r.workload, r.backend, *_error_cells(r, "matched"),
-_outlier_cell(r), _band_cell(r), r.forward_verdict] for _, r in table.iterrows()]), "",
+        markdown_table(["workload", "backend", "rgb", "alpha", "depth", "pixels over bound / outside band",
+                        "boundary band (share); ties", "verdict"],
+                       [[r.workload, r.backend, *_error_cells(r, "matched"), _outlier_cell(r), _band_cell(r),
+                         r.forward_verdict] for _, r in table.iterrows()]), "",
         "### Against the exact Gaussian mixture", "",
         "`reference` in mode \"exact\" (docs/conventions.md): no alpha_min skip, alpha clamp, radius cutoff or "
         "early stop, and also no log-scale clip or culling but the camera's clip planes, so Gaussians off-screen "
         "count in full; graphdeco's Jacobian clamp stays, as part of the projection model.", "",
-        _table(["workload", "backend", "rgb", "alpha", "depth"],
-               [[r.workload, r.backend, *_error_cells(r, "exact")] for _, r in table.iterrows()]), "",
+        markdown_table(["workload", "backend", "rgb", "alpha", "depth"],
+                       [[r.workload, r.backend, *_error_cells(r, "exact")] for _, r in table.iterrows()]), "",
         *_gradient_section(table),
         "## Time and memory", "",
         f"At each workload's full resolution, {s.repeats} rounds after one untimed warm-up per backend; within a "
@@ -345,11 +339,12 @@ _outlier_cell(r), _band_cell(r), r.forward_verdict] for _, r in table.iterrows()
         "[quartiles] (min–max), ms. Peak MB: " + "; ".join(sorted({k.removesuffix(", forward only")
                                                               for k in table.memory_kind if k}))
         + " (one forward+backward; one forward for a backend with finite-difference gradients).", "",
-        _table(["workload", "backend", "forward ms", "forward+backward ms", "peak MB", "load avg before → after",
-                "note"],
-               [[r.workload, r.backend, _spread_cell(r, "fwd"), _spread_cell(r, "fwd_bwd"), _num(r.peak_mb, ".0f"),
-                 f"{json.loads(r.loadavg_start)[:1]} → {json.loads(r.loadavg_end)[:1]}"
-                 + (" loaded" if r.loaded else ""), r.timing_note or ""] for _, r in table.iterrows()]), "",
+        markdown_table(["workload", "backend", "forward ms", "forward+backward ms", "peak MB",
+                        "load avg before → after", "note"],
+                       [[r.workload, r.backend, _spread_cell(r, "fwd"), _spread_cell(r, "fwd_bwd"),
+                         _num(r.peak_mb, ".0f"),
+                         f"{json.loads(r.loadavg_start)[:1]} → {json.loads(r.loadavg_end)[:1]}"
+                         + (" loaded" if r.loaded else ""), r.timing_note or ""] for _, r in table.iterrows()]), "",
     ]
     for path in figures:
         text += [f"![{path.stem}]({path.relative_to(out)})", ""]

@@ -15,7 +15,7 @@ import numpy as np
 from splatbench.backends.base import Backend, as_numpy
 from splatbench.conform.oracle import stack
 from splatbench.gaussians import GROUPS
-from splatbench.scene_builders import RenderInput
+from splatbench.render_inputs import RenderInput
 
 COTANGENT_SEED = 1234
 OUTPUT_CHANNELS = {"rgb": slice(0, 3), "alpha": slice(3, 4), "depth": slice(4, 5)}

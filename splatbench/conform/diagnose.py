@@ -50,7 +50,7 @@ for _axis, _names in AXIS_PROBES.items():
     for _name in _names:
         AXIS_OF.setdefault(_name, _axis)
 from splatbench.conform.results import ProbeResult
-from splatbench.scene_builders import RenderInput
+from splatbench.render_inputs import RenderInput
 
 #: The cause given when the backend fails on a probe's scene (raises, bad shape, NaN), where the
 #: probe's own convention cannot be judged.

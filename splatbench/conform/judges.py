@@ -15,7 +15,7 @@ from splatbench.conform.oracle import (conic_jacobian, forward_tolerance, gradie
                                                 oracle_grad)
 from splatbench.conform.probes import Probe
 from splatbench.conform.results import ProbeResult
-from splatbench.scene_builders import RenderInput
+from splatbench.render_inputs import RenderInput
 
 
 @dataclass(frozen=True)

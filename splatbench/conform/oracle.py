@@ -36,7 +36,7 @@ import numpy as np
 
 from splatbench.backends.base import Backend
 from splatbench.gaussians import GROUPS
-from splatbench.scene_builders import RenderInput
+from splatbench.render_inputs import RenderInput
 from splatbench.conventions import U32
 
 U64 = 2.0 ** -53

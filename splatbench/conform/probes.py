@@ -23,7 +23,7 @@ from splatbench.conform.scenes import (alpha_max, alpha_min, background, basic_c
                                        pixel_centre, quat_norm, quat_order, radius, scale_activation, sh_degree1,
                                        sh_degree2, sh_degree3, sh_degree_arg, sh_viewdir, sh_viewdir_grad, tiles)
 from splatbench.gaussians import GROUPS
-from splatbench.scene_builders import RenderInput
+from splatbench.render_inputs import RenderInput
 
 KINDS = ("forward", "gradient", "direction", "approximation")
 

@@ -17,12 +17,12 @@ import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.conventions import SH_C0
-from splatbench.scene_builders import RenderInput, logit, point_at, sh_dc, world_sigma
+from splatbench.render_inputs import RenderInput, logit, point_at, sh_dc, world_sigma
 from splatbench.workloads import random_unit_quats
 
 
 # ----------------------------------------------------------------------------
-# Scene building blocks (those every verification application uses: `splatbench.scene_builders`)
+# Scene building blocks (those every verification application uses: `splatbench.render_inputs`)
 # ----------------------------------------------------------------------------
 
 def camera(width: int = 16, height: int = 16, **kw) -> Camera:

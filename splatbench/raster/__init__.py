@@ -1,12 +1,13 @@
 """The Dr.Jit tile rasterizer: `render` (numpy) and `rasterize` (torch, differentiable).
 
 Ops mirror `reference/` by name: `project`, `eval_sh`, `composite`. The stages hand typed
-results on: `project` -> `Projection`, `bin_gaussians` -> `Bins`, `composite` -> `Composite`.
+results on: `project` -> `Projection`, `bin_gaussians` -> `Bins`, `composite` -> `Composite`;
+each reads its options from one `RasterOptions`.
 """
 
 from splatbench.raster.api import RenderResult, render
 from splatbench.raster.binning import Bins, TileGrid, bin_gaussians
-from splatbench.raster.compositing import CompositeSettings, composite
+from splatbench.raster.compositing import composite
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.projection import project
 from splatbench.raster.sh import eval_sh
@@ -23,4 +24,4 @@ def __getattr__(name: str):
 
 
 __all__ = ["render", "RenderResult", "rasterize", "RasterInfo", "RasterOptions", "project", "eval_sh", "bin_gaussians",
-           "TileGrid", "Bins", "composite", "CompositeSettings", "work_stats", "WorkStats"]
+           "TileGrid", "Bins", "composite", "work_stats", "WorkStats"]

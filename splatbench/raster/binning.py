@@ -28,6 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from splatbench.raster.device import dr
+from splatbench.raster.options import RasterOptions
 from splatbench.raster.projection import Projection, array_namespace
 
 # Slack of the rectangle test, relative to the size of the quadratic form's terms
@@ -251,14 +252,18 @@ def _empty_bins(m, grid: TileGrid, n: int, r2, box_pairs: int, cutoff_box_pairs:
                 dr.zeros(m.UInt32, n), box_pairs, m.UInt32(), r2, cutoff_box_pairs)
 
 
-def bin_gaussians(proj: Projection, grid: TileGrid, alpha_min: float, timer=None) -> Bins:
+def bin_gaussians(proj: Projection, camera, options: RasterOptions, timer=None) -> Bins:
     """Pair each visible Gaussian with the tiles of its support box (`support_extents`)
     that its support ellipse meets (`ellipse_meets_rect`), sorted by (tile, depth; ties by
     ascending Gaussian index, the reference's rule).
 
-    ``timer``: None, or a benchmark's `StageTimer`, marked "binning_cull" once the pairs
-    are known (extents, expansion, ellipse test); the caller marks "binning_sort".
+    ``proj``: the `Projection` of ``camera`` (a `splatbench.Camera`: its width and height
+    make the `TileGrid`); ``options``: `RasterOptions`, of which binning reads tile_size and
+    alpha_min. ``timer``: None, or a benchmark's `StageTimer`, marked "binning_cull" once the
+    pairs are known (extents, expansion, ellipse test); the caller marks "binning_sort".
     """
+    grid = TileGrid(camera.width, camera.height, options.tile_size)
+    alpha_min = float(options.alpha_min)
     m = array_namespace(proj.depths)
     UInt32, Float = m.UInt32, m.Float
     u, v = dr.detach(proj.means2d.x), dr.detach(proj.means2d.y)

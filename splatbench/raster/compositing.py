@@ -63,7 +63,9 @@ def needed_keys(inputs: dict, absgrad: bool) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class CompositeSettings:
-    """The compositing thresholds (`RasterOptions`' meanings) and the RGB background."""
+    """What the compositing loops read of `RasterOptions` (its thresholds, as Python floats:
+    constants of the traced kernels) and the RGB background; made from the options only,
+    by `from_options` (`composite`, `composite_loop_ad`, `work.work_stats`)."""
 
     alpha_min: float
     alpha_max: float
@@ -414,7 +416,16 @@ class CompositeState:
         self.abs_grad_means2d = None
 
 
-def composite(proj: Projection, colors, bins: Bins, settings: CompositeSettings, *,
+def splat_records(proj: Projection, colors=None) -> Records:
+    """``proj``'s Gaussians packed as the compositing loop reads them (`records.pack_records`);
+    ``colors``: [N, 3] Array3f, None for black (the work counts and lane studies read only the
+    geometry)."""
+    m = array_namespace(proj.opacities)
+    colors = dr.zeros(m.Array3f, dr.width(proj.depths)) if colors is None else colors
+    return pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq))
+
+
+def composite(proj: Projection, colors, bins: Bins, options: RasterOptions, background=(0.0, 0.0, 0.0), *,
               absgrad: bool = False) -> tuple[Composite, CompositeState]:
     """Alpha-composite screen-space Gaussians (mirrors `reference.composite`, matched mode):
     the last stage of `project` -> `bin_gaussians` -> `composite`.
@@ -423,8 +434,9 @@ def composite(proj: Projection, colors, bins: Bins, settings: CompositeSettings,
         proj: `Projection` of N Gaussians (means2d [N, 2], conics [N, 3], opacities [N],
             depths [N], cutoff_sq [N]; gradients flow to the first four).
         colors: [N, 3] Array3f, the Gaussians' colours.
-        bins: `Bins` of ``proj`` from `bin_gaussians`, with ``settings.alpha_min``.
-        settings: thresholds and background (`CompositeSettings`).
+        bins: `Bins` of ``proj`` from `bin_gaussians` with the same ``options``.
+        options: `RasterOptions`; compositing reads alpha_min, alpha_max and transmittance_min.
+        background: RGB behind the splats, 3 floats (checked by the caller).
         absgrad: also accumulate per-pixel |d loss / d mean2d| (AbsGS) in backward.
 
     Returns:
@@ -434,16 +446,17 @@ def composite(proj: Projection, colors, bins: Bins, settings: CompositeSettings,
                         "colors": colors, "depths": proj.depths}, absgrad)
     state = CompositeState(bins, absgrad, grad_keys=keys)
     out = dr.custom(_CompositeOp, proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq,
-                    state, settings)
+                    state, CompositeSettings.from_options(options, background))
     return Composite(*out), state
 
 
-def composite_loop_ad(proj: Projection, colors, bins: Bins, settings: CompositeSettings) -> tuple[Composite,
-                                                                                                  CompositeState]:
+def composite_loop_ad(proj: Projection, colors, bins: Bins, options: RasterOptions,
+                      background=(0.0, 0.0, 0.0)) -> tuple[Composite, CompositeState]:
     """`composite` differentiated by Dr.Jit's AD through the forward loop instead of the
     hand-written backward (test-only: slower; checks `_CompositeOp`)."""
+    settings = CompositeSettings.from_options(options, background)
     m = array_namespace(proj.opacities)
-    records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq))
+    records = splat_records(proj, colors)
     lanes = lanes_for(m, records, bins)
     # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
     # count (the longest tile list, rounded up to a power of two); -1 is wrong here.

@@ -11,11 +11,10 @@ from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES_OF_DEGREE
 from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins, TileGrid, bin_gaussians
-from splatbench.raster.compositing import (Composite, CompositeSettings, CompositeState, composite,
-                                           composite_loop_ad)
+from splatbench.raster.compositing import Composite, CompositeState, composite, composite_loop_ad
 from splatbench.raster.hooks import NO_HOOKS, Hooks
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.projection import Projection, array_namespace, columns, normalize, project
+from splatbench.raster.projection import Projection, array_namespace, clip_planes, columns, normalize, project
 from splatbench.raster.sh import eval_sh
 
 # Input domain (docs/conventions.md): larger SH coefficients make the true gradients
@@ -69,13 +68,6 @@ def check_background(background) -> tuple[float, float, float]:
     return tuple(float(c) for c in bg)
 
 
-def clip_planes(camera, options: RasterOptions) -> tuple[float, float]:
-    """The near and far planes in effect: the options', else the camera's."""
-    near = camera.near if options.near is None else options.near
-    far = camera.far if options.far is None else options.far
-    return near, far
-
-
 def check_view(camera, options: RasterOptions) -> None:
     """The one camera check of `render` and `rasterize`, before any work: ``camera`` is a
     `splatbench.Camera` (whose fields were checked when it was built, and whose matrix is
@@ -98,20 +90,12 @@ def check_clip_planes(camera, options: RasterOptions) -> None:
                          f"(options, else the camera's)")
 
 
-def project_view(means, log_scales, quats, opacity_logits, camera, options: RasterOptions) -> Projection:
-    """`project` with the camera's planes unless ``options`` override them (tensors as in `render_frame`)."""
-    near, far = clip_planes(camera, options)
-    return project(means, log_scales, quats, opacity_logits, camera.K, camera.world_to_camera,
-                   camera.width, camera.height, eps2d=options.eps2d, near=near, far=far,
-                   radius=options.radius, alpha_min=options.alpha_min, antialiased=options.antialiased)
-
-
 def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int,
                  background: tuple[float, float, float], options: RasterOptions,
                  absgrad: bool = False, hooks: Hooks = NO_HOOKS) -> Frame:
     """Render one view from Dr.Jit tensors (AD flows to whichever inputs have it enabled):
-    `project_view` -> `view_colors` -> `bin_gaussians` -> `composite`, each stage handing
-    its typed result to the next.
+    `project` -> `view_colors` -> `bin_gaussians` -> `composite`, each stage handing its
+    typed result to the next and reading its options from ``options`` (`RasterOptions`).
 
     Args:
         means: [N, 3], log_scales: [N, 3], quats: [N, 4], opacity_logits: [N],
@@ -123,7 +107,7 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
     if means.shape[0] == 0:
         return _empty_frame(means, camera, background, options)
     timer = hooks.timer
-    proj = project_view(means, log_scales, quats, opacity_logits, camera, options)
+    proj = project(means, log_scales, quats, opacity_logits, camera, options)
     colors = view_colors(means, sh, camera, sh_degree)
     # One kernel for every per-Gaussian quantity (the compositing loop gathers from
     # them, which would otherwise evaluate each array in a kernel of its own).
@@ -131,15 +115,13 @@ def render_frame(means, log_scales, quats, opacity_logits, sh, camera, *, sh_deg
     dr.eval(*proj, colors)
     if timer is not None:
         timer.mark("preprocess")
-    bins = bin_gaussians(proj, TileGrid(camera.width, camera.height, options.tile_size), float(options.alpha_min),
-                         timer)
+    bins = bin_gaussians(proj, camera, options, timer)
     if timer is not None:
         timer.mark("binning_sort")
-    settings = CompositeSettings.from_options(options, background)
     if hooks.loop_ad:
-        out, state = composite_loop_ad(proj, colors, bins, settings)
+        out, state = composite_loop_ad(proj, colors, bins, options, background)
     else:
-        out, state = composite(proj, colors, bins, settings, absgrad=absgrad)
+        out, state = composite(proj, colors, bins, options, background, absgrad=absgrad)
         state.timer = timer  # the backward pass marks "backward_compositing" on it
     covered = out.alpha > 0
     depth = dr.select(covered, out.depth_sum / dr.select(covered, out.alpha, 1.0), 0.0)
@@ -183,5 +165,5 @@ def frame_to_numpy(frame: Frame, height: int, width: int) -> tuple[np.ndarray, n
     return rgb, alpha, depth
 
 
-__all__ = ["Frame", "render_frame", "project_view", "frame_to_numpy", "resolve_sh_degree", "check_background",
+__all__ = ["Frame", "render_frame", "frame_to_numpy", "resolve_sh_degree", "check_background",
            "check_clip_planes", "check_view", "Composite"]

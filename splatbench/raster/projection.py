@@ -28,24 +28,19 @@ DEFAULTS = RasterOptions()
 
 
 class Projection(NamedTuple):
-    """Screen-space Gaussians (Dr.Jit arrays, all of width N).
-
-    means2d [N, 2] pixel coordinates (origin at the image's top-left corner);
-    conics [N, 3] (A, B, C) = (xx, xy, yy) of the inverse 2D covariance;
-    depths [N] camera z; opacities [N] (after antialiasing compensation);
-    cutoff_sq [N] R^2 in Mahalanobis units (detached); extents [N, 2] (rx, ry) of
-    the cutoff ellipse's bounding box in pixels (detached); radii [N] int32,
-    0 when culled; visible [N] bool.
+    """Screen-space Gaussians: Dr.Jit arrays of one module (``drjit.llvm.ad`` or ``drjit.cuda.ad``),
+    all of width N, a field [N, 2] being an ``Array2f`` of two [N] columns. Gradients flow
+    to the first four fields; the others are detached.
     """
 
-    means2d: object
-    conics: object
-    depths: object
-    opacities: object
-    cutoff_sq: object
-    extents: object
-    radii: object
-    visible: object
+    means2d: object    # Array2f, [N, 2] float32: pixel coordinates (origin at the image's top-left corner)
+    conics: object     # Array3f, [N, 3] float32: (A, B, C) = (xx, xy, yy) of the inverse 2D covariance
+    depths: object     # Float, [N] float32: camera z
+    opacities: object  # Float, [N] float32: after the antialiasing compensation
+    cutoff_sq: object  # Float, [N] float32: R^2 in Mahalanobis units (detached)
+    extents: object    # Array2f, [N, 2] float32: (rx, ry) of the cutoff ellipse's bounding box, pixels (detached)
+    radii: object      # Int32, [N] int32: 0 when culled
+    visible: object    # Bool, [N] bool
 
 
 def array_namespace(x):
@@ -127,9 +122,14 @@ def camera_constants(m, K: np.ndarray, world_to_camera: np.ndarray) -> dict:
     }
 
 
-def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width: int, height: int,
-            *, eps2d: float = DEFAULTS.eps2d, near: float = 0.01, far: float = 1e10, radius: str = DEFAULTS.radius,
-            alpha_min: float = DEFAULTS.alpha_min, antialiased: bool = DEFAULTS.antialiased) -> Projection:
+def clip_planes(camera, options: RasterOptions) -> tuple[float, float]:
+    """The near and far planes in effect: the options', else the camera's."""
+    near = camera.near if options.near is None else options.near
+    far = camera.far if options.far is None else options.far
+    return near, far
+
+
+def project(means, log_scales, quats, opacity_logits, camera, options: RasterOptions = DEFAULTS) -> Projection:
     """Project Gaussians to the screen (mirrors `reference.project`, matched mode).
 
     Args:
@@ -137,12 +137,17 @@ def project(means, log_scales, quats, opacity_logits, K, world_to_camera, width:
         log_scales: [N, 3] tensor, log of the axis scales.
         quats: [N, 4] tensor, (w, x, y, z), any length.
         opacity_logits: [N] tensor or flat array.
-        K: [3, 3] intrinsics (numpy). world_to_camera: [4, 4] (numpy, OpenCV axes).
-        width, height: image size in pixels.
+        camera: `splatbench.Camera`: intrinsics K, world_to_camera (OpenCV axes), width W and
+            height H in pixels, and the near and far planes unless ``options`` sets them.
+        options: `RasterOptions`; projection reads eps2d, near, far, radius, alpha_min and
+            antialiased.
 
     Returns:
-        `Projection` (see its docstring for shapes).
+        `Projection` (its fields name their shapes).
     """
+    K, world_to_camera, width, height = camera.K, camera.world_to_camera, camera.width, camera.height
+    near, far = clip_planes(camera, options)
+    eps2d, radius, alpha_min, antialiased = options.eps2d, options.radius, options.alpha_min, options.antialiased
     m = array_namespace(means.array)
     Float = m.Float
     mx, my, mz = columns(means, 3)  # also read for the SH view direction: no permute

@@ -14,14 +14,14 @@ import numpy as np
 
 from splatbench.raster.api import to_tensor
 from splatbench.raster.device import dr, get_device, packet_width
-from splatbench.raster.binning import TileGrid, bin_gaussians
-# The compositing loop's own lanes, lists, per-pixel test and record loads, so that
-# the counts are of exactly the decisions it makes.
+# The rasterizer's own stages, lanes, lists, per-pixel test and record loads, so that
+# the counts are of exactly the decisions compositing makes.
+from splatbench.raster.binning import bin_gaussians
 from splatbench.raster.blocks import lanes_for, pair_at
-from splatbench.raster.compositing import CompositeSettings, _alpha_at, _half_mahalanobis
-from splatbench.raster.records import Splats, load_records, pack_records
+from splatbench.raster.compositing import CompositeSettings, _alpha_at, _half_mahalanobis, splat_records
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import project_view
+from splatbench.raster.projection import project
+from splatbench.raster.records import load_records
 
 
 @dataclass(frozen=True)
@@ -75,18 +75,13 @@ def work_stats(gaussians, camera, **options) -> WorkStats:
     if len(gaussians) == 0:
         return WorkStats(0, 0, 0, 0, 0, 0, 0, 0, 0)
     with dr.suspend_grad():
-        proj = project_view(to_tensor(m, gaussians.means), to_tensor(m, gaussians.log_scales),
-                            to_tensor(m, gaussians.quats), to_tensor(m, gaussians.opacity_logits), camera, opts)
-        grid = TileGrid(camera.width, camera.height, opts.tile_size)
-        bins = bin_gaussians(proj, grid, opts.alpha_min)
+        proj = project(to_tensor(m, gaussians.means), to_tensor(m, gaussians.log_scales),
+                       to_tensor(m, gaussians.quats), to_tensor(m, gaussians.opacity_logits), camera, opts)
+        bins = bin_gaussians(proj, camera, opts)
         area = opts.tile_size ** 2
         if bins.num_pairs == 0:
             return WorkStats(bins.cutoff_box_pairs, bins.cutoff_box_pairs * area, bins.box_pairs, 0, 0, 0, 0, 0, 0)
-        zero = dr.zeros(m.Array3f, dr.width(proj.depths))
-        records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, zero, proj.depths,
-                                         proj.cutoff_sq))
-        counts = _count(m, records, bins, CompositeSettings(opts.alpha_min, opts.alpha_max,
-                                                             opts.transmittance_min, (0.0, 0.0, 0.0)))
+        counts = _count(m, splat_records(proj), bins, CompositeSettings.from_options(opts))
     return WorkStats(bins.cutoff_box_pairs, bins.cutoff_box_pairs * area, bins.box_pairs, bins.num_pairs,
                      bins.num_pairs * area, *counts)
 

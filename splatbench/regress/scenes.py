@@ -20,7 +20,7 @@ import numpy as np
 
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
-from splatbench.scene_builders import RenderInput
+from splatbench.render_inputs import RenderInput
 
 #: Bump on any change to a scene or to the list (the snapshot records it; check refuses another).
 SCENE_SET_VERSION = 1

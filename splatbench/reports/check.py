@@ -42,6 +42,7 @@ from splatbench.experiments.spec import CheckSpec, ExperimentSpec
 from splatbench.experiments.store import build_table, experiment_dir, read_records
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval
+from splatbench.report_files import markdown_table
 from splatbench.reports.findings import (Claim, fmt_interval, fmt_min_effect, fmt_number, judge, no_spread, paired,
                                          rules_for, usable_runs)
 from splatbench.reports.settling import cell_settling, unsettled_reason
@@ -260,17 +261,18 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
              f"effect and the settled rule on "
              f"each protocol's own test curves, as in the findings above"
              + (f"; the check's runs are in `{CHECK_TABLE_NAME}` beside this file." if len(result.table) else "."),
-             "",
-             f"| protocol | runs done | `{a}` | `{b}` | `{b}` − `{a}`, paired | settled |",
-             "|---|---:|---:|---:|---|---|"]
+             ""]
+    rows = []
     for side, name in ((result.grid, f"`{result.grid.protocol}` (the grid's)"),
                        (result.rerun, f"`{result.rerun.protocol}`")):
         runs = f"{side.done} of {side.total}" + (f" ({side.failed} failed)" if side.failed else "")
         diff = side.claim.text if side.claim is not None else "–"
         settled = "–" if side.settled is None else "yes" if side.settled else f"no: {side.why}"
-        lines.append(f"| {name} | {runs} | {_cell(side, 0, m, len(result.seeds))} | "
-                     f"{_cell(side, 1, m, len(result.seeds))} | {diff} | {settled} |")
-    lines += ["", f"Cells: {_name(m)} ({m.unit}), mean over seeds ± the half-width of its 95 % t interval."
+        rows.append([name, runs, _cell(side, 0, m, len(result.seeds)), _cell(side, 1, m, len(result.seeds)), diff,
+                     settled])
+    head = ["protocol", "runs done", f"`{a}`", f"`{b}`", f"`{b}` − `{a}`, paired", "settled"]
+    lines += [*markdown_table(head, rows, align="-rrr--").splitlines(),
+              "", f"Cells: {_name(m)} ({m.unit}), mean over seeds ± the half-width of its 95 % t interval."
               if m.unit else f"Cells: {_name(m)}, mean over seeds ± the half-width of its 95 % t interval.", ""]
     sentence = f"**{result.headline}**: {result.reason}"
     if result.verdict in ("holds", "does not hold") and result.rerun.settled is False:

@@ -43,6 +43,7 @@ from splatbench.experiments.store import TABLE_NAME, build_table, experiment_dir
 from splatbench.fsutil import atomic_write
 from splatbench.figures import pareto_figure
 from splatbench.metrics.spec import MetricSpec
+from splatbench.report_files import markdown_table
 from splatbench.reports.check import CHECK_TABLE_NAME, CheckResult, check_lines, check_result, check_table, header_line
 from splatbench.reports.figures import cell_means, curves_figure
 from splatbench.reports.findings import Finding, axis_finding
@@ -327,16 +328,14 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
 
     if warned:
         lines += ["## Warnings", "", "What each run's own tool warned of (the run's file keeps it too).", "",
-                  "| run | scene | cell | seed | warning |", "|---|---|---|---|---|"]
-        lines += [f"| `{rid}` | {scene} | {cell} | {seed} | {text.replace('|', '/')} |"
-                  for rid, scene, cell, seed, text in warned]
-        lines.append("")
+                  markdown_table(["run", "scene", "cell", "seed", "warning"],
+                                 ([f"`{rid}`", scene, cell, seed, text] for rid, scene, cell, seed, text in warned)),
+                  ""]
     failed = table[table.status == "failed"] if len(table) else table
     if len(failed):
-        lines += ["## Failed runs", "", "| run | scene | seed | error |", "|---|---|---|---|"]
-        for _, r in failed.iterrows():
-            lines.append(f"| `{r.run_id}` | {r.scene} | {r.seed} | {str(r.error).replace('|', '/')} |")
-        lines.append("")
+        lines += ["## Failed runs", "",
+                  markdown_table(["run", "scene", "seed", "error"],
+                                 ([f"`{r.run_id}`", r.scene, r.seed, r.error] for _, r in failed.iterrows())), ""]
     return "\n".join(lines).rstrip() + "\n"
 
 

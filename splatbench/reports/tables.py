@@ -35,6 +35,7 @@ from splatbench.experiments.kinds import get_kind
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import t_quantile
+from splatbench.report_files import markdown_table
 
 
 def kind_report(kind: str) -> KindReport | None:
@@ -213,13 +214,10 @@ class AxisTable:
         return Stat(float(row[f"{metric}.mean"]), float(row[f"{metric}.std"]), int(row[f"{metric}.n"]))
 
     def markdown(self) -> str:
-        heads = ["scene", self.axis, "runs", *(m.label for m in self.metrics)]
-        lines = ["| " + " | ".join(heads) + " |", "|" + "|".join(["---"] * 3 + ["---:"] * len(self.metrics)) + "|"]
-        for _, r in self.frame.iterrows():
-            cells = [r.scene, f"`{r.label}`", str(int(r.runs))]
-            cells += [_cell(r, m) for m in self.metrics]
-            lines.append("| " + " | ".join(cells) + " |")
-        return "\n".join(lines)
+        return markdown_table(["scene", self.axis, "runs", *(m.label for m in self.metrics)],
+                              ([r.scene, f"`{r.label}`", int(r.runs), *(_cell(r, m) for m in self.metrics)]
+                               for _, r in self.frame.iterrows()),
+                              align="---" + "r" * len(self.metrics))
 
 
 def _cell(r: pd.Series, m: MetricSpec) -> str:

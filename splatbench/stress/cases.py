@@ -6,7 +6,7 @@ Plain NumPy (``np.random.default_rng``), so the CLI needs no test dependency;
 ``tests/test_stress.py`` feeds the same builders from hypothesis strategies.
 
 Scenes are made in camera space (so they land in view) and moved to the world
-through the camera pose (`splatbench.scene_builders`). The camera's rotation is
+through the camera pose (`splatbench.render_inputs`). The camera's rotation is
 uniformly random; its centre, the image size, N and the rasterizer options come
 from small menus, because the rasterizer bakes these into its Dr.Jit kernels as
 literals (see docs/stress.md): free choices would recompile kernels in every case.
@@ -24,7 +24,7 @@ from splatbench.cameras import Camera
 from splatbench.errors import InputError
 from splatbench.gaussians import GROUPS, quat_to_rotmat
 from splatbench.raster import RasterOptions
-from splatbench.scene_builders import RenderInput, camera_points, to_world, world_sigma
+from splatbench.render_inputs import RenderInput, camera_points, to_world, world_sigma
 from splatbench.workloads import random_unit_quats
 
 FIELDS = GROUPS  # StressCase's parameter fields, in rasterize's argument order

@@ -59,6 +59,7 @@ from splatbench.errors import InputError
 from splatbench.fsutil import read_text
 from splatbench.overrides import parse_override
 from splatbench.raster.options import RasterOptions
+from splatbench.report_files import write_text
 from splatbench.train.sh_schedule import MAX_LOOKAHEAD
 
 #: Keys of the ``data`` table.
@@ -412,11 +413,8 @@ def load_config(path: str | Path) -> TrainConfig:
 
 
 def save_config(config: TrainConfig, path: str | Path) -> Path:
-    """Write ``config`` as TOML (creating the folder)."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(config.to_toml(), encoding="utf-8")
-    return p
+    """Write ``config`` as TOML (creating the folder), atomically (`report_files.write_text`)."""
+    return write_text(path, config.to_toml())
 
 
 def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...]) -> TrainConfig:

@@ -7,7 +7,7 @@
     @register_init("mast3r")
     def mast3r(dataset, settings): ...
 
-Built in (every one seeded by `splatbench.init.from_points`: 3-NN scales, opacity
+Built in (every one seeded by `splatbench.initial_gaussians.from_points`: 3-NN scales, opacity
 ``settings.opacity``, DC colour from the point colour):
 
 * ``auto`` (the default) -- the dataset's own points when it has them (``surface``),
@@ -47,7 +47,7 @@ import numpy as np
 
 from splatbench.errors import InputError
 from splatbench.gaussians import Gaussians
-from splatbench.init import from_points, knn_mean_sq_dist
+from splatbench.initial_gaussians import from_points, knn_mean_sq_dist
 
 #: Where ``init = "random"`` samples (`random_region`):
 #:

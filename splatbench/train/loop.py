@@ -39,6 +39,7 @@ from splatbench.errors import InputError
 from splatbench.interrupt import Interrupted, deferred
 from splatbench.ply import ViewHints
 from splatbench.raster.torch_bridge import parameter_device, rasterize
+from splatbench.report_files import write_text
 from splatbench.scenes.orientation import dataset_up, rig_up
 from splatbench.strategies import topology_counts
 from splatbench.strategies.base import StepContext
@@ -588,7 +589,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step, protocol=config.protocol,
         raster=config.raster.to_dict(),
         step_evaluations=step_evaluations, topology=topology_counts(trainer.state))
-    (out / "result.json").write_text(result.to_json(indent=2) + "\n", encoding="utf-8")
+    write_text(out / "result.json", result.to_json(indent=2) + "\n")  # whole or not at all
     return result
 
 

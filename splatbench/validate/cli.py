@@ -39,7 +39,7 @@ def mitsuba(out: Path, resolution: int, sweeps: tuple[str, ...], no_probe: bool)
         checks = vm.check_tight(resolution) + checks
     probe = [] if no_probe else vm.intersection_probe()
     paths = vm.write_report(rows, out, width=resolution, probe=probe, checks=checks)
-    click.echo(vm.markdown_table(rows, resolution))
+    click.echo(vm.sweep_markdown(rows, resolution))
     if probe:
         click.echo(vm.probe_markdown(probe))
     for c in checks:

@@ -65,7 +65,7 @@ from splatbench.validate.mitsuba.checks import (MIN_TREND_SIGMA_PX, PREDICTION_A
                                                 check_trends)
 from splatbench.validate.mitsuba.prediction import IsotropicPrediction, isotropic_prediction
 from splatbench.validate.mitsuba.probe import ProbeRow, intersection_probe
-from splatbench.validate.mitsuba.report import (DEFAULT_OUT, ReportPaths, markdown_table, probe_markdown,
+from splatbench.validate.mitsuba.report import (DEFAULT_OUT, ReportPaths, probe_markdown, sweep_markdown,
                                                 write_report)
 from splatbench.validate.mitsuba.scene import (DEFAULT_OPTIONS, MATCHED_OPTIONS, OPTION_SETS, SWEEP_OPACITY,
                                                Comparison, ComparisonMetrics, compare, render_splat, render_traced)
@@ -73,6 +73,6 @@ from splatbench.validate.mitsuba.scene import (DEFAULT_OPTIONS, MATCHED_OPTIONS,
 __all__ = ["MITSUBA_VARIANT", "SWEEPS", "Case", "SweepRow", "angle_cases", "anisotropy_cases", "overlap_cases",
            "run_case", "run_sweeps", "sh_cases", "size_cases", "MIN_TREND_SIGMA_PX", "PREDICTION_ATOL", "Check",
            "check_tight", "check_trends", "IsotropicPrediction", "isotropic_prediction", "ProbeRow",
-           "intersection_probe", "DEFAULT_OUT", "ReportPaths", "markdown_table", "probe_markdown", "write_report",
+           "intersection_probe", "DEFAULT_OUT", "ReportPaths", "sweep_markdown", "probe_markdown", "write_report",
            "DEFAULT_OPTIONS", "MATCHED_OPTIONS", "OPTION_SETS", "SWEEP_OPACITY", "Comparison", "ComparisonMetrics",
            "compare", "render_splat", "render_traced"]

@@ -15,7 +15,7 @@ import numpy as np
 from splatbench.cameras import Camera
 from splatbench.errors import InputError
 from splatbench.gaussians import Gaussians
-from splatbench.scene_builders import logit, point_at, sh_dc, to_world, world_sigma
+from splatbench.render_inputs import logit, point_at, sh_dc, to_world, world_sigma
 from splatbench.workloads import random_unit_quats
 from splatbench.validate.mitsuba.scene import OPTION_SETS, SWEEP_OPACITY, ComparisonMetrics, compare
 

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
-from splatbench.report_files import save_figure, write_csv, write_text
+from splatbench.report_files import markdown_table, save_figure, write_csv, write_text
 from splatbench.validate.mitsuba.cases import SweepRow
 from splatbench.validate.mitsuba.checks import Check
 from splatbench.validate.mitsuba.probe import ProbeRow
@@ -38,16 +38,14 @@ def _fmt(x: float) -> str:
     return f"{x:.4g}" if isinstance(x, float) else str(x)
 
 
-def markdown_table(rows: Sequence[SweepRow], width: int) -> str:
+def sweep_markdown(rows: Sequence[SweepRow], width: int) -> str:
     """The rows as a markdown table (one per sweep)."""
     lines = [f"Rasterizer vs Mitsuba `volprim_rf_dedup`, {width}x{width}, one ray per pixel centre, linear RGB, "
              f"peak 1. `shipped`: `volprim_rf_basic` as shipped. Options `matched`: {MATCHED_OPTIONS}; "
              f"`3dgs`: the rasterizer's defaults (eps2d 0.3, alpha_min 1/255, alpha_max 0.99).", ""]
-    header = ("| sweep | parameter | value | options | N | PSNR (dB) | max error | mean error | PSNR shipped | "
-              "max error shipped | re-hit pixels |")
-    lines += [header, "|" + "---|" * 11]
-    for r in rows:
-        lines.append("| " + " | ".join(_fmt(v) for v in r.columns().values()) + " |")
+    header = ["sweep", "parameter", "value", "options", "N", "PSNR (dB)", "max error", "mean error", "PSNR shipped",
+              "max error shipped", "re-hit pixels"]
+    lines.append(markdown_table(header, ([_fmt(v) for v in r.columns().values()] for r in rows)))
     return "\n".join(lines) + "\n"
 
 
@@ -58,14 +56,13 @@ def probe_markdown(probe: Sequence[ProbeRow]) -> str:
     cell = {(r.sigma, r.distance_ratio): r for r in probe}
     lines = ["## Mitsuba's ray-ellipsoid test (llvm_ad_rgb): wrong hit/miss decisions", "",
              "Fraction of rays whose hit/miss differs from the exact test m_ray < 3 (max |m_ray - 3| among "
-             "them in brackets); rows: sigma (world units), columns: ray-origin distance / sigma.", "",
-             "| sigma | " + " | ".join(f"D/sigma {x:g}" for x in ratios) + " |", "|---|" + "---|" * len(ratios)]
-    for sg in sigmas:
-        cells = []
-        for ra in ratios:
-            r = cell.get((sg, ra))
-            cells.append("" if r is None else (f"{r.wrong:.2%}" + (f" ({r.max_m_error:.2g})" if r.wrong else "")))
-        lines.append(f"| {sg:g} | " + " | ".join(cells) + " |")
+             "them in brackets); rows: sigma (world units), columns: ray-origin distance / sigma.", ""]
+
+    def text(r: ProbeRow | None) -> str:
+        return "" if r is None else f"{r.wrong:.2%}" + (f" ({r.max_m_error:.2g})" if r.wrong else "")
+
+    lines.append(markdown_table(["sigma", *(f"D/sigma {x:g}" for x in ratios)],
+                                ([f"{sg:g}", *(text(cell.get((sg, ra))) for ra in ratios)] for sg in sigmas)))
     return "\n".join(lines) + "\n"
 
 
@@ -82,7 +79,7 @@ def write_report(rows: Sequence[SweepRow], out_dir: str | Path = DEFAULT_OUT, *,
     out = Path(out_dir)
     csv_path = write_csv(out / "table.csv", SweepRow.column_names(),
                          ({k: (_fmt(v) if isinstance(v, float) else v) for k, v in r.columns().items()} for r in rows))
-    text = markdown_table(rows, width)
+    text = sweep_markdown(rows, width)
     extra = {}
     if probe:
         extra["intersection"] = write_csv(out / "intersection.csv", [f.name for f in fields(ProbeRow)],

@@ -1,4 +1,7 @@
-"""Initialising Gaussians: from a point cloud, SfM, uniform random points, or the true surfaces.
+"""Initial Gaussians: from a point cloud, SfM, uniform random points, or the true surfaces.
+
+The constructors themselves; training picks one by name (`TrainConfig.init`) through
+`splatbench.train.initializers`, which calls these.
 
 Every initialiser ends in `from_points`: one isotropic Gaussian per point, scales
 from the mean squared distance to the 3 nearest neighbours, opacity 0.1, SH DC from

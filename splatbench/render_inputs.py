@@ -1,5 +1,6 @@
-"""Building blocks of hand-made scenes: Gaussians placed by where they land on screen and
-how large they look there.
+"""The inputs of one render (`RenderInput`: Gaussians, a camera, a background) and the
+building blocks of hand-made ones: Gaussians placed by where they land on screen and how
+large they look there. (A Mitsuba scene that datasets are rendered from is `splatbench.scenes`.)
 
 The verification applications each build their own scenes from these: conform's probe
 scenes (`splatbench.conform.scenes`), stress's degenerate cases (`splatbench.stress.cases`)
