@@ -1,8 +1,8 @@
 """Front-to-back alpha compositing over tiles, with an analytic backward pass.
 
-Mirrors `reference.composite`. Lanes are ordered tile by tile (a SIMD packet of
-16 lanes with AVX-512 holds one 16x16 tile), and each lane shades a block of
-PIXEL_BLOCK x PIXEL_BLOCK pixels, walking its own list: the pairs of its tile whose
+Mirrors `reference.composite`. Lanes are ordered tile by tile (with 4x4 blocks a SIMD
+packet of 16 lanes with AVX-512 holds one 16x16 tile), and each lane shades a block of
+B x B pixels (`RasterOptions.pixel_block`), walking its own list: the pairs of its tile whose
 support meets the block (`blocks.block_lists`). One load of a Gaussian's packed
 record serves the whole block, and in the backward pass the block's gradient
 contributions are summed in registers before one scatter. A symbolic loop per lane
@@ -63,17 +63,19 @@ def needed_keys(inputs: dict, absgrad: bool) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class CompositeSettings:
-    """The compositing thresholds (`RasterOptions`' meanings) and the RGB background."""
+    """The compositing thresholds (`RasterOptions`' meanings), the RGB background, and the
+    side of a lane's pixel block (`RasterOptions.pixel_block`: the lane layout, never the image)."""
 
     alpha_min: float
     alpha_max: float
     transmittance_min: float
     background: tuple[float, float, float]
+    pixel_block: int = RasterOptions.pixel_block
 
     @classmethod
     def from_options(cls, options: RasterOptions, background=(0.0, 0.0, 0.0)) -> CompositeSettings:
         return cls(float(options.alpha_min), float(options.alpha_max), float(options.transmittance_min),
-                   tuple(float(c) for c in background))
+                   tuple(float(c) for c in background), options.pixel_block)
 
 
 class Composite(NamedTuple):
@@ -338,7 +340,7 @@ class _CompositeOp(dr.CustomOp):
         self.n = dr.width(opacities)
         self.records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
         dr.eval(self.records)
-        self.lanes = lanes_for(m, self.records, self.bins)
+        self.lanes = lanes_for(m, self.records, self.bins, cfg.pixel_block)
         fwd = _forward_loop(m, self.records, self.bins.gaussian_ids, self.lanes, cfg)
         dr.eval(fwd)
         self.fwd = fwd
@@ -444,7 +446,7 @@ def composite_loop_ad(proj: Projection, colors, bins: Bins, settings: CompositeS
     hand-written backward (test-only: slower; checks `_CompositeOp`)."""
     m = array_namespace(proj.opacities)
     records = pack_records(m, Splats(proj.means2d, proj.conics, proj.opacities, colors, proj.depths, proj.cutoff_sq))
-    lanes = lanes_for(m, records, bins)
+    lanes = lanes_for(m, records, bins, settings.pixel_block)
     # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
     # count (the longest tile list, rounded up to a power of two); -1 is wrong here.
     bound = next_power_of_two(max(bins.max_list_length, 1))
