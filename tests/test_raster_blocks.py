@@ -89,3 +89,23 @@ def test_smaller_blocks_perform_fewer_evaluations_with_the_same_useful_ones():
     assert two.useful == four.useful and two.pairs == four.pairs
     assert two.block_evaluations < four.block_evaluations and two.performed < four.performed
     assert two.useful_share > four.useful_share
+
+
+def test_the_drjit_backend_passes_pixel_block_on(monkeypatch):
+    """`compare`'s drjit backend hands every `RasterOptions` field to the rasterizer, the
+    lane layout included (it used to name the fields it passed, and would drop a new one)."""
+    import splatbench.raster
+    from splatbench.backends.builtins.drjit_backend import make_drjit_backend
+
+    seen = {}
+
+    def rasterize(*args, **kwargs):
+        seen.update(kwargs)
+        return None, None, None, None
+
+    monkeypatch.setattr(splatbench.raster, "rasterize", rasterize)
+    backend = make_drjit_backend(pixel_block=2, tile_size=8)
+    backend.fn(None, None, None, None, None, None)
+    assert seen["pixel_block"] == 2 and seen["tile_size"] == 8
+    assert {k for k in seen if k not in ("sh_degree", "background")} == set(RasterOptions().to_dict()) | {"near",
+                                                                                                          "far"}
