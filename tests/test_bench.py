@@ -118,7 +118,7 @@ def test_table_marks_met_and_missed_targets():
     stages = StageSplit(1.0, 2.0, 3.0, 4.0, 5.0, 0.5, 15.5, binning_cull_ms=1.5, binning_sort_ms=0.5)
     base = RasterBenchResult(
         name="synthetic-10000-256x256-s0", n=10_000, width=256, height=256, sh_degree=3, device="cpu",
-        tile_size=16, repeats=5, fwd_ms=10.0, fwd_bwd_ms=30.0, stages=stages, pairs=1000, visible=900,
+        tile_size=16, pixel_block=4, repeats=5, fwd_ms=10.0, fwd_bwd_ms=30.0, stages=stages, pairs=1000, visible=900,
         evaluations=256_000, mevals_per_s=85.3, box_pairs=1200, block_evaluations=120_000,
         inside_cutoff_evaluations=70_000, useful_evaluations=64_000, useful_share=0.25, cutoff_box_pairs=2000,
         cutoff_evaluations=512_000, cutoff_useful_share=0.125, peak_gflops=80.0,

@@ -157,13 +157,14 @@ def test_support_boxes_shrink_faint_gaussians_and_keep_needles():
     assert dim.any() and (rx[dim] < 0.9 * cut_x[dim]).all()
 
 
-@pytest.mark.parametrize("tile_size", [8, 16, 32])
-def test_backward_is_bit_reproducible(tile_size):
+@pytest.mark.parametrize("tile_size, pixel_block", [(8, 4), (16, 4), (32, 4), (16, 2)])
+def test_backward_is_bit_reproducible(tile_size, pixel_block):
     """Several backward passes give the same bits. 96 x 96 at tile_size 32 is 9 tiles of
     4 SIMD packets each (16-lane AVX-512): with two threads Dr.Jit splits the launch into
     two blocks of 18 packets, so a tile straddles them, and a per-pair slot shared by the
     whole tile rounded differently from run to run (issue 30: 3 of 14 runs). 32 x 32 is a
-    single such tile. Needs more than one Dr.Jit thread, or any order is fixed."""
+    single such tile; 2 x 2 pixel blocks make a 16-pixel tile 4 packets too. Needs more
+    than one Dr.Jit thread, or any order is fixed."""
     threads = dr.thread_count()
     if threads < 2:
         dr.set_thread_count(2)
@@ -172,9 +173,9 @@ def test_backward_is_bit_reproducible(tile_size):
             workload = synthetic(1500, size, size, seed=size)
             c = workload.camera
             v = Cotangents.standard_normal(1, c.height, c.width)
-            first = fast_vjp(workload, v, device="cpu", tile_size=tile_size)
+            first = fast_vjp(workload, v, device="cpu", tile_size=tile_size, pixel_block=pixel_block)
             for _ in range(6):
-                again = fast_vjp(workload, v, device="cpu", tile_size=tile_size)
+                again = fast_vjp(workload, v, device="cpu", tile_size=tile_size, pixel_block=pixel_block)
                 np.testing.assert_array_equal(again.rgb, first.rgb)
                 for k in GROUPS:
                     np.testing.assert_array_equal(again.grads[k], first.grads[k], err_msg=f"{k} at {size}")

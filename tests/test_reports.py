@@ -690,3 +690,15 @@ def test_report_rebuild_rewrites_a_committed_report_from_its_own_parquet(tmp_pat
                                     "--out", str(tmp_path / "r")])
     assert res.exit_code == 2 and "does not hold the runs the grid makes now" in res.output
     assert len(res.output.strip().splitlines()) == 1
+
+
+def test_raster_kind_run_ids_ignore_pixel_block_at_the_value_earlier_runs_had():
+    """pixel_block came after runs were recorded with 4 x 4 blocks: at 4 it is left out of
+    the run id (those runs keep their ids), any other value makes a run of its own."""
+    from splatbench.experiments.grid import make_run_id
+    from splatbench.experiments.raster_kind import identity, resolve
+
+    before = {k: v for k, v in resolve({"scene": "garden"}).items() if k != "pixel_block"}
+    assert make_run_id("raster", identity(resolve({"scene": "garden"}))) == make_run_id("raster", before)
+    two = identity(resolve({"scene": "garden", "pixel_block": 2}))
+    assert two["pixel_block"] == 2 and make_run_id("raster", two) != make_run_id("raster", before)

@@ -54,7 +54,7 @@ def test_raster_keys_are_set_one_at_a_time_and_round_trip_through_toml(tmp_path)
 @pytest.mark.parametrize("override, message", [
     ("raster.alpha_mn=0.1", "raster.alpha_mn: unknown key (did you mean 'alpha_min'?)"),
     ("raster.bogus=1", "raster.bogus: unknown key (known: alpha_max, alpha_min, antialiased, eps2d, far, near, "
-                       "radius, tile_size, transmittance_min)"),
+                       "pixel_block, radius, tile_size, transmittance_min)"),
     ("raster.tile_size=12", "raster.tile_size: expected a power of two in [1, 64], got 12"),
     ("raster.tile_size=8.0", "raster.tile_size: expected an int, got 8.0"),
     ("raster.alpha_min=x", "raster.alpha_min: expected a finite number, got 'x'"),

@@ -9,13 +9,14 @@ A lane shades a B x B block of pixels and walks its own list (`splatbench.raster
 the lanes of a SIMD packet (16 with AVX-512) run until the longest list among them ends,
 so a packet costs 16 x B^2 x its longest list. For each (tile_size, B) this prints that
 cost with the lanes as the rasterizer lays them out (tile by tile; within a tile of
-more lanes than a packet, sorted by list length: `blocks.sort_lanes_by_length`; for
-B = 4 this is `work_stats`' `performed`), with every tile's lanes sorted by list length
+more lanes than a packet, sorted by list length: `blocks.sort_lanes_by_length`; this is
+`work_stats(..., tile_size=T, pixel_block=B)`'s `performed`), with every tile's lanes sorted by list length
 exactly (packets stay inside a tile),
 and with all lanes sorted by length (packets mix tiles), beside the list entries x B^2
 (no idle lane at all) and the useful evaluations (`work_stats(...).useful`, which no
 layout changes). It says nothing about time: smaller blocks share each record load among
-fewer pixels and cost more list building (issue 30; docs/benchmarks.md).
+fewer pixels and cost more list building (issue 30; tools/lane_timing.py times the layouts,
+docs/benchmarks.md "Lane layouts in wall time").
 """
 
 from __future__ import annotations

@@ -119,6 +119,7 @@ class RasterBenchResult:
     sh_degree: int                    # SH degree evaluated
     device: str                       # "cpu" (Dr.Jit LLVM) or "cuda"
     tile_size: int                    # tile side (pixels)
+    pixel_block: int                  # side of a compositing lane's pixel block (pixels; capped at tile_size)
     repeats: int                      # timed runs per measurement
     fwd_ms: float                     # forward only (no gradients), median
     fwd_bwd_ms: float                 # forward + backward of rgb.sum() to all five groups, median
@@ -128,7 +129,7 @@ class RasterBenchResult:
     evaluations: int                  # pixel-Gaussian evaluations compositing performs per pass (work_stats)
     mevals_per_s: float               # evaluations / forward compositing seconds / 10^6
     box_pairs: int                    # pairs of the support bounding boxes, before the ellipse-tile test
-    block_evaluations: int            # 16 x (4x4 block, Gaussian) pairs whose block meets the support
+    block_evaluations: int            # B^2 x (B x B block, Gaussian) pairs whose block meets the support
     inside_cutoff_evaluations: int    # (pixel, Gaussian) with the pixel centre inside the cutoff ellipse
     useful_evaluations: int           # ... that also pass alpha >= alpha_min: inside the support
     useful_share: float               # useful_evaluations / evaluations
@@ -233,7 +234,8 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
                                                      or first_run_peak <= target.peak_rss_mb)
     return RasterBenchResult(
         name=name, n=n, width=camera.width, height=camera.height, sh_degree=stats.sh_degree, device=device,
-        tile_size=opts.tile_size, repeats=settings.repeats, fwd_ms=milliseconds(statistics.median(fwd_s)),
+        tile_size=opts.tile_size, pixel_block=min(opts.pixel_block, opts.tile_size), repeats=settings.repeats,
+        fwd_ms=milliseconds(statistics.median(fwd_s)),
         fwd_bwd_ms=fwd_bwd_ms, stages=stages, pairs=stats.num_pairs, visible=int(stats.visible.sum()),
         evaluations=evaluations, mevals_per_s=mevals, box_pairs=work.box_pairs,
         block_evaluations=work.block_evaluations, inside_cutoff_evaluations=work.inside_cutoff,

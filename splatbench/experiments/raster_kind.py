@@ -11,7 +11,7 @@ Scene names are workloads (`splatbench.workloads.parse_workload_name`)::
 
 Config (flat; defaults in `DEFAULTS`): the rasterizer options, every `RasterOptions`
 field but ``near`` and ``far`` (the workload's camera sets those): ``tile_size``,
-``alpha_min``, ``alpha_max``, ``transmittance_min``, ``eps2d``, ``radius``,
+``pixel_block``, ``alpha_min``, ``alpha_max``, ``transmittance_min``, ``eps2d``, ``radius``,
 ``antialiased`` and ``device`` (`RASTER_FIELDS`, read from the dataclass, so a new option
 is a config field here without an edit); ``sh_degree`` (0..3, the bands evaluated); and
 how to measure (`MEASUREMENT`): ``repeats`` (timed pairs, at least 7) and
@@ -106,7 +106,10 @@ MEASUREMENT: dict[str, Any] = {
 DEFAULTS: dict[str, Any] = {**{k: v for k, v in RasterOptions().to_dict().items() if k in RASTER_FIELDS},
                             **MEASUREMENT}
 #: Options with no counterpart in the reference (accelerations and placement only).
-FAST_ONLY = ("tile_size", "device")
+FAST_ONLY = ("tile_size", "pixel_block", "device")
+#: Options added after runs were recorded, with the value those runs had implicitly: at that
+#: value an option is left out of the run id (`identity`), so those runs keep their ids.
+IMPLICIT_BEFORE = {"pixel_block": 4}
 #: What a run measures, in the resolved config (so in the run id): 2 = error against the
 #: exact model and the median of per-pair time ratios (1, unnamed: error against the
 #: default-option reference, ratio of medians). Results measured otherwise are never reused.
@@ -181,6 +184,12 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
     out = {**DEFAULTS, **config, **options_of(config).to_dict(), "protocol": PROTOCOL}
     out["error_scale"] = float(out["error_scale"])
     return out
+
+
+def identity(config: dict[str, Any]) -> dict[str, Any]:
+    """What the run id hashes of a resolved config: the config without the `IMPLICIT_BEFORE`
+    options at the values runs had before those options existed."""
+    return {k: v for k, v in config.items() if not (k in IMPLICIT_BEFORE and v == IMPLICIT_BEFORE[k])}
 
 
 def options_of(config: dict[str, Any]) -> RasterOptions:
@@ -357,7 +366,7 @@ REPORT = KindReport(
     meanings=METRICS,
 )
 
-RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, prepare=prepare,
+RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, identity=identity, prepare=prepare,
                  description="time the rasterizer under options against the defaults; error against the exact model",
                  report=REPORT)
 

@@ -1,6 +1,6 @@
 """Compositing lanes (`Lanes`, in tile order) and their per-block lists: each lane walks
-only the pairs of its tile whose support ellipse meets the lane's PIXEL_BLOCK x PIXEL_BLOCK
-block of pixels.
+only the pairs of its tile whose support ellipse meets the lane's B x B block of pixels
+(B: `RasterOptions.pixel_block`, capped at the tile size).
 
 A tile's list holds every Gaussian whose ellipse meets some pixel of the tile, but a
 small ellipse meets only a few of the tile's blocks. `block_lists` tests every
@@ -19,11 +19,6 @@ from typing import NamedTuple
 from splatbench.raster.device import dr, packet_width
 from splatbench.raster.binning import Bins, TileGrid, ellipse_meets_rect, tile_pixel_offsets
 from splatbench.raster.records import Records, load_records
-
-# Each lane shades a PIXEL_BLOCK x PIXEL_BLOCK block of pixels: one load of a record
-# serves them all, and their gradient terms are summed in registers before a scatter.
-# 4x4 measured best on AVX-512 (one 16-lane packet per 16x16 tile); see docs/benchmarks.md.
-PIXEL_BLOCK = 4
 
 
 class Lanes(NamedTuple):
@@ -52,7 +47,9 @@ def pair_at(m, lanes: Lanes, i):
     return i if lanes.pairs is None else dr.gather(m.UInt32, lanes.pairs, i)
 
 
-def make_lanes(m, grid: TileGrid, bins: Bins, pixel_block: int = PIXEL_BLOCK) -> Lanes:
+def make_lanes(m, grid: TileGrid, bins: Bins, pixel_block: int) -> Lanes:
+    """The lanes in tile order, each a ``pixel_block`` x ``pixel_block`` block (capped at
+    the tile), walking its tile's whole range of the sorted pairs."""
     ts = grid.tile_size
     block = min(pixel_block, ts)
     side = ts // block                      # lanes per tile side
@@ -79,10 +76,12 @@ def make_lanes(m, grid: TileGrid, bins: Bins, pixel_block: int = PIXEL_BLOCK) ->
     return Lanes(px, py, inside, image_index, start, end, lanes_per_tile)
 
 
-def lanes_for(m, rec: Records, bins: Bins, pixel_block: int = PIXEL_BLOCK) -> Lanes:
+def lanes_for(m, rec: Records, bins: Bins, pixel_block: int) -> Lanes:
     """The compositing lanes with their per-block lists (`block_lists`); ``pixel_block``:
-    the side of a lane's block (a power of two; other than `PIXEL_BLOCK` only in
-    tools/lane_packing.py, which counts what another block size would do)."""
+    the side of a lane's block (`RasterOptions.pixel_block`, a power of two; capped at
+    the tile size). Each lane shades its block's pixels: one load of a record serves
+    them all, and their gradient terms are summed in registers before a scatter (4x4:
+    one 16-lane AVX-512 packet per 16x16 tile; docs/benchmarks.md measures the others)."""
     lanes = make_lanes(m, bins.grid, bins, pixel_block)
     if bins.num_pairs == 0:
         return lanes
@@ -114,8 +113,8 @@ def block_lists(m, rec: Records, bins: Bins, lanes):
     """`Lanes` whose [start, end) index their own list ``pairs`` (UInt32 sorted pair
     positions, depth order) instead of the tile's range.
 
-    Where a tile has more lanes than a SIMD packet (LLVM, e.g. tile_size 32: 64 lanes in
-    four 16-lane packets), a tile's lanes are sorted by the length of their lists
+    Where a tile has more lanes than a SIMD packet (LLVM, e.g. tile_size 32 or 2x2 blocks:
+    64 lanes in four 16-lane packets), a tile's lanes are sorted by the length of their lists
     (`sort_lanes_by_length`) first, so each packet holds lanes of similar lengths and
     waits less for its longest one. Lanes never leave their tile's packets, which the
     deterministic gradient reduction needs (`reduction.lane_group`); a tile of one packet

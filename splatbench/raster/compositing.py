@@ -1,8 +1,8 @@
 """Front-to-back alpha compositing over tiles, with an analytic backward pass.
 
-Mirrors `reference.composite`. Lanes are ordered tile by tile (a SIMD packet of
-16 lanes with AVX-512 holds one 16x16 tile), and each lane shades a block of
-PIXEL_BLOCK x PIXEL_BLOCK pixels, walking its own list: the pairs of its tile whose
+Mirrors `reference.composite`. Lanes are ordered tile by tile (with 4x4 blocks a SIMD
+packet of 16 lanes with AVX-512 holds one 16x16 tile), and each lane shades a block of
+B x B pixels (`RasterOptions.pixel_block`), walking its own list: the pairs of its tile whose
 support meets the block (`blocks.block_lists`). One load of a Gaussian's packed
 record serves the whole block, and in the backward pass the block's gradient
 contributions are summed in registers before one scatter. A symbolic loop per lane
@@ -64,18 +64,20 @@ def needed_keys(inputs: dict, absgrad: bool) -> tuple[str, ...]:
 @dataclass(frozen=True)
 class CompositeSettings:
     """What the compositing loops read of `RasterOptions` (its thresholds, as Python floats:
-    constants of the traced kernels) and the RGB background; made from the options only,
-    by `from_options` (`composite`, `composite_loop_ad`, `work.work_stats`)."""
+    constants of the traced kernels; the side of a lane's pixel block, `pixel_block`: the lane
+    layout, never the image) and the RGB background; made from the options only, by
+    `from_options` (`composite`, `composite_loop_ad`, `work.work_stats`)."""
 
     alpha_min: float
     alpha_max: float
     transmittance_min: float
     background: tuple[float, float, float]
+    pixel_block: int = RasterOptions.pixel_block
 
     @classmethod
     def from_options(cls, options: RasterOptions, background=(0.0, 0.0, 0.0)) -> CompositeSettings:
         return cls(float(options.alpha_min), float(options.alpha_max), float(options.transmittance_min),
-                   tuple(float(c) for c in background))
+                   tuple(float(c) for c in background), options.pixel_block)
 
 
 class Composite(NamedTuple):
@@ -340,7 +342,7 @@ class _CompositeOp(dr.CustomOp):
         self.n = dr.width(opacities)
         self.records = pack_records(m, Splats(means2d, conics, opacities, colors, depths, cutoff_sq))
         dr.eval(self.records)
-        self.lanes = lanes_for(m, self.records, self.bins)
+        self.lanes = lanes_for(m, self.records, self.bins, cfg.pixel_block)
         fwd = _forward_loop(m, self.records, self.bins.gaussian_ids, self.lanes, cfg)
         dr.eval(fwd)
         self.fwd = fwd
@@ -457,7 +459,7 @@ def composite_loop_ad(proj: Projection, colors, bins: Bins, options: RasterOptio
     settings = CompositeSettings.from_options(options, background)
     m = array_namespace(proj.opacities)
     records = splat_records(proj, colors)
-    lanes = lanes_for(m, records, bins)
+    lanes = lanes_for(m, records, bins, settings.pixel_block)
     # Reverse-mode AD through a symbolic loop needs a true upper bound on the trip
     # count (the longest tile list, rounded up to a power of two); -1 is wrong here.
     bound = next_power_of_two(max(bins.max_list_length, 1))

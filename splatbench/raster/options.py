@@ -12,6 +12,11 @@ from splatbench.devices import check_device
 from splatbench.errors import InputError
 
 RADIUS_RULES = ("3sigma", "opacity")
+#: Largest side of a compositing lane's pixel block: a lane carries the state of its
+#: block's pixels through the loops, and traces their code once each.
+MAX_PIXEL_BLOCK = 8
+#: Most blocks along a tile's side: binning's per-pair block mask holds (side)^2 bits.
+MAX_BLOCKS_PER_SIDE = 32
 
 
 @dataclass(frozen=True)
@@ -22,6 +27,8 @@ class RasterOptions:
     """
 
     tile_size: int = 16            # pixels per tile side; an acceleration only, never changes the image
+    pixel_block: int = 4           # pixels per side of a compositing lane's block (capped at tile_size);
+                                   # an acceleration only: the image is the same (docs/benchmarks.md)
     alpha_min: float = 1.0 / 255.0  # contributions with alpha below this are skipped
     alpha_max: float = 0.99        # alpha is clamped to this (keeps 1 - alpha invertible)
     transmittance_min: float = 1e-4  # a pixel stops before transmittance would drop below this
@@ -36,6 +43,12 @@ class RasterOptions:
         ts = self.tile_size
         if not isinstance(ts, int) or isinstance(ts, bool) or ts < 1 or ts > 64 or ts & (ts - 1):
             raise InputError(f"tile_size: expected a power of two in [1, 64], got {ts!r}")
+        pb = self.pixel_block
+        if not isinstance(pb, int) or isinstance(pb, bool) or pb < 1 or pb > MAX_PIXEL_BLOCK or pb & (pb - 1):
+            raise InputError(f"pixel_block: expected a power of two in [1, {MAX_PIXEL_BLOCK}], got {pb!r}")
+        if ts // min(pb, ts) > MAX_BLOCKS_PER_SIDE:
+            raise InputError(f"pixel_block: at most {MAX_BLOCKS_PER_SIDE} blocks per tile side, got tile_size "
+                             f"{ts} / pixel_block {pb}; use pixel_block >= {ts // MAX_BLOCKS_PER_SIDE}")
         if not (0.0 < float(self.alpha_max) <= 1.0 - 1e-6):
             raise InputError(f"alpha_max: expected a value in (0, 1), got {self.alpha_max!r}")
         if not (0.0 < float(self.alpha_min) < float(self.alpha_max)):

@@ -34,10 +34,10 @@ class WorkStats:
     (`binning.support_extents`), what binning's ellipse-tile test sees; pairs: the
     Gaussian-tile pairs kept; tile_evaluations: pairs x tile_size^2, what compositing would
     evaluate if every lane walked its whole tile list; block_evaluations: the sum over lanes
-    of PIXEL_BLOCK^2 x the length of the lane's own list (`blocks.block_lists`), i.e.
-    (block, Gaussian) pairs whose block meets the support, x 16; performed: pixel-Gaussian
-    evaluations compositing does, per SIMD packet its lanes x PIXEL_BLOCK^2 x the longest of
-    their lists (a packet runs until its longest list ends; on LLVM a packet is
+    of B^2 x the length of the lane's own list (`blocks.block_lists`; B x B: the lane's pixel
+    block, `RasterOptions.pixel_block` capped at the tile), i.e. (block, Gaussian) pairs whose
+    block meets the support, x B^2; performed: pixel-Gaussian evaluations compositing does, per
+    SIMD packet its lanes x B^2 x the longest of their lists (a packet runs until its longest list ends; on LLVM a packet is
     min(lanes per tile, packet width) lanes of one tile, elsewhere counted as a whole tile);
     inside_cutoff: (pixel, Gaussian) evaluations with the pixel centre inside the cutoff
     ellipse, q = 2 sigma <= R^2; useful: those that also pass alpha >= alpha_min, i.e. the
@@ -89,7 +89,7 @@ def work_stats(gaussians, camera, **options) -> WorkStats:
 def _count(m, records, bins, cfg: CompositeSettings) -> tuple[int, int, int, int]:
     """(block_evaluations, performed, inside_cutoff, useful), walking the lanes' own lists."""
     UInt32 = m.UInt32
-    lanes = lanes_for(m, records, bins)
+    lanes = lanes_for(m, records, bins, cfg.pixel_block)
     K = len(lanes.px)
     # The lanes that run together: a SIMD packet of one tile on LLVM, else a whole tile.
     width = packet_width(m)

@@ -25,7 +25,7 @@ REFERENCE_OPTIONS = ("alpha_min", "alpha_max", "transmittance_min", "eps2d", "ra
 #: The vocabulary's axes a conventions mapping may also set (`splatbench.backends.base.AXES`).
 AXIS_OPTIONS = tuple(a.name for a in AXES if a.name not in REFERENCE_OPTIONS)
 #: Rasterizer options with no counterpart in the reference (accelerations and placement only).
-FAST_ONLY = ("tile_size", "device")
+FAST_ONLY = ("tile_size", "pixel_block", "device")
 #: Central-difference half step. In float64 the truncation error is O(eps^2) ~ 1e-12 and the
 #: rounding error ~ 1e-16 / eps ~ 1e-10 relative, both far below float32 roundoff.
 FD_EPS = 1e-6
