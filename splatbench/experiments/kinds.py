@@ -56,8 +56,8 @@ class RunOutput:
         table column ``metric.<name>``.
     curves: any JSON-serialisable value (e.g. ``{"step": [...], "psnr": [...]}``), kept
         whole in the run's file and as one JSON string column ``curves``.
-    warnings: one line each, what the run's own tool warned of (a training run's notes
-        that start with ``warning:``, e.g. a budget not met); kept in the run's file, the
+    warnings: one line each, what the run's own tool warned of (a training run's
+        `TrainResult.warnings`, e.g. a budget not met); kept in the run's file, the
         table's ``warnings`` column (JSON) and the report's "Warnings" section, so that a
         grid never hides what a single run would have printed.
     """

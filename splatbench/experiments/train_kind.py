@@ -435,7 +435,7 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
     }
     if rows["step_evaluations"]:  # a protocol's 7K / 30K columns (only runs that make them: earlier curves unchanged)
         curves["step_evaluations"] = rows["step_evaluations"]
-    warnings = tuple(note for note in result.notes if note.startswith("warning:"))
+    warnings = tuple(result.warnings)
     return RunOutput(metrics=metrics, curves=curves, warnings=warnings)
 
 
