@@ -16,13 +16,14 @@ import math
 import os
 import time
 import zlib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from splatbench.checks import check_keys
 from splatbench.errors import InputError
 from splatbench.experiments.configs import flatten, override, unflatten
-from splatbench.experiments.kinds import KindProtocols, RunKind, RunOutput
+from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, metric
 
 #: What an experiment file writes in ``kind = "..."``.
 KIND = "tests.kinds_for_tests:DUMMY"
@@ -37,6 +38,18 @@ DUMMY_DEFAULTS: dict[str, Any] = {
     "opts": {"a": 0, "b": "p"},  # a nested table, for dotted keys
 }
 DUMMY_SCENES = frozenset({"alpha", "beta", "gamma"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class DummyRun(RunResult):
+    """What a dummy run records: each field a column ``metric.<name>`` (`metric`: how a report
+    shows it, what it means); ``warnings`` and ``curves`` come with `RunResult`."""
+
+    value: float = metric("value", ".4g", better="higher", meaning="the curve's last point")
+    total: float = metric("total", ".4g", meaning="the curve's sum")
+    a_plus_seed: int = metric(meaning="opts.a + seed")
+    scene_tag: str = metric(meaning="scene and opts.b")
+    positive: bool = metric(meaning="whether value > 0")
 
 
 def _validate(config: dict[str, Any]) -> None:
@@ -82,7 +95,7 @@ def _pass_gate(gate: Path) -> None:
     marker.unlink(missing_ok=True)
 
 
-def _run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
+def _run(config: dict[str, Any], workdir: Path, prepared: None) -> DummyRun:
     """Deterministic numbers from the config; sleeps, waits at a gate, raises or kills
     its process on demand. (No ``prepare``: ``prepared`` is None.)"""
     import numpy as np
@@ -98,11 +111,10 @@ def _run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
     rng = np.random.default_rng([config["seed"], tag, config["n"]])
     curve = (config["x"] + rng.random(config["n"])).round(12)
     (workdir / "note.txt").write_text(f"{config['scene']} {config['seed']}\n")
-    metrics = {"value": float(curve[-1]), "total": float(curve.sum()), "a_plus_seed": config["opts"]["a"] + config["seed"],
-               "scene_tag": f"{config['scene']}-{config['opts']['b']}", "positive": bool(curve[-1] > 0)}
     warnings = (f"warning: dummy run told to warn (seed {config['seed']})",) if config["mode"] == "warn" else ()
-    return RunOutput(metrics=metrics, curves={"step": list(range(config["n"])), "value": curve.tolist()},
-                     warnings=warnings)
+    return DummyRun(value=float(curve[-1]), total=float(curve.sum()), a_plus_seed=config["opts"]["a"] + config["seed"],
+                    scene_tag=f"{config['scene']}-{config['opts']['b']}", positive=bool(curve[-1] > 0),
+                    curves={"step": list(range(config["n"])), "value": curve.tolist()}, warnings=warnings)
 
 
 def _scenes() -> set[str]:
@@ -121,7 +133,7 @@ def _with_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:
 
 
 #: Deterministic metrics computed from the config (see `DUMMY_DEFAULTS`).
-DUMMY = RunKind(name=KIND, validate=_validate, run=_run, resolve=_resolve, scenes=_scenes,
+DUMMY = RunKind(name=KIND, validate=_validate, run=_run, result=DummyRun, resolve=_resolve, scenes=_scenes,
                 description="for tests: deterministic numbers, configurable sleep, gate and failure",
                 protocols=KindProtocols(_with_protocol, lambda name: "curves 7 points long"))
 
@@ -135,16 +147,27 @@ def _probe_prepare(configs: list[dict[str, Any]]) -> dict[str, int]:
     return {"runs": len(configs), "parent": os.getpid()}
 
 
-def _probe_run(config: dict[str, Any], workdir: Path, prepared: dict[str, int]) -> RunOutput:
+@dataclass(frozen=True, kw_only=True)
+class ProbeRun(RunResult):
+    """What reached a probe run's worker."""
+
+    drjit_threads: int = metric(meaning="the worker's Dr.Jit thread budget")
+    prepared_runs: int = metric(meaning="runs `prepare` was handed, in the parent")
+    prepared_parent: int = metric(meaning="the parent's process id, as `prepare` saw it")
+    pid: int = metric(meaning="the worker's process id")
+    env: str = metric(meaning="the SPLATBENCH_* variables of the worker's environment")
+
+
+def _probe_run(config: dict[str, Any], workdir: Path, prepared: dict[str, int]) -> ProbeRun:
     """What reached the worker from the runner: its Dr.Jit thread budget, what ``prepare``
     returned, and the ``SPLATBENCH_*`` variables of its environment."""
     import drjit as dr
 
-    return RunOutput(metrics={"drjit_threads": dr.thread_count(), "prepared_runs": prepared["runs"],
-                              "prepared_parent": prepared["parent"], "pid": os.getpid(),
-                              "env": ",".join(sorted(k for k in os.environ if k.startswith("SPLATBENCH_")))})
+    return ProbeRun(drjit_threads=dr.thread_count(), prepared_runs=prepared["runs"],
+                    prepared_parent=prepared["parent"], pid=os.getpid(),
+                    env=",".join(sorted(k for k in os.environ if k.startswith("SPLATBENCH_"))))
 
 
 #: A kind that reports what its worker was handed (``kind = "tests.kinds_for_tests:PROBE"``).
-PROBE = RunKind(name="tests.kinds_for_tests:PROBE", validate=_probe_validate, run=_probe_run,
+PROBE = RunKind(name="tests.kinds_for_tests:PROBE", validate=_probe_validate, run=_probe_run, result=ProbeRun,
                 prepare=_probe_prepare, description="for tests: what a worker gets from the runner")

@@ -311,7 +311,7 @@ def test_failed_runs_are_recorded_the_rest_complete_and_resume_skips_done(tmp_pa
 
 
 def test_a_runs_warnings_reach_its_file_the_table_and_the_report(tmp_path, capsys):
-    """What a run warned of (`RunOutput.warnings`) is never dropped by the grid: the run's
+    """What a run warned of (`RunResult.warnings`) is never dropped by the grid: the run's
     file, the table's ``warnings`` column and a "Warnings" section (with a pointer in the
     header) carry it; a grid whose runs warned of nothing has neither."""
     from splatbench.reports.report import build_report, write_report

@@ -1,18 +1,22 @@
 """Run kinds: what one run of an experiment is.
 
-A `RunKind` is a small record of callables with one typed signature for every kind
-(training, rasterizer timing, one of your own); the runner never needs to know which
-kind it holds::
+A `RunKind` is a typed contract, the same for every kind (training, rasterizer timing,
+one of your own); the runner never needs to know which kind it holds::
 
+    result                                   its `RunResult` subclass: each metric a field made
+                                             by `metric` (a ``metric.<name>`` column, with how a
+                                             report shows it), plus ``warnings`` and ``curves``
     validate(config) -> None                 raise a one-line InputError naming the dotted field
     resolve(config) -> dict                  optional: the config with every default filled in
     identity(config) -> dict                 optional: what the run id hashes of a resolved config
-    run(config, workdir, prepared) -> RunOutput   one run, in a worker process
+    run(config, workdir, prepared) -> result one run, in a worker process
     scenes() -> set[str]                     optional: known scene names (None: any name)
     prepare(configs) -> Any                  optional: once, in the parent, before any run;
                                              what it returns is ``run``'s ``prepared``
     protocols                                optional `KindProtocols`: a cell rerun under a named
                                              protocol (an experiment's ``[check]``)
+    report                                   optional `KindReport`: what its reports show, and
+                                             its report hooks (a report is handed the kind)
 
 ``config`` is the nested dict of one run: the experiment's base, overridden by its
 axis values, plus ``scene`` and ``seed``. `resolve`'s output is what the run id
@@ -35,36 +39,61 @@ complete kind (the one the runner's tests use).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import MISSING, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import KindReport
+from splatbench.metrics.spec import MetricSpec
 
 #: A table cell: what a metric may be.
 Scalar = bool | int | float | str | None
 
 
-@dataclass(frozen=True)
-class RunOutput:
-    """What a kind's ``run`` returns.
+#: The key of a `RunResult` field's metadata that holds its `MetricSpec` (`metric`).
+METRIC = "splatbench.metric"
 
-    metrics: flat ``name -> scalar`` (bool, int, float, str or None); each becomes a
-        table column ``metric.<name>``.
-    curves: any JSON-serialisable value (e.g. ``{"step": [...], "psnr": [...]}``), kept
-        whole in the run's file and as one JSON string column ``curves``.
+
+def metric(label: str = "", fmt: str = ".4g", unit: str = "", better: str = "", meaning: str = "", *,
+           interval: bool = True, default: Any = MISSING) -> Any:
+    """A field of a kind's `RunResult` that is a metric: a table column ``metric.<field name>``,
+    shown by a report as `MetricSpec` (``label``: the column heading, the field's name when
+    empty; ``fmt``: one value's format; ``unit``; ``better``: "higher", "lower" or "";
+    ``meaning``: what it is, in words; ``interval``: False where a table shows the mean alone).
+    The field's value is a scalar: bool, int, float, str or None."""
+    spec = MetricSpec("", label, fmt, unit, better, interval, meaning)
+    return field(default=default, metadata={METRIC: spec})
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunResult:
+    """What a kind's ``run`` returns: a frozen dataclass subclassing this one, each metric a field
+    made by `metric` (the kind's ``result``; `metric_specs` reads them), and
+
     warnings: one line each, what the run's own tool warned of (a training run's
-        `TrainResult.warnings`, e.g. a budget not met); kept in the run's file, the
-        table's ``warnings`` column (JSON) and the report's "Warnings" section, so that a
-        grid never hides what a single run would have printed.
+        `TrainResult.warnings`, e.g. a budget not met); kept in the run's file, the table's
+        ``warnings`` column (JSON) and the report's "Warnings" section, so that a grid never
+        hides what a single run would have printed.
+    curves: any JSON-serialisable value (e.g. ``{"step": [...], "psnr": [...]}``), kept whole in
+        the run's file and as one JSON string column ``curves``.
     """
 
-    metrics: Mapping[str, Scalar]
-    curves: Any = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    curves: Any = field(default_factory=dict)
+
+
+def metric_specs(result: type[RunResult]) -> tuple[MetricSpec, ...]:
+    """The `MetricSpec` of each metric field of the `RunResult` class ``result``, in field order."""
+    out = []
+    for f in dataclasses.fields(result):
+        spec = f.metadata.get(METRIC)
+        if spec is not None:
+            out.append(dataclasses.replace(spec, name=f.name, label=spec.label or f.name))
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -89,7 +118,9 @@ class RunKind:
 
     name: str
     validate: Callable[[dict[str, Any]], None]
-    run: Callable[[dict[str, Any], Path, Any], RunOutput]
+    run: Callable[[dict[str, Any], Path, Any], RunResult]
+    #: The `RunResult` subclass ``run`` returns: its metric fields are the table's ``metric.*`` columns.
+    result: type[RunResult]
     resolve: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     identity: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     scenes: Callable[[], set[str]] | None = None
@@ -104,6 +135,17 @@ class RunKind:
     #: How a cell is rerun under a named protocol (an experiment's ``[check]``); None: the kind has
     #: no protocols, and an experiment of it with a ``[check]`` is refused.
     protocols: KindProtocols | None = None
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.result, type) and issubclass(self.result, RunResult)):
+            raise TypeError(f"run kind {self.name!r}: result must be a RunResult subclass, got {self.result!r}")
+        if self.report is not None:
+            self.report.check(self.specs)
+
+    @property
+    def specs(self) -> dict[str, MetricSpec]:
+        """Metric name -> `MetricSpec`, every metric of its ``result`` in field order."""
+        return {m.name: m for m in metric_specs(self.result)}
 
 
 #: Kinds known by name in every process: name -> "module:ATTR" (imported on first use).
@@ -138,25 +180,30 @@ def get_kind(name: str) -> RunKind:
     return kind
 
 
-def check_output(output: Any, kind: str) -> RunOutput:
-    """``output`` as a `RunOutput` whose metrics are plain Python scalars (NumPy scalars
-    are converted); `TypeError` for anything else."""
-    if not isinstance(output, RunOutput):
-        raise TypeError(f"run kind {kind!r} returned {type(output).__name__}, not RunOutput")
-    metrics: dict[str, Scalar] = {}
-    for key, value in output.metrics.items():
-        if not isinstance(key, str) or not key:
-            raise TypeError(f"run kind {kind!r}: metric name {key!r} is not a non-empty string")
+def check_output(output: Any, kind: RunKind) -> RunResult:
+    """``output`` if it is the kind's `RunResult` (its warnings made one line each); `TypeError`
+    for anything else."""
+    if not isinstance(output, kind.result):
+        raise TypeError(f"run kind {kind.name!r} returned {type(output).__name__}, not {kind.result.__name__}")
+    warnings = tuple(output.warnings)
+    if not all(isinstance(w, str) for w in warnings):
+        raise TypeError(f"run kind {kind.name!r}: warnings must be strings, got {list(warnings)!r:.80}")
+    return dataclasses.replace(output, warnings=tuple(" ".join(w.split()) for w in warnings))
+
+
+def metric_values(result: RunResult) -> dict[str, Scalar]:
+    """The metric fields of ``result`` as ``name -> scalar`` (NumPy / torch scalars made plain);
+    `TypeError` naming a field that is not a scalar."""
+    out: dict[str, Scalar] = {}
+    for spec in metric_specs(type(result)):
+        value = getattr(result, spec.name)
         if hasattr(value, "item") and getattr(value, "shape", None) == ():
             value = value.item()  # NumPy / torch scalar
         if value is not None and not isinstance(value, (bool, int, float, str)):
-            raise TypeError(f"run kind {kind!r}: metric {key!r} is a {type(value).__name__}, not a scalar")
-        metrics[key] = value
-    warnings = tuple(output.warnings)
-    if not all(isinstance(w, str) for w in warnings):
-        raise TypeError(f"run kind {kind!r}: warnings must be strings, got {list(warnings)!r:.80}")
-    return RunOutput(metrics=metrics, curves=output.curves, warnings=tuple(" ".join(w.split()) for w in warnings))
+            raise TypeError(f"{type(result).__name__}.{spec.name} is a {type(value).__name__}, not a scalar")
+        out[spec.name] = value
+    return out
 
 
-__all__ = ["RunKind", "RunOutput", "KindProtocols", "Scalar", "BUILTIN_KINDS", "register_kind", "get_kind",
-           "check_output"]
+__all__ = ["RunKind", "RunResult", "metric", "metric_specs", "metric_values", "METRIC", "KindProtocols", "Scalar",
+           "BUILTIN_KINDS", "register_kind", "get_kind", "check_output"]

@@ -58,7 +58,7 @@ One run:
      (``mode="matched"``) -- the implementation's own float32 error (about 1e-6 when
      the rasterizer is right).
 
-Metrics: `METRICS`; how reports show them: `REPORT`. Curves: every timed call
+Metrics: `RasterRun`'s fields, with how reports show them; what reports show: `REPORT`. Curves: every timed call
 (``fwd_runs_ms``, ``fwd_bwd_runs_ms``, ``default_fwd_runs_ms``,
 ``default_fwd_bwd_runs_ms``, pair i at index i).
 
@@ -76,17 +76,19 @@ import math
 import statistics
 import sys
 from pathlib import Path
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from splatbench.checks import check_keys, check_sh_degree, check_type
 from splatbench.errors import InputError
-from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, Tradeoff
+from splatbench.experiments.kind_report import (Claim, Comparison, Finding, FindingRules, KindReport, LoadMarks,
+                                               Tradeoff, done_runs)
 from splatbench.fsutil import atomic_write, cache_root
-from splatbench.experiments.kinds import RunKind, RunOutput
+from splatbench.experiments.kinds import RunKind, RunResult, metric
 from splatbench.metrics.load import Load, own_share
-from splatbench.metrics.spec import MetricSpec
 from splatbench.raster.options import RasterOptions
 from splatbench.workloads import build_workload, parse_workload_name
 
@@ -114,46 +116,68 @@ PROTOCOL = 2
 #: Fewest timed pairs a run may use (a bootstrap interval of a median needs several).
 MIN_PAIRS = 7
 
-#: Metric name -> meaning.
-METRICS: dict[str, str] = {
-    "fwd_ms": "median forward time at full resolution (ms)",
-    "fwd_bwd_ms": "median forward + backward time at full resolution (ms)",
-    "fwd_rel": "median over timed pairs of forward time / the default options' (same process, alternately; "
-               "< 1: faster)",
-    "fwd_rel_low": "low end of the 95 % bootstrap interval of fwd_rel",
-    "fwd_rel_high": "high end of the 95 % bootstrap interval of fwd_rel",
-    "fwd_bwd_rel": "median over timed pairs of forward + backward time / the default options' (< 1: faster)",
-    "fwd_bwd_rel_low": "low end of the 95 % bootstrap interval of fwd_bwd_rel",
-    "fwd_bwd_rel_high": "high end of the 95 % bootstrap interval of fwd_bwd_rel",
-    "timed_pairs": "timed A B pairs (the run's options, then the defaults)",
-    "default_fwd_ms": "median forward time with the default options, in the same run (ms)",
-    "default_fwd_bwd_ms": "median forward + backward time with the default options, in the same run (ms)",
-    "load_before": "1-minute load average before the timed pairs",
-    "load_after": "1-minute load average after them",
-    "own_cpu": "this process's CPU use during the timed pairs (CPU seconds / wall seconds, in cores)",
-    "load_other": "estimated load of other processes: the largest of load(t) - own_before * exp(-t / 60 s) - own_cpu "
-                  "* (1 - exp(-t / 60 s)) over the section's samples (splatbench.metrics.load)",
-    "own_before": "this process's own share of the load average when the timed pairs started (its earlier CPU "
-                  "use: warm-up, the previous run's error renders), an exponential moving average",
-    "cores": "CPU cores this process may use",
-    "loaded": "1 when load_other exceeded cores / 2: timings not trusted, left out of the findings",
-    "exact_psnr": "PSNR (dB) of the render against the exact Gaussian mixture (reference mode 'exact', every "
-                  "SH band; capped at 200)",
-    "exact_max_abs": "largest |render - exact| over pixels and channels",
-    "exact_mean_abs": "mean |render - exact|",
-    "parity_max_abs": "largest |render - float64 reference with the same options| (implementation error)",
-    "pairs": "Gaussian-tile pairs composited (full resolution)",
-    "evaluations": "pixel-Gaussian evaluations compositing performs per view (`splatbench.raster.work_stats`: "
-                   "per SIMD packet of a tile's lanes, its lanes' blocks x the longest block list; early stop "
-                   "ignored; full resolution)",
-    "useful_evaluations": "of those, the evaluations inside the Gaussian's support (within the cutoff and "
-                          "alpha >= alpha_min), where it can change the pixel",
-    "visible": "Gaussians that survived culling (full resolution)",
-    "n": "Gaussians in the workload",
-    "width": "image width (pixels)", "height": "image height (pixels)",
-    "error_width": "width of the error measurement (pixels)", "error_height": "its height",
-    "device": "where the rasterizer ran ('cpu' or 'cuda')",
-}
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RasterRun(RunResult):
+    """What one raster run measures (module doc): each field a table column ``metric.<name>``,
+    with how a report shows it and what it means. Curves: every timed call."""
+
+    fwd_ms: float = metric("forward (ms)", ".1f", "ms", "lower", "median forward time at full resolution (ms)")
+    fwd_bwd_ms: float = metric("fwd+bwd (ms)", ".1f", "ms", "lower",
+                               "median forward + backward time at full resolution (ms)")
+    fwd_rel: float = metric(meaning="median over timed pairs of forward time / the default options' (same process, "
+                                    "alternately; < 1: faster)")
+    fwd_rel_low: float = metric(meaning="low end of the 95 % bootstrap interval of fwd_rel")
+    fwd_rel_high: float = metric(meaning="high end of the 95 % bootstrap interval of fwd_rel")
+    fwd_bwd_rel: float = metric("fwd+bwd / default (median of pairs)", ".3f", "", "lower",
+                                "median over timed pairs of forward + backward time / the default options' "
+                                "(< 1: faster)")
+    fwd_bwd_rel_low: float = metric("bootstrap low", ".3f", interval=False,
+                                    meaning="low end of the 95 % bootstrap interval of fwd_bwd_rel")
+    fwd_bwd_rel_high: float = metric("bootstrap high", ".3f", interval=False,
+                                     meaning="high end of the 95 % bootstrap interval of fwd_bwd_rel")
+    timed_pairs: int = metric(meaning="timed A B pairs (the run's options, then the defaults)")
+    default_fwd_ms: float = metric(meaning="median forward time with the default options, in the same run (ms)")
+    default_fwd_bwd_ms: float = metric(meaning="median forward + backward time with the default options, in the "
+                                               "same run (ms)")
+    load_before: float = metric(meaning="1-minute load average before the timed pairs")
+    load_after: float = metric(meaning="1-minute load average after them")
+    own_cpu: float = metric(meaning="this process's CPU use during the timed pairs (CPU seconds / wall seconds, "
+                                    "in cores)")
+    own_before: float = metric(meaning="this process's own share of the load average when the timed pairs started "
+                                       "(its earlier CPU use: warm-up, the previous run's error renders), an "
+                                       "exponential moving average")
+    load_other: float = metric(meaning="estimated load of other processes: the largest of load(t) - own_before * "
+                                       "exp(-t / 60 s) - own_cpu * (1 - exp(-t / 60 s)) over the section's samples "
+                                       "(splatbench.metrics.load)")
+    cores: int = metric(meaning="CPU cores this process may use")
+    loaded: int = metric("loaded (fraction of runs)", ".2f", interval=False,
+                         meaning="1 when load_other exceeded cores / 2: timings not trusted, left out of the "
+                                 "findings")
+    exact_psnr: float = metric("PSNR to exact (dB)", ".2f", "dB", "higher",
+                               "PSNR (dB) of the render against the exact Gaussian mixture (reference mode "
+                               "'exact', every SH band; capped at 200)")
+    exact_max_abs: float = metric("max abs error to exact", ".2e", "", "lower",
+                                  "largest |render - exact| over pixels and channels")
+    exact_mean_abs: float = metric(meaning="mean |render - exact|")
+    parity_max_abs: float = metric("parity max abs", ".1e", "", "lower",
+                                   "largest |render - float64 reference with the same options| (implementation "
+                                   "error)")
+    pairs: int = metric("pairs", ".0f", meaning="Gaussian-tile pairs composited (full resolution)")
+    evaluations: int = metric("evaluations performed", ".3g",
+                              meaning="pixel-Gaussian evaluations compositing performs per view "
+                                      "(`splatbench.raster.work_stats`: per SIMD packet of a tile's lanes, its "
+                                      "lanes' blocks x the longest block list; early stop ignored; full resolution)")
+    useful_evaluations: int = metric("evaluations useful", ".3g",
+                                     meaning="of those, the evaluations inside the Gaussian's support (within the "
+                                             "cutoff and alpha >= alpha_min), where it can change the pixel")
+    visible: int = metric(meaning="Gaussians that survived culling (full resolution)")
+    n: int = metric(meaning="Gaussians in the workload")
+    width: int = metric(meaning="image width (pixels)")
+    height: int = metric(meaning="image height (pixels)")
+    error_width: int = metric(meaning="width of the error measurement (pixels)")
+    error_height: int = metric(meaning="its height")
+    device: str = metric(meaning="where the rasterizer ran ('cpu' or 'cuda')")
+
 
 # --------------------------------------------------------------------------- config
 def validate(config: dict[str, Any]) -> None:
@@ -261,7 +285,7 @@ def prepare(configs: list[dict[str, Any]]) -> None:
 
 
 # --------------------------------------------------------------------------- run
-def run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
+def run(config: dict[str, Any], workdir: Path, prepared: None) -> RasterRun:
     """Time the rasterizer on the workload with the run's options; measure its error
     (``prepared``: None; `prepare` leaves the exact-model renders in the cache)."""
     import torch
@@ -307,59 +331,69 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
     exact = exact_model(config["scene"], config["seed"], scale)
     matched = reference_render(workload, scale, sh_degree=degree, **options)
     err = np.abs(fast - exact)
-    metrics = {
-        "fwd_ms": round(1e3 * med["fwd"], 3), "fwd_bwd_ms": round(1e3 * med["fwd_bwd"], 3),
-        "fwd_rel": round(fwd_rel.estimate, 4), "fwd_rel_low": _r4(fwd_rel.low), "fwd_rel_high": _r4(fwd_rel.high),
-        "fwd_bwd_rel": round(fwd_bwd_rel.estimate, 4), "fwd_bwd_rel_low": _r4(fwd_bwd_rel.low),
-        "fwd_bwd_rel_high": _r4(fwd_bwd_rel.high), "timed_pairs": config["repeats"],
-        "default_fwd_ms": round(1e3 * med["default_fwd"], 3),
-        "default_fwd_bwd_ms": round(1e3 * med["default_fwd_bwd"], 3),
+    return RasterRun(
+        fwd_ms=round(1e3 * med["fwd"], 3), fwd_bwd_ms=round(1e3 * med["fwd_bwd"], 3),
+        fwd_rel=round(fwd_rel.estimate, 4), fwd_rel_low=_r4(fwd_rel.low), fwd_rel_high=_r4(fwd_rel.high),
+        fwd_bwd_rel=round(fwd_bwd_rel.estimate, 4), fwd_bwd_rel_low=_r4(fwd_bwd_rel.low),
+        fwd_bwd_rel_high=_r4(fwd_bwd_rel.high), timed_pairs=config["repeats"],
+        default_fwd_ms=round(1e3 * med["default_fwd"], 3), default_fwd_bwd_ms=round(1e3 * med["default_fwd_bwd"], 3),
         **load.metrics(),
-        "exact_psnr": round(min(psnr(fast, exact, clamp=False), 200.0), 4), "exact_max_abs": float(err.max()),
-        "exact_mean_abs": float(err.mean()), "parity_max_abs": float(np.abs(fast - matched).max()),
-        "pairs": int(stats.num_pairs), "evaluations": work.performed, "useful_evaluations": work.useful,
-        "visible": int(torch.as_tensor(stats.visible).sum()),
-        "n": len(workload.gaussians), "width": workload.camera.width, "height": workload.camera.height,
-        "error_width": small.width, "error_height": small.height, "device": resolve_device(options["device"]),
-    }
-    curves = {f"{k}_runs_ms": [round(1e3 * s, 3) for s in v] for k, v in times.items()}
-    return RunOutput(metrics=metrics, curves=curves)
+        exact_psnr=round(min(psnr(fast, exact, clamp=False), 200.0), 4), exact_max_abs=float(err.max()),
+        exact_mean_abs=float(err.mean()), parity_max_abs=float(np.abs(fast - matched).max()),
+        pairs=int(stats.num_pairs), evaluations=work.performed, useful_evaluations=work.useful,
+        visible=int(torch.as_tensor(stats.visible).sum()),
+        n=len(workload.gaussians), width=workload.camera.width, height=workload.camera.height,
+        error_width=small.width, error_height=small.height, device=resolve_device(options["device"]),
+        curves={f"{k}_runs_ms": [round(1e3 * s, 3) for s in v] for k, v in times.items()})
 
 
 def _r4(x: float) -> float:
     return round(x, 4) if math.isfinite(x) else math.nan
 
 
-#: The ``raster`` kind (``kind = "raster"``).
+# --------------------------------------------------------------------------- report
+def parity_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None) -> Finding | None:
+    """The largest implementation error against the matched reference (`KindReport.run_findings`)."""
+    col = "metric.parity_max_abs"
+    done = done_runs(runs)
+    if col not in done.columns or done[col].dropna().empty:
+        return None
+    values = pd.to_numeric(done[col])
+    worst = float(values.max())
+    row = done.loc[values.idxmax()]
+    # the worst run's cell: the axes where it differs from the most common value (the base, one at a time)
+    axes = [c for c in done.columns if c.startswith("axis.")]
+    cell = ", ".join(f"{c[5:]}={row[c]}" for c in axes if row[c] != done[c].mode().iloc[0]) or "the base"
+    text = f"{worst:.1e}"
+    claim = Claim("parity", "", "", "parity_max_abs", "max", worst, text)
+    return Finding("parity", [f"- Against the float64 reference with the *same* options, the largest difference "
+                              f"over all {len(done)} runs is {text} ({row['scene']}, {cell}). Most of a pixel's "
+                              f"difference is float32 rounding (~1e-6); a pixel where float32 and float64 fall on "
+                              f"different sides of a threshold (alpha_min, the cutoff, the early stop) differs by a "
+                              f"whole contribution, up to about alpha_min x its colour, which is why the largest "
+                              f"difference grows with alpha_min. The exact-error columns above are what each option "
+                              f"trades in against the exact Gaussian mixture."],
+                   [claim])
+
+
 #: What the reports of raster runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
-    metrics=(
-
-        MetricSpec("fwd_ms", "forward (ms)", ".1f", "ms", "lower"),
-        MetricSpec("fwd_bwd_ms", "fwd+bwd (ms)", ".1f", "ms", "lower"),
-        MetricSpec("fwd_bwd_rel", "fwd+bwd / default (median of pairs)", ".3f", "", "lower"),
-        MetricSpec("fwd_bwd_rel_low", "bootstrap low", ".3f", "", "", False),
-        MetricSpec("fwd_bwd_rel_high", "bootstrap high", ".3f", "", "", False),
-        MetricSpec("exact_psnr", "PSNR to exact (dB)", ".2f", "dB", "higher"),
-        MetricSpec("exact_max_abs", "max abs error to exact", ".2e", "", "lower"),
-        MetricSpec("parity_max_abs", "parity max abs", ".1e", "", "lower"),
-        MetricSpec("pairs", "pairs", ".0f", "", ""),
-        MetricSpec("evaluations", "evaluations performed", ".3g", "", ""),
-        MetricSpec("useful_evaluations", "evaluations useful", ".3g", "", ""),
-        MetricSpec("loaded", "loaded (fraction of runs)", ".2f", "", "", False),
-    ),
+    metrics=("fwd_ms", "fwd_bwd_ms", "fwd_bwd_rel", "fwd_bwd_rel_low", "fwd_bwd_rel_high", "exact_psnr",
+             "exact_max_abs", "parity_max_abs", "pairs", "evaluations", "useful_evaluations", "loaded"),
     # minimum effects (docs/reports.md): a 5 % speed change, 0.1 dB of error to the exact model, 5 % pairs
     rules=FindingRules("fwd_bwd_rel", (Comparison("fwd_bwd_rel", "mean", 1.0, min_effect=0.05),
                                        Comparison("exact_psnr", "diff", min_effect=0.1),
                                        Comparison("pairs", "ratio", min_effect=0.05))),
     tradeoffs=(Tradeoff("fwd_bwd_rel", "exact_psnr", "speed_vs_error",
                         "Rasterizer speed against error to the exact Gaussian mixture (mean over seeds)"),),
-    meanings=METRICS,
+    load=LoadMarks("loaded", "all"),
+    run_findings=(parity_finding,),
 )
 
-RASTER = RunKind(name="raster", validate=validate, run=run, resolve=resolve, prepare=prepare,
+#: The ``raster`` kind (``kind = "raster"``).
+RASTER = RunKind(name="raster", validate=validate, run=run, result=RasterRun, resolve=resolve, prepare=prepare,
                  description="time the rasterizer under options against the defaults; error against the exact model",
                  report=REPORT)
 
-__all__ = ["RASTER", "REPORT", "DEFAULTS", "METRICS", "RASTER_FIELDS", "MEASUREMENT", "reference_render",
+__all__ = ["RASTER", "RasterRun", "REPORT", "DEFAULTS", "RASTER_FIELDS", "MEASUREMENT", "reference_render",
            "exact_model", "cache_dir", "MIN_PAIRS", "PROTOCOL"]
