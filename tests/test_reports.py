@@ -666,6 +666,10 @@ def test_a_new_kind_declares_its_report_in_one_place():
     from splatbench.reports.findings import rules_for
     from splatbench.reports.tables import metric_specs
 
+    @dataclass(frozen=True)
+    class ToyConfig:
+        rate: float = 0.1
+
     @dataclass(frozen=True, kw_only=True)
     class Toy(RunResult):
         loss: float = metric("loss", ".3f", "", "lower", "what the toy minimises")
@@ -676,19 +680,19 @@ def test_a_new_kind_declares_its_report_in_one_place():
 
     declared = KindReport(metrics=("loss",), rules=FindingRules("loss", (Comparison("loss", "diff"),)),
                           axis_notes=(note,))
-    toy = RunKind(name="toy-report-kind", validate=lambda config: None, result=Toy,
+    toy = RunKind(name="toy-report-kind", validate=lambda config: None, config=ToyConfig, result=Toy,
                   run=lambda config, workdir, prepared: Toy(loss=0.0, other=1.0), report=declared)
     loss = toy.specs["loss"]
     assert (loss.label, loss.fmt, loss.better, loss.meaning) == ("loss", ".3f", "lower", "what the toy minimises")
     table = pd.DataFrame({"metric.loss": [0.5], "metric.other": [1.0]})
     assert metric_specs(toy, table) == (loss,)      # its own metrics only
     assert rules_for(toy, (loss,)) == declared.rules
-    bare = RunKind(name="toy-bare-kind", validate=lambda config: None, result=Toy,
+    bare = RunKind(name="toy-bare-kind", validate=lambda config: None, config=ToyConfig, result=Toy,
                    run=lambda config, workdir, prepared: Toy(loss=0.0, other=1.0))
     assert [m.name for m in metric_specs(bare, table)] == ["loss", "other"]  # undeclared: every one
     assert declared.axis_notes == (note,)
     with pytest.raises(TypeError, match="KindReport names metrics its kind's result does not have: lost"):
-        RunKind(name="toy-wrong-kind", validate=lambda config: None, result=Toy, run=toy.run,
+        RunKind(name="toy-wrong-kind", validate=lambda config: None, config=ToyConfig, result=Toy, run=toy.run,
                 report=KindReport(metrics=("lost",)))
 
 

@@ -29,6 +29,7 @@ from typing import Any
 
 from splatbench.errors import InputError
 from splatbench.experiments.configs import canonical_json, flatten, override, unflatten
+from splatbench.experiments.kinds import check_config
 from splatbench.experiments.spec import ExperimentSpec, parse_experiment, same_value
 from splatbench.fsutil import read_text
 
@@ -135,7 +136,9 @@ def _run_maker(spec: ExperimentSpec, kind, protocol: str | None = None
         key = canonical_json(flat)
         if key not in checked:
             try:
-                kind.validate(unflatten(flat))
+                nested = unflatten(flat)
+                check_config(kind.config, nested)  # every key a field of the kind's Config
+                kind.validate(nested)
                 checked[key] = None
             except InputError as exc:
                 checked[key] = str(exc)

@@ -3,6 +3,9 @@
 A `RunKind` is a typed contract, the same for every kind (training, rasterizer timing,
 one of your own); the runner never needs to know which kind it holds::
 
+    config                                   its Config: the frozen dataclass of one run's
+                                             settings, each dotted key of a run's config a field
+                                             (`check_config`, `read_config`)
     result                                   its `RunResult` subclass: each metric a field made
                                              by `metric` (a ``metric.<name>`` column, with how a
                                              report shows it), plus ``warnings`` and ``curves``
@@ -19,7 +22,11 @@ one of your own); the runner never needs to know which kind it holds::
                                              its report hooks (a report is handed the kind)
 
 ``config`` is the nested dict of one run: the experiment's base, overridden by its
-axis values, plus ``scene`` and ``seed``. `resolve`'s output is what the run id
+axis values, plus ``scene`` and ``seed`` (`RUN_KEYS`). The engine checks every key of it
+against the kind's Config before ``validate`` (`check_config`: a field, a field of a
+dataclass-typed field such as ``raster.tile_size``, or an `INLINE` field's own at the top
+level; an unknown key is one `InputError` line naming it), and a kind reads it onto its
+Config with `read_config` (types, then the Config's own ``__post_init__`` checks). `resolve`'s output is what the run id
 hashes and what `run` receives, so a kind that fills in defaults makes
 ``sh_degree = 3`` written out and left to the default the same run, and makes a
 changed default a new run. ``prepared`` is how the parent tells every worker what it
@@ -41,11 +48,13 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
-from collections.abc import Callable
+import typing
+from collections.abc import Callable, Mapping
 from dataclasses import MISSING, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
+from splatbench.checks import check_keys, dataclass_from_mapping
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import KindReport
 from splatbench.metrics.spec import MetricSpec
@@ -53,6 +62,8 @@ from splatbench.metrics.spec import MetricSpec
 #: A table cell: what a metric may be.
 Scalar = bool | int | float | str | None
 
+
+C = TypeVar("C")
 
 #: The key of a `RunResult` field's metadata that holds its `MetricSpec` (`metric`).
 METRIC = "splatbench.metric"
@@ -96,6 +107,73 @@ def metric_specs(result: type[RunResult]) -> tuple[MetricSpec, ...]:
     return tuple(out)
 
 
+# --------------------------------------------------------------------------- configs
+#: Keys of every run's config, set by the engine from the experiment's ``scenes`` and ``seeds``
+#: (a kind's Config may have fields of those names too).
+RUN_KEYS = ("scene", "seed")
+#: Field metadata of a Config field whose type is a dataclass read from keys at the field's own level
+#: (``metadata={INLINE: True}``): a raster run's ``alpha_min``, not ``options.alpha_min``.
+INLINE = "splatbench.inline"
+
+
+def config_keys(config: type) -> dict[str, Any]:
+    """Key -> its annotated type, every key a table of the dataclass ``config`` takes: its fields
+    by name, an `INLINE` field's own fields in its place."""
+    hints = _hints(config)
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(config):
+        if f.metadata.get(INLINE):
+            out.update(config_keys(hints[f.name]))
+        else:
+            out[f.name] = hints[f.name]
+    return out
+
+
+def check_config(config: type, table: Mapping[str, Any], *, prefix: str = "") -> None:
+    """A one-line `InputError` ``PREFIXKEY: unknown key (...)`` for the first key of ``table`` (a
+    run's nested config) that the dataclass ``config`` does not take (`config_keys`, and at the top
+    `RUN_KEYS`); a table under a field whose type is a dataclass is checked against that class
+    (``raster.tile_sise`` against `RasterOptions`); a mapping field's keys are the kind's to check
+    (``strategy_options``, ``data``)."""
+    keys = config_keys(config)
+    check_keys(table, {*keys, *(() if prefix else RUN_KEYS)}, prefix=prefix)
+    for key, value in table.items():
+        if isinstance(value, Mapping) and _is_dataclass_type(keys.get(key)):
+            check_config(keys[key], value, prefix=f"{prefix}{key}.")
+
+
+def read_config(config: type[C], table: Mapping[str, Any], *, prefix: str = "") -> C:
+    """The dataclass ``config`` of a run's nested config ``table``: each key onto the field of its
+    name (`check_config` first), an `INLINE` field's keys onto that field's own, a table under a
+    dataclass-typed field read the same way; `RUN_KEYS` the class has no field for are left out.
+    Types are checked by `splatbench.checks.dataclass_from_mapping`, ranges by each class's
+    ``__post_init__``: one `InputError` line naming the dotted key as the file writes it."""
+    check_config(config, table, prefix=prefix)
+    hints = _hints(config)
+    values: dict[str, Any] = {}
+    for f in dataclasses.fields(config):
+        tp = hints[f.name]
+        if f.metadata.get(INLINE):
+            own = config_keys(tp)
+            values[f.name] = read_config(tp, {k: v for k, v in table.items() if k in own}, prefix=prefix)
+        elif f.name in table:
+            value = table[f.name]
+            nested = _is_dataclass_type(tp) and isinstance(value, Mapping)
+            values[f.name] = read_config(tp, value, prefix=f"{prefix}{f.name}.") if nested else value
+    return dataclass_from_mapping(config, values, prefix=prefix)
+
+
+def _hints(config: type) -> dict[str, Any]:
+    """Field name -> its evaluated annotation (`typing.get_type_hints`)."""
+    if not (isinstance(config, type) and dataclasses.is_dataclass(config)):
+        raise TypeError(f"a run kind's config must be a dataclass, got {config!r}")
+    return typing.get_type_hints(config)
+
+
+def _is_dataclass_type(tp: Any) -> bool:
+    return isinstance(tp, type) and dataclasses.is_dataclass(tp)
+
+
 @dataclass(frozen=True)
 class KindProtocols:
     """How a kind reruns a cell of a grid under a named protocol: what an experiment's
@@ -121,6 +199,9 @@ class RunKind:
     run: Callable[[dict[str, Any], Path, Any], RunResult]
     #: The `RunResult` subclass ``run`` returns: its metric fields are the table's ``metric.*`` columns.
     result: type[RunResult]
+    #: The frozen dataclass of one run's settings: a run's config is read onto its fields (`read_config`;
+    #: the engine checks every key against it, `check_config`, before ``validate``).
+    config: type
     resolve: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     identity: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     scenes: Callable[[], set[str]] | None = None
@@ -137,6 +218,7 @@ class RunKind:
     protocols: KindProtocols | None = None
 
     def __post_init__(self) -> None:
+        _hints(self.config)  # a dataclass whose annotations resolve (TypeError otherwise)
         if not (isinstance(self.result, type) and issubclass(self.result, RunResult)):
             raise TypeError(f"run kind {self.name!r}: result must be a RunResult subclass, got {self.result!r}")
         if self.report is not None:
@@ -206,4 +288,5 @@ def metric_values(result: RunResult) -> dict[str, Scalar]:
 
 
 __all__ = ["RunKind", "RunResult", "metric", "metric_specs", "metric_values", "METRIC", "KindProtocols", "Scalar",
-           "BUILTIN_KINDS", "register_kind", "get_kind", "check_output"]
+           "BUILTIN_KINDS", "register_kind", "get_kind", "check_output", "RUN_KEYS", "INLINE", "config_keys",
+           "check_config", "read_config"]

@@ -9,14 +9,13 @@ Scene names are workloads (`splatbench.workloads.parse_workload_name`)::
     garden               the bundled Mip-NeRF 360 garden SfM capture, view 0 (648x420,
     garden-vK              138,766 Gaussians), or view K; the run's seed changes nothing
 
-Config (flat; defaults in `DEFAULTS`): the rasterizer options, every `RasterOptions`
-field but ``near`` and ``far`` (the workload's camera sets those): ``tile_size``,
-``alpha_min``, ``alpha_max``, ``transmittance_min``, ``eps2d``, ``radius``,
-``antialiased`` and ``device`` (`RASTER_FIELDS`, read from the dataclass, so a new option
-is a config field here without an edit); ``sh_degree`` (0..3, the bands evaluated); and
-how to measure (`MEASUREMENT`): ``repeats`` (timed pairs, at least 7) and
-``error_scale`` (the resolution factor of the error measurement, so that the float64
-reference stays affordable).
+Config (`RasterConfig`, flat): the rasterizer options, every `RasterOptions` field but
+``near`` and ``far`` (the workload's camera sets those), written at the top level
+(``tile_size``, ``alpha_min``, ``alpha_max``, ``transmittance_min``, ``eps2d``, ``radius``,
+``antialiased``, ``device``: the config embeds a `RasterOptions`, so a new option is a
+config field here without an edit); ``sh_degree`` (0..3, the bands evaluated); and how to
+measure: ``repeats`` (timed pairs, at least 7) and ``error_scale`` (the resolution factor
+of the error measurement, so that the float64 reference stays affordable).
 
 One run:
 
@@ -82,33 +81,20 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from splatbench.checks import check_keys, check_sh_degree, check_type
+from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import (Claim, Comparison, Finding, FindingRules, KindReport, LoadMarks,
                                                Tradeoff, done_runs)
 from splatbench.fsutil import atomic_write, cache_root
-from splatbench.experiments.kinds import RunKind, RunResult, metric
+from splatbench.experiments.kinds import INLINE, RunKind, RunResult, metric, read_config
 from splatbench.metrics.load import Load, own_share
 from splatbench.raster.options import RasterOptions
 from splatbench.workloads import build_workload, parse_workload_name
 
 #: `RasterOptions` fields a workload's camera sets (never in a raster run's config).
 CAMERA_FIELDS = ("near", "far")
-#: Config fields passed to the rasterizer as `RasterOptions`: every field of the dataclass but
-#: `CAMERA_FIELDS` (sh_degree goes separately).
-RASTER_FIELDS = tuple(f.name for f in dataclasses.fields(RasterOptions) if f.name not in CAMERA_FIELDS)
-#: The other config fields and their defaults: what is rendered and how it is measured.
-MEASUREMENT: dict[str, Any] = {
-    "sh_degree": 3,              # SH bands evaluated (the workloads hold degree 3)
-    "repeats": 7,                # timed A B pairs (run's options, defaults), at least MIN_PAIRS
-    "error_scale": 0.5,          # resolution factor of the error measurement (0 < s <= 1)
-}
-#: Config fields and defaults: `RasterOptions`' (graphdeco-inria 3DGS's; see its field comments),
-#: then the measurement's.
-DEFAULTS: dict[str, Any] = {**{k: v for k, v in RasterOptions().to_dict().items() if k in RASTER_FIELDS},
-                            **MEASUREMENT}
-#: Options with no counterpart in the reference (accelerations and placement only).
-FAST_ONLY = ("tile_size", "device")
+#: The SH degree of every workload: the bands the default options' side of a pair evaluates.
+FULL_SH_DEGREE = 3
 #: What a run measures, in the resolved config (so in the run id): 2 = error against the
 #: exact model and the median of per-pair time ratios (1, unnamed: error against the
 #: default-option reference, ratio of medians). Results measured otherwise are never reused.
@@ -180,36 +166,60 @@ class RasterRun(RunResult):
 
 
 # --------------------------------------------------------------------------- config
+@dataclasses.dataclass(frozen=True)
+class RasterConfig:
+    """One raster run (module doc): a workload, the rasterizer's options and how to measure them.
+
+    scene, seed: the workload (`splatbench.workloads.parse_workload_name`) and its seed;
+    options: the rasterizer's options, written at the config's top level (``alpha_min = 0.01``;
+    every `RasterOptions` field but ``near`` and ``far``, which the workload's camera sets);
+    sh_degree: the SH bands evaluated (the workloads hold `FULL_SH_DEGREE`); repeats: the timed A B
+    pairs (the run's options, then the defaults), at least `MIN_PAIRS`; error_scale: the resolution
+    factor of the error measurement (0 < s <= 1), so that the float64 reference stays affordable;
+    protocol: what a run measures (`PROTOCOL`; set by the kind, never in a file).
+    """
+
+    scene: str = ""
+    seed: int = 0
+    options: RasterOptions = dataclasses.field(default_factory=RasterOptions, metadata={INLINE: True})
+    sh_degree: int = FULL_SH_DEGREE
+    repeats: int = MIN_PAIRS
+    error_scale: float = 0.5
+    protocol: int = PROTOCOL
+
+    def __post_init__(self) -> None:
+        parse_workload_name(self.scene)
+        for name in CAMERA_FIELDS:
+            if getattr(self.options, name) is not None:
+                raise InputError(f"{name}: set by the workload's camera, not by a raster run")
+        check_sh_degree("sh_degree", self.sh_degree)
+        if self.repeats < MIN_PAIRS:
+            raise InputError(f"repeats: expected at least {MIN_PAIRS} timed pairs (a bootstrap interval of the "
+                             f"median ratio needs several), got {self.repeats}")
+        if not 0 < self.error_scale <= 1:
+            raise InputError(f"error_scale: expected a factor in (0, 1], got {self.error_scale!r}")
+        if self.protocol != PROTOCOL:
+            raise InputError(f"protocol: set by the raster kind (what a run measures: {PROTOCOL}), "
+                             f"got {self.protocol!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The resolved config, flat as a file writes it: every option, the measurement's fields, the
+        workload and `PROTOCOL`; what the run id hashes."""
+        return {**self.options.to_dict(), "sh_degree": self.sh_degree, "repeats": self.repeats,
+                "error_scale": self.error_scale, "scene": self.scene, "seed": self.seed, "protocol": self.protocol}
+
+
 def validate(config: dict[str, Any]) -> None:
-    """One-line `InputError` naming the first bad field."""
-    check_keys(config, {*DEFAULTS, "scene", "seed"})
-    for key, value in config.items():
-        if isinstance(value, dict):
-            raise InputError(f"{key}: expected a value, got a table")
-    parse_workload_name(str(config.get("scene", "")))
-    options_of(config)  # types and ranges of the options, naming the bad one (RasterOptions.from_dict)
-    merged = {**DEFAULTS, **config}
-    check_type("repeats", merged["repeats"], int)
-    check_type("error_scale", merged["error_scale"], float)
-    check_sh_degree("sh_degree", merged["sh_degree"])
-    if merged["repeats"] < MIN_PAIRS:
-        raise InputError(f"repeats: expected at least {MIN_PAIRS} timed pairs (a bootstrap interval of the median "
-                         f"ratio needs several), got {merged['repeats']}")
-    if not 0 < merged["error_scale"] <= 1:
-        raise InputError(f"error_scale: expected a factor in (0, 1], got {merged['error_scale']!r}")
+    """One-line `InputError` naming the first bad field (`RasterConfig`; the SH degree by the one
+    check of every SH degree, `check_sh_degree`, before its type is read)."""
+    check_sh_degree("sh_degree", config.get("sh_degree", FULL_SH_DEGREE))
+    read_config(RasterConfig, config)
 
 
 def resolve(config: dict[str, Any]) -> dict[str, Any]:
-    """Every field filled in; numbers normalised (``alpha_min = 1`` and ``1.0`` are one run);
-    ``protocol`` (`PROTOCOL`) added."""
-    out = {**DEFAULTS, **config, **options_of(config).to_dict(), "protocol": PROTOCOL}
-    out["error_scale"] = float(out["error_scale"])
-    return out
-
-
-def options_of(config: dict[str, Any]) -> RasterOptions:
-    """The `RasterOptions` of a config's `RASTER_FIELDS` (the defaults for those it leaves out)."""
-    return RasterOptions.from_dict({k: v for k, v in config.items() if k in RASTER_FIELDS})
+    """Every field filled in (`RasterConfig.to_dict`); numbers normalised (``alpha_min = 1`` and
+    ``1.0`` are one run); ``protocol`` (`PROTOCOL`) added."""
+    return read_config(RasterConfig, config).to_dict()
 
 
 # --------------------------------------------------------------------------- reference
@@ -274,9 +284,9 @@ def exact_model(scene: str, seed: int, scale: float) -> np.ndarray:
 def prepare(configs: list[dict[str, Any]]) -> None:
     """Compute (or find cached) every exact-model render the pending runs need, once, in the parent."""
     seen: set[tuple] = set()
-    for config in configs:
-        kind, _ = parse_workload_name(config["scene"])
-        key = (config["scene"], config["seed"] if kind == "synthetic" else 0, config["error_scale"])
+    for cfg in (read_config(RasterConfig, c) for c in configs):
+        kind, _ = parse_workload_name(cfg.scene)
+        key = (cfg.scene, cfg.seed if kind == "synthetic" else 0, cfg.error_scale)
         if key not in seen:
             seen.add(key)
             exact_model(*key)
@@ -297,15 +307,16 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RasterRun:
     from splatbench.raster import render, work_stats
 
     own_share()  # a checkpoint of the own-load tracker: what ran before this run, then the warm-up
-    workload = build_workload(config["scene"], config["seed"])
-    degree = config["sh_degree"]
-    options = options_of(config).to_dict()
-    defaults = RasterOptions(device=options["device"]).to_dict()
+    cfg = read_config(RasterConfig, config)
+    workload = build_workload(cfg.scene, cfg.seed)
+    degree = cfg.sh_degree
+    options = cfg.options.to_dict()
+    defaults = RasterOptions(device=cfg.options.device).to_dict()
     full = torch_params(workload.gaussians)
     params = (*full[:4], full[4][:, : (degree + 1) ** 2].contiguous())
     closures = {}
     for name, p, opts in (("run", params, {**options, "sh_degree": degree}),
-                          ("default", full, {**defaults, "sh_degree": DEFAULTS["sh_degree"]})):
+                          ("default", full, {**defaults, "sh_degree": FULL_SH_DEGREE})):
         closures[name] = (forward_with_init(p, workload.camera, opts),
                           forward_backward_with_init(p, workload.camera, opts))
         closures[name][1]()
@@ -313,7 +324,7 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RasterRun:
     times: dict[str, list[float]] = {k: [] for k in ("fwd", "fwd_bwd", "default_fwd", "default_fwd_bwd")}
     stats = None
     load = Load.start()
-    for _ in range(config["repeats"]):  # A B A B ...: both sides of a pair see the same load
+    for _ in range(cfg.repeats):  # A B A B ...: both sides of a pair see the same load
         for name, prefix in (("run", ""), ("default", "default_")):
             s, st = time_runs(closures[name][0], 1)
             times[prefix + "fwd"] += s
@@ -325,17 +336,17 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RasterRun:
     fwd_bwd_rel = bootstrap_median_ratio(times["fwd_bwd"], times["default_fwd_bwd"])
 
     work = work_stats(workload.gaussians, workload.camera, **options)
-    scale = config["error_scale"]
+    scale = cfg.error_scale
     small = workload.camera if scale == 1 else workload.camera.scaled(scale)
     fast = render(workload.gaussians, small, sh_degree=degree, **options).rgb.astype(np.float64)
-    exact = exact_model(config["scene"], config["seed"], scale)
+    exact = exact_model(cfg.scene, cfg.seed, scale)
     matched = reference_render(workload, scale, sh_degree=degree, **options)
     err = np.abs(fast - exact)
     return RasterRun(
         fwd_ms=round(1e3 * med["fwd"], 3), fwd_bwd_ms=round(1e3 * med["fwd_bwd"], 3),
         fwd_rel=round(fwd_rel.estimate, 4), fwd_rel_low=_r4(fwd_rel.low), fwd_rel_high=_r4(fwd_rel.high),
         fwd_bwd_rel=round(fwd_bwd_rel.estimate, 4), fwd_bwd_rel_low=_r4(fwd_bwd_rel.low),
-        fwd_bwd_rel_high=_r4(fwd_bwd_rel.high), timed_pairs=config["repeats"],
+        fwd_bwd_rel_high=_r4(fwd_bwd_rel.high), timed_pairs=cfg.repeats,
         default_fwd_ms=round(1e3 * med["default_fwd"], 3), default_fwd_bwd_ms=round(1e3 * med["default_fwd_bwd"], 3),
         **load.metrics(),
         exact_psnr=round(min(psnr(fast, exact, clamp=False), 200.0), 4), exact_max_abs=float(err.max()),
@@ -391,9 +402,10 @@ REPORT = KindReport(
 )
 
 #: The ``raster`` kind (``kind = "raster"``).
-RASTER = RunKind(name="raster", validate=validate, run=run, result=RasterRun, resolve=resolve, prepare=prepare,
+RASTER = RunKind(name="raster", validate=validate, run=run, config=RasterConfig, result=RasterRun, resolve=resolve,
+                 prepare=prepare,
                  description="time the rasterizer under options against the defaults; error against the exact model",
                  report=REPORT)
 
-__all__ = ["RASTER", "RasterRun", "REPORT", "DEFAULTS", "RASTER_FIELDS", "MEASUREMENT", "reference_render",
+__all__ = ["RASTER", "RasterConfig", "RasterRun", "REPORT", "FULL_SH_DEGREE", "reference_render",
            "exact_model", "cache_dir", "MIN_PAIRS", "PROTOCOL"]

@@ -60,8 +60,9 @@ from splatbench.checks import check_image_size, check_keys
 from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff
-from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, metric, metric_specs
+from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, check_config, metric, metric_specs
 from splatbench.experiments.train_report import auto_sh_degree_note, lpips_note, protocol_lines, schedule_confound_note
+from splatbench.train.config import TrainConfig  # the kind's Config (loads torch: every use of the kind validates)
 
 #: Environment variable naming the folder of rendered datasets.
 DATASETS_ENV = "SPLATBENCH_DATASETS"
@@ -166,23 +167,16 @@ class TrainRun(RunResult):
 
 
 # --------------------------------------------------------------------------- config
-def _train_fields() -> tuple[str, ...]:
-    from splatbench.train.config import TrainConfig
-
-    return tuple(f.name for f in dataclasses.fields(TrainConfig))
-
-
 def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]:
     """(scene, the ``data`` table, the TrainConfig fields) of a nested run config; one-line
-    `InputError` naming the field for anything unknown."""
-    fields = _train_fields()
-    known = sorted({*fields, "scene", "data"} - set(OWNED_FIELDS))
+    `InputError` naming the field for anything unknown (`check_config`: the kind's Config is
+    `TrainConfig`, its ``data`` table the scene's, below)."""
     for key in config:
         if key in OWNED_FIELDS:
             what = "the rendered scene" if key == "dataset" else "the run's folder"
             raise InputError(f"{key}: set by the train kind ({what}); choose the scene with 'scenes' and its "
                              f"rendering with data.resolution / data.views / data.spp / data.test_spp")
-    check_keys(config, known)
+    check_config(TrainConfig, config)
     scene = config.get("scene")
     if not isinstance(scene, str) or not scene:
         raise InputError(f"scene: expected a scene name, got {scene!r}")
@@ -211,9 +205,7 @@ def scene_type(data: dict[str, Any]) -> str:
     return "folder" if "path" in data else "teacher" if "model" in data else "catalog"
 
 
-def _train_config(train: dict[str, Any]):
-    from splatbench.train.config import TrainConfig
-
+def _train_config(train: dict[str, Any]) -> TrainConfig:
     return TrainConfig.from_dict(dict(train), source="config").validate()
 
 
@@ -445,7 +437,7 @@ def _prepare_sfm(path: Path, downscale: int, poses: str, layout: str, test_every
 def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> TrainRun:
     """Train on the run's dataset (found, or rendered on a worker that has no copy, under
     ``prepared.datasets``), writing the run's files into ``workdir``."""
-    from splatbench.train import TrainConfig, train
+    from splatbench.train import train
 
     scene, data, fields = _split(config)
     dataset = ensure_dataset(scene, data, prepared.datasets)
@@ -524,10 +516,10 @@ REPORT = KindReport(
 )
 
 #: The ``train`` kind (``kind = "train"``).
-TRAIN = RunKind(name="train", validate=validate, run=run, result=TrainRun, resolve=resolve, identity=identity,
-                scenes=scenes, prepare=prepare,
-                description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT,
-                planned=planned, protocols=KindProtocols(with_protocol, describe_protocol))
+TRAIN = RunKind(name="train", validate=validate, run=run, config=TrainConfig, result=TrainRun, resolve=resolve,
+                identity=identity, scenes=scenes, prepare=prepare, report=REPORT, planned=planned,
+                description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)",
+                protocols=KindProtocols(with_protocol, describe_protocol))
 
 __all__ = ["TRAIN", "TrainRun", "REPORT", "MIN_EFFECT", "TOPOLOGY_METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
            "dataset_folder", "ensure_dataset"]
