@@ -18,11 +18,13 @@ means "not declared" and is taken to be graphdeco's value.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from splatbench.cameras import Camera
 from splatbench.gaussians import GROUPS  # noqa: F401 - the backend signature's parameter groups, in its order
 from splatbench.raster.options import RasterOptions
 
@@ -31,6 +33,9 @@ from splatbench.raster.options import RasterOptions
 GRAPHDECO = {name: getattr(RasterOptions(), name) for name in ("alpha_min", "alpha_max", "transmittance_min",
                                                                "eps2d", "radius", "tile_size", "antialiased")}
 OUTPUTS = ("rgb", "alpha", "depth")
+
+if TYPE_CHECKING:  # the signatures' tensor type; a backend module loads torch itself when it renders
+    import torch
 
 
 def as_numpy(x) -> np.ndarray:
@@ -87,8 +92,20 @@ CONVENTIONS = {**GRAPHDECO, **{a.name: a.graphdeco for a in AXES}}
 
 
 class RasterFn(Protocol):
-    def __call__(self, means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree: int | None = None,
-                 background=None) -> tuple[Any, Any, Any]: ...
+    """A backend function (the module doc's signature): float32 torch tensors in and out."""
+
+    def __call__(
+        self,
+        means: torch.Tensor,           # [N, 3]
+        log_scales: torch.Tensor,      # [N, 3]
+        quats: torch.Tensor,           # [N, 4] (w, x, y, z), not necessarily unit
+        opacity_logits: torch.Tensor,  # [N]
+        sh: torch.Tensor,              # [N, K, 3], K = (d + 1)^2
+        camera: Camera,                # width W, height H
+        *,
+        sh_degree: int | None = None,
+        background: Sequence[float] | None = None,  # RGB in [0, 1] (None: black)
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]: ...  # rgb [H, W, 3], alpha [H, W], depth [H, W]
 
 
 @dataclass(frozen=True)
@@ -179,13 +196,25 @@ class BackendInfo:
 class Backend:
     """A rasterizer: ``fn`` with the signature in this module's docstring, and its ``info``."""
 
-    fn: Callable[..., tuple[Any, Any, Any]]
+    fn: RasterFn
     info: BackendInfo
 
     @property
     def name(self) -> str:
         return self.info.name
 
-    def __call__(self, means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
+    def __call__(
+        self,
+        means: torch.Tensor,           # [N, 3]
+        log_scales: torch.Tensor,      # [N, 3]
+        quats: torch.Tensor,           # [N, 4] (w, x, y, z), not necessarily unit
+        opacity_logits: torch.Tensor,  # [N]
+        sh: torch.Tensor,              # [N, K, 3], K = (d + 1)^2
+        camera: Camera,                # width W, height H
+        *,
+        sh_degree: int | None = None,
+        background: Sequence[float] | None = None,  # RGB in [0, 1] (None: black)
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:  # rgb [H, W, 3], alpha [H, W], depth [H, W]
+        """Render with this backend (float32 torch tensors; the module doc's conventions)."""
         return self.fn(means, log_scales, quats, opacity_logits, sh, camera, sh_degree=sh_degree,
                        background=background)

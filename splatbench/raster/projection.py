@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import sys
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -27,25 +27,22 @@ DEFAULTS = RasterOptions()
 
 
 
+#: A Dr.Jit array of the device's backend (``drjit.llvm.ad`` or ``drjit.cuda.ad``: `array_namespace`):
+#: a field's comment gives its type there and its shape.
+DrArray = Any
+
+
 class Projection(NamedTuple):
-    """Screen-space Gaussians (Dr.Jit arrays, all of width N).
+    """Screen-space Gaussians, N of them: Dr.Jit arrays of width N (`DrArray`)."""
 
-    means2d [N, 2] pixel coordinates (origin at the image's top-left corner);
-    conics [N, 3] (A, B, C) = (xx, xy, yy) of the inverse 2D covariance;
-    depths [N] camera z; opacities [N] (after antialiasing compensation);
-    cutoff_sq [N] R^2 in Mahalanobis units (detached); extents [N, 2] (rx, ry) of
-    the cutoff ellipse's bounding box in pixels (detached); radii [N] int32,
-    0 when culled; visible [N] bool.
-    """
-
-    means2d: object
-    conics: object
-    depths: object
-    opacities: object
-    cutoff_sq: object
-    extents: object
-    radii: object
-    visible: object
+    means2d: DrArray    # Array2f [N, 2]: pixel coordinates (x, y), origin at the image's top-left corner
+    conics: DrArray     # Array3f [N, 3]: (A, B, C) = (xx, xy, yy) of the inverse 2D covariance
+    depths: DrArray     # Float [N]: camera z
+    opacities: DrArray  # Float [N]: after the antialiasing compensation
+    cutoff_sq: DrArray  # Float [N]: R^2 in Mahalanobis units (detached)
+    extents: DrArray    # Array2f [N, 2]: (rx, ry) of the cutoff ellipse's bounding box in pixels (detached)
+    radii: DrArray      # Int32 [N]: 0 when culled
+    visible: DrArray    # Bool [N]
 
 
 def array_namespace(x):
