@@ -26,15 +26,15 @@ axis values, plus ``scene`` and ``seed`` (`RUN_KEYS`). The engine checks every k
 against the kind's Config before ``validate`` (`check_config`: a field, a field of a
 dataclass-typed field such as ``raster.tile_size``, or an `INLINE` field's own at the top
 level; an unknown key is one `InputError` line naming it), and a kind reads it onto its
-Config with `read_config` (types, then the Config's own ``__post_init__`` checks). `resolve`'s output is what the run id
-hashes and what `run` receives, so a kind that fills in defaults makes
-``sh_degree = 3`` written out and left to the default the same run, and makes a
-changed default a new run. ``prepared`` is how the parent tells every worker what it
-settled (plain, picklable data, e.g. the folder it rendered datasets into; None for a
-kind without ``prepare``): it travels with each run, never through the environment. `identity` (default: the resolved config itself) lets a kind
-hash what a run depends on rather than where it was found: the train kind swaps a user's
-dataset folder or model path for its content hash, so a committed report's run ids hold in
-any clone.
+Config with `read_config` (types, then the Config's own ``__post_init__`` checks).
+`resolve`'s output is what the run id hashes and what `run` receives, so a kind that
+fills in defaults makes ``sh_degree = 3`` written out and left to the default the same
+run, and makes a changed default a new run. ``prepared`` is how the parent tells every
+worker what it settled (plain, picklable data, e.g. the folder it rendered datasets into;
+None for a kind without ``prepare``): it travels with each run, never through the
+environment. `identity` (default: the resolved config itself) lets a kind hash what a run
+depends on rather than where it was found: the train kind swaps a user's dataset folder or
+model path for its content hash, so a committed report's run ids hold in any clone.
 
 Workers find a kind by name in a fresh process, so a kind must be reachable by
 name there: a built-in (`BUILTIN_KINDS`, imported lazily) or ``"package.module:ATTR"``
