@@ -92,20 +92,11 @@ CONVENTIONS = {**GRAPHDECO, **{a.name: a.graphdeco for a in AXES}}
 
 
 class RasterFn(Protocol):
-    """A backend function (the module doc's signature): float32 torch tensors in and out."""
+    """A backend function: float32 torch tensors in and out, shaped as `Backend.__call__` says."""
 
-    def __call__(
-        self,
-        means: torch.Tensor,           # [N, 3]
-        log_scales: torch.Tensor,      # [N, 3]
-        quats: torch.Tensor,           # [N, 4] (w, x, y, z), not necessarily unit
-        opacity_logits: torch.Tensor,  # [N]
-        sh: torch.Tensor,              # [N, K, 3], K = (d + 1)^2
-        camera: Camera,                # width W, height H
-        *,
-        sh_degree: int | None = None,
-        background: Sequence[float] | None = None,  # RGB in [0, 1] (None: black)
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]: ...  # rgb [H, W, 3], alpha [H, W], depth [H, W]
+    def __call__(self, means: torch.Tensor, log_scales: torch.Tensor, quats: torch.Tensor, opacity_logits: torch.Tensor,
+                 sh: torch.Tensor, camera: Camera, *, sh_degree: int | None = None,
+                 background: Sequence[float] | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]: ...
 
 
 @dataclass(frozen=True)
