@@ -16,51 +16,69 @@ import math
 import os
 import time
 import zlib
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from splatbench.checks import check_keys
 from splatbench.errors import InputError
-from splatbench.experiments.configs import flatten, override, unflatten
-from splatbench.experiments.kinds import KindProtocols, RunKind, RunOutput
+from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, metric, read_config
 
 #: What an experiment file writes in ``kind = "..."``.
 KIND = "tests.kinds_for_tests:DUMMY"
 
-#: The dummy kind's fields and defaults.
-DUMMY_DEFAULTS: dict[str, Any] = {
-    "x": 0.0,        # a number folded into the metrics
-    "n": 3,          # curve length (>= 1)
-    "mode": "ok",    # "ok", "warn" (ok, with a warning), "fail" (raise) or "crash" (the worker exits at once)
-    "sleep": 0.0,    # seconds to sleep before computing
-    "gate": "",      # a folder: the run waits there for a token (see `_pass_gate`); "" = no gate
-    "opts": {"a": 0, "b": "p"},  # a nested table, for dotted keys
-}
+@dataclass(frozen=True)
+class DummyOpts:
+    """A nested table of the dummy kind's config, for dotted keys (``opts.a``)."""
+
+    a: int = 0       # folded into the metric a_plus_seed
+    b: str = "p"     # folded into the metric scene_tag and the curve's seed
+
+
+@dataclass(frozen=True)
+class DummyConfig:
+    """The dummy kind's Config: every key of a run's config is one of its fields (the engine checks
+    them, `splatbench.experiments.kinds.check_config`); types are checked as the config is read
+    (`read_config`), ranges here."""
+
+    scene: str = ""
+    seed: int = 0
+    x: float = 0.0        # a number folded into the metrics
+    n: int = 3            # curve length (>= 1)
+    mode: str = "ok"      # "ok", "warn" (ok, with a warning), "fail" (raise) or "crash" (the worker exits at once)
+    sleep: float = 0.0    # seconds to sleep before computing
+    gate: str = ""        # a folder: the run waits there for a token (see `_pass_gate`); "" = no gate
+    opts: DummyOpts = field(default_factory=DummyOpts)
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("ok", "warn", "fail", "crash"):
+            raise InputError(f"mode: expected 'ok', 'warn', 'fail' or 'crash', got {self.mode!r}")
+        if not (math.isfinite(self.sleep) and self.sleep >= 0):
+            raise InputError(f"sleep: expected seconds >= 0, got {self.sleep!r}")
+        if self.n < 1:
+            raise InputError(f"n: expected an int >= 1, got {self.n!r}")
+
+
 DUMMY_SCENES = frozenset({"alpha", "beta", "gamma"})
 
 
+@dataclass(frozen=True, kw_only=True)
+class DummyRun(RunResult):
+    """What a dummy run records: each field a column ``metric.<name>`` (`metric`: how a report
+    shows it, what it means); ``warnings`` and ``curves`` come with `RunResult`."""
+
+    value: float = metric("value", ".4g", better="higher", meaning="the curve's last point")
+    total: float = metric("total", ".4g", meaning="the curve's sum")
+    a_plus_seed: int = metric(meaning="opts.a + seed")
+    scene_tag: str = metric(meaning="scene and opts.b")
+    positive: bool = metric(meaning="whether value > 0")
+
+
 def _validate(config: dict[str, Any]) -> None:
-    known = {**flatten(DUMMY_DEFAULTS), "scene": "", "seed": 0}
-    check_keys(flatten(config), known)
-    for key, value in flatten(config).items():
-        expected = type(known[key])
-        ok = (isinstance(value, (int, float)) and not isinstance(value, bool)) if expected is float \
-            else isinstance(value, expected) and not (expected is int and isinstance(value, bool))
-        if not ok:
-            raise InputError(f"{key}: expected {expected.__name__}, got {value!r}")
-    if config.get("mode", "ok") not in ("ok", "warn", "fail", "crash"):
-        raise InputError(f"mode: expected 'ok', 'warn', 'fail' or 'crash', got {config['mode']!r}")
-    if not (math.isfinite(config.get("sleep", 0.0)) and config.get("sleep", 0.0) >= 0):
-        raise InputError(f"sleep: expected seconds >= 0, got {config['sleep']!r}")
-    if config.get("n", 1) < 1:
-        raise InputError(f"n: expected an int >= 1, got {config['n']!r}")
+    read_config(DummyConfig, config)
 
 
 def _resolve(config: dict[str, Any]) -> dict[str, Any]:
-    out = unflatten(override(flatten(DUMMY_DEFAULTS), flatten(config)))
-    out["x"] = float(out["x"])
-    out["sleep"] = float(out["sleep"])
-    return out
+    return asdict(read_config(DummyConfig, config))
 
 
 def _pass_gate(gate: Path) -> None:
@@ -82,27 +100,27 @@ def _pass_gate(gate: Path) -> None:
     marker.unlink(missing_ok=True)
 
 
-def _run(config: dict[str, Any], workdir: Path, prepared: None) -> RunOutput:
+def _run(config: dict[str, Any], workdir: Path, prepared: None) -> DummyRun:
     """Deterministic numbers from the config; sleeps, waits at a gate, raises or kills
     its process on demand. (No ``prepare``: ``prepared`` is None.)"""
     import numpy as np
 
-    time.sleep(config["sleep"])
-    if config["gate"]:
-        _pass_gate(Path(config["gate"]))
-    if config["mode"] == "fail":
-        raise RuntimeError(f"dummy run told to fail (scene {config['scene']}, seed {config['seed']})")
-    if config["mode"] == "crash":
+    cfg = read_config(DummyConfig, config)
+    time.sleep(cfg.sleep)
+    if cfg.gate:
+        _pass_gate(Path(cfg.gate))
+    if cfg.mode == "fail":
+        raise RuntimeError(f"dummy run told to fail (scene {cfg.scene}, seed {cfg.seed})")
+    if cfg.mode == "crash":
         os._exit(70)
-    tag = zlib.crc32(f"{config['scene']}/{config['opts']['b']}".encode())
-    rng = np.random.default_rng([config["seed"], tag, config["n"]])
-    curve = (config["x"] + rng.random(config["n"])).round(12)
-    (workdir / "note.txt").write_text(f"{config['scene']} {config['seed']}\n")
-    metrics = {"value": float(curve[-1]), "total": float(curve.sum()), "a_plus_seed": config["opts"]["a"] + config["seed"],
-               "scene_tag": f"{config['scene']}-{config['opts']['b']}", "positive": bool(curve[-1] > 0)}
-    warnings = (f"warning: dummy run told to warn (seed {config['seed']})",) if config["mode"] == "warn" else ()
-    return RunOutput(metrics=metrics, curves={"step": list(range(config["n"])), "value": curve.tolist()},
-                     warnings=warnings)
+    tag = zlib.crc32(f"{cfg.scene}/{cfg.opts.b}".encode())
+    rng = np.random.default_rng([cfg.seed, tag, cfg.n])
+    curve = (cfg.x + rng.random(cfg.n)).round(12)
+    (workdir / "note.txt").write_text(f"{cfg.scene} {cfg.seed}\n")
+    warnings = (f"warning: dummy run told to warn (seed {cfg.seed})",) if cfg.mode == "warn" else ()
+    return DummyRun(value=float(curve[-1]), total=float(curve.sum()), a_plus_seed=cfg.opts.a + cfg.seed,
+                    scene_tag=f"{cfg.scene}-{cfg.opts.b}", positive=bool(curve[-1] > 0),
+                    curves={"step": list(range(cfg.n)), "value": curve.tolist()}, warnings=warnings)
 
 
 def _scenes() -> set[str]:
@@ -120,31 +138,49 @@ def _with_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:
     return {**config, "n": 7}
 
 
-#: Deterministic metrics computed from the config (see `DUMMY_DEFAULTS`).
-DUMMY = RunKind(name=KIND, validate=_validate, run=_run, resolve=_resolve, scenes=_scenes,
+#: Deterministic metrics computed from the config (`DummyConfig`).
+DUMMY = RunKind(name=KIND, validate=_validate, run=_run, config=DummyConfig, result=DummyRun, resolve=_resolve,
+                scenes=_scenes,
                 description="for tests: deterministic numbers, configurable sleep, gate and failure",
                 protocols=KindProtocols(_with_protocol, lambda name: "curves 7 points long"))
 
 
 # --------------------------------------------------------------------------- probe
+@dataclass(frozen=True)
+class ProbeConfig:
+    """A probe run takes no settings of its own (its ``scene`` and ``seed`` only)."""
+
+
 def _probe_validate(config: dict[str, Any]) -> None:
-    check_keys(flatten(config), {"scene": "", "seed": 0})
+    read_config(ProbeConfig, config)
 
 
 def _probe_prepare(configs: list[dict[str, Any]]) -> dict[str, int]:
     return {"runs": len(configs), "parent": os.getpid()}
 
 
-def _probe_run(config: dict[str, Any], workdir: Path, prepared: dict[str, int]) -> RunOutput:
+@dataclass(frozen=True, kw_only=True)
+class ProbeRun(RunResult):
+    """What reached a probe run's worker."""
+
+    drjit_threads: int = metric(meaning="the worker's Dr.Jit thread budget")
+    prepared_runs: int = metric(meaning="runs `prepare` was handed, in the parent")
+    prepared_parent: int = metric(meaning="the parent's process id, as `prepare` saw it")
+    pid: int = metric(meaning="the worker's process id")
+    env: str = metric(meaning="the SPLATBENCH_* variables of the worker's environment")
+
+
+def _probe_run(config: dict[str, Any], workdir: Path, prepared: dict[str, int]) -> ProbeRun:
     """What reached the worker from the runner: its Dr.Jit thread budget, what ``prepare``
     returned, and the ``SPLATBENCH_*`` variables of its environment."""
     import drjit as dr
 
-    return RunOutput(metrics={"drjit_threads": dr.thread_count(), "prepared_runs": prepared["runs"],
-                              "prepared_parent": prepared["parent"], "pid": os.getpid(),
-                              "env": ",".join(sorted(k for k in os.environ if k.startswith("SPLATBENCH_")))})
+    return ProbeRun(drjit_threads=dr.thread_count(), prepared_runs=prepared["runs"],
+                    prepared_parent=prepared["parent"], pid=os.getpid(),
+                    env=",".join(sorted(k for k in os.environ if k.startswith("SPLATBENCH_"))))
 
 
 #: A kind that reports what its worker was handed (``kind = "tests.kinds_for_tests:PROBE"``).
-PROBE = RunKind(name="tests.kinds_for_tests:PROBE", validate=_probe_validate, run=_probe_run,
+PROBE = RunKind(name="tests.kinds_for_tests:PROBE", validate=_probe_validate, run=_probe_run, config=ProbeConfig,
+                result=ProbeRun,
                 prepare=_probe_prepare, description="for tests: what a worker gets from the runner")

@@ -8,6 +8,7 @@ Network: the Dask test binds to 127.0.0.1 only.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import random
@@ -311,7 +312,7 @@ def test_failed_runs_are_recorded_the_rest_complete_and_resume_skips_done(tmp_pa
 
 
 def test_a_runs_warnings_reach_its_file_the_table_and_the_report(tmp_path, capsys):
-    """What a run warned of (`RunOutput.warnings`) is never dropped by the grid: the run's
+    """What a run warned of (`RunResult.warnings`) is never dropped by the grid: the run's
     file, the table's ``warnings`` column and a "Warnings" section (with a pointer in the
     header) carry it; a grid whose runs warned of nothing has neither."""
     from splatbench.reports.report import build_report, write_report
@@ -502,3 +503,61 @@ def test_a_kind_written_before_prepared_existed_still_runs(tmp_path):
     call_run(lambda config, workdir: seen.append((config, workdir)), {"a": 1}, tmp_path, "prepared")
     call_run(lambda config, workdir, prepared: seen.append(prepared), {"a": 1}, tmp_path, "prepared")
     assert seen == [({"a": 1}, tmp_path), "prepared"]
+
+
+def test_a_runs_config_is_read_onto_its_kinds_config_dataclass():
+    """The engine maps a run's dotted keys onto the kind's Config (`check_config`, `read_config`):
+    a field, a field of a dataclass-typed field (``opts.a``, ``raster.tile_size``), an INLINE
+    field's own at the top level (the raster kind's ``alpha_min``; the field's own name is no
+    key), ``scene`` and ``seed`` always; types are read (an int where a float is declared is that
+    float) and the Config's ranges checked, each mistake one line naming the key."""
+    from splatbench.experiments.kinds import RUN_KEYS, check_config, read_config
+    from splatbench.experiments.raster_kind import RasterConfig
+    from splatbench.raster.options import RasterOptions
+    from splatbench.train.config import TrainConfig
+    from tests.kinds_for_tests import DummyConfig, DummyOpts, ProbeConfig
+
+    def error(call) -> str:
+        with pytest.raises(InputError) as err:
+            call()
+        assert "\n" not in str(err.value)
+        return str(err.value)
+
+    cfg = read_config(DummyConfig, {"scene": "alpha", "seed": 2, "x": 1, "opts": {"a": 4}})
+    assert cfg == DummyConfig(scene="alpha", seed=2, x=1.0, opts=DummyOpts(a=4)) and isinstance(cfg.x, float)
+    assert error(lambda: read_config(DummyConfig, {"opts": {"c": 1}})) == "opts.c: unknown key (known: a, b)"
+    assert error(lambda: read_config(DummyConfig, {"n": 0})) == "n: expected an int >= 1, got 0"
+    assert error(lambda: read_config(DummyConfig, {"n": "3"})).startswith("n: expected an int")
+    assert read_config(ProbeConfig, {"scene": "s", "seed": 1}) == ProbeConfig() and RUN_KEYS == ("scene", "seed")
+    raster = read_config(RasterConfig, {"scene": "synthetic-10-8x8", "seed": 0, "eps2d": 1, "tile_size": 8})
+    assert raster.options == RasterOptions(eps2d=1.0, tile_size=8) and isinstance(raster.options.eps2d, float)
+    assert error(lambda: read_config(RasterConfig, {"scene": "garden", "options": {}})).startswith(
+        "options: unknown key")
+    assert error(lambda: read_config(RasterConfig, {"scene": "garden", "near": 0.5})) == \
+        "near: set by the workload's camera, not by a raster run"
+    assert error(lambda: read_config(RasterConfig, {"scene": "garden", "alpha_min": 2.0})).startswith("alpha_min: ")
+    assert error(lambda: check_config(TrainConfig, {"raster": {"tile_sise": 8}})) == \
+        "raster.tile_sise: unknown key (did you mean 'tile_size'?)"
+    check_config(TrainConfig, {"scene": "glossy", "strategy_options": {"anything": 1}})  # a mapping: the kind's
+
+
+def test_the_engine_refuses_a_key_the_kinds_config_lacks_before_the_kind_sees_it(tmp_path):
+    """A kind whose validate accepts anything still never gets a key its Config has no field for:
+    the grid checks every run's config against the Config first, naming where the key comes from."""
+    from dataclasses import dataclass
+
+    from splatbench.experiments.kinds import RunKind, register_kind
+    from tests.kinds_for_tests import DummyRun
+
+    @dataclass(frozen=True)
+    class LaxConfig:
+        rate: float = 0.1
+
+    register_kind(RunKind(name="lax-kind", validate=lambda config: None, config=LaxConfig, result=DummyRun,
+                          run=lambda config, workdir, prepared: None))
+    spec = parse_experiment({"name": "lax", "kind": "lax-kind", "scenes": ["s"], "base": {"rate": 0.2, "rat": 1}},
+                            source="lax.toml")
+    with pytest.raises(InputError, match=r"^lax\.toml: base: rat: unknown key \(did you mean 'rate'\?\)$"):
+        expand(spec)
+    assert [r.config for r in expand(dataclasses.replace(spec, base={"rate": 0.2}))] == [
+        {"rate": 0.2, "scene": "s", "seed": 0}]

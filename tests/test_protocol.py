@@ -176,8 +176,8 @@ def test_a_short_graphdeco_run_is_advised_to_run_full_length_and_told_its_column
     assert PROTOCOLS["graphdeco-7k"].early_stop_note(7000) is None and PROTOCOLS["quick"].early_stop_note(5) is None
 
 
-def test_a_graphdeco_run_stopped_early_says_so_among_its_notes(tmp_path, tiny_diffuse):
+def test_a_graphdeco_run_stopped_early_says_so_among_its_notes_and_warnings(tmp_path, tiny_diffuse):
     res = train(TrainConfig(protocol="graphdeco-7k", iterations=3, strategy="default", sh_degree=0,
                             out=str(tmp_path / "r")), dataset=tiny_diffuse)
     assert any(n.startswith("protocol 'graphdeco-7k' stopped early, after 3 of its 7000 steps") for n in res.notes)
-    assert any("never refines" in n and "run the protocol's full length" in n for n in res.notes)
+    assert any("never refines" in w and "run the protocol's full length" in w for w in res.warnings)

@@ -21,9 +21,9 @@ from splatbench.experiments.store import write_record, write_table
 from splatbench.metrics.stats import Interval
 from splatbench.reports import build_report, write_report
 from splatbench.reports.findings import fmt_interval, judge
-from splatbench.reports.notes import settling_finding
-from splatbench.reports.settling import cell_settling, last_quarter_slope
+from splatbench.reports.settling import cell_settling, last_quarter_slope, settling_finding
 from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
+from splatbench.experiments.train_kind import TRAIN
 from splatbench.metrics.spec import MetricSpec
 
 PSNR = MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher")
@@ -185,20 +185,21 @@ def _settle_table(rises: dict[str, float], train_rises: dict[str, float] | None 
 
 def test_a_rising_last_quarter_is_not_settled_and_a_flat_one_is():
     # 0.10 dB over the last 500 steps is 0.2 dB / 1,000 steps: above the 0.1 threshold
-    f = settling_finding(_settle_table({"a": 0.01, "b": 0.10}))
+    f = settling_finding(_settle_table({"a": 0.01, "b": 0.10}), TRAIN)
     by = {c.label: c for c in f.claims}
     assert by["x=a"].settled and not by["x=b"].settled
     assert "**Not settled**: 1 of 2 cells" in f.markdown() and "s `x=b` (+0.21)" in f.markdown()
-    f = settling_finding(_settle_table({"a": 0.01, "b": -0.01}))
+    f = settling_finding(_settle_table({"a": 0.01, "b": -0.01}), TRAIN)
     assert all(c.settled for c in f.claims) and "Settled: every cell" in f.markdown()
     # a falling curve is not settled either
-    assert not settling_finding(_settle_table({"a": -0.2})).claims[0].settled
+    assert not settling_finding(_settle_table({"a": -0.2}), TRAIN).claims[0].settled
     # the experiment file's minimum effect moves the threshold: 0.5 dB / 1,000 steps settles b
-    assert all(c.settled for c in settling_finding(_settle_table({"a": 0.01, "b": 0.10}), {"test_psnr": 0.5}).claims)
+    loose = settling_finding(_settle_table({"a": 0.01, "b": 0.10}), TRAIN, {"test_psnr": 0.5})
+    assert all(c.settled for c in loose.claims)
 
 
 def test_a_flat_test_curve_beside_a_rising_train_curve_is_overfitting():
-    f = settling_finding(_settle_table({"default": 0.0, "mcmc": 0.0}, {"default": 1.0, "mcmc": 0.0}))
+    f = settling_finding(_settle_table({"default": 0.0, "mcmc": 0.0}, {"default": 1.0, "mcmc": 0.0}), TRAIN)
     assert "**Overfitting**" in f.markdown() and "`x=default`" in f.markdown().split("**Overfitting**")[1]
     assert "`x=mcmc`" not in f.markdown().split("**Overfitting**")[1]
 
@@ -278,7 +279,7 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "the initial points (init = auto, seeded)" in header
 
     # a config that names its protocol (a preset added to TrainConfig) is shown as named
-    from splatbench.reports.protocol import protocol_lines
+    from splatbench.experiments.train_report import protocol_lines
 
     table = pd.read_parquet(tmp_path / "out" / "results.parquet")
     table["config.protocol"] = "graphdeco-30k"

@@ -26,7 +26,11 @@ from splatbench.figures import pareto_front
 from splatbench.reports.findings import fmt_interval
 from splatbench.metrics.stats import paired_difference, paired_ratio
 from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
+from splatbench.experiments.train_kind import TRAIN
 from splatbench.reports.tables import Stat
+
+#: The train kind's table metrics, as its result declares them.
+TRAIN_METRICS = tuple(TRAIN.specs[name] for name in TRAIN_REPORT.metrics)
 
 SCENES = ["diffuse", "glossy"]
 SH_VALUES = [0, 1, 3, "auto"]
@@ -105,7 +109,7 @@ def recompute(table: pd.DataFrame) -> dict:
         label = json.loads(label) if isinstance(label, str) else label
         out[(scene, str(label))] = {m.name: Stat(float(group[f"metric.{m.name}"].mean()),
                                                  float(group[f"metric.{m.name}"].std(ddof=1)), len(group))
-                                    for m in TRAIN_REPORT.metrics}
+                                    for m in TRAIN_METRICS}
     return out
 
 
@@ -132,7 +136,7 @@ def test_report_tables_match_parquet(sh_report):
     text = path.read_text()
     rows = [line for line in text.splitlines() if line.startswith("| diffuse") or line.startswith("| glossy")]
     assert len(rows) == len(SCENES) * len(SH_VALUES)
-    specs = TRAIN_REPORT.metrics
+    specs = TRAIN_METRICS
     for line in rows:
         cells = [c.strip() for c in line.strip("|").split("|")]
         scene, label, count = cells[0], cells[1].strip("`"), int(cells[2])
@@ -160,7 +164,7 @@ def test_findings_numbers_match_parquet(sh_report):
     # glossy's SH 3 leads SH 2 by 1.5 dB at ~x1.08 the Gaussians (1300 against 1200 made): "no single
     # best at comparable size" (docs/reports.md, "Best"), with its size claim; diffuse: no lead at all
     assert kinds == {"no best", "size", "vs", "count", "auto"}
-    specs = {m.name: m for m in TRAIN_REPORT.metrics}
+    specs = {m.name: m for m in TRAIN_METRICS}
     effects = {c.metric: c.min_effect for c in TRAIN_REPORT.rules.comparisons}
     for c in claims:
         if c.kind in ("best", "no best"):
@@ -483,13 +487,14 @@ def test_raster_kind_config_errors():
 def test_raster_kind_run(tmp_path, monkeypatch):
     """Tiny runs: paired timings with a bootstrap interval, the load recorded, work done,
     parity with the matched reference, and the error against the exact mixture."""
+    from splatbench.experiments.kinds import metric_values
     from splatbench.experiments.raster_kind import RASTER
 
     monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
     base = RASTER.resolve({"scene": "synthetic-300-32", "seed": 1, "error_scale": 0.5})
     assert base["repeats"] == 7
     out = RASTER.run(base, tmp_path, None)
-    m = out.metrics
+    m = metric_values(out)
     assert m["fwd_ms"] > 0 and m["fwd_bwd_ms"] > 0 and m["n"] == 300 and m["timed_pairs"] == 7
     assert all(len(out.curves[k]) == 7 for k in ("fwd_runs_ms", "default_fwd_bwd_runs_ms"))
     # the median of the 7 per-pair ratios, inside its bootstrap interval (the ends are pair ratios)
@@ -506,13 +511,13 @@ def test_raster_kind_run(tmp_path, monkeypatch):
     assert list((tmp_path / "cache" / "reference").glob("*exact*.npy"))  # the exact model is cached
     # the defaults cut faint tails: farther from the exact mixture than from their own reference
     assert m["exact_max_abs"] > 10 * m["parity_max_abs"]
-    tiles = RASTER.run({**base, "tile_size": 4}, tmp_path, None).metrics
+    tiles = metric_values(RASTER.run({**base, "tile_size": 4}, tmp_path, None))
     assert tiles["exact_max_abs"] == pytest.approx(m["exact_max_abs"], abs=1e-6)  # tiles never change the image
     assert tiles["evaluations"] == tiles["pairs"] * 4 ** 2
     # a lower alpha_min keeps more of each Gaussian: closer to the exact model, not "error"
-    closer = RASTER.run({**base, "alpha_min": 1e-4}, tmp_path, None).metrics
+    closer = metric_values(RASTER.run({**base, "alpha_min": 1e-4}, tmp_path, None))
     assert closer["exact_mean_abs"] < m["exact_mean_abs"] and closer["exact_psnr"] > m["exact_psnr"]
-    coarse = RASTER.run({**base, "sh_degree": 0}, tmp_path, None).metrics
+    coarse = metric_values(RASTER.run({**base, "sh_degree": 0}, tmp_path, None))
     assert coarse["parity_max_abs"] < 1e-4 and math.isfinite(coarse["exact_psnr"])
     assert coarse["exact_psnr"] < m["exact_psnr"]   # dropping view dependence moves away from the model
     with pytest.raises(InputError, match=r"^repeats: expected at least 7 timed pairs"):
@@ -521,7 +526,8 @@ def test_raster_kind_run(tmp_path, monkeypatch):
 
 def test_train_kind_run(tmp_path, monkeypatch):
     """A 3-step run on a 32-pixel dataset: the metrics and curves the reports read."""
-    from splatbench.experiments.train_kind import CURVE_KEYS, METRICS, TRAIN, dataset_folder
+    from splatbench.experiments.kinds import metric_values
+    from splatbench.experiments.train_kind import CURVE_KEYS, TRAIN, dataset_folder
 
     monkeypatch.setenv("SPLATBENCH_DATASETS", str(tmp_path / "data"))
     config = TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 3, "log_every": 1, "sh_degree": 0,
@@ -531,10 +537,48 @@ def test_train_kind_run(tmp_path, monkeypatch):
     assert (dataset_folder("diffuse", config["data"]) / "manifest.json").is_file()
     monkeypatch.delenv("SPLATBENCH_DATASETS")  # a worker finds the datasets by what prepare returned
     output = TRAIN.run(config, tmp_path / "work", prepared)
-    assert set(output.metrics) == set(METRICS)
-    assert output.metrics["iterations"] == 3 and output.metrics["test_views"] == 1
+    metrics = metric_values(output)
+    assert isinstance(output, TRAIN.result) and list(metrics) == list(TRAIN.specs)
+    assert metrics["iterations"] == 3 and metrics["test_views"] == 1
     assert set(output.curves) == set(CURVE_KEYS) and output.curves["step"] == [0, 1, 2]
     assert (tmp_path / "work" / "point_cloud.ply").is_file()
+
+
+def test_a_train_result_becomes_the_kinds_record_field_by_field():
+    """`TrainRun.of`: a `TrainResult`'s metrics by name, its load and strategy counts flattened,
+    the LPIPS convention and the load mark as 0 / 1, the dataset's hash, its warnings (never its
+    notes) and its curves; every value a scalar column (`metric_values`)."""
+    from splatbench.experiments.kinds import check_output, metric_values
+    from splatbench.experiments.train_kind import TrainRun
+    from splatbench.strategies.base import TopologyCounts
+    from splatbench.train.result import EvalPoint, HistoryPoint, TrainResult
+
+    result = TrainResult(
+        test_psnr=25.5, test_ssim=0.81, test_lpips=0.2, num_gaussians=1234, train_seconds=12.5, iterations=30,
+        sh_degree=1, sh_degree_reason="fixed", ply_path="x.ply", render_ms_per_view=3.5, peak_rss_mb=900.0,
+        test_views=4, history=[HistoryPoint(0, 0.5, 12.0, 1000), HistoryPoint(29, 0.1, 24.0, 1234)],
+        evaluations=[EvalPoint(30, 25.5, 0.81, 0.2)], notes=["a note"], warnings=["warning: a warning"],
+        lpips_net="alex", lpips_scale_inputs=False, cpu_seconds=20.0,
+        load={"load_before": 0.5, "load_after": 1.5, "own_cpu": 1.0, "own_before": 0.2, "load_other": 1.5,
+              "cores": 2, "loaded": True},
+        topology=TopologyCounts(refinements=3, opacity_resets=1, cloned=10, split=5, pruned=2, pruned_size=1))
+    record = TrainRun.of(result, "abc")
+    metrics = metric_values(record)
+    assert list(metrics) == list(TRAIN.specs)
+    assert metrics == {
+        "test_psnr": 25.5, "test_ssim": 0.81, "num_gaussians": 1234, "train_seconds": 12.5,
+        "render_ms_per_view": 3.5, "sh_degree": 1, "peak_rss_mb": 900.0, "iterations": 30, "test_views": 4,
+        "dataset_hash": "abc", "test_lpips": 0.2, "lpips_net": "alex", "lpips_scale_inputs": 0, "cpu_seconds": 20.0,
+        "load_before": 0.5, "load_after": 1.5, "load_other": 1.5, "cores": 2, "time_loaded": 1, "refinements": 3,
+        "opacity_resets": 1, "cloned": 10, "split": 5, "pruned": 2, "pruned_size": 1, "relocated": 0, "added": 0}
+    assert record.warnings == ("warning: a warning",)
+    assert record.curves["step"] == [0, 29] and record.curves["eval_psnr"] == [25.5]
+    assert check_output(record, TRAIN) == record
+    # a result from before the strategy's counts were recorded: None in those columns
+    older = metric_values(TrainRun.of(dataclasses.replace(result, topology=None), None))
+    assert older["refinements"] is None and older["dataset_hash"] is None
+    with pytest.raises(TypeError, match="returned dict, not TrainRun"):
+        check_output({"test_psnr": 1.0}, TRAIN)
 
 
 def test_raster_report_leaves_loaded_runs_out_of_findings(tmp_path):
@@ -612,34 +656,44 @@ def test_product_grid_rows_average_each_seed_first(tmp_path):
 
 
 def test_a_new_kind_declares_its_report_in_one_place():
-    """A kind's metrics and findings rules come from its own `KindReport` (plain data passed
-    to its `RunKind`), its extra findings from notes registered with the reports under its
-    name: the report code names no kind, and the kind imports no report code."""
-    from splatbench.experiments.kinds import RunKind, RunOutput, register_kind
-    from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport
-    from splatbench.metrics.spec import MetricSpec
-    from splatbench.reports.findings import rules_for
-    from splatbench.reports.notes import (auto_sh_degree_note, axis_notes, register_axis_note, run_findings,
-                                          schedule_confound_note)
-    from splatbench.reports.tables import kind_report, metric_specs
+    """A kind's metrics (its result's fields) and findings rules come from its own `KindReport`
+    (passed to its `RunKind`), its extra findings and notes from the hooks it declares there:
+    the reports are handed the kind, name none, and the kind imports no report code."""
+    from dataclasses import dataclass
 
-    declared = KindReport(metrics=(MetricSpec("loss", "loss", ".3f", "", "lower"),),
-                          rules=FindingRules("loss", (Comparison("loss", "diff"),)))
-    register_kind(RunKind(name="toy-report-kind", validate=lambda config: None,
-                          run=lambda config, workdir, prepared: RunOutput({"loss": 0.0}), report=declared))
-    assert kind_report("toy-report-kind") is declared and kind_report("no-such-kind") is None
-    table = pd.DataFrame({"metric.loss": [0.5], "metric.other": [1.0]})
-    assert metric_specs("toy-report-kind", table) == declared.metrics      # its own metrics only
-    assert rules_for("toy-report-kind", declared.metrics) == declared.rules
-    assert [m.name for m in metric_specs("no-such-kind", table)] == ["loss", "other"]  # undeclared: every one
+    from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport
+    from splatbench.experiments.kinds import RunKind, RunResult, metric
+    from splatbench.reports.findings import rules_for
+    from splatbench.reports.tables import metric_specs
+
+    @dataclass(frozen=True)
+    class ToyConfig:
+        rate: float = 0.1
+
+    @dataclass(frozen=True, kw_only=True)
+    class Toy(RunResult):
+        loss: float = metric("loss", ".3f", "", "lower", "what the toy minimises")
+        other: float = metric(meaning="anything else")
 
     def note(axis_table, runs, scenes):
         return ["- a toy note"], []
 
-    assert register_axis_note("toy-report-kind", note) is note
-    assert axis_notes("toy-report-kind") == (note,) and axis_notes("no-such-kind") == ()
-    assert [name for name, _ in run_findings("raster")] == ["parity"]  # the built-in kinds' notes
-    assert axis_notes("train") == (auto_sh_degree_note, schedule_confound_note)
+    declared = KindReport(metrics=("loss",), rules=FindingRules("loss", (Comparison("loss", "diff"),)),
+                          axis_notes=(note,))
+    toy = RunKind(name="toy-report-kind", validate=lambda config: None, config=ToyConfig, result=Toy,
+                  run=lambda config, workdir, prepared: Toy(loss=0.0, other=1.0), report=declared)
+    loss = toy.specs["loss"]
+    assert (loss.label, loss.fmt, loss.better, loss.meaning) == ("loss", ".3f", "lower", "what the toy minimises")
+    table = pd.DataFrame({"metric.loss": [0.5], "metric.other": [1.0]})
+    assert metric_specs(toy, table) == (loss,)      # its own metrics only
+    assert rules_for(toy, (loss,)) == declared.rules
+    bare = RunKind(name="toy-bare-kind", validate=lambda config: None, config=ToyConfig, result=Toy,
+                   run=lambda config, workdir, prepared: Toy(loss=0.0, other=1.0))
+    assert [m.name for m in metric_specs(bare, table)] == ["loss", "other"]  # undeclared: every one
+    assert declared.axis_notes == (note,)
+    with pytest.raises(TypeError, match="KindReport names metrics its kind's result does not have: lost"):
+        RunKind(name="toy-wrong-kind", validate=lambda config: None, config=ToyConfig, result=Toy, run=toy.run,
+                report=KindReport(metrics=("lost",)))
 
 
 def test_a_cell_whose_runs_all_failed_reports_a_dash(tmp_path):

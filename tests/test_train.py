@@ -409,15 +409,15 @@ def test_result_records_what_the_strategy_did(tmp_path, tiny_diffuse):
     assert none.topology == TopologyCounts()
 
 
-def test_a_budget_run_below_its_budget_says_so_in_its_notes(tmp_path, tiny_diffuse):
+def test_a_budget_run_below_its_budget_says_so_in_its_warnings(tmp_path, tiny_diffuse):
     """No Gaussian passes a threshold of 1 (NDC gradients are far smaller), so nothing grows and
-    the run's notes carry the strategy's warning (`BudgetStrategy.outcome_note`)."""
+    the run's warnings carry the strategy's (`BudgetStrategy.outcome_note`)."""
     opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "grad_threshold": 1.0, "budget": 1.5}
     result = train(config(tmp_path, strategy="budget", strategy_options=opts), dataset=tiny_diffuse)
     n = len(tiny_diffuse.points)
     assert result.num_gaussians <= n
     assert any(note.startswith(f"warning: strategy 'budget' ended at {result.num_gaussians:,} Gaussians, below its "
-                               f"budget of {round(1.5 * n):,}") for note in result.notes), result.notes
+                               f"budget of {round(1.5 * n):,}") for note in result.warnings), result.warnings
 
 
 def test_frozen_groups_get_no_gradient_work(tmp_path, tiny_diffuse, counting):
@@ -833,7 +833,7 @@ def test_a_model_pruned_to_nothing_trains_on_and_says_so(tmp_path, tiny_diffuse)
     r = train(config(tmp_path, iterations=12, strategy="default", strategy_options=opts, init_opacity=0.001,
                      log_every=1, raster=RasterOptions(alpha_min=5e-4)), dataset=tiny_diffuse)
     assert r.num_gaussians == 0 and r.iterations == 12
-    warning = [n for n in r.notes if n.startswith("warning: the model is empty")]
+    warning = [n for n in r.warnings if n.startswith("warning: the model is empty")]
     assert len(warning) == 1 and "none left from step 4 on" in warning[0]
 
 
@@ -995,6 +995,10 @@ def test_random_init_on_a_forward_facing_rig_says_no_region_contains_the_scene(t
                                                 say=said.append))
     assert init.summary["region"] == "camera_cube"
     assert init.note.startswith("warning:") and "forward-facing" in init.note and said == [init.note]
+    assert init.warning  # a run keeps it among its warnings (TrainResult.warnings), not its notes
+    asked = initialize("random", ds, InitSettings(sh_degree=0, opacity=0.1, random_points=100, seed=0,
+                                                  region="camera_cube"))
+    assert not asked.warning and asked.summary["region"] == "camera_cube"  # asked for: nothing to warn of
 
 
 def test_train_says_the_init_choice_live_before_the_bar_and_only_once(tmp_path, tiny_diffuse_dir):

@@ -151,7 +151,7 @@ def test_an_alpha_min_at_or_above_the_initial_opacity_is_refused():
 def test_an_alpha_min_at_or_above_the_reset_value_is_warned_about():
     """After graphdeco's opacity reset (to 0.01) alpha <= 0.01 everywhere: with alpha_min 0.01 a
     60-step smoke run stopped learning at the first reset and rendered the background alone. The
-    run is allowed (it may be the question asked) and says so in one line, kept in its notes;
+    run is allowed (it may be the question asked) and says so in one line, kept in its warnings;
     the ways out the line names give no warning."""
     cfg = apply_overrides(TrainConfig(), ["iterations=2000", "raster.alpha_min=0.01"])
     (line,) = cfg.warnings()

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 import numpy as np
 
+from splatbench.cameras import Camera
 from splatbench.gaussians import GROUPS  # noqa: F401 - the backend signature's parameter groups, in its order
 from splatbench.raster.options import RasterOptions
 
@@ -36,6 +37,9 @@ if TYPE_CHECKING:
 GRAPHDECO = {name: getattr(RasterOptions(), name) for name in ("alpha_min", "alpha_max", "transmittance_min",
                                                                "eps2d", "radius", "tile_size", "antialiased")}
 OUTPUTS = ("rgb", "alpha", "depth")
+
+if TYPE_CHECKING:  # the signatures' tensor type; a backend module loads torch itself when it renders
+    import torch
 
 
 def as_numpy(x) -> np.ndarray:
@@ -188,7 +192,7 @@ class BackendInfo:
 class Backend:
     """A rasterizer: ``fn`` with the signature in this module's docstring, and its ``info``."""
 
-    fn: Callable[..., tuple[Any, Any, Any]]
+    fn: RasterFn
     info: BackendInfo
 
     @property

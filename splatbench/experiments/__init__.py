@@ -9,8 +9,10 @@
 
 Modules: `configs` (dotted keys, canonical JSON), `spec` (file format), `grid`
 (expansion, run ids, `load_experiment`), `kinds`
-(run-kind registry), `kind_report` (what a kind declares
-about its reports, as plain data: `splatbench.reports` reads it), `store` (atomic per-run files, the
+(the run-kind contract: its Config read from a run's dotted keys, its typed result, the
+registry), `kind_report` (what a kind declares about its reports, its hooks included:
+`splatbench.reports` is handed the kind), `train_kind`, `raster_kind` (the built-in kinds;
+`train_report`: the train kind's report hooks), `store` (atomic per-run files, the
 parquet table), `runner` (drives the runs), `execute` (one run, worker side), `executors`
 (local and Dask), `claims` (per-run claims shared
 by concurrent runners), `workers` (worker processes that die with their runner),
@@ -21,11 +23,12 @@ See docs/experiments.md.
 from splatbench.experiments.configs import canonical_json
 from splatbench.experiments.execute import execute_run
 from splatbench.experiments.grid import RunSpec, check_cells, check_runs, expand, load_experiment, make_run_id
-from splatbench.experiments.kinds import KindProtocols, RunKind, RunOutput, get_kind, register_kind
+from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, get_kind, metric, read_config, register_kind
 from splatbench.experiments.runner import RunSummary, run_experiment
 from splatbench.experiments.spec import CheckSpec, ExperimentSpec, RunnerDefaults, parse_experiment
 from splatbench.experiments.store import RunRecord, read_records, read_table
 
 __all__ = ["ExperimentSpec", "CheckSpec", "RunnerDefaults", "load_experiment", "parse_experiment", "RunSpec", "expand",
-           "check_cells", "check_runs", "make_run_id", "canonical_json", "RunKind", "RunOutput", "KindProtocols", "get_kind", "register_kind", "RunSummary",
-           "run_experiment", "execute_run", "RunRecord", "read_records", "read_table"]
+           "check_cells", "check_runs", "make_run_id", "canonical_json", "RunKind", "RunResult", "metric", "read_config",
+           "KindProtocols", "get_kind", "register_kind", "RunSummary", "run_experiment", "execute_run", "RunRecord",
+           "read_records", "read_table"]

@@ -21,7 +21,7 @@ from typing import Any
 from splatbench.errors import one_line
 from splatbench.experiments.configs import plain
 from splatbench.experiments.grid import RunSpec
-from splatbench.experiments.kinds import check_output, get_kind
+from splatbench.experiments.kinds import check_output, get_kind, metric_values
 from splatbench.experiments.store import WORK_DIR, RunRecord, experiment_dir, worker_name, write_record
 from splatbench.experiments.workers import bound_threads, die_with_runner
 
@@ -67,8 +67,8 @@ def execute_run(run: RunSpec, results_dir: str, context: RunContext = RunContext
         workdir.mkdir(parents=True, exist_ok=True)
         kind = get_kind(run.kind)
         bound_threads(context.threads)
-        output = check_output(call_run(kind.run, plain(run.config), workdir, context.prepared), run.kind)
-        record.metrics, record.curves = dict(output.metrics), output.curves
+        output = check_output(call_run(kind.run, plain(run.config), workdir, context.prepared), kind)
+        record.metrics, record.curves = metric_values(output), output.curves
         record.warnings = list(output.warnings)
     except Exception as exc:  # noqa: BLE001 - every failure of a run is recorded, not raised
         record.status, record.error = "failed", one_line(exc)

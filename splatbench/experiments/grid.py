@@ -29,7 +29,7 @@ from typing import Any
 
 from splatbench.errors import InputError
 from splatbench.experiments.configs import canonical_json, flatten, override, unflatten
-from splatbench.experiments.kinds import get_kind
+from splatbench.experiments.kinds import check_config
 from splatbench.experiments.spec import ExperimentSpec, parse_experiment, same_value
 from splatbench.fsutil import read_text
 
@@ -91,10 +91,7 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
     unknown scene (``known_scenes`` or the kind's ``scenes``; neither: any name) or a
     config the kind rejects; nothing runs.
     """
-    try:
-        kind = get_kind(spec.kind)
-    except InputError as exc:
-        raise InputError(f"{spec.source}: {exc}") from None
+    kind = spec.run_kind
     scene_source = known_scenes or kind.scenes
     if scene_source is not None:
         known = scene_source()
@@ -139,7 +136,9 @@ def _run_maker(spec: ExperimentSpec, kind, protocol: str | None = None
         key = canonical_json(flat)
         if key not in checked:
             try:
-                kind.validate(unflatten(flat))
+                nested = unflatten(flat)
+                check_config(kind.config, nested)  # every key a field of the kind's Config
+                kind.validate(nested)
                 checked[key] = None
             except InputError as exc:
                 checked[key] = str(exc)
@@ -187,10 +186,7 @@ def check_cells(spec: ExperimentSpec, *, at_protocol: bool = True) -> tuple[list
     whose runs are the grid's (a protocol the grid already runs)."""
     if spec.check is None:
         return [], []
-    try:
-        kind = get_kind(spec.kind)
-    except InputError as exc:
-        raise InputError(f"{spec.source}: {exc}") from None
+    kind = spec.run_kind
     if kind.protocols is None:
         raise InputError(f"{spec.source}: check: run kind {spec.kind!r} has no protocols to check a headline at "
                          f"(remove the [check] table)")

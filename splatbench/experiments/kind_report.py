@@ -1,20 +1,108 @@
-"""What a run kind declares about its reports, as plain data: metrics, findings rules,
-the Pareto figures of a cost (time, the number of Gaussians) against quality, the
-metrics' meanings.
+"""What a run kind declares about its reports: the metrics a table shows, findings rules,
+the Pareto figures of a cost (time, the number of Gaussians) against quality, and the
+report hooks (notes and findings of code of its own).
 
 A kind's module builds one `KindReport` and passes it to its `RunKind` (``report=``),
-so adding a kind touches that one file: the report code (`splatbench.reports`) reads
-it and names no kind. A kind without a `KindReport` (or a results folder of an unknown
-kind) gets every numeric metric and a comparison of the first one. Findings that need
-code of their own register with the reports by kind name (`splatbench.reports.notes`).
+so adding a kind touches that one file: the report code (`splatbench.reports`) is handed
+the kind and names none. Every metric is named as a field of the kind's result
+(`splatbench.experiments.kinds.RunResult`), where its label, format, unit, direction and
+meaning are declared once. A kind without a `KindReport` gets every numeric metric and a
+comparison of the first one.
+
+The hooks (`KindReport.header_notes`, ``axis_notes``, ``metric_notes``, ``run_findings``) read
+the run table (pandas, the engine's columns) and return markdown lines, or `Finding` records
+of `Claim` numbers, defined here so that a kind's module can make them without importing the
+reports.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Protocol
 
 from splatbench.metrics.spec import MetricSpec
+
+if TYPE_CHECKING:  # the hooks' table type; pandas is not loaded by importing this module
+    import pandas as pd
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One number of a finding.
+
+    kind: "best", "no best", "size" (the leader's size against the runner-up's, where it kept
+    a lead from being named best), "vs", "self" (the reference row's own relative metric),
+    "count", "auto" or "parity"; scene ("" for all); label: the
+    row; reference: the row compared against ("vs"); metric; how: "mean", "diff",
+    "ratio", "count" or "max"; value: the number; low / high: its 95 % interval (NaN
+    when none); n: seeds (pairs) it comes from; significant: the interval excludes the
+    null value (False when there is no interval, and when the seeds did not vary the
+    result: `no_spread`); practical: significant and at least the comparison's minimum
+    effect (False below it; equal to ``significant`` when the comparison has none);
+    settled: both cells' curves had flattened and the difference stopped moving
+    (`splatbench.reports.settling`; None: not judged); text: how it is written.
+    """
+
+    kind: str
+    scene: str
+    label: str
+    metric: str
+    how: str
+    value: float
+    text: str
+    reference: str = ""
+    low: float = math.nan
+    high: float = math.nan
+    n: int = 0
+    significant: bool = False
+    practical: bool = False
+    settled: bool | None = None
+
+
+@dataclass
+class Finding:
+    """The finding of one axis, or a run finding (its section named by ``axis``): markdown lines
+    and the claims they state."""
+
+    axis: str
+    lines: list[str]
+    claims: list[Claim]
+
+    def markdown(self) -> str:
+        return "\n".join(self.lines)
+
+
+def done_runs(table: pd.DataFrame) -> pd.DataFrame:
+    """The runs of a run table whose status is ``done``."""
+    return table[table.status == "done"]
+
+
+class AxisRow(Protocol):
+    """What an axis note reads of one row of an axis table (`splatbench.reports.tables.Row`)."""
+
+    value: Any        # the axis value (a variant's label)
+    label: str        # the row as a report names it
+    run_ids: Sequence[str]
+
+
+class AxisRows(Protocol):
+    """What an axis note reads of an axis table (`splatbench.reports.tables.AxisTable`)."""
+
+    axis: str
+    rows: Sequence[AxisRow]
+
+
+#: Lines of a report's header (e.g. the protocol its runs followed): ``note(runs) -> lines``.
+HeaderNote = Callable[["pd.DataFrame"], list[str]]
+#: A note on one axis, appended to its finding: ``note(axis_table, runs, scenes) -> (lines, claims)``.
+AxisNote = Callable[[AxisRows, "pd.DataFrame", list[str]], tuple[list[str], list[Claim]]]
+#: Lines appended to a report's "Metrics" section: ``note(runs) -> lines``.
+MetricNote = Callable[["pd.DataFrame"], list[str]]
+#: A finding over all runs, its own section (named by `Finding.axis`): ``finding(runs, min_effect) ->
+#: Finding | None`` (``min_effect``: the experiment file's ``[report] min_effect``, metric -> number).
+RunFinding = Callable[["pd.DataFrame", "Mapping[str, float] | None"], "Finding | None"]
 
 
 @dataclass(frozen=True)
@@ -80,23 +168,65 @@ class SettlingCurves:
 
 
 @dataclass(frozen=True)
+class LoadMarks:
+    """How a kind's runs mark that they were timed while other processes loaded the machine
+    (`splatbench.metrics.load`); every name is a metric of the kind's result.
+
+    flag: a 0 / 1 metric, 1 for a run timed under load; scope: what such a run is left out of:
+    "timed" (the comparisons and Pareto fronts of the kind's ``timed`` metrics only: the train
+    kind, whose quality does not depend on the load) or "all" (every finding: the raster kind,
+    whose every metric is a time); other: the others' estimated load; cores: the usable cores.
+    """
+
+    flag: str
+    scope: str
+    other: str = "load_other"
+    cores: str = "cores"
+
+
+@dataclass(frozen=True)
 class KindReport:
-    """A kind's report declarations.
+    """A kind's report declarations; every metric is named as its result's field (`RunKind.result`),
+    where its label, format, unit, direction and meaning are declared.
 
     metrics: the table's metrics, in column order; rules: the findings' primary metric
     and comparisons (None: no findings); tradeoffs: the Pareto figures, in report order;
-    meanings: metric name -> meaning (the report's "Metrics" section); timed: metrics that
-    are times: a run whose ``metric.time_loaded`` is 1 (timed while other processes
-    loaded the machine) is left out of their comparisons only.
+    timed: metrics that are times (left out for runs timed under load: ``load``); settling: the
+    curves that decide whether a cell had settled; confounds: counts a report names when a
+    cell changed them besides its setting; load: how runs timed under load are marked (None:
+    the kind records no load). The hooks, each run in its order: header_notes (the report's
+    header), axis_notes (each axis finding), metric_notes (the "Metrics" section), run_findings
+    (a section each, after the axes).
     """
 
-    metrics: tuple[MetricSpec, ...]
+    metrics: tuple[str, ...]
     rules: FindingRules | None = None
     tradeoffs: tuple[Tradeoff, ...] = ()
-    meanings: Mapping[str, str] = field(default_factory=dict)
     timed: tuple[str, ...] = ()
     settling: SettlingCurves | None = None
-    confounds: tuple[MetricSpec, ...] = ()
+    confounds: tuple[str, ...] = ()
+    load: LoadMarks | None = None
+    header_notes: tuple[HeaderNote, ...] = ()
+    axis_notes: tuple[AxisNote, ...] = ()
+    metric_notes: tuple[MetricNote, ...] = ()
+    run_findings: tuple[RunFinding, ...] = ()
+
+    def check(self, specs: Mapping[str, MetricSpec]) -> None:
+        """`TypeError` naming a metric these declarations name that ``specs`` (the kind's result's
+        metrics) lacks, or a load scope other than "timed" and "all"."""
+        named = [*self.metrics, *self.timed, *self.confounds]
+        if self.rules is not None:
+            named += [self.rules.primary, *(c.metric for c in self.rules.comparisons)]
+            named += [self.rules.size] if self.rules.size else []
+        named += [n for t in self.tradeoffs for n in (t.cost, t.quality)]
+        if self.load is not None:
+            named += [self.load.flag, self.load.other, self.load.cores]
+            if self.load.scope not in ("timed", "all"):
+                raise TypeError(f"LoadMarks.scope: expected 'timed' or 'all', got {self.load.scope!r}")
+        unknown = [n for n in dict.fromkeys(named) if n not in specs]
+        if unknown:
+            raise TypeError(f"KindReport names metrics its kind's result does not have: {', '.join(unknown)}")
 
 
-__all__ = ["Comparison", "FindingRules", "Tradeoff", "SettlingCurves", "KindReport"]
+__all__ = ["Claim", "Finding", "done_runs", "AxisRow", "AxisRows", "HeaderNote", "AxisNote", "MetricNote", "RunFinding",
+           "Comparison", "FindingRules", "Tradeoff", "SettlingCurves", "LoadMarks", "KindReport"]

@@ -79,7 +79,7 @@ class RunSummary:
     total: int
     folder: Path
     claimed: int = 0
-    warned: int = 0  # of ``done``, runs that warned of something (`RunOutput.warnings`)
+    warned: int = 0  # of ``done``, runs that warned of something (`RunResult.warnings`)
 
     def line(self) -> str:
         warned = f" ({self.warned} warned: see their report's \"Warnings\")" if self.warned else ""

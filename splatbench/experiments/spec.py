@@ -60,6 +60,7 @@ from typing import Any
 from splatbench.checks import unknown_key_problem
 from splatbench.errors import InputError
 from splatbench.experiments.configs import FIELD_KEY, canonical_json, check_value, flatten
+from splatbench.experiments.kinds import RunKind, get_kind
 
 #: Fields an experiment file may hold at its top level.
 TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "base", "axes", "variants", "runner",
@@ -138,6 +139,16 @@ class ExperimentSpec:
     min_effect: Mapping[str, float] = field(default_factory=dict)  # ``[report] min_effect``: metric -> the
     #   smallest difference that matters (overrides the kind's; docs/reports.md, "Minimum effects")
     check: CheckSpec | None = None  # ``[check]``: the headline at another protocol (None: none declared)
+
+    @property
+    def run_kind(self) -> RunKind:
+        """The run kind ``kind`` names (`splatbench.experiments.kinds.get_kind`: a worker finds it
+        the same way, by name); a one-line `InputError` ``SOURCE: kind: ...`` for an unknown one.
+        What a report is handed (it never looks a kind up by name)."""
+        try:
+            return get_kind(self.kind)
+        except InputError as exc:
+            raise InputError(f"{self.source}: {exc}") from None
 
     @property
     def dimensions(self) -> list[str]:

@@ -60,7 +60,7 @@ class RunRecord:
     traceback: the full traceback of a failure (file only, not in the table);
     config: the resolved nested config; labels: axis name -> label;
     metrics: name -> scalar; curves: JSON value; warnings: the run's one-line warnings
-    (`RunOutput.warnings`; absent from files written before them); seconds: run time in the worker;
+    (`RunResult.warnings`; absent from files written before them); seconds: run time in the worker;
     started, finished: ISO-8601 local times; worker: ``host:pid``.
     """
 

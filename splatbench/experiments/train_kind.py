@@ -45,7 +45,7 @@ appended when the test views have their own spp). A worker calls
 `splatbench.scenes.render_dataset` again, which finds the cache (or renders, on a
 remote Dask worker that has no copy).
 
-Metrics (`METRICS`) and curves (`CURVE_KEYS`) are documented beside their names.
+Metrics (`TrainRun`'s fields) and curves (`CURVE_KEYS`) are documented beside their names.
 """
 
 from __future__ import annotations
@@ -59,9 +59,10 @@ from typing import Any
 from splatbench.checks import check_image_size, check_keys
 from splatbench.data.content import content_hash
 from splatbench.errors import InputError
-from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, SettlingCurves, Tradeoff
-from splatbench.experiments.kinds import KindProtocols, RunKind, RunOutput
-from splatbench.metrics.spec import MetricSpec
+from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff
+from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, check_config, metric, metric_specs
+from splatbench.experiments.train_report import auto_sh_degree_note, lpips_note, protocol_lines, schedule_confound_note
+from splatbench.train.config import TrainConfig  # the kind's Config (loads torch: every use of the kind validates)
 
 #: Environment variable naming the folder of rendered datasets.
 DATASETS_ENV = "SPLATBENCH_DATASETS"
@@ -74,41 +75,6 @@ FOLDER_FIELDS = ("path", "downscale")
 TEACHER_FIELDS = ("model", "views", "resolution", "up")
 TEACHER_DEFAULTS = {"views": 64, "resolution": 128}
 
-#: Metric name -> meaning (every one comes from `splatbench.train.TrainResult`).
-METRICS: dict[str, str] = {
-    "test_psnr": "mean PSNR (dB) of the final model on the test views",
-    "test_ssim": "mean SSIM on the test views",
-    "test_lpips": "mean LPIPS v0.1 on the test views (lower is better; net and inputs: `lpips_net`, "
-                  "`lpips_scale_inputs`, and the line below)",
-    "lpips_net": "LPIPS backbone of test_lpips: alex or vgg (empty: not computed)",
-    "lpips_scale_inputs": "1: LPIPS inputs scaled to [-1, 1] (the lpips package); 0: [0, 1] unscaled (graphdeco)",
-    "num_gaussians": "Gaussians at the end",
-    "train_seconds": "wall time of the optimisation loop (s; no evaluation, no I/O)",
-    "render_ms_per_view": "mean forward render time of a test view (ms)",
-    "sh_degree": "SH degree in use at the end (what 'auto' chose)",
-    "peak_rss_mb": "peak resident memory of the worker process (MB)",
-    "iterations": "steps run",
-    "test_views": "views evaluated",
-    "dataset_hash": "content hash of the rendered dataset (scene files or teacher PLY, settings, renderer); "
-                    "None for a dataset folder",
-    "cpu_seconds": "CPU seconds of the worker process (all threads) over the optimisation loop",
-    "load_before": "1-minute load average when the run started (before warm-up)",
-    "load_after": "1-minute load average after the final evaluation",
-    "load_other": "estimated load of other processes (the largest sample less the run's own share; "
-                  "splatbench.metrics.load)",
-    "cores": "usable CPU cores",
-    "time_loaded": "1 when load_other exceeded cores / 2: the run's times are not trusted and are left out of the "
-                   "time comparisons and Pareto fronts of the findings (quality metrics are kept)",
-    "refinements": "refinement steps the strategy made (densify / prune; MCMC: relocate / add)",
-    "opacity_resets": "opacity resets the strategy made",
-    "cloned": "Gaussians cloned, summed over the refinements",
-    "split": "Gaussians split (each replaced by two children), summed over the refinements",
-    "pruned": "Gaussians pruned, summed over the refinements",
-    "pruned_size": "of those pruned, the ones removed for their size (none while size pruning is off: "
-                   "reset_every = 0 turns it off)",
-    "relocated": "MCMC: dead Gaussians relocated, summed over the refinements",
-    "added": "MCMC: Gaussians added, summed over the refinements",
-}
 #: What a run records of what its strategy did besides its settings' names (`TopologyCounts`); None in
 #: the metrics of a result written before they were recorded.
 TOPOLOGY_METRICS = ("refinements", "opacity_resets", "cloned", "split", "pruned", "pruned_size", "relocated", "added")
@@ -126,24 +92,91 @@ MIN_EFFECT: dict[str, float] = {"test_psnr": 0.1, "test_ssim": 0.003, "test_lpip
 CURVE_KEYS = ("step", "loss", "psnr", "num_gaussians", "eval_step", "eval_psnr", "eval_ssim", "eval_lpips")
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class TrainRun(RunResult):
+    """What one train run records (`TrainRun.of` a `splatbench.train.TrainResult`): each field a
+    table column ``metric.<name>``, with how a report shows it and what it means."""
+
+    test_psnr: float | None = metric("test PSNR (dB)", ".2f", "dB", "higher",
+                                     "mean PSNR (dB) of the final model on the test views")
+    test_ssim: float | None = metric("SSIM", ".4f", "", "higher", "mean SSIM on the test views")
+    num_gaussians: int = metric("Gaussians", ".0f", meaning="Gaussians at the end")
+    train_seconds: float = metric("train time (s)", ".1f", "s", "lower",
+                                  "wall time of the optimisation loop (s; no evaluation, no I/O)")
+    render_ms_per_view: float | None = metric("render (ms/view)", ".1f", "ms", "lower",
+                                              "mean forward render time of a test view (ms)")
+    sh_degree: int = metric(meaning="SH degree in use at the end (what 'auto' chose)")
+    peak_rss_mb: float = metric(meaning="peak resident memory of the worker process (MB)")
+    iterations: int = metric(meaning="steps run")
+    test_views: int = metric(meaning="views evaluated")
+    dataset_hash: str | None = metric(meaning="content hash of the rendered dataset (scene files or teacher PLY, "
+                                              "settings, renderer); None for a dataset folder")
+    test_lpips: float | None = metric("LPIPS", ".4f", "", "lower",
+                                      "mean LPIPS v0.1 on the test views (lower is better; net and inputs: "
+                                      "`lpips_net`, `lpips_scale_inputs`, and the line below)")
+    lpips_net: str = metric(meaning="LPIPS backbone of test_lpips: alex or vgg (empty: not computed)")
+    lpips_scale_inputs: int = metric(meaning="1: LPIPS inputs scaled to [-1, 1] (the lpips package); 0: [0, 1] "
+                                             "unscaled (graphdeco)")
+    cpu_seconds: float = metric(meaning="CPU seconds of the worker process (all threads) over the optimisation loop")
+    load_before: float | None = metric(meaning="1-minute load average when the run started (before warm-up)")
+    load_after: float | None = metric(meaning="1-minute load average after the final evaluation")
+    load_other: float | None = metric(meaning="estimated load of other processes (the largest sample less the "
+                                              "run's own share; splatbench.metrics.load)")
+    cores: int | None = metric(meaning="usable CPU cores")
+    time_loaded: int = metric("timed under load (fraction of runs)", ".2f", interval=False,
+                              meaning="1 when load_other exceeded cores / 2: the run's times are not trusted and "
+                                      "are left out of the time comparisons and Pareto fronts of the findings "
+                                      "(quality metrics are kept)")
+    refinements: int | None = metric("refinements", ".0f", meaning="refinement steps the strategy made (densify / "
+                                                                   "prune; MCMC: relocate / add)")
+    opacity_resets: int | None = metric("opacity resets", ".0f", meaning="opacity resets the strategy made")
+    cloned: int | None = metric("cloned", ".0f", meaning="Gaussians cloned, summed over the refinements")
+    split: int | None = metric("split", ".0f", meaning="Gaussians split (each replaced by two children), summed "
+                                                       "over the refinements")
+    pruned: int | None = metric("pruned", ".0f", meaning="Gaussians pruned, summed over the refinements")
+    pruned_size: int | None = metric("pruned for size", ".0f",
+                                     meaning="of those pruned, the ones removed for their size (none while size "
+                                             "pruning is off: reset_every = 0 turns it off)")
+    relocated: int | None = metric("relocated", ".0f", meaning="MCMC: dead Gaussians relocated, summed over the "
+                                                               "refinements")
+    added: int | None = metric("added", ".0f", meaning="MCMC: Gaussians added, summed over the refinements")
+
+    @classmethod
+    def of(cls, result, dataset_hash: str | None) -> TrainRun:
+        """The record of a `splatbench.train.TrainResult`: its own metrics by name, the load
+        (`TrainResult.load`) and the strategy's counts (`TrainResult.topology`; None before
+        they were recorded) flattened, its warnings and its curves (`CURVE_KEYS`)."""
+        names = {m.name for m in metric_specs(cls)}
+        rows = result.to_dict()  # NaN / inf already None there (the one JSON-safety rule of a result)
+        history, evaluations = rows["history"], rows["evaluations"]
+        curves = {
+            "step": [p["step"] for p in history], "loss": [p["loss"] for p in history],
+            "psnr": [p["psnr"] for p in history], "num_gaussians": [p["num_gaussians"] for p in history],
+            "eval_step": [p["step"] for p in evaluations], "eval_psnr": [p["psnr"] for p in evaluations],
+            "eval_ssim": [p["ssim"] for p in evaluations], "eval_lpips": [p["lpips"] for p in evaluations],
+        }
+        if rows["step_evaluations"]:  # a protocol's 7K / 30K columns (only runs that make them)
+            curves["step_evaluations"] = rows["step_evaluations"]
+        topology = dataclasses.asdict(result.topology) if result.topology is not None else {}
+        values = {**{name: getattr(result, name) for name in names if hasattr(result, name)},
+                  **{k: v for k, v in result.load.items() if k in names},
+                  **{name: topology.get(name) for name in TOPOLOGY_METRICS},
+                  "lpips_scale_inputs": int(result.lpips_scale_inputs), "time_loaded": int(result.load["loaded"]),
+                  "dataset_hash": dataset_hash}
+        return cls(**values, warnings=tuple(result.warnings), curves=curves)
+
+
 # --------------------------------------------------------------------------- config
-def _train_fields() -> tuple[str, ...]:
-    from splatbench.train.config import TrainConfig
-
-    return tuple(f.name for f in dataclasses.fields(TrainConfig))
-
-
 def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]:
     """(scene, the ``data`` table, the TrainConfig fields) of a nested run config; one-line
-    `InputError` naming the field for anything unknown."""
-    fields = _train_fields()
-    known = sorted({*fields, "scene", "data"} - set(OWNED_FIELDS))
+    `InputError` naming the field for anything unknown (`check_config`: the kind's Config is
+    `TrainConfig`, its ``data`` table the scene's, below)."""
     for key in config:
         if key in OWNED_FIELDS:
             what = "the rendered scene" if key == "dataset" else "the run's folder"
             raise InputError(f"{key}: set by the train kind ({what}); choose the scene with 'scenes' and its "
                              f"rendering with data.resolution / data.views / data.spp / data.test_spp")
-    check_keys(config, known)
+    check_config(TrainConfig, config)
     scene = config.get("scene")
     if not isinstance(scene, str) or not scene:
         raise InputError(f"scene: expected a scene name, got {scene!r}")
@@ -172,9 +205,7 @@ def scene_type(data: dict[str, Any]) -> str:
     return "folder" if "path" in data else "teacher" if "model" in data else "catalog"
 
 
-def _train_config(train: dict[str, Any]):
-    from splatbench.train.config import TrainConfig
-
+def _train_config(train: dict[str, Any]) -> TrainConfig:
     return TrainConfig.from_dict(dict(train), source="config").validate()
 
 
@@ -403,10 +434,10 @@ def _prepare_sfm(path: Path, downscale: int, poses: str, layout: str, test_every
 
 
 # --------------------------------------------------------------------------- run
-def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
+def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> TrainRun:
     """Train on the run's dataset (found, or rendered on a worker that has no copy, under
     ``prepared.datasets``), writing the run's files into ``workdir``."""
-    from splatbench.train import TrainConfig, train
+    from splatbench.train import train
 
     scene, data, fields = _split(config)
     dataset = ensure_dataset(scene, data, prepared.datasets)
@@ -414,29 +445,7 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> RunOutput:
         fields = {**fields, "data": {"downscale": data["downscale"]}}
     cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="config")
     result = train(cfg)  # validated on construction
-    metrics = {
-        "test_psnr": result.test_psnr, "test_ssim": result.test_ssim, "num_gaussians": result.num_gaussians,
-        "train_seconds": result.train_seconds, "render_ms_per_view": result.render_ms_per_view,
-        "sh_degree": result.sh_degree, "peak_rss_mb": result.peak_rss_mb, "iterations": result.iterations,
-        "test_views": result.test_views, "dataset_hash": dataset.hash[:16] if dataset.hash else None,
-        "test_lpips": result.test_lpips, "lpips_net": result.lpips_net,
-        "lpips_scale_inputs": int(result.lpips_scale_inputs), "cpu_seconds": result.cpu_seconds,
-        **{k: result.load[k] for k in ("load_before", "load_after", "load_other", "cores")},
-        "time_loaded": int(result.load["loaded"]),
-        **{k: (getattr(result.topology, k) if result.topology is not None else None) for k in TOPOLOGY_METRICS},
-    }
-    rows = result.to_dict()  # NaN / inf already None there (the one JSON-safety rule of a result)
-    history, evaluations = rows["history"], rows["evaluations"]
-    curves = {
-        "step": [p["step"] for p in history], "loss": [p["loss"] for p in history],
-        "psnr": [p["psnr"] for p in history], "num_gaussians": [p["num_gaussians"] for p in history],
-        "eval_step": [p["step"] for p in evaluations], "eval_psnr": [p["psnr"] for p in evaluations],
-        "eval_ssim": [p["ssim"] for p in evaluations], "eval_lpips": [p["lpips"] for p in evaluations],
-    }
-    if rows["step_evaluations"]:  # a protocol's 7K / 30K columns (only runs that make them: earlier curves unchanged)
-        curves["step_evaluations"] = rows["step_evaluations"]
-    warnings = tuple(note for note in result.notes if note.startswith("warning:"))
-    return RunOutput(metrics=metrics, curves=curves, warnings=warnings)
+    return TrainRun.of(result, dataset.hash[:16] if dataset.hash else None)
 
 
 def planned(config: dict[str, Any]) -> dict[str, float]:
@@ -485,15 +494,8 @@ def describe_protocol(name: str) -> str:
 
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
-    metrics=(
-        MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher"),
-        MetricSpec("test_ssim", "SSIM", ".4f", "", "higher"),
-        MetricSpec("test_lpips", "LPIPS", ".4f", "", "lower"),
-        MetricSpec("num_gaussians", "Gaussians", ".0f", "", ""),
-        MetricSpec("train_seconds", "train time (s)", ".1f", "s", "lower"),
-        MetricSpec("render_ms_per_view", "render (ms/view)", ".1f", "ms", "lower"),
-        MetricSpec("time_loaded", "timed under load (fraction of runs)", ".2f", "", "", False),
-    ),
+    metrics=("test_psnr", "test_ssim", "test_lpips", "num_gaussians", "train_seconds", "render_ms_per_view",
+             "time_loaded"),
     rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff", min_effect=MIN_EFFECT["test_psnr"]),
                                      Comparison("test_lpips", "diff", min_effect=MIN_EFFECT["test_lpips"]),
                                      Comparison("train_seconds", "ratio", min_effect=MIN_EFFECT["train_seconds"]),
@@ -504,19 +506,20 @@ REPORT = KindReport(
                Tradeoff("num_gaussians", "test_psnr", "gaussians_vs_error",
                         "Final number of Gaussians against test PSNR per cell (mean over seeds)",
                         cheaper="smaller (fewer Gaussians)", order="fewest Gaussians first")),
-    meanings=METRICS,
     timed=("train_seconds", "render_ms_per_view"),
     settling=SettlingCurves("test_psnr", "eval_step", "eval_psnr", "step", "psnr"),
-    confounds=(MetricSpec("opacity_resets", "opacity resets", ".0f"), MetricSpec("refinements", "refinements", ".0f"),
-               MetricSpec("cloned", "cloned", ".0f"), MetricSpec("split", "split", ".0f"),
-               MetricSpec("pruned", "pruned", ".0f"), MetricSpec("pruned_size", "pruned for size", ".0f"),
-               MetricSpec("relocated", "relocated", ".0f"), MetricSpec("added", "added", ".0f")),
+    confounds=("opacity_resets", "refinements", "cloned", "split", "pruned", "pruned_size", "relocated", "added"),
+    load=LoadMarks("time_loaded", "timed"),
+    header_notes=(protocol_lines,),
+    axis_notes=(auto_sh_degree_note, schedule_confound_note),
+    metric_notes=(lpips_note,),
 )
 
 #: The ``train`` kind (``kind = "train"``).
-TRAIN = RunKind(name="train", validate=validate, run=run, resolve=resolve, identity=identity, scenes=scenes, prepare=prepare,
-                description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)", report=REPORT,
-                planned=planned, protocols=KindProtocols(with_protocol, describe_protocol))
+TRAIN = RunKind(name="train", validate=validate, run=run, config=TrainConfig, result=TrainRun, resolve=resolve,
+                identity=identity, scenes=scenes, prepare=prepare, report=REPORT, planned=planned,
+                description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)",
+                protocols=KindProtocols(with_protocol, describe_protocol))
 
-__all__ = ["TRAIN", "REPORT", "METRICS", "MIN_EFFECT", "TOPOLOGY_METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
+__all__ = ["TRAIN", "TrainRun", "REPORT", "MIN_EFFECT", "TOPOLOGY_METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
            "dataset_folder", "ensure_dataset"]

@@ -15,6 +15,7 @@ class MetricSpec:
     unit: str = ""     # unit written after differences ("dB", "ms"; "" for none)
     better: str = ""   # "higher", "lower" or "" (no preferred direction)
     interval: bool = True  # False: the table shows the mean alone (a fraction, a count of its own)
+    meaning: str = ""  # what the metric is, in words (a report's "Metrics" section)
 
 
 __all__ = ["MetricSpec"]

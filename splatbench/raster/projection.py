@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import sys
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -27,20 +27,25 @@ DEFAULTS = RasterOptions()
 
 
 
+#: A Dr.Jit array of the device's backend (``drjit.llvm.ad`` or ``drjit.cuda.ad``: `array_namespace`):
+#: a field's comment gives its type there and its shape.
+DrArray = Any
+
+
 class Projection(NamedTuple):
-    """Screen-space Gaussians: Dr.Jit arrays of one module (``drjit.llvm.ad`` or ``drjit.cuda.ad``),
-    all of width N, a field [N, 2] being an ``Array2f`` of two [N] columns. Gradients flow
-    to the first four fields; the others are detached.
+    """Screen-space Gaussians: Dr.Jit arrays of one module (``drjit.llvm.ad`` or ``drjit.cuda.ad``:
+    `DrArray`), all of width N, a field [N, 2] being an ``Array2f`` of two [N] columns. Gradients
+    flow to the first four fields; the others are detached.
     """
 
-    means2d: object    # Array2f, [N, 2] float32: pixel coordinates (origin at the image's top-left corner)
-    conics: object     # Array3f, [N, 3] float32: (A, B, C) = (xx, xy, yy) of the inverse 2D covariance
-    depths: object     # Float, [N] float32: camera z
-    opacities: object  # Float, [N] float32: after the antialiasing compensation
-    cutoff_sq: object  # Float, [N] float32: R^2 in Mahalanobis units (detached)
-    extents: object    # Array2f, [N, 2] float32: (rx, ry) of the cutoff ellipse's bounding box, pixels (detached)
-    radii: object      # Int32, [N] int32: 0 when culled
-    visible: object    # Bool, [N] bool
+    means2d: DrArray    # Array2f, [N, 2] float32: pixel coordinates (origin at the image's top-left corner)
+    conics: DrArray     # Array3f, [N, 3] float32: (A, B, C) = (xx, xy, yy) of the inverse 2D covariance
+    depths: DrArray     # Float, [N] float32: camera z
+    opacities: DrArray  # Float, [N] float32: after the antialiasing compensation
+    cutoff_sq: DrArray  # Float, [N] float32: R^2 in Mahalanobis units (detached)
+    extents: DrArray    # Array2f, [N, 2] float32: (rx, ry) of the cutoff ellipse's bounding box, pixels (detached)
+    radii: DrArray      # Int32, [N] int32: 0 when culled
+    visible: DrArray    # Bool, [N] bool
 
 
 def array_namespace(x):

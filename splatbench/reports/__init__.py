@@ -4,11 +4,12 @@
     report = build_report(spec, "results")            # tables, findings, the run table
     write_report(report, "reports/sh_degree")          # report.md, figures/*.png, results.parquet
 
-Modules: `tables` (axis rows, mean ± 95 % interval, metric specs per kind), `findings`
-(claims computed from the tables: paired differences with intervals), `notes`
-(kind-specific findings, registered by kind name), `settling` (whether a cell's curves had
-flattened: the last quarter's slope), `protocol` (a train report's header from its runs'
-configs), `check` (the 7K check: the headline's two cells rerun at graphdeco's protocol, its
+Every function is handed the run kind (`splatbench.experiments.RunKind`, from
+`ExperimentSpec.run_kind`): what its result and `KindReport` declare, its hooks included.
+
+Modules: `tables` (axis rows, mean ± 95 % interval, the metrics a kind shows), `findings`
+(claims computed from the tables: paired differences with intervals), `settling` (whether a
+cell's curves had flattened: the last quarter's slope, and its finding), `check` (the 7K check: the headline's two cells rerun at graphdeco's protocol, its
 verdict), `figures` (training curves, the
 cells of the Pareto figures), `report` (assembly, markdown), `cli`
 (``splatbench report``). Statistics are `splatbench.metrics.stats`. See docs/reports.md.

@@ -37,7 +37,7 @@ import pandas as pd
 
 from splatbench.experiments.grid import check_cells
 from splatbench.experiments.kind_report import Comparison
-from splatbench.experiments.kinds import get_kind
+from splatbench.experiments.kinds import RunKind
 from splatbench.experiments.spec import CheckSpec, ExperimentSpec
 from splatbench.experiments.store import build_table, experiment_dir, read_records
 from splatbench.metrics.spec import MetricSpec
@@ -46,7 +46,7 @@ from splatbench.report_files import markdown_table
 from splatbench.reports.findings import (Claim, fmt_interval, fmt_min_effect, fmt_number, judge, no_spread, paired,
                                          rules_for, usable_runs)
 from splatbench.reports.settling import cell_settling, unsettled_reason
-from splatbench.reports.tables import Stat, cell_labels, kind_report, metric_specs, seed_values, stat
+from splatbench.reports.tables import Stat, cell_labels, metric_specs, seed_values, stat
 
 #: The check's runs beside a report (the grid's are ``results.parquet``).
 CHECK_TABLE_NAME = "check.parquet"
@@ -128,16 +128,17 @@ def check_table(spec: ExperimentSpec, results_dir) -> pd.DataFrame:
     return build_table([records[r.run_id] for r in (*a, *b) if r.run_id in records])
 
 
-def check_result(spec: ExperimentSpec, table: pd.DataFrame, checked: pd.DataFrame | None) -> CheckResult | None:
-    """The check of ``spec`` from the grid's run table ``table`` and the check's ``checked``
-    (`check_table`; None or empty: not run); None for an experiment without a ``[check]`` or
-    a kind without findings rules."""
+def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, checked: pd.DataFrame | None
+                 ) -> CheckResult | None:
+    """The check of ``spec`` (its runs of ``kind``) from the grid's run table ``table`` and the
+    check's ``checked`` (`check_table`; None or empty: not run); None for an experiment without a
+    ``[check]`` or a kind without findings rules."""
     check = spec.check
-    metrics = metric_specs(spec.kind, table)
-    rules = rules_for(spec.kind, metrics, spec.min_effect) if check is not None else None
+    metrics = metric_specs(kind, table)
+    rules = rules_for(kind, metrics, spec.min_effect) if check is not None else None
     if rules is None:
         return None
-    declared = kind_report(spec.kind)
+    declared = kind.report
     metric = next(m for m in metrics if m.name == rules.primary)
     comp = next((c for c in rules.comparisons if c.metric == metric.name), Comparison(metric.name, "diff"))
     checked = checked if checked is not None else pd.DataFrame(columns=["run_id", "status"])
@@ -153,7 +154,7 @@ def check_result(spec: ExperimentSpec, table: pd.DataFrame, checked: pd.DataFram
         total = sum(len(c) for c in cells)
         mine = runs[runs.run_id.isin(ids[0] | ids[1])] if len(runs) else runs
         done, failed = int((mine.status == "done").sum()), int((mine.status == "failed").sum())
-        usable = usable_runs(mine) if len(mine) else mine
+        usable = usable_runs(mine, kind) if len(mine) else mine
         pick = [usable[usable.run_id.isin(i)] if len(usable) else usable for i in ids]
         values = [seed_values(p, metric.name) if len(p) else {} for p in pick]
         iv, null = paired(values[0], values[1], comp)
@@ -174,7 +175,6 @@ def check_result(spec: ExperimentSpec, table: pd.DataFrame, checked: pd.DataFram
     grid_side = side(table, quick, grid_protocol)
     rerun_side = side(checked, rerun, check.protocol)
     verdict, reason = _verdict(grid_side, rerun_side, labels, metric, comp)
-    kind = get_kind(spec.kind)
     described = kind.protocols.describe(check.protocol) if kind.protocols is not None else check.protocol
     return CheckResult(check, tuple(spec.seeds), labels, described, metric, grid_side, rerun_side, verdict, reason,
                        checked if len(checked) else build_table([]))
@@ -186,7 +186,7 @@ def _interval(claim: Claim) -> Interval:
 
 def _recorded_protocol(table: pd.DataFrame, ids: set[str]) -> str:
     """The protocol the grid's runs of the check's cells recorded (``config.protocol``; a config
-    without one is the quick protocol, `splatbench.reports.protocol`)."""
+    without one is the quick protocol, `splatbench.experiments.train_report`)."""
     if not len(table) or "config.protocol" not in table.columns:
         return "quick"
     values = {v for v in table[table.run_id.isin(ids)]["config.protocol"] if isinstance(v, str) and v}

@@ -28,13 +28,14 @@ axis:
   kind's confound counts (`KindReport.confounds`) that differ are named ("Also changed");
 * **count**: how many such comparisons the table makes (each at 95 %, no correction
   for multiplicity);
-* kind-specific notes appended to it (`splatbench.reports.notes`, registered by kind
-  name), e.g. the degree ``auto`` ended at on the train kind's SH degree axis.
+* the kind's own notes appended to it (`KindReport.axis_notes`), e.g. the degree ``auto``
+  ended at on the train kind's SH degree axis.
 
-Runs whose ``metric.loaded`` is 1 (the raster kind: timed while the load average
-exceeded half the cores) are left out of every finding (not of the tables). Runs whose
-``metric.time_loaded`` is 1 (the train kind) are left out of the comparisons of the
-kind's ``timed`` metrics only: their quality metrics do not depend on the load.
+Runs the kind marks as timed under load (`KindReport.load`) are left out of every finding
+(not of the tables) where the mark's scope is "all" (the raster kind's ``metric.loaded``:
+timed while the load average exceeded half the cores), and of the comparisons of the kind's
+``timed`` metrics only where it is "timed" (the train kind's ``metric.time_loaded``): their
+quality metrics do not depend on the load.
 """
 
 from __future__ import annotations
@@ -47,21 +48,22 @@ from dataclasses import dataclass
 import pandas as pd
 
 from splatbench.errors import InputError
-from splatbench.experiments.kind_report import Comparison, FindingRules
+from splatbench.experiments.kind_report import AxisNote, Claim, Comparison, Finding, FindingRules, done_runs
+from splatbench.experiments.kinds import RunKind
 from splatbench.figures import pareto_front
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
 from splatbench.reports.settling import CellSettling, cell_settling, unsettled_reason
-from splatbench.reports.tables import AxisTable, Row, done_runs, kind_report, loaded_runs, seed_values
+from splatbench.reports.tables import AxisTable, Row, loaded_runs, seed_values
 
 
-def rules_for(kind: str, metrics: tuple[MetricSpec, ...], min_effect: Mapping[str, float] | None = None
+def rules_for(kind: RunKind, metrics: tuple[MetricSpec, ...], min_effect: Mapping[str, float] | None = None
               ) -> FindingRules | None:
     """The kind's rules, restricted to metrics present; another kind compares its first metric.
     ``min_effect`` (an experiment file's ``[report] min_effect``) replaces the kind's minimum
     effects by metric name; a name the kind does not compare is a one-line `InputError`."""
     names = {m.name for m in metrics}
-    declared = kind_report(kind)
+    declared = kind.report
     if declared is not None:
         r = declared.rules
         if r is None:
@@ -78,58 +80,13 @@ def rules_for(kind: str, metrics: tuple[MetricSpec, ...], min_effect: Mapping[st
         compared = [metrics[0].name]
     for metric in (min_effect or {}):
         if metric not in compared:
-            raise InputError(f"report.min_effect.{metric}: not a metric the {kind!r} findings compare "
+            raise InputError(f"report.min_effect.{metric}: not a metric the {kind.name!r} findings compare "
                              f"(expected one of: {', '.join(compared)})")
     if min_effect:
         rules = FindingRules(rules.primary, tuple(dataclasses.replace(c, min_effect=min_effect[c.metric])
                                                   if c.metric in min_effect else c for c in rules.comparisons),
                              rules.size)
     return rules
-
-
-@dataclass(frozen=True)
-class Claim:
-    """One number of a finding.
-
-    kind: "best", "no best", "size" (the leader's size against the runner-up's, where it kept
-    a lead from being named best), "vs", "self" (the reference row's own relative metric),
-    "count", "auto" or "parity"; scene ("" for all); label: the
-    row; reference: the row compared against ("vs"); metric; how: "mean", "diff",
-    "ratio", "count" or "max"; value: the number; low / high: its 95 % interval (NaN
-    when none); n: seeds (pairs) it comes from; significant: the interval excludes the
-    null value (False when there is no interval, and when the seeds did not vary the
-    result: `no_spread`); practical: significant and at least the comparison's minimum
-    effect (False below it; equal to ``significant`` when the comparison has none);
-    settled: both cells' curves had flattened and the difference stopped moving
-    (`splatbench.reports.settling`; None: not judged); text: how it is written.
-    """
-
-    kind: str
-    scene: str
-    label: str
-    metric: str
-    how: str
-    value: float
-    text: str
-    reference: str = ""
-    low: float = math.nan
-    high: float = math.nan
-    n: int = 0
-    significant: bool = False
-    practical: bool = False
-    settled: bool | None = None
-
-
-@dataclass
-class Finding:
-    """The finding of one axis: markdown lines and the claims they state."""
-
-    axis: str
-    lines: list[str]
-    claims: list[Claim]
-
-    def markdown(self) -> str:
-        return "\n".join(self.lines)
 
 
 def fmt_number(value: float, how: str, spec: MetricSpec) -> str:
@@ -225,23 +182,22 @@ def reference_row(table: AxisTable) -> Row:
     return next((r for r in table.rows if r.is_base), table.rows[0])
 
 
-def usable_runs(runs: pd.DataFrame) -> pd.DataFrame:
-    """The done runs findings may use: not those marked ``metric.loaded`` (module doc)."""
+def usable_runs(runs: pd.DataFrame, kind: RunKind) -> pd.DataFrame:
+    """The done runs findings may use: not those the kind marks as timed under load where the
+    mark leaves them out of every finding (module doc)."""
     done = done_runs(runs)
-    if "metric.loaded" in done.columns:
-        done = done[pd.to_numeric(done["metric.loaded"], errors="coerce").fillna(0) == 0]
+    load = kind.report.load if kind.report is not None else None
+    col = f"metric.{load.flag}" if load is not None and load.scope == "all" else None
+    if col in done.columns:
+        done = done[pd.to_numeric(done[col], errors="coerce").fillna(0) == 0]
     return done
 
 
-#: A kind-specific note on one axis: ``note(axis_table, runs, scenes) -> (lines, claims)``.
-AxisNote = Callable[[AxisTable, pd.DataFrame, list[str]], tuple[list[str], list["Claim"]]]
-
-
-def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequence[AxisNote] = (),
-                 min_effect: Mapping[str, float] | None = None) -> Finding | None:
+def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None
+                 ) -> Finding | None:
     """The finding of one axis (None when the kind has no rules or nothing is done),
-    with the lines and claims of ``notes`` appended; ``min_effect``: the experiment file's
-    minimum effects by metric (`rules_for`)."""
+    with the lines and claims of the kind's axis notes (`KindReport.axis_notes`) appended;
+    ``min_effect``: the experiment file's minimum effects by metric (`rules_for`)."""
     rules = rules_for(kind, table.metrics, min_effect)
     if rules is None or table.frame.empty:
         return None
@@ -249,17 +205,13 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
     primary = specs[rules.primary]
     sign = -1.0 if primary.better == "lower" else 1.0
     scenes = list(dict.fromkeys(table.frame.scene))
-    usable = usable_runs(runs)
+    usable = usable_runs(runs, kind)
     excluded = len(done_runs(runs)) - len(usable)
-    declared = kind_report(kind)
+    declared = kind.report
     timed = set(declared.timed) if declared is not None else set()
-    untimed = 0
-    if timed and "metric.time_loaded" in usable.columns:
-        loaded = loaded_runs(usable)
-        untimed = int(loaded.sum())
-        timed_usable = usable[~loaded]
-    else:
-        timed_usable = usable
+    loaded = loaded_runs(usable, kind)  # all False where the kind's mark is not recorded
+    untimed = int(loaded.sum()) if timed else 0
+    timed_usable = usable[~loaded] if timed else usable
 
     def selected(scene: str, row: Row, pool: pd.DataFrame) -> pd.DataFrame:
         return pool[(pool.scene == scene) & pool.run_id.isin(row.run_ids)]
@@ -396,7 +348,7 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
             line = f"  - `{row.label}`: " + "; ".join(parts)
             if moving:
                 line += f". **Not settled** ({'; '.join(moving)})"
-            also = confounds(scenes, ref, row, usable, declared, kind)
+            also = confounds(scenes, ref, row, usable, kind)
             if also:
                 line += f". Also changed: {also}"
             lines.append(line)
@@ -429,13 +381,14 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
             lines.append(f"- This table makes {count} comparisons, but with one seed per cell no interval can be "
                          f"computed (n = 1): none of them is a significant difference; add seeds to the grid.")
     if declared is not None and declared.confounds and others and not _recorded(usable, declared):
-        lines.append("- What else each setting changed (" + ", ".join(m.label for m in declared.confounds[:5])
+        labels = ", ".join(kind.specs[name].label for name in declared.confounds[:5])
+        lines.append("- What else each setting changed (" + labels
                      + ") was not recorded by these runs (run before it was); \"(planned)\" counts are what their "
                        "configs schedule; rerun the grid to see the rest.")
     if excluded:
         lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
                      f"these findings (marked in the table's `loaded` column).")
-    if timed & set(specs) and not any(c in runs.columns for c in ("metric.time_loaded", "metric.loaded")):
+    if timed & set(specs) and not load_recorded(runs, kind):
         lines.append(f"- These runs did not record the machine's load (run before it was recorded): the "
                      f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons may come "
                      f"from a loaded machine and are no evidence of speed.")
@@ -444,7 +397,7 @@ def axis_finding(table: AxisTable, kind: str, runs: pd.DataFrame, notes: Sequenc
                      f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons (marked in "
                      f"the table's `timed under load` column; their quality metrics are kept).")
 
-    for note in notes:
+    for note in declared.axis_notes if declared is not None else ():
         more_lines, more_claims = note(table, runs, scenes)
         lines += more_lines
         claims += more_claims
@@ -461,25 +414,33 @@ def _on_front(table: AxisTable, scene: str, size: MetricSpec, quality: MetricSpe
     return all(r.label in labels for r in rows)
 
 
+def load_recorded(runs: pd.DataFrame, kind: RunKind) -> bool:
+    """Whether the runs recorded the machine's load: the kind's load mark (`KindReport.load`) is a
+    column of ``runs`` (a table of grids run before it was recorded has none)."""
+    load = kind.report.load if kind.report is not None else None
+    return load is not None and f"metric.{load.flag}" in runs.columns
+
+
 def _recorded(runs: pd.DataFrame, declared) -> bool:
     """Whether the runs recorded the kind's confound counts (a table from before has no such columns)."""
-    cols = [f"metric.{m.name}" for m in declared.confounds]
+    cols = [f"metric.{name}" for name in declared.confounds]
     return any(c in runs.columns and pd.to_numeric(runs[c], errors="coerce").notna().any() for c in cols)
 
 
-def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, declared, kind: str = "") -> str:
+def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, kind: RunKind) -> str:
     """What else ``row`` changed against ``ref`` (the kind's confound counts, mean over seeds,
     per scene): each count that differs by more than `CONFOUND_SHARE` of the larger, e.g.
     ``textured: opacity resets 7 instead of 4``; "" when none differs. Runs that did not record
     a count (grids run before it was) give the count their config schedules, where the kind
     can say it (`RunKind.planned`), written "(planned)"."""
+    declared = kind.report
     if declared is None or not declared.confounds:
         return ""
     plan = _planner(kind)
     parts = []
     for scene in scenes:
         moved = []
-        for m in declared.confounds:
+        for m in (kind.specs[name] for name in declared.confounds):
             sel_a = runs[(runs.scene == scene) & runs.run_id.isin(ref.run_ids)]
             sel_b = runs[(runs.scene == scene) & runs.run_id.isin(row.run_ids)]
             col = f"metric.{m.name}"
@@ -498,17 +459,13 @@ def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, dec
     return "; ".join(parts) + (" (mean over seeds)" if parts else "")
 
 
-def _planner(kind: str) -> Callable[[pd.DataFrame, str], dict[int, float]] | None:
+def _planner(kind: RunKind) -> Callable[[pd.DataFrame, str], dict[int, float]] | None:
     """``plan(runs, metric) -> seed -> count`` from each run's recorded config through the kind's
     `RunKind.planned`; None for a kind without one."""
     from splatbench.experiments.configs import unflatten
-    from splatbench.experiments.kinds import get_kind
     from splatbench.reports.tables import decode
 
-    try:
-        planned = get_kind(kind).planned if kind else None
-    except InputError:
-        return None
+    planned = kind.planned
     if planned is None:
         return None
 
@@ -540,6 +497,6 @@ def _name(spec: MetricSpec) -> str:
     return spec.label.split(" (")[0]
 
 
-__all__ = ["Claim", "Finding", "AxisNote", "axis_finding", "rules_for", "fmt_number", "fmt_interval", "paired",
+__all__ = ["Claim", "Finding", "AxisNote", "axis_finding", "load_recorded", "rules_for", "fmt_number", "fmt_interval", "paired",
            "reference_row", "usable_runs", "no_spread", "practical", "judge", "fmt_min_effect", "confounds",
            "CONFOUND_SHARE"]

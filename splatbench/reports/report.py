@@ -12,7 +12,7 @@ so a report is never built from a stale table. What is written, under ``out``:
   one section per axis (a table of mean ± 95 % t interval over seeds of each axis value, per
   scene; the findings; the training curves), each Pareto figure the kind declares (a cost
   against quality, the cells on the front named), the metrics' meanings, the runs' warnings
-  (`RunOutput.warnings`, one row each) and any failed runs.
+  (`RunResult.warnings`, one row each) and any failed runs.
 * ``figures/curves_<axis>.png``; the kind's Pareto figures (`KindReport.tradeoffs`):
   ``figures/time_vs_error.png`` and ``figures/gaussians_vs_error.png`` (train kind) or
   ``figures/speed_vs_error.png`` (raster kind).
@@ -37,7 +37,7 @@ import pandas as pd
 from splatbench.errors import InputError
 from splatbench.experiments.grid import expand
 from splatbench.experiments.kind_report import Tradeoff
-from splatbench.experiments.kinds import get_kind
+from splatbench.experiments.kinds import RunKind
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.experiments.store import TABLE_NAME, build_table, experiment_dir, read_records
 from splatbench.fsutil import atomic_write
@@ -46,10 +46,9 @@ from splatbench.metrics.spec import MetricSpec
 from splatbench.report_files import markdown_table
 from splatbench.reports.check import CHECK_TABLE_NAME, CheckResult, check_lines, check_result, check_table, header_line
 from splatbench.reports.figures import cell_means, curves_figure
-from splatbench.reports.findings import Finding, axis_finding
-from splatbench.reports.notes import axis_notes, header_notes, metric_notes, run_findings
-from splatbench.reports.tables import (AxisTable, axis_table, cell_labels, display, kind_report, loaded_runs,
-                                       metric_specs)
+from splatbench.reports.findings import Finding, axis_finding, load_recorded, usable_runs
+from splatbench.reports.settling import settling_finding
+from splatbench.reports.tables import AxisTable, axis_table, cell_labels, display, loaded_runs, metric_specs
 
 REPORT_NAME = "report.md"
 FIGURES = "figures"
@@ -69,8 +68,9 @@ def interval_note(max_seeds: int) -> str:
 class Report:
     """An experiment's report before it is written.
 
-    spec: the experiment; table: one row per run of the grid that has a result (grid
-    order; `splatbench.experiments.store` columns); total: runs in the grid;
+    spec: the experiment; kind: its run kind (what it declares of its reports); table: one row
+    per run of the grid that has a result (grid order; `splatbench.experiments.store` columns);
+    total: runs in the grid;
     metrics: the metrics shown; axes: one `AxisTable` per axis; findings: axis name (or
     "parity") -> `Finding`; fronts: Pareto figure stem -> scene -> Pareto-optimal cell
     labels, cheapest first (filled when written); check: the experiment's ``[check]``, its
@@ -78,6 +78,7 @@ class Report:
     """
 
     spec: ExperimentSpec
+    kind: RunKind
     table: pd.DataFrame
     total: int
     metrics: tuple[MetricSpec, ...]
@@ -114,18 +115,19 @@ def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int,
     """Tables and findings of a run table (`grid_table`'s, or a report's ``results.parquet``
     read back) of ``spec``'s grid of ``total`` runs; ``checked``: the runs of its ``[check]``
     that have a result (`check_table`, or a report's ``check.parquet``; None: none)."""
-    metrics = metric_specs(spec.kind, table)
-    axes = [axis_table(spec, axis, table, metrics) for axis in spec.dimensions]
+    kind = spec.run_kind
+    metrics = metric_specs(kind, table)
+    axes = [axis_table(spec, kind, axis, table, metrics) for axis in spec.dimensions]
     findings: dict[str, Finding] = {}
     for t in axes:
-        f = axis_finding(t, spec.kind, table, axis_notes(spec.kind), spec.min_effect)
+        f = axis_finding(t, kind, table, spec.min_effect)
         if f is not None:
             findings[t.axis] = f
-    for name, make in run_findings(spec.kind):
-        f = make(table, spec.min_effect)
-        if f is not None:
-            findings[name] = f
-    return Report(spec, table, total, metrics, axes, findings, check=check_result(spec, table, checked))
+    hooks = kind.report.run_findings if kind.report is not None else ()
+    for f in (settling_finding(table, kind, spec.min_effect), *(make(table, spec.min_effect) for make in hooks)):
+        if f is not None:  # a run finding: its own section, named by its axis
+            findings[f.axis] = f
+    return Report(spec, kind, table, total, metrics, axes, findings, check=check_result(spec, kind, table, checked))
 
 
 def reported_done(out: str | Path, name: str = TABLE_NAME) -> int | None:
@@ -196,26 +198,19 @@ def timed_runs(report: Report, tradeoff: Tradeoff) -> tuple[pd.DataFrame, pd.Dat
     """(The runs a Pareto figure may use, the done runs it leaves out): a run marked ``loaded``
     (raster) never, and for a cost the kind declares timed, never a run timed while other processes
     loaded the machine (``metric.time_loaded``): its time is not evidence (docs/reports.md)."""
-    from splatbench.reports.findings import usable_runs
-
     done = report.table[report.table.status == "done"] if len(report.table) else report.table
-    usable = usable_runs(report.table)
-    declared = kind_report(report.spec.kind)
-    if declared is not None and tradeoff.cost in declared.timed and "metric.time_loaded" in usable.columns:
-        usable = usable[~loaded_runs(usable)]
+    usable = usable_runs(report.table, report.kind)
+    declared = report.kind.report
+    if declared is not None and tradeoff.cost in declared.timed:
+        usable = usable[~loaded_runs(usable, report.kind)]
     return usable, done[~done.run_id.isin(set(usable.run_id))]
-
-
-def load_recorded(table: pd.DataFrame) -> bool:
-    """Whether the runs recorded the machine's load (``metric.time_loaded`` or ``metric.loaded``)."""
-    return any(c in table.columns for c in ("metric.time_loaded", "metric.loaded"))
 
 
 def drawable_tradeoffs(report: Report) -> list[Tradeoff]:
     """The kind's Pareto figures whose two metrics the report shows (its results hold
     them), when at least one run is done: any grid of the kind whose results have, say,
     a Gaussian count gets that figure."""
-    declared = kind_report(report.spec.kind)
+    declared = report.kind.report
     if declared is None or not report.done:
         return []
     shown = {m.name for m in report.metrics}
@@ -228,7 +223,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     """The report's text; ``tradeoffs``: each Pareto figure drawn, with its file; ``options`` /
     ``run_options``: the report's / the run command's options beyond the experiment file
     (`write_report`); a figure's file is None where every run was left out (`timed_runs`)."""
-    spec, table = report.spec, report.table
+    spec, kind, table = report.spec, report.kind, report.table
     missing = report.total - len(table)
     dims = ", ".join(f"`{d}`" for d in spec.dimensions) or "no axes"
     lines = [f"# {spec.name}", ""]
@@ -250,16 +245,16 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
             for name, src in spec.scene_tables.items())
             + " (a scene's own keys win over the shared `data.*`; `data` keys of another scene type do not apply "
               "to it).", ""]
-    for note in header_notes(spec.kind):
+    for note in kind.report.header_notes if kind.report is not None else ():
         more = note(table)
         if more:
             lines += [*more, ""]
     if report.check is not None:
         lines += [header_line(report.check), ""]
-    elif spec.check is None and _has_protocols(spec.kind):
+    elif spec.check is None and kind.protocols is not None:
         lines += ["**7K check: none declared** (the experiment file has no `[check]`: its headline is not rerun at "
                   "graphdeco's 7K protocol; docs/reports.md, \"The 7K check\").", ""]
-    timing = " ".join(t for t in (run_time(table), load_facts(table)) if t)
+    timing = " ".join(t for t in (run_time(table), load_facts(table, kind)) if t)
     if timing:
         lines += [timing, ""]
     if missing:
@@ -287,7 +282,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
         lines += check_lines(report.check, f"splatbench run {source_path(spec)}{run_options}")
 
     specs = {m.name: m for m in report.metrics}
-    declared = kind_report(spec.kind)
+    declared = kind.report
     for tradeoff, path in tradeoffs:
         cost, quality = specs[tradeoff.cost], specs[tradeoff.quality]
         lines += [f"## {cost.label} against {quality.label}", ""]
@@ -307,7 +302,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
             cells = ", ".join(dict.fromkeys(f"{sc} `{labels[i]}`" for i, sc in left.scene.items()))
             lines.append(f"- Left out of this figure and its front: {len(left)} run(s) timed while other processes "
                          f"loaded the machine ({cells}); a cell none of whose runs is left has no point.")
-        if is_time and not load_recorded(table):
+        if is_time and not load_recorded(table, kind):
             lines.append("- These runs did not record the machine's load (run before it was recorded): their times "
                          "may come from a loaded machine, so this front is no evidence of speed.")
         for scene, front in report.fronts.get(tradeoff.stem, {}).items():
@@ -318,11 +313,10 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
                 lines.append(f"- Pareto front on {scene}, {tradeoff.order}: " + " → ".join(f"`{c}`" for c in front))
         lines.append("")
 
-    meanings = metric_meanings(spec.kind)
-    if meanings:
+    if declared is not None:  # what each metric shown means, as the kind's result declares it
         lines += ["## Metrics", ""]
-        lines += [f"- `{m.label}` (`metric.{m.name}`): {meanings.get(m.name, '')}" for m in report.metrics]
-        for note in metric_notes(spec.kind):
+        lines += [f"- `{m.label}` (`metric.{m.name}`): {m.meaning}" for m in report.metrics]
+        for note in declared.metric_notes:
             lines += note(table)
         lines.append("")
 
@@ -337,14 +331,6 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
                   markdown_table(["run", "scene", "seed", "error"],
                                  ([f"`{r.run_id}`", r.scene, r.seed, r.error] for _, r in failed.iterrows())), ""]
     return "\n".join(lines).rstrip() + "\n"
-
-
-def _has_protocols(kind: str) -> bool:
-    """Whether the run kind ``kind`` can rerun a cell under a protocol (a ``[check]`` applies to it)."""
-    try:
-        return get_kind(kind).protocols is not None
-    except InputError:
-        return False
 
 
 def run_warnings(spec: ExperimentSpec, table: pd.DataFrame) -> list[tuple[str, str, str, int, str]]:
@@ -370,12 +356,6 @@ def source_path(spec: ExperimentSpec) -> str:
         return spec.source
 
 
-def metric_meanings(kind: str) -> dict[str, str]:
-    """The kind's metric documentation (name -> meaning), if it publishes one."""
-    declared = kind_report(kind)
-    return dict(declared.meanings) if declared is not None else {}
-
-
 def run_time(table: pd.DataFrame) -> str:
     """"Run time: ..." from the done runs' worker seconds and start / finish times."""
     done = table[table.status == "done"] if len(table) else table
@@ -392,17 +372,19 @@ def run_time(table: pd.DataFrame) -> str:
             f"(mean {duration(worker / len(done))} per run){span}.")
 
 
-def load_facts(table: pd.DataFrame) -> str:
+def load_facts(table: pd.DataFrame, kind: RunKind) -> str:
     """"Load: ..." -- how many done runs were timed while other processes loaded the
-    machine (``metric.time_loaded``, train; ``metric.loaded``, raster) and the range of the
-    others' estimated load (``metric.load_other``); "" for a table of grids run before
-    load was recorded."""
+    machine (the kind's mark, `KindReport.load`: ``metric.time_loaded``, train;
+    ``metric.loaded``, raster) and the range of the others' estimated load (the mark's
+    ``other`` over its ``cores``); "" for a kind without a mark, or a table of grids run
+    before load was recorded."""
     done = table[table.status == "done"] if len(table) else table
-    flag = next((c for c in ("metric.time_loaded", "metric.loaded") if c in done.columns), None)
-    if not len(done) or flag is None:
+    load = kind.report.load if kind.report is not None else None
+    flag = f"metric.{load.flag}" if load is not None else None
+    if not len(done) or flag not in done.columns:
         return ""
     marked = int((pd.to_numeric(done[flag], errors="coerce").fillna(0) != 0).sum())
-    what = ("their times are left out of the time comparisons, their quality kept" if flag == "metric.time_loaded"
+    what = ("their times are left out of the time comparisons, their quality kept" if load.scope == "timed"
             else "left out of every finding")
     text = (f"Load: {marked} of {len(done)} runs timed while other processes loaded the machine "
             f"(`{flag}`: {what})")
@@ -410,7 +392,7 @@ def load_facts(table: pd.DataFrame) -> str:
     def column(name: str) -> pd.Series:
         return pd.to_numeric(done[name], errors="coerce").dropna() if name in done.columns else pd.Series([])
 
-    other, cores = column("metric.load_other"), column("metric.cores")
+    other, cores = column(f"metric.{load.other}"), column(f"metric.{load.cores}")
     if len(other):
         on = f" on {int(cores.max())} cores" if len(cores) and cores.min() == cores.max() else ""
         text += f"; others' estimated load {other.min():.2f}–{other.max():.2f}{on}"

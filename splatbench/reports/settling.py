@@ -24,12 +24,14 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-from splatbench.experiments.kind_report import SettlingCurves
+from splatbench.experiments.kind_report import Claim, Finding, SettlingCurves, done_runs
+from splatbench.experiments.kinds import RunKind
 
 #: Share of the run, at its end, whose slope decides.
 LAST_SHARE = 0.25
@@ -172,5 +174,77 @@ def unsettled_reason(a: CellSettling | None, b: CellSettling | None, labels: tup
     return ""
 
 
+# --------------------------------------------------------------------------- the finding
+def _cell_label(done: pd.DataFrame, axes: list[str]):
+    """A row's cell as ``axis=value, ...``; in a one-at-a-time grid (every cell differs from the
+    most common one in at most one axis, with more than one axis) only the axis that differs,
+    or ``base``."""
+    common = {c: done[c].mode().iloc[0] for c in axes}
+
+    def moved(row) -> list[str]:
+        return [c for c in axes if row[c] != common[c]]
+
+    one_at_a_time = len(axes) > 1 and all(len(moved(row)) <= 1 for _, row in done.iterrows())
+    if one_at_a_time:
+        return lambda row: ", ".join(f"{c[5:]}={row[c]}" for c in moved(row)) or "base"
+    return lambda row: ", ".join(f"{c[5:]}={row[c]}" for c in axes)
+
+
+def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str, float] | None = None
+                     ) -> Finding | None:
+    """Whether each cell had settled when its runs ended, for a kind that declares its curves
+    (`KindReport.settling`; the train kind's test PSNR):
+    the slope of its test curve over the last quarter of the run (mean over seeds, per 1,000
+    steps) against the threshold, the minimum effect of the curves' metric (test PSNR: 0.1 dB, or the
+    experiment file's) per 1,000 steps; and, where the training-view PSNR is recorded, whether the test
+    curve is flat or falling while the training curve still rises (overfitting, not
+    convergence). One claim per cell: ``significant`` is True when it is *not* settled."""
+    declared = kind.report
+    done = done_runs(runs)
+    keys = declared.settling if declared is not None else None
+    if done.empty or "curves" not in done.columns or keys is None:
+        return None
+    effect = dict(min_effect or {}).get(keys.metric)
+    if effect is None:
+        effect = next((c.min_effect for c in declared.rules.comparisons if c.metric == keys.metric), None)
+    if effect is None:
+        return None
+    axes = [c for c in done.columns if c.startswith("axis.")]
+    label = _cell_label(done, axes) if axes else (lambda row: "all")
+    labels = done.apply(label, axis=1) if len(done) else pd.Series([], dtype=object)
+    cells: dict[tuple[str, str], CellSettling] = {}
+    for (scene, cell), group in done.groupby([done.scene, labels], sort=False):
+        c = cell_settling(group, keys, effect)
+        if c is not None:
+            cells[(scene, cell)] = c
+    if not cells:
+        return None
+    windows = sorted({(c.start, c.end) for c in cells.values()})
+    span = ", ".join(f"{a}→{b}" for a, b in windows)
+    threshold = f"{effect:g} dB per 1,000 steps"
+    lines = [f"- Test PSNR slope over the last quarter of the run (steps {span}; least squares, mean over seeds; "
+             f"a cell is settled below {threshold}, the minimum effect per 1,000 steps: docs/reports.md), with the "
+             f"training-view PSNR's slope where recorded: "
+             + "; ".join(f"{scene} `{cell}` {c.describe()}" for (scene, cell), c in cells.items()) + "."]
+    claims = []
+    for (scene, cell), c in cells.items():
+        claims.append(Claim("settling", scene, cell, keys.metric, "slope", c.test, f"{c.test:+.2f} dB / 1,000 steps",
+                            n=len(c.per_seed), significant=not c.settled, settled=c.settled))
+    moving = [f"{scene} `{cell}` ({c.test:+.2f})" for (scene, cell), c in cells.items() if not c.settled]
+    overfit = [f"{scene} `{cell}` (test {c.test:+.2f}, train {c.train:+.2f})" for (scene, cell), c in cells.items()
+               if c.overfitting]
+    if moving:
+        lines.append(f"- **Not settled**: {len(moving)} of {len(cells)} cells still moved by {threshold} or more over "
+                     f"the last quarter: " + ", ".join(moving) + ". Their differences above are what this run length "
+                     "gives, not where the cells converge (each such comparison is marked **not settled**).")
+    else:
+        lines.append(f"- Settled: every cell's test curve moved by less than {threshold} over the last quarter.")
+    if overfit:
+        lines.append("- **Overfitting**: the test curve is flat or falling while the training-view PSNR still rises "
+                     f"(by {threshold} or more beyond the test curve's slope): " + ", ".join(overfit)
+                     + ". Such a cell has stopped generalising; it has not converged.")
+    return Finding("settling", lines, claims)
+
+
 __all__ = ["LAST_SHARE", "SETTLE_STEPS", "DRIFT_SHARE", "Slope", "CellSettling", "last_quarter_slope",
-           "cell_settling", "drift", "difference_settled", "unsettled_reason"]
+           "cell_settling", "drift", "difference_settled", "unsettled_reason", "settling_finding"]

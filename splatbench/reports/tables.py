@@ -27,35 +27,26 @@ from typing import Any
 
 import pandas as pd
 
-from splatbench.errors import InputError
 from splatbench.experiments.configs import flatten, unflatten
 from splatbench.experiments.grid import expand
-from splatbench.experiments.kind_report import KindReport
-from splatbench.experiments.kinds import get_kind
+from splatbench.experiments.kind_report import done_runs
+from splatbench.experiments.kinds import RunKind
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import t_quantile
 from splatbench.report_files import markdown_table
 
 
-def kind_report(kind: str) -> KindReport | None:
-    """The `KindReport` the run kind ``kind`` declares (None for a kind without one or an
-    unknown kind: a results folder may name a kind this process does not know)."""
-    try:
-        return get_kind(kind).report
-    except InputError:
-        return None
-
-
-def metric_specs(kind: str, table: pd.DataFrame) -> tuple[MetricSpec, ...]:
-    """The kind's metrics present in ``table``; for another kind, every numeric metric."""
+def metric_specs(kind: RunKind, table: pd.DataFrame) -> tuple[MetricSpec, ...]:
+    """The metrics a report of ``kind`` shows that ``table`` holds: those its `KindReport` names,
+    in its order; for a kind without one, every numeric metric (as its result declares it)."""
     present = {c[len("metric."):] for c in table.columns if c.startswith("metric.")}
-    declared = kind_report(kind)
-    if declared is not None:
-        return tuple(m for m in declared.metrics if m.name in present)
-    numeric = [c for c in table.columns if c.startswith("metric.") and pd.api.types.is_numeric_dtype(table[c])
-               and not pd.api.types.is_bool_dtype(table[c])]
-    return tuple(MetricSpec(c[len("metric."):], c[len("metric."):], ".4g") for c in numeric)
+    specs = kind.specs
+    if kind.report is not None:
+        return tuple(specs[name] for name in kind.report.metrics if name in present)
+    numeric = [c[len("metric."):] for c in table.columns if c.startswith("metric.")
+               and pd.api.types.is_numeric_dtype(table[c]) and not pd.api.types.is_bool_dtype(table[c])]
+    return tuple(specs.get(name) or MetricSpec(name, name, ".4g") for name in numeric)
 
 
 # --------------------------------------------------------------------------- rows
@@ -232,25 +223,25 @@ def _cell(r: pd.Series, m: MetricSpec) -> str:
     return f"{text} ({left} loaded run{'s' if left != 1 else ''} left out)"
 
 
-def loaded_runs(runs: pd.DataFrame) -> pd.Series:
-    """True per run timed while other processes loaded the machine (``metric.time_loaded`` is 1;
-    False for every run where the column is absent: runs from before it was recorded)."""
-    if "metric.time_loaded" not in runs.columns:
+def loaded_runs(runs: pd.DataFrame, kind: RunKind) -> pd.Series:
+    """True per run timed while other processes loaded the machine, where the kind's mark leaves
+    such a run out of its timed metrics only (`LoadMarks`, scope "timed": the train kind's
+    ``metric.time_loaded`` is 1); False for every run where the kind has no such mark or the
+    column is absent (runs from before it was recorded)."""
+    load = kind.report.load if kind.report is not None else None
+    col = f"metric.{load.flag}" if load is not None and load.scope == "timed" else None
+    if col not in runs.columns:
         return pd.Series(False, index=runs.index)
-    return pd.to_numeric(runs["metric.time_loaded"], errors="coerce").fillna(0) != 0
+    return pd.to_numeric(runs[col], errors="coerce").fillna(0) != 0
 
 
-def done_runs(table: pd.DataFrame) -> pd.DataFrame:
-    return table[table.status == "done"]
-
-
-def axis_table(spec: ExperimentSpec, axis: str, table: pd.DataFrame, metrics: Sequence[MetricSpec]) -> AxisTable:
+def axis_table(spec: ExperimentSpec, kind: RunKind, axis: str, table: pd.DataFrame, metrics: Sequence[MetricSpec]
+               ) -> AxisTable:
     """The `AxisTable` of ``axis`` over the done runs of ``table``. The kind's time metrics
     (`KindReport.timed`) pool only the runs not timed under load (`loaded_runs`): column
     ``<metric>.loaded`` counts those left out (docs/reports.md, "Loaded times")."""
     rows = axis_rows(spec, axis)
-    declared = kind_report(spec.kind)
-    timed = set(declared.timed) if declared is not None else set()
+    timed = set(kind.report.timed) if kind.report is not None else set()
     done = done_runs(table)
     records = []
     per_seed: dict[tuple[str, str, str], dict[int, float]] = {}
@@ -259,7 +250,7 @@ def axis_table(spec: ExperimentSpec, axis: str, table: pd.DataFrame, metrics: Se
         for row in rows:
             runs = at_scene[at_scene.run_id.isin(row.run_ids)]
             rec: dict[str, Any] = {"scene": scene, "label": row.label, "runs": len(runs)}
-            loaded = loaded_runs(runs)
+            loaded = loaded_runs(runs, kind)
             for m in metrics:
                 left = int(loaded.sum()) if m.name in timed else 0
                 values = seed_values(runs[~loaded] if left else runs, m.name)
@@ -327,5 +318,5 @@ def _json(value: Any) -> str:
     return json.dumps(value, sort_keys=True)
 
 
-__all__ = ["kind_report", "metric_specs", "shared_prefix", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
+__all__ = ["metric_specs", "shared_prefix", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
            "axis_table", "cell_labels", "done_runs", "loaded_runs", "decode"]

@@ -50,7 +50,8 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     before SfM starts and its result as it ends; the start made (``init auto: sfm (...)``,
     ``init_region auto: convergence (...)``) is said once it is made, before the progress
     bar. These lines go to stderr as they happen,
-    unless --quiet, and are always among the result's notes (so in --json and result.json).
+    unless --quiet, and are always among the result's notes (so in --json and result.json; a
+    warning among its warnings).
 
     An output folder that already holds a run (result.json, point_cloud.ply or
     checkpoints/) is refused in one line, exit 2, untouched, unless --resume names one of
@@ -130,7 +131,9 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     if _load_line(result):
         click.echo(_load_line(result))
     for note in (n for n in result.notes if n not in shown):
-        click.echo(note if note.startswith("warning: ") else f"note: {note}", err=note.startswith("warning: "))
+        click.echo(f"note: {note}")
+    for warning in (w for w in result.warnings if w not in shown):
+        click.echo(warning, err=True)
     click.echo(f"wrote {result.ply_path}")
 
 

@@ -103,11 +103,13 @@ class Initialization:
     ``summary``: JSON-ready numbers (``method``, ``points``; ``asked`` when it differs from
     ``method``; random: ``region``, ``center``, ``size``; given points: ``jitter``; SfM:
     ``poses``, ``registered``, ``total``, ``center_rmse_rel``, ``cached``); ``note``: one
-    line for the train log (None when there is nothing to say)."""
+    line for the train log (None when there is nothing to say); ``warning``: the note is a
+    warning (`TrainResult.warnings`: the start is known not to fit the scene)."""
 
     gaussians: Gaussians
     summary: dict[str, Any] = field(default_factory=dict)
     note: str | None = None
+    warning: bool = False
 
 
 Initializer = Callable[..., "Gaussians | Initialization"]  # (dataset, settings: InitSettings) -> ...
@@ -135,7 +137,7 @@ def initialize(name: str, dataset, settings: InitSettings) -> Initialization:
     if init.note and settings.say is not None and settings.say_note:  # said as soon as the start is made, before training
         settings.say(init.note)
     return Initialization(init.gaussians, {"method": name, "points": len(init.gaussians), **init.summary},
-                          init.note)
+                          init.note, init.warning)
 
 
 # ------------------------------------------------------------------ given points
@@ -222,13 +224,14 @@ def surface(dataset, settings: InitSettings) -> Initialization:
 class Region:
     """Where random points are drawn: a ball (``size`` = radius) or an axis-aligned cube
     (``size`` = half-side) around ``center`` [3]; ``chosen`` is the `REGIONS` name, ``note``
-    says why when ``auto`` chose it or when it is known not to hold the scene."""
+    says why when ``auto`` chose it or when it is known not to hold the scene (``warning``)."""
 
     chosen: str
     shape: str            # "ball" or "cube"
     center: np.ndarray    # [3] float64
     size: float
     note: str | None = None
+    warning: bool = False  # the note warns: the region is known not to hold such a scene
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """[n, 3] float64 points uniform in the region."""
@@ -285,7 +288,8 @@ def random_region(dataset, region: str = "auto", extent: float = 3.0) -> Region:
                   f"warning: init_region auto: the training cameras look one way (forward-facing: their optical "
                   f"axes are nearly parallel), and no region here is known to contain such a scene; started from "
                   f"gsplat's camera cube (half-side {made.size:.3g} = {extent:g} scene scales around the cameras), "
-                  f"which holds only what lies within a few rig sizes of them (init=sfm triangulates the scene)")
+                  f"which holds only what lies within a few rig sizes of them (init=sfm triangulates the scene)",
+                  warning=True)
 
 
 def _convergence(cameras, meet: np.ndarray, radius: float) -> Region:
@@ -304,7 +308,7 @@ def random(dataset, settings: InitSettings) -> Initialization:
     gaussians = from_points(xyz, rgb, sh_degree=settings.sh_degree, opacity=settings.opacity)
     summary = {"region": region.chosen, "region_shape": region.shape,
                "region_center": [round(float(v), 6) for v in region.center], "region_size": round(region.size, 6)}
-    return Initialization(gaussians, summary, region.note)
+    return Initialization(gaussians, summary, region.note, region.warning)
 
 
 __all__ = ["INITIALIZERS", "REGIONS", "InitSettings", "Initialization", "Region", "initialize", "jitter_points",

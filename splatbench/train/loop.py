@@ -154,6 +154,7 @@ class Trainer:
             region=config.init_region, extent=config.init_extent, jitter=config.init_jitter,
             sfm_poses=config.init_sfm_poses, say_note=not resuming))
         gaussians, self.init_summary, self.init_note = init.gaussians, init.summary, init.note
+        self.init_warns = init.warning
         self.extent = scene_extent(train.cameras)
         self.lrs = lr_groups(config)
         # parameters, Adam's moments, the strategy's state, targets and the loss live where the
@@ -552,23 +553,23 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         ev = trainer.evaluate(list(dict.fromkeys(final_lpips + full_lpips + curve_lpips)))
     except Interrupted as exc:
         raise Interrupted(exc.signum, f"kept the final model {ply} (not evaluated)") from None
-    notes = resumed + config_warnings + list(trainer.dataset.notes) + ([trainer.init_note] if trainer.init_note else []) \
+    notes = resumed + list(trainer.dataset.notes) \
+        + ([trainer.init_note] if trainer.init_note and not trainer.init_warns else []) \
         + [trainer.background_note] + ([trainer.up_note] if trainer.up_note else []) \
         + ([lpips_note] if lpips_note else [])
-    schedule_note = _schedule_note(trainer.strategy, config)
-    if schedule_note:
-        notes.append(schedule_note)
     early_note = get_protocol(config.protocol).early_stop_note(config.iterations)
     if early_note:
         notes.append(early_note)
+    # what the run warns of (TrainResult.warnings): the config's, the random start's region, the strategy's
+    # schedule and outcome (both warnings by their contract, splatbench.strategies.base), an empty model
+    warnings = config_warnings + ([trainer.init_note] if trainer.init_note and trainer.init_warns else [])
     outcome_note = getattr(trainer.strategy, "outcome_note", lambda _: None)(trainer.state)  # optional
-    if outcome_note:
-        notes.append(outcome_note)
+    warnings += [w for w in (_schedule_note(trainer.strategy, config), outcome_note) if w]
     if trainer.num_gaussians == 0:
         gone = next((h.step for h in history if h.num_gaussians == 0), trainer.step_index)
-        notes.append(f"warning: the model is empty: every Gaussian was pruned (none left from step {gone} on), so it "
-                     f"renders the background only; start from more points (init=surface or random, or SfM with "
-                     f"more registered views)")
+        warnings.append(f"warning: the model is empty: every Gaussian was pruned (none left from step {gone} on), so "
+                        f"it renders the background only; start from more points (init=surface or random, or SfM "
+                        f"with more registered views)")
     if ev.views == 0:
         notes.append("no test views: test metrics are None")
     else:
@@ -585,7 +586,8 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         sh_degree_reason=trainer.sh.reason, ply_path=str(ply), render_ms_per_view=ev.render_ms_per_view,
         peak_rss_mb=round(peak_rss_mb(), 1), strategy=trainer.strategy.name, scene_extent=trainer.extent,
         test_views=ev.views, history=history, evaluations=evaluations,
-        sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, init=trainer.init_summary,
+        sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, warnings=warnings,
+        init=trainer.init_summary,
         warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step, protocol=config.protocol,
         raster=config.raster.to_dict(),
         step_evaluations=step_evaluations, topology=topology_counts(trainer.state))

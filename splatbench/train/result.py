@@ -66,6 +66,9 @@ class TrainResult:
     evaluations: list[EvalPoint] = field(default_factory=list)     # every `eval_every` steps, and the end
     sh_decisions: list[dict] = field(default_factory=list)         # auto SH: each band measured (ShDecision)
     notes: list[str] = field(default_factory=list)                 # e.g. why LPIPS was skipped
+    warnings: list[str] = field(default_factory=list)  # what the run warns of, one line each ("warning: ..."):
+                                        # the config's (`TrainConfig.warnings`), the strategy's schedule and outcome
+                                        # notes, a random start's region known not to hold the scene, an empty model
     init: dict = field(default_factory=dict)   # how the initial Gaussians were made: method, points (and for
                                                # init="sfm": registered, total, center_rmse_rel, cached, ...)
     warmup_seconds: float = 0.0         # kernel compilation / cache loading before the loop (not in train_seconds)

@@ -1,5 +1,11 @@
-"""The protocol a train report's runs followed, stated in its header from what the runs
-recorded (their resolved ``config.*`` columns and metrics), never from prose.
+"""The train kind's report hooks (`KindReport.header_notes`, ``axis_notes``, ``metric_notes``):
+what its reports say beyond the tables, from what the runs recorded (their resolved
+``config.*`` columns and metrics), never from prose.
+
+* header: `protocol_lines`, the protocol the runs followed (below);
+* axis notes: `auto_sh_degree_note` (the degree ``auto`` ended at), `schedule_confound_note`
+  (what a densification-schedule setting changes besides itself);
+* metric notes: `lpips_note` (which LPIPS the column is).
 
 `protocol_lines(table)`: one markdown list of the fields that change a 3DGS number
 (PROTOCOL.md; NerfBaselines): the named protocol, the schedule (iterations, scaled or
@@ -19,7 +25,7 @@ from typing import Any
 
 import pandas as pd
 
-from splatbench.reports.tables import done_runs
+from splatbench.experiments.kind_report import AxisRows, Claim, done_runs
 
 #: What the runs' protocol is called when their config names none (`TrainConfig.protocol` absent).
 DEFAULT_PROTOCOL = "quick (graphdeco's 30,000-step schedule scaled to the run's length)"
@@ -223,4 +229,89 @@ def _seeds(done: pd.DataFrame) -> str:
             f"scene) (docs/reports.md, \"What an interval covers\").")
 
 
-__all__ = ["DEFAULT_PROTOCOL", "protocol_lines", "seed_varies"]
+# --------------------------------------------------------------------------- axis and metric notes
+def auto_sh_degree_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
+    """The ``sh_degree`` axis: the degree the ``auto`` rows ended at, per scene."""
+    lines: list[str] = []
+    claims: list[Claim] = []
+    if table.axis != "sh_degree" or "metric.sh_degree" not in runs.columns:
+        return lines, claims
+    auto = [r for r in table.rows if r.value == "auto"]
+    if auto:
+        parts = []
+        done = done_runs(runs)
+        for scene in scenes:
+            sel = done[(done.scene == scene) & done.run_id.isin(auto[0].run_ids)]
+            degrees = [int(d) for d in pd.to_numeric(sel["metric.sh_degree"], errors="coerce").dropna()]
+            if not degrees:
+                continue
+            mean = sum(degrees) / len(degrees)
+            if len(set(degrees)) == 1:
+                text = f"{degrees[0]}"
+                where = "every seed" if len(degrees) > 1 else "one seed"
+            else:
+                text = f"{min(degrees)}–{max(degrees)}"
+                where = "per seed: " + ", ".join(map(str, degrees))
+            claims.append(Claim("auto", scene, auto[0].label, "sh_degree", "mean", mean, text))
+            parts.append(f"{text} on {scene} ({where})")
+        if parts:
+            lines.append("- `auto` ended at SH degree " + ", ".join(parts) + ".")
+    return lines, claims
+
+
+#: Strategies whose opacity resets gate size pruning and fire only inside the refine window
+#: (`splatbench.strategies.default.DefaultStrategy` and its subclasses).
+_RESETTING = ("default", "absgrad", "budget")
+
+
+def schedule_confound_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
+    """What a densification-schedule setting changes besides itself, read from the
+    runs' configs (so it holds for grids run before the counts were recorded):
+    ``reset_every = 0`` also turns off size pruning (DefaultStrategy prunes by size only after
+    the first reset), and ``refine_stop`` also changes the number of opacity resets (they fire
+    only inside the refine window)."""
+    done = done_runs(runs)
+    col = f"config.{table.axis}" if not table.axis.startswith("config.") else table.axis
+    if "config.strategy" not in done.columns or col not in done.columns:
+        return [], []
+    resetting = done[done["config.strategy"].isin(_RESETTING)]
+    lines = []
+    if table.axis == "strategy_options.reset_every":
+        zero = [r for r in table.rows if _decoded(r.value) == 0 and resetting.run_id.isin(r.run_ids).any()]
+        for r in zero:
+            lines.append(f"- `{r.label}` (no opacity resets) also turns off size pruning: the default strategy prunes "
+                         f"Gaussians larger than `max_world_size` × the scene extent only after its first opacity "
+                         f"reset (splatbench/strategies/default.py), so this cell changes two things, not one.")
+    if table.axis == "strategy_options.refine_stop" and len(resetting):
+        lines.append("- Opacity resets fire only inside the refine window (as in graphdeco), so `refine_stop` also "
+                     "changes how many resets a run makes (`metric.opacity_resets` where recorded).")
+    return lines, []
+
+
+def _decoded(value):
+    if isinstance(value, str):
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
+    return value
+
+
+def lpips_note(runs: pd.DataFrame) -> list[str]:
+    """Which LPIPS the report's column is (net and input convention), from the
+    done runs' ``lpips_net`` / ``lpips_scale_inputs``; none for a table without them."""
+    from splatbench.metrics.perceptual import convention  # late: the reports start without torch
+
+    if "metric.lpips_net" not in runs.columns:
+        return []
+    done = done_runs(runs)
+    done = done[done["metric.lpips_net"].fillna("").astype(bool)]
+    kinds = sorted({(str(r["metric.lpips_net"]), bool(r["metric.lpips_scale_inputs"])) for _, r in done.iterrows()})
+    if len(kinds) == 1:
+        return [f"- The `LPIPS` column is {convention(*kinds[0])}."]
+    return [f"- The `LPIPS` column mixes {len(kinds)} conventions (compare within one only): "
+            + "; ".join(convention(*k) for k in kinds) + "."] if kinds else []
+
+
+__all__ = ["DEFAULT_PROTOCOL", "protocol_lines", "seed_varies", "scene_kinds", "auto_sh_degree_note",
+           "schedule_confound_note", "lpips_note"]
