@@ -7,7 +7,8 @@ the strategy's state (accumulators, its random generator, refinement history), t
 schedule, the view order (the permutation left in this epoch and the generator that
 draws the next), the torch and numpy global random states, the step index, and the
 training history and evaluations recorded so far. It is written with `torch.save`
-(atomically, `report_files.write_binary`: temporary file, fsync, rename) beside the PLY of the same step.
+(atomically, `report_files.write_binary`: temporary file, fsync, rename) beside the PLY
+of the same step.
 
 A checkpoint is data, never code: it holds only tensors, numbers, strings, lists and
 dicts, and is read with ``torch.load(weights_only=True)``, which reconstructs nothing
