@@ -152,11 +152,13 @@ def test_report_is_rebuilt_from_its_files(run):
 
 @pytest.mark.parametrize("edit, parts", [
     (lambda d: d.pop("settings"), ["missing 'settings'"]),
-    (lambda d: d["machine"].update(gpu="x"), ["machine", "unknown 'gpu'"]),
-    (lambda d: d.update(seconds="fast"), ["'seconds'", "wrong type"]),
-    (lambda d: d["settings"].update(repeats=2.5), ["settings", "'repeats'"]),
-    (lambda d: d["machine"].update(loadavg_end=["high"]), ["loadavg_end", "list of numbers"]),
-    (lambda d: d.update(notes="one"), ["'notes'"]),
+    (lambda d: d["settings"].pop("seed"), ["settings: missing 'seed'"]),  # not silently the default
+    (lambda d: d["machine"].update(gpu="x"), ["machine.gpu: unknown key"]),
+    (lambda d: d.update(seconds="fast"), ["seconds: expected a finite number", "'fast'"]),
+    (lambda d: d["settings"].update(repeats=2.5), ["settings.repeats: expected an int", "2.5"]),
+    (lambda d: d["machine"].update(loadavg_end=["high"]), ["machine.loadavg_end: expected a list of numbers"]),
+    (lambda d: d.update(notes="one"), ["notes: expected a list of strings"]),
+    (lambda d: d.update(machine=[]), ["machine: expected a JSON object, got list"]),
 ])
 def test_a_bad_run_record_is_one_line(edit, parts, tmp_path):
     """run.json is data from a file: every field is checked before the report reads it."""

@@ -33,6 +33,7 @@ import pandas as pd
 from splatbench.backends.base import GROUPS, OUTPUTS
 from splatbench.compare.run import CompareResult, CompareRow, CompareSettings
 from splatbench.compare.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD, U32
+from splatbench.checks import dataclass_from_mapping
 from splatbench.compare.measure import spread
 from splatbench.errors import InputError
 from splatbench.fsutil import read_text
@@ -276,39 +277,30 @@ class CompareRecord:
 
     @classmethod
     def from_dict(cls, data: Any, what: str) -> CompareRecord:
-        """The record `to_dict` wrote; a missing, unknown or mistyped field is a one-line
-        `InputError` starting ``what:``."""
-        data = _fields(data, ("command", "seconds", "written", "machine", "settings", "notes"), what)
-        _check(data, what, command=str, seconds=(int, float), written=str, notes=list)
-        if not all(isinstance(n, str) for n in data["notes"]):
-            raise InputError(f"{what}: 'notes' must be a list of strings")
-        machine = _fields(data["machine"], [f.name for f in fields(MachineInfo)], f"{what}: machine")
-        _check(machine, f"{what}: machine", loadavg_start=list, loadavg_end=list)
-        for key in ("loadavg_start", "loadavg_end"):
-            if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in machine[key]):
-                raise InputError(f"{what}: machine: {key!r} must be a list of numbers, got {machine[key]!r}")
-        settings = _fields(data["settings"], [f.name for f in fields(CompareSettings)], f"{what}: settings")
-        _check(settings, f"{what}: settings", repeats=int, device=str)
-        return cls(data["command"], data["seconds"], data["written"], MachineInfo(**machine),
-                   CompareSettings(**settings), tuple(data["notes"]))
+        """The record `to_dict` wrote, checked at the boundary (`checks.dataclass_from_mapping`:
+        unknown keys, types): a missing, unknown or mistyped field is a one-line `InputError`
+        starting ``what:`` and naming it (``settings.repeats``)."""
+        data = _whole(data, cls, what)
+        machine = dataclass_from_mapping(MachineInfo, _whole(data["machine"], MachineInfo, f"{what}: machine"),
+                                         prefix="machine.", source=what)
+        settings = dataclass_from_mapping(CompareSettings, _whole(data["settings"], CompareSettings,
+                                                                  f"{what}: settings"), prefix="settings.", source=what)
+        notes = data["notes"]
+        if not (isinstance(notes, list) and all(isinstance(n, str) for n in notes)):
+            raise InputError(f"{what}: notes: expected a list of strings, got {notes!r}")
+        return dataclass_from_mapping(cls, {**data, "machine": machine, "settings": settings, "notes": tuple(notes)},
+                                      source=what)
 
 
-def _fields(data: Any, names, what: str) -> dict[str, Any]:
-    """``data`` when it is a JSON object with exactly the keys ``names``; else a one-line `InputError`."""
+def _whole(data: Any, cls: type, what: str) -> dict[str, Any]:
+    """``data`` when it is a JSON object holding every field of the dataclass ``cls`` (a missing
+    one is not given its default: the file is read as written); else a one-line `InputError`."""
     if not isinstance(data, dict):
         raise InputError(f"{what}: expected a JSON object, got {type(data).__name__}")
-    missing, unknown = [n for n in names if n not in data], [k for k in data if k not in names]
-    if missing or unknown:
-        raise InputError(f"{what}: " + "; ".join(part for part in (
-            f"missing {', '.join(map(repr, missing))}" if missing else "",
-            f"unknown {', '.join(map(repr, unknown))}" if unknown else "") if part))
+    missing = [f.name for f in fields(cls) if f.name not in data]
+    if missing:
+        raise InputError(f"{what}: missing {', '.join(map(repr, missing))}")
     return data
-
-
-def _check(data: dict[str, Any], what: str, **types) -> None:
-    for key, kind in types.items():
-        if not isinstance(data[key], kind) or isinstance(data[key], bool):
-            raise InputError(f"{what}: {key!r} has the wrong type ({data[key]!r})")
 
 
 def run_record(result: CompareResult) -> CompareRecord:
