@@ -2,7 +2,9 @@
 permissions an ordinary ``open`` / ``mkdir`` would have given them.
 
 `atomic_write` writes one file through a fsync'd temporary ``.<name>.<pid>.<random>.tmp``
-beside it, created by an ordinary ``open`` (the result store, the reports, PNGs, PLYs).
+beside it, created by an ordinary ``open``: the primitive under `splatbench.report_files`
+(the writer of every result, report, figure, cache and checkpoint) and under the model
+files below it (PLYs, PNG images, workloads).
 `tempfile.mkdtemp` creates 0700 folders whatever the umask; renamed into place as they
 are, a result would be unreadable to the rest of a group, so `replace_dir` first gives
 the temporary folder its umask mode (0755 under umask 022).

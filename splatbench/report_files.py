@@ -1,15 +1,21 @@
-"""How a report's files land on disk: the one writer of the verification applications
-(compare, conform, stress, validate), the benchmarks and the shared figures; and the one
-writer of a Markdown table (`markdown_table`), which every report's tables go through.
+"""How results, reports and caches land on disk: the one file writer of every part at the
+measurement level and above (the verification applications, the benchmarks, training's
+configs, results and checkpoints, the experiment store and its caches, the experiment
+reports and every figure); and the one writer of a Markdown table (`markdown_table`),
+which every report's tables go through.
 
-Every file is written whole or not at all (`splatbench.fsutil.atomic_write`: a
-temporary beside it, fsync'd, renamed into place with the umask's mode), so a report
-stopped half-way never leaves a truncated table beside an older markdown file.
+Every file is written whole or not at all (`splatbench.fsutil.atomic_write`, the primitive
+underneath: a temporary beside it, fsync'd, renamed into place with the umask's mode), so a
+run stopped half-way never leaves a truncated table, a half PNG or a cut checkpoint beside
+older files. Below this level, the model files (`ply`, `images`, `workloads`) call
+`atomic_write` themselves; files inside a folder built by `fsutil.building_dir` are written
+plainly, since that folder lands whole.
 
     write_text(path, text) -> Path             UTF-8 text (markdown)
     write_json(path, data, indent=1) -> Path   JSON and a final newline
     write_parquet(path, frame) -> Path         a pandas DataFrame, without its index
     write_csv(path, columns, rows) -> Path     a header line, then one line per mapping in ``rows`` (LF endings)
+    write_binary(path, dump) -> Path           what ``dump(stream)`` writes to a binary stream (np.save, torch.save)
     save_figure(fig, path, **kw) -> Path       a matplotlib figure (PNG at 110 dpi, nothing clipped), closed
     run_header(command, seconds, machine)      where and how a run was made: {"command", "seconds",
                                                "written", "machine"} (machine: `MachineInfo`, load included)
@@ -20,11 +26,11 @@ from __future__ import annotations
 
 import csv
 import json
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from splatbench.fsutil import atomic_write
 from splatbench.metrics.machine import MachineInfo
@@ -54,6 +60,16 @@ def write_csv(path: str | Path, columns: Sequence[str], rows: Iterable[Mapping[s
             writer = csv.DictWriter(fh, fieldnames=list(columns), lineterminator="\n")
             writer.writeheader()
             writer.writerows(rows)
+
+    return atomic_write(path, write)
+
+
+def write_binary(path: str | Path, dump: Callable[[BinaryIO], object]) -> Path:
+    """What ``dump(stream)`` writes to the binary ``stream`` (``np.save``, ``torch.save``: a
+    stream, so neither appends a suffix to the temporary's name) into ``path``, atomically."""
+    def write(temp: Path) -> None:
+        with open(temp, "wb") as stream:
+            dump(stream)
 
     return atomic_write(path, write)
 
@@ -113,4 +129,5 @@ def _table_line(cells: Sequence[str]) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
-__all__ = ["write_text", "write_json", "write_parquet", "write_csv", "save_figure", "run_header", "markdown_table"]
+__all__ = ["write_text", "write_json", "write_parquet", "write_csv", "write_binary", "save_figure", "run_header",
+           "markdown_table"]

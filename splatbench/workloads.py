@@ -20,6 +20,7 @@ import numpy as np
 from splatbench.cameras import Camera
 from splatbench.checks import check_sh_degree, parse_size
 from splatbench.errors import InputError
+from splatbench.fsutil import atomic_write
 from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians, quat_to_rotmat
 from splatbench.safeio import read_npz
 
@@ -150,11 +151,17 @@ def model_workload(model: str | Path, view: int, views: int, width: int, height:
     return Workload(f"{path.stem}-view{view}", gaussians, camera)
 
 
-def save_npz(workload: Workload, path: str | Path) -> None:
-    """Write ``workload`` with the keys of `WORKLOAD_KEYS`."""
+def save_npz(workload: Workload, path: str | Path) -> Path:
+    """Write ``workload`` with the keys of `WORKLOAD_KEYS` into ``path`` (as named: no suffix is
+    added), whole or not at all (`fsutil.atomic_write`); returns the path."""
     g, c = workload.gaussians, workload.camera
-    np.savez(path, means=g.means, log_scales=g.log_scales, quats=g.quats, opacity_logits=g.opacity_logits,
-             sh=g.sh, viewmat=c.world_to_camera, K=c.K, width=c.width, height=c.height)
+
+    def write(temp: Path) -> None:
+        with open(temp, "wb") as stream:  # a stream: np.savez would add ".npz" to the temporary's name
+            np.savez(stream, means=g.means, log_scales=g.log_scales, quats=g.quats, opacity_logits=g.opacity_logits,
+                     sh=g.sh, viewmat=c.world_to_camera, K=c.K, width=c.width, height=c.height)
+
+    return atomic_write(path, write)
 
 
 def load_npz(path: str | Path, *, view: int = 0) -> Workload:

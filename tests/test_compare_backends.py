@@ -23,8 +23,9 @@ from splatbench.backends import Backend, BackendInfo, get_backend
 from splatbench.backends.base import GROUPS
 from splatbench.compare.run import CompareSettings, auto_scale, run_compare
 from splatbench.compare.bounds import GRAD_TERM_OPS, U32, gradient_bound
-from splatbench.compare.report import (RUN_RECORD, findings, render_markdown, result_table, rewrite_report,
-                                                write_compare)
+from splatbench.errors import InputError
+from splatbench.compare.report import (RUN_RECORD, CompareRecord, findings, read_run_record, render_markdown,
+                                       result_table, rewrite_report, write_compare)
 from splatbench.workloads import synthetic
 
 WIDTH, HEIGHT = 32, 24
@@ -149,6 +150,33 @@ def test_report_is_rebuilt_from_its_files(run):
     assert rewrite_report(out).read_text() == text
 
 
+@pytest.mark.parametrize("edit, parts", [
+    (lambda d: d.pop("settings"), ["missing 'settings'"]),
+    (lambda d: d["settings"].pop("seed"), ["settings: missing 'seed'"]),  # not silently the default
+    (lambda d: d["machine"].update(gpu="x"), ["machine.gpu: unknown key"]),
+    (lambda d: d.update(seconds="fast"), ["seconds: expected a finite number", "'fast'"]),
+    (lambda d: d["settings"].update(repeats=2.5), ["settings.repeats: expected an int", "2.5"]),
+    (lambda d: d["machine"].update(loadavg_end=["high"]), ["machine.loadavg_end: expected a list of numbers"]),
+    (lambda d: d.update(notes="one"), ["notes: expected a list of strings"]),
+    (lambda d: d.update(machine=[]), ["machine: expected a JSON object, got list"]),
+])
+def test_a_bad_run_record_is_one_line(edit, parts, tmp_path):
+    """run.json is data from a file: every field is checked before the report reads it."""
+    data = json.loads((COMMITTED / RUN_RECORD).read_text())
+    edit(data)
+    path = tmp_path / RUN_RECORD
+    path.write_text(json.dumps(data))
+    with pytest.raises(InputError) as err:
+        read_run_record(path)
+    message = str(err.value)
+    assert "\n" not in message and message.startswith(f"{RUN_RECORD}: {str(path)!r}"), message
+    assert all(p in message for p in parts), message
+    path.write_text("{not json")
+    with pytest.raises(InputError, match="is not JSON"):
+        read_run_record(path)
+    assert isinstance(CompareRecord.from_dict(json.loads((COMMITTED / RUN_RECORD).read_text()), "x"), CompareRecord)
+
+
 def test_torch64_gradient_oracle_agrees_with_finite_differences():
     pytest.importorskip("torch")
     result = run_compare(["drjit"], [synthetic(40, WIDTH, HEIGHT, seed=3)],
@@ -204,7 +232,9 @@ def test_committed_report_is_its_numbers():
     if "band_share" not in table.columns:
         pytest.skip("reports/compare predates the derived boundary band (issue 20): rerun its command (run.json) "
                     "on a quiet machine with --out reports/compare")
-    record = json.loads((COMMITTED / RUN_RECORD).read_text())
+    record = read_run_record(COMMITTED / RUN_RECORD)
+    # the typed record writes back the very file it was read from
+    assert json.dumps(record.to_dict(), indent=1) + "\n" == (COMMITTED / RUN_RECORD).read_text()
     text = (COMMITTED / "report.md").read_text()
     figures = [COMMITTED / name for name in ("time_vs_error.png", "time_vs_error_fwd_bwd.png")]
     assert all(f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in figures)

@@ -81,7 +81,7 @@ def test_resume_of_the_folders_own_checkpoint_is_allowed_and_of_another_is_not(t
 def test_claim_out_names_resume_for_an_unfinished_run_and_removes_only_trainer_files(tmp_path):
     run = tmp_path / "run"
     (run / "checkpoints").mkdir(parents=True)
-    for name in ("iteration_5.ply", "iteration_5.pt", ".tmp-abc.pt", "keep.txt"):
+    for name in ("iteration_5.ply", "iteration_5.pt", ".tmp-abc.pt", ".iteration_6.pt.4242.0badcafe.tmp", "keep.txt"):
         (run / "checkpoints" / name).write_text(name)
     (run / "config.toml").write_text("")
     with pytest.raises(InputError) as err:  # interrupted: checkpoints but no result.json
@@ -91,6 +91,8 @@ def test_claim_out_names_resume_for_an_unfinished_run_and_removes_only_trainer_f
                               f"it (removes that run's files), or choose another --out")
     assert claim_out(run, resume=run / "checkpoints" / "iteration_5.pt") == []  # its own checkpoint: untouched
     removed = claim_out(run, force=True)
-    assert sorted(p.name for p in removed) == [".tmp-abc.pt", "config.toml", "iteration_5.ply", "iteration_5.pt"]
+    # the temporaries a killed checkpoint write leaves (fsutil.atomic_write's; an older version's .tmp-*.pt) go too
+    assert sorted(p.name for p in removed) == [".iteration_6.pt.4242.0badcafe.tmp", ".tmp-abc.pt", "config.toml",
+                                               "iteration_5.ply", "iteration_5.pt"]
     assert snapshot(run) == {"checkpoints/keep.txt": b"keep.txt"}
     assert claim_out(tmp_path / "missing") == [] and claim_out(tmp_path) == []  # no run there: nothing to do

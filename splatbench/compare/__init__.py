@@ -7,7 +7,8 @@ A verification application beside `splatbench.conform`, `splatbench.stress` and
     run       run_compare(backends, workloads, settings) -> CompareResult (what is measured)
     bounds    the derived tolerances and the typed measurements (ImageError, GradError, Timing)
     measure   oracle images, image errors, random-cotangent VJPs, interleaved timing
-    report    results.parquet, run.json, report.md and the figures (write_compare, rewrite_report)
+    report    results.parquet, run.json (a typed CompareRecord), report.md and the figures (write_compare,
+              rewrite_report)
     cli       the command line
 
 The package imports none of them here, so ``splatbench compare --help`` loads nothing heavy.

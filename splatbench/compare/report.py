@@ -2,6 +2,9 @@
 
     result_table(result) -> DataFrame     one row per backend x workload (columns below)
     findings(table) -> list[str]          statements computed from the table's numbers only
+    run_record(result) -> CompareRecord   what report.md reads besides the table (``run.json``)
+    read_run_record(path) -> CompareRecord  ``run.json`` back, checked field by field
+    render_markdown(record, table, figures, out) -> str   report.md's text
     write_compare(result, out) -> Path    DIR/results.parquet, DIR/run.json, DIR/report.md, DIR/time_vs_error*.png
     rewrite_report(out) -> Path           report.md and figures again from results.parquet and run.json
 
@@ -21,16 +24,20 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from types import SimpleNamespace
+from typing import Any
 
 import pandas as pd
 
 from splatbench.backends.base import GROUPS, OUTPUTS
-from splatbench.compare.run import CompareResult, CompareRow
+from splatbench.compare.run import CompareResult, CompareRow, CompareSettings
 from splatbench.compare.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD, U32
+from splatbench.checks import dataclass_from_mapping
 from splatbench.compare.measure import spread
+from splatbench.errors import InputError
+from splatbench.fsutil import read_text
+from splatbench.metrics.machine import MachineInfo
 from splatbench.report_files import markdown_table, run_header, write_json, write_parquet, write_text
 
 MODES = ("matched", "exact")
@@ -250,11 +257,68 @@ def _spread_cell(r, stage: str) -> str:
             f"({r[f'{stage}_ms_min']:.1f}–{r[f'{stage}_ms_max']:.1f})")
 
 
-def run_record(result: CompareResult) -> dict:
-    """What the report needs besides the table (``run.json``): command, when, how long,
-    machine, settings and the per-workload notes."""
-    return {**run_header(result.command or "run_compare(...)", result.seconds, result.machine),
-            "settings": asdict(result.settings), "notes": list(result.notes)}
+@dataclass(frozen=True)
+class CompareRecord:
+    """What the report needs besides the table (``run.json``): the command that reproduces
+    the run, how long it took (s), when the record was written (ISO 8601, UTC), the machine,
+    the settings and the per-workload notes."""
+
+    command: str
+    seconds: float
+    written: str
+    machine: MachineInfo
+    settings: CompareSettings
+    notes: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        """``run.json``'s object: `run_header`'s keys, then ``settings`` and ``notes``."""
+        return {"command": self.command, "seconds": self.seconds, "written": self.written,
+                "machine": asdict(self.machine), "settings": asdict(self.settings), "notes": list(self.notes)}
+
+    @classmethod
+    def from_dict(cls, data: Any, what: str) -> CompareRecord:
+        """The record `to_dict` wrote, checked at the boundary (`checks.dataclass_from_mapping`:
+        unknown keys, types): a missing, unknown or mistyped field is a one-line `InputError`
+        starting ``what:`` and naming it (``settings.repeats``)."""
+        data = _whole(data, cls, what)
+        machine = dataclass_from_mapping(MachineInfo, _whole(data["machine"], MachineInfo, f"{what}: machine"),
+                                         prefix="machine.", source=what)
+        settings = dataclass_from_mapping(CompareSettings, _whole(data["settings"], CompareSettings,
+                                                                  f"{what}: settings"), prefix="settings.", source=what)
+        notes = data["notes"]
+        if not (isinstance(notes, list) and all(isinstance(n, str) for n in notes)):
+            raise InputError(f"{what}: notes: expected a list of strings, got {notes!r}")
+        return dataclass_from_mapping(cls, {**data, "machine": machine, "settings": settings, "notes": tuple(notes)},
+                                      source=what)
+
+
+def _whole(data: Any, cls: type, what: str) -> dict[str, Any]:
+    """``data`` when it is a JSON object holding every field of the dataclass ``cls`` (a missing
+    one is not given its default: the file is read as written); else a one-line `InputError`."""
+    if not isinstance(data, dict):
+        raise InputError(f"{what}: expected a JSON object, got {type(data).__name__}")
+    missing = [f.name for f in fields(cls) if f.name not in data]
+    if missing:
+        raise InputError(f"{what}: missing {', '.join(map(repr, missing))}")
+    return data
+
+
+def run_record(result: CompareResult) -> CompareRecord:
+    """The run's `CompareRecord`, written now (`run_header`: the command, the time, the machine)."""
+    header = run_header(result.command or "run_compare(...)", result.seconds, result.machine)
+    return CompareRecord(header["command"], header["seconds"], header["written"], result.machine, result.settings,
+                         tuple(result.notes))
+
+
+def read_run_record(path: str | Path) -> CompareRecord:
+    """The `CompareRecord` in ``path`` (a ``run.json``): a one-line `InputError` naming the file
+    when it cannot be read, is not JSON or does not hold a record."""
+    text = read_text(path, RUN_RECORD)
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise InputError(f"{RUN_RECORD}: {str(path)!r} is not JSON ({exc})") from None
+    return CompareRecord.from_dict(data, f"{RUN_RECORD}: {str(path)!r}")
 
 
 def _gradient_section(table: pd.DataFrame) -> list[str]:
@@ -292,19 +356,18 @@ def _gradient_section(table: pd.DataFrame) -> list[str]:
         markdown_table(head, rows), ""]
 
 
-def render_markdown(record: dict, table: pd.DataFrame, figures: list[Path], out: Path) -> str:
-    """``report.md`` from the table and the run record (`run_record`)."""
-    m = SimpleNamespace(**record["machine"])
-    s = SimpleNamespace(**record["settings"])
+def render_markdown(record: CompareRecord, table: pd.DataFrame, figures: list[Path], out: Path) -> str:
+    """``report.md`` from the table (`result_table`) and the run record (`run_record`)."""
+    m, s = record.machine, record.settings
     text = [
         "# splatbench compare: rasterizers against the float64 oracle", "",
-        f"Command: `{record['command']}`  ",
-        f"Written {record['written']} in {record['seconds']:.0f} s; "
+        f"Command: `{record.command}`  ",
+        f"Written {record.written} in {record.seconds:.0f} s; "
         f"{m.cpu_count} CPUs ({m.cpu_model}), device {s.device}, torch {m.torch}, drjit {m.drjit}.  ",
         f"Load average (1, 5, 15 min) at the start {m.loadavg_start}, at the end {m.loadavg_end}; "
         + ("**loaded** (1-min load above half the cores): absolute times are inflated by others' work."
            if table.loaded.any() else "not loaded."),
-        "", "## Workloads", "", *[f"- {n}" for n in record["notes"]], "",
+        "", "## Workloads", "", *[f"- {n}" for n in record.notes], "",
         "## Findings", "", "Computed from `results.parquet` by `splatbench.compare.report.findings`.", "",
         *[f"- {line}" for line in findings(table)], "",
         "## Forward error", "",
@@ -358,15 +421,20 @@ def write_compare(result: CompareResult, out: str | Path) -> Path:
     """Write ``out``/results.parquet, ``out``/run.json, the figures and ``out``/report.md;
     returns report.md's path."""
     out = Path(out)
+    record = run_record(result)
     write_parquet(out / "results.parquet", result_table(result))
-    write_json(out / RUN_RECORD, run_record(result), indent=1)
-    return rewrite_report(out)
+    write_json(out / RUN_RECORD, record.to_dict(), indent=1)
+    return _write_report(out, record)
 
 
 def rewrite_report(out: str | Path) -> Path:
     """(Re)write ``out``/report.md and its figures from ``out``/results.parquet and run.json."""
     out = Path(out)
+    return _write_report(out, read_run_record(out / RUN_RECORD))
+
+
+def _write_report(out: Path, record: CompareRecord) -> Path:
+    """report.md and the figures from ``out``/results.parquet (the numbers as stored) and ``record``."""
     table = pd.read_parquet(out / "results.parquet")
-    record = json.loads((out / RUN_RECORD).read_text(encoding="utf-8"))
     figures = time_figures(table, out)
     return write_text(out / "report.md", render_markdown(record, table, figures, out))

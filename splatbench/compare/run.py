@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING
 from splatbench.compare.bounds import MAX_ORACLE_PIXELS, GradError, ImageError, Timing, gradient_bound
 from splatbench.devices import torch_device
 from splatbench.errors import InputError, one_line
+from splatbench.metrics.machine import MachineInfo
 from splatbench.workloads import Workload, WorkloadSpec
 
 if TYPE_CHECKING:
@@ -135,7 +136,7 @@ class CompareRow:
 class CompareResult:
     rows: tuple[CompareRow, ...]
     settings: CompareSettings
-    machine: object               # `splatbench.metrics.machine.MachineInfo`
+    machine: MachineInfo
     command: str
     seconds: float
     notes: tuple[str, ...] = ()   # per workload: resolution of the error measurement, oracles

@@ -85,10 +85,11 @@ from splatbench.checks import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import (Claim, Comparison, Finding, FindingRules, KindReport, LoadMarks,
                                                Tradeoff, done_runs)
-from splatbench.fsutil import atomic_write, cache_root
+from splatbench.fsutil import cache_root
 from splatbench.experiments.kinds import INLINE, RunKind, RunResult, metric, read_config
 from splatbench.metrics.load import Load, own_share
 from splatbench.raster.options import RasterOptions
+from splatbench.report_files import write_binary
 from splatbench.workloads import build_workload, parse_workload_name
 
 #: `RasterOptions` fields a workload's camera sets (never in a raster run's config).
@@ -282,11 +283,7 @@ def exact_model(scene: str, seed: int, scale: float) -> np.ndarray:
     out = oracle(None, g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, cam, mode="exact")
     rgb = np.asarray(out.rgb, dtype=np.float64)
 
-    def write(temp: Path) -> None:
-        with open(temp, "wb") as fh:  # a file object: np.save would add ".npy" to the temporary's name
-            np.save(fh, rgb)
-
-    atomic_write(path, write)
+    write_binary(path, lambda stream: np.save(stream, rgb))
     return rgb
 
 

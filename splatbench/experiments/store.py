@@ -6,7 +6,7 @@ Layout, under a results folder::
     <experiment>/results.parquet    the table: one row per run of the grid, grid order (then its check's)
     <experiment>/work/<run_id>/     the run's own working folder (kinds' artifacts)
 
-Every file is written atomically (`splatbench.fsutil.atomic_write`): a temporary
+Every file is written atomically (`splatbench.report_files`, through `splatbench.fsutil.atomic_write`): a temporary
 file ``.<name>.<pid>.<random>.tmp`` in the same folder, flushed and fsync'd, then `os.replace`d onto its name (and the
 folder fsync'd). A reader lists only names ``<16 hex>.json``, so it never sees a
 temporary file, and a ``<run_id>.json`` is always whole: a process killed
@@ -37,7 +37,7 @@ import pandas as pd
 
 from splatbench.experiments.claims import pid_alive
 from splatbench.experiments.configs import flatten
-from splatbench.fsutil import atomic_write
+from splatbench.report_files import write_parquet, write_text
 
 #: Version of the per-run file layout.
 RECORD_FORMAT = 1
@@ -119,7 +119,7 @@ def write_record(results_dir: str | Path, record: RunRecord) -> Path:
     """Write ``record`` to ``<results>/<experiment>/<run_id>.json`` atomically."""
     text = json.dumps(record.to_dict(), indent=1, sort_keys=True)
     path = result_path(results_dir, record.experiment, record.run_id)
-    return atomic_write(path, lambda temp: temp.write_text(text, encoding="utf-8"))
+    return write_text(path, text)
 
 
 #: Field types of a stored record (`check_record`); None allowed where the default is None.
@@ -244,7 +244,7 @@ def _column(values: list[Any]) -> pd.Series:
 def write_table(folder: str | Path, records: Iterable[RunRecord]) -> Path:
     """Build the table of ``records`` and write ``<folder>/results.parquet`` atomically."""
     frame = build_table(records)
-    return atomic_write(Path(folder) / TABLE_NAME, lambda temp: frame.to_parquet(temp, index=False))
+    return write_parquet(Path(folder) / TABLE_NAME, frame)
 
 
 def save_table(folder: str | Path, ids: list[str]) -> Path:

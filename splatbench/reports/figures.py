@@ -20,6 +20,7 @@ import pandas as pd
 
 from splatbench.figures import panels, pyplot
 from splatbench.metrics.stats import t_interval
+from splatbench.report_files import save_figure
 from splatbench.reports.tables import AxisTable, done_runs
 
 
@@ -73,10 +74,7 @@ def curves_figure(table: AxisTable, runs: pd.DataFrame, path: Path) -> Path | No
     axes[-1].legend(title=table.axis, fontsize=7, title_fontsize=8, loc="lower right")
     fig.suptitle(f"{y_label} during training, by {table.axis} (mean over runs)", fontsize=10)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.1)  # titles and labels never clipped
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)  # whole or not at all, titles and labels never clipped; closes the figure
 
 
 def cell_means(runs: pd.DataFrame, labels: pd.Series, cost: str, quality: str) -> pd.DataFrame:

@@ -40,10 +40,9 @@ from splatbench.experiments.kind_report import Tradeoff
 from splatbench.experiments.kinds import RunKind
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.experiments.store import TABLE_NAME, build_table, experiment_dir, read_records
-from splatbench.fsutil import atomic_write
 from splatbench.figures import pareto_figure
 from splatbench.metrics.spec import MetricSpec
-from splatbench.report_files import markdown_table
+from splatbench.report_files import markdown_table, write_parquet, write_text
 from splatbench.reports.check import CHECK_TABLE_NAME, CheckResult, check_lines, check_result, check_table, header_line
 from splatbench.reports.figures import cell_means, curves_figure
 from splatbench.reports.findings import Finding, axis_finding, load_recorded, usable_runs
@@ -158,10 +157,10 @@ def write_report(report: Report, out: str | Path, *, results: str | Path | None 
         shutil.rmtree(figures)
     figures.mkdir(parents=True, exist_ok=True)
     table = report.table
-    atomic_write(out / TABLE_NAME, lambda temp: table.to_parquet(temp, index=False))
+    write_parquet(out / TABLE_NAME, table)
     checked = report.check.table if report.check is not None else None
     if checked is not None and len(checked):
-        atomic_write(out / CHECK_TABLE_NAME, lambda temp: checked.to_parquet(temp, index=False))
+        write_parquet(out / CHECK_TABLE_NAME, checked)
     else:  # the folder describes this report: no check runs, no check table
         (out / CHECK_TABLE_NAME).unlink(missing_ok=True)
 
@@ -190,7 +189,7 @@ def write_report(report: Report, out: str | Path, *, results: str | Path | None 
     run_options = "" if results is None else f" --results {results}"
     options = run_options + ("" if out_option is None else f" --out {out_option}")
     text = render_markdown(report, curve_paths, drawn, out, options, run_options)
-    atomic_write(out / REPORT_NAME, lambda temp: temp.write_text(text, encoding="utf-8"))
+    write_text(out / REPORT_NAME, text)
     return out / REPORT_NAME
 
 

@@ -7,7 +7,8 @@ the strategy's state (accumulators, its random generator, refinement history), t
 schedule, the view order (the permutation left in this epoch and the generator that
 draws the next), the torch and numpy global random states, the step index, and the
 training history and evaluations recorded so far. It is written with `torch.save`
-(atomically: temporary file, then rename) beside the PLY of the same step.
+(atomically, `report_files.write_binary`: temporary file, fsync, rename) beside the PLY
+of the same step.
 
 A checkpoint is data, never code: it holds only tensors, numbers, strings, lists and
 dicts, and is read with ``torch.load(weights_only=True)``, which reconstructs nothing
@@ -30,8 +31,6 @@ Example::
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +38,7 @@ import numpy as np
 import torch
 
 from splatbench.errors import InputError
+from splatbench.report_files import write_binary
 from splatbench.strategies.base import PARAM_GROUPS
 from splatbench.strategies.budget import BudgetState
 from splatbench.strategies.default import DefaultState, LossPlateau, RefineStats
@@ -123,7 +123,6 @@ FREE_FIELDS = ("out", "checkpoint_every", "dataset")  # dataset: a path; the tra
 def save_checkpoint(trainer: Any, path: str | Path, *, extra: dict[str, Any] | None = None) -> Path:
     """Write ``trainer``'s full state (and ``extra``, e.g. the history) to ``path``."""
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
     state = {
         "format": CHECKPOINT_FORMAT,
         "config": trainer.config.to_dict(),
@@ -139,15 +138,7 @@ def save_checkpoint(trainer: Any, path: str | Path, *, extra: dict[str, Any] | N
         "numpy_rng": _numpy_rng_state(),
         "extra": _encode(extra or {}),
     }
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".pt", dir=p.parent)
-    try:
-        with os.fdopen(fd, "wb") as stream:
-            torch.save(state, stream)
-        os.replace(tmp, p)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return p
+    return write_binary(p, lambda stream: torch.save(state, stream))  # whole or not at all
 
 
 def resume_line(path: str | Path, step: int, iterations: int) -> str:

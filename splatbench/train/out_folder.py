@@ -25,9 +25,10 @@ from splatbench.errors import InputError
 #: A run's files at the top of its folder (point_cloud.png: `splatbench render` of its PLY).
 RUN_FILES = ("result.json", "config.toml", "point_cloud.ply", "point_cloud.png")
 #: The checkpoints folder and the files the trainer writes in it (`checkpoint_path`, `.pt` beside
-#: it, and `save_checkpoint`'s temporary ``.tmp-*.pt`` left by a killed write).
+#: it, and the temporary a killed write leaves: `fsutil.atomic_write`'s
+#: ``.iteration_<step>.<ply|pt>.<pid>.<hex>.tmp``, or an older version's ``.tmp-*.pt``).
 CHECKPOINTS = "checkpoints"
-_CHECKPOINT_FILE = re.compile(r"(iteration_\d+\.(ply|pt)|\.tmp-.*\.pt)")
+_CHECKPOINT_FILE = re.compile(r"(iteration_\d+\.(ply|pt)|\.iteration_\d+\.(ply|pt)\.\d+\.[0-9a-f]+\.tmp|\.tmp-.*\.pt)")
 
 
 def run_markers(out: str | Path) -> list[str]:
