@@ -7,9 +7,9 @@ One step (graphdeco-inria's order, with gsplat's strategy hooks):
 2. ``splatbench.rasterize`` of the current parameters (SH sliced to the active
    degree; frozen groups carry no gradient), ``absgrad`` only if the strategy uses it.
 3. Loss ``(1 - λ) L1 + λ (1 - SSIM)`` plus the strategy's regularisation;
-   ``strategy.pre_backward``; backward -- split in two (loss, then the rasterizer) so
-   that benchmarks can time each; one Adam step per group; ``strategy.post_backward``
-   (densify / prune / relocate).
+   ``strategy.pre_backward``; backward -- the regularisation's, then one from the loss
+   through the rasterizer (a hook on the image times the two parts for benchmarks);
+   one Adam step per group; ``strategy.post_backward`` (densify / prune / relocate).
 
 Everything random is seeded from ``config.seed`` (torch's global generator, a
 dedicated `torch.Generator` for view order and backgrounds, numpy for random init),
@@ -260,8 +260,7 @@ class Trainer:
         rgb, _, _, info = self._render(camera, degree, bg.tolist())
         sync()
         t2 = time.perf_counter()
-        image = rgb.detach().requires_grad_(rgb.requires_grad)
-        loss = photometric_loss(image, target, cfg.ssim_lambda, cfg.ssim_window)
+        loss = photometric_loss(rgb, target, cfg.ssim_lambda, cfg.ssim_window)
         sync()
         t3 = time.perf_counter()
         reg = self.strategy.regularization(self.params, step)
@@ -269,14 +268,23 @@ class Trainer:
         self.strategy.pre_backward(self.params, self.optimizers, self.state, ctx)
         sync()
         t4 = time.perf_counter()
-        if rgb.requires_grad:
-            loss.backward()
         if isinstance(reg, torch.Tensor) and reg.requires_grad:
-            reg.backward()
-        sync()
-        t5 = time.perf_counter()
+            reg.backward()  # first: the parameters' gradients are reg's, then the rasterizer's added
+        t5 = t4
         if rgb.requires_grad:
-            rgb.backward(image.grad)
+            # one backward from the scalar loss (no explicit cotangent: `Tensor.backward(grad)` would
+            # import torch.fx's sympy, ~33 MB resident); the hook marks where the loss's part ends
+            # and the rasterizer's begins, for the stage times
+            def mark(_grad):
+                nonlocal t5
+                sync()
+                t5 = time.perf_counter()
+
+            rgb.register_hook(mark)
+            loss.backward()
+        else:
+            sync()
+            t5 = time.perf_counter()
         sync()
         t6 = time.perf_counter()
         for opt in self.optimizers.values():

@@ -1,0 +1,107 @@
+"""The training step's fast path against the path it replaced (issue 30, training throughput
+and memory): the same maths, so the losses and the model must be bit-identical step for step.
+
+The old path is reproduced here (as `tests/binning_3sigma.py` keeps the old binning): the
+rendered image detached into a leaf, the loss backpropagated to it, the regularisation's
+backward, then ``rgb.backward(image.grad)`` into the rasterizer, and ``torch.optim.Adam
+(fused=True)`` per group. The new path (`Trainer.step`): one backward from the scalar loss
+through the rasterizer (the regularisation's first) and `splatbench.train.adam.FusedAdam`.
+Densification runs in the window (``refine_every=2``), so the strategies' edits of the
+parameters and Adam moments are covered too.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from splatbench.bench.train import synthetic_scene
+from splatbench.strategies.base import PARAM_GROUPS, StepContext
+from splatbench.train.config import TrainConfig
+from splatbench.train.losses import photometric_loss
+from splatbench.train.loop import Trainer
+from splatbench.train.params import refreeze, set_lr
+
+ROOT = Path(__file__).resolve().parents[1]
+STEPS = 8
+
+
+def _old_step(tr: Trainer) -> float:
+    """The step before this change (loop.py at c53a18f), minus its timers."""
+    cfg, step = tr.config, tr.step_index
+    degree = tr.sh.update(step, tr.probe_band)
+    lr = tr.means_lr(step)
+    set_lr(tr.optimizers["means"], lr)
+    view = tr._next_view()
+    target = tr.target(view)
+    for opt in tr.optimizers.values():
+        opt.zero_grad(set_to_none=True)
+    rgb, _, _, info = tr._render(tr.dataset.train.cameras[view], degree, tr.background.tolist())
+    image = rgb.detach().requires_grad_(rgb.requires_grad)
+    loss = photometric_loss(image, target, cfg.ssim_lambda, cfg.ssim_window)
+    reg = tr.strategy.regularization(tr.params, step)
+    ctx = StepContext(step=step, info=info, scene_extent=tr.extent, means_lr=lr, loss=float(loss.detach()))
+    tr.strategy.pre_backward(tr.params, tr.optimizers, tr.state, ctx)
+    loss.backward()
+    if isinstance(reg, torch.Tensor) and reg.requires_grad:
+        reg.backward()
+    rgb.backward(image.grad)
+    for opt in tr.optimizers.values():
+        opt.step()
+    tr.strategy.post_backward(tr.params, tr.optimizers, tr.state, ctx)
+    refreeze(tr.params, tr.lrs)
+    tr.step_index += 1
+    return float(loss.detach()) + float(reg.detach() if isinstance(reg, torch.Tensor) else reg)
+
+
+def _torch_adams(tr: Trainer) -> None:
+    tr.optimizers = {name: torch.optim.Adam([{"params": [tr.params[name]], "lr": tr.lrs[name], "name": name}],
+                                            lr=tr.lrs[name], eps=tr.config.adam_eps, fused=True)
+                     for name in PARAM_GROUPS}
+
+
+@pytest.mark.parametrize("strategy, extra", [("default", {"refine_start": 1, "refine_every": 2,
+                                                          "grad_threshold": 1e-7}),
+                                             ("mcmc", {"refine_start": 1, "refine_every": 2,
+                                                       "opacity_reg": 0.01, "scale_reg": 0.01})],
+                         ids=["default", "mcmc-reg"])
+def test_fast_step_gives_the_old_steps_losses_and_model_bit_for_bit(strategy, extra):
+    dataset, _ = synthetic_scene(24, 150, 3, 0)
+    cfg = TrainConfig(dataset="", out="", iterations=STEPS, strategy=strategy, strategy_options=extra,
+                      sh_degree=3, sh_interval=2, seed=0, device="cpu")
+    old, new = Trainer(cfg, dataset=dataset), Trainer(cfg, dataset=dataset)
+    _torch_adams(old)
+    old_losses = [_old_step(old) for _ in range(STEPS)]
+    new_losses = [new.step().loss for _ in range(STEPS)]
+    assert old_losses == new_losses
+    assert old.num_gaussians == new.num_gaussians != 150  # densification ran
+    for name in PARAM_GROUPS:
+        assert torch.equal(old.params[name], new.params[name]), name
+        so, sn = old.optimizers[name].state[old.params[name]], new.optimizers[name].state[new.params[name]]
+        for key in ("step", "exp_avg", "exp_avg_sq"):
+            assert torch.equal(so[key], sn[key]), (name, key)
+    t = new.times
+    assert t.steps == STEPS and t.loss > 0 and t.raster_backward > 0  # the hook split the backward
+
+
+def test_a_training_step_imports_neither_torch_dynamo_nor_sympy():
+    """torch.optim's wrappers import torch._dynamo (~70 MB resident) on first use, and
+    ``Tensor.backward(gradient)`` imports torch.fx's sympy (~33 MB): a training run uses
+    neither (docs/benchmarks.md, "Training": peak RSS)."""
+    code = (
+        "import sys\n"
+        "from splatbench.bench.train import synthetic_scene\n"
+        "from splatbench.train.config import TrainConfig\n"
+        "from splatbench.train.loop import Trainer\n"
+        "ds, _ = synthetic_scene(24, 60, 2, 0)\n"
+        "tr = Trainer(TrainConfig(dataset='', out='', iterations=2, strategy='default', seed=0, device='cpu'),"
+        " dataset=ds)\n"
+        "tr.step(); tr.step()\n"
+        "print(sorted(m for m in ('torch._dynamo', 'sympy') if m in sys.modules))\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout
