@@ -5,17 +5,20 @@ The old path is reproduced here (as `tests/binning_3sigma.py` keeps the old binn
 rendered image detached into a leaf, the loss backpropagated to it, the regularisation's
 backward, then ``rgb.backward(image.grad)`` into the rasterizer, and ``torch.optim.Adam
 (fused=True)`` per group. The new path (`Trainer.step`): one backward from the scalar loss
-through the rasterizer (the regularisation's first) and `splatbench.train.adam.FusedAdam`.
+through the rasterizer (the regularisation's first), `splatbench.train.adam.FusedAdam`, and the
+background read from host copies instead of the device tensors.
 Densification runs in the window (``refine_every=2``), so the strategies' edits of the
 parameters and Adam moments are covered too.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -38,9 +41,16 @@ def _old_step(tr: Trainer) -> float:
     set_lr(tr.optimizers["means"], lr)
     view = tr._next_view()
     target = tr.target(view)
+    if cfg.random_background:
+        bg = torch.rand(3, generator=tr.generator).to(tr.device)
+    else:
+        bg = tr.background
+    if tr.dataset.train.alpha_pixels is not None and bool((bg != tr.gt_background).any()):
+        alpha = torch.from_numpy(tr.dataset.train.alpha(view)).to(tr.device)
+        target = target + (bg - tr.gt_background) * (1 - alpha)[..., None]
     for opt in tr.optimizers.values():
         opt.zero_grad(set_to_none=True)
-    rgb, _, _, info = tr._render(tr.dataset.train.cameras[view], degree, tr.background.tolist())
+    rgb, _, _, info = tr._render(tr.dataset.train.cameras[view], degree, bg.tolist())
     image = rgb.detach().requires_grad_(rgb.requires_grad)
     loss = photometric_loss(image, target, cfg.ssim_lambda, cfg.ssim_window)
     reg = tr.strategy.regularization(tr.params, step)
@@ -64,15 +74,28 @@ def _torch_adams(tr: Trainer) -> None:
                      for name in PARAM_GROUPS}
 
 
-@pytest.mark.parametrize("strategy, extra", [("default", {"refine_start": 1, "refine_every": 2,
-                                                          "grad_threshold": 1e-7}),
-                                             ("mcmc", {"refine_start": 1, "refine_every": 2,
-                                                       "opacity_reg": 0.01, "scale_reg": 0.01})],
-                         ids=["default", "mcmc-reg"])
-def test_fast_step_gives_the_old_steps_losses_and_model_bit_for_bit(strategy, extra):
+def _with_alpha(dataset):
+    """``dataset`` with 8-bit alphas on its training views (a radial ramp), so a random
+    background is composited under the ground truth."""
+    v, h, w, _ = dataset.train.pixels.shape
+    yy, xx = np.meshgrid(np.linspace(-1, 1, h), np.linspace(-1, 1, w), indexing="ij")
+    ramp = np.clip(255 * (1.2 - np.hypot(xx, yy)), 0, 255).astype(np.uint8)
+    return dataclasses.replace(dataset, train=dataclasses.replace(dataset.train,
+                                                                  alpha_pixels=np.stack([ramp] * v)))
+
+
+@pytest.mark.parametrize("strategy, extra, random_background",
+                         [("default", {"refine_start": 1, "refine_every": 2, "grad_threshold": 1e-7}, False),
+                          ("mcmc", {"refine_start": 1, "refine_every": 2, "opacity_reg": 0.01, "scale_reg": 0.01},
+                           False),
+                          ("default", {"refine_start": 1, "refine_every": 2, "grad_threshold": 1e-7}, True)],
+                         ids=["default", "mcmc-reg", "default-random-background"])
+def test_fast_step_gives_the_old_steps_losses_and_model_bit_for_bit(strategy, extra, random_background):
     dataset, _ = synthetic_scene(24, 150, 3, 0)
+    if random_background:
+        dataset = _with_alpha(dataset)
     cfg = TrainConfig(dataset="", out="", iterations=STEPS, strategy=strategy, strategy_options=extra,
-                      sh_degree=3, sh_interval=2, seed=0, device="cpu")
+                      sh_degree=3, sh_interval=2, seed=0, device="cpu", random_background=random_background)
     old, new = Trainer(cfg, dataset=dataset), Trainer(cfg, dataset=dataset)
     _torch_adams(old)
     old_losses = [_old_step(old) for _ in range(STEPS)]

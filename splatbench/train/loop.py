@@ -170,9 +170,12 @@ class Trainer:
                              lookahead=config.sh_auto_lookahead)
         # the training views stay as the dataset holds them (8-bit); each step converts its own (`target`)
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
-        self.gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32, device=self.device)
-        self.background, self.background_note = resolve_background(config.background, train)
-        self.background = self.background.to(self.device)
+        gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
+        background, self.background_note = resolve_background(config.background, train)
+        # host copies (float32 values) for each render's background argument and the compositing
+        # check: reading them back from the device every step would wait for the GPU
+        self._gt_rgb, self._background_rgb = gt_background.tolist(), background.tolist()
+        self.gt_background, self.background = gt_background.to(self.device), background.to(self.device)
         # recorded in the saved PLY for `splatbench render`: a splatbench render's declared up, else
         # (a capture) the up its cameras share (`rig_up`), said in a note
         self.world_up, self.up_note = dataset_up(dataset.root, train.cameras), None
@@ -208,7 +211,7 @@ class Trainer:
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
         up = None if self.world_up is None else tuple(self.world_up.tolist())
-        self.gaussians().to_ply(p, ViewHints(up=up, background=tuple(self.background.tolist())))
+        self.gaussians().to_ply(p, ViewHints(up=up, background=tuple(self._background_rgb)))
         return p
 
     def _sh(self, degree: int) -> torch.Tensor:
@@ -246,18 +249,19 @@ class Trainer:
         camera = self.dataset.train.cameras[view]
         target = self.target(view)
         if cfg.random_background:
-            bg = torch.rand(3, generator=self.generator).to(self.device)  # the CPU stream on every device
+            drawn = torch.rand(3, generator=self.generator)  # the CPU stream on every device
+            bg, bg_rgb = drawn.to(self.device), drawn.tolist()
         else:
-            bg = self.background
+            bg, bg_rgb = self.background, list(self._background_rgb)
         alphas = self.dataset.train.alpha_pixels
-        if alphas is not None and bool((bg != self.gt_background).any()):
+        if alphas is not None and bg_rgb != self._gt_rgb:
             alpha = torch.from_numpy(self.dataset.train.alpha(view)).to(self.device)
             target = target + (bg - self.gt_background) * (1 - alpha)[..., None]
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
         sync()
         t1 = time.perf_counter()
-        rgb, _, _, info = self._render(camera, degree, bg.tolist())
+        rgb, _, _, info = self._render(camera, degree, bg_rgb)
         sync()
         t2 = time.perf_counter()
         loss = photometric_loss(rgb, target, cfg.ssim_lambda, cfg.ssim_window)
@@ -315,11 +319,11 @@ class Trainer:
         gradients it leaves are cleared by the next step's ``zero_grad``."""
         camera = self.dataset.train.cameras[0]
         for degree in range(self.config.max_sh_degree + 1):
-            rgb, _, _, _ = self._render(camera, degree, self.background.tolist())
+            rgb, _, _, _ = self._render(camera, degree, list(self._background_rgb))
             if rgb.requires_grad:
                 rgb.sum().backward()
             with torch.no_grad():
-                self._render(camera, degree, self.background.tolist())
+                self._render(camera, degree, list(self._background_rgb))
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
 
@@ -338,8 +342,8 @@ class Trainer:
             idx = sorted({int(i) for i in np.linspace(0, len(cams) - 1, k).round()})
         gains, visible = [], torch.zeros(self.num_gaussians, device=self.device)
         for i in idx:
-            with_band, _, _, info = self._render(cams[i], degree, self.background.tolist())
-            without, _, _, _ = self._render(cams[i], baseline, self.background.tolist())
+            with_band, _, _, info = self._render(cams[i], degree, list(self._background_rgb))
+            without, _, _, _ = self._render(cams[i], baseline, list(self._background_rgb))
             target = self.target(i)
             gains.append(psnr(with_band, target) - psnr(without, target))
             visible += info.visible.to(self.device).float()
@@ -364,7 +368,7 @@ class Trainer:
         lps: dict[tuple[str, bool], list[float]] = {spec: [] for spec in lpips}
         for i, camera in enumerate(test.cameras):
             t0 = time.perf_counter()
-            rgb, _, _, _ = self._render(camera, self.sh.degree, self.background.tolist())
+            rgb, _, _, _ = self._render(camera, self.sh.degree, list(self._background_rgb))
             seconds += time.perf_counter() - t0
             gt = torch.from_numpy(test.image(i)).to(self.device)  # one view as float at a time
             psnrs.append(psnr(rgb, gt))
