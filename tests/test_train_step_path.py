@@ -128,3 +128,27 @@ def test_a_training_step_imports_neither_torch_dynamo_nor_sympy():
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout
+
+
+
+def test_warm_up_compiles_the_loss_kernels():
+    """`Trainer.warm_up` compiles (or loads) the loss's Dr.Jit D-SSIM kernels at the
+    training image size, so the first timed step does not pay for them: after it, the
+    loss and its gradient run only kernels Dr.Jit holds in memory."""
+    import drjit as dr
+
+    dataset, _ = synthetic_scene(24, 60, 2, 0)
+    trainer = Trainer(TrainConfig(dataset="", out="", iterations=3, strategy="none", seed=0, device="cpu",
+                                  ssim_window=7), dataset=dataset)  # a window no other test compiles first
+    trainer.warm_up()
+    image = torch.rand(24, 24, 3, requires_grad=True)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()  # clears it
+        photometric_loss(image, trainer.target(1), 0.2, 7).backward()
+        history = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    jit = [k for k in history if k["type"] == dr.KernelType.JIT]
+    assert len(jit) >= 6 and all(k.get("cache_hit") and not k.get("cache_disk") for k in jit), \
+        [(k.get("cache_hit"), k.get("cache_disk"), k.get("size")) for k in jit]

@@ -36,7 +36,14 @@ def main() -> None:
     ap.add_argument("--warmup", type=int, default=4)
     ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu")
     ap.add_argument("--cprofile", type=int, default=0, metavar="N")
+    ap.add_argument("--drjit-threads", type=int, default=0, metavar="N",
+                    help="Dr.Jit's thread pool (0: its default, one per core); 1: the CPU clock counts "
+                         "compute only, not the pool's waiting")
     args = ap.parse_args()
+    if args.drjit_threads:
+        import drjit as dr
+
+        dr.set_thread_count(args.drjit_threads)
 
     import splatbench.train.loop as loop
     from splatbench.bench.train import synthetic_scene

@@ -314,8 +314,8 @@ class Trainer:
     def warm_up(self) -> None:
         """Compile (or load from Dr.Jit's cache) every rasterizer kernel training and
         evaluation will use -- forward and backward at each SH degree the schedule can
-        reach, and the forward without gradients -- so that no timed section pays for
-        compilation. Changes no parameter, optimizer state or random stream: the
+        reach, and the forward without gradients -- and the loss's D-SSIM kernels, so
+        that no timed section pays for compilation. Changes no parameter, optimizer state or random stream: the
         gradients it leaves are cleared by the next step's ``zero_grad``."""
         camera = self.dataset.train.cameras[0]
         for degree in range(self.config.max_sh_degree + 1):
@@ -324,6 +324,9 @@ class Trainer:
                 rgb.sum().backward()
             with torch.no_grad():
                 self._render(camera, degree, list(self._background_rgb))
+        # the loss's Dr.Jit kernels (the D-SSIM, `splatbench.train.dssim`) at the training image size
+        image = rgb.detach().requires_grad_(True)
+        photometric_loss(image, self.target(0), self.config.ssim_lambda, self.config.ssim_window)
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
 
