@@ -152,3 +152,22 @@ def test_warm_up_compiles_the_loss_kernels():
     jit = [k for k in history if k["type"] == dr.KernelType.JIT]
     assert len(jit) >= 6 and all(k.get("cache_hit") and not k.get("cache_disk") for k in jit), \
         [(k.get("cache_hit"), k.get("cache_disk"), k.get("size")) for k in jit]
+
+
+def test_dr_jits_allocation_cache_is_flushed_when_the_model_changes_size(monkeypatch):
+    """After a step that changed N (densification), the buffers Dr.Jit cached for the old
+    sizes are handed back (`dr.flush_malloc_cache`), and only then."""
+    import splatbench.train.loop as loop
+
+    calls = []
+    monkeypatch.setattr(loop.dr, "flush_malloc_cache", lambda: calls.append(1))
+    dataset, _ = synthetic_scene(24, 150, 3, 0)
+    cfg = TrainConfig(dataset="", out="", iterations=6, strategy="default", seed=0, device="cpu",
+                      strategy_options={"refine_start": 1, "refine_every": 2, "grad_threshold": 1e-7})
+    trainer = Trainer(cfg, dataset=dataset)
+    changed = 0
+    for _ in range(6):
+        n = trainer.num_gaussians
+        trainer.step()
+        changed += trainer.num_gaussians != n
+    assert changed >= 1 and len(calls) == changed
