@@ -300,8 +300,8 @@ class Trainer:
         refreeze(self.params, self.lrs)
         if self.num_gaussians != n_before:
             # Dr.Jit keeps freed buffers in its allocation cache for reuse; those sized for the
-            # old N go mostly unused, so hand them back (peak RSS -20 MiB at 128^2 with
-            # densification, docs/benchmarks.md "Training"; the next step pays page faults once)
+            # old N go mostly unused, so hand them back (docs/benchmarks.md, "Training": the
+            # resident set and its peak; the next step pays the page faults once)
             dr.flush_malloc_cache()
         sync()
         t8 = time.perf_counter()
@@ -320,8 +320,8 @@ class Trainer:
     def warm_up(self) -> None:
         """Compile (or load from Dr.Jit's cache) every rasterizer kernel training and
         evaluation will use -- forward and backward at each SH degree the schedule can
-        reach, and the forward without gradients -- and the loss's D-SSIM kernels, so
-        that no timed section pays for compilation. Changes no parameter, optimizer state or random stream: the
+        reach, and the forward without gradients -- and the SSIM kernels of the loss and
+        of the evaluation, so that no timed section pays for compilation. Changes no parameter, optimizer state or random stream: the
         gradients it leaves are cleared by the next step's ``zero_grad``."""
         camera = self.dataset.train.cameras[0]
         for degree in range(self.config.max_sh_degree + 1):
@@ -330,9 +330,10 @@ class Trainer:
                 rgb.sum().backward()
             with torch.no_grad():
                 self._render(camera, degree, list(self._background_rgb))
-        # the loss's Dr.Jit kernels (the D-SSIM, `splatbench.train.dssim`) at the training image size
-        image = rgb.detach().requires_grad_(True)
-        photometric_loss(image, self.target(0), self.config.ssim_lambda, self.config.ssim_window)
+        # the Dr.Jit kernels of the loss's D-SSIM and of the evaluation's SSIM (`splatbench.metrics.ssim`)
+        image, target = rgb.detach().requires_grad_(True), self.target(0)
+        photometric_loss(image, target, self.config.ssim_lambda, self.config.ssim_window)
+        ssim_metric(image.detach(), target, self.config.ssim_window)
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
 
