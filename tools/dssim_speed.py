@@ -1,4 +1,4 @@
-"""The trainer's D-SSIM (`splatbench.train.dssim`, Dr.Jit kernels) timed beside the torch
+"""The trainer's D-SSIM (`splatbench.train.dssim` over `metrics.ssim`, Dr.Jit kernels) timed beside the torch
 implementation it replaced (c53a18f: grouped convolutions on torch's thread), with each
 one's error against float64: a measurement for issue 30, rerunnable anywhere.
 
@@ -22,7 +22,8 @@ import time
 import torch
 import torch.nn.functional as F
 
-from splatbench.train.dssim import C1, C2, EPS, dssim, gaussian_window
+from splatbench.metrics.ssim import C1, C2, EPS, gaussian_window
+from splatbench.train.dssim import dssim
 
 def _fold_reflect(t: torch.Tensor, dim: int, pad: int) -> torch.Tensor:
     """Adjoint of reflect padding along ``dim``: [.., n + 2 pad, ..] -> [.., n, ..], each
