@@ -321,8 +321,9 @@ class Trainer:
         """Compile (or load from Dr.Jit's cache) every rasterizer kernel training and
         evaluation will use -- forward and backward at each SH degree the schedule can
         reach, and the forward without gradients -- and the SSIM kernels of the loss and
-        of the evaluation, so that no timed section pays for compilation. Changes no parameter, optimizer state or random stream: the
-        gradients it leaves are cleared by the next step's ``zero_grad``."""
+        of the evaluation, so that no timed section pays for compilation. Changes no
+        parameter, optimizer state or random stream: the gradients it leaves are cleared
+        by the next step's ``zero_grad``."""
         camera = self.dataset.train.cameras[0]
         for degree in range(self.config.max_sh_degree + 1):
             rgb, _, _, _ = self._render(camera, degree, list(self._background_rgb))
