@@ -104,3 +104,20 @@ def test_too_small_an_image_or_mismatched_shapes_are_one_line():
         dssim(torch.rand(1, 3, 5, 9), torch.rand(1, 3, 5, 9))
     with pytest.raises(InputError, match="dssim: expected two"):
         dssim(torch.rand(1, 3, 8, 8), torch.rand(1, 3, 8, 9))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_ssim_metric_is_kornias_to_float32_precision(seed):
+    """The evaluation's SSIM (`ssim_metric`, the Dr.Jit SSIM of `splatbench.metrics.ssim`)
+    against kornia's: the same maths summed in another order (separable blurs against
+    kornia's 2D kernel), so in float32 it must be as close to the float64 truth as
+    kornia's own float32 mean SSIM (factor 4 for the order, plus 4 ulps)."""
+    from splatbench.metrics.image import ssim_metric
+
+    pred64, target64 = images(seed, shape=(1, 3, 40, 56))
+    truth = float(kornia.metrics.ssim(pred64, target64, 11, max_val=1.0).mean())
+    hwc = [t[0].permute(1, 2, 0) for t in (pred64, target64)]
+    ours = ssim_metric(*(t.float() for t in hwc))
+    theirs = float(kornia.metrics.ssim(pred64.float(), target64.float(), 11, max_val=1.0).mean())
+    assert abs(ours - truth) <= 4 * abs(theirs - truth) + 4 * EPS32
+    assert abs(ssim_metric(*hwc) - truth) <= 1e-12  # float64: the same maths to float64 rounding

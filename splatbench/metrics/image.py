@@ -1,4 +1,5 @@
-"""Image metrics for evaluation: PSNR and SSIM (kornia). LPIPS: `splatbench.metrics.perceptual`."""
+"""Image metrics for evaluation: PSNR and SSIM (`splatbench.metrics.ssim`: kornia's SSIM). LPIPS:
+`splatbench.metrics.perceptual`."""
 
 from __future__ import annotations
 
@@ -26,12 +27,13 @@ def psnr(pred: torch.Tensor | np.ndarray, target: torch.Tensor | np.ndarray, *, 
 
 
 def ssim_metric(pred: torch.Tensor, target: torch.Tensor, window: int = 11) -> float:
-    """Mean SSIM (``kornia.metrics.ssim``: Gaussian window 11, σ = 1.5) of [H, W, 3]
-    images, ``pred`` clamped to [0, 1]."""
-    import kornia  # late: kornia takes a second to import and only evaluation needs it
+    """Mean SSIM (kornia's ``kornia.metrics.ssim``: Gaussian window 11, σ = 1.5, computed by
+    `splatbench.metrics.ssim.ssim_map`) of [H, W, 3] images, ``pred`` clamped to [0, 1]."""
+    from splatbench.metrics.ssim import ssim_map  # late: Dr.Jit, which only evaluation needs here
 
     with torch.no_grad():
-        return float(kornia.metrics.ssim(to_bchw(pred.clamp(0, 1)), to_bchw(target), window, max_val=1.0).mean())
+        s, _ = ssim_map(to_bchw(pred.clamp(0, 1)), to_bchw(target), window)
+        return float(s.mean())
 
 
 __all__ = ["psnr", "ssim_metric", "to_bchw"]

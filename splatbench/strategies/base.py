@@ -10,7 +10,9 @@ strategy it holds. Strategies edit parameters and Adam moments together through
 Parameter groups (`Params`, torch leaf tensors with requires_grad):
     means [N, 3], log_scales [N, 3], quats [N, 4], opacity_logits [N],
     sh_dc [N, 1, 3], sh_rest [N, K-1, 3]
-`Optimizers` maps each group name to its own `torch.optim.Adam`.
+`Optimizers` maps each group name to its own Adam: the trainer's
+`splatbench.train.adam.FusedAdam` or a ``torch.optim.Adam``; the strategies read and
+replace only its ``param_groups`` and ``state`` (`AdamLike`).
 """
 
 from __future__ import annotations
@@ -26,7 +28,17 @@ from splatbench.raster.torch_bridge import RasterInfo
 
 PARAM_GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh_dc", "sh_rest")
 Params = dict[str, torch.Tensor]
-Optimizers = dict[str, torch.optim.Optimizer]
+
+
+class AdamLike(Protocol):
+    """What strategies use of an optimizer: one group holding its parameter, and the
+    per-tensor state (``exp_avg``, ``exp_avg_sq``, ``step``) keyed by that tensor."""
+
+    param_groups: list[dict]
+    state: dict
+
+
+Optimizers = dict[str, AdamLike]
 
 
 @dataclass(frozen=True)

@@ -2,8 +2,8 @@
 (after gsplat's ``strategy/ops.py``).
 
 Every function here works in place on ``params`` (group name -> leaf
-`torch.nn.Parameter`, N rows) and ``optimizers`` (group name -> its own
-`torch.optim.Adam` holding that one parameter). A group's parameter is replaced
+`torch.nn.Parameter`, N rows) and ``optimizers`` (group name -> its own Adam
+holding that one parameter: `splatbench.strategies.base.AdamLike`). A group's parameter is replaced
 by a new leaf tensor, both in ``params`` and in the optimizer's ``param_groups``,
 and its optimizer state moves to the new tensor with the same row edit applied to
 every per-row entry (``exp_avg``, ``exp_avg_sq``, ``max_exp_avg_sq``): rows of

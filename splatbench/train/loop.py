@@ -7,9 +7,9 @@ One step (graphdeco-inria's order, with gsplat's strategy hooks):
 2. ``splatbench.rasterize`` of the current parameters (SH sliced to the active
    degree; frozen groups carry no gradient), ``absgrad`` only if the strategy uses it.
 3. Loss ``(1 - λ) L1 + λ (1 - SSIM)`` plus the strategy's regularisation;
-   ``strategy.pre_backward``; backward -- split in two (loss, then the rasterizer) so
-   that benchmarks can time each; one Adam step per group; ``strategy.post_backward``
-   (densify / prune / relocate).
+   ``strategy.pre_backward``; backward -- the regularisation's, then one from the loss
+   through the rasterizer (a hook on the image times the two parts for benchmarks);
+   one Adam step per group; ``strategy.post_backward`` (densify / prune / relocate).
 
 Everything random is seeded from ``config.seed`` (torch's global generator, a
 dedicated `torch.Generator` for view order and backgrounds, numpy for random init),
@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
+import drjit as dr
 import numpy as np
 import torch
 
@@ -172,9 +173,12 @@ class Trainer:
                              lookahead=config.sh_auto_lookahead)
         # the training views stay as the dataset holds them (8-bit); each step converts its own (`target`)
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
-        self.gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32, device=self.device)
-        self.background, self.background_note = resolve_background(config.background, train)
-        self.background = self.background.to(self.device)
+        gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
+        background, self.background_note = resolve_background(config.background, train)
+        # host copies (float32 values) for each render's background argument and the compositing
+        # check: reading them back from the device every step would wait for the GPU
+        self._gt_rgb, self._background_rgb = gt_background.tolist(), background.tolist()
+        self.gt_background, self.background = gt_background.to(self.device), background.to(self.device)
         # recorded in the saved PLY for `splatbench render`: a splatbench render's declared up, else
         # (a capture) the up its cameras share (`rig_up`), said in a note
         self.world_up, self.up_note = dataset_up(dataset.root, train.cameras), None
@@ -210,7 +214,7 @@ class Trainer:
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
         up = None if self.world_up is None else tuple(self.world_up.tolist())
-        self.gaussians().to_ply(p, ViewHints(up=up, background=tuple(self.background.tolist())))
+        self.gaussians().to_ply(p, ViewHints(up=up, background=tuple(self._background_rgb)))
         return p
 
     def _sh(self, degree: int) -> torch.Tensor:
@@ -240,7 +244,7 @@ class Trainer:
         """Run one optimisation step and return its status."""
         cfg, t, sync = self.config, self.times, self._sync
         t0 = time.perf_counter()
-        step = self.step_index
+        step, n_before = self.step_index, self.num_gaussians
         degree = self.sh.update(step, self.probe_band)
         lr = self.means_lr(step)
         set_lr(self.optimizers["means"], lr)
@@ -248,22 +252,22 @@ class Trainer:
         camera = self.dataset.train.cameras[view]
         target = self.target(view)
         if cfg.random_background:
-            bg = torch.rand(3, generator=self.generator).to(self.device)  # the CPU stream on every device
+            drawn = torch.rand(3, generator=self.generator)  # the CPU stream on every device
+            bg, bg_rgb = drawn.to(self.device), drawn.tolist()
         else:
-            bg = self.background
+            bg, bg_rgb = self.background, list(self._background_rgb)
         alphas = self.dataset.train.alpha_pixels
-        if alphas is not None and bool((bg != self.gt_background).any()):
+        if alphas is not None and bg_rgb != self._gt_rgb:
             alpha = torch.from_numpy(self.dataset.train.alpha(view)).to(self.device)
             target = target + (bg - self.gt_background) * (1 - alpha)[..., None]
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
         sync()
         t1 = time.perf_counter()
-        rgb, _, _, info = self._render(camera, degree, bg.tolist())
+        rgb, _, _, info = self._render(camera, degree, bg_rgb)
         sync()
         t2 = time.perf_counter()
-        image = rgb.detach().requires_grad_(rgb.requires_grad)
-        loss = photometric_loss(image, target, cfg.ssim_lambda, cfg.ssim_window)
+        loss = photometric_loss(rgb, target, cfg.ssim_lambda, cfg.ssim_window)
         sync()
         t3 = time.perf_counter()
         reg = self.strategy.regularization(self.params, step)
@@ -271,14 +275,23 @@ class Trainer:
         self.strategy.pre_backward(self.params, self.optimizers, self.state, ctx)
         sync()
         t4 = time.perf_counter()
-        if rgb.requires_grad:
-            loss.backward()
         if isinstance(reg, torch.Tensor) and reg.requires_grad:
-            reg.backward()
-        sync()
-        t5 = time.perf_counter()
+            reg.backward()  # first: the parameters' gradients are reg's, then the rasterizer's added
+        t5 = t4
         if rgb.requires_grad:
-            rgb.backward(image.grad)
+            # one backward from the scalar loss (no explicit cotangent: `Tensor.backward(grad)` would
+            # import torch.fx's sympy, ~33 MB resident); the hook marks where the loss's part ends
+            # and the rasterizer's begins, for the stage times
+            def mark(_grad):
+                nonlocal t5
+                sync()
+                t5 = time.perf_counter()
+
+            rgb.register_hook(mark)
+            loss.backward()
+        else:
+            sync()
+            t5 = time.perf_counter()
         sync()
         t6 = time.perf_counter()
         for opt in self.optimizers.values():
@@ -287,6 +300,11 @@ class Trainer:
         t7 = time.perf_counter()
         self.strategy.post_backward(self.params, self.optimizers, self.state, ctx)
         refreeze(self.params, self.lrs)
+        if self.num_gaussians != n_before:
+            # Dr.Jit keeps freed buffers in its allocation cache for reuse; those sized for the
+            # old N go mostly unused, so hand them back (docs/benchmarks.md, "Training": the
+            # resident set and its peak; the next step pays the page faults once)
+            dr.flush_malloc_cache()
         sync()
         t8 = time.perf_counter()
         self.step_index += 1
@@ -304,16 +322,21 @@ class Trainer:
     def warm_up(self) -> None:
         """Compile (or load from Dr.Jit's cache) every rasterizer kernel training and
         evaluation will use -- forward and backward at each SH degree the schedule can
-        reach, and the forward without gradients -- so that no timed section pays for
-        compilation. Changes no parameter, optimizer state or random stream: the
-        gradients it leaves are cleared by the next step's ``zero_grad``."""
+        reach, and the forward without gradients -- and the SSIM kernels of the loss and
+        of the evaluation, so that no timed section pays for compilation. Changes no
+        parameter, optimizer state or random stream: the gradients it leaves are cleared
+        by the next step's ``zero_grad``."""
         camera = self.dataset.train.cameras[0]
         for degree in range(self.config.max_sh_degree + 1):
-            rgb, _, _, _ = self._render(camera, degree, self.background.tolist())
+            rgb, _, _, _ = self._render(camera, degree, list(self._background_rgb))
             if rgb.requires_grad:
                 rgb.sum().backward()
             with torch.no_grad():
-                self._render(camera, degree, self.background.tolist())
+                self._render(camera, degree, list(self._background_rgb))
+        # the Dr.Jit kernels of the loss's D-SSIM and of the evaluation's SSIM (`splatbench.metrics.ssim`)
+        image, target = rgb.detach().requires_grad_(True), self.target(0)
+        photometric_loss(image, target, self.config.ssim_lambda, self.config.ssim_window)
+        ssim_metric(image.detach(), target, self.config.ssim_window)
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
 
@@ -332,8 +355,8 @@ class Trainer:
             idx = sorted({int(i) for i in np.linspace(0, len(cams) - 1, k).round()})
         gains, visible = [], torch.zeros(self.num_gaussians, device=self.device)
         for i in idx:
-            with_band, _, _, info = self._render(cams[i], degree, self.background.tolist())
-            without, _, _, _ = self._render(cams[i], baseline, self.background.tolist())
+            with_band, _, _, info = self._render(cams[i], degree, list(self._background_rgb))
+            without, _, _, _ = self._render(cams[i], baseline, list(self._background_rgb))
             target = self.target(i)
             gains.append(psnr(with_band, target) - psnr(without, target))
             visible += info.visible.to(self.device).float()
@@ -358,7 +381,7 @@ class Trainer:
         lps: dict[tuple[str, bool], list[float]] = {spec: [] for spec in lpips}
         for i, camera in enumerate(test.cameras):
             t0 = time.perf_counter()
-            rgb, _, _, _ = self._render(camera, self.sh.degree, self.background.tolist())
+            rgb, _, _, _ = self._render(camera, self.sh.degree, list(self._background_rgb))
             seconds += time.perf_counter() - t0
             gt = torch.from_numpy(test.image(i)).to(self.device)  # one view as float at a time
             psnrs.append(psnr(rgb, gt))

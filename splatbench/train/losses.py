@@ -1,10 +1,10 @@
 """The 3DGS photometric loss: ``(1 - λ) · L1 + λ · (1 − SSIM)`` (λ = 0.2, window 11).
 
 SSIM is kornia's (``kornia.metrics.ssim``: Gaussian window, σ = 1.5, "same"
-padding), averaged over pixels and channels. Images are [H, W, 3] in [0, 1]. The
-loss's D-SSIM term is `splatbench.train.dssim.dssim`, the same value with its gradient
-formed in one fused pass (tested against kornia's); the SSIM metric is
-`splatbench.metrics.image.ssim_metric` (kornia's).
+padding; computed by `splatbench.metrics.ssim`), averaged over pixels and channels.
+Images are [H, W, 3] in [0, 1]. The loss's D-SSIM term is `splatbench.train.dssim.dssim`,
+the same value with its gradient formed in one fused pass (tested against kornia's);
+the SSIM metric is `splatbench.metrics.image.ssim_metric` (the same SSIM).
 """
 
 from __future__ import annotations

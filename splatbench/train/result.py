@@ -34,7 +34,7 @@ class StepEvaluation(NamedTuple):
 
     step: int                     # steps completed when evaluated
     psnr: float                   # mean test PSNR (dB)
-    ssim: float                   # mean test SSIM (kornia, window ssim_window)
+    ssim: float                   # mean test SSIM (kornia's, window ssim_window)
     lpips_net: str                # LPIPS v0.1 backbone of the two values below ("" when LPIPS was not computed)
     lpips_scaled: float | None    # mean LPIPS, inputs scaled to [-1, 1] (the lpips package, gsplat, NerfBaselines)
     lpips_unscaled: float | None  # mean LPIPS, [0, 1] inputs unscaled (graphdeco's metrics.py, the 3DGS paper)
@@ -48,7 +48,7 @@ class TrainResult:
     """One run. Metrics are means over the test views; None where there are no test views."""
 
     test_psnr: float | None             # mean PSNR (dB) of the final model on the test views
-    test_ssim: float | None             # mean SSIM (kornia, window 11)
+    test_ssim: float | None             # mean SSIM (kornia's, window 11)
     test_lpips: float | None            # mean LPIPS v0.1 (`lpips_net`); None when not computed (see `notes`)
     num_gaussians: int                  # N at the end
     train_seconds: float                # wall time of the optimisation loop over all `iterations` steps, a resumed
