@@ -561,7 +561,8 @@ def test_a_train_result_becomes_the_kinds_record_field_by_field():
         lpips_net="alex", lpips_scale_inputs=False, cpu_seconds=20.0,
         load={"load_before": 0.5, "load_after": 1.5, "own_cpu": 1.0, "own_before": 0.2, "load_other": 1.5,
               "cores": 2, "loaded": True},
-        topology=TopologyCounts(refinements=3, opacity_resets=1, cloned=10, split=5, pruned=2, pruned_size=1))
+        topology=TopologyCounts(refinements=3, opacity_resets=1, cloned=10, split=5, pruned=2, pruned_size=1),
+        init={"method": "surface", "points": 1000, "asked": "auto", "jitter": 0.5})
     record = TrainRun.of(result, "abc")
     metrics = metric_values(record)
     assert list(metrics) == list(TRAIN.specs)
@@ -570,13 +571,14 @@ def test_a_train_result_becomes_the_kinds_record_field_by_field():
         "render_ms_per_view": 3.5, "sh_degree": 1, "peak_rss_mb": 900.0, "iterations": 30, "test_views": 4,
         "dataset_hash": "abc", "test_lpips": 0.2, "lpips_net": "alex", "lpips_scale_inputs": 0, "cpu_seconds": 20.0,
         "load_before": 0.5, "load_after": 1.5, "load_other": 1.5, "cores": 2, "time_loaded": 1, "refinements": 3,
-        "opacity_resets": 1, "cloned": 10, "split": 5, "pruned": 2, "pruned_size": 1, "relocated": 0, "added": 0}
+        "opacity_resets": 1, "cloned": 10, "split": 5, "pruned": 2, "pruned_size": 1, "relocated": 0, "added": 0,
+        "init_method": "surface", "init_points": 1000}  # what init = auto resolved to, and its start
     assert record.warnings == ("warning: a warning",)
     assert record.curves["step"] == [0, 29] and record.curves["eval_psnr"] == [25.5]
     assert check_output(record, TRAIN) == record
     # a result from before the strategy's counts were recorded: None in those columns
-    older = metric_values(TrainRun.of(dataclasses.replace(result, topology=None), None))
-    assert older["refinements"] is None and older["dataset_hash"] is None
+    older = metric_values(TrainRun.of(dataclasses.replace(result, topology=None, init={}), None))
+    assert older["refinements"] is None and older["dataset_hash"] is None and older["init_method"] is None
     with pytest.raises(TypeError, match="returned dict, not TrainRun"):
         check_output({"test_psnr": 1.0}, TRAIN)
 

@@ -140,6 +140,10 @@ class TrainRun(RunResult):
     relocated: int | None = metric("relocated", ".0f", meaning="MCMC: dead Gaussians relocated, summed over the "
                                                                "refinements")
     added: int | None = metric("added", ".0f", meaning="MCMC: Gaussians added, summed over the refinements")
+    init_method: str | None = metric(meaning="the initialisation that ran (what init = auto resolved to: surface, "
+                                             "sfm or random); None before it was recorded", default=None)
+    init_points: int | None = metric(meaning="Gaussians the run started from (its initial points); None before it "
+                                             "was recorded", default=None)
 
     @classmethod
     def of(cls, result, dataset_hash: str | None) -> TrainRun:
@@ -162,6 +166,7 @@ class TrainRun(RunResult):
                   **{k: v for k, v in result.load.items() if k in names},
                   **{name: topology.get(name) for name in TOPOLOGY_METRICS},
                   "lpips_scale_inputs": int(result.lpips_scale_inputs), "time_loaded": int(result.load["loaded"]),
+                  "init_method": (result.init or {}).get("method"), "init_points": (result.init or {}).get("points"),
                   "dataset_hash": dataset_hash}
         return cls(**values, warnings=tuple(result.warnings), curves=curves)
 

@@ -123,12 +123,108 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
     lines.append(f"- **Background**: {bg or 'not recorded'}" + ("; a random background per training step"
                                                               if True in rnd else "") + ".")
     lines.append(f"- **Metrics**: {_metrics(done)}.")
-    init = _one(done, "config.init")
-    pts = _one(done, "config.init_random_points", lambda v: f"{int(v):,}")
-    lines.append(f"- **Initialisation**: {init or 'not recorded'}"
-                 + (f" ({pts} points where random)" if init and "random" in init and pts else "") + ".")
+    lines.append(f"- **Initialisation**: {init_text(done)}.")
+    ran = schedule_as_run(done)
+    if ran:
+        lines.append(f"- **Schedule as run** (each run's recorded counts, in its {iters} steps): {ran}.")
     lines.append(f"- **Seeds**: {_seeds(done)}")
     return ["**Protocol** (from the runs' recorded configs):", "", *lines]
+
+
+def _start_count(raw: Any) -> int | None:
+    """The Gaussians at the first logged step of a run's curves (step 0: before any refinement,
+    which starts later in every schedule `check_final_window` accepts), i.e. its initial points."""
+    try:
+        c = json.loads(raw) if isinstance(raw, str) else {}
+    except ValueError:
+        return None
+    steps, counts = c.get("step") or [], c.get("num_gaussians") or []
+    return int(counts[0]) if steps and counts and steps[0] == 0 and counts[0] is not None else None
+
+
+#: What each initialisation starts from, in words (`splatbench.train.initializers`).
+_INIT_WHAT = {"surface": "the scene's own surface points", "sfm": "SfM points triangulated from the training views",
+              "random": "random points"}
+
+
+def init_text(done: pd.DataFrame) -> str:
+    """The initialisation the runs asked for and what it resolved to, per scene: the method that
+    ran (``metric.init_method``; for a run from before it was recorded, ``surface`` where
+    ``auto`` met a rendered scene, which always has its surface points, else "not recorded"),
+    the initial count (``metric.init_points``, else the curves' step-0 count) and the jitter
+    that a seed moves the given points by (``config.init_jitter``)."""
+    asked = _one(done, "config.init")
+    if asked is None:
+        return "not recorded"
+    kinds = scene_kinds(done)
+    parts = []
+    for scene, rows in done.groupby("scene", sort=False):
+        for init, cell in rows.groupby(rows["config.init"].astype(str), sort=False):
+            methods = [m for m in _values(cell, "metric.init_method") if m is not None]
+            how = ""
+            if not methods and init in _INIT_WHAT:
+                methods = [init]
+            elif not methods and init == "auto" and kinds.get(str(scene)) == "rendered":
+                methods, how = ["surface"], " (inferred: these runs did not record it; a rendered scene has its points)"
+            counts = [int(v) for v in _values(cell, "metric.init_points") if v is not None]
+            if not counts:
+                counts = [n for n in dict.fromkeys(_start_count(r) for r in cell.get("curves", [])) if n is not None]
+            count = " / ".join(f"{n:,}" for n in counts)
+            method = " / ".join(methods)
+            what = " / ".join(_INIT_WHAT.get(m, m) for m in methods) if methods else \
+                ("the method it resolved to is not recorded by these runs (auto: the dataset's own points when it "
+                 "has them, else SfM with its known poses)" if init == "auto" else "not recorded")
+            jit = [v for v in _values(cell, "config.init_jitter") if v]
+            given = any(m in ("surface", "sfm") for m in methods)
+            moved = (f", jittered {' / '.join(_g(v) for v in jit)} × their neighbour spacing per seed"
+                     if given and jit else "")
+            region = _one(cell, "config.init_region") if "random" in methods else None
+            where = f" in region {region}" if region else ""
+            arrow = f"{init} → {method}" if method and method != init else init
+            parts.append(f"{arrow} on {scene}: {what}{where}" + (f", {count} Gaussians at step 0" if count else "")
+                         + moved + how)
+    return "; ".join(parts)
+
+
+def schedule_as_run(done: pd.DataFrame) -> str:
+    """The schedule's counts as the runs made them: refinements and opacity resets (the
+    strategy's recorded counts, per cell where they differ) and the SH schedule (one band more
+    every ``sh_interval`` steps as the run reads it: `splatbench.train.schedule.scale_step`); ""
+    without those columns."""
+    from splatbench.train.schedule import scale_step  # late: the reports start without torch
+
+    axes = [c for c in done.columns if c.startswith("axis.")]
+    parts = []
+    counted = [c for c in ("metric.refinements", "metric.opacity_resets") if c in done.columns
+               and pd.to_numeric(done[c], errors="coerce").notna().any()]
+    if counted:
+        def counts(rows: pd.DataFrame) -> str:
+            out = []
+            for col, word in zip(counted, ("refinements", "opacity resets")):
+                vals = sorted({int(v) for v in pd.to_numeric(rows[col], errors="coerce").dropna()})
+                shown = f"{vals[0]}–{vals[-1]}" if len(vals) > 1 else str(vals[0]) if vals else ""
+                out.append(f"{shown} {word}" if vals else f"{word} not recorded")
+            return ", ".join(out)
+
+        cells = {}
+        for key, rows in (done.groupby(axes, sort=False) if axes else [((), done)]):
+            key = key if isinstance(key, tuple) else (key,)
+            label = ", ".join(f"{a[5:]}={v}" for a, v in zip(axes, key)) or "every run"
+            cells[label] = counts(rows)
+        if len(set(cells.values())) == 1:
+            parts.append(f"{next(iter(cells.values()))} (every run)")
+        else:
+            parts.append("; ".join(f"`{label}` {text}" for label, text in cells.items()))
+    if {"config.sh_interval", "config.iterations", "config.schedule"} <= set(done.columns):
+        steps = sorted({scale_step(int(i), int(n), str(sch), interval=True) for i, n, sch in
+                        zip(done["config.sh_interval"], done["config.iterations"], done["config.schedule"])
+                        if pd.notna(i) and pd.notna(n) and sch in ("scaled", "absolute")})
+        if steps:
+            every = " / ".join(f"{s:,}" for s in steps)
+            bands = " / ".join(", ".join(f"{k * s:,}" for k in (1, 2, 3)) for s in steps)
+            parts.append(f"SH degree raised one band every {every} steps (`sh_interval` as the run reads it: bands "
+                         f"1, 2, 3 at steps {bands}, up to each cell's maximum degree)")
+    return "; ".join(parts)
 
 
 def _eval_steps(done: pd.DataFrame) -> str:
