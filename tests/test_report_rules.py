@@ -214,6 +214,10 @@ def test_an_unsettled_difference_is_marked_in_the_axis_finding(tmp_path):
     vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
     assert vs.significant and vs.practical and vs.settled is False
     assert "**Not settled** (glossy: `3` +1.00 dB / 1,000 steps over the last quarter)" in text
+    # the paired difference at every evaluation: d = 1 + 0.02 s² (mean 1.033) at 500, 1,000 and 2,000; at
+    # 1,500 the sh 3 curve sits `rise` = 0.5 dB below its end while sh 0's is flat: 0.533
+    assert ("Paired difference at each evaluation (mean over seeds; glossy, steps 500 / 1,000 / 1,500 / 2,000: "
+            "+1.03, +1.03, +0.53, +1.03 dB)") in text
     best = next(c for c in report.findings["sh_degree"].claims if c.kind == "best")
     assert best.settled is False and "**not settled**" in best.text
 
@@ -248,6 +252,9 @@ def test_a_finding_names_what_else_a_setting_changed(tmp_path):
 
     _, text = results(tmp_path, spec_of(), make)
     assert "Also changed: glossy: opacity resets 7 instead of 4 (mean over seeds)" in text
+    # the header's schedule as run: the recorded counts per cell, as they differ
+    assert ("- **Schedule as run** (each run's recorded counts, in its 2,000 steps): `sh_degree=0` 10 refinements, "
+            "4 opacity resets; `sh_degree=3` 10 refinements, 7 opacity resets") in text
     assert "was not recorded by these runs" not in text
 
     # a table from before the counts were recorded still reports, and says so
@@ -277,6 +284,13 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "LPIPS v0.1, AlexNet backbone, inputs scaled to [-1, 1]" in header
     # the default start (init = auto: the scene's points) is jittered with the seed (init_jitter 0.5)
     assert "the initial points (init = auto, seeded)" in header
+    # ... and the header says what auto resolved to: these runs do not record it, so from the scene type
+    # (a rendered scene has its points) and the curves' step-0 count (flat_curves: 1,000)
+    assert ("- **Initialisation**: auto → surface on glossy: the scene's own surface points, 1,000 Gaussians at "
+            "step 0, jittered 0.5 × their neighbour spacing per seed (inferred") in header
+    # sh_interval 1,000 scaled to 2,000 of 30,000 steps: round(66.7) = 67; bands at 67, 134, 201
+    assert "SH degree raised one band every 67 steps (`sh_interval` as the run reads it: bands 1, 2, 3 at steps " \
+           "67, 134, 201" in header
 
     # a config that names its protocol (a preset added to TrainConfig) is shown as named
     from splatbench.experiments.train_report import protocol_lines
@@ -291,6 +305,11 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     # the header names the scenes and says that one rendered scene falls short of the evidence rule
     assert "- **Scenes**: 1: glossy (rendered by Mitsuba); 0 real; a finding here holds on this scene only" \
         in "\n".join(protocol_lines(table))
+    # a run that recorded its start: the method and count it recorded, nothing inferred
+    recorded = table.assign(**{"metric.init_method": "sfm", "metric.init_points": 1234})
+    init = next(line for line in protocol_lines(recorded) if line.startswith("- **Initialisation**"))
+    assert "auto → sfm on glossy: SfM points triangulated from the training views, 1,234 Gaussians at step 0" \
+        in init and "inferred" not in init
     table["config.init"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so

@@ -48,12 +48,13 @@ from dataclasses import dataclass
 import pandas as pd
 
 from splatbench.errors import InputError
-from splatbench.experiments.kind_report import AxisNote, Claim, Comparison, Finding, FindingRules, done_runs
+from splatbench.experiments.kind_report import (AxisNote, Claim, Comparison, Finding, FindingRules, SettlingCurves,
+                                                done_runs)
 from splatbench.experiments.kinds import RunKind
 from splatbench.figures import pareto_front
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
-from splatbench.reports.settling import CellSettling, cell_settling, unsettled_reason
+from splatbench.reports.settling import CellSettling, cell_settling, paired_curve, unsettled_reason
 from splatbench.reports.tables import AxisTable, Row, loaded_runs, seed_values
 
 
@@ -346,6 +347,9 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                     count += 1
                 parts.append(f"{_name(spec)} {' / '.join(texts)}")
             line = f"  - `{row.label}`: " + "; ".join(parts)
+            along = _along_the_run(scenes, ref, row, usable, settling, primary) if settling is not None else ""
+            if along:
+                line += f". {along}"
             if moving:
                 line += f". **Not settled** ({'; '.join(moving)})"
             also = confounds(scenes, ref, row, usable, kind)
@@ -402,6 +406,27 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         lines += more_lines
         claims += more_claims
     return Finding(table.axis, lines, claims)
+
+
+def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, keys: SettlingCurves,
+                   primary: MetricSpec) -> str:
+    """The paired difference of ``row`` against ``ref`` at every evaluation step of the kind's test
+    curve (`splatbench.reports.settling.paired_curve`), per scene, when the curve measures the
+    primary metric and has more than one step: ``Paired difference at each evaluation (glossy,
+    steps 500 / 1,000 / 1,500 / 2,000): +0.21, +0.36, +0.44, +0.47 dB``; "" otherwise."""
+    if keys.metric != primary.name:
+        return ""
+    parts = []
+    for scene in scenes:
+        sel_a = runs[(runs.scene == scene) & runs.run_id.isin(ref.run_ids)]
+        sel_b = runs[(runs.scene == scene) & runs.run_id.isin(row.run_ids)]
+        points = paired_curve(sel_a, sel_b, keys)
+        if len(points) < 2:
+            continue
+        steps = " / ".join(f"{s:,}" for s, _ in points)
+        diffs = ", ".join(f"{d:+{primary.fmt}}" for _, d in points)
+        parts.append(f"{scene}, steps {steps}: {diffs}" + (f" {primary.unit}" if primary.unit else ""))
+    return ("Paired difference at each evaluation (mean over seeds; " + "; ".join(parts) + ")") if parts else ""
 
 
 def _on_front(table: AxisTable, scene: str, size: MetricSpec, quality: MetricSpec, rows: Sequence[Row]) -> bool:

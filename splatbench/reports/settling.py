@@ -141,6 +141,31 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
                         min_effect)
 
 
+def _seed_curves(runs: pd.DataFrame, step_key: str, value_key: str) -> dict[int, dict[int, float]]:
+    """seed -> step -> value of one curve (a seed's runs averaged per step; non-finite points left out)."""
+    out: dict[int, dict[int, list[float]]] = {}
+    if "curves" not in runs.columns:
+        return {}
+    for seed, raw in zip(runs.seed, runs.curves):
+        c = _curves(raw)
+        if c is None:
+            continue
+        for s, v in zip(c.get(step_key) or [], c.get(value_key) or []):
+            if s is not None and v is not None and math.isfinite(float(v)):
+                out.setdefault(int(seed), {}).setdefault(int(s), []).append(float(v))
+    return {seed: {s: float(np.mean(v)) for s, v in steps.items()} for seed, steps in out.items()}
+
+
+def paired_curve(a: pd.DataFrame, b: pd.DataFrame, keys: SettlingCurves) -> list[tuple[int, float]]:
+    """The paired difference ``b - a`` of the test curve at every evaluation step both cells'
+    runs share: (step, mean over the seeds both have of ``b_s - a_s``), in step order; [] when
+    they share none. Whether a gap is stable while the cells still rise shows here."""
+    ca, cb = _seed_curves(a, keys.test_step, keys.test_value), _seed_curves(b, keys.test_step, keys.test_value)
+    seeds = sorted(set(ca) & set(cb))
+    steps = sorted(set.intersection(*(set(ca[s]) & set(cb[s]) for s in seeds))) if seeds else []
+    return [(step, float(np.mean([cb[s][step] - ca[s][step] for s in seeds]))) for step in steps]
+
+
 def drift(a: CellSettling, b: CellSettling) -> float:
     """How far the paired difference ``b - a`` moved over the last quarter (in the curve's unit):
     the mean over the seeds both have of the slope difference times the window."""
@@ -247,4 +272,4 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
 
 
 __all__ = ["LAST_SHARE", "SETTLE_STEPS", "DRIFT_SHARE", "Slope", "CellSettling", "last_quarter_slope",
-           "cell_settling", "drift", "difference_settled", "unsettled_reason", "settling_finding"]
+           "cell_settling", "paired_curve", "drift", "difference_settled", "unsettled_reason", "settling_finding"]
