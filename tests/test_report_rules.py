@@ -9,6 +9,7 @@ made-up metrics and curves), as tests/test_reports.py does, so they run in secon
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -196,6 +197,21 @@ def test_a_rising_last_quarter_is_not_settled_and_a_flat_one_is():
     # the experiment file's minimum effect moves the threshold: 0.5 dB / 1,000 steps settles b
     loose = settling_finding(_settle_table({"a": 0.01, "b": 0.10}), TRAIN, {"test_psnr": 0.5})
     assert all(c.settled for c in loose.claims)
+
+
+def test_the_train_test_gap_is_over_the_slopes_window():
+    # _settle_table: the training view flat 1 dB above the end (train rise 0), the test points 1,500 / 2,000
+    # at end − r / end with r = 0.005 s: the test mean is end − r / 2, so the gap is 1 + r / 2, 1.0025 on
+    # average over seeds 0..2
+    f = settling_finding(_settle_table({"a": 0.0}), TRAIN)
+    cell = cell_settling(_settle_table({"a": 0.0}), TRAIN_REPORT.settling, 0.1)
+    assert cell.gap == pytest.approx(1.0025, abs=1e-9)
+    assert "- Train–test gap over the same window" in f.markdown() and "s `x=a` +1.00 dB." in f.markdown()
+    # a table without a training curve has no gap, and no line
+    table = _settle_table({"a": 0.0})
+    table["curves"] = [json.dumps({k: v for k, v in json.loads(c).items() if k != "psnr"}) for c in table.curves]
+    assert cell_settling(table, TRAIN_REPORT.settling, 0.1).gap is None
+    assert "Train–test gap" not in settling_finding(table, TRAIN).markdown()
 
 
 def test_a_flat_test_curve_beside_a_rising_train_curve_is_overfitting():
