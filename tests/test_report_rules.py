@@ -288,6 +288,21 @@ def test_a_finding_names_what_else_a_setting_changed(tmp_path):
     assert "Opacity resets fire only inside the refine window" in text
 
 
+def test_the_model_size_counts_the_sh_bands_each_gaussian_carries(tmp_path):
+    # 1,000 Gaussians at SH degree 0 hold 14 floats each (3 + 3 + 4 + 1 + 3), at degree 3 59 (3 + 3 + 4 + 1 + 48):
+    # 14,000 against 59,000 parameters, a ratio of 59 / 14 = 4.214 at the same Gaussian count
+    def make(run):
+        d = run.labels["sh_degree"]
+        return metrics_of(30.0 + 0.01 * run.seed + (0.5 if d == 3 else 0.0), sh_degree=d), flat_curves(30.0)
+
+    report, text = results(tmp_path, spec_of(), make)
+    assert ("glossy: `0` 0.01 M parameters, 0.1 MB; `3` 0.06 M parameters, 0.2 MB (×4.214 `0`'s)") in text
+    claim = next(c for c in report.findings["sh_degree"].claims if c.kind == "model size")
+    assert claim.value == pytest.approx(59 / 14) and claim.reference == "0"
+    # ... while the Gaussian count alone reads ×1.000
+    assert "Gaussians ×1.000" in text
+
+
 # --------------------------------------------------------------------------- protocol
 def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     _, text = results(tmp_path, spec_of(), _lead(0.5))

@@ -61,7 +61,8 @@ from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, check_config, metric, metric_specs
-from splatbench.experiments.train_report import auto_sh_degree_note, lpips_note, protocol_lines, schedule_confound_note
+from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, model_size_note, protocol_lines,
+                                                 schedule_confound_note)
 from splatbench.train.config import TrainConfig  # the kind's Config (loads torch: every use of the kind validates)
 
 #: Environment variable naming the folder of rendered datasets.
@@ -516,7 +517,7 @@ REPORT = KindReport(
     confounds=("opacity_resets", "refinements", "cloned", "split", "pruned", "pruned_size", "relocated", "added"),
     load=LoadMarks("time_loaded", "timed"),
     header_notes=(protocol_lines,),
-    axis_notes=(auto_sh_degree_note, schedule_confound_note),
+    axis_notes=(model_size_note, auto_sh_degree_note, schedule_confound_note),
     metric_notes=(lpips_note,),
 )
 

@@ -355,6 +355,63 @@ def auto_sh_degree_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) 
     return lines, claims
 
 
+#: Floats per Gaussian besides its colour: position 3, log-scales 3, rotation quaternion 4, opacity 1.
+GEOMETRY_FLOATS = 3 + 3 + 4 + 1
+#: Bytes per stored parameter (float32, as trained and as a 3DGS PLY stores them).
+PARAM_BYTES = 4
+
+
+def floats_per_gaussian(sh_degree: int) -> int:
+    """Parameters of one Gaussian at SH degree ``d``: 3 + 3 + 4 + 1 + 3 (d + 1)² (14 at 0, 59 at 3)."""
+    return GEOMETRY_FLOATS + 3 * (int(sh_degree) + 1) ** 2
+
+
+def model_size_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
+    """The model size of each row beside its Gaussian count: parameters (`floats_per_gaussian` at the
+    SH degree each run ended at, ``metric.sh_degree``, times its Gaussians) and megabytes (float32),
+    mean over seeds, and each row's paired ratio to the reference row (the one-at-a-time base, else
+    the first), the geometric mean over seeds as the findings' ratios are. The SH degree sets the
+    per-Gaussian count, so a Gaussian-count ratio alone understates what an SH setting costs."""
+    from splatbench.metrics.stats import paired_ratio
+
+    done = done_runs(runs)
+    if done.empty or not {"metric.num_gaussians", "metric.sh_degree"} <= set(done.columns) or not table.rows:
+        return [], []
+    ref = next((r for r in table.rows if getattr(r, "is_base", False)), table.rows[0])
+    parts, claims = [], []
+    for scene in scenes:
+        per_row = {}
+        for row in table.rows:
+            sel = done[(done.scene == scene) & done.run_id.isin(row.run_ids)]
+            n = pd.to_numeric(sel["metric.num_gaussians"], errors="coerce")
+            d = pd.to_numeric(sel["metric.sh_degree"], errors="coerce")
+            params: dict[int, list[float]] = {}
+            for seed, g, deg in zip(sel.seed, n, d):
+                if pd.notna(g) and pd.notna(deg):
+                    params.setdefault(int(seed), []).append(float(g) * floats_per_gaussian(int(deg)))
+            if params:
+                per_row[row.label] = {k: sum(v) / len(v) for k, v in params.items()}
+        if not per_row:
+            continue
+        cells = []
+        for label, seeds in per_row.items():
+            mean = sum(seeds.values()) / len(seeds)
+            text = f"`{label}` {mean / 1e6:.2f} M parameters, {mean * PARAM_BYTES / 1e6:.1f} MB"
+            if label != ref.label and ref.label in per_row:
+                ratio = paired_ratio(per_row[ref.label], seeds)
+                if ratio.n and math.isfinite(ratio.estimate):
+                    text += f" (×{ratio.estimate:.3f} `{ref.label}`'s)"
+                    claims.append(Claim("model size", scene, label, "parameters", "ratio", ratio.estimate,
+                                        f"×{ratio.estimate:.3f}", ref.label, ratio.low, ratio.high, ratio.n))
+            cells.append(text)
+        parts.append(f"{scene}: " + "; ".join(cells))
+    if not parts:
+        return [], []
+    return [f"- Model size (float32 parameters per Gaussian 3 + 3 + 4 + 1 + 3·(d + 1)²: {floats_per_gaussian(0)} at SH "
+            f"degree 0, {floats_per_gaussian(3)} at 3, d the degree each run ended at; times its Gaussians, mean over "
+            f"seeds; ratios paired over seeds): " + " / ".join(parts) + "."], claims
+
+
 #: Strategies whose opacity resets gate size pruning and fire only inside the refine window
 #: (`splatbench.strategies.default.DefaultStrategy` and its subclasses).
 _RESETTING = ("default", "absgrad", "budget")
@@ -409,5 +466,5 @@ def lpips_note(runs: pd.DataFrame) -> list[str]:
             + "; ".join(convention(*k) for k in kinds) + "."] if kinds else []
 
 
-__all__ = ["DEFAULT_PROTOCOL", "protocol_lines", "seed_varies", "scene_kinds", "auto_sh_degree_note",
+__all__ = ["DEFAULT_PROTOCOL", "protocol_lines", "model_size_note", "floats_per_gaussian", "seed_varies", "scene_kinds", "auto_sh_degree_note",
            "schedule_confound_note", "lpips_note"]
