@@ -303,6 +303,27 @@ def test_the_model_size_counts_the_sh_bands_each_gaussian_carries(tmp_path):
     assert "Gaussians ×1.000" in text
 
 
+def test_ssim_is_compared_and_named_as_the_trained_quantity(tmp_path):
+    # SH 3's SSIM 0.01 + 0.001 s above SH 0's: a paired difference of +0.0110 over seeds 0..2
+    def make(run):
+        three = run.labels["sh_degree"] == 3
+        m = metrics_of(30.0 + 0.01 * run.seed + (0.5 if three else 0.0))
+        m["test_ssim"] = 0.8 + ((0.01 + 0.001 * run.seed) if three else 0.0)
+        return m, flat_curves(30.0)
+
+    report, text = results(tmp_path, spec_of(), make)
+    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_ssim")
+    assert vs.value == pytest.approx(0.011) and vs.significant and vs.practical  # above the 0.003 minimum effect
+    assert "; SSIM +0.0110 [95 % CI" in text and "SSIM 0.003" in text
+    # the default loss weights D-SSIM by 0.2 in every run: the SSIM compared is the one trained
+    assert "- SSIM: the loss, (1 − λ) L1 + λ D-SSIM, trains on the same SSIM (its 11-tap Gaussian window) in " \
+           "every row (ssim_lambda = 0.2)" in text
+    # a grid whose loss is L1 alone trains no SSIM and says nothing of it
+    _, text = results(tmp_path / "l1", spec_of({"base": {"iterations": 2000, "ssim_lambda": 0.0, "data": {
+        "resolution": 32, "views": 8, "spp": 2}}}), make)
+    assert "- SSIM: the loss" not in text
+
+
 # --------------------------------------------------------------------------- protocol
 def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     _, text = results(tmp_path, spec_of(), _lead(0.5))

@@ -62,7 +62,7 @@ from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, check_config, metric, metric_specs
 from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, model_size_note, protocol_lines,
-                                                 schedule_confound_note)
+                                                 schedule_confound_note, ssim_trained_note)
 from splatbench.train.config import TrainConfig  # the kind's Config (loads torch: every use of the kind validates)
 
 #: Environment variable naming the folder of rendered datasets.
@@ -503,6 +503,7 @@ REPORT = KindReport(
     metrics=("test_psnr", "test_ssim", "test_lpips", "num_gaussians", "train_seconds", "render_ms_per_view",
              "time_loaded"),
     rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff", min_effect=MIN_EFFECT["test_psnr"]),
+                                     Comparison("test_ssim", "diff", min_effect=MIN_EFFECT["test_ssim"]),
                                      Comparison("test_lpips", "diff", min_effect=MIN_EFFECT["test_lpips"]),
                                      Comparison("train_seconds", "ratio", min_effect=MIN_EFFECT["train_seconds"]),
                                      Comparison("num_gaussians", "ratio", min_effect=MIN_EFFECT["num_gaussians"])),
@@ -517,7 +518,7 @@ REPORT = KindReport(
     confounds=("opacity_resets", "refinements", "cloned", "split", "pruned", "pruned_size", "relocated", "added"),
     load=LoadMarks("time_loaded", "timed"),
     header_notes=(protocol_lines,),
-    axis_notes=(model_size_note, auto_sh_degree_note, schedule_confound_note),
+    axis_notes=(model_size_note, ssim_trained_note, auto_sh_degree_note, schedule_confound_note),
     metric_notes=(lpips_note,),
 )
 

@@ -412,6 +412,40 @@ def model_size_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> t
             f"seeds; ratios paired over seeds): " + " / ".join(parts) + "."], claims
 
 
+#: The window of the test SSIM (`splatbench.metrics.image.ssim_metric`: 11 taps, σ 1.5).
+METRIC_SSIM_WINDOW = 11
+
+
+def ssim_trained_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
+    """Where the loss trains on SSIM (``ssim_lambda > 0``: (1 − λ) L1 + λ D-SSIM), the test SSIM the
+    findings compare is the trained quantity (the same SSIM where ``ssim_window`` is the metric's 11
+    taps): a difference in it is partly the optimiser doing what it was asked, not an independent
+    measure of quality. Names the rows that train on it and the weights."""
+    done = done_runs(runs)
+    if done.empty or "config.ssim_lambda" not in done.columns:
+        return [], []
+    lam = pd.to_numeric(done["config.ssim_lambda"], errors="coerce")
+    if not (lam > 0).any():
+        return [], []
+    windows = {int(w) for w in pd.to_numeric(done.get("config.ssim_window", pd.Series([], dtype=float)),
+                                              errors="coerce").dropna()}
+    same = windows == {METRIC_SSIM_WINDOW}
+    which = "the same SSIM (its 11-tap Gaussian window)" if same else         f"an SSIM of window {' / '.join(map(str, sorted(windows))) or 'unrecorded'} (the metric's is 11)"
+    rows = []
+    for row in table.rows:
+        sel = lam[done.run_id.isin(row.run_ids)]
+        values = sorted({float(v) for v in sel.dropna()})
+        if values and max(values) > 0:
+            rows.append((row.label, values))
+    if len(rows) == len(table.rows) and len({tuple(v) for _, v in rows}) == 1:
+        where = f"in every row (ssim_lambda = {' / '.join(f'{v:g}' for v in rows[0][1])})"
+    else:
+        where = "in " + ", ".join(f"`{label}` (ssim_lambda = {' / '.join(f'{v:g}' for v in vs)})" for label, vs in rows)
+    return [f"- SSIM: the loss, (1 − λ) L1 + λ D-SSIM, trains on {which} {where}: the test SSIM compared above is "
+            f"the quantity those runs optimised, so a difference in it is partly the trained objective, not an "
+            f"independent measure of quality (test PSNR and LPIPS are not trained on)."], []
+
+
 #: Strategies whose opacity resets gate size pruning and fire only inside the refine window
 #: (`splatbench.strategies.default.DefaultStrategy` and its subclasses).
 _RESETTING = ("default", "absgrad", "budget")
@@ -466,5 +500,5 @@ def lpips_note(runs: pd.DataFrame) -> list[str]:
             + "; ".join(convention(*k) for k in kinds) + "."] if kinds else []
 
 
-__all__ = ["DEFAULT_PROTOCOL", "protocol_lines", "model_size_note", "floats_per_gaussian", "seed_varies", "scene_kinds", "auto_sh_degree_note",
+__all__ = ["DEFAULT_PROTOCOL", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note",
            "schedule_confound_note", "lpips_note"]
