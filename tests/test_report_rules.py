@@ -268,6 +268,18 @@ def test_a_finding_names_what_else_a_setting_changed(tmp_path):
 
     _, text = results(tmp_path, spec_of(), make)
     assert "Also changed: glossy: opacity resets 7 instead of 4 (mean over seeds)" in text
+    # Gaussian counts below the floor (20 per run) on both sides are left out, however far apart; events are not
+    def few(run):
+        three = run.labels["sh_degree"] == 3
+        counts = {"refinements": 10, "opacity_resets": 4, "cloned": 500, "split": 300, "pruned": 100,
+                  "pruned_size": 3 if three else 15, "relocated": 0, "added": 0}
+        return metrics_of(30.0 + (1.0 if three else 0.0) + 0.01 * run.seed, **counts), flat_curves(30.0)
+
+    _, few_text = results(tmp_path / "few", spec_of(), few)
+    assert "Also changed" not in few_text
+    _, more = results(tmp_path / "more", spec_of(), lambda run: (lambda m, c: (
+        {**m, "pruned_size": 25 if run.labels["sh_degree"] == 3 else 15}, c))(*few(run)))
+    assert "Also changed: glossy: pruned for size 25 instead of 15 (mean over seeds)" in more
     # the header's schedule as run: the recorded counts per cell, as they differ
     assert ("- **Schedule as run** (each run's recorded counts, in its 2,000 steps): `sh_degree=0` 10 refinements, "
             "4 opacity resets; `sh_degree=3` 10 refinements, 7 opacity resets") in text
@@ -401,7 +413,20 @@ def test_best_is_not_named_between_models_of_different_sizes(tmp_path):
     assert size.metric == "num_gaussians" and size.value == pytest.approx(1.2, rel=0.01) and size.low > 1.05
     assert "glossy: no single best at comparable size (`3`" in text
     assert f"at {size.text} the Gaussians, more than the 5 % minimum effect" in lead.text and lead.text in text
-    assert "both on this table's Gaussians/quality Pareto front" in text  # smaller-worse and larger-better
+    # smaller-worse and larger-better: both on the front, but so is every row of this two-row table, which
+    # tells nothing: the line is written only where some row is off the front
+    assert "Pareto front" not in lead.text
+    from types import SimpleNamespace
+
+    from splatbench.reports.findings import _on_front
+
+    frame = pd.DataFrame({"scene": "s", "label": ["a", "b", "c"], "num_gaussians.mean": [1.0, 2.0, 3.0],
+                          "test_psnr.mean": [30.0, 31.0, 30.5]})  # c: larger and worse than b, dominated
+    table = SimpleNamespace(frame=frame)
+    rows = [SimpleNamespace(label=x) for x in "abc"]
+    gauss = MetricSpec("num_gaussians", "Gaussians", ".0f", "", "lower")
+    assert _on_front(table, "s", gauss, PSNR, rows[:2]) and not _on_front(table, "s", gauss, PSNR, rows[1:])
+    assert not _on_front(SimpleNamespace(frame=frame[:2]), "s", gauss, PSNR, rows[:2])  # all on the front
 
     # the experiment file's own minimum effect for the Gaussians (25 %) lets the same lead be named
     report, _ = results(tmp_path / "d", spec_of({"report": {"min_effect": {"num_gaussians": 0.25}}}),

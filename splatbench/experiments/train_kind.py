@@ -87,6 +87,14 @@ TOPOLOGY_METRICS = ("refinements", "opacity_resets", "cloned", "split", "pruned"
 #: overrides them.
 MIN_EFFECT: dict[str, float] = {"test_psnr": 0.1, "test_ssim": 0.003, "test_lpips": 0.005,
                                 "train_seconds": 0.10, "num_gaussians": 0.05}
+#: Confound counts that count Gaussians (not events: refinements and opacity resets are always named).
+GAUSSIAN_COUNTS = ("cloned", "split", "pruned", "pruned_size", "relocated", "added")
+#: A Gaussian count is left out of "Also changed" where both cells' means are below this many per run: then
+#: at most 20 Gaussians differ, under the 5 % minimum effect on the Gaussian count for any model of 400 or
+#: more Gaussians and under 0.5 % of the smallest final model of any committed train report (4,757, the
+#: fox's MCMC); e.g. "pruned for size 13.3 instead of 14.3" in a model of 25,000 (docs/reports.md,
+#: "Confounds"). Event counts (refinements, opacity resets) have no floor: one reset more is a change.
+CONFOUND_FLOOR = 20.0
 #: Keys of the curves: the training history (every ``log_every`` steps) and the test evaluations; a run
 #: with full step evaluations (a graphdeco protocol, or eval_steps) adds ``step_evaluations``, the list of
 #: `splatbench.train.StepEvaluation` as objects.
@@ -516,6 +524,7 @@ REPORT = KindReport(
     timed=("train_seconds", "render_ms_per_view"),
     settling=SettlingCurves("test_psnr", "eval_step", "eval_psnr", "step", "psnr"),
     confounds=("opacity_resets", "refinements", "cloned", "split", "pruned", "pruned_size", "relocated", "added"),
+    confound_floor=tuple((name, CONFOUND_FLOOR) for name in GAUSSIAN_COUNTS),
     load=LoadMarks("time_loaded", "timed"),
     header_notes=(protocol_lines,),
     axis_notes=(model_size_note, ssim_trained_note, auto_sh_degree_note, schedule_confound_note),

@@ -431,12 +431,13 @@ def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame
 
 def _on_front(table: AxisTable, scene: str, size: MetricSpec, quality: MetricSpec, rows: Sequence[Row]) -> bool:
     """Whether every one of ``rows`` is on the Pareto front of ``table``'s rows at ``scene`` on the
-    means (no other row both smaller in ``size`` and better in ``quality``; `splatbench.figures`)."""
+    means (no other row both smaller in ``size`` and better in ``quality``; `splatbench.figures`)
+    while some row is not: where every row is on the front, saying so tells nothing."""
     at = table.frame[table.frame.scene == scene]
     sign = -1.0 if quality.better == "lower" else 1.0
     front = pareto_front(list(at[f"{size.name}.mean"]), [sign * q for q in at[f"{quality.name}.mean"]])
     labels = {at.iloc[i].label for i in front}
-    return all(r.label in labels for r in rows)
+    return all(r.label in labels for r in rows) and len(labels) < len(set(at.label))
 
 
 def load_recorded(runs: pd.DataFrame, kind: RunKind) -> bool:
@@ -454,7 +455,8 @@ def _recorded(runs: pd.DataFrame, declared) -> bool:
 
 def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, kind: RunKind) -> str:
     """What else ``row`` changed against ``ref`` (the kind's confound counts, mean over seeds,
-    per scene): each count that differs by more than `CONFOUND_SHARE` of the larger, e.g.
+    per scene): each count that differs by more than `CONFOUND_SHARE` of the larger and is not
+    below its floor on both sides (`KindReport.confound_floor`), e.g.
     ``textured: opacity resets 7 instead of 4``; "" when none differs. Runs that did not record
     a count (grids run before it was) give the count their config schedules, where the kind
     can say it (`RunKind.planned`), written "(planned)"."""
@@ -462,6 +464,7 @@ def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, kin
     if declared is None or not declared.confounds:
         return ""
     plan = _planner(kind)
+    floors = dict(declared.confound_floor)
     parts = []
     for scene in scenes:
         moved = []
@@ -477,6 +480,8 @@ def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, kin
             if not a or not b:
                 continue
             ma, mb = sum(a.values()) / len(a), sum(b.values()) / len(b)
+            if m.name in floors and max(abs(ma), abs(mb)) < floors[m.name]:
+                continue  # too few on both sides to change the model (`KindReport.confound_floor`)
             if abs(mb - ma) > CONFOUND_SHARE * max(abs(ma), abs(mb)):
                 moved.append(f"{m.label} {_count(mb)} instead of {_count(ma)}{how}")
         if moved:
