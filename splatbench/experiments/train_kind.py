@@ -115,7 +115,10 @@ class TrainRun(RunResult):
     render_ms_per_view: float | None = metric("render (ms/view)", ".1f", "ms", "lower",
                                               "mean forward render time of a test view (ms)")
     sh_degree: int = metric(meaning="SH degree in use at the end (what 'auto' chose)")
-    peak_rss_mb: float = metric(meaning="peak resident memory of the worker process (MB)")
+    peak_rss_mb: float = metric("peak RSS (MB)", ".0f", "MB", "lower",
+                                "peak resident memory of the worker process (MB: the whole process, Python, torch "
+                                "and the dataset included, not the model alone); unlike a time, it does not "
+                                "depend on the machine's load, so it is the cost a loaded run still measures")
     iterations: int = metric(meaning="steps run")
     test_views: int = metric(meaning="views evaluated")
     dataset_hash: str | None = metric(meaning="content hash of the rendered dataset (scene files or teacher PLY, "
@@ -508,8 +511,8 @@ def describe_protocol(name: str) -> str:
 
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
-    metrics=("test_psnr", "test_ssim", "test_lpips", "num_gaussians", "train_seconds", "render_ms_per_view",
-             "time_loaded"),
+    metrics=("test_psnr", "test_ssim", "test_lpips", "num_gaussians", "peak_rss_mb", "train_seconds",
+             "render_ms_per_view", "time_loaded"),
     rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff", min_effect=MIN_EFFECT["test_psnr"]),
                                      Comparison("test_ssim", "diff", min_effect=MIN_EFFECT["test_ssim"]),
                                      Comparison("test_lpips", "diff", min_effect=MIN_EFFECT["test_lpips"]),
