@@ -120,8 +120,8 @@ def test_best_needs_a_significant_and_practical_lead(tmp_path):
 
 
 def test_a_minimum_effect_for_a_metric_the_findings_do_not_compare_is_refused(tmp_path):
-    with pytest.raises(InputError, match=r"report\.min_effect\.test_ssim: not a metric"):
-        results(tmp_path, spec_of({"report": {"min_effect": {"test_ssim": 0.01}}}), _lead(0.5))
+    with pytest.raises(InputError, match=r"report\.min_effect\.test_views: not a metric"):
+        results(tmp_path, spec_of({"report": {"min_effect": {"test_views": 1}}}), _lead(0.5))
     with pytest.raises(InputError, match=r"report\.min_effect\.test_psnr: expected a number >= 0"):
         spec_of({"report": {"min_effect": {"test_psnr": -1}}})
     with pytest.raises(InputError, match=r"report\.minimum"):

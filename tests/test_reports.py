@@ -163,7 +163,7 @@ def test_findings_numbers_match_parquet(sh_report):
     kinds = {c.kind for c in claims}
     # glossy's SH 3 leads SH 2 by 1.5 dB at ~x1.08 the Gaussians (1300 against 1200 made): "no single
     # best at comparable size" (docs/reports.md, "Best"), with its size claim; diffuse: no lead at all
-    assert kinds == {"no best", "size", "vs", "count", "auto"}
+    assert kinds == {"no best", "size", "vs", "count", "auto", "model size"}
     specs = {m.name: m for m in TRAIN_METRICS}
     effects = {c.metric: c.min_effect for c in TRAIN_REPORT.rules.comparisons}
     for c in claims:
@@ -204,9 +204,18 @@ def test_findings_numbers_match_parquet(sh_report):
             # lead over the runner-up with its size against it (one "no best" and one "size" per scene)
             leads = sum(1 for x in claims if x.kind in ("best", "no best", "size") and x.reference
                         and math.isfinite(x.low))
-            assert sum(1 for x in claims if x.kind == "vs") == 3 * len(SCENES) * 4 and leads >= len(SCENES)
-            assert c.value == 3 * len(SCENES) * 4 + leads
+            # 5 compared metrics: test PSNR, SSIM, LPIPS, train time, Gaussians
+            assert sum(1 for x in claims if x.kind == "vs") == 3 * len(SCENES) * 5 and leads >= len(SCENES)
+            assert c.value == 3 * len(SCENES) * 5 + leads
             assert f"This table makes {int(c.value)} comparisons" in text
+        elif c.kind == "model size":
+            # parameters: Gaussians x (3 + 3 + 4 + 1 + 3 (d + 1)²) at the degree each run ended at, paired ratio
+            def params(label):
+                g, d = (per_seed(table, c.scene, label, m) for m in ("num_gaussians", "sh_degree"))
+                return {k: g[k] * (11 + 3 * (int(d[k]) + 1) ** 2) for k in g}
+
+            iv = paired_ratio(params(c.reference), params(c.label))
+            assert (c.value, c.n) == pytest.approx((iv.estimate, iv.n)) and c.text == f"×{iv.estimate:.3f}"
         elif c.kind == "auto":
             done = table[(table.status == "done") & (table.scene == c.scene)]
             auto = done[done["axis.sh_degree"] == json.dumps("auto")]
@@ -254,7 +263,8 @@ def test_train_report_names_its_lpips_and_leaves_loaded_times_out(tmp_path):
             assert "| LPIPS |" in text and "| timed under load (fraction of runs) |" in text
             assert "The `LPIPS` column is LPIPS v0.1, AlexNet backbone, inputs scaled to [-1, 1]" in text
             # seed 2's times are out (2 pairs), its PSNR and LPIPS in (3 pairs)
-            assert vs == {("test_psnr", 3), ("test_lpips", 3), ("train_seconds", 2), ("num_gaussians", 3)}
+            assert vs == {("test_psnr", 3), ("test_ssim", 3), ("test_lpips", 3), ("train_seconds", 2),
+                          ("num_gaussians", 3)}
             assert "1 run(s) timed while other processes loaded the machine are left out of the render / train time comparisons" in text
             assert (f"Load: 1 of {len(runs)} runs timed while other processes loaded the machine (`metric.time_loaded`: "
                     f"their times are left out of the time comparisons, their quality kept); others' estimated load "
@@ -264,7 +274,7 @@ def test_train_report_names_its_lpips_and_leaves_loaded_times_out(tmp_path):
             assert "timed under load" not in text and "Load:" not in text
             # without a load record, times are shown but said to be no evidence
             assert "did not record the machine's load" in text
-            assert vs == {("test_psnr", 3), ("train_seconds", 3), ("num_gaussians", 3)}
+            assert vs == {("test_psnr", 3), ("test_ssim", 3), ("train_seconds", 3), ("num_gaussians", 3)}
 
 
 def test_one_seed_report_says_no_interval(sh_results, tmp_path):
