@@ -284,9 +284,11 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
     lines += [*markdown_table(head, rows, align="-rrr--").splitlines(),
               "", f"Cells: {_name(m)} ({m.unit}), mean over seeds ± the half-width of its 95 % t interval."
               if m.unit else f"Cells: {_name(m)}, mean over seeds ± the half-width of its 95 % t interval.", ""]
+    # the sides with a result (a check not run yet has none: no rows of dashes)
     others = [(side, name) for side, name in ((result.grid, f"`{result.grid.protocol}`"),
-                                              (result.rerun, f"`{result.rerun.protocol}`")) if side.others]
-    if others and any(st.n for side, _ in others for _, *sts in side.others for st in sts):
+                                              (result.rerun, f"`{result.rerun.protocol}`"))
+              if side.others and any(st.n for _, *sts in side.others for st in sts)]
+    if others:
         specs = [m for m, _, _ in others[0][0].others]
         head = ["protocol", "cell", _label(m), *(_label(o) for o in specs)]
         cells = []
