@@ -313,8 +313,13 @@ def test_the_model_size_counts_the_sh_bands_each_gaussian_carries(tmp_path):
     assert claim.value == pytest.approx(59 / 14) and claim.reference == "0"
     # ... while the Gaussian count alone reads ×1.000
     assert "Gaussians ×1.000" in text
-    # the process's peak memory per cell is a column: it does not depend on the load that voids the times
+    # runs that recorded only their worker's lifetime peak RSS show no memory column, and say why
+    assert "| peak RSS (MB) |" not in text and "- No peak-memory column: these runs recorded their worker" in text
+    # a run's own peak (reset as it starts) is a column: it does not depend on the load that voids the times
+    _, text = results(tmp_path / "own", spec_of(), lambda run: (lambda m, c: ({**m, "run_peak_rss_mb": 500.0}, c))(
+        *make(run)))
     assert "| Gaussians | peak RSS (MB) | train time (s) |" in text and "| 1000 (no spread) | 500 (no spread) |" in text
+    assert "No peak-memory column" not in text
 
 
 def test_ssim_is_compared_and_named_as_the_trained_quantity(tmp_path):

@@ -54,7 +54,8 @@ def fake_metrics(scene: str, degree, seed: int) -> tuple[dict, dict]:
                "iterations": 100, "test_views": 1, "dataset_hash": "0" * 16,
                "test_lpips": 0.2 - (0.02 * d if scene == "glossy" else 0.0) + rng.normal(0, 0.005),
                "lpips_net": "alex", "lpips_scale_inputs": 1, "cpu_seconds": 15.0 + rng.random(),
-               "load_before": 0.5, "load_after": 1.5, "load_other": 0.2, "cores": 2, "time_loaded": 0}
+               "load_before": 0.5, "load_after": 1.5, "load_other": 0.2, "cores": 2, "time_loaded": 0,
+               "run_peak_rss_mb": 600.0 + 20 * d + seed}
     curves = {"step": steps, "psnr": [psnr - 6, psnr - 2, psnr], "loss": [0.3, 0.2, 0.1],
               "num_gaussians": [1000] * 3, "eval_step": [50, 100], "eval_psnr": [psnr - 1, psnr],
               "eval_ssim": [0.7, 0.8], "eval_lpips": [0.3, 0.2]}
@@ -582,7 +583,10 @@ def test_a_train_result_becomes_the_kinds_record_field_by_field():
         "dataset_hash": "abc", "test_lpips": 0.2, "lpips_net": "alex", "lpips_scale_inputs": 0, "cpu_seconds": 20.0,
         "load_before": 0.5, "load_after": 1.5, "load_other": 1.5, "cores": 2, "time_loaded": 1, "refinements": 3,
         "opacity_resets": 1, "cloned": 10, "split": 5, "pruned": 2, "pruned_size": 1, "relocated": 0, "added": 0,
-        "init_method": "surface", "init_points": 1000}  # what init = auto resolved to, and its start
+        "init_method": "surface", "init_points": 1000,  # what init = auto resolved to, and its start
+        "run_peak_rss_mb": None}  # the peak was not reset as the run started: no per-run peak
+    # reset (the kind's run does it on Linux): the process's peak is the run's own
+    assert metric_values(TrainRun.of(result, "abc", own_peak=True))["run_peak_rss_mb"] == 900.0
     assert record.warnings == ("warning: a warning",)
     assert record.curves["step"] == [0, 29] and record.curves["eval_psnr"] == [25.5]
     assert check_output(record, TRAIN) == record

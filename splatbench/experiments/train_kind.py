@@ -61,8 +61,10 @@ from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, check_config, metric, metric_specs
-from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, model_size_note, protocol_lines,
+from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, memory_note, model_size_note,
+                                                 protocol_lines,
                                                  schedule_confound_note, ssim_trained_note)
+from splatbench.metrics.memory import reset_peak_rss
 from splatbench.train.config import TrainConfig  # the kind's Config (loads torch: every use of the kind validates)
 
 #: Environment variable naming the folder of rendered datasets.
@@ -115,10 +117,9 @@ class TrainRun(RunResult):
     render_ms_per_view: float | None = metric("render (ms/view)", ".1f", "ms", "lower",
                                               "mean forward render time of a test view (ms)")
     sh_degree: int = metric(meaning="SH degree in use at the end (what 'auto' chose)")
-    peak_rss_mb: float = metric("peak RSS (MB)", ".0f", "MB", "lower",
-                                "peak resident memory of the worker process (MB: the whole process, Python, torch "
-                                "and the dataset included, not the model alone); unlike a time, it does not "
-                                "depend on the machine's load, so it is the cost a loaded run still measures")
+    peak_rss_mb: float = metric(meaning="peak resident memory of the worker process over its life so far (MB): a "
+                                        "worker runs several runs in turn, so it carries the peaks of the runs "
+                                        "before this one (run_peak_rss_mb is the run's own)")
     iterations: int = metric(meaning="steps run")
     test_views: int = metric(meaning="views evaluated")
     dataset_hash: str | None = metric(meaning="content hash of the rendered dataset (scene files or teacher PLY, "
@@ -152,16 +153,25 @@ class TrainRun(RunResult):
     relocated: int | None = metric("relocated", ".0f", meaning="MCMC: dead Gaussians relocated, summed over the "
                                                                "refinements")
     added: int | None = metric("added", ".0f", meaning="MCMC: Gaussians added, summed over the refinements")
+    run_peak_rss_mb: float | None = metric("peak RSS (MB)", ".0f", "MB", "lower",
+                                           "peak resident memory of the worker process during this run alone (MB; "
+                                           "the high-water mark reset as the run starts: the whole process, Python, "
+                                           "torch and the dataset included, not the model alone); unlike a time it "
+                                           "does not depend on the machine's load, so a loaded run still measures "
+                                           "it; None where the reset is unavailable and before it was recorded",
+                                           default=None)
     init_method: str | None = metric(meaning="the initialisation that ran (what init = auto resolved to: surface, "
                                              "sfm or random); None before it was recorded", default=None)
     init_points: int | None = metric(meaning="Gaussians the run started from (its initial points); None before it "
                                              "was recorded", default=None)
 
     @classmethod
-    def of(cls, result, dataset_hash: str | None) -> TrainRun:
+    def of(cls, result, dataset_hash: str | None, *, own_peak: bool = False) -> TrainRun:
         """The record of a `splatbench.train.TrainResult`: its own metrics by name, the load
         (`TrainResult.load`) and the strategy's counts (`TrainResult.topology`; None before
-        they were recorded) flattened, its warnings and its curves (`CURVE_KEYS`)."""
+        they were recorded) flattened, its warnings and its curves (`CURVE_KEYS`). ``own_peak``:
+        the process's peak RSS was reset as the run started, so ``result.peak_rss_mb`` is the
+        run's own (``run_peak_rss_mb``; None otherwise)."""
         names = {m.name for m in metric_specs(cls)}
         rows = result.to_dict()  # NaN / inf already None there (the one JSON-safety rule of a result)
         history, evaluations = rows["history"], rows["evaluations"]
@@ -179,6 +189,7 @@ class TrainRun(RunResult):
                   **{name: topology.get(name) for name in TOPOLOGY_METRICS},
                   "lpips_scale_inputs": int(result.lpips_scale_inputs), "time_loaded": int(result.load["loaded"]),
                   "init_method": (result.init or {}).get("method"), "init_points": (result.init or {}).get("points"),
+                  "run_peak_rss_mb": result.peak_rss_mb if own_peak else None,
                   "dataset_hash": dataset_hash}
         return cls(**values, warnings=tuple(result.warnings), curves=curves)
 
@@ -461,8 +472,10 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> TrainRun:
     if scene_type(data) == "folder":
         fields = {**fields, "data": {"downscale": data["downscale"]}}
     cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="config")
+    # a worker runs several runs in turn: reset its high-water mark so the peak recorded is this run's own
+    own_peak = reset_peak_rss()
     result = train(cfg)  # validated on construction
-    return TrainRun.of(result, dataset.hash[:16] if dataset.hash else None)
+    return TrainRun.of(result, dataset.hash[:16] if dataset.hash else None, own_peak=own_peak)
 
 
 def planned(config: dict[str, Any]) -> dict[str, float]:
@@ -511,7 +524,7 @@ def describe_protocol(name: str) -> str:
 
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
-    metrics=("test_psnr", "test_ssim", "test_lpips", "num_gaussians", "peak_rss_mb", "train_seconds",
+    metrics=("test_psnr", "test_ssim", "test_lpips", "num_gaussians", "run_peak_rss_mb", "train_seconds",
              "render_ms_per_view", "time_loaded"),
     rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff", min_effect=MIN_EFFECT["test_psnr"]),
                                      Comparison("test_ssim", "diff", min_effect=MIN_EFFECT["test_ssim"]),
@@ -531,7 +544,7 @@ REPORT = KindReport(
     load=LoadMarks("time_loaded", "timed"),
     header_notes=(protocol_lines,),
     axis_notes=(model_size_note, ssim_trained_note, auto_sh_degree_note, schedule_confound_note),
-    metric_notes=(lpips_note,),
+    metric_notes=(lpips_note, memory_note),
 )
 
 #: The ``train`` kind (``kind = "train"``).

@@ -484,6 +484,21 @@ def _decoded(value):
     return value
 
 
+def memory_note(runs: pd.DataFrame) -> list[str]:
+    """Why a table of runs recorded before ``run_peak_rss_mb`` shows no memory column: their
+    ``peak_rss_mb`` is their worker process's lifetime peak, which carries the peaks of the runs
+    that worker ran before (a spawn pool reuses its workers), so it is no per-cell cost."""
+    done = done_runs(runs)
+    own = "metric.run_peak_rss_mb" in done.columns and pd.to_numeric(done["metric.run_peak_rss_mb"],
+                                                                       errors="coerce").notna().any()
+    if own or "metric.peak_rss_mb" not in done.columns or done.empty:
+        return []
+    return ["- No peak-memory column: these runs recorded their worker process's lifetime peak RSS "
+            "(`metric.peak_rss_mb`), and a worker runs several runs in turn, so a run carries the peaks of the runs "
+            "it followed (not a cost of its cell). Runs since record their own (`metric.run_peak_rss_mb`, the "
+            "high-water mark reset as each run starts), shown as `peak RSS (MB)`."]
+
+
 def lpips_note(runs: pd.DataFrame) -> list[str]:
     """Which LPIPS the report's column is (net and input convention), from the
     done runs' ``lpips_net`` / ``lpips_scale_inputs``; none for a table without them."""
@@ -501,4 +516,4 @@ def lpips_note(runs: pd.DataFrame) -> list[str]:
 
 
 __all__ = ["DEFAULT_PROTOCOL", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note",
-           "schedule_confound_note", "lpips_note"]
+           "schedule_confound_note", "lpips_note", "memory_note"]
