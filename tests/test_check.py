@@ -287,6 +287,9 @@ def test_report_says_not_run_without_the_checks_results(tmp_path):
             "(finished runs are skipped) and report again.") in text
     assert "| `graphdeco-7k` | 0 of 6 | – | – | – | – |" in text
     assert "the 3DGS paper's 7K column" in text and not (out / CHECK_TABLE_NAME).exists()
+    # each cell's other metrics beside the primary: the grid's side only (the check has no runs yet)
+    assert "Each cell's SSIM, LPIPS, Gaussians beside its test PSNR" in text
+    assert "| `quick` | `sh_degree=3` |" in text and "| `graphdeco-7k` | `sh_degree=3` |" not in text
     # a grid without [check] names none
     plain = write_report(build_report(spec_of(SH_GRID, check=None), tmp_path / "results"), tmp_path / "plain")
     assert "**7K check: none declared**" in plain.read_text() and "## Headline at" not in plain.read_text()
@@ -319,6 +322,11 @@ def test_report_gives_a_verdict_with_the_checks_results(tmp_path, grid_gain, gai
     claim = check.rerun.claim
     assert claim.n == 3 and claim.value == pytest.approx(iv.estimate) and claim.low == pytest.approx(iv.low)
     assert abs(claim.value - gain) < 3 * noise and claim.text in text
+    # beside each cell's PSNR, its SSIM, LPIPS and Gaussians at each protocol (record(): 0.9, 0.1 and 1,000 in
+    # every run: seeds that did not vary them)
+    row = next(line for line in text.splitlines() if line.startswith("| `graphdeco-7k` | `sh_degree=3` |"))
+    assert row.endswith("| 0.9000 (no spread) | 0.1000 (no spread) | 1000 (no spread) |"), row
+    assert [m.name for m, _, _ in check.rerun.others] == ["test_ssim", "test_lpips", "num_gaussians"]
     assert check.rerun.settled is (slope == 0.0)
     assert ("**not settled** at `graphdeco-7k` (`sh_degree=3` +0.50 dB / 1,000 steps" in text) is (slope > 0)
     # the grid's side is the grid's runs of the same two cells (iterations 100), not the check's
@@ -367,6 +375,8 @@ def test_report_command_keeps_the_check_beside_the_report_and_rebuilds_it(tmp_pa
     run = CliRunner().invoke(report_command, [str(path), "--out", str(out), "--rebuild"])
     assert run.exit_code == 0, run.output
     rebuilt = (out / "report.md").read_text()
-    assert rebuilt.replace(f" --results {full} --out {out}", "").replace(f" --results {full}", "") \
+    # the rebuilt report names the --out it was rebuilt with (no --results: it read the report folder)
+    assert f"shfake.toml --out {out}`: " in rebuilt
+    assert rebuilt.replace(f" --out {out}", "") \
         == text.replace(f" --results {full} --out {out}", "").replace(f" --results {full}", "")
     assert "**7K check: holds**: " in rebuilt

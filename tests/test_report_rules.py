@@ -9,6 +9,7 @@ made-up metrics and curves), as tests/test_reports.py does, so they run in secon
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -119,8 +120,8 @@ def test_best_needs_a_significant_and_practical_lead(tmp_path):
 
 
 def test_a_minimum_effect_for_a_metric_the_findings_do_not_compare_is_refused(tmp_path):
-    with pytest.raises(InputError, match=r"report\.min_effect\.test_ssim: not a metric"):
-        results(tmp_path, spec_of({"report": {"min_effect": {"test_ssim": 0.01}}}), _lead(0.5))
+    with pytest.raises(InputError, match=r"report\.min_effect\.test_views: not a metric"):
+        results(tmp_path, spec_of({"report": {"min_effect": {"test_views": 1}}}), _lead(0.5))
     with pytest.raises(InputError, match=r"report\.min_effect\.test_psnr: expected a number >= 0"):
         spec_of({"report": {"min_effect": {"test_psnr": -1}}})
     with pytest.raises(InputError, match=r"report\.minimum"):
@@ -198,6 +199,21 @@ def test_a_rising_last_quarter_is_not_settled_and_a_flat_one_is():
     assert all(c.settled for c in loose.claims)
 
 
+def test_the_train_test_gap_is_over_the_slopes_window():
+    # _settle_table: the training view flat 1 dB above the end (train rise 0), the test points 1,500 / 2,000
+    # at end − r / end with r = 0.005 s: the test mean is end − r / 2, so the gap is 1 + r / 2, 1.0025 on
+    # average over seeds 0..2
+    f = settling_finding(_settle_table({"a": 0.0}), TRAIN)
+    cell = cell_settling(_settle_table({"a": 0.0}), TRAIN_REPORT.settling, 0.1)
+    assert cell.gap == pytest.approx(1.0025, abs=1e-9)
+    assert "- Train–test gap over the same window" in f.markdown() and "s `x=a` +1.00 dB." in f.markdown()
+    # a table without a training curve has no gap, and no line
+    table = _settle_table({"a": 0.0})
+    table["curves"] = [json.dumps({k: v for k, v in json.loads(c).items() if k != "psnr"}) for c in table.curves]
+    assert cell_settling(table, TRAIN_REPORT.settling, 0.1).gap is None
+    assert "Train–test gap" not in settling_finding(table, TRAIN).markdown()
+
+
 def test_a_flat_test_curve_beside_a_rising_train_curve_is_overfitting():
     f = settling_finding(_settle_table({"default": 0.0, "mcmc": 0.0}, {"default": 1.0, "mcmc": 0.0}), TRAIN)
     assert "**Overfitting**" in f.markdown() and "`x=default`" in f.markdown().split("**Overfitting**")[1]
@@ -214,6 +230,10 @@ def test_an_unsettled_difference_is_marked_in_the_axis_finding(tmp_path):
     vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
     assert vs.significant and vs.practical and vs.settled is False
     assert "**Not settled** (glossy: `3` +1.00 dB / 1,000 steps over the last quarter)" in text
+    # the paired difference at every evaluation: d = 1 + 0.02 s² (mean 1.033) at 500, 1,000 and 2,000; at
+    # 1,500 the sh 3 curve sits `rise` = 0.5 dB below its end while sh 0's is flat: 0.533
+    assert ("Paired difference at each evaluation (mean over seeds; glossy, steps 500 / 1,000 / 1,500 / 2,000: "
+            "+1.03, +1.03, +0.53, +1.03 dB)") in text
     best = next(c for c in report.findings["sh_degree"].claims if c.kind == "best")
     assert best.settled is False and "**not settled**" in best.text
 
@@ -248,6 +268,21 @@ def test_a_finding_names_what_else_a_setting_changed(tmp_path):
 
     _, text = results(tmp_path, spec_of(), make)
     assert "Also changed: glossy: opacity resets 7 instead of 4 (mean over seeds)" in text
+    # Gaussian counts below the floor (20 per run) on both sides are left out, however far apart; events are not
+    def few(run):
+        three = run.labels["sh_degree"] == 3
+        counts = {"refinements": 10, "opacity_resets": 4, "cloned": 500, "split": 300, "pruned": 100,
+                  "pruned_size": 3 if three else 15, "relocated": 0, "added": 0}
+        return metrics_of(30.0 + (1.0 if three else 0.0) + 0.01 * run.seed, **counts), flat_curves(30.0)
+
+    _, few_text = results(tmp_path / "few", spec_of(), few)
+    assert "Also changed" not in few_text
+    _, more = results(tmp_path / "more", spec_of(), lambda run: (lambda m, c: (
+        {**m, "pruned_size": 25 if run.labels["sh_degree"] == 3 else 15}, c))(*few(run)))
+    assert "Also changed: glossy: pruned for size 25 instead of 15 (mean over seeds)" in more
+    # the header's schedule as run: the recorded counts per cell, as they differ
+    assert ("- **Schedule as run** (each run's recorded counts, in its 2,000 steps): `sh_degree=0` 10 refinements, "
+            "4 opacity resets; `sh_degree=3` 10 refinements, 7 opacity resets") in text
     assert "was not recorded by these runs" not in text
 
     # a table from before the counts were recorded still reports, and says so
@@ -265,6 +300,49 @@ def test_a_finding_names_what_else_a_setting_changed(tmp_path):
     assert "Opacity resets fire only inside the refine window" in text
 
 
+def test_the_model_size_counts_the_sh_bands_each_gaussian_carries(tmp_path):
+    # 1,000 Gaussians at SH degree 0 hold 14 floats each (3 + 3 + 4 + 1 + 3), at degree 3 59 (3 + 3 + 4 + 1 + 48):
+    # 14,000 against 59,000 parameters, a ratio of 59 / 14 = 4.214 at the same Gaussian count
+    def make(run):
+        d = run.labels["sh_degree"]
+        return metrics_of(30.0 + 0.01 * run.seed + (0.5 if d == 3 else 0.0), sh_degree=d), flat_curves(30.0)
+
+    report, text = results(tmp_path, spec_of(), make)
+    assert ("glossy: `0` 0.01 M parameters, 0.1 MB; `3` 0.06 M parameters, 0.2 MB (×4.214 `0`'s)") in text
+    claim = next(c for c in report.findings["sh_degree"].claims if c.kind == "model size")
+    assert claim.value == pytest.approx(59 / 14) and claim.reference == "0"
+    # ... while the Gaussian count alone reads ×1.000
+    assert "Gaussians ×1.000" in text
+    # runs that recorded only their worker's lifetime peak RSS show no memory column, and say why
+    assert "| peak RSS (MB) |" not in text and "- No peak-memory column: these runs recorded their worker" in text
+    # a run's own peak (reset as it starts) is a column: it does not depend on the load that voids the times
+    _, text = results(tmp_path / "own", spec_of(), lambda run: (lambda m, c: ({**m, "run_peak_rss_mb": 500.0}, c))(
+        *make(run)))
+    assert "| Gaussians | peak RSS (MB) | train time (s) |" in text and "| 1000 (no spread) | 500 (no spread) |" in text
+    assert "No peak-memory column" not in text
+
+
+def test_ssim_is_compared_and_named_as_the_trained_quantity(tmp_path):
+    # SH 3's SSIM 0.01 + 0.001 s above SH 0's: a paired difference of +0.0110 over seeds 0..2
+    def make(run):
+        three = run.labels["sh_degree"] == 3
+        m = metrics_of(30.0 + 0.01 * run.seed + (0.5 if three else 0.0))
+        m["test_ssim"] = 0.8 + ((0.01 + 0.001 * run.seed) if three else 0.0)
+        return m, flat_curves(30.0)
+
+    report, text = results(tmp_path, spec_of(), make)
+    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_ssim")
+    assert vs.value == pytest.approx(0.011) and vs.significant and vs.practical  # above the 0.003 minimum effect
+    assert "; SSIM +0.0110 [95 % CI" in text and "SSIM 0.003" in text
+    # the default loss weights D-SSIM by 0.2 in every run: the SSIM compared is the one trained
+    assert "- SSIM: the loss, (1 − λ) L1 + λ D-SSIM, trains on the same SSIM (its 11-tap Gaussian window) in " \
+           "every row (ssim_lambda = 0.2)" in text
+    # a grid whose loss is L1 alone trains no SSIM and says nothing of it
+    _, text = results(tmp_path / "l1", spec_of({"base": {"iterations": 2000, "ssim_lambda": 0.0, "data": {
+        "resolution": 32, "views": 8, "spp": 2}}}), make)
+    assert "- SSIM: the loss" not in text
+
+
 # --------------------------------------------------------------------------- protocol
 def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     _, text = results(tmp_path, spec_of(), _lead(0.5))
@@ -277,6 +355,13 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "LPIPS v0.1, AlexNet backbone, inputs scaled to [-1, 1]" in header
     # the default start (init = auto: the scene's points) is jittered with the seed (init_jitter 0.5)
     assert "the initial points (init = auto, seeded)" in header
+    # ... and the header says what auto resolved to: these runs do not record it, so from the scene type
+    # (a rendered scene has its points) and the curves' step-0 count (flat_curves: 1,000)
+    assert ("- **Initialisation**: auto → surface on glossy: the scene's own surface points, 1,000 Gaussians at "
+            "step 0, jittered 0.5 × their neighbour spacing per seed (inferred") in header
+    # sh_interval 1,000 scaled to 2,000 of 30,000 steps: round(66.7) = 67; bands at 67, 134, 201
+    assert "SH degree raised one band every 67 steps (`sh_interval` as the run reads it: bands 1, 2, 3 at steps " \
+           "67, 134, 201" in header
 
     # a config that names its protocol (a preset added to TrainConfig) is shown as named
     from splatbench.experiments.train_report import protocol_lines
@@ -291,6 +376,11 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     # the header names the scenes and says that one rendered scene falls short of the evidence rule
     assert "- **Scenes**: 1: glossy (rendered by Mitsuba); 0 real; a finding here holds on this scene only" \
         in "\n".join(protocol_lines(table))
+    # a run that recorded its start: the method and count it recorded, nothing inferred
+    recorded = table.assign(**{"metric.init_method": "sfm", "metric.init_points": 1234})
+    init = next(line for line in protocol_lines(recorded) if line.startswith("- **Initialisation**"))
+    assert "auto → sfm on glossy: SfM points triangulated from the training views, 1,234 Gaussians at step 0" \
+        in init and "inferred" not in init
     table["config.init"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so
@@ -330,7 +420,20 @@ def test_best_is_not_named_between_models_of_different_sizes(tmp_path):
     assert size.metric == "num_gaussians" and size.value == pytest.approx(1.2, rel=0.01) and size.low > 1.05
     assert "glossy: no single best at comparable size (`3`" in text
     assert f"at {size.text} the Gaussians, more than the 5 % minimum effect" in lead.text and lead.text in text
-    assert "both on this table's Gaussians/quality Pareto front" in text  # smaller-worse and larger-better
+    # smaller-worse and larger-better: both on the front, but so is every row of this two-row table, which
+    # tells nothing: the line is written only where some row is off the front
+    assert "Pareto front" not in lead.text
+    from types import SimpleNamespace
+
+    from splatbench.reports.findings import _on_front
+
+    frame = pd.DataFrame({"scene": "s", "label": ["a", "b", "c"], "num_gaussians.mean": [1.0, 2.0, 3.0],
+                          "test_psnr.mean": [30.0, 31.0, 30.5]})  # c: larger and worse than b, dominated
+    table = SimpleNamespace(frame=frame)
+    rows = [SimpleNamespace(label=x) for x in "abc"]
+    gauss = MetricSpec("num_gaussians", "Gaussians", ".0f", "", "lower")
+    assert _on_front(table, "s", gauss, PSNR, rows[:2]) and not _on_front(table, "s", gauss, PSNR, rows[1:])
+    assert not _on_front(SimpleNamespace(frame=frame[:2]), "s", gauss, PSNR, rows[:2])  # all on the front
 
     # the experiment file's own minimum effect for the Gaussians (25 %) lets the same lead be named
     report, _ = results(tmp_path / "d", spec_of({"report": {"min_effect": {"num_gaussians": 0.25}}}),

@@ -54,7 +54,8 @@ def fake_metrics(scene: str, degree, seed: int) -> tuple[dict, dict]:
                "iterations": 100, "test_views": 1, "dataset_hash": "0" * 16,
                "test_lpips": 0.2 - (0.02 * d if scene == "glossy" else 0.0) + rng.normal(0, 0.005),
                "lpips_net": "alex", "lpips_scale_inputs": 1, "cpu_seconds": 15.0 + rng.random(),
-               "load_before": 0.5, "load_after": 1.5, "load_other": 0.2, "cores": 2, "time_loaded": 0}
+               "load_before": 0.5, "load_after": 1.5, "load_other": 0.2, "cores": 2, "time_loaded": 0,
+               "run_peak_rss_mb": 600.0 + 20 * d + seed}
     curves = {"step": steps, "psnr": [psnr - 6, psnr - 2, psnr], "loss": [0.3, 0.2, 0.1],
               "num_gaussians": [1000] * 3, "eval_step": [50, 100], "eval_psnr": [psnr - 1, psnr],
               "eval_ssim": [0.7, 0.8], "eval_lpips": [0.3, 0.2]}
@@ -163,7 +164,7 @@ def test_findings_numbers_match_parquet(sh_report):
     kinds = {c.kind for c in claims}
     # glossy's SH 3 leads SH 2 by 1.5 dB at ~x1.08 the Gaussians (1300 against 1200 made): "no single
     # best at comparable size" (docs/reports.md, "Best"), with its size claim; diffuse: no lead at all
-    assert kinds == {"no best", "size", "vs", "count", "auto"}
+    assert kinds == {"no best", "size", "vs", "count", "auto", "model size"}
     specs = {m.name: m for m in TRAIN_METRICS}
     effects = {c.metric: c.min_effect for c in TRAIN_REPORT.rules.comparisons}
     for c in claims:
@@ -204,9 +205,18 @@ def test_findings_numbers_match_parquet(sh_report):
             # lead over the runner-up with its size against it (one "no best" and one "size" per scene)
             leads = sum(1 for x in claims if x.kind in ("best", "no best", "size") and x.reference
                         and math.isfinite(x.low))
-            assert sum(1 for x in claims if x.kind == "vs") == 3 * len(SCENES) * 4 and leads >= len(SCENES)
-            assert c.value == 3 * len(SCENES) * 4 + leads
+            # 5 compared metrics: test PSNR, SSIM, LPIPS, train time, Gaussians
+            assert sum(1 for x in claims if x.kind == "vs") == 3 * len(SCENES) * 5 and leads >= len(SCENES)
+            assert c.value == 3 * len(SCENES) * 5 + leads
             assert f"This table makes {int(c.value)} comparisons" in text
+        elif c.kind == "model size":
+            # parameters: Gaussians x (3 + 3 + 4 + 1 + 3 (d + 1)²) at the degree each run ended at, paired ratio
+            def params(label):
+                g, d = (per_seed(table, c.scene, label, m) for m in ("num_gaussians", "sh_degree"))
+                return {k: g[k] * (11 + 3 * (int(d[k]) + 1) ** 2) for k in g}
+
+            iv = paired_ratio(params(c.reference), params(c.label))
+            assert (c.value, c.n) == pytest.approx((iv.estimate, iv.n)) and c.text == f"×{iv.estimate:.3f}"
         elif c.kind == "auto":
             done = table[(table.status == "done") & (table.scene == c.scene)]
             auto = done[done["axis.sh_degree"] == json.dumps("auto")]
@@ -254,7 +264,8 @@ def test_train_report_names_its_lpips_and_leaves_loaded_times_out(tmp_path):
             assert "| LPIPS |" in text and "| timed under load (fraction of runs) |" in text
             assert "The `LPIPS` column is LPIPS v0.1, AlexNet backbone, inputs scaled to [-1, 1]" in text
             # seed 2's times are out (2 pairs), its PSNR and LPIPS in (3 pairs)
-            assert vs == {("test_psnr", 3), ("test_lpips", 3), ("train_seconds", 2), ("num_gaussians", 3)}
+            assert vs == {("test_psnr", 3), ("test_ssim", 3), ("test_lpips", 3), ("train_seconds", 2),
+                          ("num_gaussians", 3)}
             assert "1 run(s) timed while other processes loaded the machine are left out of the render / train time comparisons" in text
             assert (f"Load: 1 of {len(runs)} runs timed while other processes loaded the machine (`metric.time_loaded`: "
                     f"their times are left out of the time comparisons, their quality kept); others' estimated load "
@@ -264,7 +275,7 @@ def test_train_report_names_its_lpips_and_leaves_loaded_times_out(tmp_path):
             assert "timed under load" not in text and "Load:" not in text
             # without a load record, times are shown but said to be no evidence
             assert "did not record the machine's load" in text
-            assert vs == {("test_psnr", 3), ("train_seconds", 3), ("num_gaussians", 3)}
+            assert vs == {("test_psnr", 3), ("test_ssim", 3), ("train_seconds", 3), ("num_gaussians", 3)}
 
 
 def test_one_seed_report_says_no_interval(sh_results, tmp_path):
@@ -561,7 +572,8 @@ def test_a_train_result_becomes_the_kinds_record_field_by_field():
         lpips_net="alex", lpips_scale_inputs=False, cpu_seconds=20.0,
         load={"load_before": 0.5, "load_after": 1.5, "own_cpu": 1.0, "own_before": 0.2, "load_other": 1.5,
               "cores": 2, "loaded": True},
-        topology=TopologyCounts(refinements=3, opacity_resets=1, cloned=10, split=5, pruned=2, pruned_size=1))
+        topology=TopologyCounts(refinements=3, opacity_resets=1, cloned=10, split=5, pruned=2, pruned_size=1),
+        init={"method": "surface", "points": 1000, "asked": "auto", "jitter": 0.5})
     record = TrainRun.of(result, "abc")
     metrics = metric_values(record)
     assert list(metrics) == list(TRAIN.specs)
@@ -570,13 +582,17 @@ def test_a_train_result_becomes_the_kinds_record_field_by_field():
         "render_ms_per_view": 3.5, "sh_degree": 1, "peak_rss_mb": 900.0, "iterations": 30, "test_views": 4,
         "dataset_hash": "abc", "test_lpips": 0.2, "lpips_net": "alex", "lpips_scale_inputs": 0, "cpu_seconds": 20.0,
         "load_before": 0.5, "load_after": 1.5, "load_other": 1.5, "cores": 2, "time_loaded": 1, "refinements": 3,
-        "opacity_resets": 1, "cloned": 10, "split": 5, "pruned": 2, "pruned_size": 1, "relocated": 0, "added": 0}
+        "opacity_resets": 1, "cloned": 10, "split": 5, "pruned": 2, "pruned_size": 1, "relocated": 0, "added": 0,
+        "init_method": "surface", "init_points": 1000,  # what init = auto resolved to, and its start
+        "run_peak_rss_mb": None}  # the peak was not reset as the run started: no per-run peak
+    # reset (the kind's run does it on Linux): the process's peak is the run's own
+    assert metric_values(TrainRun.of(result, "abc", own_peak=True))["run_peak_rss_mb"] == 900.0
     assert record.warnings == ("warning: a warning",)
     assert record.curves["step"] == [0, 29] and record.curves["eval_psnr"] == [25.5]
     assert check_output(record, TRAIN) == record
     # a result from before the strategy's counts were recorded: None in those columns
-    older = metric_values(TrainRun.of(dataclasses.replace(result, topology=None), None))
-    assert older["refinements"] is None and older["dataset_hash"] is None
+    older = metric_values(TrainRun.of(dataclasses.replace(result, topology=None, init={}), None))
+    assert older["refinements"] is None and older["dataset_hash"] is None and older["init_method"] is None
     with pytest.raises(TypeError, match="returned dict, not TrainRun"):
         check_output({"test_psnr": 1.0}, TRAIN)
 
@@ -739,7 +755,14 @@ def test_report_rebuild_rewrites_a_committed_report_from_its_own_parquet(tmp_pat
     res = CliRunner().invoke(main, ["report", str(root / "experiments" / f"{name}.toml"), "--rebuild",
                                     "--out", str(tmp_path / "r")])
     assert res.exit_code == 0, res.output
-    assert (tmp_path / "r" / "report.md").read_text() == (root / "reports" / name / "report.md").read_text()
+    rebuilt = (tmp_path / "r" / "report.md").read_text()
+    # the command line names the --out it was rebuilt with (the user's options are kept); the rest is the text
+    assert f"Generated by `splatbench report experiments/{name}.toml --out {tmp_path / 'r'}`" in rebuilt
+
+    def unnamed(text: str) -> str:
+        return re.sub(r"Generated by `splatbench report [^`]*`", "Generated by", text)
+
+    assert unnamed(rebuilt) == unnamed((root / "reports" / name / "report.md").read_text())
     res = CliRunner().invoke(main, ["report", str(root / "experiments" / "loss_weighting.toml"), "--rebuild",
                                     "--out", str(tmp_path / "r")])
     assert res.exit_code == 2 and "does not hold the runs the grid makes now" in res.output

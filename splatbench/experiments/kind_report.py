@@ -34,7 +34,7 @@ class Claim:
 
     kind: "best", "no best", "size" (the leader's size against the runner-up's, where it kept
     a lead from being named best), "vs", "self" (the reference row's own relative metric),
-    "count", "auto" or "parity"; scene ("" for all); label: the
+    "count", "auto", "model size" (a row's parameters against the reference row's) or "parity"; scene ("" for all); label: the
     row; reference: the row compared against ("vs"); metric; how: "mean", "diff",
     "ratio", "count" or "max"; value: the number; low / high: its 95 % interval (NaN
     when none); n: seeds (pairs) it comes from; significant: the interval excludes the
@@ -193,7 +193,9 @@ class KindReport:
     and comparisons (None: no findings); tradeoffs: the Pareto figures, in report order;
     timed: metrics that are times (left out for runs timed under load: ``load``); settling: the
     curves that decide whether a cell had settled; confounds: counts a report names when a
-    cell changed them besides its setting; load: how runs timed under load are marked (None:
+    cell changed them besides its setting; confound_floor: (count, floor) pairs: a confound count left
+    out where both sides' means are below its floor (too few to change the model); load: how runs
+    timed under load are marked (None:
     the kind records no load). The hooks, each run in its order: header_notes (the report's
     header), axis_notes (each axis finding), metric_notes (the "Metrics" section), run_findings
     (a section each, after the axes).
@@ -205,6 +207,7 @@ class KindReport:
     timed: tuple[str, ...] = ()
     settling: SettlingCurves | None = None
     confounds: tuple[str, ...] = ()
+    confound_floor: tuple[tuple[str, float], ...] = ()
     load: LoadMarks | None = None
     header_notes: tuple[HeaderNote, ...] = ()
     axis_notes: tuple[AxisNote, ...] = ()
@@ -214,7 +217,7 @@ class KindReport:
     def check(self, specs: Mapping[str, MetricSpec]) -> None:
         """`TypeError` naming a metric these declarations name that ``specs`` (the kind's result's
         metrics) lacks, or a load scope other than "timed" and "all"."""
-        named = [*self.metrics, *self.timed, *self.confounds]
+        named = [*self.metrics, *self.timed, *self.confounds, *(name for name, _ in self.confound_floor)]
         if self.rules is not None:
             named += [self.rules.primary, *(c.metric for c in self.rules.comparisons)]
             named += [self.rules.size] if self.rules.size else []

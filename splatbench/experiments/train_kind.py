@@ -61,7 +61,10 @@ from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, check_config, metric, metric_specs
-from splatbench.experiments.train_report import auto_sh_degree_note, lpips_note, protocol_lines, schedule_confound_note
+from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, memory_note, model_size_note,
+                                                 protocol_lines,
+                                                 schedule_confound_note, ssim_trained_note)
+from splatbench.metrics.memory import reset_peak_rss
 from splatbench.train.config import TrainConfig  # the kind's Config (loads torch: every use of the kind validates)
 
 #: Environment variable naming the folder of rendered datasets.
@@ -86,6 +89,14 @@ TOPOLOGY_METRICS = ("refinements", "opacity_resets", "cloned", "split", "pruned"
 #: overrides them.
 MIN_EFFECT: dict[str, float] = {"test_psnr": 0.1, "test_ssim": 0.003, "test_lpips": 0.005,
                                 "train_seconds": 0.10, "num_gaussians": 0.05}
+#: Confound counts that count Gaussians (not events: refinements and opacity resets are always named).
+GAUSSIAN_COUNTS = ("cloned", "split", "pruned", "pruned_size", "relocated", "added")
+#: A Gaussian count is left out of "Also changed" where both cells' means are below this many per run: then
+#: at most 20 Gaussians differ, under the 5 % minimum effect on the Gaussian count for any model of 400 or
+#: more Gaussians and under 0.5 % of the smallest final model of any committed train report (4,757, the
+#: fox's MCMC); e.g. "pruned for size 13.3 instead of 14.3" in a model of 25,000 (docs/reports.md,
+#: "Confounds"). Event counts (refinements, opacity resets) have no floor: one reset more is a change.
+CONFOUND_FLOOR = 20.0
 #: Keys of the curves: the training history (every ``log_every`` steps) and the test evaluations; a run
 #: with full step evaluations (a graphdeco protocol, or eval_steps) adds ``step_evaluations``, the list of
 #: `splatbench.train.StepEvaluation` as objects.
@@ -106,7 +117,9 @@ class TrainRun(RunResult):
     render_ms_per_view: float | None = metric("render (ms/view)", ".1f", "ms", "lower",
                                               "mean forward render time of a test view (ms)")
     sh_degree: int = metric(meaning="SH degree in use at the end (what 'auto' chose)")
-    peak_rss_mb: float = metric(meaning="peak resident memory of the worker process (MB)")
+    peak_rss_mb: float = metric(meaning="peak resident memory of the worker process over its life so far (MB): a "
+                                        "worker runs several runs in turn, so it carries the peaks of the runs "
+                                        "before this one (run_peak_rss_mb is the run's own)")
     iterations: int = metric(meaning="steps run")
     test_views: int = metric(meaning="views evaluated")
     dataset_hash: str | None = metric(meaning="content hash of the rendered dataset (scene files or teacher PLY, "
@@ -140,12 +153,25 @@ class TrainRun(RunResult):
     relocated: int | None = metric("relocated", ".0f", meaning="MCMC: dead Gaussians relocated, summed over the "
                                                                "refinements")
     added: int | None = metric("added", ".0f", meaning="MCMC: Gaussians added, summed over the refinements")
+    run_peak_rss_mb: float | None = metric("peak RSS (MB)", ".0f", "MB", "lower",
+                                           "peak resident memory of the worker process during this run alone (MB; "
+                                           "the high-water mark reset as the run starts: the whole process, Python, "
+                                           "torch and the dataset included, not the model alone); unlike a time it "
+                                           "does not depend on the machine's load, so a loaded run still measures "
+                                           "it; None where the reset is unavailable and before it was recorded",
+                                           default=None)
+    init_method: str | None = metric(meaning="the initialisation that ran (what init = auto resolved to: surface, "
+                                             "sfm or random); None before it was recorded", default=None)
+    init_points: int | None = metric(meaning="Gaussians the run started from (its initial points); None before it "
+                                             "was recorded", default=None)
 
     @classmethod
-    def of(cls, result, dataset_hash: str | None) -> TrainRun:
+    def of(cls, result, dataset_hash: str | None, *, own_peak: bool = False) -> TrainRun:
         """The record of a `splatbench.train.TrainResult`: its own metrics by name, the load
         (`TrainResult.load`) and the strategy's counts (`TrainResult.topology`; None before
-        they were recorded) flattened, its warnings and its curves (`CURVE_KEYS`)."""
+        they were recorded) flattened, its warnings and its curves (`CURVE_KEYS`). ``own_peak``:
+        the process's peak RSS was reset as the run started, so ``result.peak_rss_mb`` is the
+        run's own (``run_peak_rss_mb``; None otherwise)."""
         names = {m.name for m in metric_specs(cls)}
         rows = result.to_dict()  # NaN / inf already None there (the one JSON-safety rule of a result)
         history, evaluations = rows["history"], rows["evaluations"]
@@ -162,6 +188,8 @@ class TrainRun(RunResult):
                   **{k: v for k, v in result.load.items() if k in names},
                   **{name: topology.get(name) for name in TOPOLOGY_METRICS},
                   "lpips_scale_inputs": int(result.lpips_scale_inputs), "time_loaded": int(result.load["loaded"]),
+                  "init_method": (result.init or {}).get("method"), "init_points": (result.init or {}).get("points"),
+                  "run_peak_rss_mb": result.peak_rss_mb if own_peak else None,
                   "dataset_hash": dataset_hash}
         return cls(**values, warnings=tuple(result.warnings), curves=curves)
 
@@ -444,8 +472,10 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> TrainRun:
     if scene_type(data) == "folder":
         fields = {**fields, "data": {"downscale": data["downscale"]}}
     cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="config")
+    # a worker runs several runs in turn: reset its high-water mark so the peak recorded is this run's own
+    own_peak = reset_peak_rss()
     result = train(cfg)  # validated on construction
-    return TrainRun.of(result, dataset.hash[:16] if dataset.hash else None)
+    return TrainRun.of(result, dataset.hash[:16] if dataset.hash else None, own_peak=own_peak)
 
 
 def planned(config: dict[str, Any]) -> dict[str, float]:
@@ -494,9 +524,10 @@ def describe_protocol(name: str) -> str:
 
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
-    metrics=("test_psnr", "test_ssim", "test_lpips", "num_gaussians", "train_seconds", "render_ms_per_view",
-             "time_loaded"),
+    metrics=("test_psnr", "test_ssim", "test_lpips", "num_gaussians", "run_peak_rss_mb", "train_seconds",
+             "render_ms_per_view", "time_loaded"),
     rules=FindingRules("test_psnr", (Comparison("test_psnr", "diff", min_effect=MIN_EFFECT["test_psnr"]),
+                                     Comparison("test_ssim", "diff", min_effect=MIN_EFFECT["test_ssim"]),
                                      Comparison("test_lpips", "diff", min_effect=MIN_EFFECT["test_lpips"]),
                                      Comparison("train_seconds", "ratio", min_effect=MIN_EFFECT["train_seconds"]),
                                      Comparison("num_gaussians", "ratio", min_effect=MIN_EFFECT["num_gaussians"])),
@@ -509,10 +540,11 @@ REPORT = KindReport(
     timed=("train_seconds", "render_ms_per_view"),
     settling=SettlingCurves("test_psnr", "eval_step", "eval_psnr", "step", "psnr"),
     confounds=("opacity_resets", "refinements", "cloned", "split", "pruned", "pruned_size", "relocated", "added"),
+    confound_floor=tuple((name, CONFOUND_FLOOR) for name in GAUSSIAN_COUNTS),
     load=LoadMarks("time_loaded", "timed"),
     header_notes=(protocol_lines,),
-    axis_notes=(auto_sh_degree_note, schedule_confound_note),
-    metric_notes=(lpips_note,),
+    axis_notes=(model_size_note, ssim_trained_note, auto_sh_degree_note, schedule_confound_note),
+    metric_notes=(lpips_note, memory_note),
 )
 
 #: The ``train`` kind (``kind = "train"``).

@@ -123,12 +123,108 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
     lines.append(f"- **Background**: {bg or 'not recorded'}" + ("; a random background per training step"
                                                               if True in rnd else "") + ".")
     lines.append(f"- **Metrics**: {_metrics(done)}.")
-    init = _one(done, "config.init")
-    pts = _one(done, "config.init_random_points", lambda v: f"{int(v):,}")
-    lines.append(f"- **Initialisation**: {init or 'not recorded'}"
-                 + (f" ({pts} points where random)" if init and "random" in init and pts else "") + ".")
+    lines.append(f"- **Initialisation**: {init_text(done)}.")
+    ran = schedule_as_run(done)
+    if ran:
+        lines.append(f"- **Schedule as run** (each run's recorded counts, in its {iters} steps): {ran}.")
     lines.append(f"- **Seeds**: {_seeds(done)}")
     return ["**Protocol** (from the runs' recorded configs):", "", *lines]
+
+
+def _start_count(raw: Any) -> int | None:
+    """The Gaussians at the first logged step of a run's curves (step 0: before any refinement,
+    which starts later in every schedule `check_final_window` accepts), i.e. its initial points."""
+    try:
+        c = json.loads(raw) if isinstance(raw, str) else {}
+    except ValueError:
+        return None
+    steps, counts = c.get("step") or [], c.get("num_gaussians") or []
+    return int(counts[0]) if steps and counts and steps[0] == 0 and counts[0] is not None else None
+
+
+#: What each initialisation starts from, in words (`splatbench.train.initializers`).
+_INIT_WHAT = {"surface": "the scene's own surface points", "sfm": "SfM points triangulated from the training views",
+              "random": "random points"}
+
+
+def init_text(done: pd.DataFrame) -> str:
+    """The initialisation the runs asked for and what it resolved to, per scene: the method that
+    ran (``metric.init_method``; for a run from before it was recorded, ``surface`` where
+    ``auto`` met a rendered scene, which always has its surface points, else "not recorded"),
+    the initial count (``metric.init_points``, else the curves' step-0 count) and the jitter
+    that a seed moves the given points by (``config.init_jitter``)."""
+    asked = _one(done, "config.init")
+    if asked is None:
+        return "not recorded"
+    kinds = scene_kinds(done)
+    parts = []
+    for scene, rows in done.groupby("scene", sort=False):
+        for init, cell in rows.groupby(rows["config.init"].astype(str), sort=False):
+            methods = [m for m in _values(cell, "metric.init_method") if m is not None]
+            how = ""
+            if not methods and init in _INIT_WHAT:
+                methods = [init]
+            elif not methods and init == "auto" and kinds.get(str(scene)) == "rendered":
+                methods, how = ["surface"], " (inferred: these runs did not record it; a rendered scene has its points)"
+            counts = [int(v) for v in _values(cell, "metric.init_points") if v is not None]
+            if not counts:
+                counts = [n for n in dict.fromkeys(_start_count(r) for r in cell.get("curves", [])) if n is not None]
+            count = " / ".join(f"{n:,}" for n in counts)
+            method = " / ".join(methods)
+            what = " / ".join(_INIT_WHAT.get(m, m) for m in methods) if methods else \
+                ("the method it resolved to is not recorded by these runs (auto: the dataset's own points when it "
+                 "has them, else SfM with its known poses)" if init == "auto" else "not recorded")
+            jit = [v for v in _values(cell, "config.init_jitter") if v]
+            given = any(m in ("surface", "sfm") for m in methods)
+            moved = (f", jittered {' / '.join(_g(v) for v in jit)} × their neighbour spacing per seed"
+                     if given and jit else "")
+            region = _one(cell, "config.init_region") if "random" in methods else None
+            where = f" in region {region}" if region else ""
+            arrow = f"{init} → {method}" if method and method != init else init
+            parts.append(f"{arrow} on {scene}: {what}{where}" + (f", {count} Gaussians at step 0" if count else "")
+                         + moved + how)
+    return "; ".join(parts)
+
+
+def schedule_as_run(done: pd.DataFrame) -> str:
+    """The schedule's counts as the runs made them: refinements and opacity resets (the
+    strategy's recorded counts, per cell where they differ) and the SH schedule (one band more
+    every ``sh_interval`` steps as the run reads it: `splatbench.train.schedule.scale_step`); ""
+    without those columns."""
+    from splatbench.train.schedule import scale_step  # late: the reports start without torch
+
+    axes = [c for c in done.columns if c.startswith("axis.")]
+    parts = []
+    counted = [c for c in ("metric.refinements", "metric.opacity_resets") if c in done.columns
+               and pd.to_numeric(done[c], errors="coerce").notna().any()]
+    if counted:
+        def counts(rows: pd.DataFrame) -> str:
+            out = []
+            for col, word in zip(counted, ("refinements", "opacity resets")):
+                vals = sorted({int(v) for v in pd.to_numeric(rows[col], errors="coerce").dropna()})
+                shown = f"{vals[0]}–{vals[-1]}" if len(vals) > 1 else str(vals[0]) if vals else ""
+                out.append(f"{shown} {word}" if vals else f"{word} not recorded")
+            return ", ".join(out)
+
+        cells = {}
+        for key, rows in (done.groupby(axes, sort=False) if axes else [((), done)]):
+            key = key if isinstance(key, tuple) else (key,)
+            label = ", ".join(f"{a[5:]}={v}" for a, v in zip(axes, key)) or "every run"
+            cells[label] = counts(rows)
+        if len(set(cells.values())) == 1:
+            parts.append(f"{next(iter(cells.values()))} (every run)")
+        else:
+            parts.append("; ".join(f"`{label}` {text}" for label, text in cells.items()))
+    if {"config.sh_interval", "config.iterations", "config.schedule"} <= set(done.columns):
+        steps = sorted({scale_step(int(i), int(n), str(sch), interval=True) for i, n, sch in
+                        zip(done["config.sh_interval"], done["config.iterations"], done["config.schedule"])
+                        if pd.notna(i) and pd.notna(n) and sch in ("scaled", "absolute")})
+        if steps:
+            every = " / ".join(f"{s:,}" for s in steps)
+            bands = " / ".join(", ".join(f"{k * s:,}" for k in (1, 2, 3)) for s in steps)
+            parts.append(f"SH degree raised one band every {every} steps (`sh_interval` as the run reads it: bands "
+                         f"1, 2, 3 at steps {bands}, up to each cell's maximum degree)")
+    return "; ".join(parts)
 
 
 def _eval_steps(done: pd.DataFrame) -> str:
@@ -259,6 +355,97 @@ def auto_sh_degree_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) 
     return lines, claims
 
 
+#: Floats per Gaussian besides its colour: position 3, log-scales 3, rotation quaternion 4, opacity 1.
+GEOMETRY_FLOATS = 3 + 3 + 4 + 1
+#: Bytes per stored parameter (float32, as trained and as a 3DGS PLY stores them).
+PARAM_BYTES = 4
+
+
+def floats_per_gaussian(sh_degree: int) -> int:
+    """Parameters of one Gaussian at SH degree ``d``: 3 + 3 + 4 + 1 + 3 (d + 1)² (14 at 0, 59 at 3)."""
+    return GEOMETRY_FLOATS + 3 * (int(sh_degree) + 1) ** 2
+
+
+def model_size_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
+    """The model size of each row beside its Gaussian count: parameters (`floats_per_gaussian` at the
+    SH degree each run ended at, ``metric.sh_degree``, times its Gaussians) and megabytes (float32),
+    mean over seeds, and each row's paired ratio to the reference row (the one-at-a-time base, else
+    the first), the geometric mean over seeds as the findings' ratios are. The SH degree sets the
+    per-Gaussian count, so a Gaussian-count ratio alone understates what an SH setting costs."""
+    from splatbench.metrics.stats import paired_ratio
+
+    done = done_runs(runs)
+    if done.empty or not {"metric.num_gaussians", "metric.sh_degree"} <= set(done.columns) or not table.rows:
+        return [], []
+    ref = next((r for r in table.rows if getattr(r, "is_base", False)), table.rows[0])
+    parts, claims = [], []
+    for scene in scenes:
+        per_row = {}
+        for row in table.rows:
+            sel = done[(done.scene == scene) & done.run_id.isin(row.run_ids)]
+            n = pd.to_numeric(sel["metric.num_gaussians"], errors="coerce")
+            d = pd.to_numeric(sel["metric.sh_degree"], errors="coerce")
+            params: dict[int, list[float]] = {}
+            for seed, g, deg in zip(sel.seed, n, d):
+                if pd.notna(g) and pd.notna(deg):
+                    params.setdefault(int(seed), []).append(float(g) * floats_per_gaussian(int(deg)))
+            if params:
+                per_row[row.label] = {k: sum(v) / len(v) for k, v in params.items()}
+        if not per_row:
+            continue
+        cells = []
+        for label, seeds in per_row.items():
+            mean = sum(seeds.values()) / len(seeds)
+            text = f"`{label}` {mean / 1e6:.2f} M parameters, {mean * PARAM_BYTES / 1e6:.1f} MB"
+            if label != ref.label and ref.label in per_row:
+                ratio = paired_ratio(per_row[ref.label], seeds)
+                if ratio.n and math.isfinite(ratio.estimate):
+                    text += f" (×{ratio.estimate:.3f} `{ref.label}`'s)"
+                    claims.append(Claim("model size", scene, label, "parameters", "ratio", ratio.estimate,
+                                        f"×{ratio.estimate:.3f}", ref.label, ratio.low, ratio.high, ratio.n))
+            cells.append(text)
+        parts.append(f"{scene}: " + "; ".join(cells))
+    if not parts:
+        return [], []
+    return [f"- Model size (float32 parameters per Gaussian 3 + 3 + 4 + 1 + 3·(d + 1)²: {floats_per_gaussian(0)} at SH "
+            f"degree 0, {floats_per_gaussian(3)} at 3, d the degree each run ended at; times its Gaussians, mean over "
+            f"seeds; ratios paired over seeds): " + " / ".join(parts) + "."], claims
+
+
+#: The window of the test SSIM (`splatbench.metrics.image.ssim_metric`: 11 taps, σ 1.5).
+METRIC_SSIM_WINDOW = 11
+
+
+def ssim_trained_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
+    """Where the loss trains on SSIM (``ssim_lambda > 0``: (1 − λ) L1 + λ D-SSIM), the test SSIM the
+    findings compare is the trained quantity (the same SSIM where ``ssim_window`` is the metric's 11
+    taps): a difference in it is partly the optimiser doing what it was asked, not an independent
+    measure of quality. Names the rows that train on it and the weights."""
+    done = done_runs(runs)
+    if done.empty or "config.ssim_lambda" not in done.columns:
+        return [], []
+    lam = pd.to_numeric(done["config.ssim_lambda"], errors="coerce")
+    if not (lam > 0).any():
+        return [], []
+    windows = {int(w) for w in pd.to_numeric(done.get("config.ssim_window", pd.Series([], dtype=float)),
+                                              errors="coerce").dropna()}
+    same = windows == {METRIC_SSIM_WINDOW}
+    which = "the same SSIM (its 11-tap Gaussian window)" if same else         f"an SSIM of window {' / '.join(map(str, sorted(windows))) or 'unrecorded'} (the metric's is 11)"
+    rows = []
+    for row in table.rows:
+        sel = lam[done.run_id.isin(row.run_ids)]
+        values = sorted({float(v) for v in sel.dropna()})
+        if values and max(values) > 0:
+            rows.append((row.label, values))
+    if len(rows) == len(table.rows) and len({tuple(v) for _, v in rows}) == 1:
+        where = f"in every row (ssim_lambda = {' / '.join(f'{v:g}' for v in rows[0][1])})"
+    else:
+        where = "in " + ", ".join(f"`{label}` (ssim_lambda = {' / '.join(f'{v:g}' for v in vs)})" for label, vs in rows)
+    return [f"- SSIM: the loss, (1 − λ) L1 + λ D-SSIM, trains on {which} {where}: the test SSIM compared above is "
+            f"the quantity those runs optimised, so a difference in it is partly the trained objective, not an "
+            f"independent measure of quality (test PSNR and LPIPS are not trained on)."], []
+
+
 #: Strategies whose opacity resets gate size pruning and fire only inside the refine window
 #: (`splatbench.strategies.default.DefaultStrategy` and its subclasses).
 _RESETTING = ("default", "absgrad", "budget")
@@ -297,6 +484,21 @@ def _decoded(value):
     return value
 
 
+def memory_note(runs: pd.DataFrame) -> list[str]:
+    """Why a table of runs recorded before ``run_peak_rss_mb`` shows no memory column: their
+    ``peak_rss_mb`` is their worker process's lifetime peak, which carries the peaks of the runs
+    that worker ran before (a spawn pool reuses its workers), so it is no per-cell cost."""
+    done = done_runs(runs)
+    own = "metric.run_peak_rss_mb" in done.columns and pd.to_numeric(done["metric.run_peak_rss_mb"],
+                                                                       errors="coerce").notna().any()
+    if own or "metric.peak_rss_mb" not in done.columns or done.empty:
+        return []
+    return ["- No peak-memory column: these runs recorded their worker process's lifetime peak RSS "
+            "(`metric.peak_rss_mb`), and a worker runs several runs in turn, so a run carries the peaks of the runs "
+            "it followed (not a cost of its cell). Runs since record their own (`metric.run_peak_rss_mb`, the "
+            "high-water mark reset as each run starts), shown as `peak RSS (MB)`."]
+
+
 def lpips_note(runs: pd.DataFrame) -> list[str]:
     """Which LPIPS the report's column is (net and input convention), from the
     done runs' ``lpips_net`` / ``lpips_scale_inputs``; none for a table without them."""
@@ -313,5 +515,5 @@ def lpips_note(runs: pd.DataFrame) -> list[str]:
             + "; ".join(convention(*k) for k in kinds) + "."] if kinds else []
 
 
-__all__ = ["DEFAULT_PROTOCOL", "protocol_lines", "seed_varies", "scene_kinds", "auto_sh_degree_note",
-           "schedule_confound_note", "lpips_note"]
+__all__ = ["DEFAULT_PROTOCOL", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note",
+           "schedule_confound_note", "lpips_note", "memory_note"]

@@ -87,6 +87,7 @@ class CheckSide:
     claim: Claim | None
     settled: bool | None
     why: str
+    others: tuple[tuple[MetricSpec, Stat, Stat], ...] = ()  # the cells' other quality and size metrics
 
     @property
     def complete(self) -> bool:
@@ -148,6 +149,12 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
                                                    for r in (quick[0][0], quick[1][0])])))
     settling = declared.settling if declared is not None and declared.settling is not None \
         and declared.settling.metric == metric.name else None
+    # beside the primary metric, each cell's other compared metrics that do not depend on the load (the
+    # train kind: SSIM, LPIPS, Gaussians): what else the headline's cells are at each protocol
+    timed = set(declared.timed) if declared is not None else set()
+    by_name = {m.name: m for m in metrics}
+    shown = [by_name[c.metric] for c in rules.comparisons if c.metric != metric.name and c.metric not in timed
+             and c.metric in by_name]
 
     def side(runs: pd.DataFrame, cells, protocol: str) -> CheckSide:
         ids = [{r.run_id for r in cell} for cell in cells]
@@ -157,6 +164,8 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
         usable = usable_runs(mine, kind) if len(mine) else mine
         pick = [usable[usable.run_id.isin(i)] if len(usable) else usable for i in ids]
         values = [seed_values(p, metric.name) if len(p) else {} for p in pick]
+        others = tuple((m, *(stat(seed_values(p, m.name) if len(p) and f"metric.{m.name}" in p.columns else {})
+                             for p in pick)) for m in shown)
         iv, null = paired(values[0], values[1], comp)
         claim = None
         settled, why = None, ""
@@ -169,7 +178,8 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
             significant, practical = judge(iv, comp.how, null, metric, comp.min_effect)
             claim = Claim("check", check.scene, labels[1], metric.name, comp.how, iv.estimate, text, labels[0],
                           iv.low, iv.high, iv.n, significant, practical, settled)
-        return CheckSide(protocol, done, failed, total, (stat(values[0]), stat(values[1])), claim, settled, why)
+        return CheckSide(protocol, done, failed, total, (stat(values[0]), stat(values[1])), claim, settled, why,
+                         others)
 
     grid_protocol = _recorded_protocol(table, {r.run_id for c in quick for r in c})
     grid_side = side(table, quick, grid_protocol)
@@ -274,6 +284,21 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
     lines += [*markdown_table(head, rows, align="-rrr--").splitlines(),
               "", f"Cells: {_name(m)} ({m.unit}), mean over seeds ± the half-width of its 95 % t interval."
               if m.unit else f"Cells: {_name(m)}, mean over seeds ± the half-width of its 95 % t interval.", ""]
+    # the sides with a result (a check not run yet has none: no rows of dashes)
+    others = [(side, name) for side, name in ((result.grid, f"`{result.grid.protocol}`"),
+                                              (result.rerun, f"`{result.rerun.protocol}`"))
+              if side.others and any(st.n for _, *sts in side.others for st in sts)]
+    if others:
+        specs = [m for m, _, _ in others[0][0].others]
+        head = ["protocol", "cell", _label(m), *(_label(o) for o in specs)]
+        cells = []
+        for side, name in others:
+            for k, label in enumerate((a, b)):
+                cells.append([name, f"`{label}`", _cell(side, k, m, len(result.seeds)),
+                              *(_other(st[k], o, side, len(result.seeds)) for o, *st in side.others)])
+        lines += [f"Each cell's {', '.join(_name(o) for o in specs)} beside its {_name(m)} (mean over seeds ± the "
+                  f"half-width of its 95 % t interval):", "",
+                  *markdown_table(head, cells, align="--" + "r" * (1 + len(specs))).splitlines(), ""]
     sentence = f"**{result.headline}**: {result.reason}"
     if result.verdict in ("holds", "does not hold") and result.rerun.settled is False:
         sentence += f"; **not settled** at `{c.protocol}` ({result.rerun.why})"
@@ -287,6 +312,20 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
                   for _, r in failed.iterrows()]
         lines.append("")
     return lines
+
+
+def _label(spec: MetricSpec) -> str:
+    return spec.label or spec.name
+
+
+def _other(st: Stat, spec: MetricSpec, side: CheckSide, seeds: int) -> str:
+    """Another metric's cell, written as the primary's (`_cell`): mean ± interval, or the mean of the
+    seeds done, marked."""
+    if st.n == 0:
+        return "–"
+    if side.done >= side.total:
+        return st.text(spec.fmt)
+    return f"{format(st.mean, spec.fmt)} ({st.n} of {seeds} seeds; no interval)"
 
 
 def header_line(result: CheckResult) -> str:

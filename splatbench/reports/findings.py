@@ -48,12 +48,13 @@ from dataclasses import dataclass
 import pandas as pd
 
 from splatbench.errors import InputError
-from splatbench.experiments.kind_report import AxisNote, Claim, Comparison, Finding, FindingRules, done_runs
+from splatbench.experiments.kind_report import (AxisNote, Claim, Comparison, Finding, FindingRules, SettlingCurves,
+                                                done_runs)
 from splatbench.experiments.kinds import RunKind
 from splatbench.figures import pareto_front
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
-from splatbench.reports.settling import CellSettling, cell_settling, unsettled_reason
+from splatbench.reports.settling import CellSettling, cell_settling, paired_curve, unsettled_reason
 from splatbench.reports.tables import AxisTable, Row, loaded_runs, seed_values
 
 
@@ -346,6 +347,9 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                     count += 1
                 parts.append(f"{_name(spec)} {' / '.join(texts)}")
             line = f"  - `{row.label}`: " + "; ".join(parts)
+            along = _along_the_run(scenes, ref, row, usable, settling, primary) if settling is not None else ""
+            if along:
+                line += f". {along}"
             if moving:
                 line += f". **Not settled** ({'; '.join(moving)})"
             also = confounds(scenes, ref, row, usable, kind)
@@ -404,14 +408,36 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     return Finding(table.axis, lines, claims)
 
 
+def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, keys: SettlingCurves,
+                   primary: MetricSpec) -> str:
+    """The paired difference of ``row`` against ``ref`` at every evaluation step of the kind's test
+    curve (`splatbench.reports.settling.paired_curve`), per scene, when the curve measures the
+    primary metric and has more than one step: ``Paired difference at each evaluation (glossy,
+    steps 500 / 1,000 / 1,500 / 2,000): +0.21, +0.36, +0.44, +0.47 dB``; "" otherwise."""
+    if keys.metric != primary.name:
+        return ""
+    parts = []
+    for scene in scenes:
+        sel_a = runs[(runs.scene == scene) & runs.run_id.isin(ref.run_ids)]
+        sel_b = runs[(runs.scene == scene) & runs.run_id.isin(row.run_ids)]
+        points = paired_curve(sel_a, sel_b, keys)
+        if len(points) < 2:
+            continue
+        steps = " / ".join(f"{s:,}" for s, _ in points)
+        diffs = ", ".join(f"{d:+{primary.fmt}}" for _, d in points)
+        parts.append(f"{scene}, steps {steps}: {diffs}" + (f" {primary.unit}" if primary.unit else ""))
+    return ("Paired difference at each evaluation (mean over seeds; " + "; ".join(parts) + ")") if parts else ""
+
+
 def _on_front(table: AxisTable, scene: str, size: MetricSpec, quality: MetricSpec, rows: Sequence[Row]) -> bool:
     """Whether every one of ``rows`` is on the Pareto front of ``table``'s rows at ``scene`` on the
-    means (no other row both smaller in ``size`` and better in ``quality``; `splatbench.figures`)."""
+    means (no other row both smaller in ``size`` and better in ``quality``; `splatbench.figures`)
+    while some row is not: where every row is on the front, saying so tells nothing."""
     at = table.frame[table.frame.scene == scene]
     sign = -1.0 if quality.better == "lower" else 1.0
     front = pareto_front(list(at[f"{size.name}.mean"]), [sign * q for q in at[f"{quality.name}.mean"]])
     labels = {at.iloc[i].label for i in front}
-    return all(r.label in labels for r in rows)
+    return all(r.label in labels for r in rows) and len(labels) < len(set(at.label))
 
 
 def load_recorded(runs: pd.DataFrame, kind: RunKind) -> bool:
@@ -429,7 +455,8 @@ def _recorded(runs: pd.DataFrame, declared) -> bool:
 
 def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, kind: RunKind) -> str:
     """What else ``row`` changed against ``ref`` (the kind's confound counts, mean over seeds,
-    per scene): each count that differs by more than `CONFOUND_SHARE` of the larger, e.g.
+    per scene): each count that differs by more than `CONFOUND_SHARE` of the larger and is not
+    below its floor on both sides (`KindReport.confound_floor`), e.g.
     ``textured: opacity resets 7 instead of 4``; "" when none differs. Runs that did not record
     a count (grids run before it was) give the count their config schedules, where the kind
     can say it (`RunKind.planned`), written "(planned)"."""
@@ -437,6 +464,7 @@ def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, kin
     if declared is None or not declared.confounds:
         return ""
     plan = _planner(kind)
+    floors = dict(declared.confound_floor)
     parts = []
     for scene in scenes:
         moved = []
@@ -452,6 +480,8 @@ def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, kin
             if not a or not b:
                 continue
             ma, mb = sum(a.values()) / len(a), sum(b.values()) / len(b)
+            if m.name in floors and max(abs(ma), abs(mb)) < floors[m.name]:
+                continue  # too few on both sides to change the model (`KindReport.confound_floor`)
             if abs(mb - ma) > CONFOUND_SHARE * max(abs(ma), abs(mb)):
                 moved.append(f"{m.label} {_count(mb)} instead of {_count(ma)}{how}")
         if moved:

@@ -86,6 +86,7 @@ class CellSettling:
     end: int
     per_seed: dict[int, float]
     threshold: float
+    gap: float | None = None  # train − test over the window (mean over seeds; None: no training curve)
 
     @property
     def settled(self) -> bool:
@@ -118,6 +119,7 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
         return None
     test: dict[int, list[float]] = {}
     train: dict[int, list[float]] = {}
+    gaps: dict[int, list[float]] = {}
     starts, ends = [], []
     for seed, raw in zip(runs.seed, runs.curves):
         c = _curves(raw)
@@ -133,12 +135,57 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
             t = last_quarter_slope(c.get(keys.train_step), c.get(keys.train_value), end=s.end)
             if t is not None:
                 train.setdefault(int(seed), []).append(t.slope)
+            g = window_gap(c, keys, s.start, s.end)
+            if g is not None:
+                gaps.setdefault(int(seed), []).append(g)
     if not test:
         return None
     per_seed = {k: float(np.mean(v)) for k, v in sorted(test.items())}
     train_mean = float(np.mean([np.mean(v) for v in train.values()])) if train else None
+    gap = float(np.mean([np.mean(v) for v in gaps.values()])) if gaps else None
     return CellSettling(float(np.mean(list(per_seed.values()))), train_mean, min(starts), max(ends), per_seed,
-                        min_effect)
+                        min_effect, gap)
+
+
+def window_gap(curves: dict, keys: SettlingCurves, start: int, end: int) -> float | None:
+    """The train–test gap of one run over the steps ``start..end`` (the last quarter): the mean of
+    the training-view curve's points there minus the mean of the test curve's; None when either
+    has no finite point there. The training-view value is the view each step trained on, measured
+    before its update and logged every ``log_every`` steps: a noisy but unbiased sample of the fit
+    to the training views, over the same steps as the test points it is set against."""
+    def mean_in(steps, values) -> float | None:
+        pts = [float(v) for s, v in zip(steps or [], values or []) if s is not None and v is not None
+               and start <= float(s) <= end and math.isfinite(float(v))]
+        return float(np.mean(pts)) if pts else None
+
+    train = mean_in(curves.get(keys.train_step), curves.get(keys.train_value))
+    test = mean_in(curves.get(keys.test_step), curves.get(keys.test_value))
+    return None if train is None or test is None else train - test
+
+
+def _seed_curves(runs: pd.DataFrame, step_key: str, value_key: str) -> dict[int, dict[int, float]]:
+    """seed -> step -> value of one curve (a seed's runs averaged per step; non-finite points left out)."""
+    out: dict[int, dict[int, list[float]]] = {}
+    if "curves" not in runs.columns:
+        return {}
+    for seed, raw in zip(runs.seed, runs.curves):
+        c = _curves(raw)
+        if c is None:
+            continue
+        for s, v in zip(c.get(step_key) or [], c.get(value_key) or []):
+            if s is not None and v is not None and math.isfinite(float(v)):
+                out.setdefault(int(seed), {}).setdefault(int(s), []).append(float(v))
+    return {seed: {s: float(np.mean(v)) for s, v in steps.items()} for seed, steps in out.items()}
+
+
+def paired_curve(a: pd.DataFrame, b: pd.DataFrame, keys: SettlingCurves) -> list[tuple[int, float]]:
+    """The paired difference ``b - a`` of the test curve at every evaluation step both cells'
+    runs share: (step, mean over the seeds both have of ``b_s - a_s``), in step order; [] when
+    they share none. Whether a gap is stable while the cells still rise shows here."""
+    ca, cb = _seed_curves(a, keys.test_step, keys.test_value), _seed_curves(b, keys.test_step, keys.test_value)
+    seeds = sorted(set(ca) & set(cb))
+    steps = sorted(set.intersection(*(set(ca[s]) & set(cb[s]) for s in seeds))) if seeds else []
+    return [(step, float(np.mean([cb[s][step] - ca[s][step] for s in seeds]))) for step in steps]
 
 
 def drift(a: CellSettling, b: CellSettling) -> float:
@@ -230,6 +277,13 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
     for (scene, cell), c in cells.items():
         claims.append(Claim("settling", scene, cell, keys.metric, "slope", c.test, f"{c.test:+.2f} dB / 1,000 steps",
                             n=len(c.per_seed), significant=not c.settled, settled=c.settled))
+    gaps = [(scene, cell, c.gap) for (scene, cell), c in cells.items() if c.gap is not None]
+    if gaps:
+        lines.append(f"- Train–test gap over the same window (mean training-view PSNR minus mean test PSNR at the "
+                     f"evaluations there, mean over seeds; the training view is the one each step trained on, "
+                     f"before its update, logged every `log_every` steps; a larger gap is a cell fitting its training "
+                     f"views more than it generalises): "
+                     + "; ".join(f"{scene} `{cell}` {g:+.2f} dB" for scene, cell, g in gaps) + ".")
     moving = [f"{scene} `{cell}` ({c.test:+.2f})" for (scene, cell), c in cells.items() if not c.settled]
     overfit = [f"{scene} `{cell}` (test {c.test:+.2f}, train {c.train:+.2f})" for (scene, cell), c in cells.items()
                if c.overfitting]
@@ -247,4 +301,4 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
 
 
 __all__ = ["LAST_SHARE", "SETTLE_STEPS", "DRIFT_SHARE", "Slope", "CellSettling", "last_quarter_slope",
-           "cell_settling", "drift", "difference_settled", "unsettled_reason", "settling_finding"]
+           "cell_settling", "window_gap", "paired_curve", "drift", "difference_settled", "unsettled_reason", "settling_finding"]
