@@ -199,6 +199,21 @@ def test_a_rising_last_quarter_is_not_settled_and_a_flat_one_is():
     assert all(c.settled for c in loose.claims)
 
 
+def test_a_cell_evaluated_once_is_said_to_be_unknown_not_left_out():
+    # a new user's 200-step grid evaluated the test views only at its end: before, the report
+    # said nothing about settling at all
+    import json
+
+    table = _settle_table({"a": 0.01})
+    one_point = {"eval_step": [2000], "eval_psnr": [30.0]}
+    extra = pd.DataFrame([{"run_id": f"b{seed}", "status": "done", "scene": "s", "seed": seed, "axis.x": "b",
+                           "curves": json.dumps(one_point)} for seed in range(3)])
+    f = settling_finding(pd.concat([table, extra], ignore_index=True), TRAIN)
+    assert "**Cannot tell whether s `x=b` settled**" in f.markdown() and len(f.claims) == 1
+    only = settling_finding(extra, TRAIN)
+    assert "**Cannot tell whether any cell settled**" in only.markdown() and not only.claims
+
+
 def test_the_train_test_gap_is_over_the_slopes_window():
     # _settle_table: the training view flat 1 dB above the end (train rise 0), the test points 1,500 / 2,000
     # at end − r / end with r = 0.005 s: the test mean is end − r / 2, so the gap is 1 + r / 2, 1.0025 on

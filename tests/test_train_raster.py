@@ -224,6 +224,9 @@ def test_a_grid_sweeps_raster_options_and_its_rows_carry_them():
                                                   "'alpha_min'?)"),
     ("axis", {"axes": {"raster.tile_size": [16, 12]}}, "x.toml: axes.raster.tile_size = 12: raster.tile_size: "
                                                        "expected a power of two in [1, 64], got 12"),
+    ("base value an axis sets inside", {"base": {"raster": "fast"}, "axes": {"raster.alpha_min": [0.005]}},
+     "x.toml: base.raster: a value (\"fast\"), but axes.raster.alpha_min = 0.005 sets raster.alpha_min inside it; "
+     "write [base.raster] as a table, or leave it out"),
     ("dead run", {"axes": {"raster.alpha_min": [0.005, 0.1]}},
      "x.toml: axes.raster.alpha_min = 0.1: raster.alpha_min: 0.1 is at or above the initial opacity 0.1 "
      "(init_opacity), and alpha = opacity x G never exceeds the opacity: every Gaussian would be skipped and get "

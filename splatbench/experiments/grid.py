@@ -146,7 +146,12 @@ def _run_maker(spec: ExperimentSpec, kind, protocol: str | None = None
 
     def make(cell, scene: str, seed: int) -> RunSpec:
         flat = dict(spec.base)
-        for _, _, settings, _ in cell:
+        for _, _, settings, where in cell:
+            for path in settings:  # a base value an axis would set keys inside: never dropped silently
+                above = next((key for key in spec.base if path.startswith(key + ".")), None)
+                if above is not None:
+                    raise InputError(f"{spec.source}: base.{above}: a value ({canonical_json(spec.base[above])}), but "
+                                     f"{where} sets {path} inside it; write [base.{above}] as a table, or leave it out")
             flat = override(flat, settings)
         flat = {**flat, **_source(spec, scene), "scene": scene, "seed": seed}
         if protocol is not None:

@@ -260,12 +260,18 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
     label = _cell_label(done, axes) if axes else (lambda row: "all")
     labels = done.apply(label, axis=1) if len(done) else pd.Series([], dtype=object)
     cells: dict[tuple[str, str], CellSettling] = {}
+    unknown = []
     for (scene, cell), group in done.groupby([done.scene, labels], sort=False):
         c = cell_settling(group, keys, effect)
         if c is not None:
             cells[(scene, cell)] = c
+        else:
+            unknown.append(f"{scene} `{cell}`")
+    cannot_tell = (f"- **Cannot tell whether {'any cell' if not cells else ', '.join(unknown)} settled**: "
+                   "no run of it evaluated the test views twice or more (set `eval_every`, e.g. a quarter of "
+                   "`iterations`), so its findings say nothing about convergence.") if unknown else None
     if not cells:
-        return None
+        return Finding("settling", [cannot_tell], [])
     windows = sorted({(c.start, c.end) for c in cells.values()})
     span = ", ".join(f"{a}→{b}" for a, b in windows)
     threshold = f"{effect:g} dB per 1,000 steps"
@@ -293,6 +299,8 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
                      "gives, not where the cells converge (each such comparison is marked **not settled**).")
     else:
         lines.append(f"- Settled: every cell's test curve moved by less than {threshold} over the last quarter.")
+    if cannot_tell:
+        lines.append(cannot_tell)
     if overfit:
         lines.append("- **Overfitting**: the test curve is flat or falling while the training-view PSNR still rises "
                      f"(by {threshold} or more beyond the test curve's slope): " + ", ".join(overfit)
