@@ -62,7 +62,8 @@ def _dry_run(spec, results: Path, check: bool) -> None:
         status = records[r.run_id].status if r.run_id in records else "pending"
         labels = " ".join(f"{k}={v}" for k, v in r.labels.items())
         click.echo(f"{r.run_id}  {status:<7}  {r.scene}  seed={r.seed}  {labels}{tag}".rstrip())
-    click.echo(f"{len(runs) + len(checks)} runs in {experiment_dir(results, spec.name)}"
+    total = len(runs) + len(checks)
+    click.echo(f"{total} run{'' if total == 1 else 's'} in {experiment_dir(results, spec.name)}"
                + (f" ({len(checks)} of them the check)" if checks else ""))
 
 

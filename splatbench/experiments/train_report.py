@@ -222,7 +222,7 @@ def schedule_as_run(done: pd.DataFrame) -> str:
         if steps:
             every = " / ".join(f"{s:,}" for s in steps)
             bands = " / ".join(", ".join(f"{k * s:,}" for k in (1, 2, 3)) for s in steps)
-            parts.append(f"SH degree raised one band every {every} steps (`sh_interval` as the run reads it: bands "
+            parts.append(f"SH degree raised one band every {every} step{'' if steps == [1] else 's'} (`sh_interval` as the run reads it: bands "
                          f"1, 2, 3 at steps {bands}, up to each cell's maximum degree)")
     return "; ".join(parts)
 

@@ -190,6 +190,6 @@ def no_refinement_note(name: str, refine_every: int, refine_start: int, refine_s
     if last_multiple(refine_every, refine_start, min(iterations, refine_stop - 1)) is not None:
         return None
     return (f"warning: strategy {name!r} never refines in this run: no multiple of refine_every {refine_every} "
-            f"falls in its refine window {refine_start}..{refine_stop} of {iterations} iterations; "
+            f"falls in its refine window, steps {refine_start} to {refine_stop - 1}, of {iterations} iterations; "
             f"{advice or REFINE_ADVICE}")
 
