@@ -108,7 +108,7 @@ def test_rasterize_rejects_non_finite_input_naming_the_field(scene, field):
     ({"sh_degree": 4}, "sh_degree: expected an int in 0..3, got 4"),
     ({"background": (1, 2)}, "background: expected 3 values in [0, 1]"),
     ({"background": (2, 0, 0)}, "background: expected 3 values in [0, 1], got [2, 0, 0]"),
-    ({"near": 10, "far": 1}, "near, far: expected near < far, got near=10, far=1"),
+    ({"near": 10, "far": 1}, "near: expected a value below far (1), got 10"),  # both given: RasterOptions says so
     ({"near": 2e10}, "near, far: expected near < far, got near=20000000000.0, far=10000000000.0"),
 ])
 def test_render_rejects_bad_options(scene, options, message):

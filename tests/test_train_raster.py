@@ -68,6 +68,14 @@ def test_a_bad_raster_key_is_one_line_naming_it(override, message):
     assert str(info.value) == message
 
 
+def test_clip_planes_in_the_wrong_order_are_refused_before_anything_is_written():
+    # a new user's `--set raster.near=0.5 --set raster.far=0.1` used to fail only at the first render,
+    # after config.toml was written, naming "near, far" rather than the key
+    with pytest.raises(InputError) as info:
+        apply_overrides(TrainConfig(), ["raster.near=0.5", "raster.far=0.1"])
+    assert str(info.value) == "raster.near: expected a value below far (0.1), got 0.5"
+
+
 def test_the_device_is_set_once_by_device():
     """``raster.device`` is not a setting: it always equals ``TrainConfig.device``."""
     with pytest.raises(InputError, match=r"^raster\.device: the rasterizer runs on the run's `device`"):

@@ -61,6 +61,8 @@ class RasterOptions:
             raise InputError(f"near: expected a finite value > 0, got {self.near!r}")
         if self.far is not None and not (self.far > 0):
             raise InputError(f"far: expected a value > 0, got {self.far!r}")
+        if self.near is not None and self.far is not None and not self.near < self.far:
+            raise InputError(f"near: expected a value below far ({self.far!r}), got {self.near!r}")
         if self.radius not in RADIUS_RULES:
             raise InputError(f"radius: expected one of {RADIUS_RULES}, got {self.radius!r}")
         check_device(self.device)
