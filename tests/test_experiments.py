@@ -27,6 +27,7 @@ from click.testing import CliRunner
 from splatbench.errors import InputError
 from splatbench.experiments import expand, load_experiment, parse_experiment, run_experiment
 from splatbench.experiments.grid import make_run_id
+from splatbench.versions import code_version
 from splatbench.experiments.store import (CORE_COLUMNS, TABLE_NAME, RunRecord, build_table, read_records, read_table,
                                           remove_stale_temps, result_path, write_record)
 
@@ -74,6 +75,7 @@ def assert_table_matches_files(folder: Path, expected_ids: set[str]) -> None:
         assert (row["status"], row["scene"], row["seed"], row["error"]) == (rec.status, rec.scene, rec.seed,
                                                                               rec.error)
         assert row["config.x"] == rec.config["x"] and row["config.opts.b"] == rec.config["opts"]["b"]
+        assert row["code"] == rec.code == code_version()  # the code each run ran (tests/test_run_code.py)
         for name, value in rec.metrics.items():
             assert row[f"metric.{name}"] == value, name
         for name, label in rec.labels.items():

@@ -24,6 +24,7 @@ from splatbench.experiments.grid import RunSpec
 from splatbench.experiments.kinds import check_output, get_kind, metric_values
 from splatbench.experiments.store import WORK_DIR, RunRecord, experiment_dir, worker_name, write_record
 from splatbench.experiments.workers import bound_threads, die_with_runner
+from splatbench.versions import code_version
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,7 @@ def execute_run(run: RunSpec, results_dir: str, context: RunContext = RunContext
     workdir = experiment_dir(results_dir, run.experiment) / WORK_DIR / run.run_id
     record = RunRecord(run_id=run.run_id, experiment=run.experiment, kind=run.kind, scene=run.scene, seed=run.seed,
                        status="done", config=plain(run.config), labels=dict(run.labels), worker=worker_name(),
-                       started=started.isoformat(timespec="seconds"))
+                       started=started.isoformat(timespec="seconds"), code=code_version())
     try:
         workdir.mkdir(parents=True, exist_ok=True)
         kind = get_kind(run.kind)

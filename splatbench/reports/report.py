@@ -253,7 +253,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     elif spec.check is None and kind.protocols is not None:
         lines += ["**7K check: none declared** (the experiment file has no `[check]`: its headline is not rerun at "
                   "graphdeco's 7K protocol; docs/reports.md, \"The 7K check\").", ""]
-    timing = " ".join(t for t in (run_time(table), load_facts(table, kind)) if t)
+    timing = " ".join(t for t in (run_time(table), load_facts(table, kind), code_facts(table)) if t)
     if timing:
         lines += [timing, ""]
     if missing:
@@ -369,6 +369,26 @@ def run_time(table: pd.DataFrame) -> str:
         span = ""
     return (f"Run time: {duration(worker)} of worker time over {len(done)} runs "
             f"(mean {duration(worker / len(done))} per run){span}.")
+
+
+def code_facts(table: pd.DataFrame) -> str:
+    """"Code: ..." -- the commits the done runs ran at (their record's ``code``), with how many
+    runs each; a report whose cells ran at more than one says so, since a change of code between
+    runs is a confound the grid does not see. "" for a table of grids run before runs recorded it."""
+    done = table[table.status == "done"] if len(table) else table
+    if "code" not in done.columns or not len(done):
+        return ""
+    codes = done.code.fillna("").astype(str)
+    counts = codes[codes != ""].value_counts()
+    if counts.empty:
+        return ""
+    missing = int((codes == "").sum())
+    listed = ", ".join(f"`{c}` ({n} run{'s' if n != 1 else ''})" for c, n in sorted(counts.items()))
+    unknown = f"; {missing} run(s) ran before runs recorded it" if missing else ""
+    if len(counts) == 1 and not missing:
+        return f"Code: every run at {listed}."
+    return (f"Code: the runs ran at more than one commit: {listed}{unknown}; a difference between cells "
+            f"run at different commits is also a difference of code.")
 
 
 def load_facts(table: pd.DataFrame, kind: RunKind) -> str:
