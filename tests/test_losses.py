@@ -104,6 +104,12 @@ def test_too_small_an_image_or_mismatched_shapes_are_one_line():
         dssim(torch.rand(1, 3, 5, 9), torch.rand(1, 3, 5, 9))
     with pytest.raises(InputError, match="dssim: expected two"):
         dssim(torch.rand(1, 3, 8, 8), torch.rand(1, 3, 8, 9))
+    # the SSIM map's own boundary: an image without its batch axis (before: a ValueError from
+    # unpacking the shape, the check after it unreachable)
+    from splatbench.metrics.ssim import ssim_map
+
+    with pytest.raises(InputError, match=r"^ssim: expected two \[B, C, H, W\] images of one shape, got \[3, 8, 8\]"):
+        ssim_map(torch.rand(3, 8, 8), torch.rand(3, 8, 8))
 
 
 @pytest.mark.parametrize("seed", [0, 1])

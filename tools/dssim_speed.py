@@ -22,7 +22,7 @@ import time
 import torch
 import torch.nn.functional as F
 
-from splatbench.metrics.ssim import C1, C2, EPS, gaussian_window
+from splatbench.metrics.ssim import gaussian_window, ssim_terms
 from splatbench.train.dssim import dssim
 
 def _fold_reflect(t: torch.Tensor, dim: int, pad: int) -> torch.Tensor:
@@ -69,16 +69,9 @@ class _TorchDssim(torch.autograd.Function):
         c = x.shape[1]
         blur = _blur(window, 5 * c, x.shape[2], x.shape[3], x.dtype, x.device)
         mu_x, mu_y, e_xx, e_yy, e_xy = blur(torch.cat([x, y, x * x, y * y, x * y], dim=1)).split(c, dim=1)
-        a1 = 2 * mu_x * mu_y + C1
-        a2 = 2 * (e_xy - mu_x * mu_y) + C2
-        b1 = mu_x * mu_x + mu_y * mu_y + C1
-        b2 = (e_xx - mu_x * mu_x) + (e_yy - mu_y * mu_y) + C2
-        d = b1 * b2 + EPS
-        s = a1 * a2 / d
-        if pred.requires_grad:
-            d_mu = (2 * mu_y * (a2 - a1) - 2 * mu_x * s * (b2 - b1)) / d
-            d_exx = -s * b1 / d
-            d_exy = 2 * a1 / d
+        s, partials = ssim_terms(mu_x, mu_y, e_xx, e_yy, e_xy, grad=pred.requires_grad)
+        if partials is not None:
+            d_mu, d_exx, d_exy = partials
             adj = _blur(window, 3 * c, x.shape[2], x.shape[3], x.dtype, x.device)
             g_mu, g_xx, g_xy = adj.adjoint(torch.cat([d_mu, d_exx, d_exy], dim=1)).split(c, dim=1)
             # d(1 - mean S)/dx

@@ -57,6 +57,21 @@ def gaussian_window(window: int, *, dtype: torch.dtype = torch.float32) -> torch
     return g / g.sum()
 
 
+def ssim_terms(mu_x, mu_y, e_xx, e_yy, e_xy, *, grad: bool):
+    """The SSIM map S from the five blurred maps, and with ``grad`` its partials [∂S/∂μx,
+    ∂S/∂Exx, ∂S/∂Exy] (else None): the module doc's formulas in plain arithmetic, so that
+    Dr.Jit arrays and torch tensors (``tools/dssim_speed.py``'s baseline) share them."""
+    a1 = 2 * mu_x * mu_y + C1
+    a2 = 2 * (e_xy - mu_x * mu_y) + C2
+    b1 = mu_x * mu_x + mu_y * mu_y + C1
+    b2 = (e_xx - mu_x * mu_x) + (e_yy - mu_y * mu_y) + C2
+    d = b1 * b2 + EPS
+    s = a1 * a2 / d
+    if not grad:
+        return s, None
+    return s, [(2 * mu_y * (a2 - a1) - 2 * mu_x * s * (b2 - b1)) / d, -s * b1 / d, 2 * a1 / d]
+
+
 def _module(t: torch.Tensor) -> ModuleType:
     """Dr.Jit's plain (non-AD) array namespace for the device of ``t``: drjit.llvm or drjit.cuda."""
     from splatbench.raster.device import get_device
@@ -107,17 +122,10 @@ def _dssim_maps(m, f, x, y, planes: int, height: int, width: int, taps: list[flo
     for k, g in enumerate(taps):  # along the height
         src = u((plane * height + _reflect(row + (k - pad), height)) * width + col)
         blurred = [dr.fma(g, dr.gather(f, a, src), b) for b, a in zip(blurred, acc)]
-    mu_x, mu_y, e_xx, e_yy, e_xy = blurred
-    a1 = 2 * mu_x * mu_y + C1
-    a2 = 2 * (e_xy - mu_x * mu_y) + C2
-    b1 = mu_x * mu_x + mu_y * mu_y + C1
-    b2 = (e_xx - mu_x * mu_x) + (e_yy - mu_y * mu_y) + C2
-    d = b1 * b2 + EPS
-    s = a1 * a2 / d
-    if not grad:
+    s, partials = ssim_terms(*blurred, grad=grad)
+    if partials is None:
         dr.eval(s)
         return s, None
-    partials = [(2 * mu_y * (a2 - a1) - 2 * mu_x * s * (b2 - b1)) / d, -s * b1 / d, 2 * a1 / d]
     dr.eval(s, partials)
     del acc, blurred
     # adjoint along the height: transposed correlation onto height + 2 pad rows, then folded
@@ -159,16 +167,16 @@ def ssim_map(pred: torch.Tensor, target: torch.Tensor, window: int = 11, *,
     """The SSIM map S [B, C, H, W] of ``pred`` against ``target`` ([B, C, H, W], float32 or
     float64, in [0, 1]) and, with ``grad``, the gradient of ``1 - mean(S)`` with respect to
     ``pred`` [B, C, H, W] (else None): torch tensors viewing Dr.Jit's results."""
+    if pred.shape != target.shape or pred.dim() != 4:  # before the shape is unpacked
+        from splatbench.errors import InputError
+
+        raise InputError(f"ssim: expected two [B, C, H, W] images of one shape, got {list(pred.shape)} and "
+                         f"{list(target.shape)}")
     b, c, h, w = pred.shape
     if min(h, w) <= window // 2:
         from splatbench.errors import InputError
 
         raise InputError(f"ssim_window: {window} needs images larger than {window // 2} px, got {w}x{h}")
-    if pred.shape != target.shape or pred.dim() != 4:
-        from splatbench.errors import InputError
-
-        raise InputError(f"ssim: expected two [B, C, H, W] images of one shape, got {list(pred.shape)} and "
-                         f"{list(target.shape)}")
     if pred.dtype not in (torch.float32, torch.float64):
         from splatbench.errors import InputError
 
@@ -186,4 +194,4 @@ def ssim_map(pred: torch.Tensor, target: torch.Tensor, window: int = 11, *,
     return as_torch(s), (as_torch(g) if g is not None else None)
 
 
-__all__ = ["ssim_map", "gaussian_window", "SIGMA", "C1", "C2", "EPS"]
+__all__ = ["ssim_map", "ssim_terms", "gaussian_window", "SIGMA", "C1", "C2", "EPS"]
