@@ -210,6 +210,7 @@ def test_a_cell_evaluated_once_is_said_to_be_unknown_not_left_out():
                            "curves": json.dumps(one_point)} for seed in range(3)])
     f = settling_finding(pd.concat([table, extra], ignore_index=True), TRAIN)
     assert "**Cannot tell whether s `x=b` settled**" in f.markdown() and len(f.claims) == 1
+    assert "Settled: every cell with a slope's test curve" in f.markdown()  # not "every cell": b has none
     only = settling_finding(extra, TRAIN)
     assert "**Cannot tell whether any cell settled**" in only.markdown() and not only.claims
 

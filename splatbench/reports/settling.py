@@ -298,7 +298,8 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
                      f"the last quarter: " + ", ".join(moving) + ". Their differences above are what this run length "
                      "gives, not where the cells converge (each such comparison is marked **not settled**).")
     else:
-        lines.append(f"- Settled: every cell's test curve moved by less than {threshold} over the last quarter.")
+        lines.append(f"- Settled: every cell{' with a slope' if unknown else ''}'s test curve moved by less than "
+                     f"{threshold} over the last quarter.")
     if cannot_tell:
         lines.append(cannot_tell)
     if overfit:
