@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import subprocess
 from importlib import metadata
 from pathlib import Path
@@ -18,12 +19,14 @@ def package_version(package: str) -> str:
         return "not installed"
 
 
+@functools.cache
 def code_version() -> str:
     """The code this process runs: ``git:<short commit>`` of the checkout splatbench is imported
     from, with ``+dirty`` when its tracked files differ from that commit; ``<version>`` (e.g.
     ``0.1.0``) when it is not a git checkout or git cannot be run. What a run records
     (`splatbench.experiments.store.RunRecord.code`), so a report can say which commit each of its
-    cells ran at."""
+    cells ran at. Read once per process, at its first call (a worker's first run): a process keeps
+    the modules it imported, so a checkout moved later does not change the code it runs."""
     root = Path(__file__).resolve().parents[1]
     try:
         head = subprocess.run(["git", "-C", str(root), "rev-parse", "--short=12", "HEAD"], capture_output=True,
