@@ -212,7 +212,41 @@ MALFORMED = {
                                              r"variants\.densify\.budget: lr_means: 0 freezes the means, but strategy "
                                              r"'budget'"),
     "invalid TOML": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = [\n', r"invalid TOML"),
+    # overlapping dimensions: in a product cell with both, the later used to drop the other's value silently
+    "two variants setting one field": (HEAD + '[variants.v]\nok = {}\nloud = { mode = "warn" }\n'
+                                       '[variants.w]\nquick = {}\nslow = { sleep = 0.1, mode = "ok" }\n',
+                                       r"variants\.w\.slow\.mode: overlaps variants\.v\.loud\.mode \(in a cell with "
+                                       r"both, the later would drop the other's value\); set it in one variant, or "
+                                       r"merge the two into one \[variants\.NAME\] table$"),
+    "a variant setting a field inside another's": (HEAD + '[variants.v]\nwhole = { opts = {} }\n'
+                                                   '[variants.w]\none = { opts.a = 2 }\n',
+                                                   r"variants\.w\.one\.opts\.a: overlaps variants\.v\.whole\.opts "
+                                                   r"\(in a cell with both"),
+    "an axis inside another axis": (HEAD + '[axes]\nopts = [{ a = 1 }]\n"opts.a" = [2]\n',
+                                    r"axes\.opts\.a: overlaps axes\.opts \(in a cell with both, the later would drop "
+                                    r"the other's value\); sweep only one of them, or use a \[variants\.NAME\] table "
+                                    r"for values that go together$"),
+    "a variant inside an axis": (HEAD + '[axes]\nopts = [{ a = 1 }]\n[variants.v]\nl = { opts.b = "q" }\n',
+                                 r"variants\.v\.l\.opts\.b: also swept by axes\.opts \(in a cell with both, the later "
+                                 r"would drop the other's value\); set it in the axis or in the variant, not both$"),
+    "a scene table setting a swept data field": ('kind = "tests.kinds_for_tests:DUMMY"\n'
+                                                 'scenes = [{ name = "here", path = ".", downscale = 8 }]\n'
+                                                 '[axes]\ndata.downscale = [4, 8]\n',
+                                                 r"scenes\.here\.downscale: sets data\.downscale, which "
+                                                 r"axes\.data\.downscale sweeps \(the scene's value would drop the "
+                                                 r"swept one in its runs\); leave it out of one of them$"),
 }
+
+
+def test_two_variant_tables_on_different_fields_combine_in_a_product_grid(tmp_path):
+    """The overlap refusals above leave disjoint variant tables alone: every cell keeps both
+    tables' values."""
+    path = write(tmp_path, HEAD + '[variants.v]\nok = {}\nloud = { mode = "warn" }\n'
+                                  '[variants.w]\nquick = {}\nslow = { sleep = 0.1 }\n')
+    runs = expand(load_experiment(path))
+    assert [(r.labels["v"], r.labels["w"], r.config["mode"], r.config["sleep"]) for r in runs] == [
+        ("ok", "quick", "ok", 0.0), ("ok", "slow", "ok", 0.1),
+        ("loud", "quick", "warn", 0.0), ("loud", "slow", "warn", 0.1)]
 
 
 @pytest.mark.parametrize("case", MALFORMED, ids=list(MALFORMED))

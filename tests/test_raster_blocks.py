@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from splatbench.errors import InputError
-from splatbench.raster.options import RasterOptions
+from splatbench.raster.options import DEFAULT_PIXEL_BLOCK, RasterOptions
 from splatbench.raster.work import work_stats
 from splatbench.workloads import model_workload
 from tests.compare import assert_grads_agree
@@ -50,18 +50,41 @@ def test_pixel_block_keeps_the_image_and_the_gradients_within_the_band(tile_size
             assert_grads_agree(f"{workload.name} {k}", other.grads[k], base.grads[k], rel_l2=REL_L2, cosine=COSINE)
 
 
-def test_the_default_block_is_four_and_the_tile_caps_it():
-    """4 x 4 is the layout measured fastest (docs/benchmarks.md); a tile smaller than the
-    block is one block, with the image of every other layout."""
-    assert RasterOptions().pixel_block == 4
+def test_the_default_block_is_four_follows_a_smaller_tile_and_records_what_runs():
+    """4 x 4 is the layout measured fastest (docs/benchmarks.md). A tile smaller than that
+    (tile_size 1 or 2, which a user may set) gets the tile's side as its block, held as
+    the value itself, so a config or record says what ran (it used to say 4 while 2 ran);
+    that layout renders the image of every other."""
+    assert RasterOptions().pixel_block == DEFAULT_PIXEL_BLOCK == 4
+    assert [RasterOptions(tile_size=t).pixel_block for t in (1, 2, 4, 8, 64)] == [1, 2, 4, 4, 4]
+    small = RasterOptions(tile_size=2)
+    assert small == RasterOptions(tile_size=2, pixel_block=2) and small.to_dict()["pixel_block"] == 2
+    assert RasterOptions.from_dict(small.to_dict()) == small
+    assert RasterOptions.from_kwargs(tile_size=2).pixel_block == 2
+    assert RasterOptions.from_dict({"tile_size": 2}, prefix="raster.").pixel_block == 2
     workload, background = parity_scene(1)
     c = workload.camera
     v = Cotangents.standard_normal(1, c.height, c.width)
-    capped = fast_vjp(workload, v, background=background, device="cpu", tile_size=2, pixel_block=8)
-    same = fast_vjp(workload, v, background=background, device="cpu", tile_size=2, pixel_block=2)
-    np.testing.assert_array_equal(capped.rgb, same.rgb)
-    for k in GROUPS:
-        np.testing.assert_array_equal(capped.grads[k], same.grads[k])
+    default = fast_vjp(workload, v, background=background, device="cpu", tile_size=2)
+    ones = fast_vjp(workload, v, background=background, device="cpu", tile_size=2, pixel_block=1)
+    np.testing.assert_array_equal(default.rgb, ones.rgb)
+
+
+def test_a_block_larger_than_the_tile_is_refused_not_capped():
+    """A pixel_block given larger than the tile used to run as the tile's side while the
+    config said otherwise; now it is one line naming the field and the fix."""
+    message = ("pixel_block: at most tile_size (2), got 8; use pixel_block <= 2, or leave it out (the default "
+               "follows a smaller tile)")
+    with pytest.raises(InputError) as info:
+        RasterOptions(tile_size=2, pixel_block=8)
+    assert str(info.value) == message
+    with pytest.raises(InputError) as info:
+        RasterOptions.from_kwargs(tile_size=2, pixel_block=8)
+    assert str(info.value) == message
+    with pytest.raises(InputError) as info:
+        RasterOptions.from_dict({"tile_size": 2, "pixel_block": 4}, prefix="raster.")
+    assert str(info.value) == ("raster.pixel_block: at most tile_size (2), got 4; use pixel_block <= 2, or leave "
+                               "it out (the default follows a smaller tile)")
 
 
 @pytest.mark.parametrize("options, message", [

@@ -51,6 +51,25 @@ def test_raster_keys_are_set_one_at_a_time_and_round_trip_through_toml(tmp_path)
     assert TrainConfig().raster == RasterOptions()               # nothing set: graphdeco's defaults
 
 
+def test_a_small_tile_set_alone_takes_its_default_block_and_a_block_given_stays():
+    """`raster.pixel_block` is at most the tile (a larger one is refused, not capped): a
+    `--set raster.tile_size=2` on a config that never set the block takes the tile's default
+    (2, recorded as such) rather than an error about a block the user never gave; back at 16,
+    the default 4; a block the config gives stays, and one too large for the tile is named."""
+    small = apply_overrides(TrainConfig(), ["raster.tile_size=2"])
+    assert (small.raster.tile_size, small.raster.pixel_block) == (2, 2)
+    assert small.to_dict()["raster"]["pixel_block"] == 2
+    back = apply_overrides(small, ["raster.tile_size=16"])
+    assert back.raster == RasterOptions() and back.raster.pixel_block == 4
+    given = apply_overrides(TrainConfig(), ["raster.pixel_block=2"])
+    assert apply_overrides(given, ["raster.tile_size=8"]).raster.pixel_block == 2
+    assert apply_overrides(given, ["raster.tile_size=2"]).raster.pixel_block == 2
+    with pytest.raises(InputError) as info:
+        apply_overrides(TrainConfig(), ["raster.tile_size=2", "raster.pixel_block=4"])
+    assert str(info.value) == ("raster.pixel_block: at most tile_size (2), got 4; use pixel_block <= 2, or leave it "
+                               "out (the default follows a smaller tile)")
+
+
 @pytest.mark.parametrize("override, message", [
     ("raster.alpha_mn=0.1", "raster.alpha_mn: unknown key (did you mean 'alpha_min'?)"),
     ("raster.bogus=1", "raster.bogus: unknown key (known: alpha_max, alpha_min, antialiased, eps2d, far, near, "

@@ -119,7 +119,7 @@ class RasterBenchResult:
     sh_degree: int                    # SH degree evaluated
     device: str                       # "cpu" (Dr.Jit LLVM) or "cuda"
     tile_size: int                    # tile side (pixels)
-    pixel_block: int                  # side of a compositing lane's pixel block (pixels; capped at tile_size)
+    pixel_block: int                  # side of a compositing lane's pixel block (pixels; at most tile_size)
     repeats: int                      # timed runs per measurement
     fwd_ms: float                     # forward only (no gradients), median
     fwd_bwd_ms: float                 # forward + backward of rgb.sum() to all five groups, median
@@ -234,7 +234,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
                                                      or first_run_peak <= target.peak_rss_mb)
     return RasterBenchResult(
         name=name, n=n, width=camera.width, height=camera.height, sh_degree=stats.sh_degree, device=device,
-        tile_size=opts.tile_size, pixel_block=min(opts.pixel_block, opts.tile_size), repeats=settings.repeats,
+        tile_size=opts.tile_size, pixel_block=opts.pixel_block, repeats=settings.repeats,
         fwd_ms=milliseconds(statistics.median(fwd_s)),
         fwd_bwd_ms=fwd_bwd_ms, stages=stages, pairs=stats.num_pairs, visible=int(stats.visible.sum()),
         evaluations=evaluations, mevals_per_s=mevals, box_pairs=work.box_pairs,

@@ -49,13 +49,20 @@ def unflatten(flat: Mapping[str, Any]) -> dict[str, Any]:
     return nested
 
 
+def overlaps(a: str, b: str) -> bool:
+    """Whether dotted paths ``a`` and ``b`` name the same field, or one a field inside the other."""
+    return a == b or a.startswith(b + ".") or b.startswith(a + ".")
+
+
 def override(flat: Mapping[str, Any], settings: Mapping[str, Any]) -> dict[str, Any]:
     """``flat`` with ``settings`` applied: each set path replaces the base value at that
-    path, everything under it and any leaf above it."""
+    path, everything under it and any leaf above it. (An experiment's axes and variants
+    never overlap one another, so in a grid cell only the base's values are replaced:
+    `splatbench.experiments.spec`.)"""
     out = dict(flat)
     for path in settings:
         for key in list(out):
-            if key == path or key.startswith(path + ".") or path.startswith(key + "."):
+            if overlaps(key, path):
                 del out[key]
     out.update(settings)
     return out
@@ -63,7 +70,7 @@ def override(flat: Mapping[str, Any], settings: Mapping[str, Any]) -> dict[str, 
 
 def _set_path(flat: dict[str, Any], path: str, value: Any, *, where: str) -> None:
     for key in flat:
-        if key == path or key.startswith(path + ".") or path.startswith(key + "."):
+        if overlaps(key, path):
             raise InputError(f"{where}.{path}: set twice (also as {key!r})")
     flat[path] = value
 

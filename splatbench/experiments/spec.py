@@ -36,7 +36,9 @@ Dotted keys: a config is held *flat*, as ``dotted.path -> value``. A TOML sub-ta
 (``[base.raster]``), a TOML dotted key (``raster.tile_size = 8``) and a quoted key
 with dots (``"raster.tile_size" = 8``) all name the same field ``raster.tile_size``;
 the kind receives the nested form (``{"raster": {"tile_size": 8}}``). A value set by
-an axis or a variant replaces the base value at its path. An axis value that is a
+an axis or a variant replaces the base value at its path; no two of them (axes, variant
+tables, a scene table's ``data.*`` field) may set overlapping paths, since in a cell
+with both the later would drop the other's value: a one-line error naming both. An axis value that is a
 table (``opts = [{a = 1}, {a = 2, b = 3}]``) replaces the whole sub-table: no key of
 the base's sub-table survives. Inside a variant, a nested table is read as dotted
 keys: each leaf is set on its own and the base's other keys stay.
@@ -59,7 +61,7 @@ from typing import Any
 
 from splatbench.checks import unknown_key_problem
 from splatbench.errors import InputError
-from splatbench.experiments.configs import FIELD_KEY, canonical_json, check_value, flatten
+from splatbench.experiments.configs import FIELD_KEY, canonical_json, check_value, flatten, overlaps
 from splatbench.experiments.kinds import RunKind, get_kind
 
 #: Fields an experiment file may hold at its top level.
@@ -69,6 +71,8 @@ TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "b
 CHECK_FIELDS = ("protocol", "scene", "cells")
 #: Fields of its ``[runner]`` table.
 RUNNER_FIELDS = ("workers", "executor", "scheduler", "results")
+#: Why two dimensions (axes, variants) may not set overlapping paths, in their error lines.
+DROPS = "in a cell with both, the later would drop the other's value"
 #: How axes combine: every combination, or each value alone against the base.
 GRID_MODES = ("product", "one-at-a-time")
 EXECUTORS = ("local", "dask")
@@ -237,6 +241,7 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
             raise fail(where, "empty axis (a variant axis needs at least one label)")
         if vname in axes:
             raise fail(where, f"name clashes with the axis {vname!r}")
+        earlier = _variant_paths(variants)  # what the variant axes before this one set
         variants[vname] = {}
         for label, settings in labels.items():
             if not isinstance(settings, Mapping):
@@ -245,9 +250,23 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
             for path, value in flat.items():
                 check_value(value, f"{source}: {where}.{label}.{path}")
                 for axis in axes:
-                    if path == axis or path.startswith(axis + ".") or axis.startswith(path + "."):
-                        raise fail(f"{where}.{label}.{path}", f"also swept by axes.{axis}")
+                    if overlaps(path, axis):
+                        raise fail(f"{where}.{label}.{path}", f"also swept by axes.{axis} ({DROPS}); set it in the "
+                                                              f"axis or in the variant, not both")
+                hit = next((w for w, p in earlier if overlaps(path, p)), None)
+                if hit is not None:
+                    raise fail(f"{where}.{label}.{path}", f"overlaps {hit} ({DROPS}); set it in one variant, or "
+                                                          f"merge the two into one [variants.NAME] table")
             variants[vname][str(label)] = flat
+
+    swept = [*((f"axes.{p}", p) for p in axes), *_variant_paths(variants)]
+    for scene_name, fields in scene_sources.items():  # a scene's data.* win over the base's, never over a sweep
+        for key in fields:
+            hit = next((w for w, p in swept if overlaps(f"data.{key}", p)), None)
+            if hit is not None:
+                raise fail(f"scenes.{scene_name}.{key}", f"sets data.{key}, which {hit} sweeps (the scene's value "
+                                                         f"would drop the swept one in its runs); leave it out of "
+                                                         f"one of them")
 
     for where, paths in [("base", base), *((f"axes.{p}", [p]) for p in axes),
                          *((f"variants.{v}.{lab}", s) for v, labs in variants.items() for lab, s in labs.items())]:
@@ -418,6 +437,12 @@ def _scene_table(table: Mapping[str, Any], where: str, fail, base_dir: Path | No
     return name, fields
 
 
+def _variant_paths(variants: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> list[tuple[str, str]]:
+    """(where in the file, path) of every path a variant's label sets."""
+    return [(f"variants.{name}.{label}.{path}", path)
+            for name, labels in variants.items() for label, flat in labels.items() for path in flat]
+
+
 def _flatten_axes(table: Mapping[str, Any], prefix: str, fail) -> dict[str, list]:
     """``[axes]`` -> ``{dotted.path: [values]}``; a sub-table nests, a list is an axis."""
     out: dict[str, list] = {}
@@ -434,8 +459,9 @@ def _flatten_axes(table: Mapping[str, Any], prefix: str, fail) -> dict[str, list
             raise fail(f"axes.{path}", f"expected a list of values, got {value!r}")
         for sub, values in items.items():
             for other in out:
-                if other == sub or other.startswith(sub + ".") or sub.startswith(other + "."):
-                    raise fail(f"axes.{sub}", f"overlaps axes.{other}")
+                if overlaps(sub, other):
+                    raise fail(f"axes.{sub}", f"overlaps axes.{other} ({DROPS}); sweep only one of them, or use "
+                                              f"a [variants.NAME] table for values that go together")
             out[sub] = values
     return out
 

@@ -1,6 +1,6 @@
 """Compositing lanes (`Lanes`, in tile order) and their per-block lists: each lane walks
 only the pairs of its tile whose support ellipse meets the lane's B x B block of pixels
-(B: `RasterOptions.pixel_block`, capped at the tile size).
+(B: `RasterOptions.pixel_block`, at most the tile size).
 
 A tile's list holds every Gaussian whose ellipse meets some pixel of the tile, but a
 small ellipse meets only a few of the tile's blocks. `block_lists` tests every
@@ -48,10 +48,11 @@ def pair_at(m, lanes: Lanes, i):
 
 
 def make_lanes(m, grid: TileGrid, bins: Bins, pixel_block: int) -> Lanes:
-    """The lanes in tile order, each a ``pixel_block`` x ``pixel_block`` block (capped at
-    the tile), walking its tile's whole range of the sorted pairs."""
+    """The lanes in tile order, each a ``pixel_block`` x ``pixel_block`` block (at most
+    the tile: `RasterOptions` refuses a larger one), walking its tile's whole range of the
+    sorted pairs."""
     ts = grid.tile_size
-    block = min(pixel_block, ts)
+    block = pixel_block
     side = ts // block                      # lanes per tile side
     lanes_per_tile = side * side
     lane = dr.arange(m.UInt32, grid.num_tiles * lanes_per_tile)
@@ -78,8 +79,8 @@ def make_lanes(m, grid: TileGrid, bins: Bins, pixel_block: int) -> Lanes:
 
 def lanes_for(m, rec: Records, bins: Bins, pixel_block: int) -> Lanes:
     """The compositing lanes with their per-block lists (`block_lists`); ``pixel_block``:
-    the side of a lane's block (`RasterOptions.pixel_block`, a power of two; capped at
-    the tile size). Each lane shades its block's pixels: one load of a record serves
+    the side of a lane's block (`RasterOptions.pixel_block`, a power of two, at most the
+    tile size). Each lane shades its block's pixels: one load of a record serves
     them all, and their gradient terms are summed in registers before a scatter (4x4:
     one 16-lane AVX-512 packet per 16x16 tile; docs/benchmarks.md measures the others)."""
     lanes = make_lanes(m, bins.grid, bins, pixel_block)

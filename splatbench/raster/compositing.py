@@ -36,7 +36,7 @@ from typing import NamedTuple
 from splatbench.raster.device import dr
 from splatbench.raster.binning import Bins, TileGrid
 from splatbench.raster.blocks import Lanes, lanes_for, pair_at
-from splatbench.raster.options import RasterOptions
+from splatbench.raster.options import DEFAULT_PIXEL_BLOCK, RasterOptions
 from splatbench.raster.projection import Projection, array_namespace, next_power_of_two
 from splatbench.raster.records import GeoRecord, Records, Splats, load_records, pack_records
 from splatbench.raster.reduction import PairBuffers, reduce_pairs
@@ -72,7 +72,7 @@ class CompositeSettings:
     alpha_max: float
     transmittance_min: float
     background: tuple[float, float, float]
-    pixel_block: int = RasterOptions.pixel_block
+    pixel_block: int = DEFAULT_PIXEL_BLOCK
 
     @classmethod
     def from_options(cls, options: RasterOptions, background=(0.0, 0.0, 0.0)) -> CompositeSettings:

@@ -15,6 +15,9 @@ RADIUS_RULES = ("3sigma", "opacity")
 #: Largest side of a compositing lane's pixel block: a lane carries the state of its
 #: block's pixels through the loops, and traces their code once each.
 MAX_PIXEL_BLOCK = 8
+#: The side of a lane's pixel block when none is given (the layout measured fastest,
+#: docs/benchmarks.md), or the tile's side where the tile is smaller.
+DEFAULT_PIXEL_BLOCK = 4
 #: Most blocks along a tile's side: binning's per-pair block mask holds (side)^2 bits.
 MAX_BLOCKS_PER_SIDE = 32
 
@@ -23,12 +26,15 @@ MAX_BLOCKS_PER_SIDE = 32
 class RasterOptions:
     """Options of the tile rasterizer; defaults are graphdeco-inria 3DGS's.
 
-    See docs/conventions.md for the exact meaning of each threshold.
+    See docs/conventions.md for the exact meaning of each threshold. ``pixel_block`` left
+    out (None) is resolved on construction to the value that runs, so ``to_dict`` and every
+    record hold that int; one given is never changed (larger than ``tile_size``: an error).
     """
 
     tile_size: int = 16            # pixels per tile side; an acceleration only, never changes the image
-    pixel_block: int = 4           # pixels per side of a compositing lane's block (capped at tile_size);
-                                   # an acceleration only: the image is the same (docs/benchmarks.md)
+    pixel_block: int | None = None  # pixels per side of a compositing lane's block, at most tile_size; None:
+                                    # DEFAULT_PIXEL_BLOCK (4), or tile_size where smaller, stored as that int;
+                                    # an acceleration only: the image is the same (docs/benchmarks.md)
     alpha_min: float = 1.0 / 255.0  # contributions with alpha below this are skipped
     alpha_max: float = 0.99        # alpha is clamped to this (keeps 1 - alpha invertible)
     transmittance_min: float = 1e-4  # a pixel stops before transmittance would drop below this
@@ -44,9 +50,15 @@ class RasterOptions:
         if not isinstance(ts, int) or isinstance(ts, bool) or ts < 1 or ts > 64 or ts & (ts - 1):
             raise InputError(f"tile_size: expected a power of two in [1, 64], got {ts!r}")
         pb = self.pixel_block
+        if pb is None:  # the default, as the value that runs (so a record says what ran)
+            pb = min(DEFAULT_PIXEL_BLOCK, ts)
+            object.__setattr__(self, "pixel_block", pb)
         if not isinstance(pb, int) or isinstance(pb, bool) or pb < 1 or pb > MAX_PIXEL_BLOCK or pb & (pb - 1):
             raise InputError(f"pixel_block: expected a power of two in [1, {MAX_PIXEL_BLOCK}], got {pb!r}")
-        if ts // min(pb, ts) > MAX_BLOCKS_PER_SIDE:
+        if pb > ts:  # a lane's block lies inside one tile
+            raise InputError(f"pixel_block: at most tile_size ({ts}), got {pb}; use pixel_block <= {ts}, or leave "
+                             f"it out (the default follows a smaller tile)")
+        if ts // pb > MAX_BLOCKS_PER_SIDE:
             raise InputError(f"pixel_block: at most {MAX_BLOCKS_PER_SIDE} blocks per tile side, got tile_size "
                              f"{ts} / pixel_block {pb}; use pixel_block >= {ts // MAX_BLOCKS_PER_SIDE}")
         if not (0.0 < float(self.alpha_max) <= 1.0 - 1e-6):
@@ -69,9 +81,10 @@ class RasterOptions:
 
     @classmethod
     def from_kwargs(cls, base: RasterOptions | None = None, **kwargs) -> RasterOptions:
-        """Build options from keyword arguments, naming any unknown one."""
+        """Build options from keyword arguments, naming any unknown one; ``base``'s values
+        (all given, its resolved ``pixel_block`` too) for the rest, else the defaults."""
         check_keys(kwargs, (f.name for f in fields(cls)))
-        return replace(base or cls(), **kwargs)
+        return cls(**kwargs) if base is None else replace(base, **kwargs)
 
     @classmethod
     def from_dict(cls, table: Mapping[str, Any], *, base: RasterOptions | None = None, prefix: str = "",

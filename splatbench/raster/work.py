@@ -35,7 +35,7 @@ class WorkStats:
     Gaussian-tile pairs kept; tile_evaluations: pairs x tile_size^2, what compositing would
     evaluate if every lane walked its whole tile list; block_evaluations: the sum over lanes
     of B^2 x the length of the lane's own list (`blocks.block_lists`; B x B: the lane's pixel
-    block, `RasterOptions.pixel_block` capped at the tile), i.e. (block, Gaussian) pairs whose
+    block, `RasterOptions.pixel_block`, at most the tile), i.e. (block, Gaussian) pairs whose
     block meets the support, x B^2; performed: pixel-Gaussian evaluations compositing does, per
     SIMD packet its lanes x B^2 x the longest of their lists (a packet runs until its longest list ends; on LLVM a packet is
     min(lanes per tile, packet width) lanes of one tile, elsewhere counted as a whole tile);

@@ -418,7 +418,9 @@ def save_config(config: TrainConfig, path: str | Path) -> Path:
 
 
 def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...]) -> TrainConfig:
-    """A copy of ``config`` with ``key=value`` overrides applied (types coerced)."""
+    """A copy of ``config`` with ``key=value`` overrides applied (types coerced). A
+    ``raster.tile_size`` set without ``raster.pixel_block``, on a config whose block is the
+    default for its tile, takes the default for the new tile (`RasterOptions.pixel_block`)."""
     data = config.to_dict()
     keys = set()
     for item in overrides:
@@ -434,6 +436,9 @@ def apply_overrides(config: TrainConfig, overrides: list[str] | tuple[str, ...])
             data[key] = value
     if "protocol" in keys and "iterations" not in keys and data["protocol"] != config.protocol:
         data["iterations"] = _protocol_iterations(data["protocol"], config.iterations)  # the protocol's length
+    if "raster.tile_size" in keys and "raster.pixel_block" not in keys and isinstance(data["raster"], dict) and \
+            config.raster.pixel_block == RasterOptions(tile_size=config.raster.tile_size).pixel_block:
+        data["raster"] = {k: v for k, v in data["raster"].items() if k != "pixel_block"}  # the default follows the tile
     return TrainConfig.from_dict(data, source="--set")
 
 
