@@ -8,6 +8,8 @@ from the repository root has it as its working directory).
 
 The kind computes deterministic numbers from its config, and sleeps, waits at a gate,
 raises or kills its process on demand, so the runner's tests need no rendering.
+`PROBE` reports what its worker was handed; `TRACE` appends a line to a file as each run
+runs (the order a runner ran them in).
 """
 
 from __future__ import annotations
@@ -184,3 +186,49 @@ def _probe_run(config: dict[str, Any], workdir: Path, prepared: dict[str, int]) 
 PROBE = RunKind(name="tests.kinds_for_tests:PROBE", validate=_probe_validate, run=_probe_run, config=ProbeConfig,
                 result=ProbeRun,
                 prepare=_probe_prepare, description="for tests: what a worker gets from the runner")
+
+
+# --------------------------------------------------------------------------- trace
+@dataclass(frozen=True)
+class TraceConfig:
+    """A trace run's settings: ``cell`` names its cell, ``log`` the file it appends to."""
+
+    scene: str = ""
+    seed: int = 0
+    cell: str = ""
+    log: str = ""         # a file: the run appends "SCENE CELL SEED PROTOCOL" to it, one line
+    protocol: str = ""    # "" in the grid; the protocol's name in an experiment's [check]
+
+
+def _trace_validate(config: dict[str, Any]) -> None:
+    read_config(TraceConfig, config)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TraceRun(RunResult):
+    """What a trace run records: its line of the log."""
+
+    line: str = metric(meaning="the line the run appended to its log")
+
+
+def _trace_run(config: dict[str, Any], workdir: Path, prepared: None) -> TraceRun:
+    """Append one line naming this run to ``log``: the order runs ran in (one worker: one at a time)."""
+    cfg = read_config(TraceConfig, config)
+    line = f"{cfg.scene} {cfg.cell} {cfg.seed} {cfg.protocol or '-'}"
+    with open(cfg.log, "a") as f:
+        f.write(line + "\n")
+    return TraceRun(line=line)
+
+
+def _trace_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:
+    """The cell under the protocol ``"long"``: marked with its name (a new run id); one-line error otherwise."""
+    if name != DUMMY_PROTOCOL:
+        raise InputError(f"protocol: expected {DUMMY_PROTOCOL!r}, got {name!r}")
+    return {**config, "protocol": name}
+
+
+#: A kind whose runs append a line to a file as they run (``kind = "tests.kinds_for_tests:TRACE"``),
+#: so that a test sees the order a runner ran them in; any scene name; protocol "long" (a [check]).
+TRACE = RunKind(name="tests.kinds_for_tests:TRACE", validate=_trace_validate, run=_trace_run, config=TraceConfig,
+                result=TraceRun, description="for tests: each run appends a line to a log as it runs",
+                protocols=KindProtocols(_trace_protocol, lambda name: "the run marked with the protocol's name"))

@@ -25,7 +25,7 @@ import pytest
 from click.testing import CliRunner
 
 from splatbench.errors import InputError
-from splatbench.experiments import expand, load_experiment, parse_experiment, run_experiment
+from splatbench.experiments import check_runs, expand, load_experiment, parse_experiment, run_experiment
 from splatbench.experiments.grid import make_run_id
 from splatbench.versions import code_version
 from splatbench.experiments.store import (CORE_COLUMNS, TABLE_NAME, RunRecord, build_table, read_records, read_table,
@@ -403,6 +403,113 @@ def test_a_run_that_kills_its_worker_is_recorded_and_the_rest_complete(tmp_path)
         assert r.status == ("failed" if r.labels["mode"] == "crash" else "done")
         if r.status == "failed":
             assert r.error == "worker process died while running it (a crash, or killed)"
+
+
+# --------------------------------------------------------------------------- execution order
+TRACED = """
+name = "traced"
+kind = "tests.kinds_for_tests:TRACE"
+scenes = ["alpha", "beta"]
+seeds = [0, 1, 2]
+[base]
+log = "{log}"
+[axes]
+cell = ["a", "b"]
+[check]
+protocol = "long"
+scene = "beta"
+cells = [{{ cell = "a" }}, {{ cell = "b" }}]
+"""
+
+#: The runs of TRACED in the order they execute: seed by seed, scene by scene, each cell in turn;
+#: then the check's runs, seed by seed, each cell in turn.
+INTERLEAVED = [f"{scene} {cell} {seed} -" for seed in (0, 1, 2) for scene in ("alpha", "beta") for cell in "ab"] + \
+              [f"beta {cell} {seed} long" for seed in (0, 1, 2) for cell in "ab"]
+
+
+def _line(run) -> str:
+    return f"{run.scene} {run.config['cell']} {run.seed} {run.config.get('protocol') or '-'}"
+
+
+def test_runs_execute_interleaved_across_cells_and_the_table_keeps_expand_order(tmp_path):
+    """One worker runs the grid seed-major (consecutive runs are different cells, so a machine
+    drifting over the grid's time spreads over every cell), the check's runs after the grid's;
+    the results table is in `expand`'s order (scene, cell, seed), then the check's. A resumed
+    grid runs what is left in the same interleaved order."""
+    log = tmp_path / "ran.log"
+    spec = spec_of(TRACED.format(log=log))
+    grid, checks = expand(spec), check_runs(spec)
+    assert [_line(r) for r in grid] == [f"{scene} {cell} {seed} -" for scene in ("alpha", "beta") for cell in "ab"
+                                        for seed in (0, 1, 2)]  # expand's own order: unchanged
+    results = tmp_path / "results"
+    summary = run_experiment(spec, workers=1, results_dir=results, progress=False)
+    assert (summary.done, summary.failed, summary.total) == (18, 0, 18)
+    assert log.read_text().splitlines() == INTERLEAVED
+    table = read_table(results / "traced")
+    assert list(table.run_id) == [r.run_id for r in [*grid, *checks]]
+    assert list(table["metric.line"]) == [_line(r) for r in [*grid, *checks]]
+
+    # resumed: the runs left (here every cell "b" of seeds 1 and 2, and one check run) run interleaved too
+    gone = [r for r in [*grid, *checks] if (r.config["cell"] == "b" and r.seed > 0) or _line(r) == "beta a 2 long"]
+    for r in gone:
+        result_path(results, "traced", r.run_id).unlink()
+    log.unlink()
+    again = run_experiment(spec, workers=1, results_dir=results, progress=False)
+    assert (again.done, again.skipped) == (len(gone), 18 - len(gone))
+    assert log.read_text().splitlines() == [line for line in INTERLEAVED if line in {_line(r) for r in gone}]
+    assert list(read_table(results / "traced").run_id) == [r.run_id for r in [*grid, *checks]]
+
+
+def test_an_executor_with_many_slots_gets_the_runs_submitted_interleaved(tmp_path, monkeypatch):
+    """With several workers it is the order of submission that spreads drift: the Dask executor
+    (every run submitted at once; the scheduler runs them first submitted, first run) gets them
+    interleaved. A stand-in executor records the submissions and runs each in this process."""
+    from concurrent.futures import Future
+
+    from splatbench.experiments import runner
+    from splatbench.experiments.execute import RunContext, execute_run
+
+    submitted: list[str] = []
+
+    class Recording:
+        capacity = sys.maxsize  # as DaskExecutor's
+
+        def __init__(self, workers, threads, scheduler, prepared):
+            assert workers == 4
+
+        def submit(self, run, results_dir):
+            submitted.append(_line(run))
+            fut: Future = Future()
+            fut.set_result(execute_run(run, results_dir, RunContext()))
+            return fut
+
+        def wait(self, futures, timeout=None):
+            return set(futures)
+
+        @staticmethod
+        def broken(exc):
+            return False
+
+        def close(self, cancel=False):
+            pass
+
+    monkeypatch.setattr(runner, "DaskExecutor", Recording)
+    spec = spec_of(TRACED.format(log=tmp_path / "ran.log"))
+    summary = run_experiment(spec, workers=4, executor="dask", results_dir=tmp_path / "results", progress=False)
+    assert (summary.done, summary.total) == (18, 18)
+    assert submitted == INTERLEAVED
+    assert list(read_table(tmp_path / "results" / "traced").run_id) == [r.run_id for r in [*expand(spec),
+                                                                                            *check_runs(spec)]]
+
+
+def test_a_dask_worker_runs_them_in_the_order_submitted(tmp_path):
+    """Dask's scheduler hands out runs submitted at once first submitted, first (a one-worker
+    `LocalCluster` on 127.0.0.1 runs them interleaved), so the order of submission holds there too."""
+    log = tmp_path / "ran.log"
+    spec = spec_of(TRACED.format(log=log))
+    summary = run_experiment(spec, workers=1, executor="dask", results_dir=tmp_path / "results", progress=False)
+    assert (summary.done, summary.total) == (18, 18)
+    assert log.read_text().splitlines() == INTERLEAVED
 
 
 # --------------------------------------------------------------------------- kill and resume

@@ -4,8 +4,12 @@
 after the grid's runs, the runs of the experiment's ``[check]`` (its headline at another
 protocol, `splatbench.experiments.grid.check_runs`; ``check=False`` leaves them out),
 skips the runs whose result file already says ``done``, and submits the rest to
-an executor. Failed runs are *not* skipped: they run again on the next
-invocation (delete nothing; a new result replaces the old file).
+an executor, interleaved (`execution_order`: seed by seed, and within a seed scene by
+scene, every cell in turn), so that runs one after another belong to different cells and
+a machine that drifts (another process's load, the time of day) spreads over every cell
+instead of landing on whichever cell ran then; the results table keeps `expand`'s order.
+Failed runs are *not* skipped: they run again on the next invocation (delete nothing; a
+new result replaces the old file).
 
 Both executors share one code path: the parent submits the top-level function
 `execute_run(run, results_dir, context)`, which runs the kind in a worker process and writes
@@ -98,7 +102,8 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     results_dir: folder holding ``<experiment>/``; progress: a tqdm bar on stderr;
     check: also run the experiment's ``[check]`` (after the grid's runs, in the same folder,
     each under its own run id; counted in the summary). The grid and the check are expanded
-    and checked before any executor starts (`InputError`).
+    and checked before any executor starts (`InputError`). Runs are submitted interleaved
+    (`execution_order`), the grid's and then the check's; the table is in `expand`'s order.
     """
     if executor not in EXECUTORS:
         raise InputError(f"executor: expected one of {', '.join(EXECUTORS)}, got {executor!r}")
@@ -111,9 +116,10 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise InputError(f"workers: expected an int >= 1, got {workers!r}")
 
-    runs = expand(spec, known_scenes=known_scenes)
+    grid = expand(spec, known_scenes=known_scenes)
     checks = check_runs(spec) if check else []
-    runs = [*runs, *checks]
+    runs = [*grid, *checks]  # the table's order
+    order = [*execution_order(grid), *execution_order(checks)]  # the order they are submitted in
     results_dir = Path(results_dir).absolute()  # workers may run elsewhere (another cwd, a Dask host)
     folder = experiment_dir(results_dir, spec.name)
     folder.mkdir(parents=True, exist_ok=True)
@@ -122,7 +128,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     ids = [r.run_id for r in runs]
     damaged: list[tuple[Path, str]] = []
     records = {rid: rec for rid, rec in read_records(folder, damaged).items() if rid in set(ids)}
-    pending = [r for r in runs if r.run_id not in records or records[r.run_id].status != "done"]
+    pending = [r for r in order if r.run_id not in records or records[r.run_id].status != "done"]
     skipped = len(runs) - len(pending)
 
     log = _logger(progress)
@@ -224,6 +230,19 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
                       warned=warned)
 
 
+def execution_order(runs: list[RunSpec]) -> list[RunSpec]:
+    """``runs`` (in `expand`'s order: scene, then cell, then seed) reordered seed-major: for
+    each seed, for each scene, every cell in turn (cells in their order in ``runs``).
+    Seeds and scenes rank by where they first appear in ``runs``; the sort is stable, so
+    within one seed and scene the cells keep their order. The same runs, none dropped."""
+    seed_rank: dict[int, int] = {}
+    scene_rank: dict[str, int] = {}
+    for run in runs:
+        seed_rank.setdefault(run.seed, len(seed_rank))
+        scene_rank.setdefault(run.scene, len(scene_rank))
+    return sorted(runs, key=lambda run: (seed_rank[run.seed], scene_rank[run.scene]))
+
+
 def _drive(pool, pending: list[RunSpec], results_dir: str, finish: Callable[[RunRecord], None], *,
            admit: Callable[[RunSpec], bool] = lambda run: True, heartbeat: Callable[[], None] = lambda: None) -> None:
     """Submit runs (at most ``pool.capacity`` in flight, each only once ``admit`` says
@@ -321,4 +340,4 @@ def _logger(enabled: bool) -> Callable[[str], None]:
     return log
 
 
-__all__ = ["RunSummary", "run_experiment"]
+__all__ = ["RunSummary", "execution_order", "run_experiment"]
