@@ -215,6 +215,60 @@ def test_run_runs_the_check_after_the_grid_and_resumes(tmp_path):
     assert "check:" not in out.output and "12 runs in" in out.output
 
 
+def test_check_only_runs_the_checks_runs_alone_and_resumes(tmp_path):
+    """`splatbench run --check-only`: exactly the check's runs, under the run ids a full run gives them
+    (so a later full run skips them), none of the grid's; resumable; --dry-run lists the same runs."""
+    from splatbench.cli import main
+    from splatbench.experiments.store import read_table
+
+    spec = spec_of(DUMMY_GRID)
+    grid, checks = expand(spec), check_runs(spec)
+    summary = run_experiment(spec, workers=2, results_dir=tmp_path, progress=False, check_only=True)
+    assert (summary.done, summary.skipped, summary.failed, summary.total) == (4, 0, 0, 4)
+    assert set(read_records(tmp_path / "dcheck")) == {r.run_id for r in checks}  # none of the grid's ran
+    assert list(read_table(tmp_path / "dcheck").run_id) == [r.run_id for r in checks]
+    summary = run_experiment(spec, workers=2, results_dir=tmp_path, progress=False, check_only=True)
+    assert (summary.done, summary.skipped, summary.total) == (0, 4, 4)
+    # a full run afterwards runs the grid's 12 alone: the check's runs are the ones it would have run
+    summary = run_experiment(spec, workers=2, results_dir=tmp_path, progress=False)
+    assert (summary.done, summary.skipped, summary.total) == (12, 4, 16)
+    # the command line: --dry-run --check-only lists the check's runs, in check order, and nothing else
+    path = tmp_path / "dcheck.toml"
+    path.write_text(DUMMY_GRID)
+    fresh = tmp_path / "fresh"
+    out = CliRunner().invoke(main, ["run", str(path), "--results", str(fresh), "--dry-run", "--check-only"])
+    assert out.exit_code == 0, out.output
+    lines = out.output.splitlines()
+    assert [line.split()[0] for line in lines[:-1]] == [r.run_id for r in checks]
+    assert all(line.split()[1] == "pending" and line.endswith("check: protocol=long") for line in lines[:-1])
+    assert lines[-1] == f"4 runs in {fresh / 'dcheck'} (the check's only; the grid's left out)"
+    out = CliRunner().invoke(main, ["run", str(path), "--results", str(fresh), "--check-only", "--workers", "1",
+                                    "--no-progress"])
+    assert out.exit_code == 0, out.output
+    assert "done 4, skipped 0 (finished), 0 claimed by another runner, failed 0 of 4" in out.output
+    assert set(read_records(fresh / "dcheck")) == {r.run_id for r in checks}
+    assert not {r.run_id for r in grid} & set(read_records(fresh / "dcheck"))
+
+
+def test_check_only_without_a_check_or_with_no_check_is_one_line(tmp_path):
+    from splatbench.cli import main
+
+    path = tmp_path / "plain.toml"
+    path.write_text(DUMMY_GRID.split("[check]")[0])
+    for args in (["--check-only"], ["--check-only", "--dry-run"]):
+        out = CliRunner().invoke(main, ["run", str(path), "--results", str(tmp_path), *args])
+        assert out.exit_code == 2 and out.output.count("\n") == 1, out.output
+        assert out.output.startswith(f"splatbench: error: {path}: --check-only: the file has no [check] table")
+    with pytest.raises(InputError, match=r"--check-only: the file has no \[check\] table"):
+        run_experiment(spec_of(DUMMY_GRID, check=None), workers=1, results_dir=tmp_path, progress=False,
+                       check_only=True)
+    path.write_text(DUMMY_GRID)
+    out = CliRunner().invoke(main, ["run", str(path), "--results", str(tmp_path), "--check-only", "--no-check"])
+    assert out.exit_code == 2 and out.output.count("\n") == 1, out.output
+    assert "--check-only: runs only the file's [check], --no-check leaves it out" in out.output
+    assert not (tmp_path / "dcheck").exists() and not (tmp_path / "plain").exists()  # nothing ran
+
+
 # --------------------------------------------------------------------------- the report
 SH_GRID = """
 name = "shfake"
@@ -253,23 +307,24 @@ def record(spec, run, psnr: float, slope: float = 0.0) -> RunRecord:
                      worker="h:1")
 
 
-def grid_results(root, spec, gain: float = 0.5, noise: float = 0.05):
-    """The grid done: SH 3 over SH 0 by ``gain`` dB on glossy, seed noise of ``noise`` dB, flat curves."""
+def grid_results(root, spec, gain: float = 0.5, noise: float = 0.05, code: str = ""):
+    """The grid done: SH 3 over SH 0 by ``gain`` dB on glossy, seed noise of ``noise`` dB, flat curves;
+    ``code``: the commit the runs record."""
     rng = np.random.default_rng(0)
     for run in expand(spec):
         d = run.labels["sh_degree"]
-        write_record(root, record(spec, run, 26.0 + (gain if d == 3 and run.scene == "glossy" else 0.0)
-                                  + rng.normal(0, noise)))
+        write_record(root, dataclasses.replace(record(spec, run, 26.0 + (gain if d == 3 and run.scene == "glossy"
+                                                                         else 0.0) + rng.normal(0, noise)), code=code))
 
 
-def check_results(root, spec, gain: float, slope: float = 0.0, skip: int = 0, noise: float = 0.05):
+def check_results(root, spec, gain: float, slope: float = 0.0, skip: int = 0, noise: float = 0.05, code: str = ""):
     """The check's runs done (but the last ``skip``): SH 3 over SH 0 by ``gain`` dB."""
     rng = np.random.default_rng(1)
     runs = check_runs(spec)
     for run in runs[:len(runs) - skip]:
         d = run.labels["sh_degree"]
-        write_record(root, record(spec, run, 28.0 + (gain if d == 3 else 0.0) + rng.normal(0, noise),
-                                  slope if d == 3 else 0.0))
+        write_record(root, dataclasses.replace(record(spec, run, 28.0 + (gain if d == 3 else 0.0)
+                                                      + rng.normal(0, noise), slope if d == 3 else 0.0), code=code))
 
 
 def test_report_says_not_run_without_the_checks_results(tmp_path):
@@ -380,3 +435,81 @@ def test_report_command_keeps_the_check_beside_the_report_and_rebuilds_it(tmp_pa
     assert rebuilt.replace(f" --out {out}", "") \
         == text.replace(f" --results {full} --out {out}", "").replace(f" --results {full}", "")
     assert "**7K check: holds**: " in rebuilt
+
+
+def test_rebuild_with_results_adds_the_check_to_a_committed_report(tmp_path):
+    """A committed report whose grid's results folder is gone gets its check with `splatbench run
+    --check-only` and `splatbench report --rebuild --results DIR`: the grid's table is the report
+    folder's own, unchanged (whatever DIR holds of the grid), the check's runs are DIR's; a mixed-commit
+    report says so; a check.parquet never shrinks (but with --force); a folder without a finished
+    check run, or a file without a [check], is one line."""
+    from splatbench.experiments import load_experiment
+    from splatbench.reports.cli import report as report_command
+
+    path = tmp_path / "shfake.toml"
+    path.write_text(SH_GRID)
+    spec = load_experiment(path)
+    gone, new, out = tmp_path / "gone", tmp_path / "new", tmp_path / "out"
+    grid_results(gone, spec, code="git:aaaaaaaaaaaa")
+    run = CliRunner().invoke(report_command, [str(path), "--results", str(gone), "--out", str(out)])
+    assert run.exit_code == 0, run.output
+    committed = pd.read_parquet(out / "results.parquet")
+    before = (out / "report.md").read_text()
+    assert "**7K check: not run**" in before and "Code: every run at `git:aaaaaaaaaaaa` (12 runs)." in before
+    # the new folder: the check's runs at another commit, and grid runs that differ from the committed ones
+    check_results(new, spec, 0.6, code="git:bbbbbbbbbbbb")
+    grid_results(new, spec, gain=-1.0, code="git:cccccccccccc")
+    run = CliRunner().invoke(report_command, [str(path), "--out", str(out), "--rebuild", "--results", str(new)])
+    assert run.exit_code == 0, run.output
+    assert (f"shfake: rebuilt from {out / 'results.parquet'}, the check's runs from {new / 'shfake'}: "
+            f"7K check: holds (6 of its 6 runs done)") in run.output
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "results.parquet"), committed)
+    assert list(pd.read_parquet(out / CHECK_TABLE_NAME).run_id) == [r.run_id for r in check_runs(spec)]
+    text = (out / "report.md").read_text()
+    report = report_from_table(spec, committed, len(expand(spec)))
+    for axis in report.axes:  # the grid's tables and findings: the committed runs', not the new folder's
+        assert axis.markdown() in text and report.findings[axis.axis].markdown() in text
+    assert "**7K check: holds**" in text
+    assert ("Code: the runs ran at more than one commit: the grid's runs at `git:aaaaaaaaaaaa` (12 runs); the "
+            "check's runs at `git:bbbbbbbbbbbb` (6 runs); a difference between runs at different commits is also a "
+            "difference of code") in text
+    assert "git:cccccccccccc" not in text
+    # the command that made it: the grid's runs from the report folder, the check's from --results
+    assert f"Generated by `splatbench report {path} --rebuild --results {new} --out {out}`: 12 runs" in text
+    # the check's section names the run command as a report made from one results folder does
+    assert f"`splatbench run {path}` runs it after the grid's runs" in text
+    after = text
+
+    # never fewer finished check runs than check.parquet holds; --force replaces it anyway
+    partial, empty = tmp_path / "partial", tmp_path / "empty"
+    check_results(partial, spec, 0.6, skip=2)
+    run = CliRunner().invoke(report_command, [str(path), "--out", str(out), "--rebuild", "--results", str(partial)])
+    assert isinstance(run.exception, InputError)
+    message = str(run.exception)
+    assert message == (f"{out / CHECK_TABLE_NAME}: holds 6 finished runs, the check's runs in {partial / 'shfake'} "
+                       f"would give 4; run the rest with `splatbench run {path} --check-only --results {partial}`, "
+                       f"or pass --force to replace it")
+    assert (out / "report.md").read_text() == after and len(pd.read_parquet(out / CHECK_TABLE_NAME)) == 6
+    run = CliRunner().invoke(report_command, [str(path), "--out", str(out), "--rebuild", "--results", str(empty)])
+    assert isinstance(run.exception, InputError) and "\n" not in str(run.exception)
+    assert str(run.exception) == (f"--rebuild --results: no finished run of the check's 6 in {empty / 'shfake'}; "
+                                  f"run `splatbench run {path} --check-only --results {empty}` first")
+    run = CliRunner().invoke(report_command, [str(path), "--out", str(out), "--rebuild", "--results", str(partial),
+                                              "--force"])
+    assert run.exit_code == 0, run.output
+    assert "7K check: incomplete (4 of its 6 runs done)" in run.output
+    assert len(pd.read_parquet(out / CHECK_TABLE_NAME)) == 4
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "results.parquet"), committed)
+    # a plain --rebuild afterwards reads the check back from check.parquet: the same report
+    again = (out / "report.md").read_text()
+    run = CliRunner().invoke(report_command, [str(path), "--out", str(out), "--rebuild"])
+    assert run.exit_code == 0, run.output
+    assert (out / "report.md").read_text().replace(f" --out {out}", "") == \
+        again.replace(f" --rebuild --results {partial}", "").replace(f" --out {out}", "")
+
+    # a file without a [check]: --results has nothing to be read for with --rebuild
+    plain = tmp_path / "plain.toml"
+    plain.write_text(SH_GRID.split("[check]")[0])
+    run = CliRunner().invoke(report_command, [str(plain), "--out", str(out), "--rebuild", "--results", str(new)])
+    assert isinstance(run.exception, InputError) and "\n" not in str(run.exception)
+    assert str(run.exception).startswith(f"--rebuild --results: {plain} has no [check]")

@@ -47,3 +47,22 @@ def test_a_record_written_before_runs_recorded_their_code_still_reads():
     old = {"format": 1, "run_id": "0" * 16, "experiment": "e", "kind": "train", "scene": "s", "seed": 0,
            "status": "done", "config": {}}
     assert RunRecord.from_dict(old).code == ""
+
+
+def test_the_code_line_covers_the_checks_runs_and_names_them_apart():
+    """A check added later (`splatbench run --check-only`, `splatbench report --rebuild --results`) ran at
+    another commit than its grid, or its grid recorded none: the line says the runs span commits."""
+    a, b = "git:aaaaaaaaaaaa", "git:bbbbbbbbbbbb"
+    assert code_facts(_table([a] * 3), _table([a] * 2)) == \
+        "Code: every run at `git:aaaaaaaaaaaa` (5 runs: the grid's 3 and the check's 2)."
+    assert code_facts(_table([a] * 3), _table([b] * 2)).startswith(
+        "Code: the runs ran at more than one commit: the grid's runs at `git:aaaaaaaaaaaa` (3 runs); the check's runs "
+        "at `git:bbbbbbbbbbbb` (2 runs); a difference between runs at different commits is also a difference of code")
+    # a committed grid from before runs recorded their code (no column), the check's runs at one commit
+    assert code_facts(_table([a] * 3).drop(columns=["code"]), _table([b] * 2)).startswith(
+        "Code: the runs may span more than one commit (not every run recorded its own; those that did ran at "
+        "`git:bbbbbbbbbbbb`): the grid's 3 runs ran before runs recorded it; the check's runs at `git:bbbbbbbbbbbb` "
+        "(2 runs);")
+    # a check with no done run, or none recorded anywhere: as before
+    assert code_facts(_table([a] * 3), _table([])) == "Code: every run at `git:aaaaaaaaaaaa` (3 runs)."
+    assert code_facts(_table(["", ""]), _table(["", ""])) == ""

@@ -21,9 +21,13 @@ import click
 @click.option("--dry-run", is_flag=True, help="List the runs and whether each is done; run nothing.")
 @click.option("--check/--no-check", default=True, show_default=True,
               help="Also run the file's [check] (its headline at another protocol, after the grid's runs).")
+@click.option("--check-only", is_flag=True,
+              help="Run only the file's [check] (same run ids, resumable), not the grid's runs: to add the check to "
+                   "a report whose grid ran elsewhere; then `splatbench report EXPERIMENT.toml --rebuild --results "
+                   "DIR`.")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
 def run(experiment: Path, workers: int | None, executor: str | None, scheduler: str | None, results: Path | None,
-        dry_run: bool, check: bool, progress: bool) -> None:
+        dry_run: bool, check: bool, check_only: bool, progress: bool) -> None:
     """Run every pending run of EXPERIMENT.toml and print "done D, skipped S (finished),
     C claimed by another runner, failed F of T".
 
@@ -31,32 +35,38 @@ def run(experiment: Path, workers: int | None, executor: str | None, scheduler: 
     stopped; failed runs are tried again; runs another live runner holds are left to
     it. A file with a [check] table also runs the check's runs (its headline comparison
     at another protocol; docs/reports.md, "The 7K check") after the grid's, unless
-    --no-check. Exits with status 1 when a run failed.
+    --no-check; --check-only runs the check's runs alone (to add the check to a committed
+    report: `splatbench report EXPERIMENT.toml --rebuild --results DIR` then puts them
+    beside the report's own grid runs). Exits with status 1 when a run failed.
     """
-    from splatbench.experiments.runner import run_experiment
+    from splatbench.experiments.runner import check_only_problem, run_experiment
     from splatbench.experiments.grid import load_experiment
 
     spec = load_experiment(experiment)
+    if check_only:
+        check_only_problem(spec, check)
     executor = executor or spec.runner.executor or "local"
     scheduler = scheduler or (spec.runner.scheduler if executor == "dask" else None)
     results = results or spec.runner.results or Path("results")
     workers = workers if workers is not None else spec.runner.workers
     if dry_run:
-        _dry_run(spec, results, check)
+        _dry_run(spec, results, check, check_only)
         return
     summary = run_experiment(spec, workers=workers, executor=executor, scheduler=scheduler, results_dir=results,
-                             progress=progress, check=check)
+                             progress=progress, check=check, check_only=check_only)
     click.echo(summary.line())
     if summary.failed:
         sys.exit(1)
 
 
-def _dry_run(spec, results: Path, check: bool) -> None:
+def _dry_run(spec, results: Path, check: bool, check_only: bool = False) -> None:
     from splatbench.experiments.grid import check_runs, expand
     from splatbench.experiments.store import experiment_dir, read_records
 
     runs = expand(spec)
     checks = check_runs(spec) if check else []
+    if check_only:
+        runs = []
     records = read_records(experiment_dir(results, spec.name))
     for r, tag in [*((r, "") for r in runs), *((r, f"  check: protocol={spec.check.protocol}") for r in checks)]:
         status = records[r.run_id].status if r.run_id in records else "pending"
@@ -64,7 +74,8 @@ def _dry_run(spec, results: Path, check: bool) -> None:
         click.echo(f"{r.run_id}  {status:<7}  {r.scene}  seed={r.seed}  {labels}{tag}".rstrip())
     total = len(runs) + len(checks)
     click.echo(f"{total} run{'' if total == 1 else 's'} in {experiment_dir(results, spec.name)}"
-               + (f" ({len(checks)} of them the check)" if checks else ""))
+               + (" (the check's only; the grid's left out)" if check_only else
+                  f" ({len(checks)} of them the check)" if checks else ""))
 
 
 if __name__ == "__main__":  # python -m splatbench.experiments.cli EXPERIMENT.toml ...

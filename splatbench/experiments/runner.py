@@ -94,7 +94,8 @@ class RunSummary:
 # --------------------------------------------------------------------------- parent side
 def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor: str = "local",
                    scheduler: str | None = None, results_dir: str | Path, progress: bool = True,
-                   known_scenes: Callable[[], set[str]] | None = None, check: bool = True) -> RunSummary:
+                   known_scenes: Callable[[], set[str]] | None = None, check: bool = True,
+                   check_only: bool = False) -> RunSummary:
     """Run every pending run of ``spec``; return the counts.
 
     workers: parallel runs (None: one per CPU); executor: "local" or "dask";
@@ -104,7 +105,13 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     each under its own run id; counted in the summary). The grid and the check are expanded
     and checked before any executor starts (`InputError`). Runs are submitted interleaved
     (`execution_order`), the grid's and then the check's; the table is in `expand`'s order.
+    check_only: run the check's runs alone (the same run ids; the grid's are neither run nor
+    counted, and the folder's table still lists those of them that have a result): to add the
+    check to a report whose grid ran elsewhere (docs/reports.md, "The 7K check"). One
+    `InputError` line for a file without a ``[check]``, or with ``check=False``.
     """
+    if check_only:
+        check_only_problem(spec, check)
     if executor not in EXECUTORS:
         raise InputError(f"executor: expected one of {', '.join(EXECUTORS)}, got {executor!r}")
     if scheduler is not None:
@@ -118,6 +125,9 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
 
     grid = expand(spec, known_scenes=known_scenes)
     checks = check_runs(spec) if check else []
+    table_ids = [r.run_id for r in (*grid, *checks)]  # the folder's table: every run this folder may hold
+    if check_only:
+        grid = []
     runs = [*grid, *checks]  # the table's order
     order = [*execution_order(grid), *execution_order(checks)]  # the order they are submitted in
     results_dir = Path(results_dir).absolute()  # workers may run elsewhere (another cwd, a Dask host)
@@ -134,8 +144,9 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     log = _logger(progress)
     for path, reason in damaged:  # the run is pending: its new result replaces the file
         log(f"{spec.name}: damaged result file {path.name} ({reason}); its run is redone")
-    save_table(folder, ids)
-    of_check = (f" ({len(checks)} of them the check at {spec.check.protocol})" if checks else
+    save_table(folder, table_ids)
+    of_check = (f" (the check's at {spec.check.protocol} only; the grid's left out)" if check_only else
+                f" ({len(checks)} of them the check at {spec.check.protocol})" if checks else
                 f" (the check at {spec.check.protocol} left out)" if spec.check is not None else "")
     log(f"{spec.name}: {len(runs)} runs{of_check}, {skipped} already done, {len(pending)} to run "
         f"({executor}, {workers} worker{'s' * (workers != 1)}); results in {folder}")
@@ -189,7 +200,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
             claim = claims.pop(record.run_id, None)
             if claim is not None:
                 claim.release()
-            save_table(folder, ids)
+            save_table(folder, table_ids)
         if record.status == "done":
             done += 1
             if record.warnings:
@@ -228,6 +239,17 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
             bar.close()
     return RunSummary(done=done, skipped=skipped, failed=failed, total=len(runs), folder=folder, claimed=claimed,
                       warned=warned)
+
+
+def check_only_problem(spec: ExperimentSpec, check: bool = True) -> None:
+    """One `InputError` line where ``--check-only`` cannot run: a file without a ``[check]``,
+    or with the check left out (``--no-check``)."""
+    if not check:
+        raise InputError("--check-only: runs only the file's [check], --no-check leaves it out; give one of the two")
+    if spec.check is None:
+        raise InputError(f"{spec.source}: --check-only: the file has no [check] table, so there is nothing to run "
+                         f"(add one: docs/reports.md, \"The 7K check\"; or run the grid with `splatbench run "
+                         f"{spec.source}`)")
 
 
 def execution_order(runs: list[RunSpec]) -> list[RunSpec]:

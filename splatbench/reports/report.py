@@ -146,11 +146,13 @@ def reported_done(out: str | Path, name: str = TABLE_NAME) -> int | None:
 
 
 def write_report(report: Report, out: str | Path, *, results: str | Path | None = None,
-                 out_option: str | Path | None = None) -> Path:
+                 out_option: str | Path | None = None, check_results: str | Path | None = None) -> Path:
     """Write ``report.md``, ``figures/*.png`` and ``results.parquet`` under ``out``; the
     report's path. Figures of an earlier report in ``out/figures`` are removed first.
     ``results`` / ``out_option``: the ``--results`` / ``--out`` the report was made with,
-    where not the defaults, so that the commands the report names are the ones that made it."""
+    where not the defaults, so that the commands the report names are the ones that made it;
+    ``check_results``: the ``--results`` of ``--rebuild --results`` (the check's runs read from
+    there, the grid's from ``out``), named as such in the report's command line."""
     out = Path(out)
     figures = out / FIGURES
     if figures.is_dir():
@@ -187,7 +189,8 @@ def write_report(report: Report, out: str | Path, *, results: str | Path | None 
         report.fronts[tradeoff.stem] = {scene: [to_full[c] for c in cells] for scene, cells in fronts.items()}
         drawn.append((tradeoff, path))
     run_options = "" if results is None else f" --results {results}"
-    options = run_options + ("" if out_option is None else f" --out {out_option}")
+    options = (run_options if check_results is None else f" --rebuild --results {check_results}") \
+        + ("" if out_option is None else f" --out {out_option}")
     text = render_markdown(report, curve_paths, drawn, out, options, run_options)
     write_text(out / REPORT_NAME, text)
     return out / REPORT_NAME
@@ -253,7 +256,8 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     elif spec.check is None and kind.protocols is not None:
         lines += ["**7K check: none declared** (the experiment file has no `[check]`: its headline is not rerun at "
                   "graphdeco's 7K protocol; docs/reports.md, \"The 7K check\").", ""]
-    timing = " ".join(t for t in (run_time(table), load_facts(table, kind), code_facts(table)) if t)
+    checked = report.check.table if report.check is not None else None
+    timing = " ".join(t for t in (run_time(table), load_facts(table, kind), code_facts(table, checked)) if t)
     if timing:
         lines += [timing, ""]
     if missing:
@@ -371,24 +375,62 @@ def run_time(table: pd.DataFrame) -> str:
             f"(mean {duration(worker / len(done))} per run){span}.")
 
 
-def code_facts(table: pd.DataFrame) -> str:
+def _done_codes(table: pd.DataFrame | None) -> pd.Series:
+    """The ``code`` of each done run of ``table`` ("" where not recorded: a table from before
+    runs recorded it has no column)."""
+    if table is None or not len(table):
+        return pd.Series([], dtype=object)
+    done = table[table.status == "done"]
+    if "code" not in done.columns:
+        return pd.Series([""] * len(done), dtype=object)
+    return done.code.fillna("").astype(str)
+
+
+def _listed(codes: pd.Series) -> str:
+    counts = codes[codes != ""].value_counts()
+    return ", ".join(f"`{c}` ({n} run{'s' if n != 1 else ''})" for c, n in sorted(counts.items()))
+
+
+def code_facts(table: pd.DataFrame, checked: pd.DataFrame | None = None) -> str:
     """"Code: ..." -- the commits the done runs ran at (their record's ``code``), with how many
     runs each; a report whose cells ran at more than one says so, since a change of code between
-    runs is a confound the grid does not see. "" for a table of grids run before runs recorded it."""
-    done = table[table.status == "done"] if len(table) else table
-    if "code" not in done.columns or not len(done):
+    runs is a confound the grid does not see. "" for a table of grids run before runs recorded it.
+    ``checked``: the ``[check]``'s runs (`CheckResult.table`); with a done one among them, the line
+    covers them too and names the grid's and the check's commits apart (a check added to a
+    committed report later ran at another commit than its grid: `splatbench report --rebuild
+    --results`)."""
+    grid, check = _done_codes(table), _done_codes(checked)
+    if not len(check):
+        if not len(grid) or not (grid != "").any():
+            return ""
+        missing = int((grid == "").sum())
+        unknown = f"; {missing} run(s) ran before runs recorded it" if missing else ""
+        if grid[grid != ""].nunique() == 1 and not missing:
+            return f"Code: every run at {_listed(grid)}."
+        return (f"Code: the runs ran at more than one commit: {_listed(grid)}{unknown}; a difference between cells "
+                f"run at different commits is also a difference of code.")
+    known = set(grid[grid != ""]) | set(check[check != ""])
+    if not known:
         return ""
-    codes = done.code.fillna("").astype(str)
-    counts = codes[codes != ""].value_counts()
-    if counts.empty:
-        return ""
-    missing = int((codes == "").sum())
-    listed = ", ".join(f"`{c}` ({n} run{'s' if n != 1 else ''})" for c, n in sorted(counts.items()))
-    unknown = f"; {missing} run(s) ran before runs recorded it" if missing else ""
-    if len(counts) == 1 and not missing:
-        return f"Code: every run at {listed}."
-    return (f"Code: the runs ran at more than one commit: {listed}{unknown}; a difference between cells "
-            f"run at different commits is also a difference of code.")
+    missing = int((grid == "").sum() + (check == "").sum())
+    if len(known) == 1 and not missing:
+        return (f"Code: every run at `{next(iter(known))}` ({len(grid) + len(check)} runs: the grid's {len(grid)} "
+                f"and the check's {len(check)}).")
+
+    def side(name: str, codes: pd.Series) -> str:
+        unknown = int((codes == "").sum())
+        before = f"{unknown} ran before runs recorded it" if unknown else ""
+        if not (codes != "").any():
+            return f"the {name} {len(codes)} runs ran before runs recorded it"
+        return f"the {name} runs at {_listed(codes)}" + (f", {before}" if before else "")
+
+    spans = ("the runs ran at more than one commit" if len(known) > 1 else
+             f"the runs may span more than one commit (not every run recorded its own; those that did ran at "
+             f"`{next(iter(known))}`)")
+    sides = side("grid's", grid) + "; " + side("check's", check)
+    return (f"Code: {spans}: {sides}; "
+            f"a difference between runs at different commits is also a difference of code (the check's verdict "
+            f"compares its runs' difference with the grid's).")
 
 
 def load_facts(table: pd.DataFrame, kind: RunKind) -> str:
