@@ -16,7 +16,8 @@ import click
 @click.option("--out", type=click.Path(path_type=Path, file_okay=False), default=None,
               help="Report folder (default: reports/<name>).")
 @click.option("--force", is_flag=True,
-              help="Replace a report folder whose results.parquet holds more finished runs than the new report.")
+              help="Replace a report folder whose results.parquet (or check.parquet) holds more finished runs than "
+                   "the new report.")
 @click.option("--rebuild", is_flag=True,
               help="Rebuild the report from the report folder's own results.parquet and check.parquet (no "
                    "results folder, nothing rerun): after a change to how reports are written. Its runs must be "
