@@ -1052,3 +1052,40 @@ def test_train_help_lists_the_protocols_inits_and_random_regions():
         listed = text.split(label, 1)[1].split(";")[0].split(". ")[0]
         assert all(re.search(rf"\b{re.escape(n)}\b", listed) for n in names), (label, listed)
     assert set(INITIALIZERS) >= {"auto", "surface", "sfm", "random"}
+
+
+def test_opacity_resets_closer_than_an_opacity_can_recover_are_warned_about():
+    """A new user's 100-step run under the quick protocol reset opacities every 10 steps (graphdeco's
+    3,000 scaled) and said nothing of it. The warning fires where the climb from the reset value back
+    to opacity 0.5 (`opacity_recovery_steps`) takes longer than the spacing of the resets, and not on
+    the committed 2,000-step grids (every 200: 81 steps), at graphdeco's schedule or without resets."""
+    from splatbench.strategies import ops
+    from splatbench.train.adam import FusedAdam
+    from splatbench.train.config import opacity_recovery_steps
+
+    (line,) = apply_overrides(TrainConfig(), ["iterations=100"]).warnings()
+    assert line.startswith("warning: strategy 'default' resets opacities every 10 steps in this run, sooner than "
+                           "an opacity can climb back from the reset value 0.01 to 0.5 (176 steps") and "\n" not in line
+    assert 'strategy_options.reset_every = 0' in line
+    quiet = ["iterations=2000", "iterations=30000", "protocol=graphdeco-7k", "strategy=mcmc",
+             "strategy_options.reset_every=0", 'strategy_options.reset_every="50%"']
+    for way in quiet:
+        assert apply_overrides(TrainConfig(), ["iterations=100", way]).warnings() == [], way
+    for every in ("10%", "20%"):  # densification_schedules' cells at 2,000 steps
+        assert apply_overrides(TrainConfig(), ["iterations=2000", f'strategy_options.reset_every="{every}"']
+                               ).warnings() == []
+    # the climb is the project's own Adam's: a steady gradient after a reset (moments zeroed, step count kept)
+    for reset_step in (10, 200):
+        p = torch.nn.Parameter(torch.full((1,), 2.0))
+        params = {"opacity_logits": p}
+        optimizers = {"opacity_logits": FusedAdam(p, lr=0.025, eps=1e-15, name="opacity_logits")}
+        for _ in range(reset_step):
+            params["opacity_logits"].grad = torch.full((1,), 0.3)
+            optimizers["opacity_logits"].step()
+        ops.reset_opacity(params, optimizers, 0.01)
+        steps = 0
+        while params["opacity_logits"].item() < 0.0:
+            params["opacity_logits"].grad = torch.full((1,), -1.0)
+            optimizers["opacity_logits"].step()
+            steps += 1
+        assert steps == opacity_recovery_steps(0.025, 0.01, reset_step)

@@ -16,7 +16,8 @@ naming the field, raised by
 `TrainConfig.validate` when the (frozen) config is constructed, before any data is
 read or rendered; ``dataclasses.replace`` or `apply_overrides` make a changed copy. A
 setting that runs but likely defeats training (``raster.alpha_min`` at or above the
-strategy's opacity reset value) is a line of `TrainConfig.warnings`, said before training.
+strategy's opacity reset value; opacity resets closer together than an opacity can climb
+back from the reset value to 0.5) is a line of `TrainConfig.warnings`, said before training.
 
 The device is set once, by ``device``: ``raster.device`` is not a setting (a ``[raster]``
 table or ``--set`` that names it is an error naming ``device``), and the constructor makes
@@ -294,7 +295,12 @@ class TrainConfig:
         step and kept among the result's notes): an ``raster.alpha_min`` at or above the
         strategy's opacity reset value (graphdeco's 0.01) in a run with resets. After each reset
         alpha = opacity x G <= the reset value, so compositing skips every Gaussian and gives it
-        no gradient; the model renders the background until nothing is left to recover."""
+        no gradient; the model renders the background until nothing is left to recover. And a
+        schedule whose opacity resets (two or more in the run) come sooner after each other
+        than an opacity can climb back from the reset value to 0.5 (`opacity_recovery_steps`
+        after the first reset): the quick protocol's scaled schedule at 100 steps resets every
+        10, where the climb takes 176; the committed 2,000-step grids (every 200, climb 81)
+        and graphdeco's 3,000 (climb 32) are not warned."""
         from splatbench.strategies import planned_counts
 
         out = []
@@ -306,6 +312,16 @@ class TrainConfig:
                        f"opacity x G never exceeds the opacity) and gets no gradient, so training cannot recover; "
                        f"lower raster.alpha_min, raise strategy_options.reset_value, or set "
                        f"strategy_options.reset_every = 0 (no resets)")
+        every = getattr(strategy, "reset_every", 0)
+        if reset is not None and every and planned_counts(strategy, self.iterations).opacity_resets >= 2:
+            climb = opacity_recovery_steps(self.lr_opacity_logits, reset, every, self.adam_eps)
+            if climb > every:
+                out.append(f"warning: strategy {self.strategy!r} resets opacities every {every} steps in this run, "
+                           f"sooner than an opacity can climb back from the reset value {reset:g} to "
+                           f"{RECOVERY_OPACITY:g} ({climb} steps at lr_opacity_logits {self.lr_opacity_logits:g} under "
+                           f"a steady gradient): each reset comes before the model has recovered from the last; train "
+                           f"longer, or set strategy_options.reset_every = 0 (no resets) or a fraction of the run "
+                           f"(\"50%\") at least {climb} steps long")
         return out
 
     def make_strategy(self, *, scaled: bool = True):
@@ -403,6 +419,35 @@ class TrainConfig:
         except tomllib.TOMLDecodeError as exc:
             raise InputError(f"{source}: invalid TOML ({exc})") from None
         return cls.from_dict(data, source=source)
+
+
+#: The opacity a Gaussian must regain between two opacity resets (`opacity_recovery_steps`).
+RECOVERY_OPACITY = 0.5
+
+
+def opacity_recovery_steps(lr: float, reset_value: float, reset_step: int, eps: float = 1e-15,
+                           target: float = RECOVERY_OPACITY) -> int:
+    """The fewest steps in which Adam (betas 0.9, 0.999, as `splatbench.train.adam`) can bring
+    an opacity logit from ``logit(reset_value)`` back up to ``logit(target)`` after an opacity
+    reset at step ``reset_step``: a gradient of one sign every step (the fastest climb; a real
+    Gaussian's gradient changes sign and climbs slower), with the moments zeroed by the reset
+    (`splatbench.strategies.ops.reset_opacity`, as graphdeco) and Adam's step count kept. At the
+    defaults (lr 0.025, reset 0.01) the climb to 0.5 takes 176 steps after a reset at step 10
+    (a 100-step quick run, resets every 10), 132 at step 60 (600 steps, every 60), 111 at 100
+    (1,000 steps), 81 at 200 (the committed 2,000-step grids, every 200) and 32 at graphdeco's
+    3,000: the bias correction of moments zeroed late in a run makes the first steps up to ~6x
+    the learning rate. Resets closer together than this leave no Gaussian half-opaque between
+    them (`TrainConfig.warnings`). Capped at 100,000 steps (an lr of 0)."""
+    goal, x = math.log(target / (1.0 - target)), math.log(reset_value / (1.0 - reset_value))
+    m = v = 0.0
+    beta1, beta2 = 0.9, 0.999
+    for k in range(1, 100_001):
+        t = reset_step + k
+        m, v = beta1 * m + (1.0 - beta1), beta2 * v + (1.0 - beta2)  # gradient 1 (scale-free but for eps)
+        x += lr * (m / (1.0 - beta1 ** t)) / (math.sqrt(v / (1.0 - beta2 ** t)) + eps)
+        if x >= goal:
+            return k
+    return 100_000
 
 
 def load_config(path: str | Path) -> TrainConfig:
