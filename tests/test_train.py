@@ -697,6 +697,8 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     fresh = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                  "--quiet", "--out", str(tmp_path / "f")])
     assert fresh.exit_code == 0 and re.search(r"^3 iterations in \d+\.\d s ", fresh.stdout, re.M), fresh.output
+    assert re.search(r"^3 iterations in .* MB, rasterized on (cpu \(Dr\.Jit LLVM\)|cuda \(Dr\.Jit CUDA\))$",
+                     fresh.stdout, re.M), fresh.stdout  # what device=auto resolved to
     # --quiet: no bar and no line as it starts; the summary's notes carry it
     quiet = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                  "--resume", str(checkpoint), "--quiet", "--out", str(tmp_path / "q")])

@@ -202,6 +202,18 @@ def test_cli_train_records_the_raster_options(tmp_path, tiny_diffuse_dir):  # no
     data = json.loads(res.stdout.strip().splitlines()[-1])
     assert data["raster"]["alpha_min"] == 0.01 and data["raster"]["tile_size"] == 8
     assert load_config(out / "config.toml").raster == RasterOptions(alpha_min=0.01, tile_size=8)
+    # the device as set ("auto") stays the config's (run ids); the device that ran is the result's, and a grid's
+    # metric.device (a new user could not tell Dr.Jit's LLVM backend from CUDA)
+    from splatbench.experiments.train_kind import TrainRun
+    from splatbench.metrics.machine import resolve_device
+    from splatbench.train import TrainResult
+
+    assert data["raster"]["device"] == "auto" and load_config(out / "config.toml").device == "auto"
+    assert data["device"] == resolve_device("auto") and data["device"] in ("cpu", "cuda")
+    assert json.loads((out / "result.json").read_text())["device"] == data["device"]
+    assert TrainRun.of(TrainResult.from_dict(data), None).device == data["device"]
+    older = {k: v for k, v in data.items() if k != "device"}  # a result.json written before it was recorded
+    assert TrainResult.from_dict(older).device == "" and TrainRun.of(TrainResult.from_dict(older), None).device is None
     bad = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "raster.alpah_min=0.01", "--quiet"])
     assert bad.exit_code == 2
     assert bad.stderr.strip().splitlines() == [bad.stderr.strip()]

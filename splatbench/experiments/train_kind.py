@@ -164,6 +164,9 @@ class TrainRun(RunResult):
                                              "sfm or random); None before it was recorded", default=None)
     init_points: int | None = metric(meaning="Gaussians the run started from (its initial points); None before it "
                                              "was recorded", default=None)
+    device: str | None = metric(meaning="where the rasterizer ran: 'cpu' (Dr.Jit's LLVM backend) or 'cuda' (what "
+                                        "config.device, 'auto' by default, resolved to); None before it was "
+                                        "recorded", default=None)
 
     @classmethod
     def of(cls, result, dataset_hash: str | None, *, own_peak: bool = False) -> TrainRun:
@@ -190,7 +193,7 @@ class TrainRun(RunResult):
                   "lpips_scale_inputs": int(result.lpips_scale_inputs), "time_loaded": int(result.load["loaded"]),
                   "init_method": (result.init or {}).get("method"), "init_points": (result.init or {}).get("points"),
                   "run_peak_rss_mb": result.peak_rss_mb if own_peak else None,
-                  "dataset_hash": dataset_hash}
+                  "device": result.device or None, "dataset_hash": dataset_hash}
         return cls(**values, warnings=tuple(result.warnings), curves=curves)
 
 

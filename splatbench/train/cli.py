@@ -43,7 +43,8 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     by content); that, the test split chosen and ignored keys are said in notes
     (docs/training.md, "Real captures").
 
-    Prints the test PSNR / SSIM, Gaussian count, SH degree and the PLY path; writes
+    Prints the test PSNR / SSIM, Gaussian count, SH degree, the device that rasterized
+    (``cpu (Dr.Jit LLVM)`` or ``cuda (Dr.Jit CUDA)``: what device=auto resolved to) and the PLY path; writes
     config.toml, point_cloud.ply and result.json under the output folder. A resumed run
     says so in one line, ``resumed from CKPT at step N of M``; init=sfm says
     ``SfM: running pycolmap on N training views (cached in DIR)`` or ``SfM: reusing DIR``
@@ -122,7 +123,8 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     click.echo(f"{result.iterations} iterations{_timed_steps(result)} in {result.train_seconds:.1f} s"
                f"{'' if result.resumed_step is None else ' in all'} "
                f"({result.iterations / max(result.train_seconds, 1e-9):.2f} it/s), render "
-               f"{fmt(result.render_ms_per_view, '.1f')} ms/view, peak RSS {result.peak_rss_mb:.0f} MB")
+               f"{fmt(result.render_ms_per_view, '.1f')} ms/view, peak RSS {result.peak_rss_mb:.0f} MB, "
+               f"rasterized on {_DEVICE_NAMES.get(result.device, result.device)}")
     for e in result.step_evaluations:  # the protocol's columns (graphdeco-30k: 7,000 and 30,000 steps)
         click.echo(f"protocol {result.protocol}, step {e.step}: test PSNR {fmt(e.psnr, '.2f')} dB, SSIM "
                    f"{fmt(e.ssim, '.4f')}, LPIPS {e.lpips_net or 'n/a'} {fmt(e.lpips_scaled, '.4f')} (inputs in [-1, 1]) / "
@@ -135,6 +137,10 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     for warning in (w for w in result.warnings if w not in shown):
         click.echo(warning, err=True)
     click.echo(f"wrote {result.ply_path}")
+
+
+#: TrainResult.device as the summary line says it.
+_DEVICE_NAMES = {"cpu": "cpu (Dr.Jit LLVM)", "cuda": "cuda (Dr.Jit CUDA)"}
 
 
 def _lpips_how(result) -> str:

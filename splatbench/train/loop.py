@@ -496,6 +496,7 @@ def _schedule_note(strategy, config: TrainConfig) -> str | None:
 
 def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     from splatbench.metrics.load import Load, process_cpu_seconds
+    from splatbench.metrics.machine import resolve_device
     from splatbench.metrics.memory import peak_rss_mb
     from splatbench.train.checkpoint import load_checkpoint, resume_line
 
@@ -612,7 +613,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, warnings=warnings,
         init=trainer.init_summary,
         warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step, protocol=config.protocol,
-        raster=config.raster.to_dict(),
+        raster=config.raster.to_dict(), device=resolve_device(config.device),
         step_evaluations=step_evaluations, topology=topology_counts(trainer.state))
     write_text(out / "result.json", result.to_json(indent=2) + "\n")  # whole or not at all
     return result

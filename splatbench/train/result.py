@@ -82,13 +82,17 @@ class TrainResult:
                                         # run that wrote it, is in train_seconds); None: not resumed
     protocol: str = "quick"             # TrainConfig.protocol (splatbench.train.protocol)
     raster: dict = field(default_factory=dict)  # the rasterizer options of every render of the run
-                                        # (TrainConfig.raster as `RasterOptions.to_dict`, device included;
-                                        # {}: a result written before training took raster options)
+                                        # (TrainConfig.raster as `RasterOptions.to_dict`: its device as set,
+                                        # "auto" by default; the device that ran is `device`; {}: a result
+                                        # written before training took raster options)
     step_evaluations: list[StepEvaluation] = field(default_factory=list)  # at TrainConfig.evaluation_steps
                                         # (graphdeco-30k: 7,000 and 30,000), the last one the final model's
     topology: TopologyCounts | None = None  # what the strategy did besides its settings' names: refinements,
                                         # opacity resets, cloned / split / pruned, MCMC relocated / added
                                         # (None: a result written before they were recorded)
+    device: str = ""                    # where the rasterizer ran: "cpu" (Dr.Jit's LLVM backend) or "cuda", what
+                                        # TrainConfig.device ("auto" by default, as `raster` records it) resolved
+                                        # to on this machine ("": a result written before it was recorded)
 
     def to_dict(self) -> dict:
         """JSON-ready dict; NaN / inf become None; history rows become objects."""
