@@ -226,6 +226,13 @@ MALFORMED = {
                                     r"axes\.opts\.a: overlaps axes\.opts \(in a cell with both, the later would drop "
                                     r"the other's value\); sweep only one of them, or use a \[variants\.NAME\] table "
                                     r"for values that go together$"),
+    # one field written quoted and dotted: the same path twice, said as the base says it (not "overlaps" itself)
+    "one axis written quoted and dotted": (HEAD + '[axes]\n"opts.a" = [1]\nopts.a = [2]\n',
+                                           r"axes\.opts\.a: set twice \(also as 'opts\.a'\)$"),
+    "one base field written quoted and dotted": (HEAD + '[base]\n"opts.a" = 1\nopts.a = 2\n',
+                                                 r"base\.opts\.a: set twice \(also as 'opts\.a'\)$"),
+    "one variant field written quoted and dotted": (HEAD + '[variants.v]\nl = { "opts.a" = 1, opts.a = 2 }\n',
+                                                    r"variants\.v\.l\.opts\.a: set twice \(also as 'opts\.a'\)$"),
     "a variant inside an axis": (HEAD + '[axes]\nopts = [{ a = 1 }]\n[variants.v]\nl = { opts.b = "q" }\n',
                                  r"variants\.v\.l\.opts\.b: also swept by axes\.opts \(in a cell with both, the later "
                                  r"would drop the other's value\); set it in the axis or in the variant, not both$"),

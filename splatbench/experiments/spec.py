@@ -459,6 +459,8 @@ def _flatten_axes(table: Mapping[str, Any], prefix: str, fail) -> dict[str, list
             raise fail(f"axes.{path}", f"expected a list of values, got {value!r}")
         for sub, values in items.items():
             for other in out:
+                if sub == other:  # one axis written twice ("raster.tile_size" and raster.tile_size), as flatten says
+                    raise fail(f"axes.{sub}", f"set twice (also as {other!r})")
                 if overlaps(sub, other):
                     raise fail(f"axes.{sub}", f"overlaps axes.{other} ({DROPS}); sweep only one of them, or use "
                                               f"a [variants.NAME] table for values that go together")
