@@ -44,7 +44,7 @@ def report(experiment: Path, results: Path | None, out: Path | None, force: bool
     from splatbench.experiments.grid import load_experiment
     from splatbench.experiments.store import TABLE_NAME, experiment_dir
     from splatbench.reports.check import CHECK_TABLE_NAME
-    from splatbench.reports.report import build_report, reported_done, write_report
+    from splatbench.reports.report import build_report, write_report
 
     spec = load_experiment(experiment)
     if rebuild:
@@ -72,11 +72,7 @@ def report(experiment: Path, results: Path | None, out: Path | None, force: bool
                          f"run `{rerun}` first")
     checked = int((rep.check.table.status == "done").sum()) if rep.check is not None and len(rep.check.table) else 0
     for name, now in ((TABLE_NAME, rep.done), (CHECK_TABLE_NAME, checked)):
-        before = None if force else reported_done(out, name)
-        if before is not None and before > now:
-            raise InputError(f"{out / name}: holds {before} finished runs, the report from {folder} would "
-                             f"hold {now}; run the rest with `{rerun}`, or pass --force "
-                             f"to replace it")
+        _refuse_shrink(out / name, now, f"the report from {folder} would hold", rerun, force)
     path = write_report(rep, out, results=given_results, out_option=given_out)
     click.echo(f"{spec.name}: {rep.done} done, {rep.failed} failed, {rep.total - len(rep.table)} not run "
                f"of {rep.total}" + (f"; {rep.check.headline} ({checked} of its {rep.check.rerun.total} runs done)"
@@ -137,7 +133,6 @@ def _check_from(spec, out: Path, results: Path, force: bool):
     from splatbench.experiments.grid import check_runs
     from splatbench.experiments.store import experiment_dir
     from splatbench.reports.check import CHECK_TABLE_NAME, check_table
-    from splatbench.reports.report import reported_done
 
     if spec.check is None:
         raise InputError(f"--rebuild --results: {spec.source} has no [check], the only runs --results is read for "
@@ -150,8 +145,18 @@ def _check_from(spec, out: Path, results: Path, force: bool):
         failed = int((checked.status == "failed").sum()) if len(checked) else 0
         raise InputError(f"--rebuild --results: no finished run of the check's {len(check_runs(spec))} in {folder}"
                          + (f" ({failed} failed)" if failed else "") + f"; run `{run}` first")
-    before = None if force else reported_done(out, CHECK_TABLE_NAME)
-    if before is not None and before > done:
-        raise InputError(f"{out / CHECK_TABLE_NAME}: holds {before} finished runs, the check's runs in {folder} "
-                         f"would give {done}; run the rest with `{run}`, or pass --force to replace it")
+    _refuse_shrink(out / CHECK_TABLE_NAME, done, f"the check's runs in {folder} would give", run, force)
     return checked
+
+
+def _refuse_shrink(path: Path, now: int, instead: str, rerun: str, force: bool) -> None:
+    """One `InputError` line when the report table ``path`` (``results.parquet`` or
+    ``check.parquet``) holds more finished runs than the ``now`` that ``instead`` names would
+    (a partial results folder must not shrink a committed baseline), unless ``force``."""
+    from splatbench.errors import InputError
+    from splatbench.reports.report import reported_done
+
+    before = None if force else reported_done(path.parent, path.name)
+    if before is not None and before > now:
+        raise InputError(f"{path}: holds {before} finished runs, {instead} {now}; run the rest with `{rerun}`, "
+                         f"or pass --force to replace it")
