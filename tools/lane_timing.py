@@ -133,7 +133,7 @@ def mixed(run, mix: bool):
 
 
 def _lanes_sorted_overall(lanes_for, m, records, bins, pixel_block):
-    from splatbench.raster.blocks import MAX_LENGTH_BUCKETS
+    from splatbench.raster.binning import count_order
     from splatbench.raster.device import dr
 
     lanes = lanes_for(m, records, bins, pixel_block)
@@ -141,8 +141,7 @@ def _lanes_sorted_overall(lanes_for, m, records, bins, pixel_block):
         return lanes
     counts = lanes.end - lanes.start
     dr.eval(counts)
-    buckets = min(1 << int(dr.max(counts)[0]).bit_length(), MAX_LENGTH_BUCKETS)
-    perm = dr.detail.block_mkperm(m.UInt32(dr.minimum(counts, buckets - 1)), dr.width(counts), buckets)
+    perm = count_order(counts)
 
     def permuted(values):
         return [dr.gather(type(v), v, perm) for v in values]

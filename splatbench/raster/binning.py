@@ -238,6 +238,25 @@ def argsort_bits(key, bits: int, digit_bits: int | None = None):
     return index
 
 
+#: The most buckets `count_order` sorts by (a power of two): larger counts share the last one.
+MAX_COUNT_BUCKETS = 1 << 16
+
+
+def count_order(counts, block: int | None = None):
+    """A stable permutation that puts ``counts`` [n] (UInt32) in ascending order within each
+    run of ``block`` elements (None: the whole array), by one counting sort; counts past
+    `MAX_COUNT_BUCKETS` - 1 count as that. Used to give the lanes of a SIMD packet loops of
+    about equal length (`reduction.reduce_pairs`, `blocks.sort_lanes_by_length`)."""
+    m = array_namespace(counts)
+    n = dr.width(counts)
+    if n == 0:
+        return m.UInt32()
+    buckets = min(1 << int(dr.max(counts)[0]).bit_length(), MAX_COUNT_BUCKETS)
+    key = m.UInt32(dr.minimum(counts, buckets - 1))
+    dr.eval(key)
+    return dr.detail.block_mkperm(key, block or n, buckets)
+
+
 def tile_order(m, tile, num_tiles: int):
     """Stable argsort of the pairs' tile ids [P] (< num_tiles): one counting sort on
     LLVM (one `block_mkperm` pass over every tile), 8-bit passes elsewhere."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from splatbench.raster.device import dr, packet_width
-from splatbench.raster.binning import Bins, TileGrid, ellipse_meets_rect, tile_pixel_offsets
+from splatbench.raster.binning import Bins, TileGrid, count_order, ellipse_meets_rect, tile_pixel_offsets
 from splatbench.raster.records import Records, load_records
 
 
@@ -165,18 +165,12 @@ def block_lists(m, rec: Records, bins: Bins, lanes):
     return lanes._replace(start=starts, end=end, pairs=pairs)
 
 
-#: The most buckets the lane sort uses (a power of two): longer lists share the last one.
-MAX_LENGTH_BUCKETS = 1 << 16
-
-
 def sort_lanes_by_length(m, lanes: Lanes, counts, lane_block):
     """(lanes, counts, lane_block) with each tile's lanes in ascending order of their list
-    length (stable; lengths past `MAX_LENGTH_BUCKETS` - 1 count as that): a permutation
-    within each tile's run of lanes, carrying every per-lane array with it."""
+    length (stable, `binning.count_order`): a permutation within each tile's run of lanes,
+    carrying every per-lane array with it."""
     UInt32 = m.UInt32
-    buckets = min(1 << int(dr.max(counts)[0]).bit_length(), MAX_LENGTH_BUCKETS)
-    key = dr.minimum(counts, buckets - 1)
-    perm = dr.detail.block_mkperm(UInt32(key), lanes.lanes_per_tile, buckets)
+    perm = count_order(counts, lanes.lanes_per_tile)
 
     def permuted(values):
         return [dr.gather(type(v), v, perm) for v in values]
