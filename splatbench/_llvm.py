@@ -170,10 +170,18 @@ def packet_width(features: str | None = None) -> int:
 
 
 def _host_cpu_features() -> str:
-    """LLVM's host CPU feature string ("" where it cannot be read)."""
+    """LLVM's host CPU feature string ("" where it cannot be read), from the libLLVM in
+    ``DRJIT_LIBLLVM_PATH`` or, where that is unset, the one `locate` finds: a program that
+    imports drjit before splatbench leaves the variable unset (`configure` sets it only
+    before Dr.Jit's import), and the features are the CPU's, whichever libLLVM reports them."""
     import ctypes  # a late import: only the rasterizer's reduction asks, once
 
     path = os.environ.get(ENV_VAR, "")
+    if not path:
+        try:
+            path = locate().path
+        except LLVMNotFoundError:
+            return ""
     if not os.path.isfile(path):
         return ""
     try:

@@ -73,3 +73,22 @@ def test_no_usable_llvm_still_imports_and_cpu_device_says_why():
     assert lines["error"].startswith("device: 'cpu' needs Dr.Jit's LLVM backend: Dr.Jit needs libLLVM >= 16")
     assert "LLVM 15 (/usr/lib/libLLVM-15.so.1)" in lines["error"] and "apt-get install" in lines["error"]
     assert "\n" not in lines["error"]
+
+
+def test_packet_width_is_the_cpus_when_drjit_was_imported_first():
+    """A program that imports drjit before splatbench leaves DRJIT_LIBLLVM_PATH unset
+    (`configure` sets it only before Dr.Jit's import). The packet width must still be the
+    CPU's: with the 4-lane fallback the reduction kept 4 gradient slots per pair on an
+    AVX-512 machine (4x the per-pair buffers, a slower backward) and summed the gradients in
+    another order than `splatbench train` on the same machine."""
+    if not os.path.isfile(os.environ.get(_llvm.ENV_VAR, "")):
+        pytest.skip("no usable libLLVM here")
+    env = {k: v for k, v in os.environ.items() if k != _llvm.ENV_VAR}
+    script = ("import os, drjit, splatbench\nfrom splatbench.raster.device import get_device, packet_width\n"
+              "print(os.environ.get('DRJIT_LIBLLVM_PATH'), packet_width(get_device('cpu').t))")
+    out = subprocess.run([sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    unset, width = out.stdout.split()
+    assert unset == "None"  # the case under test: drjit came first
+    assert int(width) == _llvm.packet_width()  # this process's, read with the variable set
