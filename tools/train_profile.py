@@ -4,6 +4,7 @@
     python tools/train_profile.py 256 --steps 20
     python tools/train_profile.py 800 --gaussians 250000 --views 4 --steps 4
     python tools/train_profile.py 128 --clock wall --cprofile 25
+    python tools/train_profile.py 800 --gaussians 100000 --steps 3 --kernels 12
 
 Builds `splatbench bench train`'s synthetic scene (`bench.train.synthetic_scene`) and
 trains it as bench train does (`Trainer`, ``strategy="none"``, SH degree 3 from the
@@ -14,7 +15,11 @@ pool too) at the stage boundaries instead of wall time: on a shared, loaded mach
 the wall time of a stage is mostly waiting for a core, its CPU time is not. ``--cprofile
 N`` also runs cProfile over the timed steps and prints its N largest functions by
 internal time (the rasterizer's kernels run inside ``torch.from_dlpack``: Dr.Jit
-evaluates lazily, when torch takes its outputs).
+evaluates lazily, when torch takes its outputs). ``--kernels N`` then runs the same number of
+steps again with Dr.Jit's kernel history on (each launch timed, so those steps run a little
+slower) and prints per step the N costliest compiled kernels (mean ms per step, width,
+IR operations) and the time of Dr.Jit's other launches by kind (memset, sort permutation,
+block reduction, ...).
 """
 
 from __future__ import annotations
@@ -36,6 +41,8 @@ def main() -> None:
     ap.add_argument("--warmup", type=int, default=4)
     ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu")
     ap.add_argument("--cprofile", type=int, default=0, metavar="N")
+    ap.add_argument("--kernels", type=int, default=0, metavar="N",
+                    help="also print the N costliest Dr.Jit kernels per step (kernel history; extra steps)")
     ap.add_argument("--drjit-threads", type=int, default=0, metavar="N",
                     help="Dr.Jit's thread pool (0: its default, one per core); 1: the CPU clock counts "
                          "compute only, not the pool's waiting")
@@ -53,7 +60,8 @@ def main() -> None:
     if args.clock == "cpu":  # the trainer's stage clocks read CPU time instead
         loop.time = types.SimpleNamespace(perf_counter=time.process_time)
     dataset, _ = synthetic_scene(args.size, args.gaussians, args.views, 0)
-    cfg = TrainConfig(dataset="", out="", iterations=args.warmup + args.steps, strategy="none", sh_degree=3,
+    cfg = TrainConfig(dataset="", out="", iterations=args.warmup + args.steps * (2 if args.kernels else 1),
+                      strategy="none", sh_degree=3,
                       sh_interval=1, schedule="absolute", seed=0, device="cpu", torch_threads=1)
     with loop.torch_threads(1):
         trainer = loop.Trainer(cfg, dataset=dataset)
@@ -71,6 +79,7 @@ def main() -> None:
         if profiler:
             profiler.disable()
         wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        history = kernel_history(trainer, args.steps) if args.kernels else None
     t, k = trainer.times, args.steps
     print(f"{args.size}x{args.size}, {trainer.num_gaussians} Gaussians, {k} steps: wall {1e3 * wall / k:.1f} ms, "
           f"CPU {1e3 * cpu / k:.1f} ms per step; last loss {status.loss:.6f}; load average {load0:.2f} -> "
@@ -82,6 +91,49 @@ def main() -> None:
         out = io.StringIO()
         pstats.Stats(profiler, stream=out).sort_stats("tottime").print_stats(args.cprofile)
         print(out.getvalue())
+    if history:
+        print_kernels(history, args.steps, args.kernels)
+
+
+def kernel_history(trainer, steps: int) -> list:
+    """Dr.Jit's kernel history of ``steps`` more training steps (each launch timed)."""
+    import drjit as dr
+
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()  # clear
+    try:
+        for _ in range(steps):
+            trainer.step()
+        return dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+
+
+def print_kernels(history: list, steps: int, count: int) -> None:
+    """The ``count`` costliest compiled kernels (same hash: one kernel) and the other launches by kind,
+    mean ms per step."""
+    import collections
+
+    import drjit as dr
+
+    jit: dict = collections.defaultdict(lambda: [0.0, 0, 0, 0])
+    other: dict = collections.defaultdict(float)
+    for h in history:
+        kind = str(h.get("type", "")).split(".")[-1]
+        if h.get("type") == dr.KernelType.JIT:
+            entry = jit[h.get("hash")]
+            entry[0] += h.get("execution_time", 0.0)
+            entry[1] += 1
+            entry[2], entry[3] = h.get("size", 0), h.get("operation_count", 0)
+        else:
+            other[kind] += h.get("execution_time", 0.0)
+    total = sum(e[0] for e in jit.values())
+    print(f"compiled kernels: {len(jit)} kinds, {sum(e[1] for e in jit.values()) / steps:.0f} launches and "
+          f"{total / steps:.1f} ms per step; the costliest (ms per step, launches per step, width, IR operations):")
+    for ms, launches, width, ops in sorted(jit.values(), key=lambda e: -e[0])[:count]:
+        print(f"  {ms / steps:9.2f} ms  x{launches / steps:<4.2g} width {width:>10,}  ops {ops:>6,}")
+    print("other launches (ms per step): " + ", ".join(f"{k} {v / steps:.2f}" for k, v in
+                                                       sorted(other.items(), key=lambda kv: -kv[1])))
 
 
 if __name__ == "__main__":
