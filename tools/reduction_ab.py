@@ -50,6 +50,13 @@ def old_reduction(commit: str):
     return module
 
 
+def packet_work(counts: np.ndarray, width: int) -> float:
+    """Iterations x lanes of a loop whose lane k runs ``counts[k]`` times, packets of ``width``
+    consecutive lanes running as long as their longest, over the iterations the lanes need."""
+    padded = np.concatenate([counts, np.zeros(-len(counts) % width, counts.dtype)]).reshape(-1, width)
+    return float(padded.max(axis=1).sum() * width / max(counts.sum(), 1))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("size", type=int, help="square image side (pixels)")
@@ -68,6 +75,7 @@ def main() -> None:
     from splatbench.bench.train import synthetic_scene
     from splatbench.metrics.load import load1
     from splatbench.raster import reduction
+    from splatbench.raster.device import packet_width
     from splatbench.train.config import TrainConfig
 
     sides = {"old": old_reduction(args.against).reduce_pairs, "new": reduction.reduce_pairs}
@@ -119,6 +127,11 @@ def main() -> None:
                     blocks[side].append((time.perf_counter() - t0) / args.block)
         compositing.reduce_pairs = sides["new"]
     old, new = np.array(blocks["old"]), np.array(blocks["new"])
+    counts = c["bins"].counts.numpy().astype(np.int64)
+    width = packet_width(c["m"])
+    print(f"  loop work (a packet runs as long as its longest lane; packet iterations x {width} lanes / pairs): "
+          f"Gaussians in index order {packet_work(counts, width):.2f}, in count order "
+          f"{packet_work(np.sort(counts), width):.2f}")
     print(f"{args.size}x{args.size}, {args.gaussians} Gaussians, {c['bins'].num_pairs:,} pairs; against "
           f"{args.against}; load average {load0:.2f} -> {load1():.2f}")
     print(f"  reduction alone: old {1e3 * np.median(alone['old']):.2f} ms, new {1e3 * np.median(alone['new']):.2f} ms "
