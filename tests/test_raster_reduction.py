@@ -60,16 +60,19 @@ def test_packet_width_follows_drjits_rule(features, width):
     assert _llvm.packet_width(features) == width
 
 
+@pytest.mark.parametrize("sorted_lanes", [True, False])
 @pytest.mark.parametrize("slots_per_pair", [1, 4])
-def test_reduce_pairs_adds_each_gaussians_pairs_in_generation_order(slots_per_pair):
+def test_reduce_pairs_adds_each_gaussians_pairs_in_generation_order(slots_per_pair, sorted_lanes, monkeypatch):
     """`reduce_pairs` gives, bit for bit, the float32 sum that adds Gaussian g's pair records
     in generation order (``offsets[g]`` upwards; a pair's S slots in slot order), whatever
-    order it runs its lanes in (ascending pair count, `binning.count_order`). NumPy's
-    element-wise float32 adds in that order are the specification: same operands, same
-    order, so the same bits."""
+    order it runs its lanes in (index order, or ascending pair count, `binning.count_order`,
+    from `SORT_MIN_PAIRS` pairs on: forced here). NumPy's element-wise float32 adds in that
+    order are the specification: same operands, same order, so the same bits."""
     from splatbench.raster.binning import bin_gaussians
     from splatbench.raster.device import get_device
     from splatbench.raster.reduction import PAIR_GROUPS, reduce_pairs
+
+    monkeypatch.setattr(reduction, "SORT_MIN_PAIRS", 0 if sorted_lanes else 1 << 31)
     from tests.test_raster_binning import bins_of, culling_scene
 
     workload = culling_scene(600, seed=5)

@@ -80,6 +80,12 @@ class PairBuffers(NamedTuple):
                 dr.scatter(buffer, values, slot, active)
 
 
+#: The fewest pairs at which `reduce_pairs` runs its lanes in order of pair count (a power of
+#: two, from tools/reduction_ab.py: at 1.9 M pairs the sort saved 24 ms of a 53 ms reduction; at
+#: 156 k pairs the reduction took 0.9 ms in either order).
+SORT_MIN_PAIRS = 1 << 19
+
+
 def reduce_pairs(m, bins: Bins, pair: dict, n: int, slots_per_pair: int = 1) -> dict:
     """Sum per-pair gradient records per Gaussian, deterministically.
 
@@ -94,14 +100,16 @@ def reduce_pairs(m, bins: Bins, pair: dict, n: int, slots_per_pair: int = 1) -> 
     Float, UInt32 = m.Float, m.UInt32
     inverse = dr.zeros(UInt32, bins.num_pairs)
     dr.scatter(inverse, dr.arange(UInt32, bins.num_pairs), bins.order, mode=dr.ReduceMode.Permute)
-    # Lane k sums the pairs of Gaussian by_count[k]: the Gaussians in ascending order of their
-    # pair counts, so the lanes of a SIMD packet loop about equally long (in index order a
-    # packet ran as long as its largest Gaussian: 2.6x the pairs at 128^2 with 20k
-    # Gaussians, 4.2x at 800^2 with 100k). Each lane still sums its own pairs in generation
-    # order: the sums are bit-identical.
-    by_count = count_order(bins.counts)
-    begin = dr.gather(UInt32, bins.offsets, by_count)
-    end = begin + dr.gather(UInt32, bins.counts, by_count)
+    # With many pairs, lane k sums the pairs of Gaussian by_count[k]: the Gaussians in
+    # ascending order of their pair counts, so the lanes of a SIMD packet loop about equally
+    # long (in index order a packet runs as long as its largest Gaussian: 2.6x the pairs' work
+    # at 128^2 with 20k Gaussians, 4.3x at 800^2 with 100k). Each lane still sums its own pairs
+    # in generation order, so the sums are bit-identical either way; the sort waits for the
+    # backward walk (a counting sort runs synchronously), which costs more than it saves
+    # where the reduction takes a millisecond or two (`SORT_MIN_PAIRS`).
+    by_count = count_order(bins.counts) if bins.num_pairs >= SORT_MIN_PAIRS else None
+    begin = bins.offsets if by_count is None else dr.gather(UInt32, bins.offsets, by_count)
+    end = begin + (bins.counts if by_count is None else dr.gather(UInt32, bins.counts, by_count))
     groups = [(name, PAIR_GROUPS[name]) for name in pair]
 
     def cond(j, *acc):
@@ -125,7 +133,11 @@ def reduce_pairs(m, bins: Bins, pair: dict, n: int, slots_per_pair: int = 1) -> 
     sums, pos = {}, 0
     for _, (width, keys) in groups:
         for k, key in enumerate(keys):
-            if key is not None:
+            if key is None:
+                continue
+            if by_count is None:
+                sums[key] = final[pos + k]
+            else:
                 sums[key] = dr.zeros(Float, n)
                 dr.scatter(sums[key], final[pos + k], by_count, mode=dr.ReduceMode.Permute)
         pos += width
