@@ -154,13 +154,17 @@ def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None, m
     """``+0.42 dB [95 % CI +0.10, +0.74]``, with ", no significant difference" when the
     interval contains ``null``, ", no practical difference (below the 0.1 dB minimum effect)"
     when it excludes it but the estimate is smaller than ``min_effect``, ``(1 seed: no
-    interval)``, or ``(seeds did not vary the result: no interval)`` when its half-width is
-    zero at the report's precision (never ``±0.00``)."""
+    interval)``, or, when its half-width is zero at the report's precision (never ``±0.00``),
+    ``(seeds did not vary the result: no interval)`` where it is exactly zero and ``(seeds
+    varied it by less than the precision shown, ±0.003 dB: no interval)`` where it is not."""
     text = fmt_number(iv.estimate, how, spec)
     if not iv.defined:
         return f"{text} ({iv.n} seed{'s' if iv.n != 1 else ''}: no interval)"
     if no_spread(iv, how, spec):
-        return f"{text} (seeds did not vary the result: no interval)"
+        if iv.half_width <= 1e-12 * max(1.0, abs(iv.estimate)):  # equal values, up to the t-interval's own rounding
+            return f"{text} (seeds did not vary the result: no interval)"
+        unit = "" if how == "ratio" or not spec.unit else f" {spec.unit}"
+        return f"{text} (seeds varied it by less than the precision shown, ±{iv.half_width:.1g}{unit}: no interval)"
     text += f" [95 % CI {_bound(iv.low, how, spec)}, {_bound(iv.high, how, spec)}]"
     if null is not None and not iv.excludes(null):
         text += ", no significant difference"
