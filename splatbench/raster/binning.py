@@ -243,10 +243,12 @@ MAX_COUNT_BUCKETS = 1 << 16
 
 
 def count_order(counts, block: int | None = None):
-    """A stable permutation that puts ``counts`` [n] (UInt32) in ascending order within each
-    run of ``block`` elements (None: the whole array), by one counting sort; counts past
-    `MAX_COUNT_BUCKETS` - 1 count as that. Used to give the lanes of a SIMD packet loops of
-    about equal length (`reduction.reduce_pairs`, `blocks.sort_lanes_by_length`)."""
+    """A permutation that puts ``counts`` [n] (UInt32) in ascending order within each run of
+    ``block`` elements (None: the whole array), by one counting sort; counts past
+    `MAX_COUNT_BUCKETS` - 1 count as that. Stable on LLVM; on CUDA `block_mkperm` is stable
+    only up to 512 buckets (`radix_bits`), which neither caller needs: each lane's work does
+    not depend on its neighbours'. Used to give the lanes of a SIMD packet loops of about
+    equal length (`reduction.reduce_pairs`; `blocks.sort_lanes_by_length`, LLVM only)."""
     m = array_namespace(counts)
     n = dr.width(counts)
     if n == 0:
