@@ -246,9 +246,10 @@ def count_order(counts, block: int | None = None):
     """A permutation that puts ``counts`` [n] (UInt32) in ascending order within each run of
     ``block`` elements (None: the whole array), by one counting sort; counts past
     `MAX_COUNT_BUCKETS` - 1 count as that. Stable on LLVM; on CUDA `block_mkperm` is stable
-    only up to 512 buckets (`radix_bits`), which neither caller needs: each lane's work does
-    not depend on its neighbours'. Used to give the lanes of a SIMD packet loops of about
-    equal length (`reduction.reduce_pairs`; `blocks.sort_lanes_by_length`, LLVM only)."""
+    only up to 512 buckets (`radix_bits`). Used to give the lanes of a SIMD packet loops of
+    about equal length: `reduction.reduce_pairs` (each lane's sum is its own, so any order
+    gives the same sums) and `blocks.sort_lanes_by_length` (LLVM only, where the order of a
+    tile's lanes is the order of their adds into a shared gradient slot: stable there)."""
     m = array_namespace(counts)
     n = dr.width(counts)
     if n == 0:
