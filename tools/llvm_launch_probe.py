@@ -11,12 +11,16 @@ drjit-core exports both setters (``jit_llvm_set_target``, ``jit_llvm_set_block_s
 C++ symbols), which this tool calls through ctypes in a fresh process per setting, then
 runs `splatbench bench raster`'s measurement of one workload (`bench.raster.run_one`:
 warm-up untimed, ``--repeats`` runs, median) and prints forward+backward and the
-compositing stages. Settings take turns, ``--rounds`` times; the last line of each
+compositing stages (the forward stage includes the lanes' lists, the backward one the
+per-Gaussian reduction). The evaluation count is `work_stats`'s, whose packets are at most
+a tile's lanes: at 32 lanes it prints the 16-lane count. Settings take turns, ``--rounds`` times; the last line of each
 workload gives each setting's median over the rounds, and the load average is printed
 before and after (a ratio from a loaded machine is not a speed claim: docs/benchmarks.md,
-"Noise"). A width other than the CPU's is also handed to the rasterizer, whose reduction
-gives each packet its own gradient slot per pair (`reduction.lane_group`); the tool times,
-it does not compare images or gradients.
+"Noise"). A width other than the CPU's is also handed to the rasterizer, so more than the
+packets change: below a tile's 16 lanes (8) each tile's lanes are sorted by list length
+(`blocks.sort_lanes_by_length`) and a pair gets a gradient slot per packet
+(`reduction.lane_group`: 2 at 8 lanes); at 32 lanes a packet spans two tiles. The tool
+times; it does not compare images or gradients.
 
 What it showed is in docs/benchmarks.md ("Dr.Jit's launch settings"). Linux, x86-64.
 """
@@ -55,8 +59,8 @@ def _child(job: dict) -> None:
     getattr(core, _SET_BLOCK_SIZE).argtypes = [ctypes.c_uint32]
     if job["width"]:
         getattr(core, _SET_TARGET)(getattr(core, _TARGET_CPU)(), getattr(core, _TARGET_FEATURES)(), job["width"])
-        device._llvm_packet_width.cache_clear()
-        device._llvm_packet_width = lambda: job["width"]  # the reduction's lane groups follow the packets
+        # `device.packet_width` looks this name up when called: the lanes and the reduction follow the packets
+        device._llvm_packet_width = lambda: job["width"]
     if job["block_size"]:
         getattr(core, _SET_BLOCK_SIZE)(job["block_size"])
 
@@ -80,9 +84,9 @@ def main() -> None:
     ap.add_argument("--size", default="400x300", help="the models' image size, WxH")
     ap.add_argument("--synthetic", nargs=2, action="append", default=[], metavar=("N", "WxH"))
     ap.add_argument("--width", type=int, action="append", default=[],
-                    help="packet width (lanes; 0: the CPU's); default: 0, 8 and 32")
+                    help="packet width (lanes, a power of two >= 4; 0: the CPU's); default: 0, 8 and 32")
     ap.add_argument("--block-size", type=int, action="append", default=[],
-                    help="lanes per block (0: Dr.Jit's 16,384); a multiple of the packet width")
+                    help="lanes per block (0: Dr.Jit's 16,384); a power of two >= the packet width")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--child", help=argparse.SUPPRESS)
@@ -92,10 +96,25 @@ def main() -> None:
         return
     widths = args.width or ([0] if args.block_size else [0, 8, 32])
     blocks = args.block_size or [0]
+
+    def power_of_two(x: int) -> bool:
+        return x > 0 and x & (x - 1) == 0
+
+    for w in widths:
+        # the reduction's lane groups (`reduction.lane_group`) divide a tile's lanes: a power of two
+        if w and not (power_of_two(w) and w >= 4):
+            sys.exit(f"llvm_launch_probe: --width {w}: expected 0 or a power of two >= 4")
+    from splatbench._llvm import packet_width  # imports no Dr.Jit
+
+    cpu_width = packet_width()
     for w in widths:
         for b in blocks:
-            if w and b and b % w:
-                sys.exit(f"llvm_launch_probe: --block-size {b} is not a multiple of --width {w}")
+            # drjit-core's jit_llvm_set_block_size refuses anything else (and would abort the child)
+            packet = w or cpu_width
+            whose = "" if w else ", this CPU's"
+            if b and not (power_of_two(b) and b >= packet):
+                sys.exit(f"llvm_launch_probe: --block-size {b}: expected 0 or a power of two >= the packet width "
+                         f"({packet} lanes{whose})")
     settings = [(w, b) for w in widths for b in blocks]
     workloads = [{"model": m, "size": args.size, "synthetic": None} for m in args.model]
     workloads += [{"model": None, "size": None, "synthetic": list(s)} for s in args.synthetic]
