@@ -167,7 +167,7 @@ def unknown_key_problem(key: str, known: Iterable[str]) -> str:
 def check_keys(keys: Iterable[str], known: Iterable[str], *, prefix: str = "", source: str = "") -> None:
     """Raise a one-line `InputError` ``[SOURCE: ]PREFIXKEY: unknown key (...)`` for the first
     of ``keys`` not in ``known`` (`unknown_key_problem`). ``prefix`` is the table's dotted
-    path (``"strategy_options."``); ``source`` names the file or flag (``"--set"``)."""
+    path (``"strategy."``); ``source`` names the file or flag (``"--set"``)."""
     known = set(known)
     for key in keys:
         if key not in known:

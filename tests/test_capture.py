@@ -228,8 +228,8 @@ kind = "train"
 scenes = ["diffuse", { name = "cap", path = "cap", downscale = 2 }, { name = "toy", model = "toy.ply", views = 9 }]
 [base]
 iterations = 20
-init = "random"
-init_random_points = 200
+init.method = "random"
+init.random_points = 200
 data.resolution = 40     # LPIPS (AlexNet) needs images of about 32 px or more
 data.views = 9
 data.spp = 2
@@ -250,10 +250,11 @@ def test_grid_scenes_resolve_per_scene_type(tmp_path):
     from splatbench.experiments.grid import expand
 
     runs = {r.scene: r.config for r in expand(_mixed_grid(tmp_path))}
-    assert runs["diffuse"]["data"] == {"resolution": 40, "views": 9, "spp": 2}
-    assert runs["cap"]["data"] == {"path": str((tmp_path / "exp" / "cap").resolve()), "downscale": 2}
+    reading = {"layout": "auto", "test_every": 8, "masks": True}  # DataConfig's, in every run
+    assert runs["diffuse"]["data"] == {"resolution": 40, "views": 9, "spp": 2, **reading}
+    assert runs["cap"]["data"] == {"path": str((tmp_path / "exp" / "cap").resolve()), "downscale": 2, **reading}
     assert runs["toy"]["data"] == {"model": str((tmp_path / "exp" / "toy.ply").resolve()), "views": 9,
-                                   "resolution": 40}
+                                   "resolution": 40, **reading}
     assert runs["cap"]["iterations"] == runs["toy"]["iterations"] == 20
 
 
@@ -387,10 +388,10 @@ def test_opencv_capture_trains_like_the_same_scene_rendered_pinhole(tmp_path, mo
 
 
 def test_train_config_data_downscale():
-    from splatbench.train.config import TrainConfig, apply_overrides
+    from splatbench.train.config import DataConfig, TrainConfig, apply_overrides
 
     cfg = apply_overrides(TrainConfig(), ["data.downscale=8"])
-    assert cfg.downscale == 8 and cfg.data == {"downscale": 8} and TrainConfig().downscale == 1
+    assert cfg.data == DataConfig(downscale=8) and TrainConfig().data.downscale == 1
     assert TrainConfig.from_toml(cfg.to_toml()) == cfg
     with pytest.raises(InputError, match="data.size: unknown key"):
         apply_overrides(TrainConfig(), ["data.size=8"])
@@ -436,10 +437,10 @@ def test_a_model_trained_on_a_capture_records_the_up_its_cameras_share(tmp_path)
     identity: image-up is world +y) with a note, so `splatbench render` draws it upright."""
     from splatbench.ply import read_view_hints
     from splatbench.train import TrainConfig, train
+    from splatbench.train.config import EvalConfig, InitConfig
 
     cap = _pinhole_capture(tmp_path / "cap", 9)
-    result = train(TrainConfig(dataset=str(cap), out=str(tmp_path / "run"), iterations=3, init="random",
-                               init_random_points=50, lpips_net="none"))
+    result = train(TrainConfig(dataset=str(cap), out=str(tmp_path / "run"), iterations=3, init=InitConfig(method="random", random_points=50), eval=EvalConfig(lpips_net="none")))
     assert np.allclose(read_view_hints(result.ply_path).up, [0.0, 1.0, 0.0], atol=1e-9)
     assert any(n.startswith("world up [0.0, 1.0, 0.0] estimated from the training cameras") for n in result.notes)
 

@@ -34,18 +34,18 @@ scenes = ["diffuse", "glossy"]
 seeds = [0, 1, 2]
 [base]
 iterations = 100
-eval_every = 50
+eval.every = 50
 log_every = 10
 data.resolution = 32
 data.views = 8
 data.spp = 2
 [axes]
-sh_degree = [0, 1, 3]
-ssim_lambda = [0.2, 0.5]
+sh.degree = [0, 1, 3]
+loss.ssim_lambda = [0.2, 0.5]
 [check]
 protocol = "graphdeco-7k"
 scene = "glossy"
-cells = [{ sh_degree = 0, ssim_lambda = 0.2 }, { sh_degree = 3, ssim_lambda = 0.2 }]
+cells = [{ sh.degree = 0, loss.ssim_lambda = 0.2 }, { sh.degree = 3, loss.ssim_lambda = 0.2 }]
 """
 
 
@@ -68,16 +68,17 @@ def test_check_runs_are_the_two_cells_at_the_protocol():
     runs = check_runs(spec)
     assert [r.run_id for r in runs] == [r.run_id for r in (*a, *b)]
     # every seed of the two cells, only the check's scene
-    assert [(r.scene, r.seed, r.labels["sh_degree"], r.labels["ssim_lambda"]) for r in runs] == \
+    assert [(r.scene, r.seed, r.labels["sh.degree"], r.labels["loss.ssim_lambda"]) for r in runs] == \
         [("glossy", s, d, 0.2) for d in (0, 3) for s in (0, 1, 2)]
     for r in runs:
         c = r.config
         # the protocol overrides the grid's length and curve: graphdeco's 7K column, a point every 700 steps
-        assert (c["protocol"], c["iterations"], c["eval_every"]) == ("graphdeco-7k", 7000, 700)
-        assert c["schedule"] == "scaled" and c["strategy_options"]["reset_every"] == 3000  # graphdeco's, as written
+        assert (c["protocol"], c["iterations"], c["eval"]["every"]) == ("graphdeco-7k", 7000, 700)
+        assert c["schedule"] == "scaled" and c["strategy"]["reset_every"] == 3000  # graphdeco's, as written
         # everything else is the grid's cell
-        assert (c["log_every"], c["data"]) == (10, {"resolution": 32, "views": 8, "spp": 2})
-        assert c["ssim_lambda"] == 0.2 and c["sh_degree"] == r.labels["sh_degree"]
+        assert (c["log_every"], c["data"]) == (10, {"resolution": 32, "views": 8, "spp": 2, "layout": "auto",
+                                                  "test_every": 8, "masks": True})
+        assert c["loss"]["ssim_lambda"] == 0.2 and c["sh"]["degree"] == r.labels["sh.degree"]
     # own run ids; the grid's are those of the same file without [check] (existing results are found)
     grid = expand(spec)
     assert not {r.run_id for r in runs} & {r.run_id for r in grid}
@@ -100,49 +101,49 @@ grid = "one-at-a-time"
 [base]
 iterations = 2000
 data.resolution = 32
-strategy_options.reset_every = "10%"
+strategy.reset_every = "10%"
 [axes]
-strategy_options.reset_every = ["10%", 0]
-strategy_options.refine_every = [50, 100]
+strategy.reset_every = ["10%", 0]
+strategy.refine_every = [50, 100]
 [check]
 protocol = "graphdeco-7k"
 scene = "textured"
-cells = [{}, { strategy_options.reset_every = 0 }]
+cells = [{}, { strategy.reset_every = 0 }]
 """
     spec = spec_of(text)
     base, never = check_cells(spec)
-    assert [r.config["strategy_options"]["reset_every"] for r in base] == ["10%"] * 3  # 3,000 of graphdeco's 30,000
-    assert [r.config["strategy_options"]["reset_every"] for r in never] == [0] * 3
+    assert [r.config["strategy"]["reset_every"] for r in base] == ["10%"] * 3  # 3,000 of graphdeco's 30,000
+    assert [r.config["strategy"]["reset_every"] for r in never] == [0] * 3
     assert {r.config["iterations"] for r in (*base, *never)} == {7000}
     grid = {r.run_id for r in expand(spec)}
     assert all(r.run_id in grid for cell in check_cells(spec, at_protocol=False) for r in cell)
     # a number names the axis value it equals (TOML's 50.0 is the axis's 50)
-    other = spec_of(text.replace("{ strategy_options.reset_every = 0 }", "{ strategy_options.refine_every = 50.0 }"))
-    assert [r.config["strategy_options"]["refine_every"] for r in check_cells(other)[1]] == [50] * 3
+    other = spec_of(text.replace("{ strategy.reset_every = 0 }", "{ strategy.refine_every = 50.0 }"))
+    assert [r.config["strategy"]["refine_every"] for r in check_cells(other)[1]] == [50] * 3
 
 
 @pytest.mark.parametrize("check, message", [
-    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh_degree": 0, "ssim_lambda": 0.2}]},
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh.degree": 0, "loss.ssim_lambda": 0.2}]},
      "check.cells: expected two cells"),
     ({"protocol": "graphdeco-7k", "scene": "textured", "cells": [{}, {}]},
      "check.scene: expected one of the grid's scenes (diffuse, glossy), got 'textured'"),
-    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh_degree": 0, "ssim_lambda": 0.2},
-                                                              {"sh_degree": 2, "ssim_lambda": 0.2}]},
-     "check.cells[1].sh_degree: 2 is not a value of the grid's axis 'sh_degree'"),
-    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh_degree": 0}, {"sh_degree": 3}]},
-     "check.cells[0]: names no value of 'ssim_lambda'"),
-    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh_degree": 0, "ssim_lambda": 0.2, "lr": 1},
-                                                              {"sh_degree": 3, "ssim_lambda": 0.2}]},
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh.degree": 0, "loss.ssim_lambda": 0.2},
+                                                              {"sh.degree": 2, "loss.ssim_lambda": 0.2}]},
+     "check.cells[1].sh.degree: 2 is not a value of the grid's axis 'sh.degree'"),
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh.degree": 0}, {"sh.degree": 3}]},
+     "check.cells[0]: names no value of 'loss.ssim_lambda'"),
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh.degree": 0, "loss.ssim_lambda": 0.2, "lr": 1},
+                                                              {"sh.degree": 3, "loss.ssim_lambda": 0.2}]},
      "check.cells[0].lr: not an axis of the grid"),
-    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh_degree": 3, "ssim_lambda": 0.2}] * 2},
+    ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh.degree": 3, "loss.ssim_lambda": 0.2}] * 2},
      "check.cells: the two cells are the same cell"),
     ({"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{}, {}], "seeds": [0]},
      "check.seeds: unknown key"),
-    ({"protocol": "quick", "scene": "glossy", "cells": [{"sh_degree": 0, "ssim_lambda": 0.2},
-                                                       {"sh_degree": 3, "ssim_lambda": 0.2}]},
+    ({"protocol": "quick", "scene": "glossy", "cells": [{"sh.degree": 0, "loss.ssim_lambda": 0.2},
+                                                       {"sh.degree": 3, "loss.ssim_lambda": 0.2}]},
      "check.protocol: 'quick' is laid over the grid's own iterations"),
-    ({"protocol": "graphdeco-9k", "scene": "glossy", "cells": [{"sh_degree": 0, "ssim_lambda": 0.2},
-                                                              {"sh_degree": 3, "ssim_lambda": 0.2}]},
+    ({"protocol": "graphdeco-9k", "scene": "glossy", "cells": [{"sh.degree": 0, "loss.ssim_lambda": 0.2},
+                                                              {"sh.degree": 3, "loss.ssim_lambda": 0.2}]},
      "check.protocol: expected one of 'quick', 'graphdeco-30k', 'graphdeco-7k', got 'graphdeco-9k'"),
 ])
 def test_a_bad_check_is_one_line_before_anything_runs(check, message):
@@ -154,7 +155,7 @@ def test_a_bad_check_is_one_line_before_anything_runs(check, message):
 
 def test_a_check_at_the_grids_own_protocol_or_of_a_kind_without_protocols_is_refused():
     with pytest.raises(InputError, match=r"check.protocol: the grid already runs 'graphdeco-7k'"):
-        spec_of(TRAIN_GRID.replace("iterations = 100\neval_every = 50", 'protocol = "graphdeco-7k"\neval_every = 700'))
+        spec_of(TRAIN_GRID.replace("iterations = 100\neval.every = 50", 'protocol = "graphdeco-7k"\neval.every = 700'))
     raster = """
 name = "r"
 kind = "raster"
@@ -277,23 +278,23 @@ scenes = ["diffuse", "glossy"]
 seeds = [0, 1, 2]
 [base]
 iterations = 100
-eval_every = 50
+eval.every = 50
 data.resolution = 32
 data.views = 8
 data.spp = 2
 [axes]
-sh_degree = [0, 3]
+sh.degree = [0, 3]
 [check]
 protocol = "graphdeco-7k"
 scene = "glossy"
-cells = [{ sh_degree = 0 }, { sh_degree = 3 }]
+cells = [{ sh.degree = 0 }, { sh.degree = 3 }]
 """
 
 
 def record(spec, run, psnr: float, slope: float = 0.0) -> RunRecord:
     """A finished train run ending at ``psnr`` whose test curve rises ``slope`` dB per 1,000 steps."""
     end = run.config["iterations"]
-    every = run.config["eval_every"]
+    every = run.config["eval"]["every"]
     steps = list(range(every, end + 1, every))
     curve = [psnr - slope * (end - s) / 1000 for s in steps]
     metrics = {"test_psnr": psnr, "test_ssim": 0.9, "test_lpips": 0.1, "num_gaussians": 1000,
@@ -312,7 +313,7 @@ def grid_results(root, spec, gain: float = 0.5, noise: float = 0.05, code: str =
     ``code``: the commit the runs record."""
     rng = np.random.default_rng(0)
     for run in expand(spec):
-        d = run.labels["sh_degree"]
+        d = run.labels["sh.degree"]
         write_record(root, dataclasses.replace(record(spec, run, 26.0 + (gain if d == 3 and run.scene == "glossy"
                                                                          else 0.0) + rng.normal(0, noise)), code=code))
 
@@ -322,7 +323,7 @@ def check_results(root, spec, gain: float, slope: float = 0.0, skip: int = 0, no
     rng = np.random.default_rng(1)
     runs = check_runs(spec)
     for run in runs[:len(runs) - skip]:
-        d = run.labels["sh_degree"]
+        d = run.labels["sh.degree"]
         write_record(root, dataclasses.replace(record(spec, run, 28.0 + (gain if d == 3 else 0.0)
                                                       + rng.normal(0, noise), slope if d == 3 else 0.0), code=code))
 
@@ -336,7 +337,7 @@ def test_report_says_not_run_without_the_checks_results(tmp_path):
     assert report.check.verdict == "not run" and report.check.headline == "7K check: not run"
     assert report.check.rerun.claim is None and report.check.grid.claim.practical
     assert "## Headline at the 7K protocol" in text
-    assert ("**7K check: not run** (`sh_degree=3` against `sh_degree=0` on glossy, rerun at protocol "
+    assert ("**7K check: not run** (`sh.degree=3` against `sh.degree=0` on glossy, rerun at protocol "
             "`graphdeco-7k`") in text  # the header
     assert ("**7K check: not run**: none of its 6 runs has a finished result. Run `splatbench run x.toml` "
             "(finished runs are skipped) and report again.") in text
@@ -344,7 +345,7 @@ def test_report_says_not_run_without_the_checks_results(tmp_path):
     assert "the 3DGS paper's 7K column" in text and not (out / CHECK_TABLE_NAME).exists()
     # each cell's other metrics beside the primary: the grid's side only (the check has no runs yet)
     assert "Each cell's SSIM, LPIPS, Gaussians beside its test PSNR" in text
-    assert "| `quick` | `sh_degree=3` |" in text and "| `graphdeco-7k` | `sh_degree=3` |" not in text
+    assert "| `quick` | `sh.degree=3` |" in text and "| `graphdeco-7k` | `sh.degree=3` |" not in text
     # a grid without [check] names none
     plain = write_report(build_report(spec_of(SH_GRID, check=None), tmp_path / "results"), tmp_path / "plain")
     assert "**7K check: none declared**" in plain.read_text() and "## Headline at" not in plain.read_text()
@@ -372,18 +373,18 @@ def test_report_gives_a_verdict_with_the_checks_results(tmp_path, grid_gain, gai
     # the numbers are those of the check's own runs, written beside the report, paired over seeds
     table = pd.read_parquet(out / CHECK_TABLE_NAME)
     assert list(table.run_id) == [r.run_id for r in check_runs(spec)]
-    per = {d: dict(zip(g.seed, g["metric.test_psnr"])) for d, g in table.groupby("axis.sh_degree")}
+    per = {d: dict(zip(g.seed, g["metric.test_psnr"])) for d, g in table.groupby("axis.sh.degree")}
     iv = paired_difference(per[0], per[3])
     claim = check.rerun.claim
     assert claim.n == 3 and claim.value == pytest.approx(iv.estimate) and claim.low == pytest.approx(iv.low)
     assert abs(claim.value - gain) < 3 * noise and claim.text in text
     # beside each cell's PSNR, its SSIM, LPIPS and Gaussians at each protocol (record(): 0.9, 0.1 and 1,000 in
     # every run: seeds that did not vary them)
-    row = next(line for line in text.splitlines() if line.startswith("| `graphdeco-7k` | `sh_degree=3` |"))
+    row = next(line for line in text.splitlines() if line.startswith("| `graphdeco-7k` | `sh.degree=3` |"))
     assert row.endswith("| 0.9000 (no spread) | 0.1000 (no spread) | 1000 (no spread) |"), row
     assert [m.name for m, _, _ in check.rerun.others] == ["test_ssim", "test_lpips", "num_gaussians"]
     assert check.rerun.settled is (slope == 0.0)
-    assert ("**not settled** at `graphdeco-7k` (`sh_degree=3` +0.50 dB / 1,000 steps" in text) is (slope > 0)
+    assert ("**not settled** at `graphdeco-7k` (`sh.degree=3` +0.50 dB / 1,000 steps" in text) is (slope > 0)
     # the grid's side is the grid's runs of the same two cells (iterations 100), not the check's
     assert check.grid.protocol == "quick" and check.grid.claim.value == pytest.approx(grid_gain, abs=0.15)
     if grid_gain == 0.0:  # a no-difference headline: holds only where the interval rules a difference out

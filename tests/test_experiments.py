@@ -206,10 +206,10 @@ MALFORMED = {
                              r"runner\.threads: unknown key"),
     "bad scheduler": (HEAD + '[runner]\nscheduler = "127.0.0.1"\n',
                       r"runner\.scheduler: expected an address like tcp://HOST:PORT"),
-    "a base value one variant cannot take": ('kind = "train"\nscenes = ["textured"]\n[base]\nlr_means = 0.0\n'
-                                             'lr_means_final = 0.0\n[variants.densify]\nnone = { strategy = "none" }\n'
-                                             'budget = { strategy = "budget" }\n',
-                                             r"variants\.densify\.budget: lr_means: 0 freezes the means, but strategy "
+    "a base value one variant cannot take": ('kind = "train"\nscenes = ["textured"]\n[base]\noptim.lr_means = 0.0\n'
+                                             'optim.lr_means_final = 0.0\n[variants.densify]\nnone = { strategy.name = "none" }\n'
+                                             'budget = { strategy.name = "budget" }\n',
+                                             r"variants\.densify\.budget: optim\.lr_means: 0 freezes the means, but strategy "
                                              r"'budget'"),
     "invalid TOML": ('kind = "tests.kinds_for_tests:DUMMY"\nscenes = [\n', r"invalid TOML"),
     # overlapping dimensions: in a product cell with both, the later used to drop the other's value silently
@@ -688,7 +688,7 @@ def test_a_runs_config_is_read_onto_its_kinds_config_dataclass():
     assert error(lambda: read_config(RasterConfig, {"scene": "garden", "alpha_min": 2.0})).startswith("alpha_min: ")
     assert error(lambda: check_config(TrainConfig, {"raster": {"tile_sise": 8}})) == \
         "raster.tile_sise: unknown key (did you mean 'tile_size'?)"
-    check_config(TrainConfig, {"scene": "glossy", "strategy_options": {"anything": 1}})  # a mapping: the kind's
+    check_config(TrainConfig, {"scene": "glossy", "strategy": {"anything": 1}})  # a group that reads its own table
 
 
 def test_the_engine_refuses_a_key_the_kinds_config_lacks_before_the_kind_sees_it(tmp_path):

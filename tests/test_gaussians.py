@@ -13,6 +13,7 @@ from hypothesis.extra import numpy as hnp
 
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_C0, Gaussians, normalize_quats, quat_to_rotmat
+from splatbench.train.config import SHConfig
 from tests.assertions import one_line_error
 
 EPS64 = np.finfo(np.float64).eps
@@ -254,6 +255,7 @@ def test_sh_degree_is_checked_by_one_function_everywhere(value):
     from splatbench.experiments.raster_kind import validate as validate_raster_config
     from splatbench.initial_gaussians import from_points
     from splatbench.train import TrainConfig
+    from splatbench.train.config import SHConfig
     from splatbench.workloads import synthetic
 
     with pytest.raises(InputError) as first:
@@ -266,6 +268,6 @@ def test_sh_degree_is_checked_by_one_function_everywhere(value):
         with pytest.raises(InputError, match="^" + re.escape(message) + "$"):
             call()
     if type(value) is int:  # TrainConfig's field types are checked before its ranges
-        with pytest.raises(InputError, match=r"^sh_degree: expected an int in 0\.\.3 or 'auto', got "):
-            TrainConfig(dataset="x", sh_degree=value).validate()
+        with pytest.raises(InputError, match=r"^sh\.degree: expected an int in 0\.\.3 or 'auto', got "):
+            TrainConfig(dataset="x", sh=SHConfig(degree=value)).validate()
     assert check_sh_degree("d", "auto", allow_auto=True) == "auto"

@@ -257,8 +257,8 @@ def test_a_misspelt_key_gets_one_wording_and_a_suggestion_everywhere():
     from splatbench.train.config import TrainConfig, apply_overrides
 
     cases = {
-        "strategy 'default': strategy_options.grad_treshold: unknown key (did you mean 'grad_threshold'?)":
-            lambda: apply_overrides(TrainConfig(), ["strategy_options.grad_treshold=1e-4"]),
+        "strategy 'default': strategy.grad_treshold: unknown key (did you mean 'grad_threshold'?)":
+            lambda: apply_overrides(TrainConfig(), ["strategy.grad_treshold=1e-4"]),
         "--set: iteration: unknown key (did you mean 'iterations'?)":
             lambda: apply_overrides(TrainConfig(), ["iteration=10"]),
         "alpha_mn: unknown key (did you mean 'alpha_min'?)": lambda: RasterOptions.from_kwargs(alpha_mn=0.1),

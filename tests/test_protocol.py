@@ -8,6 +8,7 @@ is tested is where the schedule is laid and where the evaluations fall, not qual
 
 from __future__ import annotations
 
+
 import math
 from pathlib import Path
 
@@ -16,6 +17,7 @@ import torch
 
 from splatbench.errors import InputError
 from splatbench.train import TrainConfig, TrainResult, apply_overrides, train
+from splatbench.train.config import EvalConfig, SHConfig, StrategyConfig
 from splatbench.train.loop import Trainer
 from splatbench.train.protocol import PROTOCOLS, evaluation_steps
 from tests.test_train import config, tiny_diffuse, tiny_diffuse_dir  # noqa: F401 - fixtures
@@ -41,8 +43,8 @@ def test_graphdeco_protocols_run_the_30k_schedule_unscaled_and_quick_scales_it()
         apply_overrides(TrainConfig(), ["protocol=graphdeco-7k", "iterations=7001"])
     with pytest.raises(InputError, match="protocol: expected one of 'quick', 'graphdeco-30k', 'graphdeco-7k'"):
         apply_overrides(TrainConfig(), ["protocol=graphdeco"])
-    with pytest.raises(InputError, match=r"eval_steps: expected steps in 1\.\.300"):
-        apply_overrides(TrainConfig(), ["iterations=300", "eval_steps=[301]"])
+    with pytest.raises(InputError, match=r"eval.steps: expected steps in 1\.\.300"):
+        apply_overrides(TrainConfig(), ["iterations=300", "eval.steps=[301]"])
     # the quick protocol keeps its final-10 % check; graphdeco's 7K model is taken mid-refinement as the paper's is
     with pytest.raises(InputError, match="final 10 %"):
         TrainConfig(iterations=7000, schedule="absolute")
@@ -54,7 +56,7 @@ def test_the_position_lr_decays_over_30k_steps_under_graphdecos_protocols(tmp_pa
     steps: at 7,000 it is 1.6e-4^(23/30) 1.6e-6^(7/30) x extent), not a decay over 7,000."""
     lr = {}
     for name in ("graphdeco-30k", "graphdeco-7k", "quick"):
-        cfg = TrainConfig(protocol=name, iterations=7000, strategy="none", out=str(tmp_path / name))
+        cfg = TrainConfig(protocol=name, iterations=7000, out=str(tmp_path / name), strategy=StrategyConfig(name="none"))
         lr[name] = Trainer(cfg, dataset=tiny_diffuse).means_lr
     extent = lr["quick"].scale
     for step in (0, 3500, 6999):
@@ -71,7 +73,7 @@ def test_the_7k_check_is_the_30k_run_stopped_there(tmp_path, tiny_diffuse):
     learning rate decays over each run's own length), so the comparison can fail."""
     def run(name, protocol, iterations, **kw):
         return train(config(tmp_path, out=str(tmp_path / name), protocol=protocol, iterations=iterations,
-                            strategy="default", schedule="scaled", **kw), dataset=tiny_diffuse)
+                            schedule="scaled", **kw, strategy=StrategyConfig(name="default")), dataset=tiny_diffuse)
 
     short = run("7k", "graphdeco-7k", 10)
     long = run("30k", "graphdeco-30k", 20, checkpoint_every=10)
@@ -88,7 +90,7 @@ def test_step_evaluations_record_every_column_and_survive_a_resume(tmp_path, tin
     steps (PSNR, SSIM, LPIPS in both input conventions, Gaussians, loop time), the last one
     the final model's; the curve holds the step-6 point too; a resumed run ends with the
     same list; the JSON round trip keeps it."""
-    base = dict(protocol="graphdeco-30k", iterations=12, eval_steps=[6], strategy="default", sh_degree=0)
+    base = dict(protocol="graphdeco-30k", iterations=12, eval=EvalConfig(steps=[6]), strategy=StrategyConfig(name="default"), sh=SHConfig(degree=0))
     straight = train(config(tmp_path, out=str(tmp_path / "a"), checkpoint_every=8, **base), dataset=tiny_diffuse)
     assert straight.protocol == "graphdeco-30k"
     assert [e.step for e in straight.step_evaluations] == [6, 12]
@@ -114,22 +116,21 @@ def test_step_evaluations_record_every_column_and_survive_a_resume(tmp_path, tin
 
 
 def test_a_checkpoint_written_before_protocols_existed_resumes(tmp_path, tiny_diffuse):
-    """A checkpoint whose config has no ``protocol`` / ``eval_steps`` (written before they
-    existed) resumes a run at their defaults."""
+    """A checkpoint whose config has no ``protocol`` / ``eval.steps`` (a field added after it was
+    written) resumes a run at their defaults."""
     base = dict(iterations=8, checkpoint_every=4)
     train(config(tmp_path, out=str(tmp_path / "a"), **base), dataset=tiny_diffuse)
     ckpt = tmp_path / "a" / "checkpoints" / "iteration_4.pt"
     state = torch.load(ckpt, map_location="cpu", weights_only=True)
-    for key in ("protocol", "eval_steps"):
-        del state["config"][key]
+    del state["config"]["protocol"], state["config"]["eval"]["steps"]
     torch.save(state, ckpt)
     assert train(config(tmp_path, out=str(tmp_path / "b"), **base), dataset=tiny_diffuse, resume=ckpt).iterations == 8
 
 
-def test_protocol_changes_run_ids_only_where_it_is_used():
-    """Grid run ids hash the resolved config (splatbench.experiments.train_kind): the quick
-    protocol and empty eval_steps are left out, so every committed grid keeps its ids
-    (tests/test_committed_reports.py), while another protocol or eval steps make new runs."""
+def test_protocol_and_eval_steps_change_run_ids():
+    """Grid run ids hash the resolved config (splatbench.experiments.train_kind): the protocol and
+    the evaluation steps are in it, at their defaults too, so another protocol or other eval steps
+    make new runs, and the default written out is the same run."""
     from splatbench.experiments.grid import make_run_id
     from splatbench.experiments.train_kind import TRAIN
 
@@ -137,9 +138,9 @@ def test_protocol_changes_run_ids_only_where_it_is_used():
         return make_run_id("train", TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 7000, **kw}))
 
     resolved = TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 2000})
-    assert "protocol" not in resolved and "eval_steps" not in resolved
-    assert run_id() == run_id(protocol="quick") == run_id(eval_steps=[])
-    ids = {run_id(protocol="graphdeco-7k"), run_id(protocol="graphdeco-30k"), run_id(eval_steps=[100])}
+    assert resolved["protocol"] == "quick" and resolved["eval"]["steps"] == []
+    assert run_id() == run_id(protocol="quick") == run_id(eval={"steps": []})
+    ids = {run_id(protocol="graphdeco-7k"), run_id(protocol="graphdeco-30k"), run_id(eval={"steps": [100]})}
     assert len(ids) == 3 and run_id() not in ids
     # a protocol given without iterations brings its own
     assert TRAIN.resolve({"scene": "diffuse", "seed": 0, "protocol": "graphdeco-7k"})["iterations"] == 7000
@@ -164,7 +165,7 @@ def test_a_short_graphdeco_run_is_advised_to_run_full_length_and_told_its_column
     assert note.startswith("warning: strategy 'default' never refines in this run")
     assert "run the protocol's full length (iterations=7000" in note and "smaller value" not in note
     quick = apply_overrides(TrainConfig(), ["iterations=200"])
-    assert "give strategy_options.refine_every a smaller value" in _schedule_note(quick.make_strategy(), quick)
+    assert "give strategy.refine_every a smaller value" in _schedule_note(quick.make_strategy(), quick)
 
     assert PROTOCOLS["graphdeco-7k"].early_stop_note(50) == (
         "protocol 'graphdeco-7k' stopped early, after 50 of its 7000 steps: its step evaluation at 50 is not the "
@@ -177,7 +178,6 @@ def test_a_short_graphdeco_run_is_advised_to_run_full_length_and_told_its_column
 
 
 def test_a_graphdeco_run_stopped_early_says_so_among_its_notes_and_warnings(tmp_path, tiny_diffuse):
-    res = train(TrainConfig(protocol="graphdeco-7k", iterations=3, strategy="default", sh_degree=0,
-                            out=str(tmp_path / "r")), dataset=tiny_diffuse)
+    res = train(TrainConfig(protocol="graphdeco-7k", iterations=3, out=str(tmp_path / "r"), strategy=StrategyConfig(name="default"), sh=SHConfig(degree=0)), dataset=tiny_diffuse)
     assert any(n.startswith("protocol 'graphdeco-7k' stopped early, after 3 of its 7000 steps") for n in res.notes)
     assert any("never refines" in w and "run the protocol's full length" in w for w in res.warnings)

@@ -55,11 +55,11 @@ def test_paper_config_is_graphdecos_30k_protocol_on_white(tool, tmp_path):
     cfg = tool.paper_config(tmp_path / "lego", tmp_path / "run")
     assert (cfg.protocol, cfg.iterations, cfg.schedule_length, cfg.evaluation_steps) == \
         ("graphdeco-30k", 30_000, 30_000, [7000, 30_000])
-    assert cfg.background == [1.0, 1.0, 1.0] and cfg.init_random_points == 100_000
-    assert (cfg.init, cfg.init_region, cfg.initial_opacity) == ("random", "nerf_synthetic", 0.1)
-    assert (cfg.lpips_net, cfg.lpips_scale_inputs, cfg.layout) == ("vgg", False, "blender")
+    assert cfg.background == [1.0, 1.0, 1.0] and cfg.init.random_points == 100_000
+    assert (cfg.init.method, cfg.init.region, cfg.initial_opacity) == ("random", "nerf_synthetic", 0.1)
+    assert (cfg.eval.lpips_net, cfg.eval.lpips_scale_inputs, cfg.data.layout) == ("vgg", False, "blender")
     smoke = tool.paper_config(tmp_path / "lego", tmp_path / "run", tool.SMOKE)
-    assert (smoke.iterations, smoke.evaluation_steps, smoke.downscale) == (300, [100, 300], 4)
+    assert (smoke.iterations, smoke.evaluation_steps, smoke.data.downscale) == (300, [100, 300], 4)
 
 
 def test_the_tool_adds_no_initializer_so_a_bare_resume_reads_its_config(tool, tmp_path):
@@ -70,7 +70,7 @@ def test_the_tool_adds_no_initializer_so_a_bare_resume_reads_its_config(tool, tm
     spec.loader.exec_module(importlib.util.module_from_spec(spec))
     assert INITIALIZERS == before
     cfg = tool.paper_config(tmp_path / "lego", tmp_path / "run")
-    assert INITIALIZERS[cfg.init].__module__ == "splatbench.train.initializers"  # built in
+    assert INITIALIZERS[cfg.init.method].__module__ == "splatbench.train.initializers"  # built in
     assert TrainConfig.from_dict(cfg.to_dict()) == cfg
 
 
@@ -114,10 +114,10 @@ def test_region_auto_picks_graphdecos_box_on_a_nerf_synthetic_folder(tool, tmp_p
     assert off.chosen == "convergence"
     np.testing.assert_allclose(off.center, [3.0, 0.0, 0.0], atol=1e-6)
 
-    cfg = tool.paper_config(tmp_path / "lego", tmp_path / "run", ["init_random_points=3000"])
-    made = initialize(cfg.init, ds, InitSettings(sh_degree=cfg.sh_degree, opacity=cfg.initial_opacity,
-                                                 random_points=cfg.init_random_points, seed=cfg.seed,
-                                                 region=cfg.init_region))
+    cfg = tool.paper_config(tmp_path / "lego", tmp_path / "run", ["init.random_points=3000"])
+    made = initialize(cfg.init.method, ds, InitSettings(sh_degree=cfg.sh.max_degree, opacity=cfg.initial_opacity,
+                                                 random_points=cfg.init.random_points, seed=cfg.seed,
+                                                 region=cfg.init.region))
     g, summary = made.gaussians, made.summary
     assert (summary["method"], summary["region"], summary["points"]) == ("random", "nerf_synthetic", 3000)
     means = g.means.astype(np.float64)

@@ -33,7 +33,7 @@ PSNR = MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher")
 def spec_of(extra: dict | None = None):
     return parse_experiment({"name": "rules", "kind": "train", "scenes": ["glossy"], "seeds": [0, 1, 2],
                              "base": {"iterations": 2000, "data": {"resolution": 32, "views": 8, "spp": 2}},
-                             "axes": {"sh_degree": [0, 3]}, **(extra or {})}, source="rules.toml")
+                             "axes": {"sh.degree": [0, 3]}, **(extra or {})}, source="rules.toml")
 
 
 def metrics_of(psnr: float, seconds: float = 10.0, loaded: int = 0, **more) -> dict:
@@ -92,14 +92,14 @@ def _lead(delta: float):
     """SH 3 ahead of SH 0 by ``delta`` dB on every seed, plus a little seeded noise."""
     def make(run):
         rng = np.random.default_rng(run.seed)
-        psnr = 30.0 + rng.normal(0, 0.5) + (delta + rng.normal(0, 0.004) if run.labels["sh_degree"] == 3 else 0.0)
+        psnr = 30.0 + rng.normal(0, 0.5) + (delta + rng.normal(0, 0.004) if run.labels["sh.degree"] == 3 else 0.0)
         return metrics_of(psnr), flat_curves(psnr)
     return make
 
 
 def test_best_needs_a_significant_and_practical_lead(tmp_path):
     report, text = results(tmp_path, spec_of(), _lead(0.05))
-    claims = report.findings["sh_degree"].claims
+    claims = report.findings["sh.degree"].claims
     assert not [c for c in claims if c.kind == "best"]
     lead = next(c for c in claims if c.kind == "no best")
     assert lead.significant and not lead.practical and lead.label == "3"
@@ -109,14 +109,14 @@ def test_best_needs_a_significant_and_practical_lead(tmp_path):
 
     # the experiment file's own minimum effect: 0.01 dB makes the same lead a best
     report, text = results(tmp_path / "b", spec_of({"report": {"min_effect": {"test_psnr": 0.01}}}), _lead(0.05))
-    best = [c for c in report.findings["sh_degree"].claims if c.kind == "best"]
+    best = [c for c in report.findings["sh.degree"].claims if c.kind == "best"]
     assert [(c.scene, c.label, c.reference) for c in best] == [("glossy", "3", "0")]
-    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
+    vs = next(c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
     assert "of at least 0.01 dB" in text and vs.practical and "no practical difference" not in vs.text
 
     # a 0.5 dB lead is named best under the default minimum effect
     report, _ = results(tmp_path / "c", spec_of(), _lead(0.5))
-    assert [c.label for c in report.findings["sh_degree"].claims if c.kind == "best"] == ["3"]
+    assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
 
 
 def test_a_minimum_effect_for_a_metric_the_findings_do_not_compare_is_refused(tmp_path):
@@ -133,15 +133,15 @@ def test_seeds_that_vary_nothing_print_no_interval(tmp_path):
     """Every seed gives the same PSNR (what init = surface did to biker): the table says
     "(no spread)", a 0.02 dB difference is not called significant, and no ±0.00 is printed."""
     def make(run):
-        psnr = 41.2613 + (0.02 if run.labels["sh_degree"] == 3 else 0.0)
+        psnr = 41.2613 + (0.02 if run.labels["sh.degree"] == 3 else 0.0)
         return metrics_of(psnr), flat_curves(psnr)
 
     report, text = results(tmp_path, spec_of(), make)
     assert "± 0.00 " not in text and "±0.00" not in text and "± 0.00|" not in text.replace(" |", "|")
     assert "41.26 (no spread)" in text and "41.28 (no spread)" in text
-    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
+    vs = next(c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
     assert vs.text == "+0.02 dB (seeds did not vary the result: no interval)" and not vs.significant
-    assert not [c for c in report.findings["sh_degree"].claims if c.kind == "best"]
+    assert not [c for c in report.findings["sh.degree"].claims if c.kind == "best"]
 
 
 def test_seeds_that_vary_less_than_the_precision_shown_say_so(tmp_path):
@@ -150,11 +150,11 @@ def test_seeds_that_vary_less_than_the_precision_shown_say_so(tmp_path):
     must not claim the seeds did not vary it (sh_degree_spp128 had said so of a ±0.004 dB
     interval); it gives the half-width instead."""
     def make(run):
-        psnr = 41.2613 + (0.02 + 0.001 * run.seed if run.labels["sh_degree"] == 3 else 0.0)
+        psnr = 41.2613 + (0.02 + 0.001 * run.seed if run.labels["sh.degree"] == 3 else 0.0)
         return metrics_of(psnr), flat_curves(psnr)
 
     report, text = results(tmp_path, spec_of(), make)
-    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
+    vs = next(c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
     assert "did not vary" not in vs.text and not vs.significant
     # 3 seeds: mean 0.021, s = 0.001, t(0.975, 2) = 4.303: half-width 0.0025
     assert vs.text == "+0.02 dB (seeds varied it by less than the precision shown, ±0.002 dB: no interval)"
@@ -165,16 +165,16 @@ def test_a_loaded_runs_time_never_enters_the_pareto_front(tmp_path):
     """SH 0 is fastest, but every one of its runs was timed under load: the time front is SH 3
     alone, and the report names what it left out; the Gaussians front keeps SH 0."""
     def make(run):
-        zero = run.labels["sh_degree"] == 0
+        zero = run.labels["sh.degree"] == 0
         psnr = 30.0 + (0.0 if zero else 1.0) + 0.01 * run.seed
         return metrics_of(psnr, seconds=5.0 if zero else 20.0, loaded=int(zero)), flat_curves(psnr)
 
     report, text = results(tmp_path, spec_of(), make)
-    assert report.fronts["time_vs_error"] == {"glossy": ["sh_degree=3"]}
+    assert report.fronts["time_vs_error"] == {"glossy": ["sh.degree=3"]}
     assert "Left out of this figure and its front: 3 run(s) timed while other processes loaded the machine " \
-           "(glossy `sh_degree=0`)" in text
-    assert report.fronts["gaussians_vs_error"]["glossy"][0] == "sh_degree=3"  # 1000 each: the better one
-    time_vs = [c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "train_seconds"]
+           "(glossy `sh.degree=0`)" in text
+    assert report.fronts["gaussians_vs_error"]["glossy"][0] == "sh.degree=3"  # 1000 each: the better one
+    time_vs = [c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "train_seconds"]
     assert time_vs == []  # no pair of trusted times: no time comparison at all
 
 
@@ -254,24 +254,24 @@ def test_a_flat_test_curve_beside_a_rising_train_curve_is_overfitting():
 
 def test_an_unsettled_difference_is_marked_in_the_axis_finding(tmp_path):
     def make(run):
-        three = run.labels["sh_degree"] == 3
+        three = run.labels["sh.degree"] == 3
         psnr = 30.0 + (1.0 + 0.02 * run.seed ** 2 if three else 0.0) + 0.01 * run.seed
         return metrics_of(psnr), flat_curves(psnr, rise=0.5 if three else 0.0)
 
     report, text = results(tmp_path, spec_of(), make)
-    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
+    vs = next(c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
     assert vs.significant and vs.practical and vs.settled is False
     assert "**Not settled** (glossy: `3` +1.00 dB / 1,000 steps over the last quarter)" in text
     # the paired difference at every evaluation: d = 1 + 0.02 s² (mean 1.033) at 500, 1,000 and 2,000; at
     # 1,500 the sh 3 curve sits `rise` = 0.5 dB below its end while sh 0's is flat: 0.533
     assert ("Paired difference at each evaluation (mean over seeds; glossy, steps 500 / 1,000 / 1,500 / 2,000: "
             "+1.03, +1.03, +0.53, +1.03 dB)") in text
-    best = next(c for c in report.findings["sh_degree"].claims if c.kind == "best")
+    best = next(c for c in report.findings["sh.degree"].claims if c.kind == "best")
     assert best.settled is False and "**not settled**" in best.text
 
     report, _ = results(tmp_path / "b", spec_of(), lambda run: (metrics_of(30.0 + run.seed * 0.01 + (
-        1.0 + 0.02 * run.seed ** 2 if run.labels["sh_degree"] == 3 else 0.0)), flat_curves(30.0)))
-    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
+        1.0 + 0.02 * run.seed ** 2 if run.labels["sh.degree"] == 3 else 0.0)), flat_curves(30.0)))
+    vs = next(c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
     assert vs.settled is True
 
 
@@ -292,7 +292,7 @@ def test_a_cell_drifting_apart_late_is_not_settled():
 # --------------------------------------------------------------------------- confounds
 def test_a_finding_names_what_else_a_setting_changed(tmp_path):
     def make(run):
-        three = run.labels["sh_degree"] == 3
+        three = run.labels["sh.degree"] == 3
         psnr = 30.0 + (1.0 if three else 0.0) + 0.01 * run.seed
         counts = {"refinements": 10, "opacity_resets": 7 if three else 4, "cloned": 500, "split": 300,
                   "pruned": 100, "pruned_size": 0, "relocated": 0, "added": 0}
@@ -302,7 +302,7 @@ def test_a_finding_names_what_else_a_setting_changed(tmp_path):
     assert "Also changed: glossy: opacity resets 7 instead of 4 (mean over seeds)" in text
     # Gaussian counts below the floor (20 per run) on both sides are left out, however far apart; events are not
     def few(run):
-        three = run.labels["sh_degree"] == 3
+        three = run.labels["sh.degree"] == 3
         counts = {"refinements": 10, "opacity_resets": 4, "cloned": 500, "split": 300, "pruned": 100,
                   "pruned_size": 3 if three else 15, "relocated": 0, "added": 0}
         return metrics_of(30.0 + (1.0 if three else 0.0) + 0.01 * run.seed, **counts), flat_curves(30.0)
@@ -310,11 +310,11 @@ def test_a_finding_names_what_else_a_setting_changed(tmp_path):
     _, few_text = results(tmp_path / "few", spec_of(), few)
     assert "Also changed" not in few_text
     _, more = results(tmp_path / "more", spec_of(), lambda run: (lambda m, c: (
-        {**m, "pruned_size": 25 if run.labels["sh_degree"] == 3 else 15}, c))(*few(run)))
+        {**m, "pruned_size": 25 if run.labels["sh.degree"] == 3 else 15}, c))(*few(run)))
     assert "Also changed: glossy: pruned for size 25 instead of 15 (mean over seeds)" in more
     # the header's schedule as run: the recorded counts per cell, as they differ
-    assert ("- **Schedule as run** (each run's recorded counts, in its 2,000 steps): `sh_degree=0` 10 refinements, "
-            "4 opacity resets; `sh_degree=3` 10 refinements, 7 opacity resets") in text
+    assert ("- **Schedule as run** (each run's recorded counts, in its 2,000 steps): `sh.degree=0` 10 refinements, "
+            "4 opacity resets; `sh.degree=3` 10 refinements, 7 opacity resets") in text
     assert "was not recorded by these runs" not in text
 
     # a table from before the counts were recorded still reports, and says so
@@ -325,9 +325,9 @@ def test_a_finding_names_what_else_a_setting_changed(tmp_path):
     # 2,000 (every 200), fire only inside the refine window: 2 below 500 (25 %), 7 below 1,500 (75 %)
     stops = parse_experiment({"name": "stops", "kind": "train", "scenes": ["glossy"], "seeds": [0, 1, 2],
                               "base": {"iterations": 2000, "data": {"resolution": 32, "views": 8, "spp": 2}},
-                              "axes": {"strategy_options.refine_stop": ["25%", "75%"]}}, source="stops.toml")
+                              "axes": {"strategy.refine_stop": ["25%", "75%"]}}, source="stops.toml")
     _, text = results(tmp_path / "stops", stops, lambda run: (metrics_of(30.0 + run.seed * 0.1 + (
-        0.5 if run.labels["strategy_options.refine_stop"] == "75%" else 0.0)), flat_curves(30.0)))
+        0.5 if run.labels["strategy.refine_stop"] == "75%" else 0.0)), flat_curves(30.0)))
     assert "Also changed: glossy: opacity resets 7 instead of 2 (planned), refinements 14 instead of 4 (planned)" in text
     assert "Opacity resets fire only inside the refine window" in text
 
@@ -336,12 +336,12 @@ def test_the_model_size_counts_the_sh_bands_each_gaussian_carries(tmp_path):
     # 1,000 Gaussians at SH degree 0 hold 14 floats each (3 + 3 + 4 + 1 + 3), at degree 3 59 (3 + 3 + 4 + 1 + 48):
     # 14,000 against 59,000 parameters, a ratio of 59 / 14 = 4.214 at the same Gaussian count
     def make(run):
-        d = run.labels["sh_degree"]
+        d = run.labels["sh.degree"]
         return metrics_of(30.0 + 0.01 * run.seed + (0.5 if d == 3 else 0.0), sh_degree=d), flat_curves(30.0)
 
     report, text = results(tmp_path, spec_of(), make)
     assert ("glossy: `0` 0.01 M parameters, 0.1 MB; `3` 0.06 M parameters, 0.2 MB (×4.214 `0`'s)") in text
-    claim = next(c for c in report.findings["sh_degree"].claims if c.kind == "model size")
+    claim = next(c for c in report.findings["sh.degree"].claims if c.kind == "model size")
     assert claim.value == pytest.approx(59 / 14) and claim.reference == "0"
     # ... while the Gaussian count alone reads ×1.000
     assert "Gaussians ×1.000" in text
@@ -357,20 +357,20 @@ def test_the_model_size_counts_the_sh_bands_each_gaussian_carries(tmp_path):
 def test_ssim_is_compared_and_named_as_the_trained_quantity(tmp_path):
     # SH 3's SSIM 0.01 + 0.001 s above SH 0's: a paired difference of +0.0110 over seeds 0..2
     def make(run):
-        three = run.labels["sh_degree"] == 3
+        three = run.labels["sh.degree"] == 3
         m = metrics_of(30.0 + 0.01 * run.seed + (0.5 if three else 0.0))
         m["test_ssim"] = 0.8 + ((0.01 + 0.001 * run.seed) if three else 0.0)
         return m, flat_curves(30.0)
 
     report, text = results(tmp_path, spec_of(), make)
-    vs = next(c for c in report.findings["sh_degree"].claims if c.kind == "vs" and c.metric == "test_ssim")
+    vs = next(c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "test_ssim")
     assert vs.value == pytest.approx(0.011) and vs.significant and vs.practical  # above the 0.003 minimum effect
     assert "; SSIM +0.0110 [95 % CI" in text and "SSIM 0.003" in text
     # the default loss weights D-SSIM by 0.2 in every run: the SSIM compared is the one trained
     assert "- SSIM: the loss, (1 − λ) L1 + λ D-SSIM, trains on the same SSIM (its 11-tap Gaussian window) in " \
-           "every row (ssim_lambda = 0.2)" in text
+           "every row (loss.ssim_lambda = 0.2)" in text
     # a grid whose loss is L1 alone trains no SSIM and says nothing of it
-    _, text = results(tmp_path / "l1", spec_of({"base": {"iterations": 2000, "ssim_lambda": 0.0, "data": {
+    _, text = results(tmp_path / "l1", spec_of({"base": {"iterations": 2000, "loss.ssim_lambda": 0.0, "data": {
         "resolution": 32, "views": 8, "spp": 2}}}), make)
     assert "- SSIM: the loss" not in text
 
@@ -378,21 +378,21 @@ def test_ssim_is_compared_and_named_as_the_trained_quantity(tmp_path):
 # --------------------------------------------------------------------------- protocol
 def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     _, text = results(tmp_path, spec_of(), _lead(0.5))
-    header = text.split("## sh_degree")[0]
+    header = text.split("## sh.degree")[0]
     assert "- **Protocol**: quick (graphdeco's 30,000-step schedule scaled" in header
     assert "- **Schedule**: 2,000 iterations, graphdeco's 30,000-step schedule scaled to the run" in header
     assert "learning rates not scaled: positions 0.00016 → 1.6e-06 × scene extent" in header
     assert "- **Evaluation**: the test views at steps 500, 1,000, 1,500, 2,000" in header
     assert "rendered scenes at 32 px wide by Mitsuba, 2 spp" in header
     assert "LPIPS v0.1, AlexNet backbone, inputs scaled to [-1, 1]" in header
-    # the default start (init = auto: the scene's points) is jittered with the seed (init_jitter 0.5)
+    # the default start (init = auto: the scene's points) is jittered with the seed (init.jitter 0.5)
     assert "the initial points (init = auto, seeded)" in header
     # ... and the header says what auto resolved to: these runs do not record it, so from the scene type
     # (a rendered scene has its points) and the curves' step-0 count (flat_curves: 1,000)
     assert ("- **Initialisation**: auto → surface on glossy: the scene's own surface points, 1,000 Gaussians at "
             "step 0, jittered 0.5 × their neighbour spacing per seed (inferred") in header
-    # sh_interval 1,000 scaled to 2,000 of 30,000 steps: round(66.7) = 67; bands at 67, 134, 201
-    assert "SH degree raised one band every 67 steps (`sh_interval` as the run reads it: bands 1, 2, 3 at steps " \
+    # sh.interval 1,000 scaled to 2,000 of 30,000 steps: round(66.7) = 67; bands at 67, 134, 201
+    assert "SH degree raised one band every 67 steps (`sh.interval` as the run reads it: bands 1, 2, 3 at steps " \
            "67, 134, 201" in header
 
     # a config that names its protocol (a preset added to TrainConfig) is shown as named
@@ -413,7 +413,7 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     init = next(line for line in protocol_lines(recorded) if line.startswith("- **Initialisation**"))
     assert "auto → sfm on glossy: SfM points triangulated from the training views, 1,234 Gaussians at step 0" \
         in init and "inferred" not in init
-    table["config.init"] = "random"
+    table["config.init.method"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so
     table["config.init"], table["config.init_jitter"] = "surface", 0.0
@@ -425,7 +425,7 @@ def _bigger_lead(share: float):
     """SH 3 ahead of SH 0 by 0.5 dB on every seed, with ``share`` more Gaussians (plus seeded noise)."""
     def make(run):
         rng = np.random.default_rng(run.seed)
-        three = run.labels["sh_degree"] == 3
+        three = run.labels["sh.degree"] == 3
         psnr = 30.0 + rng.normal(0, 0.5) + (0.5 + rng.normal(0, 0.004) if three else 0.0)
         count = round(10000 * (1.0 + rng.normal(0, 0.01)) * ((1.0 + share) if three else 1.0))
         return metrics_of(psnr, num_gaussians=count), flat_curves(psnr)
@@ -437,14 +437,14 @@ def test_best_is_not_named_between_models_of_different_sizes(tmp_path):
     fewer, but at 20 % more it is "no single best at comparable size", with the size ratio as a
     claim whose number is the paired geometric-mean ratio of the runs' counts."""
     report, text = results(tmp_path / "a", spec_of(), _bigger_lead(0.03))
-    assert [c.label for c in report.findings["sh_degree"].claims if c.kind == "best"] == ["3"]
+    assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
     assert "with no more than 5 % more Gaussians" in text
 
     report, text = results(tmp_path / "b", spec_of(), _bigger_lead(-0.3))  # the leader is smaller: named
-    assert [c.label for c in report.findings["sh_degree"].claims if c.kind == "best"] == ["3"]
+    assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
 
     report, text = results(tmp_path / "c", spec_of(), _bigger_lead(0.2))
-    claims = report.findings["sh_degree"].claims
+    claims = report.findings["sh.degree"].claims
     assert not [c for c in claims if c.kind == "best"]
     lead = next(c for c in claims if c.kind == "no best")
     assert (lead.label, lead.reference) == ("3", "0") and lead.significant and lead.practical
@@ -470,7 +470,7 @@ def test_best_is_not_named_between_models_of_different_sizes(tmp_path):
     # the experiment file's own minimum effect for the Gaussians (25 %) lets the same lead be named
     report, _ = results(tmp_path / "d", spec_of({"report": {"min_effect": {"num_gaussians": 0.25}}}),
                         _bigger_lead(0.2))
-    assert [c.label for c in report.findings["sh_degree"].claims if c.kind == "best"] == ["3"]
+    assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
 
 
 def test_the_raster_kind_declares_no_size_for_its_best():
@@ -484,7 +484,7 @@ def test_a_time_timed_under_load_prints_no_number_in_the_table(tmp_path):
     """Every SH 0 run was timed under load: its time cells read "— (loaded)". One SH 3 run (seed 2)
     was: its cells average the other two seeds and say one run was left out. Quality is kept."""
     def make(run):
-        zero = run.labels["sh_degree"] == 0
+        zero = run.labels["sh.degree"] == 0
         psnr = 30.0 + (0.0 if zero else 1.0) + 0.01 * run.seed
         loaded = int(zero or run.seed == 2)
         seconds = 1000.0 if loaded else 10.0 + run.seed  # a loaded run's time would move the mean a lot
@@ -498,5 +498,5 @@ def test_a_time_timed_under_load_prints_no_number_in_the_table(tmp_path):
     assert rows["`0`"][q].startswith("30.01 ± ")  # quality kept: the mean of 30.00, 30.01, 30.02
     # seeds 0 and 1 only: 10.0 and 11.0 -> 10.5 (the loaded 1000 s would make it 340.3)
     assert rows["`3`"][t].startswith("10.5 ± ") and rows["`3`"][t].endswith("(1 loaded run left out)")
-    table = next(a for a in report.axes if a.axis == "sh_degree")
+    table = next(a for a in report.axes if a.axis == "sh.degree")
     assert table.stat("glossy", "3", "train_seconds").n == 2 and table.stat("glossy", "0", "train_seconds").n == 0

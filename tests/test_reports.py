@@ -39,7 +39,7 @@ SH_VALUES = [0, 1, 3, "auto"]
 def sh_spec(seeds=(0, 1, 2)):
     return parse_experiment({"name": "shfake", "kind": "train", "scenes": SCENES, "seeds": list(seeds),
                              "base": {"iterations": 100, "data": {"resolution": 32, "views": 8, "spp": 2}},
-                             "axes": {"sh_degree": SH_VALUES}}, source="shfake.toml")
+                             "axes": {"sh.degree": SH_VALUES}}, source="shfake.toml")
 
 
 def fake_metrics(scene: str, degree, seed: int) -> tuple[dict, dict]:
@@ -80,7 +80,7 @@ def sh_results(tmp_path_factory):
     for i, run in enumerate(runs):
         if i == 5:
             continue  # never ran
-        metrics, curves = fake_metrics(run.scene, run.labels["sh_degree"], run.seed)
+        metrics, curves = fake_metrics(run.scene, run.labels["sh.degree"], run.seed)
         status = "failed" if i == 7 else "done"
         rec = RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
                         status=status, config=dict(run.config), labels=dict(run.labels),
@@ -106,7 +106,7 @@ def recompute(table: pd.DataFrame) -> dict:
     """(scene, label) -> metric -> Stat, straight from the parquet (labels as the report writes them)."""
     done = table[table.status == "done"]
     out = {}
-    for (scene, label), group in done.groupby(["scene", "axis.sh_degree"]):
+    for (scene, label), group in done.groupby(["scene", "axis.sh.degree"]):
         label = json.loads(label) if isinstance(label, str) else label
         out[(scene, str(label))] = {m.name: Stat(float(group[f"metric.{m.name}"].mean()),
                                                  float(group[f"metric.{m.name}"].std(ddof=1)), len(group))
@@ -151,7 +151,7 @@ def test_report_tables_match_parquet(sh_report):
 def per_seed(table: pd.DataFrame, scene: str, label: str, metric: str) -> dict[int, float]:
     """Seed -> metric of the done run of (scene, SH degree label), straight from the parquet."""
     done = table[(table.status == "done") & (table.scene == scene)]
-    sel = done[done["axis.sh_degree"].map(lambda v: str(json.loads(v) if isinstance(v, str) else v)) == label]
+    sel = done[done["axis.sh.degree"].map(lambda v: str(json.loads(v) if isinstance(v, str) else v)) == label]
     return {int(s): float(v) for s, v in zip(sel.seed, sel[f"metric.{metric}"])}
 
 
@@ -160,7 +160,7 @@ def test_findings_numbers_match_parquet(sh_report):
     table = pd.read_parquet(path.parent / "results.parquet")
     expected = recompute(table)
     text = path.read_text()
-    claims = report.findings["sh_degree"].claims
+    claims = report.findings["sh.degree"].claims
     kinds = {c.kind for c in claims}
     # glossy's SH 3 leads SH 2 by 1.5 dB at ~x1.08 the Gaussians (1300 against 1200 made): "no single
     # best at comparable size" (docs/reports.md, "Best"), with its size claim; diffuse: no lead at all
@@ -219,7 +219,7 @@ def test_findings_numbers_match_parquet(sh_report):
             assert (c.value, c.n) == pytest.approx((iv.estimate, iv.n)) and c.text == f"×{iv.estimate:.3f}"
         elif c.kind == "auto":
             done = table[(table.status == "done") & (table.scene == c.scene)]
-            auto = done[done["axis.sh_degree"] == json.dumps("auto")]
+            auto = done[done["axis.sh.degree"] == json.dumps("auto")]
             assert c.value == pytest.approx(auto["metric.sh_degree"].mean())
         assert c.text in text
     # The pattern the numbers were made with is what the findings say.
@@ -244,13 +244,13 @@ def test_train_report_names_its_lpips_and_leaves_loaded_times_out(tmp_path):
     load were recorded (no such columns) reports without them."""
     spec = sh_spec()
     runs = expand(spec)
-    loaded_run = next(r for r in runs if r.scene == "glossy" and r.labels["sh_degree"] == 3 and r.seed == 2)
+    loaded_run = next(r for r in runs if r.scene == "glossy" and r.labels["sh.degree"] == 3 and r.seed == 2)
     old = ("test_lpips", "lpips_net", "lpips_scale_inputs", "cpu_seconds", "load_before", "load_after",
            "load_other", "cores", "time_loaded")
     for name, drop in (("new", ()), ("old", old)):
         records = []
         for run in runs:
-            metrics, curves = fake_metrics(run.scene, run.labels["sh_degree"], run.seed)
+            metrics, curves = fake_metrics(run.scene, run.labels["sh.degree"], run.seed)
             metrics["time_loaded"] = int(run is loaded_run)
             metrics = {k: v for k, v in metrics.items() if k not in drop}
             records.append(done_record(spec, run, metrics, curves))
@@ -258,7 +258,7 @@ def test_train_report_names_its_lpips_and_leaves_loaded_times_out(tmp_path):
         write_table(tmp_path / name / spec.name, records)
         report = build_report(spec, tmp_path / name)
         text = write_report(report, tmp_path / "out" / name).read_text()
-        vs = {(c.metric, c.n) for c in report.findings["sh_degree"].claims
+        vs = {(c.metric, c.n) for c in report.findings["sh.degree"].claims
               if c.kind == "vs" and c.scene == "glossy" and c.label == "3"}
         if name == "new":
             assert "| LPIPS |" in text and "| timed under load (fraction of runs) |" in text
@@ -285,7 +285,7 @@ def test_one_seed_report_says_no_interval(sh_results, tmp_path):
     one = sh_spec(seeds=(0,))
     report = build_report(one, root)
     text = write_report(report, tmp_path / "one").read_text()
-    vs = [c for c in report.findings["sh_degree"].claims if c.kind == "vs"]
+    vs = [c for c in report.findings["sh.degree"].claims if c.kind == "vs"]
     assert vs and all(c.n == 1 and not c.significant and "(1 seed: no interval)" in c.text for c in vs)
     assert "no interval can be computed (n = 1)" in text and "±" not in text
 
@@ -369,23 +369,23 @@ def test_figure_labels_leave_out_the_axes_shared_prefix(tmp_path):
     (``refine_stop=25%``); the report's text still names each front cell in full."""
     from splatbench.reports.tables import cell_labels, shared_prefix
 
-    assert shared_prefix(["strategy_options.refine_stop", "strategy_options.reset_every"]) == "strategy_options."
+    assert shared_prefix(["strategy.refine_stop", "strategy.reset_every"]) == "strategy."
     assert shared_prefix(["a.b.c", "a.b.d"]) == "a.b." and shared_prefix(["a.x", "b.y"]) == ""
-    assert shared_prefix(["sh_degree"]) == "" and shared_prefix(["strategy_options.cap_max"]) == "strategy_options."
+    assert shared_prefix(["sh_degree"]) == "" and shared_prefix(["strategy.cap_max"]) == "strategy."
     spec = parse_experiment({"name": "oatfake", "kind": "train", "scenes": ["diffuse"], "seeds": [0, 1],
                              "grid": "one-at-a-time",
                              "base": {"iterations": 100, "data": {"resolution": 32, "views": 8, "spp": 2},
-                                      "strategy_options": {"refine_stop": "50%", "grad_threshold": 2e-4}},
-                             "axes": {"strategy_options.refine_stop": ["25%", "50%"],
-                                      "strategy_options.grad_threshold": [2e-4, 4e-4]}}, source="oatfake.toml")
+                                      "strategy": {"refine_stop": "50%", "grad_threshold": 2e-4}},
+                             "axes": {"strategy.refine_stop": ["25%", "50%"],
+                                      "strategy.grad_threshold": [2e-4, 4e-4]}}, source="oatfake.toml")
     runs = expand(spec)
     # more Gaussians, better PSNR, cell by cell: every cell is on the front
     cells = {"base": (30_000, 26.0), "refine_stop=25%": (20_000, 25.0), "grad_threshold=0.0004": (25_000, 25.5)}
     records = []
     for run in runs:
         short = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in run.labels.items()
-                          if v != {"strategy_options.refine_stop": "50%",
-                                   "strategy_options.grad_threshold": 2e-4}[k]) or "base"
+                          if v != {"strategy.refine_stop": "50%",
+                                   "strategy.grad_threshold": 2e-4}[k]) or "base"
         count, psnr = cells[short]
         metrics, curves = fake_metrics("diffuse", 0, run.seed)
         metrics.update(test_psnr=psnr + 0.01 * run.seed, num_gaussians=count + run.seed)
@@ -395,7 +395,7 @@ def test_figure_labels_leave_out_the_axes_shared_prefix(tmp_path):
     report = build_report(spec, tmp_path)
     assert set(cell_labels(spec, report.table, short=True)) == set(cells)
     text = write_report(report, tmp_path / "out").read_text()
-    front = ["strategy_options.refine_stop=25%", "strategy_options.grad_threshold=0.0004", "base"]
+    front = ["strategy.refine_stop=25%", "strategy.grad_threshold=0.0004", "base"]
     assert report.fronts["gaussians_vs_error"] == {"diffuse": front}
     assert "fewest Gaussians first: " + " → ".join(f"`{c}`" for c in front) in text
 
@@ -417,35 +417,36 @@ def test_train_kind_config_errors_and_defaults():
         kind.validate({**base, "data": {"width": 3}})
     resolved = kind.resolve({**base, "iterations": 10})
     assert "dataset" not in resolved and "out" not in resolved
-    assert resolved["data"] == {"resolution": 256, "views": 32, "spp": 64}  # the diffuse rig's
-    assert resolved["strategy_options"]["grad_threshold"] == 2e-4  # the strategy's own defaults
-    explicit = kind.resolve({**base, "iterations": 10, "ssim_lambda": 0.2, "data": {"resolution": 256},
-                             "strategy_options": {"refine_every": 100}})
+    assert resolved["data"] == {"resolution": 256, "views": 32, "spp": 64,  # the diffuse rig's
+                                "layout": "auto", "test_every": 8, "masks": True}  # DataConfig's defaults
+    assert resolved["strategy"]["grad_threshold"] == 2e-4  # the strategy's own defaults
+    explicit = kind.resolve({**base, "iterations": 10, "loss": {"ssim_lambda": 0.2}, "data": {"resolution": 256},
+                             "strategy": {"refine_every": 100}})
     assert make_run_id("train", explicit) == make_run_id("train", resolved)
-    assert kind.resolve({**base, "iterations": 10, "ssim_lambda": 1})["ssim_lambda"] == 1.0
+    assert kind.resolve({**base, "iterations": 10, "loss": {"ssim_lambda": 1}})["loss"]["ssim_lambda"] == 1.0
     assert {"diffuse", "glossy", "textured"} <= kind.scenes()
 
 
-def test_train_kind_keeps_run_fractions_and_earlier_run_ids():
+def test_train_kind_keeps_run_fractions():
     """A step field written as a fraction of the run stays that string in the resolved
     config (the run scales it once, as written; a resolved step count would be scaled
-    again under schedule = "scaled"), and revised_opacity = false, the behaviour before
-    the field existed, is left out, so earlier default-strategy run ids stay valid."""
+    again under schedule = "scaled"); every strategy field is in it, so a changed one
+    (revised_opacity) is a new run and one written at its default is the same run."""
     from splatbench.experiments.grid import make_run_id
     from splatbench.experiments.train_kind import TRAIN
     from splatbench.train.config import TrainConfig
 
     base = {"scene": "diffuse", "seed": 0, "iterations": 2000}
-    resolved = TRAIN.resolve({**base, "strategy_options": {"refine_stop": "75%", "reset_every": 0}})
-    assert resolved["strategy_options"]["refine_stop"] == "75%" and resolved["strategy_options"]["reset_every"] == 0
+    resolved = TRAIN.resolve({**base, "strategy": {"refine_stop": "75%", "reset_every": 0}})
+    assert resolved["strategy"]["refine_stop"] == "75%" and resolved["strategy"]["reset_every"] == 0
     cfg = TrainConfig.from_dict({k: v for k, v in resolved.items() if k not in ("scene", "data")})
     assert cfg.make_strategy().refine_stop == 1500   # 75 % of 2000, not scaled again
     plain = TRAIN.resolve(base)
-    assert "revised_opacity" not in plain["strategy_options"]
+    assert plain["strategy"]["revised_opacity"] is False
     assert make_run_id("train", plain) == make_run_id("train", TRAIN.resolve(
-        {**base, "strategy_options": {"revised_opacity": False}}))
-    revised = TRAIN.resolve({**base, "strategy_options": {"revised_opacity": True}})
-    assert revised["strategy_options"]["revised_opacity"] is True
+        {**base, "strategy": {"revised_opacity": False}}))
+    revised = TRAIN.resolve({**base, "strategy": {"revised_opacity": True}})
+    assert revised["strategy"]["revised_opacity"] is True
     assert make_run_id("train", revised) != make_run_id("train", plain)
 
 
@@ -465,7 +466,8 @@ def test_train_kind_test_spp(tmp_path, monkeypatch):
     monkeypatch.setenv("SPLATBENCH_DATASETS", str(tmp_path / "data"))
     plain = TRAIN.resolve({**base, "data": {"spp": 2}})
     same = TRAIN.resolve({**base, "data": {"spp": 2, "test_spp": 2}})
-    assert plain["data"] == same["data"] == {"resolution": 256, "views": 32, "spp": 2}
+    assert plain["data"] == same["data"] == {"resolution": 256, "views": 32, "spp": 2,
+                                             "layout": "auto", "test_every": 8, "masks": True}
     assert make_run_id("train", plain) == make_run_id("train", same)
     assert dataset_folder("diffuse", plain["data"]).name == "diffuse-256-v32-s2"
     clean = TRAIN.resolve({**base, "data": {"resolution": 16, "views": 8, "spp": 2, "test_spp": 16}})
@@ -486,7 +488,7 @@ def test_raster_kind_config_errors():
         kind.validate({**base, "scene": "synth-1"})
     with pytest.raises(InputError, match=r"^tile_size: expected a power of two"):
         kind.validate({**base, "tile_size": 12})
-    with pytest.raises(InputError, match=r"^sh_degree: expected an int in 0\.\.3, got 4$"):
+    with pytest.raises(InputError, match=r"^sh.degree: expected an int in 0\.\.3, got 4$"):
         kind.validate({**base, "sh_degree": 4})
     with pytest.raises(InputError, match=r"^tile_siz: unknown key \(did you mean 'tile_size'\?\)$"):
         kind.validate({**base, "tile_siz": 8})
@@ -541,7 +543,7 @@ def test_train_kind_run(tmp_path, monkeypatch):
     from splatbench.experiments.train_kind import CURVE_KEYS, TRAIN, dataset_folder
 
     monkeypatch.setenv("SPLATBENCH_DATASETS", str(tmp_path / "data"))
-    config = TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 3, "log_every": 1, "sh_degree": 0,
+    config = TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 3, "log_every": 1, "sh": {"degree": 0},
                             "strategy": "none", "data": {"resolution": 32, "views": 8, "spp": 2}})
     prepared = TRAIN.prepare([config])
     assert prepared.datasets == tmp_path / "data"  # the user's setting, read in the runner
@@ -718,11 +720,11 @@ def test_a_cell_whose_runs_all_failed_reports_a_dash(tmp_path):
     # written, with "–" for that cell and the runs under "Failed runs"
     spec = sh_spec()
     runs = expand(spec)
-    dead = runs[0].labels["sh_degree"]
+    dead = runs[0].labels["sh.degree"]
     records = []
     for run in runs:
-        failed = run.labels["sh_degree"] == dead and run.scene == runs[0].scene
-        metrics, curves = fake_metrics(run.scene, run.labels["sh_degree"], run.seed)
+        failed = run.labels["sh.degree"] == dead and run.scene == runs[0].scene
+        metrics, curves = fake_metrics(run.scene, run.labels["sh.degree"], run.seed)
         rec = RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
                         status="failed" if failed else "done", config=dict(run.config), labels=dict(run.labels),
                         metrics={} if failed else metrics, curves=None if failed else curves,

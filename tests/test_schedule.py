@@ -8,7 +8,7 @@ import pytest
 
 from splatbench.errors import InputError
 from splatbench.strategies import STRATEGIES, DefaultStrategy, MCMCStrategy
-from splatbench.train.config import TrainConfig
+from splatbench.train.config import StrategyConfig, TrainConfig
 from splatbench.train.schedule import final_window_start, scale_step
 
 
@@ -39,7 +39,7 @@ def test_config_scales_strategy_and_sh_steps():
     assert cfg.sh_steps == 20
     written = cfg.make_strategy(scaled=False)
     assert (written.refine_start, written.refine_stop, written.reset_every) == (500, 15_000, 3000)
-    absolute = TrainConfig(iterations=600, schedule="absolute", strategy_options={"refine_stop": 450})
+    absolute = TrainConfig(iterations=600, schedule="absolute", strategy=StrategyConfig(options={"refine_stop": 450}))
     assert absolute.validate().make_strategy().refine_start == 500 and absolute.sh_steps == 1000
 
 
@@ -52,7 +52,7 @@ def test_absolute_graphdeco_schedule_on_a_short_run_is_rejected_with_one_line():
     assert "refine window 500..15000" in msg and "step 599" in msg and "final 10 % of 600" in msg
     assert "schedule='scaled'" in msg
     with pytest.raises(InputError, match="relocation .*step 599"):
-        TrainConfig(iterations=600, schedule="absolute", strategy="mcmc").validate()
+        TrainConfig(iterations=600, schedule="absolute", strategy=StrategyConfig(name="mcmc")).validate()
     with pytest.raises(InputError, match="schedule: expected"):
         TrainConfig(iterations=600, schedule="fractions").validate()
 
@@ -60,7 +60,7 @@ def test_absolute_graphdeco_schedule_on_a_short_run_is_rejected_with_one_line():
 @pytest.mark.parametrize("iterations", [1, 2, 7, 60, 600, 2000, 30_000])
 @pytest.mark.parametrize("name", sorted(STRATEGIES))
 def test_scaled_defaults_are_valid_at_any_length(name, iterations):
-    cfg = TrainConfig(iterations=iterations, strategy=name).validate()
+    cfg = TrainConfig(iterations=iterations, strategy=StrategyConfig(name=name)).validate()
     change = cfg.make_strategy().last_topology_change(iterations)
     assert change is None or change.step < final_window_start(iterations)
 
@@ -81,40 +81,39 @@ def test_last_topology_change_names_the_latest_event():
 
 def test_step_fields_as_fractions_of_the_run():
     """"25%" / "1/4" of the run, whatever `schedule` says; not scaled again; periods >= 1."""
-    cfg = TrainConfig(iterations=2000, strategy_options={"refine_stop": "75%", "refine_every": "1/40",
-                                                         "reset_every": "1/5", "refine_start": 50})
+    cfg = TrainConfig(iterations=2000, strategy=StrategyConfig(options={"refine_stop": "75%", "refine_every": "1/40",
+                                                         "reset_every": "1/5", "refine_start": 50}))
     s = cfg.make_strategy()
     # refine_start is steps of graphdeco's 30,000 (scaled: 50 x 2000 / 30000 = 3.33 -> 3)
     assert (s.refine_start, s.refine_stop, s.refine_every, s.reset_every) == (3, 1500, 50, 400)
     assert cfg.make_strategy(scaled=False).refine_stop == 1500
-    absolute = TrainConfig(iterations=2000, schedule="absolute",
-                           strategy_options={"refine_start": "1%", "refine_stop": "50%", "reset_every": "10%"})
+    absolute = TrainConfig(iterations=2000, schedule="absolute", strategy=StrategyConfig(options={"refine_start": "1%", "refine_stop": "50%", "reset_every": "10%"}))
     a = absolute.make_strategy()
     assert (a.refine_start, a.refine_stop, a.reset_every) == (20, 1000, 200)
-    tiny = TrainConfig(iterations=20, strategy="mcmc", strategy_options={"refine_every": "1%"}).make_strategy()
+    tiny = TrainConfig(iterations=20, strategy=StrategyConfig(name="mcmc", options={"refine_every": "1%"})).make_strategy()
     assert tiny.refine_every == 1                     # 0.2 steps: a period is never 0
     # the same fraction is the same proportion at any length
     for n in (600, 6000):
-        assert TrainConfig(iterations=n, strategy_options={"refine_stop": "1/4"}).make_strategy().refine_stop == n // 4
+        assert TrainConfig(iterations=n, strategy=StrategyConfig(options={"refine_stop": "1/4"})).make_strategy().refine_stop == n // 4
 
 
 @pytest.mark.parametrize("options, match", [
-    ({"refine_stop": "3/4 of it"}, "strategy_options.refine_stop: expected steps .* fraction"),
+    ({"refine_stop": "3/4 of it"}, "strategy.refine_stop: expected steps .* fraction"),
     ({"refine_stop": "120%"}, "between 0 and 1"),
-    ({"reset_every": "1/0"}, "strategy_options.reset_every"),
+    ({"reset_every": "1/0"}, "strategy.reset_every"),
     ({"grad_threshold": "10%"}, "grad_threshold"),
 ])
 def test_bad_fractions_are_one_line(options, match):
     with pytest.raises(InputError, match=match) as err:
-        TrainConfig(iterations=2000, strategy_options=options)
+        TrainConfig(iterations=2000, strategy=StrategyConfig(options=options))
     assert "\n" not in str(err.value)
 
 
 def test_fraction_schedule_still_keeps_the_final_window():
     with pytest.raises(InputError, match="final 10 %"):
-        TrainConfig(iterations=2000, strategy_options={"refine_stop": "100%", "reset_every": 0})
+        TrainConfig(iterations=2000, strategy=StrategyConfig(options={"refine_stop": "100%", "reset_every": 0}))
 
 
 def test_reset_every_zero_stays_zero_when_scaled():
-    s = TrainConfig(iterations=600, strategy_options={"reset_every": 0}).make_strategy()
+    s = TrainConfig(iterations=600, strategy=StrategyConfig(options={"reset_every": 0})).make_strategy()
     assert s.reset_every == 0 and s.last_topology_change(600).what.startswith("a refinement")

@@ -20,6 +20,7 @@ from splatbench.errors import InputError
 from splatbench.fsutil import read_manifest
 from splatbench.sfm import cached_sfm, sfm_cache_dir, sfm_inputs
 from splatbench.train import TrainConfig, train
+from splatbench.train.config import InitConfig, SHConfig, StrategyConfig
 from splatbench.train.initializers import InitSettings, initialize
 from tests.test_init import tiny  # noqa: F401 - the module-scoped tiny capture fixture
 
@@ -105,8 +106,7 @@ def test_sfm_is_reused_while_the_training_views_are_unchanged_and_rerun_when_one
 
 
 def test_train_with_sfm_init_logs_points_and_registered_views(capture, tmp_path):
-    cfg = TrainConfig(dataset=str(capture), out=str(tmp_path / "run"), iterations=2, init="sfm", strategy="none",
-                      sh_degree=0, schedule="absolute")
+    cfg = TrainConfig(dataset=str(capture), out=str(tmp_path / "run"), iterations=2, schedule="absolute", init=InitConfig(method="sfm"), strategy=StrategyConfig(name="none"), sh=SHConfig(degree=0))
     result = train(cfg)
     assert result.init["method"] == "sfm" and result.init["points"] == result.num_gaussians
     note = next(n for n in result.notes if n.startswith("SfM: "))
@@ -121,8 +121,7 @@ def test_a_dataset_sfm_cannot_register_is_one_line(capture, tmp_path, capfd):
     ds = load_dataset(capture)
     for name in ds.train.names:
         Image.new("RGB", Image.open(capture / name).size, (128, 128, 128)).save(capture / name)
-    cfg = TrainConfig(dataset=str(capture), out=str(tmp_path / "run"), iterations=2, init="sfm", strategy="none",
-                      schedule="absolute")
+    cfg = TrainConfig(dataset=str(capture), out=str(tmp_path / "run"), iterations=2, schedule="absolute", init=InitConfig(method="sfm"), strategy=StrategyConfig(name="none"))
     with pytest.raises(InputError) as err:
         train(cfg)
     text = str(err.value)
@@ -149,7 +148,7 @@ def test_train_says_sfm_as_it_starts_and_ends_before_the_progress_bar(capture, t
                       f"in {cache_of(capture)})", "pycolmap"]
 
     res = CliRunner().invoke(main, ["train", str(capture), "--out", str(tmp_path / "run"), "--set", "iterations=2",
-                                    "--set", "init='sfm'", "--set", "strategy='none'", "--set", "sh_degree=0",
+                                    "--set", "init='sfm'", "--set", "strategy='none'", "--set", "sh.degree=0",
                                     "--set", "schedule='absolute'"])
     assert res.exit_code == 0, res.output
     lines = [line for line in res.stderr.splitlines() if line.strip()]

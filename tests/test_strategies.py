@@ -579,9 +579,9 @@ def test_none_is_a_no_op():
 
 @pytest.mark.parametrize("name, overrides, match", [
     ("nope", {}, "unknown name 'nope'"),
-    ("default", {"grad_thresh": 1e-4}, r"strategy_options\.grad_thresh: unknown key \(did you mean 'grad_threshold'"),
-    ("mcmc", {"absgrad": True}, r"strategy_options\.absgrad: unknown key \(known: "),
-    ("none", {"seed": 1}, r"strategy_options\.seed: unknown key \(known: none\)"),
+    ("default", {"grad_thresh": 1e-4}, r"strategy\.grad_thresh: unknown key \(did you mean 'grad_threshold'"),
+    ("mcmc", {"absgrad": True}, r"strategy\.absgrad: unknown key \(known: "),
+    ("none", {"seed": 1}, r"strategy\.seed: unknown key \(known: none\)"),
     ("default", {"refine_every": 0}, "refine_every"),
     ("mcmc", {"cap_max": "many"}, "cap_max"),
     ("default", {"grad_threshold": -1.0}, "grad_threshold"),
@@ -816,7 +816,7 @@ def test_budget_and_mcmc_say_when_their_budget_or_cap_is_below_the_initial_count
         strat.refine(params, opts, state, step=k, scene_extent=1.0)
     note = strat.outcome_note(state)
     assert note.startswith("warning: strategy 'budget': its budget of 30 is below the initial 60 Gaussians")
-    assert "strategy_options.budget_mode=final_count" in note and "ended at 60" in note
+    assert "strategy.budget_mode=final_count" in note and "ended at 60" in note
     params, opts = make_params(60, seed=0, opacity=0.5)
     mcmc = make_strategy("mcmc", cap_max=40)
     note = mcmc.outcome_note(mcmc.initialize_state(params))
@@ -874,14 +874,14 @@ def test_budget_final_count_and_multiplier_and_bad_values():
 
 def test_a_strategys_own_check_names_the_option_as_the_user_wrote_it():
     """__post_init__ says ``BudgetStrategy.budget_mode``; through make_strategy (a config's
-    strategy_options) the message names ``strategy_options.budget_mode``, the same name the type
+    strategy_options) the message names ``strategy.budget_mode``, the same name the type
     checks use, so one option has one name whatever check caught it."""
     with pytest.raises(InputError) as err:
         make_strategy("budget", budget_mode="final")
-    assert str(err.value).startswith("strategy 'budget': strategy_options.budget_mode: expected one of")
+    assert str(err.value).startswith("strategy 'budget': strategy.budget_mode: expected one of")
     with pytest.raises(InputError) as err:
         make_strategy("budget", reset_value=2.0)   # checked by the base class, DefaultStrategy
-    assert str(err.value).startswith("strategy 'budget': strategy_options.reset_value: expected a number in (0, 1)")
+    assert str(err.value).startswith("strategy 'budget': strategy.reset_value: expected a number in (0, 1)")
 
 
 def test_budget_score_is_median_normalised():
@@ -912,12 +912,11 @@ def test_a_scaled_schedule_that_never_refines_is_named():
     """graphdeco's schedule scaled to 200 steps: refine window 3..100, every 100 (a sample
     size, not scaled), so no refinement step falls in it; the run says so rather than
     reporting 'default' densification that never densified. At 2000 steps it refines."""
-    from splatbench.train.config import TrainConfig
+    from splatbench.train.config import StrategyConfig, TrainConfig
 
     for name in ("default", "absgrad", "budget"):
-        short = TrainConfig(dataset="x", iterations=200, strategy=name).make_strategy()
+        short = TrainConfig(dataset="x", iterations=200, strategy=StrategyConfig(name=name)).make_strategy()
         assert "never refines in this run" in short.schedule_note(200) and "refine_every" in short.schedule_note(200)
-        assert TrainConfig(dataset="x", iterations=2000, strategy=name).make_strategy().schedule_note(2000) is None
-    fraction = TrainConfig(dataset="x", iterations=200, strategy="default",
-                           strategy_options={"refine_every": "5%"}).make_strategy()
+        assert TrainConfig(dataset="x", iterations=2000, strategy=StrategyConfig(name=name)).make_strategy().schedule_note(2000) is None
+    fraction = TrainConfig(dataset="x", iterations=200, strategy=StrategyConfig(name="default", options={"refine_every": "5%"})).make_strategy()
     assert fraction.schedule_note(200) is None

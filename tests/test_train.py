@@ -10,6 +10,7 @@ view-independent with SH degree 0, or with strong band-1 colour).
 
 from __future__ import annotations
 
+
 import dataclasses
 import json
 import math
@@ -28,7 +29,7 @@ from splatbench.data.dataset import Dataset, PointCloud, Split, load_dataset
 from splatbench.errors import InputError
 from splatbench.gaussians import Gaussians
 from splatbench.train import TrainConfig, TrainResult, apply_overrides, load_config, save_config, train
-from splatbench.train.config import parse_override
+from splatbench.train.config import EvalConfig, InitConfig, OptimConfig, SHConfig, StrategyConfig, parse_override
 from splatbench.train.loop import Trainer, torch_threads
 from splatbench.train.params import ExponentialLR, scene_extent
 from splatbench.train.sh_schedule import BandMeasure, ShSchedule
@@ -98,8 +99,8 @@ def synthetic_dataset(root: Path, *, view_dependent: bool, views: int = 12, n: i
 
 def config(tmp_path: Path, **fields) -> TrainConfig:
     # the tests write their schedules in steps of their short runs
-    base = dict(dataset="", out=str(tmp_path / "run"), iterations=20, strategy="none", log_every=5,
-                schedule="absolute")
+    base = dict(dataset="", out=str(tmp_path / "run"), iterations=20, log_every=5,
+                schedule="absolute", strategy=StrategyConfig(name="none"))
     return TrainConfig(**{**base, **fields})
 
 
@@ -129,28 +130,32 @@ def counting(monkeypatch) -> CountingRasterize:
 
 # ----------------------------------------------------------------------------- config
 def test_config_toml_round_trip_and_overrides(tmp_path):
-    cfg = TrainConfig(dataset="data/x", iterations=123, sh_degree="auto", background=[0.5, 0.25, 1.0],
-                      strategy="mcmc", strategy_options={"cap_max": 5000, "noise_lr": 5e5})
+    cfg = TrainConfig(dataset="data/x", iterations=123, background=[0.5, 0.25, 1.0], sh=SHConfig(degree="auto"), strategy=StrategyConfig(name="mcmc", options={"cap_max": 5000, "noise_lr": 5e5}))
     path = save_config(cfg, tmp_path / "c.toml")
     assert load_config(path) == cfg
     import tomllib
 
-    assert tomllib.loads(path.read_text())["sh_degree"] == "auto"             # plain TOML, no code
+    assert tomllib.loads(path.read_text())["sh"]["degree"] == "auto"          # plain TOML, no code
     assert TrainConfig.from_toml(TrainConfig().to_toml()) == TrainConfig()
 
-    out = apply_overrides(cfg, ["iterations=7000", "lr_means=1", "sh_degree=2",
+    out = apply_overrides(cfg, ["iterations=7000", "optim.lr_means=1", "sh.degree=2",
                                 "background=[0, 0, 1]", "random_background=true",
-                                "strategy_options.cap_max=100", "dataset=some/where"])
-    assert (out.iterations, out.sh_degree, out.strategy, out.random_background, out.dataset) == \
+                                "strategy.cap_max=100", "dataset=some/where"])
+    assert (out.iterations, out.sh.degree, out.strategy.name, out.random_background, out.dataset) == \
         (7000, 2, "mcmc", True, "some/where")
-    assert out.lr_means == 1.0 and isinstance(out.lr_means, float)           # int widened to float
+    assert out.optim.lr_means == 1.0 and isinstance(out.optim.lr_means, float)  # int widened to float
     assert out.background == [0.0, 0.0, 1.0]
-    assert out.strategy_options == {"cap_max": 100, "noise_lr": 5e5}
-    assert apply_overrides(cfg, ["sh_degree=auto"]).sh_degree == "auto"        # bare string
+    assert out.strategy.options == {"cap_max": 100, "noise_lr": 5e5}
+    assert apply_overrides(cfg, ["sh.degree=auto"]).sh.degree == "auto"        # bare string
+    # one reader: a group as a TOML table, as dotted keys, or (strategy, init) by its name alone
+    assert TrainConfig.from_dict({"sh": {"degree": 1}}) == TrainConfig.from_dict({"sh.degree": 1})
+    assert apply_overrides(TrainConfig(), ["strategy=mcmc", "init=random"]) == \
+        TrainConfig.from_toml('[strategy]\nname = "mcmc"\n[init]\nmethod = "random"\n')
+    assert apply_overrides(TrainConfig(), ["background=1,1,1"]).background == [1.0, 1.0, 1.0]  # render's spelling
     assert parse_override("init = random") == ("init", "random")
     assert cfg.iterations == 123                                               # the original is untouched
     # the config is validated on construction: MCMC's options under another strategy fail at once
-    with pytest.raises(InputError, match=r"^strategy 'default': strategy_options\.cap_max: unknown key \(known: "):
+    with pytest.raises(InputError, match=r"^strategy 'default': strategy\.cap_max: unknown key \(known: "):
         apply_overrides(cfg, ["strategy=default"])
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.iterations = 5  # frozen: change a copy with dataclasses.replace / apply_overrides
@@ -161,22 +166,22 @@ BAD_CONFIGS = [
     (["iterations=0"], "iterations"),
     (["iterations=ten"], "iterations"),             # bad value
     (["iterations=1.5"], "iterations"),
-    (["lr_means=-1e-4"], "lr_means"),
-    (["lr_sh_rest=-1"], "lr_sh_rest"),
+    (["optim.lr_means=-1e-4"], "optim.lr_means"),
+    (["optim.lr_sh_rest=-1"], "optim.lr_sh_rest"),
     (["strategy=densest"], "strategy"),
-    (["strategy_options.no_such_field=1"], "no_such_field"),
+    (["strategy.no_such_field=1"], "no_such_field"),
     (["init=poisson"], "init"),
-    (["init_region=sky"], "init_region"),
-    (["init_extent=0"], "init_extent"),
-    (["init_jitter=-0.1"], "init_jitter"),
-    (["init_sfm_poses=guessed"], "init_sfm_poses"),
-    (["sh_degree=4"], "sh_degree"),
-    (["sh_degree=high"], "sh_degree"),
-    (["sh_auto_lookahead=3"], "sh_auto_lookahead"),   # 0..2: after band 1, at most bands 2 and 3
-    (["sh_auto_lookahead=-1"], "sh_auto_lookahead"),
-    (["sh_auto_lookahead=1.5"], "sh_auto_lookahead"),
+    (["init.region=sky"], "init.region"),
+    (["init.extent=0"], "init.extent"),
+    (["init.jitter=-0.1"], "init.jitter"),
+    (["init.sfm_poses=guessed"], "init.sfm_poses"),
+    (["sh.degree=4"], "sh.degree"),
+    (["sh.degree=high"], "sh.degree"),
+    (["sh.auto_lookahead=3"], "sh.auto_lookahead"),   # 0..2: after band 1, at most bands 2 and 3
+    (["sh.auto_lookahead=-1"], "sh.auto_lookahead"),
+    (["sh.auto_lookahead=1.5"], "sh.auto_lookahead"),
     (["background=[2, 0, 0]"], "background"),
-    (["ssim_window=10"], "ssim_window"),
+    (["loss.ssim_window=10"], "loss.ssim_window"),
 ]
 
 
@@ -218,7 +223,7 @@ def test_bad_dataset_is_one_line_error_before_any_work(tmp_path, tiny_diffuse_di
 
 # ----------------------------------------------------------------------------- training
 # 40 steps are few for 3DGS's rates: opacity and colour learn 4x faster in the short runs.
-FAST = dict(lr_opacity_logits=0.1, lr_sh_dc=0.01)
+FAST = dict(optim=OptimConfig(lr_opacity_logits=0.1, lr_sh_dc=0.01))
 
 
 def test_short_run_lowers_loss_and_writes_a_valid_ply(tmp_path):
@@ -257,8 +262,7 @@ def test_final_lpips_follows_the_config_and_the_curves_use_alexnet(tmp_path):
     from splatbench.metrics import lpips
 
     ds = synthetic_dataset(tmp_path, view_dependent=False, views=8, n=60)
-    cfg = config(tmp_path, iterations=4, eval_every=2, lpips_net="vgg", lpips_scale_inputs=False,
-                 background=[0.0, 0.0, 0.0], **FAST)
+    cfg = config(tmp_path, iterations=4, background=[0.0, 0.0, 0.0], **FAST, eval=EvalConfig(every=2, lpips_net="vgg", lpips_scale_inputs=False))
     result = train(cfg, dataset=ds)
     assert result.lpips_net == "vgg" and not result.lpips_scale_inputs
     model = Gaussians.from_ply(result.ply_path)  # the final model, rendered again through the public API
@@ -268,10 +272,10 @@ def test_final_lpips_follows_the_config_and_the_curves_use_alexnet(tmp_path):
     assert result.test_lpips == pytest.approx(want, abs=1e-5)
     alex = [p.lpips for p in result.evaluations]
     assert len(alex) == 2 and all(0 < v < 1 for v in alex) and alex[-1] != pytest.approx(result.test_lpips, abs=1e-3)
-    off = train(config(tmp_path, iterations=2, lpips_net="none", out=str(tmp_path / "off"), **FAST), dataset=ds)
+    off = train(config(tmp_path, iterations=2, out=str(tmp_path / "off"), **FAST, eval=EvalConfig(lpips_net="none")), dataset=ds)
     assert off.test_lpips is None and off.lpips_net == "" and off.evaluations[-1].lpips is None
-    with pytest.raises(InputError, match="lpips_net: expected"):
-        config(tmp_path, lpips_net="squeeze")
+    with pytest.raises(InputError, match="eval.lpips_net: expected"):
+        config(tmp_path, eval=EvalConfig(lpips_net="squeeze"))
 
 
 def test_trained_sh0_model_saves_graphdecos_62_properties_and_reads_back_as_degree_0(tmp_path):
@@ -280,7 +284,7 @@ def test_trained_sh0_model_saves_graphdecos_62_properties_and_reads_back_as_degr
     from tests.test_ply import GRAPHDECO_62
 
     ds = synthetic_dataset(tmp_path, view_dependent=False, views=8, n=60)
-    result = train(config(tmp_path, iterations=4, sh_degree=0), dataset=ds)
+    result = train(config(tmp_path, iterations=4, sh=SHConfig(degree=0)), dataset=ds)
     assert result.sh_degree == 0
     ply = PlyData.read(result.ply_path)
     assert [p.name for p in ply["vertex"].properties] == GRAPHDECO_62  # graphdeco's order, 45 f_rest
@@ -310,14 +314,14 @@ def test_saved_ply_records_the_datasets_up_and_the_background(tmp_path, tiny_dif
 def test_auto_initial_opacity_is_the_strategys_reference_value(tmp_path, tiny_diffuse):
     """graphdeco's create_from_pcd starts at 0.1, 3DGS-MCMC's at 0.5; a number overrides both."""
     assert config(tmp_path).initial_opacity == 0.1
-    assert config(tmp_path, strategy="mcmc").initial_opacity == 0.5
-    assert config(tmp_path, strategy="mcmc", init_opacity=0.2).initial_opacity == 0.2
-    trainer = Trainer(config(tmp_path, strategy="mcmc"), dataset=tiny_diffuse)
+    assert config(tmp_path, strategy=StrategyConfig(name="mcmc")).initial_opacity == 0.5
+    assert config(tmp_path, strategy=StrategyConfig(name="mcmc"), init=InitConfig(opacity=0.2)).initial_opacity == 0.2
+    trainer = Trainer(config(tmp_path, strategy=StrategyConfig(name="mcmc")), dataset=tiny_diffuse)
     # logit(0.5) = 0 exactly, so every opacity is 0.5 to float32 rounding of sigmoid(0)
     assert torch.equal(torch.sigmoid(trainer.params["opacity_logits"].detach()),
                        torch.full((len(tiny_diffuse.points),), 0.5))
-    with pytest.raises(InputError, match="init_opacity: expected a number in \\(0, 1\\) or 'auto'"):
-        config(tmp_path, init_opacity="half").validate()
+    with pytest.raises(InputError, match="init.opacity: expected a number in \\(0, 1\\) or 'auto'"):
+        config(tmp_path, init=InitConfig(opacity="half")).validate()
 
 
 def test_same_seed_and_config_give_the_same_ply_bytes(tmp_path, tiny_diffuse):
@@ -325,7 +329,7 @@ def test_same_seed_and_config_give_the_same_ply_bytes(tmp_path, tiny_diffuse):
     opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 11, "grad_threshold": 1e-5}  # two refinements
     plys = []
     for run in ("a", "b"):
-        cfg = config(tmp_path, out=str(tmp_path / run), iterations=20, strategy="default", strategy_options=opts)
+        cfg = config(tmp_path, out=str(tmp_path / run), iterations=20, strategy=StrategyConfig(name="default", options=opts))
         plys.append(Path(train(cfg, dataset=tiny_diffuse).ply_path).read_bytes())
     assert plys[0] == plys[1]
     assert len(Gaussians.from_ply(tmp_path / "a" / "point_cloud.ply")) != len(tiny_diffuse.points)  # densified
@@ -346,7 +350,7 @@ def test_checkpoint_resumes_training_exactly(tmp_path, tiny_diffuse, strategy):
     parameters bit for bit, with refinements on both sides of the checkpoint (the
     strategy's accumulators, count schedule and generator, Adam's moments and the view order resume)."""
     opts = CHECKPOINT_STRATEGIES[strategy]
-    base = dict(iterations=20, strategy=strategy, strategy_options=opts, sh_degree=1, sh_interval=8)
+    base = dict(iterations=20, strategy=StrategyConfig(name=strategy, options=opts), sh=SHConfig(degree=1, interval=8))
     straight = train(config(tmp_path, out=str(tmp_path / "straight"), **base), dataset=tiny_diffuse)
     first = train(config(tmp_path, out=str(tmp_path / "first"), checkpoint_every=10, **base), dataset=tiny_diffuse)
     assert Path(first.ply_path).read_bytes() == Path(straight.ply_path).read_bytes()
@@ -381,28 +385,26 @@ def test_result_records_what_the_strategy_did(tmp_path, tiny_diffuse):
     from splatbench.strategies import TopologyCounts, planned_counts
 
     opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "grad_threshold": 1e-5, "reset_every": 6}
-    r = train(config(tmp_path, strategy="default", strategy_options=opts), dataset=tiny_diffuse)
+    r = train(config(tmp_path, strategy=StrategyConfig(name="default", options=opts)), dataset=tiny_diffuse)
     t = r.topology
     assert (t.refinements, t.opacity_resets, t.relocated, t.added) == (3, 2, 0, 0)
     assert t.cloned + t.split > 0  # the low threshold grows the model
     assert len(tiny_diffuse.points) + t.cloned + t.split - t.pruned == r.num_gaussians
     assert 0 <= t.pruned_size <= t.pruned
     # what the schedule plans (what a report names for runs that did not record it) is what happened
-    planned = planned_counts(config(tmp_path, strategy="default", strategy_options=opts).make_strategy(), 20)
+    planned = planned_counts(config(tmp_path, strategy=StrategyConfig(name="default", options=opts)).make_strategy(), 20)
     assert (planned.refinements, planned.opacity_resets) == (t.refinements, t.opacity_resets)
     saved = json.loads((tmp_path / "run" / "result.json").read_text())
     assert saved["topology"]["opacity_resets"] == 2 and TrainResult.from_dict(saved).topology == t
     del saved["topology"]
     assert TrainResult.from_dict(saved).topology is None
     # reset_every = 0: no resets, and no size pruning either (it waits for the first reset)
-    never = train(config(tmp_path, out=str(tmp_path / "never"), strategy="default",
-                         strategy_options={**opts, "reset_every": 0}), dataset=tiny_diffuse)
+    never = train(config(tmp_path, out=str(tmp_path / "never"), strategy=StrategyConfig(name="default", options={**opts, "reset_every": 0})), dataset=tiny_diffuse)
     assert never.topology.opacity_resets == 0 and never.topology.pruned_size == 0
     # MCMC relocates and adds (refine_start 4 < it < 16, every 5); no strategy changes nothing
-    mcmc = train(config(tmp_path, out=str(tmp_path / "mcmc"), strategy="mcmc",
-                        strategy_options=CHECKPOINT_STRATEGIES["mcmc"]), dataset=tiny_diffuse)
+    mcmc = train(config(tmp_path, out=str(tmp_path / "mcmc"), strategy=StrategyConfig(name="mcmc", options=CHECKPOINT_STRATEGIES["mcmc"])), dataset=tiny_diffuse)
     assert mcmc.topology.refinements == 3 and mcmc.topology.opacity_resets == 0  # it = 5, 10, 15
-    assert planned_counts(config(tmp_path, strategy="mcmc", strategy_options=CHECKPOINT_STRATEGIES["mcmc"])
+    assert planned_counts(config(tmp_path, strategy=StrategyConfig(name="mcmc", options=CHECKPOINT_STRATEGIES["mcmc"]))
                           .make_strategy(), 20).refinements == 3
     assert len(tiny_diffuse.points) + mcmc.topology.added == mcmc.num_gaussians
     none = train(config(tmp_path, out=str(tmp_path / "none")), dataset=tiny_diffuse)
@@ -413,7 +415,7 @@ def test_a_budget_run_below_its_budget_says_so_in_its_warnings(tmp_path, tiny_di
     """No Gaussian passes a threshold of 1 (NDC gradients are far smaller), so nothing grows and
     the run's warnings carry the strategy's (`BudgetStrategy.outcome_note`)."""
     opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "grad_threshold": 1.0, "budget": 1.5}
-    result = train(config(tmp_path, strategy="budget", strategy_options=opts), dataset=tiny_diffuse)
+    result = train(config(tmp_path, strategy=StrategyConfig(name="budget", options=opts)), dataset=tiny_diffuse)
     n = len(tiny_diffuse.points)
     assert result.num_gaussians <= n
     assert any(note.startswith(f"warning: strategy 'budget' ended at {result.num_gaussians:,} Gaussians, below its "
@@ -421,7 +423,7 @@ def test_a_budget_run_below_its_budget_says_so_in_its_warnings(tmp_path, tiny_di
 
 
 def test_frozen_groups_get_no_gradient_work(tmp_path, tiny_diffuse, counting):
-    cfg = config(tmp_path, lr_quats=0.0, lr_means=0.0, lr_means_final=0.0, lr_sh_rest=0.0, sh_interval=1)
+    cfg = config(tmp_path, optim=OptimConfig(lr_quats=0.0, lr_means=0.0, lr_means_final=0.0, lr_sh_rest=0.0), sh=SHConfig(interval=1))
     with torch_threads(1):
         trainer = Trainer(cfg, dataset=tiny_diffuse)
         before = {k: v.detach().clone() for k, v in trainer.params.items()}
@@ -457,7 +459,7 @@ def test_fixed_sh_schedule_raises_the_degree_every_interval():
 
 def test_trainer_follows_the_sh_schedule(tmp_path, tiny_diffuse, counting):
     degrees = []
-    cfg = config(tmp_path, iterations=9, sh_interval=3, sh_degree=2)
+    cfg = config(tmp_path, iterations=9, sh=SHConfig(interval=3, degree=2))
     result = train(cfg, dataset=tiny_diffuse, progress=lambda s: degrees.append(s.sh_degree))
     assert degrees == [0, 0, 0, 1, 1, 1, 2, 2, 2]
     assert result.sh_degree == 2 and Gaussians.from_ply(result.ply_path).sh_degree == 2
@@ -536,24 +538,29 @@ def test_auto_sh_judges_the_bands_on_trial_at_the_end_of_the_run():
     assert cut.degree == 0 and "the run ended, bands above 0 dropped" in cut.reason
 
 
-def test_sh_auto_lookahead_changes_only_auto_run_ids():
-    """The experiment runner hashes the resolved config (splatbench.experiments.grid):
-    sh_auto_lookahead is read only under sh_degree="auto", so a fixed-degree run leaves
-    it out (its id, and every committed fixed-degree report, stays as it was), while an
-    auto run's id depends on it."""
+def test_run_ids_hash_every_group_field_and_a_default_written_out_equals_one_left_out():
+    """The experiment runner hashes the resolved config (splatbench.experiments.grid), which
+    holds every field of every group: any field changed makes a new run (sh.auto_lookahead
+    too, on a fixed-degree run: no field is left out by hand), a field written at its
+    default is the same run as one left out, and a group written as a table or as dotted
+    keys is the same run."""
     from splatbench.experiments.grid import make_run_id
     from splatbench.experiments.train_kind import TRAIN
 
-    def run_id(**kw):
-        return make_run_id("train", TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 10, **kw}))
+    def run_id(config):
+        return make_run_id("train", TRAIN.resolve({"scene": "diffuse", "seed": 0, "iterations": 10, **config}))
 
-    assert "sh_auto_lookahead" not in TRAIN.resolve({"scene": "diffuse", "seed": 0, "sh_degree": 3})
-    assert run_id(sh_degree=3) == run_id(sh_degree=3, sh_auto_lookahead=0)
-    assert run_id(sh_degree="auto") == run_id(sh_degree="auto", sh_auto_lookahead=2)   # the default
-    assert run_id(sh_degree="auto") != run_id(sh_degree="auto", sh_auto_lookahead=0)
+    resolved = TRAIN.resolve({"scene": "diffuse", "seed": 0})
+    assert set(resolved["sh"]) == {f.name for f in dataclasses.fields(SHConfig)}
+    assert resolved["strategy"]["name"] == "default" and "revised_opacity" in resolved["strategy"]
+    assert run_id({"sh.degree": 3}) == run_id({}) == run_id({"sh": {"degree": 3, "auto_lookahead": 2}})
+    ids = {run_id(c) for c in ({}, {"sh.auto_lookahead": 0}, {"sh.degree": "auto"}, {"optim.lr_quats": 2e-3},
+                               {"strategy.revised_opacity": True}, {"data.test_every": 4}, {"raster.tile_size": 8},
+                               {"eval.lpips_net": "vgg"}, {"loss.ssim_lambda": 0.0})}
+    assert len(ids) == 9
 
 
-AUTO = dict(iterations=30, sh_degree="auto", sh_interval=15, lr_sh_rest=2e-2, sh_auto_probe_views=0)
+AUTO = dict(iterations=30, sh=SHConfig(degree="auto", interval=15, auto_probe_views=0), optim=OptimConfig(lr_sh_rest=2e-2))
 
 
 @pytest.fixture
@@ -569,14 +576,14 @@ def truth_init(monkeypatch):
 
 
 def test_auto_sh_picks_0_for_a_view_independent_scene(tmp_path, truth_init):
-    result = train(config(tmp_path, init="truth", **AUTO), dataset=synthetic_dataset(tmp_path, view_dependent=False))
+    result = train(config(tmp_path, **AUTO, init=InitConfig(method="truth")), dataset=synthetic_dataset(tmp_path, view_dependent=False))
     assert result.sh_degree == 0, result.sh_degree_reason
     assert [(d["degree"], d["baseline"], d["kept"]) for d in result.sh_decisions] == [(1, 0, False)]
     assert "degree 1 gained" in result.sh_degree_reason and Gaussians.from_ply(result.ply_path).sh_degree == 0
 
 
 def test_auto_sh_keeps_band_1_for_a_view_dependent_scene(tmp_path, truth_init):
-    result = train(config(tmp_path, init="truth", **AUTO), dataset=synthetic_dataset(tmp_path, view_dependent=True))
+    result = train(config(tmp_path, **AUTO, init=InitConfig(method="truth")), dataset=synthetic_dataset(tmp_path, view_dependent=True))
     assert result.sh_degree == 1, result.sh_degree_reason
     assert [(d["degree"], d["baseline"], d["kept"]) for d in result.sh_decisions] == [(1, 0, True)]
     assert result.sh_decisions[0]["gain_db"] >= 0.1
@@ -584,7 +591,8 @@ def test_auto_sh_keeps_band_1_for_a_view_dependent_scene(tmp_path, truth_init):
 
 def test_auto_sh_holds_views_out_of_training_until_the_degree_settles(tmp_path, truth_init, counting):
     ds = synthetic_dataset(tmp_path, view_dependent=False)
-    cfg = config(tmp_path, init="truth", **{**AUTO, "sh_auto_holdout_every": 4})
+    cfg = config(tmp_path, **{**AUTO, "sh": dataclasses.replace(AUTO["sh"], auto_holdout_every=4)},
+                 init=InitConfig(method="truth"))
     with torch_threads(1):
         trainer = Trainer(cfg, dataset=ds)
         assert trainer.holdout == [2, 6]                          # i % 4 == 2 of 9 training views
@@ -605,7 +613,7 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     from splatbench.cli import main
 
     cfg = tmp_path / "c.toml"
-    save_config(TrainConfig(iterations=2, strategy="none", init="random", init_random_points=300), cfg)
+    save_config(TrainConfig(iterations=2, strategy=StrategyConfig(name="none"), init=InitConfig(method="random", random_points=300)), cfg)
     runner = CliRunner()
     res = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                "--json", "--quiet", "--out", str(tmp_path / "o")])
@@ -614,7 +622,7 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     assert len(lines) == 1
     data = json.loads(lines[0])
     assert data["iterations"] == 3 and data["num_gaussians"] == 300 and Path(data["ply_path"]).is_file()
-    bad = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "lr_quats=-1", "--quiet"])
+    bad = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "optim.lr_quats=-1", "--quiet"])
     assert bad.exit_code == 2
     assert bad.stderr.strip().splitlines() == [bad.stderr.strip()] and "lr_quats" in bad.stderr
     # --resume reaches train(): the run's own checkpoint resumes to the same result; a
@@ -718,7 +726,7 @@ def test_cli_rejects_graphdecos_absolute_schedule_on_a_short_run_before_reading_
     assert line.splitlines() == [line] and "refine window 500..15000" in line and "final 10 %" in line
     # the scaled default (refine 0..10, opacity reset every 2 of 20 steps) trains
     ok = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "iterations=20", "--set", "init=random",
-                              "--set", "init_random_points=300", "--json", "--quiet", "--out", str(tmp_path / "o")])
+                              "--set", "init.random_points=300", "--json", "--quiet", "--out", str(tmp_path / "o")])
     assert ok.exit_code == 0, ok.output
     assert json.loads(ok.stdout.strip().splitlines()[-1])["iterations"] == 20
 
@@ -754,8 +762,7 @@ def test_a_step_after_warm_up_compiles_no_kernel_for_a_new_view():
     from splatbench.bench.train import synthetic_scene
 
     dataset, _ = synthetic_scene(24, 60, 4, 0)
-    cfg = TrainConfig(dataset="", out="", iterations=10, strategy="none", sh_degree=3, sh_interval=1,
-                      schedule="absolute", seed=0, device="cpu")
+    cfg = TrainConfig(dataset="", out="", iterations=10, schedule="absolute", seed=0, device="cpu", strategy=StrategyConfig(name="none"), sh=SHConfig(degree=3, interval=1))
     trainer = Trainer(cfg, dataset=dataset)
     trainer.warm_up()
     trainer.step()
@@ -789,9 +796,9 @@ def test_frozen_means_with_a_gradient_densifier_is_one_line():
     # (tests/test_raster_frozen.py), which the default strategy densifies from
     from splatbench.train import TrainConfig
 
-    with pytest.raises(InputError, match="lr_means: 0 freezes the means, but strategy 'default' densifies"):
-        TrainConfig(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0)
-    TrainConfig(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0, strategy="mcmc")  # no screen gradient used
+    with pytest.raises(InputError, match="optim.lr_means: 0 freezes the means, but strategy 'default' densifies"):
+        TrainConfig(dataset="d", out="o", optim=OptimConfig(lr_means=0.0, lr_means_final=0.0))
+    TrainConfig(dataset="d", out="o", optim=OptimConfig(lr_means=0.0, lr_means_final=0.0), strategy=StrategyConfig(name="mcmc"))  # no screen gradient used
 
 
 def test_frozen_means_check_follows_the_strategys_declaration(monkeypatch):
@@ -815,12 +822,12 @@ def test_frozen_means_check_follows_the_strategys_declaration(monkeypatch):
 
     monkeypatch.setitem(STRATEGIES, "gradless", (Gradless, {}))
     monkeypatch.setitem(STRATEGIES, "reader", (Reader, {}))
-    frozen = dict(dataset="d", out="o", lr_means=0.0, lr_means_final=0.0)
-    assert TrainConfig(**frozen, strategy="gradless").strategy == "gradless"
+    frozen = dict(dataset="d", out="o", optim=OptimConfig(lr_means=0.0, lr_means_final=0.0))
+    assert TrainConfig(**frozen, strategy=StrategyConfig(name="gradless")).strategy.name == "gradless"
     with pytest.raises(InputError) as err:
-        TrainConfig(**frozen, strategy="reader")
-    assert str(err.value) == ("lr_means: 0 freezes the means, but strategy 'reader' densifies from their screen-space "
-                              "gradients (use a positive lr_means, or strategy=none or mcmc or gradless)")
+        TrainConfig(**frozen, strategy=StrategyConfig(name="reader"))
+    assert str(err.value) == ("optim.lr_means: 0 freezes the means, but strategy 'reader' densifies from their screen-space "
+                              "gradients (use a positive optim.lr_means, or strategy=none or mcmc or gradless)")
 
 
 def test_a_model_pruned_to_nothing_trains_on_and_says_so(tmp_path, tiny_diffuse):
@@ -832,8 +839,7 @@ def test_a_model_pruned_to_nothing_trains_on_and_says_so(tmp_path, tiny_diffuse)
     from splatbench.raster.options import RasterOptions
 
     opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 8}
-    r = train(config(tmp_path, iterations=12, strategy="default", strategy_options=opts, init_opacity=0.001,
-                     log_every=1, raster=RasterOptions(alpha_min=5e-4)), dataset=tiny_diffuse)
+    r = train(config(tmp_path, iterations=12, log_every=1, raster=RasterOptions(alpha_min=5e-4), strategy=StrategyConfig(name="default", options=opts), init=InitConfig(opacity=0.001)), dataset=tiny_diffuse)
     assert r.num_gaussians == 0 and r.iterations == 12
     warning = [n for n in r.warnings if n.startswith("warning: the model is empty")]
     assert len(warning) == 1 and "none left from step 4 on" in warning[0]
@@ -857,7 +863,7 @@ def test_auto_init_starts_from_the_dataset_points_or_else_sfm_with_known_poses(t
     from splatbench.sfm import SfmRun, Similarity
     from splatbench.train.initializers import InitSettings, initialize
 
-    assert TrainConfig().init == "auto" and TrainConfig().init_sfm_poses == "known"
+    assert TrainConfig().init.method == "auto" and TrainConfig().init.sfm_poses == "known"
     settings = InitSettings(sh_degree=0, opacity=0.1, random_points=50, seed=0)
     have = initialize("auto", tiny_diffuse, settings)
     assert have.summary["method"] == "surface" and have.summary["asked"] == "auto"
@@ -901,9 +907,9 @@ def test_seeds_vary_the_default_start_of_a_rendered_scene(tmp_path, tiny_diffuse
     # within 0.05 of 1.128 (the chi's standard deviation is 0.67, /sqrt(1500) x sqrt(2) x 0.5 ~ 0.012)
     assert abs(np.mean(moved / spacing) - 0.5 * math.sqrt(2) * 1.5958) < 0.05
     assert np.abs(a0 - given).max() < 6 * 0.5 * spacing.max()  # never beyond 6 standard deviations
-    plain = _starts(tmp_path, tiny_diffuse, seed=1, init_jitter=0.0)  # 0: the points as given, any seed
+    plain = _starts(tmp_path, tiny_diffuse, seed=1, init=InitConfig(jitter=0.0))  # 0: the points as given, any seed
     np.testing.assert_array_equal(plain, given.astype(np.float32))
-    r0, r0_again, r1 = (_starts(tmp_path, tiny_diffuse, seed=s, init="random", init_random_points=300)
+    r0, r0_again, r1 = (_starts(tmp_path, tiny_diffuse, seed=s, init=InitConfig(method="random", random_points=300))
                         for s in (0, 0, 1))
     np.testing.assert_array_equal(r0, r0_again)
     assert not np.allclose(r0, r1)
@@ -1012,17 +1018,17 @@ def test_train_says_the_init_choice_live_before_the_bar_and_only_once(tmp_path, 
 
     for extra in (["--json"], []):
         res = CliRunner().invoke(main, ["train", str(tiny_diffuse_dir), "--out", str(tmp_path / f"r{len(extra)}"),
-                                        "--set", "init='random'", "--set", "iterations=2", "--set", "sh_degree=0",
+                                        "--set", "init='random'", "--set", "iterations=2", "--set", "sh.degree=0",
                                         "--set", "strategy='none'", *extra])
         assert res.exit_code == 0, res.output
         err = [line for line in res.stderr.splitlines() if line.strip()]
-        said = [i for i, line in enumerate(err) if line.startswith("init_region auto: ")]
+        said = [i for i, line in enumerate(err) if line.startswith("init.region auto: ")]
         bar = next(i for i, line in enumerate(err) if line.startswith("train"))
         assert len(said) == 1 and said[0] < bar, res.stderr
         if extra:  # still among the result's notes
             assert err[said[0]] in json.loads(res.stdout)["notes"]
         else:  # not printed again at the end
-            assert "init_region auto" not in res.stdout
+            assert "init.region auto" not in res.stdout
 
 
 def test_auto_init_note_separates_its_choice_from_the_sfm_result(tiny_diffuse, monkeypatch):
@@ -1042,15 +1048,15 @@ def test_auto_init_note_separates_its_choice_from_the_sfm_result(tiny_diffuse, m
 
 
 def test_train_help_lists_the_protocols_inits_and_random_regions():
-    """`splatbench train --help` names every choice of protocol, init and init_region (the
+    """`splatbench train --help` names every choice of protocol, init and init.region (the
     help is written out, so that --help does not import torch: this keeps it in step)."""
     from splatbench.cli import main
     from splatbench.train.initializers import INITIALIZERS, REGIONS
     from splatbench.train.protocol import PROTOCOLS
 
     text = " ".join(CliRunner().invoke(main, ["train", "--help"]).output.split())
-    for label, names in (("protocol:", PROTOCOLS), ("init:", ("auto", "surface", "sfm", "random")),
-                         ("init_region (init=random):", REGIONS)):
+    for label, names in (("protocol:", PROTOCOLS), ("init (init.method):", ("auto", "surface", "sfm", "random")),
+                         ("init.region (init=random):", REGIONS)):
         listed = text.split(label, 1)[1].split(";")[0].split(". ")[0]
         assert all(re.search(rf"\b{re.escape(n)}\b", listed) for n in names), (label, listed)
     assert set(INITIALIZERS) >= {"auto", "surface", "sfm", "random"}
@@ -1068,13 +1074,13 @@ def test_opacity_resets_closer_than_an_opacity_can_recover_are_warned_about():
     (line,) = apply_overrides(TrainConfig(), ["iterations=100"]).warnings()
     assert line.startswith("warning: strategy 'default' resets opacities every 10 steps in this run, sooner than "
                            "an opacity can climb back from the reset value 0.01 to 0.5 (176 steps") and "\n" not in line
-    assert 'strategy_options.reset_every = 0' in line
+    assert 'strategy.reset_every = 0' in line
     quiet = ["iterations=2000", "iterations=30000", "protocol=graphdeco-7k", "strategy=mcmc",
-             "strategy_options.reset_every=0", 'strategy_options.reset_every="50%"']
+             "strategy.reset_every=0", 'strategy.reset_every="50%"']
     for way in quiet:
         assert apply_overrides(TrainConfig(), ["iterations=100", way]).warnings() == [], way
     for every in ("10%", "20%"):  # densification_schedules' cells at 2,000 steps
-        assert apply_overrides(TrainConfig(), ["iterations=2000", f'strategy_options.reset_every="{every}"']
+        assert apply_overrides(TrainConfig(), ["iterations=2000", f'strategy.reset_every="{every}"']
                                ).warnings() == []
     # the climb is the project's own Adam's: a steady gradient after a reset (moments zeroed, step count kept)
     for reset_step in (10, 200):

@@ -14,7 +14,7 @@ from splatbench.errors import InputError
 from splatbench.train.out_folder import claim_out
 
 #: A few steps on a tiny scene, random init: the run's files, not its quality, are under test.
-FAST = ["--set", "iterations=3", "--set", "strategy=none", "--set", "init=random", "--set", "init_random_points=200",
+FAST = ["--set", "iterations=3", "--set", "strategy=none", "--set", "init=random", "--set", "init.random_points=200",
         "--quiet"]
 
 

@@ -27,7 +27,7 @@ from splatbench.experiments.store import RunRecord
 from splatbench.experiments.train_kind import TRAIN
 from splatbench.raster.options import RasterOptions
 from splatbench.train import TrainConfig, apply_overrides, load_config, save_config, train
-from splatbench.train.config import RASTER_KEYS
+from splatbench.train.config import RASTER_KEYS, EvalConfig, SHConfig
 from splatbench.train.loop import Trainer, torch_threads
 from tests.test_train import config, synthetic_dataset, tiny_diffuse_dir  # noqa: F401 (a fixture)
 
@@ -130,8 +130,8 @@ def test_every_render_of_a_run_uses_the_configs_raster_options(tmp_path, monkeyp
     monkeypatch.setattr("splatbench.train.loop.rasterize", spy)
     options = RasterOptions(alpha_min=0.02, tile_size=8, radius="opacity")
     # auto SH (a probe every 2 steps), an evaluation every 3 steps and the final one
-    cfg = config(tmp_path, iterations=6, sh_degree="auto", sh_interval=2, sh_auto_probe_views=2, eval_every=3,
-                 lpips_net="none", device="cpu", raster=options)
+    cfg = config(tmp_path, iterations=6, sh=SHConfig(degree="auto", interval=2, auto_probe_views=2),
+                 eval=EvalConfig(every=3, lpips_net="none"), device="cpu", raster=options)
     result = train(cfg, dataset=synthetic_dataset(tmp_path, view_dependent=True))
     callers = {caller for caller, _ in spy.calls}
     assert {"step", "warm_up", "probe_band", "evaluate"} <= callers, callers
@@ -172,7 +172,7 @@ def test_an_alpha_min_at_or_above_the_initial_opacity_is_refused():
         apply_overrides(TrainConfig(), ["raster.alpha_min=0.1"])
     assert str(info.value).startswith("raster.alpha_min: 0.1 is at or above the initial opacity 0.1") \
         and "\n" not in str(info.value)
-    apply_overrides(TrainConfig(), ["raster.alpha_min=0.1", "init_opacity=0.2"])  # the way out it names
+    apply_overrides(TrainConfig(), ["raster.alpha_min=0.1", "init.opacity=0.2"])  # the way out it names
 
 
 def test_an_alpha_min_at_or_above_the_reset_value_is_warned_about():
@@ -184,7 +184,7 @@ def test_an_alpha_min_at_or_above_the_reset_value_is_warned_about():
     (line,) = cfg.warnings()
     assert line.startswith("warning: raster.alpha_min=0.01 is at or above the opacity reset value 0.01 of "
                            "strategy 'default'") and "\n" not in line
-    for way_out in ("strategy_options.reset_every=0", "strategy_options.reset_value=0.02", "strategy=mcmc",
+    for way_out in ("strategy.reset_every=0", "strategy.reset_value=0.02", "strategy=mcmc",
                     "raster.alpha_min=0.008"):
         assert apply_overrides(cfg, [way_out]).warnings() == [], way_out
     assert TrainConfig().warnings() == []
@@ -197,7 +197,7 @@ def test_cli_train_records_the_raster_options(tmp_path, tiny_diffuse_dir):  # no
     out = tmp_path / "o"
     res = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--set", "raster.alpha_min=0.01", "--set",
                                "raster.tile_size=8", "--set", "iterations=3", "--set", "strategy=none", "--set",
-                               "lpips_net=none", "--json", "--quiet", "--out", str(out)])
+                               "eval.lpips_net=none", "--json", "--quiet", "--out", str(out)])
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout.strip().splitlines()[-1])
     assert data["raster"]["alpha_min"] == 0.01 and data["raster"]["tile_size"] == 8
@@ -225,19 +225,16 @@ def _id(config: dict) -> str:
     return make_run_id("train", TRAIN.identity(TRAIN.resolve(config)))
 
 
-def test_a_config_without_raster_options_keeps_its_run_id():
-    """The id hashes what it hashed before training took raster options: the resolved config
-    without a ``raster`` table. Options written at their defaults are the same run; a set one
-    is a new run, hashed as that option alone."""
+def test_raster_options_are_in_the_run_id():
+    """The id hashes the resolved config with its whole ``raster`` table: options written at their
+    defaults are the same run; a set one is a new run."""
     base = {"scene": "diffuse", "seed": 0, "iterations": 2000}
     resolved = TRAIN.resolve(base)
     assert resolved["raster"] == {k: v for k, v in RasterOptions().to_dict().items() if k != "device"}
-    before = {k: v for k, v in resolved.items() if k != "raster"}   # the resolved config as it was
-    assert TRAIN.identity(resolved) == before
-    assert _id(base) == make_run_id("train", before)
+    assert TRAIN.identity(resolved) == resolved
     assert _id({**base, "raster": {"alpha_min": DEFAULT_ALPHA_MIN, "tile_size": 16, "radius": "3sigma"}}) == _id(base)
     changed = TRAIN.identity(TRAIN.resolve({**base, "raster": {"alpha_min": 0.008}}))
-    assert changed == {**before, "raster": {"alpha_min": 0.008}}
+    assert changed == {**resolved, "raster": {**resolved["raster"], "alpha_min": 0.008}}
     assert _id({**base, "raster": {"alpha_min": 0.008}}) != _id(base)
 
 
@@ -268,8 +265,8 @@ def test_a_grid_sweeps_raster_options_and_its_rows_carry_them():
      "write [base.raster] as a table, or leave it out"),
     ("dead run", {"axes": {"raster.alpha_min": [0.005, 0.1]}},
      "x.toml: axes.raster.alpha_min = 0.1: raster.alpha_min: 0.1 is at or above the initial opacity 0.1 "
-     "(init_opacity), and alpha = opacity x G never exceeds the opacity: every Gaussian would be skipped and get "
-     "no gradient; lower raster.alpha_min or raise init_opacity"),
+     "(init.opacity), and alpha = opacity x G never exceeds the opacity: every Gaussian would be skipped and get "
+     "no gradient; lower raster.alpha_min or raise init.opacity"),
 ])
 def test_a_grid_names_a_bad_raster_key_in_one_line(where, table, message):
     spec = {"name": "t", "kind": "train", "scenes": ["diffuse"], "seeds": [0], "base": {"iterations": 2000}}

@@ -24,7 +24,7 @@ import torch
 
 from splatbench.bench.train import synthetic_scene
 from splatbench.strategies.base import PARAM_GROUPS, StepContext
-from splatbench.train.config import TrainConfig
+from splatbench.train.config import LossConfig, SHConfig, StrategyConfig, TrainConfig
 from splatbench.train.losses import photometric_loss
 from splatbench.train.loop import Trainer
 from splatbench.train.params import refreeze, set_lr
@@ -52,7 +52,7 @@ def _old_step(tr: Trainer) -> float:
         opt.zero_grad(set_to_none=True)
     rgb, _, _, info = tr._render(tr.dataset.train.cameras[view], degree, bg.tolist())
     image = rgb.detach().requires_grad_(rgb.requires_grad)
-    loss = photometric_loss(image, target, cfg.ssim_lambda, cfg.ssim_window)
+    loss = photometric_loss(image, target, cfg.loss.ssim_lambda, cfg.loss.ssim_window)
     reg = tr.strategy.regularization(tr.params, step)
     ctx = StepContext(step=step, info=info, scene_extent=tr.extent, means_lr=lr, loss=float(loss.detach()))
     tr.strategy.pre_backward(tr.params, tr.optimizers, tr.state, ctx)
@@ -70,7 +70,7 @@ def _old_step(tr: Trainer) -> float:
 
 def _torch_adams(tr: Trainer) -> None:
     tr.optimizers = {name: torch.optim.Adam([{"params": [tr.params[name]], "lr": tr.lrs[name], "name": name}],
-                                            lr=tr.lrs[name], eps=tr.config.adam_eps, fused=True)
+                                            lr=tr.lrs[name], eps=tr.config.optim.adam_eps, fused=True)
                      for name in PARAM_GROUPS}
 
 
@@ -94,8 +94,7 @@ def test_fast_step_gives_the_old_steps_losses_and_model_bit_for_bit(strategy, ex
     dataset, _ = synthetic_scene(24, 150, 3, 0)
     if random_background:
         dataset = _with_alpha(dataset)
-    cfg = TrainConfig(dataset="", out="", iterations=STEPS, strategy=strategy, strategy_options=extra,
-                      sh_degree=3, sh_interval=2, seed=0, device="cpu", random_background=random_background)
+    cfg = TrainConfig(dataset="", out="", iterations=STEPS, seed=0, device="cpu", random_background=random_background, strategy=StrategyConfig(name=strategy, options=extra), sh=SHConfig(degree=3, interval=2))
     old, new = Trainer(cfg, dataset=dataset), Trainer(cfg, dataset=dataset)
     _torch_adams(old)
     old_losses = [_old_step(old) for _ in range(STEPS)]
@@ -118,10 +117,11 @@ def test_a_training_step_imports_neither_torch_dynamo_nor_sympy():
     code = (
         "import sys\n"
         "from splatbench.bench.train import synthetic_scene\n"
-        "from splatbench.train.config import TrainConfig\n"
+        "from splatbench.train.config import StrategyConfig, TrainConfig\n"
         "from splatbench.train.loop import Trainer\n"
         "ds, _ = synthetic_scene(24, 60, 2, 0)\n"
-        "tr = Trainer(TrainConfig(dataset='', out='', iterations=2, strategy='default', seed=0, device='cpu'),"
+        "tr = Trainer(TrainConfig(dataset='', out='', iterations=2, strategy=StrategyConfig(name='default'), seed=0,"
+        " device='cpu'),"
         " dataset=ds)\n"
         "tr.step(); tr.step()\n"
         "print(sorted(m for m in ('torch._dynamo', 'sympy') if m in sys.modules))\n")
@@ -138,8 +138,7 @@ def test_warm_up_compiles_the_loss_kernels():
     import drjit as dr
 
     dataset, _ = synthetic_scene(24, 60, 2, 0)
-    trainer = Trainer(TrainConfig(dataset="", out="", iterations=3, strategy="none", seed=0, device="cpu",
-                                  ssim_window=7), dataset=dataset)  # a window no other test compiles first
+    trainer = Trainer(TrainConfig(dataset="", out="", iterations=3, seed=0, device="cpu", strategy=StrategyConfig(name="none"), loss=LossConfig(ssim_window=7)), dataset=dataset)  # a window no other test compiles first
     trainer.warm_up()
     image = torch.rand(24, 24, 3, requires_grad=True)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
@@ -162,8 +161,7 @@ def test_dr_jits_allocation_cache_is_flushed_when_the_model_changes_size(monkeyp
     calls = []
     monkeypatch.setattr(loop.dr, "flush_malloc_cache", lambda: calls.append(1))
     dataset, _ = synthetic_scene(24, 150, 3, 0)
-    cfg = TrainConfig(dataset="", out="", iterations=6, strategy="default", seed=0, device="cpu",
-                      strategy_options={"refine_start": 1, "refine_every": 2, "grad_threshold": 1e-7})
+    cfg = TrainConfig(dataset="", out="", iterations=6, seed=0, device="cpu", strategy=StrategyConfig(name="default", options={"refine_start": 1, "refine_every": 2, "grad_threshold": 1e-7}))
     trainer = Trainer(cfg, dataset=dataset)
     changed = 0
     for _ in range(6):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from splatbench.train.config import TrainConfig
+from splatbench.train.config import SHConfig, StrategyConfig, TrainConfig
 from splatbench.train.loop import Trainer
 
 
@@ -25,8 +25,7 @@ def dataset_dir(tmp_path_factory):
 
 def test_after_warm_up_no_step_or_evaluation_compiles_a_kernel(tmp_path, dataset_dir):
     # the schedule raises the degree every 2 steps: 0, 1, 2, 3 within the 8 steps
-    config = TrainConfig(dataset=str(dataset_dir), out=str(tmp_path), iterations=8, sh_degree=3, sh_interval=2,
-                         strategy="none").validate()
+    config = TrainConfig(dataset=str(dataset_dir), out=str(tmp_path), iterations=8, sh=SHConfig(degree=3, interval=2), strategy=StrategyConfig(name="none")).validate()
     trainer = Trainer(config)
     before = {k: v.detach().clone() for k, v in trainer.params.items()}
     rng_state = trainer.generator.get_state()

@@ -15,9 +15,9 @@ and evaluation, 100,000 initial points uniform in [-1.3, 1.3]^3, SH degree 3, th
 densification. LPIPS is VGG (the paper's) in both input conventions; ``test_lpips`` is
 graphdeco's ([0, 1] unscaled).
 
-The initial points are the built-in ``init = "random"`` with ``init_region = "nerf_synthetic"``
+The initial points are the built-in ``init.method = "random"`` with ``init.region = "nerf_synthetic"``
 (set explicitly; ``auto`` picks the same box on lego: the axes meet at the origin, rig radius
-4.03) and ``init_random_points = 100000``, so the run's checkpoints hold nothing this tool
+4.03) and ``init.random_points = 100000``, so the run's checkpoints hold nothing this tool
 adds: ``splatbench train --resume OUT/checkpoints/iteration_N.pt`` continues a lego run as
 ``--resume`` here does. Against graphdeco's ``readNerfSyntheticInfo`` + ``create_from_pcd``:
 
@@ -63,6 +63,7 @@ from splatbench.errors import InputError  # noqa: E402
 from splatbench.interrupt import Interrupted, stop_on_signals  # noqa: E402
 from splatbench.report_files import markdown_table, save_figure, write_csv, write_json, write_text  # noqa: E402
 from splatbench.train import TrainConfig, TrainResult, apply_overrides  # noqa: E402
+from splatbench.train.config import DataConfig, EvalConfig, InitConfig, SHConfig, StrategyConfig
 from splatbench.train.initializers import NERF_SYNTHETIC_HALF  # noqa: E402
 
 #: The 3DGS paper's lego test PSNR at 30K (Kerbl et al. 2023, Table 2; the table gives PSNR only).
@@ -74,16 +75,12 @@ PAPER_POINTS = 100_000
 EVAL_EVERY = 2500          # test-curve points (AlexNet LPIPS); the 7K and 30K evaluations are full
 CHECKPOINT_EVERY = 2500
 REPORT_DIR = ROOT / "reports" / "published_lego"
-SMOKE = ["iterations=300", "eval_steps=[100]", "eval_every=100", "data.downscale=4", "checkpoint_every=100"]
+SMOKE = ["iterations=300", "eval.steps=[100]", "eval.every=100", "data.downscale=4", "checkpoint_every=100"]
 
 
 def paper_config(dataset: str | Path, out: str | Path, overrides: list[str] = ()) -> TrainConfig:
     """The paper's settings (module doc) on ``dataset``, writing into ``out``, then ``overrides``."""
-    base = TrainConfig(dataset=str(Path(dataset).resolve()), out=str(Path(out).resolve()), layout="blender",
-                       protocol="graphdeco-30k", iterations=30_000, init="random", init_region="nerf_synthetic",
-                       init_random_points=PAPER_POINTS, background=[1.0, 1.0, 1.0], sh_degree=3, strategy="default",
-                       lpips_net="vgg", lpips_scale_inputs=False, eval_every=EVAL_EVERY,
-                       checkpoint_every=CHECKPOINT_EVERY)
+    base = TrainConfig(dataset=str(Path(dataset).resolve()), out=str(Path(out).resolve()), protocol="graphdeco-30k", iterations=30_000, background=[1.0, 1.0, 1.0], checkpoint_every=CHECKPOINT_EVERY, data=DataConfig(layout="blender"), init=InitConfig(method="random", region="nerf_synthetic", random_points=PAPER_POINTS), sh=SHConfig(degree=3), strategy=StrategyConfig(name="default"), eval=EvalConfig(lpips_net="vgg", lpips_scale_inputs=False, every=EVAL_EVERY))
     return apply_overrides(base, list(overrides))
 
 
@@ -107,24 +104,24 @@ def report_markdown(result: TrainResult, config: TrainConfig, *, command: str, t
     training split's size, when known): the paper's number beside ours, the protocol in the
     header, a smoke run (anything but the paper's length and resolution) marked as such in its
     first line."""
-    paper_length = config.protocol == "graphdeco-30k" and result.iterations == 30_000 and config.downscale == 1
+    paper_length = config.protocol == "graphdeco-30k" and result.iterations == 30_000 and config.data.downscale == 1
     cols = result.step_evaluations
     final = cols[-1] if cols else None
     lines = []
     if not paper_length:
         lines += [f"> **Not the paper's protocol**: {result.iterations} steps of protocol `{config.protocol}`, images "
-                  f"downscaled {config.downscale}x. A check of the path from run to report, not a result.", ""]
+                  f"downscaled {config.data.downscale}x. A check of the path from run to report, not a result.", ""]
     lines += ["# NeRF-synthetic lego at the 3DGS paper's settings", "",
               f"**Protocol.** `{config.protocol}`: graphdeco-inria's 30,000-step schedule unscaled (refine 500..15,000 "
               f"every 100, opacity reset every 3,000, one SH band more every 1,000, position learning rate "
-              f"{config.lr_means:.1e} -> {config.lr_means_final:.1e} x scene extent over 30,000 steps); the test split "
+              f"{config.optim.lr_means:.1e} -> {config.optim.lr_means_final:.1e} x scene extent over 30,000 steps); the test split "
               f"evaluated after {_and([f'{e.step:,}' for e in cols]) or 'no step'} steps of one run "
               f"(the paper's 7K / 30K columns are checkpoints of one 30K run). Seed {config.seed}, strategy "
               f"`{result.strategy}`, SH degree {result.sh_degree}.", "",
               f"**Data.** `transforms_train.json` ({_f(train_views, 'd')} views) for training, `transforms_test.json` "
               f"({result.test_views} views) for testing, `transforms_val.json` unused (graphdeco's `--eval`); "
               f"RGBA composited on white, white background in training and evaluation"
-              f"{'' if config.downscale == 1 else f'; images downscaled {config.downscale}x (PIL bicubic)'}.", "",
+              f"{'' if config.data.downscale == 1 else f'; images downscaled {config.data.downscale}x (PIL bicubic)'}.", "",
               f"**Initialisation.** {_init_line(result, config)}", "",
               "**Metrics.** Means over the test views of PSNR and SSIM (splatbench's: float32 renders against the "
               "float32 composited targets; graphdeco's `metrics.py` reads 8-bit PNGs of both) and LPIPS v0.1 "
@@ -166,7 +163,7 @@ def report_markdown(result: TrainResult, config: TrainConfig, *, command: str, t
     if result.evaluations:
         lines += ["## Test curve", "",
                   "Mean test PSNR / SSIM and LPIPS (AlexNet, inputs in [-1, 1]: the cheap curve metric) every "
-                  f"{config.eval_every or 'n/a'} steps and at each full evaluation; `curve.csv`, `curve.png`.", "",
+                  f"{config.eval.every or 'n/a'} steps and at each full evaluation; `curve.csv`, `curve.png`.", "",
                   markdown_table(["step", "PSNR (dB)", "SSIM", "LPIPS (AlexNet)"],
                                  ([f"{p.step:,}", f"{p.psnr:.2f}", f"{p.ssim:.4f}", _f(p.lpips, ".4f")]
                                   for p in result.evaluations), align="rrrr"), ""]
@@ -196,7 +193,7 @@ def _init_line(result: TrainResult, config: TrainConfig) -> str:
     if not (init.get("method") == "random" and init.get("region") == "nerf_synthetic" and points == PAPER_POINTS):
         return f"`{init.get('method', '?')}` ({points} points): NOT the paper's initialisation."
     return (f"{points:,} points uniform in [-{NERF_SYNTHETIC_HALF}, {NERF_SYNTHETIC_HALF}]^3 (graphdeco's "
-            f"`readNerfSyntheticInfo` box; `init = \"random\"`, `init_region = \"nerf_synthetic\"`), opacity "
+            f"`readNerfSyntheticInfo` box; `init.method = \"random\"`, `init.region = \"nerf_synthetic\"`), opacity "
             f"{config.initial_opacity:g}, 3-NN scales (graphdeco's `create_from_pcd`); colours uniform in [0, 1) "
             f"per channel, where graphdeco's are all 127/255 grey (its 8-bit `points3d.ply`): not measured "
             f"what that changes.")

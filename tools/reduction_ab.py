@@ -76,7 +76,7 @@ def main() -> None:
     from splatbench.metrics.load import load1
     from splatbench.raster import reduction
     from splatbench.raster.device import packet_width
-    from splatbench.train.config import TrainConfig
+    from splatbench.train.config import SHConfig, StrategyConfig, TrainConfig
 
     sides = {"old": old_reduction(args.against).reduce_pairs, "new": reduction.reduce_pairs}
     captured: dict = {}
@@ -87,8 +87,7 @@ def main() -> None:
 
     dataset, _ = synthetic_scene(args.size, args.gaussians, args.views, 0)
     steps = 3 + 2 * (2 + args.pairs) * args.block
-    cfg = TrainConfig(dataset="", out="", iterations=steps, strategy="none", sh_degree=3, sh_interval=1,
-                      schedule="absolute", seed=0, device="cpu", torch_threads=1)
+    cfg = TrainConfig(dataset="", out="", iterations=steps, schedule="absolute", seed=0, device="cpu", torch_threads=1, strategy=StrategyConfig(name="none"), sh=SHConfig(degree=3, interval=1))
     load0 = load1()
     with loop.torch_threads(1):
         trainer = loop.Trainer(cfg, dataset=dataset)

@@ -55,14 +55,14 @@ def main() -> None:
     import splatbench.train.loop as loop
     from splatbench.bench.train import synthetic_scene
     from splatbench.metrics.load import load1
-    from splatbench.train.config import TrainConfig
+    from splatbench.train.config import SHConfig, StrategyConfig, TrainConfig
 
     if args.clock == "cpu":  # the trainer's stage clocks read CPU time instead
         loop.time = types.SimpleNamespace(perf_counter=time.process_time)
     dataset, _ = synthetic_scene(args.size, args.gaussians, args.views, 0)
     cfg = TrainConfig(dataset="", out="", iterations=args.warmup + args.steps * (2 if args.kernels else 1),
-                      strategy="none", sh_degree=3,
-                      sh_interval=1, schedule="absolute", seed=0, device="cpu", torch_threads=1)
+                      sh=SHConfig(degree=3, interval=1),
+                       schedule="absolute", seed=0, device="cpu", torch_threads=1, strategy=StrategyConfig(name=StrategyConfig(name="none")))
     with loop.torch_threads(1):
         trainer = loop.Trainer(cfg, dataset=dataset)
         trainer.warm_up()

@@ -44,9 +44,14 @@ from splatbench.train.config import TrainConfig
 from splatbench.train.loop import Trainer, torch_threads
 dr.set_thread_count(spec["threads"])
 dataset, _ = synthetic_scene(spec["size"], spec["gaussians"], spec["views"], spec["seed"])
-kwargs = dict(dataset="", out="", iterations=spec["iterations"], strategy="none", sh_degree=3, sh_interval=1,
-              seed=spec["seed"], device="cpu", torch_threads=1)
-if "schedule" in {f.name for f in dataclasses.fields(TrainConfig)}:
+kwargs = dict(dataset="", out="", iterations=spec["iterations"], seed=spec["seed"], device="cpu", torch_threads=1)
+fields = {f.name for f in dataclasses.fields(TrainConfig)}
+if "sh" in fields:  # the grouped TrainConfig
+    from splatbench.train.config import SHConfig, StrategyConfig
+    kwargs.update(strategy=StrategyConfig(name="none"), sh=SHConfig(degree=3, interval=1))
+else:  # a commit before the regroup: flat fields
+    kwargs.update(strategy="none", sh_degree=3, sh_interval=1)
+if "schedule" in fields:
     kwargs["schedule"] = "absolute"
 with torch_threads(1):
     trainer = Trainer(TrainConfig(**kwargs), dataset=dataset)

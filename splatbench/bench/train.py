@@ -129,13 +129,13 @@ def run_size(size: int, settings: TrainBenchSettings) -> TrainBenchResult:
     """Benchmark training at ``size`` x ``size`` in this process."""
     from splatbench.metrics.memory import peak_rss_mb
     from splatbench.metrics.machine import resolve_device
-    from splatbench.train.config import TrainConfig
+    from splatbench.train.config import SHConfig, StrategyConfig, TrainConfig
     from splatbench.train.loop import StepTimes, Trainer, torch_threads
 
     dataset, _ = synthetic_scene(size, settings.gaussians, settings.views, settings.seed)
-    cfg = TrainConfig(dataset="", out="", iterations=settings.warmup + settings.iterations, strategy="none",
-                      sh_degree=3, sh_interval=1, schedule="absolute", seed=settings.seed, device=settings.device,
-                      torch_threads=settings.torch_threads)
+    cfg = TrainConfig(dataset="", out="", iterations=settings.warmup + settings.iterations,
+                      strategy=StrategyConfig(name="none"), sh=SHConfig(degree=3, interval=1), schedule="absolute",
+                      seed=settings.seed, device=settings.device, torch_threads=settings.torch_threads)
     with torch_threads(settings.torch_threads):
         trainer = Trainer(cfg, dataset=dataset)
         for _ in range(settings.warmup):

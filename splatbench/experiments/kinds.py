@@ -133,12 +133,15 @@ def check_config(config: type, table: Mapping[str, Any], *, prefix: str = "") ->
     """A one-line `InputError` ``PREFIXKEY: unknown key (...)`` for the first key of ``table`` (a
     run's nested config) that the dataclass ``config`` does not take (`config_keys`, and at the top
     `RUN_KEYS`); a table under a field whose type is a dataclass is checked against that class
-    (``raster.tile_sise`` against `RasterOptions`); a mapping field's keys are the kind's to check
-    (``strategy_options``, ``data``)."""
+    (``raster.tile_sise`` against `RasterOptions`); a mapping field's keys, and those of a dataclass
+    that reads its own table (a ``from_table`` classmethod: the train config's groups, whose ``data``
+    table a grid shares with the scene's keys and whose ``strategy`` table holds the strategy's
+    fields), are the kind's to check in ``validate``."""
     keys = config_keys(config)
     check_keys(table, {*keys, *(() if prefix else RUN_KEYS)}, prefix=prefix)
     for key, value in table.items():
-        if isinstance(value, Mapping) and _is_dataclass_type(keys.get(key)):
+        if isinstance(value, Mapping) and _is_dataclass_type(keys.get(key)) and \
+                not hasattr(keys[key], "from_table"):
             check_config(keys[key], value, prefix=f"{prefix}{key}.")
 
 

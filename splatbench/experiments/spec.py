@@ -19,7 +19,7 @@ sweep it (docs/experiments.md has the full format)::
 
     [variants.densify]                # one axis whose values set several fields together
     none = { strategy = "none" }
-    mcmc = { strategy = "mcmc", strategy_options.cap_max = 50000 }   # dotted: a nested field
+    mcmc = { strategy = "mcmc", strategy.cap_max = 50000 }   # dotted: a nested field
 
     [runner]                          # defaults of `splatbench run` (the command line wins)
     workers = 2
@@ -343,7 +343,7 @@ def same_value(a: Any, b: Any) -> bool:
 
 def _cell_values(cell: Mapping[str, Any], dims: list[str], where: str, fail, prefix: str = "") -> dict[str, Any]:
     """A check cell's ``dimension -> value``: a key (dotted or nested, as TOML writes
-    ``strategy_options.reset_every``) that is a dimension takes its value whole (an axis value
+    ``strategy.reset_every``) that is a dimension takes its value whole (an axis value
     may be a table); any other key must lead to one."""
     out: dict[str, Any] = {}
     for key, value in cell.items():

@@ -5,7 +5,6 @@ Config (the nested dict an experiment gives one run)::
 
     scene, seed          from the experiment's ``scenes`` / ``seeds`` (``seed`` is TrainConfig.seed)
     data.path            a dataset folder (a scene table ``{ name, path, downscale }``)
-    data.downscale       its image size divided by N (TrainConfig.data.downscale; default 1)
     data.model           a 3DGS PLY rendered as a teacher scene (``{ name, model, views,
                          resolution, up }``; splatbench.experiments.teacher), with data.views
                          (default 64), data.resolution (default 128) and data.up (default:
@@ -16,26 +15,24 @@ Config (the nested dict an experiment gives one run)::
     data.test_spp        samples per pixel of the held-out views (default: data.spp); more
                          samples make cleaner test targets (their noise is a floor under
                          every run's test PSNR; docs/training.md)
-    raster.<option>      the rasterizer's options for every render of the run
-                         (TrainConfig.raster: ``raster.alpha_min``, ``raster.tile_size``,
-                         ``raster.radius``, ...; RASTER_KEYS of splatbench.train.config)
-    <any TrainConfig field> but ``dataset`` and ``out``, which are machine-specific:
-                         the kind sets them (the dataset folder, the run's work folder)
+    data.<DataConfig>    how the dataset is read (``data.downscale`` of a dataset folder,
+                         ``data.masks``, ``data.layout``, ``data.test_every``)
+    <any TrainConfig field or group> but ``dataset`` and ``out``, which are machine-specific:
+                         the kind sets them (the dataset folder, the run's work folder);
+                         groups as tables or dotted keys (``sh.degree``, ``strategy.name``,
+                         ``strategy.cap_max``, ``raster.alpha_min``)
 
 The ``data`` keys describe a scene: a key that does not apply to a run's scene type
 (``spp`` for a teacher, ``resolution`` for a dataset folder, ``downscale`` for a rendered
 scene) is left out of that run's resolved config, so a grid mixing the types can set
 ``data.resolution`` in its base; a scene table's own keys win over the base's.
 
-`resolve` fills every default in -- TrainConfig's, the rig's for ``data``, and the
-strategy's own fields for ``strategy_options`` -- so a field written at its default
-is the same run as one left out, and a changed default makes new runs. `identity`
-hashes a dataset folder's or a teacher model's content in place of its path
+`resolve` fills every default in -- TrainConfig's (every group, ``raster`` included), the
+rig's for ``data``, and the strategy's own fields in the ``strategy`` table -- so a field
+written at its default is the same run as one left out, and a changed default makes new
+runs. `identity` hashes a dataset folder's or a teacher model's content in place of its path
 (`splatbench.data.content`), so the run ids of a grid over a user's data are the same in
-every clone and change when the data does. It also leaves out the ``raster`` options at
-their defaults (the whole table when every one is): the resolved config, its records and its
-table rows (``config.raster.*``) carry every option, while a run that sets none keeps the
-id it had before training took raster options (the committed results are keyed by them).
+every clone and change when the data does.
 
 Datasets are rendered once, in the parent, by `prepare` (Mitsuba, cached by content
 hash) into ``$SPLATBENCH_DATASETS`` (default ``./data/scenes``), read once there and
@@ -60,12 +57,12 @@ from splatbench.checks import check_image_size, check_keys
 from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff
-from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, check_config, metric, metric_specs
+from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, metric, metric_specs
 from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, memory_note, model_size_note,
                                                  protocol_lines,
                                                  schedule_confound_note, ssim_trained_note)
 from splatbench.metrics.memory import reset_peak_rss
-from splatbench.train.config import TrainConfig  # the kind's Config (loads torch: every use of the kind validates)
+from splatbench.train.config import DataConfig, TrainConfig, nest  # the kind's Config (loads torch: every use of the kind validates)
 
 #: Environment variable naming the folder of rendered datasets.
 DATASETS_ENV = "SPLATBENCH_DATASETS"
@@ -74,7 +71,7 @@ OWNED_FIELDS = ("dataset", "out")
 #: The ``data`` table: how the scene is rendered into a dataset.
 DATA_FIELDS = ("resolution", "views", "spp", "test_spp")
 #: ``data`` keys of a dataset folder and of a teacher scene.
-FOLDER_FIELDS = ("path", "downscale")
+FOLDER_FIELDS = ("path",)
 TEACHER_FIELDS = ("model", "views", "resolution", "up")
 TEACHER_DEFAULTS = {"views": 64, "resolution": 128}
 
@@ -199,25 +196,29 @@ class TrainRun(RunResult):
 
 # --------------------------------------------------------------------------- config
 def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]:
-    """(scene, the ``data`` table, the TrainConfig fields) of a nested run config; one-line
-    `InputError` naming the field for anything unknown (`check_config`: the kind's Config is
-    `TrainConfig`, its ``data`` table the scene's, below)."""
+    """(scene, the scene's ``data`` keys, the TrainConfig fields) of a nested run config: the
+    ``data`` table holds both the scene's keys (`DATA_FIELDS`, `FOLDER_FIELDS`, `TEACHER_FIELDS`)
+    and `DataConfig`'s (how the dataset is read: ``downscale``, ``masks``, ...), which go to the
+    TrainConfig. Dotted keys (``"sh.degree"``) are read into their tables (`nest`). One-line
+    `InputError` naming the field for anything unknown."""
+    config = nest(config)
     for key in config:
         if key in OWNED_FIELDS:
             what = "the rendered scene" if key == "dataset" else "the run's folder"
             raise InputError(f"{key}: set by the train kind ({what}); choose the scene with 'scenes' and its "
                              f"rendering with data.resolution / data.views / data.spp / data.test_spp")
-    check_config(TrainConfig, config)
+    check_keys(config, (*(f.name for f in dataclasses.fields(TrainConfig)), "scene"))
     scene = config.get("scene")
     if not isinstance(scene, str) or not scene:
         raise InputError(f"scene: expected a scene name, got {scene!r}")
-    data = config.get("data", {})
-    if not isinstance(data, dict):
-        raise InputError(f"data: expected a table of {', '.join(DATA_FIELDS)}, got {data!r}")
-    kind = scene_type(data)
+    table = config.get("data", {})
+    if not isinstance(table, dict):
+        raise InputError(f"data: expected a table of {', '.join(DATA_FIELDS)}, got {table!r}")
+    read_keys = tuple(f.name for f in dataclasses.fields(DataConfig))
+    check_keys(table, (*DATA_FIELDS, *FOLDER_FIELDS, *TEACHER_FIELDS, *read_keys), prefix="data.")
+    kind = scene_type(table)
     allowed = {"catalog": DATA_FIELDS, "folder": FOLDER_FIELDS, "teacher": TEACHER_FIELDS}[kind]
-    check_keys(data, (*DATA_FIELDS, *FOLDER_FIELDS, *TEACHER_FIELDS), prefix="data.")
-    data = {k: v for k, v in data.items() if k in allowed}  # keys of other scene types: module doc
+    data = {k: v for k, v in table.items() if k in allowed and k not in read_keys}  # other types' keys: module doc
     for key, value in data.items():
         if key in ("path", "model", "up"):
             continue
@@ -228,6 +229,9 @@ def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]
     if data.get("views") is not None and data["views"] < 2:
         raise InputError(f"data.views: expected at least 2 views (one is held out), got {data['views']}")
     train = {k: v for k, v in config.items() if k not in ("scene", "data")}
+    reading = {k: v for k, v in table.items() if k in read_keys and (kind == "folder" or k != "downscale")}
+    if reading:
+        train["data"] = reading
     return scene, data, train
 
 
@@ -237,7 +241,7 @@ def scene_type(data: dict[str, Any]) -> str:
 
 
 def _train_config(train: dict[str, Any]) -> TrainConfig:
-    return TrainConfig.from_dict(dict(train), source="config").validate()
+    return TrainConfig.from_dict(dict(train), source="config")
 
 
 def validate(config: dict[str, Any]) -> None:
@@ -246,24 +250,18 @@ def validate(config: dict[str, Any]) -> None:
     _train_config(train)
 
 
-#: Strategy fields added after runs were reported, left out of the resolved config at
-#: these values (the behaviour before they existed), so that earlier run ids stay valid.
-_LATER_FIELDS: dict[str, Any] = {"revised_opacity": False}
-
-
-def _strategy_options(cfg) -> dict[str, Any]:
-    """Every field of the configured strategy (preset and overrides applied, schedule
-    fields as written, not scaled), JSON values; a step field written as a fraction of
-    the run ("50%") stays that string, so the run scales it, once, as the file says."""
+def _strategy_table(cfg: TrainConfig) -> dict[str, Any]:
+    """``name`` and every field of the configured strategy (preset and options applied, schedule
+    fields as written, not scaled), JSON values; a step field written as a fraction of the run
+    ("50%") stays that string, so the run scales it, once, as the file says."""
     from splatbench.train.schedule import parse_run_fraction
 
     strategy = cfg.make_strategy(scaled=False)
-    out = {f.name: _json(getattr(strategy, f.name)) for f in dataclasses.fields(strategy)
-           if not (f.name in _LATER_FIELDS and getattr(strategy, f.name) == _LATER_FIELDS[f.name])}
-    for name, value in cfg.strategy_options.items():
-        if name in strategy.run_fraction_fields and parse_run_fraction(value, f"strategy_options.{name}") is not None:
+    out = {f.name: _json(getattr(strategy, f.name)) for f in dataclasses.fields(strategy)}
+    for name, value in cfg.strategy.options.items():
+        if name in strategy.run_fraction_fields and parse_run_fraction(value, f"strategy.{name}") is not None:
             out[name] = value
-    return out
+    return {"name": cfg.strategy.name, **out}
 
 
 def _json(value: Any) -> Any:
@@ -278,28 +276,23 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
 
     scene, data, train = _split(config)
     kind = scene_type(data)
-    if kind == "folder":
-        train = {**train, "data": {"downscale": data.get("downscale") or 1}}
     cfg = _train_config(train)
     out = {k: v for k, v in cfg.to_dict().items() if k not in OWNED_FIELDS}
-    if cfg.sh_degree != "auto":  # read only by sh_degree="auto": left out, so fixed-degree run ids are unchanged
-        del out["sh_auto_lookahead"]
-    for name, default in (("lpips_net", "alex"), ("lpips_scale_inputs", True), ("protocol", "quick"),
-                          ("eval_steps", [])):
-        if out[name] == default:  # added after the first grids: at the default left out, so their run ids hold
-            del out[name]
-    out["strategy_options"] = _strategy_options(cfg)
+    out["strategy"] = _strategy_table(cfg)
     out["scene"] = scene
+    read = out["data"]  # DataConfig's keys; a rendered scene is not downscaled (its resolution is set)
     if kind == "folder":
-        out["data"] = {"path": data["path"], "downscale": cfg.downscale}
+        out["data"] = {**read, "path": data["path"]}
         return out
+    read = {k: v for k, v in read.items() if k != "downscale"}
     if kind == "teacher":
-        out["data"] = {"model": data["model"], **{k: data.get(k) or v for k, v in TEACHER_DEFAULTS.items()}}
+        out["data"] = {**read, "model": data["model"], **{k: data.get(k) or v for k, v in TEACHER_DEFAULTS.items()}}
         if data.get("up") is not None:
             out["data"]["up"] = data["up"]
         return out
     rig = get_scene(scene).rig
     out["data"] = {
+        **read,
         "resolution": data.get("resolution") or int(rig.resolution[0]),
         "views": data.get("views") or int(rig.train_views + rig.test_views),
         "spp": data.get("spp") or int(rig.spp),
@@ -312,28 +305,14 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
 
 def identity(config: dict[str, Any]) -> dict[str, Any]:
     """What the run id hashes of a resolved config: ``data.path`` / ``data.model`` replaced by
-    ``data.content``, the hash of what the folder or file holds (module doc); the ``raster``
-    options at their defaults left out, and the table with them when all are (a run that sets
-    none has the id it had before training took raster options)."""
-    config = _raster_identity(config)
+    ``data.content``, the hash of what the folder or file holds (module doc), so that a report's
+    run ids hold in any clone and change when the data does."""
     data = config.get("data", {})
     key = "path" if "path" in data else "model" if "model" in data else None
     if key is None:
         return config
     rest = {k: v for k, v in data.items() if k != key}
     return {**config, "data": {**rest, "content": _content(str(Path(data[key]).absolute()))}}
-
-
-def _raster_identity(config: dict[str, Any]) -> dict[str, Any]:
-    """``config`` with only the ``raster`` options that differ from `RasterOptions`' defaults."""
-    if "raster" not in config:
-        return config
-    from splatbench.raster.options import RasterOptions
-
-    defaults = RasterOptions().to_dict()
-    changed = {k: v for k, v in config["raster"].items() if k not in defaults or v != defaults[k]}
-    rest = {k: v for k, v in config.items() if k != "raster"}
-    return {**rest, "raster": changed} if changed else rest
 
 
 def _content(path: str) -> str:
@@ -421,8 +400,8 @@ def prepare(configs: list[dict[str, Any]]) -> Prepared:
         if kind == "folder":
             from splatbench.data import load_dataset
 
-            ds = load_dataset(data["path"], downscale=data["downscale"],
-                              say=lambda line: print(line, file=sys.stderr, flush=True))
+            ds = load_dataset(data["path"], layout=data["layout"], test_every=data["test_every"],
+                              downscale=data["downscale"], say=lambda line: print(line, file=sys.stderr, flush=True))
             print(f"dataset {config['scene']}: {data['path']} (downscale {data['downscale']}: "
                   f"{len(ds.train)} train, {len(ds.test)} test views)", file=sys.stderr, flush=True)
             path = Path(data["path"])
@@ -438,9 +417,9 @@ def prepare(configs: list[dict[str, Any]]) -> Prepared:
             print(f"dataset {config['scene']} {what}: {how} ({result.path})", file=sys.stderr, flush=True)
             path = result.path
         no_points = kind == "folder" and ds.points is None  # init="auto" triangulates those (SfM, known poses)
-        needs = sorted({(c.get("init_sfm_poses", "known"), c.get("layout", "auto"), c.get("test_every", 8))
+        needs = sorted({(c["init"]["sfm_poses"], c["data"]["layout"], c["data"]["test_every"])
                         for c in configs if c["scene"] == config["scene"] and c["data"] == data
-                        and (c.get("init") == "sfm" or (c.get("init") == "auto" and no_points))})
+                        and (c["init"]["method"] == "sfm" or (c["init"]["method"] == "auto" and no_points))})
         for poses, layout, test_every in needs:
             _prepare_sfm(path, data.get("downscale") or 1, poses, layout, test_every)
     return prepared
@@ -472,8 +451,6 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> TrainRun:
 
     scene, data, fields = _split(config)
     dataset = ensure_dataset(scene, data, prepared.datasets)
-    if scene_type(data) == "folder":
-        fields = {**fields, "data": {"downscale": data["downscale"]}}
     cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="config")
     # a worker runs several runs in turn: reset its high-water mark so the peak recorded is this run's own
     own_peak = reset_peak_rss()
@@ -499,7 +476,7 @@ def planned(config: dict[str, Any]) -> dict[str, float]:
 def with_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:
     """``config`` (a run's nested, unresolved config) under protocol ``name``: what an experiment's
     ``[check]`` runs. ``protocol = name``; ``iterations`` left out, so the protocol brings its own
-    length (7,000 for graphdeco-7k); ``eval_every`` the protocol's `curve_every` (700 for
+    length (7,000 for graphdeco-7k); ``eval.every`` the protocol's `curve_every` (700 for
     graphdeco-7k: no point on an opacity reset). Every other field as the cell has it. One-line
     `InputError` for an unknown name or one without a length of its own (``quick``: the grid's)."""
     from splatbench.train.protocol import get_protocol  # late: splatbench.train imports torch
@@ -508,8 +485,10 @@ def with_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:
     if protocol.curve_every is None:
         raise InputError(f"protocol: {name!r} is laid over the grid's own iterations; a check reruns the "
                          f"headline at a protocol of its own length (graphdeco-7k, graphdeco-30k)")
-    out = {k: v for k, v in config.items() if k not in ("iterations", "eval_every")}
-    return {**out, "protocol": name, "eval_every": protocol.curve_every}
+    out = {k: v for k, v in config.items() if k != "iterations"}
+    evaluation = out.get("eval", {})
+    evaluation = {**(evaluation if isinstance(evaluation, dict) else {}), "every": protocol.curve_every}
+    return {**out, "protocol": name, "eval": evaluation}
 
 
 def describe_protocol(name: str) -> str:

@@ -28,7 +28,8 @@ import pandas as pd
 from splatbench.experiments.kind_report import AxisRows, Claim, done_runs
 
 #: What the runs' protocol is called when their config names none (`TrainConfig.protocol` absent).
-DEFAULT_PROTOCOL = "quick (graphdeco's 30,000-step schedule scaled to the run's length)"
+DEFAULT_PROTOCOL = ("quick (graphdeco's 30,000-step schedule scaled to the run's length): a smoke test, not evidence "
+                    "about a 3DGS method (the field's numbers come from graphdeco's 7K and 30K protocols)")
 
 
 def _values(done: pd.DataFrame, column: str) -> list[Any]:
@@ -69,12 +70,12 @@ def seed_varies(config: dict[str, Any]) -> tuple[list[str], list[str]]:
     fixed = []
     if config.get("random_background"):
         varies.append("random backgrounds")
-    if config.get("strategy") not in (None, "none") and config.get("strategy_options.seed") is not None:
+    if config.get("strategy.name") not in (None, "none") and config.get("strategy.seed") is not None:
         varies.append("the strategy's random draws (split children, MCMC relocation and noise)")
-    init = config.get("init")
+    init = config.get("init.method")
     if init == "random":
         varies.append("the random initial points")
-    elif config.get("init_seeded") or config.get("init_jitter") or config.get("init_subsample"):
+    elif config.get("init.jitter"):
         varies.append(f"the initial points (init = {init}, seeded)")
     elif init is not None:
         fixed.append(f"the initial points of init = {init}")
@@ -88,19 +89,19 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
     if done.empty or "config.iterations" not in done.columns:
         return []
     lines = []
-    protocol = _one(done, "config.protocol") or DEFAULT_PROTOCOL
-    lines.append(f"- **Protocol**: {protocol}.")
+    protocol = _one(done, "config.protocol") or "quick"
+    lines.append(f"- **Protocol**: {DEFAULT_PROTOCOL if protocol == 'quick' else protocol}.")
     iters = _one(done, "config.iterations", lambda v: f"{int(v):,}")
     schedules = _values(done, "config.schedule")
     how = {"scaled": "graphdeco's 30,000-step schedule scaled to the run (refine window, opacity resets, SH steps "
                      "times iterations / 30,000)",
            "absolute": "schedule steps as written"}
     sched = " / ".join(how.get(s, str(s)) for s in schedules if s is not None) or "not recorded"
-    lr = _one(done, "config.lr_means", _g)
-    lr_final = _one(done, "config.lr_means_final", _g)
+    lr = _one(done, "config.optim.lr_means", _g)
+    lr_final = _one(done, "config.optim.lr_means_final", _g)
     lrs = (f"; learning rates not scaled: positions {lr} → {lr_final} × scene extent, decayed over the run's "
            f"iterations, the other groups constant" if lr and lr_final else "")
-    if protocol in ("quick", DEFAULT_PROTOCOL):
+    if protocol == "quick":
         lines.append(f"- **Schedule**: {iters} iterations, {sched}{lrs}.")
     else:  # a graphdeco protocol: its schedule as written, whatever length the runs stopped at
         lines.append(f"- **Schedule**: {iters} iterations of graphdeco's 30,000-step schedule as written (refine "
@@ -110,7 +111,7 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
     evals = _eval_steps(done)
     lines.append(f"- **Evaluation**: the test views at steps {evals}; the reported numbers are the last step's."
                  if evals else "- **Evaluation**: the test views at the end.")
-    test_every = _one(done, "config.test_every")
+    test_every = _one(done, "config.data.test_every")
     views = _one(done, "config.data.views")
     split = f"every {test_every}th view held out for testing (where the dataset gives no split of its own)" \
         if test_every else "the dataset's own split"
@@ -152,14 +153,14 @@ def init_text(done: pd.DataFrame) -> str:
     ran (``metric.init_method``; for a run from before it was recorded, ``surface`` where
     ``auto`` met a rendered scene, which always has its surface points, else "not recorded"),
     the initial count (``metric.init_points``, else the curves' step-0 count) and the jitter
-    that a seed moves the given points by (``config.init_jitter``)."""
-    asked = _one(done, "config.init")
+    that a seed moves the given points by (``config.init.jitter``)."""
+    asked = _one(done, "config.init.method")
     if asked is None:
         return "not recorded"
     kinds = scene_kinds(done)
     parts = []
     for scene, rows in done.groupby("scene", sort=False):
-        for init, cell in rows.groupby(rows["config.init"].astype(str), sort=False):
+        for init, cell in rows.groupby(rows["config.init.method"].astype(str), sort=False):
             methods = [m for m in _values(cell, "metric.init_method") if m is not None]
             how = ""
             if not methods and init in _INIT_WHAT:
@@ -174,11 +175,11 @@ def init_text(done: pd.DataFrame) -> str:
             what = " / ".join(_INIT_WHAT.get(m, m) for m in methods) if methods else \
                 ("the method it resolved to is not recorded by these runs (auto: the dataset's own points when it "
                  "has them, else SfM with its known poses)" if init == "auto" else "not recorded")
-            jit = [v for v in _values(cell, "config.init_jitter") if v]
+            jit = [v for v in _values(cell, "config.init.jitter") if v]
             given = any(m in ("surface", "sfm") for m in methods)
             moved = (f", jittered {' / '.join(_g(v) for v in jit)} × their neighbour spacing per seed"
                      if given and jit else "")
-            region = _one(cell, "config.init_region") if "random" in methods else None
+            region = _one(cell, "config.init.region") if "random" in methods else None
             where = f" in region {region}" if region else ""
             arrow = f"{init} → {method}" if method and method != init else init
             parts.append(f"{arrow} on {scene}: {what}{where}" + (f", {count} Gaussians at step 0" if count else "")
@@ -189,7 +190,7 @@ def init_text(done: pd.DataFrame) -> str:
 def schedule_as_run(done: pd.DataFrame) -> str:
     """The schedule's counts as the runs made them: refinements and opacity resets (the
     strategy's recorded counts, per cell where they differ) and the SH schedule (one band more
-    every ``sh_interval`` steps as the run reads it: `splatbench.train.schedule.scale_step`); ""
+    every ``sh.interval`` steps as the run reads it: `splatbench.train.schedule.scale_step`); ""
     without those columns."""
     from splatbench.train.schedule import scale_step  # late: the reports start without torch
 
@@ -215,14 +216,14 @@ def schedule_as_run(done: pd.DataFrame) -> str:
             parts.append(f"{next(iter(cells.values()))} (every run)")
         else:
             parts.append("; ".join(f"`{label}` {text}" for label, text in cells.items()))
-    if {"config.sh_interval", "config.iterations", "config.schedule"} <= set(done.columns):
+    if {"config.sh.interval", "config.iterations", "config.schedule"} <= set(done.columns):
         steps = sorted({scale_step(int(i), int(n), str(sch), interval=True) for i, n, sch in
-                        zip(done["config.sh_interval"], done["config.iterations"], done["config.schedule"])
+                        zip(done["config.sh.interval"], done["config.iterations"], done["config.schedule"])
                         if pd.notna(i) and pd.notna(n) and sch in ("scaled", "absolute")})
         if steps:
             every = " / ".join(f"{s:,}" for s in steps)
             bands = " / ".join(", ".join(f"{k * s:,}" for k in (1, 2, 3)) for s in steps)
-            parts.append(f"SH degree raised one band every {every} step{'' if steps == [1] else 's'} (`sh_interval` as the run reads it: bands "
+            parts.append(f"SH degree raised one band every {every} step{'' if steps == [1] else 's'} (`sh.interval` as the run reads it: bands "
                          f"1, 2, 3 at steps {bands}, up to each cell's maximum degree)")
     return "; ".join(parts)
 
@@ -327,10 +328,10 @@ def _seeds(done: pd.DataFrame) -> str:
 
 # --------------------------------------------------------------------------- axis and metric notes
 def auto_sh_degree_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
-    """The ``sh_degree`` axis: the degree the ``auto`` rows ended at, per scene."""
+    """The ``sh.degree`` axis: the degree the ``auto`` rows ended at, per scene."""
     lines: list[str] = []
     claims: list[Claim] = []
-    if table.axis != "sh_degree" or "metric.sh_degree" not in runs.columns:
+    if table.axis != "sh.degree" or "metric.sh_degree" not in runs.columns:
         return lines, claims
     auto = [r for r in table.rows if r.value == "auto"]
     if auto:
@@ -417,17 +418,17 @@ METRIC_SSIM_WINDOW = 11
 
 
 def ssim_trained_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
-    """Where the loss trains on SSIM (``ssim_lambda > 0``: (1 − λ) L1 + λ D-SSIM), the test SSIM the
-    findings compare is the trained quantity (the same SSIM where ``ssim_window`` is the metric's 11
+    """Where the loss trains on SSIM (``loss.ssim_lambda > 0``: (1 − λ) L1 + λ D-SSIM), the test SSIM the
+    findings compare is the trained quantity (the same SSIM where ``loss.ssim_window`` is the metric's 11
     taps): a difference in it is partly the optimiser doing what it was asked, not an independent
     measure of quality. Names the rows that train on it and the weights."""
     done = done_runs(runs)
-    if done.empty or "config.ssim_lambda" not in done.columns:
+    if done.empty or "config.loss.ssim_lambda" not in done.columns:
         return [], []
-    lam = pd.to_numeric(done["config.ssim_lambda"], errors="coerce")
+    lam = pd.to_numeric(done["config.loss.ssim_lambda"], errors="coerce")
     if not (lam > 0).any():
         return [], []
-    windows = {int(w) for w in pd.to_numeric(done.get("config.ssim_window", pd.Series([], dtype=float)),
+    windows = {int(w) for w in pd.to_numeric(done.get("config.loss.ssim_window", pd.Series([], dtype=float)),
                                               errors="coerce").dropna()}
     same = windows == {METRIC_SSIM_WINDOW}
     which = "the same SSIM (its 11-tap Gaussian window)" if same else         f"an SSIM of window {' / '.join(map(str, sorted(windows))) or 'unrecorded'} (the metric's is 11)"
@@ -438,9 +439,9 @@ def ssim_trained_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) ->
         if values and max(values) > 0:
             rows.append((row.label, values))
     if len(rows) == len(table.rows) and len({tuple(v) for _, v in rows}) == 1:
-        where = f"in every row (ssim_lambda = {' / '.join(f'{v:g}' for v in rows[0][1])})"
+        where = f"in every row (loss.ssim_lambda = {' / '.join(f'{v:g}' for v in rows[0][1])})"
     else:
-        where = "in " + ", ".join(f"`{label}` (ssim_lambda = {' / '.join(f'{v:g}' for v in vs)})" for label, vs in rows)
+        where = "in " + ", ".join(f"`{label}` (loss.ssim_lambda = {' / '.join(f'{v:g}' for v in vs)})" for label, vs in rows)
     return [f"- SSIM: the loss, (1 − λ) L1 + λ D-SSIM, trains on {which} {where}: the test SSIM compared above is "
             f"the quantity those runs optimised, so a difference in it is partly the trained objective, not an "
             f"independent measure of quality (test PSNR and LPIPS are not trained on)."], []
@@ -459,17 +460,17 @@ def schedule_confound_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str
     only inside the refine window)."""
     done = done_runs(runs)
     col = f"config.{table.axis}" if not table.axis.startswith("config.") else table.axis
-    if "config.strategy" not in done.columns or col not in done.columns:
+    if "config.strategy.name" not in done.columns or col not in done.columns:
         return [], []
-    resetting = done[done["config.strategy"].isin(_RESETTING)]
+    resetting = done[done["config.strategy.name"].isin(_RESETTING)]
     lines = []
-    if table.axis == "strategy_options.reset_every":
+    if table.axis == "strategy.reset_every":
         zero = [r for r in table.rows if _decoded(r.value) == 0 and resetting.run_id.isin(r.run_ids).any()]
         for r in zero:
             lines.append(f"- `{r.label}` (no opacity resets) also turns off size pruning: the default strategy prunes "
                          f"Gaussians larger than `max_world_size` × the scene extent only after its first opacity "
                          f"reset (splatbench/strategies/default.py), so this cell changes two things, not one.")
-    if table.axis == "strategy_options.refine_stop" and len(resetting):
+    if table.axis == "strategy.refine_stop" and len(resetting):
         lines.append("- Opacity resets fire only inside the refine window (as in graphdeco), so `refine_stop` also "
                      "changes how many resets a run makes (`metric.opacity_resets` where recorded).")
     return lines, []

@@ -268,7 +268,7 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
         else:
             unknown.append(f"{scene} `{cell}`")
     cannot_tell = (f"- **Cannot tell whether {'any cell' if not cells else ', '.join(unknown)} settled**: "
-                   "no run of it evaluated the test views twice or more (set `eval_every`, e.g. a quarter of "
+                   "no run of it evaluated the test views twice or more (set `eval.every`, e.g. a quarter of "
                    "`iterations`), so its findings say nothing about convergence.") if unknown else None
     if not cells:
         return Finding("settling", [cannot_tell], [])

@@ -264,8 +264,8 @@ def axis_table(spec: ExperimentSpec, kind: RunKind, axis: str, table: pd.DataFra
 
 # --------------------------------------------------------------------------- cells
 def shared_prefix(names: Sequence[str]) -> str:
-    """The dotted prefix every name shares (``"strategy_options."`` for
-    ``strategy_options.refine_stop`` and ``strategy_options.reset_every``), else ""."""
+    """The dotted prefix every name shares (``"strategy."`` for
+    ``strategy.refine_stop`` and ``strategy.reset_every``), else ""."""
     parts = [n.split(".")[:-1] for n in names]
     common: list[str] = []
     for level in zip(*parts) if parts else ():
@@ -277,9 +277,9 @@ def shared_prefix(names: Sequence[str]) -> str:
 
 def cell_labels(spec: ExperimentSpec, table: pd.DataFrame, short: bool = False) -> pd.Series:
     """A display label per run of ``table`` naming its grid cell (``sh_degree=3``;
-    ``densify=mcmc, ssim_lambda=0.2``; ``base`` for a one-at-a-time base). ``short``: the
+    ``densify=mcmc, loss.ssim_lambda=0.2``; ``base`` for a one-at-a-time base). ``short``: the
     axes' shared dotted prefix left out (``refine_stop=25%`` for
-    ``strategy_options.refine_stop=25%``; the figures' point labels)."""
+    ``strategy.refine_stop=25%``; the figures' point labels)."""
     dims = spec.dimensions
     if not dims:
         return pd.Series(["all"] * len(table), index=table.index)

@@ -47,10 +47,10 @@ def make_strategy(name: str, **overrides) -> Strategy:
 
     Raises:
         InputError: (one line) for an unknown name, an unknown field
-            (``strategy_options.KEY: unknown key (did you mean ...)``), or a bad value.
+            (``strategy.KEY: unknown key (did you mean ...)``), or a bad value.
     """
     cls, preset = _lookup(name)
-    return dataclass_from_mapping(cls, overrides, base=preset, prefix="strategy_options.",
+    return dataclass_from_mapping(cls, overrides, base=preset, prefix="strategy.",
                                   source=f"strategy {name!r}")
 
 

@@ -125,17 +125,17 @@ class Strategy(Protocol):
     #: Step-valued fields that `TrainConfig.schedule = "scaled"` multiplies by
     #: iterations / 30,000 (name -> True for a period, kept >= 1); see splatbench.train.schedule.
     schedule_fields: ClassVar[dict[str, bool]]
-    #: Step-valued fields that `TrainConfig.strategy_options` may also give as a fraction of
+    #: Step-valued fields that `TrainConfig.strategy` (its options) may also give as a fraction of
     #: the run ("25%" or "1/4", name -> True for a period, kept >= 1); see splatbench.train.schedule.
     run_fraction_fields: ClassVar[dict[str, bool]]
-    #: The initial opacity of the reference implementation (`TrainConfig.init_opacity = "auto"`).
+    #: The initial opacity of the reference implementation (`TrainConfig.init.opacity = "auto"`).
     initial_opacity: ClassVar[float]
     #: Whether `post_backward` reads ``info.means2d_absgrad`` (AbsGS): the trainer
     #: rasterizes with ``absgrad=strategy.absgrad`` (the extra accumulation costs time).
     absgrad: bool
     #: Whether the hooks read the screen-space mean gradients (``info.means2d_grad`` or
     #: ``info.means2d_absgrad``), as graphdeco's adaptive density control does. Frozen means
-    #: (``lr_means = 0``) have none, so `TrainConfig` refuses them with such a strategy.
+    #: (``optim.lr_means = 0``) have none, so `TrainConfig` refuses them with such a strategy.
     reads_mean_gradients: ClassVar[bool]
 
     def last_topology_change(self, iterations: int) -> TopologyChange | None:
@@ -178,7 +178,7 @@ class Strategy(Protocol):
 
 
 #: What `no_refinement_note` advises by default: the run's own schedule may change.
-REFINE_ADVICE = 'give strategy_options.refine_every a smaller value or a fraction of the run ("5%"), or train longer'
+REFINE_ADVICE = 'give strategy.refine_every a smaller value or a fraction of the run ("5%"), or train longer'
 
 
 def no_refinement_note(name: str, refine_every: int, refine_start: int, refine_stop: int,

@@ -171,7 +171,7 @@ class BudgetStrategy(DefaultStrategy):
         budget = state.targets[-1]
         end = state.last.num_gaussians if state.last is not None else state.initial
         mode = (f"; budget_mode is 'multiplier', so the budget is {self.budget:g} x the initial {state.initial:,}: "
-                f"for a number of Gaussians set strategy_options.budget_mode=final_count"
+                f"for a number of Gaussians set strategy.budget_mode=final_count"
                 if self.budget_mode == "multiplier" else "")
         if budget < state.initial:
             return (f"warning: strategy 'budget': its budget of {budget:,} is below the initial {state.initial:,} "
@@ -183,7 +183,7 @@ class BudgetStrategy(DefaultStrategy):
                     f"at {len(state.short)} of {state.refinements} refinements fewer Gaussians passed grad_threshold "
                     f"{self.grad_threshold:g} than its count schedule asked for (the last: {reach:,} within reach of "
                     f"a target of {target:,}); Taming 3DGS grows only those, so a smaller budget or a lower "
-                    f"strategy_options.grad_threshold meets it{mode}")
+                    f"strategy.grad_threshold meets it{mode}")
         if end < budget and state.refinements < len(state.targets):
             return (f"strategy 'budget' ended at {end:,} Gaussians, below its budget of {budget:,}: it made "
                     f"{state.refinements} of the {len(state.targets)} refinements its count schedule plans "

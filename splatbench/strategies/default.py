@@ -134,7 +134,7 @@ class DefaultStrategy:
     #: Step fields that may be written as a fraction of the run ("25%", "1/4"; True: a period).
     run_fraction_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False,
                                                       "refine_every": True, "reset_every": True}
-    #: TrainConfig.init_opacity='auto' (graphdeco create_from_pcd: inverse_sigmoid(0.1))
+    #: TrainConfig.init.opacity='auto' (graphdeco create_from_pcd: inverse_sigmoid(0.1))
     initial_opacity: ClassVar[float] = 0.1
     #: Clone / split from the averaged info.means2d_grad (AbsGS: info.means2d_absgrad).
     reads_mean_gradients: ClassVar[bool] = True
@@ -219,7 +219,7 @@ class DefaultStrategy:
                 f"at step {worst.step + 1} (max scale > max_world_size {self.max_world_size:g} x the scene extent "
                 f"{state.scene_extent:.3g}, from the first opacity reset on, as graphdeco and gsplat): the extent "
                 f"comes from the camera spread, so a scene far beyond the cameras or a sparse start counts as too "
-                f"big; strategy_options.max_world_size=0 turns the rule off")
+                f"big; strategy.max_world_size=0 turns the rule off")
 
     def initialize_state(self, params: Params) -> DefaultState:
         n, device = params["means"].shape[0], params["means"].device

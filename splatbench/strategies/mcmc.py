@@ -9,7 +9,7 @@ onto live ones sampled proportionally to opacity, then 5 % more are added the sa
 way, up to ``cap_max``. The loss gets ``opacity_reg`` x mean(opacity) +
 ``scale_reg`` x mean(scale).
 
-Initialisation is the trainer's: with ``init_opacity = "auto"`` it starts from this
+Initialisation is the trainer's: with ``init.opacity = "auto"`` it starts from this
 strategy's ``initial_opacity`` 0.5, as 3DGS-MCMC's ``create_from_pcd`` does; its scales
 (0.1 x the nearest-neighbour distance there) stay graphdeco's (docs/training.md).
 """
@@ -73,7 +73,7 @@ class MCMCStrategy:
     #: Relocation samples by opacity, the noise by opacity and covariance: no screen-space
     #: gradient is read (as in gsplat 1.5.3's MCMCStrategy).
     reads_mean_gradients: ClassVar[bool] = False
-    initial_opacity: ClassVar[float] = 0.5  # init_opacity="auto" (ubc-vision/3dgs-mcmc create_from_pcd)
+    initial_opacity: ClassVar[float] = 0.5  # init.opacity="auto" (ubc-vision/3dgs-mcmc create_from_pcd)
     #: Scaled by ``TrainConfig.schedule = "scaled"``; refine_every stays as written.
     schedule_fields: ClassVar[dict[str, bool]] = {"refine_start": False, "refine_stop": False}
     #: Step fields that may be written as a fraction of the run ("25%", "1/4"; True: a period).

@@ -12,12 +12,12 @@ from splatbench.strategies.base import Optimizers, Params, StepContext, Topology
 class NoneStrategy:
     """Leaves the Gaussians alone; every hook is a no-op (no gsplat counterpart: a gsplat
     trainer without a strategy). Its one default, the initial opacity 0.1
-    (``init_opacity = "auto"``), is graphdeco's ``create_from_pcd``."""
+    (``init.opacity = "auto"``), is graphdeco's ``create_from_pcd``."""
 
     name: ClassVar[str] = "none"
     absgrad: ClassVar[bool] = False  # the trainer never needs info.means2d_absgrad
     reads_mean_gradients: ClassVar[bool] = False  # no hook reads anything
-    initial_opacity: ClassVar[float] = 0.1  # init_opacity="auto" (graphdeco create_from_pcd)
+    initial_opacity: ClassVar[float] = 0.1  # init.opacity="auto" (graphdeco create_from_pcd)
     schedule_fields: ClassVar[dict[str, bool]] = {}
     run_fraction_fields: ClassVar[dict[str, bool]] = {}
 

@@ -206,10 +206,21 @@ def load_checkpoint(trainer: Any, path: str | Path) -> dict[str, Any]:
                          f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") from None
 
 
+def _dotted(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A config's TOML tables as ``group.key -> value`` (so that a difference names its field)."""
+    out: dict[str, Any] = {}
+    for key, value in table.items():
+        if isinstance(value, dict) and value:
+            out.update(_dotted(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
 def _apply(trainer: Any, state: dict[str, Any], p: Path) -> dict[str, Any]:
-    saved, now = state["config"], trainer.config.to_dict()
-    defaults = type(trainer.config)().to_dict()  # a field added since the checkpoint was written: its default
-    differ = [key for key in now if key not in FREE_FIELDS and saved.get(key, defaults[key]) != now[key]]
+    saved, now = _dotted(state["config"]), _dotted(trainer.config.to_dict())
+    defaults = _dotted(type(trainer.config)().to_dict())  # a field added since the checkpoint was written: its default
+    differ = [key for key in now if key not in FREE_FIELDS and saved.get(key, defaults.get(key)) != now[key]]
     if differ:
         raise InputError(f"resume: {str(p)!r} was written with "
                          + ", ".join(f"{key}={saved.get(key)!r}" for key in differ) + "; this run has "
@@ -224,7 +235,7 @@ def _apply(trainer: Any, state: dict[str, Any], p: Path) -> dict[str, Any]:
     device = trainer.device  # the parameters are read onto the CPU (`read_checkpoint`); the run's live here
     trainer.params = {name: torch.nn.Parameter(params[name].to(device), requires_grad=trainer.lrs[name] > 0)
                       for name in PARAM_GROUPS}
-    trainer.optimizers = make_optimizers(trainer.params, trainer.lrs, trainer.config.adam_eps)
+    trainer.optimizers = make_optimizers(trainer.params, trainer.lrs, trainer.config.optim.adam_eps)
     for name in PARAM_GROUPS:
         trainer.optimizers[name].load_state_dict(state["optimizers"][name])  # moments follow their tensor
     trainer.state = state["strategy_state"]  # on ``device`` (`read_checkpoint`)

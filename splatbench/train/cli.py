@@ -10,17 +10,19 @@ import click
 @click.command()
 @click.argument("dataset", type=click.Path(path_type=Path), required=False)
 @click.option("--config", "config_file", type=click.Path(path_type=Path), default=None,
-              help="TOML config (fields of TrainConfig; see docs/training.md).")
+              help="TOML config (TrainConfig's fields and its [data], [init], [sh], [optim], [loss], [strategy], "
+                   "[eval], [raster] tables; see docs/training.md).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
-              help="Override a config field (repeatable), e.g. --set iterations=2000 --set sh_degree=auto "
-                   "--set strategy_options.cap_max=50000 --set data.downscale=8 (images / 8, or images_8/) "
+              help="Override a config field (repeatable): KEY a top-level field or GROUP.KEY, e.g. --set iterations=2000 "
+                   "--set sh.degree=auto --set strategy=mcmc --set strategy.cap_max=50000 --set loss.ssim_lambda=0 "
+                   "--set optim.lr_means=3e-4 --set background=1,1,1 --set data.downscale=8 (images / 8, or images_8/) "
                    "--set raster.tile_size=8 --set raster.alpha_min=0.005 (the rasterizer's options of every render; "
                    "the device is --set device=...) "
                    "--set checkpoint_every=500 (a checkpoint every 500 steps, for --resume) "
                    "--set protocol=graphdeco-30k (graphdeco's schedule unscaled, evaluated at 7,000 and 30,000). "
                    "protocol: quick (the default: the schedule scaled to iterations), graphdeco-7k, graphdeco-30k. "
-                   "init: auto (the default: the dataset's points, else SfM), surface (the dataset's points), "
-                   "sfm (pycolmap), random; init_region (init=random): auto, convergence, camera_cube, "
+                   "init (init.method): auto (the default: the dataset's points, else SfM), surface (the dataset's "
+                   "points), sfm (pycolmap), random; init.region (init=random): auto, convergence, camera_cube, "
                    "nerf_synthetic.")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default: the config's `out`, runs/train). One holding another run is refused "
@@ -49,7 +51,7 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
     says so in one line, ``resumed from CKPT at step N of M``; init=sfm says
     ``SfM: running pycolmap on N training views (cached in DIR)`` or ``SfM: reusing DIR``
     before SfM starts and its result as it ends; the start made (``init auto: sfm (...)``,
-    ``init_region auto: convergence (...)``) is said once it is made, before the progress
+    ``init.region auto: convergence (...)``) is said once it is made, before the progress
     bar. These lines go to stderr as they happen,
     unless --quiet, and are always among the result's notes (so in --json and result.json; a
     warning among its warnings).

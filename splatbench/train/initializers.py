@@ -249,7 +249,7 @@ def random_region(dataset, region: str = "auto", extent: float = 3.0) -> Region:
     from splatbench.train.params import scene_extent
 
     if region not in REGIONS:
-        raise InputError(f"init_region: expected one of {', '.join(REGIONS)}, got {region!r}")
+        raise InputError(f"init.region: expected one of {', '.join(REGIONS)}, got {region!r}")
     cameras = dataset.train.cameras
     centres = np.stack([c.center for c in cameras]).astype(np.float64)
     meet = axes_meeting_point(cameras) if len(cameras) >= 2 else None
@@ -267,8 +267,8 @@ def random_region(dataset, region: str = "auto", extent: float = 3.0) -> Region:
         return nerf()
     if region == "convergence":
         if meet is None:
-            raise InputError("init_region: 'convergence' needs cameras whose optical axes meet in front of them; "
-                             "these look one way (forward-facing) or outward (use init_region=camera_cube, or "
+            raise InputError("init.region: 'convergence' needs cameras whose optical axes meet in front of them; "
+                             "these look one way (forward-facing) or outward (use init.region=camera_cube, or "
                              "init=sfm)")
         return _convergence(cameras, meet, radius)
     # auto
@@ -276,16 +276,16 @@ def random_region(dataset, region: str = "auto", extent: float = 3.0) -> Region:
                  and meet is not None and float(np.linalg.norm(meet)) <= 0.1 * radius and 2.5 <= radius <= 6.0)
     if synthetic:
         return Region("nerf_synthetic", "cube", np.zeros(3), NERF_SYNTHETIC_HALF,
-                      f"init_region auto: nerf_synthetic (NeRF-synthetic layout: the axes meet at the origin, rig "
+                      f"init.region auto: nerf_synthetic (NeRF-synthetic layout: the axes meet at the origin, rig "
                       f"radius {radius:.3g}): uniform in [-1.3, 1.3]^3 as graphdeco")
     if meet is not None:
         made = _convergence(cameras, meet, radius)
         return Region(made.chosen, made.shape, made.center, made.size,
-                      f"init_region auto: convergence (the optical axes meet at {np.round(meet, 3).tolist()}): a "
+                      f"init.region auto: convergence (the optical axes meet at {np.round(meet, 3).tolist()}): a "
                       f"ball of radius {made.size:.3g} there")
     made = cube()
     return Region(made.chosen, made.shape, made.center, made.size,
-                  f"warning: init_region auto: the training cameras look one way (forward-facing: their optical "
+                  f"warning: init.region auto: the training cameras look one way (forward-facing: their optical "
                   f"axes are nearly parallel), and no region here is known to contain such a scene; started from "
                   f"gsplat's camera cube (half-side {made.size:.3g} = {extent:g} scene scales around the cameras), "
                   f"which holds only what lies within a few rig sizes of them (init=sfm triangulates the scene)",

@@ -118,12 +118,6 @@ def resolve_background(background: list[float] | str, split) -> tuple[torch.Tens
         f"background auto: {rgb}, the mean of {int(empty.sum())} training pixels with {how}"
 
 
-def lr_groups(config: TrainConfig) -> dict[str, float]:
-    """Initial learning rate per parameter group (means before extent scaling)."""
-    return {"means": config.lr_means, "log_scales": config.lr_log_scales, "quats": config.lr_quats,
-            "opacity_logits": config.lr_opacity_logits, "sh_dc": config.lr_sh_dc, "sh_rest": config.lr_sh_rest}
-
-
 class Trainer:
     """A training run in progress. ``Trainer(config)`` validates everything and sets up
     (no rendering); `step` runs one iteration; `evaluate` measures the test split."""
@@ -139,8 +133,8 @@ class Trainer:
                 raise InputError("dataset: no dataset folder given")
             from splatbench.data.dataset import load_dataset
 
-            dataset = load_dataset(config.dataset, layout=config.layout, test_every=config.test_every,
-                                   background=self._gt_background(config), downscale=config.downscale, say=say)
+            dataset = load_dataset(config.dataset, layout=config.data.layout, test_every=config.data.test_every,
+                                   background=self._gt_background(config), downscale=config.data.downscale, say=say)
         self.dataset = dataset
         train = dataset.train
         if len(train) == 0:
@@ -150,27 +144,27 @@ class Trainer:
                              "background cannot be composited under the ground truth")
         torch.manual_seed(config.seed)
         np.random.seed(config.seed % 2**32)
-        init = initialize(config.init, dataset, InitSettings(
-            config.max_sh_degree, config.initial_opacity, config.init_random_points, config.seed, say=say,
-            region=config.init_region, extent=config.init_extent, jitter=config.init_jitter,
-            sfm_poses=config.init_sfm_poses, say_note=not resuming))
+        init = initialize(config.init.method, dataset, InitSettings(
+            config.sh.max_degree, config.initial_opacity, config.init.random_points, config.seed, say=say,
+            region=config.init.region, extent=config.init.extent, jitter=config.init.jitter,
+            sfm_poses=config.init.sfm_poses, say_note=not resuming))
         gaussians, self.init_summary, self.init_note = init.gaussians, init.summary, init.note
         self.init_warns = init.warning
         self.extent = scene_extent(train.cameras)
-        self.lrs = lr_groups(config)
+        self.lrs = config.optim.rates()
         # parameters, Adam's moments, the strategy's state, targets and the loss live where the
         # rasterizer runs (torch's CUDA device on CUDA): no host round trip per step
         self.device = parameter_device(config.device)
         # the step's stage times wait for the GPU's queued work at each boundary (on the CPU: nothing)
         self._sync = device_sync(self.device)
         self.params = params_from_gaussians(gaussians, self.lrs, self.device)
-        self.optimizers = make_optimizers(self.params, self.lrs, config.adam_eps)
+        self.optimizers = make_optimizers(self.params, self.lrs, config.optim.adam_eps)
         # decays over the protocol's schedule (30,000 steps under graphdeco's, however early the run stops)
-        self.means_lr = ExponentialLR(config.lr_means, config.lr_means_final, config.schedule_length, self.extent)
+        self.means_lr = ExponentialLR(config.optim.lr_means, config.optim.lr_means_final, config.schedule_length, self.extent)
         self.state = self.strategy.initialize_state(self.params)
         self.absgrad = bool(self.strategy.absgrad)  # declared by the Strategy protocol
-        self.sh = ShSchedule(config.sh_degree, config.sh_steps, min_gain_db=config.sh_auto_min_gain_db,
-                             lookahead=config.sh_auto_lookahead)
+        self.sh = ShSchedule(config.sh.degree, config.sh_steps, min_gain_db=config.sh.auto_min_gain_db,
+                             lookahead=config.sh.auto_lookahead)
         # the training views stay as the dataset holds them (8-bit); each step converts its own (`target`)
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
         gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
@@ -188,7 +182,7 @@ class Trainer:
                             f"(recorded in the PLY for splatbench render; --up overrides it there)")
         self.generator = torch.Generator().manual_seed(config.seed)
         self._order: list[int] = []
-        k = config.sh_auto_holdout_every if self.sh.auto else 0
+        k = config.sh.auto_holdout_every if self.sh.auto else 0
         # auto SH with a holdout: these training views are kept out of training until the degree settles
         self.holdout = [i for i in range(len(train)) if i % k == k // 2] if k and len(train) >= 2 * k else []
         self.step_index = 0
@@ -267,7 +261,7 @@ class Trainer:
         rgb, _, _, info = self._render(camera, degree, bg_rgb)
         sync()
         t2 = time.perf_counter()
-        loss = photometric_loss(rgb, target, cfg.ssim_lambda, cfg.ssim_window)
+        loss = photometric_loss(rgb, target, cfg.loss.ssim_lambda, cfg.loss.ssim_window)
         sync()
         t3 = time.perf_counter()
         reg = self.strategy.regularization(self.params, step)
@@ -327,7 +321,7 @@ class Trainer:
         parameter, optimizer state or random stream: the gradients it leaves are cleared
         by the next step's ``zero_grad``."""
         camera = self.dataset.train.cameras[0]
-        for degree in range(self.config.max_sh_degree + 1):
+        for degree in range(self.config.sh.max_degree + 1):
             rgb, _, _, _ = self._render(camera, degree, list(self._background_rgb))
             if rgb.requires_grad:
                 rgb.sum().backward()
@@ -335,8 +329,8 @@ class Trainer:
                 self._render(camera, degree, list(self._background_rgb))
         # the Dr.Jit kernels of the loss's D-SSIM and of the evaluation's SSIM (`splatbench.metrics.ssim`)
         image, target = rgb.detach().requires_grad_(True), self.target(0)
-        photometric_loss(image, target, self.config.ssim_lambda, self.config.ssim_window)
-        ssim_metric(image.detach(), target, self.config.ssim_window)
+        photometric_loss(image, target, self.config.loss.ssim_lambda, self.config.loss.ssim_window)
+        ssim_metric(image.detach(), target, self.config.loss.ssim_window)
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
 
@@ -346,7 +340,7 @@ class Trainer:
         """Probe-view PSNR gain of SH degree ``degree`` over degree ``baseline`` (< degree)
         and the relative coefficient energy of bands ``baseline+1..degree``."""
         cams = self.dataset.train.cameras
-        k = self.config.sh_auto_probe_views
+        k = self.config.sh.auto_probe_views
         if self.holdout:
             idx = self.holdout
         elif k == 0 or k >= len(cams):
@@ -385,7 +379,7 @@ class Trainer:
             seconds += time.perf_counter() - t0
             gt = torch.from_numpy(test.image(i)).to(self.device)  # one view as float at a time
             psnrs.append(psnr(rgb, gt))
-            ssims.append(ssim_metric(rgb, gt, self.config.ssim_window))
+            ssims.append(ssim_metric(rgb, gt, self.config.loss.ssim_window))
             for (net, scaled), values in lps.items():
                 values.append(lpips_distance(rgb, gt, net=net, scale_inputs=scaled))
         return Evaluation(float(np.mean(psnrs)), float(np.mean(ssims)), {k: float(np.mean(v)) for k, v in lps.items()},
@@ -402,16 +396,16 @@ def lpips_plan(config: TrainConfig, test) -> tuple[list[tuple[str, bool]], list[
     for test images under 16 px (AlexNet's first layers need them)."""
     from splatbench.metrics.perceptual import weights_path
 
-    if config.lpips_net == "none" or len(test) == 0:
+    if config.eval.lpips_net == "none" or len(test) == 0:
         return [], [], ""
     try:
-        weights_path(config.lpips_net), weights_path(CURVE_LPIPS[0])
+        weights_path(config.eval.lpips_net), weights_path(CURVE_LPIPS[0])
     except InputError as exc:
         return [], [], f"LPIPS skipped: {exc}"
     height, width = test.image_size
     if min(height, width) < 16:
         return [], [], f"LPIPS skipped: test images of {width}x{height} px are under 16 px on a side"
-    return [(config.lpips_net, config.lpips_scale_inputs)], [CURVE_LPIPS], ""
+    return [(config.eval.lpips_net, config.eval.lpips_scale_inputs)], [CURVE_LPIPS], ""
 
 
 def step_lpips(final: list[tuple[str, bool]]) -> list[tuple[str, bool]]:
@@ -554,7 +548,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
             if progress is not None:
                 progress(status)
             full = done in full_steps and done < config.iterations  # the last step's is the final evaluation
-            if full or (config.eval_every and done % config.eval_every == 0 and done < config.iterations):
+            if full or (config.eval.every and done % config.eval.every == 0 and done < config.iterations):
                 ev = trainer.evaluate(list(dict.fromkeys(full_lpips + curve_lpips)) if full else curve_lpips)
                 if ev.psnr is not None:
                     evaluations.append(EvalPoint(done, ev.psnr, ev.ssim, ev.lpips.get(CURVE_LPIPS)))
@@ -603,7 +597,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                                                      loop_seconds))
     result = TrainResult(
         test_psnr=ev.psnr, test_ssim=ev.ssim, test_lpips=ev.lpips.get(final_lpips[0]) if final_lpips else None,
-        lpips_net=final_lpips[0][0] if final_lpips else "", lpips_scale_inputs=config.lpips_scale_inputs,
+        lpips_net=final_lpips[0][0] if final_lpips else "", lpips_scale_inputs=config.eval.lpips_scale_inputs,
         cpu_seconds=round(cpu_seconds, 3), load=load.stop().metrics(),
         num_gaussians=trainer.num_gaussians,
         train_seconds=round(loop_seconds, 3), iterations=trainer.step_index, sh_degree=trainer.sh.degree,
@@ -619,4 +613,4 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     return result
 
 
-__all__ = ["train", "torch_threads", "resolve_background", "Trainer", "StepStatus", "StepTimes", "Evaluation", "lr_groups"]
+__all__ = ["train", "torch_threads", "resolve_background", "Trainer", "StepStatus", "StepTimes", "Evaluation"]

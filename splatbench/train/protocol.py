@@ -9,7 +9,7 @@
     position learning rate decays over ``iterations``. The learning rates themselves
     are NOT scaled, so a 2,000-step run compresses graphdeco's schedule 15x while its
     positions can travel only about 1/15 as far. Evaluated at the end (and every
-    ``eval_every`` steps). Cheap; stands beside no published column.
+    ``eval.every`` steps). Cheap; stands beside no published column.
 ``"graphdeco-30k"``
     graphdeco-inria's schedule unscaled: every step field as written for a
     30,000-step run, the position learning rate decaying over 30,000 steps, 30,000
@@ -60,7 +60,7 @@ class Protocol:
     eval_steps: tuple[int, ...]   # steps of a full test evaluation (`TrainResult.step_evaluations`), besides the end
     final_window_check: bool      # the last topology change must precede the final 10 % of the run
     stands_beside: str            # the published numbers it is comparable with
-    curve_every: int | None = None  # test-curve spacing of a grid's check at this protocol (`eval_every`; None:
+    curve_every: int | None = None  # test-curve spacing of a grid's check at this protocol (`eval.every`; None:
     #                               # no check runs at it): no point on an opacity reset's step (module doc)
 
     def check_iterations(self, iterations: int) -> None:

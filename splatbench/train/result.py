@@ -20,7 +20,7 @@ class HistoryPoint(NamedTuple):
 
 
 class EvalPoint(NamedTuple):
-    """Test-split metrics at one step (``eval_every``, and the final evaluation)."""
+    """Test-split metrics at one step (``eval.every``, and the final evaluation)."""
 
     step: int            # steps completed when evaluated
     psnr: float          # mean test PSNR (dB)
@@ -34,7 +34,7 @@ class StepEvaluation(NamedTuple):
 
     step: int                     # steps completed when evaluated
     psnr: float                   # mean test PSNR (dB)
-    ssim: float                   # mean test SSIM (kornia's, window ssim_window)
+    ssim: float                   # mean test SSIM (kornia's, window loss.ssim_window)
     lpips_net: str                # LPIPS v0.1 backbone of the two values below ("" when LPIPS was not computed)
     lpips_scaled: float | None    # mean LPIPS, inputs scaled to [-1, 1] (the lpips package, gsplat, NerfBaselines)
     lpips_unscaled: float | None  # mean LPIPS, [0, 1] inputs unscaled (graphdeco's metrics.py, the 3DGS paper)
@@ -63,7 +63,7 @@ class TrainResult:
     scene_extent: float = 0.0           # 1.1 x camera-centre radius (scales the position learning rate)
     test_views: int = 0                 # views evaluated
     history: list[HistoryPoint] = field(default_factory=list)      # every `log_every` steps, and the last
-    evaluations: list[EvalPoint] = field(default_factory=list)     # every `eval_every` steps, and the end
+    evaluations: list[EvalPoint] = field(default_factory=list)     # every `eval.every` steps, and the end
     sh_decisions: list[dict] = field(default_factory=list)         # auto SH: each band measured (ShDecision)
     notes: list[str] = field(default_factory=list)                 # e.g. why LPIPS was skipped
     warnings: list[str] = field(default_factory=list)  # what the run warns of, one line each ("warning: ..."):

@@ -32,8 +32,8 @@ scaled again. So a one-at-a-time grid around the defaults reads as proportions a
 any run length::
 
     [axes]
-    strategy_options.refine_stop = ["25%", "50%", "75%"]
-    strategy_options.reset_every = ["10%", "20%", 0]     # 0: never
+    strategy.refine_stop = ["25%", "50%", "75%"]
+    strategy.reset_every = ["10%", "20%", 0]     # 0: never
 
 Whatever the form, `check_final_window` rejects a run whose last topology change
 (densify, prune, opacity reset, relocation) falls in the final 10 % of its steps, so
@@ -106,7 +106,7 @@ def resolve_run_fractions(fraction_fields: dict[str, bool], options: dict[str, A
     for name, value in options.items():
         if name not in fraction_fields:
             continue
-        frac = parse_run_fraction(value, f"strategy_options.{name}")
+        frac = parse_run_fraction(value, f"strategy.{name}")
         if frac is None:
             continue
         steps = int(math.floor(frac * iterations + 0.5))
@@ -144,7 +144,7 @@ def check_final_window(strategy, iterations: int, schedule: str) -> None:
     if change is None or change.step < start:
         return
     hint = ("use schedule='scaled' (graphdeco's proportions) or end the refine window earlier"
-            if schedule == "absolute" else "end the refine window earlier (strategy_options.refine_stop)")
+            if schedule == "absolute" else "end the refine window earlier (strategy.refine_stop)")
     raise InputError(f"strategy {strategy.name!r}: the last topology change, {change.what}, is at step {change.step}, "
                      f"in the final 10 % of {iterations} iterations (steps {start}..{iterations - 1}, {schedule} "
                      f"schedule), so the final evaluation would see a model that has not trained since; {hint}")

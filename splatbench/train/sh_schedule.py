@@ -116,7 +116,7 @@ class ShSchedule:
         if self.auto and not self._settled:
             if self.degree == 0:
                 self._settle(f"auto: the run ended (step {step}) before band 1 could be tried "
-                             f"(sh_interval={self.interval})")
+                             f"(sh.interval={self.interval})")
             else:
                 self._judge(step, probe, last=True)
         elif not self.auto:
@@ -149,7 +149,7 @@ class ShSchedule:
         if degree == self.max_degree or failed > self.lookahead or last:
             self.degree = base
             why = (f"degree {degree} reached" if degree == self.max_degree else "the run ended" if last else
-                   f"{failed} band(s) in a row failed (sh_auto_lookahead={self.lookahead})")
+                   f"{failed} band(s) in a row failed (sh.auto_lookahead={self.lookahead})")
             self._settle(f"auto: {what}; {why}, bands above {base} dropped; settled at degree {base}")
 
     def _settle(self, reason: str) -> None:
