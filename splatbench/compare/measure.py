@@ -1,5 +1,6 @@
-"""The measurements of `splatbench.compare.run`: oracle images, image errors,
-random-cotangent VJPs, the gradient oracle, and interleaved timing.
+"""The measurements of `splatbench.compare.run`: oracle images, image errors, the gradient
+oracle, and interleaved timing (the cotangents, a backend's VJP, the float32 bound and the
+gradient judgement are the verification core's: `splatbench.verification`).
 
 All images are numpy float64 on the host; backends get float32 torch tensors on the
 compare device.
