@@ -156,11 +156,6 @@ def _rel(got: np.ndarray, want: np.ndarray, bound: np.ndarray) -> tuple[float, f
     return float(np.linalg.norm(got - want)) / scale, float(np.linalg.norm(bound)) / scale
 
 
-def _cotangents(s: RenderInput, ctx: Context) -> Cotangents:
-    """Conform's seeded cotangents of ``s``, zero for the outputs the backend does not produce."""
-    return Cotangents.random(COTANGENT_SEED, s.camera.height, s.camera.width, ctx.backend.info.outputs)
-
-
 def _backend_grads(probe: Probe, s: RenderInput, ctx: Context, v: Cotangents) -> dict[str, np.ndarray]:
     key = probe.build.__name__
     if key not in ctx.vjps:
@@ -172,7 +167,7 @@ def _backend_grads(probe: Probe, s: RenderInput, ctx: Context, v: Cotangents) ->
 def _judge_gradient(probe: Probe, s: RenderInput, ctx: Context) -> ProbeResult:
     if not ctx.backend.info.gradients:
         return _skip(probe, "the backend declares no gradients")
-    v = _cotangents(s, ctx)
+    v = Cotangents.random(COTANGENT_SEED, s.camera.height, s.camera.width, ctx.backend.info.outputs)
     grads = _backend_grads(probe, s, ctx, v)
     gamma, source = gradient_gamma(s, ctx.conv)
     band, widen = gradient_band(probe.build.__name__, s, ctx.conv)
@@ -195,7 +190,7 @@ def _judge_direction(probe: Probe, s: RenderInput, ctx: Context) -> ProbeResult:
     if not ctx.backend.info.gradients:
         return _skip(probe, "the backend declares no gradients")
     name, n = probe.build.__name__, s.means.shape[0]
-    v = _cotangents(s, ctx)
+    v = Cotangents.random(COTANGENT_SEED, s.camera.height, s.camera.width, ctx.backend.info.outputs)
     grads = _backend_grads(probe, s, ctx, v)
     gamma, source = gradient_gamma(s, ctx.conv)
     ls, ls_bound = oracle_grad(name, s, ctx.conv, "log_scales", v.stacked(), gamma)
