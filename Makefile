@@ -17,7 +17,7 @@ help:
 	@echo "make demo       set up if needed, then run the main job"
 	@echo "make test       set up if needed, then run the default test suite"
 	@echo "make test-slow  the long checks (marked slow)"
-	@echo "make golden     regenerate tests/golden/ gradient files (explicit)"
+	@echo "make golden     retake tests/golden/, splatbench's own regression snapshot (explicit)"
 	@echo "make conform-public  conform on third-party rasterizers from PyPI into reports/conform_public/"
 	@echo "make cuda-check on a machine with an NVIDIA GPU: CUDA tests and benchmarks into out/cuda"
 
@@ -60,8 +60,9 @@ test-slow: setup
 test-all: setup
 	$(PYTEST) $(PYTEST_ARGS)
 
+# splatbench's own snapshot (`splatbench snapshot`), checked by tests/test_golden.py (`splatbench check`).
 golden: setup
-	$(PY) -m tests.golden.regenerate
+	$(PY) -m splatbench snapshot drjit --scenes parity --out tests/golden
 
 # Run the shipped experiments (resumable: finished runs are skipped), each with its [check]
 # (its headline rerun at graphdeco's 7K protocol, docs/reports.md), and write reports/<name>/;

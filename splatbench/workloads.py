@@ -51,6 +51,55 @@ def random_unit_quats(rng: np.random.Generator, n: int) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
+PARITY_KINDS = ("standard", "overlap", "needles", "tiny", "large")
+
+
+def random_camera_pose(rng: np.random.Generator) -> np.ndarray:
+    """A random world_to_camera [4, 4] (rotation from a random unit quaternion)."""
+    M = np.eye(4)
+    M[:3, :3] = quat_to_rotmat(random_unit_quats(rng, 1)[0])
+    M[:3, 3] = rng.uniform(-3, 3, 3)
+    return M
+
+
+def parity_scene(seed: int) -> tuple[Workload, tuple[float, float, float]]:
+    """(workload, background) for parity scene ``seed``: the rasterizer's parity and gradient tests'
+    scenes and regress's ``parity`` set. Gaussians generated in camera space (so they land in view),
+    some beyond the image edges, moved to the world through a random rigid camera pose; off-centre
+    principal point, non-square image; the kind (`PARITY_KINDS`) cycles with the seed, the SH degree
+    is seed % 4, odd seeds have a random background."""
+    rng = np.random.default_rng(10_000 + seed)
+    kind = PARITY_KINDS[seed % len(PARITY_KINDS)]
+    degree = seed % 4
+    W, H = int(rng.integers(24, 72)), int(rng.integers(24, 72))
+    n = int(rng.choice([1, 12, 60, 200, 400])) if kind != "overlap" else 300
+    fx = W * rng.uniform(0.8, 1.5)
+    fy = fx * rng.uniform(0.9, 1.1)
+    cx = W / 2 + rng.uniform(-0.15, 0.15) * W
+    cy = H / 2 + rng.uniform(-0.15, 0.15) * H
+    z = rng.uniform(2, 6, n)
+    if kind == "overlap":  # heavy overlap: a dense, opaque clump at the centre
+        u, v = rng.normal(cx, 0.1 * W, n), rng.normal(cy, 0.1 * H, n)
+    else:  # include some Gaussians beyond the image edges
+        u, v = rng.uniform(-0.1 * W, 1.1 * W, n), rng.uniform(-0.1 * H, 1.1 * H, n)
+    sigma_px = {"standard": (0.3, 6.0), "overlap": (1.0, 8.0), "needles": (0.5, 4.0), "tiny": (0.05, 0.8),
+                "large": (5.0, 25.0)}[kind]
+    aniso = 1.5 if kind == "needles" else 0.25
+    cam_pts = np.stack([(u - cx) * z / fx, (v - cy) * z / fy, z], axis=1)
+    sigma = np.exp(rng.uniform(np.log(sigma_px[0]), np.log(sigma_px[1]), n))
+    log_scales = np.log(sigma * z / fx)[:, None] + aniso * rng.standard_normal((n, 3))
+    logits = rng.normal(2.0 if kind == "overlap" else 0.0, 1.5, n)
+    k = (degree + 1) ** 2
+    sh = np.concatenate([0.6 * rng.standard_normal((n, 1, 3)), 0.1 * rng.standard_normal((n, k - 1, 3))], 1)
+    w2c = random_camera_pose(rng)
+    R, t = w2c[:3, :3], w2c[:3, 3]
+    means = (cam_pts - t) @ R  # R^T (p - t), row-wise
+    gaussians = Gaussians(means, log_scales, random_unit_quats(rng, n), logits, sh)
+    camera = Camera(W, H, fx, fy, cx, cy, w2c)
+    background = tuple(rng.uniform(0, 1, 3)) if seed % 2 else (0.0, 0.0, 0.0)
+    return Workload(f"parity-{seed}-{kind}-d{degree}", gaussians, camera), background
+
+
 def synthetic(n: int, width: int, height: int, seed: int = 0, *, sh_degree: int = 3,
               sigma_px: tuple[float, float] = (0.3, 6.0), anisotropy: float = 0.25,
               depth_range: tuple[float, float] = (2.0, 6.0), margin: float = 0.1,

@@ -41,9 +41,9 @@ def assert_images_close(tag: str, fast: np.ndarray, ref: np.ndarray, atol: float
     where some contribution lies within float32 error of a discrete decision (the radius
     cutoff, alpha_min, the early stop) and float32 may add or drop a whole contribution.
     ``slack`` [H, W] widens a pixel's bound by what a depth tie there can change.
-    Both None: |fast - ref| <= atol everywhere. Uses `splatbench.compare.bounds.over_bound`.
+    Both None: |fast - ref| <= atol everywhere. Uses `splatbench.verification.bounds.over_bound`.
     """
-    from splatbench.compare.bounds import over_bound
+    from splatbench.verification.bounds import over_bound
 
     fast = np.asarray(fast, dtype=np.float64)
     ref = np.asarray(ref, dtype=np.float64)

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from splatbench.backends.base import GROUPS
-from splatbench.compare.measure import Cotangents  # the one random-cotangent helper
+from splatbench.verification.cotangents import Cotangents  # the one random-cotangent helper
 from splatbench.raster.hooks import NO_HOOKS, Hooks
 from splatbench.raster.torch_bridge import rasterize_with_hooks
 

@@ -54,8 +54,10 @@ def test_the_gradient_oracle_runs_on_float64_cpu_copies():
     equal its gradients on the float32 originals to float32 rounding."""
     import torch
 
-    from splatbench.compare.measure import Cotangents, GradOracle, OracleImages, backend_vjp, torch_inputs
     from splatbench.backends.registry import get_backend
+    from splatbench.compare.measure import GradOracle, OracleImages, torch_inputs
+    from splatbench.verification.calls import vjp
+    from splatbench.verification.cotangents import Cotangents
     from splatbench.workloads import synthetic
 
     workload = synthetic(200, 32, 32, 0)
@@ -65,9 +67,9 @@ def test_the_gradient_oracle_runs_on_float64_cpu_copies():
     assert all(p.device.type == "cpu" and p.dtype == torch.float64 for p in oracle.params)
     assert all(torch.equal(a.double(), b) for a, b in zip(params, oracle.params))
     backend = get_backend("torch64")
-    v = Cotangents.random(0, np.ones((32, 32)), ("rgb", "alpha", "depth"))
-    on_copies = backend_vjp(backend, oracle.params, workload.camera, v)
-    on_originals = backend_vjp(backend, params, workload.camera, v)
+    v = Cotangents.random(0, 32, 32, ("rgb", "alpha", "depth"))
+    on_copies = vjp(backend, oracle.params, workload.camera, v)
+    on_originals = vjp(backend, params, workload.camera, v)
     for name in on_copies:
         np.testing.assert_allclose(on_copies[name], on_originals[name], rtol=1e-5, atol=1e-7)
 

@@ -22,7 +22,7 @@ import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench.backends import Backend, BackendInfo, get_backend
 from splatbench.backends.base import GROUPS
 from splatbench.compare.run import CompareSettings, auto_scale, run_compare
-from splatbench.compare.bounds import GRAD_TERM_OPS, U32, gradient_bound
+from splatbench.verification.bounds import GRAD_TERM_OPS, U32, gradient_bound
 from splatbench.errors import InputError
 from splatbench.compare.report import (RUN_RECORD, CompareRecord, findings, read_run_record, render_markdown,
                                        result_table, rewrite_report, write_compare)
@@ -187,7 +187,7 @@ def test_torch64_gradient_oracle_agrees_with_finite_differences():
 
 def test_a_zero_oracle_gradient_has_no_relative_error():
     from splatbench.compare.run import CompareRow
-    from splatbench.compare.measure import grad_error
+    from splatbench.verification.judging import grad_error
 
     # isotropic Gaussians: the true quaternion gradient is exactly 0, float32 leaves roundoff
     zero = grad_error(np.full(8, 1e-12), np.zeros(8))

@@ -35,7 +35,7 @@ def garden_check(out: Path, scale: float) -> None:
     """Render the garden capture with the rasterizer and (at ``scale``) the reference."""
     import splatbench
     from splatbench.backends import reference_render
-    from splatbench.compare.bounds import FORWARD_ATOL, over_bound
+    from splatbench.verification.bounds import FORWARD_ATOL, over_bound
     from splatbench.images import save_png
     from splatbench.figures import difference_figure
     from splatbench.workloads import GARDEN_SFM, load_npz

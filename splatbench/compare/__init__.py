@@ -5,8 +5,9 @@ A verification application beside `splatbench.conform`, `splatbench.stress` and
 (`splatbench.backends`). Modules:
 
     run       run_compare(backends, workloads, settings) -> CompareResult (what is measured)
-    bounds    the derived tolerances and the typed measurements (ImageError, GradError, Timing)
-    measure   oracle images, image errors, random-cotangent VJPs, interleaved timing
+    measure   oracle images, image errors, the gradient oracle, interleaved timing (the float32 bound,
+              the cotangents, a backend's VJP and the gradient judgement: `splatbench.verification`)
+    timing    the typed timing of one backend (Timing)
     report    results.parquet, run.json (a typed CompareRecord), report.md and the figures (write_compare,
               rewrite_report)
     cli       the command line

@@ -1,5 +1,6 @@
-"""The measurements of `splatbench.compare.run`: oracle images, image errors,
-random-cotangent VJPs, the gradient oracle, and interleaved timing.
+"""The measurements of `splatbench.compare.run`: oracle images, image errors, the gradient
+oracle, and interleaved timing (the cotangents, a backend's VJP, the float32 bound and the
+gradient judgement are the verification core's: `splatbench.verification`).
 
 All images are numpy float64 on the host; backends get float32 torch tensors on the
 compare device.
@@ -17,11 +18,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.backends.base import GROUPS, OUTPUTS, Backend, as_numpy
-from splatbench.compare.bounds import (DEPTH_ALPHA_MIN, OFF_THRESHOLD, GradError, ImageError, Timing,
-                                               over_bound)
+from splatbench.compare.timing import Timing
 from splatbench.errors import InputError, one_line
 from splatbench.metrics.image import psnr
 from splatbench.metrics.timing import device_sync
+from splatbench.verification.bounds import OFF_THRESHOLD, GradError, ImageError, over_bound
+from splatbench.verification.calls import vjp
+from splatbench.verification.cotangents import Cotangents
+from splatbench.verification.judging import entry_band, grad_error
 
 
 # ----------------------------------------------------------------------------- oracle
@@ -84,90 +88,11 @@ def image_errors(out, oracle, outputs: Sequence[str]) -> dict[str, ImageError]:
     return errors
 
 
-@dataclass(frozen=True)
-class Cotangents:
-    """v_rgb [H, W, 3], v_alpha [H, W], v_depth [H, W] (float64; zero for undeclared outputs)."""
-
-    rgb: np.ndarray
-    alpha: np.ndarray
-    depth: np.ndarray
-
-    @classmethod
-    def standard_normal(cls, seed: int, height: int, width: int) -> Cotangents:
-        """Every entry standard normal, drawn rgb, alpha, depth from one seeded generator."""
-        rng = np.random.default_rng(seed)
-        return cls(rng.standard_normal((height, width, 3)), rng.standard_normal((height, width)),
-                   rng.standard_normal((height, width)))
-
-    @classmethod
-    def random(cls, seed: int, oracle_alpha: np.ndarray, outputs: Sequence[str]) -> Cotangents:
-        """`standard_normal`, with depth weighted only where the oracle is opaque enough to define
-        it and undeclared outputs zeroed."""
-        n = cls.standard_normal(seed, *oracle_alpha.shape)
-        v = {"rgb": n.rgb, "alpha": n.alpha, "depth": n.depth * (oracle_alpha > DEPTH_ALPHA_MIN)}
-        return cls(*(v[k] if k in outputs else np.zeros_like(v[k]) for k in OUTPUTS))
-
-    def loss(self, rgb, alpha, depth):
-        """sum(v . outputs) for torch or numpy outputs."""
-        if hasattr(rgb, "detach"):
-            import torch
-
-            t = lambda a, like: torch.as_tensor(a, dtype=like.dtype, device=like.device)  # noqa: E731
-            return (rgb * t(self.rgb, rgb)).sum() + (alpha * t(self.alpha, alpha)).sum() \
-                + (depth * t(self.depth, depth)).sum()
-        return float((rgb * self.rgb).sum() + (alpha * self.alpha).sum() + (depth * self.depth).sum())
-
-
 def torch_inputs(workload, device: str) -> tuple:
     """The five parameter groups as float32 torch tensors on ``device``."""
     from splatbench.metrics.timing import torch_params
 
     return tuple(p.to(device) for p in torch_params(workload.gaussians))
-
-
-def backend_vjp(backend: Backend, params: tuple, camera, v: Cotangents) -> dict[str, np.ndarray]:
-    """Gradient of sum(v . outputs) for each group (zeros where the backend gives none)."""
-    leaves = [p.detach().clone().requires_grad_(True) for p in params]
-    rgb, alpha, depth = backend(*leaves, camera)
-    v.loss(rgb, alpha, depth).backward()
-    return {k: (as_numpy(p.grad) if p.grad is not None else np.zeros(p.shape)) for k, p in zip(GROUPS, leaves)}
-
-
-def grad_error(a: np.ndarray, b: np.ndarray, band: np.ndarray | None = None) -> GradError:
-    """`GradError` of gradient ``a`` against the oracle's ``b`` (any shapes with the same size);
-    ``band``: [same size] bool, the entries of the gradient band (`reference.band`), measured apart."""
-    a, b = np.ravel(a).astype(np.float64), np.ravel(b).astype(np.float64)
-    if not np.isfinite(a).all():
-        return GradError(math.inf, math.nan, math.inf, float(np.linalg.norm(b)), math.inf, math.inf,
-                         0 if band is None else int(np.count_nonzero(band)))
-    na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
-    if nb == 0.0:
-        return GradError(0.0, 1.0, na, nb) if na == 0.0 else GradError(math.nan, math.nan, na, nb)
-    cosine = float(a @ b) / (na * nb) if na > 0 else 0.0
-    rest = band_rel = math.nan
-    if band is not None:
-        band = np.ravel(band).astype(bool)
-        out, inside = ~band, band
-        rest = _rel(a[out], b[out])
-        band_rel = _rel(a[inside], b[inside]) if inside.any() else 0.0
-    return GradError(float(np.linalg.norm(a - b)) / nb, cosine, na, nb, rest, band_rel,
-                     0 if band is None else int(np.count_nonzero(band)))
-
-
-def _rel(a: np.ndarray, b: np.ndarray) -> float:
-    """|a - b| / |b|; 0 when both are 0, inf when only b is."""
-    num, den = float(np.linalg.norm(a - b)), float(np.linalg.norm(b))
-    return num / den if den > 0 else (0.0 if num == 0 else math.inf)
-
-
-def entry_band(grad_band: np.ndarray | None, size: int, idx: np.ndarray | None = None) -> np.ndarray | None:
-    """The gradient band per entry of a group of ``size`` entries (``idx``: only those flat entries),
-    from the band per Gaussian [N] (None: no band)."""
-    if grad_band is None:
-        return None
-    per = size // len(grad_band)
-    flat = np.repeat(np.asarray(grad_band, dtype=bool), per)
-    return flat if idx is None else flat[idx]
 
 
 # ----------------------------------------------------------------------------- gradient oracle
@@ -209,7 +134,7 @@ class GradOracle:
         key = (info.exact, tuple(sorted(info.reference_options().items())), tuple(info.outputs))
         if key not in self._cache:
             matched = self.images.matched(info)
-            v = Cotangents.random(self.seed, matched.alpha, info.outputs)
+            v = Cotangents.random(self.seed, *matched.alpha.shape, info.outputs, alpha=matched.alpha)
             self._cache[key] = self._compute(info, v, matched)
         return self._cache[key]
 
@@ -233,7 +158,7 @@ class GradOracle:
         oracle, why = self._oracle_backend(info)
         if oracle is not None:
             try:
-                grads = backend_vjp(oracle, self.params, self.images.camera, v)
+                grads = vjp(oracle, self.params, self.images.camera, v)
                 same = oracle is self._backend
                 label = f"{oracle.name} (float64, every entry{'' if same else ', ' + info.name + ' conventions'})"
                 return label, v, {k: (None, g) for k, g in grads.items()}
@@ -359,7 +284,7 @@ def time_backends(backends: Sequence[Backend], params: tuple, camera, device: st
                   seed: int = 0, progress: Callable[[str], None] | None = None) -> dict[str, Timing | str]:
     """Interleaved timing (module doc of `splatbench.compare.run`): name -> `Timing`,
     or a one-line error for a backend that raised."""
-    v = Cotangents.random(seed, np.ones((camera.height, camera.width)), OUTPUTS)
+    v = Cotangents.random(seed, camera.height, camera.width, OUTPUTS)
     results: dict[str, Timing | str] = {}
     timed: list[_Timed] = []
     for b in backends:

@@ -32,7 +32,7 @@ import pandas as pd
 
 from splatbench.backends.base import GROUPS, OUTPUTS
 from splatbench.compare.run import CompareResult, CompareRow, CompareSettings
-from splatbench.compare.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD, U32
+from splatbench.verification.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD, U32
 from splatbench.checks import dataclass_from_mapping
 from splatbench.compare.measure import spread
 from splatbench.errors import InputError

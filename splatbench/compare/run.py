@@ -40,11 +40,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
-from splatbench.compare.bounds import MAX_ORACLE_PIXELS, GradError, ImageError, Timing, gradient_bound
+from splatbench.compare.timing import Timing
 from splatbench.devices import torch_device
 from splatbench.errors import InputError, one_line
 from splatbench.metrics.machine import MachineInfo
+from splatbench.verification.bounds import GradError, ImageError, gradient_bound
 from splatbench.workloads import Workload, WorkloadSpec
+
+MAX_ORACLE_PIXELS = 20_000  # automatic error scale: the largest 1/2^k with W' H' <= this
 
 if TYPE_CHECKING:
     from splatbench.backends.base import Backend
@@ -272,7 +275,8 @@ def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: 
     """Forward errors, gradient errors and the predicted full-resolution forward time of one backend."""
     import torch
 
-    from splatbench.compare.measure import backend_vjp, compare_grads, image_errors
+    from splatbench.compare.measure import compare_grads, image_errors
+    from splatbench.verification.calls import vjp
     from splatbench.metrics.timing import device_sync
 
     info, camera = backend.info, images.camera
@@ -320,7 +324,7 @@ def _accuracy(backend, images, params, grads, settings: CompareSettings, scale: 
     matched = None if info.exact else images.matched(info)
     grad_band = getattr(matched, "grad_band", None)
     try:
-        m.grads = compare_grads(backend_vjp(backend, params, camera, v), ref, grad_band)
+        m.grads = compare_grads(vjp(backend, params, camera, v), ref, grad_band)
     except Exception as exc:  # noqa: BLE001
         m.error = f"gradient: {one_line(exc)}"
         return m

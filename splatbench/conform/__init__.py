@@ -26,7 +26,8 @@ from __future__ import annotations
 import dataclasses
 
 from splatbench.backends.base import Backend
-from splatbench.conform.calls import Fault, captured
+from splatbench.conform.calls import captured
+from splatbench.verification.calls import Fault
 from splatbench.conform.diagnose import (FAULT_CAUSE, FAULT_DEFECT, UNDRAWN_CAUSE, Defect, Finding, explained_by, fingerprint,
                                                   root_causes, run_probes)
 from splatbench.conform.judges import Context
@@ -48,11 +49,11 @@ def _preflight(backend: Backend, scene, device: str) -> None:
     line (exit 2), not a fault repeated under every probe's cause. A backend that raises or returns NaN
     here is not stopped: that is a finding about the backend, reported as a defect of each probe it
     fails on (with its exception and the last frame of its traceback), while every other probe runs."""
-    from splatbench.conform.calls import check_signature, outputs
+    from splatbench.verification.calls import check_signature, forward
 
     try:
         check_signature(backend)
-        outputs(backend, scene, device)
+        forward(backend, scene, device)
     except Fault as fault:
         if fault.usage:
             raise BackendFault(f"backend {backend.name!r} cannot be checked: {fault} (conform calls "

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from splatbench.backends.base import AXES, AXIS
-from splatbench.conform.calls import Fault
+from splatbench.verification.calls import Fault
 from splatbench.conform.evidence import coverage, describe, undrawn
 from splatbench.conform.judges import JUDGES, Context, _backend_outputs, _compared, _pixel_diff
 from splatbench.conform.oracle import oracle, projection

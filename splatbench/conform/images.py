@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.backends.base import Backend
-from splatbench.conform.calls import Fault, captured, outputs
+from splatbench.conform.calls import captured
+from splatbench.verification.calls import Fault, forward
 from splatbench.conform.oracle import conventions_of, oracle
 from splatbench.conform.probes import Probe
 from splatbench.figures import pyplot
@@ -44,7 +45,7 @@ def save_images(backend: Backend, probes: tuple[Probe, ...], directory: str | Pa
         s = probe.build()
         try:
             with captured():
-                got = outputs(backend, s, device)
+                got = forward(backend, s, device)
         except Fault:
             continue
         ref = oracle(probe.build.__name__, s, conv)

@@ -9,13 +9,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from splatbench.backends.base import Backend
-from splatbench.conform.calls import OUTPUT_CHANNELS, cotangents, vjp
-from splatbench.conform.calls import outputs as backend_outputs
 from splatbench.conform.oracle import (conic_jacobian, forward_tolerance, gradient_band, gradient_gamma, oracle,
                                                 oracle_grad)
 from splatbench.conform.probes import Probe
 from splatbench.conform.results import ProbeResult
 from splatbench.render_inputs import RenderInput
+from splatbench.verification.calls import finite_gradients, forward, param_tensors, vjp
+from splatbench.verification.cotangents import OUTPUT_CHANNELS, Cotangents
+
+#: Seed of conform's cotangents (one draw per probe scene, shared by its gradient probes).
+COTANGENT_SEED = 1234
 
 
 @dataclass(frozen=True)
@@ -29,7 +32,7 @@ class Context:
 
 def _backend_outputs(s: RenderInput, name: str, ctx: Context) -> np.ndarray:
     if name not in ctx.outs:
-        ctx.outs[name] = backend_outputs(ctx.backend, s, ctx.device)
+        ctx.outs[name] = forward(ctx.backend, s, ctx.device)
     return ctx.outs[name]
 
 
@@ -153,23 +156,24 @@ def _rel(got: np.ndarray, want: np.ndarray, bound: np.ndarray) -> tuple[float, f
     return float(np.linalg.norm(got - want)) / scale, float(np.linalg.norm(bound)) / scale
 
 
-def _backend_grads(probe: Probe, s: RenderInput, ctx: Context, v: np.ndarray) -> dict[str, np.ndarray]:
+def _backend_grads(probe: Probe, s: RenderInput, ctx: Context, v: Cotangents) -> dict[str, np.ndarray]:
     key = probe.build.__name__
     if key not in ctx.vjps:
-        ctx.vjps[key] = vjp(ctx.backend, s, v, ctx.device)
+        ctx.vjps[key] = finite_gradients(vjp(ctx.backend, param_tensors(s, ctx.device), s.camera, v,
+                                             sh_degree=s.sh_degree, background=s.background))
     return ctx.vjps[key]
 
 
 def _judge_gradient(probe: Probe, s: RenderInput, ctx: Context) -> ProbeResult:
     if not ctx.backend.info.gradients:
         return _skip(probe, "the backend declares no gradients")
-    v = cotangents(s, ctx.backend.info.outputs)
+    v = Cotangents.random(COTANGENT_SEED, s.camera.height, s.camera.width, ctx.backend.info.outputs)
     grads = _backend_grads(probe, s, ctx, v)
     gamma, source = gradient_gamma(s, ctx.conv)
     band, widen = gradient_band(probe.build.__name__, s, ctx.conv)
     measured = []  # (deviation, tolerance, group)
     for g in probe.groups:
-        want, bound = oracle_grad(probe.build.__name__, s, ctx.conv, g, v, gamma)
+        want, bound = oracle_grad(probe.build.__name__, s, ctx.conv, g, v.stacked(), gamma)
         out = ~np.repeat(band, want.size // band.size)  # judged outside the gradient band (reference.band)
         dev, tol = _rel(grads[g].reshape(-1)[out], want[out], bound[out])
         measured.append((dev, tol + widen, g))
@@ -186,11 +190,11 @@ def _judge_direction(probe: Probe, s: RenderInput, ctx: Context) -> ProbeResult:
     if not ctx.backend.info.gradients:
         return _skip(probe, "the backend declares no gradients")
     name, n = probe.build.__name__, s.means.shape[0]
-    v = cotangents(s, ctx.backend.info.outputs)
+    v = Cotangents.random(COTANGENT_SEED, s.camera.height, s.camera.width, ctx.backend.info.outputs)
     grads = _backend_grads(probe, s, ctx, v)
     gamma, source = gradient_gamma(s, ctx.conv)
-    ls, ls_bound = oracle_grad(name, s, ctx.conv, "log_scales", v, gamma)
-    q, q_bound = oracle_grad(name, s, ctx.conv, "quats", v, gamma)
+    ls, ls_bound = oracle_grad(name, s, ctx.conv, "log_scales", v.stacked(), gamma)
+    q, q_bound = oracle_grad(name, s, ctx.conv, "quats", v.stacked(), gamma)
     want_all = np.concatenate([ls.reshape(n, 3), q.reshape(n, 4)], 1)
     bound_all = np.concatenate([ls_bound.reshape(n, 3), q_bound.reshape(n, 4)], 1)
     got_all = np.concatenate([grads["log_scales"].reshape(n, 3), grads["quats"].reshape(n, 4)], 1)

@@ -38,6 +38,7 @@ from splatbench.backends.base import Backend
 from splatbench.gaussians import GROUPS
 from splatbench.render_inputs import RenderInput
 from splatbench.conventions import U32
+from splatbench.verification.calls import stack
 
 U64 = 2.0 ** -53
 FD_H = 1e-6
@@ -54,12 +55,6 @@ _CACHE: dict = {}
 
 def _key(probe_scene: str, conv: dict, *extra) -> tuple:
     return (probe_scene, tuple(sorted(conv.items())), *extra)
-
-
-def stack(out) -> np.ndarray:
-    """rgb [H, W, 3], alpha [H, W], depth [H, W] -> [H, W, 5] float64."""
-    rgb, alpha, depth = (np.asarray(x, dtype=np.float64) for x in out)
-    return np.concatenate([rgb, alpha[..., None], depth[..., None]], axis=-1)
 
 
 def _kwargs(s: RenderInput, conv: dict) -> dict:

@@ -126,7 +126,7 @@ def check(backend, against: str | Path, *, device: str = "auto", scenes: tuple[s
     (module doc). ``scenes``: only these scene names (default: all). ``diagnose``: run conform for the
     cause of a regression. ``save_images``: a folder for PNGs of every changed output."""
     from splatbench.backends.registry import get_backend
-    from splatbench.conform.calls import Fault, check_signature
+    from splatbench.verification.calls import Fault, check_signature
     from splatbench.regress.files import backend_record, read_snapshot, resolve_device
     from splatbench.regress.scenes import scene_set
 
@@ -231,10 +231,9 @@ def _verdict(backend, scene, q, values, arrays, band, z_max, declared_change, ca
     """Improvement, regression or convention change of a quantity that moved (module doc)."""
     import dataclasses
 
-    from splatbench.compare.bounds import gradient_bound
-    from splatbench.compare.measure import entry_band
-    from splatbench.regress.measure import (GRAD_PREFIX, gradient_scale, oracle, oracle_gradients, output_excess,
-                                            relative)
+    from splatbench.regress.measure import GRAD_PREFIX, gradient_scale, oracle, oracle_gradients, output_excess
+    from splatbench.verification.bounds import gradient_bound
+    from splatbench.verification.judging import entry_band, relative
 
     if declared_change:
         return dataclasses.replace(result, status="convention change",

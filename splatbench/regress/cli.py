@@ -15,8 +15,9 @@ from splatbench.devices import device_option
 @click.argument("backend")
 @click.option("--out", "out", required=True, type=click.Path(path_type=Path, file_okay=False),
               help="The snapshot folder (a new or empty one, or an older snapshot to replace).")
-@click.option("--scenes", "scenes", default="full", show_default=True, type=click.Choice(["full", "small"]),
-              help="The scene set: full (probes, synthetic, garden, a real model) or small (probes, synthetic).")
+@click.option("--scenes", "scenes", default="full", show_default=True, type=click.Choice(["full", "small", "parity"]),
+              help="The scene set: full (probes, synthetic, garden, a real model), small (probes, synthetic) or "
+                   "parity (the rasterizer's parity scenes 0, 7, 13: splatbench's own golden snapshot).")
 @device_option
 @click.option("--quiet", is_flag=True, help="No progress lines.")
 def snapshot(backend: str, out: Path, scenes: str, device: str, quiet: bool) -> None:

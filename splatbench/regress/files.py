@@ -105,7 +105,7 @@ def snapshot(backend, out: str | Path, *, scenes: str = "full", device: str = "a
     anything else is refused. A backend that raises is one `InputError` line naming the scene: a
     snapshot is a reference, never taken of a backend that fails."""
     from splatbench.backends.registry import get_backend
-    from splatbench.conform.calls import Fault, check_signature
+    from splatbench.verification.calls import Fault, check_signature
     from splatbench.regress.measure import bands, quantities, render
 
     spec = backend if isinstance(backend, str) else getattr(backend, "name", repr(backend))

@@ -2,7 +2,8 @@
 
 Quantities per scene: ``rgb`` [H, W, 3], ``alpha`` [H, W], ``depth`` [H, W] (the backend's
 declared outputs) and ``grad_<group>`` (the gradient of sum(v . outputs) for seeded standard
-normal cotangents v, v_depth kept where the snapshot's alpha > 0.05, as compare does).
+normal cotangents v (`splatbench.verification.cotangents`), v_depth kept where the snapshot's
+alpha > 0.05, as compare does).
 
 Tolerances of "the same quantity, now against the snapshot". Both are float32 computations of
 the same maths, each within the float32 bound of the float64 oracle outside the oracle's band,
@@ -25,9 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from splatbench.backends.base import GROUPS, OUTPUTS, Backend, as_numpy
-from splatbench.compare.bounds import BAND_BUDGET, DEPTH_ALPHA_MIN, FORWARD_ATOL, gradient_bound
+from splatbench.backends.base import GROUPS, OUTPUTS, Backend
 from splatbench.regress.scenes import Scene
+from splatbench.verification.bounds import BAND_BUDGET, FORWARD_ATOL, gradient_bound
+from splatbench.verification.calls import finite_gradients, forward, param_tensors, vjp
+from splatbench.verification.cotangents import Cotangents
+from splatbench.verification.judging import entry_band, relative
 
 GRAD_PREFIX = "grad_"
 
@@ -39,68 +43,26 @@ def quantities(backend: Backend) -> tuple[str, ...]:
     return outs + grads
 
 
-def cotangents(scene: Scene, alpha: np.ndarray, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
-    """Seeded standard normal cotangents per output; depth's kept where ``alpha`` > 0.05 (depth = sum / alpha
-    amplifies alpha's error by 1 / alpha); zero for undeclared outputs."""
-    from splatbench.compare.measure import Cotangents
-
-    n = Cotangents.standard_normal(scene.seed, scene.camera.height, scene.camera.width)
-    v = {"rgb": n.rgb, "alpha": n.alpha, "depth": n.depth * (alpha > DEPTH_ALPHA_MIN)}
-    return {k: (v[k] if k in outputs else np.zeros_like(v[k])) for k in OUTPUTS}
-
-
 def render(backend: Backend, scene: Scene, device: str = "cpu", alpha_for_cotangents: np.ndarray | None = None
            ) -> dict[str, np.ndarray]:
-    """Every quantity of ``backend`` on ``scene`` (float64 numpy). ``alpha_for_cotangents``: the alpha
-    that masks v_depth (the snapshot's at check time; None: the backend's own, at snapshot time).
-    A backend that raises or returns NaN raises `splatbench.conform.calls.Fault` (one line, with the
-    last frame of its traceback)."""
-    import torch
-
-    from splatbench.conform.calls import Fault, param_tensors, raised
-
+    """Every quantity of ``backend`` on ``scene`` (float64 numpy), through the verification core's
+    `forward` and `vjp` with the scene's seeded `Cotangents` (v_depth kept where alpha > 0.05).
+    ``alpha_for_cotangents``: the alpha that masks v_depth (the snapshot's at check time; None: the
+    backend's own, at snapshot time). A backend that raises or returns NaN raises
+    `splatbench.verification.calls.Fault` (one line, with the last frame of its traceback)."""
     want = quantities(backend)
     outs = tuple(o for o in OUTPUTS if o in want)
-
-    def call(params):
-        try:
-            out = backend(*params, scene.camera, sh_degree=scene.sh_degree, background=scene.background)
-        except Exception as exc:  # noqa: BLE001 - user code failing is a finding about it, in one line
-            raise Fault(raised(exc)) from None
-        if not isinstance(out, (tuple, list)) or len(out) != 3:
-            raise Fault("backend returned other than the 3 outputs (rgb, alpha, depth)", usage=True)
-        return out
-
-    with torch.no_grad():
-        first = call(param_tensors(scene, device, False))
-    result = {}
-    H, W = scene.camera.height, scene.camera.width
-    for name, x, shape in zip(OUTPUTS, first, ((H, W, 3), (H, W), (H, W))):
-        if name in outs:
-            arr = as_numpy(x)
-            if arr.shape != shape:
-                raise Fault(f"{name}: shape {list(arr.shape)}, expected {list(shape)}", usage=True)
-            if not np.isfinite(arr).all():
-                raise Fault(f"non-finite {name}")
-            result[name] = arr
+    out = forward(backend, scene, device, outs)  # [H, W, 5]
+    result = {name: x for name, x in (("rgb", out[..., :3]), ("alpha", out[..., 3]), ("depth", out[..., 4]))
+              if name in outs}
     if not any(q.startswith(GRAD_PREFIX) for q in want):
         return result
+    H, W = scene.camera.height, scene.camera.width
     alpha = result.get("alpha") if alpha_for_cotangents is None else alpha_for_cotangents
-    v = cotangents(scene, np.ones((H, W)) if alpha is None else alpha, outs)
-    params = param_tensors(scene, device, True)
-    out = call(params)
-    try:
-        loss = sum((x.double() * torch.as_tensor(v[k].reshape(x.shape), device=x.device)).sum()
-                   for k, x in zip(OUTPUTS, out) if k in outs and x.requires_grad)
-        loss.backward()
-    except Exception as exc:  # noqa: BLE001
-        raise Fault(raised(exc, "backward raised")) from None
-    for k, p in zip(GROUPS, params):
-        g = np.zeros(p.shape) if p.grad is None else as_numpy(p.grad)
-        if not np.isfinite(g).all():
-            raise Fault(f"non-finite gradient of {k}")
-        result[GRAD_PREFIX + k] = g
-    return result
+    v = Cotangents.random(scene.seed, H, W, outs, alpha=alpha)
+    grads = finite_gradients(vjp(backend, param_tensors(scene, device), scene.camera, v, sh_degree=scene.sh_degree,
+                                 background=scene.background))
+    return {**result, **{GRAD_PREFIX + k: g for k, g in grads.items()}}
 
 
 @dataclass(frozen=True)
@@ -173,12 +135,6 @@ def output_excess(name, got, ref, got_alpha, ref_alpha, z_max, band: Band) -> fl
     return float(np.where(band.band, 0.0, d / (FORWARD_ATOL + band.tie_slack)).max())
 
 
-def relative(a: np.ndarray, b: np.ndarray, floor: float = 0.0) -> float:
-    """|a - b| / max(|b|, floor); 0 when both are 0, inf when only the denominator is."""
-    num, den = float(np.linalg.norm(a - b)), max(float(np.linalg.norm(b)), floor)
-    return num / den if den > 0 else (0.0 if num == 0 else float("inf"))
-
-
 def gradient_scale(q: str, ref: dict[str, np.ndarray], outside: np.ndarray | None = None) -> float:
     """The floor of a gradient group's relative error denominator: for quats, the norm of the log_scales
     gradient. An isotropic Gaussian's rotation gradient is exactly 0 by symmetry, and float32 leaves
@@ -197,8 +153,6 @@ def gradient_difference(q: str, got: np.ndarray, ref: np.ndarray, band: Band, re
     """(relative L2 difference of quantity ``q`` outside the gradient band, inside it, where the largest
     entry difference outside it is: Gaussian and component); ``ref_all``: every reference quantity, for
     the denominator's floor (`gradient_scale`)."""
-    from splatbench.compare.measure import entry_band
-
     a, b = got.reshape(-1), ref.reshape(-1)
     inside = entry_band(band.grad_band, a.size)
     rest = relative(a[~inside], b[~inside], gradient_scale(q, ref_all, ~inside))

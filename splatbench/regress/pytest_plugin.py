@@ -54,7 +54,7 @@ class _State:
         from splatbench.errors import SplatbenchError
 
         self.spec, self.against, self.device = spec, against, device
-        from splatbench.conform.calls import Fault, check_signature
+        from splatbench.verification.calls import Fault, check_signature
 
         try:
             self.backend = get_backend(spec)
@@ -188,7 +188,7 @@ def splatbench_scene(request):
         import numpy as np
 
         from splatbench.backends.registry import get_backend
-        from splatbench.compare.bounds import BAND_BUDGET, gradient_bound
+        from splatbench.verification.bounds import BAND_BUDGET, gradient_bound
         from splatbench.regress.measure import (GRAD_PREFIX, bands, gradient_difference, oracle, oracle_gradients,
                                                 output_excess, render)
         from splatbench.regress.scenes import Scene

@@ -4,11 +4,14 @@
 convention), two synthetic workloads seen from random camera poses (so world-space mistakes
 show), the bundled garden SfM view at 1/8 resolution, and a real trained model (the bundled
 PlayCanvas guitar, 64x64, framed 20 degrees from above). ``small``: the probe scenes and the
-synthetic workloads only, for dense toy backends that cannot render ~100k Gaussians.
+synthetic workloads only, for dense toy backends that cannot render ~100k Gaussians. ``parity``:
+three of the rasterizer's parity scenes (`splatbench.workloads.parity_scene` 0, 7, 13: standard,
+needles and tiny Gaussians, SH degrees 0, 3 and 1, black and coloured backgrounds, some Gaussians
+beyond the image edges, random poses), the scenes of splatbench's own snapshot (tests/golden).
 
 `SCENE_SET_VERSION` is stored in every snapshot and checked: any change to a scene (its
 Gaussians, camera, size, cotangent seed) or to the list must bump it, so that a snapshot is
-never compared with other scenes.
+never compared with other scenes (adding a set changes no scene of the others: their snapshots hold).
 """
 
 from __future__ import annotations
@@ -24,7 +27,9 @@ from splatbench.render_inputs import RenderInput
 
 #: Bump on any change to a scene or to the list (the snapshot records it; check refuses another).
 SCENE_SET_VERSION = 1
-SCENE_SETS = ("full", "small")
+SCENE_SETS = ("full", "small", "parity")
+#: The parity scenes of the ``parity`` set (`splatbench.workloads.parity_scene` seeds).
+PARITY_SEEDS = (0, 7, 13)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -84,10 +89,24 @@ def _real_model() -> Scene:
     return _from_gaussians("guitar-view0-64x64", w.gaussians, w.camera)
 
 
+def _parity_scenes() -> list[Scene]:
+    from splatbench.workloads import parity_scene
+
+    out = []
+    for seed in PARITY_SEEDS:
+        w, background = parity_scene(seed)
+        g = w.gaussians
+        out.append(Scene(_f32(g.means), _f32(g.log_scales), _f32(g.quats), _f32(g.opacity_logits), _f32(g.sh),
+                         w.camera, tuple(float(c) for c in background), name=w.name))
+    return out
+
+
 def scene_set(name: str = "full") -> list[Scene]:
-    """The scenes of set ``name`` ("full" or "small"), in a fixed order (built fresh each call)."""
+    """The scenes of set ``name`` (`SCENE_SETS`), in a fixed order (built fresh each call)."""
     if name not in SCENE_SETS:
         raise InputError(f"--scenes: expected one of {list(SCENE_SETS)}, got {name!r}")
+    if name == "parity":
+        return _parity_scenes()
     scenes = _probe_scenes() + _synthetic_scenes()
     if name == "full":
         scenes += [_garden(), _real_model()]

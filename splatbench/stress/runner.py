@@ -23,6 +23,7 @@ import torch
 from splatbench.errors import InputError
 from splatbench.raster.device import get_device
 from splatbench.stress.cases import CATEGORIES, FIELDS, StressCase, build_case
+from splatbench.verification.cotangents import Cotangents
 
 
 @dataclass(frozen=True)
@@ -150,10 +151,8 @@ def run_case(case: StressCase, *, device: str | None = None) -> CaseResult:
     try:
         rgb, alpha, depth, info = rasterize(*params, case.camera, **dataclasses.asdict(options))
         outputs = {"rgb": rgb, "alpha": alpha, "depth": depth}
-        rng = np.random.default_rng([case.seed, 1])
-        loss = sum((out * torch.from_numpy(rng.standard_normal(tuple(out.shape)).astype(np.float32))).sum()
-                   for out in outputs.values())
-        loss.backward()
+        Cotangents.standard_normal([case.seed, 1], case.camera.height, case.camera.width).loss(rgb, alpha,
+                                                                                               depth).backward()
     except InputError as exc:
         return dataclasses.replace(base, rejected=True, error=_check_rejection(case, exc),
                                    seconds=time.perf_counter() - start)

@@ -1,9 +1,11 @@
-"""What `splatbench compare` measures: its derived tolerances and typed measurements.
+"""The float32 bound of the verification applications, and the boundary bands' part in it.
 
-The bounds (`FORWARD_ATOL`, `gradient_bound`, ...) are derived in the comments below;
-`ImageError`, `GradError` and `Timing` are one measurement each. Shared by
-`splatbench.compare.run` (which runs a comparison), `measure` (which measures) and
-`report` (which writes it); imports none of them.
+The bounds (`FORWARD_ATOL`, `gradient_bound`, `BAND_BUDGET`, ...) are derived in the comments
+below: how far a float32 rasterizer may lie from the float64 oracle with the same conventions,
+outside the oracle's boundary band and gradient band (`reference.band`). `ImageError` and
+`GradError` are one judged measurement each (`splatbench.verification.judging` measures them).
+Used by compare (against the oracle), regress (against a snapshot: twice the bound) and the
+demo; imports nothing of them.
 """
 
 from __future__ import annotations
@@ -26,7 +28,6 @@ FORWARD_ATOL = 2e-5
 OFF_THRESHOLD = 1e-4        # "share of pixels off by more than 1e-4" (per pixel, max over channels)
 DEPTH_ALPHA_MIN = 0.05      # v_depth is kept where the oracle's alpha exceeds this
 GRAD_TERM_OPS = 20          # float32 operations per gradient term (forward + backward)
-MAX_ORACLE_PIXELS = 20_000  # automatic error scale: the largest 1/2^k with W' H' <= this
 
 
 def gradient_bound(pixels: int, outliers: int = 0, grad_weight=None) -> float:
@@ -38,7 +39,7 @@ def gradient_bound(pixels: int, outliers: int = 0, grad_weight=None) -> float:
     error of the sum by at most sqrt(P) (tests/test_raster_grads.py): 20 u sqrt(P). Where
     float32 may take a discrete decision the other way (a band pixel, a depth tie), the
     Gaussians whose own term changes whole are the gradient band, reported apart
-    (`splatbench.compare.measure.grad_error`); every other term at that pixel changes by a relative
+    (`splatbench.verification.judging.grad_error`); every other term at that pixel changes by a relative
     ``grad_weight`` [H, W] at most (a_k of a flipped contribution, T at an early stop,
     T a_i a_j for a swap), which among P pixels of comparable terms adds
     sqrt(sum_p w_p^2 / P). Without a gradient band (``grad_weight`` None), ``outliers``
@@ -113,15 +114,3 @@ class GradError:
         """Outside the band within ``bound``, the band within its budget (`BAND_BUDGET`)."""
         band_ok = self.band_gaussians == 0 or math.isnan(self.band_rel_l2) or self.band_rel_l2 <= BAND_BUDGET
         return self.judged <= bound and band_ok
-
-
-@dataclass(frozen=True)
-class Timing:
-    """Milliseconds of every timed forward and forward+backward run (empty: not timed),
-    why not, and the peak memory rise of one forward+backward (MB, 10^6 bytes)."""
-
-    fwd_ms: tuple[float, ...] = ()
-    fwd_bwd_ms: tuple[float, ...] = ()
-    note: str = ""
-    peak_mb: float = math.nan
-    memory_kind: str = ""
