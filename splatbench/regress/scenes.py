@@ -4,7 +4,8 @@
 convention), two synthetic workloads seen from random camera poses (so world-space mistakes
 show), the bundled garden SfM view at 1/8 resolution, and a real trained model (the bundled
 PlayCanvas guitar, 64x64, framed 20 degrees from above). ``small``: the probe scenes and the
-synthetic workloads only, for dense toy backends that cannot render ~100k Gaussians.
+synthetic workloads only, for dense toy backends that cannot render ~100k Gaussians. A snapshot
+may hold only some scenes of its set, by name (`scene_set`'s ``only``).
 
 `SCENE_SET_VERSION` is stored in every snapshot and checked: any change to a scene (its
 Gaussians, camera, size, cotangent seed) or to the list must bump it, so that a snapshot is
@@ -70,25 +71,36 @@ def _synthetic_scenes() -> list[Scene]:
             for w in (synthetic(300, 64, 64, seed=1, random_pose=True), synthetic(300, 48, 64, seed=2, random_pose=True))]
 
 
+GARDEN = "garden-view0-x0.125"
+MODEL = "guitar-view0-64x64"
+
+
 def _garden() -> Scene:
     from splatbench.workloads import GARDEN_SFM, load_npz
 
     w = load_npz(GARDEN_SFM, view=0)
-    return _from_gaussians("garden-view0-x0.125", w.gaussians, w.camera.scaled(0.125))
+    return _from_gaussians(GARDEN, w.gaussians, w.camera.scaled(0.125))
 
 
 def _real_model() -> Scene:
     from splatbench.workloads import model_workload
 
     w = model_workload("guitar", 0, 3, 64, 64)
-    return _from_gaussians("guitar-view0-64x64", w.gaussians, w.camera)
+    return _from_gaussians(MODEL, w.gaussians, w.camera)
 
 
-def scene_set(name: str = "full") -> list[Scene]:
-    """The scenes of set ``name`` ("full" or "small"), in a fixed order (built fresh each call)."""
+def scene_set(name: str = "full", only: tuple[str, ...] | list[str] | None = None) -> list[Scene]:
+    """The scenes of set ``name`` ("full" or "small"), in a fixed order (built fresh each call).
+    ``only``: just the scenes of these names (still in the set's order; the two large scenes are
+    loaded only when named); a name not in the set is one `InputError` line listing the set's names."""
     if name not in SCENE_SETS:
         raise InputError(f"--scenes: expected one of {list(SCENE_SETS)}, got {name!r}")
     scenes = _probe_scenes() + _synthetic_scenes()
-    if name == "full":
-        scenes += [_garden(), _real_model()]
-    return scenes
+    large = {GARDEN: _garden, MODEL: _real_model} if name == "full" else {}
+    if only is None:
+        return scenes + [build() for build in large.values()]
+    known = [s.name for s in scenes] + list(large)
+    unknown = [n for n in only if n not in known]
+    if unknown:
+        raise InputError(f"--scene: {unknown[0]!r} is not in scene set {name!r} (its scenes: {', '.join(known)})")
+    return [s for s in scenes if s.name in only] + [build() for n, build in large.items() if n in only]
