@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -271,3 +273,38 @@ def test_the_large_scenes_are_loaded_only_when_named(monkeypatch):
     assert names == [s.name for s in SCENE_SET("small") if s.name in names]  # the set's order, not the call's
     with pytest.raises(InputError, match="'garden-view0-x0.125' is not in scene set 'small'"):
         SCENE_SET("small", only=("garden-view0-x0.125",))
+
+
+def test_the_worked_example_of_the_docs_runs_as_it_says(tmp_path, monkeypatch):
+    """docs/regression.md's worked example: its myrast.py as written, snapshotted, the bug it plants
+    (0.9 x the opacity gradient) a regression of grad_opacity_logits alone named by conform; and its
+    advice on the camera's read-only matrix holds (torch.tensor copies silently, torch.as_tensor warns)."""
+    import re
+    import warnings
+
+    import torch
+
+    from splatbench.cameras import Camera
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "regression.md").read_text()
+    section = doc[doc.index("## A worked example"):doc.index("## Adopting it")]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    bug = "opacity_logits = 0.9 * opacity_logits + 0.1 * opacity_logits.detach()"
+    assert bug in " ".join(section.split()).replace("` ", "").replace("`", "")  # the docs plant this line
+    (tmp_path / "myrast.py").write_text(code)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    snap = snapshot("myrast:render", tmp_path / "snapshots", scenes="small",
+                    only=("probe-basic_centred", "probe-gradients"))
+    assert check("myrast:render", snap, diagnose=False).status == "unchanged"
+    (tmp_path / "myrast.py").write_text(code.replace("    return _torch(", f"    {bug}\n    return _torch(", 1))
+    monkeypatch.delitem(sys.modules, "myrast")  # the edited file, imported again
+    report = check("myrast:render", snap)
+    assert report.exit_code == 1 and {(r.quantity, r.status) for r in report.changed} == {
+        ("grad_opacity_logits", "regression")}
+    assert "conform: defect grad_opacity_logits" in report.conform
+    cam = Camera.look_at(eye=[0, 0, -3], target=[0, 0, 0], up=[0, -1, 0], width=8, height=8, fov_x_deg=60)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        torch.tensor(cam.world_to_camera)
+        with pytest.raises(UserWarning, match="not writable"):
+            torch.as_tensor(cam.world_to_camera)
