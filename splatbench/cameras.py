@@ -145,7 +145,9 @@ class Camera:
         near, far        clip depths along camera z, 0 < near < far
 
     Frozen, and its array is read-only (a private checked copy): change a camera with
-    `dataclasses.replace` or its methods, never in place.
+    `dataclasses.replace` or its methods, never in place. A backend wanting the matrix as a
+    tensor copies it (``torch.tensor(cam.world_to_camera)``; ``torch.as_tensor`` would share the
+    read-only memory and warns that it is not writable).
 
     Pixel (row i, column j) has its centre at ``(u, v) = (j + 0.5, i + 0.5)``.
 

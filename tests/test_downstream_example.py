@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tests.test_pytest_plugin import plugin_args  # the installed entry point, or -p on a bare tree
 
 REPO = Path(__file__).resolve().parents[1]
@@ -35,6 +37,7 @@ def _edit(folder: Path, old: str, new: str) -> None:
 def test_the_downstream_example_catches_a_gradient_change_and_reports_its_fix(tmp_path):
     project = tmp_path / "toy"
     shutil.copytree(EXAMPLE, project, ignore=shutil.ignore_patterns("__pycache__"))
+    shipped = sorted(str(p.relative_to(project)) for p in project.rglob("*") if p.is_file())
     assert (project / "pyproject.toml").is_file() and (project / ".github" / "workflows" / "splatbench.yml").is_file()
     workflow = (project / ".github" / "workflows" / "splatbench.yml").read_text()
     assert "--splatbench-backend toy_splat:render" in workflow
@@ -69,5 +72,21 @@ def test_the_downstream_example_catches_a_gradient_change_and_reports_its_fix(tm
     assert "toy-splat: improved:" in fixed.stdout and "moved toward the oracle" in fixed.stdout
     assert "0 regressed" in fixed.stdout
 
-    own = _run(project, "pytest", *plugin_args(), "-p", "no:cacheprovider", "-q")
+    own = _run(project, "pytest", *plugin_args(), "-q", "--junitxml=splatbench.xml")  # as its CI: a JUnit file
     assert own.returncode == 0 and "1 passed" in own.stdout, own.stdout + own.stderr
+
+    # its .gitignore: what the run left is ignored, the snapshot (to be committed) and the shipped files are not
+    git = shutil.which("git")
+    if git is None:
+        pytest.skip("no git to read the example's .gitignore with")
+    subprocess.run([git, "init", "-q"], cwd=project, check=True)
+    status = subprocess.run([git, "status", "--porcelain", "--untracked-files=all", "--ignored"], cwd=project,
+                            capture_output=True, text=True, check=True).stdout.splitlines()
+    untracked = sorted(line[3:] for line in status if line.startswith("?? "))
+    assert untracked == sorted(shipped + [str(p.relative_to(project)) for p in (project / "snapshots").rglob("*")
+                                          if p.is_file()]), status
+    ignored = {line[3:].split("/")[0] for line in status if line.startswith("!! ")}
+    assert {"splatbench.xml", ".pytest_cache"} <= ignored, ignored
+    others = ["check.json", "toy_splat.egg-info/PKG-INFO", "toy_splat/__pycache__/rasterizer.cpython-311.pyc"]
+    ci = subprocess.run([git, "check-ignore", *others], cwd=project, capture_output=True, text=True)
+    assert ci.stdout.split() == others, ci.stdout + ci.stderr  # the workflow's other steps, pip -e, bytecode

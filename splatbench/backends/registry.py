@@ -60,15 +60,24 @@ def as_backend(obj, name: str | None = None) -> Backend:
     return Backend(obj, info)
 
 
-def _load(target: str, label: str):
+# How the folder of a ``module:function`` spec gets on the path, per command that loads it.
+_PATH_HINTS = {
+    "splatbench": "the folder holding it must be on PYTHONPATH (the current folder is not on the splatbench "
+                  "command's path): PYTHONPATH=/path/to/folder splatbench ...",
+    "pytest": "the folder holding it must be on pytest's path: pythonpath = [\"/path/to/folder\"] in the pytest "
+              "configuration ([tool.pytest.ini_options]), or PYTHONPATH=/path/to/folder pytest ..., or python -m "
+              "pytest run from that folder",
+}
+
+
+def _load(target: str, label: str, command: str = "splatbench"):
     module_name, _, attr = target.partition(":")
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
         hint = ""
         if isinstance(exc, ModuleNotFoundError) and exc.name and module_name.startswith(exc.name):
-            hint = (f"; the folder holding it must be on PYTHONPATH (the current folder is not on the "
-                    f"splatbench command's path): PYTHONPATH=/path/to/folder splatbench ...")
+            hint = f"; {_PATH_HINTS[command]}"
         raise InputError(f"backend: cannot import module {module_name!r} for {label!r} ({exc}){hint}") from None
     except Exception as exc:  # noqa: BLE001 - user code failing on import is bad input, named in one line
         where = ""
@@ -85,8 +94,9 @@ def _load(target: str, label: str):
     return obj
 
 
-def get_backend(spec) -> Backend:
-    """Resolve ``spec`` (a name, ``module:function``, a Backend or a callable) to a `Backend`."""
+def get_backend(spec, *, command: str = "splatbench") -> Backend:
+    """Resolve ``spec`` (a name, ``module:function``, a Backend or a callable) to a `Backend`. ``command``:
+    what loads it ("splatbench" or "pytest"), for the hint of a module that is not on the path."""
     if not isinstance(spec, str):
         return as_backend(spec)
     if spec in BUILTINS:
@@ -97,7 +107,7 @@ def get_backend(spec) -> Backend:
             obj = ep.load()
             return as_backend(obj() if _is_factory(obj) else obj, spec)
     if ":" in spec:
-        obj = _load(spec, spec)
+        obj = _load(spec, spec, command)
         return as_backend(obj() if _is_factory(obj) else obj, spec)
     raise InputError(f"backend: unknown backend {spec!r} (known: {', '.join(available())}; "
                      f"or give user code as module:function)")

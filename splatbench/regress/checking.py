@@ -8,14 +8,16 @@ now and in the snapshot, outside the band, in units of the float32 bound:
 * **improvement**: now closer to the oracle by more than one bound unit;
 * **regression**: farther by more than one bound unit;
 * **convention change**: neither (it moved, but no nearer to nor farther from the truth), or the
-  backend declares other conventions than when the snapshot was taken.
+  backend declares other conventions than when the snapshot was taken (a declaration changed with
+  unchanged outputs fails the check too: `CheckReport.declared_changes`).
 
 For every regression and convention change conform runs once on the backend and its diagnosis
 (a convention it follows that differs from the declaration) or root cause is named beside the
 quantity. A backend that raises (or returns NaN) on a scene fails every quantity of that scene,
 with its exception and the last frame of its traceback. Exit status (`CheckReport.exit_code`):
-0 when every quantity is unchanged or improved, 1 otherwise; bad input (no or a damaged snapshot,
-another scene-set version, a backend that cannot be called) is an `InputError` (exit 2).
+0 when every quantity is unchanged or improved and the declaration is the snapshot's, 1 otherwise;
+bad input (no or a damaged snapshot, another scene-set version, a backend that cannot be called)
+is an `InputError` (exit 2).
 """
 
 from __future__ import annotations
@@ -90,6 +92,7 @@ class CheckReport:
     seconds: float = 0.0
     notes: tuple[str, ...] = field(default=())
     conform: str = ""  # what conform says of the backend now (run when something regressed), one clause
+    declared_changes: tuple[str, ...] = ()  # "AXIS OLD -> NEW" per declared convention changed since the snapshot
 
     @property
     def changed(self) -> tuple[QuantityResult, ...]:
@@ -97,7 +100,9 @@ class CheckReport:
 
     @property
     def passed(self) -> bool:
-        return all(r.passed for r in self.results)
+        """Every quantity unchanged or improved, and the same declared conventions as the snapshot's (a
+        changed declaration is a convention change even where no quantity moved)."""
+        return all(r.passed for r in self.results) and not self.declared_changes
 
     @property
     def exit_code(self) -> int:
@@ -115,7 +120,7 @@ class CheckReport:
     def to_dict(self) -> dict:
         return {"backend": self.backend, "version": self.version, "against": self.against,
                 "snapshot_backend": self.snapshot_backend, "scene_set": self.scene_set, "status": self.status,
-                "conform": self.conform,
+                "conform": self.conform, "declared_changes": list(self.declared_changes),
                 "passed": self.passed, "summary": self.counts(), "notes": list(self.notes),
                 "seconds": round(self.seconds, 2), "quantities": [asdict(r) for r in self.results]}
 
@@ -128,7 +133,6 @@ def check(backend, against: str | Path, *, device: str = "auto", scenes: tuple[s
     from splatbench.backends.registry import get_backend
     from splatbench.verification.calls import Fault, check_signature
     from splatbench.regress.files import backend_record, read_snapshot, resolve_device
-    from splatbench.regress.scenes import scene_set
 
     start = time.perf_counter()
     spec = backend if isinstance(backend, str) else getattr(backend, "name", repr(backend))
@@ -139,7 +143,7 @@ def check(backend, against: str | Path, *, device: str = "auto", scenes: tuple[s
         check_signature(backend)
     except Fault as fault:
         raise InputError(f"backend {backend.name!r}: {fault}") from None
-    chosen = scene_set(snap.manifest["scene_set"])
+    chosen = snap.scenes()
     if scenes:
         unknown = sorted(set(scenes) - {s.name for s in chosen})
         if unknown:
@@ -150,9 +154,9 @@ def check(backend, against: str | Path, *, device: str = "auto", scenes: tuple[s
     notes = []
     declared_change = {k: (before.get("conventions", {}).get(k), v) for k, v in now["conventions"].items()
                        if before.get("conventions", {}).get(k) != v}
-    if declared_change:
-        notes.append("declared conventions changed since the snapshot: " + ", ".join(
-            f"{k} {a!r} -> {b!r}" for k, (a, b) in declared_change.items()))
+    declared = tuple(f"{k} {a!r} -> {b!r}" for k, (a, b) in declared_change.items())
+    if declared:
+        notes.append("declared conventions changed since the snapshot: " + ", ".join(declared))
     say = progress or (lambda line: None)
     results: list[QuantityResult] = []
     for scene in chosen:
@@ -179,13 +183,15 @@ def check(backend, against: str | Path, *, device: str = "auto", scenes: tuple[s
 
     return CheckReport(backend.name, backend_version(backend), str(against),
                        f"{before.get('name')} {before.get('version')}", snap.manifest["scene_set"], tuple(results),
-                       time.perf_counter() - start, tuple(notes), cause)
+                       time.perf_counter() - start, tuple(notes), cause, declared)
 
 
 def _render(backend, scene, device, arrays):
+    from splatbench.regress.files import _deterministic_torch
     from splatbench.regress.measure import render
 
-    return render(backend, scene, device, alpha_for_cotangents=arrays.get("alpha"))
+    with _deterministic_torch():  # as the snapshot rendered: the same code gives the same bits
+        return render(backend, scene, device, alpha_for_cotangents=arrays.get("alpha"))
 
 
 def _with_cause(r: QuantityResult, cause: str) -> QuantityResult:

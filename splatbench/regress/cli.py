@@ -18,9 +18,11 @@ from splatbench.devices import device_option
 @click.option("--scenes", "scenes", default="full", show_default=True, type=click.Choice(["full", "small", "parity"]),
               help="The scene set: full (probes, synthetic, garden, a real model), small (probes, synthetic) or "
                    "parity (the rasterizer's parity scenes 0, 7, 13: splatbench's own golden snapshot).")
+@click.option("--scene", "only", multiple=True,
+              help="Only this scene of the set (repeatable; `check` then checks these). An unknown name lists them.")
 @device_option
 @click.option("--quiet", is_flag=True, help="No progress lines.")
-def snapshot(backend: str, out: Path, scenes: str, device: str, quiet: bool) -> None:
+def snapshot(backend: str, out: Path, scenes: str, only: tuple[str, ...], device: str, quiet: bool) -> None:
     """Render BACKEND on a fixed, versioned scene set and store its outputs and gradients in DIR.
 
     BACKEND: a built-in name, an installed entry point, or module:function. The snapshot
@@ -31,7 +33,7 @@ def snapshot(backend: str, out: Path, scenes: str, device: str, quiet: bool) -> 
     """
     from splatbench.regress.files import snapshot as take
 
-    path = take(backend, out, scenes=scenes, device=device,
+    path = take(backend, out, scenes=scenes, only=only or None, device=device,
                 progress=None if quiet else (lambda line: click.echo(line, err=True)))
     click.echo(f"snapshot: {path}")
 
@@ -89,14 +91,44 @@ def format_report(report) -> str:
         lines.append("")
         lines.append({"regression": "REGRESSIONS", "convention change": "CONVENTION CHANGES",
                       "improvement": "improvements"}[status] + f" ({len(rows)}, the largest first):")
-        lines += [f"  {r.line().removesuffix(suffix)}" for r in rows[:SHOWN]]
-        if len(rows) > SHOWN:
-            lines.append(f"  ... and {len(rows) - SHOWN} more (--json lists every quantity)")
+        shown = _per_scene_faults(rows)
+        lines += [f"  {line.removesuffix(suffix)}" for line in shown[:SHOWN]]
+        if len(shown) > SHOWN:
+            lines.append(f"  ... and {len(shown) - SHOWN} more (--json lists every quantity)")
     if report.conform:
         lines.append("")
         lines.append(f"{report.conform.replace('conform: ', 'conform on the backend now: ', 1)}")
     lines.append("")
     lines.append(f"{report.backend}: {report.status}: {counts['unchanged']} unchanged, {counts['improvement']} "
-                 f"improved, {counts['regression']} regressed, {counts['convention change']} convention changes "
-                 f"({report.seconds:.1f} s)")
+                 f"improved, {counts['regression']} regressed, {counts['convention change']} convention changes"
+                 + (f"; the declared conventions changed ({', '.join(report.declared_changes)}): take the snapshot "
+                    f"again if that is intended" if report.declared_changes else "")
+                 + f" ({report.seconds:.1f} s)")
     return "\n".join(lines)
+
+
+def _per_scene_faults(rows) -> list[str]:
+    """One line per row, except that the quantities of a scene failing for one cause (a backend that
+    raised on it) are one line for the scene, where the first of them stood."""
+    out: list[str] = []
+    groups: dict[tuple[str, str], list] = {}
+    for r in rows:
+        if r.difference is None:
+            key = (r.scene, r.cause)
+            if key not in groups:
+                groups[key] = []
+                out.append(key)
+            groups[key].append(r)
+        else:
+            out.append(r.line())
+    lines = []
+    for entry in out:
+        if isinstance(entry, str):
+            lines.append(entry)
+            continue
+        group = groups[entry]
+        if len(group) == 1:
+            lines.append(group[0].line())
+        else:
+            lines.append(f"{entry[0]} ({len(group)} quantities): {group[0].status}: {entry[1]}")
+    return lines

@@ -6,7 +6,8 @@ A snapshot is a folder::
     DIR/scenes/NAME.npz         per scene: the quantities, and the oracle's bands
 
 ``snapshot.json``: ``format`` ("splatbench-snapshot"), ``format_version`` (1), ``scene_set``
-and ``scene_set_version`` (`splatbench.regress.scenes`), ``backend`` (name, version, spec,
+and ``scene_set_version`` (`splatbench.regress.scenes`), ``selected`` (only in a snapshot of
+some scenes of the set: their names), ``backend`` (name, version, spec,
 description, the declared conventions, outputs, gradients), ``versions`` (splatbench, numpy,
 torch, drjit, python), ``device``, and ``scenes``: per scene its ``name``, ``file``,
 ``sha256`` (of the npz), ``n`` (Gaussians), ``width``, ``height`` and ``quantities`` (name ->
@@ -98,10 +99,11 @@ def backend_record(backend: Backend, spec: str) -> dict:
             "outputs": list(info.outputs), "gradients": bool(info.gradients), "exact": bool(info.exact)}
 
 
-def snapshot(backend, out: str | Path, *, scenes: str = "full", device: str = "auto",
-             progress=None) -> Path:
-    """Render every scene of set ``scenes`` with ``backend`` (a spec, `Backend` or callable) and write the
-    snapshot folder ``out`` (module doc). An existing snapshot there is replaced; a folder holding
+def snapshot(backend, out: str | Path, *, scenes: str = "full", only: tuple[str, ...] | None = None,
+             device: str = "auto", progress=None) -> Path:
+    """Render every scene of set ``scenes`` (or ``only`` the scenes of these names in it) with ``backend``
+    (a spec, `Backend` or callable) and write the snapshot folder ``out`` (module doc); `check` then
+    checks those scenes. An existing snapshot there is replaced; a folder holding
     anything else is refused. A backend that raises is one `InputError` line naming the scene: a
     snapshot is a reference, never taken of a backend that fails."""
     from splatbench.backends.registry import get_backend
@@ -114,6 +116,9 @@ def snapshot(backend, out: str | Path, *, scenes: str = "full", device: str = "a
     if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / MANIFEST).is_file())):
         raise InputError(f"--out: {str(out)!r} exists and is not a snapshot folder; choose a new or empty folder")
     say = progress or (lambda line: None)
+    if only is not None and not only:
+        raise InputError("--scene: no scene named; name one or more, or leave --scene out for the whole set")
+    chosen = scene_set(scenes, only)  # an unknown name: one line, before anything renders
     device = resolve_device(backend, device)
     try:
         check_signature(backend)
@@ -123,7 +128,7 @@ def snapshot(backend, out: str | Path, *, scenes: str = "full", device: str = "a
         (tmp / "scenes").mkdir()
         records = []
         with _deterministic_torch():
-            for scene in scene_set(scenes):
+            for scene in chosen:
                 try:
                     values = render(backend, scene, device)
                 except Fault as fault:
@@ -141,6 +146,8 @@ def snapshot(backend, out: str | Path, *, scenes: str = "full", device: str = "a
         manifest = {"format": SNAPSHOT_FORMAT, "format_version": FORMAT_VERSION, "scene_set": scenes,
                     "scene_set_version": SCENE_SET_VERSION, "backend": backend_record(backend, spec),
                     "versions": _versions(), "device": device, "scenes": records}
+        if only is not None:
+            manifest["selected"] = [s.name for s in chosen]
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=1, sort_keys=True, default=str) + "\n",
                                     encoding="utf-8")
     return out
@@ -174,6 +181,10 @@ class Snapshot:
     @property
     def scene_names(self) -> list[str]:
         return [s["name"] for s in self.manifest["scenes"]]
+
+    def scenes(self) -> list[Scene]:
+        """The scenes this snapshot holds: its set's, or those of it that were selected."""
+        return scene_set(self.manifest["scene_set"], self.manifest.get("selected"))
 
     def record(self, name: str) -> dict:
         return next(s for s in self.manifest["scenes"] if s["name"] == name)
@@ -212,7 +223,7 @@ class Snapshot:
     def verify(self) -> None:
         """Check every scene file against the manifest (SHA-256, readable npz, shapes, finite values):
         one `InputError` line naming the first bad file, before any rendering."""
-        for scene in scene_set(self.manifest["scene_set"]):
+        for scene in self.scenes():
             self.arrays(scene)
 
 
@@ -225,6 +236,10 @@ def read_snapshot(folder: str | Path, scenes: list[Scene] | None = None) -> Snap
 
     folder = Path(folder)
     path = folder / MANIFEST
+    if folder.is_file():  # a file is never a snapshot: name the folder that holds one
+        hint = (f"give the folder holding it: --against {folder.parent}" if folder.name == MANIFEST else
+                f"give the folder `splatbench snapshot BACKEND --out DIR` wrote (it holds {MANIFEST})")
+        raise InputError(f"--against: {str(folder)!r} is a file, not a snapshot folder; {hint}")
     if not folder.is_dir():
         raise InputError(f"--against: no snapshot folder {str(folder)!r} (take one with `splatbench snapshot BACKEND "
                          f"--out {folder}`)")
@@ -248,7 +263,16 @@ def read_snapshot(folder: str | Path, scenes: list[Scene] | None = None) -> Snap
     for key, kind in (("scene_set", str), ("backend", dict), ("scenes", list), ("device", str)):
         if not isinstance(manifest.get(key), kind):
             raise InputError(f"{where}: field {key!r} missing or of the wrong type; the file is damaged")
-    expected = [s.name for s in (scenes if scenes is not None else scene_set(manifest["scene_set"]))]
+    selected = manifest.get("selected")
+    if selected is not None and not (isinstance(selected, list) and selected and
+                                     all(isinstance(n, str) for n in selected)):
+        raise InputError(f"{where}: field 'selected' is not a list of scene names; the file is damaged")
+    if scenes is None:
+        try:
+            scenes = scene_set(manifest["scene_set"], selected)
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}; the file is damaged or of another splatbench") from None
+    expected = [s.name for s in scenes]
     names = []
     for rec in manifest["scenes"]:
         if not isinstance(rec, dict) or not all(k in rec for k in ("name", "file", "sha256", "quantities")):

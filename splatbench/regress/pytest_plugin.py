@@ -8,13 +8,16 @@
 Registered as the ``pytest11`` entry point ``splatbench``, so installing splatbench is all; from
 a source checkout that is not installed, add ``-p splatbench.regress.pytest_plugin``. Inert
 unless ``--splatbench-backend`` is given: it adds its options and one fixture, imports nothing
-heavy and collects nothing. Given, it adds items named ``splatbench/conform/PROBE`` and
-``splatbench/check/SCENE/QUANTITY`` to whatever else pytest collects (``-k splatbench`` runs
-only them); conform and check each run once, on the first item that needs them. A failing item
-says conform's one-line root cause (or check's line: what moved, by how much, toward or away
-from the oracle). A backend that cannot be loaded, or a missing or damaged snapshot, is a
-usage error of pytest (one line, exit 4), never a pass. JUnit XML (``--junitxml``) works as for
-any item.
+heavy and collects nothing. Given, it adds items ``splatbench::conform::PROBE``, and with a
+snapshot ``splatbench::check::SCENE::QUANTITY`` and ``splatbench::check::declared_conventions``
+(the declaration is the snapshot's), to whatever else pytest collects (``-k splatbench`` runs
+only them; node ids are relative to the folder pytest runs in, as a test file's are). They are
+collected as pytest collects any test (``--collect-only`` lists and counts them), and in JUnit
+XML (``--junitxml``) their class name is the node id's path (``splatbench.conform``,
+``splatbench.check.SCENE``). conform and check each run once, on the first item that needs
+them. A failing item says conform's one-line root cause (or check's line: what moved, by how
+much, toward or away from the oracle). A backend that cannot be loaded, or a missing or damaged
+snapshot, is a usage error of pytest (one line, exit 4), never a pass.
 
 Fixture ``splatbench_scene``: check a project's own scene against the float64 oracle::
 
@@ -23,9 +26,10 @@ Fixture ``splatbench_scene``: check a project's own scene against the float64 or
         splatbench_scene(..., camera, backend="mypkg.rast:render", sh_degree=1)  # or given here
 
 It renders the scene with the backend and with the oracle (matched to the backend's declared
-conventions) and fails, in one line, when an output differs by more than the float32 bound
-outside the boundary band, or a gradient (random cotangents) by more than its bound outside
-the gradient band (`splatbench.regress.measure`).
+conventions) and fails, in one line and without a traceback, when an output differs by more
+than the float32 bound outside the boundary band, or a gradient (random cotangents) by more
+than its bound outside the gradient band (`splatbench.regress.measure`), or the backend raises
+or cannot be loaded.
 """
 
 from __future__ import annotations
@@ -57,7 +61,7 @@ class _State:
         from splatbench.verification.calls import Fault, check_signature
 
         try:
-            self.backend = get_backend(spec)
+            self.backend = get_backend(spec, command="pytest")
             try:  # a spec that cannot take conform's call is wired up wrong: once here, not per item
                 check_signature(self.backend)
             except Fault as fault:
@@ -118,7 +122,22 @@ class _Item(pytest.Item):
         return super().repr_failure(excinfo, style)
 
     def reportinfo(self):
-        return self.path, None, self.name
+        return self.path, None, self.nodeid.rsplit("/", 1)[-1]  # the failure's heading: splatbench::...
+
+
+class _Group(pytest.Collector):
+    """A node of the plugin's tree (``splatbench``, ``splatbench::conform``, ``splatbench::check``,
+    ``splatbench::check::SCENE``); ``children(self)`` makes its nodes."""
+
+    def __init__(self, *, children, **kwargs):
+        super().__init__(**kwargs)
+        self._children = children
+
+    def collect(self):
+        return self._children(self)
+
+    def reportinfo(self):
+        return self.path, None, self.nodeid
 
 
 def _run_probe(state: _State, name: str) -> None:
@@ -145,8 +164,13 @@ def _root(report, name: str) -> str:
     return r.cause or "fails"
 
 
-def _run_quantity(state: _State, key: tuple[str, str]) -> None:
+def _run_quantity(state: _State, key: tuple[str, str] | None) -> None:
     report = state.check()
+    if key is None:  # the declaration: a changed one fails as check does (exit 1), even with no quantity moved
+        if report.declared_changes:
+            raise SplatbenchFailure(f"the declared conventions changed since the snapshot: "
+                                    f"{', '.join(report.declared_changes)}; take the snapshot again if that is intended")
+        return
     r = next((r for r in report.results if (r.scene, r.quantity) == key), None)
     if r is None:
         raise SplatbenchFailure(f"{key[0]}::{key[1]}: not measured")
@@ -163,20 +187,46 @@ def _run_quantity(state: _State, key: tuple[str, str]) -> None:
 
 @pytest.hookimpl(tryfirst=True)  # before -k / -m deselect, so that they select among these items too
 def pytest_collection_modifyitems(session, config, items) -> None:
+    """The plugin's tree, collected as pytest collects files (each node reported, so that the terminal
+    and ``--collect-only`` count its items), appended to ``items``."""
     state = getattr(config, _STATE_KEY, None)
     if state is None:
         return
     from splatbench.conform.probes import PROBES
 
-    path = session.path
-    for p in PROBES:
-        items.append(_Item.from_parent(session, name=f"splatbench/conform/{p.name}", state=state, kind="conform",
-                                       key=p.name, path=path))
-    if state.snapshot is not None:
-        for rec in state.snapshot.manifest["scenes"]:
-            for q in rec["quantities"]:
-                items.append(_Item.from_parent(session, name=f"splatbench/check/{rec['name']}/{q}", state=state,
-                                               kind="check", key=(rec["name"], q), path=path))
+    def item(parent, name, kind, key):
+        return _Item.from_parent(parent, name=name, state=state, kind=kind, key=key)
+
+    def group(parent, name, children):
+        return _Group.from_parent(parent, name=name, children=children)
+
+    def conform(node):
+        return [item(node, p.name, "conform", p.name) for p in PROBES]
+
+    def scene(rec):
+        return lambda node: [item(node, q, "check", (rec["name"], q)) for q in rec["quantities"]]
+
+    def check(node):
+        return [item(node, "declared_conventions", "check", None)] + [
+            group(node, rec["name"], scene(rec)) for rec in state.snapshot.manifest["scenes"]]
+
+    def root(node):
+        return [group(node, "conform", conform)] + ([group(node, "check", check)] if state.snapshot else [])
+
+    top = _Group.from_parent(session, name="splatbench", nodeid=_root_id(config), path=session.path, children=root)
+    items.extend(session.genitems(top))
+
+
+def _root_id(config) -> str:
+    """The tree's node id: ``splatbench``, under the folder pytest runs in when that is below the
+    rootdir (node ids are relative to the rootdir, and pytest shows them relative to that folder:
+    ``splatbench::...``, never ``..::splatbench``)."""
+    here, root = config.invocation_params.dir, config.rootpath
+    try:
+        below = here.relative_to(root).as_posix()
+    except ValueError:
+        below = "."
+    return "splatbench" if below == "." else f"{below}/splatbench"
 
 
 @pytest.fixture
@@ -185,40 +235,56 @@ def splatbench_scene(request):
 
     def check_scene(means, log_scales, quats, opacity_logits, sh, camera, *, backend=None, sh_degree=None,
                     background=None) -> None:
-        import numpy as np
-
-        from splatbench.backends.registry import get_backend
-        from splatbench.verification.bounds import BAND_BUDGET, gradient_bound
-        from splatbench.regress.measure import (GRAD_PREFIX, bands, gradient_difference, oracle, oracle_gradients,
-                                                output_excess, render)
-        from splatbench.regress.scenes import Scene
+        __tracebackhide__ = True  # a failure is its one line, not this function's source and the arrays
+        from splatbench.verification.calls import Fault
+        from splatbench.errors import SplatbenchError
 
         state = getattr(request.config, _STATE_KEY, None)
         if backend is None and state is None:
             pytest.skip("no backend: give --splatbench-backend or splatbench_scene(..., backend=...)")
-        b = get_backend(backend) if backend is not None else state.backend
-        f64 = lambda x: np.asarray(np.asarray(x.detach().cpu() if hasattr(x, "detach") else x,  # noqa: E731
-                                              dtype=np.float32), dtype=np.float64)
-        scene = Scene(f64(means), f64(log_scales), f64(quats), f64(opacity_logits), f64(sh), camera,
-                      None if background is None else tuple(float(v) for v in background), sh_degree, name="user")
-        got = render(b, scene, "cpu")
-        band = bands(b.info, scene)
-        ref = oracle(b.info, scene, band=False)
-        z_max = max(1.0, float(np.abs(ref.depth).max(initial=0.0)))
-        for q, want in (("rgb", ref.rgb), ("alpha", ref.alpha), ("depth", ref.depth)):
-            if q in got:
-                excess = output_excess(q, got[q], want, got.get("alpha"), ref.alpha, z_max, band)
-                if excess > 1:
-                    raise AssertionError(f"{q}: {excess:.3g} x the float32 bound away from the oracle outside the "
-                                         f"boundary band ({int(band.band.sum())} pixels)")
-        grads = oracle_gradients(b.info, scene, got.get("alpha"))
-        if grads is None or not any(q.startswith(GRAD_PREFIX) for q in got):
-            return
-        bound = gradient_bound(camera.width * camera.height, 0, band.grad_weight)
-        for q in (q for q in got if q.startswith(GRAD_PREFIX)):
-            rest, in_band, _ = gradient_difference(q, got[q], grads[q], band, grads)
-            if rest > bound or in_band > BAND_BUDGET:
-                raise AssertionError(f"{q}: relative L2 {rest:.2e} against the oracle outside the gradient band "
-                                     f"({int(band.grad_band.sum())} Gaussians), bound {bound:.1e}")
+        try:
+            failure = _scene_failure(means, log_scales, quats, opacity_logits, sh, camera, sh_degree, background,
+                                     state.backend if backend is None else backend)
+        except (SplatbenchError, Fault) as exc:
+            failure = f"splatbench_scene: {exc}"
+        if failure:
+            pytest.fail(failure, pytrace=False)
 
     return check_scene
+
+
+def _scene_failure(means, log_scales, quats, opacity_logits, sh, camera, sh_degree, background, backend) -> str:
+    """What `splatbench_scene` finds wrong, in one line ("" when nothing)."""
+    import numpy as np
+
+    from splatbench.backends.registry import get_backend
+    from splatbench.verification.bounds import BAND_BUDGET, gradient_bound
+    from splatbench.regress.measure import (GRAD_PREFIX, bands, gradient_difference, oracle, oracle_gradients,
+                                            output_excess, render)
+    from splatbench.regress.scenes import Scene
+
+    b = get_backend(backend, command="pytest") if isinstance(backend, str) else get_backend(backend)
+    f64 = lambda x: np.asarray(np.asarray(x.detach().cpu() if hasattr(x, "detach") else x,  # noqa: E731
+                                          dtype=np.float32), dtype=np.float64)
+    scene = Scene(f64(means), f64(log_scales), f64(quats), f64(opacity_logits), f64(sh), camera,
+                  None if background is None else tuple(float(v) for v in background), sh_degree, name="user")
+    got = render(b, scene, "cpu")
+    band = bands(b.info, scene)
+    ref = oracle(b.info, scene, band=False)
+    z_max = max(1.0, float(np.abs(ref.depth).max(initial=0.0)))
+    for q, want in (("rgb", ref.rgb), ("alpha", ref.alpha), ("depth", ref.depth)):
+        if q in got:
+            excess = output_excess(q, got[q], want, got.get("alpha"), ref.alpha, z_max, band)
+            if excess > 1:
+                return (f"{b.name}: {q}: {excess:.3g} x the float32 bound away from the oracle outside the "
+                        f"boundary band ({int(band.band.sum())} pixels)")
+    grads = oracle_gradients(b.info, scene, got.get("alpha"))
+    if grads is None or not any(q.startswith(GRAD_PREFIX) for q in got):
+        return ""
+    bound = gradient_bound(camera.width * camera.height, 0, band.grad_weight)
+    for q in (q for q in got if q.startswith(GRAD_PREFIX)):
+        rest, in_band, where = gradient_difference(q, got[q], grads[q], band, grads)
+        if rest > bound or in_band > BAND_BUDGET:
+            return (f"{b.name}: {q}: relative L2 {rest:.2e} against the oracle outside the gradient band "
+                    f"({int(band.grad_band.sum())} Gaussians), bound {bound:.1e}; largest at {where}")
+    return ""

@@ -7,7 +7,8 @@ PlayCanvas guitar, 64x64, framed 20 degrees from above). ``small``: the probe sc
 synthetic workloads only, for dense toy backends that cannot render ~100k Gaussians. ``parity``:
 three of the rasterizer's parity scenes (`splatbench.workloads.parity_scene` 0, 7, 13: standard,
 needles and tiny Gaussians, SH degrees 0, 3 and 1, black and coloured backgrounds, some Gaussians
-beyond the image edges, random poses), the scenes of splatbench's own snapshot (tests/golden).
+beyond the image edges, random poses), the scenes of splatbench's own snapshot (tests/golden). A
+snapshot may hold only some scenes of its set, by name (`scene_set`'s ``only``).
 
 `SCENE_SET_VERSION` is stored in every snapshot and checked: any change to a scene (its
 Gaussians, camera, size, cotangent seed) or to the list must bump it, so that a snapshot is
@@ -75,18 +76,22 @@ def _synthetic_scenes() -> list[Scene]:
             for w in (synthetic(300, 64, 64, seed=1, random_pose=True), synthetic(300, 48, 64, seed=2, random_pose=True))]
 
 
+GARDEN = "garden-view0-x0.125"
+MODEL = "guitar-view0-64x64"
+
+
 def _garden() -> Scene:
     from splatbench.workloads import GARDEN_SFM, load_npz
 
     w = load_npz(GARDEN_SFM, view=0)
-    return _from_gaussians("garden-view0-x0.125", w.gaussians, w.camera.scaled(0.125))
+    return _from_gaussians(GARDEN, w.gaussians, w.camera.scaled(0.125))
 
 
 def _real_model() -> Scene:
     from splatbench.workloads import model_workload
 
     w = model_workload("guitar", 0, 3, 64, 64)
-    return _from_gaussians("guitar-view0-64x64", w.gaussians, w.camera)
+    return _from_gaussians(MODEL, w.gaussians, w.camera)
 
 
 def _parity_scenes() -> list[Scene]:
@@ -101,13 +106,18 @@ def _parity_scenes() -> list[Scene]:
     return out
 
 
-def scene_set(name: str = "full") -> list[Scene]:
-    """The scenes of set ``name`` (`SCENE_SETS`), in a fixed order (built fresh each call)."""
+def scene_set(name: str = "full", only: tuple[str, ...] | list[str] | None = None) -> list[Scene]:
+    """The scenes of set ``name`` (`SCENE_SETS`), in a fixed order (built fresh each call).
+    ``only``: just the scenes of these names (still in the set's order; the two large scenes are
+    loaded only when named); a name not in the set is one `InputError` line listing the set's names."""
     if name not in SCENE_SETS:
         raise InputError(f"--scenes: expected one of {list(SCENE_SETS)}, got {name!r}")
-    if name == "parity":
-        return _parity_scenes()
-    scenes = _probe_scenes() + _synthetic_scenes()
-    if name == "full":
-        scenes += [_garden(), _real_model()]
-    return scenes
+    scenes = _parity_scenes() if name == "parity" else _probe_scenes() + _synthetic_scenes()
+    large = {GARDEN: _garden, MODEL: _real_model} if name == "full" else {}
+    if only is None:
+        return scenes + [build() for build in large.values()]
+    known = [s.name for s in scenes] + list(large)
+    unknown = [n for n in only if n not in known]
+    if unknown:
+        raise InputError(f"--scene: {unknown[0]!r} is not in scene set {name!r} (its scenes: {', '.join(known)})")
+    return [s for s in scenes if s.name in only] + [build() for n, build in large.items() if n in only]
