@@ -11,15 +11,21 @@ PYTEST  := $(PY) -m pytest
 # Default suite stays well under 15 minutes on 2 cores; `slow` checks run in test-slow.
 PYTEST_ARGS ?=
 
-.PHONY: setup llvm demo test test-slow test-all golden reports bench cuda-check conform-public clean help
+.PHONY: setup llvm demo test test-slow test-all golden reports cuda-check conform-public clean help
 
 help:
 	@echo "make demo       set up if needed, then run the main job"
 	@echo "make test       set up if needed, then run the default test suite"
 	@echo "make test-slow  the long checks (marked slow)"
+	@echo "make test-all   the default suite and the long checks together"
+	@echo "make setup      only the set-up: .venv, the project, libLLVM, the LPIPS weights"
+	@echo "make llvm       only install libllvm19 where no libLLVM >= 16 exists (Dr.Jit needs it)"
+	@echo "make reports    rerun the shipped experiments and rewrite reports/<name>/ (REPORTS=sh_degree for one)"
 	@echo "make golden     retake tests/golden/, splatbench's own regression snapshot (explicit)"
 	@echo "make conform-public  conform on third-party rasterizers from PyPI into reports/conform_public/"
 	@echo "make cuda-check on a machine with an NVIDIA GPU: CUDA tests and benchmarks into out/cuda"
+	@echo "make clean      remove .venv and the build and test caches"
+	@echo "make help       this list"
 
 setup: llvm $(STAMP) $(LPIPS_STAMP)
 

@@ -10,7 +10,7 @@ from the state phase 1 left; images and transmittances must come out bit-identic
 and both are timed alternately (median of 10 after 2, wall clock, Dr.Jit's default threads).
 Timing only: the backward pass would need the same (and a pair's gradient slot would be added
 from several packets, which the deterministic reduction does not allow), so it is not in the
-rasterizer. docs/benchmarks.md ("2026-12-06") has what it found.
+rasterizer. docs/history/benchmarks.md ("2026-12-06") has what it found.
 """
 from __future__ import annotations
 

@@ -22,7 +22,7 @@ packets change: below a tile's 16 lanes (8) each tile's lanes are sorted by list
 (`reduction.lane_group`: 2 at 8 lanes); at 32 lanes a packet spans two tiles. The tool
 times; it does not compare images or gradients.
 
-What it showed is in docs/benchmarks.md ("Dr.Jit's launch settings"). Linux, x86-64.
+What it showed is in docs/history/benchmarks.md ("Dr.Jit's launch settings"). Linux, x86-64.
 """
 
 from __future__ import annotations
