@@ -64,7 +64,7 @@ from splatbench.report_files import write_text
 from splatbench.train.sh_schedule import MAX_LOOKAHEAD
 
 #: Keys of the ``data`` table.
-DATA_KEYS = ("downscale",)
+DATA_KEYS = ("downscale", "masks")
 #: Keys of the ``raster`` table: every `RasterOptions` field but ``device`` (``TrainConfig.device``).
 RASTER_KEYS = tuple(f.name for f in dataclasses.fields(RasterOptions) if f.name != "device")
 #: Learning-rate fields (Adam, one optimizer per parameter group); 0 freezes a group.
@@ -79,11 +79,12 @@ class TrainConfig:
     # --- data and output
     dataset: str = ""                 # dataset folder (COLMAP or Blender layout, see splatbench.data)
     out: str = "runs/train"           # output folder: point_cloud.ply, checkpoints/, config.toml, result.json
-    layout: str = "auto"              # dataset layout: "auto", "colmap" or "blender"
+    layout: str = "auto"              # dataset layout: "auto", "colmap", "blender" or "llff"
     test_every: int = 8               # hold out every n-th view when the dataset gives no split
     data: dict[str, Any] = field(default_factory=dict)  # how the dataset is loaded (`--set data.downscale=8`):
                                       # downscale = N divides the image size (images_N/ when present;
-                                      # splatbench.data.load_dataset); DATA_KEYS
+                                      # splatbench.data.load_dataset); masks = false ignores a
+                                      # capture's masks/; DATA_KEYS
     seed: int = 0                     # seeds torch, numpy, the view order, random backgrounds and the start
                                       # (init="random"'s draws, init_jitter)
     # --- initialisation
@@ -221,12 +222,15 @@ class TrainConfig:
         if not (math.isfinite(self.init_jitter) and self.init_jitter >= 0):
             raise InputError(f"init_jitter: expected a number >= 0 (0 = the points as given), got "
                              f"{self.init_jitter!r}")
-        if self.layout not in ("auto", "colmap", "blender"):
-            raise InputError(f"layout: expected 'auto', 'colmap' or 'blender', got {self.layout!r}")
+        if self.layout not in ("auto", "colmap", "blender", "llff"):
+            raise InputError(f"layout: expected 'auto', 'colmap', 'blender' or 'llff', got {self.layout!r}")
         for key, value in self.data.items():
             if key not in DATA_KEYS:
                 raise InputError(f"data.{key}: unknown key (known: {', '.join(DATA_KEYS)})")
-            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+            if key == "masks":  # read a capture's masks/ as alphas (default true)
+                if not isinstance(value, bool):
+                    raise InputError(f"data.masks: expected true or false, got {value!r}")
+            elif not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
                 raise InputError(f"data.{key}: expected an int >= 1, got {value!r}")
         check_sh_degree("sh_degree", self.sh_degree, allow_auto=True)
         positive = ("sh_interval", "log_every", "init_random_points", "ssim_window")
@@ -375,6 +379,11 @@ class TrainConfig:
     def downscale(self) -> int:
         """``data.downscale`` (1 when not set)."""
         return int(self.data.get("downscale", 1))
+
+    @property
+    def masks(self) -> bool:
+        """``data.masks`` (true when not set): a capture's masks become its alphas."""
+        return bool(self.data.get("masks", True))
 
     @property
     def max_sh_degree(self) -> int:
