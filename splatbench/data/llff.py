@@ -12,8 +12,8 @@ bounds of the view::
 so the project's camera (OpenCV axes x right, y down, z forward, ``docs/conventions.md``)
 has camera-to-world columns ``[right, down, forward] = [c1, c0, -c2]``; its principal
 point is the image centre, ``fx = fy = f`` scaled to the images read (LLFF stores no
-distortion and one focal). `camera_from_row` and `row_from_camera` are the two
-directions; the world frame is kept as stored (no recentring, no rescaling by the
+distortion and one focal; the rotation is snapped to the nearest rotation, as a float32
+file holds it to ~1e-7). `camera_from_row` and `row_from_camera` are the two directions; the world frame is kept as stored (no recentring, no rescaling by the
 bounds, unlike NeRF's ``load_llff_data``), so a capture converted to another layout
 loads to the same cameras.
 
@@ -57,10 +57,16 @@ def camera_from_row(row: np.ndarray, where: str) -> tuple[Camera, float, float]:
     w2c[:3, :3] = c2w[:3, :3].T
     w2c[:3, 3] = -c2w[:3, :3].T @ c2w[:3, 3]
     try:
-        camera = Camera(int(w), int(h), float(f), float(f), w / 2, h / 2, w2c)
-    except InputError as exc:  # e.g. a rotation that is not one
+        Camera(int(w), int(h), float(f), float(f), w / 2, h / 2, w2c)  # checked as stored: a rotation?
+    except InputError as exc:
         raise InputError(f"{where}: {exc}") from None
-    return camera, float(row[15]), float(row[16])
+    # then the nearest rotation (SVD): rows stored in float32 are orthonormal to ~1e-7 only, and every
+    # other layout holds a rotation exactly (COLMAP as a quaternion), so a converted capture loads the same
+    u, _, vt = np.linalg.svd(c2w[:3, :3])
+    rot = u @ vt
+    w2c[:3, :3] = rot.T
+    w2c[:3, 3] = -rot.T @ c2w[:3, 3]
+    return Camera(int(w), int(h), float(f), float(f), w / 2, h / 2, w2c), float(row[15]), float(row[16])
 
 
 def row_from_camera(camera: Camera, near: float, far: float) -> np.ndarray:
