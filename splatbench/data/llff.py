@@ -56,6 +56,9 @@ def camera_from_row(row: np.ndarray, where: str) -> tuple[Camera, float, float]:
     w2c = np.eye(4)
     w2c[:3, :3] = c2w[:3, :3].T
     w2c[:3, 3] = -c2w[:3, :3].T @ c2w[:3, 3]
+    if np.abs(pose[:, :3]).max() > 1 + 1e-5:  # no entry of a rotation exceeds 1 (and 1e308 would overflow RᵀR)
+        raise InputError(f"{where}: the rotation (columns 0..2 of the 3x5 pose) has an entry "
+                         f"{np.abs(pose[:, :3]).max():.6g} > 1: not a rotation")
     try:
         Camera(int(w), int(h), float(f), float(f), w / 2, h / 2, w2c)  # checked as stored: a rotation?
     except InputError as exc:
