@@ -1,4 +1,4 @@
-"""Multi-view datasets in the COLMAP or Blender (NeRF synthetic / nerfstudio) layout.
+"""Multi-view datasets in the COLMAP, Blender (NeRF synthetic / nerfstudio) or LLFF layout.
 
 `load_dataset` reads a folder written by ``splatbench scenes render`` or by other tools
 and returns typed train and test splits::
@@ -37,6 +37,15 @@ Layouts:
   ``transforms_train.json`` and ``transforms_test.json`` gets a note); a file holding a key
   twice, a number beyond float64 or no frames is refused; a UTF-8 byte-order mark is read.
 
+* **LLFF** -- ``poses_bounds.npy`` beside ``images/`` / ``images_N/`` (`splatbench.data.llff`:
+  N x 17 rows in the order of the sorted image names, rotation columns [down, right, back],
+  [h, w, f] of the originals, near and far). ``downscale`` N is relative to the originals:
+  ``images_N/`` when it exists, else the nearest finer folder reduced by area averaging.
+  Object masks (``masks/`` / ``masks_N/``, by stem with an optional ``_mask``) become the
+  views' alphas, composited by `Split.image` (``masks=False`` ignores them); the near/far
+  bounds of the training views are ``Dataset.bounds``. Every 8th image by name is a test
+  view. docs/captures.md has the table of layouts.
+
 Distortion: images whose camera has lens distortion are undistorted by pycolmap (COLMAP's
 undistorter: bilinear remap, cropped to the pixels that saw the scene) into a cache folder
 keyed by content, and returned with the PINHOLE intrinsics of the result
@@ -47,7 +56,7 @@ copies; distorted captures are undistorted from the full images instead); the ca
 are scaled to the result. A note is added when the images' long side exceeds 1,600 px
 at downscale 1 (graphdeco shrinks images wider than 1,600 px; splatbench keeps what it is given).
 
-Real captures are opaque: nothing is composited under RGB photos.
+Real captures are opaque: nothing is composited under RGB photos (unless masks give them an alpha).
 
 Images are held as stored, 8-bit (``Split.pixels``, uint8: a quarter of float32's
 memory; NeRF-synthetic lego's 300 RGBA views at 800x800 are 0.77 GB instead of 3.1 GB),
