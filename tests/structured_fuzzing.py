@@ -124,7 +124,29 @@ def capture_seed(source: Path, frames: int) -> Callable[[Path], None]:
     return build
 
 
-SEEDS: dict[str, Callable[[Path], None]] = {"ngp": ngp_seed, "blender": blender_seed, "colmap-text": colmap_text_seed}
+def llff_seed(folder: Path) -> None:
+    """An LLFF capture as NeRD ships one: ``poses_bounds.npy`` (4 rows, float64, [h, w, f] of
+    12x8 originals), ``images_2/`` at 6x4 and ``masks_2/`` with ``_mask`` names (read at
+    ``downscale=2``)."""
+    from splatbench.cameras import Camera
+    from splatbench.data.llff import row_from_camera
+
+    rows = []
+    for i in range(4):
+        _png(folder / "images_2" / f"IMG_{i:04d}.png", seed=i)
+        mask = np.random.default_rng(20 + i).integers(0, 2, (4, 6)).astype(np.uint8) * 255
+        (folder / "masks_2").mkdir(parents=True, exist_ok=True)
+        from PIL import Image
+
+        Image.fromarray(mask).save(folder / "masks_2" / f"IMG_{i:04d}_mask.png")
+        w2c = np.eye(4)
+        w2c[:3, 3] = [-0.1 * i, 0.0, 0.0]
+        rows.append(row_from_camera(Camera(12, 8, 10.0, 10.0, 6.0, 4.0, w2c), 1.0 + 0.1 * i, 5.0))
+    np.save(folder / "poses_bounds.npy", np.stack(rows))
+
+
+SEEDS: dict[str, Callable[[Path], None]] = {"ngp": ngp_seed, "blender": blender_seed, "colmap-text": colmap_text_seed,
+                                            "llff": llff_seed}
 
 
 # ------------------------------------------------------------------------ values
@@ -691,10 +713,185 @@ COLMAP_CLASSES: dict[str, Callable[[Case], str]] = {
     "truncated": c_truncated,
 }
 
-CLASSES = {"ngp": JSON_CLASSES, "blender": JSON_CLASSES, "colmap-text": COLMAP_CLASSES, "fox": JSON_CLASSES}
+# ------------------------------------------------------------------------ LLFF: poses_bounds.npy and masks
+POSES = "poses_bounds.npy"
+VALUES = [math.nan, math.inf, -math.inf, 1e308, -1e308, 0.0, -0.0, -1.0, 5e-324, 1e-300, 2.0 ** 64, 0.5, 1e9]
+
+
+def _rows(c: Case) -> np.ndarray:
+    return np.load(c.folder / POSES)
+
+
+def l_value(c: Case) -> str:
+    rows = _rows(c)
+    i, j, v = c.rng.randrange(rows.shape[0]), c.rng.randrange(17), c.rng.choice(VALUES)
+    rows[i, j] = v
+    np.save(c.folder / POSES, rows)
+    return f"{POSES}[{i}, {j}] = {v!r}"
+
+
+def l_pose(c: Case) -> str:
+    rows = _rows(c)
+    i = c.rng.randrange(rows.shape[0])
+    pose = rows[i, :15].reshape(3, 5)
+    how = c.rng.choice(["scale", "swap", "flip", "zero", "hw", "focal", "bounds", "shear"])
+    if how == "scale":
+        pose[:, :3] *= c.rng.choice([0.5, 1.00001, 1.001, 2.0, 1e6])
+    elif how == "swap":
+        pose[:, [0, 1]] = pose[:, [1, 0]]
+    elif how == "flip":
+        pose[:, c.rng.randrange(3)] *= -1
+    elif how == "zero":
+        pose[:, :3] = 0
+    elif how == "hw":
+        pose[c.rng.randrange(2), 4] = c.rng.choice([0, -8, 8.5, 1e9, 2 ** 31, 3, 24, 1])
+    elif how == "focal":
+        pose[2, 4] = c.rng.choice([0, -10, 1e308, 5e-324, 1e-9])
+    elif how == "bounds":
+        rows[i, 15:] = c.rng.choice([(5.0, 1.0), (0.0, 5.0), (-1.0, 5.0), (1.0, 1.0), (1.0, 1e308)])
+    else:
+        pose[0, 1] += c.rng.choice([1e-7, 1e-4, 0.1])
+    rows[i, :15] = pose.ravel()
+    np.save(c.folder / POSES, rows)
+    return f"{POSES} row {i}: {how}"
+
+
+def l_shape(c: Case) -> str:
+    rows = _rows(c)
+    how = c.rng.choice(["fewer", "more", "columns", "transposed", "flat", "3d", "empty", "scalar", "15 columns",
+                        "one row"])
+    new = {"fewer": rows[:-1], "more": np.concatenate([rows, rows[:2]]), "columns": rows[:, :16],
+           "transposed": rows.T, "flat": rows.ravel(), "3d": rows[None], "empty": rows[:0],
+           "scalar": np.float64(3.0), "15 columns": rows[:, :15], "one row": rows[:1]}[how]
+    np.save(c.folder / POSES, new)
+    return f"{POSES}: {how} {list(np.shape(new))}"
+
+
+def l_dtype(c: Case) -> str:
+    rows = _rows(c)
+    how = c.rng.choice(["bool", "int", "float16", "float32", "complex", "big-endian", "string", "structured",
+                        "object", "pickle", "datetime"])
+    path = c.folder / POSES
+    if how == "object":
+        np.save(path, np.array([rows, "x"], dtype=object), allow_pickle=True)
+    elif how == "pickle":
+        import pickle
+
+        path.write_bytes(pickle.dumps(rows))
+    elif how == "structured":
+        np.save(path, np.zeros((4, 17), dtype=[("a", "f8"), ("b", "i4")]))
+    else:
+        dtype = {"bool": bool, "int": np.int64, "float16": np.float16, "float32": np.float32,
+                 "complex": np.complex128, "big-endian": ">f8", "string": "U8", "datetime": "M8[s]"}[how]
+        np.save(path, rows.astype(dtype) if how != "datetime" else rows.astype(np.int64).astype(dtype))
+    return f"{POSES}: dtype {how}"
+
+
+def l_bytes(c: Case) -> str:
+    path = c.folder / POSES
+    data = bytearray(path.read_bytes())
+    how = c.rng.choice(["truncated", "header", "magic", "version", "fortran", "shape claim", "empty", "garbage"])
+    if how == "truncated":
+        data = data[:c.rng.choice([0, 5, 10, 60, 127, len(data) - 8, len(data) - 1])]
+    elif how == "header":
+        k = c.rng.randrange(10, 120)
+        data[k] = c.rng.choice(b"{}()':,0123456789 \x00\xff")
+    elif how == "magic":
+        data[0:6] = b"\x93NUMPX"
+    elif how == "version":
+        data[6] = c.rng.choice([0, 4, 9, 255])
+    elif how == "fortran":
+        data = bytearray(bytes(data).replace(b"'fortran_order': False", b"'fortran_order': True "))
+    elif how == "shape claim":
+        data = bytearray(bytes(data).replace(b"(4, 17)", c.rng.choice([b"(9, 17)", b"(4, 99)", b"(99999999999, 17)",
+                                                                      b"(-4, 17)", b"(4, 1, 17)"])))
+    elif how == "empty":
+        data = bytearray()
+    else:
+        data = bytearray(c.rng.randbytes(len(data)))
+    path.write_bytes(bytes(data))
+    return f"{POSES}: {how}"
+
+
+def l_mask(c: Case) -> str:
+    from PIL import Image
+
+    folder = c.folder / "masks_2"
+    names = sorted(p.name for p in folder.iterdir())
+    name = c.rng.choice(names)
+    how = c.rng.choice(["missing", "size", "rgb", "rgba", "16 bit", "not an image", "truncated", "empty",
+                        "ambiguous", "folder", "symlink out", "only masks/", "dangling"])
+    path = folder / name
+    if how == "missing":
+        path.unlink()
+    elif how == "size":
+        Image.fromarray(np.zeros(c.rng.choice([(4, 5), (5, 6), (8, 12), (1, 1)]), np.uint8)).save(path)
+    elif how in ("rgb", "rgba"):
+        Image.fromarray(np.full((4, 6, 3 if how == "rgb" else 4), 200, np.uint8)).save(path)
+    elif how == "16 bit":
+        Image.fromarray(np.full((4, 6), 60000, np.uint16)).save(path)
+    elif how == "not an image":
+        path.write_bytes(b"not an image")
+    elif how == "truncated":
+        path.write_bytes(path.read_bytes()[:c.rng.randrange(1, 60)])
+    elif how == "empty":
+        path.write_bytes(b"")
+    elif how == "ambiguous":
+        shutil.copyfile(path, folder / name.replace("_mask.png", ".jpg"))
+        shutil.copyfile(path, folder / name.replace("_mask.png", ".png"))
+    elif how == "folder":
+        path.unlink()
+        path.mkdir()
+    elif how == "symlink out":
+        path.unlink()
+        path.symlink_to(c.outside / "outside.png")
+    elif how == "only masks/":
+        folder.rename(c.folder / "masks")
+    else:
+        path.unlink()
+        path.symlink_to(c.folder / "nowhere.png")
+    return f"masks_2/{name}: {how}"
+
+
+def l_images(c: Case) -> str:
+    folder = c.folder / "images_2"
+    names = sorted(p.name for p in folder.iterdir())
+    name = c.rng.choice(names)
+    how = c.rng.choice(["missing", "extra", "size", "not an image", "no folder", "images_0", "images_99999",
+                        "a file", "empty folder"])
+    if how == "missing":
+        (folder / name).unlink()
+    elif how == "extra":
+        shutil.copyfile(folder / name, folder / "ZZZ.png")
+    elif how == "size":
+        _png(folder / name, w=c.rng.choice([5, 7, 12]), h=c.rng.choice([3, 4, 8]))
+    elif how == "not an image":
+        (folder / name).write_bytes(b"\x89PNG garbage")
+    elif how == "no folder":
+        shutil.rmtree(folder)
+    elif how in ("images_0", "images_99999"):
+        folder.rename(c.folder / how)
+    elif how == "a file":
+        shutil.rmtree(folder)
+        folder.write_bytes(b"x")
+    else:
+        for n in names:
+            (folder / n).unlink()
+    return f"images_2/{name}: {how}"
+
+
+LLFF_CLASSES: dict[str, Callable[[Case], str]] = {
+    "npy value": l_value, "npy pose": l_pose, "npy shape": l_shape, "npy dtype": l_dtype, "npy bytes": l_bytes,
+    "mask": l_mask, "image": l_images,
+}
+
+CLASSES = {"ngp": JSON_CLASSES, "blender": JSON_CLASSES, "colmap-text": COLMAP_CLASSES, "fox": JSON_CLASSES,
+           "llff": LLFF_CLASSES}
 
 
 def seed_files(kind: str, folder: Path) -> list[str]:
+    if kind == "llff":
+        return [POSES]
     if kind == "colmap-text":
         return [p.relative_to(folder).as_posix() for p in sorted((folder / "sparse" / "0").glob("*.txt"))]
     return sorted(p.name for p in folder.glob("transforms*.json"))
@@ -732,7 +929,7 @@ def inside(root: Path, rel: str) -> bool:
     return not os.path.isabs(rel) and norm != ".." and not norm.startswith("../") and (root / rel).is_file()
 
 
-__all__ = ["SEEDS", "CLASSES", "JSON_CLASSES", "COLMAP_CLASSES", "mutate", "inside", "describe"]
+__all__ = ["SEEDS", "CLASSES", "JSON_CLASSES", "COLMAP_CLASSES", "LLFF_CLASSES", "mutate", "inside", "describe"]
 
 
 def describe(kind: str, klass: str, number: int) -> str:
@@ -744,8 +941,8 @@ def table(stats: dict[str, dict[str, int]]) -> str:
     counts that ``SPLATBENCH_FUZZ_STATS=fuzz.json pytest tests/test_fuzz.py -k structured``
     writes: one row per mutation class, one column per seed capture."""
     kinds = [("ngp", "instant-ngp `transforms.json`"), ("blender", "NeRF-synthetic `transforms_{train,test}.json`"),
-             ("colmap-text", "COLMAP text model")]
-    names = list(JSON_CLASSES) + [k for k in COLMAP_CLASSES if k not in JSON_CLASSES]
+             ("colmap-text", "COLMAP text model"), ("llff", "LLFF `poses_bounds.npy` + masks")]
+    names = list(JSON_CLASSES) + [k for k in COLMAP_CLASSES if k not in JSON_CLASSES] + list(LLFF_CLASSES)
     from splatbench.report_files import markdown_table
 
     rows = []

@@ -244,7 +244,8 @@ def test_unknown_camera_models_are_rejected_by_name(tmp_path):
 
 def test_argument_errors(tmp_path):
     write_colmap(tmp_path, orbit_cameras(2), ["a.png", "b.png"])
-    one_line_error(lambda: load_dataset(tmp_path, layout="llff"), "layout:", "'llff'")
+    one_line_error(lambda: load_dataset(tmp_path, layout="nerfies"), "layout:", "'nerfies'")
+    one_line_error(lambda: load_dataset(tmp_path, layout="llff"), "poses_bounds.npy", "no such file")
     one_line_error(lambda: load_dataset(tmp_path, test_every=-1), "test_every:")
     one_line_error(lambda: load_dataset(tmp_path, background=(2, 0, 0)), "background:")
     one_line_error(lambda: load_dataset(tmp_path, layout="blender"), "transforms_train.json: missing")

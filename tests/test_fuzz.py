@@ -152,6 +152,8 @@ def _valid_dataset(ds) -> None:
         assert all(inside(ds.root, name) for name in split.names), split.names  # nothing read from outside
         assert split.images.dtype == np.float32 and np.isfinite(split.images).all()
         assert split.images.size == 0 or (split.images.min() >= 0 and split.images.max() <= 1)
+        if split.alphas is not None:
+            assert split.alphas.size == 0 or (split.alphas.min() >= 0 and split.alphas.max() <= 1)
         for cam in split.cameras:
             assert np.isfinite(cam.world_to_camera).all() and cam.width > 0 and cam.height > 0
     if ds.points is not None:
@@ -207,6 +209,12 @@ def _load(folder: Path):
     from splatbench.data import load_dataset
 
     return load_dataset(folder, test_every=2)
+
+
+def _load_llff(folder: Path):
+    from splatbench.data import load_dataset
+
+    return load_dataset(folder, test_every=2, downscale=2)  # the seed's images_2/ and masks_2/
 
 
 def _ply_ascii(folder: Path) -> None:
@@ -362,6 +370,8 @@ def test_fuzz_slow(name, tmp_path):
 #: Cases per mutation class (tests/structured_fuzzing.py) in the default suite; the slow suite runs 10x.
 #: 15 classes for each transforms.json form and 13 for COLMAP text: 344 cases, 3440 in the slow suite.
 STRUCTURED_CASES = 8
+#: LLFF's cases are cheaper (an .npy of 4 rows, 6x4 images): 7 classes x 80 = 560, 5600 in the slow suite.
+LLFF_CASES = 80
 
 
 def structured_campaign(kind: str, tmp_path: Path, per_class: int) -> None:
@@ -369,13 +379,14 @@ def structured_campaign(kind: str, tmp_path: Path, per_class: int) -> None:
 
     seed = tmp_path / "seed"
     sf.SEEDS[kind](seed)
-    _valid_dataset(_load(seed))  # the seed itself loads and passes the check
+    load = _load_llff if kind == "llff" else _load
+    _valid_dataset(load(seed))  # the seed itself loads and passes the check
     total = sum(len(b) for b in _files(seed).values())
     for klass in sf.CLASSES[kind]:
         for number in range(per_class):
             what = sf.mutate(kind, klass, number, seed, tmp_path / "case")
             try:
-                run_case(f"{kind}: {klass}", lambda: _load(tmp_path / "case" / "capture"), _valid_dataset,
+                run_case(f"{kind}: {klass}", lambda: load(tmp_path / "case" / "capture"), _valid_dataset,
                          2 * total)
             except BaseException as exc:  # name the case that reproduces it
                 raise AssertionError(f"{sf.describe(kind, klass, number)}: {what}: {type(exc).__name__}: "
@@ -388,12 +399,12 @@ def _cache(tmp_path, monkeypatch):
     monkeypatch.setenv("SPLATBENCH_CACHE", str(tmp_path / "cache"))
 
 
-@pytest.mark.parametrize("kind", ["ngp", "blender", "colmap-text"])
+@pytest.mark.parametrize("kind", ["ngp", "blender", "colmap-text", "llff"])
 def test_fuzz_structured(kind, tmp_path, _cache):
-    structured_campaign(kind, tmp_path, STRUCTURED_CASES)
+    structured_campaign(kind, tmp_path, LLFF_CASES if kind == "llff" else STRUCTURED_CASES)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["ngp", "blender", "colmap-text"])
+@pytest.mark.parametrize("kind", ["ngp", "blender", "colmap-text", "llff"])
 def test_fuzz_structured_slow(kind, tmp_path, _cache):
-    structured_campaign(kind, tmp_path, 10 * STRUCTURED_CASES)
+    structured_campaign(kind, tmp_path, 10 * (LLFF_CASES if kind == "llff" else STRUCTURED_CASES))

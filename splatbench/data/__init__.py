@@ -1,7 +1,8 @@
 """Datasets and bundled data.
 
-``load_dataset(path, *, layout="auto", test_every=8, images_dir="images", background=(0, 0, 0), downscale=1)``
-reads a COLMAP or Blender (NeRF synthetic / nerfstudio / instant-ngp) dataset folder, undistorting
+``load_dataset(path, *, layout="auto", test_every=8, images_dir="images", background=(0, 0, 0), downscale=1, masks=True)``
+reads a COLMAP, Blender (NeRF synthetic / nerfstudio / instant-ngp) or LLFF (``poses_bounds.npy``,
+``llff.py``; object masks as alphas) dataset folder, undistorting
 images whose cameras have lens distortion (``undistort.py``, pycolmap), into a typed
 `Dataset` of `Split` s (see ``dataset.py``). The folder also holds package data:
 ``garden_sfm.npz`` (see ``NOTICE.md``).

@@ -1,4 +1,4 @@
-"""Multi-view datasets in the COLMAP or Blender (NeRF synthetic / nerfstudio) layout.
+"""Multi-view datasets in the COLMAP, Blender (NeRF synthetic / nerfstudio) or LLFF layout.
 
 `load_dataset` reads a folder written by ``splatbench scenes render`` or by other tools
 and returns typed train and test splits::
@@ -37,6 +37,15 @@ Layouts:
   ``transforms_train.json`` and ``transforms_test.json`` gets a note); a file holding a key
   twice, a number beyond float64 or no frames is refused; a UTF-8 byte-order mark is read.
 
+* **LLFF** -- ``poses_bounds.npy`` beside ``images/`` / ``images_N/`` (`splatbench.data.llff`:
+  N x 17 rows in the order of the sorted image names, rotation columns [down, right, back],
+  [h, w, f] of the originals, near and far). ``downscale`` N is relative to the originals:
+  ``images_N/`` when it exists, else the nearest finer folder reduced by area averaging.
+  Object masks (``masks/`` / ``masks_N/``, by stem with an optional ``_mask``) become the
+  views' alphas, composited by `Split.image` (``masks=False`` ignores them); the near/far
+  bounds of the training views are ``Dataset.bounds``. Every 8th image by name is a test
+  view. docs/captures.md has the table of layouts.
+
 Distortion: images whose camera has lens distortion are undistorted by pycolmap (COLMAP's
 undistorter: bilinear remap, cropped to the pixels that saw the scene) into a cache folder
 keyed by content, and returned with the PINHOLE intrinsics of the result
@@ -47,7 +56,7 @@ copies; distorted captures are undistorted from the full images instead); the ca
 are scaled to the result. A note is added when the images' long side exceeds 1,600 px
 at downscale 1 (graphdeco shrinks images wider than 1,600 px; splatbench keeps what it is given).
 
-Real captures are opaque: nothing is composited under RGB photos.
+Real captures are opaque: nothing is composited under RGB photos (unless masks give them an alpha).
 
 Images are held as stored, 8-bit (``Split.pixels``, uint8: a quarter of float32's
 memory; NeRF-synthetic lego's 300 RGBA views at 800x800 are 0.77 GB instead of 3.1 GB),
@@ -77,12 +86,13 @@ import numpy as np
 from splatbench.cameras import Camera
 from splatbench.checks import check_image_size
 from splatbench.data.colmap_bounds import check_colmap_binary, check_colmap_text
+from splatbench.data.llff import POSES_FILE
 from splatbench.data.undistort import Lens, check_lens
 from splatbench.errors import InputError
 from splatbench.ply import read_ply_data
 from splatbench.safeio import read_image_with_alpha, read_npy
 
-LAYOUTS = ("auto", "colmap", "blender")
+LAYOUTS = ("auto", "colmap", "blender", "llff")
 #: COLMAP camera models accepted as they are (no distortion).
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
 _DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
@@ -192,17 +202,22 @@ class Dataset:
     test: Split
     points: PointCloud | None  # COLMAP points3D, or the Blender layout's ply_file_path; None if absent
     root: Path                 # the dataset folder
-    layout: str                # "colmap" or "blender"
+    layout: str                # "colmap", "blender" or "llff"
     notes: tuple[str, ...] = ()  # what loading did that the user should know (undistortion, ignored keys)
+    masks: str = ""            # the mask folder the views' alphas were read from ("masks_8"); "" when none was
+    bounds: np.ndarray | None = None  # [V, 2] float64 near, far depth of each training view (LLFF's bounds);
+                                      # None when the layout gives none
 
 
 def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8, images_dir: str = "images",
-                 background: Sequence[float] = (0.0, 0.0, 0.0), downscale: int = 1,
+                 background: Sequence[float] = (0.0, 0.0, 0.0), downscale: int = 1, masks: bool = True,
                  say: Callable[[str], None] | None = None) -> Dataset:
-    """Load a COLMAP or Blender dataset folder into typed train/test splits.
+    """Load a COLMAP, Blender or LLFF dataset folder into typed train/test splits.
 
-    ``layout``: ``"auto"`` (COLMAP when ``sparse/`` exists, else Blender), ``"colmap"``
-    or ``"blender"``. ``test_every``: hold out every n-th view when the dataset gives no
+    ``layout``: ``"auto"`` (COLMAP when ``sparse/`` exists, else Blender when a
+    transforms file does, else LLFF when ``poses_bounds.npy`` does), ``"colmap"``,
+    ``"blender"`` or ``"llff"``. ``masks`` (LLFF): read ``masks/`` / ``masks_N/`` as the
+    views' alphas (False: ignore them, with a note). ``test_every``: hold out every n-th view when the dataset gives no
     split (0: no test views). ``images_dir`` (COLMAP only): the image folder, e.g.
     ``"images_4"`` of Mip-NeRF 360; when it is not ``"images"`` the cameras are scaled to
     the image size. ``background``: RGB in [0, 1] under RGBA images. ``downscale``: an
@@ -227,12 +242,21 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
             layout = "colmap"
         elif any((root / f).is_file() for f in ("transforms_train.json", "transforms.json")):
             layout = "blender"
+        elif (root / POSES_FILE).is_file():
+            layout = "llff"
         else:
-            raise InputError(f"dataset: {str(root)!r} holds neither a COLMAP model (sparse/0/) "
-                             f"nor Blender transforms (transforms_train.json or transforms.json)")
+            raise InputError(f"dataset: {str(root)!r} holds neither a COLMAP model (sparse/0/), Blender transforms "
+                             f"(transforms_train.json or transforms.json) nor LLFF's {POSES_FILE}")
+    if not isinstance(masks, bool):
+        raise InputError(f"masks: expected true or false, got {masks!r}")
     load = _Load(root, bg, downscale, say or (lambda line: None))
     if layout == "colmap":
         dataset = _load_colmap(root, test_every, images_dir, load)
+        if (root / POSES_FILE).is_file():
+            load.note(f"{POSES_FILE} is here too: read the COLMAP model (its points start training; "
+                      f"data.layout=llff reads {POSES_FILE} instead)")
+    elif layout == "llff":
+        dataset = _load_llff(root, test_every, load, masks)
     else:
         dataset = _load_blender(root, test_every, load)
     return dataclasses.replace(dataset, notes=tuple(load.finish_notes(dataset)))
@@ -500,6 +524,106 @@ def _load_blender(root: Path, test_every: int, load: _Load) -> Dataset:
         raise InputError(f"{root / 'transforms_train.json'}: missing (nor is there a transforms.json)")
     return Dataset(root.resolve().name, _split(root, train, load), _split(root, test, load), points, root,
                    "blender")
+
+
+# --------------------------------------------------------------------------- LLFF
+def _load_llff(root: Path, test_every: int, load: _Load, use_masks: bool) -> Dataset:
+    """``poses_bounds.npy`` with ``images/`` / ``images_N/`` (and ``masks/`` / ``masks_N/``):
+    `splatbench.data.llff`. ``downscale`` N is relative to the poses' original size, as
+    gsplat's ``data_factor``: ``images_N/`` when it exists, else the nearest finer
+    ``images_M/`` reduced by N/M by area averaging; masks likewise."""
+    from splatbench.data import llff
+    from splatbench.safeio import read_image
+
+    n = load.downscale
+    image_folders = llff.folders(root, "images")
+    if not image_folders:
+        raise InputError(f"{root / POSES_FILE}: no images/ or images_N/ folder beside it (LLFF's layout keeps "
+                         f"the photos there)")
+    factor = n if n in image_folders else max((m for m in image_folders if m < n), default=None)
+    folder = image_folders[factor if factor is not None else min(image_folders)]
+    names = llff.image_files(root / folder)
+    if not names:
+        raise InputError(f"{folder}/: no images ({', '.join(llff.IMAGE_SUFFIXES)}) beside {POSES_FILE}")
+    rows = llff.read_poses_bounds(root / POSES_FILE, len(names), folder)
+    height, width, focal = rows[0, [4, 9, 14]]
+    if factor is None:
+        raise InputError(f"data.downscale={n}: no image folder serves it ({POSES_FILE}'s images are "
+                         f"{width:.0f}x{height:.0f}; available factors {', '.join(map(str, image_folders))} "
+                         f"from {', '.join(f + '/' for f in image_folders.values())}, and a folder is reduced, never "
+                         f"enlarged); set data.downscale to one of them or larger")
+    mask_folder, mask_files = "", None
+    mask_folders = llff.folders(root, "masks")
+    if mask_folders and not use_masks:
+        load.note(f"{', '.join(f + '/' for f in mask_folders.values())}: masks ignored (data.masks=false); the "
+                  f"photos are trained as they are")
+    elif mask_folders:
+        mfactor = n if n in mask_folders else max((m for m in mask_folders if m < n), default=None)
+        if mfactor is None:
+            raise InputError(f"data.downscale={n}: no mask folder serves it (factors "
+                             f"{', '.join(map(str, mask_folders))}); set data.downscale to one of them or larger, "
+                             f"or data.masks=false to ignore the masks")
+        mask_folder = mask_folders[mfactor]
+        mask_files = llff.mask_index(root / mask_folder, names, folder)
+    views, bounds = [], []
+    for i, name in enumerate(names):
+        rel = f"{folder}/{name}"
+        camera, near, far = llff.camera_from_row(rows[i], f"{POSES_FILE}: row {i} ({rel})")
+        rgb, alpha = _read_image(root, rel, f"listed in {folder}/")
+        read = _fit_camera(camera, rgb, rel, scale_ok=True)  # the folder's size; focal scaled to it
+        target = read if factor == n else camera.scaled(1 / n)
+        if mask_files is not None:
+            mrel = f"{mask_folder}/{mask_files[i]}"
+            mask = read_image(root / mrel, what=mrel, mode="L")  # grey, 255 = the object
+            if mask_folder.removeprefix("masks") == folder.removeprefix("images") and mask.shape != rgb.shape[:2]:
+                raise InputError(f"{mrel}: mask size {mask.shape[1]}x{mask.shape[0]} differs from its image {rel} "
+                                 f"{rgb.shape[1]}x{rgb.shape[0]}")
+            _fit_camera(camera, mask, mrel, scale_ok=True)  # a reduction of the original size
+            if alpha is not None:  # an RGBA photo with a mask: both mark what is not the object
+                if alpha.shape != mask.shape:
+                    alpha = _area_resize(alpha, mask.shape[1], mask.shape[0])
+                alpha = ((alpha.astype(np.uint32) * mask + 127) // 255).astype(np.uint8)
+            else:
+                alpha = mask
+        size = (target.width, target.height)
+        rgb = rgb if rgb.shape[1::-1] == size else _area_resize(rgb, *size)
+        alpha = alpha if alpha is None or alpha.shape[::-1] == size else _area_resize(alpha, *size)
+        views.append((rel, target, rgb, alpha, alpha is None))  # alpha composited per view (Split.image)
+        bounds.append((near, far))
+    first = views[0][1]
+    load.note(f"LLFF layout: {POSES_FILE}, {len(names)} views of {width:.0f}x{height:.0f} originals (focal "
+              f"{focal:.6g} px); {folder}/ read" + (f" at {first.width}x{first.height}" if factor == n else
+              f" and reduced by {n / factor:g} to {first.width}x{first.height} by area averaging (no images_{n}/; "
+              f"data.downscale={n} of the originals)") + f", focal scaled to {first.fx:.6g} px")
+    if mask_files is not None:
+        load.note(f"masks: {mask_folder}/ ({len(mask_files)} object masks) become the views' alphas: the photos are "
+                  f"composited over the run's background (data.masks=false ignores them)")
+    order = list(range(len(views)))
+    test_ids = [i for i in order if test_every and i % test_every == 0]
+    train_ids = [i for i in order if not (test_every and i % test_every == 0)]
+    if test_every:
+        load.note(f"{POSES_FILE} gives no split: every {test_every}th image by sorted name is a test view "
+                  f"({len(test_ids)} test, {len(train_ids)} train; as graphdeco's --eval)")
+    return Dataset(root.resolve().name, _split(root, [views[i] for i in train_ids], load),
+                   _split(root, [views[i] for i in test_ids], load), None, root, "llff", masks=mask_folder,
+                   bounds=np.array([bounds[i] for i in train_ids], np.float64).reshape(-1, 2))
+
+
+def _area_resize(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """``image`` [H, W(, C)] uint8 reduced to ``height`` x ``width`` by area averaging: each
+    output pixel the mean of the input area it covers, weighted by the overlap, for any
+    ratio (OpenCV's INTER_AREA; PIL's BOX weighs whole pixels by their centres instead),
+    rounded to uint8."""
+    def weights(n_in: int, n_out: int) -> np.ndarray:  # [n_out, n_in], rows summing to 1
+        edges = np.arange(n_out + 1) * (n_in / n_out)
+        pixel = np.arange(n_in)[None, :]
+        overlap = np.minimum(edges[1:, None], pixel + 1) - np.maximum(edges[:-1, None], pixel)
+        return np.clip(overlap, 0, None) / (n_in / n_out)
+
+    pixels = image.reshape(*image.shape[:2], -1).astype(np.float32)  # [H, W, C]; float32 means of 8-bit values: ~1e-5
+    rows = (weights(image.shape[0], height).astype(np.float32) @ pixels.reshape(image.shape[0], -1))
+    out = weights(image.shape[1], width).astype(np.float32) @ rows.reshape(height, image.shape[1], -1)
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8).reshape(height, width, *image.shape[2:])
 
 
 def _read_json(path: Path, *, frames_required: bool = True) -> dict:

@@ -23,7 +23,8 @@ import click
                    "protocol: quick (the default: the schedule scaled to iterations), graphdeco-7k, graphdeco-30k. "
                    "init (init.method): auto (the default: the dataset's points, else SfM), surface (the dataset's "
                    "points), sfm (pycolmap), random; init.region (init=random): auto, convergence, camera_cube, "
-                   "nerf_synthetic.")
+                   "nerf_synthetic, depth_bounds (LLFF's near/far). --set data.masks=false ignores a capture's "
+                   "masks/.")
 @click.option("--out", "out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default: the config's `out`, runs/train). One holding another run is refused "
                    "unless --resume continues one of its checkpoints or --force replaces it.")
@@ -38,7 +39,7 @@ import click
 @click.option("--quiet", is_flag=True, help="No progress bar (for sweeps).")
 def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], out: Path | None,
           resume: Path | None, force: bool, as_json: bool, quiet: bool) -> None:
-    """Train 3D Gaussian Splatting on DATASET (a COLMAP or Blender / instant-ngp folder;
+    """Train 3D Gaussian Splatting on DATASET (a COLMAP, Blender / instant-ngp or LLFF folder;
     optional with --resume, or with a --config that names one).
 
     A capture whose cameras have lens distortion is undistorted by pycolmap first (cached

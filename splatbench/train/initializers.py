@@ -38,6 +38,7 @@ with another seed starts from other points, and the same seed from the same poin
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -69,12 +70,17 @@ from splatbench.initial_gaussians import from_points, knn_mean_sq_dist
 #:   [-1.3, 1.3]^3 (graphdeco draws 100,000 points there). Right for NeRF-synthetic
 #:   scenes (the object at the origin inside that box, cameras on a sphere of radius
 #:   ~4); meaningless for a capture in another frame.
+#: * ``depth_bounds`` -- spread over the training views' frusta between each view's near
+#:   and far depth bounds (LLFF's ``poses_bounds.npy``: the depths its SfM points spanned
+#:   in that view): a view drawn uniformly, then a pixel, then a depth uniform in
+#:   [near, far]. Needs a dataset with bounds (`Dataset.bounds`).
 #: * ``auto`` -- ``nerf_synthetic`` for a Blender-layout dataset with
 #:   ``transforms_train.json`` whose axes meet within 0.1 rig radius of the origin with a
 #:   rig radius of 2.5..6 (NeRF-synthetic's is 4.03); else ``convergence`` when the
-#:   axes meet in front of the cameras; else (a forward-facing rig) ``camera_cube``, with a
-#:   note that no region here contains such a scene. The choice is in the summary.
-REGIONS = ("auto", "convergence", "camera_cube", "nerf_synthetic")
+#:   axes meet in front of the cameras; else (a forward-facing rig) ``depth_bounds`` when the
+#:   dataset has bounds, else ``camera_cube``, with a note that no region here contains such
+#:   a scene. The choice is in the summary.
+REGIONS = ("auto", "convergence", "camera_cube", "nerf_synthetic", "depth_bounds")
 #: graphdeco's NeRF-synthetic random box: uniform in [-NERF_SYNTHETIC_HALF, +]^3.
 NERF_SYNTHETIC_HALF = 1.3
 
@@ -227,14 +233,25 @@ class Region:
     says why when ``auto`` chose it or when it is known not to hold the scene (``warning``)."""
 
     chosen: str
-    shape: str            # "ball" or "cube"
-    center: np.ndarray    # [3] float64
-    size: float
+    shape: str            # "ball", "cube" or "frusta" (``frusta``: each view's frustum between its bounds)
+    center: np.ndarray    # [3] float64 (frusta: the mean of the frusta's mid-depth centres)
+    size: float           # frusta: the largest far bound
     note: str | None = None
     warning: bool = False  # the note warns: the region is known not to hold such a scene
+    frusta: tuple = ()    # shape "frusta": ((camera, near, far), ...)
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """[n, 3] float64 points uniform in the region."""
+        if self.shape == "frusta":
+            pick = rng.integers(0, len(self.frusta), n)
+            out = np.empty((n, 3))
+            for k, (cam, near, far) in enumerate(self.frusta):
+                rows = np.flatnonzero(pick == k)
+                u, v = rng.random(len(rows)) * cam.width, rng.random(len(rows)) * cam.height
+                z = near + (far - near) * rng.random(len(rows))
+                local = np.stack([(u - cam.cx) / cam.fx * z, (v - cam.cy) / cam.fy * z, z], 1)
+                out[rows] = local @ cam.rotation + cam.center  # camera -> world: R^T x + centre, row-wise
+            return out
         if self.shape == "cube":
             return self.center + self.size * (2.0 * rng.random((n, 3)) - 1.0)
         direction = rng.standard_normal((n, 3))
@@ -265,6 +282,19 @@ def random_region(dataset, region: str = "auto", extent: float = 3.0) -> Region:
         return cube()
     if region == "nerf_synthetic":
         return nerf()
+    bounds = getattr(dataset, "bounds", None)
+    if region == "depth_bounds" or (region == "auto" and meet is None and bounds is not None):
+        if bounds is None or len(bounds) != len(cameras):
+            raise InputError("init.region: 'depth_bounds' needs per-view depth bounds (LLFF's poses_bounds.npy); "
+                             "this dataset has none (use init.region=auto)")
+        frusta = tuple((c, float(b[0]), float(b[1])) for c, b in zip(cameras, bounds))
+        mid = np.mean([c.center + c.rotation[2] * 0.5 * (b[0] + b[1]) for c, b in zip(cameras, bounds)], axis=0)
+        made = Region("depth_bounds", "frusta", mid, float(bounds[:, 1].max()), frusta=frusta)
+        if region == "auto":
+            made = dataclasses.replace(made, note=f"init.region auto: depth_bounds (a forward-facing rig with depth "
+                                                  f"bounds {bounds[:, 0].min():.3g}..{bounds[:, 1].max():.3g}): "
+                                                  f"uniform in the training views' frusta between them")
+        return made
     if region == "convergence":
         if meet is None:
             raise InputError("init.region: 'convergence' needs cameras whose optical axes meet in front of them; "

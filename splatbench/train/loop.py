@@ -94,14 +94,20 @@ class Evaluation:
     per_view_psnr: list[float] = field(default_factory=list)
 
 
-def resolve_background(background: list[float] | str, split) -> tuple[torch.Tensor, str]:
+def resolve_background(background: list[float] | str, split, masks: str = "") -> tuple[torch.Tensor, str]:
     """The render background [3] and how it was chosen.
 
-    ``"auto"``: the mean ground-truth colour of the pixels the split marks as empty --
-    alpha 0 when it has alphas, else depth 0 (nothing hit: a constant environment
-    shows there) -- or black when it marks none (3DGS's default)."""
+    ``"auto"``: white for a masked capture (``masks``: the folder its alphas came from;
+    the object on white, as NeRF-synthetic is evaluated); else the mean ground-truth
+    colour of the pixels the split marks as empty -- alpha 0 when it has alphas, else
+    depth 0 (nothing hit: a constant environment shows there) -- or black when it marks
+    none (3DGS's default)."""
     if not isinstance(background, str):
         return torch.tensor(background, dtype=torch.float32), f"background {list(background)} (config)"
+    if masks:
+        return torch.ones(3), (f"background auto: white [1.0, 1.0, 1.0] (a masked capture, {masks}/: the object "
+                               f"on white, as NeRF-synthetic; training targets and test views are composited over "
+                               f"it with their masks; set background or random_background for another)")
     empty = None
     if split.alpha_pixels is not None:
         empty, how = split.alpha_pixels == 0, "alpha 0"  # 8-bit 0 is exactly alpha 0
@@ -134,7 +140,8 @@ class Trainer:
             from splatbench.data.dataset import load_dataset
 
             dataset = load_dataset(config.dataset, layout=config.data.layout, test_every=config.data.test_every,
-                                   background=self._gt_background(config), downscale=config.data.downscale, say=say)
+                                   background=self._gt_background(config), downscale=config.data.downscale,
+                                   masks=config.data.masks, say=say)
         self.dataset = dataset
         train = dataset.train
         if len(train) == 0:
@@ -168,7 +175,8 @@ class Trainer:
         # the training views stay as the dataset holds them (8-bit); each step converts its own (`target`)
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
         gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
-        background, self.background_note = resolve_background(config.background, train)
+        background, self.background_note = resolve_background(config.background, train,
+                                                              getattr(dataset, "masks", ""))
         # host copies (float32 values) for each render's background argument and the compositing
         # check: reading them back from the device every step would wait for the GPU
         self._gt_rgb, self._background_rgb = gt_background.tolist(), background.tolist()
@@ -378,6 +386,10 @@ class Trainer:
             rgb, _, _, _ = self._render(camera, self.sh.degree, list(self._background_rgb))
             seconds += time.perf_counter() - t0
             gt = torch.from_numpy(test.image(i)).to(self.device)  # one view as float at a time
+            if test.alpha_pixels is not None and self._background_rgb != self._gt_rgb:
+                # composited over the render background, as the training targets are (`step`)
+                alpha = torch.from_numpy(test.alpha(i)).to(self.device)
+                gt = gt + (self.background - self.gt_background) * (1 - alpha)[..., None]
             psnrs.append(psnr(rgb, gt))
             ssims.append(ssim_metric(rgb, gt, self.config.loss.ssim_window))
             for (net, scaled), values in lps.items():
