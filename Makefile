@@ -73,7 +73,7 @@ golden: setup
 # Run the shipped experiments (resumable: finished runs are skipped), each with its [check]
 # (its headline rerun at graphdeco's 7K protocol, docs/reports.md), and write reports/<name>/;
 # a failed run is listed in its report and makes the target fail.
-REPORTS ?= raster_speed_vs_error sh_degree sh_degree_spp128 sh_degree_clean_test sh_degree_spp128_clean_test loss_weighting densification initialization densification_schedules real_capture teacher_scenes train_raster_options
+REPORTS ?= quick_protocol raster_speed_vs_error sh_degree loss_weighting densification densification_schedules
 reports: setup
 	@status=0; for e in $(REPORTS); do \
 	  $(VENV)/bin/splatbench run experiments/$$e.toml || status=1; \
