@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 from splatbench.backends.base import GROUPS
+from splatbench.raster.options import RasterOptions
 from splatbench.verification.cotangents import Cotangents  # the one random-cotangent helper
 from splatbench.raster.hooks import NO_HOOKS, Hooks
 from splatbench.raster.torch_bridge import rasterize_with_hooks
@@ -27,7 +28,7 @@ def fast_vjp(workload, v: Cotangents, hooks: Hooks = NO_HOOKS, **options) -> VJP
     """``hooks``: e.g. ``Hooks(loop_ad=True)``, Dr.Jit's loop AD instead of the hand-written backward."""
     g = workload.gaussians
     params = [torch.tensor(getattr(g, k), requires_grad=True) for k in GROUPS]
-    rgb, alpha, depth, _ = rasterize_with_hooks(*params, workload.camera, hooks, **options)
+    rgb, alpha, depth, _ = rasterize_with_hooks(*params, workload.camera, hooks, options=RasterOptions(**options))
     v.loss(rgb, alpha, depth).backward()
     return VJP(rgb.detach().numpy(), alpha.detach().numpy(), depth.detach().numpy(),
                {k: p.grad.numpy().copy() for k, p in zip(GROUPS, params)})

@@ -255,7 +255,6 @@ def test_sh_degree_is_checked_by_one_function_everywhere(value):
     from splatbench.experiments.raster_kind import validate as validate_raster_config
     from splatbench.initial_gaussians import from_points
     from splatbench.train import TrainConfig
-    from splatbench.train.config import SHConfig
     from splatbench.workloads import synthetic
 
     with pytest.raises(InputError) as first:

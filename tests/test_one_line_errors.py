@@ -203,7 +203,7 @@ def test_clip_planes_and_background_are_checked():
     g = one_gaussian()
     cam = framing_camera(g, 16, 16)
     with pytest.raises(InputError, match=r"^near: expected a value below far \(1\), got 10"):
-        splatbench.render(g, cam, near=10, far=1)
+        splatbench.render(g, cam, options=splatbench.RasterOptions(near=10, far=1))
     with pytest.raises(InputError, match=r"^background: expected 3 values in \[0, 1\]"):
         splatbench.render(g, cam, background=(2, 0, 0))
 

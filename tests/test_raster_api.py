@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import inspect
+
 import gc
 import weakref
 
@@ -12,6 +14,7 @@ import torch
 import splatbench
 from splatbench import Camera, Gaussians, InputError
 from splatbench.raster import compositing as composite_module
+from splatbench.raster.options import RasterOptions
 from splatbench.workloads import synthetic
 
 GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh")
@@ -108,13 +111,32 @@ def test_rasterize_rejects_non_finite_input_naming_the_field(scene, field):
     ({"sh_degree": 4}, "sh_degree: expected an int in 0..3, got 4"),
     ({"background": (1, 2)}, "background: expected 3 values in [0, 1]"),
     ({"background": (2, 0, 0)}, "background: expected 3 values in [0, 1], got [2, 0, 0]"),
-    ({"near": 10, "far": 1}, "near: expected a value below far (1), got 10"),  # both given: RasterOptions says so
+    ({"near": 10, "far": 1}, "near: expected a value below far (1.0), got 10.0"),  # both given: RasterOptions says so
     ({"near": 2e10}, "near, far: expected near < far, got near=20000000000.0, far=10000000000.0"),
 ])
 def test_render_rejects_bad_options(scene, options, message):
     with pytest.raises(InputError) as info:
-        splatbench.render(scene.gaussians, scene.camera, **options)
+        splatbench.render(scene.gaussians, scene.camera, **_split(options))
     assert message in str(info.value)
+
+
+def _split(options: dict) -> dict:
+    """``render``'s keyword arguments from one table: ``sh_degree`` and ``background`` as they are,
+    the rest read into the typed ``options`` (`RasterOptions.from_dict`, where bad ones are caught)."""
+    render_keys = ("sh_degree", "background")
+    raster = {k: v for k, v in options.items() if k not in render_keys}
+    return {**{k: v for k, v in options.items() if k in render_keys},
+            **({"options": RasterOptions.from_dict(raster)} if raster else {})}
+
+
+def test_options_are_a_raster_options_record(scene):
+    """``options`` is typed: a dict (the keyword arguments of an older splatbench) is one line."""
+    for call in (lambda: splatbench.render(scene.gaussians, scene.camera, options={"tile_size": 8}),
+                 lambda: splatbench.rasterize(*params(scene), scene.camera, options={"tile_size": 8})):
+        with pytest.raises(InputError, match=r"^options: expected splatbench.RasterOptions or None, got dict"):
+            call()
+    assert inspect.signature(splatbench.render).parameters["options"].annotation == "RasterOptions | None"
+    assert inspect.signature(splatbench.rasterize).parameters["options"].annotation == "RasterOptions | None"
 
 
 def test_sh_degree_larger_than_available_is_an_error(scene):
@@ -195,7 +217,7 @@ def test_render_and_rasterize_check_the_camera_the_same_way(scene):
         cases.append((huge, {}, r"^camera width, height: 30000x30000 needs about .* GiB"))
     for camera, options, message in cases:
         with pytest.raises(InputError, match=message) as by_render:
-            splatbench.render(scene.gaussians, camera, **options)
+            splatbench.render(scene.gaussians, camera, **_split(options))
         with pytest.raises(InputError) as by_rasterize:
-            splatbench.rasterize(*params(scene), camera, **options)
+            splatbench.rasterize(*params(scene), camera, **_split(options))
         assert str(by_rasterize.value) == str(by_render.value)

@@ -77,7 +77,7 @@ def test_culled_binning_is_bit_identical_to_the_cutoff_box(tile_size, monkeypatc
     workload = culling_scene(500, seed=tile_size)
     new, old = vjp_both_ways(workload, monkeypatch, tile_size=tile_size)
     assert_same_vjp(new, old)
-    stats = work_stats(workload.gaussians, workload.camera, device="cpu", tile_size=tile_size)
+    stats = work_stats(workload.gaussians, workload.camera, RasterOptions(device="cpu", tile_size=tile_size))
     assert stats.pairs <= stats.box_pairs < stats.cutoff_box_pairs  # the support boxes culled some
 
 

@@ -107,8 +107,8 @@ def test_smaller_blocks_perform_fewer_evaluations_with_the_same_useful_ones():
     the useful evaluations are the image's, the same at every layout (the ones inside the
     cutoff but outside the support are not: the blocks follow the support)."""
     w = model_workload("guitar", 0, 3, 120, 90)
-    four = work_stats(w.gaussians, w.camera, device="cpu")
-    two = work_stats(w.gaussians, w.camera, device="cpu", pixel_block=2)
+    four = work_stats(w.gaussians, w.camera, RasterOptions(device="cpu"))
+    two = work_stats(w.gaussians, w.camera, RasterOptions(device="cpu", pixel_block=2))
     assert two.useful == four.useful and two.pairs == four.pairs
     assert two.block_evaluations < four.block_evaluations and two.performed < four.performed
     assert two.useful_share > four.useful_share

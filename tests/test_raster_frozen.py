@@ -16,6 +16,7 @@ import torch
 
 import splatbench
 from splatbench.raster.compositing import GRAD_KEYS
+from splatbench.raster.options import RasterOptions
 from tests.gradcheck import GROUPS, Cotangents
 from tests.scenes import parity_scene
 
@@ -34,10 +35,12 @@ CASES = [
 ]
 
 
-def vjp(workload, v: Cotangents, trainable, **options):
+def vjp(workload, v: Cotangents, trainable, antialiased: bool = False, **kwargs):
+    """``kwargs``: `splatbench.rasterize`'s (``background``, ``absgrad``)."""
     g = workload.gaussians
     params = [torch.tensor(getattr(g, k), requires_grad=k in trainable) for k in GROUPS]
-    rgb, alpha, depth, info = splatbench.rasterize(*params, workload.camera, device="cpu", **options)
+    options = RasterOptions(device="cpu", antialiased=antialiased)
+    rgb, alpha, depth, info = splatbench.rasterize(*params, workload.camera, options=options, **kwargs)
     v.loss(rgb, alpha, depth).backward()
     grads = {k: None if p.grad is None else p.grad.numpy().copy() for k, p in zip(GROUPS, params)}
     return grads, info

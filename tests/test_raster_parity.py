@@ -27,6 +27,7 @@ import pytest
 
 import splatbench
 from splatbench.backends import reference_render
+from splatbench.raster.options import RasterOptions
 from splatbench.workloads import GARDEN_SFM, load_npz, model_workload
 from tests.compare import EPS32, assert_render_close
 from tests.scenes import parity_scene
@@ -35,7 +36,8 @@ ATOL = 2e-5
 
 
 def check_parity(tag: str, workload, background, device: str = "cpu", **options) -> None:
-    fast = splatbench.render(workload.gaussians, workload.camera, background=background, device=device, **options)
+    fast = splatbench.render(workload.gaussians, workload.camera, background=background,
+                            options=RasterOptions(device=device, **options))
     g = workload.gaussians  # the reference follows the same options (tile_size and device have no counterpart)
     ref = reference_render(options, g.means, g.log_scales, g.quats, g.opacity_logits, g.sh, workload.camera,
                            background=background, band=True)
@@ -68,7 +70,8 @@ def test_forward_parity_options(options, device):
 def test_tile_size_does_not_change_the_image():
     """Tiles are an acceleration only: the per-pixel cutoff decides (conventions.md)."""
     workload, _ = parity_scene(1)
-    images = [splatbench.render(workload.gaussians, workload.camera, tile_size=ts).rgb for ts in (4, 8, 16, 32)]
+    images = [splatbench.render(workload.gaussians, workload.camera, options=RasterOptions(tile_size=ts)).rgb
+              for ts in (4, 8, 16, 32)]
     for img in images[1:]:
         # Same float32 operations in the same order per pixel: identical up to FMA
         # contraction differences between kernels, a few ulp of values <= ~2.

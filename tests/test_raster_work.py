@@ -63,7 +63,7 @@ def dense_useful(gaussians, camera, opts: RasterOptions) -> int:
 def test_tile_test_keeps_every_accepted_pixel(tile_size, radius, antialiased):
     g, cam = elongated_scene(400, seed=tile_size)
     opts = dict(device="cpu", tile_size=tile_size, radius=radius, antialiased=antialiased)
-    stats = work_stats(g, cam, **opts)
+    stats = work_stats(g, cam, RasterOptions(**opts))
     assert stats.useful == dense_useful(g, cam, RasterOptions.from_kwargs(**opts))
     # The tests do drop work here (thin diagonal ellipses in square boxes): pairs at
     # the tile level (32-pixel tiles are too coarse for much of it) ...
@@ -75,12 +75,12 @@ def test_tile_test_keeps_every_accepted_pixel(tile_size, radius, antialiased):
     # ... and the counts are consistent with each other.
     assert stats.useful <= stats.inside_cutoff <= stats.block_evaluations <= stats.performed
     assert stats.performed <= stats.tile_evaluations == stats.pairs * tile_size ** 2
-    assert splatbench.render(g, cam, **opts).num_pairs == stats.pairs
+    assert splatbench.render(g, cam, options=RasterOptions(**opts)).num_pairs == stats.pairs
 
 
 def test_work_stats_standard_workload_matches_dense_count():
     w = synthetic(2000, 96, 80, seed=5)
-    stats = work_stats(w.gaussians, w.camera, device="cpu")
+    stats = work_stats(w.gaussians, w.camera, RasterOptions(device="cpu"))
     assert stats.useful == dense_useful(w.gaussians, w.camera, RasterOptions(device="cpu"))
     assert 0 < stats.useful_share < 1
 
@@ -88,7 +88,7 @@ def test_work_stats_standard_workload_matches_dense_count():
 def test_work_stats_of_nothing_is_zero():
     cam = Camera(16, 12, 16.0, 16.0, 8.0, 6.0, np.eye(4))
     g = Gaussians(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 4)), np.zeros(0), np.zeros((0, 1, 3)))
-    assert work_stats(g, cam, device="cpu").performed == 0
+    assert work_stats(g, cam, RasterOptions(device="cpu")).performed == 0
 
 
 def test_dropped_pairs_change_no_output_or_gradient(monkeypatch):
@@ -104,7 +104,7 @@ def test_dropped_pairs_change_no_output_or_gradient(monkeypatch):
 
     def run():
         leaves = [torch.tensor(getattr(g, k), requires_grad=True) for k in names]
-        rgb, alpha, depth, info = splatbench.rasterize(*leaves, cam, device="cpu", background=(0.1, 0.2, 0.3))
+        rgb, alpha, depth, info = splatbench.rasterize(*leaves, cam, options=RasterOptions(device="cpu"), background=(0.1, 0.2, 0.3))
         (rgb.square().sum() + alpha.sum() + 0.1 * depth.sum()).backward()
         return [rgb.detach(), alpha.detach(), depth.detach()] + [p.grad for p in leaves], info.num_pairs
 

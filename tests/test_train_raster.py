@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import json
-from pathlib import Path
 
 import pytest
 import torch
@@ -21,7 +20,7 @@ from click.testing import CliRunner
 
 from splatbench.errors import InputError
 from splatbench.experiments.configs import flatten
-from splatbench.experiments.grid import expand, load_experiment, make_run_id
+from splatbench.experiments.grid import expand, make_run_id
 from splatbench.experiments.spec import parse_experiment
 from splatbench.experiments.store import RunRecord
 from splatbench.experiments.train_kind import TRAIN
@@ -31,7 +30,6 @@ from splatbench.train.config import RASTER_KEYS, EvalConfig, SHConfig
 from splatbench.train.loop import Trainer, torch_threads
 from tests.test_train import config, synthetic_dataset, tiny_diffuse_dir  # noqa: F401 (a fixture)
 
-ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_ALPHA_MIN = 0.00392156862745098  # 1/255 as a TOML file writes it (the same float64)
 
 
@@ -119,9 +117,9 @@ class OptionsSpy:
     def __call__(self, *args, **kwargs):
         from splatbench.raster.torch_bridge import rasterize
 
-        names = {f.name for f in dataclasses.fields(RasterOptions)}
         caller = inspect.stack()[2].function  # rasterize <- Trainer._render <- the render's purpose
-        self.calls.append((caller, RasterOptions.from_kwargs(**{k: v for k, v in kwargs.items() if k in names})))
+        assert isinstance(kwargs["options"], RasterOptions)  # the config's typed record, as it is
+        self.calls.append((caller, kwargs["options"]))
         return rasterize(*args, **kwargs)
 
 
@@ -137,7 +135,7 @@ def test_every_render_of_a_run_uses_the_configs_raster_options(tmp_path, monkeyp
     assert {"step", "warm_up", "probe_band", "evaluate"} <= callers, callers
     assert all(opts == dataclasses.replace(options, device="cpu") for _, opts in spy.calls)
     # the run records them: result.json / --json and config.toml
-    assert result.raster == {**options.to_dict(), "device": "cpu"}
+    assert result.raster == dataclasses.replace(options, device="cpu")
     assert json.loads((tmp_path / "run" / "result.json").read_text())["raster"]["tile_size"] == 8
     assert load_config(tmp_path / "run" / "config.toml").raster == cfg.raster
 
@@ -275,12 +273,3 @@ def test_a_grid_names_a_bad_raster_key_in_one_line(where, table, message):
     with pytest.raises(InputError) as info:
         expand(parse_experiment(spec, source="x.toml"))
     assert str(info.value) == message
-
-
-def test_the_shipped_raster_options_grid_sweeps_alpha_min_and_the_tile_size():
-    spec = load_experiment(ROOT / "experiments" / "train_raster_options.toml")
-    runs = expand(spec)
-    cells = {(r.config["raster"]["alpha_min"], r.config["raster"]["tile_size"]) for r in runs}
-    assert cells == {(a, t) for a in (DEFAULT_ALPHA_MIN, 0.005, 0.008) for t in (16, 8)}
-    assert len(spec.scenes) == 2 and len(runs) == 2 * 6 * 3
-    assert all(r.config.get("protocol", "quick") == "quick" and r.config["data"]["resolution"] == 128 for r in runs)

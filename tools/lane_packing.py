@@ -10,7 +10,7 @@ the lanes of a SIMD packet (16 with AVX-512) run until the longest list among th
 so a packet costs 16 x B^2 x its longest list. For each (tile_size, B) this prints that
 cost with the lanes as the rasterizer lays them out (tile by tile; within a tile of
 more lanes than a packet, sorted by list length: `blocks.sort_lanes_by_length`; this is
-`work_stats(..., tile_size=T, pixel_block=B)`'s `performed`), with every tile's lanes sorted by list length
+`work_stats(..., RasterOptions(tile_size=T, pixel_block=B))`'s `performed`), with every tile's lanes sorted by list length
 exactly (packets stay inside a tile),
 and with all lanes sorted by length (packets mix tiles), beside the list entries x B^2
 (no idle lane at all) and the useful evaluations (`work_stats(...).useful`, which no
@@ -67,7 +67,7 @@ def main(argv: list[str]) -> int:
     else:
         workload = model_workload(argv[0], 0, 1, width, height)
     g, cam = workload.gaussians, workload.camera
-    useful = work_stats(g, cam, device="cpu").useful
+    useful = work_stats(g, cam, RasterOptions(device="cpu")).useful
     print(f"{workload.name} {width}x{height}: useful evaluations {useful:,}")
     print("tile  B  | entries x B^2   | as rasterized   | sorted in tile  | sorted overall")
     for tile_size, block in LAYOUTS:

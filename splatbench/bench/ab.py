@@ -43,17 +43,24 @@ WORKER = r"""
 import json, sys, time
 spec = json.loads(sys.argv[1])
 import drjit as dr, numpy as np, torch
+import inspect
 import splatbench
 from splatbench.workloads import load_npz
 dr.set_thread_count(spec["threads"]); torch.set_num_threads(spec["threads"])
 w = load_npz(spec["npz"])
 g = w.gaussians
 names = ("means", "log_scales", "quats", "opacity_logits", "sh")
+_opt = inspect.signature(splatbench.rasterize).parameters.get("options")
+if _opt is not None and _opt.kind is not _opt.VAR_KEYWORD:  # typed options (this side may be older: **options)
+    from splatbench.raster.options import RasterOptions
+    CPU = {"options": RasterOptions(device="cpu")}
+else:
+    CPU = {"device": "cpu"}
 leaves = [torch.tensor(getattr(g, k)).requires_grad_(True) for k in names]
 
 def run(save=None):
     t0 = time.perf_counter()
-    rgb, _, _, _ = splatbench.rasterize(*leaves, w.camera, device="cpu")
+    rgb, _, _, _ = splatbench.rasterize(*leaves, w.camera, **CPU)
     rgb.sum().backward()
     seconds = time.perf_counter() - t0
     if save:

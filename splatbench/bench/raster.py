@@ -205,8 +205,8 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     setup_rss = peak_rss_mb()
     rss_reset = reset_peak_rss()
 
-    forward = forward_with_init(params, camera, options)
-    forward_backward = forward_backward_with_init(params, camera, options)
+    forward = forward_with_init(params, camera, opts)
+    forward_backward = forward_backward_with_init(params, camera, opts)
     forward_backward()
     first_run_peak = max(setup_rss, peak_rss_mb())
     forward()
@@ -221,7 +221,7 @@ def run_one(spec: WorkloadSpec, settings: BenchSettings) -> RasterBenchResult:
     gc.collect()
     retained = (current_rss_mb() - rss_warm) / (3 * settings.repeats)
 
-    work = work_stats(Gaussians(*(p.cpu().numpy() for p in params)), camera, **options)
+    work = work_stats(Gaussians(*(p.cpu().numpy() for p in params)), camera, opts)
     evaluations = work.performed
     comp_s = stages.compositing_ms / 1e3
     peak = fp32_peak(device)

@@ -78,6 +78,7 @@ def render(source: Path, out: Path | None, view: int, size: str | None, up: str 
     up (--up, or the one the PLY records) up in the image."""
     import splatbench
     from splatbench.images import save_png
+    from splatbench.raster.options import RasterOptions
     from splatbench.ply import read_view_hints
     from splatbench.workloads import load_npz
 
@@ -125,7 +126,7 @@ def render(source: Path, out: Path | None, view: int, size: str | None, up: str 
     else:
         raise InputError(f"source: expected a .ply or .npz file, got {str(source)!r}")
     result = splatbench.render(gaussians, camera, sh_degree=sh_degree, background=rgb or (0.0, 0.0, 0.0),
-                               **parse_overrides(options, "--option"))
+                               options=RasterOptions.from_dict(parse_overrides(options, "--option")))
     path = save_png(result.rgb, out)
     for note in notes:
         click.echo(f"note: {note}", err=True)

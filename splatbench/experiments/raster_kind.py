@@ -316,15 +316,14 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RasterRun:
     cfg = read_config(RasterConfig, config)
     workload = build_workload(cfg.scene, cfg.seed)
     degree = cfg.sh_degree
-    options = cfg.options.to_dict()
-    defaults = RasterOptions(device=cfg.options.device).to_dict()
+    options = cfg.options
+    defaults = RasterOptions(device=cfg.options.device)
     full = torch_params(workload.gaussians)
     params = (*full[:4], full[4][:, : (degree + 1) ** 2].contiguous())
     closures = {}
-    for name, p, opts in (("run", params, {**options, "sh_degree": degree}),
-                          ("default", full, {**defaults, "sh_degree": FULL_SH_DEGREE})):
-        closures[name] = (forward_with_init(p, workload.camera, opts),
-                          forward_backward_with_init(p, workload.camera, opts))
+    for name, p, opts, d in (("run", params, options, degree), ("default", full, defaults, FULL_SH_DEGREE)):
+        closures[name] = (forward_with_init(p, workload.camera, opts, d),
+                          forward_backward_with_init(p, workload.camera, opts, d))
         closures[name][1]()
         closures[name][0]()  # warm-up: kernels compile or load from Dr.Jit's cache
     times: dict[str, list[float]] = {k: [] for k in ("fwd", "fwd_bwd", "default_fwd", "default_fwd_bwd")}
@@ -341,12 +340,12 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RasterRun:
     fwd_rel = bootstrap_median_ratio(times["fwd"], times["default_fwd"])
     fwd_bwd_rel = bootstrap_median_ratio(times["fwd_bwd"], times["default_fwd_bwd"])
 
-    work = work_stats(workload.gaussians, workload.camera, **options)
+    work = work_stats(workload.gaussians, workload.camera, options)
     scale = cfg.error_scale
     small = workload.camera if scale == 1 else workload.camera.scaled(scale)
-    fast = render(workload.gaussians, small, sh_degree=degree, **options).rgb.astype(np.float64)
+    fast = render(workload.gaussians, small, sh_degree=degree, options=options).rgb.astype(np.float64)
     exact = exact_model(cfg.scene, cfg.seed, scale)
-    matched = reference_render(workload, scale, sh_degree=degree, **options)
+    matched = reference_render(workload, scale, sh_degree=degree, **options.to_dict())
     err = np.abs(fast - exact)
     return RasterRun(
         fwd_ms=round(1e3 * med["fwd"], 3), fwd_bwd_ms=round(1e3 * med["fwd_bwd"], 3),
@@ -360,7 +359,7 @@ def run(config: dict[str, Any], workdir: Path, prepared: None) -> RasterRun:
         pairs=int(stats.num_pairs), evaluations=work.performed, useful_evaluations=work.useful,
         visible=int(torch.as_tensor(stats.visible).sum()),
         n=len(workload.gaussians), width=workload.camera.width, height=workload.camera.height,
-        error_width=small.width, error_height=small.height, device=resolve_device(options["device"]),
+        error_width=small.width, error_height=small.height, device=resolve_device(options.device),
         curves={f"{k}_runs_ms": [round(1e3 * s, 3) for s in v] for k, v in times.items()})
 
 

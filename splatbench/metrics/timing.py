@@ -71,7 +71,7 @@ def _ready() -> None:
     """Nothing to wait for (`device_sync` on the CPU)."""
 
 
-def forward_with_init(params: tuple, camera, options: dict) -> Callable[[], RunStats]:
+def forward_with_init(params: tuple, camera, options, sh_degree: int | None = None) -> Callable[[], RunStats]:
     """Forward only: `splatbench.rasterize` under ``torch.no_grad()`` on inputs that
     need no gradient (so Dr.Jit records no AD graph, as in `splatbench.render`)."""
     import torch
@@ -83,14 +83,14 @@ def forward_with_init(params: tuple, camera, options: dict) -> Callable[[], RunS
 
     def forward() -> RunStats:
         with torch.no_grad():
-            _, _, _, info = rasterize(*inputs, camera, **options)
+            _, _, _, info = rasterize(*inputs, camera, sh_degree=sh_degree, options=options)
         sync()
         return RunStats(info.num_pairs, info.visible, info.sh_degree)
 
     return forward
 
 
-def forward_backward_with_init(params: tuple, camera, options: dict) -> Callable[..., RunStats]:
+def forward_backward_with_init(params: tuple, camera, options, sh_degree: int | None = None) -> Callable[..., RunStats]:
     """Forward and backward: loss = rgb.sum() through `splatbench.rasterize`, all five
     parameter groups requiring grad. The closure takes an optional `StageTimer`."""
     from splatbench.raster.hooks import Hooks
@@ -102,7 +102,7 @@ def forward_backward_with_init(params: tuple, camera, options: dict) -> Callable
     def forward_backward(timer=None) -> RunStats:
         if timer is not None:
             timer.start()
-        rgb, _, _, info = rasterize_with_hooks(*leaves, camera, Hooks(timer=timer), **options)
+        rgb, _, _, info = rasterize_with_hooks(*leaves, camera, Hooks(timer=timer), sh_degree=sh_degree, options=options)
         if timer is not None:
             timer.mark("other")  # outputs copied to torch, RasterInfo
         rgb.sum().backward()

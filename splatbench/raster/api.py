@@ -10,8 +10,8 @@ import numpy as np
 from splatbench.errors import InputError
 from splatbench.raster.device import dr, get_device
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import (check_background, check_sh_range, check_view, frame_to_numpy, render_frame,
-                                       resolve_sh_degree)
+from splatbench.raster.pipeline import (check_background, check_options, check_sh_range, check_view, frame_to_numpy,
+                                       render_frame, resolve_sh_degree)
 
 if TYPE_CHECKING:
     from splatbench.cameras import Camera
@@ -48,7 +48,7 @@ def render(
     *,
     sh_degree: int | None = None,
     background=(0.0, 0.0, 0.0),
-    **options,
+    options: RasterOptions | None = None,
 ) -> RenderResult:                 # rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N], visible [N]
     """Render ``gaussians`` seen from ``camera`` with the Dr.Jit tile rasterizer.
 
@@ -57,8 +57,8 @@ def render(
         camera: `splatbench.Camera` (width W, height H).
         sh_degree: SH bands to evaluate (default: all that ``gaussians.sh`` holds).
         background: RGB behind the splats.
-        **options: `RasterOptions` fields (tile_size, alpha_min, alpha_max,
-            transmittance_min, eps2d, near, far, radius, antialiased, device).
+        options: the rasterizer's `RasterOptions` (tile_size, alpha_min, alpha_max,
+            transmittance_min, eps2d, near, far, radius, antialiased, device); None: the defaults.
 
     Returns:
         `RenderResult` with rgb [H, W, 3], alpha [H, W], depth [H, W], radii [N], visible [N].
@@ -72,7 +72,7 @@ def render(
 
     if not isinstance(gaussians, Gaussians):
         raise InputError(f"gaussians: expected splatbench.Gaussians, got {type(gaussians).__name__}")
-    opts = RasterOptions.from_kwargs(**options)
+    opts = check_options(options)
     check_view(camera, opts)
     degree = resolve_sh_degree(gaussians.sh.shape[1], sh_degree)
     if gaussians.sh.size:

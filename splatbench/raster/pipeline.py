@@ -68,6 +68,17 @@ def check_background(background) -> tuple[float, float, float]:
     return tuple(float(c) for c in bg)
 
 
+def check_options(options) -> RasterOptions:
+    """The ``options`` argument of `render` and `rasterize`: a `RasterOptions` as it is, None for
+    the defaults; anything else (a dict of options, say) is one `InputError` line naming the fix."""
+    if options is None:
+        return RasterOptions()
+    if not isinstance(options, RasterOptions):
+        raise InputError(f"options: expected splatbench.RasterOptions or None, got {type(options).__name__} "
+                         f"(build one: RasterOptions(tile_size=8), or RasterOptions.from_dict(table))")
+    return options
+
+
 def check_view(camera, options: RasterOptions) -> None:
     """The one camera check of `render` and `rasterize`, before any work: ``camera`` is a
     `splatbench.Camera` (whose fields were checked when it was built, and whose matrix is

@@ -25,7 +25,7 @@ from splatbench.errors import InputError
 from splatbench.raster.device import Device, dr, get_device
 from splatbench.raster.hooks import NO_HOOKS, Hooks
 from splatbench.raster.options import RasterOptions
-from splatbench.raster.pipeline import (SH_ABS_MAX, Frame, check_background, check_view, check_sh_range,
+from splatbench.raster.pipeline import (SH_ABS_MAX, Frame, check_background, check_options, check_view, check_sh_range,
                                        render_frame, resolve_sh_degree)
 from splatbench.checks import check_finite, check_shape
 
@@ -213,7 +213,7 @@ def rasterize(
     sh_degree: int | None = None,
     background=None,               # 3 values in [0, 1] (default black)
     absgrad: bool = False,
-    **options,
+    options: RasterOptions | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, RasterInfo]:  # [H, W, 3], [H, W], [H, W], info
     """Differentiable 3DGS rasterization of torch tensors through the Dr.Jit pipeline.
 
@@ -224,18 +224,19 @@ def rasterize(
         sh_degree: SH bands to evaluate (default: all in ``sh``); higher bands get zero gradient.
         background: RGB behind the splats (default black).
         absgrad: also accumulate ``info.means2d_absgrad`` (AbsGS) in the backward pass.
-        **options: `RasterOptions` fields.
+        options: the rasterizer's `RasterOptions` (None: the defaults).
 
     Returns:
         rgb [H, W, 3], alpha [H, W], depth [H, W] (float32 torch tensors, differentiable
         with respect to every input with ``requires_grad``), and a `RasterInfo`.
     """
     return rasterize_with_hooks(means, log_scales, quats, opacity_logits, sh, camera, NO_HOOKS, sh_degree=sh_degree,
-                                background=background, absgrad=absgrad, **options)
+                                background=background, absgrad=absgrad, options=options)
 
 
 def rasterize_with_hooks(means, log_scales, quats, opacity_logits, sh, camera, hooks: Hooks, *,
-                         sh_degree: int | None = None, background=None, absgrad: bool = False, **options):
+                         sh_degree: int | None = None, background=None, absgrad: bool = False,
+                         options: RasterOptions | None = None):
     """`rasterize` with test and benchmark `Hooks` (the gradient tests' and the stage
     timings' entry point; arguments and results as for `rasterize`)."""
     sizes: dict[str, int] = {}
@@ -244,7 +245,7 @@ def rasterize_with_hooks(means, log_scales, quats, opacity_logits, sh, camera, h
     _check("quats", quats, ("N", 4), sizes)
     _check("opacity_logits", opacity_logits, ("N",), sizes)
     sh_largest = _check("sh", sh, ("N", None, 3), sizes)
-    opts = RasterOptions.from_kwargs(**options)
+    opts = check_options(options)
     check_view(camera, opts)
     degree = resolve_sh_degree(sh.shape[1], sh_degree)
     if sh_largest > SH_ABS_MAX:  # only then find where (a full |sh| temporary)

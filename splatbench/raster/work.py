@@ -20,6 +20,7 @@ from splatbench.raster.binning import bin_gaussians
 from splatbench.raster.blocks import lanes_for, pair_at
 from splatbench.raster.compositing import CompositeSettings, _alpha_at, _half_mahalanobis, splat_records
 from splatbench.raster.options import RasterOptions
+from splatbench.raster.pipeline import check_options
 from splatbench.raster.projection import project
 from splatbench.raster.records import load_records
 
@@ -60,17 +61,17 @@ class WorkStats:
         return self.useful / self.performed if self.performed else 0.0
 
 
-def work_stats(gaussians, camera, **options) -> WorkStats:
+def work_stats(gaussians, camera, options: RasterOptions | None = None) -> WorkStats:
     """Count the compositing work of rendering ``gaussians`` from ``camera``.
 
     Args:
         gaussians: `splatbench.Gaussians` [N]. camera: `splatbench.Camera` (W x H).
-        **options: `RasterOptions` fields, as for `splatbench.render`.
+        options: the rasterizer's `RasterOptions`, as for `splatbench.render` (None: the defaults).
 
     Returns:
         `WorkStats` (integers).
     """
-    opts = RasterOptions.from_kwargs(**options)
+    opts = check_options(options)
     m = get_device(opts.device).t
     if len(gaussians) == 0:
         return WorkStats(0, 0, 0, 0, 0, 0, 0, 0, 0)

@@ -149,7 +149,7 @@ def run_case(case: StressCase, *, device: str | None = None) -> CaseResult:
     options = case.options if device is None else dataclasses.replace(case.options, device=device)
     params = [torch.tensor(a, requires_grad=True) for a in case.params().values()]
     try:
-        rgb, alpha, depth, info = rasterize(*params, case.camera, **dataclasses.asdict(options))
+        rgb, alpha, depth, info = rasterize(*params, case.camera, options=options)
         outputs = {"rgb": rgb, "alpha": alpha, "depth": depth}
         Cotangents.standard_normal([case.seed, 1], case.camera.height, case.camera.width).loss(rgb, alpha,
                                                                                                depth).backward()

@@ -195,7 +195,6 @@ class Trainer:
         self.holdout = [i for i in range(len(train)) if i % k == k // 2] if k and len(train) >= 2 * k else []
         self.step_index = 0
         self.times = StepTimes()
-        self.raster_options = config.raster.to_dict()  # TrainConfig.raster (its device: config.device)
 
     @staticmethod
     def _gt_background(config: TrainConfig) -> list[float]:
@@ -226,7 +225,7 @@ class Trainer:
     def _render(self, camera, degree: int, background) -> tuple:
         p = self.params
         return rasterize(p["means"], p["log_scales"], p["quats"], p["opacity_logits"], self._sh(degree), camera,
-                         sh_degree=degree, background=background, absgrad=self.absgrad, **self.raster_options)
+                         sh_degree=degree, background=background, absgrad=self.absgrad, options=self.config.raster)
 
     def _next_view(self) -> int:
         if not self._order:
@@ -619,7 +618,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         sh_decisions=[d._asdict() for d in trainer.sh.decisions], notes=notes, warnings=warnings,
         init=trainer.init_summary,
         warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step, protocol=config.protocol,
-        raster=config.raster.to_dict(), device=resolve_device(config.device),
+        raster=config.raster, device=resolve_device(config.device),
         step_evaluations=step_evaluations, topology=topology_counts(trainer.state))
     write_text(out / "result.json", result.to_json(indent=2) + "\n")  # whole or not at all
     return result

@@ -7,6 +7,7 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import NamedTuple
 
+from splatbench.raster.options import RasterOptions
 from splatbench.strategies.base import TopologyCounts
 
 
@@ -81,10 +82,10 @@ class TrainResult:
     resumed_step: int | None = None     # --resume: the checkpoint's step (its earlier steps' loop time, timed by the
                                         # run that wrote it, is in train_seconds); None: not resumed
     protocol: str = "quick"             # TrainConfig.protocol (splatbench.train.protocol)
-    raster: dict = field(default_factory=dict)  # the rasterizer options of every render of the run
-                                        # (TrainConfig.raster as `RasterOptions.to_dict`: its device as set,
-                                        # "auto" by default; the device that ran is `device`; {}: a result
-                                        # written before training took raster options)
+    raster: RasterOptions | None = None  # the rasterizer options of every render of the run (TrainConfig.raster:
+                                        # its device as set, "auto" by default; the device that ran is `device`;
+                                        # None: a result written before training took raster options; in JSON
+                                        # the table of `RasterOptions.to_dict`, {} for None)
     step_evaluations: list[StepEvaluation] = field(default_factory=list)  # at TrainConfig.evaluation_steps
                                         # (graphdeco-30k: 7,000 and 30,000), the last one the final model's
     topology: TopologyCounts | None = None  # what the strategy did besides its settings' names: refinements,
@@ -97,6 +98,7 @@ class TrainResult:
     def to_dict(self) -> dict:
         """JSON-ready dict; NaN / inf become None; history rows become objects."""
         data = asdict(self)
+        data["raster"] = self.raster.to_dict() if self.raster is not None else {}
         data["history"] = [p._asdict() for p in self.history]
         data["evaluations"] = [p._asdict() for p in self.evaluations]
         data["step_evaluations"] = [p._asdict() for p in self.step_evaluations]
@@ -108,8 +110,8 @@ class TrainResult:
 
     @classmethod
     def from_dict(cls, data: dict) -> TrainResult:
-        topology = data.get("topology")
-        return cls(**{**data, "history": [HistoryPoint(**p) for p in data.get("history", [])],
+        topology, raster = data.get("topology"), data.get("raster")
+        return cls(**{**data, "raster": RasterOptions.from_dict(raster) if raster else None, "history": [HistoryPoint(**p) for p in data.get("history", [])],
                       "evaluations": [EvalPoint(**p) for p in data.get("evaluations", [])],
                       "step_evaluations": [StepEvaluation(**p) for p in data.get("step_evaluations", [])],
                       "topology": TopologyCounts(**topology) if isinstance(topology, dict) else None})

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import fields
-
 from splatbench.backends.base import Backend, BackendInfo
 
 DESCRIPTION = ("splatbench's Dr.Jit tile rasterizer (LLVM on the CPU, CUDA where Dr.Jit finds a GPU) with "
@@ -28,11 +26,9 @@ def make_drjit_backend(**options) -> Backend:
         alpha_min=opts.alpha_min, alpha_max=opts.alpha_max, transmittance_min=opts.transmittance_min,
         eps2d=opts.eps2d, radius=opts.radius, tile_size=opts.tile_size, antialiased=opts.antialiased,
         description=DESCRIPTION)
-    kwargs = {f.name: getattr(opts, f.name) for f in fields(RasterOptions)}  # every option reaches the rasterizer
-
     def drjit(means, log_scales, quats, opacity_logits, sh, camera, *, sh_degree=None, background=None):
         rgb, alpha, depth, _ = rasterize(means, log_scales, quats, opacity_logits, sh, camera,
-                                         sh_degree=sh_degree, background=background, **kwargs)
+                                         sh_degree=sh_degree, background=background, options=opts)
         return rgb, alpha, depth
 
     return Backend(drjit, info)

@@ -17,6 +17,7 @@ from splatbench.cameras import Camera
 from splatbench.gaussians import Gaussians
 from splatbench.metrics.image import psnr
 from splatbench.raster import render
+from splatbench.raster.options import RasterOptions
 
 #: Rasterizer options that match ``volprim_rf_basic`` wherever the two definitions allow.
 MATCHED_OPTIONS = {"eps2d": 0.0, "alpha_min": 1e-7, "alpha_max": 0.9999, "transmittance_min": 0.0,
@@ -43,7 +44,8 @@ def render_traced(gaussians: Gaussians, camera: Camera, *, shipped: bool = False
 def render_splat(gaussians: Gaussians, camera: Camera, options: dict | None = None) -> np.ndarray:
     """[H, W, 3] float32 from `splatbench.render` (black background); ``options`` default `MATCHED_OPTIONS`."""
     opts = MATCHED_OPTIONS if options is None else options
-    return render(gaussians, camera, background=(0.0, 0.0, 0.0), device="cpu", **opts).rgb
+    options = RasterOptions.from_kwargs(device="cpu", **opts)
+    return render(gaussians, camera, background=(0.0, 0.0, 0.0), options=options).rgb
 
 
 
