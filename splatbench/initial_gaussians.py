@@ -32,7 +32,7 @@ import numpy as np
 
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES_OF_DEGREE, SH_C0, Gaussians
-from splatbench.checks import as_float_array, check_sh_degree, check_shape
+from splatbench.guards import as_float_array, check_sh_degree, check_shape
 
 #: Lower bound on the mean squared neighbour distance (graphdeco's ``clamp_min(dist2, 1e-7)``).
 MIN_DIST2 = 1e-7

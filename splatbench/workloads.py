@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
-from splatbench.checks import check_sh_degree, parse_size
+from splatbench.guards import check_sh_degree, parse_size
 from splatbench.errors import InputError
 from splatbench.fsutil import atomic_write
 from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians, quat_to_rotmat

@@ -33,7 +33,7 @@ import pandas as pd
 from splatbench.backends.base import GROUPS, OUTPUTS
 from splatbench.compare.run import CompareResult, CompareRow, CompareSettings
 from splatbench.verification.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD, U32
-from splatbench.checks import dataclass_from_mapping
+from splatbench.guards import dataclass_from_mapping
 from splatbench.compare.measure import spread
 from splatbench.errors import InputError
 from splatbench.fsutil import read_text
@@ -277,7 +277,7 @@ class CompareRecord:
 
     @classmethod
     def from_dict(cls, data: Any, what: str) -> CompareRecord:
-        """The record `to_dict` wrote, checked at the boundary (`checks.dataclass_from_mapping`:
+        """The record `to_dict` wrote, checked at the boundary (`guards.dataclass_from_mapping`:
         unknown keys, types): a missing, unknown or mistyped field is a one-line `InputError`
         starting ``what:`` and naming it (``settings.repeats``)."""
         data = _whole(data, cls, what)

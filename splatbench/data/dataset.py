@@ -84,7 +84,7 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
-from splatbench.checks import check_image_size
+from splatbench.guards import check_image_size
 from splatbench.data.colmap_bounds import check_colmap_binary, check_colmap_text
 from splatbench.data.llff import POSES_FILE
 from splatbench.data.undistort import Lens, check_lens
