@@ -86,7 +86,7 @@ class _State:
 
     def check(self):
         if self._check is None:
-            from splatbench.regress.checking import check
+            from splatbench.regress.against_snapshot import check
 
             self._check = check(self.backend, self.against, device=self.device, diagnose=False)
         return self._check
