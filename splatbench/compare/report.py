@@ -179,8 +179,8 @@ def findings(table: pd.DataFrame) -> list[str]:
 # ----------------------------------------------------------------------------- figures
 def time_figures(table: pd.DataFrame, out: Path) -> list[Path]:
     """Forward (and forward+backward) median time against rgb PSNR to the exact mixture, one
-    panel per workload, Pareto front marked (`splatbench.figures.pareto_figure`)."""
-    from splatbench.figures import pareto_figure
+    panel per workload, Pareto front marked (`splatbench.plotting.pareto_figure`)."""
+    from splatbench.plotting import pareto_figure
     from splatbench.metrics.spec import MetricSpec
 
     quality = MetricSpec("exact_rgb_psnr", "rgb PSNR to the exact mixture (dB)", ".1f", "dB", "higher")

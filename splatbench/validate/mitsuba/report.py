@@ -73,7 +73,7 @@ def write_report(rows: Sequence[SweepRow], out_dir: str | Path = DEFAULT_OUT, *,
     With ``probe`` rows, also ``intersection.csv`` and a section of ``table.md``; with
     ``checks``, a pass/fail section of ``table.md``.
     """
-    from splatbench.figures import panels, pyplot
+    from splatbench.plotting import panels, pyplot
 
     plt = pyplot()
     out = Path(out_dir)
