@@ -246,7 +246,7 @@ def sfm_camera(arrays: dict, view: int) -> Camera:
 
 
 def _from_sfm(name: str, arrays: dict, view: int) -> Workload:
-    from splatbench.initial_gaussians import from_points
+    from splatbench.gaussians_from_points import from_points
 
     gaussians = from_points(arrays["means3d"], arrays["colors"])
     return Workload(f"{name}-view{view}", gaussians, sfm_camera(arrays, view))

@@ -253,7 +253,7 @@ def test_sh_degree_is_checked_by_one_function_everywhere(value):
     TrainConfig and the raster run kind: the same one-line message from each."""
     from splatbench.guards import check_sh_degree
     from splatbench.experiments.raster_kind import validate as validate_raster_config
-    from splatbench.initial_gaussians import from_points
+    from splatbench.gaussians_from_points import from_points
     from splatbench.train import TrainConfig
     from splatbench.train.config import SHConfig
     from splatbench.workloads import synthetic

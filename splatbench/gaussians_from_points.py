@@ -1,4 +1,5 @@
-"""Initial Gaussians: from a point cloud, SfM, uniform random points, or the true surfaces.
+"""Gaussians from points: the initial Gaussians of a training, from a point cloud, SfM,
+uniform random points, or the true surfaces.
 
 The constructors themselves; training picks one by name (`TrainConfig.init`) through
 `splatbench.train.initializers`, which calls these.
