@@ -22,7 +22,7 @@ from splatbench.cli import main
 from splatbench.errors import InputError
 from splatbench.regress import check, snapshot
 from splatbench.regress import files as regress_files
-from splatbench.regress import scenes as regress_scenes
+from splatbench.regress import snapshot_scenes as regress_scenes
 from splatbench.regress.files import MANIFEST, read_snapshot, write_npz
 from tests.gradient_bugs import conic_b_half
 
