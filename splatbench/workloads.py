@@ -2,7 +2,8 @@
 trained models (a 3DGS PLY framed from a few directions).
 
 A workload is a set of Gaussians and one camera; benchmarks, the stress test and
-the parity tests all draw their scenes from here. This module is also the one home of
+the parity tests all draw their scenes from here (a workload is one of the five kinds of
+"scene": docs/architecture.md). This module is also the one home of
 workload naming: a `WorkloadSpec` (cheap to pass between processes) is what the
 command line's ``--synthetic N WxH`` / ``--workload FILE.npz|garden`` (`parse_synthetic`,
 `parse_workload`) and an experiment's scene names ``synthetic-N-S``, ``synthetic-N-WxH``,

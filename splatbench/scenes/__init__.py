@@ -1,5 +1,8 @@
 """Mitsuba scene catalog and multi-view dataset rendering.
 
+These are catalog scenes, the ground truth that datasets are rendered from (one of the five
+kinds of "scene": docs/architecture.md).
+
 Catalog (``catalog.py``, no Mitsuba import)::
 
     find_scenes(extra=()) -> dict[str, SceneSpec]     every scene folder found
