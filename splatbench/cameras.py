@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from splatbench.checks import as_float_array, check_image_size
+from splatbench.guards import as_float_array, check_image_size
 from splatbench.errors import InputError
 from splatbench.mitsuba_loader import mitsuba
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from splatbench.checks import SH_BASES_OF_DEGREE, as_float_array, check_sh_degree
+from splatbench.guards import SH_BASES_OF_DEGREE, as_float_array, check_sh_degree
 from splatbench.conventions import LOG_SCALE_CLIP, QUAT_MIN, SH_C0
 from splatbench.errors import InputError
 from splatbench.ply import ViewHints, read_ply, write_ply

@@ -34,7 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from splatbench.checks import SH_BASES_OF_DEGREE
+from splatbench.guards import SH_BASES_OF_DEGREE
 from splatbench.errors import InputError
 from splatbench.fsutil import atomic_write
 from splatbench.safeio import check_count

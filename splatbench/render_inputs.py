@@ -3,7 +3,7 @@ building blocks of hand-made ones: Gaussians placed by where they land on screen
 large they look there. (A Mitsuba scene that datasets are rendered from is `splatbench.scenes`.)
 
 The verification applications each build their own scenes from these: conform's probe
-scenes (`splatbench.conform.scenes`), stress's degenerate cases (`splatbench.stress.cases`)
+scenes (`splatbench.conform.probe_scenes`), stress's degenerate cases (`splatbench.stress.cases`)
 and validate's sweeps (`splatbench.validate.mitsuba.cases`); the synthetic workloads' random
 rotations are `splatbench.workloads.random_unit_quats`. What they hand a rasterizer is a
 `RenderInput` (regress's scenes and stress's cases add their name or category to it).

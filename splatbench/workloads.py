@@ -2,7 +2,8 @@
 trained models (a 3DGS PLY framed from a few directions).
 
 A workload is a set of Gaussians and one camera; benchmarks, the stress test and
-the parity tests all draw their scenes from here. This module is also the one home of
+the parity tests all draw their scenes from here (a workload is one of the five kinds of
+"scene": docs/architecture.md). This module is also the one home of
 workload naming: a `WorkloadSpec` (cheap to pass between processes) is what the
 command line's ``--synthetic N WxH`` / ``--workload FILE.npz|garden`` (`parse_synthetic`,
 `parse_workload`) and an experiment's scene names ``synthetic-N-S``, ``synthetic-N-WxH``,
@@ -18,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
-from splatbench.checks import check_sh_degree, parse_size
+from splatbench.guards import check_sh_degree, parse_size
 from splatbench.errors import InputError
 from splatbench.fsutil import atomic_write
 from splatbench.gaussians import SH_BASES_OF_DEGREE, Gaussians, quat_to_rotmat
@@ -246,7 +247,7 @@ def sfm_camera(arrays: dict, view: int) -> Camera:
 
 
 def _from_sfm(name: str, arrays: dict, view: int) -> Workload:
-    from splatbench.initial_gaussians import from_points
+    from splatbench.gaussians_from_points import from_points
 
     gaussians = from_points(arrays["means3d"], arrays["colors"])
     return Workload(f"{name}-view{view}", gaussians, sfm_camera(arrays, view))

@@ -474,7 +474,7 @@ def test_an_executor_with_many_slots_gets_the_runs_submitted_interleaved(tmp_pat
     from concurrent.futures import Future
 
     from splatbench.experiments import runner
-    from splatbench.experiments.execute import RunContext, execute_run
+    from splatbench.experiments.one_run import RunContext, execute_run
 
     submitted: list[str] = []
 
@@ -647,7 +647,7 @@ def test_workers_get_their_budget_and_what_prepare_returned_with_each_run(tmp_pa
 def test_a_kind_written_before_prepared_existed_still_runs(tmp_path):
     """`run(config, workdir)` (two parameters, the contract before `prepare`'s result was
     passed on) is still called, without it; a three-parameter run gets it."""
-    from splatbench.experiments.execute import call_run
+    from splatbench.experiments.one_run import call_run
 
     seen = []
     call_run(lambda config, workdir: seen.append((config, workdir)), {"a": 1}, tmp_path, "prepared")

@@ -14,7 +14,7 @@ import splatbench  # noqa: F401 - sets DRJIT_LIBLLVM_PATH first
 from splatbench.workloads import GARDEN_SFM
 from splatbench.cameras import Camera
 from splatbench.gaussians import SH_C0
-from splatbench.initial_gaussians import from_points
+from splatbench.gaussians_from_points import from_points
 
 EPS32 = float(np.finfo(np.float32).eps)
 N_POINTS = 138766

@@ -249,11 +249,11 @@ def test_dc_constant():
 
 @pytest.mark.parametrize("value", [4, -1, True, 1.5, "2"])
 def test_sh_degree_is_checked_by_one_function_everywhere(value):
-    """`checks.check_sh_degree` is the SH-degree check of init, workloads, with_sh_degree,
+    """`guards.check_sh_degree` is the SH-degree check of init, workloads, with_sh_degree,
     TrainConfig and the raster run kind: the same one-line message from each."""
-    from splatbench.checks import check_sh_degree
+    from splatbench.guards import check_sh_degree
     from splatbench.experiments.raster_kind import validate as validate_raster_config
-    from splatbench.initial_gaussians import from_points
+    from splatbench.gaussians_from_points import from_points
     from splatbench.train import TrainConfig
     from splatbench.workloads import synthetic
 

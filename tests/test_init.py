@@ -14,7 +14,7 @@ from click.testing import CliRunner
 import splatbench  # noqa: F401 - configures libLLVM before drjit loads
 from splatbench import InputError
 from splatbench.gaussians import SH_C0, quat_to_rotmat
-from splatbench.initial_gaussians import from_points, from_random, from_sfm, from_surface, knn_mean_sq_dist
+from splatbench.gaussians_from_points import from_points, from_random, from_sfm, from_surface, knn_mean_sq_dist
 from splatbench.scenes import builtin_scenes_dir, linear_to_srgb, render_dataset
 from splatbench.sfm import Similarity, rig_radius, umeyama
 

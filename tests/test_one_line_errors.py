@@ -19,7 +19,7 @@ from click.testing import CliRunner
 
 import splatbench
 from splatbench import Gaussians
-from splatbench.checks import DRJIT_MAX_ENTRIES, check_image_size, image_size_problem
+from splatbench.guards import DRJIT_MAX_ENTRIES, check_image_size, image_size_problem
 from splatbench.framing import framing_camera
 from splatbench.errors import InputError
 

@@ -103,7 +103,7 @@ def test_region_auto_picks_graphdecos_box_on_a_nerf_synthetic_folder(tool, tmp_p
     tool sets explicitly; the same rig moved off the origin gets the convergence ball instead.
     The tool's initializer then fills [-1.3, 1.3]^3 with graphdeco's opacity and 3-NN scales."""
     from splatbench.data import load_dataset
-    from splatbench.initial_gaussians import knn_mean_sq_dist
+    from splatbench.gaussians_from_points import knn_mean_sq_dist
 
     ds = load_dataset(_blender_folder(tmp_path / "lego"), background=(1.0, 1.0, 1.0))
     assert ds.layout == "blender" and ds.points is None

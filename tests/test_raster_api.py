@@ -208,7 +208,7 @@ def test_gradients_do_not_depend_on_the_input_layout(scene):
 def test_render_and_rasterize_check_the_camera_the_same_way(scene):
     """One check (`check_view`) at both entry points: not a Camera, an image larger than
     the memory available now (30000² x 256 B per pixel is 230 GB), planes near >= far."""
-    from splatbench.checks import image_size_problem
+    from splatbench.guards import image_size_problem
 
     cases = [({}, {}, r"^camera: expected splatbench.Camera, got dict$"),
              (scene.camera, {"near": 2e10}, r"^near, far: expected near < far")]  # near past the camera's far

@@ -22,7 +22,7 @@ from splatbench.cli import main
 from splatbench.errors import InputError
 from splatbench.regress import check, snapshot
 from splatbench.regress import files as regress_files
-from splatbench.regress import scenes as regress_scenes
+from splatbench.regress import snapshot_scenes as regress_scenes
 from splatbench.regress.files import MANIFEST, read_snapshot, write_npz
 from tests.gradient_bugs import conic_b_half
 
@@ -189,7 +189,7 @@ def test_cli_json_and_images(torch_snapshot, tmp_path):
 
 
 def test_a_check_failing_on_convention_changes_alone_is_not_called_regressed():
-    from splatbench.regress.checking import CheckReport, QuantityResult
+    from splatbench.regress.against_snapshot import CheckReport, QuantityResult
     from splatbench.regress.cli import format_report
 
     moved = QuantityResult("s", "rgb", "convention change", 1.0, 0.1)

@@ -108,7 +108,7 @@ def test_every_result_report_and_cache_file_goes_through_the_one_writer():
 
 
 def test_save_figure_writes_a_png_and_closes_the_figure(tmp_path):
-    from splatbench.figures import pyplot
+    from splatbench.plotting import pyplot
 
     plt = pyplot()
     fig, ax = plt.subplots()

@@ -22,7 +22,7 @@ from splatbench.errors import InputError
 from splatbench.experiments import RunRecord, expand, parse_experiment
 from splatbench.experiments.store import write_record, write_table
 from splatbench.reports import build_report, write_report
-from splatbench.figures import pareto_front
+from splatbench.plotting import pareto_front
 from splatbench.reports.findings import fmt_interval
 from splatbench.metrics.stats import paired_difference, paired_ratio
 from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT

@@ -894,7 +894,7 @@ def test_seeds_vary_the_default_start_of_a_rendered_scene(tmp_path, tiny_diffuse
     init (a rendered scene: its surface points) two seeds start from different points, the same
     seed from the same points; the jitter is a fraction of each point's neighbour spacing, so the
     cloud stays where the surfaces are."""
-    from splatbench.initial_gaussians import knn_mean_sq_dist
+    from splatbench.gaussians_from_points import knn_mean_sq_dist
 
     a0, a0_again, a1 = (_starts(tmp_path, tiny_diffuse, seed=s) for s in (0, 0, 1))
     np.testing.assert_array_equal(a0, a0_again)

@@ -39,7 +39,7 @@ def test_the_draw_is_stress_s_and_compare_s():
 
 
 def _scene():
-    from splatbench.regress.scenes import scene_set
+    from splatbench.regress.snapshot_scenes import scene_set
 
     return next(s for s in scene_set("small") if s.name == "probe-gradients")
 

@@ -41,10 +41,9 @@ from splatbench.errors import InputError
 def _distortion(src: Path) -> str | None:
     """What in SRC describes lens distortion (None: none): a COLMAP camera model other
     than PINHOLE / SIMPLE_PINHOLE, or distortion coefficients in a transforms file."""
-    from splatbench.data import PINHOLE_MODELS
-    from splatbench.data.dataset import _colmap_folder
+    from splatbench.data import PINHOLE_MODELS, colmap_folder
 
-    sparse = _colmap_folder(src)
+    sparse = colmap_folder(src)
     if sparse is not None:
         import pycolmap
 

@@ -41,7 +41,7 @@ def raster(synthetic: tuple[tuple[str, str], ...], seed: int, workloads: tuple[s
                                          write_csv, write_json)
     from splatbench.metrics.machine import load_average, machine_info
     from splatbench.workloads import parse_models, parse_synthetic, parse_workload
-    from splatbench.checks import check_image_size
+    from splatbench.guards import check_image_size
     from splatbench.overrides import parse_overrides
 
     settings = BenchSettings(repeats=repeats, device=device, options=parse_overrides(options, "--option"))

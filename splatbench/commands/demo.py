@@ -37,7 +37,7 @@ def garden_check(out: Path, scale: float) -> None:
     from splatbench.backends import reference_render
     from splatbench.verification.bounds import FORWARD_ATOL, over_bound
     from splatbench.images import save_png
-    from splatbench.figures import difference_figure
+    from splatbench.plotting import difference_figure
     from splatbench.workloads import GARDEN_SFM, load_npz
 
     workload = load_npz(GARDEN_SFM, view=0)

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from splatbench.checks import check_image_size, check_sh_degree, parse_size
+from splatbench.guards import check_image_size, check_sh_degree, parse_size
 from splatbench.errors import InputError
 from splatbench.framing import AXES, DEFAULT_UP, KNOWN_UP_ELEVATION, framing_camera, parse_up
 from splatbench.overrides import parse_overrides

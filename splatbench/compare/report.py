@@ -33,7 +33,7 @@ import pandas as pd
 from splatbench.backends.base import GROUPS, OUTPUTS
 from splatbench.compare.run import CompareResult, CompareRow, CompareSettings
 from splatbench.verification.bounds import FORWARD_ATOL, GRAD_TERM_OPS, OFF_THRESHOLD, U32
-from splatbench.checks import dataclass_from_mapping
+from splatbench.guards import dataclass_from_mapping
 from splatbench.compare.measure import spread
 from splatbench.errors import InputError
 from splatbench.fsutil import read_text
@@ -179,8 +179,8 @@ def findings(table: pd.DataFrame) -> list[str]:
 # ----------------------------------------------------------------------------- figures
 def time_figures(table: pd.DataFrame, out: Path) -> list[Path]:
     """Forward (and forward+backward) median time against rgb PSNR to the exact mixture, one
-    panel per workload, Pareto front marked (`splatbench.figures.pareto_figure`)."""
-    from splatbench.figures import pareto_figure
+    panel per workload, Pareto front marked (`splatbench.plotting.pareto_figure`)."""
+    from splatbench.plotting import pareto_figure
     from splatbench.metrics.spec import MetricSpec
 
     quality = MetricSpec("exact_rgb_psnr", "rgb PSNR to the exact mixture (dB)", ".1f", "dB", "higher")
@@ -277,7 +277,7 @@ class CompareRecord:
 
     @classmethod
     def from_dict(cls, data: Any, what: str) -> CompareRecord:
-        """The record `to_dict` wrote, checked at the boundary (`checks.dataclass_from_mapping`:
+        """The record `to_dict` wrote, checked at the boundary (`guards.dataclass_from_mapping`:
         unknown keys, types): a missing, unknown or mistyped field is a one-line `InputError`
         starting ``what:`` and naming it (``settings.repeats``)."""
         data = _whole(data, cls, what)

@@ -6,7 +6,7 @@
     report.diagnosis, report.defects            # conventions found to differ / root causes left
     report.to_dict()                            # {"diagnosis", "defects", "version", "probes": [...], ...}
 
-Each probe (`probes.PROBES`, the basic ones first) renders a tiny scene (`scenes`) with the
+Each probe (`probes.PROBES`, the basic ones first) renders a tiny scene (`probe_scenes`) with the
 backend (float32 torch inputs) and with the float64 oracle (`reference_render`, matched to the
 conventions the backend declares in its `BackendInfo`), and gets a status: pass, fail, warn
 (a declared approximation not followed, but one of its listed alternatives is) or skip (the
@@ -14,11 +14,11 @@ backend lacks the output or gradients the probe needs). Failures are then diagno
 (`diagnose`): the conventions of the vocabulary that explain them (those probes become
 "explained"), and the root causes of the rest. Modules:
 
-    scenes    the probe scenes            probes    what each probe checks, and the likely cause
-    oracle    float64 renders, finite differences, derived tolerances (derivation in its docstring)
-    calls     calling the backend         judges    pass / fail / warn per kind of probe
-    diagnose  fingerprinting, root causes results   ProbeResult, ConformReport
-    images    --save-images
+    probe_scenes  the probe scenes            probes    what each probe checks, and the likely cause
+    oracle        float64 renders, finite differences, derived tolerances (derivation in its docstring)
+    calls         calling the backend         judges    pass / fail / warn per kind of probe
+    diagnose      fingerprinting, root causes results   ProbeResult, ConformReport
+    images        --save-images
 """
 
 from __future__ import annotations

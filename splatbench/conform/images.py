@@ -12,7 +12,7 @@ from splatbench.conform.calls import captured
 from splatbench.verification.calls import Fault, forward
 from splatbench.conform.oracle import conventions_of, oracle
 from splatbench.conform.probes import Probe
-from splatbench.figures import pyplot
+from splatbench.plotting import pyplot
 from splatbench.report_files import save_figure
 
 UPSCALE = 16  # probe images are 12 to 32 pixels wide: each pixel drawn as a 16x16 block

@@ -17,11 +17,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
-from splatbench.conform.scenes import (alpha_max, alpha_min, background, basic_centred, basic_offaxis, basic_overlap,
-                                       colour_clamp, conic, depth_order, early_stop, eps2d, expected_depth,
-                                       gradients, intrinsics, jacobian_clamp, near_plane, opacity_activation,
-                                       pixel_centre, quat_norm, quat_order, radius, scale_activation, sh_degree1,
-                                       sh_degree2, sh_degree3, sh_degree_arg, sh_viewdir, sh_viewdir_grad, tiles)
+from splatbench.conform.probe_scenes import (
+    alpha_max, alpha_min, background, basic_centred, basic_offaxis, basic_overlap, colour_clamp, conic,
+    depth_order, early_stop, eps2d, expected_depth, gradients, intrinsics, jacobian_clamp, near_plane,
+    opacity_activation, pixel_centre, quat_norm, quat_order, radius, scale_activation, sh_degree1, sh_degree2,
+    sh_degree3, sh_degree_arg, sh_viewdir, sh_viewdir_grad, tiles)
 from splatbench.gaussians import GROUPS
 from splatbench.render_inputs import RenderInput
 

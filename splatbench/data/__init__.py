@@ -4,10 +4,11 @@
 reads a COLMAP, Blender (NeRF synthetic / nerfstudio / instant-ngp) or LLFF (``poses_bounds.npy``,
 ``llff.py``; object masks as alphas) dataset folder, undistorting
 images whose cameras have lens distortion (``undistort.py``, pycolmap), into a typed
-`Dataset` of `Split` s (see ``dataset.py``). The folder also holds package data:
+`Dataset` of `Split` s (see ``dataset.py``); ``colmap_folder(path)`` is where a folder's COLMAP
+model is (``sparse/0/`` or ``sparse/``; None: none). The folder also holds package data:
 ``garden_sfm.npz`` (see ``NOTICE.md``).
 """
 
-from splatbench.data.dataset import LAYOUTS, PINHOLE_MODELS, Dataset, PointCloud, Split, load_dataset
+from splatbench.data.dataset import LAYOUTS, PINHOLE_MODELS, Dataset, PointCloud, Split, colmap_folder, load_dataset
 
-__all__ = ["Dataset", "Split", "PointCloud", "load_dataset", "LAYOUTS", "PINHOLE_MODELS"]
+__all__ = ["Dataset", "Split", "PointCloud", "load_dataset", "LAYOUTS", "PINHOLE_MODELS", "colmap_folder"]

@@ -84,7 +84,7 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.cameras import Camera
-from splatbench.checks import check_image_size
+from splatbench.guards import check_image_size
 from splatbench.data.colmap_bounds import check_colmap_binary, check_colmap_text
 from splatbench.data.llff import POSES_FILE
 from splatbench.data.undistort import Lens, check_lens
@@ -238,7 +238,7 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
     if bg.shape != (3,) or not np.all((bg >= 0) & (bg <= 1)):
         raise InputError(f"background: expected 3 values in [0, 1], got {list(background)}")
     if layout == "auto":
-        if _colmap_folder(root) is not None or (root / "sparse").is_dir():
+        if colmap_folder(root) is not None or (root / "sparse").is_dir():
             layout = "colmap"
         elif any((root / f).is_file() for f in ("transforms_train.json", "transforms.json")):
             layout = "blender"
@@ -355,7 +355,9 @@ def _resize(image: np.ndarray, width: int, height: int) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------- COLMAP
-def _colmap_folder(root: Path) -> Path | None:
+def colmap_folder(root: Path) -> Path | None:
+    """The folder of the dataset folder ``root``'s COLMAP model (``sparse/0/`` or ``sparse/``, the
+    first holding ``cameras.bin`` or ``cameras.txt``); None when it has none."""
     for sub in (root / "sparse" / "0", root / "sparse"):
         if any((sub / f"cameras.{ext}").is_file() for ext in ("bin", "txt")):
             return sub
@@ -367,7 +369,7 @@ def _load_colmap(root: Path, test_every: int, images_dir: str, load: _Load) -> D
 
     pycolmap = import_pycolmap()
 
-    sparse = _colmap_folder(root)
+    sparse = colmap_folder(root)
     if sparse is None:
         raise InputError(f"{root / 'sparse' / '0' / 'cameras.bin'}: missing (no COLMAP model in sparse/0/ or sparse/)")
     ext = "bin" if (sparse / "cameras.bin").is_file() else "txt"

@@ -13,7 +13,7 @@ Modules: `configs` (dotted keys, canonical JSON), `spec` (file format), `grid`
 registry), `kind_report` (what a kind declares about its reports, its hooks included:
 `splatbench.reports` is handed the kind), `train_kind`, `raster_kind` (the built-in kinds;
 `train_report`: the train kind's report hooks), `store` (atomic per-run files, the
-parquet table), `runner` (drives the runs), `execute` (one run, worker side), `executors`
+parquet table), `runner` (drives the runs), `one_run` (one run, worker side), `executors`
 (local and Dask), `claims` (per-run claims shared
 by concurrent runners), `workers` (worker processes that die with their runner),
 `cli` (``splatbench run``).
@@ -21,7 +21,7 @@ See docs/experiments.md.
 """
 
 from splatbench.experiments.configs import canonical_json
-from splatbench.experiments.execute import execute_run
+from splatbench.experiments.one_run import execute_run
 from splatbench.experiments.grid import RunSpec, check_cells, check_runs, expand, load_experiment, make_run_id
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, get_kind, metric, read_config, register_kind
 from splatbench.experiments.runner import RunSummary, run_experiment

@@ -1,6 +1,6 @@
 """The runner's executors: a local spawn process pool and a Dask client, one interface.
 
-Both submit `splatbench.experiments.execute.execute_run` with a `RunContext` (the
+Both submit `splatbench.experiments.one_run.execute_run` with a `RunContext` (the
 worker's thread budget, what the kind prepared) and expose ``capacity``
 (runs in flight at most), ``submit``, ``wait``, ``broken``, ``restart`` and
 ``close``; `splatbench.experiments.runner` drives them (the module docstring there
@@ -18,7 +18,7 @@ import sys
 import time
 from typing import Any
 
-from splatbench.experiments.execute import RunContext, execute_run
+from splatbench.experiments.one_run import RunContext, execute_run
 from splatbench.experiments.grid import RunSpec
 from splatbench.experiments.workers import init_worker, runner_id
 from splatbench.interrupt import children_spared_sigint, deferred, start_quiet_resource_tracker

@@ -54,7 +54,7 @@ from dataclasses import MISSING, dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
-from splatbench.checks import check_keys, dataclass_from_mapping
+from splatbench.guards import check_keys, dataclass_from_mapping
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import KindReport
 from splatbench.metrics.spec import MetricSpec
@@ -149,7 +149,7 @@ def read_config(config: type[C], table: Mapping[str, Any], *, prefix: str = "") 
     """The dataclass ``config`` of a run's nested config ``table``: each key onto the field of its
     name (`check_config` first), an `INLINE` field's keys onto that field's own, a table under a
     dataclass-typed field read the same way; `RUN_KEYS` the class has no field for are left out.
-    Types are checked by `splatbench.checks.dataclass_from_mapping`, ranges by each class's
+    Types are checked by `splatbench.guards.dataclass_from_mapping`, ranges by each class's
     ``__post_init__``: one `InputError` line naming the dotted key as the file writes it."""
     check_config(config, table, prefix=prefix)
     hints = _hints(config)

@@ -81,7 +81,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from splatbench.checks import check_sh_degree
+from splatbench.guards import check_sh_degree
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import (Claim, Comparison, Finding, FindingRules, KindReport, LoadMarks,
                                                Tradeoff, done_runs)

@@ -38,7 +38,7 @@ Executors:
            a folder every worker sees (a shared file system); where it is not, the
            parent writes the returned record itself.
 
-Each run reaches its worker with a `RunContext` (`splatbench.experiments.execute`):
+Each run reaches its worker with a `RunContext` (`splatbench.experiments.one_run`):
 the worker's Dr.Jit thread budget, max(1, CPUs // workers), so that parallel runs
 do not oversubscribe the machine (a remote scheduler's workers keep their own), and
 what the kind's ``prepare`` returned in the parent (e.g. the train kind's datasets

@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from splatbench.checks import unknown_key_problem
+from splatbench.guards import unknown_key_problem
 from splatbench.errors import InputError
 from splatbench.experiments.configs import FIELD_KEY, canonical_json, check_value, flatten, overlaps
 from splatbench.experiments.kinds import RunKind, get_kind

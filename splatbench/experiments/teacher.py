@@ -1,5 +1,6 @@
 """Teacher scenes: a trained 3DGS model (a PLY) rendered by splatbench's rasterizer into a dataset
-(here, above the rasterizer, for the train run kind: the model layer cannot render).
+(here, above the rasterizer, for the train run kind: the model layer cannot render). A teacher scene
+is a run's scene (a dataset), one of the five kinds of "scene" in docs/architecture.md.
 
 A teacher scene gives realistic appearance with exact ground truth: the cameras are a
 `splatbench.framing.framing_rig` ring around the model (``views`` views at 20° above the

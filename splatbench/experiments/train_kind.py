@@ -53,7 +53,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from splatbench.checks import check_image_size, check_keys
+from splatbench.guards import check_image_size, check_keys
 from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff

@@ -1,6 +1,6 @@
 """The runner's worker processes: their thread budget and a life tied to the runner's.
 
-The runner hands each worker what it needs with every run (`execute.RunContext`):
+The runner hands each worker what it needs with every run (`one_run.RunContext`):
 nothing reaches a worker through environment variables the runner sets.
 
 A worker must never outlive its runner: a runner killed with SIGKILL (or stopped by

@@ -165,11 +165,8 @@ def _unpack(state, pixel_type, width: int):
     return state[0], [pixel_type(*state[1 + width * k: 1 + width * (k + 1)]) for k in range((len(state) - 1) // width)]
 
 
-def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, max_iterations=None,
-                  resume_from: list | None = None) -> _Forward:
-    """Composite each lane's list front to back. ``resume_from``: each pixel's `_FrontPixel` to start
-    from (None: nothing composited yet, as the rasterizer always starts; tools/compaction_probe.py
-    resumes a walk from another loop's state)."""
+def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, max_iterations=None) -> _Forward:
+    """Composite each lane's list front to back, from nothing composited yet."""
     Float, UInt32 = m.Float, m.UInt32
     K = len(lanes.px)
     n = dr.width(lanes.start)
@@ -202,10 +199,9 @@ def _forward_loop(m, rec: Records, ids, lanes: Lanes, cfg: CompositeSettings, ma
                                      depth_sum=p.depth_sum + w * geo.depth, stop=dr.select(stop_now, i, p.stop)))
         return _pack(i_next, after)
 
-    if resume_from is None:
-        resume_from = [_FrontPixel(Float(one), Float(zero), Float(zero), Float(zero), Float(zero),
-                                   dr.select(lanes.inside[k], lanes.end, lanes.start)) for k in range(K)]
-    start = _pack(UInt32(lanes.start), resume_from)
+    start = _pack(UInt32(lanes.start), [_FrontPixel(Float(one), Float(zero), Float(zero), Float(zero), Float(zero),
+                                                    dr.select(lanes.inside[k], lanes.end, lanes.start))
+                                        for k in range(K)])
     kwargs = {} if max_iterations is None else {"max_iterations": max_iterations}
     final = dr.while_loop(start, cond, body, mode="symbolic", **kwargs)
     _, pixels = _unpack(final, _FrontPixel, width)

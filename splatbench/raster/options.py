@@ -7,7 +7,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
-from splatbench.checks import check_keys, dataclass_from_mapping
+from splatbench.guards import check_keys, dataclass_from_mapping
 from splatbench.devices import check_device
 from splatbench.errors import InputError
 
@@ -94,7 +94,7 @@ class RasterOptions:
         rest. Every key names a field, every value has its field's type (an int where a float is
         expected is that float), then the ranges above; each mistake is one `InputError` line
         naming ``PREFIXKEY`` (``raster.alpha_min``) as the user wrote it, an unknown key with the
-        field it is close to or the list of fields (`splatbench.checks.dataclass_from_mapping`)."""
+        field it is close to or the list of fields (`splatbench.guards.dataclass_from_mapping`)."""
         return dataclass_from_mapping(cls, table, base=None if base is None else asdict(base), prefix=prefix,
                                       source=source)
 

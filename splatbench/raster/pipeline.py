@@ -6,7 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from splatbench.checks import check_image_size, check_sh_degree
+from splatbench.guards import check_image_size, check_sh_degree
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES_OF_DEGREE
 from splatbench.raster.device import dr

@@ -27,7 +27,7 @@ from splatbench.raster.hooks import NO_HOOKS, Hooks
 from splatbench.raster.options import RasterOptions
 from splatbench.raster.pipeline import (SH_ABS_MAX, Frame, check_background, check_options, check_view, check_sh_range,
                                        render_frame, resolve_sh_degree)
-from splatbench.checks import check_finite, check_shape
+from splatbench.guards import check_finite, check_shape
 
 if TYPE_CHECKING:
     from splatbench.cameras import Camera

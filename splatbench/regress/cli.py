@@ -58,7 +58,7 @@ def check(backend: str, against: Path, as_json: bool, save_dir: Path | None, sce
     convention change, 2 on bad input (no or a damaged snapshot, another scene-set version, a
     backend that cannot be called).
     """
-    from splatbench.regress.checking import check as run_check
+    from splatbench.regress.against_snapshot import check as run_check
 
     report = run_check(backend, against, device=device, scenes=scenes or None,
                        diagnose=not no_diagnose, save_images=save_dir,

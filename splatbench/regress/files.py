@@ -6,7 +6,7 @@ A snapshot is a folder::
     DIR/scenes/NAME.npz         per scene: the quantities, and the oracle's bands
 
 ``snapshot.json``: ``format`` ("splatbench-snapshot"), ``format_version`` (1), ``scene_set``
-and ``scene_set_version`` (`splatbench.regress.scenes`), ``selected`` (only in a snapshot of
+and ``scene_set_version`` (`splatbench.regress.snapshot_scenes`), ``selected`` (only in a snapshot of
 some scenes of the set: their names), ``backend`` (name, version, spec,
 description, the declared conventions, outputs, gradients), ``versions`` (splatbench, numpy,
 torch, drjit, python), ``device``, and ``scenes``: per scene its ``name``, ``file``,
@@ -37,7 +37,7 @@ import numpy as np
 from splatbench.backends.base import Backend
 from splatbench.errors import InputError
 from splatbench.fsutil import building_dir
-from splatbench.regress.scenes import SCENE_SET_VERSION, Scene, scene_set
+from splatbench.regress.snapshot_scenes import SCENE_SET_VERSION, Scene, scene_set
 
 SNAPSHOT_FORMAT = "splatbench-snapshot"
 FORMAT_VERSION = 1

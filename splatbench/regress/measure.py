@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from splatbench.backends.base import GROUPS, OUTPUTS, Backend
-from splatbench.regress.scenes import Scene
+from splatbench.regress.snapshot_scenes import Scene
 from splatbench.verification.bounds import BAND_BUDGET, FORWARD_ATOL, gradient_bound
 from splatbench.verification.calls import finite_gradients, forward, param_tensors, vjp
 from splatbench.verification.cotangents import Cotangents

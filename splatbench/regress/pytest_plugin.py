@@ -86,7 +86,7 @@ class _State:
 
     def check(self):
         if self._check is None:
-            from splatbench.regress.checking import check
+            from splatbench.regress.against_snapshot import check
 
             self._check = check(self.backend, self.against, device=self.device, diagnose=False)
         return self._check
@@ -261,7 +261,7 @@ def _scene_failure(means, log_scales, quats, opacity_logits, sh, camera, sh_degr
     from splatbench.verification.bounds import BAND_BUDGET, gradient_bound
     from splatbench.regress.measure import (GRAD_PREFIX, bands, gradient_difference, oracle, oracle_gradients,
                                             output_excess, render)
-    from splatbench.regress.scenes import Scene
+    from splatbench.regress.snapshot_scenes import Scene
 
     b = get_backend(backend, command="pytest") if isinstance(backend, str) else get_backend(backend)
     f64 = lambda x: np.asarray(np.asarray(x.detach().cpu() if hasattr(x, "detach") else x,  # noqa: E731

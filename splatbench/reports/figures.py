@@ -5,7 +5,7 @@ the Pareto figures (time or Gaussians against error) draw.
   row's runs of the test PSNR at each evaluation (``eval_step`` / ``eval_psnr`` in the
   curves) when runs evaluated at least twice, else of the training-view PSNR.
 * `cell_means`: one point per grid cell (mean over seeds, with the half-widths of the
-  95 % t intervals over seeds), what `splatbench.figures.pareto_figure` draws.
+  95 % t intervals over seeds), what `splatbench.plotting.pareto_figure` draws.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from splatbench.figures import panels, pyplot
+from splatbench.plotting import panels, pyplot
 from splatbench.metrics.stats import t_interval
 from splatbench.report_files import save_figure
 from splatbench.reports.tables import AxisTable, done_runs

@@ -51,7 +51,7 @@ from splatbench.errors import InputError
 from splatbench.experiments.kind_report import (AxisNote, Claim, Comparison, Finding, FindingRules, SettlingCurves,
                                                 done_runs)
 from splatbench.experiments.kinds import RunKind
-from splatbench.figures import pareto_front
+from splatbench.plotting import pareto_front
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
 from splatbench.reports.settling import CellSettling, cell_settling, paired_curve, unsettled_reason
@@ -435,7 +435,7 @@ def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame
 
 def _on_front(table: AxisTable, scene: str, size: MetricSpec, quality: MetricSpec, rows: Sequence[Row]) -> bool:
     """Whether every one of ``rows`` is on the Pareto front of ``table``'s rows at ``scene`` on the
-    means (no other row both smaller in ``size`` and better in ``quality``; `splatbench.figures`)
+    means (no other row both smaller in ``size`` and better in ``quality``; `splatbench.plotting`)
     while some row is not: where every row is on the front, saying so tells nothing."""
     at = table.frame[table.frame.scene == scene]
     sign = -1.0 if quality.better == "lower" else 1.0

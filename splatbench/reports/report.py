@@ -40,7 +40,7 @@ from splatbench.experiments.kind_report import Tradeoff
 from splatbench.experiments.kinds import RunKind
 from splatbench.experiments.spec import ExperimentSpec
 from splatbench.experiments.store import TABLE_NAME, build_table, experiment_dir, read_records
-from splatbench.figures import pareto_figure
+from splatbench.plotting import pareto_figure
 from splatbench.metrics.spec import MetricSpec
 from splatbench.report_files import markdown_table, write_parquet, write_text
 from splatbench.reports.check import CHECK_TABLE_NAME, CheckResult, check_lines, check_result, check_table, header_line

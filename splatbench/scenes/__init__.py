@@ -1,5 +1,8 @@
 """Mitsuba scene catalog and multi-view dataset rendering.
 
+These are catalog scenes, the ground truth that datasets are rendered from (one of the five
+kinds of "scene": docs/architecture.md).
+
 Catalog (``catalog.py``, no Mitsuba import)::
 
     find_scenes(extra=()) -> dict[str, SceneSpec]     every scene folder found
@@ -20,7 +23,8 @@ Folders (``folders.py``)::
     render_rgb(mi_scene, camera, *, spp, seed=0) -> [H, W, 3] linear RGB
     render_depth(mi_scene, camera) -> [H, W] camera z (0 = no hit)
 
-Surface sampling (``surface.py``, the one implementation; `splatbench.initial_gaussians.from_surface` uses it)::
+Surface sampling (``surface.py``, the one implementation; `splatbench.gaussians_from_points.from_surface`
+uses it)::
 
     sample_surface(mi_scene, n, *, seed=0, albedo=False)
         -> SurfacePoints(xyz, normals, shape_index, shape_ids, albedo)

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from splatbench.cameras import Camera
-from splatbench.checks import check_keys
+from splatbench.guards import check_keys
 from splatbench.errors import InputError
 
 #: Camera placements a rig can ask for.

@@ -1,8 +1,8 @@
 """Seeded area-uniform sampling of a Mitsuba scene's true surfaces: the one implementation.
 
 `sample_surface` is used by ``splatbench.scenes`` (public API) and by
-`splatbench.initial_gaussians.from_surface`; both get the same points for the same seed because
-there is only this copy. Shapes are taken in a canonical order (`shape_order_key`):
+`splatbench.gaussians_from_points.from_surface`; both get the same points for the same seed
+because there is only this copy. Shapes are taken in a canonical order (`shape_order_key`):
 Mitsuba loads plugins in parallel, so ``mi.Scene.shapes()`` comes back in a different
 order from one load to the next, and a seed must give the same points.
 """

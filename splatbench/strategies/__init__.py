@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from splatbench.checks import dataclass_from_mapping
+from splatbench.guards import dataclass_from_mapping
 from splatbench.errors import InputError
 from splatbench.strategies.base import (PARAM_GROUPS, Optimizers, Params, StepContext, Strategy, TopologyChange,
                                        TopologyCounts)

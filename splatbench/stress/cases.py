@@ -1,4 +1,5 @@
-"""Degenerate-input scenes for the numerical-stability stress test.
+"""Degenerate-input scenes for the numerical-stability stress test (hand-made probe scenes, one of
+the five kinds of "scene": docs/architecture.md).
 
 Every builder takes an integer seed and returns a `StressCase`: a small scene
 (1-60 Gaussians, or 1000 stacked ones) seen by a small, randomly posed camera.

@@ -66,7 +66,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
-from splatbench.checks import check_keys, check_sh_degree, check_type, coerce, dataclass_from_mapping
+from splatbench.guards import check_keys, check_sh_degree, check_type, coerce, dataclass_from_mapping
 from splatbench.devices import check_device
 from splatbench.errors import InputError
 from splatbench.fsutil import read_text
@@ -83,7 +83,7 @@ RASTER_KEYS = tuple(f.name for f in dataclasses.fields(RasterOptions) if f.name 
 
 class _Group:
     """A config group: a frozen dataclass whose fields are checked on construction against
-    their annotated types (`checks.check_type`) and then by the group's `_check`; every
+    their annotated types (`guards.check_type`) and then by the group's `_check`; every
     message names the dotted field (``sh.degree: ...``)."""
 
     PREFIX: ClassVar[str] = ""

@@ -7,8 +7,8 @@
     @register_init("mast3r")
     def mast3r(dataset, settings): ...
 
-Built in (every one seeded by `splatbench.initial_gaussians.from_points`: 3-NN scales, opacity
-``settings.opacity``, DC colour from the point colour):
+Built in (every one seeded by `splatbench.gaussians_from_points.from_points`: 3-NN scales,
+opacity ``settings.opacity``, DC colour from the point colour):
 
 * ``auto`` (the default) -- the dataset's own points when it has them (``surface``),
   else SfM with the dataset's known poses (``sfm``); never random unless asked. The
@@ -48,7 +48,7 @@ import numpy as np
 
 from splatbench.errors import InputError
 from splatbench.gaussians import Gaussians
-from splatbench.initial_gaussians import from_points, knn_mean_sq_dist
+from splatbench.gaussians_from_points import from_points, knn_mean_sq_dist
 
 #: Where ``init = "random"`` samples (`random_region`):
 #:

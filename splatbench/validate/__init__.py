@@ -6,5 +6,5 @@ Submodules, imported on demand:
   Mitsuba's ``volprim_rf_basic`` (``splatbench validate mitsuba``; docs/validation.md).
 
 (The boundary checks on arrays that every public function uses live in
-`splatbench.checks`.)
+`splatbench.guards`.)
 """

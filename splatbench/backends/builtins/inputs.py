@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from splatbench.backends.base import GROUPS
-from splatbench.checks import check_finite, check_shape
+from splatbench.guards import check_finite, check_shape
 from splatbench.errors import InputError
 from splatbench.raster.pipeline import check_background, check_sh_range, resolve_sh_degree
 

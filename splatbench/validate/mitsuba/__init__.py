@@ -43,7 +43,7 @@ alike) misjudges hit/miss for ellipsoids that are small in absolute world units
 and camera together, so the sweep scenes sit 400 units from the camera (sigma >= ~1.5),
 where the probe finds no wrong decision up to 300 sigma.
 
-Layout (one job per module): `scene` (both renders, `compare`; the ``mi.Scene`` itself is
+Layout (one job per module): `renderers` (both renders, `compare`; the ``mi.Scene`` itself is
 `splatbench.backends.builtins.mitsuba_scene`, shared with the ``mitsuba`` backend),
 `prediction` (the isotropic closed form), `cases` (the sweeps), `probe` (Mitsuba's
 intersection test), `checks` (pass/fail statements), `report` (CSV, markdown, plot).
@@ -65,10 +65,11 @@ from splatbench.validate.mitsuba.checks import (MIN_TREND_SIGMA_PX, PREDICTION_A
                                                 check_trends)
 from splatbench.validate.mitsuba.prediction import IsotropicPrediction, isotropic_prediction
 from splatbench.validate.mitsuba.probe import ProbeRow, intersection_probe
+from splatbench.validate.mitsuba.renderers import (DEFAULT_OPTIONS, MATCHED_OPTIONS, OPTION_SETS, SWEEP_OPACITY,
+                                                   Comparison, ComparisonMetrics, compare, render_splat,
+                                                   render_traced)
 from splatbench.validate.mitsuba.report import (DEFAULT_OUT, ReportPaths, probe_markdown, sweep_markdown,
                                                 write_report)
-from splatbench.validate.mitsuba.scene import (DEFAULT_OPTIONS, MATCHED_OPTIONS, OPTION_SETS, SWEEP_OPACITY,
-                                               Comparison, ComparisonMetrics, compare, render_splat, render_traced)
 
 __all__ = ["MITSUBA_VARIANT", "SWEEPS", "Case", "SweepRow", "angle_cases", "anisotropy_cases", "overlap_cases",
            "run_case", "run_sweeps", "sh_cases", "size_cases", "MIN_TREND_SIGMA_PX", "PREDICTION_ATOL", "Check",

@@ -1,7 +1,7 @@
 """The sweeps: scenes that vary one factor of the splatting approximation at a time.
 
 Each ``*_cases`` builder returns `Case` objects (Gaussians + camera); `run_sweeps`
-renders them with both renderers (`scene.compare`) into `SweepRow` lines.
+renders them with both renderers (`renderers.compare`) into `SweepRow` lines.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from splatbench.errors import InputError
 from splatbench.gaussians import Gaussians
 from splatbench.render_inputs import logit, point_at, sh_dc, to_world, world_sigma
 from splatbench.workloads import random_unit_quats
-from splatbench.validate.mitsuba.scene import OPTION_SETS, SWEEP_OPACITY, ComparisonMetrics, compare
+from splatbench.validate.mitsuba.renderers import OPTION_SETS, SWEEP_OPACITY, ComparisonMetrics, compare
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ import numpy as np
 
 from splatbench.validate.mitsuba.cases import SweepRow, size_cases
 from splatbench.validate.mitsuba.prediction import isotropic_prediction
-from splatbench.validate.mitsuba.scene import compare
+from splatbench.validate.mitsuba.renderers import compare
 
 
 @dataclass(frozen=True)

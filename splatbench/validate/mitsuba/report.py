@@ -11,7 +11,7 @@ from splatbench.report_files import markdown_table, save_figure, write_csv, writ
 from splatbench.validate.mitsuba.cases import SweepRow
 from splatbench.validate.mitsuba.checks import Check
 from splatbench.validate.mitsuba.probe import ProbeRow
-from splatbench.validate.mitsuba.scene import MATCHED_OPTIONS
+from splatbench.validate.mitsuba.renderers import MATCHED_OPTIONS
 
 #: Default output folder of `write_report`, relative to the current folder.
 DEFAULT_OUT = Path("out") / "validate_mitsuba"  # the committed baseline: --out reports/validate_mitsuba
@@ -73,7 +73,7 @@ def write_report(rows: Sequence[SweepRow], out_dir: str | Path = DEFAULT_OUT, *,
     With ``probe`` rows, also ``intersection.csv`` and a section of ``table.md``; with
     ``checks``, a pass/fail section of ``table.md``.
     """
-    from splatbench.figures import panels, pyplot
+    from splatbench.plotting import panels, pyplot
 
     plt = pyplot()
     out = Path(out_dir)

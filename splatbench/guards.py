@@ -1,6 +1,6 @@
-"""Boundary checks, each reported in one line (`InputError`): arrays (shape, dtype,
-finiteness), SH degrees, image sizes, and mappings turned into frozen dataclasses
-(known keys with "did you mean", annotated value types)."""
+"""Input guards at the boundary, each reporting a bad value in one line (`InputError`):
+arrays (shape, dtype, finiteness), SH degrees, image sizes, and mappings turned into frozen
+dataclasses (known keys with "did you mean", annotated value types)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Initial Gaussians: from a point cloud, SfM, uniform random points, or the true surfaces.
+"""Gaussians from points: the initial Gaussians of a training, from a point cloud, SfM,
+uniform random points, or the true surfaces.
 
 The constructors themselves; training picks one by name (`TrainConfig.init`) through
 `splatbench.train.initializers`, which calls these.
@@ -32,7 +33,7 @@ import numpy as np
 
 from splatbench.errors import InputError
 from splatbench.gaussians import SH_BASES_OF_DEGREE, SH_C0, Gaussians
-from splatbench.checks import as_float_array, check_sh_degree, check_shape
+from splatbench.guards import as_float_array, check_sh_degree, check_shape
 
 #: Lower bound on the mean squared neighbour distance (graphdeco's ``clamp_min(dist2, 1e-7)``).
 MIN_DIST2 = 1e-7

@@ -1,7 +1,8 @@
-"""Checks the finding of report.md: metal-gauss 0.2.1's torch_ref with its "too wide" cull switched
-off (`max_radius_frac`, torch_ref.py:140-141), through the same adapter, under conform. A what-if.
+"""Checks the finding of reports/conform_public/metal-gauss/report.md: metal-gauss 0.2.1's torch_ref
+with its "too wide" cull switched off (`max_radius_frac`, torch_ref.py:140-141), through the same
+adapter, under conform. A what-if.
 
-    PYTHONPATH=.:out/conform_public/site-metal-gauss python reports/conform_public/metal-gauss/verify.py [FRAC]
+    PYTHONPATH=.:out/conform_public/site-metal-gauss python tools/verify_metal_gauss.py [FRAC]
 
 FRAC replaces the package's default max_radius_frac=1.0 (1e9 by default: no Gaussian is culled for
 its size).

@@ -1,4 +1,5 @@
-"""The scene set a snapshot is taken on: fixed, deterministic, versioned.
+"""The scene set a snapshot is taken on: fixed, deterministic, versioned (snapshot scenes, one of
+the five kinds of "scene": docs/architecture.md).
 
 ``full`` (the default): every scene of conform's probes (tiny scenes, each isolating one
 convention), two synthetic workloads seen from random camera poses (so world-space mistakes

@@ -1,4 +1,5 @@
-"""The probe scenes of `splatbench conform`: a few Gaussians each, 16x16 to 32x32 pixels.
+"""The probe scenes of `splatbench conform`: a few Gaussians each, 16x16 to 32x32 pixels (hand-made
+probe scenes, one of the five kinds of "scene": docs/architecture.md).
 
 Each scene isolates one convention or one classic bug (see `probes` for what each checks).
 Scenes are built so that the approximations a probe does not test cannot matter: outside

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # device session 2026-11-28, call 4: A/B bench train ABBA (3 pairs), old 7d7939f vs new (.whl/commit.txt); MCMC resume into its own folder
+# (what made reports/cuda/h200_2026-11-28/ab_abba/ and resume_check/, kept as its record: run from the repository root)
 set -uo pipefail
 R=$PWD; W=/tmp/cc2; mkdir -p $W
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 3

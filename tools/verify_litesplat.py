@@ -1,8 +1,9 @@
-"""Checks the findings of report.md: LiteSplat 0.1.1 with its four bugs corrected in memory, through
-the same adapter, under conform. Not a backend anyone should use: a what-if.
+"""Checks the findings of reports/conform_public/litesplat/report.md: LiteSplat 0.1.1 with its four
+bugs corrected in memory, through the same adapter, under conform. Not a backend anyone should use:
+a what-if.
 
     KERAS_BACKEND=torch PYTHONPATH=.:out/conform_public/site-litesplat \
-        python reports/conform_public/litesplat/verify.py [rot,pix,flip,sort] [--declare-dense]
+        python tools/verify_litesplat.py [rot,pix,flip,sort] [--declare-dense]
 
 Each name corrects one bug (all four by default), by editing LiteSplat's source text of
 `CameraLayer.render_pixel_color` / replacing `get_sorted_keys` in this process only:

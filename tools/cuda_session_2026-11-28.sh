@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # device session 2026-11-28: wheels, then tools/cuda_check.sh, then an old/new A/B of bench train; results tarred into $OUT
+# (what made reports/cuda/h200_2026-11-28/, kept as its record: run from the repository root, wheels in .whl/)
 set -uo pipefail
 R=$PWD; W=/tmp/cc; mkdir -p $W
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 3

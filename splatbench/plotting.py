@@ -1,4 +1,4 @@
-"""Figures shared by the report writers (the experiment reports, ``compare``):
+"""Plotting shared by the report writers (experiment reports, ``compare``, ``conform``, ``validate``, the demo):
 matplotlib on the Agg backend (PNG), side-by-side panels, and the cost-against-quality
 figure with its Pareto front.
 
