@@ -520,3 +520,22 @@ def test_rebuild_with_results_adds_the_check_to_a_committed_report(tmp_path):
     run = CliRunner().invoke(report_command, [str(plain), "--out", str(out), "--rebuild", "--results", str(new)])
     assert isinstance(run.exception, InputError) and "\n" not in str(run.exception)
     assert str(run.exception).startswith(f"--rebuild --results: {plain} has no [check]")
+
+
+def test_a_check_whose_ssim_goes_the_other_way_says_so_in_its_headline(tmp_path):
+    """Issue 39: sh_degree's 7K check held in PSNR while its SSIM reversed; the verdict's sentence and
+    the header's line say so."""
+    spec = spec_of(SH_GRID)
+    root = tmp_path / "results"
+    grid_results(root, spec)
+    rng = np.random.default_rng(1)
+    for run in check_runs(spec):
+        three = run.labels["sh.degree"] == 3
+        rec = record(spec, run, 28.0 + (0.6 if three else 0.0) + rng.normal(0, 0.05))
+        ssim = 0.9 - (0.01 + 0.001 * run.seed if three else 0.0)
+        write_record(root, dataclasses.replace(rec, metrics={**rec.metrics, "test_ssim": ssim}))
+    report = build_report(spec, root)
+    text = write_report(report, tmp_path / "report").read_text()
+    assert report.check.verdict == "holds" and report.check.rerun.opposed[0][0] == "SSIM"
+    assert "**7K check: holds**, **but SSIM goes the other way, significantly there** (SSIM -0.0110 [95 % CI" in text
+    assert "; **but SSIM goes the other way, significantly** at `graphdeco-7k`: SSIM -0.0110" in text

@@ -237,10 +237,10 @@ def usable_runs(runs: pd.DataFrame, kind: RunKind) -> pd.DataFrame:
 
 
 def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None,
-                 spec: ExperimentSpec | None = None) -> Finding | None:
+                 experiment: ExperimentSpec | None = None) -> Finding | None:
     """The finding of one axis (None when the kind has no rules or nothing is done),
     with the lines and claims of the kind's axis notes (`KindReport.axis_notes`) appended;
-    ``spec``: the experiment (its ``[report] matched`` cells: `matched_lines`);
+    ``experiment``: its ``[report] matched`` cells (docs/reports.md, "Model size");
     ``min_effect``: the experiment file's minimum effects by metric (`rules_for`)."""
     rules = rules_for(kind, table.metrics, min_effect)
     if rules is None or table.frame.empty:
@@ -293,7 +293,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         return out
 
     bytes_of = declared.model_bytes if declared is not None else None
-    matched = dict(spec.matched) if spec is not None else {}
+    matched = dict(experiment.matched) if experiment is not None else {}
     dim, matched_values = next(iter(matched.items()), (None, ()))
     stratum = _stratum(usable, dim, matched_values)  # the run ids at the matched size (empty: none declared)
 
@@ -330,10 +330,11 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
 
     def matched_text(a: Row, b: Row) -> str:
         """Where ``b`` comes with `MATCHED_SHARE` more (or fewer) Gaussians than ``a`` at a scene, the same
-        difference at the matched size (`[report] matched`), or that the grid has none (`matched_lines`)."""
+        difference at the matched size (`[report] matched`), or that the grid has none."""
         pieces = []
-        if dim == table.axis and all(any(same_value(r.value, v) for v in matched_values) for r in (a, b)):
-            return ""  # both at the matched size: the comparison is itself matched
+        if dim == table.axis and (len(matched_values) < 2 or all(any(same_value(r.value, v) for v in matched_values)
+                                                                 for r in (a, b))):
+            return ""  # the matched axis's own rows (natural against matched), or two matched cells
         for scene in scenes:
             natural_ids = None if not stratum else set(usable.run_id) - stratum
             if dim == table.axis:
@@ -364,7 +365,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                                     a.label, iv.low, iv.high, iv.n,
                                     *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
                 at = f"×{size.estimate:.3f} the {_name(size_spec)}" if size.n else "sizes not recorded"
-                pieces.append(head + f" at its natural size); at the matched size ({setting_text(spec, dim)}): "
+                pieces.append(head + f" at its natural size); at the matched size ({setting_text(experiment, dim)}): "
                                      f"{_name(primary)} {text}, at {at}")
         return (". **Against model size**: " + "; ".join(pieces)) if pieces else ""
 
@@ -541,7 +542,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 parts.append(f"`{row.label}` against `{rows[0].label}`: " + "; ".join(texts))
         if parts:
             lines.append(f"- **At a matched size** (`[report] matched`: {', '.join(f'`{r.label}`' for r in rows)} end at "
-                         f"one {_name(size_spec)} count; {setting_text(spec, dim, [r.value for r in rows])}): "
+                         f"one {_name(size_spec)} count; {setting_text(experiment, dim, [r.value for r in rows])}): "
                          + ". ".join(parts) + ".")
     self_parts = []
     for comp in rules.comparisons:
