@@ -417,7 +417,7 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     table["config.init.method"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so
-    table["config.init"], table["config.init_jitter"] = "surface", 0.0
+    table["config.init.method"], table["config.init.jitter"] = "surface", 0.0
     assert "not the initial points of init = surface" in "\n".join(protocol_lines(table))
 
 
