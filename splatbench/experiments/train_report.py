@@ -280,7 +280,7 @@ def _resolution(done: pd.DataFrame) -> str:
     return "; ".join(parts) or "not recorded"
 
 
-#: The evidence rule for a headline's scenes (docs/reports.md, "Scenes"; issue 39 item 2): 3 scenes, 2
+#: The evidence rule for a headline's scenes (docs/reports.md, "How many scenes a finding stands on"): 3 scenes, 2
 #: of them real captures (a teacher scene is rendered from a model trained on photos: not a capture).
 SCENES_WANTED, REAL_WANTED = 3, 2
 
