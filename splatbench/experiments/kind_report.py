@@ -34,7 +34,10 @@ class Claim:
 
     kind: "best", "no best", "size" (the leader's size against the runner-up's, where it kept
     a lead from being named best), "vs", "self" (the reference row's own relative metric),
-    "count", "auto", "model size" (a row's parameters against the reference row's) or "parity"; scene ("" for all); label: the
+    "count", "auto", "model size" (a row's parameters against the reference row's), "matched" (a
+    difference at the matched model size, `[report] matched`), "settling", "rank", "tau" (two scenes'
+    rank agreement; scene "a/b"), "quick tau" (the quick version's against this one) or "parity";
+    scene ("" for all); label: the
     row; reference: the row compared against ("vs"); metric; how: "mean", "diff",
     "ratio", "count" or "max"; value: the number; low / high: its 95 % interval (NaN
     when none); n: seeds (pairs) it comes from; significant: the interval excludes the

@@ -439,7 +439,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, text, runner.label,
                                 lead.low, lead.high, lead.n, significant, is_practical, settled))
         else:
-            bound = ("" if not significant or unit_text is None else
+            bound = ("" if not is_practical or unit_text is None else
                      f"; its interval's bound nearer no difference is not beyond the {unit_text} minimum effect")
             text = (f"{scene}: no single best (`{row.label}`, {mean_text}, leads `{runner.label}` by {lead_text}"
                     f"{bound})")
@@ -503,17 +503,18 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 line += f". Also changed: {also}"
             primaries = [c for c in claims if c.kind == "vs" and c.label == row.label and c.reference == ref.label
                          and c.metric == primary.name]
+            primary_null = {"diff": 0.0, "ratio": 1.0}.get(primary_comp.how, primary_comp.null or 0.0)
             opposed = []
             for c in primaries:
                 if c.significant:
-                    against = other_way(primary, c.value - (0.0 if primary_comp.how == "diff" else 1.0),
+                    against = other_way(primary, c.value - primary_null,
                                         quality_intervals(c.scene, ref, row))
                     if against:
                         opposed.append(f"{c.scene}: {'; '.join(t for _, t in against)}")
             if opposed:
                 line += f". **The other way** (against the {_name(primary)} difference, significantly): " \
                     + "; ".join(opposed)
-            across = across_scenes(primaries, scenes)
+            across = across_scenes(primaries, scenes, primary_null)
             if across:
                 line += f". {across}"
             size = size_line(scenes, ref, row)
@@ -623,16 +624,16 @@ def setting_text(spec: ExperimentSpec | None, dim: str | None, values: Sequence 
     return ", ".join(f"`{dim} = {display(v)}`" for v in values)
 
 
-def across_scenes(claims: Sequence[Claim], scenes: Sequence[str]) -> str:
+def across_scenes(claims: Sequence[Claim], scenes: Sequence[str], null: float = 0.0) -> str:
     """Whether a primary difference holds across scenes: ``**Across scenes**`` where it is practical
     with one sign on every scene (two or more); where it is practical on some scenes only, or its sign
-    differs, ``**Per scene only**`` naming them; "" with one scene, or nowhere practical."""
+    differs, ``**Per scene only**`` naming them (the sign against ``null``, the comparison's no
+    difference); "" with one scene, or nowhere practical."""
     if len(scenes) < 2 or not claims:
         return ""
     practical_ = [c for c in claims if c.practical]
     if not practical_:
         return ""
-    null = 1.0 if claims[0].how == "ratio" else 0.0
     signs = {c.value > null for c in practical_}
     if len(practical_) == len(scenes) and len(signs) == 1:
         return f"**Across scenes**: practical and of one sign on all {len(scenes)} scenes"

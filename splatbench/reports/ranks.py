@@ -30,7 +30,7 @@ from splatbench.experiments.store import TABLE_NAME
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import kendall_tau
 from splatbench.report_files import markdown_table
-from splatbench.reports.findings import rules_for
+from splatbench.reports.findings import rules_for, usable_runs
 from splatbench.reports.tables import cell_labels, metric_specs, seed_values
 
 
@@ -95,7 +95,7 @@ def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick
     if rules is None:
         return None
     primary: MetricSpec = next(m for m in metrics if m.name == rules.primary)
-    means = cell_means(spec, table, primary.name)
+    means = cell_means(spec, usable_runs(table, kind), primary.name)  # not runs left out of every finding
     if not means or max(len(m) for m in means.values()) < 2:
         return None
     scenes = list(means)
@@ -127,7 +127,7 @@ def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick
         lines.append("- **Quick protocol against this one**: no quick version (the experiment file's `[report] quick` "
                      "names no run table of this grid at the quick protocol).")
     else:
-        theirs = cell_means(spec, quick, primary.name)
+        theirs = cell_means(spec, usable_runs(quick, kind), primary.name)
         shared = [s for s in scenes if s in theirs]
         parts = []
         for scene in shared:
