@@ -1,7 +1,7 @@
 """The 7K check (issue 29, item 2): a grid's ``[check]`` reruns its headline's two cells at one
 scene, every seed, under graphdeco's 7K protocol; `splatbench run` runs those runs too, under
 their own run ids, and `splatbench report` sets their paired difference beside the grid's with
-a verdict ("holds", "does not hold", "not run", "incomplete").
+a verdict ("holds", "does not hold", "inconclusive", "not run", "incomplete").
 
 Planning is checked on the train kind itself (expansion renders nothing); running on the dummy
 kind of `tests.kinds_for_tests` (its protocol "long"); the report on made-up train records
@@ -355,10 +355,12 @@ def test_report_says_not_run_without_the_checks_results(tmp_path):
     (0.5, 0.6, 0.0, 0.05, "holds"),            # same sign, significant, above 0.1 dB
     (0.5, 0.6, 0.5, 0.05, "holds"),            # holds, but SH 3's 7K curve still rises 0.5 dB / 1,000 steps
     (0.5, -0.4, 0.0, 0.05, "does not hold"),   # the sign flips
-    (0.5, 0.03, 0.0, 0.05, "does not hold"),   # no practical difference at 7K
-    (0.5, 0.6, 0.0, 1.0, "does not hold"),     # seeds too noisy at 7K: no significant difference
+    (0.5, 0.03, 0.0, 0.005, "does not hold"),  # the 7K interval within ±0.1 dB: no practical difference there
+    (0.5, 0.03, 0.0, 0.05, "inconclusive"),    # the 7K interval spans 0 and reaches past 0.1 dB: cannot tell
+    (0.5, 0.6, 0.0, 1.0, "inconclusive"),      # seeds too noisy at 7K: an interval that cannot tell either way
     (0.0, 0.0, 0.0, 0.005, "holds"),           # no difference at either; the 7K interval within ±0.1 dB
-    (0.0, 0.0, 0.0, 0.2, "does not hold"),     # no significant difference, but the interval reaches past 0.1 dB
+    (0.0, 0.0, 0.0, 0.2, "inconclusive"),      # no significant difference, but the interval reaches past 0.1 dB
+    (0.0, 0.6, 0.0, 0.05, "does not hold"),    # no difference in the grid, a practical one at 7K
 ])
 def test_report_gives_a_verdict_with_the_checks_results(tmp_path, grid_gain, gain, slope, noise, verdict):
     spec = spec_of(SH_GRID)
@@ -387,6 +389,10 @@ def test_report_gives_a_verdict_with_the_checks_results(tmp_path, grid_gain, gai
     assert ("**not settled** at `graphdeco-7k` (`sh.degree=3` +0.50 dB / 1,000 steps" in text) is (slope > 0)
     # the grid's side is the grid's runs of the same two cells (iterations 100), not the check's
     assert check.grid.protocol == "quick" and check.grid.claim.value == pytest.approx(grid_gain, abs=0.15)
+    if grid_gain == 0.5:  # the verdict re-derived from the check's interval (docs/reports.md, "The 7K check")
+        expected = ("holds" if claim.low > 0 and claim.value >= 0.1 else
+                    "does not hold" if claim.high < 0 or (-0.1 < claim.low and claim.high < 0.1) else "inconclusive")
+        assert expected == verdict, (claim.low, claim.value, claim.high)
     if grid_gain == 0.0:  # a no-difference headline: holds only where the interval rules a difference out
         inside = -0.1 < claim.low and claim.high < 0.1
         assert inside is (verdict == "holds") and (claim.high - claim.low < 0.2) is (noise < 0.05)
@@ -514,3 +520,22 @@ def test_rebuild_with_results_adds_the_check_to_a_committed_report(tmp_path):
     run = CliRunner().invoke(report_command, [str(plain), "--out", str(out), "--rebuild", "--results", str(new)])
     assert isinstance(run.exception, InputError) and "\n" not in str(run.exception)
     assert str(run.exception).startswith(f"--rebuild --results: {plain} has no [check]")
+
+
+def test_a_check_whose_ssim_goes_the_other_way_says_so_in_its_headline(tmp_path):
+    """Issue 39: sh_degree's 7K check held in PSNR while its SSIM reversed; the verdict's sentence and
+    the header's line say so."""
+    spec = spec_of(SH_GRID)
+    root = tmp_path / "results"
+    grid_results(root, spec)
+    rng = np.random.default_rng(1)
+    for run in check_runs(spec):
+        three = run.labels["sh.degree"] == 3
+        rec = record(spec, run, 28.0 + (0.6 if three else 0.0) + rng.normal(0, 0.05))
+        ssim = 0.9 - (0.01 + 0.001 * run.seed if three else 0.0)
+        write_record(root, dataclasses.replace(rec, metrics={**rec.metrics, "test_ssim": ssim}))
+    report = build_report(spec, root)
+    text = write_report(report, tmp_path / "report").read_text()
+    assert report.check.verdict == "holds" and report.check.rerun.opposed[0][0] == "SSIM"
+    assert "**7K check: holds**, **but SSIM goes the other way, significantly there** (SSIM -0.0110 [95 % CI" in text
+    assert "; **but SSIM goes the other way, significantly** at `graphdeco-7k`: SSIM -0.0110" in text

@@ -90,7 +90,7 @@ def test_committed_report_matches_its_parquet(name):
         assert axis.markdown() in text, f"reports/{name}: the `{axis.axis}` table differs from results.parquet"
         if axis.axis in report.findings:
             assert report.findings[axis.axis].markdown() in text, f"reports/{name}: `{axis.axis}` findings differ"
-    for finding in ("parity", "settling"):  # the run findings: their own sections
+    for finding in ("parity", "settling", "ranks"):  # the run findings: their own sections
         if finding in report.findings:
             assert report.findings[finding].markdown() in text, f"reports/{name}: the {finding} finding differs"
     if spec.kind == "train":  # issue 29: the header names the protocol and the headline's 7K check

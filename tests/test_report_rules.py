@@ -112,7 +112,8 @@ def test_best_needs_a_significant_and_practical_lead(tmp_path):
     best = [c for c in report.findings["sh.degree"].claims if c.kind == "best"]
     assert [(c.scene, c.label, c.reference) for c in best] == [("glossy", "3", "0")]
     vs = next(c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
-    assert "of at least 0.01 dB" in text and vs.practical and "no practical difference" not in vs.text
+    assert "lies wholly beyond the 0.01 dB minimum effect" in text and vs.practical
+    assert "no practical difference" not in vs.text
 
     # a 0.5 dB lead is named best under the default minimum effect
     report, _ = results(tmp_path / "c", spec_of(), _lead(0.5))
@@ -406,8 +407,8 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "graphdeco's 30,000-step schedule as written" in schedule and "over 30,000 steps, not scaled" in schedule \
         and "scaled to the run (" not in schedule
     # the header names the scenes and says that one rendered scene falls short of the evidence rule
-    assert "- **Scenes**: 1: glossy (rendered by Mitsuba); 0 real; a finding here holds on this scene only" \
-        in "\n".join(protocol_lines(table))
+    assert "- **Scenes**: 1: glossy (rendered by Mitsuba); 0 real captures; a finding here holds on this scene " \
+        "only" in "\n".join(protocol_lines(table))
     # a run that recorded its start: the method and count it recorded, nothing inferred
     recorded = table.assign(**{"metric.init_method": "sfm", "metric.init_points": 1234})
     init = next(line for line in protocol_lines(recorded) if line.startswith("- **Initialisation**"))
@@ -416,7 +417,7 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     table["config.init.method"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so
-    table["config.init"], table["config.init_jitter"] = "surface", 0.0
+    table["config.init.method"], table["config.init.jitter"] = "surface", 0.0
     assert "not the initial points of init = surface" in "\n".join(protocol_lines(table))
 
 

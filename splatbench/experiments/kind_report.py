@@ -34,7 +34,10 @@ class Claim:
 
     kind: "best", "no best", "size" (the leader's size against the runner-up's, where it kept
     a lead from being named best), "vs", "self" (the reference row's own relative metric),
-    "count", "auto", "model size" (a row's parameters against the reference row's) or "parity"; scene ("" for all); label: the
+    "count", "auto", "model size" (a row's parameters against the reference row's), "matched" (a
+    difference at the matched model size, `[report] matched`), "settling", "rank", "tau" (two scenes'
+    rank agreement; scene "a/b"), "quick tau" (the quick version's against this one) or "parity";
+    scene ("" for all); label: the
     row; reference: the row compared against ("vs"); metric; how: "mean", "diff",
     "ratio", "count" or "max"; value: the number; low / high: its 95 % interval (NaN
     when none); n: seeds (pairs) it comes from; significant: the interval excludes the
@@ -100,6 +103,9 @@ HeaderNote = Callable[["pd.DataFrame"], list[str]]
 AxisNote = Callable[[AxisRows, "pd.DataFrame", list[str]], tuple[list[str], list[Claim]]]
 #: Lines appended to a report's "Metrics" section: ``note(runs) -> lines``.
 MetricNote = Callable[["pd.DataFrame"], list[str]]
+#: The bytes of each run's trained model, a series over the table's rows (NaN where unknown):
+#: ``model_bytes(runs) -> pd.Series``.
+ModelBytes = Callable[["pd.DataFrame"], "pd.Series"]
 #: A finding over all runs, its own section (named by `Finding.axis`): ``finding(runs, min_effect) ->
 #: Finding | None`` (``min_effect``: the experiment file's ``[report] min_effect``, metric -> number).
 RunFinding = Callable[["pd.DataFrame", "Mapping[str, float] | None"], "Finding | None"]
@@ -130,11 +136,15 @@ class FindingRules:
 
     size: a metric counting the model's size (the train kind's ``num_gaussians``; None: the kind
     records none): the best-of names a cell only when it is not larger than the runner-up by more
-    than that metric's comparison's minimum effect (docs/reports.md, "Best")."""
+    than that metric's comparison's minimum effect (docs/reports.md, "Best"). quality: other
+    metrics of the same quality the primary measures (the train kind's SSIM and LPIPS): a primary
+    difference whose quality metric goes significantly the other way says so where it is stated
+    (docs/reports.md, "The other way")."""
 
     primary: str
     comparisons: tuple[Comparison, ...]
     size: str | None = None
+    quality: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -158,13 +168,16 @@ class Tradeoff:
 class SettlingCurves:
     """The curves (keys of a run's ``curves``) whose last quarter decides whether a cell had
     settled (`splatbench.reports.settling`): the test curve of ``metric`` (steps and values)
-    and, where recorded, the training-view curve of the same quantity (overfitting)."""
+    and, where recorded, the training-view curve of the same quantity (overfitting); better:
+    "higher" or "lower", the direction of a better value (a cell "past its peak" ended more than
+    the minimum effect worse than its best)."""
 
     metric: str
     test_step: str
     test_value: str
     train_step: str = ""
     train_value: str = ""
+    better: str = "higher"
 
 
 @dataclass(frozen=True)
@@ -196,8 +209,10 @@ class KindReport:
     cell changed them besides its setting; confound_floor: (count, floor) pairs: a confound count left
     out where both sides' means are below its floor (too few to change the model); load: how runs
     timed under load are marked (None:
-    the kind records no load). The hooks, each run in its order: header_notes (the report's
-    header), axis_notes (each axis finding), metric_notes (the "Metrics" section), run_findings
+    the kind records no load); model_bytes: the bytes of each run's trained model (stated beside
+    each comparison's Gaussians; None: not known). The hooks, each run in its order: title_notes
+    (lines right under the report's title, e.g. that a quick-protocol report is a smoke test),
+    header_notes (the report's header), axis_notes (each axis finding), metric_notes (the "Metrics" section), run_findings
     (a section each, after the axes).
     """
 
@@ -210,6 +225,8 @@ class KindReport:
     confound_floor: tuple[tuple[str, float], ...] = ()
     load: LoadMarks | None = None
     header_notes: tuple[HeaderNote, ...] = ()
+    title_notes: tuple[HeaderNote, ...] = ()
+    model_bytes: ModelBytes | None = None
     axis_notes: tuple[AxisNote, ...] = ()
     metric_notes: tuple[MetricNote, ...] = ()
     run_findings: tuple[RunFinding, ...] = ()
@@ -221,6 +238,7 @@ class KindReport:
         if self.rules is not None:
             named += [self.rules.primary, *(c.metric for c in self.rules.comparisons)]
             named += [self.rules.size] if self.rules.size else []
+            named += list(self.rules.quality)
         named += [n for t in self.tradeoffs for n in (t.cost, t.quality)]
         if self.load is not None:
             named += [self.load.flag, self.load.other, self.load.cores]
@@ -231,5 +249,5 @@ class KindReport:
             raise TypeError(f"KindReport names metrics its kind's result does not have: {', '.join(unknown)}")
 
 
-__all__ = ["Claim", "Finding", "done_runs", "AxisRow", "AxisRows", "HeaderNote", "AxisNote", "MetricNote", "RunFinding",
+__all__ = ["Claim", "Finding", "done_runs", "AxisRow", "AxisRows", "HeaderNote", "ModelBytes", "AxisNote", "MetricNote", "RunFinding",
            "Comparison", "FindingRules", "Tradeoff", "SettlingCurves", "LoadMarks", "KindReport"]

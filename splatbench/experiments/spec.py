@@ -26,6 +26,10 @@ sweep it (docs/experiments.md has the full format)::
 
     [report]                          # how `splatbench report` reads the results (changes no run)
     min_effect = { test_psnr = 0.2 }  # the smallest difference that matters (docs/reports.md)
+    matched = { size = "matched" }    # cells at one matched model size (a value, or a list of
+                                      # values matched to each other: { densify = ["mcmc", "budget"] })
+    quick = "../reports/x_quick"      # the same grid at the quick protocol (a report folder or a
+                                      # run table, relative to this file): its ranks beside these
 
     [check]                           # the headline rerun at the field's protocol (docs/reports.md,
     protocol = "graphdeco-7k"         # "The 7K check"): two cells of the grid, one of its scenes,
@@ -143,6 +147,10 @@ class ExperimentSpec:
     min_effect: Mapping[str, float] = field(default_factory=dict)  # ``[report] min_effect``: metric -> the
     #   smallest difference that matters (overrides the kind's; docs/reports.md, "Minimum effects")
     check: CheckSpec | None = None  # ``[check]``: the headline at another protocol (None: none declared)
+    matched: Mapping[str, tuple[Any, ...]] = field(default_factory=dict)  # ``[report] matched``: a dimension
+    #   -> the values whose cells end at one matched model size (docs/reports.md, "Model size")
+    quick: str | None = None  # ``[report] quick``: the same grid's quick-protocol results, as written
+    #   (relative to the file; docs/reports.md, "Rank agreement")
 
     @property
     def run_kind(self) -> RunKind:
@@ -275,12 +283,12 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
                 raise fail(where, f"{path!r} is set by the top-level 'scenes' / 'seeds', not here")
 
     runner = _parse_runner(data.get("runner", {}), fail, source, base_dir)
-    min_effect = _parse_report(data.get("report", {}), fail)
+    min_effect, matched, quick = _parse_report(data.get("report", {}), fail, axes, variants)
     check = _parse_check(data["check"], fail, scenes, axes, variants, grid) if "check" in data else None
     return ExperimentSpec(name=name, kind=kind, scenes=tuple(scenes), seeds=tuple(seeds), base=base, axes=axes,
                           variants=variants, grid=grid, description=description, runner=runner, source=source,
                           scene_sources=scene_sources, scene_tables=scene_tables, min_effect=min_effect,
-                          check=check)
+                          check=check, matched=matched, quick=quick)
 
 
 def _parse_check(table: Any, fail, scenes: list[str], axes: Mapping[str, tuple[Any, ...]],
@@ -357,14 +365,21 @@ def _cell_values(cell: Mapping[str, Any], dims: list[str], where: str, fail, pre
     return out
 
 
-def _parse_report(table: Any, fail) -> dict[str, float]:
+#: Keys of the ``[report]`` table.
+REPORT_FIELDS = ("min_effect", "matched", "quick")
+
+
+def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variants: Mapping[str, Mapping[str, Any]]
+                  ) -> tuple[dict[str, float], dict[str, tuple[Any, ...]], str | None]:
     """The ``[report]`` table: ``min_effect = { metric = number >= 0, ... }`` (the metric names are
-    checked against the kind's comparisons when the report is built)."""
+    checked against the kind's comparisons when the report is built), ``matched = { dimension =
+    value or [values] }`` (each a value of one of the grid's axes or variants: one matched
+    dimension) and ``quick = "path"``: (min_effect, matched, quick)."""
     if not isinstance(table, Mapping):
         raise fail("report", f"expected a table, got {table!r}")
     for key in table:
-        if key != "min_effect":
-            raise fail(f"report.{key}", unknown_key_problem(key, ("min_effect",)))
+        if key not in REPORT_FIELDS:
+            raise fail(f"report.{key}", unknown_key_problem(key, REPORT_FIELDS))
     given = table.get("min_effect", {})
     if not isinstance(given, Mapping):
         raise fail("report.min_effect", f"expected a table of metric = number, got {given!r}")
@@ -373,7 +388,27 @@ def _parse_report(table: Any, fail) -> dict[str, float]:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < math.inf:
             raise fail(f"report.min_effect.{metric}", f"expected a number >= 0, got {value!r}")
         out[str(metric)] = float(value)
-    return out
+    raw = table.get("matched", {})
+    if not isinstance(raw, Mapping):
+        raise fail("report.matched", f"expected a table of dimension = value or [values] (e.g. "
+                                     f"{{ size = \"matched\" }}), got {raw!r}")
+    dims = [*axes, *variants]
+    matched: dict[str, tuple[Any, ...]] = {}
+    for dim, value in _cell_values(raw, dims, "report.matched", fail).items():
+        values = tuple(value) if isinstance(value, list) else (value,)
+        known = tuple(axes[dim]) if dim in axes else tuple(variants[dim])
+        for v in values:
+            if not any(same_value(v, k) for k in known):
+                raise fail(f"report.matched.{dim}", f"{v!r} is not a value of the grid's {dim!r} (its values: "
+                                                    f"{', '.join(map(str, known))})")
+        matched[dim] = tuple(next(k for k in known if same_value(v, k)) for v in values)
+    if len(matched) > 1:
+        raise fail("report.matched", f"expected one dimension, got {', '.join(matched)}")
+    quick = table.get("quick")
+    if quick is not None and (not isinstance(quick, str) or not quick.strip()):
+        raise fail("report.quick", f"expected the path of the quick version's results (a report folder or a "
+                                   f"run table), got {quick!r}")
+    return out, matched, quick
 
 
 #: Keys of a scene table: a dataset folder or a teacher model (besides ``name``).

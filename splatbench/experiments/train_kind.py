@@ -58,9 +58,9 @@ from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, metric, metric_specs
-from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, memory_note, model_size_note,
-                                                 protocol_lines,
-                                                 schedule_confound_note, ssim_trained_note)
+from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, memory_note, model_bytes,
+                                                 model_size_note, protocol_lines, schedule_confound_note,
+                                                 smoke_test_line, ssim_trained_note)
 from splatbench.metrics.memory import reset_peak_rss
 from splatbench.train.config import DataConfig, TrainConfig, nest  # the kind's Config (loads torch: every use of the kind validates)
 
@@ -513,7 +513,7 @@ REPORT = KindReport(
                                      Comparison("test_lpips", "diff", min_effect=MIN_EFFECT["test_lpips"]),
                                      Comparison("train_seconds", "ratio", min_effect=MIN_EFFECT["train_seconds"]),
                                      Comparison("num_gaussians", "ratio", min_effect=MIN_EFFECT["num_gaussians"])),
-                       size="num_gaussians"),
+                       size="num_gaussians", quality=("test_ssim", "test_lpips")),
     tradeoffs=(Tradeoff("train_seconds", "test_psnr", "time_vs_error",
                         "Training time against test PSNR per cell (mean over seeds)"),
                Tradeoff("num_gaussians", "test_psnr", "gaussians_vs_error",
@@ -525,6 +525,8 @@ REPORT = KindReport(
     confound_floor=tuple((name, CONFOUND_FLOOR) for name in GAUSSIAN_COUNTS),
     load=LoadMarks("time_loaded", "timed"),
     header_notes=(protocol_lines,),
+    title_notes=(smoke_test_line,),
+    model_bytes=model_bytes,
     axis_notes=(model_size_note, ssim_trained_note, auto_sh_degree_note, schedule_confound_note),
     metric_notes=(lpips_note, memory_note),
 )

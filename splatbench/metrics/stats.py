@@ -21,6 +21,9 @@ nothing the report prints no interval (`splatbench.reports.findings.no_spread`).
   alternately in one process) with a percentile bootstrap interval
   (`scipy.stats.bootstrap`, seeded, so a report rebuilt from its table gives the same
   numbers).
+* `kendall_tau`: the rank agreement of two rankings of the same items (Kendall's tau-b, ties
+  counted: `scipy.stats.kendalltau`), +1 the same order, -1 the reverse; NaN with fewer than
+  two items or where one side ranks every item equal.
 
 Example::
 
@@ -138,9 +141,23 @@ def bootstrap_median_ratio(x: Sequence[float], y: Sequence[float], *, seed: int 
     return Interval(median, float(res.confidence_interval.low), float(res.confidence_interval.high), n, "bootstrap")
 
 
+def kendall_tau(a: Mapping[str, float], b: Mapping[str, float]) -> tuple[float, int]:
+    """(Kendall's tau-b of the values of ``a`` and ``b`` over the keys both have, the number of such
+    keys); NaN where fewer than two keys are shared or either side is constant."""
+    from scipy import stats
+
+    keys = [k for k in a if k in b and math.isfinite(a[k]) and math.isfinite(b[k])]
+    if len(keys) < 2:
+        return math.nan, len(keys)
+    x, y = [a[k] for k in keys], [b[k] for k in keys]
+    if len(set(x)) < 2 or len(set(y)) < 2:
+        return math.nan, len(keys)
+    return float(stats.kendalltau(x, y, variant="b").statistic), len(keys)
+
+
 def _as_map(values: Mapping[int, float] | Sequence[float]) -> Mapping[int, float]:
     return values if isinstance(values, Mapping) else dict(enumerate(values))
 
 
-__all__ = ["CONFIDENCE", "BOOTSTRAP_RESAMPLES", "Interval", "t_quantile", "t_interval", "paired_difference",
+__all__ = ["CONFIDENCE", "BOOTSTRAP_RESAMPLES", "Interval", "t_quantile", "t_interval", "paired_difference", "kendall_tau",
            "paired_ratio", "bootstrap_median_ratio"]

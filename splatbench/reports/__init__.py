@@ -10,7 +10,8 @@ Every function is handed the run kind (`splatbench.experiments.RunKind`, from
 Modules: `tables` (axis rows, mean ± 95 % interval, the metrics a kind shows), `findings`
 (claims computed from the tables: paired differences with intervals), `settling` (whether a
 cell's curves had flattened: the last quarter's slope, and its finding), `check` (the 7K check: the headline's two cells rerun at graphdeco's protocol, its
-verdict), `figures` (training curves, the
+verdict), `ranks` (each scene's cells in order, Kendall's tau across scenes and against the
+grid's quick version), `figures` (training curves, the
 cells of the Pareto figures), `report` (assembly, markdown), `cli`
 (``splatbench report``). Statistics are `splatbench.metrics.stats`. See docs/reports.md.
 """

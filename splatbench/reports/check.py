@@ -10,12 +10,17 @@ statistics of every finding (`splatbench.reports.findings.paired`, `fmt_interval
 the paired t interval over seeds, the minimum effect) and the settled rule on each side's own
 test curves (`splatbench.reports.settling`), and gives one verdict (`VERDICTS`):
 
-* **holds**: every run of both sides is done, and both protocols give a significant difference
-  of at least the minimum effect with the same sign; or, for a headline of no practical
-  difference, the check's interval lies within the minimum effect either side of no difference
-  (an interval too wide to tell is not "holds");
-* **does not hold**: the sign flips, one protocol gives a practical difference and the other
-  does not, or a no-difference headline's check interval reaches beyond the minimum effect;
+* **holds**: every run of both sides is done, and for a headline of a practical difference (the
+  grid's side significant and at least the minimum effect) the check's difference is significant,
+  of the same sign and at least the minimum effect; for a headline of no practical difference,
+  the check's interval lies within the minimum effect either side of no difference;
+* **does not hold**: for a practical headline, the check's interval excludes the headline's sign
+  (it lies wholly on the other side of no difference) or lies within the minimum effect either
+  side of it (the check shows there is no practical difference); for a no-difference headline, the
+  check gives a practical difference;
+* **inconclusive**: every other case with every run done: an interval that cannot tell either way
+  (it spans no difference and reaches beyond the minimum effect, or excludes no difference only
+  by less than the minimum effect while reaching past it; seeds that did not vary the result);
 * **not run**: none of the check's runs has a result (the report is written all the same);
 * **incomplete**: some of the check's runs, or of the grid's runs of the two cells, have no
   finished result (no verdict from part of the seeds).
@@ -43,15 +48,17 @@ from splatbench.experiments.store import build_table, experiment_dir, read_recor
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval
 from splatbench.report_files import markdown_table
-from splatbench.reports.findings import (Claim, fmt_interval, fmt_min_effect, fmt_number, judge, no_spread, paired,
-                                         rules_for, usable_runs)
+from splatbench.reports.findings import (Claim, fmt_interval, fmt_min_effect, fmt_number, judge, no_spread,
+                                         other_way, paired, rules_for, usable_runs)
 from splatbench.reports.settling import cell_settling, unsettled_reason
 from splatbench.reports.tables import Stat, cell_labels, metric_specs, seed_values, stat
 
 #: The check's runs beside a report (the grid's are ``results.parquet``).
 CHECK_TABLE_NAME = "check.parquet"
 #: What a check can conclude (module doc).
-VERDICTS = ("holds", "does not hold", "not run", "incomplete")
+VERDICTS = ("holds", "does not hold", "inconclusive", "not run", "incomplete")
+#: The verdicts given from a complete check.
+JUDGED = ("holds", "does not hold", "inconclusive")
 
 
 def protocol_title(protocol: str) -> str:
@@ -88,6 +95,8 @@ class CheckSide:
     settled: bool | None
     why: str
     others: tuple[tuple[MetricSpec, Stat, Stat], ...] = ()  # the cells' other quality and size metrics
+    opposed: tuple[tuple[str, str], ...] = ()  # (name, difference) of each of the kind's other quality metrics
+    #   that goes significantly the other way (`splatbench.reports.findings.other_way`)
 
     @property
     def complete(self) -> bool:
@@ -167,6 +176,12 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
         others = tuple((m, *(stat(seed_values(p, m.name) if len(p) and f"metric.{m.name}" in p.columns else {})
                              for p in pick)) for m in shown)
         iv, null = paired(values[0], values[1], comp)
+        quality = []
+        for q in (by_name[n] for n in rules.quality if n in by_name and n != metric.name):
+            q_how = next((c.how for c in rules.comparisons if c.metric == q.name), "diff")
+            q_values = [seed_values(p, q.name) if len(p) and f"metric.{q.name}" in p.columns else {} for p in pick]
+            quality.append((q, paired(q_values[0], q_values[1], Comparison(q.name, q_how))[0], q_how))
+        opposed = tuple(other_way(metric, iv.estimate - (null or 0.0), quality)) if iv.n else ()
         claim = None
         settled, why = None, ""
         if iv.n:
@@ -179,15 +194,24 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
             claim = Claim("check", check.scene, labels[1], metric.name, comp.how, iv.estimate, text, labels[0],
                           iv.low, iv.high, iv.n, significant, practical, settled)
         return CheckSide(protocol, done, failed, total, (stat(values[0]), stat(values[1])), claim, settled, why,
-                         others)
+                         others, opposed)
 
     grid_protocol = _recorded_protocol(table, {r.run_id for c in quick for r in c})
     grid_side = side(table, quick, grid_protocol)
     rerun_side = side(checked, rerun, check.protocol)
     verdict, reason = _verdict(grid_side, rerun_side, labels, metric, comp)
+    if verdict in JUDGED and rerun_side.opposed:
+        reason += (f"; **but {opposed_text(rerun_side)}** at `{check.protocol}`: "
+                   f"{'; '.join(t for _, t in rerun_side.opposed)}")
     described = kind.protocols.describe(check.protocol) if kind.protocols is not None else check.protocol
     return CheckResult(check, tuple(spec.seeds), labels, described, metric, grid_side, rerun_side, verdict, reason,
                        checked if len(checked) else build_table([]))
+
+
+def opposed_text(side: CheckSide) -> str:
+    """``SSIM goes the other way, significantly`` (the metrics of `CheckSide.opposed`)."""
+    names = [n for n, _ in side.opposed]
+    return f"{' and '.join(names)} go{'es' if len(names) == 1 else ''} the other way, significantly"
 
 
 def _interval(claim: Claim) -> Interval:
@@ -222,27 +246,38 @@ def _verdict(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str], metric:
     compared = f"`{labels[1]}` against `{labels[0]}` on {r.scene}"
     quick = f"the grid's protocol ({grid.protocol}) gives {g.text}"
     null = 1.0 if how == "ratio" else (comp.null or 0.0) if how == "mean" else 0.0  # `findings.paired`'s
-    if g.practical and r.practical:
-        if (g.value - null) * (r.value - null) > 0:
-            effect = f" and at least the {fmt_min_effect(min_effect, how, metric)} minimum effect" \
-                if min_effect is not None else ""
+    defined = math.isfinite(r.low) and math.isfinite(r.high) and not no_spread(_interval(r), how, metric)
+    bound = fmt_min_effect(min_effect, how, metric) if min_effect is not None else None
+    if min_effect is None:
+        within = False
+    else:
+        lo, hi = (null / (1 + min_effect), null * (1 + min_effect)) if how == "ratio" else \
+            (null - min_effect, null + min_effect)
+        within = defined and lo < r.low and r.high < hi
+    cannot_tell = (f"at {at}, {compared}: {r.text}, where {quick}; " + (
+        "the seeds did not vary the check's result, so it has no interval" if not defined else
+        f"its interval can tell neither a practical difference of the grid's sign nor one ruled out"
+        + (f" (it reaches beyond the {bound} minimum effect)" if bound else "")))
+    if g.practical:
+        sign = 1.0 if g.value > null else -1.0
+        if r.practical and (r.value - null) * sign > 0:
+            effect = f" and at least the {bound} minimum effect" if bound else ""
             return "holds", (f"at {at}, {compared}: {r.text}; the same sign as under the grid's protocol "
                              f"({fmt_number(g.value, how, metric)}), significant{effect}")
-        return "does not hold", (f"at {at}, {compared}: {r.text}, the opposite sign of the grid's protocol "
-                                 f"({fmt_number(g.value, how, metric)})")
-    if g.practical or r.practical:  # one of the two only
-        return "does not hold", f"at {at}, {compared}: {r.text}, where {quick}"
-    # a headline of no practical difference holds only where the check's interval rules one out
-    if min_effect is None or not math.isfinite(r.low) or no_spread(_interval(r), how, metric):
-        return "does not hold", (f"at {at}, {compared}: {r.text}, where {quick}: without an interval and a minimum "
-                                 f"effect the check cannot show that there is no practical difference")
-    lo, hi = (1 / (1 + min_effect), 1 + min_effect) if how == "ratio" else (null - min_effect, null + min_effect)
-    bound = fmt_min_effect(min_effect, how, metric)
-    if lo < r.low and r.high < hi:
+        if defined and ((sign > 0 and r.high < null) or (sign < 0 and r.low > null)):
+            return "does not hold", (f"at {at}, {compared}: {r.text}: its interval excludes the sign of the grid's "
+                                     f"protocol ({fmt_number(g.value, how, metric)})")
+        if within:
+            return "does not hold", (f"at {at}, {compared}: {r.text}, where {quick}: its interval lies within the "
+                                     f"{bound} minimum effect either side, so the difference is not practical there")
+        return "inconclusive", cannot_tell
+    # a headline of no practical difference: holds where the check's interval rules one out
+    if r.practical:
+        return "does not hold", (f"at {at}, {compared}: {r.text}, a practical difference, where {quick}")
+    if within:
         return "holds", (f"neither protocol gives a practical difference: {quick}; {at} gives {r.text}, its "
                          f"interval within the {bound} minimum effect either side")
-    return "does not hold", (f"at {at}, {compared}: {r.text}, where {quick}; the {at} interval reaches beyond the "
-                             f"{bound} minimum effect, so it does not show that there is no practical difference")
+    return "inconclusive", cannot_tell
 
 
 def _cell(side: CheckSide, k: int, metric: MetricSpec, seeds: int) -> str:
@@ -300,7 +335,7 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
                   f"half-width of its 95 % t interval):", "",
                   *markdown_table(head, cells, align="--" + "r" * (1 + len(specs))).splitlines(), ""]
     sentence = f"**{result.headline}**: {result.reason}"
-    if result.verdict in ("holds", "does not hold") and result.rerun.settled is False:
+    if result.verdict in JUDGED and result.rerun.settled is False:
         sentence += f"; **not settled** at `{c.protocol}` ({result.rerun.why})"
     if result.verdict in ("not run", "incomplete"):
         sentence += f". Run `{run_command}` (finished runs are skipped) and report again"
@@ -331,9 +366,12 @@ def _other(st: Stat, spec: MetricSpec, side: CheckSide, seeds: int) -> str:
 def header_line(result: CheckResult) -> str:
     """The report header's line naming the check and its verdict."""
     a, b = result.labels
-    unsettled = ", not settled there" if result.verdict in ("holds", "does not hold") \
-        and result.rerun.settled is False else ""
-    return (f"**{result.headline}** (`{b}` against `{a}` on {result.check.scene}, rerun at protocol "
+    unsettled = ", not settled there" if result.verdict in JUDGED and result.rerun.settled is False else ""
+    but = ""
+    if result.verdict in JUDGED and result.rerun.opposed:
+        but = (f", **but {opposed_text(result.rerun)} there** "
+               f"({'; '.join(t for _, t in result.rerun.opposed)})")
+    return (f"**{result.headline}**{but} (`{b}` against `{a}` on {result.check.scene}, rerun at protocol "
             f"`{result.check.protocol}`{unsettled}; section \"Headline at the "
             f"{protocol_title(result.check.protocol)} protocol\").")
 
@@ -342,5 +380,5 @@ def _name(spec: MetricSpec) -> str:
     return spec.label.split(" (")[0]
 
 
-__all__ = ["CHECK_TABLE_NAME", "VERDICTS", "CheckSide", "CheckResult", "check_name", "protocol_title", "check_table", "check_result",
+__all__ = ["CHECK_TABLE_NAME", "VERDICTS", "JUDGED", "CheckSide", "CheckResult", "check_name", "protocol_title", "check_table", "check_result",
            "check_lines", "header_line"]

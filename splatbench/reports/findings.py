@@ -55,7 +55,9 @@ from splatbench.plotting import pareto_front
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
 from splatbench.reports.settling import CellSettling, cell_settling, paired_curve, unsettled_reason
-from splatbench.reports.tables import AxisTable, Row, loaded_runs, seed_values
+from splatbench.experiments.configs import flatten
+from splatbench.experiments.spec import ExperimentSpec, same_value
+from splatbench.reports.tables import AxisTable, Row, decode, display, loaded_runs, seed_values
 
 
 def rules_for(kind: RunKind, metrics: tuple[MetricSpec, ...], min_effect: Mapping[str, float] | None = None
@@ -70,7 +72,7 @@ def rules_for(kind: RunKind, metrics: tuple[MetricSpec, ...], min_effect: Mappin
         if r is None:
             return None
         rules = FindingRules(r.primary, tuple(c for c in r.comparisons if c.metric in names),
-                             r.size if r.size in names else None)
+                             r.size if r.size in names else None, tuple(q for q in r.quality if q in names))
         compared = [c.metric for c in r.comparisons]
         if r.primary not in names:
             return None
@@ -86,7 +88,7 @@ def rules_for(kind: RunKind, metrics: tuple[MetricSpec, ...], min_effect: Mappin
     if min_effect:
         rules = FindingRules(rules.primary, tuple(dataclasses.replace(c, min_effect=min_effect[c.metric])
                                                   if c.metric in min_effect else c for c in rules.comparisons),
-                             rules.size)
+                             rules.size, rules.quality)
     return rules
 
 
@@ -173,6 +175,42 @@ def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None, m
     return text
 
 
+def clears(iv: Interval, how: str, null: float, min_effect: float | None) -> bool:
+    """True when the whole interval lies beyond the minimum effect on the estimate's side of ``null``:
+    its bound nearer to no difference exceeds it (``low - null > min_effect`` for a positive
+    difference; for a ratio ``low > null (1 + min_effect)``, or ``high < null / (1 + min_effect)``).
+    What "best" asks of a lead over the runner-up (docs/reports.md, "Best"); without a minimum
+    effect, that the interval excludes ``null``."""
+    if not iv.defined or not math.isfinite(iv.low) or not math.isfinite(iv.high):
+        return False
+    m = min_effect or 0.0
+    if how == "ratio":
+        return iv.low > null * (1 + m) or iv.high < null / (1 + m)
+    return iv.low - null > m or null - iv.high > m
+
+
+def other_way(primary: MetricSpec, diff: float, others: Sequence[tuple[MetricSpec, Interval, str]]
+              ) -> list[tuple[str, str]]:
+    """The quality metrics (`FindingRules.quality`) that go significantly the other way of a primary
+    difference ``diff`` (its estimate minus the null, in the primary's direction: positive is the
+    compared cell better where higher is better): ``others`` holds each one's paired interval and
+    how it compares ("diff" or "ratio"); each one whose interval excludes no difference (with a
+    spread) on the side that is worse, as (its name, ``SSIM −0.010 [95 % CI −0.015, −0.005]``)."""
+    if not math.isfinite(diff) or diff == 0.0:
+        return []
+    up = (diff > 0) == (primary.better != "lower")  # the compared cell is better in the primary metric
+    out = []
+    for spec, iv, how in others:
+        null = 1.0 if how == "ratio" else 0.0
+        if not iv.defined or not iv.excludes(null) or no_spread(iv, how, spec):
+            continue
+        higher = iv.estimate > null
+        better = higher == (spec.better != "lower")
+        if better != up:
+            out.append((_name(spec), f"{_name(spec)} {fmt_interval(iv, how, spec, null)}"))
+    return out
+
+
 def paired(a: dict[int, float], b: dict[int, float], comp: Comparison) -> tuple[Interval, float | None]:
     """The interval of row ``b`` against reference ``a`` (per-seed values) and its null value."""
     if comp.how == "diff":
@@ -198,10 +236,11 @@ def usable_runs(runs: pd.DataFrame, kind: RunKind) -> pd.DataFrame:
     return done
 
 
-def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None
-                 ) -> Finding | None:
+def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None,
+                 experiment: ExperimentSpec | None = None) -> Finding | None:
     """The finding of one axis (None when the kind has no rules or nothing is done),
     with the lines and claims of the kind's axis notes (`KindReport.axis_notes`) appended;
+    ``experiment``: its ``[report] matched`` cells (docs/reports.md, "Model size");
     ``min_effect``: the experiment file's minimum effects by metric (`rules_for`)."""
     rules = rules_for(kind, table.metrics, min_effect)
     if rules is None or table.frame.empty:
@@ -242,6 +281,100 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             settle_cache[key] = cell_settling(selected(scene, row, usable), settling, settle_effect)
         return settle_cache[key]
 
+    qualities = [(specs[q], next((c.how for c in rules.comparisons if c.metric == q), "diff"))
+                 for q in rules.quality if q in specs and q != primary.name]
+
+    def quality_intervals(scene: str, a: Row, b: Row) -> list[tuple[MetricSpec, Interval, str]]:
+        """The paired interval of ``b`` against ``a`` of each of the kind's other quality metrics."""
+        out = []
+        for spec, how in qualities:
+            iv, _ = paired(values(scene, a, spec.name), values(scene, b, spec.name), Comparison(spec.name, how))
+            out.append((spec, iv, how))
+        return out
+
+    bytes_of = declared.model_bytes if declared is not None else None
+    matched = dict(experiment.matched) if experiment is not None else {}
+    dim, matched_values = next(iter(matched.items()), (None, ()))
+    stratum = _stratum(usable, dim, matched_values)  # the run ids at the matched size (empty: none declared)
+
+    def mean_of(scene: str, row: Row, metric: str, ids: set[str] | None = None) -> float | None:
+        sel = selected(scene, row, usable)
+        if ids is not None:
+            sel = sel[sel.run_id.isin(ids)]
+        if metric == "bytes":
+            if bytes_of is None or not len(sel):
+                return None
+            per = pd.DataFrame({"seed": sel.seed.astype(int), "v": bytes_of(sel).to_numpy()}).dropna()
+            v = per.groupby("seed").v.mean()
+        else:
+            v = pd.Series(seed_values(sel, metric) if len(sel) and f"metric.{metric}" in sel.columns else {},
+                          dtype="float64")
+        return float(v.mean()) if len(v) else None
+
+    def size_line(scenes_: Sequence[str], a: Row, b: Row) -> str:
+        """``Size (mean over seeds, `b` against `a`): fox 5,210 Gaussians, 1.23 MB against 1,000, 0.24 MB``."""
+        if size_spec is None:
+            return ""
+        parts = []
+        for scene in scenes_:
+            na, nb = mean_of(scene, a, size_spec.name), mean_of(scene, b, size_spec.name)
+            if na is None or nb is None:
+                continue
+            ba, bb = mean_of(scene, a, "bytes"), mean_of(scene, b, "bytes")
+            mb = (lambda x: f", {x / 1e6:.2f} MB") if ba is not None and bb is not None else (lambda x: "")
+            parts.append(f"{scene} {_count(nb)} {_name(size_spec)}{mb(bb)} against {_count(na)}{mb(ba)}")
+        if not parts:
+            return ""
+        what = f"{_name(size_spec)} and bytes" if bytes_of is not None else _name(size_spec)
+        return f"{what[:1].upper()}{what[1:]} (mean over seeds, `{b.label}` against `{a.label}`): " + "; ".join(parts)
+
+    def matched_text(a: Row, b: Row) -> str:
+        """Where ``b`` comes with `MATCHED_SHARE` more (or fewer) Gaussians than ``a`` at a scene, the same
+        difference at the matched size (`[report] matched`), or that the grid has none."""
+        pieces = []
+        if dim == table.axis and (len(matched_values) < 2 or all(any(same_value(r.value, v) for v in matched_values)
+                                                                 for r in (a, b))):
+            return ""  # the matched axis's own rows (natural against matched), or two matched cells
+        for scene in scenes:
+            natural_ids = None if not stratum else set(usable.run_id) - stratum
+            if dim == table.axis:
+                natural_ids = None
+            ratio = paired_ratio(*(values_in(scene, r, size_spec.name, natural_ids) for r in (a, b)))
+            if not ratio.n or not math.isfinite(ratio.estimate) or max(ratio.estimate, 1 / ratio.estimate) < \
+                    1 + MATCHED_SHARE - 1e-12:
+                continue
+            more = "more" if ratio.estimate > 1 else "fewer"
+            head = f"{scene}: ×{ratio.estimate:.3f} the {_name(size_spec)} (≥ {100 * MATCHED_SHARE:g} % {more}"
+            if not matched:
+                pieces.append(head + "; the grid declares no matched-size cell, `[report] matched`: quality and size "
+                                     "are not separated)")
+            elif dim == table.axis:
+                pieces.append(head + f"; no matched-size cell of this comparison: the matched cells are "
+                                     f"{', '.join(f'`{display(v)}`' for v in matched_values)}, compared below)")
+            else:
+                pa = values_in(scene, a, primary.name, stratum)
+                pb = values_in(scene, b, primary.name, stratum)
+                iv, null = paired(pa, pb, primary_comp)
+                if not iv.n:
+                    pieces.append(head + "; its matched-size cells have no done runs)")
+                    continue
+                size = paired_ratio(values_in(scene, a, size_spec.name, stratum),
+                                    values_in(scene, b, size_spec.name, stratum))
+                text = fmt_interval(iv, primary_comp.how, primary, null, primary_comp.min_effect)
+                claims.append(Claim("matched", scene, b.label, primary.name, primary_comp.how, iv.estimate, text,
+                                    a.label, iv.low, iv.high, iv.n,
+                                    *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
+                at = f"×{size.estimate:.3f} the {_name(size_spec)}" if size.n else "sizes not recorded"
+                pieces.append(head + f" at its natural size); at the matched size ({setting_text(experiment, dim)}): "
+                                     f"{_name(primary)} {text}, at {at}")
+        return (". **Against model size**: " + "; ".join(pieces)) if pieces else ""
+
+    def values_in(scene: str, row: Row, metric: str, ids: set[str] | None) -> dict[int, float]:
+        sel = selected(scene, row, usable)
+        if ids is not None:
+            sel = sel[sel.run_id.isin(ids)]
+        return seed_values(sel, metric) if len(sel) and f"metric.{metric}" in sel.columns else {}
+
     def unsettled(scene: str, a: Row, b: Row, diff: float) -> str:
         """"" when the difference ``b - a`` at ``scene`` is settled or not judged, else why not."""
         return unsettled_reason(settle(scene, a), settle(scene, b), (a.label, b.label), diff, primary.unit)
@@ -268,11 +401,13 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         lead = (paired_ratio if how == "ratio" else paired_difference)(values(scene, runner, primary.name),
                                                                        values(scene, row, primary.name))
         significant, is_practical = judge(lead, how, null, primary, primary_comp.min_effect)
+        clear = significant and clears(lead, how, null, primary_comp.min_effect)
         lead_text = fmt_interval(lead, how, primary, null, primary_comp.min_effect)
         why = unsettled(scene, runner, row, lead.estimate - null)
         settled = None if settle(scene, row) is None else not why
+        reversed_ = other_way(primary, lead.estimate - null, quality_intervals(scene, runner, row))
         larger = None  # the leader's size against the runner-up's, where it is larger by the minimum effect
-        if significant and is_practical and size_spec is not None:
+        if clear and size_spec is not None:
             ratio = paired_ratio(values(scene, runner, size_spec.name), values(scene, row, size_spec.name))
             if ratio.n and math.isfinite(ratio.estimate) and ratio.estimate > 1.0 \
                     and practical(ratio, "ratio", 1.0, size_effect):
@@ -293,14 +428,21 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             claims.append(Claim("size", scene, row.label, size_spec.name, "ratio", larger.estimate, size_text,
                                 runner.label, larger.low, larger.high, larger.n, *judge(larger, "ratio", 1.0,
                                                                                            size_spec, size_effect)))
-        elif significant and is_practical:
+        elif clear:
             text = f"{scene} `{row.label}` ({mean_text}; {lead_text} over `{runner.label}`)"
+            if reversed_:
+                names = " and ".join(n for n, _ in reversed_)
+                text += (f", **but {names} go{'es' if len(reversed_) == 1 else ''} the other way** "
+                         f"({'; '.join(t for _, t in reversed_)})")
             if why:
                 text += f", **not settled** ({why})"
             claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, text, runner.label,
                                 lead.low, lead.high, lead.n, significant, is_practical, settled))
         else:
-            text = (f"{scene}: no single best (`{row.label}`, {mean_text}, leads `{runner.label}` by {lead_text})")
+            bound = ("" if not is_practical or unit_text is None else
+                     f"; its interval's bound nearer no difference is not beyond the {unit_text} minimum effect")
+            text = (f"{scene}: no single best (`{row.label}`, {mean_text}, leads `{runner.label}` by {lead_text}"
+                    f"{bound})")
             claims.append(Claim("no best", scene, row.label, primary.name, how, lead.estimate, text, runner.label,
                                 lead.low, lead.high, lead.n, significant, is_practical, settled))
         best_parts.append(text)
@@ -311,8 +453,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                                         f"quiet machine (docs/reports.md, \"Quiet numbers\")."], [])
         return None
     word = "best" if primary.better != "lower" else "lowest"
-    rule = ("named only where it beats the runner-up by a significant paired difference"
-            + (f" of at least {unit_text}" if unit_text else "")
+    rule = ("named only where the 95 % interval of its paired lead over the runner-up lies wholly beyond "
+            + (f"the {unit_text} minimum effect" if unit_text else "no difference")
             + (f" with no more than {fmt_min_effect(size_effect, 'ratio', size_spec)} more {_name(size_spec)}"
                if size_spec is not None else ""))
     lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds; {rule}): "
@@ -359,7 +501,50 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             also = confounds(scenes, ref, row, usable, kind)
             if also:
                 line += f". Also changed: {also}"
+            primaries = [c for c in claims if c.kind == "vs" and c.label == row.label and c.reference == ref.label
+                         and c.metric == primary.name]
+            primary_null = {"diff": 0.0, "ratio": 1.0}.get(primary_comp.how, primary_comp.null or 0.0)
+            opposed = []
+            for c in primaries:
+                if c.significant:
+                    against = other_way(primary, c.value - primary_null,
+                                        quality_intervals(c.scene, ref, row))
+                    if against:
+                        opposed.append(f"{c.scene}: {'; '.join(t for _, t in against)}")
+            if opposed:
+                line += f". **The other way** (against the {_name(primary)} difference, significantly): " \
+                    + "; ".join(opposed)
+            across = across_scenes(primaries, scenes, primary_null)
+            if across:
+                line += f". {across}"
+            size = size_line(scenes, ref, row)
+            if size:
+                line += f". {size}"
+            if size_spec is not None:
+                line += matched_text(ref, row)
             lines.append(line)
+    if size_spec is not None and dim == table.axis and len(matched_values) >= 2:
+        rows = [r for r in table.rows if any(same_value(r.value, v) for v in matched_values)]
+        parts = []
+        for row in rows[1:]:
+            texts = []
+            for scene in scenes:
+                iv, null = paired(values(scene, rows[0], primary.name), values(scene, row, primary.name), primary_comp)
+                if not iv.n:
+                    continue
+                text = fmt_interval(iv, primary_comp.how, primary, null, primary_comp.min_effect)
+                claims.append(Claim("matched", scene, row.label, primary.name, primary_comp.how, iv.estimate, text,
+                                    rows[0].label, iv.low, iv.high, iv.n,
+                                    *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
+                ratio = paired_ratio(values(scene, rows[0], size_spec.name), values(scene, row, size_spec.name))
+                at = f" at ×{ratio.estimate:.3f} the {_name(size_spec)}" if ratio.n else ""
+                texts.append(f"{scene} {text}{at}")
+            if texts:
+                parts.append(f"`{row.label}` against `{rows[0].label}`: " + "; ".join(texts))
+        if parts:
+            lines.append(f"- **At a matched size** (`[report] matched`: {', '.join(f'`{r.label}`' for r in rows)} end at "
+                         f"one {_name(size_spec)} count; {setting_text(experiment, dim, [r.value for r in rows])}): "
+                         + ". ".join(parts) + ".")
     self_parts = []
     for comp in rules.comparisons:
         if comp.how != "mean" or comp.null is None:
@@ -375,6 +560,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     if self_parts:
         lines.append(f"- `{ref.label}` against itself (the same options timed as both sides of each pair; the "
                      f"noise floor of the ratio): " + "; ".join(self_parts) + ".")
+    count += sum(1 for c in claims if c.kind == "matched")
     if count:
         claims.append(Claim("count", "", "", "", "count", float(count), str(count)))
         seeds = max((c.n for c in claims if c.kind == "vs"), default=0)
@@ -410,6 +596,50 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         lines += more_lines
         claims += more_claims
     return Finding(table.axis, lines, claims)
+
+
+#: A comparison whose Gaussian count differs by at least this share is also stated at the matched size.
+MATCHED_SHARE = 0.10
+
+
+def _stratum(runs: pd.DataFrame, dim: str | None, values: Sequence) -> set[str]:
+    """The run ids of ``runs`` whose ``dim`` is one of ``values`` (`[report] matched`); empty without."""
+    col = f"axis.{dim}"
+    if dim is None or col not in runs.columns or not len(runs):
+        return set()
+    keep = [any(same_value(decode(v), w) for w in values) for v in runs[col]]
+    return set(runs.run_id[keep])
+
+
+def setting_text(spec: ExperimentSpec | None, dim: str | None, values: Sequence | None = None) -> str:
+    """What the matched setting sets: ``size = matched: strategy.name = budget, strategy.budget = 6000``
+    (a variant's fields), ``loss.ssim_lambda = 0.2`` (a plain axis)."""
+    if spec is None or dim is None:
+        return ""
+    values = list(values if values is not None else spec.matched.get(dim, ()))
+    if dim in spec.variants:
+        return "; ".join(f"`{dim} = {display(v)}` sets " + ", ".join(f"`{k} = {display(x)}`" for k, x in
+                                                                      flatten(dict(spec.variants[dim][v])).items())
+                         for v in values)
+    return ", ".join(f"`{dim} = {display(v)}`" for v in values)
+
+
+def across_scenes(claims: Sequence[Claim], scenes: Sequence[str], null: float = 0.0) -> str:
+    """Whether a primary difference holds across scenes: ``**Across scenes**`` where it is practical
+    with one sign on every scene (two or more); where it is practical on some scenes only, or its sign
+    differs, ``**Per scene only**`` naming them (the sign against ``null``, the comparison's no
+    difference); "" with one scene, or nowhere practical."""
+    if len(scenes) < 2 or not claims:
+        return ""
+    practical_ = [c for c in claims if c.practical]
+    if not practical_:
+        return ""
+    signs = {c.value > null for c in practical_}
+    if len(practical_) == len(scenes) and len(signs) == 1:
+        return f"**Across scenes**: practical and of one sign on all {len(scenes)} scenes"
+    on = ", ".join(f"{c.scene} {'+' if c.value > null else '−'}" for c in practical_)
+    return (f"**Per scene only** (not across scenes: practical on {len(practical_)} of {len(scenes)} scenes"
+            + (", with opposite signs" if len(signs) > 1 else "") + f": {on})")
 
 
 def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, keys: SettlingCurves,

@@ -46,6 +46,7 @@ from splatbench.report_files import markdown_table, write_parquet, write_text
 from splatbench.reports.check import CHECK_TABLE_NAME, CheckResult, check_lines, check_result, check_table, header_line
 from splatbench.reports.figures import cell_means, curves_figure
 from splatbench.reports.findings import Finding, axis_finding, load_recorded, usable_runs
+from splatbench.reports.ranks import quick_table, rank_finding
 from splatbench.reports.settling import settling_finding
 from splatbench.reports.tables import AxisTable, axis_table, cell_labels, display, loaded_runs, metric_specs
 
@@ -119,11 +120,13 @@ def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int,
     axes = [axis_table(spec, kind, axis, table, metrics) for axis in spec.dimensions]
     findings: dict[str, Finding] = {}
     for t in axes:
-        f = axis_finding(t, kind, table, spec.min_effect)
+        f = axis_finding(t, kind, table, spec.min_effect, spec)
         if f is not None:
             findings[t.axis] = f
     hooks = kind.report.run_findings if kind.report is not None else ()
-    for f in (settling_finding(table, kind, spec.min_effect), *(make(table, spec.min_effect) for make in hooks)):
+    quick, quick_path = quick_table(spec)
+    for f in (settling_finding(table, kind, spec.min_effect), *(make(table, spec.min_effect) for make in hooks),
+              rank_finding(spec, kind, table, quick, quick_path)):
         if f is not None:  # a run finding: its own section, named by its axis
             findings[f.axis] = f
     return Report(spec, kind, table, total, metrics, axes, findings, check=check_result(spec, kind, table, checked))
@@ -229,6 +232,10 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     missing = report.total - len(table)
     dims = ", ".join(f"`{d}`" for d in spec.dimensions) or "no axes"
     lines = [f"# {spec.name}", ""]
+    for note in kind.report.title_notes if kind.report is not None else ():  # the first line, e.g. a smoke test
+        more = note(table)
+        if more:
+            lines += [*more, ""]
     if spec.description:
         lines += [f"> {spec.description}", ""]
     lines += [

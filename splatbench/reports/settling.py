@@ -12,6 +12,11 @@ and the metric they measure); the rule (docs/reports.md, "Settled"):
   more steps at that slope -- half the quick protocol's run again, and the slope only falls
   as the learning rate decays -- would move it by less than the minimum effect (0.1 dB PSNR
   by default: 0.1 dB per 1,000 steps). A falling curve is not settled either;
+* **past its peak**: the test curve's last value (mean over seeds at each evaluation step the
+  seeds share) is more than the minimum effect below its best value at an earlier step (above,
+  for a metric where lower is better): such a cell is "past its peak (best at step N)", never
+  settled, however flat its last quarter (a curve that peaked at 2,100 steps and fell 0.3 dB by
+  7,000 may end flat);
 * **overfitting**: the test curve is flat or falling (slope below the threshold) while the
   training-view curve, where recorded, still rises faster than the test curve by at least
   the threshold: the cell fits its training views, it has not converged;
@@ -87,10 +92,38 @@ class CellSettling:
     per_seed: dict[int, float]
     threshold: float
     gap: float | None = None  # train − test over the window (mean over seeds; None: no training curve)
+    best: float | None = None  # the mean curve's best value (None: no step every seed evaluated)
+    best_step: int | None = None  # the step of ``best`` (the first, on a tie)
+    last: float | None = None  # the mean curve's value at its last step
+
+    @property
+    def flat(self) -> bool:
+        """The last quarter's slope is below the threshold."""
+        return abs(self.test) < self.threshold
+
+    @property
+    def fall(self) -> float:
+        """How far the mean curve's last value is below its best (>= 0, in the curve's unit; 0 unknown)."""
+        return 0.0 if self.best is None or self.last is None else abs(self.best - self.last)
+
+    @property
+    def past_peak(self) -> bool:
+        """The last value is more than the minimum effect (the threshold per 1,000 steps) below the best."""
+        return self.fall > self.threshold + 1e-12
 
     @property
     def settled(self) -> bool:
-        return abs(self.test) < self.threshold
+        """Flat over the last quarter and not past its peak (module doc)."""
+        return self.flat and not self.past_peak
+
+    def why_not(self, unit: str = "dB") -> str:
+        """Why the cell is not settled: its slope, and / or ``past its peak (best at step 2,100, 0.31 dB
+        above its last value)``; "" when settled."""
+        parts = [] if self.flat else [f"{self.test:+.2f} {unit} / 1,000 steps over the last quarter"]
+        if self.past_peak:
+            parts.append(f"past its peak (best at step {self.best_step:,}, {self.fall:.2f} {unit} above its last "
+                         f"value)")
+        return ", ".join(parts)
 
     @property
     def overfitting(self) -> bool:
@@ -110,6 +143,22 @@ def _curves(value) -> dict | None:
     except ValueError:
         return None
     return parsed if isinstance(parsed, dict) else None
+
+
+def mean_peak(runs: pd.DataFrame, keys: SettlingCurves) -> tuple[float, int, float] | None:
+    """(best value, its step, last value) of the test curve averaged over seeds at each step every seed
+    of ``runs`` evaluated (a seed's runs averaged first); best is the highest, or the lowest where
+    ``keys.better`` is "lower"; None when the seeds share no step."""
+    seeds = _seed_curves(runs, keys.test_step, keys.test_value)
+    if not seeds:
+        return None
+    steps = sorted(set.intersection(*(set(c) for c in seeds.values())))
+    if not steps:
+        return None
+    mean = [(s, float(np.mean([c[s] for c in seeds.values()]))) for s in steps]
+    sign = -1.0 if keys.better == "lower" else 1.0
+    step, best = max(mean, key=lambda p: (sign * p[1], -p[0]))
+    return best, step, mean[-1][1]
 
 
 def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -> CellSettling | None:
@@ -143,8 +192,10 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
     per_seed = {k: float(np.mean(v)) for k, v in sorted(test.items())}
     train_mean = float(np.mean([np.mean(v) for v in train.values()])) if train else None
     gap = float(np.mean([np.mean(v) for v in gaps.values()])) if gaps else None
+    peak = mean_peak(runs, keys)
+    best, best_step, last = peak if peak is not None else (None, None, None)
     return CellSettling(float(np.mean(list(per_seed.values()))), train_mean, min(starts), max(ends), per_seed,
-                        min_effect, gap)
+                        min_effect, gap, best, best_step, last)
 
 
 def window_gap(curves: dict, keys: SettlingCurves, start: int, end: int) -> float | None:
@@ -213,9 +264,9 @@ def unsettled_reason(a: CellSettling | None, b: CellSettling | None, labels: tup
     quarter; "" when it is settled, or not judged (a cell without a curve)."""
     if a is None or b is None:
         return ""
-    moving = [f"`{label}` {c.test:+.2f}" for label, c in ((labels[1], b), (labels[0], a)) if not c.settled]
+    moving = [f"`{label}` {c.why_not(unit)}" for label, c in ((labels[1], b), (labels[0], a)) if not c.settled]
     if moving:
-        return ", ".join(moving) + f" {unit} / 1,000 steps over the last quarter"
+        return "; ".join(moving)
     if not difference_settled(a, b, diff):
         return f"the difference moved {drift(a, b):+.2f} {unit} over the last quarter"
     return ""
@@ -290,16 +341,23 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
                      f"before its update, logged every `log_every` steps; a larger gap is a cell fitting its training "
                      f"views more than it generalises): "
                      + "; ".join(f"{scene} `{cell}` {g:+.2f} dB" for scene, cell, g in gaps) + ".")
-    moving = [f"{scene} `{cell}` ({c.test:+.2f})" for (scene, cell), c in cells.items() if not c.settled]
+    moving = [f"{scene} `{cell}` ({c.test:+.2f})" for (scene, cell), c in cells.items() if not c.flat]
+    peaked = [f"{scene} `{cell}` (best at step {c.best_step:,}, {c.fall:.2f} dB above its last value)"
+              for (scene, cell), c in cells.items() if c.past_peak]
     overfit = [f"{scene} `{cell}` (test {c.test:+.2f}, train {c.train:+.2f})" for (scene, cell), c in cells.items()
                if c.overfitting]
     if moving:
         lines.append(f"- **Not settled**: {len(moving)} of {len(cells)} cells still moved by {threshold} or more over "
                      f"the last quarter: " + ", ".join(moving) + ". Their differences above are what this run length "
                      "gives, not where the cells converge (each such comparison is marked **not settled**).")
-    else:
+    if peaked:
+        lines.append(f"- **Past its peak** (not settled, however flat its end): {len(peaked)} of {len(cells)} cells "
+                     f"ended more than the {effect:g} dB minimum effect below their best test PSNR (the curve's mean "
+                     f"over seeds): " + ", ".join(peaked) + ". Their numbers are the last step's, not the best's.")
+    if not moving and not peaked:
         lines.append(f"- Settled: every cell{' with a slope' if unknown else ''}'s test curve moved by less than "
-                     f"{threshold} over the last quarter.")
+                     f"{threshold} over the last quarter, and none ended more than the minimum effect below its "
+                     f"best.")
     if cannot_tell:
         lines.append(cannot_tell)
     if overfit:

@@ -1,0 +1,270 @@
+"""The report rules of issue 39 (item 4, 5 and the header of item 2): settled means flat *and* not
+past its peak, "best" only where the lead's interval clears the minimum effect, a PSNR difference
+whose SSIM or LPIPS goes the other way says so, "across scenes" only where the sign agrees on every
+scene, ranks and Kendall's tau (across scenes and against a quick version), Gaussians and bytes
+beside each comparison with the matched-size cells of ``[report] matched``, the Scenes line's real
+captures and a quick-protocol report's first line.
+
+Results folders are written by hand (made-up metrics and curves on the real grid of a small train
+experiment), as tests/test_report_rules.py does: no training runs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from splatbench.errors import InputError
+from splatbench.experiments import parse_experiment
+from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
+from splatbench.experiments.train_kind import TRAIN
+from splatbench.experiments.train_report import floats_per_gaussian, protocol_lines, smoke_test_line
+from splatbench.metrics.stats import kendall_tau
+from splatbench.reports.ranks import ranks
+from splatbench.reports.settling import cell_settling, settling_finding
+from tests.test_report_rules import flat_curves, metrics_of, results
+
+
+def spec_of(scenes=("glossy",), axes=None, **extra):
+    return parse_experiment({"name": "rules", "kind": "train", "scenes": list(scenes), "seeds": [0, 1, 2],
+                             "base": {"iterations": 2000, "data": {"resolution": 32, "views": 8, "spp": 2}},
+                             "axes": axes if axes is not None else {"sh.degree": [0, 3]}, **extra},
+                            source="rules.toml")
+
+
+def vs_line(text: str, label: str) -> str:
+    return next(line for line in text.splitlines() if line.startswith(f"  - `{label}`: "))
+
+
+# --------------------------------------------------------------------------- past its peak
+def _peaked(fall: float, seeds: int = 3) -> pd.DataFrame:
+    """A 7K test curve (a point every 700 steps) that peaks at 2,100 steps and falls by ``fall`` dB
+    by 4,200, then stays flat (so its last quarter is flat)."""
+    steps = list(range(700, 7001, 700))
+    rows = []
+    for seed in range(seeds):
+        values = [28.0 + 0.1 * seed + (s / 2100 if s <= 2100 else 1.0 - fall * min(1.0, (s - 2100) / 2100))
+                  for s in steps]
+        rows.append({"run_id": f"p{seed}", "status": "done", "scene": "fox", "seed": seed, "axis.x": "a",
+                     "curves": json.dumps({"eval_step": steps, "eval_psnr": values})})
+    return pd.DataFrame(rows)
+
+
+def test_a_flat_curve_that_fell_from_its_peak_is_not_settled():
+    cell = cell_settling(_peaked(0.3), TRAIN_REPORT.settling, 0.1)
+    assert cell.flat and cell.past_peak and not cell.settled
+    assert (cell.best_step, round(cell.fall, 6)) == (2100, 0.3)  # the mean curve's best and its fall
+    assert "past its peak (best at step 2,100, 0.30 dB above its last value)" in cell.why_not()
+    text = settling_finding(_peaked(0.3), TRAIN).markdown()
+    assert "**Past its peak**" in text and "fox `x=a` (best at step 2,100, 0.30 dB above its last value)" in text
+    assert "Settled: every cell" not in text and not settling_finding(_peaked(0.3), TRAIN).claims[0].settled
+    # a fall within the minimum effect (0.05 dB < 0.1 dB) is settled; and the file's minimum effect moves it
+    assert cell_settling(_peaked(0.05), TRAIN_REPORT.settling, 0.1).settled
+    assert cell_settling(_peaked(0.3), TRAIN_REPORT.settling, 0.5).settled
+
+
+# --------------------------------------------------------------------------- best
+def test_best_needs_the_leads_interval_beyond_the_minimum_effect(tmp_path):
+    """+0.12 dB (per seed +0.08, +0.12, +0.16: significant, estimate above 0.1 dB) has a lower bound of
+    +0.12 − t · 0.04 / √3 = +0.021 dB: within the minimum effect, so no best (the rule of issue 39)."""
+    deltas = {0: 0.08, 1: 0.12, 2: 0.16}
+
+    def make(run):
+        psnr = 30.0 + run.seed * 0.3 + (deltas[run.seed] if run.labels["sh.degree"] == 3 else 0.0)
+        return metrics_of(psnr), flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of(), make)
+    claims = report.findings["sh.degree"].claims
+    lead = next(c for c in claims if c.kind == "no best")
+    assert lead.significant and lead.practical and lead.low == pytest.approx(0.12 - 4.302653 * 0.04 / math.sqrt(3),
+                                                                             abs=1e-4)
+    assert not [c for c in claims if c.kind == "best"]
+    assert "not beyond the 0.1 dB minimum effect" in lead.text and lead.text in text
+
+
+# --------------------------------------------------------------------------- the other way
+def _ssim_make(ssim_gain: float):
+    """SH 3 ahead by +0.5 dB (+0.01 per seed); its SSIM ``ssim_gain`` (+0.0005 per seed) from SH 0's."""
+    def make(run):
+        three = run.labels["sh.degree"] == 3
+        psnr = 30.0 + run.seed * 0.01 + ((0.5 + 0.01 * run.seed) if three else 0.0)
+        ssim = 0.9 + run.seed * 0.001 + ((ssim_gain + 0.0005 * run.seed) if three else 0.0)
+        return metrics_of(psnr, test_ssim=ssim), flat_curves(psnr)
+    return make
+
+
+def test_a_psnr_lead_whose_ssim_goes_the_other_way_says_so(tmp_path):
+    report, text = results(tmp_path, spec_of(), _ssim_make(-0.0105))
+    best = next(c for c in report.findings["sh.degree"].claims if c.kind == "best")
+    assert "**but SSIM goes the other way** (SSIM -0.0100 [95 % CI" in best.text and best.text in text
+    assert "**The other way** (against the test PSNR difference, significantly): glossy: SSIM -0.0100" \
+        in vs_line(text, "3")
+    # SSIM going the same way is not named
+    _, text = results(tmp_path / "b", spec_of(), _ssim_make(0.01))
+    assert "the other way" not in text.lower()
+
+
+# --------------------------------------------------------------------------- across scenes
+def test_a_difference_holds_across_scenes_only_with_one_sign_on_every_scene(tmp_path):
+    def make_with(sign_on_diffuse: float):
+        def make(run):
+            gain = 0.5 * (sign_on_diffuse if run.scene == "diffuse" else 1.0)
+            psnr = 30.0 + run.seed * 0.01 + (gain + 0.01 * run.seed if run.labels["sh.degree"] == 3 else 0.0)
+            return metrics_of(psnr), flat_curves(psnr)
+        return make
+
+    _, text = results(tmp_path / "a", spec_of(("glossy", "diffuse")), make_with(1.0))
+    assert "**Across scenes**: practical and of one sign on all 2 scenes" in vs_line(text, "3")
+    _, text = results(tmp_path / "b", spec_of(("glossy", "diffuse")), make_with(-1.0))
+    line = vs_line(text, "3")
+    assert "**Across scenes**" not in line
+    assert "**Per scene only** (not across scenes: practical on 2 of 2 scenes, with opposite signs: glossy +, " \
+           "diffuse −)" in line
+
+
+# --------------------------------------------------------------------------- ranks
+def test_kendall_tau_b_against_hand_counted_pairs():
+    # one discordant pair (b, c) of 6: (5 − 1) / 6
+    assert kendall_tau({"a": 1, "b": 2, "c": 3, "d": 4}, {"a": 1, "b": 3, "c": 2, "d": 4}) == (pytest.approx(4 / 6), 4)
+    # ties: x = 1, 2, 2, 3 and y = 1, 2, 3, 3: 4 concordant, 0 discordant, one tie on each side:
+    # tau-b = 4 / sqrt((6 − 1) (6 − 1)) = 0.8
+    assert kendall_tau({"a": 1, "b": 2, "c": 2, "d": 3}, {"a": 1, "b": 2, "c": 3, "d": 3})[0] == pytest.approx(0.8)
+    assert kendall_tau({"a": 1, "b": 2}, {"a": 2, "b": 1})[0] == pytest.approx(-1.0)
+    assert math.isnan(kendall_tau({"a": 1}, {"a": 1})[0]) and math.isnan(kendall_tau({"a": 1, "b": 1},
+                                                                                      {"a": 1, "b": 2})[0])
+    assert ranks({"x": 30.0, "y": 31.0, "z": 31.0}, "higher") == {"x": 3.0, "y": 1.5, "z": 1.5}
+    assert ranks({"x": 0.1, "y": 0.3}, "lower") == {"x": 1.0, "y": 2.0}
+
+
+def test_a_report_ranks_its_cells_per_scene_and_against_its_quick_version(tmp_path):
+    gains = {"glossy": {0: 0.0, 1: 0.5, 3: 1.0}, "diffuse": {0: 1.0, 1: 0.5, 3: 0.0}}  # reversed order
+
+    def make(run):
+        psnr = 30.0 + gains[run.scene][run.labels["sh.degree"]] + 0.01 * run.seed
+        return metrics_of(psnr), flat_curves(psnr)
+
+    spec = spec_of(("glossy", "diffuse"), {"sh.degree": [0, 1, 3]})
+    report, text = results(tmp_path / "a", spec, make)
+    ranked = {(c.scene, c.label): c.value for c in report.findings["ranks"].claims if c.kind == "rank"}
+    assert ranked[("glossy", "sh.degree=3")] == 1 and ranked[("diffuse", "sh.degree=3")] == 3
+    tau = next(c for c in report.findings["ranks"].claims if c.kind == "tau")
+    assert tau.value == pytest.approx(-1.0) and tau.n == 3
+    assert "- **Rank agreement across scenes** (Kendall's τ-b" in text and "glossy / diffuse -1.00 (3 cells)" in text
+    assert "| `sh.degree=3` | 1 (31.01 dB) | 3 (30.01 dB) |" in text
+    assert "no quick version" in text
+
+    # the quick version: the same grid's table, glossy in the same order, diffuse with 0 and 1 swapped
+    quick = pd.read_parquet(tmp_path / "a" / "out" / "results.parquet")
+    swap = {0: 0.5, 1: 1.0, 3: 0.0}
+    quick["metric.test_psnr"] = [30.0 + (gains[s][int(d)] if s == "glossy" else swap[int(d)]) for s, d in
+                                 zip(quick.scene, quick["axis.sh.degree"])]
+    quick.to_parquet(tmp_path / "quick.parquet")
+    spec = spec_of(("glossy", "diffuse"), {"sh.degree": [0, 1, 3]},
+                   report={"quick": str(tmp_path / "quick.parquet")})
+    report, text = results(tmp_path / "b", spec, make)
+    q = {c.scene: c.value for c in report.findings["ranks"].claims if c.kind == "quick tau"}
+    # glossy the same order (+1); diffuse: quick 1 > 0 > 3 against 0 > 1 > 3: one discordant pair of 3
+    assert q == {"glossy": pytest.approx(1.0), "diffuse": pytest.approx(1 / 3)}
+    assert "- **Quick protocol against this one** (Kendall's τ-b" in text and "diffuse +0.33 (3 cells)" in text
+    # a pointer to nothing is one line
+    with pytest.raises(InputError, match=r"report\.quick: .*missing\.parquet does not exist"):
+        results(tmp_path / "c", spec_of(report={"quick": str(tmp_path / "missing.parquet")}), make)
+
+
+# --------------------------------------------------------------------------- model size
+LOSS_GRID = {"variants": {"size": {"natural": {"strategy.name": "default"},
+                                   "matched": {"strategy.name": "budget", "strategy.budget": 600,
+                                               "strategy.budget_mode": "final_count"}}}}
+
+
+def _loss_make(run):
+    one = run.labels["loss.ssim_lambda"] == 1.0
+    matched = run.labels["size"] == "matched"
+    psnr = 30.0 + 0.01 * run.seed + ((0.2 + 0.01 * run.seed) if matched else (1.0 + 0.02 * run.seed)) * one
+    count = 600 + run.seed if matched else (5000 if one else 1000) + 10 * run.seed
+    return metrics_of(psnr, num_gaussians=count, sh_degree=3), flat_curves(psnr)
+
+
+def test_a_difference_with_more_gaussians_is_also_given_at_the_matched_size(tmp_path):
+    axes = {"loss.ssim_lambda": [0.0, 1.0]}
+    spec = spec_of(axes=axes, **LOSS_GRID, report={"matched": {"size": "matched"}})
+    assert spec.matched == {"size": ("matched",)}
+    report, text = results(tmp_path / "a", spec, _loss_make)
+    line = vs_line(text, "1")
+    # Gaussians and bytes (59 floats per Gaussian at SH degree 3, 4 bytes each) beside the comparison: the
+    # row pools natural and matched runs: seed s has (5000 + 10 s + 600 + s) / 2, 2,805.5 over seeds 0..2
+    mb_one = (5000 + 600 + 11 * 1) / 2 * floats_per_gaussian(3) * 4 / 1e6
+    assert f"Gaussians and bytes (mean over seeds, `1` against `0`): glossy 2,806 Gaussians, {mb_one:.2f} MB" in line
+    # the matched axis's own rows (matched against natural) are the size comparison itself: nothing added
+    assert "**Against model size**" not in vs_line(text, "matched")
+    matched = next(c for c in report.findings["loss.ssim_lambda"].claims if c.kind == "matched")
+    assert matched.value == pytest.approx(0.21) and matched.reference == "0" and matched.label == "1"
+    natural = math.exp(np.mean([math.log((5000 + 10 * s) / (1000 + 10 * s)) for s in range(3)]))  # paired, geometric
+    assert f"**Against model size**: glossy: ×{natural:.3f} the Gaussians (≥ 10 % more at its natural size); at the matched " \
+           "size (`size = matched` sets `strategy.name = budget`, `strategy.budget = 600`, " \
+           "`strategy.budget_mode = final_count`): test PSNR +0.21 dB [95 % CI" in line
+    assert "at ×1.000 the Gaussians" in line
+
+    # without [report] matched the same line says that quality and size are not separated
+    _, text = results(tmp_path / "b", spec_of(axes=axes, **LOSS_GRID), _loss_make)
+    assert "the grid declares no matched-size cell, `[report] matched`: quality and size are not separated" \
+        in vs_line(text, "1")
+
+
+def test_matched_cells_of_the_compared_axis_are_compared_with_each_other(tmp_path):
+    variants = {"densify": {"none": {"strategy.name": "none"}, "default": {"strategy.name": "default"},
+                            "mcmc": {"strategy.name": "mcmc", "strategy.cap_max": 600},
+                            "budget": {"strategy.name": "budget", "strategy.budget": 600,
+                                       "strategy.budget_mode": "final_count"}}}
+    counts = {"none": 300, "default": 3000, "mcmc": 600, "budget": 600}
+    gain = {"none": 0.0, "default": 2.0, "mcmc": 1.5, "budget": 1.0}
+
+    def make(run):
+        d = run.labels["densify"]
+        psnr = 28.0 + gain[d] + 0.01 * run.seed * (1 + list(gain).index(d))
+        return metrics_of(psnr, num_gaussians=counts[d] + run.seed), flat_curves(psnr)
+
+    spec = spec_of(axes={}, variants=variants, report={"matched": {"densify": ["mcmc", "budget"]}})
+    report, text = results(tmp_path, spec, make)
+    assert "- **At a matched size** (`[report] matched`: `mcmc`, `budget` end at one Gaussians count;" in text
+    # budget − mcmc per seed: (1.0 + 0.04 s) − (1.5 + 0.03 s) = −0.5 + 0.01 s, −0.49 over seeds 0..2
+    assert "`budget` against `mcmc`: glossy -0.49 dB [95 % CI" in text and "at ×1.000 the Gaussians." in text
+    # default (×10 the Gaussians of none) has no matched-size cell of its own: said so
+    assert "no matched-size cell of this comparison: the matched cells are `mcmc`, `budget`" \
+        in vs_line(text, "default")
+
+
+def test_report_matched_and_quick_are_checked_when_the_file_is_read():
+    with pytest.raises(InputError, match=r"report\.matched\.size: 'smaller' is not a value of the grid's 'size'"):
+        spec_of(axes={"loss.ssim_lambda": [0.0]}, **LOSS_GRID, report={"matched": {"size": "smaller"}})
+    with pytest.raises(InputError, match=r"report\.matched\.lr: not an axis of the grid"):
+        spec_of(report={"matched": {"lr": 1}})
+    with pytest.raises(InputError, match=r"report\.quick: expected the path"):
+        spec_of(report={"quick": 3})
+
+
+# --------------------------------------------------------------------------- header
+def test_the_scenes_line_counts_real_captures_and_a_quick_report_says_smoke_test(tmp_path):
+    _, text = results(tmp_path, spec_of(("glossy", "diffuse", "thin")), lambda run: (
+        metrics_of(30.0 + run.seed * 0.1), flat_curves(30.0)))
+    lines = text.splitlines()
+    assert lines[2].startswith("**A smoke test, not evidence**: these runs follow the quick protocol")
+    table = pd.read_parquet(tmp_path / "out" / "results.parquet")
+    scenes = lambda t: next(x for x in protocol_lines(t) if x.startswith("- **Scenes**"))  # noqa: E731
+    assert "0 real captures; a finding here holds on these scenes only" in scenes(table)
+    # two dataset folders (config.data.path) are real captures; a teacher scene is not
+    table["config.data.path"] = [("/data/" + s) if s in ("glossy", "diffuse") else None for s in table.scene]
+    assert scenes(table).startswith("- **Scenes**: 3: diffuse (a real capture), glossy (a real capture), thin "
+                                    "(rendered by Mitsuba); the evidence rule's count (3 scenes, 2 of them real "
+                                    "captures) is met.")
+    table["config.data.path"] = [("/data/" + s) if s == "glossy" else None for s in table.scene]
+    table["config.data.model"] = [("/m/" + s) if s == "diffuse" else None for s in table.scene]
+    assert "diffuse (a teacher scene rendered from a trained model, not a capture)" in scenes(table)
+    assert "1 real capture; a finding here" in scenes(table)
+    # a report at graphdeco's 7K column is no smoke test
+    assert smoke_test_line(table.assign(**{"config.protocol": "graphdeco-7k"})) == []
+    assert smoke_test_line(table)[0].startswith("**A smoke test, not evidence**")
