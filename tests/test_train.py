@@ -153,9 +153,16 @@ def test_config_toml_round_trip_and_overrides(tmp_path):
         TrainConfig.from_toml('[strategy]\nname = "mcmc"\n[init]\nmethod = "random"\n')
     assert apply_overrides(TrainConfig(), ["background=1,1,1"]).background == [1.0, 1.0, 1.0]  # render's spelling
     assert parse_override("init = random") == ("init", "random")
+    # a flat key of the config before its groups points to its place now; a top-level field written
+    # inside a table (after a [table] header in TOML) says so
+    with pytest.raises(InputError, match=r"^--set: sh_degree: now sh\.degree \(the config is in groups"):
+        apply_overrides(cfg, ["sh_degree=2"])
+    with pytest.raises(InputError, match=r"^c\.toml: data\.background: not a key of \[data\]: background is a top-level"):
+        TrainConfig.from_toml('[data]\ndownscale = 2\nbackground = [1, 1, 1]\n', source="c.toml")
     assert cfg.iterations == 123                                               # the original is untouched
     # the config is validated on construction: MCMC's options under another strategy fail at once
-    with pytest.raises(InputError, match=r"^strategy 'default': strategy\.cap_max: unknown key \(known: "):
+    with pytest.raises(InputError, match=r"^strategy\.cap_max: not a field of strategy 'default' \(set strategy\.name: "
+                                         r"cap_max is a field of mcmc\)$"):
         apply_overrides(cfg, ["strategy=default"])
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.iterations = 5  # frozen: change a copy with dataclasses.replace / apply_overrides
@@ -1097,3 +1104,24 @@ def test_opacity_resets_closer_than_an_opacity_can_recover_are_warned_about():
             optimizers["opacity_logits"].step()
             steps += 1
         assert steps == opacity_recovery_steps(0.025, 0.01, reset_step)
+
+
+def test_paths_in_a_config_file_are_relative_to_the_file(tmp_path, tiny_diffuse_dir, monkeypatch):
+    """`train --config` reads a relative `dataset` / `out` from the config file's folder (as an
+    experiment file's paths), and keeps them absolute, so its checkpoint resumes from any folder."""
+    import os
+
+    from splatbench.cli import main
+
+    conf = tmp_path / "conf"
+    conf.mkdir()
+    rel = os.path.relpath(tiny_diffuse_dir, conf)
+    (conf / "c.toml").write_text(f'dataset = "{rel}"\nout = "run"\niterations = 2\n[strategy]\nname = "none"\n'
+                                 f'[eval]\nlpips_net = "none"\n', encoding="utf-8")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)  # the working folder is neither the file's nor the dataset's
+    res = CliRunner().invoke(main, ["train", "--config", str(conf / "c.toml"), "--json"])
+    assert res.exit_code == 0, res.output
+    written = load_config(conf / "run" / "config.toml")
+    assert written.dataset == str(tiny_diffuse_dir.resolve()) and written.out == str((conf / "run").resolve())

@@ -92,10 +92,10 @@ if want train; then
     run render $SB scenes render diffuse --resolution 128 --out "$data"
   fi
   # The Blender layout of the rendered dataset: the COLMAP one would need pycolmap on the GPU machine.
-  run train-diffuse $SB train "$data" --set device=cuda --set layout=blender --set iterations=2000 \
+  run train-diffuse $SB train "$data" --set device=cuda --set data.layout=blender --set iterations=2000 \
     --out "$out/train_diffuse" --quiet --json
   # MCMC's draws on the CUDA device, a checkpoint, and a resume from it on CUDA
-  run train-mcmc $SB train "$data" --set device=cuda --set layout=blender --set strategy=mcmc \
+  run train-mcmc $SB train "$data" --set device=cuda --set data.layout=blender --set strategy=mcmc \
     --set iterations=600 --set checkpoint_every=300 --out "$out/train_mcmc" --quiet --json
   run train-resume $SB train --resume "$out/train_mcmc/checkpoints/iteration_300.pt" --quiet --json
 fi

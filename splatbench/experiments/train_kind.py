@@ -241,7 +241,7 @@ def scene_type(data: dict[str, Any]) -> str:
 
 
 def _train_config(train: dict[str, Any]) -> TrainConfig:
-    return TrainConfig.from_dict(dict(train), source="config")
+    return TrainConfig.from_dict(dict(train), source="")  # the grid's messages name where the value came from
 
 
 def validate(config: dict[str, Any]) -> None:
@@ -451,7 +451,7 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> TrainRun:
 
     scene, data, fields = _split(config)
     dataset = ensure_dataset(scene, data, prepared.datasets)
-    cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="config")
+    cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="")
     # a worker runs several runs in turn: reset its high-water mark so the peak recorded is this run's own
     own_peak = reset_peak_rss()
     result = train(cfg)  # validated on construction

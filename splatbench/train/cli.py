@@ -67,6 +67,13 @@ def train(dataset: Path, config_file: Path | None, overrides: tuple[str, ...], o
 
     if config_file is not None:
         config = load_config(config_file)
+        # paths in a config file are relative to the file (as an experiment file's are), not to
+        # the folder the command runs in; made absolute below with the others
+        written = _top_level_keys(config_file)  # a default `out` is the working folder's, not the file's
+        paths = [f"{key}={_toml_str(str((Path(config_file).parent / value).resolve()))}"
+                 for key, value in (("dataset", config.dataset), ("out", config.out))
+                 if key in written and value and not Path(value).is_absolute()]
+        config = apply_overrides(config, paths) if paths else config
     else:  # an interrupted run continues as it was set up (the checkpoint holds its config, as data)
         config = checkpoint_config(resume) if resume is not None else TrainConfig()
     if resume is not None and out is None and config_file is None:
@@ -180,3 +187,10 @@ def _toml_str(text: str) -> str:
     import json
 
     return json.dumps(text)
+
+
+def _top_level_keys(path: Path) -> set[str]:
+    """The top-level keys a TOML config file sets (it was read and checked already)."""
+    import tomllib
+
+    return set(tomllib.loads(Path(path).read_text(encoding="utf-8")))

@@ -270,6 +270,15 @@ class StrategyConfig:
         check_type("strategy", self.options, dict[str, Any])
         if "name" in self.options:
             raise InputError("strategy.name: the strategy's name is not one of its options")
+        from splatbench.strategies import STRATEGIES, strategy_fields
+
+        if self.name in STRATEGIES:
+            own = strategy_fields(self.name)
+            for key in self.options:
+                others = [n for n in STRATEGIES if n != self.name and key in strategy_fields(n)]
+                if key not in own and others:
+                    raise InputError(f"strategy.{key}: not a field of strategy {self.name!r} (set strategy.name: "
+                                     f"{key} is a field of {', '.join(others)})")
         self.build(iterations=None, schedule="absolute", seed=0)
 
     def build(self, *, iterations: int | None, schedule: str, seed: int, scaled: bool = True):
@@ -322,6 +331,21 @@ class EvalConfig(_Group):
         if self.lpips_net not in ("alex", "vgg", "none"):
             self._fail("lpips_net", "'alex', 'vgg' or 'none'")
 
+
+#: The flat keys of TrainConfig before it was grouped, with their place now: named in the one-line error
+#: of a config that still uses one (read nowhere else: an old key is an error, never reinterpreted).
+FORMER_KEYS = {"layout": "data.layout", "test_every": "data.test_every", "init_random_points": "init.random_points",
+               "init_region": "init.region", "init_extent": "init.extent", "init_jitter": "init.jitter",
+               "init_sfm_poses": "init.sfm_poses", "init_opacity": "init.opacity", "sh_degree": "sh.degree",
+               "sh_interval": "sh.interval", "sh_auto_min_gain_db": "sh.auto_min_gain_db",
+               "sh_auto_lookahead": "sh.auto_lookahead", "sh_auto_probe_views": "sh.auto_probe_views",
+               "sh_auto_holdout_every": "sh.auto_holdout_every", "ssim_lambda": "loss.ssim_lambda",
+               "ssim_window": "loss.ssim_window", "eval_every": "eval.every", "eval_steps": "eval.steps",
+               "lpips_net": "eval.lpips_net", "lpips_scale_inputs": "eval.lpips_scale_inputs",
+               "strategy_options": "strategy (its fields beside strategy.name)", "adam_eps": "optim.adam_eps",
+               "downscale": "data.downscale", "masks": "data.masks",
+               **{k: f"optim.{k}" for k in ("lr_means", "lr_means_final", "lr_log_scales", "lr_quats",
+                                             "lr_opacity_logits", "lr_sh_dc", "lr_sh_rest")}}
 
 #: The groups: top-level key -> its class (`RasterOptions` is read by `raster_options`).
 GROUPS: dict[str, type] = {"data": DataConfig, "init": InitConfig, "sh": SHConfig, "optim": OptimConfig,
@@ -525,18 +549,29 @@ class TrainConfig:
         (``"sh.degree"``) is read as its table's key, as TOML reads one. Unknown keys and
         wrong types are one-line `InputError`s naming the dotted field."""
         if not isinstance(data, dict):
-            raise InputError(f"{source}: expected a table of fields, got {type(data).__name__}")
+            raise InputError(f"{source or 'config'}: expected a table of fields, got {type(data).__name__}")
         data = nest(data)
-        check_keys(data, (f.name for f in dataclasses.fields(cls)), source=source)
+        names = [f.name for f in dataclasses.fields(cls)]
+        for key in data:
+            if key not in names and key in FORMER_KEYS:
+                raise InputError(f"{_where(source)}{key}: now {FORMER_KEYS[key]} (the config is in groups: "
+                                 f"docs/training.md, \"Config\")")
+        check_keys(data, names, source=source)
         types = _types(cls)
         values: dict[str, Any] = {}
         for key, value in data.items():
+            if key in GROUPS:  # a top-level key written after a [table] lands in it (raster names its own)
+                misplaced = [k for k in (value if isinstance(value, dict) else ()) if k in names
+                             and not (key == "strategy" and _a_strategy_field(k))]
+                if misplaced:
+                    raise InputError(f"{_where(source)}{key}.{misplaced[0]}: not a key of [{key}]: {misplaced[0]} is a "
+                                     f"top-level field (in TOML, write it before the first [table])")
             if key == "raster":
                 values[key] = raster_options(value)
             elif key in GROUPS:
                 if key in SHORTHANDS and not isinstance(value, dict):
                     value = {SHORTHANDS[key]: value}
-                values[key] = GROUPS[key].from_table(value)
+                values[key] = GROUPS[key].from_table(value, source)
             else:
                 if key == "background" and isinstance(value, str) and value != "auto":
                     value = _rgb(value)
@@ -670,6 +705,13 @@ def _rgb(text: str) -> Any:
         return [float(p) for p in parts] if len(parts) == 3 else text
     except ValueError:
         return text
+
+
+def _a_strategy_field(key: str) -> bool:
+    """Whether ``key`` is a field of some strategy (``seed`` is, and a top-level field too)."""
+    from splatbench.strategies import STRATEGIES, strategy_fields
+
+    return any(key in strategy_fields(name) for name in STRATEGIES)
 
 
 def _where(source: str) -> str:
