@@ -41,10 +41,12 @@ Layouts:
   N x 17 rows in the order of the sorted image names, rotation columns [down, right, back],
   [h, w, f] of the originals, near and far). ``downscale`` N is relative to the originals:
   ``images_N/`` when it exists, else the nearest finer folder reduced by area averaging.
-  Object masks (``masks/`` / ``masks_N/``, by stem with an optional ``_mask``) become the
-  views' alphas, composited by `Split.image` (``masks=False`` ignores them); the near/far
-  bounds of the training views are ``Dataset.bounds``. Every 8th image by name is a test
+  The near/far bounds of the training views are ``Dataset.bounds``. Every 8th image by name is a test
   view. docs/captures.md has the table of layouts.
+
+Masks, in every layout: ``masks/`` / ``masks_N/`` beside the images (`splatbench.data.masks`:
+by stem with an optional ``_mask``, ``images_N/`` taking ``masks_N/``) become the views'
+alphas (``masks=False`` ignores them, with a note); ``Dataset.masks`` names the folder.
 
 Distortion: images whose camera has lens distortion are undistorted by pycolmap (COLMAP's
 undistorter: bilinear remap, cropped to the pixels that saw the scene) into a cache folder
@@ -217,8 +219,8 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
 
     ``layout``: ``"auto"`` (COLMAP when ``sparse/`` exists, else Blender when a
     transforms file does, else LLFF when ``poses_bounds.npy`` does), ``"colmap"``,
-    ``"blender"`` or ``"llff"``. ``masks`` (LLFF): read ``masks/`` / ``masks_N/`` as the
-    views' alphas (False: ignore them, with a note). ``test_every``: hold out every n-th view when the dataset gives no
+    ``"blender"`` or ``"llff"``. ``masks``: read ``masks/`` / ``masks_N/`` as the
+    views' alphas, in every layout (False: ignore them, with a note). ``test_every``: hold out every n-th view when the dataset gives no
     split (0: no test views). ``images_dir`` (COLMAP only): the image folder, e.g.
     ``"images_4"`` of Mip-NeRF 360; when it is not ``"images"`` the cameras are scaled to
     the image size. ``background``: RGB in [0, 1] under RGBA images. ``downscale``: an
