@@ -175,7 +175,11 @@ def read_image_with_alpha(path: str | os.PathLike, *, what: str, mode: str | Non
     except (Image.DecompressionBombError, Image.DecompressionBombWarning) as exc:
         raise InputError(f"{what}: refused as a decompression bomb ({_short(exc)})") from None
     except Exception as exc:  # noqa: BLE001 - Pillow's decoders raise OSError, ValueError, SyntaxError, struct.error ...
-        raise InputError(f"{what}: cannot read the image ({type(exc).__name__}: {_short(exc)})") from None
+        if isinstance(exc, Image.UnidentifiedImageError):  # its message names the in-memory buffer, not the file
+            raise InputError(f"{what}: not an image Pillow can decode (empty, damaged, or not a PNG/JPEG/...): "
+                             f"replace it with the image file") from None
+        raise InputError(f"{what}: cannot read the image ({type(exc).__name__}: {_short(exc)}); replace it with an "
+                         f"intact copy") from None
     return arr, has_alpha
 
 

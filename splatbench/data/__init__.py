@@ -2,7 +2,7 @@
 
 ``load_dataset(path, *, layout="auto", test_every=8, images_dir="images", background=(0, 0, 0), downscale=1, masks=True)``
 reads a COLMAP, Blender (NeRF synthetic / nerfstudio / instant-ngp) or LLFF (``poses_bounds.npy``,
-``llff.py``; object masks as alphas) dataset folder, undistorting
+``llff.py``) dataset folder, with object masks as alphas in every layout (``masks.py``), undistorting
 images whose cameras have lens distortion (``undistort.py``, pycolmap), into a typed
 `Dataset` of `Split` s (see ``dataset.py``); ``colmap_folder(path)`` is where a folder's COLMAP
 model is (``sparse/0/`` or ``sparse/``; None: none). The folder also holds package data:

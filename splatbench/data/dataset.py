@@ -41,10 +41,12 @@ Layouts:
   N x 17 rows in the order of the sorted image names, rotation columns [down, right, back],
   [h, w, f] of the originals, near and far). ``downscale`` N is relative to the originals:
   ``images_N/`` when it exists, else the nearest finer folder reduced by area averaging.
-  Object masks (``masks/`` / ``masks_N/``, by stem with an optional ``_mask``) become the
-  views' alphas, composited by `Split.image` (``masks=False`` ignores them); the near/far
-  bounds of the training views are ``Dataset.bounds``. Every 8th image by name is a test
+  The near/far bounds of the training views are ``Dataset.bounds``. Every 8th image by name is a test
   view. docs/captures.md has the table of layouts.
+
+Masks, in every layout: ``masks/`` / ``masks_N/`` beside the images (`splatbench.data.masks`:
+by stem with an optional ``_mask``, ``images_N/`` taking ``masks_N/``) become the views'
+alphas (``masks=False`` ignores them, with a note); ``Dataset.masks`` names the folder.
 
 Distortion: images whose camera has lens distortion are undistorted by pycolmap (COLMAP's
 undistorter: bilinear remap, cropped to the pixels that saw the scene) into a cache folder
@@ -87,6 +89,7 @@ from splatbench.cameras import Camera
 from splatbench.guards import check_image_size
 from splatbench.data.colmap_bounds import check_colmap_binary, check_colmap_text
 from splatbench.data.llff import POSES_FILE
+from splatbench.data.masks import Masks, area_resize, combine, folder_factor
 from splatbench.data.undistort import Lens, check_lens
 from splatbench.errors import InputError
 from splatbench.ply import read_ply_data
@@ -216,8 +219,8 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
 
     ``layout``: ``"auto"`` (COLMAP when ``sparse/`` exists, else Blender when a
     transforms file does, else LLFF when ``poses_bounds.npy`` does), ``"colmap"``,
-    ``"blender"`` or ``"llff"``. ``masks`` (LLFF): read ``masks/`` / ``masks_N/`` as the
-    views' alphas (False: ignore them, with a note). ``test_every``: hold out every n-th view when the dataset gives no
+    ``"blender"`` or ``"llff"``. ``masks``: read ``masks/`` / ``masks_N/`` as the
+    views' alphas, in every layout (False: ignore them, with a note). ``test_every``: hold out every n-th view when the dataset gives no
     split (0: no test views). ``images_dir`` (COLMAP only): the image folder, e.g.
     ``"images_4"`` of Mip-NeRF 360; when it is not ``"images"`` the cameras are scaled to
     the image size. ``background``: RGB in [0, 1] under RGBA images. ``downscale``: an
@@ -227,7 +230,9 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
     root = Path(path)
     if not root.is_dir():
         raise InputError(f"dataset: {str(root)!r} is not a dataset folder (it does not exist or is a file); give a "
-                         "COLMAP or Blender folder, or render one with `splatbench scenes render NAME`")
+                         "capture folder in a layout splatbench reads (COLMAP's sparse/0/ + images/, Blender's or "
+                         "instant-ngp's transforms*.json, LLFF's poses_bounds.npy + images/), or render one with "
+                         "`splatbench scenes render NAME`")
     if layout not in LAYOUTS:
         raise InputError(f"layout: expected one of {', '.join(LAYOUTS)}, got {layout!r}")
     if not (isinstance(test_every, int) and not isinstance(test_every, bool) and test_every >= 0):
@@ -250,16 +255,18 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
     if not isinstance(masks, bool):
         raise InputError(f"masks: expected true or false, got {masks!r}")
     load = _Load(root, bg, downscale, say or (lambda line: None))
+    load.masks = Masks(root, masks, load.note)
     if layout == "colmap":
         dataset = _load_colmap(root, test_every, images_dir, load)
         if (root / POSES_FILE).is_file():
             load.note(f"{POSES_FILE} is here too: read the COLMAP model (its points start training; "
                       f"data.layout=llff reads {POSES_FILE} instead)")
     elif layout == "llff":
-        dataset = _load_llff(root, test_every, load, masks)
+        dataset = _load_llff(root, test_every, load)
     else:
         dataset = _load_blender(root, test_every, load)
-    return dataclasses.replace(dataset, notes=tuple(load.finish_notes(dataset)))
+    used = load.masks.finish()
+    return dataclasses.replace(dataset, masks=used, notes=tuple(load.finish_notes(dataset)))
 
 
 class _Load:
@@ -269,6 +276,7 @@ class _Load:
         self.root, self.bg, self.downscale, self.say = root, bg, downscale, say
         self.notes: list[str] = []
         self.pending: list[tuple[list, int, str, Camera, Lens]] = []  # (views, index, rel, posed camera, lens)
+        self.masks: Masks  # the capture's object masks (set by load_dataset)
 
     def note(self, line: str) -> None:
         if line not in self.notes:
@@ -286,10 +294,19 @@ class _Load:
 
     def view(self, rel: str, camera: Camera, context: str, *, scale_ok: bool = False, resize: bool = True) -> tuple:
         """(rel, camera, rgb, alpha, final) of an undistorted image: the camera fitted to
-        the file (scaled to it when ``scale_ok``), then both downscaled when ``resize``.
-        ``rgb`` and ``alpha`` are uint8; ``final``: rgb needs no compositing (an RGB image,
-        or RGBA composited before downscaling, as graphdeco resizes the composited image)."""
+        the file (scaled to it when ``scale_ok``), its mask (if the capture has masks) made
+        its alpha, then both downscaled when ``resize``. ``rgb`` and ``alpha`` are uint8;
+        ``final``: rgb needs no compositing (an RGB image, or RGBA composited before
+        downscaling, as graphdeco resizes the composited image)."""
         rgb, alpha = _read_image(self.root, rel, context)
+        if self.masks.enabled:  # at the file's size: images_N/ takes masks_N/ (or a finer folder, reduced)
+            folder = Path(rel).parts[0] if len(Path(rel).parts) > 1 else ""
+            factor = folder_factor(folder) if folder.startswith("images") else 1
+            mfolder = self.masks.folder_for(factor, f"{folder or rel}/ (images reduced by {factor})")
+            size = (rgb.shape[1], rgb.shape[0])
+            mask = self.masks.read(self.masks.file(mfolder, rel), rel, size,
+                                   size if self.masks.folders.get(factor) == mfolder else None)
+            alpha = combine(alpha, mask)
         camera = _fit_camera(camera, rgb, rel, scale_ok=scale_ok)
         if not resize or self.downscale == 1:
             return rel, camera, rgb, alpha, alpha is None
@@ -303,6 +320,8 @@ class _Load:
 
     def defer(self, views: list, rel: str, camera: Camera, lens: Lens) -> None:
         """Leave a slot in ``views`` for an image to undistort (`finish` fills it)."""
+        if self.masks.enabled:
+            self.masks.refuse_distortion(rel, lens.model)
         views.append(None)
         self.pending.append((views, len(views) - 1, rel, camera, lens))
 
@@ -529,14 +548,12 @@ def _load_blender(root: Path, test_every: int, load: _Load) -> Dataset:
 
 
 # --------------------------------------------------------------------------- LLFF
-def _load_llff(root: Path, test_every: int, load: _Load, use_masks: bool) -> Dataset:
+def _load_llff(root: Path, test_every: int, load: _Load) -> Dataset:
     """``poses_bounds.npy`` with ``images/`` / ``images_N/`` (and ``masks/`` / ``masks_N/``):
     `splatbench.data.llff`. ``downscale`` N is relative to the poses' original size, as
     gsplat's ``data_factor``: ``images_N/`` when it exists, else the nearest finer
-    ``images_M/`` reduced by N/M by area averaging; masks likewise."""
+    ``images_M/`` reduced by N/M by area averaging; masks likewise (`splatbench.data.masks`)."""
     from splatbench.data import llff
-    from splatbench.safeio import read_image
-
     n = load.downscale
     image_folders = llff.folders(root, "images")
     if not image_folders:
@@ -547,49 +564,30 @@ def _load_llff(root: Path, test_every: int, load: _Load, use_masks: bool) -> Dat
     names = llff.image_files(root / folder)
     if not names:
         raise InputError(f"{folder}/: no images ({', '.join(llff.IMAGE_SUFFIXES)}) beside {POSES_FILE}")
-    rows = llff.read_poses_bounds(root / POSES_FILE, len(names), folder)
+    poses = root / POSES_FILE
+    rows = llff.read_poses_bounds(poses, len(names), folder)
     height, width, focal = rows[0, [4, 9, 14]]
     if factor is None:
         raise InputError(f"data.downscale={n}: no image folder serves it ({POSES_FILE}'s images are "
                          f"{width:.0f}x{height:.0f}; available factors {', '.join(map(str, image_folders))} "
                          f"from {', '.join(f + '/' for f in image_folders.values())}, and a folder is reduced, never "
                          f"enlarged); set data.downscale to one of them or larger")
-    mask_folder, mask_files = "", None
-    mask_folders = llff.folders(root, "masks")
-    if mask_folders and not use_masks:
-        load.note(f"{', '.join(f + '/' for f in mask_folders.values())}: masks ignored (data.masks=false); the "
-                  f"photos are trained as they are")
-    elif mask_folders:
-        mfactor = n if n in mask_folders else max((m for m in mask_folders if m < n), default=None)
-        if mfactor is None:
-            raise InputError(f"data.downscale={n}: no mask folder serves it (factors "
-                             f"{', '.join(map(str, mask_folders))}); set data.downscale to one of them or larger, "
-                             f"or data.masks=false to ignore the masks")
-        mask_folder = mask_folders[mfactor]
-        mask_files = llff.mask_index(root / mask_folder, names, folder)
+    masks = load.masks
+    mask_folder = masks.folder_for(n, f"data.downscale={n}") if masks.enabled else ""
     views, bounds = [], []
     for i, name in enumerate(names):
         rel = f"{folder}/{name}"
-        camera, near, far = llff.camera_from_row(rows[i], f"{POSES_FILE}: row {i} ({rel})")
+        camera, near, far = llff.camera_from_row(rows[i], f"{poses}: row {i} ({rel})")
         rgb, alpha = _read_image(root, rel, f"listed in {folder}/")
+        rgb_size = (rgb.shape[1], rgb.shape[0])
         read = _fit_camera(camera, rgb, rel, scale_ok=True)  # the folder's size; focal scaled to it
         target = read if factor == n else camera.scaled(1 / n)
-        if mask_files is not None:
-            mrel = f"{mask_folder}/{mask_files[i]}"
-            mask = read_image(root / mrel, what=mrel, mode="L")  # grey, 255 = the object
-            if mask_folder.removeprefix("masks") == folder.removeprefix("images") and mask.shape != rgb.shape[:2]:
-                raise InputError(f"{mrel}: mask size {mask.shape[1]}x{mask.shape[0]} differs from its image {rel} "
-                                 f"{rgb.shape[1]}x{rgb.shape[0]}")
-            _fit_camera(camera, mask, mrel, scale_ok=True)  # a reduction of the original size
-            if alpha is not None:  # an RGBA photo with a mask: both mark what is not the object
-                if alpha.shape != mask.shape:
-                    alpha = _area_resize(alpha, mask.shape[1], mask.shape[0])
-                alpha = ((alpha.astype(np.uint32) * mask + 127) // 255).astype(np.uint8)
-            else:
-                alpha = mask
         size = (target.width, target.height)
-        rgb = rgb if rgb.shape[1::-1] == size else _area_resize(rgb, *size)
-        alpha = alpha if alpha is None or alpha.shape[::-1] == size else _area_resize(alpha, *size)
+        rgb = rgb if rgb.shape[1::-1] == size else area_resize(rgb, *size)
+        alpha = alpha if alpha is None or alpha.shape[::-1] == size else area_resize(alpha, *size)
+        if mask_folder:  # the mask folder of the image folder's own factor holds masks of its images' size
+            exact = rgb_size if masks.folders.get(factor) == mask_folder else None
+            alpha = combine(alpha, masks.read(masks.file(mask_folder, rel), rel, size, exact))
         views.append((rel, target, rgb, alpha, alpha is None))  # alpha composited per view (Split.image)
         bounds.append((near, far))
     first = views[0][1]
@@ -597,9 +595,6 @@ def _load_llff(root: Path, test_every: int, load: _Load, use_masks: bool) -> Dat
               f"{focal:.6g} px); {folder}/ read" + (f" at {first.width}x{first.height}" if factor == n else
               f" and reduced by {n / factor:g} to {first.width}x{first.height} by area averaging (no images_{n}/; "
               f"data.downscale={n} of the originals)") + f", focal scaled to {first.fx:.6g} px")
-    if mask_files is not None:
-        load.note(f"masks: {mask_folder}/ ({len(mask_files)} object masks) become the views' alphas: the photos are "
-                  f"composited over the run's background (data.masks=false ignores them)")
     order = list(range(len(views)))
     test_ids = [i for i in order if test_every and i % test_every == 0]
     train_ids = [i for i in order if not (test_every and i % test_every == 0)]
@@ -607,25 +602,8 @@ def _load_llff(root: Path, test_every: int, load: _Load, use_masks: bool) -> Dat
         load.note(f"{POSES_FILE} gives no split: every {test_every}th image by sorted name is a test view "
                   f"({len(test_ids)} test, {len(train_ids)} train; as graphdeco's --eval)")
     return Dataset(root.resolve().name, _split(root, [views[i] for i in train_ids], load),
-                   _split(root, [views[i] for i in test_ids], load), None, root, "llff", masks=mask_folder,
+                   _split(root, [views[i] for i in test_ids], load), None, root, "llff",
                    bounds=np.array([bounds[i] for i in train_ids], np.float64).reshape(-1, 2))
-
-
-def _area_resize(image: np.ndarray, width: int, height: int) -> np.ndarray:
-    """``image`` [H, W(, C)] uint8 reduced to ``height`` x ``width`` by area averaging: each
-    output pixel the mean of the input area it covers, weighted by the overlap, for any
-    ratio (OpenCV's INTER_AREA; PIL's BOX weighs whole pixels by their centres instead),
-    rounded to uint8."""
-    def weights(n_in: int, n_out: int) -> np.ndarray:  # [n_out, n_in], rows summing to 1
-        edges = np.arange(n_out + 1) * (n_in / n_out)
-        pixel = np.arange(n_in)[None, :]
-        overlap = np.minimum(edges[1:, None], pixel + 1) - np.maximum(edges[:-1, None], pixel)
-        return np.clip(overlap, 0, None) / (n_in / n_out)
-
-    pixels = image.reshape(*image.shape[:2], -1).astype(np.float32)  # [H, W, C]; float32 means of 8-bit values: ~1e-5
-    rows = (weights(image.shape[0], height).astype(np.float32) @ pixels.reshape(image.shape[0], -1))
-    out = weights(image.shape[1], width).astype(np.float32) @ rows.reshape(height, image.shape[1], -1)
-    return np.clip(np.rint(out), 0, 255).astype(np.uint8).reshape(height, width, *image.shape[2:])
 
 
 def _read_json(path: Path, *, frames_required: bool = True) -> dict:

@@ -20,21 +20,19 @@ loads to the same cameras.
 `read_poses_bounds` checks the file as data from others (one `InputError` line naming
 the file and the fix): no pickle, its header against its size, a 2-D numeric array of
 17 columns, one row per image, every value finite, sizes whole and positive, focal
-positive, ``0 < near < far``, rotations orthonormal. `folders` lists the capture's
-``images_N/`` (or ``masks_N/``) folders by factor; `mask_index` matches masks to
-images by file stem, with or without a ``_mask`` suffix (NeRD's
-``masks_8/IMG_9669_mask.png``) or named after the whole image name (COLMAP's
-``masks/IMG.jpg.png``).
+positive, ``0 < near < far``, rotations orthonormal; every message names the file's
+full path and prints numbers as plain numbers. `folders` lists the capture's
+``images_N/`` folders by factor. Masks are every layout's (`splatbench.data.masks`).
 """
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import numpy as np
 
 from splatbench.cameras import Camera
+from splatbench.data.masks import folders
 from splatbench.errors import InputError
 from splatbench.safeio import read_npy
 
@@ -76,13 +74,14 @@ def row_from_camera(camera: Camera, near: float, far: float) -> np.ndarray:
     """The poses_bounds row [17] float64 of ``camera`` (square pixels, principal point at
     the centre, no distortion: what LLFF can hold; `InputError` otherwise)."""
     if camera.fx != camera.fy:
-        raise InputError(f"fx, fy: LLFF's [h, w, f] holds one focal, the camera has fx={camera.fx!r} "
-                         f"fy={camera.fy!r}")
+        raise InputError(f"fx, fy: LLFF's [h, w, f] holds one focal, the camera has fx={float(camera.fx):g} "
+                         f"fy={float(camera.fy):g}")
     if (camera.cx, camera.cy) != (camera.width / 2, camera.height / 2):
         raise InputError(f"cx, cy: LLFF's [h, w, f] puts the principal point at the image centre "
-                         f"({camera.width / 2}, {camera.height / 2}), the camera has ({camera.cx}, {camera.cy})")
+                         f"({camera.width / 2:g}, {camera.height / 2:g}), the camera has ({float(camera.cx):g}, "
+                         f"{float(camera.cy):g})")
     if not 0 < near < far or not np.isfinite(far):
-        raise InputError(f"near, far: expected 0 < near < far, finite, got {near!r}, {far!r}")
+        raise InputError(f"near, far: expected 0 < near < far, finite, got {float(near):g}, {float(far):g}")
     c2w = camera.camera_to_world
     pose = np.zeros((3, 5))
     pose[:, :3] = c2w[:3, :3] @ _TO_OPENCV.T
@@ -91,17 +90,23 @@ def row_from_camera(camera: Camera, near: float, far: float) -> np.ndarray:
     return np.concatenate([pose.reshape(-1), [near, far]])
 
 
+_VALID = ("a valid one is LLFF's N x 17 float array (one row per image), written by imgs2poses.py or by "
+          "np.save(path, rows.astype(np.float64))")
+
+
 def read_poses_bounds(path: Path, images: int, folder: str) -> np.ndarray:
     """The rows [images, 17] float64 of ``path``, checked (module doc); ``folder``: where
     the ``images`` images were listed, for the messages."""
-    what = POSES_FILE
-    data = read_npy(path, what=what)  # no pickle, header against the file's size
+    what = str(path)
+    try:
+        data = read_npy(path, what=what)  # no pickle, header against the file's size
+    except InputError as exc:  # empty, text, truncated, pickled: say what the file should be
+        raise InputError(f"{exc}; {_VALID}") from None
     if data.dtype.kind not in "fiu":  # bool, complex, strings, structured records are not poses
-        raise InputError(f"{what}: dtype {data.dtype}, expected float rows of 17 numbers (LLFF's N x 17 "
-                         f"float64); write it with np.save(path, array.astype(np.float64))")
+        raise InputError(f"{what}: dtype {data.dtype}, expected float rows of 17 numbers; {_VALID}")
     if data.ndim != 2 or data.shape[1] != 17:
         raise InputError(f"{what}: shape {list(data.shape)}, expected [N, 17] (a 3x5 pose of [rotation | centre "
-                         f"| h, w, f] and near, far per image); is it LLFF's poses_bounds.npy?")
+                         f"| h, w, f] and near, far per image); is it LLFF's poses_bounds.npy? {_VALID}")
     if data.shape[0] != images:
         raise InputError(f"{what}: {data.shape[0]} rows for {images} images in {folder}/ (one row per image, in "
                          f"the order of their sorted names); the file belongs to another capture or images are "
@@ -109,34 +114,24 @@ def read_poses_bounds(path: Path, images: int, folder: str) -> np.ndarray:
     rows = data.astype(np.float64)
     bad = ~np.isfinite(rows)
     if bad.any():
-        i, j = np.argwhere(bad)[0]
-        raise InputError(f"{what}: row {i} column {j} is {rows[i, j]!r} ({int(bad.any(axis=1).sum())} rows hold "
+        i, j = (int(k) for k in np.argwhere(bad)[0])
+        raise InputError(f"{what}: row {i} column {j} is {float(rows[i, j])} ({int(bad.any(axis=1).sum())} rows hold "
                          f"NaN or infinite values); every pose and bound must be finite")
     hw = rows[:, [4, 9]]
     wrong = (hw < 1) | (hw != np.round(hw)) | (hw > 1 << 20)
     if wrong.any():
         i = int(np.argwhere(wrong.any(axis=1))[0, 0])
-        raise InputError(f"{what}: row {i}: height, width {rows[i, 4]!r}, {rows[i, 9]!r}: expected whole numbers of "
-                         f"pixels (columns 4 and 9: the original images' size)")
+        raise InputError(f"{what}: row {i}: height, width {float(rows[i, 4]):g}, {float(rows[i, 9]):g}: expected "
+                         f"whole numbers of pixels (columns 4 and 9: the original images' size)")
     if not (rows[:, 14] > 0).all():
         i = int(np.argwhere(rows[:, 14] <= 0)[0, 0])
-        raise InputError(f"{what}: row {i}: focal {rows[i, 14]!r}: expected a positive focal length in pixels "
-                         f"(column 14)")
+        raise InputError(f"{what}: row {i}: focal {float(rows[i, 14]):g}: expected a positive focal length in "
+                         f"pixels (column 14)")
     if not ((rows[:, 15] > 0) & (rows[:, 15] < rows[:, 16])).all():
         i = int(np.argwhere(~((rows[:, 15] > 0) & (rows[:, 15] < rows[:, 16])))[0, 0])
-        raise InputError(f"{what}: row {i}: near, far {rows[i, 15]!r}, {rows[i, 16]!r}: expected 0 < near < far "
-                         f"(columns 15 and 16: the view's depth bounds)")
+        raise InputError(f"{what}: row {i}: near, far {float(rows[i, 15]):g}, {float(rows[i, 16]):g}: expected "
+                         f"0 < near < far (columns 15 and 16: the view's depth bounds)")
     return rows
-
-
-def folders(root: Path, base: str) -> dict[int, str]:
-    """``{factor: folder}`` of ``root``'s ``base/`` (factor 1) and ``base_N/`` folders."""
-    out = {1: base} if (root / base).is_dir() else {}
-    for entry in root.iterdir():
-        m = re.fullmatch(rf"{re.escape(base)}_(\d{{1,4}})", entry.name)
-        if m and int(m.group(1)) >= 1 and entry.is_dir():
-            out.setdefault(int(m.group(1)), entry.name)
-    return dict(sorted(out.items()))
 
 
 def image_files(folder: Path) -> list[str]:
@@ -144,31 +139,5 @@ def image_files(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
 
 
-def mask_index(folder: Path, names: list[str], image_folder: str) -> list[str]:
-    """The mask file of each image name, by stem (``IMG_1.png`` <- ``IMG_1.png``,
-    ``IMG_1_mask.png``, ``IMG_1.jpg``, ``IMG_1.png.png``); one `InputError` line naming the
-    first image without a mask, or a mask that two files could be."""
-    by_key: dict[str, list[str]] = {}
-    for name in image_files(folder):
-        stem = Path(name).stem
-        keys = {stem} | ({stem[:-5]} if stem.endswith("_mask") else set())
-        for key in keys:
-            by_key.setdefault(key, []).append(name)
-    out = []
-    for name in names:
-        stem = Path(name).stem
-        found = by_key.get(stem) or by_key.get(name) or []
-        if not found:
-            raise InputError(f"{folder.name}/: no mask for {image_folder}/{name} (expected {stem}.png or "
-                             f"{stem}_mask.png; every image needs its mask), or set data.masks=false to ignore "
-                             f"the masks")
-        exact = [f for f in found if Path(f).stem == stem]
-        if len(exact) > 1 or (not exact and len(found) > 1):
-            raise InputError(f"{folder.name}/: {', '.join(found)} could each be the mask of {image_folder}/{name} "
-                             f"(keep one)")
-        out.append((exact or found)[0])
-    return out
-
-
 __all__ = ["POSES_FILE", "IMAGE_SUFFIXES", "camera_from_row", "row_from_camera", "read_poses_bounds", "folders",
-           "image_files", "mask_index"]
+           "image_files"]
