@@ -252,7 +252,7 @@ def test_the_scenes_line_counts_real_captures_and_a_quick_report_says_smoke_test
     _, text = results(tmp_path, spec_of(("glossy", "diffuse", "thin")), lambda run: (
         metrics_of(30.0 + run.seed * 0.1), flat_curves(30.0)))
     lines = text.splitlines()
-    assert lines[2].startswith("**A smoke test, not evidence**: these runs follow the quick protocol")
+    assert lines[2].startswith("**A smoke test, not evidence**: this grid's runs follow the quick protocol")
     table = pd.read_parquet(tmp_path / "out" / "results.parquet")
     scenes = lambda t: next(x for x in protocol_lines(t) if x.startswith("- **Scenes**"))  # noqa: E731
     assert "0 real captures; a finding here holds on these scenes only" in scenes(table)

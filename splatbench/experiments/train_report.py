@@ -84,9 +84,10 @@ def seed_varies(config: dict[str, Any]) -> tuple[list[str], list[str]]:
 
 
 #: The first line of a quick-protocol report, right under its title.
-SMOKE_TEST = ("**A smoke test, not evidence**: these runs follow the quick protocol (graphdeco's schedule scaled to "
-              "{iters} steps), which moves results against graphdeco's 7K column (`reports/quick_protocol`); no "
-              "number below is evidence about a 3DGS method.")
+SMOKE_TEST = ("**A smoke test, not evidence**: this grid's runs follow the quick protocol (graphdeco's schedule "
+              "compressed into {iters} steps, its learning rates not scaled: docs/training.md, \"Protocols\"), whose "
+              "results graphdeco's 7K column has not confirmed; no number below is evidence about a 3DGS method "
+              "(a `[check]` rerun at a graphdeco protocol, where there is one, is reported apart).")
 
 
 def smoke_test_line(table: pd.DataFrame) -> list[str]:
