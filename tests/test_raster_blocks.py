@@ -115,7 +115,7 @@ def test_smaller_blocks_perform_fewer_evaluations_with_the_same_useful_ones():
 
 
 def test_the_drjit_backend_passes_pixel_block_on(monkeypatch):
-    """`compare`'s drjit backend hands every `RasterOptions` field to the rasterizer, the
+    """`compare`'s drjit backend hands its `RasterOptions` to the rasterizer as they are, the
     lane layout included (it used to name the fields it passed, and would drop a new one)."""
     import splatbench.raster
     from splatbench.backends.builtins.drjit_backend import make_drjit_backend
@@ -129,6 +129,6 @@ def test_the_drjit_backend_passes_pixel_block_on(monkeypatch):
     monkeypatch.setattr(splatbench.raster, "rasterize", rasterize)
     backend = make_drjit_backend(pixel_block=2, tile_size=8)
     backend.fn(None, None, None, None, None, None)
-    assert seen["pixel_block"] == 2 and seen["tile_size"] == 8
-    assert {k for k in seen if k not in ("sh_degree", "background")} == set(RasterOptions().to_dict()) | {"near",
-                                                                                                          "far"}
+    assert seen["options"].pixel_block == 2 and seen["options"].tile_size == 8  # the typed record, whole
+    assert seen["options"] == RasterOptions(pixel_block=2, tile_size=8)  # every field, none dropped or renamed
+    assert set(seen) == {"options", "sh_degree", "background"}
