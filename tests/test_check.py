@@ -385,6 +385,10 @@ def test_report_gives_a_verdict_with_the_checks_results(tmp_path, grid_gain, gai
     row = next(line for line in text.splitlines() if line.startswith("| `graphdeco-7k` | `sh.degree=3` |"))
     assert row.endswith("| 0.9000 (no spread) | 0.1000 (no spread) | 1000 (no spread) |"), row
     assert [m.name for m, _, _ in check.rerun.others] == ["test_ssim", "test_lpips", "num_gaussians"]
+    # each seed's value of both cells, so that a seed that went its own way shows (the means hide it)
+    for seed in (0, 1, 2):
+        a, b = per[0][seed], per[3][seed]
+        assert f"| `graphdeco-7k` | {seed} | {a:.2f} | {b:.2f} | {b - a:+.2f} |" in text
     assert check.rerun.settled is (slope == 0.0)
     assert ("**not settled** at `graphdeco-7k` (`sh.degree=3` +0.50 dB / 1,000 steps" in text) is (slope > 0)
     # the grid's side is the grid's runs of the same two cells (iterations 100), not the check's

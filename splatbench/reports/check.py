@@ -97,6 +97,7 @@ class CheckSide:
     others: tuple[tuple[MetricSpec, Stat, Stat], ...] = ()  # the cells' other quality and size metrics
     opposed: tuple[tuple[str, str], ...] = ()  # (name, difference) of each of the kind's other quality metrics
     #   that goes significantly the other way (`splatbench.reports.findings.other_way`)
+    per_seed: tuple[dict, dict] = ({}, {})  # each cell's primary metric by seed (a seed's runs averaged)
 
     @property
     def complete(self) -> bool:
@@ -194,7 +195,7 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
             claim = Claim("check", check.scene, labels[1], metric.name, comp.how, iv.estimate, text, labels[0],
                           iv.low, iv.high, iv.n, significant, practical, settled)
         return CheckSide(protocol, done, failed, total, (stat(values[0]), stat(values[1])), claim, settled, why,
-                         others, opposed)
+                         others, opposed, (values[0], values[1]))
 
     grid_protocol = _recorded_protocol(table, {r.run_id for c in quick for r in c})
     grid_side = side(table, quick, grid_protocol)
@@ -334,6 +335,7 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
         lines += [f"Each cell's {', '.join(_name(o) for o in specs)} beside its {_name(m)} (mean over seeds ± the "
                   f"half-width of its 95 % t interval):", "",
                   *markdown_table(head, cells, align="--" + "r" * (1 + len(specs))).splitlines(), ""]
+    lines += _per_seed_lines(result)
     sentence = f"**{result.headline}**: {result.reason}"
     if result.verdict in JUDGED and result.rerun.settled is False:
         sentence += f"; **not settled** at `{c.protocol}` ({result.rerun.why})"
@@ -347,6 +349,27 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
                   for _, r in failed.iterrows()]
         lines.append("")
     return lines
+
+
+def _per_seed_lines(result: CheckResult) -> list[str]:
+    """Each seed's value of both cells at both protocols: three seeds summarised by a mean and a t
+    interval can hide one seed that went its own way (a run that diverged, say); this shows it."""
+    m = result.metric
+    a, b = result.labels
+    rows = []
+    for side in (result.grid, result.rerun):
+        va, vb = side.per_seed
+        for seed in sorted(set(va) | set(vb), key=str):
+            x, y = va.get(seed), vb.get(seed)
+            cells = [format(v, m.fmt) if v is not None else "–" for v in (x, y)]
+            diff = format(y - x, "+" + m.fmt) if x is not None and y is not None else "–"
+            rows.append([f"`{side.protocol}`", str(seed), *cells, diff])
+    if not rows:
+        return []
+    head = ["protocol", "seed", f"`{a}`", f"`{b}`", f"`{b}` − `{a}`"]
+    return [f"Each seed's {_name(m)}" + (f" ({m.unit})" if m.unit else "") + ", both cells (a seed that went its own "
+            f"way shows here, not in the means above):", "", *markdown_table(head, rows, align="--rrr").splitlines(),
+            ""]
 
 
 def _label(spec: MetricSpec) -> str:
