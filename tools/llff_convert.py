@@ -90,15 +90,12 @@ def convert(src: Path, dst: Path, to: str, downscale: int = 1, near: float | Non
         raise InputError(text) from None
     views = ds.train
     cameras, names = views.cameras, views.names
-    if to == "llff":
+    if to == "llff":  # every view must fit a poses_bounds row (row_from_camera says why not), before any file
         for cam, rel in zip(cameras, names):
-            if cam.fx != cam.fy:
-                raise InputError(f"{rel}: fx {float(cam.fx):g} != fy {float(cam.fy):g}: LLFF's [h, w, f] holds one "
-                                 f"focal (convert to colmap or blender instead)")
-            if (cam.cx, cam.cy) != (cam.width / 2, cam.height / 2):
-                raise InputError(f"{rel}: principal point ({float(cam.cx):g}, {float(cam.cy):g}) is not the image "
-                                 f"centre ({cam.width / 2:g}, {cam.height / 2:g}), which LLFF's [h, w, f] assumes "
-                                 f"(convert to colmap or blender instead)")
+            try:
+                row_from_camera(cam, 1.0, 2.0)  # the bounds are checked on their own, below
+            except InputError as exc:
+                raise InputError(f"{rel}: {exc} (convert to colmap or blender instead)") from None
     base = [Path(rel).name for rel in names]
     if len(set(base)) != len(base):
         raise InputError(f"{src}: two images share a file name in different folders; rename them first")
