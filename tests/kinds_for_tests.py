@@ -14,6 +14,7 @@ runs (the order a runner ran them in).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -232,3 +233,9 @@ def _trace_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:
 TRACE = RunKind(name="tests.kinds_for_tests:TRACE", validate=_trace_validate, run=_trace_run, config=TraceConfig,
                 result=TraceRun, description="for tests: each run appends a line to a log as it runs",
                 protocols=KindProtocols(_trace_protocol, lambda name: "the run marked with the protocol's name"))
+
+
+# --------------------------------------------------------------------------- reusable
+#: The dummy kind declared ``reusable`` (as training is): a run another experiment in the same
+#: results folder finished is copied, not run again (``kind = "tests.kinds_for_tests:REUSABLE"``).
+REUSABLE = dataclasses.replace(DUMMY, name="tests.kinds_for_tests:REUSABLE", reusable=True)

@@ -25,9 +25,13 @@ import click
               help="Run only the file's [check] (same run ids, resumable), not the grid's runs: to add the check to "
                    "a report whose grid ran elsewhere; then `splatbench report EXPERIMENT.toml --rebuild --results "
                    "DIR`.")
+@click.option("--reuse/--no-reuse", default=True, show_default=True,
+              help="Copy the runs another experiment in the results folder finished under the same run id and "
+                   "config instead of running them again (training runs; each copy names its experiment in "
+                   "reused_from).")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
 def run(experiment: Path, workers: int | None, executor: str | None, scheduler: str | None, results: Path | None,
-        dry_run: bool, check: bool, check_only: bool, progress: bool) -> None:
+        dry_run: bool, check: bool, check_only: bool, reuse: bool, progress: bool) -> None:
     """Run every pending run of EXPERIMENT.toml and print "done D, skipped S (finished),
     C claimed by another runner, failed F of T".
 
@@ -37,7 +41,9 @@ def run(experiment: Path, workers: int | None, executor: str | None, scheduler: 
     at another protocol; docs/reports.md, "The 7K check") after the grid's, unless
     --no-check; --check-only runs the check's runs alone (to add the check to a committed
     report: `splatbench report EXPERIMENT.toml --rebuild --results DIR` then puts them
-    beside the report's own grid runs). Exits with status 1 when a run failed.
+    beside the report's own grid runs). A training run that another experiment in the same
+    results folder finished (the same run id: the same resolved config) is copied, not run
+    again, unless --no-reuse. Exits with status 1 when a run failed.
     """
     from splatbench.experiments.runner import check_only_problem, run_experiment
     from splatbench.experiments.grid import load_experiment
@@ -53,7 +59,7 @@ def run(experiment: Path, workers: int | None, executor: str | None, scheduler: 
         _dry_run(spec, results, check, check_only)
         return
     summary = run_experiment(spec, workers=workers, executor=executor, scheduler=scheduler, results_dir=results,
-                             progress=progress, check=check, check_only=check_only)
+                             progress=progress, check=check, check_only=check_only, reuse=reuse)
     click.echo(summary.line())
     if summary.failed:
         sys.exit(1)

@@ -219,6 +219,11 @@ class RunKind:
     #: How a cell is rerun under a named protocol (an experiment's ``[check]``); None: the kind has
     #: no protocols, and an experiment of it with a ``[check]`` is refused.
     protocols: KindProtocols | None = None
+    #: Whether a run finished for another experiment in the same results folder, under the same run
+    #: id and config, stands for this experiment's run (the runner copies its record instead of
+    #: running it again): True for a kind whose result depends only on its config (training), False
+    #: where it depends on when it ran (timings taken side by side, alternately).
+    reusable: bool = False
 
     def __post_init__(self) -> None:
         _hints(self.config)  # a dataclass whose annotations resolve (TypeError otherwise)

@@ -52,7 +52,7 @@ import sys
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -84,18 +84,20 @@ class RunSummary:
     folder: Path
     claimed: int = 0
     warned: int = 0  # of ``done``, runs that warned of something (`RunResult.warnings`)
+    reused: int = 0  # of ``skipped``, runs copied from another experiment's folder (`reuse_finished`)
 
     def line(self) -> str:
         warned = f" ({self.warned} warned: see their report's \"Warnings\")" if self.warned else ""
-        return (f"done {self.done}{warned}, skipped {self.skipped} (finished), {self.claimed} claimed by another "
-                f"runner, failed {self.failed} of {self.total}")
+        reused = f", {self.reused} of them reused from another experiment" if self.reused else ""
+        return (f"done {self.done}{warned}, skipped {self.skipped} (finished{reused}), {self.claimed} claimed by "
+                f"another runner, failed {self.failed} of {self.total}")
 
 
 # --------------------------------------------------------------------------- parent side
 def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor: str = "local",
                    scheduler: str | None = None, results_dir: str | Path, progress: bool = True,
                    known_scenes: Callable[[], set[str]] | None = None, check: bool = True,
-                   check_only: bool = False) -> RunSummary:
+                   check_only: bool = False, reuse: bool = True) -> RunSummary:
     """Run every pending run of ``spec``; return the counts.
 
     workers: parallel runs (None: one per CPU); executor: "local" or "dask";
@@ -109,6 +111,9 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     counted, and the folder's table still lists those of them that have a result): to add the
     check to a report whose grid ran elsewhere (docs/reports.md, "The 7K check"). One
     `InputError` line for a file without a ``[check]``, or with ``check=False``.
+    reuse: first copy into this folder the runs that another experiment in ``results_dir`` finished
+    under the same run id and config (`reuse_finished`; only for a kind that is ``reusable``); they
+    count as skipped.
     """
     if check_only:
         check_only_problem(spec, check)
@@ -139,19 +144,29 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     damaged: list[tuple[Path, str]] = []
     records = {rid: rec for rid, rec in read_records(folder, damaged).items() if rid in set(ids)}
     pending = [r for r in order if r.run_id not in records or records[r.run_id].status != "done"]
+    log = _logger(progress)
+    reused: list[RunRecord] = []
+    if reuse and pending and get_kind(spec.kind).reusable:
+        reused = reuse_finished(results_dir, spec, pending)
+        records.update((r.run_id, r) for r in reused)
+        pending = [r for r in pending if r.run_id not in records or records[r.run_id].status != "done"]
     skipped = len(runs) - len(pending)
 
-    log = _logger(progress)
     for path, reason in damaged:  # the run is pending: its new result replaces the file
         log(f"{spec.name}: damaged result file {path.name} ({reason}); its run is redone")
     save_table(folder, table_ids)
     of_check = (f" (the check's at {spec.check.protocol} only; the grid's left out)" if check_only else
                 f" ({len(checks)} of them the check at {spec.check.protocol})" if checks else
                 f" (the check at {spec.check.protocol} left out)" if spec.check is not None else "")
-    log(f"{spec.name}: {len(runs)} runs{of_check}, {skipped} already done, {len(pending)} to run "
+    of_reused = ""
+    if reused:
+        sources = sorted({r.reused_from for r in reused})
+        of_reused = (f" ({len(reused)} of them reused: the same run id and config finished for "
+                     f"{', '.join(sources)} in {results_dir})")
+    log(f"{spec.name}: {len(runs)} runs{of_check}, {skipped} already done{of_reused}, {len(pending)} to run "
         f"({executor}, {workers} worker{'s' * (workers != 1)}); results in {folder}")
     if not pending:
-        return RunSummary(done=0, skipped=skipped, failed=0, total=len(runs), folder=folder)
+        return RunSummary(done=0, skipped=skipped, failed=0, total=len(runs), folder=folder, reused=len(reused))
 
     kind = get_kind(spec.kind)
     prepared = None if kind.prepare is None else kind.prepare([plain(r.config) for r in pending])
@@ -238,7 +253,42 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
         if bar is not None:
             bar.close()
     return RunSummary(done=done, skipped=skipped, failed=failed, total=len(runs), folder=folder, claimed=claimed,
-                      warned=warned)
+                      warned=warned, reused=len(reused))
+
+
+def reuse_finished(results_dir: Path, spec: ExperimentSpec, runs: list[RunSpec]) -> list[RunRecord]:
+    """Copy into ``spec``'s folder each of ``runs`` that another experiment's folder in
+    ``results_dir`` holds finished: a done record of the same run id whose kind, scene, seed
+    and resolved config are this run's. A run id hashes the resolved config (a train run's
+    dataset by its content), so it is the same run; the copy takes this experiment's name and
+    axis labels and ``reused_from`` = the experiment it ran for (the first one, through copies
+    of copies); its metrics, curves, times and code are the original's. A run another runner
+    of this experiment holds (`splatbench.experiments.claims`) is left to it. Returns the
+    records written."""
+    by_id = {run.run_id: run for run in runs}
+    others = sorted(p for p in results_dir.iterdir() if p.is_dir() and p.name != spec.name) \
+        if results_dir.is_dir() else []
+    folder = experiment_dir(results_dir, spec.name)
+    written: list[RunRecord] = []
+    for run_id, run in by_id.items():
+        for other in others:
+            source = read_record(other / f"{run_id}.json")
+            if (source is None or source.status != "done" or source.kind != spec.kind or source.scene != run.scene
+                    or source.seed != run.seed or source.config != plain(run.config)):
+                continue
+            claim = try_claim(folder, run_id)
+            if claim is None:
+                break
+            try:
+                with deferred():
+                    record = replace(source, experiment=spec.name, labels=dict(run.labels),
+                                     reused_from=source.reused_from or source.experiment)
+                    write_record(results_dir, record)
+            finally:
+                claim.release()
+            written.append(record)
+            break
+    return written
 
 
 def check_only_problem(spec: ExperimentSpec, check: bool = True) -> None:
@@ -362,4 +412,4 @@ def _logger(enabled: bool) -> Callable[[str], None]:
     return log
 
 
-__all__ = ["RunSummary", "execution_order", "run_experiment"]
+__all__ = ["RunSummary", "execution_order", "reuse_finished", "run_experiment"]

@@ -14,8 +14,8 @@ mid-write leaves at most a stray temporary file (removed by the next run when
 its process is gone), never a half-written result.
 
 Table columns: ``run_id, experiment, kind, scene, seed, status, error`` (the
-deterministic core), ``seconds, started, finished, worker, code`` (`VOLATILE_COLUMNS`:
-when, where and at which commit it ran), then ``axis.<name>`` (the run's axis labels),
+deterministic core), ``seconds, started, finished, worker, code, reused_from`` (`VOLATILE_COLUMNS`:
+when, where, at which commit and for which experiment it ran), then ``axis.<name>`` (the run's axis labels),
 ``config.<dotted.path>`` (every resolved config field but scene and seed),
 ``metric.<name>``, ``warnings`` (JSON list, None for none) and ``curves`` (JSON text). A column whose values mix types
 (``sh_degree`` 0..3 and ``"auto"``) holds their JSON text; lists and tables too.
@@ -45,7 +45,7 @@ TABLE_NAME = "results.parquet"
 WORK_DIR = "work"
 STATUSES = ("done", "failed")
 CORE_COLUMNS = ("run_id", "experiment", "kind", "scene", "seed", "status", "error")
-VOLATILE_COLUMNS = ("seconds", "started", "finished", "worker", "code")
+VOLATILE_COLUMNS = ("seconds", "started", "finished", "worker", "code", "reused_from")
 
 _RESULT_NAME = re.compile(r"^[0-9a-f]{16}\.json$")
 _TEMP_NAME = re.compile(  # `splatbench.fsutil.atomic_write`'s temporary files
@@ -63,7 +63,9 @@ class RunRecord:
     (`RunResult.warnings`; absent from files written before them); seconds: run time in the worker;
     started, finished: ISO-8601 local times; worker: ``host:pid``; code: the code the run ran
     (`splatbench.versions.code_version`: ``git:<commit>``, ``+dirty`` with local changes; "" in
-    files written before runs recorded it).
+    files written before runs recorded it); reused_from: the experiment this run ran for when this
+    record is a copy of the same run finished there ("" for a run made for this experiment: the
+    runner's reuse, `splatbench.experiments.runner.reuse_finished`).
     """
 
     run_id: str
@@ -84,6 +86,7 @@ class RunRecord:
     finished: str = ""
     worker: str = ""
     code: str = ""
+    reused_from: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return {"format": RECORD_FORMAT, **asdict(self)}
@@ -130,7 +133,7 @@ _FIELD_TYPES: dict[str, tuple[type, ...]] = {
     "run_id": (str,), "experiment": (str,), "kind": (str,), "scene": (str,), "seed": (int,), "status": (str,),
     "config": (dict,), "labels": (dict,), "metrics": (dict,), "warnings": (list,), "error": (str, type(None)),
     "traceback": (str, type(None)), "seconds": (int, float), "started": (str,), "finished": (str,),
-    "worker": (str,), "code": (str,)}
+    "worker": (str,), "code": (str,), "reused_from": (str,)}
 
 
 def check_record(data: Any, name: str) -> RunRecord:

@@ -535,7 +535,7 @@ REPORT = KindReport(
 TRAIN = RunKind(name="train", validate=validate, run=run, config=TrainConfig, result=TrainRun, resolve=resolve,
                 identity=identity, scenes=scenes, prepare=prepare, report=REPORT, planned=planned,
                 description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)",
-                protocols=KindProtocols(with_protocol, describe_protocol))
+                protocols=KindProtocols(with_protocol, describe_protocol), reusable=True)
 
 __all__ = ["TRAIN", "TrainRun", "REPORT", "MIN_EFFECT", "TOPOLOGY_METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
            "dataset_folder", "ensure_dataset"]

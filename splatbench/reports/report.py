@@ -264,7 +264,8 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
         lines += ["**7K check: none declared** (the experiment file has no `[check]`: its headline is not rerun at "
                   "graphdeco's 7K protocol; docs/reports.md, \"The 7K check\").", ""]
     checked = report.check.table if report.check is not None else None
-    timing = " ".join(t for t in (run_time(table), load_facts(table, kind), code_facts(table, checked)) if t)
+    timing = " ".join(t for t in (run_time(table), load_facts(table, kind), code_facts(table, checked),
+                                  reuse_facts(table)) if t)
     if timing:
         lines += [timing, ""]
     if missing:
@@ -380,6 +381,22 @@ def run_time(table: pd.DataFrame) -> str:
         span = ""
     return (f"Run time: {duration(worker)} of worker time over {len(done)} runs "
             f"(mean {duration(worker / len(done))} per run){span}.")
+
+
+def reuse_facts(table: pd.DataFrame) -> str:
+    """"Reused: ..." -- how many done runs are copies of the same run finished for another
+    experiment (their record's ``reused_from``: `splatbench.experiments.runner.reuse_finished`),
+    by experiment; their times above are those of the original runs. "" when none is (or the
+    table is from before records named it)."""
+    if not len(table) or "reused_from" not in table.columns:
+        return ""
+    sources = table.loc[table.status == "done", "reused_from"].fillna("").astype(str)
+    counts = sources[sources != ""].value_counts()
+    if not len(counts):
+        return ""
+    named = ", ".join(f"{n} from `{name}`" for name, n in sorted(counts.items()))
+    return (f"Reused: {int(counts.sum())} of the {len(sources)} runs ran for another experiment under the same run id "
+            f"(the same resolved config) and were copied, not rerun ({named}).")
 
 
 def _done_codes(table: pd.DataFrame | None) -> pd.Series:
