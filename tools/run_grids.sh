@@ -11,7 +11,8 @@
 # (the runner's folder: finished runs are skipped), reports/NAME/ (the report of what is finished).
 # Before running, the records committed in reports/NAME/runs/*.json are copied into results/NAME/
 # (never over a record already there), so a machine that kept nothing starts where the last one
-# stopped. Run it from a checkout that stays put while it runs (e.g. a `git worktree` of a commit):
+# stopped; every grid's, before any runs, since a grid copies the runs another grid finished under
+# the same run id (graphdeco's default cell: the runner's reuse, docs/experiments.md). Run it from a checkout that stays put while it runs (e.g. a `git worktree` of a commit):
 # the workers import splatbench from it.
 set -u
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
@@ -31,6 +32,12 @@ done
 SB="$ROOT/.venv/bin/splatbench"
 [ -x "$SB" ] || { echo "run_grids: $SB not found: run make setup first" >&2; exit 2; }
 export PYTHONPATH="$ROOT" SPLATBENCH_DATASETS="${SPLATBENCH_DATASETS:-$CACHE/datasets}"
+if [ "$SAVE" = 0 ]; then  # every grid's committed records first: a grid reuses another's identical runs
+  for name in "${GRIDS[@]}"; do
+    mkdir -p "$CACHE/results/$name"
+    for f in "$ROOT/reports/$name/runs"/*.json; do [ -f "$f" ] && cp -n "$f" "$CACHE/results/$name/"; done
+  done
+fi
 for name in "${NAMES[@]}"; do
   results="$CACHE/results/$name" saved="$ROOT/reports/$name/runs"
   if [ "$SAVE" = 1 ]; then
@@ -44,8 +51,6 @@ for name in "${NAMES[@]}"; do
     echo "$name: $n finished run records in reports/$name/runs/"
     continue
   fi
-  mkdir -p "$results"
-  for f in "$saved"/*.json; do [ -f "$f" ] && cp -n "$f" "$results/"; done
   echo "$name: start $(date -Is) at $(git -C "$ROOT" rev-parse --short HEAD)"
   nice -n 5 "$SB" run "$ROOT/experiments/$name.toml" --results "$CACHE/results" --no-progress
   nice -n 5 "$SB" report "$ROOT/experiments/$name.toml" --results "$CACHE/results" --out "$CACHE/reports/$name" --force
