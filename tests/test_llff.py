@@ -212,6 +212,7 @@ def test_masks_become_alphas_and_a_masked_capture_trains_and_evaluates_on_white(
     cfg = TrainConfig(dataset=str(tmp_path), out=str(tmp_path / "run"), iterations=30, schedule="absolute", strategy=StrategyConfig(name="none"), init=InitConfig(method="random", random_points=2000), data=DataConfig(downscale=2, test_every=3), eval=EvalConfig(lpips_net="none"))
     trainer = Trainer(cfg)
     assert trainer._background_rgb == [1.0, 1.0, 1.0] and "white" in trainer.background_note
+    assert trainer.background_source == "masks"  # what TrainResult.background_source records
     assert "depth_bounds" in trainer.init_note  # a forward-facing rig with bounds: its frusta
     for _ in range(30):
         trainer.step()
@@ -228,6 +229,7 @@ def test_masks_become_alphas_and_a_masked_capture_trains_and_evaluates_on_white(
     # data.masks=false: the photos as they are, on the auto background of an RGB capture
     plain = Trainer(dataclasses.replace(cfg, data=DataConfig(downscale=2, masks=False)))
     assert plain.dataset.train.alpha_pixels is None and "black" in plain.background_note
+    assert plain.background_source == "none" and plain._background_rgb == [0.0, 0.0, 0.0]
 
 
 def test_broken_masks_are_one_line(tmp_path):

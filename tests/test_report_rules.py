@@ -414,6 +414,26 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     init = next(line for line in protocol_lines(recorded) if line.startswith("- **Initialisation**"))
     assert "auto → sfm on glossy: SfM points triangulated from the training views, 1,234 Gaussians at step 0" \
         in init and "inferred" not in init
+    # the background: these runs did not record the RGB auto resolved to, so the config's value, said unresolved
+    line = lambda t, head: next(x for x in protocol_lines(t) if x.startswith(head))  # noqa: E731
+    assert "glossy `auto` (the RGB it resolved to is not recorded: these runs predate `metric.background`; auto " \
+           "is white for a masked capture, else the mean colour" in line(table, "- **Background**")
+    # an RGB set in the config is what the runs used: shown as the RGB
+    assert "glossy (1, 1, 1), set by the config." in line(table.assign(**{"config.background": "[1.0, 1.0, 1.0]"}),
+                                                             "- **Background**")
+    # runs that recorded it: the RGB each scene rendered and evaluated against, and where it came from
+    both = table.assign(**{"metric.background": "0.4706, 0.5, 0.52", "metric.background_source": "depth"})
+    both = pd.concat([both, both.assign(scene="maryrose", **{"metric.background": "1, 1, 1",
+                                                             "metric.background_source": "masks"})])
+    assert line(both, "- **Background**").endswith(
+        "glossy (0.4706, 0.5, 0.52), the mean colour of the pixels its depth marks empty, nothing hit (auto); "
+        "maryrose (1, 1, 1), masked capture: its photos composited over it with their masks (auto).")
+    # the metrics line: each metric per test view, then the mean over the views (as graphdeco's metrics.py)
+    metrics = line(table, "- **Metrics**")
+    assert "averaged over the 1 test view: the mean of the views' PSNRs, as graphdeco's metrics.py" in metrics
+    assert "not the PSNR of the pooled MSE" in metrics and "SSIM and LPIPS likewise the mean over views" in metrics
+    assert "averaged over the test views (1 on glossy, 8 on maryrose)" in line(
+        pd.concat([table, table.assign(scene="maryrose", **{"metric.test_views": 8})]), "- **Metrics**")
     table["config.init.method"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so

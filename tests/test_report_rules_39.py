@@ -265,6 +265,16 @@ def test_the_scenes_line_counts_real_captures_and_a_quick_report_says_smoke_test
     table["config.data.model"] = [("/m/" + s) if s == "diffuse" else None for s in table.scene]
     assert "diffuse (a teacher scene rendered from a trained model, not a capture)" in scenes(table)
     assert "1 real capture; a finding here" in scenes(table)
+    # a teacher scene is fit by the model family and rasterizer that rendered it: the line says so, once
+    assert scenes(table).count("Inverse crime: diffuse was rendered by this project's rasterizer from a trained "
+                               "3DGS model and is fit by the same model family and rasterizer") == 1
+    assert "its absolute numbers are not comparable with captures or published numbers." in scenes(table)
+    # a Mitsuba scene is no inverse crime, and no published benchmark either; a capture is neither
+    assert "Rendered by Mitsuba, another renderer (no inverse crime), thin is still no published benchmark: its " \
+           "absolute numbers are not the field's either." in scenes(table)
+    table["config.data.path"] = [("/data/" + s) for s in table.scene]  # three captures: no note at all
+    table["config.data.model"] = None
+    assert "Inverse crime" not in scenes(table) and "Mitsuba" not in scenes(table)
     # a report at graphdeco's 7K column is no smoke test
     assert smoke_test_line(table.assign(**{"config.protocol": "graphdeco-7k"})) == []
     assert smoke_test_line(table)[0].startswith("**A smoke test, not evidence**")

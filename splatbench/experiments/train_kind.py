@@ -164,6 +164,14 @@ class TrainRun(RunResult):
     device: str | None = metric(meaning="where the rasterizer ran: 'cpu' (Dr.Jit's LLVM backend) or 'cuda' (what "
                                         "config.device, 'auto' by default, resolved to); None before it was "
                                         "recorded", default=None)
+    background: str | None = metric(meaning="the RGB in [0, 1] behind the splats in every test render (and under "
+                                            "the targets where the dataset has alphas or masks), 'r, g, b' (what "
+                                            "background = 'auto' resolved to: TrainResult.background); None before "
+                                            "it was recorded", default=None)
+    background_source: str | None = metric(meaning="where the background came from: config, masks (a masked "
+                                                   "capture: white), alpha / depth (the mean of the pixels the "
+                                                   "dataset marks empty), none (black: it marks none); None before "
+                                                   "it was recorded", default=None)
 
     @classmethod
     def of(cls, result, dataset_hash: str | None, *, own_peak: bool = False) -> TrainRun:
@@ -190,7 +198,9 @@ class TrainRun(RunResult):
                   "lpips_scale_inputs": int(result.lpips_scale_inputs), "time_loaded": int(result.load["loaded"]),
                   "init_method": (result.init or {}).get("method"), "init_points": (result.init or {}).get("points"),
                   "run_peak_rss_mb": result.peak_rss_mb if own_peak else None,
-                  "device": result.device or None, "dataset_hash": dataset_hash}
+                  "device": result.device or None, "dataset_hash": dataset_hash,
+                  "background": ", ".join(f"{c:g}" for c in result.background) if result.background else None,
+                  "background_source": result.background_source or None}
         return cls(**values, warnings=tuple(result.warnings), curves=curves)
 
 

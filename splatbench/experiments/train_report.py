@@ -140,11 +140,11 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
     lines.append(f"- **Split**: {split}" + (f"; {views} views" if views else "") + ".")
     lines.append(f"- **Resolution**: {_resolution(done)}.")
     lines.append(f"- **Scenes**: {_scenes(done)}")
-    bg = _one(done, "config.background", lambda v: "auto (the mean colour of the pixels the dataset marks empty, "
-              "black where it marks none)" if v == "auto" else str(v))
     rnd = _values(done, "config.random_background")
-    lines.append(f"- **Background**: {bg or 'not recorded'}" + ("; a random background per training step"
-                                                              if True in rnd else "") + ".")
+    lines.append(f"- **Background** (the RGB behind the splats in every render, and under the targets where a "
+                 f"dataset has alphas or masks): {background_text(done)}"
+                 + ("; a random background per training step (the one above in the evaluations)"
+                    if True in rnd else "") + ".")
     lines.append(f"- **Metrics**: {_metrics(done)}.")
     lines.append(f"- **Initialisation**: {init_text(done)}.")
     ran = schedule_as_run(done)
@@ -152,6 +152,61 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
         lines.append(f"- **Schedule as run** (each run's recorded counts, in its {iters} steps): {ran}.")
     lines.append(f"- **Seeds**: {_seeds(done)}")
     return ["**Protocol** (from the runs' recorded configs):", "", *lines]
+
+
+#: Where each run's background came from (``metric.background_source``: `splatbench.train.loop.resolve_background`).
+_BACKGROUND_FROM = {"config": "set by the config",
+                    "masks": "masked capture: its photos composited over it with their masks (auto)",
+                    "alpha": "the mean colour of the pixels its alpha marks empty (auto)",
+                    "depth": "the mean colour of the pixels its depth marks empty, nothing hit (auto)",
+                    "none": "black: the dataset marks no empty pixels (auto)"}
+#: What ``background = "auto"`` resolves to, for runs that did not record the RGB.
+_AUTO_RULE = ("white for a masked capture, else the mean colour of the pixels the dataset marks empty, black where it "
+              "marks none")
+
+
+def _config_rgb(value: Any) -> Any:
+    """``config.background`` as the table holds it ("auto", an RGB list, or either as JSON text when
+    the column mixes them) -> "auto" or the list."""
+    if isinstance(value, str) and value != "auto":
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
+    return value
+
+
+def background_text(done: pd.DataFrame) -> str:
+    """Each scene's background as its runs recorded it: the RGB they rendered and evaluated
+    against (``metric.background``) and where it came from (``metric.background_source``),
+    ``guitar (0, 0, 0), auto: the mean colour of the pixels its depth marks empty``; for runs
+    from before it was recorded, the config's value (an RGB is what they used; ``auto`` is named
+    with its rule and said to be unresolved). Values that differ between a scene's runs are
+    joined with " / "; scenes with the same text share it (``guitar and textured `auto` (...)``)."""
+    texts: dict[str, list[str]] = {}
+    for scene, rows in done.groupby("scene", sort=True):
+        shown = []
+        rgbs = rows.get("metric.background", pd.Series(None, index=rows.index, dtype=object))
+        sources = rows.get("metric.background_source", pd.Series(None, index=rows.index, dtype=object))
+        recorded = rgbs.notna()
+        for rgb, source in dict.fromkeys(zip(rgbs[recorded], sources[recorded])):
+            how = _BACKGROUND_FROM.get(source, f"source {source}" if isinstance(source, str) else "source not recorded")
+            shown.append(f"({rgb}), {how}")
+        older = rows[~recorded]
+        values: list[Any] = []
+        for v in older.get("config.background", []):
+            if _config_rgb(v) not in values:
+                values.append(_config_rgb(v))
+        for value in values:
+            if value == "auto":
+                shown.append(f"`auto` (the RGB it resolved to is not recorded: these runs predate "
+                             f"`metric.background`; auto is {_AUTO_RULE})")
+            elif isinstance(value, list):
+                shown.append(f"({', '.join(_g(float(c)) for c in value)}), set by the config")
+            elif value is not None:
+                shown.append(f"config {value}")
+        texts.setdefault(" / ".join(shown) or "not recorded", []).append(str(scene))
+    return "; ".join(f"{_names(scenes)} {text}" for text, scenes in texts.items()) or "not recorded"
 
 
 def _start_count(raw: Any) -> int | None:
@@ -314,14 +369,34 @@ def _scenes(done: pd.DataFrame) -> str:
                 f"{'this scene' if len(kinds) == 1 else 'these scenes'} only: the evidence rule asks a headline to "
                 f"hold on {SCENES_WANTED} scenes, {REAL_WANTED} of them real captures (docs/reports.md), which this "
                 f"grid does not test.")
-    return f"{len(kinds)}: {listed}; {rule}"
+    notes = []
+    teachers = [s for s, k in kinds.items() if k == "teacher"]
+    if teachers:
+        notes.append(f" Inverse crime: {_names(teachers)} {'was' if len(teachers) == 1 else 'were'} rendered by "
+                     f"this project's rasterizer from a trained 3DGS model and {'is' if len(teachers) == 1 else 'are'}"
+                     f" fit by the same model family and rasterizer, which inflates absolute PSNR and can favour "
+                     f"choices that match the teacher: {'its' if len(teachers) == 1 else 'their'} absolute numbers "
+                     f"are not comparable with captures or published numbers.")
+    rendered = [s for s, k in kinds.items() if k == "rendered"]
+    if rendered:
+        one = len(rendered) == 1
+        notes.append(f" Rendered by Mitsuba, another renderer (no inverse crime), {_names(rendered)} "
+                     f"{'is' if one else 'are'} still no published benchmark: {'its' if one else 'their'} absolute "
+                     f"numbers are not the field's either.")
+    return f"{len(kinds)}: {listed}; {rule}" + "".join(notes)
+
+
+def _names(scenes: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return scenes[0] if len(scenes) == 1 else ", ".join(scenes[:-1]) + f" and {scenes[-1]}"
 
 
 def _metrics(done: pd.DataFrame) -> str:
     from splatbench.metrics.perceptual import convention  # late: the reports start without torch
 
     text = ("PSNR of the model's image clamped to [0, 1] against the target, on float images (the prediction "
-            "is not quantized to uint8), SSIM with an 11-pixel Gaussian window (σ 1.5)")
+            "is not quantized to uint8), SSIM with an 11-pixel Gaussian window (σ 1.5; kornia's reflect padding at "
+            "the borders, where graphdeco's SSIM pads with zeros)")
     if "metric.lpips_net" in done.columns:
         kinds = sorted({(str(n), bool(s)) for n, s in zip(done["metric.lpips_net"], done["metric.lpips_scale_inputs"])
                         if isinstance(n, str) and n})
@@ -329,7 +404,30 @@ def _metrics(done: pd.DataFrame) -> str:
             text += "; " + " / ".join(convention(*k) for k in kinds)
     else:
         text += "; LPIPS not recorded"
-    return text
+    return text + "; " + AGGREGATION.format(views=_test_views(done))
+
+
+#: How the test metrics are aggregated over the test views (`splatbench.train.loop.Trainer.evaluate`).
+AGGREGATION = ("each metric is computed per test view (PSNR from that view's MSE over its pixels and channels) and "
+               "averaged over the {views}: the mean of the views' PSNRs, as graphdeco's metrics.py and its training "
+               "evaluation report it, not the PSNR of the pooled MSE (never higher: −10 log10 is convex); SSIM and "
+               "LPIPS likewise the mean over views")
+
+
+def _test_views(done: pd.DataFrame) -> str:
+    """``8 test views`` (every scene), ``test views (8 on fox, 24 on lego)`` where scenes differ,
+    from ``metric.test_views``; ``test views`` where not recorded."""
+    if "metric.test_views" not in done.columns:
+        return "test views"
+    per = {str(scene): [int(v) for v in _values(rows, "metric.test_views") if v is not None]
+           for scene, rows in done.groupby("scene", sort=True)}
+    counts = {" / ".join(map(str, v)) for v in per.values() if v}
+    if not counts:
+        return "test views"
+    if len(counts) == 1 and all(per.values()):
+        count = next(iter(counts))
+        return f"{count} test view{'' if count == '1' else 's'}"
+    return "test views (" + ", ".join(f"{' / '.join(map(str, v))} on {s}" for s, v in per.items() if v) + ")"
 
 
 def _seeds(done: pd.DataFrame) -> str:

@@ -94,33 +94,39 @@ class Evaluation:
     per_view_psnr: list[float] = field(default_factory=list)
 
 
-def resolve_background(background: list[float] | str, split, masks: str = "") -> tuple[torch.Tensor, str]:
-    """The render background [3] and how it was chosen.
+#: Where a run's background came from (`resolve_background`; `TrainResult.background_source`).
+BACKGROUND_SOURCES = ("config", "masks", "alpha", "depth", "none")
+
+
+def resolve_background(background: list[float] | str, split, masks: str = "") -> tuple[torch.Tensor, str, str]:
+    """The render background [3], where it came from (one of `BACKGROUND_SOURCES`) and how it
+    was chosen, in words.
 
     ``"auto"``: white for a masked capture (``masks``: the folder its alphas came from;
-    the object on white, as NeRF-synthetic is evaluated); else the mean ground-truth
-    colour of the pixels the split marks as empty -- alpha 0 when it has alphas, else
-    depth 0 (nothing hit: a constant environment shows there) -- or black when it marks
-    none (3DGS's default)."""
+    the object on white, as NeRF-synthetic is evaluated; source "masks"); else the mean
+    ground-truth colour of the pixels the split marks as empty -- alpha 0 when it has
+    alphas ("alpha"), else depth 0 ("depth": nothing hit, a constant environment shows
+    there) -- or black when it marks none ("none": 3DGS's default). A given RGB: "config"."""
     if not isinstance(background, str):
-        return torch.tensor(background, dtype=torch.float32), f"background {list(background)} (config)"
+        return torch.tensor(background, dtype=torch.float32), "config", f"background {list(background)} (config)"
     if masks:
-        return torch.ones(3), (f"background auto: white [1.0, 1.0, 1.0] (a masked capture, {masks}/: the object "
-                               f"on white, as NeRF-synthetic; training targets and test views are composited over "
-                               f"it with their masks; set background or random_background for another)")
+        return torch.ones(3), "masks", (
+            f"background auto: white [1.0, 1.0, 1.0] (a masked capture, {masks}/: the object on white, as "
+            f"NeRF-synthetic; training targets and test views are composited over it with their masks; set "
+            f"background or random_background for another)")
     empty = None
     if split.alpha_pixels is not None:
-        empty, how = split.alpha_pixels == 0, "alpha 0"  # 8-bit 0 is exactly alpha 0
+        empty, source, how = split.alpha_pixels == 0, "alpha", "alpha 0"  # 8-bit 0 is exactly alpha 0
     elif split.depths is not None:
-        empty, how = split.depths == 0, "depth 0 (nothing hit)"
+        empty, source, how = split.depths == 0, "depth", "depth 0 (nothing hit)"
     if empty is None or not empty.any():
-        return torch.zeros(3), "background auto: black (the dataset marks no empty pixels)"
+        return torch.zeros(3), "none", "background auto: black (the dataset marks no empty pixels)"
     # the empty pixels of each view in turn (one float view at a time), in the order of a boolean
     # index over the whole stack, so the mean is the same sum as before
     pixels = np.concatenate([split.image(i)[empty[i]] for i in range(len(split))])
     colour = pixels.astype(np.float64).mean(axis=0)
     rgb = [round(float(c), 4) for c in colour]
-    return torch.tensor(rgb, dtype=torch.float32), \
+    return torch.tensor(rgb, dtype=torch.float32), source, \
         f"background auto: {rgb}, the mean of {int(empty.sum())} training pixels with {how}"
 
 
@@ -175,8 +181,8 @@ class Trainer:
         # the training views stay as the dataset holds them (8-bit); each step converts its own (`target`)
         # RGBA ground truth is composited on `gt_background` (by load_dataset); renders use `background`
         gt_background = torch.tensor(self._gt_background(config), dtype=torch.float32)
-        background, self.background_note = resolve_background(config.background, train,
-                                                              getattr(dataset, "masks", ""))
+        background, self.background_source, self.background_note = resolve_background(
+            config.background, train, getattr(dataset, "masks", ""))
         # host copies (float32 values) for each render's background argument and the compositing
         # check: reading them back from the device every step would wait for the GPU
         self._gt_rgb, self._background_rgb = gt_background.tolist(), background.tolist()
@@ -619,9 +625,10 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         init=trainer.init_summary,
         warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step, protocol=config.protocol,
         raster=config.raster, device=resolve_device(config.device),
-        step_evaluations=step_evaluations, topology=topology_counts(trainer.state))
+        step_evaluations=step_evaluations, topology=topology_counts(trainer.state),
+        background=[round(c, 6) for c in trainer._background_rgb], background_source=trainer.background_source)
     write_text(out / "result.json", result.to_json(indent=2) + "\n")  # whole or not at all
     return result
 
 
-__all__ = ["train", "torch_threads", "resolve_background", "Trainer", "StepStatus", "StepTimes", "Evaluation"]
+__all__ = ["train", "torch_threads", "resolve_background", "BACKGROUND_SOURCES", "Trainer", "StepStatus", "StepTimes", "Evaluation"]

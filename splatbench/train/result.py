@@ -94,6 +94,13 @@ class TrainResult:
     device: str = ""                    # where the rasterizer ran: "cpu" (Dr.Jit's LLVM backend) or "cuda", what
                                         # TrainConfig.device ("auto" by default, as `raster` records it) resolved
                                         # to on this machine ("": a result written before it was recorded)
+    background: list[float] = field(default_factory=list)  # RGB in [0, 1] behind the splats in every test
+                                        # render, and under the targets where the dataset has alphas or masks
+                                        # (what background = "auto" resolved to, to 6 decimals; a random_background
+                                        # run's evaluation background; []: a result written before it was recorded)
+    background_source: str = ""         # where it came from (`splatbench.train.loop.BACKGROUND_SOURCES`): "config",
+                                        # "masks" (a masked capture: white), "alpha" / "depth" (the mean of the
+                                        # pixels the dataset marks empty), "none" (black: it marks none); "": not recorded
 
     def to_dict(self) -> dict:
         """JSON-ready dict; NaN / inf become None; history rows become objects."""
