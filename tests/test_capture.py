@@ -4,6 +4,8 @@ experiments.train_kind)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 from pathlib import Path
 
@@ -299,7 +301,12 @@ def test_grid_over_catalog_folder_and_teacher_scenes_runs_and_reports(tmp_path, 
     rows = {r.scene: r for r in read_records(tmp_path / "results" / "mixed").values()}
     assert set(rows) == {"diffuse", "cap", "toy"}
     assert all(r.status == "done" for r in rows.values()), [r.error for r in rows.values()]
-    assert rows["cap"].config["data"] == {"path": str((tmp_path / "exp" / "cap").resolve()), "downscale": 2}
+    # the folder's keys as the file gave them (the path made absolute), the rest of DataConfig at its defaults
+    from splatbench.train.config import DataConfig
+
+    defaults = {k: v for k, v in dataclasses.asdict(DataConfig()).items() if k not in ("path", "downscale")}
+    assert rows["cap"].config["data"] == {"path": str((tmp_path / "exp" / "cap").resolve()), "downscale": 2,
+                                          **defaults}
     assert rows["toy"].config["data"]["resolution"] == 40 and rows["toy"].config["data"]["views"] == 9
     assert "spp" not in rows["toy"].config["data"]
     assert all(r.metrics["test_psnr"] is not None for r in rows.values())
