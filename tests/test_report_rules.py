@@ -434,6 +434,18 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "not the PSNR of the pooled MSE" in metrics and "SSIM and LPIPS likewise the mean over views" in metrics
     assert "averaged over the test views (1 on glossy, 8 on maryrose)" in line(
         pd.concat([table, table.assign(scene="maryrose", **{"metric.test_views": 8})]), "- **Metrics**")
+    # the split per scene as the runs recorded it: a rendered scene's test views of its total, a capture's
+    # train and test views; a capture's reduction and, where recorded, its image size in pixels
+    assert line(table, "- **Split**").endswith(f"; glossy 1 test of {int(table['config.data.views'].iloc[0])}.")
+    capture = table.assign(scene="fox", **{"config.data.path": "/data/fox", "config.data.downscale": 12,
+                                           "config.data.views": None, "metric.test_views": 9})
+    assert "fox 9 test" in line(capture, "- **Split**") and "of 64" not in line(capture, "- **Split**")
+    assert "captures reduced from their photos' size: fox 1/12 (" in line(capture, "- **Resolution**") \
+        and "image sizes not recorded by these runs" in line(capture, "- **Resolution**")
+    sized = capture.assign(**{"metric.train_views": 58, "metric.image_width": 89, "metric.image_height": 158})
+    assert "fox 58 train / 9 test" in line(sized, "- **Split**")
+    assert "fox 1/12 (89×158 px)" in line(sized, "- **Resolution**") \
+        and "not recorded" not in line(sized, "- **Resolution**")
     table["config.init.method"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so

@@ -274,6 +274,9 @@ def test_final_lpips_follows_the_config_and_the_curves_use_alexnet(tmp_path):
     assert result.lpips_net == "vgg" and not result.lpips_scale_inputs
     # the background the renders used is recorded, and where it came from (here: the config's)
     assert result.background == [0.0, 0.0, 0.0] and result.background_source == "config"
+    # and the views and image size it trained and was evaluated at, as the dataset holds them
+    height, width = ds.test.image_size
+    assert (result.train_views, result.image_size) == (len(ds.train), [width, height])
     model = Gaussians.from_ply(result.ply_path)  # the final model, rendered again through the public API
     want = np.mean([lpips(splatbench.render(model, cam).rgb, gt, net="vgg", scale_inputs=False)
                     for cam, gt in zip(ds.test.cameras, ds.test.images)])

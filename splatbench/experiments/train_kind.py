@@ -172,6 +172,11 @@ class TrainRun(RunResult):
                                                    "capture: white), alpha / depth (the mean of the pixels the "
                                                    "dataset marks empty), none (black: it marks none); None before "
                                                    "it was recorded", default=None)
+    train_views: int | None = metric(meaning="views trained on; None before it was recorded", default=None)
+    image_width: int | None = metric(meaning="width of the test images in pixels, as trained and evaluated (after "
+                                             "data.downscale); None before it was recorded", default=None)
+    image_height: int | None = metric(meaning="height of the test images in pixels; None before it was recorded",
+                                      default=None)
 
     @classmethod
     def of(cls, result, dataset_hash: str | None, *, own_peak: bool = False) -> TrainRun:
@@ -200,7 +205,10 @@ class TrainRun(RunResult):
                   "run_peak_rss_mb": result.peak_rss_mb if own_peak else None,
                   "device": result.device or None, "dataset_hash": dataset_hash,
                   "background": ", ".join(f"{c:g}" for c in result.background) if result.background else None,
-                  "background_source": result.background_source or None}
+                  "background_source": result.background_source or None,
+                  "train_views": result.train_views or None,
+                  "image_width": result.image_size[0] if result.image_size else None,
+                  "image_height": result.image_size[1] if result.image_size else None}
         return cls(**values, warnings=tuple(result.warnings), curves=curves)
 
 

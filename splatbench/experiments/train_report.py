@@ -134,10 +134,10 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
     lines.append(f"- **Evaluation**: the test views at steps {evals}; the reported numbers are the last step's."
                  if evals else "- **Evaluation**: the test views at the end.")
     test_every = _one(done, "config.data.test_every")
-    views = _one(done, "config.data.views")
+    views = _view_counts(done) or (_one(done, "config.data.views") or "") and f"{_one(done, 'config.data.views')} views"
     split = f"every {test_every}th view held out for testing (where the dataset gives no split of its own)" \
         if test_every else "the dataset's own split"
-    lines.append(f"- **Split**: {split}" + (f"; {views} views" if views else "") + ".")
+    lines.append(f"- **Split**: {split}" + (f"; {views}" if views else "") + ".")
     lines.append(f"- **Resolution**: {_resolution(done)}.")
     lines.append(f"- **Scenes**: {_scenes(done)}")
     rnd = _values(done, "config.random_background")
@@ -318,6 +318,35 @@ def _eval_steps(done: pd.DataFrame) -> str:
     return ", ".join(f"{s:,}" for s in sorted(steps))
 
 
+def _image_size(rows: pd.DataFrame) -> str:
+    """``89×158`` (width × height in pixels, ``metric.image_width`` / ``image_height``; ``a / b``
+    where runs differ); "" where the runs did not record it."""
+    if "metric.image_width" not in rows.columns or "metric.image_height" not in rows.columns:
+        return ""
+    sizes = [f"{int(w)}×{int(h)}" for w, h in dict.fromkeys(zip(rows["metric.image_width"], rows["metric.image_height"]))
+             if pd.notna(w) and pd.notna(h)]
+    return " / ".join(sizes)
+
+
+def _view_counts(done: pd.DataFrame) -> str:
+    """Per scene, the views trained on and tested on as the runs recorded them (``metric.train_views``,
+    ``metric.test_views``; a rendered or teacher scene's ``config.data.views`` is their sum), e.g.
+    ``fox 58 train / 9 test``; "" where nothing was recorded."""
+    kinds = scene_kinds(done)
+    parts = []
+    for scene, rows in done.groupby("scene", sort=False):
+        def counts(column: str) -> str:
+            return " / ".join(f"{int(v)}" for v in _values(rows, column) if v is not None)
+
+        train, test = counts("metric.train_views"), counts("metric.test_views")
+        total = counts("config.data.views") if kinds.get(str(scene)) != "capture" else ""
+        if train and test:
+            parts.append(f"{scene} {train} train / {test} test")
+        elif test:
+            parts.append(f"{scene} {test} test" + (f" of {total}" if total else ""))
+    return ", ".join(parts)
+
+
 def _resolution(done: pd.DataFrame) -> str:
     parts = []
     if "config.data.model" in done.columns and done["config.data.model"].notna().any():
@@ -329,10 +358,21 @@ def _resolution(done: pd.DataFrame) -> str:
         test_spp = _one(sel, "config.data.test_spp")
         parts.append(f"rendered scenes at {res} px wide by Mitsuba, {spp} spp"
                      + (f" ({test_spp} spp for the test views)" if test_spp and test_spp != spp else ""))
-    if "config.data.downscale" in done.columns and done["config.data.downscale"].notna().any():
-        down = _one(done[done["config.data.downscale"].notna()], "config.data.downscale")
-        parts.append(f"captures at 1/{down} of their size (the capture's images_{down}/ where it has them, else "
-                     f"resized on load)")
+    kinds = scene_kinds(done)
+    captures = []
+    for scene, rows in done.groupby("scene", sort=False):
+        if kinds.get(str(scene)) != "capture":
+            continue
+        down = _one(rows, "config.data.downscale", _g)
+        size = _image_size(rows)
+        captures.append(f"{scene} " + (f"1/{down}" if down else "at full size") + (f" ({size} px)" if size else ""))
+    if captures:
+        recorded = all(_image_size(rows) for scene, rows in done.groupby("scene", sort=False)
+                       if kinds.get(str(scene)) == "capture")
+        parts.append("captures reduced from their photos' size: " + ", ".join(captures)
+                     + " (a capture's images_N/ where it has that folder, else an area reduction of the nearest finer "
+                       "one on load" + ("" if recorded else "; image sizes not recorded by these runs: the experiment "
+                                                            "file's comment gives them") + ")")
     return "; ".join(parts) or "not recorded"
 
 

@@ -505,6 +505,14 @@ def _schedule_note(strategy, config: TrainConfig) -> str | None:
     return note(config.iterations)
 
 
+def _image_size(dataset) -> list[int]:
+    """[width, height] of the dataset's test images (its training images where it has no test
+    split): the size the run trained and was evaluated at."""
+    split = dataset.test if len(dataset.test) else dataset.train
+    height, width = split.image_size
+    return [int(width), int(height)]
+
+
 def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     from splatbench.metrics.load import Load, process_cpu_seconds
     from splatbench.metrics.machine import resolve_device
@@ -626,7 +634,8 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         warmup_seconds=round(warmup_seconds, 3), resumed_step=resumed_step, protocol=config.protocol,
         raster=config.raster, device=resolve_device(config.device),
         step_evaluations=step_evaluations, topology=topology_counts(trainer.state),
-        background=[round(c, 6) for c in trainer._background_rgb], background_source=trainer.background_source)
+        background=[round(c, 6) for c in trainer._background_rgb], background_source=trainer.background_source,
+        train_views=len(trainer.dataset.train), image_size=_image_size(trainer.dataset))
     write_text(out / "result.json", result.to_json(indent=2) + "\n")  # whole or not at all
     return result
 

@@ -101,6 +101,9 @@ class TrainResult:
     background_source: str = ""         # where it came from (`splatbench.train.loop.BACKGROUND_SOURCES`): "config",
                                         # "masks" (a masked capture: white), "alpha" / "depth" (the mean of the
                                         # pixels the dataset marks empty), "none" (black: it marks none); "": not recorded
+    train_views: int = 0                # views trained on (0: a result written before it was recorded)
+    image_size: list[int] = field(default_factory=list)  # [width, height] of the test images in pixels, as
+                                        # trained and evaluated (after downscale; []: not recorded)
 
     def to_dict(self) -> dict:
         """JSON-ready dict; NaN / inf become None; history rows become objects."""
