@@ -209,6 +209,9 @@ def test_a_metric_the_kind_does_not_report_is_refused_at_load_time(tmp_path, met
     path = tmp_path / "x.toml"
     path.write_text(GRID + DIFFERENCE + f'metric = "{metric}"\n')
     one_line_error(lambda: load_experiment(path), f"{path}: {message}")
+    # a spec parsed alone (not loaded) meets the same line when its report is built
+    parsed = parse_experiment(tomllib.loads(GRID + DIFFERENCE + f'metric = "{metric}"\n'), source="x.toml")
+    one_line_error(lambda: published_results(parsed, parsed.run_kind, pd.DataFrame()), f"x.toml: {message}")
     path.write_text(GRID + DIFFERENCE + 'metric = "total"\n')
     assert load_experiment(path).published[0].metric == "total"
 

@@ -96,10 +96,10 @@ def published_results(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame) 
     timed = set(kind.report.timed) if kind.report is not None else set()
     out = []
     for entry in spec.published:
+        cells = published_runs(spec, entry)  # first: a metric the kind does not report is one line here
         name = entry.metric or headline_metric(kind)
         metric = kind.specs[name]
         pool = usable[~loaded_runs(usable, kind)] if name in timed and len(usable) else usable
-        cells = published_runs(spec, entry)
         labels = tuple(cell_labels(spec, pd.DataFrame([{f"axis.{k}": v for k, v in cell[0].labels.items()}
                                                         for cell in cells])))
         rows = []
