@@ -30,7 +30,7 @@ from typing import Any
 
 from splatbench.errors import InputError
 from splatbench.experiments.configs import canonical_json, flatten, override, unflatten
-from splatbench.experiments.kinds import check_config
+from splatbench.experiments.kinds import RunKind, check_config
 from splatbench.experiments.spec import ExperimentSpec, PublishedSpec, parse_experiment, same_value
 from splatbench.fsutil import read_text
 
@@ -242,7 +242,7 @@ def published_runs(spec: ExperimentSpec, entry: PublishedSpec) -> tuple[list[Run
     return out
 
 
-def reported_metrics(kind) -> list[str]:
+def reported_metrics(kind: RunKind) -> list[str]:
     """The metrics a report of ``kind`` can show: those its `KindReport` names, else its result's
     numeric metric fields (`splatbench.reports.tables.metric_specs` keeps those a table holds)."""
     if kind.report is not None:
