@@ -22,13 +22,14 @@ See docs/experiments.md.
 
 from splatbench.experiments.configs import canonical_json
 from splatbench.experiments.one_run import execute_run
-from splatbench.experiments.grid import RunSpec, check_cells, check_runs, expand, load_experiment, make_run_id
+from splatbench.experiments.grid import (RunSpec, check_cells, check_runs, expand, load_experiment, make_run_id,
+                                        published_runs)
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, get_kind, metric, read_config, register_kind
 from splatbench.experiments.runner import RunSummary, run_experiment
-from splatbench.experiments.spec import CheckSpec, ExperimentSpec, RunnerDefaults, parse_experiment
+from splatbench.experiments.spec import CheckSpec, ExperimentSpec, PublishedSpec, RunnerDefaults, parse_experiment
 from splatbench.experiments.store import RunRecord, read_records, read_table
 
-__all__ = ["ExperimentSpec", "CheckSpec", "RunnerDefaults", "load_experiment", "parse_experiment", "RunSpec", "expand",
-           "check_cells", "check_runs", "make_run_id", "canonical_json", "RunKind", "RunResult", "metric", "read_config",
-           "KindProtocols", "get_kind", "register_kind", "RunSummary", "run_experiment", "execute_run", "RunRecord",
-           "read_records", "read_table"]
+__all__ = ["ExperimentSpec", "CheckSpec", "PublishedSpec", "RunnerDefaults", "load_experiment", "parse_experiment",
+           "RunSpec", "expand", "check_cells", "check_runs", "published_runs", "make_run_id", "canonical_json",
+           "RunKind", "RunResult", "metric", "read_config", "KindProtocols", "get_kind", "register_kind", "RunSummary",
+           "run_experiment", "execute_run", "RunRecord", "read_records", "read_table"]

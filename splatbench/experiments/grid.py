@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import tomllib
+import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,8 +30,8 @@ from typing import Any
 
 from splatbench.errors import InputError
 from splatbench.experiments.configs import canonical_json, flatten, override, unflatten
-from splatbench.experiments.kinds import check_config
-from splatbench.experiments.spec import ExperimentSpec, parse_experiment, same_value
+from splatbench.experiments.kinds import RunKind, check_config
+from splatbench.experiments.spec import ExperimentSpec, PublishedSpec, parse_experiment, same_value
 from splatbench.fsutil import read_text
 
 
@@ -195,16 +196,9 @@ def check_cells(spec: ExperimentSpec, *, at_protocol: bool = True) -> tuple[list
     if kind.protocols is None:
         raise InputError(f"{spec.source}: check: run kind {spec.kind!r} has no protocols to check a headline at "
                          f"(remove the [check] table)")
-    dims = dict(_choices(spec))
     make = _run_maker(spec, kind, spec.check.protocol if at_protocol else None)
-    out: list[list[RunSpec]] = []
-    for values in spec.check.cells:
-        cell = []
-        for name, value in values.items():  # the choice whose label is the value (spec.py checked it is one)
-            label, settings, where = next((lab, s, w) for lab, s, w in dims[name] if same_value(value, lab))
-            cell.append((name, label, settings, where))
-        out.append([make(cell, spec.check.scene, seed) for seed in spec.seeds])
-    a, b = out
+    a, b = ([make(cell, spec.check.scene, seed) for seed in spec.seeds]
+            for cell in _named_cells(spec, spec.check.cells))
     if {r.run_id for r in a} == {r.run_id for r in b}:
         raise InputError(f"{spec.source}: check.cells: both cells are the same runs (a value equal to the base is "
                          f"the base)")
@@ -214,6 +208,47 @@ def check_cells(spec: ExperimentSpec, *, at_protocol: bool = True) -> tuple[list
             raise InputError(f"{spec.source}: check.protocol: the grid already runs {spec.check.protocol!r}; a check "
                              f"reruns its headline at another protocol")
     return a, b
+
+
+def _named_cells(spec: ExperimentSpec, cells) -> list[list[tuple[str, Any, dict[str, Any], str]]]:
+    """Cells named as ``dimension -> value`` (`CheckSpec.cells`, `PublishedSpec.cells`; spec.py checked
+    each is a cell of the grid) as `_cells` lists them: each value's choice, whose label is the value."""
+    dims = dict(_choices(spec))
+    return [[(name, *next((lab, s, w) for lab, s, w in dims[name] if same_value(value, lab)))
+             for name, value in values.items()] for values in cells]
+
+
+def published_runs(spec: ExperimentSpec, entry: PublishedSpec) -> tuple[list[RunSpec], ...]:
+    """The grid's runs of a ``[report] published`` entry's cells (`PublishedSpec`), one list per cell
+    (A first), each of every seed at the entry's scene (a difference: at every scene of the grid, in
+    file order). One `InputError` line for a metric the kind's reports do not show, or two cells
+    that are the same runs (a value equal to a one-at-a-time grid's base is its base)."""
+    kind = spec.run_kind
+    at = next((f"[{i}]" for i, e in enumerate(spec.published) if e is entry), "")
+    where = f"{spec.source}: report.published{at}"
+    shown = reported_metrics(kind)
+    if entry.metric is not None and entry.metric not in shown:
+        raise InputError(f"{where}.metric: {entry.metric!r} is not a metric {spec.kind!r} reports "
+                         f"(expected one of: {', '.join(shown)})")
+    if entry.metric is None and kind.report is not None and kind.report.rules is None:
+        raise InputError(f"{where}.metric: missing ({spec.kind!r} has no headline metric; name one of: "
+                         f"{', '.join(shown)})")
+    scenes = spec.scenes if entry.scene is None else (entry.scene,)
+    make = _run_maker(spec, kind)
+    out = tuple([make(cell, scene, seed) for scene in scenes for seed in spec.seeds]
+                for cell in _named_cells(spec, entry.cells))
+    if len(out) == 2 and {r.run_id for r in out[0]} == {r.run_id for r in out[1]}:
+        raise InputError(f"{where}.cells: both cells are the same runs (a value equal to the base is the base)")
+    return out
+
+
+def reported_metrics(kind: RunKind) -> list[str]:
+    """The metrics a report of ``kind`` can show: those its `KindReport` names, else its result's
+    numeric metric fields (`splatbench.reports.tables.metric_specs` keeps those a table holds)."""
+    if kind.report is not None:
+        return list(kind.report.metrics)
+    hints = typing.get_type_hints(kind.result)
+    return [name for name in kind.specs if hints.get(name) in (int, float)]
 
 
 def check_runs(spec: ExperimentSpec) -> list[RunSpec]:
@@ -272,10 +307,13 @@ def load_experiment(path: str | Path, *, known_scenes: Callable[[], set[str]] | 
 def check_experiment(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None = None) -> None:
     """Check the kind exists, every scene is known (``known_scenes``, else the kind's
     ``scenes``; neither: any name) and every run's config passes the kind's
-    ``validate``, by expanding the grid and its check. Raises one `InputError` line; runs
-    nothing."""
+    ``validate``, by expanding the grid and its check, and the runs of each ``[report] published``
+    entry (`published_runs`). Raises one `InputError` line; runs nothing."""
     expand(spec, known_scenes=known_scenes)
     check_runs(spec)
+    for entry in spec.published:
+        published_runs(spec, entry)
 
 
-__all__ = ["RunSpec", "expand", "check_cells", "check_runs", "make_run_id", "load_experiment", "check_experiment"]
+__all__ = ["RunSpec", "expand", "check_cells", "check_runs", "published_runs", "reported_metrics",
+           "make_run_id", "load_experiment", "check_experiment"]

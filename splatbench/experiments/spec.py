@@ -30,6 +30,11 @@ sweep it (docs/experiments.md has the full format)::
                                       # values matched to each other: { densify = ["mcmc", "budget"] })
     quick = "../reports/x_quick"      # the same grid at the quick protocol (a report folder or a
                                       # run table, relative to this file): its ranks beside these
+    [[report.published]]              # a published number the report sets this grid's beside:
+    cells = [{ densify = "mcmc" }, { densify = "none" }]   # A against B (or cell = {...}, scene = "x":
+    value = 0.5                       # one cell's value on one scene); value: A - B as published;
+    source = "where it is published"  # metric (default: the kind's headline), source and protocol
+    protocol = "graphdeco-30k, ..."   # (both required) as docs/reports.md, "Beside published numbers"
 
     [check]                           # the headline rerun at the field's protocol (docs/reports.md,
     protocol = "graphdeco-7k"         # "The 7K check"): two cells of the grid, one of its scenes,
@@ -120,6 +125,31 @@ class CheckSpec:
 
 
 @dataclass(frozen=True)
+class PublishedSpec:
+    """One entry of ``[report] published``: a published number the report sets the grid's own beside
+    (docs/reports.md, "Beside published numbers").
+
+    cells: (A, B) for a published difference A − B, or (A,) for a published value of one cell; each
+    ``dimension -> value`` naming one cell of the grid, as `CheckSpec.cells`; scene: the grid's scene
+    an absolute value is of (None for a difference: every scene of the grid stands beside it);
+    value: the published number; metric: the metric it is of (None: the kind's headline, its
+    findings' primary metric); source: where it is published; protocol: its protocol (free text or
+    a protocol's name).
+    """
+
+    cells: tuple[Mapping[str, Any], ...]
+    value: float
+    source: str
+    protocol: str
+    metric: str | None = None
+    scene: str | None = None
+
+    @property
+    def is_difference(self) -> bool:
+        return len(self.cells) == 2
+
+
+@dataclass(frozen=True)
 class ExperimentSpec:
     """One experiment. Configs are flat (``dotted.path -> value``, see the module doc).
 
@@ -151,6 +181,8 @@ class ExperimentSpec:
     #   -> the values whose cells end at one matched model size (docs/reports.md, "Model size")
     quick: str | None = None  # ``[report] quick``: the same grid's quick-protocol results, as written
     #   (relative to the file; docs/reports.md, "Rank agreement")
+    published: tuple[PublishedSpec, ...] = ()  # ``[report] published``: published numbers to stand beside
+    #   (docs/reports.md, "Beside published numbers")
 
     @property
     def run_kind(self) -> RunKind:
@@ -284,11 +316,12 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
 
     runner = _parse_runner(data.get("runner", {}), fail, source, base_dir)
     min_effect, matched, quick = _parse_report(data.get("report", {}), fail, axes, variants)
+    published = _parse_published(data.get("report", {}).get("published", []), fail, scenes, axes, variants, grid)
     check = _parse_check(data["check"], fail, scenes, axes, variants, grid) if "check" in data else None
     return ExperimentSpec(name=name, kind=kind, scenes=tuple(scenes), seeds=tuple(seeds), base=base, axes=axes,
                           variants=variants, grid=grid, description=description, runner=runner, source=source,
                           scene_sources=scene_sources, scene_tables=scene_tables, min_effect=min_effect,
-                          check=check, matched=matched, quick=quick)
+                          check=check, matched=matched, quick=quick, published=published)
 
 
 def _parse_check(table: Any, fail, scenes: list[str], axes: Mapping[str, tuple[Any, ...]],
@@ -312,30 +345,36 @@ def _parse_check(table: Any, fail, scenes: list[str], axes: Mapping[str, tuple[A
     if not isinstance(cells, list) or len(cells) != 2:
         raise fail("check.cells", f"expected two cells, reference first (e.g. [{{ sh_degree = 0 }}, "
                                   f"{{ sh_degree = 3 }}]), got {cells!r}")
-    dims = [*axes, *variants]
-    parsed = []
-    for i, cell in enumerate(cells):
-        where = f"check.cells[{i}]"
-        if not isinstance(cell, Mapping):
-            raise fail(where, f"expected a table of axis = value, got {cell!r}")
-        values = _cell_values(cell, dims, where, fail)
-        for dim, value in values.items():
-            known = list(axes[dim]) if dim in axes else list(variants[dim])
-            if not any(same_value(value, v) for v in known):
-                raise fail(f"{where}.{dim}", f"{value!r} is not a value of the grid's "
-                                            f"{'axis' if dim in axes else 'variant'} {dim!r} "
-                                            f"({', '.join(map(repr, known))})")
-        if grid == "product" and set(values) != set(dims):
-            missing = [d for d in dims if d not in values]
-            raise fail(where, f"names no value of {', '.join(map(repr, missing))} (a cell of a product grid "
-                              f"names one value of every axis)")
-        if grid == "one-at-a-time" and len(values) > 1:
-            raise fail(where, f"names {len(values)} axes; a cell of a one-at-a-time grid is its base ({{}}) or one "
-                              f"axis value alone")
-        parsed.append(values)
+    parsed = [_grid_cell(cell, f"check.cells[{i}]", fail, axes, variants, grid) for i, cell in enumerate(cells)]
     if canonical_json(parsed[0]) == canonical_json(parsed[1]):
         raise fail("check.cells", "the two cells are the same cell")
     return CheckSpec(protocol=protocol, scene=scene, cells=(parsed[0], parsed[1]))
+
+
+def _grid_cell(cell: Any, where: str, fail, axes: Mapping[str, tuple[Any, ...]],
+               variants: Mapping[str, Mapping[str, Any]], grid: str) -> dict[str, Any]:
+    """A cell of the grid named by a table of ``dimension = value`` (a ``[check]`` cell, a
+    ``[report] published`` cell): each value one of its dimension's, every dimension named in a
+    product grid, at most one in a one-at-a-time grid (none: its base); one `InputError` line
+    ``where...`` otherwise."""
+    if not isinstance(cell, Mapping):
+        raise fail(where, f"expected a table of axis = value, got {cell!r}")
+    dims = [*axes, *variants]
+    values = _cell_values(cell, dims, where, fail)
+    for dim, value in values.items():
+        known = list(axes[dim]) if dim in axes else list(variants[dim])
+        if not any(same_value(value, v) for v in known):
+            raise fail(f"{where}.{dim}", f"{value!r} is not a value of the grid's "
+                                        f"{'axis' if dim in axes else 'variant'} {dim!r} "
+                                        f"({', '.join(map(repr, known))})")
+    if grid == "product" and set(values) != set(dims):
+        missing = [d for d in dims if d not in values]
+        raise fail(where, f"names no value of {', '.join(map(repr, missing))} (a cell of a product grid "
+                          f"names one value of every axis)")
+    if grid == "one-at-a-time" and len(values) > 1:
+        raise fail(where, f"names {len(values)} axes; a cell of a one-at-a-time grid is its base ({{}}) or one "
+                          f"axis value alone")
+    return values
 
 
 def same_value(a: Any, b: Any) -> bool:
@@ -366,7 +405,9 @@ def _cell_values(cell: Mapping[str, Any], dims: list[str], where: str, fail, pre
 
 
 #: Keys of the ``[report]`` table.
-REPORT_FIELDS = ("min_effect", "matched", "quick")
+REPORT_FIELDS = ("min_effect", "matched", "quick", "published")
+#: Keys of one ``[[report.published]]`` entry: a difference (``cells``) or one cell's value (``cell``, ``scene``).
+PUBLISHED_FIELDS = ("cells", "cell", "scene", "value", "metric", "source", "protocol")
 
 
 def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variants: Mapping[str, Mapping[str, Any]]
@@ -409,6 +450,67 @@ def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variant
         raise fail("report.quick", f"expected the path of the quick version's results (a report folder or a "
                                    f"run table), got {quick!r}")
     return out, matched, quick
+
+
+def _parse_published(entries: Any, fail, scenes: list[str], axes: Mapping[str, tuple[Any, ...]],
+                     variants: Mapping[str, Mapping[str, Any]], grid: str) -> tuple[PublishedSpec, ...]:
+    """``[[report.published]]`` (`PublishedSpec`): each entry a published difference
+    ``cells = [A, B]``, ``value`` = A − B, or a published value of one cell on one of the grid's
+    scenes (``cell``, ``scene``, ``value``); ``source`` and ``protocol`` required, ``metric``
+    optional (whether the kind reports it is checked with the kind,
+    `splatbench.experiments.grid.published_runs`). Each cell a cell of the grid (`_grid_cell`)."""
+    example = ('[[report.published]] tables, e.g. { cells = [{ densify = "absgrad" }, { densify = "default" }], '
+               'value = 0.11, source = "...", protocol = "..." }')
+    if not isinstance(entries, list):
+        raise fail("report.published", f"expected an array of {example}, got {entries!r}")
+    out = []
+    for i, entry in enumerate(entries):
+        where = f"report.published[{i}]"
+        if not isinstance(entry, Mapping):
+            raise fail(where, f"expected a table (one published number), got {entry!r}")
+        for key in entry:
+            if key not in PUBLISHED_FIELDS:
+                raise fail(f"{where}.{key}", unknown_key_problem(key, PUBLISHED_FIELDS))
+        if ("cells" in entry) == ("cell" in entry):
+            raise fail(where, "expected either cells = [A, B] (a published difference A − B) or cell = {...} with "
+                              "scene = \"...\" (a published value of one cell on one scene)")
+        for key in ("value", "source", "protocol"):
+            if key not in entry:
+                raise fail(f"{where}.{key}", "missing (a published number gives its value, its source and its "
+                                             "protocol)")
+        if "cells" in entry:
+            raw = entry["cells"]
+            if not isinstance(raw, list) or len(raw) != 2:
+                raise fail(f"{where}.cells", f"expected two cells, A then B, for a published A − B (e.g. [{{ densify "
+                                             f"= \"absgrad\" }}, {{ densify = \"default\" }}]), got {raw!r}")
+            if "scene" in entry:
+                raise fail(f"{where}.scene", "a published difference stands beside every scene of the grid; scene "
+                                             "goes with cell = {...} (a published value of one cell)")
+            cells = tuple(_grid_cell(c, f"{where}.cells[{k}]", fail, axes, variants, grid) for k, c in enumerate(raw))
+            if canonical_json(cells[0]) == canonical_json(cells[1]):
+                raise fail(f"{where}.cells", "the two cells are the same cell")
+            scene = None
+        else:
+            cells = (_grid_cell(entry["cell"], f"{where}.cell", fail, axes, variants, grid),)
+            scene = entry.get("scene")
+            if scene not in scenes:
+                raise fail(f"{where}.scene", f"expected the grid's scene the value is of (one of: "
+                                             f"{', '.join(scenes)}), got {scene!r}")
+        value = entry["value"]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise fail(f"{where}.value", f"expected the published number (a finite number), got {value!r}")
+        for key in ("source", "protocol"):
+            text = entry[key]
+            if not isinstance(text, str) or not text.strip():
+                what = ("where it is published (e.g. \"gsplat docs/source/tests/eval.rst\")" if key == "source" else
+                        "its protocol (free text or a protocol's name, e.g. \"graphdeco-30k, Mip-NeRF 360\")")
+                raise fail(f"{where}.{key}", f"expected {what}, got {text!r}")
+        metric = entry.get("metric")
+        if metric is not None and (not isinstance(metric, str) or not metric):
+            raise fail(f"{where}.metric", f"expected a metric's name (e.g. \"test_psnr\"), got {metric!r}")
+        out.append(PublishedSpec(cells=cells, value=float(value), source=" ".join(entry["source"].split()),
+                                 protocol=" ".join(entry["protocol"].split()), metric=metric, scene=scene))
+    return tuple(out)
 
 
 #: Keys of a scene table: a dataset folder or a teacher model (besides ``name``).
@@ -544,5 +646,6 @@ def _no_duplicates(values: list, where: str, fail) -> None:
         seen.add(key)
 
 
-__all__ = ["ExperimentSpec", "CheckSpec", "RunnerDefaults", "TOP_LEVEL_FIELDS", "RUNNER_FIELDS", "CHECK_FIELDS", "GRID_MODES", "EXECUTORS",
-           "RESERVED_KEYS", "FOLDER_SCENE_KEYS", "TEACHER_SCENE_KEYS", "parse_experiment", "check_scheduler", "same_value"]
+__all__ = ["ExperimentSpec", "CheckSpec", "PublishedSpec", "RunnerDefaults", "TOP_LEVEL_FIELDS", "RUNNER_FIELDS",
+           "CHECK_FIELDS", "REPORT_FIELDS", "PUBLISHED_FIELDS", "GRID_MODES", "EXECUTORS", "RESERVED_KEYS",
+           "FOLDER_SCENE_KEYS", "TEACHER_SCENE_KEYS", "parse_experiment", "check_scheduler", "same_value"]

@@ -46,6 +46,7 @@ from splatbench.report_files import markdown_table, write_parquet, write_text
 from splatbench.reports.check import CHECK_TABLE_NAME, CheckResult, check_lines, check_result, check_table, header_line
 from splatbench.reports.figures import cell_means, curves_figure
 from splatbench.reports.findings import Finding, axis_finding, load_recorded, usable_runs
+from splatbench.reports.published import published_lines
 from splatbench.reports.ranks import quick_table, rank_finding
 from splatbench.reports.settling import settling_finding
 from splatbench.reports.tables import AxisTable, axis_table, cell_labels, display, loaded_runs, metric_specs
@@ -291,6 +292,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
 
     if report.check is not None:
         lines += check_lines(report.check, f"splatbench run {source_path(spec)}{run_options}")
+    lines += published_lines(spec, kind, table)  # "Beside published numbers" ([] without [report] published)
 
     specs = {m.name: m for m in report.metrics}
     declared = kind.report
