@@ -576,7 +576,8 @@ def test_a_train_result_becomes_the_kinds_record_field_by_field():
               "cores": 2, "loaded": True},
         topology=TopologyCounts(refinements=3, opacity_resets=1, cloned=10, split=5, pruned=2, pruned_size=1),
         init={"method": "surface", "points": 1000, "asked": "auto", "jitter": 0.5}, device="cpu",
-        background=[0.4706, 1.0, 0.0], background_source="alpha", train_views=28, image_size=[89, 158])
+        background=[0.4706, 1.0, 0.0], background_source="alpha", train_views=28, image_size=[89, 158],
+        test_view_psnr=[26.0, 24.5, 25.5, 26.0])
     record = TrainRun.of(result, "abc")
     metrics = metric_values(record)
     assert list(metrics) == list(TRAIN.specs)
@@ -590,19 +591,23 @@ def test_a_train_result_becomes_the_kinds_record_field_by_field():
         "run_peak_rss_mb": None,  # the peak was not reset as the run started: no per-run peak
         "device": "cpu",  # where the rasterizer ran (what device = auto resolved to)
         "background": "0.4706, 1, 0", "background_source": "alpha",  # what background = auto resolved to, and why
-        "train_views": 28, "image_width": 89, "image_height": 158}  # the views and the size it trained at
+        "train_views": 28, "image_width": 89, "image_height": 158,  # the views and the size it trained at
+        "worst_view_psnr": 24.5}  # the lowest test view's PSNR (each view's in the curves)
     # reset (the kind's run does it on Linux): the process's peak is the run's own
     assert metric_values(TrainRun.of(result, "abc", own_peak=True))["run_peak_rss_mb"] == 900.0
     assert record.warnings == ("warning: a warning",)
     assert record.curves["step"] == [0, 29] and record.curves["eval_psnr"] == [25.5]
+    assert record.curves["test_view_psnr"] == [26.0, 24.5, 25.5, 26.0]
     assert check_output(record, TRAIN) == record
     # a result from before the strategy's counts were recorded: None in those columns
     older = metric_values(TrainRun.of(dataclasses.replace(result, topology=None, init={}, background=[],
-                                                          background_source="", train_views=0, image_size=[]),
+                                                          background_source="", train_views=0, image_size=[],
+                                                          test_view_psnr=[]),
                                      None))
     assert older["refinements"] is None and older["dataset_hash"] is None and older["init_method"] is None
     assert older["background"] is None and older["background_source"] is None
     assert older["train_views"] is None and older["image_width"] is None and older["image_height"] is None
+    assert older["worst_view_psnr"] is None
     with pytest.raises(TypeError, match="returned dict, not TrainRun"):
         check_output({"test_psnr": 1.0}, TRAIN)
 

@@ -277,6 +277,10 @@ def test_final_lpips_follows_the_config_and_the_curves_use_alexnet(tmp_path):
     # and the views and image size it trained and was evaluated at, as the dataset holds them
     height, width = ds.test.image_size
     assert (result.train_views, result.image_size) == (len(ds.train), [width, height])
+    # each test view's PSNR at the end, in test-split order: their mean is the reported test PSNR (rounded to
+    # 1e-6 dB per view, so the mean agrees to that)
+    assert len(result.test_view_psnr) == len(ds.test)
+    assert abs(float(np.mean(result.test_view_psnr)) - result.test_psnr) < 1e-6
     model = Gaussians.from_ply(result.ply_path)  # the final model, rendered again through the public API
     want = np.mean([lpips(splatbench.render(model, cam).rgb, gt, net="vgg", scale_inputs=False)
                     for cam, gt in zip(ds.test.cameras, ds.test.images)])

@@ -177,6 +177,9 @@ class TrainRun(RunResult):
                                              "data.downscale); None before it was recorded", default=None)
     image_height: int | None = metric(meaning="height of the test images in pixels; None before it was recorded",
                                       default=None)
+    worst_view_psnr: float | None = metric(meaning="the lowest PSNR (dB) of a test view in the final evaluation (each "
+                                                   "view's in curves.test_view_psnr); None before it was recorded",
+                                           default=None)
 
     @classmethod
     def of(cls, result, dataset_hash: str | None, *, own_peak: bool = False) -> TrainRun:
@@ -196,6 +199,8 @@ class TrainRun(RunResult):
         }
         if rows["step_evaluations"]:  # a protocol's 7K / 30K columns (only runs that make them)
             curves["step_evaluations"] = rows["step_evaluations"]
+        if rows.get("test_view_psnr"):  # each test view's PSNR at the end (runs that recorded it)
+            curves["test_view_psnr"] = rows["test_view_psnr"]
         topology = dataclasses.asdict(result.topology) if result.topology is not None else {}
         values = {**{name: getattr(result, name) for name in names if hasattr(result, name)},
                   **{k: v for k, v in result.load.items() if k in names},
@@ -208,7 +213,8 @@ class TrainRun(RunResult):
                   "background_source": result.background_source or None,
                   "train_views": result.train_views or None,
                   "image_width": result.image_size[0] if result.image_size else None,
-                  "image_height": result.image_size[1] if result.image_size else None}
+                  "image_height": result.image_size[1] if result.image_size else None,
+                  "worst_view_psnr": min(result.test_view_psnr) if result.test_view_psnr else None}
         return cls(**values, warnings=tuple(result.warnings), curves=curves)
 
 

@@ -635,7 +635,8 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         raster=config.raster, device=resolve_device(config.device),
         step_evaluations=step_evaluations, topology=topology_counts(trainer.state),
         background=[round(c, 6) for c in trainer._background_rgb], background_source=trainer.background_source,
-        train_views=len(trainer.dataset.train), image_size=_image_size(trainer.dataset))
+        train_views=len(trainer.dataset.train), image_size=_image_size(trainer.dataset),
+        test_view_psnr=[round(float(p), 6) for p in ev.per_view_psnr])
     write_text(out / "result.json", result.to_json(indent=2) + "\n")  # whole or not at all
     return result
 

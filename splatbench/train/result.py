@@ -102,6 +102,9 @@ class TrainResult:
                                         # "masks" (a masked capture: white), "alpha" / "depth" (the mean of the
                                         # pixels the dataset marks empty), "none" (black: it marks none); "": not recorded
     train_views: int = 0                # views trained on (0: a result written before it was recorded)
+    test_view_psnr: list[float] = field(default_factory=list)  # the final evaluation's PSNR of each test view
+                                        # (dB, test-split order; their mean is test_psnr): one view far below the
+                                        # others is a floater in front of its camera ([]: not recorded)
     image_size: list[int] = field(default_factory=list)  # [width, height] of the test images in pixels, as
                                         # trained and evaluated (after downscale; []: not recorded)
 
