@@ -10,8 +10,9 @@ so a report is never built from a stale table. What is written, under ``out``:
 
 * ``report.md``: a header (runs done / failed / not run, shared settings, run time),
   one section per axis (a table of mean ± 95 % t interval over seeds of each axis value, per
-  scene; the findings; the training curves), each Pareto figure the kind declares (a cost
-  against quality, the cells on the front named), the metrics' meanings, the runs' warnings
+  scene; the findings; the training curves), the check's section, the published numbers the
+  file declares beside the grid's own (`splatbench.reports.published`), each Pareto figure the
+  kind declares (a cost against quality, the cells on the front named), the metrics' meanings, the runs' warnings
   (`RunResult.warnings`, one row each) and any failed runs.
 * ``figures/curves_<axis>.png``; the kind's Pareto figures (`KindReport.tradeoffs`):
   ``figures/time_vs_error.png`` and ``figures/gaussians_vs_error.png`` (train kind) or
