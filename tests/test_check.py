@@ -543,3 +543,32 @@ def test_a_check_whose_ssim_goes_the_other_way_says_so_in_its_headline(tmp_path)
     assert report.check.verdict == "holds" and report.check.rerun.opposed[0][0] == "SSIM"
     assert "**7K check: holds**, **but SSIM goes the other way, significantly there** (SSIM -0.0110 [95 % CI" in text
     assert "; **but SSIM goes the other way, significantly** at `graphdeco-7k`: SSIM -0.0110" in text
+
+
+def test_a_check_run_with_a_test_view_far_below_its_other_seeds_is_named_under_the_per_seed_table(tmp_path):
+    # guitar seed 1 at graphdeco-7k (docs/history/2026-12-07-divergent-seed.md): one view 18 dB below the same view
+    # in the other seeds; the check's runs are compared among themselves, cell by cell
+    spec = spec_of(SH_GRID)
+    root = tmp_path / "results"
+    grid_results(root, spec)
+    check_results(root, spec, 0.6)
+    records = read_records(root / spec.name)
+    for run in check_runs(spec):
+        views = [40.0 + v + 0.1 * run.seed for v in range(4)]
+        if run.seed == 1 and run.labels["sh.degree"] == 3:
+            views[2] -= 18.0
+        rec = records[run.run_id]
+        write_record(root, dataclasses.replace(rec, curves={**rec.curves, "test_view_psnr": views}))
+    text = write_report(build_report(spec, root), tmp_path / "report").read_text()
+    section = text[text.index("## Headline at the 7K protocol"):]
+    lines = section.splitlines()
+    flagged = [i for i, line in enumerate(lines) if line.startswith("- **Outlier test view**")]
+    assert len(flagged) == 1 and lines[flagged[0]].startswith(
+        "- **Outlier test view**: glossy, `sh.degree=3`, seed 1 (`"), lines
+    assert "test view 2 at 24.10 dB, 18.0 dB below the same view in the cell's other seeds (their median 42.10 dB)" \
+        in lines[flagged[0]]
+    assert lines[flagged[0] + 1].endswith("6 runs checked, 1 flagged.")
+    # under the per-seed table, before the verdict
+    assert lines.index("Each seed's test PSNR (dB), both cells (a seed that went its own way shows here, not in the "
+                       "means above):") < flagged[0] < next(i for i, line in enumerate(lines)
+                                                            if line.startswith("**7K check: "))

@@ -533,3 +533,78 @@ def test_a_time_timed_under_load_prints_no_number_in_the_table(tmp_path):
     assert rows["`3`"][t].startswith("10.5 ± ") and rows["`3`"][t].endswith("(1 loaded run left out)")
     table = next(a for a in report.axes if a.axis == "sh.degree")
     assert table.stat("glossy", "3", "train_seconds").n == 2 and table.stat("glossy", "0", "train_seconds").n == 0
+
+
+# --------------------------------------------------------------------------- outlier test views
+def _views(seed: int, sh: int, floater: dict | None = None) -> list[float]:
+    """Eight test views of a healthy run: each its own level (30-37 dB) and a seed-to-seed wobble of
+    0.3 dB; ``floater``: {(seed, sh): (view, drop)} -- that run's view ``view`` ``drop`` dB lower."""
+    rng = np.random.default_rng(100 * seed + sh)
+    views = [30.0 + v + float(rng.normal(0, 0.3)) for v in range(8)]
+    view, drop = (floater or {}).get((seed, sh), (None, 0.0))
+    if view is not None:
+        views[view] -= drop
+    return [round(v, 6) for v in views]
+
+
+def view_results(tmp_path, floater: dict | None = None, recorded=lambda run: True):
+    """A results folder whose runs record their test views (`_views`) unless ``recorded(run)`` is
+    false; each run's test PSNR is their mean, as a run's is."""
+    def make(run):
+        views = _views(run.seed, run.labels["sh.degree"], floater)
+        curves = flat_curves(float(np.mean(views)))
+        if recorded(run):
+            curves["test_view_psnr"] = views
+        return metrics_of(float(np.mean(views)), test_views=8), curves
+    return results(tmp_path, spec_of(), make)
+
+
+def test_a_run_with_one_test_view_far_below_the_same_view_of_its_other_seeds_is_flagged(tmp_path):
+    report, text = view_results(tmp_path, floater={(1, 3): (4, 20.0)})
+    section = report.findings["outlier test views"].markdown()
+    assert "## Outlier test views" in text and section in text
+    flagged = [line for line in section.splitlines() if line.startswith("- **Outlier test view**")]
+    assert len(flagged) == 1, section
+    line = flagged[0]
+    table = report.table
+    run = table[(table.seed == 1) & (table["axis.sh.degree"] == 3)].iloc[0]
+    views = _views(1, 3, {(1, 3): (4, 20.0)})
+    others = np.median([_views(s, 3)[4] for s in (0, 2)])
+    assert line.startswith(f"- **Outlier test view**: glossy, `sh.degree=3`, seed 1 (`{run.run_id}`): test view 4 "
+                           f"at {views[4]:.2f} dB, {others - views[4]:.1f} dB below the same view in the cell's other "
+                           f"seeds (their median {others:.2f} dB)"), line
+    assert "docs/history/2026-12-07-divergent-seed.md" in line
+    # its cell's mean with and without it: 20 dB over 8 views is 2.5 dB in the run's mean
+    cell = table[table["axis.sh.degree"] == 3]["metric.test_psnr"]
+    with_it, without = cell.mean(), cell[table.seed != 1].mean()
+    assert f"its cell's mean test PSNR is {with_it:.2f} dB with it, {without:.2f} dB without " \
+           f"({with_it - without:+.2f} dB)" in line
+    assert with_it - without == pytest.approx(-2.5 / 3, abs=0.3)  # one seed of three down 2.5 dB
+    assert "- Each run's test views against the same views in its cell's other seeds (flagged: more than 10 dB " \
+           "below their median): 6 runs checked, 1 flagged." in section
+
+
+def test_healthy_seeds_and_a_drop_below_the_threshold_are_not_flagged(tmp_path):
+    # a 6 dB drop: above a healthy run's spread of one view, below the floaters' 15-25 dB (OUTLIER_VIEW_DB)
+    report, text = view_results(tmp_path, floater={(1, 3): (4, 6.0)})
+    section = report.findings["outlier test views"].markdown()
+    assert "**Outlier test view**" not in text
+    assert section == ("- Each run's test views against the same views in its cell's other seeds (flagged: more "
+                       "than 10 dB below their median): 6 runs checked, 0 flagged.")
+
+
+def test_runs_without_a_per_view_record_are_counted_not_checked(tmp_path):
+    # seed 2 of SH 0 finished before runs recorded their views; seeds 1 and 2 of SH 3 likewise, so seed 0 of SH 3
+    # has no other seed to compare with; the floater in seed 1 of SH 0 is still found against seed 0 alone
+    report, text = view_results(tmp_path, floater={(1, 0): (2, 18.0)},
+                                recorded=lambda run: (run.seed, run.labels["sh.degree"]) not in
+                                {(2, 0), (1, 3), (2, 3)})
+    section = report.findings["outlier test views"].markdown()
+    assert section.count("- **Outlier test view**: glossy, `sh.degree=0`, seed 1") == 1
+    assert section.splitlines()[-1] == (
+        "- Each run's test views against the same views in its cell's other seeds (flagged: more than 10 dB below "
+        "their median): 2 runs checked, 1 flagged; 4 could not be: 3 without a per-view record (finished before "
+        "runs recorded `curves.test_view_psnr`), 1 without another seed of its cell to compare with.")
+    # a report of runs none of which recorded their views says nothing of them (a committed report stays as it was)
+    report, text = view_results(tmp_path / "old", recorded=lambda run: False)
+    assert "outlier test views" not in report.findings and "Outlier test view" not in text

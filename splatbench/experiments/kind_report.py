@@ -106,6 +106,9 @@ MetricNote = Callable[["pd.DataFrame"], list[str]]
 #: The bytes of each run's trained model, a series over the table's rows (NaN where unknown):
 #: ``model_bytes(runs) -> pd.Series``.
 ModelBytes = Callable[["pd.DataFrame"], "pd.Series"]
+#: Lines about the runs of an experiment's ``[check]`` (their own table), under its per-seed table:
+#: ``note(check_runs) -> lines``.
+CheckNote = Callable[["pd.DataFrame"], list[str]]
 #: A finding over all runs, its own section (named by `Finding.axis`): ``finding(runs, min_effect) ->
 #: Finding | None`` (``min_effect``: the experiment file's ``[report] min_effect``, metric -> number).
 RunFinding = Callable[["pd.DataFrame", "Mapping[str, float] | None"], "Finding | None"]
@@ -213,7 +216,7 @@ class KindReport:
     each comparison's Gaussians; None: not known). The hooks, each run in its order: title_notes
     (lines right under the report's title, e.g. that a quick-protocol report is a smoke test),
     header_notes (the report's header), axis_notes (each axis finding), metric_notes (the "Metrics" section), run_findings
-    (a section each, after the axes).
+    (a section each, after the axes), check_notes (the check's runs, under its per-seed table).
     """
 
     metrics: tuple[str, ...]
@@ -230,6 +233,7 @@ class KindReport:
     axis_notes: tuple[AxisNote, ...] = ()
     metric_notes: tuple[MetricNote, ...] = ()
     run_findings: tuple[RunFinding, ...] = ()
+    check_notes: tuple[CheckNote, ...] = ()
 
     def check(self, specs: Mapping[str, MetricSpec]) -> None:
         """`TypeError` naming a metric these declarations name that ``specs`` (the kind's result's
@@ -249,5 +253,5 @@ class KindReport:
             raise TypeError(f"KindReport names metrics its kind's result does not have: {', '.join(unknown)}")
 
 
-__all__ = ["Claim", "Finding", "done_runs", "AxisRow", "AxisRows", "HeaderNote", "ModelBytes", "AxisNote", "MetricNote", "RunFinding",
+__all__ = ["Claim", "Finding", "done_runs", "AxisRow", "AxisRows", "HeaderNote", "ModelBytes", "AxisNote", "MetricNote", "RunFinding", "CheckNote",
            "Comparison", "FindingRules", "Tradeoff", "SettlingCurves", "LoadMarks", "KindReport"]

@@ -59,8 +59,9 @@ from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, metric, metric_specs
 from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, memory_note, model_bytes,
-                                                 model_size_note, protocol_lines, schedule_confound_note,
-                                                 smoke_test_line, ssim_trained_note)
+                                                 model_size_note, outlier_view_finding, outlier_view_lines,
+                                                 protocol_lines, schedule_confound_note, smoke_test_line,
+                                                 ssim_trained_note)
 from splatbench.metrics.memory import reset_peak_rss
 from splatbench.train.config import DataConfig, TrainConfig, nest  # the kind's Config (loads torch: every use of the kind validates)
 
@@ -553,6 +554,8 @@ REPORT = KindReport(
     model_bytes=model_bytes,
     axis_notes=(model_size_note, ssim_trained_note, auto_sh_degree_note, schedule_confound_note),
     metric_notes=(lpips_note, memory_note),
+    run_findings=(outlier_view_finding,),
+    check_notes=(outlier_view_lines,),
 )
 
 #: The ``train`` kind (``kind = "train"``).

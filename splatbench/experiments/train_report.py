@@ -5,7 +5,9 @@ what its reports say beyond the tables, from what the runs recorded (their resol
 * header: `protocol_lines`, the protocol the runs followed (below);
 * axis notes: `auto_sh_degree_note` (the degree ``auto`` ended at), `schedule_confound_note`
   (what a densification-schedule setting changes besides itself);
-* metric notes: `lpips_note` (which LPIPS the column is).
+* metric notes: `lpips_note` (which LPIPS the column is);
+* run finding and check note: `outlier_view_finding` / `outlier_view_lines` (a run with a test view
+  far below the same view in its cell's other seeds: a floater in front of that camera).
 
 `protocol_lines(table)`: one markdown list of the fields that change a 3DGS number
 (PROTOCOL.md; NerfBaselines): the named protocol, the schedule (iterations, scaled or
@@ -20,12 +22,14 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
-from splatbench.experiments.kind_report import AxisRows, Claim, done_runs
+from splatbench.experiments.kind_report import AxisRows, Claim, Finding, done_runs
 
 #: What the runs' protocol is called when their config names none (`TrainConfig.protocol` absent).
 DEFAULT_PROTOCOL = ("quick (graphdeco's 30,000-step schedule scaled to the run's length): a smoke test, not evidence "
@@ -691,5 +695,150 @@ def lpips_note(runs: pd.DataFrame) -> list[str]:
             + "; ".join(convention(*k) for k in kinds) + "."] if kinds else []
 
 
-__all__ = ["DEFAULT_PROTOCOL", "SMOKE_TEST", "smoke_test_line", "model_bytes", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note",
+# --------------------------------------------------------------------------- outlier test views
+#: How far (dB) a test view must fall below the median of the same view over its cell's other seeds to be
+#: flagged (`view_outliers`). Far above a healthy run's seed-to-seed spread of one view, measured on real
+#: records (each saved final model evaluated again, tools/backfill_view_psnr.py; the gap is a view's PSNR
+#: below the median of the same view in the cell's other seeds): 192 views of the 24 quick_protocol runs that
+#: stayed healthy (guitar teacher at 43-46 dB, textured Mitsuba scene at 29 dB, 3 seeds, 8 views) gap at most
+#: 1.5 dB (SD 0.34 dB on guitar, 0.08 dB on textured); the real capture fox (sh_degree, 9 views, 2 seeds per
+#: cell) at most 4.5 dB, on its hardest view (view 7 at 23-28 dB), its other views at most 0.7 dB. And below
+#: the drops of the floaters seen: 18.3 and 24.8 dB in guitar seed 1's two 7K runs, 15-25 dB at its
+#: checkpoints (docs/history/2026-12-07-divergent-seed.md). 10 dB is more than twice the largest healthy gap
+#: and 5 dB under the smallest floater drop. A smaller floater can cost a view less (guitar's 7K no_resets
+#: seed 2 has view 7 at 46.7 dB against 51.7 / 52.8 in the other seeds, 5.6 dB, its mean 0.1 dB lower) and
+#: goes unflagged: at 52 dB that is 1.5e-5 more mean square error, and 5.6 dB is near fox's healthy 4.5 dB.
+#: A run's own worst view against its median is no test: maryrose's view 8 sits 10-12 dB below its run's
+#: median view in every run (a hard view, not a floater).
+OUTLIER_VIEW_DB = 10.0
+#: Where the mechanism is explained.
+FLOATER_DOC = "docs/history/2026-12-07-divergent-seed.md"
+
+
+@dataclass(frozen=True)
+class OutlierRun:
+    """A run with test views far below the same views in its cell's other seeds (`view_outliers`).
+
+    views: (view index in test-split order, its PSNR, the median of the same view over the cell's
+    other runs that recorded it), each more than `OUTLIER_VIEW_DB` below that median; cell_mean /
+    without: the mean test PSNR over the cell's done runs with this run and without it (NaN when
+    it is the cell's only run with a test PSNR)."""
+
+    run_id: str
+    scene: str
+    cell: str
+    seed: int
+    views: tuple[tuple[int, float, float], ...]
+    cell_mean: float
+    without: float
+
+
+@dataclass(frozen=True)
+class ViewCheck:
+    """`view_outliers`' answer: the flagged runs; how many runs were compared with their cell's
+    other seeds (``checked``); how many could not be: ``unrecorded`` (no ``curves.test_view_psnr``:
+    finished before runs recorded it) and ``alone`` (no other run of its cell recorded as many views)."""
+
+    outliers: tuple[OutlierRun, ...]
+    checked: int
+    unrecorded: int
+    alone: int
+
+
+def _view_psnrs(raw: Any) -> list[float] | None:
+    """A run's ``curves.test_view_psnr`` (the curves' JSON text), or None where not recorded."""
+    try:
+        c = json.loads(raw) if isinstance(raw, str) else {}
+    except ValueError:
+        return None
+    views = c.get("test_view_psnr") if isinstance(c, dict) else None
+    if not isinstance(views, list) or not views or not all(isinstance(v, (int, float)) for v in views):
+        return None
+    return [float(v) for v in views]
+
+
+def _plain(v: Any) -> Any:
+    """A table cell as a hashable plain value (NaN / NA as None)."""
+    if v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v)):
+        return None
+    return v.item() if hasattr(v, "item") else v
+
+
+def view_outliers(table: pd.DataFrame, threshold: float = OUTLIER_VIEW_DB) -> ViewCheck:
+    """Each done run's test views (``curves.test_view_psnr``) against the same views of the other
+    runs of its scene and cell (the same ``axis.*`` values and ``config.protocol``: the other
+    seeds): a run is flagged for every view more than ``threshold`` dB below the median of that
+    view over the others (a floater in front of that camera: `FLOATER_DOC`)."""
+    done = done_runs(table)
+    axes = [c for c in done.columns if c.startswith("axis.")]
+    keys = [*axes, *(["config.protocol"] if "config.protocol" in done.columns else [])]
+    cells: dict[tuple, list[tuple[Any, list[float] | None]]] = {}
+    for _, row in done.iterrows():
+        key = (str(row.scene), *(_plain(row[c]) for c in keys))
+        cells.setdefault(key, []).append((row, _view_psnrs(row.get("curves"))))
+    outliers, checked, unrecorded, alone = [], 0, 0, 0
+    for (scene, *values), runs in cells.items():
+        label = ", ".join(f"{a[5:]}={_g(v)}" for a, v in zip(axes, values)) or "the base"
+        psnrs = pd.to_numeric(pd.Series([r["metric.test_psnr"] if "metric.test_psnr" in r else None
+                                         for r, _ in runs]), errors="coerce")
+        for k, (row, views) in enumerate(runs):
+            if views is None:
+                unrecorded += 1
+                continue
+            others = [v for j, (_, v) in enumerate(runs) if j != k and v is not None and len(v) == len(views)]
+            if not others:
+                alone += 1
+                continue
+            checked += 1
+            median = np.median(np.array(others), axis=0)
+            low = [(i, p, float(m)) for i, (p, m) in enumerate(zip(views, median))
+                   if math.isfinite(p) and math.isfinite(m) and m - p > threshold]
+            if low:
+                rest = psnrs.drop(index=k).dropna()
+                outliers.append(OutlierRun(str(row.run_id), scene, label, int(row.seed), tuple(low),
+                                           float(psnrs.dropna().mean()) if psnrs.notna().any() else math.nan,
+                                           float(rest.mean()) if len(rest) else math.nan))
+    return ViewCheck(tuple(outliers), checked, unrecorded, alone)
+
+
+def outlier_view_lines(table: pd.DataFrame) -> list[str]:
+    """`view_outliers` in words: one line per flagged run (its views, how far below, what its cell's
+    mean is with and without it) and one of what was checked; [] where no done run recorded its
+    views (runs from before `curves.test_view_psnr`: nothing to say but that, which a report of
+    such runs does not repeat)."""
+    found = view_outliers(table)
+    if not found.checked and not found.alone:
+        return []
+    lines = []
+    for o in found.outliers:
+        views = "; ".join(f"test view {i} at {p:.2f} dB, {m - p:.1f} dB below the same view in the cell's other "
+                          f"seeds (their median {m:.2f} dB)" for i, p, m in o.views)
+        moved = (f"; its cell's mean test PSNR is {o.cell_mean:.2f} dB with it, {o.without:.2f} dB without "
+                 f"({o.cell_mean - o.without:+.2f} dB)" if math.isfinite(o.cell_mean) and math.isfinite(o.without)
+                 else "")
+        lines.append(f"- **Outlier test view**: {o.scene}, `{o.cell}`, seed {o.seed} (`{o.run_id}`): {views}: a "
+                     f"floater in front of that camera ({FLOATER_DOC}){moved}.")
+    missed = []
+    if found.unrecorded:
+        missed.append(f"{found.unrecorded} without a per-view record (finished before runs recorded "
+                      f"`curves.test_view_psnr`)")
+    if found.alone:
+        missed.append(f"{found.alone} without another seed of its cell to compare with")
+    lines.append(f"- Each run's test views against the same views in its cell's other seeds (flagged: more than "
+                 f"{OUTLIER_VIEW_DB:g} dB below their median): {found.checked} run{'' if found.checked == 1 else 's'} "
+                 f"checked, {len(found.outliers)} flagged"
+                 + (f"; {found.unrecorded + found.alone} could not be: {', '.join(missed)}" if missed else "") + ".")
+    return lines
+
+
+def outlier_view_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None) -> Finding | None:
+    """The grid's runs' `outlier_view_lines` as a run finding (`KindReport.run_findings`), its own
+    section "Outlier test views"; None where no run recorded its views."""
+    lines = outlier_view_lines(runs)
+    return Finding("outlier test views", lines, []) if lines else None
+
+
+__all__ = ["OUTLIER_VIEW_DB", "FLOATER_DOC", "OutlierRun", "ViewCheck", "view_outliers", "outlier_view_lines",
+           "outlier_view_finding",
+           "DEFAULT_PROTOCOL", "SMOKE_TEST", "smoke_test_line", "model_bytes", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note",
            "schedule_confound_note", "lpips_note", "memory_note"]

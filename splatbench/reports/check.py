@@ -120,6 +120,7 @@ class CheckResult:
     verdict: str
     reason: str
     table: pd.DataFrame
+    notes: tuple[str, ...] = ()  # the kind's notes on the check's runs (`KindReport.check_notes`)
 
     @property
     def name(self) -> str:
@@ -205,8 +206,11 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
         reason += (f"; **but {opposed_text(rerun_side)}** at `{check.protocol}`: "
                    f"{'; '.join(t for _, t in rerun_side.opposed)}")
     described = kind.protocols.describe(check.protocol) if kind.protocols is not None else check.protocol
+    mine = checked[checked.run_id.isin({r.run_id for c in rerun for r in c})] if len(checked) else checked
+    notes = tuple(line for note in (declared.check_notes if declared is not None else ()) if len(mine)
+                  for line in note(mine))
     return CheckResult(check, tuple(spec.seeds), labels, described, metric, grid_side, rerun_side, verdict, reason,
-                       checked if len(checked) else build_table([]))
+                       checked if len(checked) else build_table([]), notes)
 
 
 def opposed_text(side: CheckSide) -> str:
@@ -336,6 +340,8 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
                   f"half-width of its 95 % t interval):", "",
                   *markdown_table(head, cells, align="--" + "r" * (1 + len(specs))).splitlines(), ""]
     lines += _per_seed_lines(result)
+    if result.notes:
+        lines += [*result.notes, ""]
     sentence = f"**{result.headline}**: {result.reason}"
     if result.verdict in JUDGED and result.rerun.settled is False:
         sentence += f"; **not settled** at `{c.protocol}` ({result.rerun.why})"

@@ -1,0 +1,85 @@
+"""`evaluate_saved_run`: a finished run's final evaluation, made again from its output folder.
+
+A train run writes ``config.toml`` (its resolved config), ``point_cloud.ply`` (the final model,
+SH truncated to the degree it ended at) and ``result.json`` (`TrainResult`, whose ``sh_degree``
+is that degree) into its output folder. This rebuilds the run's `Trainer` from that config and
+dataset, puts the PLY's Gaussians into it at that degree, and calls `Trainer.evaluate`: the one
+evaluation (the same test split, background, compositing of masked or alpha targets over it,
+clamping and PSNR), not a second one. The PLY holds the float32 parameters bit for bit
+(`splatbench.ply`), so on the machine and environment the run had, the numbers are the run's
+own; elsewhere they differ by float32 rounding only.
+
+What it is for: runs finished before `TrainResult.test_view_psnr` was recorded
+(``tools/backfill_view_psnr.py``). Nothing is trained and nothing is written.
+
+Example::
+
+    ev = evaluate_saved_run("results/sh_degree/work/8f323452d4d1f2bc")
+    ev.psnr, ev.per_view_psnr          # the run's test PSNR (dB) and each test view's
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+
+from splatbench.errors import InputError
+from splatbench.gaussians import Gaussians
+from splatbench.fsutil import read_text
+from splatbench.train.config import TrainConfig
+from splatbench.train.loop import Evaluation, Trainer, torch_threads
+from splatbench.train.params import params_from_gaussians
+
+#: The files of a run's output folder that `evaluate_saved_run` reads.
+CONFIG_FILE, MODEL_FILE, RESULT_FILE = "config.toml", "point_cloud.ply", "result.json"
+
+
+def final_sh_degree(run_dir: str | Path) -> int:
+    """The SH degree the run ended at (``result.json``'s ``sh_degree``): the degree its final
+    evaluation rendered at. One-line `InputError` for a missing or unreadable file."""
+    path = Path(run_dir) / RESULT_FILE
+    try:
+        degree = json.loads(read_text(path, "result"))["sh_degree"]
+    except (ValueError, KeyError, TypeError):
+        raise InputError(f"{path}: not a train result with an sh_degree (rerun the run)") from None
+    if not isinstance(degree, int) or not 0 <= degree <= 3:
+        raise InputError(f"{path}: sh_degree {degree!r} is not a degree 0..3")
+    return degree
+
+
+def evaluate_saved_run(run_dir: str | Path, *, dataset=None) -> Evaluation:
+    """The final evaluation of the run whose output folder is ``run_dir`` (module doc), from its
+    ``config.toml``, ``point_cloud.ply`` and ``result.json``: PSNR and SSIM over its test views and
+    ``per_view_psnr`` (test-split order); no LPIPS. ``dataset``: the loaded dataset, instead of
+    reading the config's ``dataset`` folder. One-line `InputError` for a missing file, a model whose
+    SH degree is not the one the run ended at, or a config or dataset that no longer loads."""
+    from splatbench.train.config import load_config
+
+    run = Path(run_dir)
+    config = load_config(run / CONFIG_FILE)
+    degree = final_sh_degree(run)
+    model = Gaussians.from_ply(run / MODEL_FILE)
+    if model.sh_degree != degree:
+        raise InputError(f"{run / MODEL_FILE}: SH degree {model.sh_degree}, but {run / RESULT_FILE} says the run "
+                         f"ended at {degree}: not this run's final model")
+    return evaluate_model(config, model, degree, dataset=dataset)
+
+
+def evaluate_model(config: TrainConfig, model: Gaussians, degree: int, *, dataset=None) -> Evaluation:
+    """`Trainer.evaluate` of ``model`` at SH degree ``degree`` for a run of ``config`` (its dataset,
+    background, raster options), on the config's torch threads; see `evaluate_saved_run`."""
+    with torch_threads(config.torch_threads):
+        trainer = Trainer(config, dataset=dataset, resuming=True)  # the initial model is replaced below
+        if degree > config.sh.max_degree:
+            raise InputError(f"model: SH degree {degree} is above the config's sh.degree {config.sh.degree}")
+        # as a checkpoint's parameters go in (`splatbench.train.checkpoint`); SH beyond the model's degree is
+        # never read: `Trainer._render` slices the degree's bands
+        trainer.params = params_from_gaussians(model, trainer.lrs, trainer.device)
+        trainer.sh.degree = degree
+        with torch.no_grad():
+            return trainer.evaluate()
+
+
+__all__ = ["evaluate_saved_run", "evaluate_model", "final_sh_degree", "CONFIG_FILE", "MODEL_FILE", "RESULT_FILE"]

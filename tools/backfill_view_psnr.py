@@ -1,0 +1,148 @@
+"""Backfill each test view's PSNR into train runs finished before runs recorded it (e5194ed).
+
+    python tools/backfill_view_psnr.py RESULTS_DIR EXPERIMENT [--dry-run]
+
+For each done record of ``RESULTS_DIR/EXPERIMENT/`` without ``curves.test_view_psnr`` whose work
+folder (``work/<run_id>/``) holds the run's final model, evaluates that model again on the run's
+test views exactly as the run's final evaluation did (`splatbench.train.reevaluate`:
+`Trainer.evaluate` of the saved PLY at the SH degree the run ended at), checks that the views'
+mean is the record's ``metric.test_psnr`` to within float32 rendering noise (`tolerance_db`; a
+run that disagrees is refused and left as it is), and rewrites the record atomically
+(`splatbench.experiments.store.write_record`) with ``curves.test_view_psnr``,
+``curves.test_view_psnr_from`` (`FROM`) and ``metrics.worst_view_psnr``, as a run made since
+would have recorded them. Then rewrites the experiment's ``results.parquet`` from the records
+on disk (`rewrite_table`: the table's own runs, under the runners' lock). A run a runner holds
+(``claims/<run_id>.claim``) is never touched. One line per run; errors are one line each.
+``--dry-run``: evaluate and check, write nothing.
+
+Only evaluation runs (no training); safe beside a runner working in the same folder: records
+are replaced whole, only those of finished runs nobody holds, and the table is rewritten under
+the runners' lock.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import fcntl
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from splatbench.errors import InputError
+from splatbench.experiments.store import (RunRecord, experiment_dir, read_records, read_table, write_record,
+                                          write_table)
+
+#: What a backfilled record says of where its per-view PSNRs came from (``curves.test_view_psnr_from``).
+FROM = "recomputed from the run's saved final model (tools/backfill_view_psnr.py)"
+#: The largest change of a rendered value in [0, 1] that float32 rounding alone makes between two
+#: executions of the same render (another summation order: packet width, threads, machine): 16 units in the
+#: last place of 1.0 (2^-23 each), a pixel's front-to-back blend rounding once per Gaussian it blends and the
+#: errors adding up over a dozen or so. Not measured here: on the machine that ran them, every run checked
+#: so far (42 of 42, sh_degree and quick_protocol) evaluates again bit for bit.
+RENDER_ULPS = 16 * 2.0 ** -23
+
+
+def tolerance_db(view_psnrs: list[float]) -> float:
+    """How far the mean of ``view_psnrs`` (dB) may be from the recorded test PSNR by float32
+    rendering noise alone: each rendered value off by at most ``d`` = `RENDER_ULPS` changes a
+    view's mean square error e² by at most 2 d mean|e| <= 2 d rms(e), so its PSNR by at most
+    (10 / ln 10) 2 d / rms(e) = (20 / ln 10) d 10^(PSNR / 20) dB (first order); the mean of the
+    views' bounds bounds their mean's change. E.g. 1.7e-3 dB at 46 dB, 1.5e-4 dB at 25 dB:
+    rendering at another SH degree, over another background or from another model moves it by
+    tenths of a dB and more."""
+    bounds = [20 / math.log(10) * RENDER_ULPS * 10 ** (p / 20) for p in view_psnrs if math.isfinite(p)]
+    return float(np.mean(bounds)) if bounds else 0.0
+
+
+def needs_backfill(record: RunRecord) -> bool:
+    """A done run whose curves lack each test view's PSNR."""
+    return record.status == "done" and not (isinstance(record.curves, dict) and record.curves.get("test_view_psnr"))
+
+
+def backfilled(record: RunRecord, views: list[float]) -> RunRecord:
+    """``record`` with the per-view PSNRs as a run records them (`splatbench.train.loop`: each
+    rounded to 1e-6 dB; `TrainRun.of`: the worst in ``metrics.worst_view_psnr``) and `FROM`."""
+    rounded = [round(float(p), 6) for p in views]
+    curves = {**(record.curves or {}), "test_view_psnr": rounded, "test_view_psnr_from": FROM}
+    return dataclasses.replace(record, curves=curves, metrics={**record.metrics, "worst_view_psnr": min(rounded)})
+
+
+def backfill_run(folder: Path, record: RunRecord) -> tuple[RunRecord, str]:
+    """(The backfilled record, its line) for one run of the experiment folder ``folder``;
+    `InputError` (one line) where its model is missing or its evaluation disagrees with its record."""
+    from splatbench.train.reevaluate import MODEL_FILE, evaluate_saved_run  # late: torch and Dr.Jit
+
+    work = folder / "work" / record.run_id
+    if not (work / MODEL_FILE).is_file():
+        raise InputError(f"{record.run_id}: no final model {work / MODEL_FILE} (its work folder was removed)")
+    want = record.metrics.get("test_psnr")
+    if not isinstance(want, (int, float)) or not math.isfinite(want):
+        raise InputError(f"{record.run_id}: the record has no test PSNR to check the evaluation against")
+    ev = evaluate_saved_run(work)
+    views = [float(p) for p in ev.per_view_psnr]
+    got, tol = float(np.mean(views)), tolerance_db(views)
+    if len(views) != record.metrics.get("test_views", len(views)):
+        raise InputError(f"{record.run_id}: {len(views)} test views now, the record says "
+                         f"{record.metrics.get('test_views')}: the dataset changed; refused")
+    if not abs(got - want) <= tol:
+        raise InputError(f"{record.run_id}: the saved model evaluates to {got:.6f} dB, the record says {want:.6f} dB "
+                         f"(differ by {got - want:+.2e}, beyond the {tol:.1e} dB of float32 rendering noise); refused")
+    worst = int(np.argmin(views))
+    line = (f"{record.run_id} {record.scene} {record.labels} seed {record.seed}: {len(views)} views, mean "
+            f"{got:.4f} dB (record {want:.4f}, {got - want:+.1e}); worst view {worst} at {views[worst]:.2f} dB, "
+            f"{float(np.median(views)) - views[worst]:.2f} dB below the run's median view")
+    return backfilled(record, views), line
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("results", type=Path, help="the results folder (e.g. ~/.cache/splatbench/results)")
+    parser.add_argument("experiment", help="the experiment's name (its folder under RESULTS_DIR)")
+    parser.add_argument("--dry-run", action="store_true", help="evaluate and check; write nothing")
+    args = parser.parse_args(argv)
+    folder = experiment_dir(args.results, args.experiment)
+    if not (folder / "results.parquet").is_file():
+        print(f"error: {folder}: no results.parquet there (not an experiment's results folder)", file=sys.stderr)
+        return 2
+    records = read_records(folder)
+    pending = [r for r in records.values() if needs_backfill(r)]
+    print(f"{args.experiment}: {len(records)} records, {len(pending)} done without per-view PSNRs", flush=True)
+    written = failed = 0
+    for record in pending:
+        if (folder / "claims" / f"{record.run_id}.claim").exists():
+            print(f"{record.run_id}: held by a runner (claims/{record.run_id}.claim); left alone", flush=True)
+            continue
+        try:
+            new, line = backfill_run(folder, record)
+        except InputError as exc:
+            print(f"error: {exc}", flush=True)
+            failed += 1
+            continue
+        if not args.dry_run:
+            write_record(args.results, new)
+            written += 1
+        print(line + ("" if not args.dry_run else " (dry run: not written)"), flush=True)
+    if written:
+        print(f"{args.experiment}: {written} records rewritten; results.parquet rewritten "
+              f"({rewrite_table(folder)} runs)")
+    return 1 if failed else 0
+
+
+def rewrite_table(folder: Path) -> int:
+    """Rewrite ``folder/results.parquet`` from the records on disk, its runs and their order those of
+    the table as it is (the runner's: its grid's and check's runs that have a record), read and
+    written under the runners' ``.table.lock`` (`store.save_table`'s), so a runner's table written
+    meanwhile is not undone; the runs in it."""
+    with open(folder / ".table.lock", "a+b") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        ids = [str(i) for i in read_table(folder).run_id]
+        records = read_records(folder)
+        write_table(folder, [records[i] for i in ids if i in records])
+    return len(ids)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
