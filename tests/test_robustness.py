@@ -81,6 +81,39 @@ def test_an_old_pickled_checkpoint_is_refused(tmp_path):
     one_line_error(lambda: read_checkpoint(path), "is not a splatbench-checkpoint/2 checkpoint")
 
 
+def test_a_checkpoint_in_another_container_is_refused_before_its_counts_are_used(tmp_path):
+    """torch.load also reads torch's legacy (pre-zip) format, whose storage sizes are counts in the
+    file allocated before anything is read (the fuzz campaign's 27 KB file asked for 84 MB), and a
+    zip member may be compressed (inflating without bound): `save_checkpoint` writes neither, so both
+    are refused in one line, allocating no more than a few times the file."""
+    import tracemalloc
+    import zipfile
+
+    from splatbench.train.checkpoint import read_checkpoint
+
+    legacy = tmp_path / "legacy.pt"
+    torch.save({"format": "splatbench-checkpoint/2", "x": torch.zeros(1000)}, legacy,
+               _use_new_zipfile_serialization=False)
+    tracemalloc.start()
+    one_line_error(lambda: read_checkpoint(legacy), "legacy.pt", "not torch's zip archive")
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert peak < 1_000_000  # the refusal reads the zip directory only (no such directory here)
+    good = tmp_path / "good.pt"
+    torch.save({"format": "splatbench-checkpoint/2", "x": torch.zeros(1000)}, good)
+    deflated = tmp_path / "deflated.pt"
+    with zipfile.ZipFile(good) as src, zipfile.ZipFile(deflated, "w", zipfile.ZIP_DEFLATED) as dst:
+        for item in src.infolist():
+            dst.writestr(item.filename, src.read(item))
+    one_line_error(lambda: read_checkpoint(deflated), "deflated.pt", "is compressed")
+    # the fuzz case: zipfile finds the directory at the end, but torch.load goes by the first 4 bytes
+    # (not "PK\x03\x04": the legacy reader), so the file is refused by those bytes too
+    renamed = tmp_path / "renamed.pt"
+    renamed.write_bytes(b"X\x00\x00\x00" + good.read_bytes()[4:])
+    assert zipfile.is_zipfile(renamed)
+    one_line_error(lambda: read_checkpoint(renamed), "renamed.pt", "not torch's zip archive")
+
+
 def test_checkpoint_objects_round_trip_as_data(tmp_path):
     """MCMC's state (generator, stats, noise) and the SH schedule survive `_encode`, a
     weights_only load and `_decode`; a name outside the allowlist is refused."""

@@ -31,6 +31,7 @@ Example::
 
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -146,6 +147,30 @@ def resume_line(path: str | Path, step: int, iterations: int) -> str:
     return f"resumed from {path} at step {step} of {iterations}"
 
 
+def _check_archive(p: Path) -> None:
+    """One-line `InputError` unless ``p`` is what `save_checkpoint` writes: torch's zip archive
+    with every member stored uncompressed and no larger than the file. torch.load also reads its
+    legacy (pre-zip) format, whose storage sizes are counts in the file that it allocates before
+    reading (a 27 KB file asked for 84 MB), and a compressed member can inflate without bound: a
+    file the project never writes is refused before any of its counts is used."""
+    size = p.stat().st_size  # FileNotFoundError: the caller's one line
+    try:
+        with open(p, "rb") as stream:  # torch.load takes a file for a zip by these 4 bytes, not by its directory
+            if stream.read(4) != b"PK\x03\x04":
+                raise zipfile.BadZipFile("it does not start as one")
+        with zipfile.ZipFile(p) as archive:
+            members = archive.infolist()
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+        raise InputError(f"resume: {str(p)!r} is not a readable checkpoint (not torch's zip archive: "
+                         f"{type(exc).__name__}); checkpoints are the checkpoints/iteration_<step>.pt files of a "
+                         f"run's output folder") from None
+    for member in members:
+        if member.compress_type != zipfile.ZIP_STORED or member.file_size > size:
+            raise InputError(f"resume: {str(p)!r} is not a readable checkpoint (member {member.filename!r:.60} "
+                             f"is compressed or claims {member.file_size} bytes of a {size}-byte file; "
+                             f"torch.save stores its members as they are)")
+
+
 def read_checkpoint(path: str | Path, *, mmap: bool = False, device: torch.device | None = None) -> dict[str, Any]:
     """The state saved at ``path`` with its objects rebuilt (`_CLASSES` only), read as data
     (``weights_only=True``): nothing in the file is executed. A missing, damaged, foreign
@@ -154,8 +179,11 @@ def read_checkpoint(path: str | Path, *, mmap: bool = False, device: torch.devic
     ``device``: where the strategy state's tensors go (the rest stays on the CPU)."""
     p = Path(path)
     try:
+        _check_archive(p)
         # tensors and plain containers only
         state = torch.load(p, map_location="cpu", weights_only=True, mmap=mmap)
+    except InputError:
+        raise
     except FileNotFoundError:
         raise InputError(f"resume: no such checkpoint {str(p)!r}") from None
     except Exception as exc:  # noqa: BLE001 - a refused global, a damaged zip: a bad file, nothing executed
