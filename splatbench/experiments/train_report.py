@@ -831,14 +831,47 @@ def outlier_view_lines(table: pd.DataFrame) -> list[str]:
     return lines
 
 
+def hardest_view_lines(table: pd.DataFrame) -> list[str]:
+    """Per scene, the test view that is the lowest in the most runs (a view low in *every* run -- a hard
+    view, or a target the model cannot match, such as a mask that cuts away what the model renders --
+    is not an outlier of one seed, so `view_outliers` cannot see it): how often it is the lowest, its
+    PSNR and its gap below each run's median view, and how much each cell's mean test PSNR would rise
+    without it (a rise the same in every cell leaves the comparisons as they are; a spread of rises
+    bounds how much that one view moves them). [] where no run recorded its views."""
+    done = done_runs(table)
+    axes = [c for c in done.columns if c.startswith("axis.")]
+    lines = []
+    for scene, rows in done.groupby("scene", sort=False):
+        runs = [(tuple(_plain(r[c]) for c in axes), v) for _, r in rows.iterrows()
+                if (v := _view_psnrs(r.get("curves"))) is not None]
+        if not runs or len({len(v) for _, v in runs}) != 1 or len(runs[0][1]) < 2:
+            continue
+        worst = [int(np.argmin(v)) for _, v in runs]
+        view = max(set(worst), key=worst.count)
+        psnr = [v[view] for _, v in runs]
+        gap = [float(np.median(v)) - v[view] for _, v in runs]
+        rise: dict[tuple, list[float]] = {}
+        for cell, v in runs:
+            rise.setdefault(cell, []).append(float(np.mean(np.delete(np.array(v), view)) - np.mean(v)))
+        cell_rise = [float(np.mean(r)) for r in rise.values()]
+        lines.append(f"- {scene}: test view {view}, the lowest in {worst.count(view)} of {len(runs)} runs, "
+                     f"{min(psnr):.1f}–{max(psnr):.1f} dB, {min(gap):.1f}–{max(gap):.1f} dB below its run's median "
+                     f"view; without it each cell's mean test PSNR would rise by {min(cell_rise):.2f}–"
+                     f"{max(cell_rise):.2f} dB.")
+    if not lines:
+        return []
+    return ["- **Hardest test view** per scene (a view low in every run is a property of the scene or its "
+            "target, e.g. a mask that cuts away what the model renders, not of a seed):", *("  " + x for x in lines)]
+
+
 def outlier_view_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None) -> Finding | None:
     """The grid's runs' `outlier_view_lines` as a run finding (`KindReport.run_findings`), its own
     section "Outlier test views"; None where no run recorded its views."""
     lines = outlier_view_lines(runs)
-    return Finding("outlier test views", lines, []) if lines else None
+    return Finding("outlier test views", [*lines, *hardest_view_lines(runs)], []) if lines else None
 
 
 __all__ = ["OUTLIER_VIEW_DB", "FLOATER_DOC", "OutlierRun", "ViewCheck", "view_outliers", "outlier_view_lines",
-           "outlier_view_finding",
+           "outlier_view_finding", "hardest_view_lines",
            "DEFAULT_PROTOCOL", "SMOKE_TEST", "smoke_test_line", "model_bytes", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note",
            "schedule_confound_note", "lpips_note", "memory_note"]
