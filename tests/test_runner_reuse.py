@@ -105,10 +105,10 @@ def test_the_cli_says_what_it_reused_and_no_reuse_turns_it_off(tmp_path):
     assert runner.invoke(main, ["run", str(tmp_path / "first.toml"), *args]).exit_code == 0
     out = runner.invoke(main, ["run", str(tmp_path / "second.toml"), *args])
     assert out.exit_code == 0, out.output
-    assert "skipped 2 (finished, 2 of them reused from another experiment)" in out.output
+    assert "skipped 2 (finished, 2 of them reused from another experiment)" in out.stdout
     (tmp_path / "third.toml").write_text(SECOND.replace('"second"', '"third"').format(kind=REUSABLE))
     out = runner.invoke(main, ["run", str(tmp_path / "third.toml"), *args, "--no-reuse"])
-    assert out.exit_code == 0 and out.output.startswith("done 4, skipped 0 (finished)"), out.output
+    assert out.exit_code == 0 and out.stdout.startswith("done 4, skipped 0 (finished)"), out.output
 
 
 def test_the_report_counts_the_reused_runs(tmp_path):
@@ -124,3 +124,36 @@ def test_the_report_counts_the_reused_runs(tmp_path):
         reuse_facts(read_table(results / "second"))
     # a table from before records named it has no column: nothing to say
     assert reuse_facts(read_table(results / "second").drop(columns=["reused_from"])) == ""
+
+
+def test_dry_run_marks_what_a_run_would_reuse_and_what_it_reused(tmp_path, capsys):
+    from splatbench.cli import main
+
+    results = tmp_path / "results"
+    for name, text in (("first", FIRST), ("second", SECOND)):
+        (tmp_path / f"{name}.toml").write_text(text.format(kind=REUSABLE))
+    runner = CliRunner()
+    args = ["--results", str(results)]
+    assert runner.invoke(main, ["run", str(tmp_path / "first.toml"), *args, "--workers", "1",
+                                "--no-progress"]).exit_code == 0
+    before = runner.invoke(main, ["run", str(tmp_path / "second.toml"), *args, "--dry-run"]).output.splitlines()
+    assert sum("reusable" in line and line.endswith("(from first)") for line in before) == 2
+    assert sum(" pending " in line for line in before) == 2
+    off = runner.invoke(main, ["run", str(tmp_path / "second.toml"), *args, "--dry-run", "--no-reuse"]).output
+    assert "reusable" not in off
+    # the runner says what it reused, even without a progress bar (on stderr)
+    out = runner.invoke(main, ["run", str(tmp_path / "second.toml"), *args, "--workers", "1", "--no-progress"])
+    assert "2 of them reused: the same run id and config finished for first" in out.stderr
+    after = runner.invoke(main, ["run", str(tmp_path / "second.toml"), *args, "--dry-run"]).output.splitlines()
+    assert sum(line.endswith("(reused from first)") and " done " in line for line in after) == 2
+
+
+def test_the_reports_run_time_counts_only_the_runs_made_for_it(tmp_path):
+    from splatbench.reports.report import run_time
+
+    results = tmp_path / "results"
+    run_experiment(spec_of(FIRST, REUSABLE), workers=1, results_dir=results, progress=False)
+    run_experiment(spec_of(SECOND, REUSABLE), workers=1, results_dir=results, progress=False)
+    table = read_table(results / "second")
+    assert "over 2 runs" in run_time(table)  # 4 done, 2 of them copies of first's runs
+    assert "over 4 runs" in run_time(table.assign(reused_from=""))

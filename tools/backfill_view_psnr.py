@@ -75,9 +75,11 @@ def backfill_run(folder: Path, record: RunRecord) -> tuple[RunRecord, str]:
     `InputError` (one line) where its model is missing or its evaluation disagrees with its record."""
     from splatbench.train.reevaluate import MODEL_FILE, evaluate_saved_run  # late: torch and Dr.Jit
 
-    work = folder / "work" / record.run_id
+    # a reused run's model is where it ran: its original experiment's folder (`reused_from`)
+    work = folder.parent / (record.reused_from or folder.name) / "work" / record.run_id
     if not (work / MODEL_FILE).is_file():
-        raise InputError(f"{record.run_id}: no final model {work / MODEL_FILE} (its work folder was removed)")
+        raise InputError(f"{record.run_id}: no final model {work / MODEL_FILE} (its work folder is gone: a results "
+                         f"folder copied without work/, or removed)")
     want = record.metrics.get("test_psnr")
     if not isinstance(want, (int, float)) or not math.isfinite(want):
         raise InputError(f"{record.run_id}: the record has no test PSNR to check the evaluation against")

@@ -28,7 +28,8 @@ import click
 @click.option("--reuse/--no-reuse", default=True, show_default=True,
               help="Copy the runs another experiment in the results folder finished under the same run id and "
                    "config instead of running them again (training runs; each copy names its experiment in "
-                   "reused_from).")
+                   "reused_from; --dry-run marks them 'reusable'). --no-reuse runs the ones not yet copied; a copy "
+                   "already made stays (delete its file to run it here).")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
 def run(experiment: Path, workers: int | None, executor: str | None, scheduler: str | None, results: Path | None,
         dry_run: bool, check: bool, check_only: bool, reuse: bool, progress: bool) -> None:
@@ -56,7 +57,7 @@ def run(experiment: Path, workers: int | None, executor: str | None, scheduler: 
     results = results or spec.runner.results or Path("results")
     workers = workers if workers is not None else spec.runner.workers
     if dry_run:
-        _dry_run(spec, results, check, check_only)
+        _dry_run(spec, results, check, check_only, reuse)
         return
     summary = run_experiment(spec, workers=workers, executor=executor, scheduler=scheduler, results_dir=results,
                              progress=progress, check=check, check_only=check_only, reuse=reuse)
@@ -65,7 +66,7 @@ def run(experiment: Path, workers: int | None, executor: str | None, scheduler: 
         sys.exit(1)
 
 
-def _dry_run(spec, results: Path, check: bool, check_only: bool = False) -> None:
+def _dry_run(spec, results: Path, check: bool, check_only: bool = False, reuse: bool = True) -> None:
     from splatbench.experiments.grid import check_runs, expand
     from splatbench.experiments.store import experiment_dir, read_records
 
@@ -73,11 +74,22 @@ def _dry_run(spec, results: Path, check: bool, check_only: bool = False) -> None
     checks = check_runs(spec) if check else []
     if check_only:
         runs = []
+    from splatbench.experiments.kinds import get_kind
+    from splatbench.experiments.runner import find_reusable
+
     records = read_records(experiment_dir(results, spec.name))
+    pending = [r for r in (*runs, *checks) if r.run_id not in records or records[r.run_id].status != "done"]
+    reusable = find_reusable(Path(results), spec, pending) if reuse and get_kind(spec.kind).reusable else {}
     for r, tag in [*((r, "") for r in runs), *((r, f"  check: protocol={spec.check.protocol}") for r in checks)]:
         status = records[r.run_id].status if r.run_id in records else "pending"
+        if status == "done" and records[r.run_id].reused_from:
+            tag += f"  (reused from {records[r.run_id].reused_from})"
+        elif r.run_id in reusable:
+            status = "reusable"
+            source = reusable[r.run_id][1]
+            tag += f"  (from {source.reused_from or source.experiment})"
         labels = " ".join(f"{k}={v}" for k, v in r.labels.items())
-        click.echo(f"{r.run_id}  {status:<7}  {r.scene}  seed={r.seed}  {labels}{tag}".rstrip())
+        click.echo(f"{r.run_id}  {status:<8}  {r.scene}  seed={r.seed}  {labels}{tag}".rstrip())
     total = len(runs) + len(checks)
     click.echo(f"{total} run{'' if total == 1 else 's'} in {experiment_dir(results, spec.name)}"
                + (" (the check's only; the grid's left out)" if check_only else

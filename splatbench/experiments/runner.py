@@ -144,7 +144,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     damaged: list[tuple[Path, str]] = []
     records = {rid: rec for rid, rec in read_records(folder, damaged).items() if rid in set(ids)}
     pending = [r for r in order if r.run_id not in records or records[r.run_id].status != "done"]
-    log = _logger(progress)
+    log = _logger()
     reused: list[RunRecord] = []
     if reuse and pending and get_kind(spec.kind).reusable:
         reused = reuse_finished(results_dir, spec, pending)
@@ -152,8 +152,10 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
         pending = [r for r in pending if r.run_id not in records or records[r.run_id].status != "done"]
     skipped = len(runs) - len(pending)
 
-    for path, reason in damaged:  # the run is pending: its new result replaces the file
-        log(f"{spec.name}: damaged result file {path.name} ({reason}); its run is redone")
+    copied = {r.run_id: r.reused_from for r in reused}
+    for path, reason in damaged:  # the run was pending: a copy or its new result replaces the file
+        again = (f"copied again from {copied[path.stem]}" if path.stem in copied else "redone")
+        log(f"{spec.name}: damaged result file {path.name} ({reason}); its run is {again}")
     save_table(folder, table_ids)
     of_check = (f" (the check's at {spec.check.protocol} only; the grid's left out)" if check_only else
                 f" ({len(checks)} of them the check at {spec.check.protocol})" if checks else
@@ -265,30 +267,41 @@ def reuse_finished(results_dir: Path, spec: ExperimentSpec, runs: list[RunSpec])
     of copies); its metrics, curves, times and code are the original's. A run another runner
     of this experiment holds (`splatbench.experiments.claims`) is left to it. Returns the
     records written."""
-    by_id = {run.run_id: run for run in runs}
-    others = sorted(p for p in results_dir.iterdir() if p.is_dir() and p.name != spec.name) \
-        if results_dir.is_dir() else []
     folder = experiment_dir(results_dir, spec.name)
     written: list[RunRecord] = []
-    for run_id, run in by_id.items():
-        for other in others:
-            source = read_record(other / f"{run_id}.json")
-            if (source is None or source.status != "done" or source.kind != spec.kind or source.scene != run.scene
-                    or source.seed != run.seed or source.config != plain(run.config)):
-                continue
-            claim = try_claim(folder, run_id)
-            if claim is None:
-                break
-            try:
-                with deferred():
-                    record = replace(source, experiment=spec.name, labels=dict(run.labels),
-                                     reused_from=source.reused_from or source.experiment)
-                    write_record(results_dir, record)
-            finally:
-                claim.release()
-            written.append(record)
-            break
+    for run, source in find_reusable(results_dir, spec, runs).values():
+        claim = try_claim(folder, run.run_id)
+        if claim is None:
+            continue
+        try:
+            with deferred():
+                record = replace(source, experiment=spec.name, labels=dict(run.labels),
+                                 reused_from=source.reused_from or source.experiment)
+                write_record(results_dir, record)
+        finally:
+            claim.release()
+        written.append(record)
     return written
+
+
+def find_reusable(results_dir: Path, spec: ExperimentSpec,
+                  runs: list[RunSpec]) -> dict[str, tuple[RunSpec, RunRecord]]:
+    """Run id -> (run, the record to copy) for each of ``runs`` that another experiment's folder in ``results_dir`` holds finished (the
+    first such folder by name): a done record of the same run id whose kind, scene, seed and
+    resolved config are the run's (`reuse_finished`, which copies them; ``--dry-run`` lists them).
+    Nothing is written."""
+    results_dir = Path(results_dir)
+    others = sorted(p for p in results_dir.iterdir() if p.is_dir() and p.name != spec.name) \
+        if results_dir.is_dir() else []
+    found: dict[str, tuple[RunSpec, RunRecord]] = {}
+    for run in runs:
+        for other in others:
+            source = read_record(other / f"{run.run_id}.json")
+            if (source is not None and source.status == "done" and source.kind == spec.kind
+                    and source.scene == run.scene and source.seed == run.seed and source.config == plain(run.config)):
+                found[run.run_id] = (run, source)
+                break
+    return found
 
 
 def check_only_problem(spec: ExperimentSpec, check: bool = True) -> None:
@@ -404,12 +417,13 @@ def _progress_bar(total: int, name: str, enabled: bool):
     return tqdm(total=total, desc=name, unit="run", file=sys.stderr, dynamic_ncols=True)
 
 
-def _logger(enabled: bool) -> Callable[[str], None]:
+def _logger() -> Callable[[str], None]:
+    """The runner's one-line notes on stderr (what it will run, what it reused, a damaged file),
+    with or without a progress bar: ``progress`` turns off the bar, not what a user must know."""
     def log(line: str) -> None:
-        if enabled:
-            print(line, file=sys.stderr, flush=True)
+        print(line, file=sys.stderr, flush=True)
 
     return log
 
 
-__all__ = ["RunSummary", "execution_order", "reuse_finished", "run_experiment"]
+__all__ = ["RunSummary", "execution_order", "find_reusable", "reuse_finished", "run_experiment"]

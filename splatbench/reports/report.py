@@ -371,8 +371,11 @@ def source_path(spec: ExperimentSpec) -> str:
 
 
 def run_time(table: pd.DataFrame) -> str:
-    """"Run time: ..." from the done runs' worker seconds and start / finish times."""
+    """"Run time: ..." from the done runs' worker seconds and start / finish times (the runs made for
+    this experiment: a reused run's are its original's, `reuse_facts`)."""
     done = table[table.status == "done"] if len(table) else table
+    if "reused_from" in done.columns:  # a copy's times are its original's, for another experiment (`reuse_facts`)
+        done = done[done.reused_from.fillna("").astype(str) == ""]
     if not len(done):
         return ""
     worker = float(pd.to_numeric(done.seconds, errors="coerce").sum())
@@ -399,7 +402,7 @@ def reuse_facts(table: pd.DataFrame) -> str:
         return ""
     named = ", ".join(f"{n} from `{name}`" for name, n in sorted(counts.items()))
     return (f"Reused: {int(counts.sum())} of the {len(sources)} runs ran for another experiment under the same run id "
-            f"(the same resolved config) and were copied, not rerun ({named}).")
+            f"(the same resolved config) and were copied, not rerun ({named}); the run time above leaves them out.")
 
 
 def _done_codes(table: pd.DataFrame | None) -> pd.Series:
