@@ -393,15 +393,20 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert ("- **Initialisation**: auto → surface on glossy: the scene's own surface points, 1,000 Gaussians at "
             "step 0, jittered 0.5 × their neighbour spacing per seed (inferred") in header
     # sh.interval 1,000 scaled to 2,000 of 30,000 steps: round(66.7) = 67; bands at 67, 134, 201
-    assert "SH degree raised one band every 67 steps (`sh.interval` as the run reads it: bands 1, 2, 3 at steps " \
-           "67, 134, 201" in header
+    assert "SH degree raised one band every 67 steps (bands 1, 2, 3 at steps 67, 134, 201" in header
 
     # a config that names its protocol (a preset added to TrainConfig) is shown as named
     from splatbench.experiments.train_report import protocol_lines
 
     table = pd.read_parquet(tmp_path / "out" / "results.parquet")
     table["config.protocol"] = "graphdeco-30k"
+    line = lambda t, head: next(x for x in protocol_lines(t) if x.startswith(head))  # noqa: E731
     assert "- **Protocol**: graphdeco-30k." in protocol_lines(table)
+    # a graphdeco protocol lays the schedule over its 30,000 steps, whatever `schedule` the run recorded
+    # ("scaled", the default): sh.interval 1,000 stays 1,000 (the old header scaled it to 2,000 / 30,000: 67)
+    seven = table.assign(**{"config.protocol": "graphdeco-7k", "config.iterations": 7000})
+    assert "SH degree raised one band every 1,000 steps (bands 1, 2, 3 at steps 1,000, 2,000, 3,000" \
+        in line(seven, "- **Schedule as run**")
     # its schedule is graphdeco's as written, not scaled to the runs' length (nor their LR decay)
     schedule = next(line for line in protocol_lines(table) if line.startswith("- **Schedule**"))
     assert "graphdeco's 30,000-step schedule as written" in schedule and "over 30,000 steps, not scaled" in schedule \
@@ -415,7 +420,6 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "auto → sfm on glossy: SfM points triangulated from the training views, 1,234 Gaussians at step 0" \
         in init and "inferred" not in init
     # the background: these runs did not record the RGB auto resolved to, so the config's value, said unresolved
-    line = lambda t, head: next(x for x in protocol_lines(t) if x.startswith(head))  # noqa: E731
     assert "glossy `auto` (the RGB it resolved to is not recorded: these runs predate `metric.background`; auto " \
            "is white for a masked capture, else the mean colour" in line(table, "- **Background**")
     # an RGB set in the config is what the runs used: shown as the RGB
@@ -451,6 +455,27 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so
     table["config.init.method"], table["config.init.jitter"] = "surface", 0.0
     assert "not the initial points of init = surface" in "\n".join(protocol_lines(table))
+
+
+def test_the_sh_steps_in_the_header_are_where_the_real_runs_curves_part():
+    # reports/sh_degree/runs (graphdeco-7k, sh.interval 1,000, recorded schedule "scaled"): SH 0 and SH 3 of one
+    # seed are the same run, bit for bit, until band 1 starts training; the header's band-1 step must be the last
+    # logged step (every 100) at which their training PSNR is still equal
+    from pathlib import Path
+
+    from splatbench.experiments.store import build_table, read_records
+    from splatbench.experiments.train_report import schedule_as_run
+
+    folder = Path(__file__).resolve().parents[1] / "reports" / "sh_degree" / "runs"
+    if not folder.is_dir():
+        pytest.skip("reports/sh_degree/runs is gone (the report arrived)")
+    table = build_table(read_records(folder).values())
+    fox = table[(table.scene == "fox") & (table.seed == 0)]
+    zero, three = (json.loads(fox[fox["axis.sh.degree"].astype(str) == d].curves.iloc[0]) for d in ("0", "3"))
+    assert zero["step"] == three["step"]
+    parted = next(s for s, a, b in zip(zero["step"], zero["psnr"], three["psnr"]) if a != b)
+    band1 = max(s for s in zero["step"] if s < parted)
+    assert band1 == 1000 and f"SH degree raised one band every {band1:,} steps" in schedule_as_run(table)
 
 
 # --------------------------------------------------------------------------- best at comparable size

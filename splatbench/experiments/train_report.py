@@ -271,9 +271,11 @@ def init_text(done: pd.DataFrame) -> str:
 def schedule_as_run(done: pd.DataFrame) -> str:
     """The schedule's counts as the runs made them: refinements and opacity resets (the
     strategy's recorded counts, per cell where they differ) and the SH schedule (one band more
-    every ``sh.interval`` steps as the run reads it: `splatbench.train.schedule.scale_step`); ""
-    without those columns."""
-    from splatbench.train.schedule import scale_step  # late: the reports start without torch
+    every ``sh.interval`` steps as the run reads it, `TrainConfig.sh_steps`: scaled by
+    `splatbench.train.schedule.scale_step` over the protocol's schedule length, 30,000 under a
+    graphdeco protocol, which so keeps its steps as written); "" without those columns."""
+    from splatbench.train.protocol import PROTOCOLS  # late: the reports start without torch
+    from splatbench.train.schedule import scale_step
 
     axes = [c for c in done.columns if c.startswith("axis.")]
     parts = []
@@ -298,14 +300,20 @@ def schedule_as_run(done: pd.DataFrame) -> str:
         else:
             parts.append("; ".join(f"`{label}` {text}" for label, text in cells.items()))
     if {"config.sh.interval", "config.iterations", "config.schedule"} <= set(done.columns):
-        steps = sorted({scale_step(int(i), int(n), str(sch), interval=True) for i, n, sch in
-                        zip(done["config.sh.interval"], done["config.iterations"], done["config.schedule"])
+        protocols = done["config.protocol"] if "config.protocol" in done.columns else pd.Series(None, index=done.index)
+
+        def length(n: Any, protocol: Any) -> int:  # `TrainConfig.schedule_length`: no protocol recorded is quick
+            known = PROTOCOLS.get(protocol) if isinstance(protocol, str) else None
+            return (known.schedule_length if known is not None else None) or int(n)
+
+        steps = sorted({scale_step(int(i), length(n, p), str(sch), interval=True) for i, n, sch, p in
+                        zip(done["config.sh.interval"], done["config.iterations"], done["config.schedule"], protocols)
                         if pd.notna(i) and pd.notna(n) and sch in ("scaled", "absolute")})
         if steps:
             every = " / ".join(f"{s:,}" for s in steps)
             bands = " / ".join(", ".join(f"{k * s:,}" for k in (1, 2, 3)) for s in steps)
-            parts.append(f"SH degree raised one band every {every} step{'' if steps == [1] else 's'} (`sh.interval` as the run reads it: bands "
-                         f"1, 2, 3 at steps {bands}, up to each cell's maximum degree)")
+            parts.append(f"SH degree raised one band every {every} step{'' if steps == [1] else 's'} (bands 1, 2, 3 at "
+                         f"steps {bands}, up to each cell's maximum degree)")
     return "; ".join(parts)
 
 
