@@ -432,6 +432,13 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert line(both, "- **Background**").endswith(
         "glossy (0.4706, 0.5, 0.52), the mean colour of the pixels its depth marks empty, nothing hit (auto); "
         "maryrose (1, 1, 1), masked capture: its photos composited over it with their masks (auto).")
+    # one statement per scene: a run that predates the record has the RGB its scene's runs with the same
+    # background and data config recorded (auto resolves from the dataset, data.masks and config.background)
+    some = pd.concat([both, table], ignore_index=True)
+    assert "; glossy (0.4706, 0.5, 0.52), the mean colour of the pixels its depth marks empty, nothing hit (auto);" \
+        in "; " + line(some, "- **Background**").split(": ", 1)[1] and "not recorded" not in line(some, "- **Background**")
+    unmasked = pd.concat([both, table.assign(**{"config.data.masks": not table["config.data.masks"].iloc[0]})])
+    assert "(auto) / `auto` (the RGB it resolved to is not recorded" in line(unmasked, "- **Background**")
     # the metrics line: each metric per test view, then the mean over the views (as graphdeco's metrics.py)
     metrics = line(table, "- **Metrics**")
     assert "averaged over the 1 test view: the mean of the views' PSNRs, as graphdeco's metrics.py" in metrics
@@ -440,16 +447,28 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
         pd.concat([table, table.assign(scene="maryrose", **{"metric.test_views": 8})]), "- **Metrics**")
     # the split per scene as the runs recorded it: a rendered scene's test views of its total, a capture's
     # train and test views; a capture's reduction and, where recorded, its image size in pixels
-    assert line(table, "- **Split**").endswith(f"; glossy 1 test of {int(table['config.data.views'].iloc[0])}.")
+    views = int(table["config.data.views"].iloc[0])  # a rendered scene's train views are the rest of them
+    assert line(table, "- **Split**").endswith(f"; glossy {views - 1} / 1 (train / test views).")
+    # the rule as the loaders apply it (splatbench.data.dataset: i % test_every == 0), graphdeco's --eval holdout
+    assert "view i is a test view when i % 8 = 0 (every 8th from the first, by sorted image name" \
+        in line(table, "- **Split**")
     capture = table.assign(scene="fox", **{"config.data.path": "/data/fox", "config.data.downscale": 12,
                                            "config.data.views": None, "metric.test_views": 9})
-    assert "fox 9 test" in line(capture, "- **Split**") and "of 64" not in line(capture, "- **Split**")
-    assert "captures reduced from their photos' size: fox 1/12 (" in line(capture, "- **Resolution**") \
-        and "image sizes not recorded by these runs" in line(capture, "- **Resolution**")
+    assert line(capture, "- **Split**").endswith("; fox – / 9 (train / test views; –: not recorded).")
+    assert "captures at 1/`data.downscale` of their photos: fox 1/12 (image size not recorded by fox's runs)" \
+        in line(capture, "- **Resolution**")
     sized = capture.assign(**{"metric.train_views": 58, "metric.image_width": 89, "metric.image_height": 158})
-    assert "fox 58 train / 9 test" in line(sized, "- **Split**")
+    assert "; fox 58 / 9 (train / test views)." in line(sized, "- **Split**")
     assert "fox 1/12 (89×158 px)" in line(sized, "- **Resolution**") \
         and "not recorded" not in line(sized, "- **Resolution**")
+    # a run that predates the records takes them from the scene's runs with the same data config, not from
+    # a run of another downscale (its size and views may differ)
+    older = capture.assign(**{"metric.train_views": None, "metric.image_width": None, "metric.image_height": None})
+    mixed = pd.concat([sized, older], ignore_index=True)
+    assert "fox 1/12 (89×158 px)" in line(mixed, "- **Resolution**") and "; fox 58 / 9 (" in line(mixed, "- **Split**")
+    other = pd.concat([sized, older.assign(**{"config.data.downscale": 24})], ignore_index=True)
+    assert "(image size not recorded by fox's runs, or some of them)" in line(other, "- **Resolution**") \
+        and "; fox 58 / – / 9 (train / test views; –: not recorded)" in line(other, "- **Split**")
     table["config.init.method"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so
@@ -633,3 +652,23 @@ def test_runs_without_a_per_view_record_are_counted_not_checked(tmp_path):
     # a report of runs none of which recorded their views says nothing of them (a committed report stays as it was)
     report, text = view_results(tmp_path / "old", recorded=lambda run: False)
     assert "outlier test views" not in report.findings and "Outlier test view" not in text
+
+
+def test_the_header_names_the_folder_a_captures_images_came_from(tmp_path):
+    # splatbench.data.dataset: images_N/ where the capture has it; else the nearest finer folder reduced by
+    # N / M, by area averaging in the LLFF layout and PIL bicubic in the others (after undistortion)
+    from splatbench.experiments.train_report import capture_source
+
+    llff = tmp_path / "llff"
+    for d in ("images_8", "masks_8"):
+        (llff / d).mkdir(parents=True)
+    (llff / "poses_bounds.npy").write_bytes(b"")
+    assert capture_source(str(llff), 25) == "images_8/ ÷ 3.125, area"
+    assert capture_source(str(llff), 8) == "images_8/" and capture_source(str(llff), 4) == ""
+    fox = tmp_path / "fox"
+    (fox / "images").mkdir(parents=True)
+    (fox / "transforms.json").write_text(json.dumps({"k1": 0.05, "p1": 0.0, "frames": []}), encoding="utf-8")
+    assert capture_source(str(fox), 12) == "undistorted, then images/ ÷ 12, bicubic"
+    (fox / "transforms.json").write_text(json.dumps({"k1": 0.0, "frames": []}), encoding="utf-8")
+    assert capture_source(str(fox), 12) == "images/ ÷ 12, bicubic"
+    assert capture_source(str(tmp_path / "absent"), 12) == ""
