@@ -672,3 +672,23 @@ def test_the_header_names_the_folder_a_captures_images_came_from(tmp_path):
     (fox / "transforms.json").write_text(json.dumps({"k1": 0.0, "frames": []}), encoding="utf-8")
     assert capture_source(str(fox), 12) == "images/ ÷ 12, bicubic"
     assert capture_source(str(tmp_path / "absent"), 12) == ""
+
+
+def test_auto_is_defined_and_its_holdout_named_as_what_else_it_changed(tmp_path):
+    # sh.degree = auto (splatbench.train.sh_schedule): bands on trial every sh.interval steps (1,000 scaled to
+    # 2,000 of 30,000: 67), measured on every 8th training view, held out of training until band 3 has been
+    # measured one interval after it starts: step 4 x 67 = 268 (auto_lookahead 2, the default)
+    spec = spec_of({"axes": {"sh.degree": [0, 3, "auto"]}})
+
+    def make(run):
+        d = run.labels["sh.degree"]
+        return metrics_of(30.0 + 0.01 * run.seed, sh_degree=0 if d == "auto" else d), flat_curves(30.0)
+
+    _, text = results(tmp_path, spec, make)
+    note = next(x for x in text.splitlines() if x.startswith("- `auto`"))
+    assert note.startswith("- `auto` (a band added every 67 steps is kept if it gains ≥ 0.1 dB per band on every 8th "
+                           "training view, held out of training until the degree settles) ended at SH degree 0 on "
+                           "glossy (every seed).")
+    # ... so where it ended at a fixed row's degree, its difference from that row is the holdout's, not SH's
+    assert note.endswith("Also changed: it trained on about 7/8 of the training views until step 268, so its difference "
+                         "from the row of the degree it ended at (glossy `0`) is the holdout's cost, not a degree's.")

@@ -299,10 +299,7 @@ def schedule_as_run(done: pd.DataFrame) -> str:
     strategy's recorded counts, per cell where they differ) and the SH schedule (one band more
     every ``sh.interval`` steps as the run reads it, `TrainConfig.sh_steps`: scaled by
     `splatbench.train.schedule.scale_step` over the protocol's schedule length, 30,000 under a
-    graphdeco protocol, which so keeps its steps as written); "" without those columns."""
-    from splatbench.train.protocol import PROTOCOLS  # late: the reports start without torch
-    from splatbench.train.schedule import scale_step
-
+    graphdeco protocol, which so keeps its steps as written: `sh_interval_steps`); "" without those columns."""
     axes = [c for c in done.columns if c.startswith("axis.")]
     parts = []
     counted = [c for c in ("metric.refinements", "metric.opacity_resets") if c in done.columns
@@ -326,21 +323,33 @@ def schedule_as_run(done: pd.DataFrame) -> str:
         else:
             parts.append("; ".join(f"`{label}` {text}" for label, text in cells.items()))
     if {"config.sh.interval", "config.iterations", "config.schedule"} <= set(done.columns):
-        protocols = done["config.protocol"] if "config.protocol" in done.columns else pd.Series(None, index=done.index)
-
-        def length(n: Any, protocol: Any) -> int:  # `TrainConfig.schedule_length`: no protocol recorded is quick
-            known = PROTOCOLS.get(protocol) if isinstance(protocol, str) else None
-            return (known.schedule_length if known is not None else None) or int(n)
-
-        steps = sorted({scale_step(int(i), length(n, p), str(sch), interval=True) for i, n, sch, p in
-                        zip(done["config.sh.interval"], done["config.iterations"], done["config.schedule"], protocols)
-                        if pd.notna(i) and pd.notna(n) and sch in ("scaled", "absolute")})
+        steps = sh_interval_steps(done)
         if steps:
             every = " / ".join(f"{s:,}" for s in steps)
             bands = " / ".join(", ".join(f"{k * s:,}" for k in (1, 2, 3)) for s in steps)
             parts.append(f"SH degree raised one band every {every} step{'' if steps == [1] else 's'} (bands 1, 2, 3 at "
                          f"steps {bands}, up to each cell's maximum degree)")
     return "; ".join(parts)
+
+
+def sh_interval_steps(done: pd.DataFrame) -> list[int]:
+    """The distinct ``sh.interval`` of the runs in their steps (`TrainConfig.sh_steps`: scaled by
+    `splatbench.train.schedule.scale_step` over the protocol's schedule length, 30,000 under a
+    graphdeco protocol, which so keeps its steps as written); [] without those columns."""
+    from splatbench.train.protocol import PROTOCOLS  # late: the reports start without torch
+    from splatbench.train.schedule import scale_step
+
+    if not {"config.sh.interval", "config.iterations", "config.schedule"} <= set(done.columns):
+        return []
+    protocols = done["config.protocol"] if "config.protocol" in done.columns else pd.Series(None, index=done.index)
+
+    def length(n: Any, protocol: Any) -> int:  # `TrainConfig.schedule_length`: no protocol recorded is quick
+        known = PROTOCOLS.get(protocol) if isinstance(protocol, str) else None
+        return (known.schedule_length if known is not None else None) or int(n)
+
+    return sorted({scale_step(int(i), length(n, p), str(sch), interval=True) for i, n, sch, p in
+                   zip(done["config.sh.interval"], done["config.iterations"], done["config.schedule"], protocols)
+                   if pd.notna(i) and pd.notna(n) and sch in ("scaled", "absolute")})
 
 
 def _eval_steps(done: pd.DataFrame) -> str:
@@ -571,16 +580,47 @@ def _seeds(done: pd.DataFrame) -> str:
 
 
 # --------------------------------------------------------------------------- axis and metric notes
+def _auto_rule(done: pd.DataFrame) -> tuple[str, str]:
+    """(What ``sh.degree = auto`` does, in one clause; the holdout it trains without, or ""), from the
+    auto runs' configs (`splatbench.train.sh_schedule`; docs/training.md, "SH degree"): a band added every
+    ``sh.interval`` steps (`schedule_as_run`'s reading) is kept if it gains ``auto_min_gain_db`` per band
+    on every ``auto_holdout_every``-th training view, held out of training until the degree settles: with
+    ``auto_lookahead`` 2, when band 3 has been measured, one interval after it starts (4 intervals)."""
+    def one(col: str) -> Any:
+        values = [v for v in _values(done, f"config.sh.{col}") if v is not None]
+        return values[0] if len(values) == 1 else None
+
+    from splatbench.train.sh_schedule import MAX_LOOKAHEAD  # late: as `sh_interval_steps`
+
+    gain, every, ahead = one("auto_min_gain_db"), one("auto_holdout_every"), one("auto_lookahead")
+    steps = sh_interval_steps(done)
+    if gain is None or len(steps) != 1:
+        return "", ""
+    iters = [int(v) for v in _values(done, "config.iterations") if v is not None]
+    on = f"every {int(every)}th training view, held out of training until the degree settles" if every else \
+        "training views"
+    rule = f"a band added every {steps[0]:,} steps is kept if it gains ≥ {_g(float(gain))} dB per band on {on}"
+    if not every:
+        return rule, ""
+    settle = 4 * steps[0]
+    until = (f"until step {settle:,}" if ahead == MAX_LOOKAHEAD and iters and settle <= min(iters) else
+             f"until it settled (by step {settle:,} at the latest)")
+    return rule, f"it trained on about {int(every) - 1}/{int(every)} of the training views {until}"
+
+
 def auto_sh_degree_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
-    """The ``sh.degree`` axis: the degree the ``auto`` rows ended at, per scene."""
+    """The ``sh.degree`` axis: what ``auto`` is and the holdout it trains without (`_auto_rule`), the
+    degree its rows ended at per scene, and where that degree is a fixed row's: its difference from
+    that row there is the holdout's and the trials' cost, not a degree's."""
     lines: list[str] = []
     claims: list[Claim] = []
     if table.axis != "sh.degree" or "metric.sh_degree" not in runs.columns:
         return lines, claims
     auto = [r for r in table.rows if r.value == "auto"]
     if auto:
-        parts = []
+        parts, same = [], []
         done = done_runs(runs)
+        fixed = {_decoded(r.value): r.label for r in table.rows if r.value != "auto"}
         for scene in scenes:
             sel = done[(done.scene == scene) & done.run_id.isin(auto[0].run_ids)]
             degrees = [int(d) for d in pd.to_numeric(sel["metric.sh_degree"], errors="coerce").dropna()]
@@ -595,8 +635,14 @@ def auto_sh_degree_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) 
                 where = "per seed: " + ", ".join(map(str, degrees))
             claims.append(Claim("auto", scene, auto[0].label, "sh_degree", "mean", mean, text))
             parts.append(f"{text} on {scene} ({where})")
+            if len(set(degrees)) == 1 and degrees[0] in fixed:
+                same.append(f"{scene} `{fixed[degrees[0]]}`")
         if parts:
-            lines.append("- `auto` ended at SH degree " + ", ".join(parts) + ".")
+            rule, holdout = _auto_rule(done[done.run_id.isin(auto[0].run_ids)])
+            lines.append("- `auto`" + (f" ({rule})" if rule else "") + " ended at SH degree " + ", ".join(parts) + "."
+                         + (f" Also changed: {holdout}" + (f", so its difference from the row of the degree it ended at"
+                            f" ({', '.join(same)}) is the holdout's cost, not a degree's" if same else "") + "."
+                            if holdout else ""))
     return lines, claims
 
 
