@@ -493,7 +493,7 @@ def _scenes(done: pd.DataFrame) -> str:
     real = [s for s, k in kinds.items() if k == "capture"]
     listed = ", ".join(f"{s} ({what[k]})" for s, k in kinds.items())
     if len(kinds) >= SCENES_WANTED and len(real) >= REAL_WANTED:
-        rule = f"the evidence rule's count ({SCENES_WANTED} scenes, {REAL_WANTED} of them real captures) is met."
+        rule = f"enough scenes for a headline ({SCENES_WANTED}, {REAL_WANTED} of them real captures: docs/reports.md)."
     else:
         rule = (f"{len(real)} real capture{'s' if len(real) != 1 else ''}; a finding here holds on "
                 f"{'this scene' if len(kinds) == 1 else 'these scenes'} only: the evidence rule asks a headline to "
@@ -510,9 +510,9 @@ def _scenes(done: pd.DataFrame) -> str:
     rendered = [s for s, k in kinds.items() if k == "rendered"]
     if rendered:
         one = len(rendered) == 1
-        notes.append(f" Rendered by Mitsuba, another renderer (no inverse crime), {_names(rendered)} "
-                     f"{'is' if one else 'are'} still no published benchmark: {'its' if one else 'their'} absolute "
-                     f"numbers are not the field's either.")
+        notes.append(f" {_names(rendered)}, rendered by Mitsuba (not by this rasterizer: no inverse crime), "
+                     f"{'is' if one else 'are'} no published benchmark: {'its' if one else 'their'} absolute numbers "
+                     f"are not the field's.")
     return f"{len(kinds)}: {listed}; {rule}" + "".join(notes)
 
 
@@ -540,8 +540,8 @@ def _metrics(done: pd.DataFrame) -> str:
 #: How the test metrics are aggregated over the test views (`splatbench.train.loop.Trainer.evaluate`).
 AGGREGATION = ("each metric is computed per test view (PSNR from that view's MSE over its pixels and channels) and "
                "averaged over the {views}: the mean of the views' PSNRs, as graphdeco's metrics.py and its training "
-               "evaluation report it, not the PSNR of the pooled MSE (never higher: −10 log10 is convex); SSIM and "
-               "LPIPS likewise the mean over views")
+               "evaluation report it, not the PSNR of the pooled MSE (which is never higher than this mean: −10 log10 is "
+               "convex); SSIM and LPIPS likewise")
 
 
 def _test_views(done: pd.DataFrame) -> str:
