@@ -292,7 +292,9 @@ def test_no_entry_no_section_and_missing_runs_give_no_verdict(tmp_path):
     spec = spec_of(GRID)
     results(tmp_path / "results", spec)
     text = write_report(build_report(spec, tmp_path / "results"), tmp_path / "plain").read_text()
-    assert TITLE not in text and "Not a replication" not in text
+    # no entry: one line saying none is declared, no section (and no verdict)
+    assert f"## {TITLE}" not in text and "Not a replication" not in text
+    assert f"\n**{TITLE}**: none declared (the experiment file has no `[[report.published]]`)" in text
     # an entry whose runs have no result yet: the section all the same, no verdict
     published = spec_of(GRID + DIFFERENCE)
     text = write_report(build_report(published, tmp_path / "empty"), tmp_path / "none").read_text()

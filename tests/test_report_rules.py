@@ -393,15 +393,20 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert ("- **Initialisation**: auto → surface on glossy: the scene's own surface points, 1,000 Gaussians at "
             "step 0, jittered 0.5 × their neighbour spacing per seed (inferred") in header
     # sh.interval 1,000 scaled to 2,000 of 30,000 steps: round(66.7) = 67; bands at 67, 134, 201
-    assert "SH degree raised one band every 67 steps (`sh.interval` as the run reads it: bands 1, 2, 3 at steps " \
-           "67, 134, 201" in header
+    assert "SH degree raised one band every 67 steps (bands 1, 2, 3 at steps 67, 134, 201" in header
 
     # a config that names its protocol (a preset added to TrainConfig) is shown as named
     from splatbench.experiments.train_report import protocol_lines
 
     table = pd.read_parquet(tmp_path / "out" / "results.parquet")
     table["config.protocol"] = "graphdeco-30k"
+    line = lambda t, head: next(x for x in protocol_lines(t) if x.startswith(head))  # noqa: E731
     assert "- **Protocol**: graphdeco-30k." in protocol_lines(table)
+    # a graphdeco protocol lays the schedule over its 30,000 steps, whatever `schedule` the run recorded
+    # ("scaled", the default): sh.interval 1,000 stays 1,000 (the old header scaled it to 2,000 / 30,000: 67)
+    seven = table.assign(**{"config.protocol": "graphdeco-7k", "config.iterations": 7000})
+    assert "SH degree raised one band every 1,000 steps (bands 1, 2, 3 at steps 1,000, 2,000, 3,000" \
+        in line(seven, "- **Schedule as run**")
     # its schedule is graphdeco's as written, not scaled to the runs' length (nor their LR decay)
     schedule = next(line for line in protocol_lines(table) if line.startswith("- **Schedule**"))
     assert "graphdeco's 30,000-step schedule as written" in schedule and "over 30,000 steps, not scaled" in schedule \
@@ -415,7 +420,6 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "auto → sfm on glossy: SfM points triangulated from the training views, 1,234 Gaussians at step 0" \
         in init and "inferred" not in init
     # the background: these runs did not record the RGB auto resolved to, so the config's value, said unresolved
-    line = lambda t, head: next(x for x in protocol_lines(t) if x.startswith(head))  # noqa: E731
     assert "glossy `auto` (the RGB it resolved to is not recorded: these runs predate `metric.background`; auto " \
            "is white for a masked capture, else the mean colour" in line(table, "- **Background**")
     # an RGB set in the config is what the runs used: shown as the RGB
@@ -428,29 +432,70 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert line(both, "- **Background**").endswith(
         "glossy (0.4706, 0.5, 0.52), the mean colour of the pixels its depth marks empty, nothing hit (auto); "
         "maryrose (1, 1, 1), masked capture: its photos composited over it with their masks (auto).")
+    # one statement per scene: a run that predates the record has the RGB its scene's runs with the same
+    # background and data config recorded (auto resolves from the dataset, data.masks and config.background)
+    some = pd.concat([both, table], ignore_index=True)
+    assert "; glossy (0.4706, 0.5, 0.52), the mean colour of the pixels its depth marks empty, nothing hit (auto);" \
+        in "; " + line(some, "- **Background**").split(": ", 1)[1] and "not recorded" not in line(some, "- **Background**")
+    unmasked = pd.concat([both, table.assign(**{"config.data.masks": not table["config.data.masks"].iloc[0]})])
+    assert "(auto) / `auto` (the RGB it resolved to is not recorded" in line(unmasked, "- **Background**")
     # the metrics line: each metric per test view, then the mean over the views (as graphdeco's metrics.py)
     metrics = line(table, "- **Metrics**")
     assert "averaged over the 1 test view: the mean of the views' PSNRs, as graphdeco's metrics.py" in metrics
-    assert "not the PSNR of the pooled MSE" in metrics and "SSIM and LPIPS likewise the mean over views" in metrics
+    assert "not the PSNR of the pooled MSE (which is never higher than this mean: " in metrics \
+        and "SSIM and LPIPS likewise" in metrics
     assert "averaged over the test views (1 on glossy, 8 on maryrose)" in line(
         pd.concat([table, table.assign(scene="maryrose", **{"metric.test_views": 8})]), "- **Metrics**")
     # the split per scene as the runs recorded it: a rendered scene's test views of its total, a capture's
     # train and test views; a capture's reduction and, where recorded, its image size in pixels
-    assert line(table, "- **Split**").endswith(f"; glossy 1 test of {int(table['config.data.views'].iloc[0])}.")
+    views = int(table["config.data.views"].iloc[0])  # a rendered scene's train views are the rest of them
+    assert line(table, "- **Split**").endswith(f"; glossy {views - 1} / 1 (train / test views).")
+    # the rule as the loaders apply it (splatbench.data.dataset: i % test_every == 0), graphdeco's --eval holdout
+    assert "view i is a test view when i % 8 = 0 (every 8th from the first, by sorted image name" \
+        in line(table, "- **Split**")
     capture = table.assign(scene="fox", **{"config.data.path": "/data/fox", "config.data.downscale": 12,
                                            "config.data.views": None, "metric.test_views": 9})
-    assert "fox 9 test" in line(capture, "- **Split**") and "of 64" not in line(capture, "- **Split**")
-    assert "captures reduced from their photos' size: fox 1/12 (" in line(capture, "- **Resolution**") \
-        and "image sizes not recorded by these runs" in line(capture, "- **Resolution**")
+    assert line(capture, "- **Split**").endswith("; fox – / 9 (train / test views; –: not recorded).")
+    assert "captures at 1/`data.downscale` of their photos: fox 1/12 (image size not recorded by fox's runs)" \
+        in line(capture, "- **Resolution**")
     sized = capture.assign(**{"metric.train_views": 58, "metric.image_width": 89, "metric.image_height": 158})
-    assert "fox 58 train / 9 test" in line(sized, "- **Split**")
+    assert "; fox 58 / 9 (train / test views)." in line(sized, "- **Split**")
     assert "fox 1/12 (89×158 px)" in line(sized, "- **Resolution**") \
         and "not recorded" not in line(sized, "- **Resolution**")
+    # a run that predates the records takes them from the scene's runs with the same data config, not from
+    # a run of another downscale (its size and views may differ)
+    older = capture.assign(**{"metric.train_views": None, "metric.image_width": None, "metric.image_height": None})
+    mixed = pd.concat([sized, older], ignore_index=True)
+    assert "fox 1/12 (89×158 px)" in line(mixed, "- **Resolution**") and "; fox 58 / 9 (" in line(mixed, "- **Split**")
+    other = pd.concat([sized, older.assign(**{"config.data.downscale": 24})], ignore_index=True)
+    assert "(image size not recorded by fox's runs, or some of them)" in line(other, "- **Resolution**") \
+        and "; fox 58 / – / 9 (train / test views; –: not recorded)" in line(other, "- **Split**")
     table["config.init.method"] = "random"
     assert "the random initial points" in "\n".join(protocol_lines(table))
     # given points kept as given (init_jitter = 0) do not vary with the seed, and the header says so
     table["config.init.method"], table["config.init.jitter"] = "surface", 0.0
     assert "not the initial points of init = surface" in "\n".join(protocol_lines(table))
+
+
+def test_the_sh_steps_in_the_header_are_where_the_real_runs_curves_part():
+    # reports/sh_degree/runs (graphdeco-7k, sh.interval 1,000, recorded schedule "scaled"): SH 0 and SH 3 of one
+    # seed are the same run, bit for bit, until band 1 starts training; the header's band-1 step must be the last
+    # logged step (every 100) at which their training PSNR is still equal
+    from pathlib import Path
+
+    from splatbench.experiments.store import build_table, read_records
+    from splatbench.experiments.train_report import schedule_as_run
+
+    folder = Path(__file__).resolve().parents[1] / "reports" / "sh_degree" / "runs"
+    if not folder.is_dir():
+        pytest.skip("reports/sh_degree/runs is gone (the report arrived)")
+    table = build_table(read_records(folder).values())
+    fox = table[(table.scene == "fox") & (table.seed == 0)]
+    zero, three = (json.loads(fox[fox["axis.sh.degree"].astype(str) == d].curves.iloc[0]) for d in ("0", "3"))
+    assert zero["step"] == three["step"]
+    parted = next(s for s, a, b in zip(zero["step"], zero["psnr"], three["psnr"]) if a != b)
+    band1 = max(s for s in zero["step"] if s < parted)
+    assert band1 == 1000 and f"SH degree raised one band every {band1:,} steps" in schedule_as_run(table)
 
 
 # --------------------------------------------------------------------------- best at comparable size
@@ -629,3 +674,43 @@ def test_runs_without_a_per_view_record_are_counted_not_checked(tmp_path):
     # a report of runs none of which recorded their views says nothing of them (a committed report stays as it was)
     report, text = view_results(tmp_path / "old", recorded=lambda run: False)
     assert "outlier test views" not in report.findings and "Outlier test view" not in text
+
+
+def test_the_header_names_the_folder_a_captures_images_came_from(tmp_path):
+    # splatbench.data.dataset: images_N/ where the capture has it; else the nearest finer folder reduced by
+    # N / M, by area averaging in the LLFF layout and PIL bicubic in the others (after undistortion)
+    from splatbench.experiments.train_report import capture_source
+
+    llff = tmp_path / "llff"
+    for d in ("images_8", "masks_8"):
+        (llff / d).mkdir(parents=True)
+    (llff / "poses_bounds.npy").write_bytes(b"")
+    assert capture_source(str(llff), 25) == "images_8/ ÷ 3.125, area"
+    assert capture_source(str(llff), 8) == "images_8/" and capture_source(str(llff), 4) == ""
+    fox = tmp_path / "fox"
+    (fox / "images").mkdir(parents=True)
+    (fox / "transforms.json").write_text(json.dumps({"k1": 0.05, "p1": 0.0, "frames": []}), encoding="utf-8")
+    assert capture_source(str(fox), 12) == "undistorted, then images/ ÷ 12, bicubic"
+    (fox / "transforms.json").write_text(json.dumps({"k1": 0.0, "frames": []}), encoding="utf-8")
+    assert capture_source(str(fox), 12) == "images/ ÷ 12, bicubic"
+    assert capture_source(str(tmp_path / "absent"), 12) == ""
+
+
+def test_auto_is_defined_and_its_holdout_named_as_what_else_it_changed(tmp_path):
+    # sh.degree = auto (splatbench.train.sh_schedule): bands on trial every sh.interval steps (1,000 scaled to
+    # 2,000 of 30,000: 67), measured on every 8th training view, held out of training until band 3 has been
+    # measured one interval after it starts: step 4 x 67 = 268 (auto_lookahead 2, the default)
+    spec = spec_of({"axes": {"sh.degree": [0, 3, "auto"]}})
+
+    def make(run):
+        d = run.labels["sh.degree"]
+        return metrics_of(30.0 + 0.01 * run.seed, sh_degree=0 if d == "auto" else d), flat_curves(30.0)
+
+    _, text = results(tmp_path, spec, make)
+    note = next(x for x in text.splitlines() if x.startswith("- `auto`"))
+    assert note.startswith("- `auto` (a band added every 67 steps is kept if it gains ≥ 0.1 dB per band on every 8th "
+                           "training view, held out of training until the degree settles) ended at SH degree 0 on "
+                           "glossy (every seed).")
+    # ... so where it ended at a fixed row's degree, its difference from that row is the holdout's, not SH's
+    assert note.endswith("Also changed: it trained on about 7/8 of the training views until step 268, so its difference "
+                         "from the row of the degree it ended at (glossy `0`) is the holdout's cost, not a degree's.")

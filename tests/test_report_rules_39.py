@@ -259,8 +259,8 @@ def test_the_scenes_line_counts_real_captures_and_a_quick_report_says_smoke_test
     # two dataset folders (config.data.path) are real captures; a teacher scene is not
     table["config.data.path"] = [("/data/" + s) if s in ("glossy", "diffuse") else None for s in table.scene]
     assert scenes(table).startswith("- **Scenes**: 3: diffuse (a real capture), glossy (a real capture), thin "
-                                    "(rendered by Mitsuba); the evidence rule's count (3 scenes, 2 of them real "
-                                    "captures) is met.")
+                                    "(rendered by Mitsuba); enough scenes for a headline (3, 2 of them real captures: "
+                                    "docs/reports.md).")
     table["config.data.path"] = [("/data/" + s) if s == "glossy" else None for s in table.scene]
     table["config.data.model"] = [("/m/" + s) if s == "diffuse" else None for s in table.scene]
     assert "diffuse (a teacher scene rendered from a trained model, not a capture)" in scenes(table)
@@ -270,8 +270,8 @@ def test_the_scenes_line_counts_real_captures_and_a_quick_report_says_smoke_test
                                "3DGS model and is fit by the same model family and rasterizer") == 1
     assert "its absolute numbers are not comparable with captures or published numbers." in scenes(table)
     # a Mitsuba scene is no inverse crime, and no published benchmark either; a capture is neither
-    assert "Rendered by Mitsuba, another renderer (no inverse crime), thin is still no published benchmark: its " \
-           "absolute numbers are not the field's either." in scenes(table)
+    assert " thin, rendered by Mitsuba (not by this rasterizer: no inverse crime), is no published benchmark: its " \
+           "absolute numbers are not the field's." in scenes(table)
     table["config.data.path"] = [("/data/" + s) for s in table.scene]  # three captures: no note at all
     table["config.data.model"] = None
     assert "Inverse crime" not in scenes(table) and "Mitsuba" not in scenes(table)

@@ -139,8 +139,9 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
                  if evals else "- **Evaluation**: the test views at the end.")
     test_every = _one(done, "config.data.test_every")
     views = _view_counts(done) or (_one(done, "config.data.views") or "") and f"{_one(done, 'config.data.views')} views"
-    split = f"every {test_every}th view held out for testing (where the dataset gives no split of its own)" \
-        if test_every else "the dataset's own split"
+    split = (f"where the dataset gives none, view i is a test view when i % {test_every} = 0 (every {test_every}th "
+             f"from the first, by sorted image name or render order, as graphdeco's --eval)") if test_every \
+        else "the dataset's own split"
     lines.append(f"- **Split**: {split}" + (f"; {views}" if views else "") + ".")
     lines.append(f"- **Resolution**: {_resolution(done)}.")
     lines.append(f"- **Scenes**: {_scenes(done)}")
@@ -180,6 +181,30 @@ def _config_rgb(value: Any) -> Any:
     return value
 
 
+def carried(done: pd.DataFrame, columns: tuple[str, ...], also: tuple[str, ...] = ()) -> pd.DataFrame:
+    """``done`` with each of ``columns`` (metrics a run records since some commit: image size,
+    view counts, background) filled in for the runs that predate it from the same scene's runs
+    whose data config is the same (every ``config.data.*`` column and those named in ``also``:
+    the fields that decide the value), where those recorded exactly one value; left empty otherwise."""
+    columns = tuple(c for c in columns if c in done.columns)
+    if not columns or done.empty:
+        return done
+    keys = ["scene", *sorted(c for c in done.columns if c.startswith("config.data.")), *(a for a in also
+                                                                                           if a in done.columns)]
+    out = done.copy()
+    group = [tuple(_plain(v) if not isinstance(v, (list, np.ndarray)) else str(v) for v in row)
+             for row in done[keys].itertuples(index=False)]
+    for col in columns:
+        out[col] = out[col].astype(object)
+        known: dict[tuple, set] = {}
+        for g, v in zip(group, done[col]):
+            if _plain(v) is not None:
+                known.setdefault(g, set()).add(_plain(v))
+        out[col] = [v if _plain(v) is not None else (next(iter(known[g])) if len(known.get(g, ())) == 1 else None)
+                    for g, v in zip(group, out[col])]
+    return out
+
+
 def background_text(done: pd.DataFrame) -> str:
     """Each scene's background as its runs recorded it: the RGB they rendered and evaluated
     against (``metric.background``) and where it came from (``metric.background_source``),
@@ -188,6 +213,7 @@ def background_text(done: pd.DataFrame) -> str:
     with its rule and said to be unresolved). Values that differ between a scene's runs are
     joined with " / "; scenes with the same text share it (``guitar and textured `auto` (...)``)."""
     texts: dict[str, list[str]] = {}
+    done = carried(done, ("metric.background", "metric.background_source"), ("config.background",))
     for scene, rows in done.groupby("scene", sort=True):
         shown = []
         rgbs = rows.get("metric.background", pd.Series(None, index=rows.index, dtype=object))
@@ -271,10 +297,9 @@ def init_text(done: pd.DataFrame) -> str:
 def schedule_as_run(done: pd.DataFrame) -> str:
     """The schedule's counts as the runs made them: refinements and opacity resets (the
     strategy's recorded counts, per cell where they differ) and the SH schedule (one band more
-    every ``sh.interval`` steps as the run reads it: `splatbench.train.schedule.scale_step`); ""
-    without those columns."""
-    from splatbench.train.schedule import scale_step  # late: the reports start without torch
-
+    every ``sh.interval`` steps as the run reads it, `TrainConfig.sh_steps`: scaled by
+    `splatbench.train.schedule.scale_step` over the protocol's schedule length, 30,000 under a
+    graphdeco protocol, which so keeps its steps as written: `sh_interval_steps`); "" without those columns."""
     axes = [c for c in done.columns if c.startswith("axis.")]
     parts = []
     counted = [c for c in ("metric.refinements", "metric.opacity_resets") if c in done.columns
@@ -298,15 +323,33 @@ def schedule_as_run(done: pd.DataFrame) -> str:
         else:
             parts.append("; ".join(f"`{label}` {text}" for label, text in cells.items()))
     if {"config.sh.interval", "config.iterations", "config.schedule"} <= set(done.columns):
-        steps = sorted({scale_step(int(i), int(n), str(sch), interval=True) for i, n, sch in
-                        zip(done["config.sh.interval"], done["config.iterations"], done["config.schedule"])
-                        if pd.notna(i) and pd.notna(n) and sch in ("scaled", "absolute")})
+        steps = sh_interval_steps(done)
         if steps:
             every = " / ".join(f"{s:,}" for s in steps)
             bands = " / ".join(", ".join(f"{k * s:,}" for k in (1, 2, 3)) for s in steps)
-            parts.append(f"SH degree raised one band every {every} step{'' if steps == [1] else 's'} (`sh.interval` as the run reads it: bands "
-                         f"1, 2, 3 at steps {bands}, up to each cell's maximum degree)")
+            parts.append(f"SH degree raised one band every {every} step{'' if steps == [1] else 's'} (bands 1, 2, 3 at "
+                         f"steps {bands}, up to each cell's maximum degree)")
     return "; ".join(parts)
+
+
+def sh_interval_steps(done: pd.DataFrame) -> list[int]:
+    """The distinct ``sh.interval`` of the runs in their steps (`TrainConfig.sh_steps`: scaled by
+    `splatbench.train.schedule.scale_step` over the protocol's schedule length, 30,000 under a
+    graphdeco protocol, which so keeps its steps as written); [] without those columns."""
+    from splatbench.train.protocol import PROTOCOLS  # late: the reports start without torch
+    from splatbench.train.schedule import scale_step
+
+    if not {"config.sh.interval", "config.iterations", "config.schedule"} <= set(done.columns):
+        return []
+    protocols = done["config.protocol"] if "config.protocol" in done.columns else pd.Series(None, index=done.index)
+
+    def length(n: Any, protocol: Any) -> int:  # `TrainConfig.schedule_length`: no protocol recorded is quick
+        known = PROTOCOLS.get(protocol) if isinstance(protocol, str) else None
+        return (known.schedule_length if known is not None else None) or int(n)
+
+    return sorted({scale_step(int(i), length(n, p), str(sch), interval=True) for i, n, sch, p in
+                   zip(done["config.sh.interval"], done["config.iterations"], done["config.schedule"], protocols)
+                   if pd.notna(i) and pd.notna(n) and sch in ("scaled", "absolute")})
 
 
 def _eval_steps(done: pd.DataFrame) -> str:
@@ -323,32 +366,39 @@ def _eval_steps(done: pd.DataFrame) -> str:
 
 
 def _image_size(rows: pd.DataFrame) -> str:
-    """``89×158`` (width × height in pixels, ``metric.image_width`` / ``image_height``; ``a / b``
-    where runs differ); "" where the runs did not record it."""
+    """``89×158`` (width × height in pixels, ``metric.image_width`` / ``image_height``, `carried`
+    to runs of the scene's data config that predate them; ``a / b`` where runs differ); "" where
+    no run of it recorded them."""
     if "metric.image_width" not in rows.columns or "metric.image_height" not in rows.columns:
         return ""
+    rows = carried(rows, ("metric.image_width", "metric.image_height"))
     sizes = [f"{int(w)}×{int(h)}" for w, h in dict.fromkeys(zip(rows["metric.image_width"], rows["metric.image_height"]))
              if pd.notna(w) and pd.notna(h)]
     return " / ".join(sizes)
 
 
 def _view_counts(done: pd.DataFrame) -> str:
-    """Per scene, the views trained on and tested on as the runs recorded them (``metric.train_views``,
-    ``metric.test_views``; a rendered or teacher scene's ``config.data.views`` is their sum), e.g.
-    ``fox 58 train / 9 test``; "" where nothing was recorded."""
+    """Per scene, the views trained on / tested on as the runs recorded them (``metric.train_views``,
+    ``metric.test_views``, `carried` within the scene's data config; a rendered or teacher scene's
+    ``config.data.views`` is their sum), e.g. ``fox 58 / 9, maryrose – / 9 (train / test views; –:
+    not recorded)``; "" where nothing was recorded."""
     kinds = scene_kinds(done)
-    parts = []
+    done = carried(done, ("metric.train_views", "metric.test_views"))
+    parts, unknown = [], False
     for scene, rows in done.groupby("scene", sort=False):
-        def counts(column: str) -> str:
-            return " / ".join(f"{int(v)}" for v in _values(rows, column) if v is not None)
+        def counts(column: str) -> list[int]:
+            return [int(v) for v in _values(rows, column) if v is not None]
 
         train, test = counts("metric.train_views"), counts("metric.test_views")
-        total = counts("config.data.views") if kinds.get(str(scene)) != "capture" else ""
-        if train and test:
-            parts.append(f"{scene} {train} train / {test} test")
-        elif test:
-            parts.append(f"{scene} {test} test" + (f" of {total}" if total else ""))
-    return ", ".join(parts)
+        total = counts("config.data.views") if kinds.get(str(scene)) != "capture" else []
+        if not train and len(test) == 1 and len(total) == 1:
+            train = [total[0] - test[0]]
+        elif train and "metric.train_views" in rows.columns and rows["metric.train_views"].isna().any():
+            train.append("–")  # some of its runs (another data config) did not record theirs
+        if test:
+            unknown = unknown or not train or "–" in train
+            parts.append(f"{scene} {' / '.join(map(str, train)) or '–'} / {' / '.join(map(str, test))}")
+    return ", ".join(parts) + (" (train / test views" + ("; –: not recorded)" if unknown else ")")) if parts else ""
 
 
 def _resolution(done: pd.DataFrame) -> str:
@@ -363,21 +413,57 @@ def _resolution(done: pd.DataFrame) -> str:
         parts.append(f"rendered scenes at {res} px wide by Mitsuba, {spp} spp"
                      + (f" ({test_spp} spp for the test views)" if test_spp and test_spp != spp else ""))
     kinds = scene_kinds(done)
-    captures = []
+    captures, unsized = [], []
     for scene, rows in done.groupby("scene", sort=False):
         if kinds.get(str(scene)) != "capture":
             continue
         down = _one(rows, "config.data.downscale", _g)
         size = _image_size(rows)
-        captures.append(f"{scene} " + (f"1/{down}" if down else "at full size") + (f" ({size} px)" if size else ""))
+        paths = [p for p in _values(rows, "config.data.path") if isinstance(p, str)]
+        how = capture_source(paths[0], int(float(down))) if len(paths) == 1 and down and "/" not in down else ""
+        shown = "; ".join(x for x in (how, f"{size} px" if size else "") if x)
+        captures.append(f"{scene} " + (f"1/{down}" if down else "at full size") + (f" ({shown})" if shown else ""))
+        sizes = carried(rows, ("metric.image_width",)).get("metric.image_width", pd.Series([None]))
+        unsized += [str(scene)] if pd.isna(sizes).any() else []
     if captures:
-        recorded = all(_image_size(rows) for scene, rows in done.groupby("scene", sort=False)
-                       if kinds.get(str(scene)) == "capture")
-        parts.append("captures reduced from their photos' size: " + ", ".join(captures)
-                     + " (a capture's images_N/ where it has that folder, else an area reduction of the nearest finer "
-                       "one on load" + ("" if recorded else "; image sizes not recorded by these runs: the experiment "
-                                                            "file's comment gives them") + ")")
+        parts.append("captures at 1/`data.downscale` of their photos: " + ", ".join(captures)
+                     + (f" (image size not recorded by {_names(unsized)}'s runs"
+                        + (", or some of them" if any(_image_size(r) for sc, r in done.groupby("scene") if str(sc) in
+                                                      unsized) else "") + ")" if unsized else ""))
     return "; ".join(parts) or "not recorded"
+
+
+def capture_source(path: str, n: int) -> str:
+    """How `splatbench.data.load_dataset` makes a capture's images at ``downscale`` n, from the
+    folder at ``path`` as it is here ("" where it is not): ``images_8/`` where the capture has
+    ``images_n/``; else the nearest finer ``images_m/`` (or ``images/``) reduced by n/m, by area
+    averaging in the LLFF layout (``poses_bounds.npy``), by PIL bicubic in the others, after
+    undistortion where ``transforms.json`` gives lens coefficients."""
+    import re
+    from pathlib import Path
+
+    root = Path(path)
+    if n < 1 or not root.is_dir():
+        return ""
+    folders = {int(m.group(1)) if m.group(1) else 1: d.name for d in root.iterdir()
+               if d.is_dir() and (m := re.fullmatch(r"images(?:_(\d+))?", d.name))}
+    if n in folders and n > 1:
+        return f"{folders[n]}/"
+    finer = [m for m in folders if m < n]
+    if not finer:
+        return ""
+    m = max(finer)
+    llff = (root / "poses_bounds.npy").is_file()
+    lens = ""
+    if not llff and (root / "transforms.json").is_file():
+        try:
+            meta = json.loads((root / "transforms.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            meta = {}
+        if isinstance(meta, dict) and any(isinstance(meta.get(k), (int, float)) and meta[k]
+                                          for k in ("k1", "k2", "k3", "k4", "p1", "p2")):
+            lens = "undistorted, then "
+    return f"{lens}{folders[m]}/ ÷ {n / m:g}, {'area' if llff else 'bicubic'}"
 
 
 #: The evidence rule for a headline's scenes (docs/reports.md, "How many scenes a finding stands on"): 3 scenes, 2
@@ -407,7 +493,7 @@ def _scenes(done: pd.DataFrame) -> str:
     real = [s for s, k in kinds.items() if k == "capture"]
     listed = ", ".join(f"{s} ({what[k]})" for s, k in kinds.items())
     if len(kinds) >= SCENES_WANTED and len(real) >= REAL_WANTED:
-        rule = f"the evidence rule's count ({SCENES_WANTED} scenes, {REAL_WANTED} of them real captures) is met."
+        rule = f"enough scenes for a headline ({SCENES_WANTED}, {REAL_WANTED} of them real captures: docs/reports.md)."
     else:
         rule = (f"{len(real)} real capture{'s' if len(real) != 1 else ''}; a finding here holds on "
                 f"{'this scene' if len(kinds) == 1 else 'these scenes'} only: the evidence rule asks a headline to "
@@ -424,9 +510,9 @@ def _scenes(done: pd.DataFrame) -> str:
     rendered = [s for s, k in kinds.items() if k == "rendered"]
     if rendered:
         one = len(rendered) == 1
-        notes.append(f" Rendered by Mitsuba, another renderer (no inverse crime), {_names(rendered)} "
-                     f"{'is' if one else 'are'} still no published benchmark: {'its' if one else 'their'} absolute "
-                     f"numbers are not the field's either.")
+        notes.append(f" {_names(rendered)}, rendered by Mitsuba (not by this rasterizer: no inverse crime), "
+                     f"{'is' if one else 'are'} no published benchmark: {'its' if one else 'their'} absolute numbers "
+                     f"are not the field's.")
     return f"{len(kinds)}: {listed}; {rule}" + "".join(notes)
 
 
@@ -454,8 +540,8 @@ def _metrics(done: pd.DataFrame) -> str:
 #: How the test metrics are aggregated over the test views (`splatbench.train.loop.Trainer.evaluate`).
 AGGREGATION = ("each metric is computed per test view (PSNR from that view's MSE over its pixels and channels) and "
                "averaged over the {views}: the mean of the views' PSNRs, as graphdeco's metrics.py and its training "
-               "evaluation report it, not the PSNR of the pooled MSE (never higher: −10 log10 is convex); SSIM and "
-               "LPIPS likewise the mean over views")
+               "evaluation report it, not the PSNR of the pooled MSE (which is never higher than this mean: −10 log10 is "
+               "convex); SSIM and LPIPS likewise")
 
 
 def _test_views(done: pd.DataFrame) -> str:
@@ -494,16 +580,47 @@ def _seeds(done: pd.DataFrame) -> str:
 
 
 # --------------------------------------------------------------------------- axis and metric notes
+def _auto_rule(done: pd.DataFrame) -> tuple[str, str]:
+    """(What ``sh.degree = auto`` does, in one clause; the holdout it trains without, or ""), from the
+    auto runs' configs (`splatbench.train.sh_schedule`; docs/training.md, "SH degree"): a band added every
+    ``sh.interval`` steps (`schedule_as_run`'s reading) is kept if it gains ``auto_min_gain_db`` per band
+    on every ``auto_holdout_every``-th training view, held out of training until the degree settles: with
+    ``auto_lookahead`` 2, when band 3 has been measured, one interval after it starts (4 intervals)."""
+    def one(col: str) -> Any:
+        values = [v for v in _values(done, f"config.sh.{col}") if v is not None]
+        return values[0] if len(values) == 1 else None
+
+    from splatbench.train.sh_schedule import MAX_LOOKAHEAD  # late: as `sh_interval_steps`
+
+    gain, every, ahead = one("auto_min_gain_db"), one("auto_holdout_every"), one("auto_lookahead")
+    steps = sh_interval_steps(done)
+    if gain is None or len(steps) != 1:
+        return "", ""
+    iters = [int(v) for v in _values(done, "config.iterations") if v is not None]
+    on = f"every {int(every)}th training view, held out of training until the degree settles" if every else \
+        "training views"
+    rule = f"a band added every {steps[0]:,} steps is kept if it gains ≥ {_g(float(gain))} dB per band on {on}"
+    if not every:
+        return rule, ""
+    settle = 4 * steps[0]
+    until = (f"until step {settle:,}" if ahead == MAX_LOOKAHEAD and iters and settle <= min(iters) else
+             f"until it settled (by step {settle:,} at the latest)")
+    return rule, f"it trained on about {int(every) - 1}/{int(every)} of the training views {until}"
+
+
 def auto_sh_degree_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) -> tuple[list[str], list[Claim]]:
-    """The ``sh.degree`` axis: the degree the ``auto`` rows ended at, per scene."""
+    """The ``sh.degree`` axis: what ``auto`` is and the holdout it trains without (`_auto_rule`), the
+    degree its rows ended at per scene, and where that degree is a fixed row's: its difference from
+    that row there is the holdout's and the trials' cost, not a degree's."""
     lines: list[str] = []
     claims: list[Claim] = []
     if table.axis != "sh.degree" or "metric.sh_degree" not in runs.columns:
         return lines, claims
     auto = [r for r in table.rows if r.value == "auto"]
     if auto:
-        parts = []
+        parts, same = [], []
         done = done_runs(runs)
+        fixed = {_decoded(r.value): r.label for r in table.rows if r.value != "auto"}
         for scene in scenes:
             sel = done[(done.scene == scene) & done.run_id.isin(auto[0].run_ids)]
             degrees = [int(d) for d in pd.to_numeric(sel["metric.sh_degree"], errors="coerce").dropna()]
@@ -518,8 +635,14 @@ def auto_sh_degree_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) 
                 where = "per seed: " + ", ".join(map(str, degrees))
             claims.append(Claim("auto", scene, auto[0].label, "sh_degree", "mean", mean, text))
             parts.append(f"{text} on {scene} ({where})")
+            if len(set(degrees)) == 1 and degrees[0] in fixed:
+                same.append(f"{scene} `{fixed[degrees[0]]}`")
         if parts:
-            lines.append("- `auto` ended at SH degree " + ", ".join(parts) + ".")
+            rule, holdout = _auto_rule(done[done.run_id.isin(auto[0].run_ids)])
+            lines.append("- `auto`" + (f" ({rule})" if rule else "") + " ended at SH degree " + ", ".join(parts) + "."
+                         + (f" Also changed: {holdout}" + (f", so its difference from the row of the degree it ended at"
+                            f" ({', '.join(same)}) is the holdout's cost, not a degree's" if same else "") + "."
+                            if holdout else ""))
     return lines, claims
 
 

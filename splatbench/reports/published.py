@@ -19,7 +19,7 @@ interval is not a replication when the two were measured differently.
 
 The runs used are those the findings use (`findings.usable_runs`; a time metric of the kind's
 `KindReport.timed` also leaves out runs timed under load, as the findings do). A grid whose file
-declares no entry gets no section (`published_lines` returns []).
+declares no entry gets one line saying so (`NONE_DECLARED`), no section.
 """
 
 from __future__ import annotations
@@ -42,6 +42,9 @@ from splatbench.reports.tables import cell_labels, loaded_runs, seed_values
 VERDICTS = ("inside", "above", "below", "no interval", "no result")
 #: The section's title.
 TITLE = "Beside published numbers"
+#: The line of a report whose file declares no published number.
+NONE_DECLARED = (f"**{TITLE}**: none declared (the experiment file has no `[[report.published]]`): no number here is "
+                 f"set beside a published one.")
 
 
 @dataclass(frozen=True)
@@ -141,11 +144,11 @@ def _name(spec: MetricSpec) -> str:
 
 
 def published_lines(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame) -> list[str]:
-    """The report's section "Beside published numbers" (title included); [] for a file that declares
-    no ``[report] published`` entry."""
+    """The report's section "Beside published numbers" (title included); `NONE_DECLARED` for a file
+    that declares no ``[report] published`` entry."""
     results = published_results(spec, kind, table)
     if not results:
-        return []
+        return [NONE_DECLARED, ""]
     lines = [f"## {TITLE}", "",
              "The numbers the experiment file declares as published (`[report] published`; docs/reports.md, "
              "\"Beside published numbers\"), each beside this grid's own: a difference as the grid's paired difference over "
@@ -184,5 +187,5 @@ def _differs(spec: ExperimentSpec, r: PublishedResult) -> str:
             f"interval does not replicate it, nor does one outside refute it.")
 
 
-__all__ = ["VERDICTS", "TITLE", "PublishedRow", "PublishedResult", "headline_metric", "placement",
+__all__ = ["VERDICTS", "TITLE", "NONE_DECLARED", "PublishedRow", "PublishedResult", "headline_metric", "placement",
            "published_results", "published_lines"]
