@@ -456,7 +456,7 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     capture = table.assign(scene="fox", **{"config.data.path": "/data/fox", "config.data.downscale": 12,
                                            "config.data.views": None, "metric.test_views": 9})
     assert line(capture, "- **Split**").endswith("; fox – / 9 (train / test views; –: not recorded).")
-    assert "captures at 1/`data.downscale` of their photos: fox 1/12 (image size not recorded by fox's runs)" \
+    assert "each run's notes say which): fox 1/12 (image size not recorded by fox's runs)" \
         in line(capture, "- **Resolution**")
     sized = capture.assign(**{"metric.train_views": 58, "metric.image_width": 89, "metric.image_height": 158})
     assert "; fox 58 / 9 (train / test views)." in line(sized, "- **Split**")
@@ -674,26 +674,6 @@ def test_runs_without_a_per_view_record_are_counted_not_checked(tmp_path):
     # a report of runs none of which recorded their views says nothing of them (a committed report stays as it was)
     report, text = view_results(tmp_path / "old", recorded=lambda run: False)
     assert "outlier test views" not in report.findings and "Outlier test view" not in text
-
-
-def test_the_header_names_the_folder_a_captures_images_came_from(tmp_path):
-    # splatbench.data.dataset: images_N/ where the capture has it; else the nearest finer folder reduced by
-    # N / M, by area averaging in the LLFF layout and PIL bicubic in the others (after undistortion)
-    from splatbench.experiments.train_report import capture_source
-
-    llff = tmp_path / "llff"
-    for d in ("images_8", "masks_8"):
-        (llff / d).mkdir(parents=True)
-    (llff / "poses_bounds.npy").write_bytes(b"")
-    assert capture_source(str(llff), 25) == "images_8/ ÷ 3.125, area"
-    assert capture_source(str(llff), 8) == "images_8/" and capture_source(str(llff), 4) == ""
-    fox = tmp_path / "fox"
-    (fox / "images").mkdir(parents=True)
-    (fox / "transforms.json").write_text(json.dumps({"k1": 0.05, "p1": 0.0, "frames": []}), encoding="utf-8")
-    assert capture_source(str(fox), 12) == "undistorted, then images/ ÷ 12, bicubic"
-    (fox / "transforms.json").write_text(json.dumps({"k1": 0.0, "frames": []}), encoding="utf-8")
-    assert capture_source(str(fox), 12) == "images/ ÷ 12, bicubic"
-    assert capture_source(str(tmp_path / "absent"), 12) == ""
 
 
 def test_auto_is_defined_and_its_holdout_named_as_what_else_it_changed(tmp_path):

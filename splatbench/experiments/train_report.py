@@ -419,51 +419,17 @@ def _resolution(done: pd.DataFrame) -> str:
             continue
         down = _one(rows, "config.data.downscale", _g)
         size = _image_size(rows)
-        paths = [p for p in _values(rows, "config.data.path") if isinstance(p, str)]
-        how = capture_source(paths[0], int(float(down))) if len(paths) == 1 and down and "/" not in down else ""
-        shown = "; ".join(x for x in (how, f"{size} px" if size else "") if x)
-        captures.append(f"{scene} " + (f"1/{down}" if down else "at full size") + (f" ({shown})" if shown else ""))
+        captures.append(f"{scene} " + (f"1/{down}" if down else "at full size") + (f" ({size} px)" if size else ""))
         sizes = carried(rows, ("metric.image_width",)).get("metric.image_width", pd.Series([None]))
         unsized += [str(scene)] if pd.isna(sizes).any() else []
     if captures:
-        parts.append("captures at 1/`data.downscale` of their photos: " + ", ".join(captures)
+        parts.append("captures at 1/`data.downscale` of their photos (`images_N/` where the capture has it, else "
+                     "the nearest finer images folder reduced on load, after undistortion where the camera has lens "
+                     "coefficients: each run's notes say which): " + ", ".join(captures)
                      + (f" (image size not recorded by {_names(unsized)}'s runs"
                         + (", or some of them" if any(_image_size(r) for sc, r in done.groupby("scene") if str(sc) in
                                                       unsized) else "") + ")" if unsized else ""))
     return "; ".join(parts) or "not recorded"
-
-
-def capture_source(path: str, n: int) -> str:
-    """How `splatbench.data.load_dataset` makes a capture's images at ``downscale`` n, from the
-    folder at ``path`` as it is here ("" where it is not): ``images_8/`` where the capture has
-    ``images_n/``; else the nearest finer ``images_m/`` (or ``images/``) reduced by n/m, by area
-    averaging in the LLFF layout (``poses_bounds.npy``), by PIL bicubic in the others, after
-    undistortion where ``transforms.json`` gives lens coefficients."""
-    import re
-    from pathlib import Path
-
-    root = Path(path)
-    if n < 1 or not root.is_dir():
-        return ""
-    folders = {int(m.group(1)) if m.group(1) else 1: d.name for d in root.iterdir()
-               if d.is_dir() and (m := re.fullmatch(r"images(?:_(\d+))?", d.name))}
-    if n in folders and n > 1:
-        return f"{folders[n]}/"
-    finer = [m for m in folders if m < n]
-    if not finer:
-        return ""
-    m = max(finer)
-    llff = (root / "poses_bounds.npy").is_file()
-    lens = ""
-    if not llff and (root / "transforms.json").is_file():
-        try:
-            meta = json.loads((root / "transforms.json").read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            meta = {}
-        if isinstance(meta, dict) and any(isinstance(meta.get(k), (int, float)) and meta[k]
-                                          for k in ("k1", "k2", "k3", "k4", "p1", "p2")):
-            lens = "undistorted, then "
-    return f"{lens}{folders[m]}/ ÷ {n / m:g}, {'area' if llff else 'bicubic'}"
 
 
 #: The evidence rule for a headline's scenes (docs/reports.md, "How many scenes a finding stands on"): 3 scenes, 2
