@@ -506,6 +506,31 @@ def test_best_is_not_named_between_models_of_different_sizes(tmp_path):
     assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
 
 
+def test_best_at_comparable_size_is_judged_by_bytes_where_bytes_per_gaussian_differ(tmp_path):
+    """Review of sh_degree, item 2: SH 3 with 3 % more Gaussians than SH 0 (below the 5 % minimum
+    effect, so the count alone names it best) holds 59 / 14 floats per Gaussian: ×1.03 · 59 / 14 =
+    ×4.34 the bytes, far beyond 5 %: "no single best at comparable size", the size ratio in bytes
+    with the Gaussians' beside it, the comparison "Against model size" (≥ 10 % larger in bytes)."""
+    def make(run):
+        metrics, curves = _bigger_lead(0.03)(run)
+        return {**metrics, "sh_degree": run.labels["sh.degree"]}, curves
+
+    report, text = results(tmp_path, spec_of(), make)
+    claims = report.findings["sh.degree"].claims
+    assert not [c for c in claims if c.kind == "best"]
+    size = next(c for c in claims if c.kind == "size")
+    # the paired geometric-mean bytes ratio: the Gaussians' (1.03, seeded noise ±1 % per seed) times 59 / 14
+    assert size.metric == "bytes" and size.value == pytest.approx(1.03 * 59 / 14, rel=0.02)
+    lead = next(c for c in claims if c.kind == "no best")
+    assert f"at {size.text} the bytes (×1.0" in lead.text and "the Gaussians), more than the 5 % minimum" in lead.text
+    assert "with no more than 5 % more bytes (float32 parameters: the cells' bytes per Gaussian differ)" in text
+    assert "**Against model size**: glossy: ×4." in text and "% larger; the grid declares no matched-size" in text
+    # one SH degree everywhere: the bytes per Gaussian are one number, so the count decides as before
+    report, text = results(tmp_path / "one", spec_of(), _bigger_lead(0.03))
+    assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
+    assert "more Gaussians" in text and "bytes per Gaussian differ" not in text
+
+
 def test_the_raster_kind_declares_no_size_for_its_best():
     from splatbench.experiments.raster_kind import REPORT as RASTER_REPORT
 
