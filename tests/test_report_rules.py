@@ -253,6 +253,57 @@ def test_a_flat_test_curve_beside_a_rising_train_curve_is_overfitting():
     assert "`x=mcmc`" not in f.markdown().split("**Overfitting**")[1]
 
 
+def test_past_its_peak_is_judged_on_the_fall_as_written():
+    """Review of sh_degree, item 4: fox `0` fell 0.1049 dB from its peak, printed "0.10 dB above its
+    last value" and called past its peak against the 0.1 dB minimum effect; the documented rule judges
+    at the precision written (a printed 0.10 is not more than 0.1). 0.106 prints 0.11: past its peak."""
+    from splatbench.reports.settling import CellSettling
+
+    def cell(fall: float) -> CellSettling:
+        return CellSettling(0.0, None, 5600, 7000, {0: 0.0}, 0.1, best=32.0 + fall, best_step=5600, last=32.0)
+
+    assert not cell(0.1049).past_peak and cell(0.1049).settled and cell(0.1049).why_not() == ""
+    assert cell(0.106).past_peak and "0.11 dB above its last value" in cell(0.106).why_not()
+
+
+def _reset_results(tmp_path):
+    """A flat test curve and a training-view curve flat 1 dB above it but for an opacity reset at
+    iteration 1,600 (schedule absolute, refining until 1,700: its one reset): the point logged at 1,600 is 26 dB low,
+    the one at 1,700 5 dB low (sh_degree's fox at its reset: 28-31 and 4-6 dB), both inside the last
+    quarter (1,500-2,000)."""
+    spec = spec_of({"base": {"iterations": 2000, "schedule": "absolute",
+                             "data": {"resolution": 32, "views": 8, "spp": 2},
+                             "strategy": {"reset_every": 1600, "refine_stop": 1700}}})
+
+    def make(run):
+        curves = flat_curves(30.0 + 0.01 * run.seed)
+        dips = {1600: 26.0, 1700: 5.0}
+        curves["psnr"] = [v - dips.get(s, 0.0) for s, v in zip(curves["step"], curves["psnr"])]
+        return metrics_of(30.0 + 0.01 * run.seed, sh_degree=0), curves
+
+    return results(tmp_path, spec, make)
+
+
+def test_training_view_points_just_after_an_opacity_reset_are_left_out_of_overfitting_and_the_gap(tmp_path):
+    """Review of sh_degree, item 3: the dip at the reset made the training slope over the last quarter
+    rise (from 4 dB below at its start to flat), "overfitting" beside a flat test curve, and pulled the
+    gap below zero ((4 · 1 − 25 − 4) / 6 = −4.17 dB). Without the points logged ≤ 100 steps after the
+    reset the training curve is flat 1 dB above the test curve: no overfitting, a gap of +1.00 dB; the
+    text names the window used and the reset in it."""
+    from splatbench.experiments.train_kind import opacity_reset_steps
+    from splatbench.reports.tables import run_config
+
+    report, text = _reset_results(tmp_path)
+    runs = report.table
+    assert opacity_reset_steps(run_config(runs.iloc[0])) == (1600,)
+    settling = report.findings["settling"].markdown()
+    assert "**Overfitting**" not in settling
+    assert "glossy `sh.degree=0` +1.00 dB" in settling and "glossy `sh.degree=3` +1.00 dB" in settling
+    assert "steps 1,500–2,000: its test evaluations from step 1,500 on" in settling
+    assert ("**An opacity reset in the window** (step 1,600)" in settling
+            and "logged 100 steps or fewer after it (steps 1,600, 1,700) are left out" in settling)
+
+
 def test_an_unsettled_difference_is_marked_in_the_axis_finding(tmp_path):
     def make(run):
         three = run.labels["sh.degree"] == 3

@@ -57,7 +57,7 @@ from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, 
 from splatbench.reports.settling import CellSettling, cell_settling, paired_curve, unsettled_reason
 from splatbench.experiments.configs import flatten
 from splatbench.experiments.spec import ExperimentSpec, same_value
-from splatbench.reports.tables import AxisTable, Row, decode, display, loaded_runs, seed_values
+from splatbench.reports.tables import AxisTable, Row, decode, display, loaded_runs, run_config, seed_values
 
 
 def rules_for(kind: RunKind, metrics: tuple[MetricSpec, ...], min_effect: Mapping[str, float] | None = None
@@ -774,21 +774,14 @@ def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, kin
 def _planner(kind: RunKind) -> Callable[[pd.DataFrame, str], dict[int, float]] | None:
     """``plan(runs, metric) -> seed -> count`` from each run's recorded config through the kind's
     `RunKind.planned`; None for a kind without one."""
-    from splatbench.experiments.configs import unflatten
-    from splatbench.reports.tables import decode
-
     planned = kind.planned
     if planned is None:
         return None
 
     def plan(runs: pd.DataFrame, metric: str) -> dict[int, float]:
         out: dict[int, list[float]] = {}
-        cols = [c for c in runs.columns if c.startswith("config.")]
         for _, r in runs.iterrows():
-            flat = {c[len("config."):]: decode(r[c]) for c in cols}
-            config = {**unflatten({k: v for k, v in flat.items() if v is not None}), "scene": r.scene,
-                      "seed": int(r.seed)}
-            value = planned(config).get(metric)
+            value = planned(run_config(r)).get(metric)
             if value is not None:
                 out.setdefault(int(r.seed), []).append(float(value))
         return {k: sum(v) / len(v) for k, v in out.items()}
