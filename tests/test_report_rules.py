@@ -130,6 +130,23 @@ def test_a_minimum_effect_for_a_metric_the_findings_do_not_compare_is_refused(tm
 
 
 # --------------------------------------------------------------------------- no spread
+def test_the_comparison_count_counts_only_comparisons_with_an_interval(tmp_path):
+    """Review of sh_degree, item 19: "This table makes 49 comparisons, each with its own 95 % interval"
+    counted the one-seed and no-spread ones too. Here SSIM, LPIPS, train time and the Gaussians are
+    one number on every seed (`metrics_of`): their four comparisons print "no interval"; the test PSNR
+    comparison and the leader's lead over the runner-up have one: 2 counted, 4 named as without."""
+    def make(run):
+        rng = np.random.default_rng(run.seed)
+        psnr = 30.0 + rng.normal(0, 0.5) + (0.5 + rng.normal(0, 0.05) if run.labels["sh.degree"] == 3 else 0.0)
+        return metrics_of(psnr), flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of(), make)
+    count = next(c for c in report.findings["sh.degree"].claims if c.kind == "count")
+    assert count.value == 2
+    assert ("This table makes 2 comparisons with a 95 % interval (Student's t over seeds; no correction for "
+            "multiple comparisons, so about 1 in 20 intervals misses by chance); 4 more have none") in text
+
+
 def test_seeds_that_vary_nothing_print_no_interval(tmp_path):
     """Every seed gives the same PSNR (what init = surface did to biker): the table says
     "(no spread)", a 0.02 dB difference is not called significant, and no ±0.00 is printed."""

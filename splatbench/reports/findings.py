@@ -26,7 +26,7 @@ axis:
   declares its curves (`KindReport.settling`), a primary-metric comparison whose cells
   had not settled is marked **not settled** (`splatbench.reports.settling`), and the
   kind's confound counts (`KindReport.confounds`) that differ are named ("Also changed");
-* **count**: how many such comparisons the table makes (each at 95 %, no correction
+* **count**: how many such comparisons the table prints with an interval (each at 95 %, no correction
   for multiplicity);
 * the kind's own notes appended to it (`KindReport.axis_notes`), e.g. the degree ``auto``
   ended at on the train kind's SH degree axis.
@@ -491,9 +491,6 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
 
     ref = reference_row(table)
     others = [r for r in table.rows if r.label != ref.label]
-    # the leader's paired lead over the runner-up (and its size against it) printed above count too
-    count = sum(1 for c in claims if c.kind in ("best", "no best", "size") and c.reference and c.n >= 2
-                and math.isfinite(c.low))
     if others and rules.comparisons:
         lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
         for row in others:
@@ -519,7 +516,6 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                     claims.append(Claim("vs", scene, row.label, comp.metric, comp.how, iv.estimate, text, ref.label,
                                         iv.low, iv.high, iv.n, significant, is_practical, settled))
                     texts.append(text)
-                    count += 1
                 parts.append(f"{_name(spec)} {' / '.join(texts)}")
             line = f"  - `{row.label}`: " + "; ".join(parts)
             along = _along_the_run(scenes, ref, row, usable, settling, primary) if settling is not None else ""
@@ -589,20 +585,26 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     if self_parts:
         lines.append(f"- `{ref.label}` against itself (the same options timed as both sides of each pair; the "
                      f"noise floor of the ratio): " + "; ".join(self_parts) + ".")
-    count += sum(1 for c in claims if c.kind == "matched")
+    # every comparison printed: the leader's lead over the runner-up (and its size against it), each row
+    # against the reference, the matched-size ones; counted where it was printed with an interval
+    made = [c for c in claims if c.kind in ("best", "no best", "size", "vs", "matched") and c.reference and c.n]
+    count = sum(1 for c in made if _with_interval(c, specs))
     if count:
         claims.append(Claim("count", "", "", "", "count", float(count), str(count)))
-        seeds = max((c.n for c in claims if c.kind == "vs"), default=0)
-        if seeds >= 2:
-            effects = [f"{_name(specs[c.metric])} {fmt_min_effect(c.min_effect, c.how, specs[c.metric])}"
-                       for c in rules.comparisons if c.min_effect is not None]
-            lines.append(f"- This table makes {count} comparisons, each with its own 95 % interval (Student's t "
-                         f"over seeds; no correction for multiple comparisons, so about 1 in 20 intervals misses "
-                         f"by chance)." + (f" Minimum effects (smaller significant differences read \"no practical "
-                                           f"difference\"): {', '.join(effects)}." if effects else ""))
-        else:
-            lines.append(f"- This table makes {count} comparisons, but with one seed per cell no interval can be "
-                         f"computed (n = 1): none of them is a significant difference; add seeds to the grid.")
+        effects = [f"{_name(specs[c.metric])} {fmt_min_effect(c.min_effect, c.how, specs[c.metric])}"
+                   for c in rules.comparisons if c.min_effect is not None]
+        rest = len(made) - count
+        lines.append(f"- This table makes {count} comparisons with a 95 % interval (Student's t over seeds; no "
+                     f"correction for multiple comparisons, so about 1 in 20 intervals misses by chance)"
+                     + (f"; {rest} more have none (one seed, or seeds that did not vary the result) and are no "
+                        f"evidence either way" if rest else "") + "."
+                     + (f" Minimum effects (smaller significant differences read \"no practical "
+                        f"difference\"): {', '.join(effects)}." if effects else ""))
+    elif made:
+        claims.append(Claim("count", "", "", "", "count", 0.0, "0"))
+        lines.append(f"- This table makes {len(made)} comparisons, but none has an interval (one seed per cell, "
+                     f"or seeds that did not vary the result): none of them is a significant difference; add "
+                     f"seeds to the grid.")
     if declared is not None and declared.confounds and others and not _recorded(usable, declared):
         labels = ", ".join(kind.specs[name].label for name in declared.confounds[:5])
         lines.append("- What else each setting changed (" + labels
@@ -625,6 +627,15 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         lines += more_lines
         claims += more_claims
     return Finding(table.axis, lines, claims)
+
+
+def _with_interval(c: Claim, specs: Mapping[str, MetricSpec]) -> bool:
+    """Whether a comparison's claim was printed with a 95 % interval: two or more seeds, finite
+    bounds, and a half-width that is not zero at the precision written (`no_spread`)."""
+    if c.n < 2 or not (math.isfinite(c.low) and math.isfinite(c.high)):
+        return False
+    spec = specs.get(c.metric) or MetricSpec(c.metric, c.metric, ".3f", "", "lower")  # the bytes: a ratio
+    return not no_spread(Interval(c.value, c.low, c.high, c.n, ""), c.how, spec)
 
 
 def bytes_differ(runs: pd.DataFrame, bytes_of: Callable[[pd.DataFrame], pd.Series] | None, count: str) -> bool:
