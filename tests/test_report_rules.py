@@ -130,6 +130,23 @@ def test_a_minimum_effect_for_a_metric_the_findings_do_not_compare_is_refused(tm
 
 
 # --------------------------------------------------------------------------- no spread
+def test_the_comparison_count_counts_only_comparisons_with_an_interval(tmp_path):
+    """Review of sh_degree, item 19: "This table makes 49 comparisons, each with its own 95 % interval"
+    counted the one-seed and no-spread ones too. Here SSIM, LPIPS, train time and the Gaussians are
+    one number on every seed (`metrics_of`): their four comparisons print "no interval"; the test PSNR
+    comparison and the leader's lead over the runner-up have one: 2 counted, 4 named as without."""
+    def make(run):
+        rng = np.random.default_rng(run.seed)
+        psnr = 30.0 + rng.normal(0, 0.5) + (0.5 + rng.normal(0, 0.05) if run.labels["sh.degree"] == 3 else 0.0)
+        return metrics_of(psnr), flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of(), make)
+    count = next(c for c in report.findings["sh.degree"].claims if c.kind == "count")
+    assert count.value == 2
+    assert ("This table makes 2 comparisons with a 95 % interval (Student's t over seeds; no correction for "
+            "multiple comparisons, so about 1 in 20 intervals misses by chance); 4 more have none") in text
+
+
 def test_seeds_that_vary_nothing_print_no_interval(tmp_path):
     """Every seed gives the same PSNR (what init = surface did to biker): the table says
     "(no spread)", a 0.02 dB difference is not called significant, and no ±0.00 is printed."""
@@ -251,6 +268,57 @@ def test_a_flat_test_curve_beside_a_rising_train_curve_is_overfitting():
     f = settling_finding(_settle_table({"default": 0.0, "mcmc": 0.0}, {"default": 1.0, "mcmc": 0.0}), TRAIN)
     assert "**Overfitting**" in f.markdown() and "`x=default`" in f.markdown().split("**Overfitting**")[1]
     assert "`x=mcmc`" not in f.markdown().split("**Overfitting**")[1]
+
+
+def test_past_its_peak_is_judged_on_the_fall_as_written():
+    """Review of sh_degree, item 4: fox `0` fell 0.1049 dB from its peak, printed "0.10 dB above its
+    last value" and called past its peak against the 0.1 dB minimum effect; the documented rule judges
+    at the precision written (a printed 0.10 is not more than 0.1). 0.106 prints 0.11: past its peak."""
+    from splatbench.reports.settling import CellSettling
+
+    def cell(fall: float) -> CellSettling:
+        return CellSettling(0.0, None, 5600, 7000, {0: 0.0}, 0.1, best=32.0 + fall, best_step=5600, last=32.0)
+
+    assert not cell(0.1049).past_peak and cell(0.1049).settled and cell(0.1049).why_not() == ""
+    assert cell(0.106).past_peak and "0.11 dB above its last value" in cell(0.106).why_not()
+
+
+def _reset_results(tmp_path):
+    """A flat test curve and a training-view curve flat 1 dB above it but for an opacity reset at
+    iteration 1,600 (schedule absolute, refining until 1,700: its one reset): the point logged at 1,600 is 26 dB low,
+    the one at 1,700 5 dB low (sh_degree's fox at its reset: 28-31 and 4-6 dB), both inside the last
+    quarter (1,500-2,000)."""
+    spec = spec_of({"base": {"iterations": 2000, "schedule": "absolute",
+                             "data": {"resolution": 32, "views": 8, "spp": 2},
+                             "strategy": {"reset_every": 1600, "refine_stop": 1700}}})
+
+    def make(run):
+        curves = flat_curves(30.0 + 0.01 * run.seed)
+        dips = {1600: 26.0, 1700: 5.0}
+        curves["psnr"] = [v - dips.get(s, 0.0) for s, v in zip(curves["step"], curves["psnr"])]
+        return metrics_of(30.0 + 0.01 * run.seed, sh_degree=0), curves
+
+    return results(tmp_path, spec, make)
+
+
+def test_training_view_points_just_after_an_opacity_reset_are_left_out_of_overfitting_and_the_gap(tmp_path):
+    """Review of sh_degree, item 3: the dip at the reset made the training slope over the last quarter
+    rise (from 4 dB below at its start to flat), "overfitting" beside a flat test curve, and pulled the
+    gap below zero ((4 · 1 − 25 − 4) / 6 = −4.17 dB). Without the points logged ≤ 100 steps after the
+    reset the training curve is flat 1 dB above the test curve: no overfitting, a gap of +1.00 dB; the
+    text names the window used and the reset in it."""
+    from splatbench.experiments.train_kind import opacity_reset_steps
+    from splatbench.reports.tables import run_config
+
+    report, text = _reset_results(tmp_path)
+    runs = report.table
+    assert opacity_reset_steps(run_config(runs.iloc[0])) == (1600,)
+    settling = report.findings["settling"].markdown()
+    assert "**Overfitting**" not in settling
+    assert "glossy `sh.degree=0` +1.00 dB" in settling and "glossy `sh.degree=3` +1.00 dB" in settling
+    assert "steps 1,500–2,000: its test evaluations from step 1,500 on" in settling
+    assert ("**An opacity reset in the window** (step 1,600)" in settling
+            and "logged 100 steps or fewer after it (steps 1,600, 1,700) are left out" in settling)
 
 
 def test_an_unsettled_difference_is_marked_in_the_axis_finding(tmp_path):
@@ -549,6 +617,31 @@ def test_best_is_not_named_between_models_of_different_sizes(tmp_path):
     report, _ = results(tmp_path / "d", spec_of({"report": {"min_effect": {"num_gaussians": 0.25}}}),
                         _bigger_lead(0.2))
     assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
+
+
+def test_best_at_comparable_size_is_judged_by_bytes_where_bytes_per_gaussian_differ(tmp_path):
+    """Review of sh_degree, item 2: SH 3 with 3 % more Gaussians than SH 0 (below the 5 % minimum
+    effect, so the count alone names it best) holds 59 / 14 floats per Gaussian: ×1.03 · 59 / 14 =
+    ×4.34 the bytes, far beyond 5 %: "no single best at comparable size", the size ratio in bytes
+    with the Gaussians' beside it, the comparison "Against model size" (≥ 10 % larger in bytes)."""
+    def make(run):
+        metrics, curves = _bigger_lead(0.03)(run)
+        return {**metrics, "sh_degree": run.labels["sh.degree"]}, curves
+
+    report, text = results(tmp_path, spec_of(), make)
+    claims = report.findings["sh.degree"].claims
+    assert not [c for c in claims if c.kind == "best"]
+    size = next(c for c in claims if c.kind == "size")
+    # the paired geometric-mean bytes ratio: the Gaussians' (1.03, seeded noise ±1 % per seed) times 59 / 14
+    assert size.metric == "bytes" and size.value == pytest.approx(1.03 * 59 / 14, rel=0.02)
+    lead = next(c for c in claims if c.kind == "no best")
+    assert f"at {size.text} the bytes (×1.0" in lead.text and "the Gaussians), more than the 5 % minimum" in lead.text
+    assert "with no more than 5 % more bytes (float32 parameters: the cells' bytes per Gaussian differ)" in text
+    assert "**Against model size**: glossy: ×4." in text and "% larger; the grid declares no matched-size" in text
+    # one SH degree everywhere: the bytes per Gaussian are one number, so the count decides as before
+    report, text = results(tmp_path / "one", spec_of(), _bigger_lead(0.03))
+    assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
+    assert "more Gaussians" in text and "bytes per Gaussian differ" not in text
 
 
 def test_the_raster_kind_declares_no_size_for_its_best():

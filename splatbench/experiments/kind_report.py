@@ -173,7 +173,10 @@ class SettlingCurves:
     settled (`splatbench.reports.settling`): the test curve of ``metric`` (steps and values)
     and, where recorded, the training-view curve of the same quantity (overfitting); better:
     "higher" or "lower", the direction of a better value (a cell "past its peak" ended more than
-    the minimum effect worse than its best)."""
+    the minimum effect worse than its best); resets: ``resets(config) -> steps`` of a run's recorded
+    config (nested, with ``scene`` and ``seed``), the steps at which its schedule resets what the
+    training curve measures (the train kind's opacity resets; None: none): the training-view points
+    just after one are left out of the overfitting slope and the train–test gap."""
 
     metric: str
     test_step: str
@@ -181,6 +184,7 @@ class SettlingCurves:
     train_step: str = ""
     train_value: str = ""
     better: str = "higher"
+    resets: Callable[[dict], Sequence[int]] | None = None
 
 
 @dataclass(frozen=True)

@@ -498,6 +498,23 @@ def planned(config: dict[str, Any]) -> dict[str, float]:
     return {"opacity_resets": counts.opacity_resets, "refinements": counts.refinements}
 
 
+def opacity_reset_steps(config: dict[str, Any]) -> tuple[int, ...]:
+    """The completed-iteration counts at which a run's resolved config resets opacities (its strategy
+    as the run scales it: every ``reset_every`` iterations while ``it < refine_stop``, the count
+    ``planned_counts`` makes); the training step logged at such a count is the first after the reset.
+    () for a strategy without resets, or a config that no longer validates (`SettlingCurves.resets`)."""
+    try:
+        _, _, train = _split(config)
+        cfg = _train_config(train)
+        strategy = cfg.make_strategy()
+    except InputError:
+        return ()
+    every = getattr(strategy, "reset_every", 0)
+    stop = getattr(strategy, "refine_stop", None)
+    hi = cfg.iterations if stop is None else min(cfg.iterations, stop - 1)
+    return tuple(range(every, hi + 1, every)) if isinstance(every, int) and every > 0 else ()
+
+
 def with_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:
     """``config`` (a run's nested, unresolved config) under protocol ``name``: what an experiment's
     ``[check]`` runs. ``protocol = name``; ``iterations`` left out, so the protocol brings its own
@@ -545,7 +562,7 @@ REPORT = KindReport(
                         "Final number of Gaussians against test PSNR per cell (mean over seeds)",
                         cheaper="smaller (fewer Gaussians)", order="fewest Gaussians first")),
     timed=("train_seconds", "render_ms_per_view"),
-    settling=SettlingCurves("test_psnr", "eval_step", "eval_psnr", "step", "psnr"),
+    settling=SettlingCurves("test_psnr", "eval_step", "eval_psnr", "step", "psnr", resets=opacity_reset_steps),
     confounds=("opacity_resets", "refinements", "cloned", "split", "pruned", "pruned_size", "relocated", "added"),
     confound_floor=tuple((name, CONFOUND_FLOOR) for name in GAUSSIAN_COUNTS),
     load=LoadMarks("time_loaded", "timed"),

@@ -26,7 +26,7 @@ axis:
   declares its curves (`KindReport.settling`), a primary-metric comparison whose cells
   had not settled is marked **not settled** (`splatbench.reports.settling`), and the
   kind's confound counts (`KindReport.confounds`) that differ are named ("Also changed");
-* **count**: how many such comparisons the table makes (each at 95 %, no correction
+* **count**: how many such comparisons the table prints with an interval (each at 95 %, no correction
   for multiplicity);
 * the kind's own notes appended to it (`KindReport.axis_notes`), e.g. the degree ``auto``
   ended at on the train kind's SH degree axis.
@@ -57,7 +57,7 @@ from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, 
 from splatbench.reports.settling import CellSettling, cell_settling, paired_curve, unsettled_reason
 from splatbench.experiments.configs import flatten
 from splatbench.experiments.spec import ExperimentSpec, same_value
-from splatbench.reports.tables import AxisTable, Row, decode, display, loaded_runs, seed_values
+from splatbench.reports.tables import AxisTable, Row, decode, display, loaded_runs, run_config, seed_values
 
 
 def rules_for(kind: RunKind, metrics: tuple[MetricSpec, ...], min_effect: Mapping[str, float] | None = None
@@ -296,6 +296,30 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     matched = dict(experiment.matched) if experiment is not None else {}
     dim, matched_values = next(iter(matched.items()), (None, ()))
     stratum = _stratum(usable, dim, matched_values)  # the run ids at the matched size (empty: none declared)
+    by_bytes = size_spec is not None and bytes_differ(usable, bytes_of, size_spec.name)
+    size_word = "bytes" if by_bytes else (_name(size_spec) if size_spec is not None else "")
+
+    def size_values(scene: str, row: Row, ids: set[str] | None = None) -> dict[int, float]:
+        """seed -> the row's model size at ``scene``: its bytes where the table's cells' bytes per
+        Gaussian differ (`bytes_differ`), else its size metric (a seed's runs averaged first)."""
+        if not by_bytes:
+            return values_in(scene, row, size_spec.name, ids)
+        sel = selected(scene, row, usable)
+        if ids is not None:
+            sel = sel[sel.run_id.isin(ids)]
+        if not len(sel):
+            return {}
+        per = pd.DataFrame({"seed": sel.seed.astype(int), "v": bytes_of(sel).to_numpy()}).dropna()
+        return {int(k): float(v) for k, v in per.groupby("seed").v.mean().items()}
+
+    def size_ratio_text(text: str, scene: str, ra: Row, rb: Row, ids: set[str] | None = None) -> str:
+        """``×3.999 [95 % CI …] the bytes (×0.949 the Gaussians)`` where sized by bytes, else
+        ``… the Gaussians``: both named where they differ."""
+        if not by_bytes:
+            return f"{text} the {size_word}"
+        count = paired_ratio(values_in(scene, ra, size_spec.name, ids), values_in(scene, rb, size_spec.name, ids))
+        also = f" (×{count.estimate:.3f} the {_name(size_spec)})" if count.n and math.isfinite(count.estimate) else ""
+        return f"{text} the bytes{also}"
 
     def mean_of(scene: str, row: Row, metric: str, ids: set[str] | None = None) -> float | None:
         sel = selected(scene, row, usable)
@@ -339,12 +363,14 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             natural_ids = None if not stratum else set(usable.run_id) - stratum
             if dim == table.axis:
                 natural_ids = None
-            ratio = paired_ratio(*(values_in(scene, r, size_spec.name, natural_ids) for r in (a, b)))
+            ratio = paired_ratio(*(size_values(scene, r, natural_ids) for r in (a, b)))
             if not ratio.n or not math.isfinite(ratio.estimate) or max(ratio.estimate, 1 / ratio.estimate) < \
                     1 + MATCHED_SHARE - 1e-12:
                 continue
-            more = "more" if ratio.estimate > 1 else "fewer"
-            head = f"{scene}: ×{ratio.estimate:.3f} the {_name(size_spec)} (≥ {100 * MATCHED_SHARE:g} % {more}"
+            more = ("more" if ratio.estimate > 1 else "fewer") if not by_bytes else \
+                ("larger" if ratio.estimate > 1 else "smaller")
+            head = (f"{scene}: {size_ratio_text(f'×{ratio.estimate:.3f}', scene, a, b, natural_ids)} "
+                    f"(≥ {100 * MATCHED_SHARE:g} % {more}")
             if not matched:
                 pieces.append(head + "; the grid declares no matched-size cell, `[report] matched`: quality and size "
                                      "are not separated)")
@@ -358,13 +384,13 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 if not iv.n:
                     pieces.append(head + "; its matched-size cells have no done runs)")
                     continue
-                size = paired_ratio(values_in(scene, a, size_spec.name, stratum),
-                                    values_in(scene, b, size_spec.name, stratum))
+                size = paired_ratio(size_values(scene, a, stratum), size_values(scene, b, stratum))
                 text = fmt_interval(iv, primary_comp.how, primary, null, primary_comp.min_effect)
                 claims.append(Claim("matched", scene, b.label, primary.name, primary_comp.how, iv.estimate, text,
                                     a.label, iv.low, iv.high, iv.n,
                                     *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
-                at = f"×{size.estimate:.3f} the {_name(size_spec)}" if size.n else "sizes not recorded"
+                at = size_ratio_text(f"×{size.estimate:.3f}", scene, a, b, stratum) if size.n else \
+                    "sizes not recorded"
                 pieces.append(head + f" at its natural size); at the matched size ({setting_text(experiment, dim)}): "
                                      f"{_name(primary)} {text}, at {at}")
         return (". **Against model size**: " + "; ".join(pieces)) if pieces else ""
@@ -408,24 +434,25 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         reversed_ = other_way(primary, lead.estimate - null, quality_intervals(scene, runner, row))
         larger = None  # the leader's size against the runner-up's, where it is larger by the minimum effect
         if clear and size_spec is not None:
-            ratio = paired_ratio(values(scene, runner, size_spec.name), values(scene, row, size_spec.name))
+            ratio = paired_ratio(size_values(scene, runner), size_values(scene, row))
             if ratio.n and math.isfinite(ratio.estimate) and ratio.estimate > 1.0 \
                     and practical(ratio, "ratio", 1.0, size_effect):
                 larger = ratio
         if larger is not None:
             size_text = fmt_interval(larger, "ratio", size_spec, None)
-            front = _on_front(table, scene, size_spec, primary, (row, runner))
+            sized = {r.label: mean_of(scene, r, "bytes") for r in table.rows} if by_bytes else None
+            front = _on_front(table, scene, size_spec, primary, (row, runner), sized)
+            at = size_ratio_text(size_text, scene, runner, row)
             text = (f"{scene}: no single best at comparable size (`{row.label}`, {mean_text}, leads "
-                    f"`{runner.label}` by {lead_text} at {size_text} the {_name(size_spec)}, more than the "
+                    f"`{runner.label}` by {lead_text} at {at}, more than the "
                     f"{fmt_min_effect(size_effect, 'ratio', size_spec)} minimum effect"
-                    + ("; both on this table's Gaussians/quality Pareto front" if front else "") + ")")
-            if size_spec.name != "num_gaussians":
-                text = text.replace("Gaussians/quality", f"{_name(size_spec)}/quality")
+                    + (f"; both on this table's {size_word}/quality Pareto front" if front else "") + ")")
             if why:
                 text += f", **not settled** ({why})"
             claims.append(Claim("no best", scene, row.label, primary.name, how, lead.estimate, text, runner.label,
                                 lead.low, lead.high, lead.n, significant, is_practical, settled))
-            claims.append(Claim("size", scene, row.label, size_spec.name, "ratio", larger.estimate, size_text,
+            claims.append(Claim("size", scene, row.label, "bytes" if by_bytes else size_spec.name, "ratio",
+                                larger.estimate, size_text,
                                 runner.label, larger.low, larger.high, larger.n, *judge(larger, "ratio", 1.0,
                                                                                            size_spec, size_effect)))
         elif clear:
@@ -455,16 +482,15 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     word = "best" if primary.better != "lower" else "lowest"
     rule = ("named only where the 95 % interval of its paired lead over the runner-up lies wholly beyond "
             + (f"the {unit_text} minimum effect" if unit_text else "no difference")
-            + (f" with no more than {fmt_min_effect(size_effect, 'ratio', size_spec)} more {_name(size_spec)}"
-               if size_spec is not None else ""))
+            + (f" with no more than {fmt_min_effect(size_effect, 'ratio', size_spec)} more {size_word}"
+               if size_spec is not None else "")
+            + (f" (float32 parameters: the cells' bytes per Gaussian differ)"
+               if by_bytes else ""))
     lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds; {rule}): "
                  + "; ".join(best_parts) + ".")
 
     ref = reference_row(table)
     others = [r for r in table.rows if r.label != ref.label]
-    # the leader's paired lead over the runner-up (and its size against it) printed above count too
-    count = sum(1 for c in claims if c.kind in ("best", "no best", "size") and c.reference and c.n >= 2
-                and math.isfinite(c.low))
     if others and rules.comparisons:
         lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
         for row in others:
@@ -490,7 +516,6 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                     claims.append(Claim("vs", scene, row.label, comp.metric, comp.how, iv.estimate, text, ref.label,
                                         iv.low, iv.high, iv.n, significant, is_practical, settled))
                     texts.append(text)
-                    count += 1
                 parts.append(f"{_name(spec)} {' / '.join(texts)}")
             line = f"  - `{row.label}`: " + "; ".join(parts)
             along = _along_the_run(scenes, ref, row, usable, settling, primary) if settling is not None else ""
@@ -536,8 +561,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 claims.append(Claim("matched", scene, row.label, primary.name, primary_comp.how, iv.estimate, text,
                                     rows[0].label, iv.low, iv.high, iv.n,
                                     *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
-                ratio = paired_ratio(values(scene, rows[0], size_spec.name), values(scene, row, size_spec.name))
-                at = f" at ×{ratio.estimate:.3f} the {_name(size_spec)}" if ratio.n else ""
+                ratio = paired_ratio(size_values(scene, rows[0]), size_values(scene, row))
+                at = f" at {size_ratio_text(f'×{ratio.estimate:.3f}', scene, rows[0], row)}" if ratio.n else ""
                 texts.append(f"{scene} {text}{at}")
             if texts:
                 parts.append(f"`{row.label}` against `{rows[0].label}`: " + "; ".join(texts))
@@ -560,20 +585,26 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     if self_parts:
         lines.append(f"- `{ref.label}` against itself (the same options timed as both sides of each pair; the "
                      f"noise floor of the ratio): " + "; ".join(self_parts) + ".")
-    count += sum(1 for c in claims if c.kind == "matched")
+    # every comparison printed: the leader's lead over the runner-up (and its size against it), each row
+    # against the reference, the matched-size ones; counted where it was printed with an interval
+    made = [c for c in claims if c.kind in ("best", "no best", "size", "vs", "matched") and c.reference and c.n]
+    count = sum(1 for c in made if _with_interval(c, specs))
     if count:
         claims.append(Claim("count", "", "", "", "count", float(count), str(count)))
-        seeds = max((c.n for c in claims if c.kind == "vs"), default=0)
-        if seeds >= 2:
-            effects = [f"{_name(specs[c.metric])} {fmt_min_effect(c.min_effect, c.how, specs[c.metric])}"
-                       for c in rules.comparisons if c.min_effect is not None]
-            lines.append(f"- This table makes {count} comparisons, each with its own 95 % interval (Student's t "
-                         f"over seeds; no correction for multiple comparisons, so about 1 in 20 intervals misses "
-                         f"by chance)." + (f" Minimum effects (smaller significant differences read \"no practical "
-                                           f"difference\"): {', '.join(effects)}." if effects else ""))
-        else:
-            lines.append(f"- This table makes {count} comparisons, but with one seed per cell no interval can be "
-                         f"computed (n = 1): none of them is a significant difference; add seeds to the grid.")
+        effects = [f"{_name(specs[c.metric])} {fmt_min_effect(c.min_effect, c.how, specs[c.metric])}"
+                   for c in rules.comparisons if c.min_effect is not None]
+        rest = len(made) - count
+        lines.append(f"- This table makes {count} comparisons with a 95 % interval (Student's t over seeds; no "
+                     f"correction for multiple comparisons, so about 1 in 20 intervals misses by chance)"
+                     + (f"; {rest} more have none (one seed, or seeds that did not vary the result) and are no "
+                        f"evidence either way" if rest else "") + "."
+                     + (f" Minimum effects (smaller significant differences read \"no practical "
+                        f"difference\"): {', '.join(effects)}." if effects else ""))
+    elif made:
+        claims.append(Claim("count", "", "", "", "count", 0.0, "0"))
+        lines.append(f"- This table makes {len(made)} comparisons, but none has an interval (one seed per cell, "
+                     f"or seeds that did not vary the result): none of them is a significant difference; add "
+                     f"seeds to the grid.")
     if declared is not None and declared.confounds and others and not _recorded(usable, declared):
         labels = ", ".join(kind.specs[name].label for name in declared.confounds[:5])
         lines.append("- What else each setting changed (" + labels
@@ -598,7 +629,31 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     return Finding(table.axis, lines, claims)
 
 
-#: A comparison whose Gaussian count differs by at least this share is also stated at the matched size.
+def _with_interval(c: Claim, specs: Mapping[str, MetricSpec]) -> bool:
+    """Whether a comparison's claim was printed with a 95 % interval: two or more seeds, finite
+    bounds, and a half-width that is not zero at the precision written (`no_spread`)."""
+    if c.n < 2 or not (math.isfinite(c.low) and math.isfinite(c.high)):
+        return False
+    spec = specs.get(c.metric) or MetricSpec(c.metric, c.metric, ".3f", "", "lower")  # the bytes: a ratio
+    return not no_spread(Interval(c.value, c.low, c.high, c.n, ""), c.how, spec)
+
+
+def bytes_differ(runs: pd.DataFrame, bytes_of: Callable[[pd.DataFrame], pd.Series] | None, count: str) -> bool:
+    """Whether the model size is judged by bytes (`KindReport.model_bytes`) rather than by the
+    ``count`` metric (Gaussians): the runs' bytes per Gaussian differ (an SH-degree axis: 14 floats
+    at degree 0, 59 at 3) and every run with a count has its bytes. Where they are one number, a
+    bytes ratio is the count's ratio, so the count is named (docs/reports.md, "Best")."""
+    col = f"metric.{count}"
+    if bytes_of is None or col not in runs.columns or not len(runs):
+        return False
+    n = pd.to_numeric(runs[col], errors="coerce")
+    per = (bytes_of(runs) / n)[n > 0]
+    if not len(per) or not per.notna().all():
+        return False
+    return float(per.max() - per.min()) > 1e-9 * float(per.max())
+
+
+#: A comparison whose size differs by at least this share is also stated at the matched size.
 MATCHED_SHARE = 0.10
 
 
@@ -663,13 +718,17 @@ def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame
     return ("Paired difference at each evaluation (mean over seeds; " + "; ".join(parts) + ")") if parts else ""
 
 
-def _on_front(table: AxisTable, scene: str, size: MetricSpec, quality: MetricSpec, rows: Sequence[Row]) -> bool:
+def _on_front(table: AxisTable, scene: str, size: MetricSpec, quality: MetricSpec, rows: Sequence[Row],
+              sizes: Mapping[str, float | None] | None = None) -> bool:
     """Whether every one of ``rows`` is on the Pareto front of ``table``'s rows at ``scene`` on the
     means (no other row both smaller in ``size`` and better in ``quality``; `splatbench.plotting`)
-    while some row is not: where every row is on the front, saying so tells nothing."""
+    while some row is not: where every row is on the front, saying so tells nothing. ``sizes``:
+    label -> the row's mean size to use instead of ``size``'s column (its bytes; None: unknown)."""
     at = table.frame[table.frame.scene == scene]
     sign = -1.0 if quality.better == "lower" else 1.0
-    front = pareto_front(list(at[f"{size.name}.mean"]), [sign * q for q in at[f"{quality.name}.mean"]])
+    cost = list(at[f"{size.name}.mean"]) if sizes is None else \
+        [math.nan if sizes.get(label) is None else sizes[label] for label in at.label]
+    front = pareto_front(cost, [sign * q for q in at[f"{quality.name}.mean"]])
     labels = {at.iloc[i].label for i in front}
     return all(r.label in labels for r in rows) and len(labels) < len(set(at.label))
 
@@ -726,21 +785,14 @@ def confounds(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, kin
 def _planner(kind: RunKind) -> Callable[[pd.DataFrame, str], dict[int, float]] | None:
     """``plan(runs, metric) -> seed -> count`` from each run's recorded config through the kind's
     `RunKind.planned`; None for a kind without one."""
-    from splatbench.experiments.configs import unflatten
-    from splatbench.reports.tables import decode
-
     planned = kind.planned
     if planned is None:
         return None
 
     def plan(runs: pd.DataFrame, metric: str) -> dict[int, float]:
         out: dict[int, list[float]] = {}
-        cols = [c for c in runs.columns if c.startswith("config.")]
         for _, r in runs.iterrows():
-            flat = {c[len("config."):]: decode(r[c]) for c in cols}
-            config = {**unflatten({k: v for k, v in flat.items() if v is not None}), "scene": r.scene,
-                      "seed": int(r.seed)}
-            value = planned(config).get(metric)
+            value = planned(run_config(r)).get(metric)
             if value is not None:
                 out.setdefault(int(r.seed), []).append(float(value))
         return {k: sum(v) / len(v) for k, v in out.items()}

@@ -17,9 +17,14 @@ and the metric they measure); the rule (docs/reports.md, "Settled"):
   for a metric where lower is better): such a cell is "past its peak (best at step N)", never
   settled, however flat its last quarter (a curve that peaked at 2,100 steps and fell 0.3 dB by
   7,000 may end flat);
+* **past its peak** is judged on the fall as written (`FALL_FMT`, two decimals): a printed
+  0.10 dB is never "more than the 0.1 dB minimum effect" (docs/reports.md, "Minimum effects");
 * **overfitting**: the test curve is flat or falling (slope below the threshold) while the
   training-view curve, where recorded, still rises faster than the test curve by at least
-  the threshold: the cell fits its training views, it has not converged;
+  the threshold: the cell fits its training views, it has not converged. The training-view
+  points logged within `RESET_RECOVERY` steps after a reset the kind names
+  (`SettlingCurves.resets`: the train kind's opacity resets) are left out of its slope and of
+  the train–test gap: they measure the reset, not the fit;
 * **a difference is settled** when both its cells are and the paired difference moved over
   the last quarter by less than `DRIFT_SHARE` (a quarter) of its final size (of the minimum
   effect, for a difference smaller than that).
@@ -37,6 +42,7 @@ import pandas as pd
 
 from splatbench.experiments.kind_report import Claim, Finding, SettlingCurves, done_runs
 from splatbench.experiments.kinds import RunKind
+from splatbench.reports.tables import run_config
 
 #: Share of the run, at its end, whose slope decides.
 LAST_SHARE = 0.25
@@ -44,24 +50,36 @@ LAST_SHARE = 0.25
 SETTLE_STEPS = 1000
 #: A paired difference is settled when it moved over the last quarter by less than this share of its size.
 DRIFT_SHARE = 0.25
+#: Training-view points logged this many steps or fewer after a reset (`SettlingCurves.resets`) are left
+#: out of the overfitting slope and the gap. sh_degree's graphdeco-7k runs (fox, log_every 100): the point
+#: logged at the reset (step 6,000) is 28-31 dB below its neighbours, the one 100 steps later 4-6 dB, the
+#: one 200 steps later 1-2 dB (within a point's own scatter, ±2 dB between neighbours before the reset).
+RESET_RECOVERY = 100
+#: The precision a fall below the peak is written with, and judged at (`CellSettling.past_peak`).
+FALL_FMT = ".2f"
 
 
 @dataclass(frozen=True)
 class Slope:
     """One curve's least-squares slope over the last quarter of a run (per 1,000 steps),
-    the window it is fitted on (first and last step) and the value at the window's end."""
+    the points it is fitted on (first and last step), the value at the window's end and the
+    window itself (``lo``: its first step, ``end - end / 4``, or the first point where the last
+    two are used)."""
 
     slope: float
     start: int
     end: int
     last: float
+    lo: int | None = None
 
 
-def last_quarter_slope(steps, values, end: int | None = None) -> Slope | None:
+def last_quarter_slope(steps, values, end: int | None = None, skip=()) -> Slope | None:
     """`Slope` of the finite points of one curve over the last quarter of a run that ends at
-    ``end`` (default: the curve's last step); None with fewer than two points."""
+    ``end`` (default: the curve's last step), the steps in ``skip`` left out; None with fewer
+    than two points."""
+    skipped = set(skip)
     pts = [(float(s), float(v)) for s, v in zip(steps or [], values or [])
-           if s is not None and v is not None and math.isfinite(float(v))]
+           if s is not None and v is not None and math.isfinite(float(v)) and int(s) not in skipped]
     if len(pts) < 2:
         return None
     end = pts[-1][0] if end is None else float(end)
@@ -69,11 +87,19 @@ def last_quarter_slope(steps, values, end: int | None = None) -> Slope | None:
     sel = [p for p in pts if lo <= p[0] <= end]
     if len(sel) < 2:
         sel = [p for p in pts if p[0] <= end][-2:]
+        lo = sel[0][0] if sel else lo
     if len(sel) < 2 or sel[-1][0] == sel[0][0]:
         return None
     x, y = np.array([p[0] for p in sel]), np.array([p[1] for p in sel])
     slope = float(np.polyfit(x, y, 1)[0]) * SETTLE_STEPS
-    return Slope(slope, int(sel[0][0]), int(sel[-1][0]), float(sel[-1][1]))
+    return Slope(slope, int(sel[0][0]), int(sel[-1][0]), float(sel[-1][1]), int(math.ceil(lo)))
+
+
+def recovering(steps, resets) -> list[int]:
+    """The steps of ``steps`` logged ``RESET_RECOVERY`` steps or fewer after one of ``resets``
+    (a reset at count ``r`` is applied after ``r`` iterations: the step logged as ``r`` is the first
+    after it)."""
+    return [int(s) for s in steps or [] if s is not None and any(0 <= int(s) - r <= RESET_RECOVERY for r in resets)]
 
 
 @dataclass(frozen=True)
@@ -95,6 +121,9 @@ class CellSettling:
     best: float | None = None  # the mean curve's best value (None: no step every seed evaluated)
     best_step: int | None = None  # the step of ``best`` (the first, on a tie)
     last: float | None = None  # the mean curve's value at its last step
+    lo: int | None = None  # the window's first step (``end - end / 4``; the test points start at ``start``)
+    resets: tuple[int, ...] = ()  # the resets (`SettlingCurves.resets`) in the window, over the runs
+    left_out: tuple[int, ...] = ()  # the training-view steps left out of the window (`RESET_RECOVERY`)
 
     @property
     def flat(self) -> bool:
@@ -108,8 +137,9 @@ class CellSettling:
 
     @property
     def past_peak(self) -> bool:
-        """The last value is more than the minimum effect (the threshold per 1,000 steps) below the best."""
-        return self.fall > self.threshold + 1e-12
+        """The last value is more than the minimum effect (the threshold per 1,000 steps) below the best,
+        as written (`FALL_FMT`: a fall printed 0.10 dB is not more than 0.1 dB)."""
+        return float(format(self.fall, FALL_FMT)) > self.threshold + 1e-12
 
     @property
     def settled(self) -> bool:
@@ -121,7 +151,7 @@ class CellSettling:
         above its last value)``; "" when settled."""
         parts = [] if self.flat else [f"{self.test:+.2f} {unit} / 1,000 steps over the last quarter"]
         if self.past_peak:
-            parts.append(f"past its peak (best at step {self.best_step:,}, {self.fall:.2f} {unit} above its last "
+            parts.append(f"past its peak (best at step {self.best_step:,}, {self.fall:{FALL_FMT}} {unit} above its last "
                          f"value)")
         return ", ".join(parts)
 
@@ -169,8 +199,11 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
     test: dict[int, list[float]] = {}
     train: dict[int, list[float]] = {}
     gaps: dict[int, list[float]] = {}
-    starts, ends = [], []
-    for seed, raw in zip(runs.seed, runs.curves):
+    starts, ends, los = [], [], []
+    resets: set[int] = set()
+    left_out: set[int] = set()
+    for (_, run), raw in zip(runs.iterrows(), runs.curves):
+        seed = run.seed
         c = _curves(raw)
         if c is None:
             continue
@@ -180,11 +213,16 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
         test.setdefault(int(seed), []).append(s.slope)
         starts.append(s.start)
         ends.append(s.end)
+        los.append(s.lo)
         if keys.train_step and keys.train_value and c.get(keys.train_value):
-            t = last_quarter_slope(c.get(keys.train_step), c.get(keys.train_value), end=s.end)
+            ran = _resets(run, keys)
+            resets |= {r for r in ran if s.lo <= r <= s.end}
+            skip = [st for st in recovering(c.get(keys.train_step), ran) if s.lo <= st <= s.end]
+            left_out |= set(skip)
+            t = last_quarter_slope(c.get(keys.train_step), c.get(keys.train_value), end=s.end, skip=skip)
             if t is not None:
                 train.setdefault(int(seed), []).append(t.slope)
-            g = window_gap(c, keys, s.start, s.end)
+            g = window_gap(c, keys, s.lo, s.end, skip)
             if g is not None:
                 gaps.setdefault(int(seed), []).append(g)
     if not test:
@@ -195,21 +233,31 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
     peak = mean_peak(runs, keys)
     best, best_step, last = peak if peak is not None else (None, None, None)
     return CellSettling(float(np.mean(list(per_seed.values()))), train_mean, min(starts), max(ends), per_seed,
-                        min_effect, gap, best, best_step, last)
+                        min_effect, gap, best, best_step, last, min(los), tuple(sorted(resets)),
+                        tuple(sorted(left_out)))
 
 
-def window_gap(curves: dict, keys: SettlingCurves, start: int, end: int) -> float | None:
+def _resets(run: pd.Series, keys: SettlingCurves) -> tuple[int, ...]:
+    """The reset steps of one run (`SettlingCurves.resets` of its recorded config); () without."""
+    if keys.resets is None or not any(str(c).startswith("config.") for c in run.index):
+        return ()
+    return tuple(int(r) for r in keys.resets(run_config(run)))
+
+
+def window_gap(curves: dict, keys: SettlingCurves, start: int, end: int, skip=()) -> float | None:
     """The train–test gap of one run over the steps ``start..end`` (the last quarter): the mean of
-    the training-view curve's points there minus the mean of the test curve's; None when either
-    has no finite point there. The training-view value is the view each step trained on, measured
-    before its update and logged every ``log_every`` steps: a noisy but unbiased sample of the fit
-    to the training views, over the same steps as the test points it is set against."""
-    def mean_in(steps, values) -> float | None:
+    the training-view curve's points there (the steps in ``skip`` left out: just after a reset) minus
+    the mean of the test curve's; None when either has no finite point there. The training-view value
+    is the view each step trained on, measured before its update and logged every ``log_every`` steps:
+    a noisy but unbiased sample of the fit to the training views."""
+    skipped = set(skip)
+
+    def mean_in(steps, values, leave=frozenset()) -> float | None:
         pts = [float(v) for s, v in zip(steps or [], values or []) if s is not None and v is not None
-               and start <= float(s) <= end and math.isfinite(float(v))]
+               and start <= float(s) <= end and math.isfinite(float(v)) and int(s) not in leave]
         return float(np.mean(pts)) if pts else None
 
-    train = mean_in(curves.get(keys.train_step), curves.get(keys.train_value))
+    train = mean_in(curves.get(keys.train_step), curves.get(keys.train_value), skipped)
     test = mean_in(curves.get(keys.test_step), curves.get(keys.test_value))
     return None if train is None or test is None else train - test
 
@@ -323,26 +371,40 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
                    "`iterations`), so its findings say nothing about convergence.") if unknown else None
     if not cells:
         return Finding("settling", [cannot_tell], [])
-    windows = sorted({(c.start, c.end) for c in cells.values()})
-    span = ", ".join(f"{a}→{b}" for a, b in windows)
+    windows = sorted({(c.lo if c.lo is not None else c.start, c.end) for c in cells.values()})
+    span = ", ".join(f"{a:,}–{b:,}" for a, b in windows)
+    evals = sorted({(c.start, c.end) for c in cells.values()})
+    firsts = ", ".join(f"{a:,}" for a, _ in evals)
     threshold = f"{effect:g} dB per 1,000 steps"
-    lines = [f"- Test PSNR slope over the last quarter of the run (steps {span}; least squares, mean over seeds; "
-             f"a cell is settled below {threshold}, the minimum effect per 1,000 steps: docs/reports.md), with the "
-             f"training-view PSNR's slope where recorded: "
+    lines = [f"- Test PSNR slope over the last quarter of the run (steps {span}: its test evaluations from step "
+             f"{firsts} on; least squares, mean over seeds; a cell is settled below {threshold}, the minimum effect "
+             f"per 1,000 steps: docs/reports.md), with the training-view PSNR's slope where recorded: "
              + "; ".join(f"{scene} `{cell}` {c.describe()}" for (scene, cell), c in cells.items()) + "."]
+    resets = sorted({r for c in cells.values() for r in c.resets})
+    left = sorted({st for c in cells.values() for st in c.left_out})
+    if resets:
+        steps = ", ".join(f"{r:,}" for r in resets)
+        lines.append(f"- **An opacity reset in the window** (step{'s' if len(resets) > 1 else ''} {steps}): the test "
+                     f"slope and the past-its-peak test are judged across it, the evaluations after it still "
+                     f"recovering, so a cell's settledness here is this run length's, not convergence"
+                     + (f"; the training-view points logged {RESET_RECOVERY} steps or fewer after it (steps "
+                        f"{', '.join(f'{st:,}' for st in left)}) are left out of the training slope, the train–test "
+                        f"gap and the overfitting test" if left else "") + ".")
     claims = []
     for (scene, cell), c in cells.items():
         claims.append(Claim("settling", scene, cell, keys.metric, "slope", c.test, f"{c.test:+.2f} dB / 1,000 steps",
                             n=len(c.per_seed), significant=not c.settled, settled=c.settled))
     gaps = [(scene, cell, c.gap) for (scene, cell), c in cells.items() if c.gap is not None]
     if gaps:
-        lines.append(f"- Train–test gap over the same window (mean training-view PSNR minus mean test PSNR at the "
+        lines.append(f"- Train–test gap over the same window (steps {span}"
+                     + (f", less the training-view points just after a reset" if left else "")
+                     + f"; mean training-view PSNR minus mean test PSNR at the "
                      f"evaluations there, mean over seeds; the training view is the one each step trained on, "
                      f"before its update, logged every `log_every` steps; a larger gap is a cell fitting its training "
                      f"views more than it generalises): "
                      + "; ".join(f"{scene} `{cell}` {g:+.2f} dB" for scene, cell, g in gaps) + ".")
     moving = [f"{scene} `{cell}` ({c.test:+.2f})" for (scene, cell), c in cells.items() if not c.flat]
-    peaked = [f"{scene} `{cell}` (best at step {c.best_step:,}, {c.fall:.2f} dB above its last value)"
+    peaked = [f"{scene} `{cell}` (best at step {c.best_step:,}, {c.fall:{FALL_FMT}} dB above its last value)"
               for (scene, cell), c in cells.items() if c.past_peak]
     overfit = [f"{scene} `{cell}` (test {c.test:+.2f}, train {c.train:+.2f})" for (scene, cell), c in cells.items()
                if c.overfitting]
@@ -368,4 +430,4 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
 
 
 __all__ = ["LAST_SHARE", "SETTLE_STEPS", "DRIFT_SHARE", "Slope", "CellSettling", "last_quarter_slope",
-           "cell_settling", "window_gap", "paired_curve", "drift", "difference_settled", "unsettled_reason", "settling_finding"]
+           "cell_settling", "window_gap", "recovering", "RESET_RECOVERY", "FALL_FMT", "paired_curve", "drift", "difference_settled", "unsettled_reason", "settling_finding"]

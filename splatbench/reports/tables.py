@@ -314,9 +314,17 @@ def decode(value: Any) -> Any:
     return value
 
 
+def run_config(run: pd.Series) -> dict[str, Any]:
+    """A run table row's recorded config, nested (its ``config.*`` columns decoded, None left out),
+    with its ``scene`` and ``seed``: what a kind's hooks (`RunKind.planned`,
+    `SettlingCurves.resets`) read."""
+    flat = {c[len("config."):]: decode(run[c]) for c in run.index if str(c).startswith("config.")}
+    return {**unflatten({k: v for k, v in flat.items() if v is not None}), "scene": run.scene, "seed": int(run.seed)}
+
+
 def _json(value: Any) -> str:
     return json.dumps(value, sort_keys=True)
 
 
 __all__ = ["metric_specs", "shared_prefix", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
-           "axis_table", "cell_labels", "done_runs", "loaded_runs", "decode"]
+           "axis_table", "cell_labels", "done_runs", "loaded_runs", "decode", "run_config"]
