@@ -559,7 +559,9 @@ def test_train_kind_run(tmp_path, monkeypatch):
     metrics = metric_values(output)
     assert isinstance(output, TRAIN.result) and list(metrics) == list(TRAIN.specs)
     assert metrics["iterations"] == 3 and metrics["test_views"] == 1
-    assert set(output.curves) == set(CURVE_KEYS) and output.curves["step"] == [0, 1, 2]
+    # the curves, and each test view's final PSNR (their mean: the test PSNR)
+    assert set(output.curves) == {*CURVE_KEYS, "test_view_psnr"} and output.curves["step"] == [0, 1, 2]
+    assert abs(np.mean(output.curves["test_view_psnr"]) - output.test_psnr) < 1e-6
     assert (tmp_path / "work" / "point_cloud.ply").is_file()
 
 
