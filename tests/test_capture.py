@@ -415,7 +415,7 @@ def test_scene_tables_are_checked_in_one_line(tmp_path):
 
     with pytest.raises(InputError, match="x.toml: scenes.a: expected exactly one of 'path'"):
         parse({"name": "a"})
-    with pytest.raises(InputError, match="scenes.a.path: .* is not a dataset folder"):
+    with pytest.raises(InputError, match="scenes.a.path: .* does not exist \\(paths are relative to the experiment file"):
         parse({"name": "a", "path": "nowhere"})
     with pytest.raises(InputError, match="scenes.a.views: unknown key"):
         (tmp_path / "d").mkdir()

@@ -42,7 +42,7 @@ def _load(name: str):
     try:
         return load_experiment(ROOT / "experiments" / f"{name}.toml")
     except InputError as exc:
-        if "is not a dataset folder" in str(exc) or "is not a file" in str(exc):
+        if "does not exist" in str(exc) or "not a dataset folder" in str(exc) or "is not a file" in str(exc):
             pytest.skip(f"experiments/{name}.toml reads data that is not here: {exc}")
         raise
 

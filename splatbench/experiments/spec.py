@@ -554,7 +554,9 @@ def _scene_table(table: Mapping[str, Any], where: str, fail, base_dir: Path | No
                 p = base_dir / p
             p = p.resolve()
             if key == "path" and not p.is_dir():
-                raise fail(f"{where}.path", f"{str(p)!r} is not a dataset folder")
+                what = "is a file, not a dataset folder" if p.exists() else "does not exist"
+                raise fail(f"{where}.path", f"{str(p)!r} {what} (paths are relative to the experiment file; give "
+                                            f"a capture's folder: COLMAP, transforms.json or LLFF)")
             if key == "model" and not p.is_file():
                 raise fail(f"{where}.model", f"{str(p)!r} is not a file (give a 3DGS PLY)")
             if key == "model" and not _looks_like_ply(p):
