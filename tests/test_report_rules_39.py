@@ -140,6 +140,23 @@ def test_kendall_tau_b_against_hand_counted_pairs():
     assert ranks({"x": 0.1, "y": 0.3}, "lower") == {"x": 1.0, "y": 2.0}
 
 
+def test_cells_less_than_the_minimum_effect_apart_are_tied_in_the_ranks():
+    from splatbench.reports.ranks import tied
+
+    # glossy at 7K, seed 0: SH 1 31.26, SH 3 31.19 (0.07 dB apart, under the 0.1 dB minimum effect), auto 31.05,
+    # SH 0 30.81: 1 and 3 tie (their mean), auto is 0.21 below the group's head, so it stands alone
+    means = {"0": 30.81, "1": 31.26, "3": 31.19, "auto": 31.05}
+    levels = tied(means, "higher", 0.1)
+    assert levels["1"] == levels["3"] == pytest.approx((31.26 + 31.19) / 2)
+    assert levels["auto"] == 31.05 and levels["0"] == 30.81
+    assert ranks(levels, "higher") == {"0": 4.0, "1": 1.5, "3": 1.5, "auto": 3.0}
+    assert tied(means, "higher", None) == means
+    # a chain closer than the minimum effect step by step joins only while within it of the group's head
+    assert len(set(tied({"a": 1.0, "b": 0.95, "c": 0.9, "d": 0.85}, "higher", 0.1).values())) == 2
+    # lower is better: the same rule from the lowest
+    assert tied({"x": 0.010, "y": 0.012, "z": 0.030}, "lower", 0.005)["x"] == pytest.approx(0.011)
+
+
 def test_a_report_ranks_its_cells_per_scene_and_against_its_quick_version(tmp_path):
     gains = {"glossy": {0: 0.0, 1: 0.5, 3: 1.0}, "diffuse": {0: 1.0, 1: 0.5, 3: 0.0}}  # reversed order
 

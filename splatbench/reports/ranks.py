@@ -49,6 +49,26 @@ def cell_means(spec: ExperimentSpec, runs: pd.DataFrame, metric: str) -> dict[st
     return out
 
 
+def tied(means: dict[str, float], better: str, min_effect: float | None) -> dict[str, float]:
+    """``means`` with the cells that no minimum effect separates made equal: down the order (best
+    first), each cell joins the group of the best cell not yet grouped while it is less than
+    ``min_effect`` from that cell, and every cell of a group takes the group's mean. A difference
+    below the minimum effect is "no difference" in the findings, so it orders nothing here either
+    (glossy's SH 1 and 3, 0.07 dB apart under a 0.1 dB minimum effect, tie). ``None``: as given."""
+    if not min_effect:
+        return dict(means)
+    sign = 1.0 if better == "lower" else -1.0
+    order = sorted(means, key=lambda c: sign * means[c])
+    out: dict[str, float] = {}
+    while order:
+        head = order[0]
+        group = [c for c in order if abs(means[c] - means[head]) < min_effect]  # a prefix: order is sorted
+        value = sum(means[c] for c in group) / len(group)
+        out.update({c: value for c in group})
+        order = [c for c in order if c not in group]
+    return {c: out[c] for c in means}
+
+
 def ranks(means: dict[str, float], better: str) -> dict[str, float]:
     """cell -> its rank by ``means`` (1 the best: the highest, or the lowest where ``better`` is
     "lower"; tied cells share their mean rank)."""
@@ -100,21 +120,25 @@ def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick
         return None
     scenes = list(means)
     order = list(dict.fromkeys(c for m in means.values() for c in m))
-    ranked = {scene: ranks(m, primary.better) for scene, m in means.items()}
+    effect = next((c.min_effect for c in rules.comparisons if c.metric == primary.name), None)
+    levels = {scene: tied(m, primary.better, effect) for scene, m in means.items()}  # what the ranks order
+    ranked = {scene: ranks(m, primary.better) for scene, m in levels.items()}
     claims = [Claim("rank", scene, cell, primary.name, "rank", r, f"{r:g}") for scene, rs in ranked.items()
               for cell, r in rs.items()]
     name = primary.label.split(" (")[0]
     unit = f" {primary.unit}" if primary.unit else ""
     rows = [[f"`{cell}`", *(f"{ranked[s][cell]:g} ({format(means[s][cell], primary.fmt)}{unit})"
                             if cell in ranked[s] else "–" for s in scenes)] for cell in order]
-    lines = [f"Each scene's cells ranked by mean {name} over seeds (1 the best; tied cells share their mean rank); "
+    within = f"; cells less than {effect:g}{unit} apart, the minimum effect, are tied" if effect else ""
+    lines = [f"Each scene's cells ranked by mean {name} over seeds (1 the best; tied cells share their mean rank"
+             f"{within}); "
              f"ranks come from means, so two cells within the seeds' spread of each other may swap by chance (the "
              f"paired findings above judge that; a rank does not):", "",
              *markdown_table(["cell", *scenes], rows, align="-" + "r" * len(scenes)).splitlines(), ""]
     if len(scenes) >= 2:
         pairs = []
         for a, b in combinations(scenes, 2):
-            tau, n = kendall_tau(means[a], means[b])
+            tau, n = kendall_tau(levels[a], levels[b])
             claims.append(Claim("tau", f"{a}/{b}", "", primary.name, "tau", tau, _tau(tau), n=n))
             pairs.append(f"{a} / {b} {_tau(tau)} ({n} cells)")
         taus = [c.value for c in claims if c.kind == "tau" and math.isfinite(c.value)]
@@ -131,7 +155,7 @@ def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick
         shared = [s for s in scenes if s in theirs]
         parts = []
         for scene in shared:
-            tau, n = kendall_tau(theirs[scene], means[scene])
+            tau, n = kendall_tau(tied(theirs[scene], primary.better, effect), levels[scene])
             claims.append(Claim("quick tau", scene, "", primary.name, "tau", tau, _tau(tau), n=n))
             parts.append(f"{scene} {_tau(tau)} ({n} cells)")
         if parts:
@@ -144,4 +168,4 @@ def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick
     return Finding("ranks", lines, claims)
 
 
-__all__ = ["cell_means", "ranks", "quick_table", "rank_finding"]
+__all__ = ["cell_means", "tied", "ranks", "quick_table", "rank_finding"]
