@@ -155,6 +155,8 @@ def test_cells_less_than_the_minimum_effect_apart_are_tied_in_the_ranks():
     assert len(set(tied({"a": 1.0, "b": 0.95, "c": 0.9, "d": 0.85}, "higher", 0.1).values())) == 2
     # lower is better: the same rule from the lowest
     assert tied({"x": 0.010, "y": 0.012, "z": 0.030}, "lower", 0.005)["x"] == pytest.approx(0.011)
+    # a ratio's minimum effect is relative: 1.00 and 1.04 within x1.05 tie, 1.10 does not
+    assert len(set(tied({"a": 1.00, "b": 1.04, "c": 1.10}, "lower", 0.05, ratio=True).values())) == 2
 
 
 def test_a_report_ranks_its_cells_per_scene_and_against_its_quick_version(tmp_path):

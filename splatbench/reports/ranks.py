@@ -49,12 +49,13 @@ def cell_means(spec: ExperimentSpec, runs: pd.DataFrame, metric: str) -> dict[st
     return out
 
 
-def tied(means: dict[str, float], better: str, min_effect: float | None) -> dict[str, float]:
+def tied(means: dict[str, float], better: str, min_effect: float | None, ratio: bool = False) -> dict[str, float]:
     """``means`` with the cells that no minimum effect separates made equal: down the order (best
     first), each cell joins the group of the best cell not yet grouped while it is less than
     ``min_effect`` from that cell, and every cell of a group takes the group's mean. A difference
     below the minimum effect is "no difference" in the findings, so it orders nothing here either
-    (glossy's SH 1 and 3, 0.07 dB apart under a 0.1 dB minimum effect, tie). ``None``: as given."""
+    (glossy's SH 1 and 3, 0.07 dB apart under a 0.1 dB minimum effect, tie). ``ratio``: the minimum
+    effect is a relative change (a "ratio" comparison: within ×(1 + min_effect)). ``None``: as given."""
     if not min_effect:
         return dict(means)
     sign = 1.0 if better == "lower" else -1.0
@@ -62,7 +63,11 @@ def tied(means: dict[str, float], better: str, min_effect: float | None) -> dict
     out: dict[str, float] = {}
     while order:
         head = order[0]
-        group = [c for c in order if abs(means[c] - means[head]) < min_effect]  # a prefix: order is sorted
+        def near(c: str) -> bool:
+            a, b = sorted((abs(means[c]), abs(means[head])))
+            return (b < a * (1 + min_effect)) if ratio else abs(means[c] - means[head]) < min_effect
+
+        group = [c for c in order if near(c)]  # a prefix: order is sorted
         value = sum(means[c] for c in group) / len(group)
         out.update({c: value for c in group})
         order = [c for c in order if c not in group]
@@ -120,8 +125,10 @@ def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick
         return None
     scenes = list(means)
     order = list(dict.fromkeys(c for m in means.values() for c in m))
-    effect = next((c.min_effect for c in rules.comparisons if c.metric == primary.name), None)
-    levels = {scene: tied(m, primary.better, effect) for scene, m in means.items()}  # what the ranks order
+    comparison = next((c for c in rules.comparisons if c.metric == primary.name), None)
+    effect = comparison.min_effect if comparison is not None else None
+    ratio = comparison is not None and comparison.how == "ratio"
+    levels = {scene: tied(m, primary.better, effect, ratio) for scene, m in means.items()}  # what the ranks order
     ranked = {scene: ranks(m, primary.better) for scene, m in levels.items()}
     claims = [Claim("rank", scene, cell, primary.name, "rank", r, f"{r:g}") for scene, rs in ranked.items()
               for cell, r in rs.items()]
@@ -129,7 +136,8 @@ def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick
     unit = f" {primary.unit}" if primary.unit else ""
     rows = [[f"`{cell}`", *(f"{ranked[s][cell]:g} ({format(means[s][cell], primary.fmt)}{unit})"
                             if cell in ranked[s] else "–" for s in scenes)] for cell in order]
-    within = f"; cells less than {effect:g}{unit} apart, the minimum effect, are tied" if effect else ""
+    within = ("" if not effect else f"; cells within ×{1 + effect:g} of each other, the minimum effect, are tied"
+              if ratio else f"; cells less than {effect:g}{unit} apart, the minimum effect, are tied")
     lines = [f"Each scene's cells ranked by mean {name} over seeds (1 the best; tied cells share their mean rank"
              f"{within}); "
              f"ranks come from means, so two cells within the seeds' spread of each other may swap by chance (the "
@@ -155,7 +163,7 @@ def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick
         shared = [s for s in scenes if s in theirs]
         parts = []
         for scene in shared:
-            tau, n = kendall_tau(tied(theirs[scene], primary.better, effect), levels[scene])
+            tau, n = kendall_tau(tied(theirs[scene], primary.better, effect, ratio), levels[scene])
             claims.append(Claim("quick tau", scene, "", primary.name, "tau", tau, _tau(tau), n=n))
             parts.append(f"{scene} {_tau(tau)} ({n} cells)")
         if parts:
