@@ -14,7 +14,6 @@ import importlib.util
 import json
 from pathlib import Path
 
-import pandas as pd
 import pytest
 
 from splatbench.experiments.kinds import metric_values

@@ -10,7 +10,6 @@ made-up metrics and curves), as tests/test_reports.py does, so they run in secon
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pandas as pd
