@@ -289,7 +289,8 @@ def test_the_scenes_line_counts_real_captures_and_a_quick_report_says_smoke_test
                                "3DGS model and is fit by the same model family and rasterizer") == 1
     assert "its absolute numbers are not comparable with captures or published numbers." in scenes(table)
     # a Mitsuba scene is no inverse crime, and no published benchmark either; a capture is neither
-    assert " thin, rendered by Mitsuba (not by this rasterizer: no inverse crime), is no published benchmark: its " \
+    assert " thin, rendered by Mitsuba (not by this rasterizer: no inverse crime in the images, though a start " \
+           "from the scene's own surface is exact geometry no capture has), is no published benchmark: its " \
            "absolute numbers are not the field's." in scenes(table)
     table["config.data.path"] = [("/data/" + s) for s in table.scene]  # three captures: no note at all
     table["config.data.model"] = None

@@ -120,7 +120,8 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
     iters = _one(done, "config.iterations", lambda v: f"{int(v):,}")
     schedules = _values(done, "config.schedule")
     how = {"scaled": "graphdeco's 30,000-step schedule scaled to the run (refine window, opacity resets, SH steps "
-                     "times iterations / 30,000)",
+                     "times iterations / 30,000; the refine interval, 100 steps, is not scaled, so a short run "
+                     "refines fewer times)",
            "absolute": "schedule steps as written"}
     sched = " / ".join(how.get(s, str(s)) for s in schedules if s is not None) or "not recorded"
     lr = _one(done, "config.optim.lr_means", _g)
@@ -251,7 +252,8 @@ def _start_count(raw: Any) -> int | None:
 
 
 #: What each initialisation starts from, in words (`splatbench.train.initializers`).
-_INIT_WHAT = {"surface": "the scene's own surface points", "sfm": "SfM points triangulated from the training views",
+_INIT_WHAT = {"surface": "the scene's own surface points (exact geometry: a rendered scene's surfaces, a teacher's "
+                         "rendered depth; not SfM's)", "sfm": "SfM points triangulated from the training views",
               "random": "random points"}
 
 
@@ -476,7 +478,8 @@ def _scenes(done: pd.DataFrame) -> str:
     rendered = [s for s, k in kinds.items() if k == "rendered"]
     if rendered:
         one = len(rendered) == 1
-        notes.append(f" {_names(rendered)}, rendered by Mitsuba (not by this rasterizer: no inverse crime), "
+        notes.append(f" {_names(rendered)}, rendered by Mitsuba (not by this rasterizer: no inverse crime in the "
+                     f"images, though a start from the scene's own surface is exact geometry no capture has), "
                      f"{'is' if one else 'are'} no published benchmark: {'its' if one else 'their'} absolute numbers "
                      f"are not the field's.")
     return f"{len(kinds)}: {listed}; {rule}" + "".join(notes)
@@ -902,11 +905,11 @@ def outlier_view_lines(table: pd.DataFrame) -> list[str]:
     for o in found.outliers:
         views = "; ".join(f"test view {i} at {p:.2f} dB, {m - p:.1f} dB below the same view in the cell's other "
                           f"seeds (their median {m:.2f} dB)" for i, p, m in o.views)
-        moved = (f"; its cell's mean test PSNR is {o.cell_mean:.2f} dB with it, {o.without:.2f} dB without "
-                 f"({o.cell_mean - o.without:+.2f} dB)" if math.isfinite(o.cell_mean) and math.isfinite(o.without)
-                 else "")
-        lines.append(f"- **Outlier test view**: {o.scene}, `{o.cell}`, seed {o.seed} (`{o.run_id}`): {views}: a "
-                     f"floater in front of that camera ({FLOATER_DOC}){moved}.")
+        moved = (f"; its cell's mean test PSNR is {o.cell_mean:.2f} dB with this run, {o.without:.2f} dB over the "
+                 f"other seeds alone ({o.cell_mean - o.without:+.2f} dB)"
+                 if math.isfinite(o.cell_mean) and math.isfinite(o.without) else "")
+        lines.append(f"- **Outlier test view**: {o.scene}, `{o.cell}`, seed {o.seed} (`{o.run_id}`): {views}: "
+                     f"likely a floater in front of that camera ({FLOATER_DOC}){moved}.")
     missed = []
     if found.unrecorded:
         missed.append(f"{found.unrecorded} without a per-view record (finished before runs recorded "
@@ -920,13 +923,15 @@ def outlier_view_lines(table: pd.DataFrame) -> list[str]:
     return lines
 
 
-def hardest_view_lines(table: pd.DataFrame) -> list[str]:
+def hardest_view_lines(table: pd.DataFrame, min_effect: float = 0.1) -> list[str]:
     """Per scene, the test view that is the lowest in the most runs (a view low in *every* run -- a hard
     view, or a target the model cannot match, such as a mask that cuts away what the model renders --
     is not an outlier of one seed, so `view_outliers` cannot see it): how often it is the lowest, its
     PSNR and its gap below each run's median view, and how much each cell's mean test PSNR would rise
     without it (a rise the same in every cell leaves the comparisons as they are; a spread of rises
-    bounds how much that one view moves them). [] where no run recorded its views."""
+    bounds how much that one view moves them). Only scenes where leaving it out would move some cell's
+    mean by ``min_effect`` dB or more (the train kind's test-PSNR minimum effect, `MIN_EFFECT`); []
+    where no run recorded its views."""
     done = done_runs(table)
     axes = [c for c in done.columns if c.startswith("axis.")]
     lines = []
@@ -943,21 +948,25 @@ def hardest_view_lines(table: pd.DataFrame) -> list[str]:
         for cell, v in runs:
             rise.setdefault(cell, []).append(float(np.mean(np.delete(np.array(v), view)) - np.mean(v)))
         cell_rise = [float(np.mean(r)) for r in rise.values()]
+        if max(cell_rise) < min_effect:  # a view that moves no cell's mean by the minimum effect is not worth a line
+            continue
         lines.append(f"- {scene}: test view {view}, the lowest in {worst.count(view)} of {len(runs)} runs, "
                      f"{min(psnr):.1f}–{max(psnr):.1f} dB, {min(gap):.1f}–{max(gap):.1f} dB below its run's median "
                      f"view; without it each cell's mean test PSNR would rise by {min(cell_rise):.2f}–"
                      f"{max(cell_rise):.2f} dB.")
     if not lines:
         return []
-    return ["- **Hardest test view** per scene (a view low in every run is a property of the scene or its "
-            "target, e.g. a mask that cuts away what the model renders, not of a seed):", *("  " + x for x in lines)]
+    return [f"- **Hardest test view** per scene where it moves a cell's mean by {min_effect:g} dB or more (a view "
+            f"low in every run is a property of the scene or its target, not of a seed):", *("  " + x for x in lines)]
 
 
 def outlier_view_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None) -> Finding | None:
     """The grid's runs' `outlier_view_lines` as a run finding (`KindReport.run_findings`), its own
     section "Outlier test views"; None where no run recorded its views."""
     lines = outlier_view_lines(runs)
-    return Finding("outlier test views", [*lines, *hardest_view_lines(runs)], []) if lines else None
+    hardest = hardest_view_lines(runs, **({"min_effect": min_effect["test_psnr"]}
+                                          if min_effect and "test_psnr" in min_effect else {}))
+    return Finding("outlier test views", [*lines, *hardest], []) if lines else None
 
 
 __all__ = ["OUTLIER_VIEW_DB", "FLOATER_DOC", "OutlierRun", "ViewCheck", "view_outliers", "outlier_view_lines",
