@@ -151,6 +151,9 @@ def test_plain_pycolmap_import_is_what_needed_fixing():
 
 
 # --------------------------------------------------------------------------- Dask runner
+#: The runner's note of what it will run (`splatbench.experiments.runner`: printed as it starts, with or without
+#: a progress bar).
+RUNNER_NOTE = re.compile(r"^\w+: \d+ runs.*, \d+ already done.*, \d+ to run \(")
 RUN_STOPPED = re.compile(r"^splatbench: interrupted by SIGINT; kept (\d+) runs finished now in (\S+); (\d+) in flight "
                          r"stopped \(they run again next time\)$")
 
@@ -204,7 +207,8 @@ def test_ctrl_c_stops_a_run_with_one_line(tmp_path, executor, moment, after):
     assert trackers and all(f"-W{TRACKER_WARNINGS}" in args for args in trackers), trackers
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=120)
-    lines = [line for line in err.decode().splitlines() if line.strip()]
+    # the runner's own first note ("NAME: N runs, ... to run") comes before any signal; then one line
+    lines = [line for line in err.decode().splitlines() if line.strip() and not RUNNER_NOTE.match(line)]
     assert proc.returncode == 128 + signal.SIGINT, (proc.returncode, lines[-12:])
     assert len(lines) == 1, lines[:40]  # no traceback from a worker, the scheduler or the runner
     match = RUN_STOPPED.match(lines[0])

@@ -695,8 +695,8 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     wrong = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                  "--resume", str(ply), "--quiet", "--out", str(tmp_path / "w")])
     assert wrong.exit_code == 2 and wrong.stderr.strip() == (
-        f"splatbench: error: resume: {str(ply)!r} is not a readable checkpoint (UnpicklingError); "
-        f"the checkpoint is the .pt file beside it: --resume {checkpoint}"), wrong.stderr
+        f"splatbench: error: resume: {str(ply)!r} is not a readable checkpoint (not torch's zip archive: "
+        f"BadZipFile); the checkpoint is the .pt file beside it: --resume {checkpoint}"), wrong.stderr
     (tmp_path / "junk.pt").write_bytes(b"not a pickle")   # no .pt beside it: where checkpoints live
     junk = runner.invoke(main, ["train", str(tiny_diffuse_dir), "--config", str(cfg), "--set", "iterations=3",
                                 "--resume", str(tmp_path / "junk.pt"), "--quiet", "--out", str(tmp_path / "j")])

@@ -147,6 +147,14 @@ def resume_line(path: str | Path, step: int, iterations: int) -> str:
     return f"resumed from {path} at step {step} of {iterations}"
 
 
+def _where_checkpoints_are(p: Path) -> str:
+    """The end of a refusal's line: the .pt file beside a file given in its place (a run's PLY), or
+    where checkpoints are."""
+    pt = p.with_suffix(".pt")
+    return (f"; the checkpoint is the .pt file beside it: --resume {pt}" if p.suffix != ".pt" and pt.is_file()
+            else "; checkpoints are the checkpoints/iteration_<step>.pt files of a run's output folder")
+
+
 def _check_archive(p: Path) -> None:
     """One-line `InputError` unless ``p`` is what `save_checkpoint` writes: torch's zip archive
     with every member stored uncompressed and no larger than the file. torch.load also reads its
@@ -162,8 +170,7 @@ def _check_archive(p: Path) -> None:
             members = archive.infolist()
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
         raise InputError(f"resume: {str(p)!r} is not a readable checkpoint (not torch's zip archive: "
-                         f"{type(exc).__name__}); checkpoints are the checkpoints/iteration_<step>.pt files of a "
-                         f"run's output folder") from None
+                         f"{type(exc).__name__}){_where_checkpoints_are(p)}") from None
     for member in members:
         if member.compress_type != zipfile.ZIP_STORED or member.file_size > size:
             raise InputError(f"resume: {str(p)!r} is not a readable checkpoint (member {member.filename!r:.60} "
@@ -189,9 +196,7 @@ def read_checkpoint(path: str | Path, *, mmap: bool = False, device: torch.devic
     except Exception as exc:  # noqa: BLE001 - a refused global, a damaged zip: a bad file, nothing executed
         if mmap:  # a file mmap cannot map (not a zip): the plain read names what is wrong with it
             return read_checkpoint(p, device=device)
-        pt = p.with_suffix(".pt")
-        hint = (f"; the checkpoint is the .pt file beside it: --resume {pt}" if p.suffix != ".pt" and pt.is_file()
-                else "; checkpoints are the checkpoints/iteration_<step>.pt files of a run's output folder")
+        hint = _where_checkpoints_are(p)
         refused = "unsupported global" in str(exc).lower()  # torch named a class or function it would not call
         reason = ("it holds objects other than tensors and plain data (a checkpoint of an older splatbench, "
                   f"before {CHECKPOINT_FORMAT}, or not a splatbench checkpoint), refused without running them"
