@@ -143,7 +143,6 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     damaged: list[tuple[Path, str]] = []
     records = {rid: rec for rid, rec in read_records(folder, damaged).items() if rid in set(ids)}
     pending = [r for r in order if r.run_id not in records or records[r.run_id].status != "done"]
-    log = _logger()
     reused: list[RunRecord] = []
     if reuse and pending and get_kind(spec.kind).reusable:
         reused = reuse_finished(results_dir, spec, pending)
@@ -154,7 +153,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     copied = {r.run_id: r.reused_from for r in reused}
     for path, reason in damaged:  # the run was pending: a copy or its new result replaces the file
         again = (f"copied again from {copied[path.stem]}" if path.stem in copied else "redone")
-        log(f"{spec.name}: damaged result file {path.name} ({reason}); its run is {again}")
+        _log(f"{spec.name}: damaged result file {path.name} ({reason}); its run is {again}")
     save_table(folder, table_ids)
     of_check = (f" (the check's at {spec.check.protocol} only; the grid's left out)" if check_only else
                 f" ({len(checks)} of them the check at {spec.check.protocol})" if checks else
@@ -164,7 +163,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
         sources = sorted({r.reused_from for r in reused})
         of_reused = (f" ({len(reused)} of them reused: the same run id and config finished for "
                      f"{', '.join(sources)} in {results_dir})")
-    log(f"{spec.name}: {len(runs)} runs{of_check}, {skipped} already done{of_reused}, {len(pending)} to run "
+    _log(f"{spec.name}: {len(runs)} runs{of_check}, {skipped} already done{of_reused}, {len(pending)} to run "
         f"({executor}, {workers} worker{'s' * (workers != 1)}); results in {folder}")
     if not pending:
         return RunSummary(done=0, skipped=skipped, failed=0, total=len(runs), folder=folder, reused=len(reused))
@@ -416,13 +415,10 @@ def _progress_bar(total: int, name: str, enabled: bool):
     return tqdm(total=total, desc=name, unit="run", file=sys.stderr, dynamic_ncols=True)
 
 
-def _logger() -> Callable[[str], None]:
-    """The runner's one-line notes on stderr (what it will run, what it reused, a damaged file),
-    with or without a progress bar: ``progress`` turns off the bar, not what a user must know."""
-    def log(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
-
-    return log
+def _log(line: str) -> None:
+    """One of the runner's one-line notes on stderr (what it will run, what it reused, a damaged
+    file), with or without a progress bar: ``progress`` turns off the bar, not what a user must know."""
+    print(line, file=sys.stderr, flush=True)
 
 
 __all__ = ["RunSummary", "execution_order", "find_reusable", "reuse_finished", "run_experiment"]

@@ -489,13 +489,22 @@ def planned(config: dict[str, Any]) -> dict[str, float]:
     not record their counts; {} for a config that no longer validates."""
     from splatbench.strategies import planned_counts
 
+    scheduled = _scheduled_strategy(config)
+    if scheduled is None:
+        return {}
+    counts = planned_counts(*scheduled)
+    return {"opacity_resets": counts.opacity_resets, "refinements": counts.refinements}
+
+
+def _scheduled_strategy(config: dict[str, Any]) -> tuple[Any, int] | None:
+    """(The strategy a run's resolved config makes, scaled as the run scales it; its iterations);
+    None for a config that no longer validates (`planned`, `opacity_reset_steps`)."""
     try:
         _, _, train = _split(config)
         cfg = _train_config(train)
-        counts = planned_counts(cfg.make_strategy(), cfg.iterations)
+        return cfg.make_strategy(), cfg.iterations
     except InputError:
-        return {}
-    return {"opacity_resets": counts.opacity_resets, "refinements": counts.refinements}
+        return None
 
 
 def opacity_reset_steps(config: dict[str, Any]) -> tuple[int, ...]:
@@ -503,16 +512,12 @@ def opacity_reset_steps(config: dict[str, Any]) -> tuple[int, ...]:
     as the run scales it: every ``reset_every`` iterations while ``it < refine_stop``, the count
     ``planned_counts`` makes); the training step logged at such a count is the first after the reset.
     () for a strategy without resets, or a config that no longer validates (`SettlingCurves.resets`)."""
-    try:
-        _, _, train = _split(config)
-        cfg = _train_config(train)
-        strategy = cfg.make_strategy()
-    except InputError:
+    scheduled = _scheduled_strategy(config)
+    if scheduled is None:
         return ()
-    every = getattr(strategy, "reset_every", 0)
-    stop = getattr(strategy, "refine_stop", None)
-    hi = cfg.iterations if stop is None else min(cfg.iterations, stop - 1)
-    return tuple(range(every, hi + 1, every)) if isinstance(every, int) and every > 0 else ()
+    strategy, iterations = scheduled
+    steps = getattr(strategy, "reset_steps", None)  # `DefaultStrategy.reset_steps` (and its subclasses')
+    return tuple(steps(iterations)) if steps is not None else ()
 
 
 def with_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:

@@ -41,11 +41,7 @@ def _values(done: pd.DataFrame, column: str) -> list[Any]:
     if column not in done.columns:
         return []
     out: list[Any] = []
-    for v in done[column]:
-        if v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v)):
-            v = None
-        elif hasattr(v, "item"):
-            v = v.item()
+    for v in map(_plain, done[column]):
         if v not in out:
             out.append(v)
     return out

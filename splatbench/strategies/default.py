@@ -195,7 +195,14 @@ class DefaultStrategy:
         when the runs did not record them."""
         hi = min(iterations, self.refine_stop - 1)  # completed iterations it = step + 1 < refine_stop
         return TopologyCounts(refinements=multiples(self.refine_every, self.refine_start, hi),
-                              opacity_resets=multiples(self.reset_every, 0, hi))
+                              opacity_resets=len(self.reset_steps(iterations)))
+
+    def reset_steps(self, iterations: int) -> tuple[int, ...]:
+        """The completed-iteration counts at which this schedule resets opacities in a run of
+        ``iterations`` steps (every ``reset_every`` while ``it < refine_stop``; `post_backward`'s
+        condition): the training step logged at such a count is the first after the reset."""
+        hi = min(iterations, self.refine_stop - 1)
+        return tuple(range(self.reset_every, hi + 1, self.reset_every)) if self.reset_every > 0 else ()
 
     def outcome_note(self, state: DefaultState) -> str | None:
         """A warning when one refinement's size prune removed at least a quarter of the model
