@@ -11,7 +11,7 @@ run that disagrees is refused and left as it is), and rewrites the record atomic
 (`splatbench.experiments.store.write_record`) with ``curves.test_view_psnr``,
 ``curves.test_view_psnr_from`` (`FROM`) and ``metrics.worst_view_psnr``, as a run made since
 would have recorded them. Then rewrites the experiment's ``results.parquet`` from the records
-on disk (`rewrite_table`: the table's own runs, under the runners' lock). A run a runner holds
+on disk (`store.save_table` of the table's own runs, under the runners' lock). A run a runner holds
 (``claims/<run_id>.claim``) is never touched. One line per run; errors are one line each.
 ``--dry-run``: evaluate and check, write nothing.
 
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import fcntl
 import math
 import sys
 from pathlib import Path
@@ -32,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from splatbench.errors import InputError
-from splatbench.experiments.store import (RunRecord, experiment_dir, read_records, read_table, write_record,
-                                          write_table)
+from splatbench.experiments.store import (RunRecord, experiment_dir, read_records, read_table, save_table,
+                                          write_record)
 
 #: What a backfilled record says of where its per-view PSNRs came from (``curves.test_view_psnr_from``).
 FROM = "recomputed from the run's saved final model (tools/backfill_view_psnr.py)"
@@ -129,21 +128,11 @@ def main(argv: list[str] | None = None) -> int:
         print(line + ("" if not args.dry_run else " (dry run: not written)"), flush=True)
     if written:
         print(f"{args.experiment}: {written} records rewritten; results.parquet rewritten "
-              f"({rewrite_table(folder)} runs)")
+              f"({len(read_table(save_table(folder).parent))} runs)")
     return 1 if failed else 0
 
 
-def rewrite_table(folder: Path) -> int:
-    """Rewrite ``folder/results.parquet`` from the records on disk, its runs and their order those of
-    the table as it is (the runner's: its grid's and check's runs that have a record), read and
-    written under the runners' ``.table.lock`` (`store.save_table`'s), so a runner's table written
-    meanwhile is not undone; the runs in it."""
-    with open(folder / ".table.lock", "a+b") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        ids = [str(i) for i in read_table(folder).run_id]
-        records = read_records(folder)
-        write_table(folder, [records[i] for i in ids if i in records])
-    return len(ids)
+
 
 
 if __name__ == "__main__":

@@ -253,14 +253,17 @@ def write_table(folder: str | Path, records: Iterable[RunRecord]) -> Path:
     return write_parquet(Path(folder) / TABLE_NAME, frame)
 
 
-def save_table(folder: str | Path, ids: list[str]) -> Path:
+def save_table(folder: str | Path, ids: list[str] | None = None) -> Path:
     """Rewrite ``results.parquet`` from the result files on disk: one row per run of the
-    grid ``ids`` that has a record, in grid order. Runners sharing the experiment
-    serialise this on ``.table.lock`` (flock), so the last table written holds every
-    record written before it."""
+    grid ``ids`` that has a record, in grid order (None: the runs of the table as it is, read
+    under the lock: records rewritten in place, e.g. by tools/backfill_view_psnr.py). Runners
+    sharing the experiment serialise this on ``.table.lock`` (flock), so the last table written
+    holds every record written before it."""
     folder = Path(folder)
     with open(folder / ".table.lock", "a+b") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
+        if ids is None:
+            ids = [str(i) for i in read_table(folder).run_id]
         records = read_records(folder)
         return write_table(folder, [records[i] for i in ids if i in records])
 
