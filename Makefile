@@ -73,7 +73,7 @@ golden: setup
 # Run the shipped experiments (resumable: finished runs are skipped), each with its [check]
 # (its headline rerun at graphdeco's 7K protocol, docs/reports.md), and write reports/<name>/;
 # a failed run is listed in its report and makes the target fail.
-REPORTS ?= quick_protocol raster_speed_vs_error sh_degree loss_weighting densification densification_schedules
+REPORTS ?= quick_protocol raster_speed_vs_error sh_degree_quick sh_degree loss_weighting densification densification_schedules
 reports: setup
 	@status=0; for e in $(REPORTS); do \
 	  $(VENV)/bin/splatbench run experiments/$$e.toml || status=1; \

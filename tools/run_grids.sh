@@ -17,7 +17,7 @@
 set -u
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 CACHE=${SPLATBENCH_CACHE:-$HOME/.cache/splatbench}
-GRIDS=(sh_degree loss_weighting densification_schedules densification)
+GRIDS=(sh_degree loss_weighting densification_schedules densification sh_degree_quick)
 SAVE=0
 NAMES=()
 for arg in "$@"; do
