@@ -307,7 +307,7 @@ def test_training_view_points_just_after_an_opacity_reset_are_left_out_of_overfi
     reset the training curve is flat 1 dB above the test curve: no overfitting, a gap of +1.00 dB; the
     text names the window used and the reset in it."""
     from splatbench.experiments.train_kind import opacity_reset_steps
-    from splatbench.reports.tables import run_config
+    from splatbench.experiments.configs import run_config
 
     report, text = _reset_results(tmp_path)
     runs = report.table
