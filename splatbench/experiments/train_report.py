@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from splatbench.experiments.configs import cell_value, decode
+from splatbench.experiments.configs import cell_value, decode, run_config
 from splatbench.experiments.kind_report import AxisRows, Claim, Finding, done_runs
 
 #: What the runs' protocol is called when their config names none (`TrainConfig.protocol` absent).
@@ -321,23 +321,18 @@ def schedule_as_run(done: pd.DataFrame) -> str:
 
 
 def sh_interval_steps(done: pd.DataFrame) -> list[int]:
-    """The distinct ``sh.interval`` of the runs in their steps (`TrainConfig.sh_steps`: scaled by
-    `splatbench.train.schedule.scale_step` over the protocol's schedule length, 30,000 under a
-    graphdeco protocol, which so keeps its steps as written); [] without those columns."""
-    from splatbench.train.protocol import PROTOCOLS  # late: the reports start without torch
-    from splatbench.train.schedule import scale_step
+    """The distinct steps between SH band raises of the runs, each as its recorded config makes it
+    (`splatbench.experiments.train_config.sh_steps`, `TrainConfig.sh_steps`: ``sh.interval`` scaled
+    over the protocol's schedule length, 30,000 under a graphdeco protocol, which so keeps its steps
+    as written); [] without those columns. A run that recorded no interval, iterations or schedule
+    (today's defaults are not what it ran), or whose config no longer validates, is left out."""
+    from splatbench.experiments.train_config import sh_steps  # late: it loads splatbench.train (torch)
 
     if not {"config.sh.interval", "config.iterations", "config.schedule"} <= set(done.columns):
         return []
-    protocols = done["config.protocol"] if "config.protocol" in done.columns else pd.Series(None, index=done.index)
-
-    def length(n: Any, protocol: Any) -> int:  # `TrainConfig.schedule_length`: no protocol recorded is quick
-        known = PROTOCOLS.get(protocol) if isinstance(protocol, str) else None
-        return (known.schedule_length if known is not None else None) or int(n)
-
-    return sorted({scale_step(int(i), length(n, p), str(sch), interval=True) for i, n, sch, p in
-                   zip(done["config.sh.interval"], done["config.iterations"], done["config.schedule"], protocols)
-                   if pd.notna(i) and pd.notna(n) and sch in ("scaled", "absolute")})
+    recorded = done[done["config.sh.interval"].notna() & done["config.iterations"].notna()
+                    & done["config.schedule"].isin(("scaled", "absolute"))]
+    return sorted({s for s in (sh_steps(run_config(run)) for _, run in recorded.iterrows()) if s is not None})
 
 
 def _eval_steps(done: pd.DataFrame) -> str:
