@@ -306,8 +306,8 @@ def test_training_view_points_just_after_an_opacity_reset_are_left_out_of_overfi
     gap below zero ((4 · 1 − 25 − 4) / 6 = −4.17 dB). Without the points logged ≤ 100 steps after the
     reset the training curve is flat 1 dB above the test curve: no overfitting, a gap of +1.00 dB; the
     text names the window used and the reset in it."""
-    from splatbench.experiments.train_kind import opacity_reset_steps
-    from splatbench.reports.tables import run_config
+    from splatbench.experiments.configs import run_config
+    from splatbench.experiments.train_config import opacity_reset_steps
 
     report, text = _reset_results(tmp_path)
     runs = report.table

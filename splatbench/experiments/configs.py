@@ -1,9 +1,13 @@
-"""Run configs as values: dotted keys (`flatten`, `unflatten`, `override`) and `canonical_json`.
+"""Run configs as values: dotted keys (`flatten`, `unflatten`, `override`), `canonical_json`,
+and a run table's cells read back (`cell_value`, `decode`, `run_config`).
 
 A config is held *flat*, as ``dotted.path -> value`` (docs/experiments.md, "Dotted
 keys"); a run kind receives the nested form. `canonical_json` is the one text of a
 config value: the run id (`splatbench.experiments.grid.make_run_id`), duplicate
 detection in `splatbench.experiments.spec` and the grid's labels all hash or compare it.
+A run table (`splatbench.experiments.store.build_table`) holds a config as ``config.*``
+columns, a column of mixed types as JSON text; `run_config` turns a row back into the
+nested config its kind's hooks read, for the reports and the kinds' report hooks alike.
 Shared by `spec`, `grid`, `kinds` and `store`; imports nothing of theirs.
 """
 
@@ -15,6 +19,8 @@ import re
 from collections.abc import Mapping
 from datetime import date, datetime, time
 from typing import Any
+
+import pandas as pd
 
 from splatbench.errors import InputError
 
@@ -105,3 +111,32 @@ def canonical_json(value: Any) -> str:
         return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
     except (TypeError, ValueError) as exc:
         raise InputError(f"config: not a canonical JSON value ({exc})") from None
+
+
+def cell_value(value: Any) -> Any:
+    """A run table cell as a plain hashable value: NaN / NA as None, a NumPy scalar as its Python
+    value; JSON text (a column of mixed types) left as text (`decode` reads it)."""
+    if value is None or value is pd.NA or (isinstance(value, float) and math.isnan(value)):
+        return None
+    return value.item() if hasattr(value, "item") else value
+
+
+def decode(value: Any) -> Any:
+    """A run table cell back to a value (`cell_value`): JSON text of a mixed column is decoded (a
+    number only where the text is its canonical JSON: ``"1.50"`` stays text), NaN is None."""
+    value = cell_value(value)
+    if isinstance(value, str):
+        try:
+            decoded = json.loads(value)
+        except ValueError:
+            return value
+        return decoded if not isinstance(decoded, (int, float)) or value.strip() == json.dumps(decoded) else value
+    return value
+
+
+def run_config(run: pd.Series) -> dict[str, Any]:
+    """A run table row's recorded config, nested (its ``config.*`` columns decoded, None left out),
+    with its ``scene`` and ``seed``: what a kind's hooks (`RunKind.planned`,
+    `SettlingCurves.resets`) read."""
+    flat = {c[len("config."):]: decode(run[c]) for c in run.index if str(c).startswith("config.")}
+    return {**unflatten({k: v for k, v in flat.items() if v is not None}), "scene": run.scene, "seed": int(run.seed)}

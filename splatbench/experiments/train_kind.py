@@ -27,6 +27,10 @@ The ``data`` keys describe a scene: a key that does not apply to a run's scene t
 scene) is left out of that run's resolved config, so a grid mixing the types can set
 ``data.resolution`` in its base; a scene table's own keys win over the base's.
 
+How a config's keys are split and read into a `TrainConfig`, and what that config schedules
+(`planned`, `opacity_reset_steps`), is `splatbench.experiments.train_config`, which the kind's
+report hooks (`splatbench.experiments.train_report`) read too.
+
 `resolve` fills every default in -- TrainConfig's (every group, ``raster`` included), the
 rig's for ``data``, and the strategy's own fields in the ``strategy`` table -- so a field
 written at its default is the same run as one left out, and a changed default makes new
@@ -53,27 +57,22 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from splatbench.guards import check_image_size, check_keys
 from splatbench.data.content import content_hash
 from splatbench.errors import InputError
 from splatbench.experiments.kind_report import Comparison, FindingRules, KindReport, LoadMarks, SettlingCurves, Tradeoff
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, metric, metric_specs
+from splatbench.experiments.train_config import (DATA_FIELDS, OWNED_FIELDS, opacity_reset_steps, planned, scene_type,
+                                                 split, train_config)
 from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, memory_note, model_bytes,
                                                  model_size_note, outlier_view_finding, outlier_view_lines,
                                                  protocol_lines, schedule_confound_note, smoke_test_line,
                                                  ssim_trained_note)
 from splatbench.metrics.memory import reset_peak_rss
-from splatbench.train.config import DataConfig, TrainConfig, nest  # the kind's Config (loads torch: every use of the kind validates)
+from splatbench.train.config import TrainConfig  # the kind's Config (loads torch: every use of the kind validates)
 
 #: Environment variable naming the folder of rendered datasets.
 DATASETS_ENV = "SPLATBENCH_DATASETS"
-#: TrainConfig fields the kind owns (machine-specific paths; never in a config).
-OWNED_FIELDS = ("dataset", "out")
-#: The ``data`` table: how the scene is rendered into a dataset.
-DATA_FIELDS = ("resolution", "views", "spp", "test_spp")
-#: ``data`` keys of a dataset folder and of a teacher scene.
-FOLDER_FIELDS = ("path",)
-TEACHER_FIELDS = ("model", "views", "resolution", "up")
+#: A teacher scene's ``data.views`` and ``data.resolution`` where its config sets none.
 TEACHER_DEFAULTS = {"views": 64, "resolution": 128}
 
 #: What a run records of what its strategy did besides its settings' names (`TopologyCounts`); None in
@@ -220,59 +219,10 @@ class TrainRun(RunResult):
 
 
 # --------------------------------------------------------------------------- config
-def _split(config: dict[str, Any]) -> tuple[str, dict[str, Any], dict[str, Any]]:
-    """(scene, the scene's ``data`` keys, the TrainConfig fields) of a nested run config: the
-    ``data`` table holds both the scene's keys (`DATA_FIELDS`, `FOLDER_FIELDS`, `TEACHER_FIELDS`)
-    and `DataConfig`'s (how the dataset is read: ``downscale``, ``masks``, ...), which go to the
-    TrainConfig. Dotted keys (``"sh.degree"``) are read into their tables (`nest`). One-line
-    `InputError` naming the field for anything unknown."""
-    config = nest(config)
-    for key in config:
-        if key in OWNED_FIELDS:
-            what = "the rendered scene" if key == "dataset" else "the run's folder"
-            raise InputError(f"{key}: set by the train kind ({what}); choose the scene with 'scenes' and its "
-                             f"rendering with data.resolution / data.views / data.spp / data.test_spp")
-    check_keys(config, (*(f.name for f in dataclasses.fields(TrainConfig)), "scene"))
-    scene = config.get("scene")
-    if not isinstance(scene, str) or not scene:
-        raise InputError(f"scene: expected a scene name, got {scene!r}")
-    table = config.get("data", {})
-    if not isinstance(table, dict):
-        raise InputError(f"data: expected a table of {', '.join(DATA_FIELDS)}, got {table!r}")
-    read_keys = tuple(f.name for f in dataclasses.fields(DataConfig))
-    check_keys(table, (*DATA_FIELDS, *FOLDER_FIELDS, *TEACHER_FIELDS, *read_keys), prefix="data.")
-    kind = scene_type(table)
-    allowed = {"catalog": DATA_FIELDS, "folder": FOLDER_FIELDS, "teacher": TEACHER_FIELDS}[kind]
-    data = {k: v for k, v in table.items() if k in allowed and k not in read_keys}  # other types' keys: module doc
-    for key, value in data.items():
-        if key in ("path", "model", "up"):
-            continue
-        if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
-            raise InputError(f"data.{key}: expected an int >= 1, got {value!r}")
-    if data.get("resolution") is not None:  # the width; checked as a square image (the rigs are square)
-        check_image_size(data["resolution"], data["resolution"], field="data.resolution", memory=False)
-    if data.get("views") is not None and data["views"] < 2:
-        raise InputError(f"data.views: expected at least 2 views (one is held out), got {data['views']}")
-    train = {k: v for k, v in config.items() if k not in ("scene", "data")}
-    reading = {k: v for k, v in table.items() if k in read_keys and (kind == "folder" or k != "downscale")}
-    if reading:
-        train["data"] = reading
-    return scene, data, train
-
-
-def scene_type(data: dict[str, Any]) -> str:
-    """"folder" (``data.path``), "teacher" (``data.model``) or "catalog"."""
-    return "folder" if "path" in data else "teacher" if "model" in data else "catalog"
-
-
-def _train_config(train: dict[str, Any]) -> TrainConfig:
-    return TrainConfig.from_dict(dict(train), source="")  # the grid's messages name where the value came from
-
-
 def validate(config: dict[str, Any]) -> None:
     """Raise a one-line `InputError` naming the first bad field (no data is touched)."""
-    _, _, train = _split(config)
-    _train_config(train)
+    _, _, train = split(config)
+    train_config(train)
 
 
 def _strategy_table(cfg: TrainConfig) -> dict[str, Any]:
@@ -299,9 +249,9 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
     """The config with every default filled in (module doc); what the run id hashes."""
     from splatbench.scenes.catalog import get_scene
 
-    scene, data, train = _split(config)
+    scene, data, train = split(config)
     kind = scene_type(data)
-    cfg = _train_config(train)
+    cfg = train_config(train)
     out = {k: v for k, v in cfg.to_dict().items() if k not in OWNED_FIELDS}
     out["strategy"] = _strategy_table(cfg)
     out["scene"] = scene
@@ -474,50 +424,13 @@ def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> TrainRun:
     ``prepared.datasets``), writing the run's files into ``workdir``."""
     from splatbench.train import train
 
-    scene, data, fields = _split(config)
+    scene, data, fields = split(config)
     dataset = ensure_dataset(scene, data, prepared.datasets)
     cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="")
     # a worker runs several runs in turn: reset its high-water mark so the peak recorded is this run's own
     own_peak = reset_peak_rss()
     result = train(cfg)  # validated on construction
     return TrainRun.of(result, dataset.hash[:16] if dataset.hash else None, own_peak=own_peak)
-
-
-def planned(config: dict[str, Any]) -> dict[str, float]:
-    """The refinements and opacity resets a run's resolved config schedules (its strategy's
-    ``planned_counts``, scaled as the run scales it): what a report names for runs that did
-    not record their counts; {} for a config that no longer validates."""
-    from splatbench.strategies import planned_counts
-
-    scheduled = _scheduled_strategy(config)
-    if scheduled is None:
-        return {}
-    counts = planned_counts(*scheduled)
-    return {"opacity_resets": counts.opacity_resets, "refinements": counts.refinements}
-
-
-def _scheduled_strategy(config: dict[str, Any]) -> tuple[Any, int] | None:
-    """(The strategy a run's resolved config makes, scaled as the run scales it; its iterations);
-    None for a config that no longer validates (`planned`, `opacity_reset_steps`)."""
-    try:
-        _, _, train = _split(config)
-        cfg = _train_config(train)
-        return cfg.make_strategy(), cfg.iterations
-    except InputError:
-        return None
-
-
-def opacity_reset_steps(config: dict[str, Any]) -> tuple[int, ...]:
-    """The completed-iteration counts at which a run's resolved config resets opacities (its strategy
-    as the run scales it: every ``reset_every`` iterations while ``it < refine_stop``, the count
-    ``planned_counts`` makes); the training step logged at such a count is the first after the reset.
-    () for a strategy without resets, or a config that no longer validates (`SettlingCurves.resets`)."""
-    scheduled = _scheduled_strategy(config)
-    if scheduled is None:
-        return ()
-    strategy, iterations = scheduled
-    steps = getattr(strategy, "reset_steps", None)  # `DefaultStrategy.reset_steps` (and its subclasses')
-    return tuple(steps(iterations)) if steps is not None else ()
 
 
 def with_protocol(config: dict[str, Any], name: str) -> dict[str, Any]:

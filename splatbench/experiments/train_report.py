@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from splatbench.experiments.configs import cell_value, decode, run_config
 from splatbench.experiments.kind_report import AxisRows, Claim, Finding, done_runs
 
 #: What the runs' protocol is called when their config names none (`TrainConfig.protocol` absent).
@@ -41,7 +42,7 @@ def _values(done: pd.DataFrame, column: str) -> list[Any]:
     if column not in done.columns:
         return []
     out: list[Any] = []
-    for v in map(_plain, done[column]):
+    for v in map(cell_value, done[column]):
         if v not in out:
             out.append(v)
     return out
@@ -167,17 +168,6 @@ _AUTO_RULE = ("white for a masked capture, else the mean colour of the pixels th
               "marks none")
 
 
-def _config_rgb(value: Any) -> Any:
-    """``config.background`` as the table holds it ("auto", an RGB list, or either as JSON text when
-    the column mixes them) -> "auto" or the list."""
-    if isinstance(value, str) and value != "auto":
-        try:
-            return json.loads(value)
-        except ValueError:
-            return value
-    return value
-
-
 def carried(done: pd.DataFrame, columns: tuple[str, ...], also: tuple[str, ...] = ()) -> pd.DataFrame:
     """``done`` with each of ``columns`` (metrics a run records since some commit: image size,
     view counts, background) filled in for the runs that predate it from the same scene's runs
@@ -189,15 +179,15 @@ def carried(done: pd.DataFrame, columns: tuple[str, ...], also: tuple[str, ...] 
     keys = ["scene", *sorted(c for c in done.columns if c.startswith("config.data.")), *(a for a in also
                                                                                            if a in done.columns)]
     out = done.copy()
-    group = [tuple(_plain(v) if not isinstance(v, (list, np.ndarray)) else str(v) for v in row)
+    group = [tuple(cell_value(v) if not isinstance(v, (list, np.ndarray)) else str(v) for v in row)
              for row in done[keys].itertuples(index=False)]
     for col in columns:
         out[col] = out[col].astype(object)
         known: dict[tuple, set] = {}
         for g, v in zip(group, done[col]):
-            if _plain(v) is not None:
-                known.setdefault(g, set()).add(_plain(v))
-        out[col] = [v if _plain(v) is not None else (next(iter(known[g])) if len(known.get(g, ())) == 1 else None)
+            if cell_value(v) is not None:
+                known.setdefault(g, set()).add(cell_value(v))
+        out[col] = [v if cell_value(v) is not None else (next(iter(known[g])) if len(known.get(g, ())) == 1 else None)
                     for g, v in zip(group, out[col])]
     return out
 
@@ -222,8 +212,8 @@ def background_text(done: pd.DataFrame) -> str:
         older = rows[~recorded]
         values: list[Any] = []
         for v in older.get("config.background", []):
-            if _config_rgb(v) not in values:
-                values.append(_config_rgb(v))
+            if decode(v) not in values:
+                values.append(decode(v))
         for value in values:
             if value == "auto":
                 shown.append(f"`auto` (the RGB it resolved to is not recorded: these runs predate "
@@ -331,23 +321,18 @@ def schedule_as_run(done: pd.DataFrame) -> str:
 
 
 def sh_interval_steps(done: pd.DataFrame) -> list[int]:
-    """The distinct ``sh.interval`` of the runs in their steps (`TrainConfig.sh_steps`: scaled by
-    `splatbench.train.schedule.scale_step` over the protocol's schedule length, 30,000 under a
-    graphdeco protocol, which so keeps its steps as written); [] without those columns."""
-    from splatbench.train.protocol import PROTOCOLS  # late: the reports start without torch
-    from splatbench.train.schedule import scale_step
+    """The distinct steps between SH band raises of the runs, each as its recorded config makes it
+    (`splatbench.experiments.train_config.sh_steps`, `TrainConfig.sh_steps`: ``sh.interval`` scaled
+    over the protocol's schedule length, 30,000 under a graphdeco protocol, which so keeps its steps
+    as written); [] without those columns. A run that recorded no interval, iterations or schedule
+    (today's defaults are not what it ran), or whose config no longer validates, is left out."""
+    from splatbench.experiments.train_config import sh_steps  # late: it loads splatbench.train (torch)
 
     if not {"config.sh.interval", "config.iterations", "config.schedule"} <= set(done.columns):
         return []
-    protocols = done["config.protocol"] if "config.protocol" in done.columns else pd.Series(None, index=done.index)
-
-    def length(n: Any, protocol: Any) -> int:  # `TrainConfig.schedule_length`: no protocol recorded is quick
-        known = PROTOCOLS.get(protocol) if isinstance(protocol, str) else None
-        return (known.schedule_length if known is not None else None) or int(n)
-
-    return sorted({scale_step(int(i), length(n, p), str(sch), interval=True) for i, n, sch, p in
-                   zip(done["config.sh.interval"], done["config.iterations"], done["config.schedule"], protocols)
-                   if pd.notna(i) and pd.notna(n) and sch in ("scaled", "absolute")})
+    recorded = done[done["config.sh.interval"].notna() & done["config.iterations"].notna()
+                    & done["config.schedule"].isin(("scaled", "absolute"))]
+    return sorted({s for s in (sh_steps(run_config(run)) for _, run in recorded.iterrows()) if s is not None})
 
 
 def _eval_steps(done: pd.DataFrame) -> str:
@@ -585,7 +570,7 @@ def auto_sh_degree_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) 
     if auto:
         parts, same = [], []
         done = done_runs(runs)
-        fixed = {_decoded(r.value): r.label for r in table.rows if r.value != "auto"}
+        fixed = {decode(r.value): r.label for r in table.rows if r.value != "auto"}
         for scene in scenes:
             sel = done[(done.scene == scene) & done.run_id.isin(auto[0].run_ids)]
             degrees = [int(d) for d in pd.to_numeric(sel["metric.sh_degree"], errors="coerce").dropna()]
@@ -732,7 +717,7 @@ def schedule_confound_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str
     resetting = done[done["config.strategy.name"].isin(_RESETTING)]
     lines = []
     if table.axis == "strategy.reset_every":
-        zero = [r for r in table.rows if _decoded(r.value) == 0 and resetting.run_id.isin(r.run_ids).any()]
+        zero = [r for r in table.rows if decode(r.value) == 0 and resetting.run_id.isin(r.run_ids).any()]
         for r in zero:
             lines.append(f"- `{r.label}` (no opacity resets) also turns off size pruning: the default strategy prunes "
                          f"Gaussians larger than `max_world_size` × the scene extent only after its first opacity "
@@ -741,15 +726,6 @@ def schedule_confound_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str
         lines.append("- Opacity resets fire only inside the refine window (as in graphdeco), so `refine_stop` also "
                      "changes how many resets a run makes (`metric.opacity_resets` where recorded).")
     return lines, []
-
-
-def _decoded(value):
-    if isinstance(value, str):
-        try:
-            return json.loads(value)
-        except ValueError:
-            return value
-    return value
 
 
 def memory_note(runs: pd.DataFrame) -> list[str]:
@@ -845,13 +821,6 @@ def _view_psnrs(raw: Any) -> list[float] | None:
     return [float(v) for v in views]
 
 
-def _plain(v: Any) -> Any:
-    """A table cell as a hashable plain value (NaN / NA as None)."""
-    if v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v)):
-        return None
-    return v.item() if hasattr(v, "item") else v
-
-
 def view_outliers(table: pd.DataFrame, threshold: float = OUTLIER_VIEW_DB) -> ViewCheck:
     """Each done run's test views (``curves.test_view_psnr``) against the same views of the other
     runs of its scene and cell (the same ``axis.*`` values and ``config.protocol``: the other
@@ -862,7 +831,7 @@ def view_outliers(table: pd.DataFrame, threshold: float = OUTLIER_VIEW_DB) -> Vi
     keys = [*axes, *(["config.protocol"] if "config.protocol" in done.columns else [])]
     cells: dict[tuple, list[tuple[Any, list[float] | None]]] = {}
     for _, row in done.iterrows():
-        key = (str(row.scene), *(_plain(row[c]) for c in keys))
+        key = (str(row.scene), *(cell_value(row[c]) for c in keys))
         cells.setdefault(key, []).append((row, _view_psnrs(row.get("curves"))))
     outliers, checked, unrecorded, alone = [], 0, 0, 0
     for (scene, *values), runs in cells.items():
@@ -932,7 +901,7 @@ def hardest_view_lines(table: pd.DataFrame, min_effect: float = 0.1) -> list[str
     axes = [c for c in done.columns if c.startswith("axis.")]
     lines = []
     for scene, rows in done.groupby("scene", sort=False):
-        runs = [(tuple(_plain(r[c]) for c in axes), v) for _, r in rows.iterrows()
+        runs = [(tuple(cell_value(r[c]) for c in axes), v) for _, r in rows.iterrows()
                 if (v := _view_psnrs(r.get("curves"))) is not None]
         if not runs or len({len(v) for _, v in runs}) != 1 or len(runs[0][1]) < 2:
             continue

@@ -40,9 +40,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from splatbench.experiments.configs import run_config
 from splatbench.experiments.kind_report import Claim, Finding, SettlingCurves, done_runs
 from splatbench.experiments.kinds import RunKind
-from splatbench.reports.tables import run_config
 
 #: Share of the run, at its end, whose slope decides.
 LAST_SHARE = 0.25

@@ -27,7 +27,7 @@ from typing import Any
 
 import pandas as pd
 
-from splatbench.experiments.configs import flatten, unflatten
+from splatbench.experiments.configs import decode, flatten, run_config, unflatten  # run_config: also imported from here
 from splatbench.experiments.grid import expand
 from splatbench.experiments.kind_report import done_runs
 from splatbench.experiments.kinds import RunKind
@@ -297,29 +297,6 @@ def cell_labels(spec: ExperimentSpec, table: pd.DataFrame, short: bool = False) 
         def label(row) -> str:
             return ", ".join(f"{n}={display(decode(row[c]))}" for n, c in zip(names, cols))
     return table.apply(label, axis=1) if len(table) else pd.Series([], dtype=object)
-
-
-def decode(value: Any) -> Any:
-    """A table cell back to a value: JSON text of a mixed column is decoded, NaN is None."""
-    if value is None or (isinstance(value, float) and math.isnan(value)) or value is pd.NA:
-        return None
-    if hasattr(value, "item"):
-        value = value.item()
-    if isinstance(value, str):
-        try:
-            decoded = json.loads(value)
-        except ValueError:
-            return value
-        return decoded if not isinstance(decoded, (int, float)) or value.strip() == json.dumps(decoded) else value
-    return value
-
-
-def run_config(run: pd.Series) -> dict[str, Any]:
-    """A run table row's recorded config, nested (its ``config.*`` columns decoded, None left out),
-    with its ``scene`` and ``seed``: what a kind's hooks (`RunKind.planned`,
-    `SettlingCurves.resets`) read."""
-    flat = {c[len("config."):]: decode(run[c]) for c in run.index if str(c).startswith("config.")}
-    return {**unflatten({k: v for k, v in flat.items() if v is not None}), "scene": run.scene, "seed": int(run.seed)}
 
 
 def _json(value: Any) -> str:
