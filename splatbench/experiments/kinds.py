@@ -16,6 +16,10 @@ one of your own); the runner never needs to know which kind it holds::
     scenes() -> set[str]                     optional: known scene names (None: any name)
     prepare(configs) -> Any                  optional: once, in the parent, before any run;
                                              what it returns is ``run``'s ``prepared``
+    check_inputs(configs) -> list[str]       optional: cheap checks of what the runs will read
+                                             (files, headers; nothing decoded or rendered), in the
+                                             parent before anything runs and in ``--dry-run``: one
+                                             InputError line, else a line per input checked
     protocols                                optional `KindProtocols`: a cell rerun under a named
                                              protocol (an experiment's ``[check]``)
     report                                   optional `KindReport`: what its reports show, and
@@ -209,6 +213,7 @@ class RunKind:
     identity: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     scenes: Callable[[], set[str]] | None = None
     prepare: Callable[[list[dict[str, Any]]], Any] | None = None
+    check_inputs: Callable[[list[dict[str, Any]]], list[str]] | None = None
     description: str = ""
     #: What its reports show (None: every numeric metric, the first one compared).
     report: KindReport | None = None

@@ -129,6 +129,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
 
     grid = expand(spec, known_scenes=known_scenes)
     checks = check_runs(spec) if check else []
+    check_inputs(spec, [*grid, *checks])
     table_ids = [r.run_id for r in (*grid, *checks)]  # the folder's table: every run this folder may hold
     if check_only:
         grid = []
@@ -302,6 +303,20 @@ def find_reusable(results_dir: Path, spec: ExperimentSpec,
     return found
 
 
+def check_inputs(spec: ExperimentSpec, runs: list[RunSpec]) -> list[str]:
+    """The kind's cheap checks of what ``runs`` will read (`RunKind.check_inputs`: the train
+    kind's dataset folders, from file names and image headers): one `InputError` line
+    ``SOURCE: scenes.NAME: problem and fix`` before anything runs (and in ``--dry-run``);
+    else the kind's line per input checked ([] for a kind without the check)."""
+    kind = get_kind(spec.kind)
+    if kind.check_inputs is None or not runs:
+        return []
+    try:
+        return kind.check_inputs([plain(r.config) for r in runs])
+    except InputError as exc:
+        raise InputError(f"{spec.source}: {exc}") from None
+
+
 def check_only_problem(spec: ExperimentSpec, check: bool = True) -> None:
     """One `InputError` line where ``--check-only`` cannot run: a file without a ``[check]``,
     or with the check left out (``--no-check``)."""
@@ -421,4 +436,4 @@ def _log(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
-__all__ = ["RunSummary", "execution_order", "find_reusable", "reuse_finished", "run_experiment"]
+__all__ = ["RunSummary", "check_inputs", "execution_order", "find_reusable", "reuse_finished", "run_experiment"]
