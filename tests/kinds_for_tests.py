@@ -55,7 +55,7 @@ class DummyConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in ("ok", "warn", "warn-many", "fail", "crash"):
-            raise InputError(f"mode: expected 'ok', 'warn', 'warn-many', 'fail' or 'crash', got {self.mode!r}")
+            raise InputError(f"mode: expected 'ok', 'warn', 'fail' or 'crash' (or 'warn-many'), got {self.mode!r}")
         if not (math.isfinite(self.sleep) and self.sleep >= 0):
             raise InputError(f"sleep: expected seconds >= 0, got {self.sleep!r}")
         if self.n < 1:
