@@ -95,10 +95,14 @@ class RunResult:
         hides what a single run would have printed.
     curves: any JSON-serialisable value (e.g. ``{"step": [...], "psnr": [...]}``), kept whole in
         the run's file and as one JSON string column ``curves``.
+    notes: one line each, what the run's tool noted of how it read its inputs (a training run's
+        `TrainResult.notes`: the dataset loader's lines, the start's, the background's); kept in
+        the run's file (`RunRecord.notes`) and the table's ``notes`` column, where a report reads them.
     """
 
     warnings: tuple[str, ...] = ()
     curves: Any = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
 
 
 def metric_specs(result: type[RunResult]) -> tuple[MetricSpec, ...]:
@@ -280,10 +284,12 @@ def check_output(output: Any, kind: RunKind) -> RunResult:
     for anything else."""
     if not isinstance(output, kind.result):
         raise TypeError(f"run kind {kind.name!r} returned {type(output).__name__}, not {kind.result.__name__}")
-    warnings = tuple(output.warnings)
-    if not all(isinstance(w, str) for w in warnings):
-        raise TypeError(f"run kind {kind.name!r}: warnings must be strings, got {list(warnings)!r:.80}")
-    return dataclasses.replace(output, warnings=tuple(" ".join(w.split()) for w in warnings))
+    warnings, notes = tuple(output.warnings), tuple(output.notes)
+    for name, lines in (("warnings", warnings), ("notes", notes)):
+        if not all(isinstance(w, str) for w in lines):
+            raise TypeError(f"run kind {kind.name!r}: {name} must be strings, got {list(lines)!r:.80}")
+    return dataclasses.replace(output, warnings=tuple(" ".join(w.split()) for w in warnings),
+                               notes=tuple(" ".join(n.split()) for n in notes))
 
 
 def metric_values(result: RunResult) -> dict[str, Scalar]:

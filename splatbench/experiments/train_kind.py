@@ -186,7 +186,8 @@ class TrainRun(RunResult):
     def of(cls, result, dataset_hash: str | None, *, own_peak: bool = False) -> TrainRun:
         """The record of a `splatbench.train.TrainResult`: its own metrics by name, the load
         (`TrainResult.load`) and the strategy's counts (`TrainResult.topology`; None before
-        they were recorded) flattened, its warnings and its curves (`CURVE_KEYS`). ``own_peak``:
+        they were recorded) flattened, its warnings, its notes (the loader's, the start's, the
+        background's: `TrainResult.notes`) and its curves (`CURVE_KEYS`). ``own_peak``:
         the process's peak RSS was reset as the run started, so ``result.peak_rss_mb`` is the
         run's own (``run_peak_rss_mb``; None otherwise)."""
         names = {m.name for m in metric_specs(cls)}
@@ -216,7 +217,7 @@ class TrainRun(RunResult):
                   "image_width": result.image_size[0] if result.image_size else None,
                   "image_height": result.image_size[1] if result.image_size else None,
                   "worst_view_psnr": min(result.test_view_psnr) if result.test_view_psnr else None}
-        return cls(**values, warnings=tuple(result.warnings), curves=curves)
+        return cls(**values, warnings=tuple(result.warnings), curves=curves, notes=tuple(result.notes))
 
 
 # --------------------------------------------------------------------------- config
