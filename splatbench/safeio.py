@@ -10,6 +10,7 @@ is one `InputError` line naming the file and the field::
     arrays = read_npz(path, what="workload")          # {key: ndarray}, no pickle
     depth = read_npy(path, what="depth map")
     rgb = read_image(path, what="images/r_0.png")     # uint8 pixels, decompression-bomb limit on
+    width, height, has_alpha = image_header(path, what="images/r_0.png")  # the header alone
 
 Readers built on these: `splatbench.ply` (PLY headers), `splatbench.data.colmap_bounds`
 (COLMAP binary models), `splatbench.workloads` (npz), `splatbench.data.dataset`
@@ -88,18 +89,25 @@ def _npy_header(stream, what: str) -> tuple[tuple[int, ...], np.dtype, int]:
 
 
 def read_npy(path: str | os.PathLike, *, what: str) -> np.ndarray:
-    """The array in a ``.npy`` file, its header checked against the file's size (no pickle)."""
-    size = file_size(path, what)
+    """The array in a ``.npy`` file, its header checked against the file's size (`npy_shape`; no pickle)."""
+    npy_shape(path, what=what)
     with open(path, "rb") as stream:
-        _, _, nbytes = _npy_header(stream, what)
-        if nbytes > size - stream.tell():
-            raise InputError(f"{what}: header claims {nbytes} bytes of data, the file holds {size - stream.tell()}; "
-                             f"truncated or damaged")
-        stream.seek(0)
         try:
             return np.load(stream, allow_pickle=False)
         except Exception as exc:  # noqa: BLE001 - a damaged array is data, any failure one line
             raise InputError(f"{what}: cannot read the array ({type(exc).__name__}: {_short(exc)})") from None
+
+
+def npy_shape(path: str | os.PathLike, *, what: str) -> tuple[tuple[int, ...], np.dtype]:
+    """``(shape, dtype)`` of a ``.npy`` file from its header, checked against the file's size
+    as `read_npy` checks it; no data is read (a dry run's check)."""
+    size = file_size(path, what)
+    with open(path, "rb") as stream:
+        shape, dtype, nbytes = _npy_header(stream, what)
+        if nbytes > size - stream.tell():
+            raise InputError(f"{what}: header claims {nbytes} bytes of data, the file holds {size - stream.tell()}; "
+                             f"truncated or damaged")
+    return shape, dtype
 
 
 def read_npz(path: str | os.PathLike, *, what: str) -> dict[str, np.ndarray]:
@@ -157,17 +165,36 @@ def read_image_with_alpha(path: str | os.PathLike, *, what: str, mode: str | Non
                           ) -> tuple[np.ndarray, bool]:
     """`read_image`, and whether the stored image has an alpha channel (``mode=None``
     then decodes RGBA for images with alpha, RGB otherwise)."""
+    def decode(im) -> tuple[np.ndarray, bool]:
+        has_alpha = _has_alpha(im)
+        return np.asarray(im.convert(mode or ("RGBA" if has_alpha else "RGB"))), has_alpha
+
+    # from memory: BytesIO.read(n) returns what is there, where a file's read(n) first
+    # allocates n bytes (Pillow reads a PNG's trailing IDAT by its stated length, up to 2 GiB)
+    return _with_image(path, what, decode, in_memory=True)
+
+
+def image_header(path: str | os.PathLike, *, what: str) -> tuple[int, int, bool]:
+    """``(width, height, has alpha)`` of an image file from its header alone (no pixel is
+    decoded), refused in one line as `read_image_with_alpha` refuses it (a decompression
+    bomb, a file Pillow cannot identify): what a dry run checks (`splatbench.data.check_dataset`)."""
+    return _with_image(path, what, lambda im: (int(im.width), int(im.height), _has_alpha(im)), in_memory=False)
+
+
+def _has_alpha(im) -> bool:
+    return im.mode in ("RGBA", "LA", "PA") or (im.mode == "P" and "transparency" in im.info)
+
+
+def _with_image(path: str | os.PathLike, what: str, use, *, in_memory: bool):
+    """``use(image)`` of the Pillow image opened from ``path`` (its bytes read into memory
+    first when ``in_memory``), every failure one `InputError` line naming ``what``."""
     from PIL import Image
 
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)  # refuse at the limit, not 2x
-            # from memory: BytesIO.read(n) returns what is there, where a file's read(n) first
-            # allocates n bytes (Pillow reads a PNG's trailing IDAT by its stated length, up to 2 GiB)
-            with Image.open(io.BytesIO(Path(path).read_bytes())) as im:
-                has_alpha = im.mode in ("RGBA", "LA", "PA") or (im.mode == "P" and "transparency" in im.info)
-                target = mode or ("RGBA" if has_alpha else "RGB")
-                arr = np.asarray(im.convert(target))
+            with Image.open(io.BytesIO(Path(path).read_bytes()) if in_memory else Path(path)) as im:
+                return use(im)
     except InputError:
         raise
     except FileNotFoundError:
@@ -180,7 +207,6 @@ def read_image_with_alpha(path: str | os.PathLike, *, what: str, mode: str | Non
                              f"replace it with the image file") from None
         raise InputError(f"{what}: cannot read the image ({type(exc).__name__}: {_short(exc)}); replace it with an "
                          f"intact copy") from None
-    return arr, has_alpha
 
 
 def _short(exc: BaseException) -> str:
@@ -188,4 +214,4 @@ def _short(exc: BaseException) -> str:
 
 
 __all__ = ["MAX_COUNT", "file_size", "check_count",
-           "read_npy", "read_npz", "read_image", "read_image_with_alpha"]
+           "read_npy", "npy_shape", "read_npz", "read_image", "read_image_with_alpha", "image_header"]

@@ -47,14 +47,15 @@ class DummyConfig:
     seed: int = 0
     x: float = 0.0        # a number folded into the metrics
     n: int = 3            # curve length (>= 1)
-    mode: str = "ok"      # "ok", "warn" (ok, with a warning), "fail" (raise) or "crash" (the worker exits at once)
+    mode: str = "ok"      # "ok", "warn" (ok, with a warning), "warn-many" (its own and a shared one, given twice),
+    #                       "fail" (raise) or "crash" (the worker exits at once)
     sleep: float = 0.0    # seconds to sleep before computing
     gate: str = ""        # a folder: the run waits there for a token (see `_pass_gate`); "" = no gate
     opts: DummyOpts = field(default_factory=DummyOpts)
 
     def __post_init__(self) -> None:
-        if self.mode not in ("ok", "warn", "fail", "crash"):
-            raise InputError(f"mode: expected 'ok', 'warn', 'fail' or 'crash', got {self.mode!r}")
+        if self.mode not in ("ok", "warn", "warn-many", "fail", "crash"):
+            raise InputError(f"mode: expected 'ok', 'warn', 'fail' or 'crash' (or 'warn-many'), got {self.mode!r}")
         if not (math.isfinite(self.sleep) and self.sleep >= 0):
             raise InputError(f"sleep: expected seconds >= 0, got {self.sleep!r}")
         if self.n < 1:
@@ -120,7 +121,9 @@ def _run(config: dict[str, Any], workdir: Path, prepared: None) -> DummyRun:
     rng = np.random.default_rng([cfg.seed, tag, cfg.n])
     curve = (cfg.x + rng.random(cfg.n)).round(12)
     (workdir / "note.txt").write_text(f"{cfg.scene} {cfg.seed}\n")
-    warnings = (f"warning: dummy run told to warn (seed {cfg.seed})",) if cfg.mode == "warn" else ()
+    warnings = (f"warning: dummy run told to warn (seed {cfg.seed})",) if cfg.mode in ("warn", "warn-many") else ()
+    if cfg.mode == "warn-many":
+        warnings += ("warning: dummy runs share this one",) * 2
     return DummyRun(value=float(curve[-1]), total=float(curve.sum()), a_plus_seed=cfg.opts.a + cfg.seed,
                     scene_tag=f"{cfg.scene}-{cfg.opts.b}", positive=bool(curve[-1] > 0),
                     curves={"step": list(range(cfg.n)), "value": curve.tolist()}, warnings=warnings)

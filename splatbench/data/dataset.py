@@ -71,6 +71,10 @@ read from ``depth/<image path without its first folder>.npy`` (camera z) when th
 dataset has a ``depth/`` folder. Every problem (missing file, image size that
 disagrees with its camera, unsupported camera model) is a one-line `InputError`
 naming the file and the field.
+
+`check_dataset` runs the same loader on image headers alone (no pixel decoded, nothing
+resized or undistorted, no cache written): the same one-line errors, and the layout,
+view counts and served image size (`DatasetCheck`): what ``splatbench run --dry-run`` checks.
 """
 
 from __future__ import annotations
@@ -93,7 +97,7 @@ from splatbench.data.masks import Masks, area_resize, combine, folder_factor
 from splatbench.data.undistort import Lens, check_lens
 from splatbench.errors import InputError
 from splatbench.ply import read_ply_data
-from splatbench.safeio import read_image_with_alpha, read_npy
+from splatbench.safeio import image_header, npy_shape, read_image_with_alpha, read_npy
 
 LAYOUTS = ("auto", "colmap", "blender", "llff")
 #: COLMAP camera models accepted as they are (no distortion).
@@ -212,6 +216,20 @@ class Dataset:
                                       # None when the layout gives none
 
 
+@dataclass(frozen=True)
+class DatasetCheck:
+    """What `check_dataset` found: the dataset `load_dataset` would return, without its pixels."""
+
+    name: str                  # the folder name
+    layout: str                # "colmap", "blender" or "llff"
+    train_views: int
+    test_views: int
+    width: int                 # of the views as served (after downscale and undistortion); 0 without views
+    height: int
+    masks: str                 # the mask folder the views' alphas would be read from; "" when none
+    notes: tuple[str, ...]     # load_dataset's notes (the undistortion's says it was not run)
+
+
 def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8, images_dir: str = "images",
                  background: Sequence[float] = (0.0, 0.0, 0.0), downscale: int = 1, masks: bool = True,
                  say: Callable[[str], None] | None = None) -> Dataset:
@@ -227,6 +245,29 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
     int >= 1 dividing the image size (``images_N/`` is read when present). ``say`` gets
     one line before anything slow (undistortion); the same lines are in ``Dataset.notes``.
     """
+    return _load(path, layout, test_every, images_dir, background, downscale, masks, say, headers_only=False)
+
+
+def check_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8, images_dir: str = "images",
+                  downscale: int = 1, masks: bool = True) -> DatasetCheck:
+    """`load_dataset`'s checks, cheaply: the same code reading file names, image headers and
+    the small files (poses, transforms, a COLMAP model, depth maps' headers) but decoding no
+    pixel, resizing nothing and undistorting nothing (a distorted camera's undistorted size is
+    pycolmap's camera alone, `splatbench.data.undistort.undistorted_cameras`); no cache is
+    written. Raises the one `InputError` line `load_dataset` would raise for the same folder
+    and options (a wrong layout, counts that disagree, a missing or misnamed mask, a downscale
+    no image folder serves, an image whose size disagrees with its camera), except what only
+    decoding finds (a damaged pixel stream). What a dry run checks (``splatbench run --dry-run``)."""
+    ds = _load(path, layout, test_every, images_dir, (0.0, 0.0, 0.0), downscale, masks, None, headers_only=True)
+    views = ds.train if len(ds.train) else ds.test
+    height, width = views.image_size if len(views) else (0, 0)
+    return DatasetCheck(ds.name, ds.layout, len(ds.train), len(ds.test), width, height, ds.masks, ds.notes)
+
+
+def _load(path: str | Path, layout: str, test_every: int, images_dir: str, background: Sequence[float],
+          downscale: int, masks: bool, say: Callable[[str], None] | None, *, headers_only: bool) -> Dataset:
+    """`load_dataset`, or with ``headers_only`` its checks alone (`check_dataset`): the
+    views' pixels are then read-only zeros of their size that take no memory."""
     root = Path(path)
     if not root.is_dir():
         raise InputError(f"dataset: {str(root)!r} is not a dataset folder (it does not exist or is a file); give a "
@@ -251,11 +292,12 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
             layout = "llff"
         else:
             raise InputError(f"dataset: {str(root)!r} holds neither a COLMAP model (sparse/0/), Blender transforms "
-                             f"(transforms_train.json or transforms.json) nor LLFF's {POSES_FILE}")
+                             f"(transforms_train.json or transforms.json) nor LLFF's {POSES_FILE}: not a capture "
+                             f"folder; give the folder that holds one of them")
     if not isinstance(masks, bool):
         raise InputError(f"masks: expected true or false, got {masks!r}")
-    load = _Load(root, bg, downscale, say or (lambda line: None))
-    load.masks = Masks(root, masks, load.note)
+    load = _Load(root, bg, downscale, say or (lambda line: None), headers_only)
+    load.masks = Masks(root, masks, load.note, headers_only=headers_only)
     if layout == "colmap":
         dataset = _load_colmap(root, test_every, images_dir, load)
         if (root / POSES_FILE).is_file():
@@ -272,8 +314,10 @@ def load_dataset(path: str | Path, *, layout: str = "auto", test_every: int = 8,
 class _Load:
     """What every loader shares: the options, the notes, and the views waiting for undistortion."""
 
-    def __init__(self, root: Path, bg: np.ndarray, downscale: int, say: Callable[[str], None]) -> None:
+    def __init__(self, root: Path, bg: np.ndarray, downscale: int, say: Callable[[str], None],
+                 headers_only: bool = False) -> None:
         self.root, self.bg, self.downscale, self.say = root, bg, downscale, say
+        self.headers_only = headers_only  # `check_dataset`: image headers read, no pixel decoded (`_blank`)
         self.notes: list[str] = []
         self.pending: list[tuple[list, int, str, Camera, Lens]] = []  # (views, index, rel, posed camera, lens)
         self.masks: Masks  # the capture's object masks (set by load_dataset)
@@ -298,7 +342,7 @@ class _Load:
         its alpha, then both downscaled when ``resize``. ``rgb`` and ``alpha`` are uint8;
         ``final``: rgb needs no compositing (an RGB image, or RGBA composited before
         downscaling, as graphdeco resizes the composited image)."""
-        rgb, alpha = _read_image(self.root, rel, context)
+        rgb, alpha = _read_image(self.root, rel, context, self.headers_only)
         if self.masks.enabled:  # at the file's size: images_N/ takes masks_N/ (or a finer folder, reduced)
             folder = Path(rel).parts[0] if len(Path(rel).parts) > 1 else ""
             factor = folder_factor(folder) if folder.startswith("images") else 1
@@ -306,17 +350,28 @@ class _Load:
             size = (rgb.shape[1], rgb.shape[0])
             mask = self.masks.read(self.masks.file(mfolder, rel), rel, size,
                                    size if self.masks.folders.get(factor) == mfolder else None)
-            alpha = combine(alpha, mask)
+            alpha = self.combine(alpha, mask)
         camera = _fit_camera(camera, rgb, rel, scale_ok=scale_ok)
         if not resize or self.downscale == 1:
             return rel, camera, rgb, alpha, alpha is None
         camera = camera.scaled(1 / self.downscale)
-        if alpha is not None:  # composited at full size, quantised to 8 bits, then resized
+        if alpha is not None and not self.headers_only:  # composited at full size, quantised to 8 bits, then resized
             composited = _as_float(rgb, _unit(alpha), self.bg)
             rgb = np.clip(np.rint(composited * 255.0), 0, 255).astype(np.uint8)
-        rgb = _resize(rgb, camera.width, camera.height)
-        alpha = None if alpha is None else _resize(alpha, camera.width, camera.height)
+        rgb = self.resize(rgb, camera.width, camera.height)
+        alpha = None if alpha is None else self.resize(alpha, camera.width, camera.height)
         return rel, camera, rgb, alpha, True
+
+    def resize(self, image: np.ndarray, width: int, height: int, *, area: bool = False) -> np.ndarray:
+        """``image`` resized to ``width`` x ``height`` (`area_resize` when ``area``, else PIL
+        bicubic); headers only: zeros of that size."""
+        if self.headers_only:
+            return _blank((height, width, *image.shape[2:]))
+        return area_resize(image, width, height) if area else _resize(image, width, height)
+
+    def combine(self, alpha: np.ndarray | None, mask: np.ndarray) -> np.ndarray:
+        """`combine` of a photo's alpha and its mask (headers only: zeros of the mask's size)."""
+        return _blank(mask.shape) if self.headers_only else combine(alpha, mask)
 
     def defer(self, views: list, rel: str, camera: Camera, lens: Lens) -> None:
         """Leave a slot in ``views`` for an image to undistort (`finish` fills it)."""
@@ -329,11 +384,14 @@ class _Load:
         """Undistort every deferred view (one cached pycolmap pass) and fill its slot."""
         if not self.pending:
             return
-        from splatbench.data.undistort import undistort_views
+        from splatbench.data.undistort import undistort_views, undistorted_cameras
 
         models = sorted({p[4].model for p in self.pending})
-        done, folder, cached = undistort_views([(self.root / p[2], p[4]) for p in self.pending],
-                                               downscale=self.downscale, say=self.say)
+        sources = [(self.root / p[2], p[4]) for p in self.pending]
+        if self.headers_only:
+            done, folder, cached = undistorted_cameras(sources, downscale=self.downscale), None, False
+        else:
+            done, folder, cached = undistort_views(sources, downscale=self.downscale, say=self.say)
         for (_, _, rel, _, lens), u in zip(self.pending, done):
             # COLMAP's undistorter crops to the pixels that saw the scene: a real lens keeps most of them
             # (the fox's OPENCV lens: about 98 % of each side at downscale 8); coefficients that leave
@@ -344,12 +402,16 @@ class _Load:
                                  f"{u.width * self.downscale}x{u.height * self.downscale} of {lens.width}x"
                                  f"{lens.height} pixels (implausible distortion coefficients; check them)")
         first = done[0]
-        self.note(f"{len(done)} images with {'/'.join(models)} lens distortion undistorted by pycolmap (COLMAP's "
+        self.note(f"{len(done)} images with {'/'.join(models)} lens distortion "
+                  f"{'would be ' if folder is None else ''}undistorted by pycolmap (COLMAP's "
                   f"undistorter, cropped to valid pixels: {first.width}x{first.height} PINHOLE"
                   f"{f' after downscale {self.downscale}' if self.downscale > 1 else ''}); "
-                  f"{'reused' if cached else 'cached in'} {folder}")
+                  + ("not run: a dry check" if folder is None else f"{'reused' if cached else 'cached in'} {folder}"))
         for (views, i, rel, camera, _), u in zip(self.pending, done):
-            rgb, alpha = _read_image(u.path.parent, u.path.name, f"undistorted from {rel}")
+            if self.headers_only:
+                rgb, alpha = _blank((u.height, u.width, 3)), None
+            else:
+                rgb, alpha = _read_image(u.path.parent, u.path.name, f"undistorted from {rel}")
             if alpha is not None:  # composited as read (float); the alpha is not kept
                 rgb = _as_float(rgb, _unit(alpha), self.bg)
             views[i] = (rel, Camera(u.width, u.height, u.fx, u.fy, u.cx, u.cy, camera.world_to_camera,
@@ -364,6 +426,12 @@ class _Load:
             self.note(f"images are {w}x{h}: the long side exceeds 1600 px (graphdeco's train.py shrinks images wider "
                       f"than 1600 px to 1600 and {would}); splatbench keeps them (data.downscale=N trains smaller)")
         return self.notes
+
+
+def _blank(shape: tuple[int, ...]) -> np.ndarray:
+    """Read-only uint8 zeros of ``shape`` that take no memory (one element, broadcast): the
+    pixels of a view whose header alone was read (`check_dataset`)."""
+    return np.broadcast_to(np.zeros((), np.uint8), tuple(int(n) for n in shape))
 
 
 def _resize(image: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -578,16 +646,16 @@ def _load_llff(root: Path, test_every: int, load: _Load) -> Dataset:
     for i, name in enumerate(names):
         rel = f"{folder}/{name}"
         camera, near, far = llff.camera_from_row(rows[i], f"{poses}: row {i} ({rel})")
-        rgb, alpha = _read_image(root, rel, f"listed in {folder}/")
+        rgb, alpha = _read_image(root, rel, f"listed in {folder}/", load.headers_only)
         rgb_size = (rgb.shape[1], rgb.shape[0])
         read = _fit_camera(camera, rgb, rel, scale_ok=True)  # the folder's size; focal scaled to it
         target = read if factor == n else camera.scaled(1 / n)
         size = (target.width, target.height)
-        rgb = rgb if rgb.shape[1::-1] == size else area_resize(rgb, *size)
-        alpha = alpha if alpha is None or alpha.shape[::-1] == size else area_resize(alpha, *size)
+        rgb = rgb if rgb.shape[1::-1] == size else load.resize(rgb, *size, area=True)
+        alpha = alpha if alpha is None or alpha.shape[::-1] == size else load.resize(alpha, *size, area=True)
         if mask_folder:  # the mask folder of the image folder's own factor holds masks of its images' size
             exact = rgb_size if masks.folders.get(factor) == mask_folder else None
-            alpha = combine(alpha, masks.read(masks.file(mask_folder, rel), rel, size, exact))
+            alpha = load.combine(alpha, masks.read(masks.file(mask_folder, rel), rel, size, exact))
         views.append((rel, target, rgb, alpha, alpha is None))  # alpha composited per view (Split.image)
         bounds.append((near, far))
     first = views[0][1]
@@ -818,11 +886,16 @@ def _read_ply(root: Path, file: str, value: object) -> PointCloud:
 
 
 # ------------------------------------------------------------------------ shared
-def _read_image(root: Path, rel: str, context: str) -> tuple[np.ndarray, np.ndarray | None]:
-    """(rgb [H, W, 3], alpha [H, W] or None) of an image file, uint8 as stored."""
+def _read_image(root: Path, rel: str, context: str, headers_only: bool = False
+                ) -> tuple[np.ndarray, np.ndarray | None]:
+    """(rgb [H, W, 3], alpha [H, W] or None) of an image file, uint8 as stored (``headers_only``:
+    `_blank` of the header's size)."""
     path = root / rel
     if not path.is_file():
         raise InputError(f"{rel}: missing ({context})")
+    if headers_only:
+        width, height, has_alpha = image_header(path, what=rel)  # decompression bombs refused
+        return _blank((height, width, 3)), _blank((height, width)) if has_alpha else None
     arr, has_alpha = read_image_with_alpha(path, what=rel)  # decompression bombs refused
     if not has_alpha:
         return arr, None
@@ -846,12 +919,16 @@ def _split(root: Path, views: list, load: _Load) -> Split:
             raise InputError(f"{rel}: image size {rgb.shape[1]}x{rgb.shape[0]} differs from {names[0]}'s {w}x{h} "
                              f"(a split needs one image size)")
     alphas = None
-    if any(v[3] is not None for v in views):  # a view without alpha is opaque: 255 composites to itself exactly
+    if load.headers_only and any(v[3] is not None for v in views):
+        alphas = _blank((len(views), h, w))
+    elif any(v[3] is not None for v in views):  # a view without alpha is opaque: 255 composites to itself exactly
         alphas = np.stack([v[3] if v[3] is not None else np.full((h, w), 255, np.uint8) for v in views])
     raw = any(v[3] is not None and not v[4] for v in views)  # RGBA at full size: composited by Split.image
     composed = any(v[3] is not None and v[4] for v in views)  # RGBA composited before downscaling
     composite = load.bg if raw else None
-    if any(v[2].dtype != np.uint8 for v in views) or (raw and composed):
+    if load.headers_only:
+        images = _blank((len(views), h, w, 3))
+    elif any(v[2].dtype != np.uint8 for v in views) or (raw and composed):
         # a split mixing final and to-be-composited RGBA views, or holding float pixels: float32 now
         images = np.stack([_as_float(v[2], None if v[4] else _unit(v[3]), load.bg) for v in views])
         composite = None
@@ -867,15 +944,17 @@ def _split(root: Path, views: list, load: _Load) -> Split:
             if not path.is_file():
                 raise InputError(f"{path.relative_to(root).as_posix()}: missing (depth/ holds depth maps, "
                                  f"but none for {rel})")
-            d = read_npy(path, what=path.relative_to(root).as_posix())
-            if d.dtype.kind not in "fiu":
-                raise InputError(f"{path.relative_to(root).as_posix()}: depth dtype {d.dtype}, expected float32")
-            if d.shape != (h, w):
-                raise InputError(f"{path.relative_to(root).as_posix()}: depth shape {list(d.shape)} disagrees "
-                                 f"with its image {h}x{w}")
-            maps.append(d.astype(np.float32))
-        depths = np.stack(maps)
+            what = path.relative_to(root).as_posix()
+            shape, dtype = npy_shape(path, what=what)  # the header, checked against the file's size
+            if dtype.kind not in "fiu":
+                raise InputError(f"{what}: depth dtype {dtype}, expected float32")
+            if shape != (h, w):
+                raise InputError(f"{what}: depth shape {list(shape)} disagrees with its image {h}x{w}")
+            if not load.headers_only:
+                maps.append(read_npy(path, what=what).astype(np.float32))
+        depths = _blank((len(names), h, w)) if load.headers_only else np.stack(maps)
     return Split(images, cameras, depths, names, alphas, composite)
 
 
-__all__ = ["Dataset", "Split", "PointCloud", "load_dataset", "LAYOUTS", "PINHOLE_MODELS"]
+__all__ = ["Dataset", "DatasetCheck", "Split", "PointCloud", "load_dataset", "check_dataset", "LAYOUTS",
+           "PINHOLE_MODELS"]

@@ -63,8 +63,9 @@ class Masks:
     """The mask folders of ``root`` and the matches made so far (module doc). ``use``:
     False ignores them (``note`` says so); ``note`` gets the lines a user should know."""
 
-    def __init__(self, root: Path, use: bool, note: Callable[[str], None]) -> None:
+    def __init__(self, root: Path, use: bool, note: Callable[[str], None], *, headers_only: bool = False) -> None:
         self.root, self.note = root, note
+        self.headers_only = headers_only  # `read` checks a mask's header and decodes nothing (a dry run)
         self.folders = folders(root, "masks")
         self.enabled = use and bool(self.folders)
         self._index: dict[str, dict[str, list[str]]] = {}  # folder -> key -> mask files (relative to the folder)
@@ -126,22 +127,27 @@ class Masks:
     def read(self, mrel: str, rel: str, size: tuple[int, int], exact: tuple[int, int] | None) -> np.ndarray:
         """Mask file ``mrel`` of image ``rel`` as uint8 [H, W] at ``size`` (W, H): as stored,
         or reduced by area from a larger one of the same aspect. ``exact`` (W, H): the size
-        the file must have (a mask folder of the image folder's own factor)."""
-        from splatbench.safeio import read_image
+        the file must have (a mask folder of the image folder's own factor). ``headers_only``:
+        the header's size checked, zeros of ``size`` returned (read-only, no memory)."""
+        from splatbench.safeio import image_header, read_image
 
-        mask = read_image(self.root / mrel, what=mrel, mode="L")  # grey, 255 = the object
-        got = (mask.shape[1], mask.shape[0])
+        if self.headers_only:
+            mask = None
+            got = image_header(self.root / mrel, what=mrel)[:2]
+        else:
+            mask = read_image(self.root / mrel, what=mrel, mode="L")  # grey, 255 = the object
+            got = (mask.shape[1], mask.shape[0])
         fix = f"resize or re-export it to its image's size, {_OFF}"
         if exact is not None and got != exact:
             raise InputError(f"{mrel}: mask size {got[0]}x{got[1]} differs from its image {rel} {exact[0]}x{exact[1]} "
                              f"({fix})")
-        if got == size:
-            return mask
         w, h = size
-        if got[0] < w or got[1] < h or abs(got[1] * w / got[0] - h) > 1:  # the same aspect, to a pixel's rounding
+        if got != size and (got[0] < w or got[1] < h or abs(got[1] * w / got[0] - h) > 1):  # the same aspect, to a
             raise InputError(f"{mrel}: mask size {got[0]}x{got[1]} cannot be reduced to its image {rel}'s {w}x{h} "
-                             f"(a mask is its image's size, or larger with the same aspect; {fix})")
-        return area_resize(mask, w, h)
+                             f"(a mask is its image's size, or larger with the same aspect; {fix})")  # pixel's rounding
+        if mask is None:
+            return np.broadcast_to(np.zeros((), np.uint8), (h, w))
+        return mask if got == size else area_resize(mask, w, h)
 
     def finish(self) -> str:
         """The mask folders used (``"masks_8"``; ``""`` when none), after noting the masks

@@ -113,15 +113,11 @@ def undistort_views(sources: Sequence[tuple[Path, Lens]], *, downscale: int = 1,
             rgb = _read_rgb8(Path(path), lens)
             bitmap, cam = pycolmap.undistort_image(options, pycolmap.Bitmap.from_array(rgb), lens.to_pycolmap())
             image = bitmap.to_array()
-            fx, fy, cx, cy = (float(p) for p in cam.params)
-            w, h = int(cam.width), int(cam.height)
-            if downscale > 1:
+            w, h, fx, fy, cx, cy = _downscaled(cam, downscale)
+            if (w, h) != (int(cam.width), int(cam.height)):
                 from PIL import Image
 
-                nw, nh = max(1, round(w / downscale)), max(1, round(h / downscale))
-                image = np.asarray(Image.fromarray(image).resize((nw, nh), Image.Resampling.BICUBIC))
-                sx, sy = nw / w, nh / h
-                fx, fy, cx, cy, w, h = fx * sx, fy * sy, cx * sx, cy * sy, nw, nh
+                image = np.asarray(Image.fromarray(image).resize((w, h), Image.Resampling.BICUBIC))
             name = f"{k:05d}.png"
             from PIL import Image
 
@@ -134,7 +130,39 @@ def undistort_views(sources: Sequence[tuple[Path, Lens]], *, downscale: int = 1,
     return views, out, False
 
 
-def _read_rgb8(path: Path, lens: Lens) -> np.ndarray:
+def undistorted_cameras(sources: Sequence[tuple[Path, Lens]], *, downscale: int = 1) -> list[Undistorted]:
+    """What `undistort_views` makes of ``sources``, undistorting nothing (a dry run's check,
+    `splatbench.data.check_dataset`): each image's header checked as `undistort_views` checks it,
+    and the PINHOLE camera of its undistorted image -- ``pycolmap.undistort_camera``, the camera
+    COLMAP's image undistorter computes before it remaps -- downscaled as `undistort_views` does.
+    ``path``: the source image (no file is written)."""
+    from splatbench.interrupt import import_pycolmap
+
+    pycolmap = import_pycolmap()
+    options = pycolmap.UndistortCameraOptions()
+    out = []
+    for path, lens in sources:
+        _read_rgb8(Path(path), lens, decode=False)
+        w, h, fx, fy, cx, cy = _downscaled(pycolmap.undistort_camera(options, lens.to_pycolmap()), downscale)
+        out.append(Undistorted(Path(path), w, h, fx, fy, cx, cy))
+    return out
+
+
+def _downscaled(cam, downscale: int) -> tuple[int, int, float, float, float, float]:
+    """(width, height, fx, fy, cx, cy) of pycolmap's PINHOLE camera ``cam`` after downscaling
+    its image by ``downscale`` (rounded sides, at least 1 px; intrinsics scaled to them)."""
+    fx, fy, cx, cy = (float(p) for p in cam.params)
+    w, h = int(cam.width), int(cam.height)
+    if downscale > 1:
+        nw, nh = max(1, round(w / downscale)), max(1, round(h / downscale))
+        sx, sy = nw / w, nh / h
+        fx, fy, cx, cy, w, h = fx * sx, fy * sy, cx * sx, cy * sy, nw, nh
+    return w, h, fx, fy, cx, cy
+
+
+def _read_rgb8(path: Path, lens: Lens, *, decode: bool = True) -> np.ndarray | None:
+    """The RGB pixels of a distorted photo, its header checked first (no alpha, the lens's
+    size); ``decode=False``: the checks alone (None)."""
     from PIL import Image
 
     try:
@@ -142,12 +170,14 @@ def _read_rgb8(path: Path, lens: Lens) -> np.ndarray:
             if im.mode in ("RGBA", "LA", "PA"):
                 raise InputError(f"{path}: an image with alpha cannot be undistorted here (its camera is "
                                  f"{lens.model}); give RGB photos")
+            if im.size != (lens.width, lens.height):
+                raise InputError(f"{path}: image size {im.size[0]}x{im.size[1]} disagrees with its camera "
+                                 f"{lens.width}x{lens.height}")
+            if not decode:
+                return None
             rgb = np.asarray(im.convert("RGB"))
     except OSError as exc:
         raise InputError(f"{path}: cannot read the image ({exc})") from None
-    if rgb.shape[:2] != (lens.height, lens.width):
-        raise InputError(f"{path}: image size {rgb.shape[1]}x{rgb.shape[0]} disagrees with its camera "
-                         f"{lens.width}x{lens.height}")
     return np.ascontiguousarray(rgb)
 
 
@@ -163,4 +193,4 @@ def _read_manifest(folder: Path, count: int) -> list[Undistorted] | None:
     return views
 
 
-__all__ = ["Lens", "Undistorted", "UNDISTORTED_MODELS", "check_lens", "undistort_views"]
+__all__ = ["Lens", "Undistorted", "UNDISTORTED_MODELS", "check_lens", "undistort_views", "undistorted_cameras"]

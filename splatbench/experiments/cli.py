@@ -18,7 +18,8 @@ import click
               help="Dask scheduler (with --executor dask; default: a LocalCluster on 127.0.0.1).")
 @click.option("--results", type=click.Path(path_type=Path, file_okay=False), default=None,
               help="Results folder (default: [runner] results, else ./results).")
-@click.option("--dry-run", is_flag=True, help="List the runs and whether each is done; run nothing.")
+@click.option("--dry-run", is_flag=True, help="Check the runs' dataset folders (file names and image headers), list the "
+                                             "runs and whether each is done; run nothing.")
 @click.option("--check/--no-check", default=True, show_default=True,
               help="Also run the file's [check] (its headline at another protocol, after the grid's runs).")
 @click.option("--check-only", is_flag=True,
@@ -75,8 +76,9 @@ def _dry_run(spec, results: Path, check: bool, check_only: bool = False, reuse: 
     if check_only:
         runs = []
     from splatbench.experiments.kinds import get_kind
-    from splatbench.experiments.runner import find_reusable
+    from splatbench.experiments.runner import check_inputs, find_reusable
 
+    inputs = check_inputs(spec, [*runs, *checks])  # one line and nothing listed when a run cannot read its data
     records = read_records(experiment_dir(results, spec.name))
     pending = [r for r in (*runs, *checks) if r.run_id not in records or records[r.run_id].status != "done"]
     reusable = find_reusable(Path(results), spec, pending) if reuse and get_kind(spec.kind).reusable else {}
@@ -90,6 +92,8 @@ def _dry_run(spec, results: Path, check: bool, check_only: bool = False, reuse: 
             tag += f"  (from {source.reused_from or source.experiment})"
         labels = " ".join(f"{k}={v}" for k, v in r.labels.items())
         click.echo(f"{r.run_id}  {status:<8}  {r.scene}  seed={r.seed}  {labels}{tag}".rstrip())
+    for line in inputs:
+        click.echo(line)
     total = len(runs) + len(checks)
     click.echo(f"{total} run{'' if total == 1 else 's'} in {experiment_dir(results, spec.name)}"
                + (" (the check's only; the grid's left out)" if check_only else

@@ -16,6 +16,10 @@ one of your own); the runner never needs to know which kind it holds::
     scenes() -> set[str]                     optional: known scene names (None: any name)
     prepare(configs) -> Any                  optional: once, in the parent, before any run;
                                              what it returns is ``run``'s ``prepared``
+    check_inputs(configs) -> list[str]       optional: cheap checks of what the runs will read
+                                             (files, headers; nothing decoded or rendered), in the
+                                             parent before anything runs and in ``--dry-run``: one
+                                             InputError line, else a line per input checked
     protocols                                optional `KindProtocols`: a cell rerun under a named
                                              protocol (an experiment's ``[check]``)
     report                                   optional `KindReport`: what its reports show, and
@@ -91,10 +95,14 @@ class RunResult:
         hides what a single run would have printed.
     curves: any JSON-serialisable value (e.g. ``{"step": [...], "psnr": [...]}``), kept whole in
         the run's file and as one JSON string column ``curves``.
+    notes: one line each, what the run's tool noted of how it read its inputs (a training run's
+        `TrainResult.notes`: the dataset loader's lines, the start's, the background's); kept in
+        the run's file (`RunRecord.notes`) and the table's ``notes`` column, where a report reads them.
     """
 
     warnings: tuple[str, ...] = ()
     curves: Any = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
 
 
 def metric_specs(result: type[RunResult]) -> tuple[MetricSpec, ...]:
@@ -209,6 +217,7 @@ class RunKind:
     identity: Callable[[dict[str, Any]], dict[str, Any]] | None = None
     scenes: Callable[[], set[str]] | None = None
     prepare: Callable[[list[dict[str, Any]]], Any] | None = None
+    check_inputs: Callable[[list[dict[str, Any]]], list[str]] | None = None
     description: str = ""
     #: What its reports show (None: every numeric metric, the first one compared).
     report: KindReport | None = None
@@ -275,10 +284,12 @@ def check_output(output: Any, kind: RunKind) -> RunResult:
     for anything else."""
     if not isinstance(output, kind.result):
         raise TypeError(f"run kind {kind.name!r} returned {type(output).__name__}, not {kind.result.__name__}")
-    warnings = tuple(output.warnings)
-    if not all(isinstance(w, str) for w in warnings):
-        raise TypeError(f"run kind {kind.name!r}: warnings must be strings, got {list(warnings)!r:.80}")
-    return dataclasses.replace(output, warnings=tuple(" ".join(w.split()) for w in warnings))
+    warnings, notes = tuple(output.warnings), tuple(output.notes)
+    for name, lines in (("warnings", warnings), ("notes", notes)):
+        if not all(isinstance(w, str) for w in lines):
+            raise TypeError(f"run kind {kind.name!r}: {name} must be strings, got {list(lines)!r:.80}")
+    return dataclasses.replace(output, warnings=tuple(" ".join(w.split()) for w in warnings),
+                               notes=tuple(" ".join(n.split()) for n in notes))
 
 
 def metric_values(result: RunResult) -> dict[str, Scalar]:

@@ -70,7 +70,7 @@ def execute_run(run: RunSpec, results_dir: str, context: RunContext = RunContext
         bound_threads(context.threads)
         output = check_output(call_run(kind.run, plain(run.config), workdir, context.prepared), kind)
         record.metrics, record.curves = metric_values(output), output.curves
-        record.warnings = list(output.warnings)
+        record.warnings, record.notes = list(output.warnings), list(output.notes)
     except Exception as exc:  # noqa: BLE001 - every failure of a run is recorded, not raised
         record.status, record.error = "failed", one_line(exc)
         record.traceback = traceback.format_exc()

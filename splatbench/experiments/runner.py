@@ -92,6 +92,33 @@ class RunSummary:
                 f"another runner, failed {self.failed} of {self.total}")
 
 
+class WarningTally:
+    """The distinct warnings of an invocation's runs (`RunRecord.warnings`), in the order first
+    seen, each with the number of runs that gave it: a run's warning is shown in full the first
+    time any run gives it (`first_seen`); identical ones after it are counted, not repeated, and
+    `summary` lists each warning that several runs gave with its count (``x 57``)."""
+
+    def __init__(self) -> None:
+        self.runs: dict[str, int] = {}  # warning -> runs that gave it, in the order first seen
+
+    def first_seen(self, warnings: list[str]) -> list[str]:
+        """Count a run's ``warnings`` (each once per run); return those no earlier run gave, in order."""
+        new = [w for w in dict.fromkeys(warnings) if w not in self.runs]
+        for w in dict.fromkeys(warnings):
+            self.runs[w] = self.runs.get(w, 0) + 1
+        return new
+
+    def summary(self, name: str) -> list[str]:
+        """One line per warning that more than one run gave (``NAME: x 57 runs warned: TEXT``),
+        after a header line; [] when every warning came from one run (each was shown with it)."""
+        repeated = [(w, n) for w, n in self.runs.items() if n > 1]
+        if not repeated:
+            return []
+        return [f"{name}: {len(self.runs)} distinct warnings from this invocation's runs, each shown above with "
+                f"the first run that gave it; given by several runs:",
+                *(f"{name}: x {n} runs warned: {w}" for w, n in repeated)]
+
+
 # --------------------------------------------------------------------------- parent side
 def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor: str = "local",
                    scheduler: str | None = None, results_dir: str | Path, progress: bool = True,
@@ -129,6 +156,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
 
     grid = expand(spec, known_scenes=known_scenes)
     checks = check_runs(spec) if check else []
+    check_inputs(spec, [*grid, *checks])
     table_ids = [r.run_id for r in (*grid, *checks)]  # the folder's table: every run this folder may hold
     if check_only:
         grid = []
@@ -173,6 +201,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
 
     threads = max(1, cpus // workers)
     done = failed = claimed = warned = 0
+    tally = WarningTally()
     claims: dict[str, RunClaim] = {}
     bar = _progress_bar(len(pending), spec.name, progress)
 
@@ -220,9 +249,9 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
             done += 1
             if record.warnings:
                 warned += 1
-                say(f"{spec.name}: run {record.run_id} ({record.scene}, seed {record.seed}) warned: "
-                    f"{record.warnings[0]}" + (f" (and {len(record.warnings) - 1} more)"
-                                               if len(record.warnings) > 1 else ""))
+                new = tally.first_seen(record.warnings)  # each distinct warning once, in full; repeats counted
+                for warning in new:
+                    say(f"{spec.name}: run {record.run_id} ({record.scene}, seed {record.seed}) warned: {warning}")
         else:
             failed += 1
             say(f"{spec.name}: run {record.run_id} ({record.scene}, seed {record.seed}) failed: {record.error}")
@@ -252,6 +281,8 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     finally:
         if bar is not None:
             bar.close()
+        for line in tally.summary(spec.name):  # interrupted too: what the finished runs warned of
+            _log(line)
     return RunSummary(done=done, skipped=skipped, failed=failed, total=len(runs), folder=folder, claimed=claimed,
                       warned=warned, reused=len(reused))
 
@@ -300,6 +331,20 @@ def find_reusable(results_dir: Path, spec: ExperimentSpec,
                 found[run.run_id] = (run, source)
                 break
     return found
+
+
+def check_inputs(spec: ExperimentSpec, runs: list[RunSpec]) -> list[str]:
+    """The kind's cheap checks of what ``runs`` will read (`RunKind.check_inputs`: the train
+    kind's dataset folders, from file names and image headers): one `InputError` line
+    ``SOURCE: scenes.NAME: problem and fix`` before anything runs (and in ``--dry-run``);
+    else the kind's line per input checked ([] for a kind without the check)."""
+    kind = get_kind(spec.kind)
+    if kind.check_inputs is None or not runs:
+        return []
+    try:
+        return kind.check_inputs([plain(r.config) for r in runs])
+    except InputError as exc:
+        raise InputError(f"{spec.source}: {exc}") from None
 
 
 def check_only_problem(spec: ExperimentSpec, check: bool = True) -> None:
@@ -421,4 +466,4 @@ def _log(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
-__all__ = ["RunSummary", "execution_order", "find_reusable", "reuse_finished", "run_experiment"]
+__all__ = ["RunSummary", "WarningTally", "check_inputs", "execution_order", "find_reusable", "reuse_finished", "run_experiment"]

@@ -17,7 +17,8 @@ Table columns: ``run_id, experiment, kind, scene, seed, status, error`` (the
 deterministic core), ``seconds, started, finished, worker, code, reused_from`` (`VOLATILE_COLUMNS`:
 when, where, at which commit and for which experiment it ran), then ``axis.<name>`` (the run's axis labels),
 ``config.<dotted.path>`` (every resolved config field but scene and seed),
-``metric.<name>``, ``warnings`` (JSON list, None for none) and ``curves`` (JSON text). A column whose values mix types
+``metric.<name>``, ``notes`` (JSON list, None for none; only when a record has notes), ``warnings`` (JSON list, None
+for none) and ``curves`` (JSON text). A column whose values mix types
 (``sh_degree`` 0..3 and ``"auto"``) holds their JSON text; lists and tables too.
 """
 
@@ -65,7 +66,11 @@ class RunRecord:
     (`splatbench.versions.code_version`: ``git:<commit>``, ``+dirty`` with local changes; "" in
     files written before runs recorded it); reused_from: the experiment this run ran for when this
     record is a copy of the same run finished there ("" for a run made for this experiment: the
-    runner's reuse, `splatbench.experiments.runner.reuse_finished`).
+    runner's reuse, `splatbench.experiments.runner.reuse_finished`); notes: the run's one-line notes
+    of how it read its inputs (`RunResult.notes`: a train run's loader notes, e.g. "images_8/ read and
+    reduced by 3.125", undistortion, masks, the split rule, the SfM start's points); absent from files
+    written before them and from a record without notes (written only when there are some, so a record
+    without them is byte for byte the earlier format).
     """
 
     run_id: str
@@ -87,9 +92,13 @@ class RunRecord:
     worker: str = ""
     code: str = ""
     reused_from: str = ""
+    notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"format": RECORD_FORMAT, **asdict(self)}
+        data = {"format": RECORD_FORMAT, **asdict(self)}
+        if not self.notes:
+            del data["notes"]
+        return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> RunRecord:
@@ -103,6 +112,8 @@ class RunRecord:
         row.update({f"config.{k}": v for k, v in flatten(self.config).items() if k not in ("scene", "seed")}
                    if self.config else {})
         row.update({f"metric.{k}": v for k, v in self.metrics.items()})
+        if self.notes:
+            row["notes"] = json.dumps(self.notes)
         row["warnings"] = json.dumps(self.warnings) if self.warnings else None
         row["curves"] = None if self.curves is None else json.dumps(self.curves, sort_keys=True)
         return row
@@ -133,7 +144,7 @@ _FIELD_TYPES: dict[str, tuple[type, ...]] = {
     "run_id": (str,), "experiment": (str,), "kind": (str,), "scene": (str,), "seed": (int,), "status": (str,),
     "config": (dict,), "labels": (dict,), "metrics": (dict,), "warnings": (list,), "error": (str, type(None)),
     "traceback": (str, type(None)), "seconds": (int, float), "started": (str,), "finished": (str,),
-    "worker": (str,), "code": (str,), "reused_from": (str,)}
+    "worker": (str,), "code": (str,), "reused_from": (str,), "notes": (list,)}
 
 
 def check_record(data: Any, name: str) -> RunRecord:
@@ -155,8 +166,9 @@ def check_record(data: Any, name: str) -> RunRecord:
         value = data[key]
         if not isinstance(value, types) or isinstance(value, bool):
             raise ValueError(f"{key}: expected {' or '.join(t.__name__ for t in types)}, got {value!r:.60}")
-    if not all(isinstance(w, str) for w in data.get("warnings", [])):
-        raise ValueError(f"warnings: expected a list of strings, got {data['warnings']!r:.60}")
+    for key in ("warnings", "notes"):
+        if not all(isinstance(w, str) for w in data.get(key, [])):
+            raise ValueError(f"{key}: expected a list of strings, got {data[key]!r:.60}")
     record = RunRecord.from_dict(data)
     if record.status not in STATUSES:
         raise ValueError(f"status: expected one of {', '.join(STATUSES)}, got {record.status!r:.60}")
@@ -224,9 +236,10 @@ def build_table(records: Iterable[RunRecord]) -> pd.DataFrame:
     """One row per record, in the given order (module doc: columns)."""
     rows = [r.row() for r in records]
     fixed = [*CORE_COLUMNS, *VOLATILE_COLUMNS]
-    extra = sorted({k for row in rows for k in row} - set(fixed) - {"warnings", "curves"},
+    extra = sorted({k for row in rows for k in row} - set(fixed) - {"notes", "warnings", "curves"},
                    key=lambda c: (("axis.", "config.", "metric.").index(c[:c.index(".") + 1]), c))
-    columns = [*fixed, *extra, "warnings", "curves"]
+    notes = ["notes"] if any("notes" in row for row in rows) else []  # absent from tables of records without
+    columns = [*fixed, *extra, *notes, "warnings", "curves"]
     frame = pd.DataFrame({c: _column([row.get(c) for row in rows]) for c in columns}, columns=columns)
     return frame
 

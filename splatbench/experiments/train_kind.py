@@ -185,7 +185,8 @@ class TrainRun(RunResult):
     def of(cls, result, dataset_hash: str | None, *, own_peak: bool = False) -> TrainRun:
         """The record of a `splatbench.train.TrainResult`: its own metrics by name, the load
         (`TrainResult.load`) and the strategy's counts (`TrainResult.topology`; None before
-        they were recorded) flattened, its warnings and its curves (`CURVE_KEYS`). ``own_peak``:
+        they were recorded) flattened, its warnings, its notes (the loader's, the start's, the
+        background's: `TrainResult.notes`) and its curves (`CURVE_KEYS`). ``own_peak``:
         the process's peak RSS was reset as the run started, so ``result.peak_rss_mb`` is the
         run's own (``run_peak_rss_mb``; None otherwise)."""
         names = {m.name for m in metric_specs(cls)}
@@ -215,7 +216,7 @@ class TrainRun(RunResult):
                   "image_width": result.image_size[0] if result.image_size else None,
                   "image_height": result.image_size[1] if result.image_size else None,
                   "worst_view_psnr": min(result.test_view_psnr) if result.test_view_psnr else None}
-        return cls(**values, warnings=tuple(result.warnings), curves=curves)
+        return cls(**values, warnings=tuple(result.warnings), curves=curves, notes=tuple(result.notes))
 
 
 # --------------------------------------------------------------------------- config
@@ -376,7 +377,7 @@ def prepare(configs: list[dict[str, Any]]) -> Prepared:
             from splatbench.data import load_dataset
 
             ds = load_dataset(data["path"], layout=data["layout"], test_every=data["test_every"],
-                              downscale=data["downscale"], say=lambda line: print(line, file=sys.stderr, flush=True))
+                              downscale=data["downscale"], masks=data["masks"], say=lambda line: print(line, file=sys.stderr, flush=True))
             print(f"dataset {config['scene']}: {data['path']} (downscale {data['downscale']}: "
                   f"{len(ds.train)} train, {len(ds.test)} test views)", file=sys.stderr, flush=True)
             path = Path(data["path"])
@@ -398,6 +399,71 @@ def prepare(configs: list[dict[str, Any]]) -> Prepared:
         for poses, layout, test_every in needs:
             _prepare_sfm(path, data.get("downscale") or 1, poses, layout, test_every)
     return prepared
+
+
+def check_inputs(configs: list[dict[str, Any]]) -> list[str]:
+    """Check each dataset folder the runs read (resolved configs), as each run reads it, from
+    file names and image headers alone (`splatbench.data.check_dataset`: the loader's own
+    checks; nothing decoded, undistorted or triangulated), and that its views are as large as
+    the run's metrics need (`min_side`). One `InputError` line naming the scene
+    (``scenes.NAME:``), the file or field, and the fix; else one line per folder and reading."""
+    from splatbench.data import check_dataset
+    from splatbench.experiments.configs import canonical_json
+
+    found: dict[str, Any] = {}
+    lines = []
+    for config in configs:
+        scene, data = config["scene"], config["data"]
+        if scene_type(data) != "folder":
+            continue
+        key = canonical_json([scene, data])
+        if key not in found:
+            try:
+                found[key] = check = check_dataset(data["path"], layout=data["layout"], test_every=data["test_every"],
+                                                   downscale=data["downscale"], masks=data["masks"])
+            except InputError as exc:
+                raise InputError(f"scenes.{scene}: {exc}") from None
+            lines.append(f"scene {scene}: {data['path']}: {check.layout}, {check.train_views} train and "
+                         f"{check.test_views} test views of {check.width}x{check.height} px (data.downscale="
+                         f"{data['downscale']}{f', {check.masks}/ as alphas' if check.masks else ''})")
+        check = found[key]
+        need, why = min_side(config, check)
+        if check.width and min(check.width, check.height) < need:
+            n = data["downscale"]
+            largest = max(1, n * min(check.width, check.height) // need)
+            raise InputError(f"scenes.{scene}: data.downscale={n}: its views are {check.width}x{check.height} px, "
+                             f"under the {need} px a side that {why} needs; set the scene's downscale to at most "
+                             f"about {largest}" + (", or eval.lpips_net = \"none\"" if "LPIPS" in why else ""))
+    return lines
+
+
+def min_side(config: dict[str, Any], check) -> tuple[int, str]:
+    """(The fewest pixels a side of a run's views may have, what needs them): the SSIM window of
+    the loss and the evaluation (``loss.ssim_window``: more than half of it), and the LPIPS nets
+    the run computes (`splatbench.train.loop.lpips_plan`, which skips LPIPS under 16 px; then
+    `splatbench.metrics.perceptual.MIN_SIDE` of each: AlexNet 31). ``check``: a `DatasetCheck`."""
+    from splatbench.metrics.perceptual import MIN_SIDE
+    from splatbench.train.loop import lpips_plan
+
+    cfg = _train_config(_split(config)[2])
+    need, why = cfg.loss.ssim_window // 2 + 1, f"SSIM's {cfg.loss.ssim_window}-px window (loss.ssim_window)"
+    final, curves, _ = lpips_plan(cfg, _Views(check.test_views, (check.height, check.width)))
+    nets = sorted({net for net, _ in (*final, *curves)}, key=lambda net: -MIN_SIDE[net])
+    if nets and MIN_SIDE[nets[0]] > need:
+        need, why = MIN_SIDE[nets[0]], (f"LPIPS with {' and '.join(nets)} (eval.lpips_net = "
+                                        f"\"{cfg.eval.lpips_net}\"; the curves' LPIPS is AlexNet's)")
+    return need, why
+
+
+@dataclasses.dataclass(frozen=True)
+class _Views:
+    """What `lpips_plan` reads of a test split: its length and (H, W)."""
+
+    count: int
+    image_size: tuple[int, int]
+
+    def __len__(self) -> int:
+        return self.count
 
 
 def _prepare_sfm(path: Path, downscale: int, poses: str, layout: str, test_every: int) -> None:
@@ -495,7 +561,8 @@ REPORT = KindReport(
 
 #: The ``train`` kind (``kind = "train"``).
 TRAIN = RunKind(name="train", validate=validate, run=run, config=TrainConfig, result=TrainRun, resolve=resolve,
-                identity=identity, scenes=scenes, prepare=prepare, report=REPORT, planned=planned,
+                identity=identity, scenes=scenes, prepare=prepare, check_inputs=check_inputs, report=REPORT,
+                planned=planned,
                 description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)",
                 protocols=KindProtocols(with_protocol, describe_protocol), reusable=True)
 

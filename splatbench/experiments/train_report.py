@@ -1,6 +1,7 @@
 """The train kind's report hooks (`KindReport.header_notes`, ``axis_notes``, ``metric_notes``):
 what its reports say beyond the tables, from what the runs recorded (their resolved
-``config.*`` columns and metrics), never from prose.
+``config.*`` columns and metrics, and, for how a capture's photos were read, the loader's notes
+the runs recorded: ``notes``, `_READ_NOTES`), never from prose written here.
 
 * header: `protocol_lines`, the protocol the runs followed (below);
 * axis notes: `auto_sh_degree_note` (the degree ``auto`` ended at), `schedule_confound_note`
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -401,8 +403,9 @@ def _resolution(done: pd.DataFrame) -> str:
         if kinds.get(str(scene)) != "capture":
             continue
         down = _one(rows, "config.data.downscale", _g)
-        size = _image_size(rows)
-        captures.append(f"{scene} " + (f"1/{down}" if down else "at full size") + (f" ({size} px)" if size else ""))
+        size, read = _image_size(rows), _how_read(rows)
+        detail = "; ".join(([f"{size} px"] if size else []) + ([read] if read else []))
+        captures.append(f"{scene} " + (f"1/{down}" if down else "at full size") + (f" ({detail})" if detail else ""))
         sizes = carried(rows, ("metric.image_width",)).get("metric.image_width", pd.Series([None]))
         unsized += [str(scene)] if pd.isna(sizes).any() else []
     if captures:
@@ -413,6 +416,27 @@ def _resolution(done: pd.DataFrame) -> str:
                         + (", or some of them" if any(_image_size(r) for sc, r in done.groupby("scene") if str(sc) in
                                                       unsized) else "") + ")" if unsized else ""))
     return "; ".join(parts) or "not recorded"
+
+
+#: How a capture's photos were read, as the Resolution line says it, from the loader's notes its runs recorded
+#: (`RunRecord.notes`, in `splatbench.data.load_dataset`'s words): (pattern, the words said).
+_READ_NOTES = tuple((re.compile(pattern), words) for pattern, words in (
+    (r"\d+ images with ([\w/]+) lens distortion undistorted by pycolmap", r"\1 lens distortion undistorted by pycolmap"),
+    (r"(images(?:_\d+)?)/ read and reduced by ([\d.]+) ", r"\1/ reduced by \2 on load"),
+    (r"(images(?:_\d+)?)/ read at ", r"\1/ as stored"),
+    (r"downscale \d+: reading (images_\d+)/", r"\1/ as stored"),
+    (r"^masks: (masks(?:_\d+)?)/ \(", r"\1/ as alphas")))
+
+
+def _how_read(rows: pd.DataFrame) -> str:
+    """How a capture's photos were read (the images folder, a reduction on load, undistortion, masks),
+    from the loader's notes its runs recorded (`_READ_NOTES`), each once, in order; "" where they
+    recorded none (runs before notes were recorded)."""
+    said = []
+    for raw in rows["notes"].dropna() if "notes" in rows.columns else ():
+        for note in json.loads(raw) if isinstance(raw, str) else raw:
+            said += [m.expand(words) for pattern, words in _READ_NOTES for m in [pattern.search(note)] if m]
+    return "; ".join(dict.fromkeys(said))
 
 
 #: The evidence rule for a headline's scenes (docs/reports.md, "How many scenes a finding stands on"): 3 scenes, 2
