@@ -248,3 +248,40 @@ def test_real_captures_dry_run_keeps_the_committed_run_ids_and_refuses_a_bad_dow
     assert out.exit_code != 0 and len(out.output.strip().splitlines()) == 1
     assert "scenes.maryrose: data.downscale=4: no image folder serves it" in out.output
     assert "available factors 8 from images_8/" in out.output
+
+
+class _TestSplit:
+    """What `lpips_plan` reads of a test split: its length and (H, W)."""
+
+    def __init__(self, count: int, size: tuple[int, int]):
+        self.count, self.image_size = count, size
+
+    def __len__(self) -> int:
+        return self.count
+
+
+@needs_weights
+@pytest.mark.parametrize("side, net, final, curves", [
+    (31, "alex", ["alex"], ["alex"]),  # AlexNet's MIN_SIDE exactly: both computed
+    (30, "alex", [], []),              # one pixel short: AlexNet in neither (it would fail inside the net)
+    (20, "vgg", ["vgg"], []),          # VGG needs 16, the curves' AlexNet 31: the final VGG is kept
+    (15, "vgg", [], []),
+])
+def test_a_run_skips_each_lpips_net_its_test_images_are_too_small_for(side, net, final, curves):
+    """The training loop's LPIPS plan drops a net whose first layers need more pixels a side than
+    the test images have (MIN_SIDE), with a note naming it, instead of failing at the first
+    evaluation; a grid is refused up front by the dry run instead (above)."""
+    from splatbench.metrics.perceptual import weights_path
+    from splatbench.train.config import EvalConfig, TrainConfig
+    from splatbench.train.loop import lpips_plan
+
+    try:
+        weights_path("vgg")
+    except InputError:
+        pytest.skip("VGG weights not installed")
+    cfg = TrainConfig(eval=EvalConfig(lpips_net=net))
+    got_final, got_curves, note = lpips_plan(cfg, _TestSplit(3, (side, side + 7)))
+    assert [n for n, _ in got_final] == final and [n for n, _ in got_curves] == curves
+    assert (note == "") == (final == [net] and curves == ["alex"]), note
+    if note:
+        assert f"{side + 7}x{side} px" in note

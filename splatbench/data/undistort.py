@@ -109,18 +109,16 @@ def undistort_views(sources: Sequence[tuple[Path, Lens]], *, downscale: int = 1,
     with building_dir(out, accept_existing=lambda p: _read_manifest(p, len(sources)) is not None) as tmp:
         records = []
         options = pycolmap.UndistortCameraOptions()  # COLMAP's defaults: crop to valid pixels
+        from PIL import Image
+
         for k, (path, lens) in enumerate(sources):
             rgb = _read_rgb8(Path(path), lens)
             bitmap, cam = pycolmap.undistort_image(options, pycolmap.Bitmap.from_array(rgb), lens.to_pycolmap())
             image = bitmap.to_array()
             w, h, fx, fy, cx, cy = _downscaled(cam, downscale)
             if (w, h) != (int(cam.width), int(cam.height)):
-                from PIL import Image
-
                 image = np.asarray(Image.fromarray(image).resize((w, h), Image.Resampling.BICUBIC))
             name = f"{k:05d}.png"
-            from PIL import Image
-
             Image.fromarray(np.ascontiguousarray(image)).save(tmp / name)
             records.append({"file": name, "source": str(path), "width": w, "height": h,
                             "fx": fx, "fy": fy, "cx": cx, "cy": cy})

@@ -440,30 +440,20 @@ def check_inputs(configs: list[dict[str, Any]]) -> list[str]:
 def min_side(config: dict[str, Any], check) -> tuple[int, str]:
     """(The fewest pixels a side of a run's views may have, what needs them): the SSIM window of
     the loss and the evaluation (``loss.ssim_window``: more than half of it), and the LPIPS nets
-    the run computes (`splatbench.train.loop.lpips_plan`, which skips LPIPS under 16 px; then
-    `splatbench.metrics.perceptual.MIN_SIDE` of each: AlexNet 31). ``check``: a `DatasetCheck`."""
+    the run's settings ask for (`splatbench.train.loop.lpips_nets`; `splatbench.metrics.perceptual.MIN_SIDE`
+    of each: AlexNet 31): a run would compute no LPIPS under them (`lpips_plan`'s note), so a grid
+    is refused up front. ``check``: a `DatasetCheck`."""
     from splatbench.metrics.perceptual import MIN_SIDE
-    from splatbench.train.loop import lpips_plan
+    from splatbench.train.loop import lpips_nets
 
-    cfg = _train_config(_split(config)[2])
+    cfg = train_config(split(config)[2])
     need, why = cfg.loss.ssim_window // 2 + 1, f"SSIM's {cfg.loss.ssim_window}-px window (loss.ssim_window)"
-    final, curves, _ = lpips_plan(cfg, _Views(check.test_views, (check.height, check.width)))
+    final, curves, _ = lpips_nets(cfg, check.test_views)
     nets = sorted({net for net, _ in (*final, *curves)}, key=lambda net: -MIN_SIDE[net])
     if nets and MIN_SIDE[nets[0]] > need:
         need, why = MIN_SIDE[nets[0]], (f"LPIPS with {' and '.join(nets)} (eval.lpips_net = "
                                         f"\"{cfg.eval.lpips_net}\"; the curves' LPIPS is AlexNet's)")
     return need, why
-
-
-@dataclasses.dataclass(frozen=True)
-class _Views:
-    """What `lpips_plan` reads of a test split: its length and (H, W)."""
-
-    count: int
-    image_size: tuple[int, int]
-
-    def __len__(self) -> int:
-        return self.count
 
 
 def _prepare_sfm(path: Path, downscale: int, poses: str, layout: str, test_every: int) -> None:

@@ -407,22 +407,36 @@ class Trainer:
 CURVE_LPIPS = ("alex", True)
 
 
-def lpips_plan(config: TrainConfig, test) -> tuple[list[tuple[str, bool]], list[tuple[str, bool]], str]:
-    """(the final evaluation's LPIPS ``[(net, scale_inputs)]``, the curves', a note when
-    LPIPS is skipped): none with ``lpips_net="none"``, without the weights installed, or
-    for test images under 16 px (AlexNet's first layers need them)."""
+def lpips_nets(config: TrainConfig, num_test: int) -> tuple[list[tuple[str, bool]], list[tuple[str, bool]], str]:
+    """(the final evaluation's LPIPS ``[(net, scale_inputs)]``, the curves', a note when LPIPS is
+    skipped) before the images' size is known: none with ``lpips_net="none"``, no test views, or
+    without the weights installed (`lpips_plan` then drops what the images are too small for)."""
     from splatbench.metrics.perceptual import weights_path
 
-    if config.eval.lpips_net == "none" or len(test) == 0:
+    if config.eval.lpips_net == "none" or num_test == 0:
         return [], [], ""
     try:
         weights_path(config.eval.lpips_net), weights_path(CURVE_LPIPS[0])
     except InputError as exc:
         return [], [], f"LPIPS skipped: {exc}"
-    height, width = test.image_size
-    if min(height, width) < 16:
-        return [], [], f"LPIPS skipped: test images of {width}x{height} px are under 16 px on a side"
     return [(config.eval.lpips_net, config.eval.lpips_scale_inputs)], [CURVE_LPIPS], ""
+
+
+def lpips_plan(config: TrainConfig, test) -> tuple[list[tuple[str, bool]], list[tuple[str, bool]], str]:
+    """(the final evaluation's LPIPS ``[(net, scale_inputs)]``, the curves', a note when
+    LPIPS is skipped): `lpips_nets`, less each net whose first layers need more pixels a side
+    than the test images have (`splatbench.metrics.perceptual.MIN_SIDE`: AlexNet 31, VGG 16)."""
+    from splatbench.metrics.perceptual import MIN_SIDE
+
+    final, curves, note = lpips_nets(config, len(test))
+    height, width = test.image_size if final else (0, 0)
+    small = sorted({net for net, _ in (*final, *curves) if MIN_SIDE[net] > min(height, width)})
+    if not final or not small:
+        return final, curves, note
+    need = ", ".join(f"{net} {MIN_SIDE[net]} px" for net in small)
+    return ([n for n in final if n[0] not in small], [n for n in curves if n[0] not in small],
+            f"LPIPS ({', '.join(small)}) skipped: test images of {width}x{height} px are under what the "
+            f"net needs a side ({need}); a larger data.resolution or a smaller data.downscale computes it")
 
 
 def step_lpips(final: list[tuple[str, bool]]) -> list[tuple[str, bool]]:
