@@ -20,7 +20,7 @@ from splatbench.experiments import RunRecord, expand, parse_experiment
 from splatbench.experiments.store import write_record, write_table
 from splatbench.metrics.stats import Interval
 from splatbench.reports import build_report, write_report
-from splatbench.reports.findings import fmt_interval, judge
+from splatbench.reports.findings import fmt_interval, judge, reading
 from splatbench.reports.settling import cell_settling, last_quarter_slope, settling_finding
 from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
 from splatbench.experiments.train_kind import TRAIN
@@ -75,7 +75,7 @@ def test_a_small_significant_difference_is_no_practical_difference():
     tight = Interval(0.05, 0.04, 0.06, 3, "paired t")
     assert judge(tight, "diff", 0.0, PSNR, 0.1) == (True, False)
     text = fmt_interval(tight, "diff", PSNR, 0.0, 0.1)
-    assert text.endswith("no practical difference (below the 0.1 dB minimum effect)")
+    assert text.endswith("no practical difference (interval within ±0.1 dB)")
     # the same interval with a 0.01 dB minimum effect, and a 0.5 dB difference, are both practical
     assert judge(tight, "diff", 0.0, PSNR, 0.01) == (True, True)
     assert judge(Interval(0.5, 0.4, 0.6, 3, "paired t"), "diff", 0.0, PSNR, 0.1) == (True, True)
@@ -85,6 +85,35 @@ def test_a_small_significant_difference_is_no_practical_difference():
     gaussians = MetricSpec("num_gaussians", "Gaussians", ".0f")
     assert judge(Interval(1.03, 1.02, 1.04, 3, "t"), "ratio", 1.0, gaussians, 0.05) == (True, False)
     assert judge(Interval(0.90, 0.89, 0.91, 3, "t"), "ratio", 1.0, gaussians, 0.05) == (True, True)
+
+
+@pytest.mark.parametrize("iv, how, effect, said, written", [
+    # significant, below the minimum effect, the whole interval within it: the only "no practical difference"
+    (Interval(0.05, 0.04, 0.06, 3, "t"), "diff", 0.1, "no practical difference", ", no practical difference (interval within ±0.1 dB)"),
+    # not significant and within: an effect ruled out all the same
+    (Interval(0.01, -0.05, 0.07, 3, "t"), "diff", 0.1, "no practical difference", ", no practical difference (interval within ±0.1 dB)"),
+    # significant, below it, but the interval reaches beyond it: nothing is ruled out
+    (Interval(0.05, 0.01, 0.15, 3, "t"), "diff", 0.1, "inconclusive",
+     ", inconclusive (below the 0.1 dB minimum effect, but its interval reaches beyond it)"),
+    # a bound printed -0.10 reaches the minimum effect (judged as written)
+    (Interval(-0.02, -0.0951, 0.05, 3, "t"), "diff", 0.1, "inconclusive",
+     ", no significant difference, inconclusive (its interval reaches beyond the 0.1 dB minimum effect)"),
+    # quick_protocol's Gaussians x1.048 [x1.042, x1.054] under 5 %: read "no practical difference" before
+    (Interval(1.048, 1.042, 1.054, 3, "t"), "ratio", 0.05, "inconclusive",
+     ", inconclusive (below the 5 % minimum effect, but its interval reaches beyond it)"),
+    # x0.955 is 1 / 0.955 = x1.047 either side: within 5 %
+    (Interval(0.99, 0.955, 1.03, 3, "t"), "ratio", 0.05, "no practical difference", ", no practical difference (interval within ±5 %)"),
+    (Interval(0.5, 0.4, 0.6, 3, "t"), "diff", 0.1, "difference", "]"),
+    (Interval(0.05, -0.3, 0.4, 3, "t"), "diff", None, "no significant difference", ", no significant difference"),
+])
+def test_only_an_interval_within_the_minimum_effect_rules_an_effect_out(iv, how, effect, said, written):
+    spec = PSNR if how == "diff" else MetricSpec("num_gaussians", "Gaussians", ".0f")
+    null = 1.0 if how == "ratio" else 0.0
+    assert reading(iv, how, null, spec, effect) == said
+    text = fmt_interval(iv, how, spec, null, effect)
+    assert text.endswith(written), text
+    assert ("no practical difference" in text) is (said == "no practical difference")
+    assert judge(iv, how, null, spec, effect)[1] is (said == "difference")
 
 
 def _lead(delta: float):
@@ -104,7 +133,7 @@ def test_best_needs_a_significant_and_practical_lead(tmp_path):
     assert lead.significant and not lead.practical and lead.label == "3"
     assert "glossy: no single best (`3`" in text and "no practical difference" in text
     vs = next(c for c in claims if c.kind == "vs" and c.metric == "test_psnr")
-    assert vs.significant and not vs.practical and "no practical difference (below the 0.1 dB" in vs.text
+    assert vs.significant and not vs.practical and "no practical difference (interval within ±0.1 dB)" in vs.text
 
     # the experiment file's own minimum effect: 0.01 dB makes the same lead a best
     report, text = results(tmp_path / "b", spec_of({"report": {"min_effect": {"test_psnr": 0.01}}}), _lead(0.05))

@@ -79,8 +79,8 @@ TEACHER_DEFAULTS = {"views": 64, "resolution": 128}
 #: What a run records of what its strategy did besides its settings' names (`TopologyCounts`); None in
 #: the metrics of a result written before they were recorded.
 TOPOLOGY_METRICS = ("refinements", "opacity_resets", "cloned", "split", "pruned", "pruned_size", "relocated", "added")
-#: The smallest differences that matter in practice (docs/reports.md, "Minimum effects"): below them a
-#: significant difference reads "no practical difference". PSNR 0.1 dB; SSIM and LPIPS the same share
+#: The smallest differences that matter in practice (docs/reports.md, "Minimum effects"): a difference
+#: whose interval lies within ± them reads "no practical difference". PSNR 0.1 dB; SSIM and LPIPS the same share
 #: (~6 %) of graphdeco's published 7K -> 30K gain as 0.1 dB is of its PSNR gain (3DGS paper Table 1,
 #: mean over Mip-NeRF 360, Tanks&Temples, Deep Blending: +1.73 dB, +0.049 SSIM, -0.079 LPIPS); times
 #: and Gaussian counts as relative changes (10 %, 5 %). An experiment file's ``[report] min_effect``

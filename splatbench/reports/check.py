@@ -10,17 +10,19 @@ statistics of every finding (`splatbench.reports.findings.paired`, `fmt_interval
 the paired t interval over seeds, the minimum effect) and the settled rule on each side's own
 test curves (`splatbench.reports.settling`), and gives one verdict (`VERDICTS`):
 
+Each side is read by the findings' one rule (`splatbench.reports.findings.reading`):
+
 * **holds**: every run of both sides is done, and for a headline of a practical difference (the
-  grid's side significant and at least the minimum effect) the check's difference is significant,
-  of the same sign and at least the minimum effect; for a headline of no practical difference,
-  the check's interval lies within the minimum effect either side of no difference;
+  grid's side reads "difference": significant and at least the minimum effect) the check's
+  reads "difference" too, with the same sign; for a headline of no practical difference (the
+  grid's interval within the minimum effect either side of no difference), the check's is too;
 * **does not hold**: for a practical headline, the check's interval excludes the headline's sign
   (it lies wholly on the other side of no difference) or lies within the minimum effect either
   side of it (the check shows there is no practical difference); for a no-difference headline, the
   check gives a practical difference;
 * **inconclusive**: every other case with every run done: an interval that cannot tell either way
-  (it spans no difference and reaches beyond the minimum effect, or excludes no difference only
-  by less than the minimum effect while reaching past it; seeds that did not vary the result);
+  (it reaches beyond the minimum effect while its estimate is below it or it spans no difference;
+  seeds that did not vary the result), or a headline that is itself inconclusive (nothing to hold);
 * **not run**: none of the check's runs has a result (the report is written all the same);
 * **incomplete**: some of the check's runs, or of the grid's runs of the two cells, have no
   finished result (no verdict from part of the seeds).
@@ -34,7 +36,6 @@ grid's as ``results.parquet``.
 
 from __future__ import annotations
 
-import math
 import re
 from dataclasses import dataclass
 
@@ -48,8 +49,8 @@ from splatbench.experiments.store import build_table, experiment_dir, read_recor
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval
 from splatbench.report_files import markdown_table
-from splatbench.reports.findings import (Claim, fmt_interval, fmt_min_effect, fmt_number, judge, no_spread,
-                                         other_way, paired, rules_for, usable_runs)
+from splatbench.reports.findings import (Claim, fmt_interval, fmt_min_effect, fmt_number, judge, other_way, paired,
+                                         reading, rules_for, usable_runs)
 from splatbench.reports.settling import cell_settling, unsettled_reason
 from splatbench.reports.tables import Stat, cell_labels, metric_specs, seed_values, stat
 
@@ -251,35 +252,32 @@ def _verdict(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str], metric:
     compared = f"`{labels[1]}` against `{labels[0]}` on {r.scene}"
     quick = f"the grid's protocol ({grid.protocol}) gives {g.text}"
     null = 1.0 if how == "ratio" else (comp.null or 0.0) if how == "mean" else 0.0  # `findings.paired`'s
-    defined = math.isfinite(r.low) and math.isfinite(r.high) and not no_spread(_interval(r), how, metric)
+    said = {k: reading(_interval(c), how, null, metric, min_effect) for k, c in (("grid", g), ("check", r))}
     bound = fmt_min_effect(min_effect, how, metric) if min_effect is not None else None
-    if min_effect is None:
-        within = False
-    else:
-        lo, hi = (null / (1 + min_effect), null * (1 + min_effect)) if how == "ratio" else \
-            (null - min_effect, null + min_effect)
-        within = defined and lo < r.low and r.high < hi
     cannot_tell = (f"at {at}, {compared}: {r.text}, where {quick}; " + (
-        "the seeds did not vary the check's result, so it has no interval" if not defined else
+        "the seeds did not vary the check's result, so it has no interval" if said["check"] == "no interval" else
         f"its interval can tell neither a practical difference of the grid's sign nor one ruled out"
         + (f" (it reaches beyond the {bound} minimum effect)" if bound else "")))
-    if g.practical:
+    if said["grid"] == "difference":
         sign = 1.0 if g.value > null else -1.0
-        if r.practical and (r.value - null) * sign > 0:
+        if said["check"] == "difference" and (r.value - null) * sign > 0:
             effect = f" and at least the {bound} minimum effect" if bound else ""
             return "holds", (f"at {at}, {compared}: {r.text}; the same sign as under the grid's protocol "
                              f"({fmt_number(g.value, how, metric)}), significant{effect}")
-        if defined and ((sign > 0 and r.high < null) or (sign < 0 and r.low > null)):
+        if said["check"] != "no interval" and ((sign > 0 and r.high < null) or (sign < 0 and r.low > null)):
             return "does not hold", (f"at {at}, {compared}: {r.text}: its interval excludes the sign of the grid's "
                                      f"protocol ({fmt_number(g.value, how, metric)})")
-        if within:
+        if said["check"] == "no practical difference":
             return "does not hold", (f"at {at}, {compared}: {r.text}, where {quick}: its interval lies within the "
                                      f"{bound} minimum effect either side, so the difference is not practical there")
         return "inconclusive", cannot_tell
-    # a headline of no practical difference: holds where the check's interval rules one out
-    if r.practical:
+    if said["grid"] != "no practical difference":  # the headline neither shows a difference nor rules one out
+        return "inconclusive", (f"{quick}, which neither shows a practical difference nor rules one out, so there is "
+                                f"no headline for the check to hold or break; at {at}, {compared}: {r.text}")
+    # a headline of no practical difference (its interval within the minimum effect): holds where the check's does too
+    if said["check"] == "difference":
         return "does not hold", (f"at {at}, {compared}: {r.text}, a practical difference, where {quick}")
-    if within:
+    if said["check"] == "no practical difference":
         return "holds", (f"neither protocol gives a practical difference: {quick}; {at} gives {r.text}, its "
                          f"interval within the {bound} minimum effect either side")
     return "inconclusive", cannot_tell
