@@ -18,7 +18,8 @@ import pytest
 from splatbench.errors import InputError
 from splatbench.experiments import RunRecord, expand, parse_experiment
 from splatbench.experiments.store import write_record, write_table
-from splatbench.metrics.stats import Interval
+from splatbench.metrics.spec import clip
+from splatbench.metrics.stats import Interval, t_interval
 from splatbench.reports import build_report, write_report
 from splatbench.reports.findings import fmt_interval, judge, reading
 from splatbench.reports.settling import cell_settling, last_quarter_slope, settling_finding
@@ -114,6 +115,30 @@ def test_only_an_interval_within_the_minimum_effect_rules_an_effect_out(iv, how,
     assert text.endswith(written), text
     assert ("no practical difference" in text) is (said == "no practical difference")
     assert judge(iv, how, null, spec, effect)[1] is (said == "difference")
+
+
+def test_an_interval_is_cut_at_the_metrics_range_in_the_table_and_the_findings(tmp_path):
+    """An SSIM near 1 over three seeds: mean ± half-width reaches past 1; the cell prints the interval cut
+    there (`splatbench.metrics.spec.clip`), and an LPIPS "mean" interval is cut at 0 the same way."""
+    ssim = {0: 0.999, 1: 0.990, 2: 0.9995}
+
+    def make(run):
+        psnr = 30.0 + 0.1 * run.seed
+        return metrics_of(psnr, test_ssim=ssim[run.seed]), flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of(), make)
+    iv = t_interval(list(ssim.values()))
+    assert iv.high > 1.0  # the t interval crosses the bound: what the report must not print
+    cell = f"{iv.estimate:.4f} [{iv.low:.4f}, 1.0000]"
+    rows = [line for line in text.splitlines() if line.startswith("| glossy | `")]
+    assert len(rows) == 2 and all(f"| {cell} |" in row for row in rows), rows
+    assert "cut at the bound" in text  # the conventions line says so
+    lpips = TRAIN.specs["test_lpips"]
+    assert fmt_interval(Interval(0.02, -0.01, 0.05, 3, "t"), "mean", lpips, None) == "0.0200 [95 % CI 0.0000, 0.0500]"
+    # a difference of a bounded metric is cut at what a difference can be (SSIM: ±2), a ratio at 0
+    assert clip(-2.5, 0.1, "diff", TRAIN.specs["test_ssim"]) == (-2.0, 0.1)
+    assert clip(-0.1, 1.2, "ratio", TRAIN.specs["num_gaussians"]) == (0.0, 1.2)
+    assert clip(-5.0, 5.0, "diff", PSNR) == (-5.0, 5.0)  # unbounded: as given
 
 
 def _lead(delta: float):

@@ -48,6 +48,7 @@ Metrics (`TrainRun`'s fields) and curves (`CURVE_KEYS`) are documented beside th
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import sys
 from pathlib import Path
@@ -106,14 +107,15 @@ class TrainRun(RunResult):
     """What one train run records (`TrainRun.of` a `splatbench.train.TrainResult`): each field a
     table column ``metric.<name>``, with how a report shows it and what it means."""
 
+    # bounds: PSNR >= 0 (images in [0, 1]: MSE <= 1), SSIM in [-1, 1], LPIPS a distance >= 0, counts and times >= 0
     test_psnr: float | None = metric("test PSNR (dB)", ".2f", "dB", "higher",
-                                     "mean PSNR (dB) of the final model on the test views")
-    test_ssim: float | None = metric("SSIM", ".4f", "", "higher", "mean SSIM on the test views")
-    num_gaussians: int = metric("Gaussians", ".0f", meaning="Gaussians at the end")
+                                     "mean PSNR (dB) of the final model on the test views", bounds=(0.0, math.inf))
+    test_ssim: float | None = metric("SSIM", ".4f", "", "higher", "mean SSIM on the test views", bounds=(-1.0, 1.0))
+    num_gaussians: int = metric("Gaussians", ".0f", meaning="Gaussians at the end", bounds=(0.0, math.inf))
     train_seconds: float = metric("train time (s)", ".1f", "s", "lower",
-                                  "wall time of the optimisation loop (s; no evaluation, no I/O)")
+                                  "wall time of the optimisation loop (s; no evaluation, no I/O)", bounds=(0.0, math.inf))
     render_ms_per_view: float | None = metric("render (ms/view)", ".1f", "ms", "lower",
-                                              "mean forward render time of a test view (ms)")
+                                              "mean forward render time of a test view (ms)", bounds=(0.0, math.inf))
     sh_degree: int = metric(meaning="SH degree in use at the end (what 'auto' chose)")
     peak_rss_mb: float = metric(meaning="peak resident memory of the worker process over its life so far (MB): a "
                                         "worker runs several runs in turn, so it carries the peaks of the runs "
@@ -124,7 +126,7 @@ class TrainRun(RunResult):
                                               "settings, renderer); None for a dataset folder")
     test_lpips: float | None = metric("LPIPS", ".4f", "", "lower",
                                       "mean LPIPS v0.1 on the test views (lower is better; net and inputs: "
-                                      "`lpips_net`, `lpips_scale_inputs`, and the line below)")
+                                      "`lpips_net`, `lpips_scale_inputs`, and the line below)", bounds=(0.0, math.inf))
     lpips_net: str = metric(meaning="LPIPS backbone of test_lpips: alex or vgg (empty: not computed)")
     lpips_scale_inputs: int = metric(meaning="1: LPIPS inputs scaled to [-1, 1] (the lpips package); 0: [0, 1] "
                                              "unscaled (graphdeco)")

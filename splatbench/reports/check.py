@@ -288,7 +288,7 @@ def _cell(side: CheckSide, k: int, metric: MetricSpec, seeds: int) -> str:
     marked, and no interval (a part of the seeds is not the cell)."""
     st = side.stats[k]
     if side.done >= side.total:
-        return st.text(metric.fmt)
+        return st.text(metric.fmt, metric.bounds)
     if st.n == 0:
         return "–"
     return f"{format(st.mean, metric.fmt)} ({st.n} of {seeds} seeds; no interval)"
@@ -386,7 +386,7 @@ def _other(st: Stat, spec: MetricSpec, side: CheckSide, seeds: int) -> str:
     if st.n == 0:
         return "–"
     if side.done >= side.total:
-        return st.text(spec.fmt)
+        return st.text(spec.fmt, spec.bounds)
     return f"{format(st.mean, spec.fmt)} ({st.n} of {seeds} seeds; no interval)"
 
 

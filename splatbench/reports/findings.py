@@ -53,7 +53,7 @@ from splatbench.experiments.kind_report import (AxisNote, Claim, Comparison, Fin
                                                 done_runs)
 from splatbench.experiments.kinds import RunKind
 from splatbench.plotting import pareto_front
-from splatbench.metrics.spec import MetricSpec
+from splatbench.metrics.spec import MetricSpec, clip
 from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
 from splatbench.reports.settling import CellSettling, cell_settling, paired_curve, unsettled_reason
 from splatbench.experiments.configs import flatten
@@ -151,6 +151,14 @@ READINGS = ("difference", "no practical difference", "inconclusive", "no signifi
             "no test")
 
 
+def bounded(iv: Interval, how: str, spec: MetricSpec) -> Interval:
+    """``iv`` cut at the values its number can take (`splatbench.metrics.spec.clip`: an SSIM mean
+    never above 1, an LPIPS never below 0): what the report prints and judges."""
+    if not iv.defined:
+        return iv
+    return dataclasses.replace(iv, **dict(zip(("low", "high"), clip(iv.low, iv.high, how, spec))))
+
+
 def reading(iv: Interval, how: str, null: float | None, spec: MetricSpec, min_effect: float | None = None) -> str:
     """The one rule that decides what a difference may be called (`READINGS`), at the precision written:
 
@@ -168,6 +176,7 @@ def reading(iv: Interval, how: str, null: float | None, spec: MetricSpec, min_ef
         return "no interval"
     if null is None:
         return "no test"
+    iv = bounded(iv, how, spec)
     if iv.excludes(null) and practical(iv, how, null, min_effect, spec.fmt):
         return "difference"
     if min_effect is None:
@@ -209,7 +218,8 @@ def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None, m
             return f"{text} (seeds did not vary the result: no interval)"
         unit = "" if how == "ratio" or not spec.unit else f" {spec.unit}"
         return f"{text} (seeds varied it by less than the precision shown, ±{iv.half_width:.1g}{unit}: no interval)"
-    text += f" [95 % CI {_bound(iv.low, how, spec)}, {_bound(iv.high, how, spec)}]"
+    shown = bounded(iv, how, spec)
+    text += f" [95 % CI {_bound(shown.low, how, spec)}, {_bound(shown.high, how, spec)}]"
     said = reading(iv, how, null, spec, min_effect)
     effect = fmt_min_effect(min_effect, how, spec) if min_effect is not None else ""
     if said == "no practical difference":
@@ -864,5 +874,5 @@ def _name(spec: MetricSpec) -> str:
 
 
 __all__ = ["Claim", "Finding", "AxisNote", "axis_finding", "load_recorded", "rules_for", "fmt_number", "fmt_interval", "paired",
-           "reference_row", "usable_runs", "no_spread", "practical", "reading", "READINGS", "judge", "fmt_min_effect", "confounds",
+           "reference_row", "usable_runs", "no_spread", "practical", "reading", "READINGS", "bounded", "judge", "fmt_min_effect", "confounds",
            "CONFOUND_SHARE"]

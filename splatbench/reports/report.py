@@ -63,7 +63,9 @@ def interval_note(max_seeds: int) -> str:
     return ("Mean ± half-width of the 95 % Student's t interval over seeds (n − 1 degrees of freedom; a seed's "
             "runs are averaged first); a cell with one seed shows its mean alone, and \"(no spread)\" marks a cell "
             "whose seeds did not vary it at the precision shown (no interval: see the protocol above for what a "
-            "seed varies)")
+            "seed varies); where mean ± half-width would cross the metric's range (SSIM ≤ 1; PSNR, LPIPS, counts "
+            "and times ≥ 0), the cell prints the interval cut at the bound, `0.9981 [0.9952, 1.0000]`, and so "
+            "does every difference or mean in the findings")
 
 
 @dataclass
