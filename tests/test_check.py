@@ -553,6 +553,30 @@ def test_a_check_whose_ssim_goes_the_other_way_says_so_in_its_headline(tmp_path)
     assert "; **but SSIM goes the other way, significantly** at `graphdeco-7k`: SSIM -0.0110" in text
 
 
+@pytest.mark.parametrize("sh_recorded", [False, True])
+def test_a_check_whose_cells_differ_in_model_size_says_so_in_its_verdict(tmp_path, sh_recorded):
+    """The findings' model-size rule (`findings.size_shift`) inside the check's verdict: SH 3 ending with
+    1.5 x the Gaussians of SH 0 at 7K; where the runs record their SH degree, bytes per Gaussian differ
+    (14 floats at degree 0, 59 at 3) and the size is judged in bytes, naming the Gaussians' ratio beside."""
+    spec = spec_of(SH_GRID)
+    root = tmp_path / "results"
+    grid_results(root, spec)
+    rng = np.random.default_rng(1)
+    for run in check_runs(spec):
+        three = run.labels["sh.degree"] == 3
+        rec = record(spec, run, 28.0 + (0.6 if three else 0.0) + rng.normal(0, 0.05))
+        more = {"num_gaussians": 1500 if three else 1000, **({"sh_degree": 3 if three else 0} if sh_recorded else {})}
+        write_record(root, dataclasses.replace(rec, metrics={**rec.metrics, **more}))
+    report = build_report(spec, root)
+    text = write_report(report, tmp_path / "report").read_text()
+    assert report.check.verdict == "holds"
+    size = (f"×{1.5 * 59 / 14:.3f} the bytes (×1.500 the Gaussians) (≥ 10 % larger" if sh_recorded else
+            "×1.500 the Gaussians (≥ 10 % more")
+    assert report.check.rerun.size == size and report.check.grid.size == ""  # the grid's cells: 1,000 each
+    assert (f"; **against model size**: `sh.degree=3` ends at {size}) at `graphdeco-7k` against `sh.degree=0`; "
+            f"the check has no matched-size cell: quality and size are not separated") in text
+
+
 def test_a_check_run_with_a_test_view_far_below_its_other_seeds_is_named_under_the_per_seed_table(tmp_path):
     # guitar seed 1 at graphdeco-7k (docs/history/2026-12-07-divergent-seed.md): one view 18 dB below the same view
     # in the other seeds; the check's runs are compared among themselves, cell by cell

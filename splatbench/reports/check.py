@@ -27,7 +27,10 @@ Each side is read by the findings' one rule (`splatbench.reports.findings.readin
 * **incomplete**: some of the check's runs, or of the grid's runs of the two cells, have no
   finished result (no verdict from part of the seeds).
 
-Whether the check's cells had settled is stated beside the verdict and does not change it: at
+Where the two cells' model sizes differ by the findings' rule (`splatbench.reports.findings.size_shift`:
+≥ 10 % in Gaussians, or in bytes where bytes per Gaussian differ), the verdict's sentence says so for
+each protocol ("against model size"): the check has no matched-size cell, so it does not separate
+quality from size. Whether the check's cells had settled is stated beside the verdict and does not change it: at
 graphdeco's 7K column a model is mid-schedule (its refinement runs to 15,000 steps and its
 last opacity reset was 1,000 steps earlier), which is the column it stands beside.
 The check's runs are kept beside the report as ``check.parquet`` (`CHECK_TABLE_NAME`), the
@@ -49,8 +52,8 @@ from splatbench.experiments.store import build_table, experiment_dir, read_recor
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval
 from splatbench.report_files import markdown_table
-from splatbench.reports.findings import (Claim, fmt_interval, fmt_min_effect, fmt_number, judge, other_way, paired,
-                                         reading, rules_for, usable_runs)
+from splatbench.reports.findings import (Claim, bytes_differ, fmt_interval, fmt_min_effect, fmt_number, judge,
+                                         other_way, paired, reading, rules_for, size_shift, usable_runs)
 from splatbench.reports.settling import cell_settling, unsettled_reason
 from splatbench.reports.tables import Stat, cell_labels, metric_specs, seed_values, stat
 
@@ -99,6 +102,8 @@ class CheckSide:
     opposed: tuple[tuple[str, str], ...] = ()  # (name, difference) of each of the kind's other quality metrics
     #   that goes significantly the other way (`splatbench.reports.findings.other_way`)
     per_seed: tuple[dict, dict] = ({}, {})  # each cell's primary metric by seed (a seed's runs averaged)
+    size: str = ""  # the second cell's model size against the first's where it differs by at least
+    #   `findings.MATCHED_SHARE` (`findings.size_shift`: "×1.602 the Gaussians (≥ 10 % more"); "" otherwise
 
     @property
     def complete(self) -> bool:
@@ -167,6 +172,8 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
     by_name = {m.name: m for m in metrics}
     shown = [by_name[c.metric] for c in rules.comparisons if c.metric != metric.name and c.metric not in timed
              and c.metric in by_name]
+    size_spec = by_name.get(rules.size) if rules.size else None
+    bytes_of = declared.model_bytes if declared is not None else None
 
     def side(runs: pd.DataFrame, cells, protocol: str) -> CheckSide:
         ids = [{r.run_id for r in cell} for cell in cells]
@@ -185,6 +192,10 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
             q_values = [seed_values(p, q.name) if len(p) and f"metric.{q.name}" in p.columns else {} for p in pick]
             quality.append((q, paired(q_values[0], q_values[1], Comparison(q.name, q_how))[0], q_how))
         opposed = tuple(other_way(metric, iv.estimate - (null or 0.0), quality)) if iv.n else ()
+        size = ""
+        if size_spec is not None and len(usable):  # the findings' model-size rule, in bytes where they differ
+            size = size_shift(pick[0], pick[1], size_spec, bytes_of,
+                              bytes_differ(usable, bytes_of, size_spec.name))
         claim = None
         settled, why = None, ""
         if iv.n:
@@ -197,7 +208,7 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
             claim = Claim("check", check.scene, labels[1], metric.name, comp.how, iv.estimate, text, labels[0],
                           iv.low, iv.high, iv.n, significant, practical, settled)
         return CheckSide(protocol, done, failed, total, (stat(values[0]), stat(values[1])), claim, settled, why,
-                         others, opposed, (values[0], values[1]))
+                         others, opposed, (values[0], values[1]), size)
 
     grid_protocol = _recorded_protocol(table, {r.run_id for c in quick for r in c})
     grid_side = side(table, quick, grid_protocol)
@@ -206,12 +217,25 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
     if verdict in JUDGED and rerun_side.opposed:
         reason += (f"; **but {opposed_text(rerun_side)}** at `{check.protocol}`: "
                    f"{'; '.join(t for _, t in rerun_side.opposed)}")
+    if verdict in JUDGED:
+        reason += size_text(grid_side, rerun_side, labels)
     described = kind.protocols.describe(check.protocol) if kind.protocols is not None else check.protocol
     mine = checked[checked.run_id.isin({r.run_id for c in rerun for r in c})] if len(checked) else checked
     notes = tuple(line for note in (declared.check_notes if declared is not None else ()) if len(mine)
                   for line in note(mine))
     return CheckResult(check, tuple(spec.seeds), labels, described, metric, grid_side, rerun_side, verdict, reason,
                        checked if len(checked) else build_table([]), notes)
+
+
+def size_text(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str]) -> str:
+    """``; **against model size**: `b` ends at ×1.602 the Gaussians (≥ 10 % more) than `a` at
+    `graphdeco-7k` …; the check has no matched-size cell: quality and size are not separated``
+    where either side's cells differ in size by the findings' rule (`CheckSide.size`); "" otherwise."""
+    parts = [f"{s.size}) at `{s.protocol}`" for s in (grid, rerun) if s.size]
+    if not parts:
+        return ""
+    return (f"; **against model size**: `{labels[1]}` ends at {' and '.join(parts)} against `{labels[0]}`; the "
+            f"check has no matched-size cell: quality and size are not separated")
 
 
 def opposed_text(side: CheckSide) -> str:

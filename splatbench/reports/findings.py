@@ -421,14 +421,11 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             natural_ids = None if not stratum else set(usable.run_id) - stratum
             if dim == table.axis:
                 natural_ids = None
-            ratio = paired_ratio(*(size_values(scene, r, natural_ids) for r in (a, b)))
-            if not ratio.n or not math.isfinite(ratio.estimate) or max(ratio.estimate, 1 / ratio.estimate) < \
-                    1 + MATCHED_SHARE - 1e-12:
+            shift = size_shift(*(selected(scene, r, usable) for r in (a, b)), size_spec, bytes_of, by_bytes,
+                               natural_ids)
+            if not shift:
                 continue
-            more = ("more" if ratio.estimate > 1 else "fewer") if not by_bytes else \
-                ("larger" if ratio.estimate > 1 else "smaller")
-            head = (f"{scene}: {size_ratio_text(f'×{ratio.estimate:.3f}', scene, a, b, natural_ids)} "
-                    f"(≥ {100 * MATCHED_SHARE:g} % {more}")
+            head = f"{scene}: {shift}"
             if not matched:
                 pieces.append(head + "; the grid declares no matched-size cell, `[report] matched`: quality and size "
                                      "are not separated)")
@@ -717,6 +714,42 @@ def bytes_differ(runs: pd.DataFrame, bytes_of: Callable[[pd.DataFrame], pd.Serie
 MATCHED_SHARE = 0.10
 
 
+def _sizes(runs: pd.DataFrame, size: str, bytes_of: Callable[[pd.DataFrame], pd.Series] | None,
+           by_bytes: bool) -> dict[int, float]:
+    """seed -> the model size of ``runs``: its bytes where ``by_bytes`` (`bytes_differ`), else its
+    ``size`` metric (a seed's runs averaged first)."""
+    if not len(runs):
+        return {}
+    if by_bytes:
+        per = pd.DataFrame({"seed": runs.seed.astype(int), "v": bytes_of(runs).to_numpy()}).dropna()
+        return {int(k): float(v) for k, v in per.groupby("seed").v.mean().items()}
+    return seed_values(runs, size) if f"metric.{size}" in runs.columns else {}
+
+
+def size_shift(a: pd.DataFrame, b: pd.DataFrame, size: MetricSpec,
+               bytes_of: Callable[[pd.DataFrame], pd.Series] | None, by_bytes: bool, ids: set[str] | None = None
+               ) -> str:
+    """The model-size rule (docs/reports.md, "Model size"): where the runs ``b`` end at least
+    `MATCHED_SHARE` larger or smaller than the runs ``a`` (paired geometric-mean ratio over seeds, of
+    the bytes where ``by_bytes``, else of the ``size`` metric), ``×1.602 the Gaussians (≥ 10 % more``
+    or ``×3.999 the bytes (×0.949 the Gaussians) (≥ 10 % larger`` (the caller closes the bracket);
+    "" otherwise. ``ids``: only these runs (None: all). The findings' comparisons and the check's
+    verdict (`splatbench.reports.check`) both flag a size change through it."""
+    if ids is not None:
+        a, b = a[a.run_id.isin(ids)], b[b.run_id.isin(ids)]
+    ratio = paired_ratio(_sizes(a, size.name, bytes_of, by_bytes), _sizes(b, size.name, bytes_of, by_bytes))
+    if not ratio.n or not math.isfinite(ratio.estimate) or ratio.estimate <= 0 or \
+            max(ratio.estimate, 1 / ratio.estimate) < 1 + MATCHED_SHARE - 1e-12:
+        return ""
+    if by_bytes:
+        count = paired_ratio(_sizes(a, size.name, None, False), _sizes(b, size.name, None, False))
+        also = f" (×{count.estimate:.3f} the {_name(size)})" if count.n and math.isfinite(count.estimate) else ""
+        text, more = f"×{ratio.estimate:.3f} the bytes{also}", "larger" if ratio.estimate > 1 else "smaller"
+    else:
+        text, more = f"×{ratio.estimate:.3f} the {_name(size)}", "more" if ratio.estimate > 1 else "fewer"
+    return f"{text} (≥ {100 * MATCHED_SHARE:g} % {more}"
+
+
 def _stratum(runs: pd.DataFrame, dim: str | None, values: Sequence) -> set[str]:
     """The run ids of ``runs`` whose ``dim`` is one of ``values`` (`[report] matched`); empty without."""
     col = f"axis.{dim}"
@@ -874,5 +907,5 @@ def _name(spec: MetricSpec) -> str:
 
 
 __all__ = ["Claim", "Finding", "AxisNote", "axis_finding", "load_recorded", "rules_for", "fmt_number", "fmt_interval", "paired",
-           "reference_row", "usable_runs", "no_spread", "practical", "reading", "READINGS", "bounded", "judge", "fmt_min_effect", "confounds",
+           "reference_row", "usable_runs", "no_spread", "practical", "reading", "READINGS", "bounded", "size_shift", "bytes_differ", "MATCHED_SHARE", "judge", "fmt_min_effect", "confounds",
            "CONFOUND_SHARE"]
