@@ -25,6 +25,7 @@ from splatbench.reports.findings import fmt_interval, judge, reading
 from splatbench.reports.settling import cell_settling, last_quarter_slope, settling_finding
 from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
 from splatbench.experiments.train_kind import TRAIN
+from splatbench.experiments.train_report import floats_per_gaussian
 from splatbench.metrics.spec import MetricSpec
 
 PSNR = MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher")
@@ -695,6 +696,29 @@ def test_best_at_comparable_size_is_judged_by_bytes_where_bytes_per_gaussian_dif
     report, text = results(tmp_path / "one", spec_of(), _bigger_lead(0.03))
     assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
     assert "more Gaussians" in text and "bytes per Gaussian differ" not in text
+
+
+def test_the_size_pareto_figure_plots_bytes_where_bytes_per_gaussian_differ(tmp_path):
+    """Review item 4: the figure of size against quality uses the size the findings use. SH 0 with 10 %
+    more Gaussians than SH 3 (fewer Gaussians: SH 3 would be on the Gaussian-count front alone) is
+    ×0.26 the bytes of SH 3 (14 / 59 floats per Gaussian): in megabytes SH 0 is the smaller cell, and the
+    front runs SH 0 → SH 3; the axis and heading name the megabytes."""
+    def make(run):
+        d = run.labels["sh.degree"]
+        psnr = 30.0 + (0.5 if d == 3 else 0.0) + 0.01 * run.seed
+        return {**metrics_of(psnr, num_gaussians=1100 if d == 0 else 1000), "sh_degree": d}, flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of(), make)
+    mb = {d: n * floats_per_gaussian(d) * 4 / 1e6 for d, n in ((0, 1100), (3, 1000))}
+    assert mb[0] < mb[3]  # the smaller model in bytes has more Gaussians
+    assert report.fronts["gaussians_vs_error"] == {"glossy": ["sh.degree=0", "sh.degree=3"]}
+    assert "## Model size (MB, float32 parameters) against test PSNR (dB)" in text
+    assert "no other cell is both smaller (fewer bytes) and better" in text
+    assert "- Pareto front on glossy, smallest first: `sh.degree=0` → `sh.degree=3`" in text
+    # one SH degree everywhere (no sh_degree recorded: bytes per Gaussian one number): the count, as declared
+    report, text = results(tmp_path / "one", spec_of(), lambda run: (make(run)[0] | {"sh_degree": 0}, make(run)[1]))
+    assert report.fronts["gaussians_vs_error"] == {"glossy": ["sh.degree=3"]}
+    assert "## Gaussians against test PSNR (dB)" in text and "fewest Gaussians first: `sh.degree=3`" in text
 
 
 def test_the_raster_kind_declares_no_size_for_its_best():
