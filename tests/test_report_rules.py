@@ -311,6 +311,11 @@ def test_the_train_test_gap_is_over_the_slopes_window():
     cell = cell_settling(_settle_table({"a": 0.0}), TRAIN_REPORT.settling, 0.1)
     assert cell.gap == pytest.approx(1.0025, abs=1e-9)
     assert "- Train–test gap over the same window" in f.markdown() and "s `x=a` +1.00 dB." in f.markdown()
+    # what it averages, said in the line: the training-view points logged at 1,500..1,900 and 1,999 (one
+    # sampled training view each) and the test evaluations at 1,500 and 2,000
+    assert cell.gap_counts == ((6, 2),)
+    assert ("the mean of 6 logged training-view PSNRs minus the mean of 2 test evaluations there" in f.markdown()
+            and "**Each training-view PSNR is one sampled training view**" in f.markdown())
     # a table without a training curve has no gap, and no line
     table = _settle_table({"a": 0.0})
     table["curves"] = [json.dumps({k: v for k, v in json.loads(c).items() if k != "psnr"}) for c in table.curves]
