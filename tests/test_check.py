@@ -351,21 +351,25 @@ def test_report_says_not_run_without_the_checks_results(tmp_path):
     assert "**7K check: none declared**" in plain.read_text() and "## Headline at" not in plain.read_text()
 
 
-@pytest.mark.parametrize("grid_gain, gain, slope, noise, verdict", [
-    (0.5, 0.6, 0.0, 0.05, "holds"),            # same sign, significant, above 0.1 dB
-    (0.5, 0.6, 0.5, 0.05, "holds"),            # holds, but SH 3's 7K curve still rises 0.5 dB / 1,000 steps
-    (0.5, -0.4, 0.0, 0.05, "does not hold"),   # the sign flips
-    (0.5, 0.03, 0.0, 0.005, "does not hold"),  # the 7K interval within ±0.1 dB: no practical difference there
-    (0.5, 0.03, 0.0, 0.05, "inconclusive"),    # the 7K interval spans 0 and reaches past 0.1 dB: cannot tell
-    (0.5, 0.6, 0.0, 1.0, "inconclusive"),      # seeds too noisy at 7K: an interval that cannot tell either way
-    (0.0, 0.0, 0.0, 0.005, "holds"),           # no difference at either; the 7K interval within ±0.1 dB
-    (0.0, 0.0, 0.0, 0.2, "inconclusive"),      # no significant difference, but the interval reaches past 0.1 dB
-    (0.0, 0.6, 0.0, 0.05, "does not hold"),    # no difference in the grid, a practical one at 7K
+@pytest.mark.parametrize("grid_gain, gain, slope, noise, verdict, grid_noise", [
+    (0.5, 0.6, 0.0, 0.05, "holds", 0.05),            # same sign, significant, above 0.1 dB
+    (0.5, 0.6, 0.5, 0.05, "holds", 0.05),            # holds, but SH 3's 7K curve still rises 0.5 dB / 1,000 steps
+    (0.5, -0.4, 0.0, 0.05, "does not hold", 0.05),   # the sign flips
+    (0.5, 0.03, 0.0, 0.005, "does not hold", 0.005),  # the 7K interval within ±0.1 dB: no practical difference there
+    (0.5, 0.03, 0.0, 0.05, "inconclusive", 0.05),    # the 7K interval spans 0 and reaches past 0.1 dB: cannot tell
+    (0.5, 0.6, 0.0, 1.0, "inconclusive", 0.05),      # seeds too noisy at 7K: an interval that cannot tell either way
+    (0.0, 0.0, 0.0, 0.005, "holds", 0.005),          # no difference at either; both intervals within ±0.1 dB
+    (0.0, 0.0, 0.0, 0.2, "inconclusive", 0.05),      # no significant difference, but the interval reaches past 0.1 dB
+    (0.0, 0.6, 0.0, 0.05, "does not hold", 0.005),   # no practical difference in the grid, a practical one at 7K
+    # the grid's interval reaches past 0.1 dB (no headline of "no difference"): nothing to break, nor to hold
+    (0.0, 0.6, 0.0, 0.05, "inconclusive", 0.05),
+    (0.0, 0.0, 0.0, 0.005, "inconclusive", 0.05),
 ])
-def test_report_gives_a_verdict_with_the_checks_results(tmp_path, grid_gain, gain, slope, noise, verdict):
+def test_report_gives_a_verdict_with_the_checks_results(tmp_path, grid_gain, gain, slope, noise, verdict,
+                                                        grid_noise):
     spec = spec_of(SH_GRID)
     root = tmp_path / "results"
-    grid_results(root, spec, grid_gain, min(noise, 0.05))
+    grid_results(root, spec, grid_gain, grid_noise)
     check_results(root, spec, gain, slope, noise=noise)
     report = build_report(spec, root)
     out = tmp_path / "report"
@@ -397,9 +401,13 @@ def test_report_gives_a_verdict_with_the_checks_results(tmp_path, grid_gain, gai
         expected = ("holds" if claim.low > 0 and claim.value >= 0.1 else
                     "does not hold" if claim.high < 0 or (-0.1 < claim.low and claim.high < 0.1) else "inconclusive")
         assert expected == verdict, (claim.low, claim.value, claim.high)
-    if grid_gain == 0.0:  # a no-difference headline: holds only where the interval rules a difference out
-        inside = -0.1 < claim.low and claim.high < 0.1
-        assert inside is (verdict == "holds") and (claim.high - claim.low < 0.2) is (noise < 0.05)
+    if grid_gain == 0.0:  # a no-difference headline: holds only where both intervals rule a difference out
+        g = check.grid.claim
+        ruled_out = [-0.1 < c.low and c.high < 0.1 for c in (g, claim)]
+        assert all(ruled_out) is (verdict == "holds") and (claim.high - claim.low < 0.2) is (noise < 0.05)
+        assert ruled_out[0] is (grid_noise < 0.05)  # the grid's seeds at 0.05 dB: its interval reaches past 0.1 dB
+        if not ruled_out[0]:
+            assert "which neither shows a practical difference nor rules one out" in check.reason
     # rebuilt from the report folder alone, the section is the same
     rebuilt = report_from_table(spec, pd.read_parquet(out / "results.parquet"), len(expand(spec)), table)
     assert rebuilt.check == dataclasses.replace(check, table=rebuilt.check.table)
@@ -543,6 +551,30 @@ def test_a_check_whose_ssim_goes_the_other_way_says_so_in_its_headline(tmp_path)
     assert report.check.verdict == "holds" and report.check.rerun.opposed[0][0] == "SSIM"
     assert "**7K check: holds**, **but SSIM goes the other way, significantly there** (SSIM -0.0110 [95 % CI" in text
     assert "; **but SSIM goes the other way, significantly** at `graphdeco-7k`: SSIM -0.0110" in text
+
+
+@pytest.mark.parametrize("sh_recorded", [False, True])
+def test_a_check_whose_cells_differ_in_model_size_says_so_in_its_verdict(tmp_path, sh_recorded):
+    """The findings' model-size rule (`findings.size_shift`) inside the check's verdict: SH 3 ending with
+    1.5 x the Gaussians of SH 0 at 7K; where the runs record their SH degree, bytes per Gaussian differ
+    (14 floats at degree 0, 59 at 3) and the size is judged in bytes, naming the Gaussians' ratio beside."""
+    spec = spec_of(SH_GRID)
+    root = tmp_path / "results"
+    grid_results(root, spec)
+    rng = np.random.default_rng(1)
+    for run in check_runs(spec):
+        three = run.labels["sh.degree"] == 3
+        rec = record(spec, run, 28.0 + (0.6 if three else 0.0) + rng.normal(0, 0.05))
+        more = {"num_gaussians": 1500 if three else 1000, **({"sh_degree": 3 if three else 0} if sh_recorded else {})}
+        write_record(root, dataclasses.replace(rec, metrics={**rec.metrics, **more}))
+    report = build_report(spec, root)
+    text = write_report(report, tmp_path / "report").read_text()
+    assert report.check.verdict == "holds"
+    size = (f"×{1.5 * 59 / 14:.3f} the bytes (×1.500 the Gaussians) (≥ 10 % larger" if sh_recorded else
+            "×1.500 the Gaussians (≥ 10 % more")
+    assert report.check.rerun.size == size and report.check.grid.size == ""  # the grid's cells: 1,000 each
+    assert (f"; **against model size**: `sh.degree=3` ends at {size}) at `graphdeco-7k` against `sh.degree=0`; "
+            f"the check has no matched-size cell: quality and size are not separated") in text
 
 
 def test_a_check_run_with_a_test_view_far_below_its_other_seeds_is_named_under_the_per_seed_table(tmp_path):

@@ -18,12 +18,14 @@ import pytest
 from splatbench.errors import InputError
 from splatbench.experiments import RunRecord, expand, parse_experiment
 from splatbench.experiments.store import write_record, write_table
-from splatbench.metrics.stats import Interval
+from splatbench.metrics.spec import clip
+from splatbench.metrics.stats import Interval, t_interval
 from splatbench.reports import build_report, write_report
-from splatbench.reports.findings import fmt_interval, judge
+from splatbench.reports.findings import fmt_interval, judge, reading
 from splatbench.reports.settling import cell_settling, last_quarter_slope, settling_finding
 from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
 from splatbench.experiments.train_kind import TRAIN
+from splatbench.experiments.train_report import floats_per_gaussian
 from splatbench.metrics.spec import MetricSpec
 
 PSNR = MetricSpec("test_psnr", "test PSNR (dB)", ".2f", "dB", "higher")
@@ -75,7 +77,7 @@ def test_a_small_significant_difference_is_no_practical_difference():
     tight = Interval(0.05, 0.04, 0.06, 3, "paired t")
     assert judge(tight, "diff", 0.0, PSNR, 0.1) == (True, False)
     text = fmt_interval(tight, "diff", PSNR, 0.0, 0.1)
-    assert text.endswith("no practical difference (below the 0.1 dB minimum effect)")
+    assert text.endswith("no practical difference (interval within ±0.1 dB)")
     # the same interval with a 0.01 dB minimum effect, and a 0.5 dB difference, are both practical
     assert judge(tight, "diff", 0.0, PSNR, 0.01) == (True, True)
     assert judge(Interval(0.5, 0.4, 0.6, 3, "paired t"), "diff", 0.0, PSNR, 0.1) == (True, True)
@@ -85,6 +87,59 @@ def test_a_small_significant_difference_is_no_practical_difference():
     gaussians = MetricSpec("num_gaussians", "Gaussians", ".0f")
     assert judge(Interval(1.03, 1.02, 1.04, 3, "t"), "ratio", 1.0, gaussians, 0.05) == (True, False)
     assert judge(Interval(0.90, 0.89, 0.91, 3, "t"), "ratio", 1.0, gaussians, 0.05) == (True, True)
+
+
+@pytest.mark.parametrize("iv, how, effect, said, written", [
+    # significant, below the minimum effect, the whole interval within it: the only "no practical difference"
+    (Interval(0.05, 0.04, 0.06, 3, "t"), "diff", 0.1, "no practical difference", ", no practical difference (interval within ±0.1 dB)"),
+    # not significant and within: an effect ruled out all the same
+    (Interval(0.01, -0.05, 0.07, 3, "t"), "diff", 0.1, "no practical difference", ", no practical difference (interval within ±0.1 dB)"),
+    # significant, below it, but the interval reaches beyond it: nothing is ruled out
+    (Interval(0.05, 0.01, 0.15, 3, "t"), "diff", 0.1, "inconclusive",
+     ", inconclusive (below the 0.1 dB minimum effect, but its interval reaches beyond it)"),
+    # a bound printed -0.10 reaches the minimum effect (judged as written)
+    (Interval(-0.02, -0.0951, 0.05, 3, "t"), "diff", 0.1, "inconclusive",
+     ", no significant difference, inconclusive (its interval reaches beyond the 0.1 dB minimum effect)"),
+    # quick_protocol's Gaussians x1.048 [x1.042, x1.054] under 5 %: read "no practical difference" before
+    (Interval(1.048, 1.042, 1.054, 3, "t"), "ratio", 0.05, "inconclusive",
+     ", inconclusive (below the 5 % minimum effect, but its interval reaches beyond it)"),
+    # x0.955 is 1 / 0.955 = x1.047 either side: within 5 %
+    (Interval(0.99, 0.955, 1.03, 3, "t"), "ratio", 0.05, "no practical difference", ", no practical difference (interval within ±5 %)"),
+    (Interval(0.5, 0.4, 0.6, 3, "t"), "diff", 0.1, "difference", "]"),
+    (Interval(0.05, -0.3, 0.4, 3, "t"), "diff", None, "no significant difference", ", no significant difference"),
+])
+def test_only_an_interval_within_the_minimum_effect_rules_an_effect_out(iv, how, effect, said, written):
+    spec = PSNR if how == "diff" else MetricSpec("num_gaussians", "Gaussians", ".0f")
+    null = 1.0 if how == "ratio" else 0.0
+    assert reading(iv, how, null, spec, effect) == said
+    text = fmt_interval(iv, how, spec, null, effect)
+    assert text.endswith(written), text
+    assert ("no practical difference" in text) is (said == "no practical difference")
+    assert judge(iv, how, null, spec, effect)[1] is (said == "difference")
+
+
+def test_an_interval_is_cut_at_the_metrics_range_in_the_table_and_the_findings(tmp_path):
+    """An SSIM near 1 over three seeds: mean ± half-width reaches past 1; the cell prints the interval cut
+    there (`splatbench.metrics.spec.clip`), and an LPIPS "mean" interval is cut at 0 the same way."""
+    ssim = {0: 0.999, 1: 0.990, 2: 0.9995}
+
+    def make(run):
+        psnr = 30.0 + 0.1 * run.seed
+        return metrics_of(psnr, test_ssim=ssim[run.seed]), flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of(), make)
+    iv = t_interval(list(ssim.values()))
+    assert iv.high > 1.0  # the t interval crosses the bound: what the report must not print
+    cell = f"{iv.estimate:.4f} [{iv.low:.4f}, 1.0000]"
+    rows = [line for line in text.splitlines() if line.startswith("| glossy | `")]
+    assert len(rows) == 2 and all(f"| {cell} |" in row for row in rows), rows
+    assert "cut at the bound" in text  # the conventions line says so
+    lpips = TRAIN.specs["test_lpips"]
+    assert fmt_interval(Interval(0.02, -0.01, 0.05, 3, "t"), "mean", lpips, None) == "0.0200 [95 % CI 0.0000, 0.0500]"
+    # a difference of a bounded metric is cut at what a difference can be (SSIM: ±2), a ratio at 0
+    assert clip(-2.5, 0.1, "diff", TRAIN.specs["test_ssim"]) == (-2.0, 0.1)
+    assert clip(-0.1, 1.2, "ratio", TRAIN.specs["num_gaussians"]) == (0.0, 1.2)
+    assert clip(-5.0, 5.0, "diff", PSNR) == (-5.0, 5.0)  # unbounded: as given
 
 
 def _lead(delta: float):
@@ -104,7 +159,7 @@ def test_best_needs_a_significant_and_practical_lead(tmp_path):
     assert lead.significant and not lead.practical and lead.label == "3"
     assert "glossy: no single best (`3`" in text and "no practical difference" in text
     vs = next(c for c in claims if c.kind == "vs" and c.metric == "test_psnr")
-    assert vs.significant and not vs.practical and "no practical difference (below the 0.1 dB" in vs.text
+    assert vs.significant and not vs.practical and "no practical difference (interval within ±0.1 dB)" in vs.text
 
     # the experiment file's own minimum effect: 0.01 dB makes the same lead a best
     report, text = results(tmp_path / "b", spec_of({"report": {"min_effect": {"test_psnr": 0.01}}}), _lead(0.05))
@@ -256,6 +311,11 @@ def test_the_train_test_gap_is_over_the_slopes_window():
     cell = cell_settling(_settle_table({"a": 0.0}), TRAIN_REPORT.settling, 0.1)
     assert cell.gap == pytest.approx(1.0025, abs=1e-9)
     assert "- Train–test gap over the same window" in f.markdown() and "s `x=a` +1.00 dB." in f.markdown()
+    # what it averages, said in the line: the training-view points logged at 1,500..1,900 and 1,999 (one
+    # sampled training view each) and the test evaluations at 1,500 and 2,000
+    assert cell.gap_counts == ((6, 2),)
+    assert ("the mean of 6 logged training-view PSNRs minus the mean of 2 test evaluations there" in f.markdown()
+            and "**Each training-view PSNR is one sampled training view**" in f.markdown())
     # a table without a training curve has no gap, and no line
     table = _settle_table({"a": 0.0})
     table["curves"] = [json.dumps({k: v for k, v in json.loads(c).items() if k != "psnr"}) for c in table.curves]
@@ -641,6 +701,29 @@ def test_best_at_comparable_size_is_judged_by_bytes_where_bytes_per_gaussian_dif
     report, text = results(tmp_path / "one", spec_of(), _bigger_lead(0.03))
     assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
     assert "more Gaussians" in text and "bytes per Gaussian differ" not in text
+
+
+def test_the_size_pareto_figure_plots_bytes_where_bytes_per_gaussian_differ(tmp_path):
+    """Review item 4: the figure of size against quality uses the size the findings use. SH 0 with 10 %
+    more Gaussians than SH 3 (fewer Gaussians: SH 3 would be on the Gaussian-count front alone) is
+    ×0.26 the bytes of SH 3 (14 / 59 floats per Gaussian): in megabytes SH 0 is the smaller cell, and the
+    front runs SH 0 → SH 3; the axis and heading name the megabytes."""
+    def make(run):
+        d = run.labels["sh.degree"]
+        psnr = 30.0 + (0.5 if d == 3 else 0.0) + 0.01 * run.seed
+        return {**metrics_of(psnr, num_gaussians=1100 if d == 0 else 1000), "sh_degree": d}, flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of(), make)
+    mb = {d: n * floats_per_gaussian(d) * 4 / 1e6 for d, n in ((0, 1100), (3, 1000))}
+    assert mb[0] < mb[3]  # the smaller model in bytes has more Gaussians
+    assert report.fronts["gaussians_vs_error"] == {"glossy": ["sh.degree=0", "sh.degree=3"]}
+    assert "## Model size (MB, float32 parameters) against test PSNR (dB)" in text
+    assert "no other cell is both smaller (fewer bytes) and better" in text
+    assert "- Pareto front on glossy, smallest first: `sh.degree=0` → `sh.degree=3`" in text
+    # one SH degree everywhere (no sh_degree recorded: bytes per Gaussian one number): the count, as declared
+    report, text = results(tmp_path / "one", spec_of(), lambda run: (make(run)[0] | {"sh_degree": 0}, make(run)[1]))
+    assert report.fronts["gaussians_vs_error"] == {"glossy": ["sh.degree=3"]}
+    assert "## Gaussians against test PSNR (dB)" in text and "fewest Gaussians first: `sh.degree=3`" in text
 
 
 def test_the_raster_kind_declares_no_size_for_its_best():

@@ -204,8 +204,15 @@ def test_findings_numbers_match_parquet(sh_report):
             null = 0.0 if c.how == "diff" else 1.0
             assert c.significant == iv.excludes(null)  # seeded noise: every interval has a spread
             assert c.text == fmt_interval(iv, c.how, specs[c.metric], null, effects[c.metric])
-            assert ("no significant difference" in c.text) == (iv.defined and not c.significant)
-            assert ("no practical difference" in c.text) == (c.significant and not c.practical)
+            # an effect is ruled out only where the whole interval lies within ± the minimum effect (recomputed
+            # here from the bounds; a ratio's bound r as the relative change max(r, 1 / r) - 1)
+            m = effects[c.metric]
+            size = (lambda r: max(r, 1 / r) - 1) if c.how == "ratio" else abs
+            within = m is not None and max(size(iv.low), size(iv.high)) < m
+            assert ("no practical difference" in c.text) == within
+            assert ("no significant difference" in c.text) == (iv.defined and not c.significant and not within)
+            assert ("inconclusive" in c.text) == (m is not None and not within and not c.practical)
+            assert c.practical == (c.significant and (m is None or size(iv.estimate) >= m))
         elif c.kind == "count":
             # every printed interval: the paired comparisons against the reference, and the leader's
             # lead over the runner-up with its size against it (one "no best" and one "size" per scene)
@@ -238,7 +245,7 @@ def test_findings_numbers_match_parquet(sh_report):
                 and c.metric == "test_psnr")
     # +4.5 dB made, seed noise 0.1 dB: a significant gain over 3 paired seeds
     assert 4.0 < gain.value < 5.0 and gain.n == 3 and gain.significant and 4.0 < gain.low < gain.high < 5.0
-    assert re.search(r"`3`: test PSNR \S+ dB \[95 % CI [^]]+\](, no significant difference)? / " + re.escape(gain.text),
+    assert re.search(r"`3`: test PSNR \S+ dB \[95 % CI [^]]+\](, (no significant difference|no practical difference|inconclusive)[^/]*)? / " + re.escape(gain.text),
                      text)
     assert "95 % Student's t interval over seeds" in text
 

@@ -122,8 +122,9 @@ class Comparison:
     means "no difference" for a "mean" comparison (None: no significance statement);
     min_effect: the smallest difference that matters in practice, in the comparison's
     units (a difference in the metric's unit for "diff" and "mean"; a relative change for
-    "ratio": 0.05 means ×1.05 or ×1/1.05). A significant difference smaller than it reads
-    "no practical difference"; None: no practical threshold (significance alone). An
+    "ratio": 0.05 means ×1.05 or ×1/1.05). A difference reads "no practical difference" only where its
+    whole interval lies within ± it, else "inconclusive" below it (`splatbench.reports.findings.reading`);
+    None: no practical threshold (significance alone). An
     experiment file may set its own (``[report] min_effect = { test_psnr = 0.2 }``).
     """
 

@@ -51,6 +51,7 @@ complete kind (the one the runner's tests use).
 from __future__ import annotations
 
 import dataclasses
+import math
 import importlib
 import typing
 from collections.abc import Callable, Mapping
@@ -74,13 +75,14 @@ METRIC = "splatbench.metric"
 
 
 def metric(label: str = "", fmt: str = ".4g", unit: str = "", better: str = "", meaning: str = "", *,
-           interval: bool = True, default: Any = MISSING) -> Any:
+           interval: bool = True, bounds: tuple[float, float] = (-math.inf, math.inf), default: Any = MISSING) -> Any:
     """A field of a kind's `RunResult` that is a metric: a table column ``metric.<field name>``,
     shown by a report as `MetricSpec` (``label``: the column heading, the field's name when
     empty; ``fmt``: one value's format; ``unit``; ``better``: "higher", "lower" or "";
-    ``meaning``: what it is, in words; ``interval``: False where a table shows the mean alone).
+    ``meaning``: what it is, in words; ``interval``: False where a table shows the mean alone;
+    ``bounds``: the range its values lie in, where a printed interval is cut, `splatbench.metrics.spec.clip`).
     The field's value is a scalar: bool, int, float, str or None."""
-    spec = MetricSpec("", label, fmt, unit, better, interval, meaning)
+    spec = MetricSpec("", label, fmt, unit, better, interval, meaning, bounds)
     return field(default=default, metadata={METRIC: spec})
 
 

@@ -111,16 +111,17 @@ class RasterRun(RunResult):
     """What one raster run measures (module doc): each field a table column ``metric.<name>``,
     with how a report shows it and what it means. Curves: every timed call."""
 
-    fwd_ms: float = metric("forward (ms)", ".1f", "ms", "lower", "median forward time at full resolution (ms)")
+    fwd_ms: float = metric("forward (ms)", ".1f", "ms", "lower", "median forward time at full resolution (ms)",
+                           bounds=(0.0, math.inf))
     fwd_bwd_ms: float = metric("fwd+bwd (ms)", ".1f", "ms", "lower",
-                               "median forward + backward time at full resolution (ms)")
+                               "median forward + backward time at full resolution (ms)", bounds=(0.0, math.inf))
     fwd_rel: float = metric(meaning="median over timed pairs of forward time / the default options' (same process, "
                                     "alternately; < 1: faster)")
     fwd_rel_low: float = metric(meaning="low end of the 95 % bootstrap interval of fwd_rel")
     fwd_rel_high: float = metric(meaning="high end of the 95 % bootstrap interval of fwd_rel")
     fwd_bwd_rel: float = metric("fwd+bwd / default (median of pairs)", ".3f", "", "lower",
                                 "median over timed pairs of forward + backward time / the default options' "
-                                "(< 1: faster)")
+                                "(< 1: faster)", bounds=(0.0, math.inf))
     fwd_bwd_rel_low: float = metric("bootstrap low", ".3f", interval=False,
                                     meaning="low end of the 95 % bootstrap interval of fwd_bwd_rel")
     fwd_bwd_rel_high: float = metric("bootstrap high", ".3f", interval=False,

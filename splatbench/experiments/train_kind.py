@@ -52,6 +52,7 @@ Metrics (`TrainRun`'s fields) and curves (`CURVE_KEYS`) are documented beside th
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import sys
 from pathlib import Path
@@ -78,8 +79,8 @@ TEACHER_DEFAULTS = {"views": 64, "resolution": 128}
 #: What a run records of what its strategy did besides its settings' names (`TopologyCounts`); None in
 #: the metrics of a result written before they were recorded.
 TOPOLOGY_METRICS = ("refinements", "opacity_resets", "cloned", "split", "pruned", "pruned_size", "relocated", "added")
-#: The smallest differences that matter in practice (docs/reports.md, "Minimum effects"): below them a
-#: significant difference reads "no practical difference". PSNR 0.1 dB; SSIM and LPIPS the same share
+#: The smallest differences that matter in practice (docs/reports.md, "Minimum effects"): a difference
+#: whose interval lies within ± them reads "no practical difference". PSNR 0.1 dB; SSIM and LPIPS the same share
 #: (~6 %) of graphdeco's published 7K -> 30K gain as 0.1 dB is of its PSNR gain (3DGS paper Table 1,
 #: mean over Mip-NeRF 360, Tanks&Temples, Deep Blending: +1.73 dB, +0.049 SSIM, -0.079 LPIPS); times
 #: and Gaussian counts as relative changes (10 %, 5 %). An experiment file's ``[report] min_effect``
@@ -105,14 +106,15 @@ class TrainRun(RunResult):
     """What one train run records (`TrainRun.of` a `splatbench.train.TrainResult`): each field a
     table column ``metric.<name>``, with how a report shows it and what it means."""
 
+    # bounds: PSNR >= 0 (images in [0, 1]: MSE <= 1), SSIM in [-1, 1], LPIPS a distance >= 0, counts and times >= 0
     test_psnr: float | None = metric("test PSNR (dB)", ".2f", "dB", "higher",
-                                     "mean PSNR (dB) of the final model on the test views")
-    test_ssim: float | None = metric("SSIM", ".4f", "", "higher", "mean SSIM on the test views")
-    num_gaussians: int = metric("Gaussians", ".0f", meaning="Gaussians at the end")
+                                     "mean PSNR (dB) of the final model on the test views", bounds=(0.0, math.inf))
+    test_ssim: float | None = metric("SSIM", ".4f", "", "higher", "mean SSIM on the test views", bounds=(-1.0, 1.0))
+    num_gaussians: int = metric("Gaussians", ".0f", meaning="Gaussians at the end", bounds=(0.0, math.inf))
     train_seconds: float = metric("train time (s)", ".1f", "s", "lower",
-                                  "wall time of the optimisation loop (s; no evaluation, no I/O)")
+                                  "wall time of the optimisation loop (s; no evaluation, no I/O)", bounds=(0.0, math.inf))
     render_ms_per_view: float | None = metric("render (ms/view)", ".1f", "ms", "lower",
-                                              "mean forward render time of a test view (ms)")
+                                              "mean forward render time of a test view (ms)", bounds=(0.0, math.inf))
     sh_degree: int = metric(meaning="SH degree in use at the end (what 'auto' chose)")
     peak_rss_mb: float = metric(meaning="peak resident memory of the worker process over its life so far (MB): a "
                                         "worker runs several runs in turn, so it carries the peaks of the runs "
@@ -123,7 +125,7 @@ class TrainRun(RunResult):
                                               "settings, renderer); None for a dataset folder")
     test_lpips: float | None = metric("LPIPS", ".4f", "", "lower",
                                       "mean LPIPS v0.1 on the test views (lower is better; net and inputs: "
-                                      "`lpips_net`, `lpips_scale_inputs`, and the line below)")
+                                      "`lpips_net`, `lpips_scale_inputs`, and the line below)", bounds=(0.0, math.inf))
     lpips_net: str = metric(meaning="LPIPS backbone of test_lpips: alex or vgg (empty: not computed)")
     lpips_scale_inputs: int = metric(meaning="1: LPIPS inputs scaled to [-1, 1] (the lpips package); 0: [0, 1] "
                                              "unscaled (graphdeco)")

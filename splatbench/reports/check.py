@@ -10,22 +10,27 @@ statistics of every finding (`splatbench.reports.findings.paired`, `fmt_interval
 the paired t interval over seeds, the minimum effect) and the settled rule on each side's own
 test curves (`splatbench.reports.settling`), and gives one verdict (`VERDICTS`):
 
+Each side is read by the findings' one rule (`splatbench.reports.findings.reading`):
+
 * **holds**: every run of both sides is done, and for a headline of a practical difference (the
-  grid's side significant and at least the minimum effect) the check's difference is significant,
-  of the same sign and at least the minimum effect; for a headline of no practical difference,
-  the check's interval lies within the minimum effect either side of no difference;
+  grid's side reads "difference": significant and at least the minimum effect) the check's
+  reads "difference" too, with the same sign; for a headline of no practical difference (the
+  grid's interval within the minimum effect either side of no difference), the check's is too;
 * **does not hold**: for a practical headline, the check's interval excludes the headline's sign
   (it lies wholly on the other side of no difference) or lies within the minimum effect either
   side of it (the check shows there is no practical difference); for a no-difference headline, the
   check gives a practical difference;
 * **inconclusive**: every other case with every run done: an interval that cannot tell either way
-  (it spans no difference and reaches beyond the minimum effect, or excludes no difference only
-  by less than the minimum effect while reaching past it; seeds that did not vary the result);
+  (it reaches beyond the minimum effect while its estimate is below it or it spans no difference;
+  seeds that did not vary the result), or a headline that is itself inconclusive (nothing to hold);
 * **not run**: none of the check's runs has a result (the report is written all the same);
 * **incomplete**: some of the check's runs, or of the grid's runs of the two cells, have no
   finished result (no verdict from part of the seeds).
 
-Whether the check's cells had settled is stated beside the verdict and does not change it: at
+Where the two cells' model sizes differ by the findings' rule (`splatbench.reports.findings.size_shift`:
+≥ 10 % in Gaussians, or in bytes where bytes per Gaussian differ), the verdict's sentence says so for
+each protocol ("against model size"): the check has no matched-size cell, so it does not separate
+quality from size. Whether the check's cells had settled is stated beside the verdict and does not change it: at
 graphdeco's 7K column a model is mid-schedule (its refinement runs to 15,000 steps and its
 last opacity reset was 1,000 steps earlier), which is the column it stands beside.
 The check's runs are kept beside the report as ``check.parquet`` (`CHECK_TABLE_NAME`), the
@@ -34,7 +39,6 @@ grid's as ``results.parquet``.
 
 from __future__ import annotations
 
-import math
 import re
 from dataclasses import dataclass
 
@@ -48,8 +52,8 @@ from splatbench.experiments.store import build_table, experiment_dir, read_recor
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval
 from splatbench.report_files import markdown_table
-from splatbench.reports.findings import (Claim, fmt_interval, fmt_min_effect, fmt_number, judge, no_spread,
-                                         other_way, paired, rules_for, usable_runs)
+from splatbench.reports.findings import (Claim, bytes_differ, fmt_interval, fmt_min_effect, fmt_number, judge,
+                                         other_way, paired, reading, rules_for, size_shift, usable_runs)
 from splatbench.reports.settling import cell_settling, unsettled_reason
 from splatbench.reports.tables import Stat, cell_labels, metric_specs, seed_values, stat
 
@@ -98,6 +102,8 @@ class CheckSide:
     opposed: tuple[tuple[str, str], ...] = ()  # (name, difference) of each of the kind's other quality metrics
     #   that goes significantly the other way (`splatbench.reports.findings.other_way`)
     per_seed: tuple[dict, dict] = ({}, {})  # each cell's primary metric by seed (a seed's runs averaged)
+    size: str = ""  # the second cell's model size against the first's where it differs by at least
+    #   `findings.MATCHED_SHARE` (`findings.size_shift`: "×1.602 the Gaussians (≥ 10 % more"); "" otherwise
 
     @property
     def complete(self) -> bool:
@@ -166,6 +172,8 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
     by_name = {m.name: m for m in metrics}
     shown = [by_name[c.metric] for c in rules.comparisons if c.metric != metric.name and c.metric not in timed
              and c.metric in by_name]
+    size_spec = by_name.get(rules.size) if rules.size else None
+    bytes_of = declared.model_bytes if declared is not None else None
 
     def side(runs: pd.DataFrame, cells, protocol: str) -> CheckSide:
         ids = [{r.run_id for r in cell} for cell in cells]
@@ -184,6 +192,10 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
             q_values = [seed_values(p, q.name) if len(p) and f"metric.{q.name}" in p.columns else {} for p in pick]
             quality.append((q, paired(q_values[0], q_values[1], Comparison(q.name, q_how))[0], q_how))
         opposed = tuple(other_way(metric, iv.estimate - (null or 0.0), quality)) if iv.n else ()
+        size = ""
+        if size_spec is not None and len(usable):  # the findings' model-size rule, in bytes where they differ
+            size = size_shift(pick[0], pick[1], size_spec, bytes_of,
+                              bytes_differ(usable, bytes_of, size_spec.name))
         claim = None
         settled, why = None, ""
         if iv.n:
@@ -196,7 +208,7 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
             claim = Claim("check", check.scene, labels[1], metric.name, comp.how, iv.estimate, text, labels[0],
                           iv.low, iv.high, iv.n, significant, practical, settled)
         return CheckSide(protocol, done, failed, total, (stat(values[0]), stat(values[1])), claim, settled, why,
-                         others, opposed, (values[0], values[1]))
+                         others, opposed, (values[0], values[1]), size)
 
     grid_protocol = _recorded_protocol(table, {r.run_id for c in quick for r in c})
     grid_side = side(table, quick, grid_protocol)
@@ -205,12 +217,25 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
     if verdict in JUDGED and rerun_side.opposed:
         reason += (f"; **but {opposed_text(rerun_side)}** at `{check.protocol}`: "
                    f"{'; '.join(t for _, t in rerun_side.opposed)}")
+    if verdict in JUDGED:
+        reason += size_text(grid_side, rerun_side, labels)
     described = kind.protocols.describe(check.protocol) if kind.protocols is not None else check.protocol
     mine = checked[checked.run_id.isin({r.run_id for c in rerun for r in c})] if len(checked) else checked
     notes = tuple(line for note in (declared.check_notes if declared is not None else ()) if len(mine)
                   for line in note(mine))
     return CheckResult(check, tuple(spec.seeds), labels, described, metric, grid_side, rerun_side, verdict, reason,
                        checked if len(checked) else build_table([]), notes)
+
+
+def size_text(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str]) -> str:
+    """``; **against model size**: `b` ends at ×1.602 the Gaussians (≥ 10 % more) than `a` at
+    `graphdeco-7k` …; the check has no matched-size cell: quality and size are not separated``
+    where either side's cells differ in size by the findings' rule (`CheckSide.size`); "" otherwise."""
+    parts = [f"{s.size}) at `{s.protocol}`" for s in (grid, rerun) if s.size]
+    if not parts:
+        return ""
+    return (f"; **against model size**: `{labels[1]}` ends at {' and '.join(parts)} against `{labels[0]}`; the "
+            f"check has no matched-size cell: quality and size are not separated")
 
 
 def opposed_text(side: CheckSide) -> str:
@@ -251,35 +276,32 @@ def _verdict(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str], metric:
     compared = f"`{labels[1]}` against `{labels[0]}` on {r.scene}"
     quick = f"the grid's protocol ({grid.protocol}) gives {g.text}"
     null = 1.0 if how == "ratio" else (comp.null or 0.0) if how == "mean" else 0.0  # `findings.paired`'s
-    defined = math.isfinite(r.low) and math.isfinite(r.high) and not no_spread(_interval(r), how, metric)
+    said = {k: reading(_interval(c), how, null, metric, min_effect) for k, c in (("grid", g), ("check", r))}
     bound = fmt_min_effect(min_effect, how, metric) if min_effect is not None else None
-    if min_effect is None:
-        within = False
-    else:
-        lo, hi = (null / (1 + min_effect), null * (1 + min_effect)) if how == "ratio" else \
-            (null - min_effect, null + min_effect)
-        within = defined and lo < r.low and r.high < hi
     cannot_tell = (f"at {at}, {compared}: {r.text}, where {quick}; " + (
-        "the seeds did not vary the check's result, so it has no interval" if not defined else
+        "the seeds did not vary the check's result, so it has no interval" if said["check"] == "no interval" else
         f"its interval can tell neither a practical difference of the grid's sign nor one ruled out"
         + (f" (it reaches beyond the {bound} minimum effect)" if bound else "")))
-    if g.practical:
+    if said["grid"] == "difference":
         sign = 1.0 if g.value > null else -1.0
-        if r.practical and (r.value - null) * sign > 0:
+        if said["check"] == "difference" and (r.value - null) * sign > 0:
             effect = f" and at least the {bound} minimum effect" if bound else ""
             return "holds", (f"at {at}, {compared}: {r.text}; the same sign as under the grid's protocol "
                              f"({fmt_number(g.value, how, metric)}), significant{effect}")
-        if defined and ((sign > 0 and r.high < null) or (sign < 0 and r.low > null)):
+        if said["check"] != "no interval" and ((sign > 0 and r.high < null) or (sign < 0 and r.low > null)):
             return "does not hold", (f"at {at}, {compared}: {r.text}: its interval excludes the sign of the grid's "
                                      f"protocol ({fmt_number(g.value, how, metric)})")
-        if within:
+        if said["check"] == "no practical difference":
             return "does not hold", (f"at {at}, {compared}: {r.text}, where {quick}: its interval lies within the "
                                      f"{bound} minimum effect either side, so the difference is not practical there")
         return "inconclusive", cannot_tell
-    # a headline of no practical difference: holds where the check's interval rules one out
-    if r.practical:
+    if said["grid"] != "no practical difference":  # the headline neither shows a difference nor rules one out
+        return "inconclusive", (f"{quick}, which neither shows a practical difference nor rules one out, so there is "
+                                f"no headline for the check to hold or break; at {at}, {compared}: {r.text}")
+    # a headline of no practical difference (its interval within the minimum effect): holds where the check's does too
+    if said["check"] == "difference":
         return "does not hold", (f"at {at}, {compared}: {r.text}, a practical difference, where {quick}")
-    if within:
+    if said["check"] == "no practical difference":
         return "holds", (f"neither protocol gives a practical difference: {quick}; {at} gives {r.text}, its "
                          f"interval within the {bound} minimum effect either side")
     return "inconclusive", cannot_tell
@@ -290,7 +312,7 @@ def _cell(side: CheckSide, k: int, metric: MetricSpec, seeds: int) -> str:
     marked, and no interval (a part of the seeds is not the cell)."""
     st = side.stats[k]
     if side.done >= side.total:
-        return st.text(metric.fmt)
+        return st.text(metric.fmt, metric.bounds)
     if st.n == 0:
         return "–"
     return f"{format(st.mean, metric.fmt)} ({st.n} of {seeds} seeds; no interval)"
@@ -388,7 +410,7 @@ def _other(st: Stat, spec: MetricSpec, side: CheckSide, seeds: int) -> str:
     if st.n == 0:
         return "–"
     if side.done >= side.total:
-        return st.text(spec.fmt)
+        return st.text(spec.fmt, spec.bounds)
     return f"{format(st.mean, spec.fmt)} ({st.n} of {seeds} seeds; no interval)"
 
 

@@ -19,8 +19,10 @@ axis:
   ``mean`` is the row's own mean (for a metric that is already relative to the base,
   like the raster kind's time ratio) with its t interval. When the interval contains
   the null value (0 for a difference, 1 for a ratio or a relative metric) the text
-  says "no significant difference"; when it excludes it by less than the comparison's
-  ``min_effect``, "no practical difference"; when the seeds did not vary the result (a
+  says "no significant difference"; against the comparison's ``min_effect``, one rule
+  (`reading`): "no practical difference" only where the whole interval lies within ± it,
+  "inconclusive" where the interval reaches beyond it while the estimate is below it or the
+  interval contains no difference; when the seeds did not vary the result (a
   half-width of zero at the precision written, `no_spread`), "no interval" and nothing
   is significant; with one seed it says no interval can be computed. Where the kind
   declares its curves (`KindReport.settling`), a primary-metric comparison whose cells
@@ -51,7 +53,7 @@ from splatbench.experiments.kind_report import (AxisNote, Claim, Comparison, Fin
                                                 done_runs)
 from splatbench.experiments.kinds import RunKind
 from splatbench.plotting import pareto_front
-from splatbench.metrics.spec import MetricSpec
+from splatbench.metrics.spec import MetricSpec, clip
 from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
 from splatbench.reports.settling import CellSettling, cell_settling, paired_curve, unsettled_reason
 from splatbench.experiments.configs import flatten
@@ -121,6 +123,17 @@ def no_spread(iv: Interval, how: str, spec: MetricSpec) -> bool:
     return float(format(iv.half_width, fmt)) == 0.0
 
 
+def _effect_size(value: float, how: str, null: float | None, fmt: str) -> float:
+    """How far ``value`` lies from no difference, at the precision the report writes it: ``|v - null|``
+    (``fmt``), or for a ratio the relative change ``r - 1`` or ``1 / r - 1`` (``r`` at ``.3f``)."""
+    if how == "ratio":  # judged at the precision the report writes (×1.050 is 5 %)
+        if value <= 0:
+            return math.inf
+        up = value if value >= 1 else 1.0 / value
+        return float(f"{up:.3f}") - 1.0
+    return abs(float(format(value - (null or 0.0), fmt or ".6g")))
+
+
 def practical(iv: Interval, how: str, null: float | None, min_effect: float | None, fmt: str = "") -> bool:
     """True when the estimate, at the precision the report writes it (``fmt``), is at least
     ``min_effect`` from the null value (a relative change for a ratio: ``r >= 1 + min_effect``
@@ -128,12 +141,49 @@ def practical(iv: Interval, how: str, null: float | None, min_effect: float | No
     is never "below the 0.1 dB minimum effect"."""
     if min_effect is None or not math.isfinite(iv.estimate):
         return min_effect is None
-    if how == "ratio":  # judged at the precision the report writes (×1.050 is 5 %)
-        if iv.estimate <= 0:
-            return False
-        up = iv.estimate if iv.estimate >= 1 else 1.0 / iv.estimate
-        return float(f"{up:.3f}") - 1.0 >= min_effect - 1e-12
-    return abs(float(format(iv.estimate - (null or 0.0), fmt or ".6g"))) >= min_effect - 1e-12
+    if how == "ratio" and iv.estimate <= 0:
+        return False
+    return _effect_size(iv.estimate, how, null, fmt) >= min_effect - 1e-12
+
+
+#: How an interval reads against no difference and the minimum effect (`reading`).
+READINGS = ("difference", "no practical difference", "inconclusive", "no significant difference", "no interval",
+            "no test")
+
+
+def bounded(iv: Interval, how: str, spec: MetricSpec) -> Interval:
+    """``iv`` cut at the values its number can take (`splatbench.metrics.spec.clip`: an SSIM mean
+    never above 1, an LPIPS never below 0): what the report prints and judges."""
+    if not iv.defined:
+        return iv
+    return dataclasses.replace(iv, **dict(zip(("low", "high"), clip(iv.low, iv.high, how, spec))))
+
+
+def reading(iv: Interval, how: str, null: float | None, spec: MetricSpec, min_effect: float | None = None) -> str:
+    """The one rule that decides what a difference may be called (`READINGS`), at the precision written:
+
+    * "no interval": one seed, or seeds that did not vary the result (`no_spread`);
+    * "no test": no null value (a "mean" comparison without one);
+    * "difference": the interval excludes ``null`` and the estimate is at least ``min_effect`` from it
+      (`practical`; any significant difference where there is no minimum effect);
+    * "no practical difference": both of the interval's bounds lie less than ``min_effect`` from
+      ``null`` (the whole interval within ± the minimum effect; significant or not): only here
+      does a report rule an effect out;
+    * "inconclusive": every other case with a minimum effect: the interval reaches beyond it while
+      the estimate is below it or the interval contains ``null``;
+    * "no significant difference": the interval contains ``null`` and there is no minimum effect."""
+    if not iv.defined or no_spread(iv, how, spec):
+        return "no interval"
+    if null is None:
+        return "no test"
+    iv = bounded(iv, how, spec)
+    if iv.excludes(null) and practical(iv, how, null, min_effect, spec.fmt):
+        return "difference"
+    if min_effect is None:
+        return "no significant difference"
+    if max(_effect_size(iv.low, how, null, spec.fmt), _effect_size(iv.high, how, null, spec.fmt)) < min_effect - 1e-12:
+        return "no practical difference"
+    return "inconclusive"
 
 
 def fmt_min_effect(min_effect: float, how: str, spec: MetricSpec) -> str:
@@ -145,19 +195,21 @@ def fmt_min_effect(min_effect: float, how: str, spec: MetricSpec) -> str:
 
 def judge(iv: Interval, how: str, null: float | None, spec: MetricSpec, min_effect: float | None = None
           ) -> tuple[bool, bool]:
-    """(significant, practical) of an interval (`Claim`)."""
+    """(significant, practical) of an interval (`Claim`): practical is `reading`'s "difference"."""
     significant = null is not None and iv.excludes(null) and not no_spread(iv, how, spec)
-    return significant, significant and practical(iv, how, null, min_effect, spec.fmt)
+    return significant, reading(iv, how, null, spec, min_effect) == "difference"
 
 
 def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None, min_effect: float | None = None
                  ) -> str:
-    """``+0.42 dB [95 % CI +0.10, +0.74]``, with ", no significant difference" when the
-    interval contains ``null``, ", no practical difference (below the 0.1 dB minimum effect)"
-    when it excludes it but the estimate is smaller than ``min_effect``, ``(1 seed: no
-    interval)``, or, when its half-width is zero at the report's precision (never ``±0.00``),
-    ``(seeds did not vary the result: no interval)`` where it is exactly zero and ``(seeds
-    varied it by less than the precision shown, ±0.003 dB: no interval)`` where it is not."""
+    """``+0.42 dB [95 % CI +0.10, +0.74]`` followed by its `reading`: nothing for a difference;
+    ", no practical difference (interval within ±0.1 dB)"; ", inconclusive (below the 0.1 dB minimum
+    effect, but its interval reaches beyond it)" or ", no significant difference, inconclusive (its
+    interval reaches beyond the 0.1 dB minimum effect)"; ", no significant difference" without a
+    minimum effect; ``(1 seed: no interval)``, or, when its half-width is zero at the report's
+    precision (never ``±0.00``), ``(seeds did not vary the result: no interval)`` where it is
+    exactly zero and ``(seeds varied it by less than the precision shown, ±0.003 dB: no interval)``
+    where it is not."""
     text = fmt_number(iv.estimate, how, spec)
     if not iv.defined:
         return f"{text} ({iv.n} seed{'s' if iv.n != 1 else ''}: no interval)"
@@ -166,11 +218,18 @@ def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None, m
             return f"{text} (seeds did not vary the result: no interval)"
         unit = "" if how == "ratio" or not spec.unit else f" {spec.unit}"
         return f"{text} (seeds varied it by less than the precision shown, ±{iv.half_width:.1g}{unit}: no interval)"
-    text += f" [95 % CI {_bound(iv.low, how, spec)}, {_bound(iv.high, how, spec)}]"
-    if null is not None and not iv.excludes(null):
+    shown = bounded(iv, how, spec)
+    text += f" [95 % CI {_bound(shown.low, how, spec)}, {_bound(shown.high, how, spec)}]"
+    said = reading(iv, how, null, spec, min_effect)
+    effect = fmt_min_effect(min_effect, how, spec) if min_effect is not None else ""
+    if said == "no practical difference":
+        text += f", no practical difference (interval within ±{effect})"
+    elif said == "inconclusive" and iv.excludes(null):
+        text += f", inconclusive (below the {effect} minimum effect, but its interval reaches beyond it)"
+    elif said == "inconclusive":
+        text += f", no significant difference, inconclusive (its interval reaches beyond the {effect} minimum effect)"
+    elif said == "no significant difference":
         text += ", no significant difference"
-    elif null is not None and not practical(iv, how, null, min_effect, spec.fmt):
-        text += f", no practical difference (below the {fmt_min_effect(min_effect, how, spec)} minimum effect)"
     return text
 
 
@@ -362,14 +421,11 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             natural_ids = None if not stratum else set(usable.run_id) - stratum
             if dim == table.axis:
                 natural_ids = None
-            ratio = paired_ratio(*(size_values(scene, r, natural_ids) for r in (a, b)))
-            if not ratio.n or not math.isfinite(ratio.estimate) or max(ratio.estimate, 1 / ratio.estimate) < \
-                    1 + MATCHED_SHARE - 1e-12:
+            shift = size_shift(*(selected(scene, r, usable) for r in (a, b)), size_spec, bytes_of, by_bytes,
+                               natural_ids)
+            if not shift:
                 continue
-            more = ("more" if ratio.estimate > 1 else "fewer") if not by_bytes else \
-                ("larger" if ratio.estimate > 1 else "smaller")
-            head = (f"{scene}: {size_ratio_text(f'×{ratio.estimate:.3f}', scene, a, b, natural_ids)} "
-                    f"(≥ {100 * MATCHED_SHARE:g} % {more}")
+            head = f"{scene}: {shift}"
             if not matched:
                 pieces.append(head + "; the grid declares no matched-size cell, `[report] matched`: quality and size "
                                      "are not separated)")
@@ -597,8 +653,10 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                      f"correction for multiple comparisons, so about 1 in 20 intervals misses by chance)"
                      + (f"; {rest} more have none (one seed, or seeds that did not vary the result) and are no "
                         f"evidence either way" if rest else "") + "."
-                     + (f" Minimum effects (smaller significant differences read \"no practical "
-                        f"difference\"): {', '.join(effects)}." if effects else ""))
+                     + (f" Minimum effects ({', '.join(effects)}): a difference reads \"no practical difference\" "
+                        f"only where its whole interval lies within ± its minimum effect, \"inconclusive\" where "
+                        f"the interval reaches beyond it while the difference is not significant or its estimate "
+                        f"is below it." if effects else ""))
     elif made:
         claims.append(Claim("count", "", "", "", "count", 0.0, "0"))
         lines.append(f"- This table makes {len(made)} comparisons, but none has an interval (one seed per cell, "
@@ -654,6 +712,42 @@ def bytes_differ(runs: pd.DataFrame, bytes_of: Callable[[pd.DataFrame], pd.Serie
 
 #: A comparison whose size differs by at least this share is also stated at the matched size.
 MATCHED_SHARE = 0.10
+
+
+def _sizes(runs: pd.DataFrame, size: str, bytes_of: Callable[[pd.DataFrame], pd.Series] | None,
+           by_bytes: bool) -> dict[int, float]:
+    """seed -> the model size of ``runs``: its bytes where ``by_bytes`` (`bytes_differ`), else its
+    ``size`` metric (a seed's runs averaged first)."""
+    if not len(runs):
+        return {}
+    if by_bytes:
+        per = pd.DataFrame({"seed": runs.seed.astype(int), "v": bytes_of(runs).to_numpy()}).dropna()
+        return {int(k): float(v) for k, v in per.groupby("seed").v.mean().items()}
+    return seed_values(runs, size) if f"metric.{size}" in runs.columns else {}
+
+
+def size_shift(a: pd.DataFrame, b: pd.DataFrame, size: MetricSpec,
+               bytes_of: Callable[[pd.DataFrame], pd.Series] | None, by_bytes: bool, ids: set[str] | None = None
+               ) -> str:
+    """The model-size rule (docs/reports.md, "Model size"): where the runs ``b`` end at least
+    `MATCHED_SHARE` larger or smaller than the runs ``a`` (paired geometric-mean ratio over seeds, of
+    the bytes where ``by_bytes``, else of the ``size`` metric), ``×1.602 the Gaussians (≥ 10 % more``
+    or ``×3.999 the bytes (×0.949 the Gaussians) (≥ 10 % larger`` (the caller closes the bracket);
+    "" otherwise. ``ids``: only these runs (None: all). The findings' comparisons and the check's
+    verdict (`splatbench.reports.check`) both flag a size change through it."""
+    if ids is not None:
+        a, b = a[a.run_id.isin(ids)], b[b.run_id.isin(ids)]
+    ratio = paired_ratio(_sizes(a, size.name, bytes_of, by_bytes), _sizes(b, size.name, bytes_of, by_bytes))
+    if not ratio.n or not math.isfinite(ratio.estimate) or ratio.estimate <= 0 or \
+            max(ratio.estimate, 1 / ratio.estimate) < 1 + MATCHED_SHARE - 1e-12:
+        return ""
+    if by_bytes:
+        count = paired_ratio(_sizes(a, size.name, None, False), _sizes(b, size.name, None, False))
+        also = f" (×{count.estimate:.3f} the {_name(size)})" if count.n and math.isfinite(count.estimate) else ""
+        text, more = f"×{ratio.estimate:.3f} the bytes{also}", "larger" if ratio.estimate > 1 else "smaller"
+    else:
+        text, more = f"×{ratio.estimate:.3f} the {_name(size)}", "more" if ratio.estimate > 1 else "fewer"
+    return f"{text} (≥ {100 * MATCHED_SHARE:g} % {more}"
 
 
 def _stratum(runs: pd.DataFrame, dim: str | None, values: Sequence) -> set[str]:
@@ -813,5 +907,5 @@ def _name(spec: MetricSpec) -> str:
 
 
 __all__ = ["Claim", "Finding", "AxisNote", "axis_finding", "load_recorded", "rules_for", "fmt_number", "fmt_interval", "paired",
-           "reference_row", "usable_runs", "no_spread", "practical", "judge", "fmt_min_effect", "confounds",
+           "reference_row", "usable_runs", "no_spread", "practical", "reading", "READINGS", "bounded", "size_shift", "bytes_differ", "MATCHED_SHARE", "judge", "fmt_min_effect", "confounds",
            "CONFOUND_SHARE"]

@@ -52,9 +52,10 @@ def cell_means(spec: ExperimentSpec, runs: pd.DataFrame, metric: str) -> dict[st
 def tied(means: dict[str, float], better: str, min_effect: float | None, ratio: bool = False) -> dict[str, float]:
     """``means`` with the cells that no minimum effect separates made equal: down the order (best
     first), each cell joins the group of the best cell not yet grouped while it is less than
-    ``min_effect`` from that cell, and every cell of a group takes the group's mean. A difference
-    below the minimum effect is "no difference" in the findings, so it orders nothing here either
-    (glossy's SH 1 and 3, 0.07 dB apart under a 0.1 dB minimum effect, tie). ``ratio``: the minimum
+    ``min_effect`` from that cell, and every cell of a group takes the group's mean. Means closer than
+    the minimum effect order nothing worth ranking (glossy's SH 1 and 3, 0.07 dB apart under a 0.1 dB
+    minimum effect, tie); a tie is about the order of the means, not a finding of no difference (that
+    needs the paired interval within the minimum effect, `splatbench.reports.findings.reading`). ``ratio``: the minimum
     effect is a relative change (a "ratio" comparison: within ×(1 + min_effect)). ``None``: as given."""
     if not min_effect:
         return dict(means)

@@ -29,6 +29,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import dataclasses
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -46,7 +47,7 @@ from splatbench.metrics.spec import MetricSpec
 from splatbench.report_files import markdown_table, write_parquet, write_text
 from splatbench.reports.check import CHECK_TABLE_NAME, CheckResult, check_lines, check_result, check_table, header_line
 from splatbench.reports.figures import cell_means, curves_figure
-from splatbench.reports.findings import Finding, axis_finding, load_recorded, usable_runs
+from splatbench.reports.findings import Finding, axis_finding, bytes_differ, load_recorded, usable_runs
 from splatbench.reports.published import published_lines
 from splatbench.reports.ranks import quick_table, rank_finding
 from splatbench.reports.settling import settling_finding
@@ -63,7 +64,9 @@ def interval_note(max_seeds: int) -> str:
     return ("Mean ± half-width of the 95 % Student's t interval over seeds (n − 1 degrees of freedom; a seed's "
             "runs are averaged first); a cell with one seed shows its mean alone, and \"(no spread)\" marks a cell "
             "whose seeds did not vary it at the precision shown (no interval: see the protocol above for what a "
-            "seed varies)")
+            "seed varies); where mean ± half-width would cross the metric's range (SSIM ≤ 1; PSNR, LPIPS, counts "
+            "and times ≥ 0), the cell prints the interval cut at the bound, `0.9981 [0.9952, 1.0000]`, and so "
+            "does every difference or mean in the findings")
 
 
 @dataclass
@@ -187,10 +190,10 @@ def write_report(report: Report, out: str | Path, *, results: str | Path | None 
             report.fronts[tradeoff.stem] = {}
             drawn.append((tradeoff, None))
             continue
+        tradeoff, trusted, cost = sized_tradeoff(report, tradeoff, trusted)
         means = cell_means(trusted, short, tradeoff.cost, tradeoff.quality)
         path = figures / f"{tradeoff.stem}.png"
-        fronts = pareto_figure(means, list(report.spec.scenes), specs[tradeoff.cost], specs[tradeoff.quality],
-                               path, tradeoff.title)
+        fronts = pareto_figure(means, list(report.spec.scenes), cost, specs[tradeoff.quality], path, tradeoff.title)
         report.fronts[tradeoff.stem] = {scene: [to_full[c] for c in cells] for scene, cells in fronts.items()}
         drawn.append((tradeoff, path))
     run_options = "" if results is None else f" --results {results}"
@@ -199,6 +202,32 @@ def write_report(report: Report, out: str | Path, *, results: str | Path | None 
     text = render_markdown(report, curve_paths, drawn, out, options, run_options)
     write_text(out / REPORT_NAME, text)
     return out / REPORT_NAME
+
+
+#: The size axis of a Pareto figure where the cells' bytes per Gaussian differ (`sized_tradeoff`).
+MODEL_MB = MetricSpec("model_mb", "Model size (MB, float32 parameters)", ".2f", "MB", "lower",
+                      bounds=(0.0, math.inf))
+
+
+def sized_tradeoff(report: Report, tradeoff: Tradeoff, runs: pd.DataFrame
+                   ) -> tuple[Tradeoff, pd.DataFrame, MetricSpec]:
+    """(The figure as drawn, its runs, its cost's `MetricSpec`): where the cost is the kind's size
+    metric (`FindingRules.size`, the Gaussian count) and the runs' bytes per Gaussian differ
+    (`findings.bytes_differ`: an SH axis, 14 floats a Gaussian at degree 0, 59 at 3), the size is the
+    model's megabytes (`KindReport.model_bytes`, column ``metric.model_mb``), as the findings judge
+    size; else the figure as declared."""
+    declared = report.kind.report
+    rules = declared.rules if declared is not None else None
+    specs = {m.name: m for m in report.metrics}
+    if rules is None or rules.size != tradeoff.cost or declared.model_bytes is None \
+            or not bytes_differ(runs, declared.model_bytes, tradeoff.cost):
+        return tradeoff, runs, specs[tradeoff.cost]
+    runs = runs.assign(**{f"metric.{MODEL_MB.name}": declared.model_bytes(runs) / 1e6})
+    quality = specs[tradeoff.quality]
+    title = (f"Model size (MB of float32 parameters, not the Gaussian count: the cells' bytes per Gaussian "
+             f"differ) against {quality.label.split(' (')[0]} per cell (mean over seeds)")
+    return (dataclasses.replace(tradeoff, cost=MODEL_MB.name, title=title, cheaper="smaller (fewer bytes)",
+                                order="smallest first"), runs, MODEL_MB)
 
 
 def timed_runs(report: Report, tradeoff: Tradeoff) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -298,7 +327,7 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     specs = {m.name: m for m in report.metrics}
     declared = kind.report
     for tradeoff, path in tradeoffs:
-        cost, quality = specs[tradeoff.cost], specs[tradeoff.quality]
+        cost, quality = specs.get(tradeoff.cost, MODEL_MB), specs[tradeoff.quality]  # `sized_tradeoff`
         lines += [f"## {cost.label} against {quality.label}", ""]
         trusted, left = timed_runs(report, tradeoff)
         shown = cell_labels(spec, trusted) if len(trusted) else pd.Series([], dtype=object)

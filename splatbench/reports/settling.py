@@ -124,6 +124,7 @@ class CellSettling:
     lo: int | None = None  # the window's first step (``end - end / 4``; the test points start at ``start``)
     resets: tuple[int, ...] = ()  # the resets (`SettlingCurves.resets`) in the window, over the runs
     left_out: tuple[int, ...] = ()  # the training-view steps left out of the window (`RESET_RECOVERY`)
+    gap_counts: tuple[tuple[int, int], ...] = ()  # each run's (training-view points, test points) in the gap
 
     @property
     def flat(self) -> bool:
@@ -199,6 +200,7 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
     test: dict[int, list[float]] = {}
     train: dict[int, list[float]] = {}
     gaps: dict[int, list[float]] = {}
+    counts: list[tuple[int, int]] = []  # per run: (training-view points, test points) its gap averages
     starts, ends, los = [], [], []
     resets: set[int] = set()
     left_out: set[int] = set()
@@ -225,6 +227,7 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
             g = window_gap(c, keys, s.lo, s.end, skip)
             if g is not None:
                 gaps.setdefault(int(seed), []).append(g)
+                counts.append(tuple(len(p) for p in gap_points(c, keys, s.lo, s.end, skip)))
     if not test:
         return None
     per_seed = {k: float(np.mean(v)) for k, v in sorted(test.items())}
@@ -234,7 +237,12 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
     best, best_step, last = peak if peak is not None else (None, None, None)
     return CellSettling(float(np.mean(list(per_seed.values()))), train_mean, min(starts), max(ends), per_seed,
                         min_effect, gap, best, best_step, last, min(los), tuple(sorted(resets)),
-                        tuple(sorted(left_out)))
+                        tuple(sorted(left_out)), tuple(sorted(set(counts))))
+
+
+def _span(values: list[int]) -> str:
+    """``12`` or ``11–12`` (the fewest and most over the runs)."""
+    return f"{values[0]}" if len(values) == 1 else f"{values[0]}–{values[-1]}"
 
 
 def _resets(run: pd.Series, keys: SettlingCurves) -> tuple[int, ...]:
@@ -250,16 +258,19 @@ def window_gap(curves: dict, keys: SettlingCurves, start: int, end: int, skip=()
     the mean of the test curve's; None when either has no finite point there. The training-view value
     is the view each step trained on, measured before its update and logged every ``log_every`` steps:
     a noisy but unbiased sample of the fit to the training views."""
-    skipped = set(skip)
+    train, test = gap_points(curves, keys, start, end, skip)
+    return None if not train or not test else float(np.mean(train)) - float(np.mean(test))
 
-    def mean_in(steps, values, leave=frozenset()) -> float | None:
-        pts = [float(v) for s, v in zip(steps or [], values or []) if s is not None and v is not None
-               and start <= float(s) <= end and math.isfinite(float(v)) and int(s) not in leave]
-        return float(np.mean(pts)) if pts else None
 
-    train = mean_in(curves.get(keys.train_step), curves.get(keys.train_value), skipped)
-    test = mean_in(curves.get(keys.test_step), curves.get(keys.test_value))
-    return None if train is None or test is None else train - test
+def gap_points(curves: dict, keys: SettlingCurves, start: int, end: int, skip=()) -> tuple[list[float], list[float]]:
+    """(The training-view points, the test points) of one run that `window_gap` averages: the finite
+    values logged at steps ``start..end``, the training-view steps in ``skip`` left out."""
+    def points(steps, values, leave=frozenset()) -> list[float]:
+        return [float(v) for s, v in zip(steps or [], values or []) if s is not None and v is not None
+                and start <= float(s) <= end and math.isfinite(float(v)) and int(s) not in leave]
+
+    return (points(curves.get(keys.train_step), curves.get(keys.train_value), set(skip)),
+            points(curves.get(keys.test_step), curves.get(keys.test_value)))
 
 
 def _seed_curves(runs: pd.DataFrame, step_key: str, value_key: str) -> dict[int, dict[int, float]]:
@@ -396,11 +407,15 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
                             n=len(c.per_seed), significant=not c.settled, settled=c.settled))
     gaps = [(scene, cell, c.gap) for (scene, cell), c in cells.items() if c.gap is not None]
     if gaps:
+        counts = [n for c in cells.values() for n in c.gap_counts]
+        n_train = _span(sorted({a for a, _ in counts}))
+        n_test = _span(sorted({b for _, b in counts}))
         lines.append(f"- Train–test gap over the same window (steps {span}"
                      + (f", less the training-view points just after a reset" if left else "")
-                     + f"; mean training-view PSNR minus mean test PSNR at the "
-                     f"evaluations there, mean over seeds; the training view is the one each step trained on, "
-                     f"before its update, logged every `log_every` steps; a larger gap is a cell fitting its training "
+                     + f"; the mean of {n_train} logged training-view PSNRs minus the mean of {n_test} test "
+                     f"evaluations there, per run, mean over seeds. **Each training-view PSNR is one sampled training "
+                     f"view**, the one its step trained on, before its update (the runs record no evaluation of all "
+                     f"training views): a noisy, view-dependent estimate; a larger gap is a cell fitting its training "
                      f"views more than it generalises): "
                      + "; ".join(f"{scene} `{cell}` {g:+.2f} dB" for scene, cell, g in gaps) + ".")
     moving = [f"{scene} `{cell}` ({c.test:+.2f})" for (scene, cell), c in cells.items() if not c.flat]
@@ -430,4 +445,4 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
 
 
 __all__ = ["LAST_SHARE", "SETTLE_STEPS", "DRIFT_SHARE", "Slope", "CellSettling", "last_quarter_slope",
-           "cell_settling", "window_gap", "recovering", "RESET_RECOVERY", "FALL_FMT", "paired_curve", "drift", "difference_settled", "unsettled_reason", "settling_finding"]
+           "cell_settling", "window_gap", "gap_points", "recovering", "RESET_RECOVERY", "FALL_FMT", "paired_curve", "drift", "difference_settled", "unsettled_reason", "settling_finding"]

@@ -32,7 +32,7 @@ from splatbench.experiments.grid import expand
 from splatbench.experiments.kind_report import done_runs
 from splatbench.experiments.kinds import RunKind
 from splatbench.experiments.spec import ExperimentSpec
-from splatbench.metrics.spec import MetricSpec
+from splatbench.metrics.spec import MetricSpec, clip
 from splatbench.metrics.stats import t_quantile
 from splatbench.report_files import markdown_table
 
@@ -146,16 +146,22 @@ class Stat:
             return math.nan
         return t_quantile(self.n) * self.std / math.sqrt(self.n)
 
-    def text(self, fmt: str) -> str:
+    def text(self, fmt: str, bounds: tuple[float, float] = (-math.inf, math.inf)) -> str:
         """``"27.31 ± 0.42"`` (mean ± 95 % half-width), the mean alone for one seed, "–" for none,
         ``"41.26 (no spread)"`` when the half-width is zero at ``fmt``'s precision: the seeds did
-        not vary the value, so there is no interval to show (never ``± 0.00``)."""
+        not vary the value, so there is no interval to show (never ``± 0.00``); ``"0.9981 [0.9952,
+        1.0000]"`` where mean ± half-width would cross the metric's ``bounds`` (`MetricSpec.bounds`):
+        the interval cut there (`splatbench.metrics.spec.clip`)."""
         if self.n == 0 or math.isnan(self.mean):
             return "–"
         if self.n < 2 or math.isnan(self.std):
             return format(self.mean, fmt)
         if float(format(self.half_width, fmt)) == 0.0:
             return f"{format(self.mean, fmt)} (no spread)"
+        low, high = self.mean - self.half_width, self.mean + self.half_width
+        if low < bounds[0] or high > bounds[1]:
+            low, high = clip(low, high, "mean", MetricSpec("", "", fmt, bounds=bounds))
+            return f"{format(self.mean, fmt)} [{format(low, fmt)}, {format(high, fmt)}]"
         return f"{format(self.mean, fmt)} ± {format(self.half_width, fmt)}"
 
 
@@ -214,7 +220,7 @@ class AxisTable:
 def _cell(r: pd.Series, m: MetricSpec) -> str:
     """One table cell: `Stat.text`; a time none of whose runs was timed on a quiet machine reads
     "— (loaded)", and one that left some out says how many (``<metric>.loaded``, `axis_table`)."""
-    text = Stat(r[f"{m.name}.mean"], r[f"{m.name}.std"] if m.interval else math.nan, int(r[f"{m.name}.n"])).text(m.fmt)
+    text = Stat(r[f"{m.name}.mean"], r[f"{m.name}.std"] if m.interval else math.nan, int(r[f"{m.name}.n"])).text(m.fmt, m.bounds)
     left = int(r.get(f"{m.name}.loaded", 0) or 0)
     if not left:
         return text
