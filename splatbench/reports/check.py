@@ -280,7 +280,7 @@ def _verdict(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str], metric:
     bound = fmt_min_effect(min_effect, how, metric) if min_effect is not None else None
     cannot_tell = (f"at {at}, {compared}: {r.text}, where {quick}; " + (
         "the seeds did not vary the check's result, so it has no interval" if said["check"] == "no interval" else
-        f"its interval can tell neither a practical difference of the grid's sign nor one ruled out"
+        "its interval can tell neither a practical difference of the grid's sign nor one ruled out"
         + (f" (it reaches beyond the {bound} minimum effect)" if bound else "")))
     if said["grid"] == "difference":
         sign = 1.0 if g.value > null else -1.0
@@ -396,7 +396,7 @@ def _per_seed_lines(result: CheckResult) -> list[str]:
         return []
     head = ["protocol", "seed", f"`{a}`", f"`{b}`", f"`{b}` − `{a}`"]
     return [f"Each seed's {_name(m)}" + (f" ({m.unit})" if m.unit else "") + ", both cells (a seed that went its own "
-            f"way shows here, not in the means above):", "", *markdown_table(head, rows, align="--rrr").splitlines(),
+            "way shows here, not in the means above):", "", *markdown_table(head, rows, align="--rrr").splitlines(),
             ""]
 
 

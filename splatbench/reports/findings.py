@@ -539,7 +539,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             + (f"the {unit_text} minimum effect" if unit_text else "no difference")
             + (f" with no more than {fmt_min_effect(size_effect, 'ratio', size_spec)} more {size_word}"
                if size_spec is not None else "")
-            + (f" (float32 parameters: the cells' bytes per Gaussian differ)"
+            + (" (float32 parameters: the cells' bytes per Gaussian differ)"
                if by_bytes else ""))
     lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds; {rule}): "
                  + "; ".join(best_parts) + ".")

@@ -411,7 +411,7 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
         n_train = _span(sorted({a for a, _ in counts}))
         n_test = _span(sorted({b for _, b in counts}))
         lines.append(f"- Train–test gap over the same window (steps {span}"
-                     + (f", less the training-view points just after a reset" if left else "")
+                     + (", less the training-view points just after a reset" if left else "")
                      + f"; the mean of {n_train} logged training-view PSNRs minus the mean of {n_test} test "
                      f"evaluations there, per run, mean over seeds. **Each training-view PSNR is one sampled training "
                      f"view**, the one its step trained on, before its update (the runs record no evaluation of all "
