@@ -600,7 +600,10 @@ def test_a_check_run_with_a_test_view_far_below_its_other_seeds_is_named_under_t
     assert "test view 2 at 24.10 dB, 18.0 dB below the same view in the cell's other seeds (their median 42.10 dB)" \
         in lines[flagged[0]]
     assert lines[flagged[0] + 1].endswith("6 runs checked, 1 flagged.")
-    # under the per-seed table, before the verdict
-    assert lines.index("Each seed's test PSNR (dB), both cells (a seed that went its own way shows here, not in the "
-                       "means above):") < flagged[0] < next(i for i, line in enumerate(lines)
-                                                            if line.startswith("**7K check: "))
+    # under the per-seed table, in the appendix after the verdict; the section's body says one run was flagged
+    verdict = next(i for i, line in enumerate(lines) if line.startswith("**7K check: "))
+    assert verdict < lines.index("## Appendix: The check in full") < lines.index(
+        "Each seed's test PSNR (dB), both cells (a seed that went its own way shows here, not in the means above):") \
+        < flagged[0]
+    assert ("Each cell's other metrics, each seed's test PSNR and the check's runs' outlier test views (**a run flagged "
+            "with an outlier test view**): \"Appendix: The check in full\".") in lines[:verdict]

@@ -28,7 +28,7 @@ import pytest
 
 from splatbench.experiments import check_runs, expand, load_experiment
 from splatbench.reports import report_from_table
-from splatbench.reports.check import CHECK_TABLE_NAME, check_lines, header_line
+from splatbench.reports.check import CHECK_TABLE_NAME, check_appendix_lines, check_lines, header_line
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted(p.stem for p in (ROOT / "experiments").glob("*.toml"))
@@ -89,7 +89,11 @@ def test_committed_report_matches_its_parquet(name):
     for axis in report.axes:
         assert axis.markdown() in text, f"reports/{name}: the `{axis.axis}` table differs from results.parquet"
         if axis.axis in report.findings:
-            assert report.findings[axis.axis].markdown() in text, f"reports/{name}: `{axis.axis}` findings differ"
+            found = report.findings[axis.axis]
+            assert found.markdown() in text, f"reports/{name}: `{axis.axis}` findings differ"
+            assert found.appendix_markdown() in text, f"reports/{name}: `{axis.axis}` findings' appendix differs"
+            for line in found.summary:  # the summary: the findings' own texts, cut short
+                assert line in text, f"reports/{name}: `{axis.axis}` summary differs: {line[:80]!r}"
     for finding in ("parity", "settling", "ranks"):  # the run findings: their own sections
         if finding in report.findings:
             assert report.findings[finding].markdown() in text, f"reports/{name}: the {finding} finding differs"
@@ -103,7 +107,7 @@ def test_committed_report_matches_its_parquet(name):
             assert set(checked.run_id) <= {r.run_id for r in check_runs(spec)}, f"reports/{name}: stale check.parquet"
         check = report_from_table(spec, table, len(runs), checked).check
         assert header_line(check) in text, f"reports/{name}: the header's 7K check differs from {CHECK_TABLE_NAME}"
-        for line in check_lines(check, f"splatbench run experiments/{name}.toml"):
+        for line in (*check_lines(check, f"splatbench run experiments/{name}.toml"), *check_appendix_lines(check)):
             assert line in text, f"reports/{name}: the 7K check's section differs: {line[:80]!r}"
     for line in text.splitlines():
         if line.startswith("![") and "](" in line:

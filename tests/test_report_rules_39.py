@@ -40,6 +40,11 @@ def vs_line(text: str, label: str) -> str:
     return next(line for line in text.splitlines() if line.startswith(f"  - `{label}`: "))
 
 
+def appendix_line(text: str, label: str) -> str:
+    """The row's line of the other comparisons, in its axis's section "Appendix: <axis> in full"."""
+    return vs_line(text[text.index("## Appendix: "):], label)
+
+
 # --------------------------------------------------------------------------- past its peak
 def _peaked(fall: float, seeds: int = 3) -> pd.DataFrame:
     """A 7K test curve (a point every 700 steps) that peaks at 2,100 steps and falls by ``fall`` dB
@@ -103,9 +108,32 @@ def test_a_psnr_lead_whose_ssim_goes_the_other_way_says_so(tmp_path):
     assert "**but SSIM goes the other way** (SSIM -0.0100 [95 % CI" in best.text and best.text in text
     assert "**The other way** (against the test PSNR difference, significantly): glossy: SSIM -0.0100" \
         in vs_line(text, "3")
+    # the report's summary, before the protocol, says so too: of the best and of the comparison (issue 39 item 4)
+    summary = text[text.index("## Summary"):text.index("## Protocol and runs")]
+    vs = next(c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
+    assert f"- **`3`** against `0`, test PSNR: glossy {vs.text}; **the other way**: SSIM on glossy." in summary
+    assert "glossy `3` (" in summary and "**but SSIM goes the other way**" in summary
     # SSIM going the same way is not named
     _, text = results(tmp_path / "b", spec_of(), _ssim_make(0.01))
     assert "the other way" not in text.lower()
+
+
+def test_the_report_opens_with_its_summary_and_ends_with_its_appendix(tmp_path):
+    """The layout (docs/reports.md, "Layout"): the summary first, then the protocol, each axis's primary findings,
+    the check and the figures; every other number in "Appendix: ..." sections at the end."""
+    report, text = results(tmp_path, spec_of(("glossy", "diffuse")), _ssim_make(-0.0105))
+    heads = [line for line in text.splitlines() if line.startswith("## ")]
+    assert heads[:3] == ["## Summary", "## Protocol and runs", "## sh.degree"]
+    first = next(i for i, h in enumerate(heads) if h.startswith("## Appendix: "))
+    assert all(h.startswith("## Appendix: ") for h in heads[first:]), heads
+    assert heads[first:first + 3] == ["## Appendix: sh.degree in full", "## Appendix: Settling", "## Appendix: Ranks"]
+    found = report.findings["sh.degree"]
+    appendix = text[text.index("## Appendix: sh.degree in full"):]
+    body = text[:text.index("## Appendix: sh.degree in full")]
+    assert found.markdown() in body and found.appendix_markdown() in appendix
+    # the body's comparisons state the primary metric alone; the others are the appendix's
+    assert "; SSIM " not in vs_line(body, "3") and appendix_line(text, "3").startswith("  - `3`: SSIM ")
+    assert report.findings["settling"].markdown() in appendix and "- Settled: every cell" in body
 
 
 # --------------------------------------------------------------------------- across scenes
@@ -217,7 +245,8 @@ def test_a_difference_with_more_gaussians_is_also_given_at_the_matched_size(tmp_
     # Gaussians and bytes (59 floats per Gaussian at SH degree 3, 4 bytes each) beside the comparison: the
     # row pools natural and matched runs: seed s has (5000 + 10 s + 600 + s) / 2, 2,805.5 over seeds 0..2
     mb_one = (5000 + 600 + 11 * 1) / 2 * floats_per_gaussian(3) * 4 / 1e6
-    assert f"Gaussians and bytes (mean over seeds, `1` against `0`): glossy 2,806 Gaussians, {mb_one:.2f} MB" in line
+    assert f"Gaussians and bytes (mean over seeds, `1` against `0`): glossy 2,806 Gaussians, {mb_one:.2f} MB" \
+        in appendix_line(text, "1")
     # the matched axis's own rows (matched against natural) are the size comparison itself: nothing added
     assert "**Against model size**" not in vs_line(text, "matched")
     matched = next(c for c in report.findings["loss.ssim_lambda"].claims if c.kind == "matched")

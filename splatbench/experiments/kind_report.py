@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
 from splatbench.metrics.spec import MetricSpec
@@ -67,14 +67,23 @@ class Claim:
 @dataclass
 class Finding:
     """The finding of one axis, or a run finding (its section named by ``axis``): markdown lines
-    and the claims they state."""
+    and the claims they state. An axis finding's ``lines`` hold its primary metric's (the report's
+    body); ``appendix``: the rest, for its section "Appendix: <axis> in full" (the other metrics'
+    comparisons, what else a setting changed, the count of comparisons, the kind's axis notes);
+    ``summary``: the short lines the report's "Summary" opens with (the same texts, cut short; no
+    number that is not in ``lines``)."""
 
     axis: str
     lines: list[str]
     claims: list[Claim]
+    appendix: list[str] = field(default_factory=list)
+    summary: list[str] = field(default_factory=list)
 
     def markdown(self) -> str:
         return "\n".join(self.lines)
+
+    def appendix_markdown(self) -> str:
+        return "\n".join(self.appendix)
 
 
 def done_runs(table: pd.DataFrame) -> pd.DataFrame:

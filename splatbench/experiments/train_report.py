@@ -951,7 +951,7 @@ def hardest_view_lines(table: pd.DataFrame, min_effect: float = 0.1) -> list[str
 
 def outlier_view_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None) -> Finding | None:
     """The grid's runs' `outlier_view_lines` as a run finding (`KindReport.run_findings`), its own
-    section "Outlier test views"; None where no run recorded its views."""
+    section "Appendix: Outlier test views"; None where no run recorded its views."""
     lines = outlier_view_lines(runs)
     hardest = hardest_view_lines(runs, **({"min_effect": min_effect["test_psnr"]}
                                           if min_effect and "test_psnr" in min_effect else {}))

@@ -318,9 +318,14 @@ def _cell(side: CheckSide, k: int, metric: MetricSpec, seeds: int) -> str:
     return f"{format(st.mean, metric.fmt)} ({st.n} of {seeds} seeds; no interval)"
 
 
+#: The title of the check's section in a report's appendix (`check_appendix_lines`).
+APPENDIX_TITLE = "Appendix: The check in full"
+
+
 def check_lines(result: CheckResult, run_command: str) -> list[str]:
-    """The report's section "Headline at the 7K protocol" (title included); ``run_command``:
-    the ``splatbench run ...`` that runs the check."""
+    """The report's section "Headline at the 7K protocol" (title included): what is rerun, its
+    table of the headline's metric, its verdict; ``run_command``: the ``splatbench run ...`` that runs
+    the check. The other metrics, each seed's values and the outlier views: `check_appendix_lines`."""
     c, m = result.check, result.metric
     a, b = result.labels
     title = protocol_title(c.protocol)
@@ -346,6 +351,35 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
     lines += [*markdown_table(head, rows, align="-rrr--").splitlines(),
               "", f"Cells: {_name(m)} ({m.unit}), mean over seeds ± the half-width of its 95 % t interval."
               if m.unit else f"Cells: {_name(m)}, mean over seeds ± the half-width of its 95 % t interval.", ""]
+    more = check_appendix_lines(result)
+    if more:
+        flagged = sum(1 for line in more if line.startswith("- **Outlier test view**"))
+        lines += [f"Each cell's other metrics, each seed's {_name(m)}"
+                  + (" and the check's runs' outlier test views" if result.notes else "")
+                  + (f" (**{'runs' if flagged > 1 else 'a run'} flagged with an outlier test view**)" if flagged else "")
+                  + f": \"{APPENDIX_TITLE}\".", ""]
+    sentence = f"**{result.headline}**: {result.reason}"
+    if result.verdict in JUDGED and result.rerun.settled is False:
+        sentence += f"; **not settled** at `{c.protocol}` ({result.rerun.why})"
+    if result.verdict in ("not run", "incomplete"):
+        sentence += f". Run `{run_command}` (finished runs are skipped) and report again"
+    lines += [sentence + ".", ""]
+    failed = result.table[result.table.status == "failed"] if len(result.table) else result.table
+    if len(failed):
+        lines += ["Failed runs of the check:", ""]
+        lines += [f"- `{r.run_id}` ({r.scene}, seed {r.seed}): {' '.join(str(r.error).split())}"
+                  for _, r in failed.iterrows()]
+        lines.append("")
+    return lines
+
+
+def check_appendix_lines(result: CheckResult) -> list[str]:
+    """The check's tables the report's appendix holds (no title; [] when it has none): each cell's
+    other metrics beside the headline's, each seed's value, and the notes on its runs (outlier test
+    views)."""
+    m = result.metric
+    a, b = result.labels
+    lines: list[str] = []
     # the sides with a result (a check not run yet has none: no rows of dashes)
     others = [(side, name) for side, name in ((result.grid, f"`{result.grid.protocol}`"),
                                               (result.rerun, f"`{result.rerun.protocol}`"))
@@ -364,18 +398,6 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
     lines += _per_seed_lines(result)
     if result.notes:
         lines += [*result.notes, ""]
-    sentence = f"**{result.headline}**: {result.reason}"
-    if result.verdict in JUDGED and result.rerun.settled is False:
-        sentence += f"; **not settled** at `{c.protocol}` ({result.rerun.why})"
-    if result.verdict in ("not run", "incomplete"):
-        sentence += f". Run `{run_command}` (finished runs are skipped) and report again"
-    lines += [sentence + ".", ""]
-    failed = result.table[result.table.status == "failed"] if len(result.table) else result.table
-    if len(failed):
-        lines += ["Failed runs of the check:", ""]
-        lines += [f"- `{r.run_id}` ({r.scene}, seed {r.seed}): {' '.join(str(r.error).split())}"
-                  for _, r in failed.iterrows()]
-        lines.append("")
     return lines
 
 
@@ -432,4 +454,4 @@ def _name(spec: MetricSpec) -> str:
 
 
 __all__ = ["CHECK_TABLE_NAME", "VERDICTS", "JUDGED", "CheckSide", "CheckResult", "check_name", "protocol_title", "check_table", "check_result",
-           "check_lines", "header_line"]
+           "check_lines", "check_appendix_lines", "APPENDIX_TITLE", "header_line"]

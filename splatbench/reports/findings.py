@@ -410,9 +410,10 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         what = f"{_name(size_spec)} and bytes" if bytes_of is not None else _name(size_spec)
         return f"{what[:1].upper()}{what[1:]} (mean over seeds, `{b.label}` against `{a.label}`): " + "; ".join(parts)
 
-    def matched_text(a: Row, b: Row) -> str:
+    def matched_text(a: Row, b: Row, heads: list[tuple[str, str]] | None = None) -> str:
         """Where ``b`` comes with `MATCHED_SHARE` more (or fewer) Gaussians than ``a`` at a scene, the same
-        difference at the matched size (`[report] matched`), or that the grid has none."""
+        difference at the matched size (`[report] matched`), or that the grid has none; ``heads``
+        collects each scene's size change, (scene, `size_shift`'s text) (the summary's)."""
         pieces = []
         if dim == table.axis and (len(matched_values) < 2 or all(any(same_value(r.value, v) for v in matched_values)
                                                                  for r in (a, b))):
@@ -426,6 +427,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             if not shift:
                 continue
             head = f"{scene}: {shift}"
+            if heads is not None:
+                heads.append((scene, shift))
             if not matched:
                 pieces.append(head + "; the grid declares no matched-size cell, `[report] matched`: quality and size "
                                      "are not separated)")
@@ -462,7 +465,10 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
 
     claims: list[Claim] = []
     lines: list[str] = []
+    appendix: list[str] = []  # the section "Appendix: <axis> in full" (`Finding.appendix`)
+    summary: list[str] = []   # the report's "Summary" (`Finding.summary`): the texts below, cut short
     best_parts = []
+    best_short = []  # each scene's verdict of ``best_parts`` without its lead's numbers
     unit_text = fmt_min_effect(primary_comp.min_effect, primary_comp.how, primary) \
         if primary_comp.min_effect is not None else None
     for scene in scenes:
@@ -475,6 +481,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         if len(means) == 1:
             claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, mean_text, n=iv.n))
             best_parts.append(f"{scene} `{row.label}` ({mean_text}; the only cell)")
+            best_short.append(best_parts[-1])
             continue
         runner = means[1][1]
         how = "ratio" if primary_comp.how == "ratio" else "diff"
@@ -502,8 +509,11 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                     f"`{runner.label}` by {lead_text} at {at}, more than the "
                     f"{fmt_min_effect(size_effect, 'ratio', size_spec)} minimum effect"
                     + (f"; both on this table's {size_word}/quality Pareto front" if front else "") + ")")
+            short = (f"{scene}: no single best at comparable size (`{row.label}` leads at "
+                     f"{fmt_number(larger.estimate, 'ratio', size_spec)} the {size_word})")
             if why:
                 text += f", **not settled** ({why})"
+                short += ", **not settled**"
             claims.append(Claim("no best", scene, row.label, primary.name, how, lead.estimate, text, runner.label,
                                 lead.low, lead.high, lead.n, significant, is_practical, settled))
             claims.append(Claim("size", scene, row.label, "bytes" if by_bytes else size_spec.name, "ratio",
@@ -512,12 +522,15 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                                                                                            size_spec, size_effect)))
         elif clear:
             text = f"{scene} `{row.label}` ({mean_text}; {lead_text} over `{runner.label}`)"
+            short = text
             if reversed_:
                 names = " and ".join(n for n, _ in reversed_)
-                text += (f", **but {names} go{'es' if len(reversed_) == 1 else ''} the other way** "
-                         f"({'; '.join(t for _, t in reversed_)})")
+                but = f", **but {names} go{'es' if len(reversed_) == 1 else ''} the other way**"
+                text += f"{but} ({'; '.join(t for _, t in reversed_)})"
+                short += but
             if why:
                 text += f", **not settled** ({why})"
+                short += ", **not settled**"
             claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, text, runner.label,
                                 lead.low, lead.high, lead.n, significant, is_practical, settled))
         else:
@@ -525,9 +538,11 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                      f"; its interval's bound nearer no difference is not beyond the {unit_text} minimum effect")
             text = (f"{scene}: no single best (`{row.label}`, {mean_text}, leads `{runner.label}` by {lead_text}"
                     f"{bound})")
+            short = f"{scene}: no single best"
             claims.append(Claim("no best", scene, row.label, primary.name, how, lead.estimate, text, runner.label,
                                 lead.low, lead.high, lead.n, significant, is_practical, settled))
         best_parts.append(text)
+        best_short.append(short)
     if not best_parts:
         if excluded:
             return Finding(table.axis, [f"- No findings: all {excluded} done run(s) were timed while the load average "
@@ -543,13 +558,18 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                if by_bytes else ""))
     lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds; {rule}): "
                  + "; ".join(best_parts) + ".")
+    best_summary = f"- **{word.capitalize()} {_name(primary)}**: " + "; ".join(best_short) + "."
 
     ref = reference_row(table)
     others = [r for r in table.rows if r.label != ref.label]
+    in_full = f"\"Appendix: {table.axis} in full\""
     if others and rules.comparisons:
         lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
+        appendix.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}), the other "
+                        f"comparisons:")
         for row in others:
             parts = []
+            rest = []  # the other comparisons' (the appendix's)
             moving = []
             for comp in rules.comparisons:
                 spec = specs[comp.metric]
@@ -571,26 +591,28 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                     claims.append(Claim("vs", scene, row.label, comp.metric, comp.how, iv.estimate, text, ref.label,
                                         iv.low, iv.high, iv.n, significant, is_practical, settled))
                     texts.append(text)
-                parts.append(f"{_name(spec)} {' / '.join(texts)}")
+                (parts if comp.metric == primary.name else rest).append(f"{_name(spec)} {' / '.join(texts)}")
             line = f"  - `{row.label}`: " + "; ".join(parts)
+            more = ["; ".join(rest)] if rest else []
             along = _along_the_run(scenes, ref, row, usable, settling, primary) if settling is not None else ""
             if along:
-                line += f". {along}"
+                more.append(along)
             if moving:
                 line += f". **Not settled** ({'; '.join(moving)})"
             also = confounds(scenes, ref, row, usable, kind)
             if also:
-                line += f". Also changed: {also}"
+                more.append(f"Also changed: {also}")
             primaries = [c for c in claims if c.kind == "vs" and c.label == row.label and c.reference == ref.label
                          and c.metric == primary.name]
             primary_null = {"diff": 0.0, "ratio": 1.0}.get(primary_comp.how, primary_comp.null or 0.0)
-            opposed = []
+            opposed, opposed_short = [], []
             for c in primaries:
                 if c.significant:
                     against = other_way(primary, c.value - primary_null,
                                         quality_intervals(c.scene, ref, row))
                     if against:
                         opposed.append(f"{c.scene}: {'; '.join(t for _, t in against)}")
+                        opposed_short.append(f"{' and '.join(n for n, _ in against)} on {c.scene}")
             if opposed:
                 line += f". **The other way** (against the {_name(primary)} difference, significantly): " \
                     + "; ".join(opposed)
@@ -599,10 +621,32 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 line += f". {across}"
             size = size_line(scenes, ref, row)
             if size:
-                line += f". {size}"
+                more.append(size)
+            heads: list[tuple[str, str]] = []
             if size_spec is not None:
-                line += matched_text(ref, row)
+                line += matched_text(ref, row, heads)
+            if also:
+                line += f". Also changed: other settings too (what, in {in_full})"
             lines.append(line)
+            if more:
+                appendix.append(f"  - `{row.label}`: " + ". ".join(more))
+            # the summary: the primary difference per scene, with the marks the line above gives it
+            said = "; ".join(f"{c.scene} {_verdict_only(c.text)}" for c in primaries)
+            marks = []
+            if moving:
+                marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in moving))
+            if opposed_short:
+                marks.append("**the other way**: " + "; ".join(opposed_short))
+            if across:
+                marks.append(across)
+            if heads:
+                marks.append("**against model size**: " + _sizes_in_brief(heads))
+            if said:
+                summary.append(f"- **`{row.label}`** against `{ref.label}`, {_name(primary)}: {said}"
+                               + "".join(f"; {m}" for m in marks) + ".")
+        if appendix[-1].startswith("- **Against"):  # no row compared anything else
+            appendix.pop()
+    summary.append(best_summary)
     if size_spec is not None and dim == table.axis and len(matched_values) >= 2:
         rows = [r for r in table.rows if any(same_value(r.value, v) for v in matched_values)]
         parts = []
@@ -649,7 +693,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         effects = [f"{_name(specs[c.metric])} {fmt_min_effect(c.min_effect, c.how, specs[c.metric])}"
                    for c in rules.comparisons if c.min_effect is not None]
         rest = len(made) - count
-        lines.append(f"- This table makes {count} comparisons with a 95 % interval (Student's t over seeds; no "
+        appendix.append(f"- This table makes {count} comparisons with a 95 % interval (Student's t over seeds; no "
                      f"correction for multiple comparisons, so about 1 in 20 intervals misses by chance)"
                      + (f"; {rest} more have none (one seed, or seeds that did not vary the result) and are no "
                         f"evidence either way" if rest else "") + "."
@@ -659,31 +703,31 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                         f"is below it." if effects else ""))
     elif made:
         claims.append(Claim("count", "", "", "", "count", 0.0, "0"))
-        lines.append(f"- This table makes {len(made)} comparisons, but none has an interval (one seed per cell, "
+        appendix.append(f"- This table makes {len(made)} comparisons, but none has an interval (one seed per cell, "
                      f"or seeds that did not vary the result): none of them is a significant difference; add "
                      f"seeds to the grid.")
     if declared is not None and declared.confounds and others and not _recorded(usable, declared):
         labels = ", ".join(kind.specs[name].label for name in declared.confounds[:5])
-        lines.append("- What else each setting changed (" + labels
+        appendix.append("- What else each setting changed (" + labels
                      + ") was not recorded by these runs (run before it was); \"(planned)\" counts are what their "
                        "configs schedule; rerun the grid to see the rest.")
     if excluded:
         lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
                      f"these findings (marked in the table's `loaded` column).")
     if timed & set(specs) and not load_recorded(runs, kind):
-        lines.append(f"- These runs did not record the machine's load (run before it was recorded): the "
+        appendix.append(f"- These runs did not record the machine's load (run before it was recorded): the "
                      f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons may come "
                      f"from a loaded machine and are no evidence of speed.")
     if untimed:
-        lines.append(f"- {untimed} run(s) timed while other processes loaded the machine are left out of the "
+        appendix.append(f"- {untimed} run(s) timed while other processes loaded the machine are left out of the "
                      f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons (marked in "
                      f"the table's `timed under load` column; their quality metrics are kept).")
 
     for note in declared.axis_notes if declared is not None else ():
         more_lines, more_claims = note(table, runs, scenes)
-        lines += more_lines
+        appendix += more_lines
         claims += more_claims
-    return Finding(table.axis, lines, claims)
+    return Finding(table.axis, lines, claims, appendix, summary)
 
 
 def _with_interval(c: Claim, specs: Mapping[str, MetricSpec]) -> bool:
@@ -895,6 +939,30 @@ def _planner(kind: RunKind) -> Callable[[pd.DataFrame, str], dict[int, float]] |
 
 #: A confound count is named when the row's mean differs from the reference's by more than this share.
 CONFOUND_SHARE = 0.05
+
+
+def _verdict_only(text: str) -> str:
+    """A difference as `fmt_interval` writes it, without the parenthesis that explains its reading:
+    ``+0.34 dB [95 % CI -0.84, +1.52], no significant difference, inconclusive`` (the summary's; the
+    findings keep the whole)."""
+    for why in (" (its interval reaches beyond the ", " (below the ", " (interval within ±"):
+        if why in text and text.endswith(")"):
+            return text[:text.rindex(why)]
+    return text
+
+
+def _sizes_in_brief(heads: Sequence[tuple[str, str]]) -> str:
+    """The model-size changes of `size_shift` per scene, in brief: ``fox ×3.998, glossy ×4.054 the bytes
+    (≥ 10 % larger)`` where every scene's is of the same kind, else each in full."""
+    parts = []
+    for scene, shift in heads:
+        ratio, _, rest = shift.partition(" ")
+        what = rest.split(" (")[0]
+        parts.append((scene, ratio, what, shift[shift.rindex("(≥"):] + ")"))
+    if len({(what, tail) for _, _, what, tail in parts}) == 1:
+        _, _, what, tail = parts[0]
+        return ", ".join(f"{scene} {ratio}" for scene, ratio, _, _ in parts) + f" {what} {tail}"
+    return "; ".join(f"{scene} {ratio} {what} {tail}" for scene, ratio, what, tail in parts)
 
 
 def _count(value: float) -> str:

@@ -112,7 +112,7 @@ def _tau(value: float) -> str:
 
 def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick: pd.DataFrame | None = None,
                  quick_path: str = "") -> Finding | None:
-    """The section "Ranks" (module doc): the cells' ranks per scene, the rank agreement of every pair
+    """The section "Appendix: Ranks" (module doc): the cells' ranks per scene, the rank agreement of every pair
     of scenes and, with ``quick`` (the quick version's run table, named ``quick_path``), the quick
     protocol's against this report's per scene; None for a kind without findings rules or a grid
     of fewer than two cells with a result."""

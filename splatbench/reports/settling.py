@@ -381,7 +381,7 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
                    "no run of it evaluated the test views twice or more (set `eval.every`, e.g. a quarter of "
                    "`iterations`), so its findings say nothing about convergence.") if unknown else None
     if not cells:
-        return Finding("settling", [cannot_tell], [])
+        return Finding("settling", [cannot_tell], [], summary=[cannot_tell])
     windows = sorted({(c.lo if c.lo is not None else c.start, c.end) for c in cells.values()})
     span = ", ".join(f"{a:,}–{b:,}" for a, b in windows)
     evals = sorted({(c.start, c.end) for c in cells.values()})
@@ -423,25 +423,36 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
               for (scene, cell), c in cells.items() if c.past_peak]
     overfit = [f"{scene} `{cell}` (test {c.test:+.2f}, train {c.train:+.2f})" for (scene, cell), c in cells.items()
                if c.overfitting]
+    heads = []  # the report's summary: each mark's count, its cells in the section
     if moving:
+        heads.append(f"**Not settled**: {len(moving)} of {len(cells)} cells still moved by {threshold} or more over "
+                     f"the last quarter")
         lines.append(f"- **Not settled**: {len(moving)} of {len(cells)} cells still moved by {threshold} or more over "
                      f"the last quarter: " + ", ".join(moving) + ". Their differences above are what this run length "
                      "gives, not where the cells converge (each such comparison is marked **not settled**).")
     if peaked:
+        heads.append(f"**Past its peak**: {len(peaked)} of {len(cells)} cells ended more than the {effect:g} dB "
+                     f"minimum effect below their best test PSNR")
         lines.append(f"- **Past its peak** (not settled, however flat its end): {len(peaked)} of {len(cells)} cells "
                      f"ended more than the {effect:g} dB minimum effect below their best test PSNR (the curve's mean "
                      f"over seeds): " + ", ".join(peaked) + ". Their numbers are the last step's, not the best's.")
     if not moving and not peaked:
+        heads.append(f"Settled: every cell{' with a slope' if unknown else ''}'s test curve moved by less than "
+                     f"{threshold} over the last quarter, and none ended more than the minimum effect below its best")
         lines.append(f"- Settled: every cell{' with a slope' if unknown else ''}'s test curve moved by less than "
                      f"{threshold} over the last quarter, and none ended more than the minimum effect below its "
                      f"best.")
     if cannot_tell:
         lines.append(cannot_tell)
     if overfit:
+        heads.append("**Overfitting** (the test curve flat or falling while the training-view PSNR still rises)")
         lines.append("- **Overfitting**: the test curve is flat or falling while the training-view PSNR still rises "
                      f"(by {threshold} or more beyond the test curve's slope): " + ", ".join(overfit)
                      + ". Such a cell has stopped generalising; it has not converged.")
-    return Finding("settling", lines, claims)
+    if cannot_tell:
+        heads.append(cannot_tell[2:].rstrip("."))
+    summary = [f"- {'; '.join(heads)} (which cells: \"Appendix: Settling\")."]
+    return Finding("settling", lines, claims, summary=summary)
 
 
 __all__ = ["LAST_SHARE", "SETTLE_STEPS", "DRIFT_SHARE", "Slope", "CellSettling", "last_quarter_slope",
