@@ -306,6 +306,7 @@ def main(argv: list[str] | None = None) -> int:
     from splatbench.metrics.perceptual import convention
     from splatbench.versions import code_version
 
+    code = code_version()  # read before measuring: the code that measures
     try:
         if args.source is not None:
             experiment, runs, skipped = read_runs(args.source)
@@ -318,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
     if not scenes:
         print(f"error: {experiment}: no scene with 2 or more runs to measure", file=sys.stderr)
         return 1
-    result = {"experiment": experiment, "tool": "tools/lpips_scale.py", "code": code_version(),
+    result = {"experiment": experiment, "tool": "tools/lpips_scale.py", "code": code,
               "conventions": {"alex": convention(*ALEX), "vgg": convention(*VGG)},
               "estimator": "reduced major axis of within-(scene, view) centred AlexNet on centred VGG; pooled with "
                            "scenes weighed equally; 95 % percentile bootstrap over runs within scenes",
