@@ -1,7 +1,8 @@
 """tools/backfill_view_psnr.py: a run finished before runs recorded each test view's PSNR gets
 them from its saved final model, evaluated again as the run's final evaluation did
 (`splatbench.train.reevaluate`), checked against its recorded test PSNR; a record that
-disagrees is refused and left as it is; a run a runner holds is never touched.
+disagrees is refused and left as it is; a run a runner holds is never touched. And
+tools/lpips_scale.py measures that run's own renders.
 
 The run: a few steps on the `diffuse` scene at 32² rendered by Mitsuba (as tests/test_train.py),
 recorded as the experiment runner records it, then stripped of its per-view fields.
@@ -12,8 +13,10 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import json
+import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from splatbench.experiments.kinds import metric_values
@@ -111,3 +114,22 @@ def test_a_record_the_model_disagrees_with_is_refused_and_a_held_run_left_alone(
         assert read_record(results / "exp" / "0123456789abcdef.json") == stripped(original)
     finally:
         (claims / "0123456789abcdef.claim").unlink()
+
+
+def test_the_lpips_scale_tool_measures_the_runs_own_renders(finished):
+    """tools/lpips_scale.py's measurement of the same saved run (`evaluate_saved_run` with both LPIPS
+    conventions): each test view's AlexNet LPIPS averages to the run's recorded test_lpips bit for bit (the
+    same renders, on the machine that trained it), and VGG's is there for each view."""
+    results, original = finished
+    spec = importlib.util.spec_from_file_location("lpips_scale", ROOT / "tools" / "lpips_scale.py")
+    tool = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = tool
+    spec.loader.exec_module(tool)
+    write_record(results, original)
+    runs, skipped = tool.measure(results, "exp")
+    assert skipped == [] and len(runs) == 1
+    run = runs[0]
+    assert original.metrics["lpips_net"] == "alex" and original.metrics["lpips_scale_inputs"] == 1
+    assert float(np.mean(run.alex)) == original.metrics["test_lpips"]
+    assert run.psnr == original.metrics["test_psnr"]
+    assert len(run.vgg) == len(run.alex) == 2 and all(v > 0 for v in run.vgg)

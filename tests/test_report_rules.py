@@ -24,7 +24,7 @@ from splatbench.reports import build_report, write_report
 from splatbench.reports.findings import fmt_interval, judge, reading
 from splatbench.reports.settling import cell_settling, last_quarter_slope, settling_finding
 from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
-from splatbench.experiments.train_kind import TRAIN
+from splatbench.experiments.train_kind import LPIPS_MIN_EFFECT, MIN_EFFECT, TRAIN
 from splatbench.experiments.train_report import floats_per_gaussian
 from splatbench.metrics.spec import MetricSpec
 
@@ -172,6 +172,47 @@ def test_best_needs_a_significant_and_practical_lead(tmp_path):
     # a 0.5 dB lead is named best under the default minimum effect
     report, _ = results(tmp_path / "c", spec_of(), _lead(0.5))
     assert [c.label for c in report.findings["sh.degree"].claims if c.kind == "best"] == ["3"]
+
+
+def _lpips_lead(delta: float, net: str, scaled: bool):
+    """SH 3 below SH 0 in LPIPS by ``delta`` on every seed (to within 5e-5), recorded as LPIPS ``net`` with
+    ``scaled`` inputs; PSNR seeded noise only."""
+    def make(run):
+        rng = np.random.default_rng(run.seed)
+        psnr, lp = 30.0 + rng.normal(0, 0.5), 0.2 + rng.normal(0, 0.01)
+        lp -= delta + rng.normal(0, 5e-5) if run.labels["sh.degree"] == 3 else 0.0
+        return (metrics_of(psnr, test_lpips=lp, lpips_net=net, lpips_scale_inputs=int(scaled)), flat_curves(psnr))
+    return make
+
+
+def test_lpips_is_judged_on_the_scale_of_the_net_its_runs_used(tmp_path):
+    """LPIPS's minimum effect is the runs' convention's (`LPIPS_MIN_EFFECT`, docs/reports.md "Minimum effects":
+    AlexNet scaled 0.004, VGG unscaled 0.005; tools/lpips_scale.py measured the scale): one difference between
+    the two is practical in AlexNet runs and no practical difference in VGG runs; a convention without a
+    measured scale is judged by its interval alone; an experiment file's own minimum effect wins."""
+    alex, vgg = LPIPS_MIN_EFFECT[("alex", True)], LPIPS_MIN_EFFECT[("vgg", False)]
+    delta = (alex + vgg) / 2  # between the two; the paired interval (3 seeds, SD 7e-5) is +-3e-4 around it
+
+    def lpips_vs(report):
+        return next(c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "test_lpips")
+
+    assert MIN_EFFECT["test_lpips"] == alex  # the default convention's
+    report, _ = results(tmp_path / "alex", spec_of(), _lpips_lead(delta, "alex", True))
+    vs = lpips_vs(report)
+    assert vs.significant and vs.practical and "no practical difference" not in vs.text, vs.text
+    report, text = results(tmp_path / "vgg", spec_of(), _lpips_lead(delta, "vgg", False))
+    vs = lpips_vs(report)
+    assert vs.significant and not vs.practical
+    assert vs.text.endswith(f"no practical difference (interval within ±{vgg:g})"), vs.text
+    assert "VGG-16 backbone" in text  # the Metrics section names the convention the threshold is on
+    # AlexNet fed [0, 1] unscaled: no measured scale, no minimum effect: significant is a difference
+    report, _ = results(tmp_path / "unscaled", spec_of(), _lpips_lead(delta / 10, "alex", False))
+    vs = lpips_vs(report)
+    assert vs.significant and vs.practical and "minimum effect" not in vs.text, vs.text
+    # the experiment file's own minimum effect over the runs' net's
+    report, _ = results(tmp_path / "own", spec_of({"report": {"min_effect": {"test_lpips": 0.01}}}),
+                        _lpips_lead(delta, "vgg", False))
+    assert lpips_vs(report).text.endswith("no practical difference (interval within ±0.01)")
 
 
 def test_a_minimum_effect_for_a_metric_the_findings_do_not_compare_is_refused(tmp_path):

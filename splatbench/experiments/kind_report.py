@@ -118,6 +118,10 @@ ModelBytes = Callable[["pd.DataFrame"], "pd.Series"]
 #: Lines about the runs of an experiment's ``[check]`` (their own table), under its per-seed table:
 #: ``note(check_runs) -> lines``.
 CheckNote = Callable[["pd.DataFrame"], list[str]]
+#: Minimum effects that depend on how the runs measured (the train kind's LPIPS: on its net's scale):
+#: ``min_effects(runs) -> {metric: minimum effect, or None for significance alone}``, over the kind's
+#: `Comparison` defaults; an experiment file's ``[report] min_effect`` overrides them.
+MinEffects = Callable[["pd.DataFrame"], "Mapping[str, float | None]"]
 #: A finding over all runs, its own section (named by `Finding.axis`): ``finding(runs, min_effect) ->
 #: Finding | None`` (``min_effect``: the experiment file's ``[report] min_effect``, metric -> number).
 RunFinding = Callable[["pd.DataFrame", "Mapping[str, float] | None"], "Finding | None"]
@@ -230,7 +234,8 @@ class KindReport:
     each comparison's Gaussians; None: not known). The hooks, each run in its order: title_notes
     (lines right under the report's title, e.g. that a quick-protocol report is a smoke test),
     header_notes (the report's header), axis_notes (each axis finding), metric_notes (the "Metrics" section), run_findings
-    (a section each, after the axes), check_notes (the check's runs, under its per-seed table).
+    (a section each, after the axes), check_notes (the check's runs, under its per-seed table); min_effects
+    (the minimum effects that depend on how the runs measured, `MinEffects`; None: the comparisons' own).
     """
 
     metrics: tuple[str, ...]
@@ -248,6 +253,7 @@ class KindReport:
     metric_notes: tuple[MetricNote, ...] = ()
     run_findings: tuple[RunFinding, ...] = ()
     check_notes: tuple[CheckNote, ...] = ()
+    min_effects: MinEffects | None = None
 
     def check(self, specs: Mapping[str, MetricSpec]) -> None:
         """`TypeError` naming a metric these declarations name that ``specs`` (the kind's result's
@@ -267,5 +273,5 @@ class KindReport:
             raise TypeError(f"KindReport names metrics its kind's result does not have: {', '.join(unknown)}")
 
 
-__all__ = ["Claim", "Finding", "done_runs", "AxisRow", "AxisRows", "HeaderNote", "ModelBytes", "AxisNote", "MetricNote", "RunFinding", "CheckNote",
+__all__ = ["Claim", "Finding", "done_runs", "AxisRow", "AxisRows", "HeaderNote", "ModelBytes", "AxisNote", "MetricNote", "RunFinding", "CheckNote", "MinEffects",
            "Comparison", "FindingRules", "Tradeoff", "SettlingCurves", "LoadMarks", "KindReport"]

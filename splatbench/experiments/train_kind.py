@@ -64,8 +64,8 @@ from splatbench.experiments.kind_report import Comparison, FindingRules, KindRep
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, metric, metric_specs
 from splatbench.experiments.train_config import (DATA_FIELDS, OWNED_FIELDS, opacity_reset_steps, planned, scene_type,
                                                  split, train_config)
-from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_note, memory_note, model_bytes,
-                                                 model_size_note, outlier_view_finding, outlier_view_lines,
+from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_conventions, lpips_note, memory_note,
+                                                 model_bytes, model_size_note, outlier_view_finding, outlier_view_lines,
                                                  protocol_lines, schedule_confound_note, smoke_test_line,
                                                  ssim_trained_note)
 from splatbench.metrics.memory import reset_peak_rss
@@ -79,13 +79,25 @@ TEACHER_DEFAULTS = {"views": 64, "resolution": 128}
 #: What a run records of what its strategy did besides its settings' names (`TopologyCounts`); None in
 #: the metrics of a result written before they were recorded.
 TOPOLOGY_METRICS = ("refinements", "opacity_resets", "cloned", "split", "pruned", "pruned_size", "relocated", "added")
+#: LPIPS's minimum effect per convention (``(lpips_net, lpips_scale_inputs)`` as runs record them): the same
+#: share (~6 %) of graphdeco's published 7K -> 30K gain as 0.1 dB is of its PSNR gain (3DGS paper Table 1,
+#: mean over Mip-NeRF 360, Tanks&Temples, Deep Blending: +1.73 dB, -0.079 LPIPS), on each net's scale. The
+#: published LPIPS is VGG fed [0, 1] unscaled (graphdeco's metrics.py): 0.079 x 0.1 / 1.73 = 0.0046 -> 0.005.
+#: AlexNet with inputs scaled to [-1, 1] (the reports' default, ``eval.lpips_net = "alex"``) is on another
+#: scale: between models on the same test views its differences are 0.974 [95 % CI 0.914, 1.118] times VGG's
+#: (reduced major axis, scenes weighed equally; per scene 0.61 fox to 1.33 maryrose; on run means 0.88),
+#: measured by tools/lpips_scale.py on sh_degree's 42 finished runs (docs/data/lpips_scale.json): 0.0046 x
+#: 0.974 = 0.0045 -> 0.004. Both rounded to one significant figure (as SSIM's 0.0028 -> 0.003); 0.005 is at
+#: the top of AlexNet's interval [0.0042, 0.0051], and every other estimate (run means, real captures alone:
+#: 0.0039-0.0044) rounds to 0.004. The other two conventions have no measured scale: None, a difference is
+#: judged by its interval alone (`lpips_min_effect`).
+LPIPS_MIN_EFFECT: dict[tuple[str, bool], float] = {("alex", True): 0.004, ("vgg", False): 0.005}
 #: The smallest differences that matter in practice (docs/reports.md, "Minimum effects"): a difference
-#: whose interval lies within ± them reads "no practical difference". PSNR 0.1 dB; SSIM and LPIPS the same share
-#: (~6 %) of graphdeco's published 7K -> 30K gain as 0.1 dB is of its PSNR gain (3DGS paper Table 1,
-#: mean over Mip-NeRF 360, Tanks&Temples, Deep Blending: +1.73 dB, +0.049 SSIM, -0.079 LPIPS); times
-#: and Gaussian counts as relative changes (10 %, 5 %). An experiment file's ``[report] min_effect``
-#: overrides them.
-MIN_EFFECT: dict[str, float] = {"test_psnr": 0.1, "test_ssim": 0.003, "test_lpips": 0.005,
+#: whose interval lies within ± them reads "no practical difference". PSNR 0.1 dB; SSIM the same share
+#: of graphdeco's published gain as LPIPS (+0.049 SSIM: 0.0028 -> 0.003); LPIPS the default convention's
+#: (`LPIPS_MIN_EFFECT`; a report picks its runs' convention's, `lpips_min_effect`); times and Gaussian
+#: counts as relative changes (10 %, 5 %). An experiment file's ``[report] min_effect`` overrides them.
+MIN_EFFECT: dict[str, float] = {"test_psnr": 0.1, "test_ssim": 0.003, "test_lpips": LPIPS_MIN_EFFECT[("alex", True)],
                                 "train_seconds": 0.10, "num_gaussians": 0.05}
 #: Confound counts that count Gaussians (not events: refinements and opacity resets are always named).
 GAUSSIAN_COUNTS = ("cloned", "split", "pruned", "pruned_size", "relocated", "added")
@@ -522,6 +534,15 @@ def describe_protocol(name: str) -> str:
             f"comparable to the paper's, only the schedule is")
 
 
+def lpips_min_effect(runs) -> dict[str, float | None]:
+    """``{"test_lpips": minimum effect}`` on the scale of the LPIPS convention the done runs of ``runs`` (a
+    run table) recorded (`LPIPS_MIN_EFFECT`; None, no practical threshold, for a convention without a
+    measured one); {} where they recorded none, or several (then the kind's default stays, and the
+    "Metrics" section says the column mixes conventions: `lpips_note`)."""
+    kinds = lpips_conventions(runs)
+    return {"test_lpips": LPIPS_MIN_EFFECT.get(kinds[0])} if len(kinds) == 1 else {}
+
+
 #: What the reports of train runs show (`splatbench.experiments.kind_report`).
 REPORT = KindReport(
     metrics=("test_psnr", "test_ssim", "test_lpips", "num_gaussians", "run_peak_rss_mb", "train_seconds",
@@ -549,6 +570,7 @@ REPORT = KindReport(
     metric_notes=(lpips_note, memory_note),
     run_findings=(outlier_view_finding,),
     check_notes=(outlier_view_lines,),
+    min_effects=lpips_min_effect,
 )
 
 #: The ``train`` kind (``kind = "train"``).
@@ -558,5 +580,5 @@ TRAIN = RunKind(name="train", validate=validate, run=run, config=TrainConfig, re
                 description="train 3DGS on a catalog scene, a dataset folder or a teacher model (splatbench.train)",
                 protocols=KindProtocols(with_protocol, describe_protocol), reusable=True)
 
-__all__ = ["TRAIN", "TrainRun", "REPORT", "MIN_EFFECT", "TOPOLOGY_METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
+__all__ = ["TRAIN", "TrainRun", "REPORT", "MIN_EFFECT", "LPIPS_MIN_EFFECT", "lpips_min_effect", "TOPOLOGY_METRICS", "CURVE_KEYS", "DATASETS_ENV", "DATA_FIELDS", "Prepared", "datasets_dir",
            "dataset_folder", "ensure_dataset"]

@@ -767,16 +767,22 @@ def memory_note(runs: pd.DataFrame) -> list[str]:
             "high-water mark reset as each run starts), shown as `peak RSS (MB)`."]
 
 
+def lpips_conventions(runs: pd.DataFrame) -> list[tuple[str, bool]]:
+    """The LPIPS conventions ``(net, scale_inputs)`` the done runs of ``runs`` recorded (``lpips_net``,
+    ``lpips_scale_inputs``), sorted; [] for a table without them or runs that computed none."""
+    if "metric.lpips_net" not in runs.columns:
+        return []
+    done = done_runs(runs)
+    done = done[done["metric.lpips_net"].fillna("").astype(bool)]
+    return sorted({(str(r["metric.lpips_net"]), bool(r["metric.lpips_scale_inputs"])) for _, r in done.iterrows()})
+
+
 def lpips_note(runs: pd.DataFrame) -> list[str]:
     """Which LPIPS the report's column is (net and input convention), from the
     done runs' ``lpips_net`` / ``lpips_scale_inputs``; none for a table without them."""
     from splatbench.metrics.perceptual import convention  # late: the reports start without torch
 
-    if "metric.lpips_net" not in runs.columns:
-        return []
-    done = done_runs(runs)
-    done = done[done["metric.lpips_net"].fillna("").astype(bool)]
-    kinds = sorted({(str(r["metric.lpips_net"]), bool(r["metric.lpips_scale_inputs"])) for _, r in done.iterrows()})
+    kinds = lpips_conventions(runs)
     if len(kinds) == 1:
         return [f"- The `LPIPS` column is {convention(*kinds[0])}."]
     return [f"- The `LPIPS` column mixes {len(kinds)} conventions (compare within one only): "
@@ -961,4 +967,4 @@ def outlier_view_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | N
 __all__ = ["OUTLIER_VIEW_DB", "FLOATER_DOC", "OutlierRun", "ViewCheck", "view_outliers", "outlier_view_lines",
            "outlier_view_finding", "hardest_view_lines",
            "DEFAULT_PROTOCOL", "SMOKE_TEST", "smoke_test_line", "model_bytes", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note",
-           "schedule_confound_note", "lpips_note", "memory_note"]
+           "schedule_confound_note", "lpips_conventions", "lpips_note", "memory_note"]

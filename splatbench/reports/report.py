@@ -124,8 +124,11 @@ def report_from_table(spec: ExperimentSpec, table: pd.DataFrame, total: int,
                       checked: pd.DataFrame | None = None) -> Report:
     """Tables and findings of a run table (`grid_table`'s, or a report's ``results.parquet``
     read back) of ``spec``'s grid of ``total`` runs; ``checked``: the runs of its ``[check]``
-    that have a result (`check_table`, or a report's ``check.parquet``; None: none)."""
+    that have a result (`check_table`, or a report's ``check.parquet``; None: none). The minimum effects: the
+    kind's, those that depend on how the runs measured (`KindReport.min_effects`), the file's own over both."""
     kind = spec.run_kind
+    if kind.report is not None and kind.report.min_effects is not None:  # e.g. LPIPS on the runs' net's scale
+        spec = dataclasses.replace(spec, min_effect={**kind.report.min_effects(table), **spec.min_effect})
     metrics = metric_specs(kind, table)
     axes = [axis_table(spec, kind, axis, table, metrics) for axis in spec.dimensions]
     findings: dict[str, Finding] = {}

@@ -92,6 +92,7 @@ class Evaluation:
     render_ms_per_view: float | None
     views: int
     per_view_psnr: list[float] = field(default_factory=list)
+    per_view_lpips: dict[tuple[str, bool], list[float]] = field(default_factory=dict)  # (net, scale_inputs) -> each test view's LPIPS
 
 
 #: Where a run's background came from (`resolve_background`; `TrainResult.background_source`).
@@ -400,7 +401,7 @@ class Trainer:
             for (net, scaled), values in lps.items():
                 values.append(lpips_distance(rgb, gt, net=net, scale_inputs=scaled))
         return Evaluation(float(np.mean(psnrs)), float(np.mean(ssims)), {k: float(np.mean(v)) for k, v in lps.items()},
-                          1e3 * seconds / len(test), len(test), psnrs)
+                          1e3 * seconds / len(test), len(test), psnrs, lps)
 
 
 #: The LPIPS of the ``eval_every`` evaluations (the curves): AlexNet, inputs scaled (cheap: ~1/20 of VGG).

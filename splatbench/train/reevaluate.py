@@ -10,17 +10,21 @@ clamping and PSNR), not a second one. The PLY holds the float32 parameters bit f
 own; elsewhere they differ by float32 rounding only.
 
 What it is for: runs finished before `TrainResult.test_view_psnr` was recorded
-(``tools/backfill_view_psnr.py``). Nothing is trained and nothing is written.
+(``tools/backfill_view_psnr.py``); each test view's LPIPS in any convention, beside the one the run
+recorded (``tools/lpips_scale.py``). Nothing is trained and nothing is written.
 
 Example::
 
     ev = evaluate_saved_run("results/sh_degree/work/8f323452d4d1f2bc")
     ev.psnr, ev.per_view_psnr          # the run's test PSNR (dB) and each test view's
+    ev = evaluate_saved_run("results/sh_degree/work/8f323452d4d1f2bc", lpips=[("alex", True), ("vgg", False)])
+    ev.per_view_lpips[("vgg", False)]  # each test view's LPIPS-VGG on [0, 1] inputs (graphdeco's)
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
@@ -49,11 +53,12 @@ def final_sh_degree(run_dir: str | Path) -> int:
     return degree
 
 
-def evaluate_saved_run(run_dir: str | Path, *, dataset=None) -> Evaluation:
+def evaluate_saved_run(run_dir: str | Path, *, dataset=None, lpips: Sequence[tuple[str, bool]] = ()) -> Evaluation:
     """The final evaluation of the run whose output folder is ``run_dir`` (module doc), from its
     ``config.toml``, ``point_cloud.ply`` and ``result.json``: PSNR and SSIM over its test views and
-    ``per_view_psnr`` (test-split order); no LPIPS. ``dataset``: the loaded dataset, instead of
-    reading the config's ``dataset`` folder. One-line `InputError` for a missing file, a model whose
+    ``per_view_psnr`` (test-split order); LPIPS in each ``(net, scale_inputs)`` of ``lpips``
+    (``Evaluation.lpips``, ``per_view_lpips``; none by default). ``dataset``: the loaded dataset,
+    instead of reading the config's ``dataset`` folder. One-line `InputError` for a missing file, a model whose
     SH degree is not the one the run ended at, or a config or dataset that no longer loads."""
     from splatbench.train.config import load_config
 
@@ -64,10 +69,11 @@ def evaluate_saved_run(run_dir: str | Path, *, dataset=None) -> Evaluation:
     if model.sh_degree != degree:
         raise InputError(f"{run / MODEL_FILE}: SH degree {model.sh_degree}, but {run / RESULT_FILE} says the run "
                          f"ended at {degree}: not this run's final model")
-    return evaluate_model(config, model, degree, dataset=dataset)
+    return evaluate_model(config, model, degree, dataset=dataset, lpips=lpips)
 
 
-def evaluate_model(config: TrainConfig, model: Gaussians, degree: int, *, dataset=None) -> Evaluation:
+def evaluate_model(config: TrainConfig, model: Gaussians, degree: int, *, dataset=None,
+                   lpips: Sequence[tuple[str, bool]] = ()) -> Evaluation:
     """`Trainer.evaluate` of ``model`` at SH degree ``degree`` for a run of ``config`` (its dataset,
     background, raster options), on the config's torch threads; see `evaluate_saved_run`."""
     with torch_threads(config.torch_threads):
@@ -79,7 +85,7 @@ def evaluate_model(config: TrainConfig, model: Gaussians, degree: int, *, datase
         trainer.params = params_from_gaussians(model, trainer.lrs, trainer.device)
         trainer.sh.degree = degree
         with torch.no_grad():
-            return trainer.evaluate()
+            return trainer.evaluate(lpips)
 
 
 __all__ = ["evaluate_saved_run", "evaluate_model", "final_sh_degree", "CONFIG_FILE", "MODEL_FILE", "RESULT_FILE"]
