@@ -916,3 +916,7 @@ def test_auto_is_defined_and_its_holdout_named_as_what_else_it_changed(tmp_path)
     # ... so where it ended at a fixed row's degree, its difference from that row is the holdout's, not SH's
     assert note.endswith("Also changed: it trained on about 7/8 of the training views until step 268, so its difference "
                          "from the row of the degree it ended at (glossy `0`) is the holdout's cost, not a degree's.")
+    # ... and the Summary says so beside auto's differences (a referee reads them as a degree's otherwise)
+    summary = text[text.index("## Summary"):text.index("## Protocol and runs")]
+    assert "- **`auto`** ended at SH degree 0 on glossy: each of its differences is the degree it chose and its " \
+           "holdout's cost together" in summary

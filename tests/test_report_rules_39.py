@@ -72,6 +72,25 @@ def test_a_flat_curve_that_fell_from_its_peak_is_not_settled():
     assert cell_settling(_peaked(0.3), TRAIN_REPORT.settling, 0.5).settled
 
 
+
+def test_the_summary_counts_the_cells_either_mark_leaves_unsettled():
+    """Not settled and past its peak overlap: the Summary gives how many cells either leaves
+    unsettled (a past-its-peak cell may be flat, a moving one below its peak), counted once."""
+    steps = list(range(700, 7001, 700))
+    rows = []
+    for scene, rise in (("fox", 0.0), ("maryrose", 0.001)):  # maryrose still rising 1 dB / 1,000 steps
+        peaked = _peaked(0.3)
+        for seed in range(3):
+            base = json.loads(peaked.curves[seed])["eval_psnr"]
+            values = base if scene == "fox" else [28.0 + rise * s for s in steps]
+            rows.append({"run_id": f"{scene}{seed}", "status": "done", "scene": scene, "seed": seed, "axis.x": "a",
+                         "curves": json.dumps({"eval_step": steps, "eval_psnr": values})})
+    summary = settling_finding(pd.DataFrame(rows), TRAIN).summary[0]
+    assert summary.startswith("- **2 of 2 cells not settled or past their peak**"), summary
+    alone = settling_finding(_peaked(0.3), TRAIN).summary[0]  # one mark: no union line
+    assert "not settled or past their peak" not in alone and "**Past its peak**: 1 of 1" in alone
+
+
 # --------------------------------------------------------------------------- best
 def test_best_needs_the_leads_interval_beyond_the_minimum_effect(tmp_path):
     """+0.12 dB (per seed +0.08, +0.12, +0.16: significant, estimate above 0.1 dB) has a lower bound of

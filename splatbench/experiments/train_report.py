@@ -133,7 +133,9 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
         lines.append(f"- **Schedule**: {iters} iterations of graphdeco's 30,000-step schedule as written (refine "
                      f"window, opacity resets, SH steps and the position learning-rate decay "
                      f"{(lr + ' → ' + lr_final + ' × scene extent ') if lr and lr_final else ''}over 30,000 steps, "
-                     f"not scaled to the run).")
+                     f"not scaled to the run; the protocol sets it, so the runs' recorded `schedule` field "
+                     f"({' / '.join(repr(str(x)) for x in schedules if x is not None) or 'none'}) is not what they "
+                     f"ran).")
     evals = _eval_steps(done)
     lines.append(f"- **Evaluation**: the test views at steps {evals}; the reported numbers are the last step's."
                  if evals else "- **Evaluation**: the test views at the end.")

@@ -509,8 +509,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                     f"`{runner.label}` by {lead_text} at {at}, more than the "
                     f"{fmt_min_effect(size_effect, 'ratio', size_spec)} minimum effect"
                     + (f"; both on this table's {size_word}/quality Pareto front" if front else "") + ")")
-            short = (f"{scene}: no single best at comparable size (`{row.label}` leads at "
-                     f"{fmt_number(larger.estimate, 'ratio', size_spec)} the {size_word})")
+            short = (f"{scene}: no single best at comparable size (`{row.label}` leads `{runner.label}` at "
+                     f"{fmt_number(larger.estimate, 'ratio', size_spec)} `{runner.label}`'s {size_word})")
             if why:
                 text += f", **not settled** ({why})"
                 short += ", **not settled**"
@@ -727,6 +727,11 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         more_lines, more_claims = note(table, runs, scenes)
         appendix += more_lines
         claims += more_claims
+    chose = [c for c in claims if c.kind == "auto"]  # a row that chose its setting per scene (SH degree "auto")
+    if chose:
+        summary.append(f"- **`{chose[0].label}`** ended at SH degree " + ", ".join(f"{c.text} on {c.scene}" for c in chose)
+                       + f": each of its differences is the degree it chose and its holdout's cost together, not "
+                         f"one degree's (\"Appendix: {table.axis} in full\").")
     return Finding(table.axis, lines, claims, appendix, summary)
 
 

@@ -451,6 +451,10 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
                      + ". Such a cell has stopped generalising; it has not converged.")
     if cannot_tell:
         heads.append(cannot_tell[2:].rstrip("."))
+    either = sum(1 for c in cells.values() if not c.flat or c.past_peak)
+    if moving and peaked:  # the two marks overlap: how many cells either leaves unsettled
+        heads.insert(0, f"**{either} of {len(cells)} cells not settled or past their peak** at this run length, so "
+                        f"each difference is this checkpoint's, not where the cells converge")
     summary = [f"- {'; '.join(heads)} (which cells: \"Appendix: Settling\")."]
     return Finding("settling", lines, claims, summary=summary)
 
