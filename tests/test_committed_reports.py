@@ -249,3 +249,16 @@ def _short_side(spec, data: dict) -> float:
     if not ("w" in head and "h" in head):
         return float("inf")
     return min(head["w"], head["h"]) / data.get("downscale", 1)
+
+
+#: Issue 39 (6): a README result row carries the question, the headline with its interval, the scenes,
+#: the protocol and the verdict; the details stay in the report.
+README_ROW_CHARS = 400
+
+
+def test_every_row_of_the_readme_results_table_is_short():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    rows = [line for line in readme.splitlines() if line.startswith("| [`reports/")]
+    assert rows, "README: no results table"
+    long = {line[:40]: len(line) for line in rows if len(line) > README_ROW_CHARS}
+    assert not long, f"README: result rows over {README_ROW_CHARS} characters: {long}"
