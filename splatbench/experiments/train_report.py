@@ -412,8 +412,9 @@ def _resolution(done: pd.DataFrame) -> str:
         unsized += [str(scene)] if pd.isna(sizes).any() else []
     if captures:
         parts.append("captures at 1/`data.downscale` of their photos (`images_N/` where the capture has it, else "
-                     "the nearest finer images folder reduced on load, after undistortion where the camera has lens "
-                     "coefficients: each run's notes say which): " + ", ".join(captures)
+                     "the nearest finer images folder reduced on load: LLFF's by area averaging, as OpenCV's INTER_AREA, "
+                     "other layouts' by PIL's bicubic, after undistortion by pycolmap where the camera has lens "
+                     "coefficients; each run's notes say which): " + ", ".join(captures)
                      + (f" (image size not recorded by {_names(unsized)}'s runs"
                         + (", or some of them" if any(_image_size(r) for sc, r in done.groupby("scene") if str(sc) in
                                                       unsized) else "") + ")" if unsized else ""))
