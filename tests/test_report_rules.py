@@ -10,16 +10,18 @@ made-up metrics and curves), as tests/test_reports.py does, so they run in secon
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pandas as pd
 import pytest
+from scipy import stats
 
 from splatbench.errors import InputError
 from splatbench.experiments import RunRecord, expand, parse_experiment
 from splatbench.experiments.store import write_record, write_table
 from splatbench.metrics.spec import clip
-from splatbench.metrics.stats import Interval, t_interval
+from splatbench.metrics.stats import Interval, holm, paired_difference, paired_ratio, t_interval, t_p_value
 from splatbench.reports import build_report, write_report
 from splatbench.reports.findings import fmt_interval, judge, reading
 from splatbench.reports.settling import cell_settling, last_quarter_slope, settling_finding
@@ -920,3 +922,88 @@ def test_auto_is_defined_and_its_holdout_named_as_what_else_it_changed(tmp_path)
     summary = text[text.index("## Summary"):text.index("## Protocol and runs")]
     assert "- **`auto`** ended at SH degree 0 on glossy: each of its differences is the degree it chose and its " \
            "holdout's cost together" in summary
+
+
+# --------------------------------------------------------------------------- Holm's correction
+def test_holm_steps_down_on_a_hand_worked_example():
+    # m = 4 at 5 %: sorted 0.005 <= 0.05/4 = 0.0125 (rejected), 0.01 <= 0.05/3 = 0.0167 (rejected),
+    # 0.03 > 0.05/2 = 0.025: stops, so 0.04 stays too although 0.04 < 0.05
+    assert holm([0.01, 0.04, 0.03, 0.005]) == [True, False, False, True]
+    # step-down, not Bonferroni: 0.001 <= 0.05/3, 0.02 <= 0.05/2, 0.04 <= 0.05/1 (Bonferroni's 0.05/3 keeps 0.001 only)
+    assert holm([0.04, 0.001, 0.02]) == [True, True, True]
+    # the stop holds every larger p-value: 0.045 would pass its own 0.05/1 but follows 0.03 > 0.05/3
+    assert holm([0.045, 0.001, 0.03, 0.04]) == [False, True, False, False]
+    # a p-value equal to its threshold is rejected (p <= alpha / (m - i)); so is a tie with a rejected one
+    assert holm([0.025, 0.05]) == [True, True]
+    assert holm([0.012, 0.012, 0.012, 0.9]) == [True, True, True, False]  # 0.012 <= 0.0125, 0.0167, 0.025
+    # one test: Holm is the test itself; NaN (no p-value) is never rejected and holds the rest
+    assert holm([0.049]) == [True] and holm([0.051]) == [False]
+    assert holm([math.nan, 0.001]) == [False, True] and holm([]) == []
+    assert holm([0.01, 0.02], alpha=0.01) == [False, False]  # 0.01 > 0.01 / 2
+
+
+def test_the_p_value_agrees_with_the_interval_it_comes_from():
+    """p < 0.05 exactly when the 95 % interval excludes the null, and it is scipy's paired t test (on the
+    logs for a ratio): both come from the same t distribution and the same numbers."""
+    rng = np.random.default_rng(7)
+    seen = set()
+    for trial in range(300):
+        n = int(rng.integers(2, 7))
+        a = rng.normal(30.0, 1.0, n)
+        b = a + rng.normal(0.0, 1.0, n) + rng.choice([0.0, 0.3, 1.0])
+        iv = paired_difference(list(a), list(b))
+        p = t_p_value(iv)
+        assert (p < 0.05) == iv.excludes(0.0), (a, b, iv, p)
+        assert p == pytest.approx(stats.ttest_rel(b, a).pvalue, rel=1e-9)
+        seen.add(iv.excludes(0.0))
+        ratio = paired_ratio(list(np.exp(a / 10)), list(np.exp(b / 10)))
+        q = t_p_value(ratio, 1.0)
+        assert (q < 0.05) == ratio.excludes(1.0)
+        assert q == pytest.approx(stats.ttest_rel(b / 10, a / 10).pvalue, rel=1e-6)  # log(exp(x / 10)) = x / 10
+    assert seen == {True, False}  # both sides of 0.05 were tried
+    # at the interval's edge: an interval that just touches 0 has p = 0.05 (half-width = estimate: t = t_{0.975, 2})
+    assert t_p_value(Interval(1.0, 0.0, 2.0, 3, "paired t")) == pytest.approx(0.05, abs=1e-12)
+    assert np.isnan(t_p_value(Interval(1.0, math.nan, math.nan, 1, "paired t")))  # one seed: no test
+
+
+#: Per SH degree, its test PSNR above SH 0's on seeds 0, 1, 2: SH 3 by 2.0 / 2.1 / 2.2 dB (p < 0.001), SH 1 by
+#: 0.35 / 0.5 / 0.65 (t = 5.77 on 2 degrees of freedom: p = 0.029, significant alone, above the 0.05 / 2 of its
+#: Holm step), SH 2 by -0.3 / +0.1 / +0.5 (not significant).
+HOLM_DIFFS = {0: (0.0, 0.0, 0.0), 1: (0.35, 0.5, 0.65), 2: (-0.3, 0.1, 0.5), 3: (2.0, 2.1, 2.2)}
+HOLM_BASE = 30.0 + 0.4 * np.arange(3)  # SH 0 per seed
+
+
+def _holm_grid(run):
+    psnr = float(HOLM_BASE[run.seed]) + HOLM_DIFFS[run.labels["sh.degree"]][run.seed]
+    return metrics_of(psnr), flat_curves(psnr)
+
+
+def test_holm_keeps_one_comparison_and_marks_the_other_in_the_summary(tmp_path):
+    report, text = results(tmp_path, spec_of({"axes": {"sh.degree": [0, 1, 2, 3]}}), _holm_grid)
+    claims = report.findings["sh.degree"].claims
+    vs = {c.label: c for c in claims if c.kind == "vs" and c.metric == "test_psnr"}
+    p = {str(d): stats.ttest_rel(HOLM_BASE + np.array(diff), HOLM_BASE).pvalue for d, diff in HOLM_DIFFS.items() if d}
+    assert 0.025 < p["1"] < 0.05 and p["3"] < 0.001 and p["2"] > 0.05  # what the grid was made to be
+    assert vs["1"].significant and vs["3"].significant and not vs["2"].significant
+    holm_claim = next(c for c in claims if c.kind == "holm")
+    assert (holm_claim.value, holm_claim.n) == (1.0, 3)
+    line = next(x for x in text.splitlines() if x.startswith("- **Holm's correction**"))
+    assert line == (f"- **Holm's correction** over the 3 test PSNR comparisons of this axis (family-wise 5 %): 1 of the "
+                    f"2 significant alone remains significant: glossy `3` (p < 0.001); the others' intervals are per "
+                    f"comparison (the first kept out: glossy `1`, p = {p['1']:.3f} > 0.05/2). Seeds with the row above "
+                    f"`0` (glossy): `1` 3/3; `2` 2/3; `3` 3/3.")
+    summary = text[text.index("## Summary"):text.index("## Protocol and runs")]
+    row = {label: next(x for x in summary.splitlines() if x.startswith(f"- **`{label}`** against"))
+           for label in ("1", "2", "3")}
+    assert "+0.50 dB [95 % CI" in row["1"] and "], not significant after Holm" in row["1"]
+    assert "Holm" not in row["3"] and "Holm" not in row["2"]  # survives; not significant in the first place
+    # the per-comparison wording stays: `1`'s findings line reads +0.50 dB as a difference, with no Holm mark
+    body = next(x for x in text.splitlines() if x.startswith("  - `1`: test PSNR"))
+    assert vs["1"].text in body and "Holm" not in body and vs["1"].practical
+    assert "except Holm's over the 3 test PSNR ones against `0`" in text
+
+
+def test_no_holm_line_without_a_family_to_correct(tmp_path):
+    # one comparison (SH 3 against 0 on one scene): Holm is the test itself, so neither line nor mark
+    report, text = results(tmp_path, spec_of(), _holm_grid)
+    assert "Holm" not in text and not [c for c in report.findings["sh.degree"].claims if c.kind == "holm"]

@@ -17,6 +17,7 @@ import re
 import numpy as np
 import pandas as pd
 import pytest
+from scipy import stats
 
 from splatbench.experiments.train_report import floats_per_gaussian
 from splatbench.errors import InputError
@@ -25,7 +26,7 @@ from splatbench.experiments.store import write_record, write_table
 from splatbench.reports import build_report, write_report
 from splatbench.plotting import pareto_front
 from splatbench.reports.findings import fmt_interval
-from splatbench.metrics.stats import paired_difference, paired_ratio
+from splatbench.metrics.stats import holm, paired_difference, paired_ratio
 from splatbench.experiments.train_kind import REPORT as TRAIN_REPORT
 from splatbench.experiments.train_kind import TRAIN
 from splatbench.reports.tables import Stat
@@ -165,7 +166,7 @@ def test_findings_numbers_match_parquet(sh_report):
     kinds = {c.kind for c in claims}
     # glossy's SH 3 leads SH 2 by 1.5 dB at ~x1.08 the Gaussians (1300 against 1200 made): "no single
     # best at comparable size" (docs/reports.md, "Best"), with its size claim; diffuse: no lead at all
-    assert kinds == {"no best", "size", "vs", "count", "auto", "model size"}
+    assert kinds == {"no best", "size", "vs", "count", "auto", "model size", "holm"}
     specs = {m.name: m for m in TRAIN_METRICS}
     effects = {c.metric: c.min_effect for c in TRAIN_REPORT.rules.comparisons}
     for c in claims:
@@ -222,6 +223,20 @@ def test_findings_numbers_match_parquet(sh_report):
             assert sum(1 for x in claims if x.kind == "vs") == 3 * len(SCENES) * 5 and leads >= len(SCENES)
             assert c.value == 3 * len(SCENES) * 5 + leads
             assert f"This table makes {int(c.value)} comparisons" in text
+        elif c.kind == "holm":
+            # Holm over the test PSNR comparisons against the reference, each p-value scipy's paired t test
+            # straight from the parquet (seeded noise: every interval has a spread, so all 3 x 2 are in it)
+            family = [x for x in claims if x.kind == "vs" and x.metric == c.metric]
+            p = []
+            for x in family:
+                a, b = (per_seed(table, x.scene, label, x.metric) for label in (x.reference, x.label))
+                seeds = sorted(set(a) & set(b))
+                p.append(stats.ttest_rel([b[k] for k in seeds], [a[k] for k in seeds]).pvalue)
+            kept = holm(p)
+            assert (c.n, c.value) == (len(family), sum(kept))
+            for x, q, k in zip(family, p, kept):
+                said = "p < 0.001" if q < 0.001 else f"p = {q:.3f}"
+                assert (f"{x.scene} `{x.label}` ({said})" in c.text) == k
         elif c.kind == "model size":
             # parameters: Gaussians x (3 + 3 + 4 + 1 + 3 (d + 1)²) at the degree each run ended at, paired ratio
             def params(label):

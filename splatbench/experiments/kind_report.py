@@ -34,7 +34,8 @@ class Claim:
 
     kind: "best", "no best", "size" (the leader's size against the runner-up's, where it kept
     a lead from being named best), "vs", "self" (the reference row's own relative metric),
-    "count", "auto", "model size" (a row's parameters against the reference row's), "matched" (a
+    "count", "holm" (value: how many primary comparisons stay significant after Holm's correction, n:
+    how many it covers), "auto", "model size" (a row's parameters against the reference row's), "matched" (a
     difference at the matched model size, `[report] matched`), "settling", "rank", "tau" (two scenes'
     rank agreement; scene "a/b"), "quick tau" (the quick version's against this one) or "parity";
     scene ("" for all); label: the

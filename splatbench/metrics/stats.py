@@ -1,5 +1,5 @@
-"""Statistics of the reports: 95 % intervals over seeds, paired differences, and a
-bootstrap interval of a median ratio.
+"""Statistics of the reports: 95 % intervals over seeds, paired differences, their p-values
+with Holm's correction, and a bootstrap interval of a median ratio.
 
 Seeds are the unit of replication: run ``s`` of one grid cell pairs with run ``s`` of
 another. An interval covers only what a seed varies (the train kind: torch / numpy state,
@@ -21,6 +21,11 @@ nothing the report prints no interval (`splatbench.reports.findings.no_spread`).
   alternately in one process) with a percentile bootstrap interval
   (`scipy.stats.bootstrap`, seeded, so a report rebuilt from its table gives the same
   numbers).
+* `t_p_value`: the two-sided p-value of a t interval's test against a null value, from the
+  interval's own numbers (``t = (estimate - null) / (half_width / t_{0.975, n-1})`` on n - 1
+  degrees of freedom): below 0.05 exactly when the 95 % interval excludes the null.
+* `holm`: Holm's step-down correction of a family of p-values (which stay significant at a
+  family-wise error rate).
 * `kendall_tau`: the rank agreement of two rankings of the same items (Kendall's tau-b, ties
   counted: `scipy.stats.kendalltau`), +1 the same order, -1 the reverse; NaN with fewer than
   two items or where one side ranks every item equal.
@@ -103,6 +108,45 @@ def t_interval(values: Sequence[float], *, method: str = "t") -> Interval:
     return Interval(mean, mean - half, mean + half, n, method)
 
 
+def t_p_value(iv: Interval, null: float = 0.0) -> float:
+    """Two-sided p-value of the t test of ``iv`` (a `t_interval`, `paired_difference` or `paired_ratio`)
+    against ``null``, from the interval's own estimate, bounds and n: its standard error is the
+    half-width over ``t_{0.975, n-1}`` (`t_quantile`), so ``p < 1 - CONFIDENCE`` exactly when the
+    interval excludes ``null``; a ratio's (method "paired t on log ratios") on the logs. NaN where the
+    interval is undefined; 0 or 1 where it has no width (the values do or do not all differ from
+    ``null``)."""
+    from scipy import stats
+
+    if not iv.defined:
+        return math.nan
+    est, low, high = iv.estimate, iv.low, iv.high
+    if iv.method == "paired t on log ratios":
+        if min(est, low, high, null) <= 0:
+            return math.nan
+        est, low, high, null = (math.log(x) for x in (est, low, high, null))
+    se = (high - low) / 2.0 / t_quantile(iv.n)
+    if se <= 0:
+        return 0.0 if est != null else 1.0
+    return float(2.0 * stats.t.sf(abs(est - null) / se, iv.n - 1))
+
+
+def holm(p_values: Sequence[float], alpha: float = round(1.0 - CONFIDENCE, 12)) -> list[bool]:
+    """Holm's step-down correction: which of the m hypotheses with these ``p_values`` are rejected at
+    family-wise error rate ``alpha``. The p-values sorted ascending, the i-th (i = 0 ... m - 1) is rejected
+    while ``p_(i) <= alpha / (m - i)``; the first that is not stops it, and every larger one stays
+    (a tie with a rejected one is rejected with it). NaN counts as 1. Example: ``holm([0.01, 0.04, 0.03,
+    0.005])`` compares 0.005 with 0.05/4, 0.01 with 0.05/3, 0.03 with 0.05/2 and stops there:
+    ``[True, False, False, True]``."""
+    p = [1.0 if not math.isfinite(float(x)) else float(x) for x in p_values]
+    m = len(p)
+    rejected = [False] * m
+    for i, k in enumerate(sorted(range(m), key=lambda j: p[j])):
+        if p[k] > alpha / (m - i):
+            break
+        rejected[k] = True
+    return rejected
+
+
 def _pairs(a: Mapping[int, float], b: Mapping[int, float]) -> list[tuple[float, float]]:
     return [(float(a[k]), float(b[k])) for k in sorted(set(a) & set(b))
             if math.isfinite(float(a[k])) and math.isfinite(float(b[k]))]
@@ -160,4 +204,5 @@ def _as_map(values: Mapping[int, float] | Sequence[float]) -> Mapping[int, float
 
 
 __all__ = ["CONFIDENCE", "BOOTSTRAP_RESAMPLES", "Interval", "t_quantile", "t_interval", "paired_difference", "kendall_tau",
+           "t_p_value", "holm",
            "paired_ratio", "bootstrap_median_ratio"]

@@ -28,8 +28,12 @@ axis:
   declares its curves (`KindReport.settling`), a primary-metric comparison whose cells
   had not settled is marked **not settled** (`splatbench.reports.settling`), and the
   kind's confound counts (`KindReport.confounds`) that differ are named ("Also changed");
+* **holm**: Holm's step-down correction (family-wise 5 %) over the primary metric's "vs" comparisons
+  that have an interval, each one's two-sided p-value from its own t interval (`t_p_value`): how
+  many significant alone remain (the Summary marks the others "not significant after Holm"), and per
+  row and scene how many seeds put the row above the reference (`holm_line`);
 * **count**: how many such comparisons the table prints with an interval (each at 95 %, no correction
-  for multiplicity);
+  for multiplicity but Holm's over the primary ones);
 * the kind's own notes appended to it (`KindReport.axis_notes`), e.g. the degree ``auto``
   ended at on the train kind's SH degree axis.
 
@@ -54,7 +58,7 @@ from splatbench.experiments.kind_report import (AxisNote, Claim, Comparison, Fin
 from splatbench.experiments.kinds import RunKind
 from splatbench.plotting import pareto_front
 from splatbench.metrics.spec import MetricSpec, clip
-from splatbench.metrics.stats import Interval, paired_difference, paired_ratio, t_interval
+from splatbench.metrics.stats import Interval, holm, paired_difference, paired_ratio, t_interval, t_p_value
 from splatbench.reports.settling import CellSettling, cell_settling, paired_curve, unsettled_reason
 from splatbench.experiments.configs import flatten
 from splatbench.experiments.spec import ExperimentSpec, same_value
@@ -563,7 +567,12 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     ref = reference_row(table)
     others = [r for r in table.rows if r.label != ref.label]
     in_full = f"\"Appendix: {table.axis} in full\""
+    family: list[Claim] = []  # the primary comparisons Holm's correction covers
     if others and rules.comparisons:
+        primary_null = {"diff": 0.0, "ratio": 1.0}.get(primary_comp.how, primary_comp.null or 0.0)
+        method = {"diff": "paired t", "ratio": "paired t on log ratios"}.get(primary_comp.how, "t")
+        signs: dict[str, list[str]] = {}  # row -> per scene "seeds above the reference/pairs"
+        pending = []  # (row, its primary claims, its marks): the summary, once Holm has run
         lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
         appendix.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}), the other "
                         f"comparisons:")
@@ -580,6 +589,10 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                     if iv.n == 0:
                         texts.append("–")
                         continue
+                    if comp.metric == primary.name and comp.how in ("diff", "ratio"):
+                        pairs = [(a[k], b[k]) for k in a if k in b and math.isfinite(a[k]) and math.isfinite(b[k])]
+                        signs.setdefault(row.label, []).append(
+                            f"{sum(1 for x, y in pairs if y > x)}/{len(pairs)}")
                     text = fmt_interval(iv, comp.how, spec, null, comp.min_effect)
                     significant, is_practical = judge(iv, comp.how, null, spec, comp.min_effect)
                     settled = None
@@ -604,7 +617,6 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 more.append(f"Also changed: {also}")
             primaries = [c for c in claims if c.kind == "vs" and c.label == row.label and c.reference == ref.label
                          and c.metric == primary.name]
-            primary_null = {"diff": 0.0, "ratio": 1.0}.get(primary_comp.how, primary_comp.null or 0.0)
             opposed, opposed_short = [], []
             for c in primaries:
                 if c.significant:
@@ -642,8 +654,26 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             if heads:
                 marks.append("**against model size**: " + _sizes_in_brief(heads))
             if said:
-                summary.append(f"- **`{row.label}`** against `{ref.label}`, {_name(primary)}: {said}"
-                               + "".join(f"; {m}" for m in marks) + ".")
+                pending.append((row, primaries, marks))
+        # Holm's correction over the family of the primary comparisons printed with an interval
+        family = [c for c in claims if c.kind == "vs" and c.reference == ref.label and c.metric == primary.name
+                  and _with_interval(c, specs)]
+        p = [t_p_value(Interval(c.value, c.low, c.high, c.n, method), primary_null) for c in family]
+        kept = holm(p)
+        lost = {(c.scene, c.label) for c, k in zip(family, kept) if c.significant and not k}
+        if len(family) < 2 or not any(c.significant for c in family):
+            family = []  # nothing for Holm to correct: one comparison, or none significant alone
+        else:
+            line = holm_line(family, p, kept, _name(primary), ref.label, scenes, signs)
+            lines.append(f"- {line}.")
+            claims.append(Claim("holm", "", "", primary.name, "count", float(sum(kept)), line, ref.label,
+                                n=len(family)))
+        for row, primaries, marks in pending:
+            said = "; ".join(f"{c.scene} {_verdict_only(c.text)}"
+                             + (", not significant after Holm" if (c.scene, c.label) in lost else "")
+                             for c in primaries)
+            summary.append(f"- **`{row.label}`** against `{ref.label}`, {_name(primary)}: {said}"
+                           + "".join(f"; {m}" for m in marks) + ".")
         if appendix[-1].startswith("- **Against"):  # no row compared anything else
             appendix.pop()
     summary.append(best_summary)
@@ -694,7 +724,9 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                    for c in rules.comparisons if c.min_effect is not None]
         rest = len(made) - count
         appendix.append(f"- This table makes {count} comparisons with a 95 % interval (Student's t over seeds; no "
-                     f"correction for multiple comparisons, so about 1 in 20 intervals misses by chance)"
+                     f"correction for multiple comparisons, so about 1 in 20 intervals misses by chance"
+                     + (f", except Holm's over the {len(family)} {_name(primary)} ones against `{ref.label}`"
+                        if family else "") + ")"
                      + (f"; {rest} more have none (one seed, or seeds that did not vary the result) and are no "
                         f"evidence either way" if rest else "") + "."
                      + (f" Minimum effects ({', '.join(effects)}): a difference reads \"no practical difference\" "
@@ -944,6 +976,39 @@ def _planner(kind: RunKind) -> Callable[[pd.DataFrame, str], dict[int, float]] |
 
 #: A confound count is named when the row's mean differs from the reference's by more than this share.
 CONFOUND_SHARE = 0.05
+
+
+def holm_line(family: Sequence[Claim], p: Sequence[float], kept: Sequence[bool], name: str, reference: str,
+              scenes: Sequence[str], signs: Mapping[str, Sequence[str]]) -> str:
+    """The findings' line of Holm's correction (`splatbench.metrics.stats.holm`, family-wise 5 %) over
+    ``family``, an axis's primary "vs" claims with an interval, ``p`` their p-values (`t_p_value` of each
+    claim's own interval) and ``kept`` Holm's verdicts: how many of those significant alone remain, which
+    (with p), the first the step-down kept out and its threshold; then per row and scene how many seeds
+    put the row above ``reference`` (``signs``: "k/n" per scene, in ``scenes`` order, where every scene has
+    one)."""
+    alone = sum(1 for c in family if c.significant)
+    names = [f"{c.scene} `{c.label}` ({_p(q)})" for c, q, k in sorted(zip(family, p, kept), key=lambda x: x[1])
+             if k]
+    line = (f"**Holm's correction** over the {len(family)} {name} comparisons of this axis (family-wise 5 %): "
+            f"{sum(kept)} of the {alone} significant alone {'remains' if sum(kept) == 1 else 'remain'} significant"
+            + (f": {', '.join(names)}" if names else ""))
+    order = sorted(range(len(family)), key=lambda i: p[i])
+    first = next((i for i in order if not kept[i]), None)
+    if first is not None:
+        line += "; the others' intervals are per comparison"
+    if first is not None and family[first].significant:
+        c, step = family[first], len(family) - order.index(first)
+        line += f" (the first kept out: {c.scene} `{c.label}`, {_p(p[first])} > 0.05/{step})"
+    whole = {label: s for label, s in signs.items() if len(s) == len(scenes)}
+    if whole:
+        line += (f". Seeds with the row above `{reference}` ({' / '.join(scenes)}): "
+                 + "; ".join(f"`{label}` {', '.join(s)}" for label, s in whole.items()))
+    return line
+
+
+def _p(p: float) -> str:
+    """``p = 0.011``, ``p < 0.001``."""
+    return "p < 0.001" if p < 0.001 else f"p = {p:.3f}"
 
 
 def _verdict_only(text: str) -> str:
