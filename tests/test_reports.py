@@ -622,7 +622,8 @@ def test_a_train_result_becomes_the_kinds_record_field_by_field():
         "device": "cpu",  # where the rasterizer ran (what device = auto resolved to)
         "background": "0.4706, 1, 0", "background_source": "alpha",  # what background = auto resolved to, and why
         "train_views": 28, "image_width": 89, "image_height": 158,  # the views and the size it trained at
-        "worst_view_psnr": 24.5}  # the lowest test view's PSNR (each view's in the curves)
+        "worst_view_psnr": 24.5,  # the lowest test view's PSNR (each view's in the curves)
+        "resumed_step": None}  # run straight through (not continued from a killed attempt's checkpoint)
     # reset (the kind's run does it on Linux): the process's peak is the run's own
     assert metric_values(TrainRun.of(result, "abc", own_peak=True))["run_peak_rss_mb"] == 900.0
     assert record.warnings == ("warning: a warning",)

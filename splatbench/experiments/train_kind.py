@@ -194,6 +194,12 @@ class TrainRun(RunResult):
     worst_view_psnr: float | None = metric(meaning="the lowest PSNR (dB) of a test view in the final evaluation (each "
                                                    "view's in curves.test_view_psnr); None before it was recorded",
                                            default=None)
+    resumed_step: int | None = metric(meaning="the step this run continued from: the checkpoint an earlier attempt "
+                                              "of it left when its worker was killed (its train_seconds and "
+                                              "cpu_seconds sum the attempts' loop times; its load marks and the "
+                                              "record's seconds are the last attempt's; splatbench.experiments."
+                                              "train_resume); None: run straight through, and before it was "
+                                              "recorded", default=None)
 
     @classmethod
     def of(cls, result, dataset_hash: str | None, *, own_peak: bool = False) -> TrainRun:
@@ -491,15 +497,17 @@ def _prepare_sfm(path: Path, downscale: int, poses: str, layout: str, test_every
 # --------------------------------------------------------------------------- run
 def run(config: dict[str, Any], workdir: Path, prepared: Prepared) -> TrainRun:
     """Train on the run's dataset (found, or rendered on a worker that has no copy, under
-    ``prepared.datasets``), writing the run's files into ``workdir``."""
-    from splatbench.train import train
+    ``prepared.datasets``), writing the run's files into ``workdir``; a long run writes
+    checkpoints there, and continues from the latest one an earlier, killed attempt left
+    (`splatbench.experiments.train_resume`)."""
+    from splatbench.experiments.train_resume import train_resuming
 
     scene, data, fields = split(config)
     dataset = ensure_dataset(scene, data, prepared.datasets)
     cfg = TrainConfig.from_dict({**fields, "dataset": str(dataset.path), "out": str(workdir)}, source="")
     # a worker runs several runs in turn: reset its high-water mark so the peak recorded is this run's own
     own_peak = reset_peak_rss()
-    result = train(cfg)  # validated on construction
+    result = train_resuming(cfg, say=lambda line: print(f"{workdir.name}: {line}", file=sys.stderr, flush=True))
     return TrainRun.of(result, dataset.hash[:16] if dataset.hash else None, own_peak=own_peak)
 
 
