@@ -1007,3 +1007,23 @@ def test_no_holm_line_without_a_family_to_correct(tmp_path):
     # one comparison (SH 3 against 0 on one scene): Holm is the test itself, so neither line nor mark
     report, text = results(tmp_path, spec_of(), _holm_grid)
     assert "Holm" not in text and not [c for c in report.findings["sh.degree"].claims if c.kind == "holm"]
+
+
+def test_across_scenes_says_how_many_of_its_comparisons_survive_holm(tmp_path):
+    """A row practical with one sign on every scene reads "Across scenes" per comparison; where some of
+    those comparisons do not survive Holm, the Summary's mark says how many do (sh_degree's SH 3: 2 of 4)."""
+    def make(run):
+        # SH 3 above SH 0 on both scenes: on textured by 2.0 / 2.1 / 2.2 (p < 0.001: kept at 0.05 / 4), on
+        # glossy by 0.35 / 0.5 / 0.65 (p = 0.029: significant alone, kept out at Holm's next step, 0.05 / 3);
+        # SH 1 by -0.3 / +0.1 / +0.5 on both (not significant): the family has 4 comparisons
+        up = {("textured", 3): (2.0, 2.1, 2.2), ("glossy", 3): (0.35, 0.5, 0.65)}.get(
+            (run.scene, run.labels["sh.degree"]), (-0.3, 0.1, 0.5) if run.labels["sh.degree"] == 1 else (0, 0, 0))
+        psnr = float(HOLM_BASE[run.seed]) + up[run.seed]
+        return metrics_of(psnr), flat_curves(psnr)
+
+    report, text = results(tmp_path, spec_of({"scenes": ["glossy", "textured"], "axes": {"sh.degree": [0, 1, 3]}}),
+                           make)
+    summary = text[text.index("## Summary"):text.index("## Protocol and runs")]
+    three = next(x for x in summary.splitlines() if x.startswith("- **`3`** against"))
+    assert "**Across scenes**: practical and of one sign on all 2 scenes (each per comparison; 1 of 2 significant " \
+           "after Holm)" in three, three

@@ -669,6 +669,9 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             claims.append(Claim("holm", "", "", primary.name, "count", float(sum(kept)), line, ref.label,
                                 n=len(family)))
         for row, primaries, marks in pending:
+            short = sum((c.scene, c.label) in lost for c in primaries)  # across scenes per comparison, not after Holm
+            marks = [m + f" (each per comparison; {len(primaries) - short} of {len(primaries)} significant after "
+                         f"Holm)" if short and m.startswith("**Across scenes**") else m for m in marks]
             said = "; ".join(f"{c.scene} {_verdict_only(c.text)}"
                              + (", not significant after Holm" if (c.scene, c.label) in lost else "")
                              for c in primaries)
