@@ -221,7 +221,7 @@ def test_dry_run_lists_a_good_scene_with_what_it_reads_and_a_real_run_refuses_be
     lines = out.output.splitlines()
     assert lines[0].split()[1:3] == ["pending", "cap"]
     assert lines[1] == (f"scene cap: {tmp_path / 'cap'}: llff, 7 train and 2 test views of 32x32 px "
-                        f"(data.downscale=16, masks_8/ as alphas)")
+                        f"(data.downscale=16; images_8/ reduced by 2 on load; masks_8/ as alphas)")
     (tmp_path / "cap" / "masks_8" / "IMG_5_mask.png").unlink()
     spec = load_experiment(_experiment(tmp_path, '{ name = "cap", path = "cap", downscale = 16 }'))
     one_line_error(lambda: run_experiment(spec, results_dir=tmp_path / "results", progress=False),
@@ -239,11 +239,12 @@ def test_real_captures_dry_run_keeps_the_committed_run_ids_and_refuses_a_bad_dow
     assert committed and committed <= listed  # every committed run keeps its id
     said = [line for line in out.output.splitlines() if line.startswith("scene ")]
     shared = SHARED.resolve()  # the folder as the dry run names it: links resolved (../shared may be one)
-    assert said == [f"scene fox: {shared / 'fox'}: blender, 58 train and 9 test views of 89x158 px (data.downscale=12)",
+    assert said == [f"scene fox: {shared / 'fox'}: blender, 58 train and 9 test views of 89x158 px "
+                    f"(data.downscale=12; OPENCV lens distortion undistorted by pycolmap)",
                     f"scene maryrose: {shared / 'maryrose'}: llff, 60 train and 9 test views of 144x144 px "
-                    f"(data.downscale=24, masks_8/ as alphas)",
+                    f"(data.downscale=24; images_8/ reduced by 3 on load; masks_8/ as alphas)",
                     f"scene ethiopian_head: {shared / 'ethiopian_head'}: llff, 57 train and 9 test views of 160x160 "
-                    f"px (data.downscale=25, masks_8/ as alphas)"]
+                    f"px (data.downscale=25; images_8/ reduced by 3.125 on load; masks_8/ as alphas)"]
     scene = f'{{ name = "maryrose", path = "{SHARED / "maryrose"}", downscale = 4 }}'
     out = _dry_run(_experiment(tmp_path, scene), tmp_path / "results")
     assert out.exit_code != 0 and len(out.output.strip().splitlines()) == 1

@@ -64,7 +64,7 @@ from splatbench.experiments.kind_report import Comparison, FindingRules, KindRep
 from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, metric, metric_specs
 from splatbench.experiments.train_config import (DATA_FIELDS, OWNED_FIELDS, opacity_reset_steps, planned, scene_type,
                                                  split, train_config)
-from splatbench.experiments.train_report import (auto_sh_degree_note, lpips_conventions, lpips_note, memory_note,
+from splatbench.experiments.train_report import (auto_sh_degree_note, how_read, lpips_conventions, lpips_note, memory_note,
                                                  model_bytes, model_size_note, outlier_view_finding, outlier_view_lines,
                                                  protocol_lines, schedule_confound_note, smoke_test_line,
                                                  ssim_trained_note)
@@ -443,9 +443,10 @@ def check_inputs(configs: list[dict[str, Any]]) -> list[str]:
                                                    downscale=data["downscale"], masks=data["masks"])
             except InputError as exc:
                 raise InputError(f"scenes.{scene}: {exc}") from None
+            read = how_read(check.notes)  # the images folder and its reduction, undistortion, masks
             lines.append(f"scene {scene}: {data['path']}: {check.layout}, {check.train_views} train and "
                          f"{check.test_views} test views of {check.width}x{check.height} px (data.downscale="
-                         f"{data['downscale']}{f', {check.masks}/ as alphas' if check.masks else ''})")
+                         f"{data['downscale']}" + (f"; {read}" if read else "") + ")")
         check = found[key]
         need, why = min_side(config, check)
         if check.width and min(check.width, check.height) < need:

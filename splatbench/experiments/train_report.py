@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -424,7 +424,8 @@ def _resolution(done: pd.DataFrame) -> str:
 #: How a capture's photos were read, as the Resolution line says it, from the loader's notes its runs recorded
 #: (`RunRecord.notes`, in `splatbench.data.load_dataset`'s words): (pattern, the words said).
 _READ_NOTES = tuple((re.compile(pattern), words) for pattern, words in (
-    (r"\d+ images with ([\w/]+) lens distortion undistorted by pycolmap", r"\1 lens distortion undistorted by pycolmap"),
+    (r"\d+ images with ([\w/]+) lens distortion (?:would be )?undistorted by pycolmap",
+     r"\1 lens distortion undistorted by pycolmap"),
     (r"(images(?:_\d+)?)/ read and reduced by ([\d.]+) ", r"\1/ reduced by \2 on load"),
     (r"(images(?:_\d+)?)/ read at ", r"\1/ as stored"),
     (r"downscale \d+: reading (images_\d+)/", r"\1/ as stored"),
@@ -435,10 +436,15 @@ def _how_read(rows: pd.DataFrame) -> str:
     """How a capture's photos were read (the images folder, a reduction on load, undistortion, masks),
     from the loader's notes its runs recorded (`_READ_NOTES`), each once, in order; "" where they
     recorded none (runs before notes were recorded)."""
-    said = []
-    for raw in rows["notes"].dropna() if "notes" in rows.columns else ():
-        for note in json.loads(raw) if isinstance(raw, str) else raw:
-            said += [m.expand(words) for pattern, words in _READ_NOTES for m in [pattern.search(note)] if m]
+    notes = [note for raw in (rows["notes"].dropna() if "notes" in rows.columns else ())
+             for note in (json.loads(raw) if isinstance(raw, str) else raw)]
+    return how_read(notes)
+
+
+def how_read(notes: Sequence[str]) -> str:
+    """How a capture's photos were (or, in a dry check, would be) read, from the loader's notes
+    (`_READ_NOTES`): each reading once, in order, "; "-joined; "" where none says."""
+    said = [m.expand(words) for note in notes for pattern, words in _READ_NOTES for m in [pattern.search(note)] if m]
     return "; ".join(dict.fromkeys(said))
 
 
@@ -969,5 +975,5 @@ def outlier_view_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | N
 
 __all__ = ["OUTLIER_VIEW_DB", "FLOATER_DOC", "OutlierRun", "ViewCheck", "view_outliers", "outlier_view_lines",
            "outlier_view_finding", "hardest_view_lines",
-           "DEFAULT_PROTOCOL", "SMOKE_TEST", "smoke_test_line", "model_bytes", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note",
+           "DEFAULT_PROTOCOL", "SMOKE_TEST", "smoke_test_line", "model_bytes", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note", "how_read",
            "schedule_confound_note", "lpips_conventions", "lpips_note", "memory_note"]
