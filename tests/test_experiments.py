@@ -378,7 +378,11 @@ def test_a_runs_warnings_reach_its_file_the_table_and_the_report(tmp_path, capsy
                                                                       ["warning: dummy run told to warn (seed 1)"]]
     report = write_report(build_report(spec, results), tmp_path / "out").read_text()
     assert "**Warnings:** 2 run(s) warned" in report and "## Warnings" in report
-    rows = [line for line in report.splitlines() if "dummy run told to warn" in line]
+    # the Summary says so too, quoting the distinct warnings (a warning can change what the numbers mean)
+    summary = report[report.index("## Summary"):report.index("## Protocol and runs")]
+    assert ('**Warnings**: 2 of 4 runs warned (2 distinct: "warning: dummy run told to warn (seed 0)"; "warning: '
+            'dummy run told to warn (seed 1)"); each in full in "Warnings".') in summary
+    rows = [line for line in report.splitlines() if "dummy run told to warn" in line and line.startswith("|")]
     assert len(rows) == 2 and all("| alpha | `mode=loud` |" in row for row in rows)
     quiet = spec_of(text.replace('loud = { mode = "warn" }', "").replace('name = "warned"', 'name = "quiet"'))
     run_experiment(quiet, workers=1, results_dir=results, progress=False)

@@ -86,7 +86,8 @@ def test_the_summary_counts_the_cells_either_mark_leaves_unsettled():
             rows.append({"run_id": f"{scene}{seed}", "status": "done", "scene": scene, "seed": seed, "axis.x": "a",
                          "curves": json.dumps({"eval_step": steps, "eval_psnr": values})})
     summary = settling_finding(pd.DataFrame(rows), TRAIN).summary[0]
-    assert summary.startswith("- **2 of 2 cells not settled or past their peak**"), summary
+    assert summary.startswith("- **2 of 2 cells not settled or past their peak** (1 still moving, 1 past their peak, "
+                              "0 both)"), summary
     alone = settling_finding(_peaked(0.3), TRAIN).summary[0]  # one mark: no union line
     assert "not settled or past their peak" not in alone and "**Past its peak**: 1 of 1" in alone
 
@@ -130,7 +131,7 @@ def test_a_psnr_lead_whose_ssim_goes_the_other_way_says_so(tmp_path):
     # the report's summary, before the protocol, says so too: of the best and of the comparison (issue 39 item 4)
     summary = text[text.index("## Summary"):text.index("## Protocol and runs")]
     vs = next(c for c in report.findings["sh.degree"].claims if c.kind == "vs" and c.metric == "test_psnr")
-    assert f"- **`3`** against `0`, test PSNR: glossy {vs.text}; **the other way**: SSIM on glossy." in summary
+    assert f"- **`3`** against `0`, test PSNR: glossy {vs.text}; **the other way** (against the test PSNR difference): SSIM on glossy." in summary
     assert "glossy `3` (" in summary and "**but SSIM goes the other way**" in summary
     # SSIM going the same way is not named
     _, text = results(tmp_path / "b", spec_of(), _ssim_make(0.01))

@@ -648,7 +648,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             if moving:
                 marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in moving))
             if opposed_short:
-                marks.append("**the other way**: " + "; ".join(opposed_short))
+                marks.append(f"**the other way** (against the {_name(primary)} difference): " + "; ".join(opposed_short))
             if across:
                 marks.append(across)
             if heads:

@@ -404,6 +404,10 @@ def _in_full(axis: str) -> str:
     return f"Appendix: {axis} in full"
 
 
+#: How much of each of the first two distinct run warnings the Summary quotes (characters).
+SUMMARY_WARNING = 120
+
+
 def summary_lines(report: Report, run_args: str) -> list[str]:
     """The report's "Summary" section: the runs not done yet; per axis, each row's primary difference
     against the reference and the best (`Finding.summary`); the settling marks; the check's verdict (or
@@ -426,6 +430,13 @@ def summary_lines(report: Report, run_args: str) -> list[str]:
              for line in f.summary]
     if marks:
         lines += [*marks, ""]
+    warned = run_warnings(spec, report.table)
+    if warned:  # a warning can change what the numbers mean (e.g. a strategy that never refined)
+        distinct = list(dict.fromkeys(w[4] for w in warned))
+        shown = "; ".join(f"\"{w if len(w) <= SUMMARY_WARNING else w[:SUMMARY_WARNING].rstrip() + '…'}\""
+                          for w in distinct[:2])
+        lines += [f"**Warnings**: {len({w[0] for w in warned})} of {len(report.table)} runs warned ({len(distinct)} "
+                  f"distinct: {shown}{'; …' if len(distinct) > 2 else ''}); each in full in \"Warnings\".", ""]
     if report.check is not None:
         lines += [header_line(report.check), ""]
     elif spec.check is None and kind.protocols is not None:

@@ -445,7 +445,8 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
     if cannot_tell:
         lines.append(cannot_tell)
     if overfit:
-        heads.append("**Overfitting** (the test curve flat or falling while the training-view PSNR still rises)")
+        heads.append(f"**Overfitting**: {len(overfit)} of {len(cells)} cells (the test curve flat or falling while the "
+                     f"training-view PSNR still rises)")
         lines.append("- **Overfitting**: the test curve is flat or falling while the training-view PSNR still rises "
                      f"(by {threshold} or more beyond the test curve's slope): " + ", ".join(overfit)
                      + ". Such a cell has stopped generalising; it has not converged.")
@@ -453,8 +454,10 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
         heads.append(cannot_tell[2:].rstrip("."))
     either = sum(1 for c in cells.values() if not c.flat or c.past_peak)
     if moving and peaked:  # the two marks overlap: how many cells either leaves unsettled
-        heads.insert(0, f"**{either} of {len(cells)} cells not settled or past their peak** at this run length, so "
-                        f"each difference is this checkpoint's, not where the cells converge")
+        both = len(moving) + len(peaked) - either
+        heads.insert(0, f"**{either} of {len(cells)} cells not settled or past their peak** ({len(moving)} still "
+                        f"moving, {len(peaked)} past their peak, {both} both) at this run length, so each difference "
+                        f"is this checkpoint's, not where the cells converge")
     summary = [f"- {'; '.join(heads)} (which cells: \"Appendix: Settling\")."]
     return Finding("settling", lines, claims, summary=summary)
 
