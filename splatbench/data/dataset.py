@@ -93,7 +93,7 @@ from splatbench.cameras import Camera
 from splatbench.guards import check_image_size
 from splatbench.data.colmap_bounds import check_colmap_binary, check_colmap_text
 from splatbench.data.llff import POSES_FILE
-from splatbench.data.masks import Masks, area_resize, combine, folder_factor
+from splatbench.data.masks import Masks, area_resize, blank, combine, folder_factor
 from splatbench.data.undistort import Lens, check_lens
 from splatbench.errors import InputError
 from splatbench.ply import read_ply_data
@@ -317,7 +317,7 @@ class _Load:
     def __init__(self, root: Path, bg: np.ndarray, downscale: int, say: Callable[[str], None],
                  headers_only: bool = False) -> None:
         self.root, self.bg, self.downscale, self.say = root, bg, downscale, say
-        self.headers_only = headers_only  # `check_dataset`: image headers read, no pixel decoded (`_blank`)
+        self.headers_only = headers_only  # `check_dataset`: image headers read, no pixel decoded (`blank`)
         self.notes: list[str] = []
         self.pending: list[tuple[list, int, str, Camera, Lens]] = []  # (views, index, rel, posed camera, lens)
         self.masks: Masks  # the capture's object masks (set by load_dataset)
@@ -366,12 +366,12 @@ class _Load:
         """``image`` resized to ``width`` x ``height`` (`area_resize` when ``area``, else PIL
         bicubic); headers only: zeros of that size."""
         if self.headers_only:
-            return _blank((height, width, *image.shape[2:]))
+            return blank((height, width, *image.shape[2:]))
         return area_resize(image, width, height) if area else _resize(image, width, height)
 
     def combine(self, alpha: np.ndarray | None, mask: np.ndarray) -> np.ndarray:
         """`combine` of a photo's alpha and its mask (headers only: zeros of the mask's size)."""
-        return _blank(mask.shape) if self.headers_only else combine(alpha, mask)
+        return blank(mask.shape) if self.headers_only else combine(alpha, mask)
 
     def defer(self, views: list, rel: str, camera: Camera, lens: Lens) -> None:
         """Leave a slot in ``views`` for an image to undistort (`finish` fills it)."""
@@ -409,7 +409,7 @@ class _Load:
                   + ("not run: a dry check" if folder is None else f"{'reused' if cached else 'cached in'} {folder}"))
         for (views, i, rel, camera, _), u in zip(self.pending, done):
             if self.headers_only:
-                rgb, alpha = _blank((u.height, u.width, 3)), None
+                rgb, alpha = blank((u.height, u.width, 3)), None
             else:
                 rgb, alpha = _read_image(u.path.parent, u.path.name, f"undistorted from {rel}")
             if alpha is not None:  # composited as read (float); the alpha is not kept
@@ -426,12 +426,6 @@ class _Load:
             self.note(f"images are {w}x{h}: the long side exceeds 1600 px (graphdeco's train.py shrinks images wider "
                       f"than 1600 px to 1600 and {would}); splatbench keeps them (data.downscale=N trains smaller)")
         return self.notes
-
-
-def _blank(shape: tuple[int, ...]) -> np.ndarray:
-    """Read-only uint8 zeros of ``shape`` that take no memory (one element, broadcast): the
-    pixels of a view whose header alone was read (`check_dataset`)."""
-    return np.broadcast_to(np.zeros((), np.uint8), tuple(int(n) for n in shape))
 
 
 def _resize(image: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -889,13 +883,13 @@ def _read_ply(root: Path, file: str, value: object) -> PointCloud:
 def _read_image(root: Path, rel: str, context: str, headers_only: bool = False
                 ) -> tuple[np.ndarray, np.ndarray | None]:
     """(rgb [H, W, 3], alpha [H, W] or None) of an image file, uint8 as stored (``headers_only``:
-    `_blank` of the header's size)."""
+    `blank` of the header's size)."""
     path = root / rel
     if not path.is_file():
         raise InputError(f"{rel}: missing ({context})")
     if headers_only:
         width, height, has_alpha = image_header(path, what=rel)  # decompression bombs refused
-        return _blank((height, width, 3)), _blank((height, width)) if has_alpha else None
+        return blank((height, width, 3)), blank((height, width)) if has_alpha else None
     arr, has_alpha = read_image_with_alpha(path, what=rel)  # decompression bombs refused
     if not has_alpha:
         return arr, None
@@ -920,14 +914,14 @@ def _split(root: Path, views: list, load: _Load) -> Split:
                              f"(a split needs one image size)")
     alphas = None
     if load.headers_only and any(v[3] is not None for v in views):
-        alphas = _blank((len(views), h, w))
+        alphas = blank((len(views), h, w))
     elif any(v[3] is not None for v in views):  # a view without alpha is opaque: 255 composites to itself exactly
         alphas = np.stack([v[3] if v[3] is not None else np.full((h, w), 255, np.uint8) for v in views])
     raw = any(v[3] is not None and not v[4] for v in views)  # RGBA at full size: composited by Split.image
     composed = any(v[3] is not None and v[4] for v in views)  # RGBA composited before downscaling
     composite = load.bg if raw else None
     if load.headers_only:
-        images = _blank((len(views), h, w, 3))
+        images = blank((len(views), h, w, 3))
     elif any(v[2].dtype != np.uint8 for v in views) or (raw and composed):
         # a split mixing final and to-be-composited RGBA views, or holding float pixels: float32 now
         images = np.stack([_as_float(v[2], None if v[4] else _unit(v[3]), load.bg) for v in views])
@@ -952,7 +946,7 @@ def _split(root: Path, views: list, load: _Load) -> Split:
                 raise InputError(f"{what}: depth shape {list(shape)} disagrees with its image {h}x{w}")
             if not load.headers_only:
                 maps.append(read_npy(path, what=what).astype(np.float32))
-        depths = _blank((len(names), h, w)) if load.headers_only else np.stack(maps)
+        depths = blank((len(names), h, w)) if load.headers_only else np.stack(maps)
     return Split(images, cameras, depths, names, alphas, composite)
 
 

@@ -146,7 +146,7 @@ class Masks:
             raise InputError(f"{mrel}: mask size {got[0]}x{got[1]} cannot be reduced to its image {rel}'s {w}x{h} "
                              f"(a mask is its image's size, or larger with the same aspect; {fix})")  # pixel's rounding
         if mask is None:
-            return np.broadcast_to(np.zeros((), np.uint8), (h, w))
+            return blank((h, w))
         return mask if got == size else area_resize(mask, w, h)
 
     def finish(self) -> str:
@@ -162,6 +162,12 @@ class Masks:
                 self.note(f"{folder}/: {len(stray)} masks match no image and are ignored ({', '.join(stray[:3])}"
                           f"{', ...' if len(stray) > 3 else ''}): is an image missing, or is a mask misnamed?")
         return ", ".join(used)
+
+
+def blank(shape: tuple[int, ...]) -> np.ndarray:
+    """Read-only uint8 zeros of ``shape`` that take no memory (one element, broadcast): the
+    pixels of an image or mask whose header alone was read (`splatbench.data.check_dataset`)."""
+    return np.broadcast_to(np.zeros((), np.uint8), tuple(int(n) for n in shape))
 
 
 def area_resize(image: np.ndarray, width: int, height: int) -> np.ndarray:
