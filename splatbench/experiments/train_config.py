@@ -92,12 +92,22 @@ def planned(config: dict[str, Any]) -> dict[str, float]:
     return {"opacity_resets": counts.opacity_resets, "refinements": counts.refinements}
 
 
+def _recorded_config(config: dict[str, Any]) -> TrainConfig | None:
+    """The TrainConfig of a run's resolved config; None for one that no longer validates (what a
+    report reads of runs made under older code: `planned`, `opacity_reset_steps`, `sh_steps`)."""
+    try:
+        return train_config(split(config)[2])
+    except InputError:
+        return None
+
+
 def _scheduled_strategy(config: dict[str, Any]) -> tuple[Any, int] | None:
     """(The strategy a run's resolved config makes, scaled as the run scales it; its iterations);
     None for a config that no longer validates (`planned`, `opacity_reset_steps`)."""
+    cfg = _recorded_config(config)
+    if cfg is None:
+        return None
     try:
-        _, _, train = split(config)
-        cfg = train_config(train)
         return cfg.make_strategy(), cfg.iterations
     except InputError:
         return None
@@ -121,11 +131,8 @@ def sh_steps(config: dict[str, Any]) -> int | None:
     ``sh.interval`` scaled by `splatbench.train.schedule.scale_step` over the protocol's schedule
     length, 30,000 under a graphdeco protocol, which so keeps its steps as written); None for a
     config that no longer validates (`splatbench.experiments.train_report.sh_interval_steps`)."""
-    try:
-        _, _, train = split(config)
-        return train_config(train).sh_steps
-    except InputError:
-        return None
+    cfg = _recorded_config(config)
+    return None if cfg is None else cfg.sh_steps
 
 
 __all__ = ["OWNED_FIELDS", "DATA_FIELDS", "FOLDER_FIELDS", "TEACHER_FIELDS", "split", "scene_type", "train_config",

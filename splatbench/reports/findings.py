@@ -60,9 +60,9 @@ from splatbench.plotting import pareto_front
 from splatbench.metrics.spec import MetricSpec, clip
 from splatbench.metrics.stats import Interval, holm, paired_difference, paired_ratio, t_interval, t_p_value
 from splatbench.reports.settling import CellSettling, cell_settling, paired_curve, unsettled_reason
-from splatbench.experiments.configs import flatten
+from splatbench.experiments.configs import decode, flatten, run_config
 from splatbench.experiments.spec import ExperimentSpec, same_value
-from splatbench.reports.tables import AxisTable, Row, decode, display, loaded_runs, run_config, seed_values
+from splatbench.reports.tables import AxisTable, Row, display, loaded_runs, seed_values
 
 
 def rules_for(kind: RunKind, metrics: tuple[MetricSpec, ...], min_effect: Mapping[str, float] | None = None
@@ -642,8 +642,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             lines.append(line)
             if more:
                 appendix.append(f"  - `{row.label}`: " + ". ".join(more))
-            # the summary: the primary difference per scene, with the marks the line above gives it
-            said = "; ".join(f"{c.scene} {_verdict_only(c.text)}" for c in primaries)
+            # the summary: the primary difference per scene (written once Holm has run), with the marks the line
+            # above gives it
             marks = []
             if moving:
                 marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in moving))
@@ -653,7 +653,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 marks.append(across)
             if heads:
                 marks.append("**against model size**: " + _sizes_in_brief(heads))
-            if said:
+            if primaries:
                 pending.append((row, primaries, marks))
         # Holm's correction over the family of the primary comparisons printed with an interval
         family = [c for c in claims if c.kind == "vs" and c.reference == ref.label and c.metric == primary.name

@@ -224,10 +224,11 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
             t = last_quarter_slope(c.get(keys.train_step), c.get(keys.train_value), end=s.end, skip=skip)
             if t is not None:
                 train.setdefault(int(seed), []).append(t.slope)
-            g = window_gap(c, keys, s.lo, s.end, skip)
+            points = gap_points(c, keys, s.lo, s.end, skip)
+            g = _gap(*points)
             if g is not None:
                 gaps.setdefault(int(seed), []).append(g)
-                counts.append(tuple(len(p) for p in gap_points(c, keys, s.lo, s.end, skip)))
+                counts.append((len(points[0]), len(points[1])))
     if not test:
         return None
     per_seed = {k: float(np.mean(v)) for k, v in sorted(test.items())}
@@ -258,7 +259,11 @@ def window_gap(curves: dict, keys: SettlingCurves, start: int, end: int, skip=()
     the mean of the test curve's; None when either has no finite point there. The training-view value
     is the view each step trained on, measured before its update and logged every ``log_every`` steps:
     a noisy but unbiased sample of the fit to the training views."""
-    train, test = gap_points(curves, keys, start, end, skip)
+    return _gap(*gap_points(curves, keys, start, end, skip))
+
+
+def _gap(train: list[float], test: list[float]) -> float | None:
+    """The mean of ``train`` minus the mean of ``test`` (`gap_points`); None when either is empty."""
     return None if not train or not test else float(np.mean(train)) - float(np.mean(test))
 
 
@@ -427,8 +432,7 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
     if moving:
         heads.append(f"**Not settled**: {len(moving)} of {len(cells)} cells still moved by {threshold} or more over "
                      f"the last quarter")
-        lines.append(f"- **Not settled**: {len(moving)} of {len(cells)} cells still moved by {threshold} or more over "
-                     f"the last quarter: " + ", ".join(moving) + ". Their differences above are what this run length "
+        lines.append(f"- {heads[-1]}: " + ", ".join(moving) + ". Their differences above are what this run length "
                      "gives, not where the cells converge (each such comparison is marked **not settled**).")
     if peaked:
         heads.append(f"**Past its peak**: {len(peaked)} of {len(cells)} cells ended more than the {effect:g} dB "
@@ -439,9 +443,7 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
     if not moving and not peaked:
         heads.append(f"Settled: every cell{' with a slope' if unknown else ''}'s test curve moved by less than "
                      f"{threshold} over the last quarter, and none ended more than the minimum effect below its best")
-        lines.append(f"- Settled: every cell{' with a slope' if unknown else ''}'s test curve moved by less than "
-                     f"{threshold} over the last quarter, and none ended more than the minimum effect below its "
-                     f"best.")
+        lines.append(f"- {heads[-1]}.")
     if cannot_tell:
         lines.append(cannot_tell)
     if overfit:

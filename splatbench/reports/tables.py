@@ -27,7 +27,7 @@ from typing import Any
 
 import pandas as pd
 
-from splatbench.experiments.configs import decode, flatten, run_config, unflatten  # run_config: also imported from here
+from splatbench.experiments.configs import decode, flatten, unflatten
 from splatbench.experiments.grid import expand
 from splatbench.experiments.kind_report import done_runs
 from splatbench.experiments.kinds import RunKind
@@ -310,4 +310,4 @@ def _json(value: Any) -> str:
 
 
 __all__ = ["metric_specs", "shared_prefix", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
-           "axis_table", "cell_labels", "done_runs", "loaded_runs", "decode", "run_config"]
+           "axis_table", "cell_labels", "done_runs", "loaded_runs"]
