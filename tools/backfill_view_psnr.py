@@ -6,7 +6,7 @@ For each done record of ``RESULTS_DIR/EXPERIMENT/`` without ``curves.test_view_p
 folder (``work/<run_id>/``) holds the run's final model, evaluates that model again on the run's
 test views exactly as the run's final evaluation did (`splatbench.train.reevaluate`:
 `Trainer.evaluate` of the saved PLY at the SH degree the run ended at), checks that the views'
-mean is the record's ``metric.test_psnr`` to within float32 rendering noise (`tolerance_db`; a
+mean is the record's ``metric.test_psnr`` to within float32 rendering noise (`splatbench.train.reevaluate.tolerance_db`; a
 run that disagrees is refused and left as it is), and rewrites the record atomically
 (`splatbench.experiments.store.write_record`) with ``curves.test_view_psnr``,
 ``curves.test_view_psnr_from`` (`FROM`) and ``metrics.worst_view_psnr``, as a run made since
@@ -36,26 +36,6 @@ from splatbench.experiments.store import (RunRecord, experiment_dir, read_record
 
 #: What a backfilled record says of where its per-view PSNRs came from (``curves.test_view_psnr_from``).
 FROM = "recomputed from the run's saved final model (tools/backfill_view_psnr.py)"
-#: The largest change of a rendered value in [0, 1] that float32 rounding alone makes between two
-#: executions of the same render (another summation order: packet width, threads, machine): 16 units in the
-#: last place of 1.0 (2^-23 each), a pixel's front-to-back blend rounding once per Gaussian it blends and the
-#: errors adding up over a dozen or so. Not measured here: on the machine that ran them, every run checked
-#: so far (42 of 42, sh_degree and quick_protocol) evaluates again bit for bit.
-RENDER_ULPS = 16 * 2.0 ** -23
-
-
-def tolerance_db(view_psnrs: list[float]) -> float:
-    """How far the mean of ``view_psnrs`` (dB) may be from the recorded test PSNR by float32
-    rendering noise alone: each rendered value off by at most ``d`` = `RENDER_ULPS` changes a
-    view's mean square error e² by at most 2 d mean|e| <= 2 d rms(e), so its PSNR by at most
-    (10 / ln 10) 2 d / rms(e) = (20 / ln 10) d 10^(PSNR / 20) dB (first order); the mean of the
-    views' bounds bounds their mean's change. E.g. 1.7e-3 dB at 46 dB, 1.5e-4 dB at 25 dB:
-    rendering at another SH degree, over another background or from another model moves it by
-    tenths of a dB and more."""
-    bounds = [20 / math.log(10) * RENDER_ULPS * 10 ** (p / 20) for p in view_psnrs if math.isfinite(p)]
-    return float(np.mean(bounds)) if bounds else 0.0
-
-
 def needs_backfill(record: RunRecord) -> bool:
     """A done run whose curves lack each test view's PSNR."""
     return record.status == "done" and not (isinstance(record.curves, dict) and record.curves.get("test_view_psnr"))
@@ -72,7 +52,7 @@ def backfilled(record: RunRecord, views: list[float]) -> RunRecord:
 def backfill_run(folder: Path, record: RunRecord) -> tuple[RunRecord, str]:
     """(The backfilled record, its line) for one run of the experiment folder ``folder``;
     `InputError` (one line) where its model is missing or its evaluation disagrees with its record."""
-    from splatbench.train.reevaluate import MODEL_FILE, evaluate_saved_run  # late: torch and Dr.Jit
+    from splatbench.train.reevaluate import MODEL_FILE, evaluate_saved_run, tolerance_db  # late: torch and Dr.Jit
 
     # a reused run's model is where it ran: its original experiment's folder (`reused_from`)
     work = folder.parent / (record.reused_from or folder.name) / "work" / record.run_id

@@ -13,7 +13,7 @@ What it does: for each done record of ``RESULTS_DIR/EXPERIMENT/`` whose work fol
 the run's final evaluation did (`splatbench.train.reevaluate.evaluate_saved_run`: `Trainer.evaluate` of the
 saved PLY at the SH degree the run ended at) and computes each view's LPIPS in both conventions (`ALEX`,
 `VGG`). A run is used only where the evaluation reproduces the record's test PSNR to within float32
-rendering noise (``tools/backfill_view_psnr.py``'s `tolerance_db`: the same renders). A run a runner holds
+rendering noise (`splatbench.train.reevaluate.tolerance_db`: the same renders). A run a runner holds
 (``claims/<run_id>.claim``) or a record not "done" is left alone. Nothing is written there: the tool only reads.
 
 The estimate (`estimate`): within each scene, each test view's values are centred on their mean over the
@@ -43,7 +43,6 @@ summary. Use ``nice``: it renders each run's test views once and runs VGG-16 on 
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import math
 import sys
@@ -70,15 +69,6 @@ PSNR_MIN_EFFECT = 0.1
 BOOT = 2000
 
 
-def _backfill_tool():
-    """``tools/backfill_view_psnr.py`` (for `tolerance_db`: the one rule of what float32 rendering noise moves)."""
-    path = Path(__file__).resolve().parent / "backfill_view_psnr.py"
-    spec = importlib.util.spec_from_file_location("backfill_view_psnr", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 @dataclass(frozen=True)
 class RunViews:
     """One run's test views measured again: its record's identity, the record's test PSNR and LPIPS
@@ -97,10 +87,11 @@ class RunViews:
     vgg: list[float]
 
 
-def measure_run(folder: Path, record: RunRecord, tolerance_db) -> RunViews:
+def measure_run(folder: Path, record: RunRecord) -> RunViews:
     """`RunViews` of one done run of the experiment folder ``folder``; one-line `InputError` where its
     work folder lacks the final model or its evaluation does not reproduce its recorded test PSNR."""
-    from splatbench.train.reevaluate import CONFIG_FILE, MODEL_FILE, RESULT_FILE, evaluate_saved_run  # late: torch
+    from splatbench.train.reevaluate import (CONFIG_FILE, MODEL_FILE, RESULT_FILE, evaluate_saved_run,  # late: torch
+                                             tolerance_db)
 
     # a reused run's model is where it ran: its original experiment's folder (`reused_from`)
     work = folder.parent / (record.reused_from or folder.name) / "work" / record.run_id
@@ -253,7 +244,6 @@ def measure(results: Path, experiment: str) -> tuple[list[RunViews], list[str]]:
     folder = experiment_dir(results, experiment)
     if not folder.is_dir():
         raise InputError(f"{folder}: no such experiment folder")
-    tolerance_db = _backfill_tool().tolerance_db
     runs: list[RunViews] = []
     skipped: list[str] = []
     for record in read_records(folder).values():
@@ -263,7 +253,7 @@ def measure(results: Path, experiment: str) -> tuple[list[RunViews], list[str]]:
             skipped.append(f"{record.run_id}: held by a runner (claims/{record.run_id}.claim)")
         else:
             try:
-                run = measure_run(folder, record, tolerance_db)
+                run = measure_run(folder, record)
             except InputError as exc:
                 skipped.append(str(exc))
             else:

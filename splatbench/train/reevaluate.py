@@ -24,9 +24,11 @@ Example::
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from splatbench.errors import InputError
@@ -35,6 +37,27 @@ from splatbench.fsutil import read_text
 from splatbench.train.config import TrainConfig
 from splatbench.train.loop import Evaluation, Trainer, torch_threads
 from splatbench.train.params import params_from_gaussians
+
+#: The largest change of a rendered value in [0, 1] that float32 rounding alone makes between two
+#: executions of the same render (another summation order: packet width, threads, machine): 16 units in the
+#: last place of 1.0 (2^-23 each), a pixel's front-to-back blend rounding once per Gaussian it blends and the
+#: errors adding up over a dozen or so. Not measured here: on the machine that ran them, every run checked
+#: so far (42 of 42, sh_degree and quick_protocol) evaluates again bit for bit (tools/backfill_view_psnr.py,
+#: tools/lpips_scale.py: each checks a saved run's evaluation against its record by it).
+RENDER_ULPS = 16 * 2.0 ** -23
+
+
+def tolerance_db(view_psnrs: list[float]) -> float:
+    """How far the mean of ``view_psnrs`` (dB) may be from the recorded test PSNR by float32
+    rendering noise alone: each rendered value off by at most ``d`` = `RENDER_ULPS` changes a
+    view's mean square error e² by at most 2 d mean|e| <= 2 d rms(e), so its PSNR by at most
+    (10 / ln 10) 2 d / rms(e) = (20 / ln 10) d 10^(PSNR / 20) dB (first order); the mean of the
+    views' bounds bounds their mean's change. E.g. 1.7e-3 dB at 46 dB, 1.5e-4 dB at 25 dB:
+    rendering at another SH degree, over another background or from another model moves it by
+    tenths of a dB and more."""
+    bounds = [20 / math.log(10) * RENDER_ULPS * 10 ** (p / 20) for p in view_psnrs if math.isfinite(p)]
+    return float(np.mean(bounds)) if bounds else 0.0
+
 
 #: The files of a run's output folder that `evaluate_saved_run` reads.
 CONFIG_FILE, MODEL_FILE, RESULT_FILE = "config.toml", "point_cloud.ply", "result.json"
@@ -88,4 +111,5 @@ def evaluate_model(config: TrainConfig, model: Gaussians, degree: int, *, datase
             return trainer.evaluate(lpips)
 
 
-__all__ = ["evaluate_saved_run", "evaluate_model", "final_sh_degree", "CONFIG_FILE", "MODEL_FILE", "RESULT_FILE"]
+__all__ = ["evaluate_saved_run", "evaluate_model", "final_sh_degree", "tolerance_db", "RENDER_ULPS", "CONFIG_FILE", "MODEL_FILE",
+           "RESULT_FILE"]
