@@ -347,3 +347,22 @@ def test_the_scenes_line_counts_real_captures_and_a_quick_report_says_smoke_test
     # a report at graphdeco's 7K column is no smoke test
     assert smoke_test_line(table.assign(**{"config.protocol": "graphdeco-7k"})) == []
     assert smoke_test_line(table)[0].startswith("**A smoke test, not evidence**")
+
+
+def test_a_peak_before_a_reset_says_the_reset_lies_between():
+    """fox's SH 3 at 7K peaked at 5,600 and was 0.13 dB below it at 7,000, one evaluation after the
+    opacity reset at 6,000: the rule is unchanged (past its peak), and the text names the reset between
+    the best step and the end, which a reader needs to tell a reset's dip from a fall; a reset before
+    the best step is not named."""
+    import dataclasses
+
+    frame = _peaked(0.3).assign(**{"config.iterations": 7000})  # a config column: the resets are read
+    at = {"reset": 3000}
+    keys = dataclasses.replace(TRAIN_REPORT.settling, resets=lambda config: (1000, at["reset"]))
+    cell = cell_settling(frame, keys, 0.1)
+    assert cell.past_peak and cell.reset_after_best == 3000
+    assert "past its peak (best at step 2,100, 0.30 dB above its last value; the reset at step 3,000 lies " \
+           "between)" in cell.why_not()
+    at["reset"] = 2000  # both resets before the best step (2,100): nothing between
+    cell = cell_settling(frame, keys, 0.1)
+    assert cell.reset_after_best is None and cell.why_not().endswith("0.30 dB above its last value)")

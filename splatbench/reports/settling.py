@@ -16,7 +16,9 @@ and the metric they measure); the rule (docs/reports.md, "Settled"):
   seeds share) is more than the minimum effect below its best value at an earlier step (above,
   for a metric where lower is better): such a cell is "past its peak (best at step N)", never
   settled, however flat its last quarter (a curve that peaked at 2,100 steps and fell 0.3 dB by
-  7,000 may end flat);
+  7,000 may end flat); where a reset the kind names falls between the best step and the end, it
+  says so ("; the reset at step 6,000 lies between": the fall may be the reset's dip, the rule
+  unchanged);
 * **past its peak** is judged on the fall as written (`FALL_FMT`, two decimals): a printed
   0.10 dB is never "more than the 0.1 dB minimum effect" (docs/reports.md, "Minimum effects");
 * **overfitting**: the test curve is flat or falling (slope below the threshold) while the
@@ -125,6 +127,7 @@ class CellSettling:
     resets: tuple[int, ...] = ()  # the resets (`SettlingCurves.resets`) in the window, over the runs
     left_out: tuple[int, ...] = ()  # the training-view steps left out of the window (`RESET_RECOVERY`)
     gap_counts: tuple[tuple[int, int], ...] = ()  # each run's (training-view points, test points) in the gap
+    reset_after_best: int | None = None  # the last reset (`SettlingCurves.resets`) after ``best_step``, by the end
 
     @property
     def flat(self) -> bool:
@@ -152,9 +155,15 @@ class CellSettling:
         above its last value)``; "" when settled."""
         parts = [] if self.flat else [f"{self.test:+.2f} {unit} / 1,000 steps over the last quarter"]
         if self.past_peak:
-            parts.append(f"past its peak (best at step {self.best_step:,}, {self.fall:{FALL_FMT}} {unit} above its last "
-                         f"value)")
+            parts.append(f"past its peak ({self.peak(unit)})")
         return ", ".join(parts)
+
+    def peak(self, unit: str = "dB") -> str:
+        """``best at step 5,600, 0.13 dB above its last value``, and ``; the reset at step 6,000 lies
+        between`` where one does (the fall may be the reset's dip, not yet recovered)."""
+        between = (f"; the reset at step {self.reset_after_best:,} lies between"
+                   if self.reset_after_best is not None else "")
+        return f"best at step {self.best_step:,}, {self.fall:{FALL_FMT}} {unit} above its last value{between}"
 
     @property
     def overfitting(self) -> bool:
@@ -203,6 +212,7 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
     counts: list[tuple[int, int]] = []  # per run: (training-view points, test points) its gap averages
     starts, ends, los = [], [], []
     resets: set[int] = set()
+    every_reset: set[int] = set()  # over the run, for `CellSettling.reset_after_best`
     left_out: set[int] = set()
     for (_, run), raw in zip(runs.iterrows(), runs.curves):
         seed = run.seed
@@ -216,6 +226,7 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
         starts.append(s.start)
         ends.append(s.end)
         los.append(s.lo)
+        every_reset |= {r for r in _resets(run, keys) if r <= s.end}
         if keys.train_step and keys.train_value and c.get(keys.train_value):
             ran = _resets(run, keys)
             resets |= {r for r in ran if s.lo <= r <= s.end}
@@ -236,9 +247,10 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
     gap = float(np.mean([np.mean(v) for v in gaps.values()])) if gaps else None
     peak = mean_peak(runs, keys)
     best, best_step, last = peak if peak is not None else (None, None, None)
+    after = [r for r in every_reset if best_step is not None and r > best_step]
     return CellSettling(float(np.mean(list(per_seed.values()))), train_mean, min(starts), max(ends), per_seed,
                         min_effect, gap, best, best_step, last, min(los), tuple(sorted(resets)),
-                        tuple(sorted(left_out)), tuple(sorted(set(counts))))
+                        tuple(sorted(left_out)), tuple(sorted(set(counts))), max(after) if after else None)
 
 
 def _span(values: list[int]) -> str:
@@ -424,7 +436,7 @@ def settling_finding(runs: pd.DataFrame, kind: RunKind, min_effect: Mapping[str,
                      f"views more than it generalises): "
                      + "; ".join(f"{scene} `{cell}` {g:+.2f} dB" for scene, cell, g in gaps) + ".")
     moving = [f"{scene} `{cell}` ({c.test:+.2f})" for (scene, cell), c in cells.items() if not c.flat]
-    peaked = [f"{scene} `{cell}` (best at step {c.best_step:,}, {c.fall:{FALL_FMT}} dB above its last value)"
+    peaked = [f"{scene} `{cell}` ({c.peak()})"
               for (scene, cell), c in cells.items() if c.past_peak]
     overfit = [f"{scene} `{cell}` (test {c.test:+.2f}, train {c.train:+.2f})" for (scene, cell), c in cells.items()
                if c.overfitting]
