@@ -875,7 +875,8 @@ def test_the_view_lowest_in_every_run_is_named_with_what_it_costs_each_cell(tmp_
             for sh in (0, 3)]
     assert lines[2] == (f"  - glossy: test view 0, the lowest in {lowest} of 6 runs, {min(psnr):.1f}–{max(psnr):.1f} dB, "
                         f"{min(gap):.1f}–{max(gap):.1f} dB below its run's median view; without it each cell's mean "
-                        f"test PSNR would rise by {min(rise):.2f}–{max(rise):.2f} dB.")
+                        f"test PSNR would rise by {min(rise):.2f}–{max(rise):.2f} dB, so it moves a mean difference "
+                        f"between two cells by at most {max(rise) - min(rise):.2f} dB (the spread of those rises).")
     assert 0.4 < min(rise) <= max(rise) < 0.6
     # a view whose removal moves no cell's mean by the minimum effect is not named
     from splatbench.experiments.train_report import hardest_view_lines

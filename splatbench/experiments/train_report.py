@@ -957,7 +957,8 @@ def hardest_view_lines(table: pd.DataFrame, min_effect: float = 0.1) -> list[str
         lines.append(f"- {scene}: test view {view}, the lowest in {worst.count(view)} of {len(runs)} runs, "
                      f"{min(psnr):.1f}–{max(psnr):.1f} dB, {min(gap):.1f}–{max(gap):.1f} dB below its run's median "
                      f"view; without it each cell's mean test PSNR would rise by {min(cell_rise):.2f}–"
-                     f"{max(cell_rise):.2f} dB.")
+                     f"{max(cell_rise):.2f} dB, so it moves a mean difference between two cells by at most "
+                     f"{max(cell_rise) - min(cell_rise):.2f} dB (the spread of those rises).")
     if not lines:
         return []
     return [f"- **Hardest test view** per scene where it moves a cell's mean by {min_effect:g} dB or more (a view "
