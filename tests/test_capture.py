@@ -61,6 +61,8 @@ def test_transforms_with_distortion_is_undistorted_by_pycolmap(tmp_path, monkeyp
     assert any("OPENCV lens distortion undistorted by pycolmap" in n for n in ds.notes)
     assert any("ignored keys aabb_scale, sharpness" in n for n in ds.notes)
     cam = ds.train.cameras[0]
+    # the note gives the focal the views train with (after the crop), as the camera carries it
+    assert any(f"focal {cam.fx:.6g} x {cam.fy:.6g} px)" in n for n in ds.notes), ds.notes
     import pycolmap
 
     expected = pycolmap.undistort_camera(pycolmap.UndistortCameraOptions(), _lens())

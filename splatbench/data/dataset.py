@@ -405,7 +405,8 @@ class _Load:
         self.note(f"{len(done)} images with {'/'.join(models)} lens distortion "
                   f"{'would be ' if folder is None else ''}undistorted by pycolmap (COLMAP's "
                   f"undistorter, cropped to valid pixels: {first.width}x{first.height} PINHOLE"
-                  f"{f' after downscale {self.downscale}' if self.downscale > 1 else ''}); "
+                  f"{f' after downscale {self.downscale}' if self.downscale > 1 else ''}, focal "
+                  f"{first.fx:.6g} x {first.fy:.6g} px); "
                   + ("not run: a dry check" if folder is None else f"{'reused' if cached else 'cached in'} {folder}"))
         for (views, i, rel, camera, _), u in zip(self.pending, done):
             if self.headers_only:
