@@ -366,3 +366,23 @@ def test_a_peak_before_a_reset_says_the_reset_lies_between():
     at["reset"] = 2000  # both resets before the best step (2,100): nothing between
     cell = cell_settling(frame, keys, 0.1)
     assert cell.reset_after_best is None and cell.why_not().endswith("0.30 dB above its last value)")
+
+
+def test_the_uint8_shift_the_metrics_line_states_is_what_quantizing_does():
+    """The Metrics line says how much lower a float-image PSNR would read on uint8 (the field's
+    metrics): Sheppard's correction, 1/(12·255²) added to the MSE. Checked by quantizing: uint8
+    targets, predictions off by a smooth residual of RMSE 0.02 (34 dB); the sample's MSE increase
+    matches within its Monte Carlo error: each pixel's increase 2·e·q + q² has sd about 2 · 0.02 · (1/255)/√12
+    = 4.5e-5, so its mean over 4e6 pixels has a standard error of 2.3e-8, 1.8 % of 1.28e-6: the 5 %
+    tolerance is 2.8 of them (a fixed seed; a formula off by a factor, e.g. 1/(4·255²), fails)."""
+    from splatbench.experiments.train_report import UINT8_MSE, _uint8_shift
+
+    rng = np.random.default_rng(0)
+    target = rng.integers(20, 236, 4_000_000) / 255.0
+    pred = target + rng.normal(0.0, 0.02, target.size)
+    added = np.mean((np.round(pred * 255) / 255 - target) ** 2) - np.mean((pred - target) ** 2)
+    assert added == pytest.approx(UINT8_MSE, rel=0.05)
+    text = _uint8_shift(pd.DataFrame({"metric.test_psnr": [30.0, 34.0]}))
+    drop = 10 * math.log10(1 + UINT8_MSE * 10 ** 3.4)
+    assert f"at 34.0 dB, this grid's highest run mean, about {drop:.3f} dB lower" in text and 0.01 < drop < 0.02
+    assert _uint8_shift(pd.DataFrame({"seed": [0]})) == ""
