@@ -715,3 +715,17 @@ def test_the_engine_refuses_a_key_the_kinds_config_lacks_before_the_kind_sees_it
         expand(spec)
     assert [r.config for r in expand(dataclasses.replace(spec, base={"rate": 0.2}))] == [
         {"rate": 0.2, "scene": "s", "seed": 0}]
+
+
+def test_a_missing_scene_folder_is_named_as_written_and_where_it_led(tmp_path):
+    """A relative path is resolved against the experiment file (often through a link such as
+    ../shared): the error gives the path as the user wrote it, then the folder it led to."""
+    (tmp_path / "exp").mkdir()
+    toml = tmp_path / "exp" / "e.toml"
+    toml.write_text('name = "e"\nkind = "train"\nscenes = [{ name = "cap", path = "../data/missing" }]\n'
+                    'seeds = [0]\n[base]\niterations = 10\n')
+    with pytest.raises(InputError) as err:
+        load_experiment(toml)
+    message = str(err.value)
+    assert f"scenes.cap.path: '../data/missing' ({(tmp_path / 'data' / 'missing').resolve()}) does not exist" \
+        in message, message

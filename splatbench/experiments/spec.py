@@ -553,14 +553,15 @@ def _scene_table(table: Mapping[str, Any], where: str, fail, base_dir: Path | No
             if base_dir is not None and not p.is_absolute():
                 p = base_dir / p
             p = p.resolve()
+            shown = repr(value) + (f" ({p})" if str(p) != value else "")  # as written, then where it led
             if key == "path" and not p.is_dir():
                 what = "is a file, not a dataset folder" if p.exists() else "does not exist"
-                raise fail(f"{where}.path", f"{str(p)!r} {what} (paths are relative to the experiment file; give "
+                raise fail(f"{where}.path", f"{shown} {what} (paths are relative to the experiment file; give "
                                             f"a capture's folder: COLMAP, transforms.json or LLFF)")
             if key == "model" and not p.is_file():
-                raise fail(f"{where}.model", f"{str(p)!r} is not a file (give a 3DGS PLY)")
+                raise fail(f"{where}.model", f"{shown} is not a file (give a 3DGS PLY)")
             if key == "model" and not _looks_like_ply(p):
-                raise fail(f"{where}.model", f"{str(p)!r} is not a PLY with a vertex element (give a 3DGS PLY)")
+                raise fail(f"{where}.model", f"{shown} is not a PLY with a vertex element (give a 3DGS PLY)")
             fields[key] = str(p)
         elif key == "up":
             if not (isinstance(value, list) and len(value) == 3
