@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Run the pending 7K grids (issue 39) resumably across sessions and machines.
 #
-#   tools/run_grids.sh                 run every pending grid, smallest first (hours: in the background,
+#   tools/run_grids.sh                 run every pending grid, in GRIDS' order (hours: in the background,
 #                                      e.g. `nohup setsid tools/run_grids.sh > ~/.cache/splatbench/grids.log 2>&1 &`)
 #   tools/run_grids.sh sh_degree       only these grids
 #   tools/run_grids.sh --save          copy each grid's finished run records into reports/NAME/runs/
@@ -17,7 +17,8 @@
 set -u
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 CACHE=${SPLATBENCH_CACHE:-$HOME/.cache/splatbench}
-GRIDS=(sh_degree loss_weighting densification_schedules densification sh_degree_quick)
+# sh_degree's report first, whole (its quick version gives its quick-versus-7K rank agreement), then the rest
+GRIDS=(sh_degree sh_degree_quick loss_weighting densification_schedules densification)
 SAVE=0
 NAMES=()
 for arg in "$@"; do
