@@ -521,7 +521,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         if larger is not None:
             size_text = fmt_interval(larger, "ratio", size_spec, None)
             sized = {r.label: mean_of(scene, r, "bytes") for r in table.rows} if by_bytes else None
-            front = _on_front(table, scene, size_spec, primary, (row, runner), sized)
+            front = _on_front(table, scene, size_spec, primary, (row, runner), sized,
+                              [r.label for r in table.rows if not r.extra])
             at = size_ratio_text(size_text, scene, runner, row)
             text = (f"{scene}: no single best at comparable size (`{row.label}`, {mean_text}, leads "
                     f"`{runner.label}` by {lead_text} at {at}, more than the "
@@ -930,12 +931,15 @@ def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame
 
 
 def _on_front(table: AxisTable, scene: str, size: MetricSpec, quality: MetricSpec, rows: Sequence[Row],
-              sizes: Mapping[str, float | None] | None = None) -> bool:
+              sizes: Mapping[str, float | None] | None = None, among: Sequence[str] | None = None) -> bool:
     """Whether every one of ``rows`` is on the Pareto front of ``table``'s rows at ``scene`` on the
     means (no other row both smaller in ``size`` and better in ``quality``; `splatbench.plotting`)
     while some row is not: where every row is on the front, saying so tells nothing. ``sizes``:
-    label -> the row's mean size to use instead of ``size``'s column (its bytes; None: unknown)."""
-    at = table.frame[(table.frame.scene == scene) & ~table.frame.label.isin([r.label for r in table.rows if r.extra])]
+    label -> the row's mean size to use instead of ``size``'s column (its bytes; None: unknown);
+    ``among``: the labels of the rows to weigh (None: all; the findings leave extra cells out)."""
+    at = table.frame[table.frame.scene == scene]
+    if among is not None:
+        at = at[at.label.isin(among)]
     sign = -1.0 if quality.better == "lower" else 1.0
     cost = list(at[f"{size.name}.mean"]) if sizes is None else \
         [math.nan if sizes.get(label) is None else sizes[label] for label in at.label]
