@@ -5,7 +5,9 @@ variants; the last one varies fastest), then seeds. ``grid = "product"`` takes e
 combination; ``grid = "one-at-a-time"`` takes the base alone, then each axis value
 (or variant) alone on top of the base. Cells whose resolved configs are equal
 (for example an axis value equal to the base) are one run, listed once, first
-occurrence first.
+occurrence first. Each scene's grid cells are followed by its ``[extra.DIMENSION]`` cells
+(file order): the base plus the cell's fields, crossed with nothing, labelled on their
+dimension by their own label; one that is the same runs as another cell is an error.
 
 Run id: the first 16 hex digits of the SHA-256 of the canonical JSON (sorted keys,
 no spaces, ASCII) of ``{"kind": KIND, "config": CONFIG}``, where CONFIG is the full
@@ -112,23 +114,34 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
     dims = _choices(spec)
     make = _run_maker(spec, kind)
     runs: list[RunSpec] = []
-    seen: set[str] = set()
+    seen: dict[str, str] = {}  # run id -> where its cell is written (an extra cell's: extra.DIM.LABEL)
+    extras = [[(dim, label, dict(s), f"extra.{dim}.{label}")] for dim, labels in spec.extra.items()
+              for label, s in labels.items()]
     for scene in spec.scenes:
         for cell in _cells(spec, dims):
             for seed in spec.seeds:
                 run = make(cell, scene, seed)
                 if run.run_id in seen:
                     continue
-                seen.add(run.run_id)
+                seen[run.run_id] = "a cell of the grid"
+                runs.append(run)
+        for cell in extras:
+            for seed in spec.seeds:
+                run = make(cell, scene, seed, extra=True)
+                if run.run_id in seen:
+                    raise InputError(f"{spec.source}: {cell[0][3]}: the same runs as {seen[run.run_id]} (the same "
+                                     f"config); give it fields that make it a cell of its own")
+                seen[run.run_id] = cell[0][3]
                 runs.append(run)
     return runs
 
 
 def _run_maker(spec: ExperimentSpec, kind, protocol: str | None = None
-               ) -> Callable[[list[tuple[str, Any, dict[str, Any], str]], str, int], RunSpec]:
-    """``make(cell, scene, seed) -> RunSpec``: one run of a cell (as `_cells` lists them), its
-    config checked by the kind (one `InputError` line naming where in the file a bad value comes
-    from), resolved and named by its run id; under ``protocol`` (an experiment's ``[check]``),
+               ) -> Callable[..., RunSpec]:
+    """``make(cell, scene, seed, extra=False) -> RunSpec``: one run of a cell (as `_cells` lists
+    them; ``extra``: an ``[extra.DIMENSION]`` cell, labelled by its own label on a plain axis too),
+    its config checked by the kind (one `InputError` line naming where in the file a bad value
+    comes from), resolved and named by its run id; under ``protocol`` (an experiment's ``[check]``),
     the kind's `KindProtocols.apply` rewrites the cell's config first."""
     variant_names = set(spec.variants)
     checked: dict[str, str | None] = {}
@@ -145,7 +158,7 @@ def _run_maker(spec: ExperimentSpec, kind, protocol: str | None = None
                 checked[key] = str(exc)
         return checked[key]
 
-    def make(cell, scene: str, seed: int) -> RunSpec:
+    def make(cell, scene: str, seed: int, extra: bool = False) -> RunSpec:
         flat = dict(spec.base)
         for _, _, settings, where in cell:
             for path in settings:  # a base value an axis would set keys inside: never dropped silently
@@ -174,8 +187,8 @@ def _run_maker(spec: ExperimentSpec, kind, protocol: str | None = None
         rid = make_run_id(spec.kind, kind.identity(config) if kind.identity is not None else config)
         resolved = flatten(config) if config else {}
         chosen = {name: label for name, label, _, _ in cell}
-        labels = {name: (chosen.get(name) if name in variant_names else _label(resolved, name))
-                  for name in spec.dimensions}
+        labels = {name: (chosen.get(name) if name in variant_names or (extra and name in chosen)
+                         else _label(resolved, name)) for name in spec.dimensions}
         return RunSpec(experiment=spec.name, kind=spec.kind, scene=scene, seed=seed, config=config, run_id=rid,
                        labels=labels)
 

@@ -21,6 +21,10 @@ sweep it (docs/experiments.md has the full format)::
     none = { strategy = "none" }
     mcmc = { strategy = "mcmc", strategy.cap_max = 50000 }   # dotted: a nested field
 
+    [extra.ssim_lambda]               # cells outside the grid, each a labelled row of one of its
+    "0.2 at 6k" = { ssim_lambda = 0.2, strategy.name = "budget", strategy.budget = 6000 }
+                                      # dimensions: the base plus these fields, crossed with nothing
+
     [runner]                          # defaults of `splatbench run` (the command line wins)
     workers = 2
 
@@ -74,8 +78,8 @@ from splatbench.experiments.configs import FIELD_KEY, canonical_json, check_valu
 from splatbench.experiments.kinds import RunKind, get_kind
 
 #: Fields an experiment file may hold at its top level.
-TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "base", "axes", "variants", "runner",
-                    "report", "check")
+TOP_LEVEL_FIELDS = ("name", "description", "kind", "grid", "scenes", "seeds", "base", "axes", "variants", "extra",
+                    "runner", "report", "check")
 #: Fields of its ``[check]`` table.
 CHECK_FIELDS = ("protocol", "scene", "cells")
 #: Fields of its ``[runner]`` table.
@@ -183,6 +187,9 @@ class ExperimentSpec:
     #   (relative to the file; docs/reports.md, "Rank agreement")
     published: tuple[PublishedSpec, ...] = ()  # ``[report] published``: published numbers to stand beside
     #   (docs/reports.md, "Beside published numbers")
+    extra: Mapping[str, Mapping[str, Mapping[str, Any]]] = field(default_factory=dict)  # ``[extra.DIMENSION]``:
+    #   dimension -> label -> fields: cells outside the grid (the base plus those fields, crossed with nothing),
+    #   each its own row of that dimension's table, compared only where ``[report] matched`` names it
 
     @property
     def run_kind(self) -> RunKind:
@@ -314,14 +321,55 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
             if path.split(".")[0] in RESERVED_KEYS:
                 raise fail(where, f"{path!r} is set by the top-level 'scenes' / 'seeds', not here")
 
+    extra = _parse_extra(data.get("extra", {}), fail, source, axes, variants)
+    for scene_name, fields in scene_sources.items():  # a scene's data.* would drop an extra cell's too
+        for key in fields:
+            hit = next((f"extra.{d}.{lab}" for d, labs in extra.items() for lab, flat in labs.items()
+                        if any(overlaps(f"data.{key}", p) for p in flat)), None)
+            if hit is not None:
+                raise fail(f"scenes.{scene_name}.{key}", f"sets data.{key}, which {hit} sets (the scene's value "
+                                                         f"would drop the cell's in its runs); leave it out of one of "
+                                                         f"them")
     runner = _parse_runner(data.get("runner", {}), fail, source, base_dir)
-    min_effect, matched, quick = _parse_report(data.get("report", {}), fail, axes, variants)
+    min_effect, matched, quick = _parse_report(data.get("report", {}), fail, axes, variants, extra)
     published = _parse_published(data.get("report", {}).get("published", []), fail, scenes, axes, variants, grid)
     check = _parse_check(data["check"], fail, scenes, axes, variants, grid) if "check" in data else None
     return ExperimentSpec(name=name, kind=kind, scenes=tuple(scenes), seeds=tuple(seeds), base=base, axes=axes,
                           variants=variants, grid=grid, description=description, runner=runner, source=source,
                           scene_sources=scene_sources, scene_tables=scene_tables, min_effect=min_effect,
-                          check=check, matched=matched, quick=quick, published=published)
+                          check=check, matched=matched, quick=quick, published=published, extra=extra)
+
+
+def _parse_extra(table: Any, fail, source: str, axes: Mapping[str, tuple[Any, ...]],
+                 variants: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
+    """``[extra.DIMENSION]`` tables: ``LABEL = { FIELD = value, ... }``, each one cell outside the
+    grid (`ExperimentSpec.extra`): DIMENSION one of the grid's axes or variants (dotted or nested,
+    as a ``[check]`` cell names it), LABEL none of its values, the fields flat (dotted keys) and
+    never ``scene`` / ``seed``. One `InputError` line otherwise."""
+    if not isinstance(table, Mapping):
+        raise fail("extra", f"expected [extra.DIMENSION] tables of label = {{ field = value, ... }}, got {table!r}")
+    dims = [*axes, *variants]
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    for dim, labels in _cell_values(table, dims, "extra", fail).items():
+        where = f"extra.{dim}"
+        if not isinstance(labels, Mapping) or not labels:
+            raise fail(where, f"expected a table of label = {{ field = value, ... }} (one extra cell each), got "
+                              f"{labels!r}")
+        known = list(axes[dim]) if dim in axes else list(variants[dim])
+        out[dim] = {}
+        for label, settings in labels.items():
+            if any(str(label) == str(v) or same_value(label, v) for v in known):
+                raise fail(f"{where}.{label}", f"a value of the grid's {dim!r} already (its values: "
+                                               f"{', '.join(map(str, known))}); give the extra cell its own label")
+            if not isinstance(settings, Mapping):
+                raise fail(f"{where}.{label}", f"expected a table of config fields, got {settings!r}")
+            flat = flatten(settings, where=f"{source}: {where}.{label}") if settings else {}
+            for path, value in flat.items():
+                check_value(value, f"{source}: {where}.{label}.{path}")
+                if path.split(".")[0] in RESERVED_KEYS:
+                    raise fail(f"{where}.{label}", f"{path!r} is set by the top-level 'scenes' / 'seeds', not here")
+            out[dim][str(label)] = flat
+    return out
 
 
 def _parse_check(table: Any, fail, scenes: list[str], axes: Mapping[str, tuple[Any, ...]],
@@ -410,12 +458,14 @@ REPORT_FIELDS = ("min_effect", "matched", "quick", "published")
 PUBLISHED_FIELDS = ("cells", "cell", "scene", "value", "metric", "source", "protocol")
 
 
-def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variants: Mapping[str, Mapping[str, Any]]
+def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variants: Mapping[str, Mapping[str, Any]],
+                  extra: Mapping[str, Mapping[str, Any]] | None = None
                   ) -> tuple[dict[str, float], dict[str, tuple[Any, ...]], str | None]:
     """The ``[report]`` table: ``min_effect = { metric = number >= 0, ... }`` (the metric names are
     checked against the kind's comparisons when the report is built), ``matched = { dimension =
-    value or [values] }`` (each a value of one of the grid's axes or variants: one matched
-    dimension) and ``quick = "path"``: (min_effect, matched, quick)."""
+    value or [values] }`` (each a value of one of the grid's axes or variants, or the label of one
+    of its ``[extra.DIMENSION]`` cells: one matched dimension) and ``quick = "path"``: (min_effect,
+    matched, quick)."""
     if not isinstance(table, Mapping):
         raise fail("report", f"expected a table, got {table!r}")
     for key in table:
@@ -437,7 +487,7 @@ def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variant
     matched: dict[str, tuple[Any, ...]] = {}
     for dim, value in _cell_values(raw, dims, "report.matched", fail).items():
         values = tuple(value) if isinstance(value, list) else (value,)
-        known = tuple(axes[dim]) if dim in axes else tuple(variants[dim])
+        known = (*(axes[dim] if dim in axes else variants[dim]), *(extra or {}).get(dim, {}))
         for v in values:
             if not any(same_value(v, k) for k in known):
                 raise fail(f"report.matched.{dim}", f"{v!r} is not a value of the grid's {dim!r} (its values: "

@@ -740,7 +740,8 @@ def ssim_trained_note(table: AxisRows, runs: pd.DataFrame, scenes: list[str]) ->
         values = sorted({float(v) for v in sel.dropna()})
         if values and max(values) > 0:
             rows.append((row.label, values))
-    if len(rows) == len(table.rows) and len({tuple(v) for _, v in rows}) == 1:
+    ran = [r for r in table.rows if done.run_id.isin(r.run_ids).any()]  # not a row without runs (an extra cell's)
+    if len(rows) == len(ran) and len({tuple(v) for _, v in rows}) == 1:
         where = f"in every row (loss.ssim_lambda = {' / '.join(f'{v:g}' for v in rows[0][1])})"
     else:
         where = "in " + ", ".join(f"`{label}` (loss.ssim_lambda = {' / '.join(f'{v:g}' for v in vs)})" for label, vs in rows)

@@ -422,6 +422,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         if dim == table.axis and (len(matched_values) < 2 or all(any(same_value(r.value, v) for v in matched_values)
                                                                  for r in (a, b))):
             return ""  # the matched axis's own rows (natural against matched), or two matched cells
+        pair = _matched_pair(experiment, table, a, b, matched_values) if dim == table.axis else None
         for scene in scenes:
             natural_ids = None if not stratum else set(usable.run_id) - stratum
             if dim == table.axis:
@@ -436,6 +437,18 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             if not matched:
                 pieces.append(head + "; the grid declares no matched-size cell, `[report] matched`: quality and size "
                                      "are not separated)")
+            elif pair is not None:  # the extra cells that repeat this comparison at one size (claimed below)
+                iv, null = paired(values(scene, pair[0], primary.name), values(scene, pair[1], primary.name),
+                                  primary_comp)
+                named = f"`{pair[1].label}` against `{pair[0].label}`"
+                if not iv.n:
+                    pieces.append(head + f"; its matched-size cells, {named}, have no done runs yet)")
+                    continue
+                size = paired_ratio(size_values(scene, pair[0]), size_values(scene, pair[1]))
+                at = size_ratio_text(f"×{size.estimate:.3f}", scene, *pair) if size.n else "sizes not recorded"
+                pieces.append(head + f" at its natural size); at a matched size ({named}): {_name(primary)} "
+                                     f"{fmt_interval(iv, primary_comp.how, primary, null, primary_comp.min_effect)}, "
+                                     f"at {at}")
             elif dim == table.axis:
                 pieces.append(head + f"; no matched-size cell of this comparison: the matched cells are "
                                      f"{', '.join(f'`{display(v)}`' for v in matched_values)}, compared below)")
@@ -476,7 +489,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     unit_text = fmt_min_effect(primary_comp.min_effect, primary_comp.how, primary) \
         if primary_comp.min_effect is not None else None
     for scene in scenes:
-        means = [(t_interval(list(values(scene, row, primary.name).values())), row) for row in table.rows]
+        means = [(t_interval(list(values(scene, row, primary.name).values())), row) for row in table.rows
+                 if not row.extra]  # an extra cell is compared only at a matched size
         means = sorted(((iv, row) for iv, row in means if iv.n > 0), key=lambda m: -sign * m[0].estimate)
         if not means:
             continue
@@ -507,7 +521,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         if larger is not None:
             size_text = fmt_interval(larger, "ratio", size_spec, None)
             sized = {r.label: mean_of(scene, r, "bytes") for r in table.rows} if by_bytes else None
-            front = _on_front(table, scene, size_spec, primary, (row, runner), sized)
+            front = _on_front(table, scene, size_spec, primary, (row, runner), sized,
+                              [r.label for r in table.rows if not r.extra])
             at = size_ratio_text(size_text, scene, runner, row)
             text = (f"{scene}: no single best at comparable size (`{row.label}`, {mean_text}, leads "
                     f"`{runner.label}` by {lead_text} at {at}, more than the "
@@ -565,7 +580,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     best_summary = f"- **{word.capitalize()} {_name(primary)}**: " + "; ".join(best_short) + "."
 
     ref = reference_row(table)
-    others = [r for r in table.rows if r.label != ref.label]
+    others = [r for r in table.rows if r.label != ref.label and not r.extra]
     in_full = f"\"Appendix: {table.axis} in full\""
     family: list[Claim] = []  # the primary comparisons Holm's correction covers
     if others and rules.comparisons:
@@ -698,10 +713,12 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 texts.append(f"{scene} {text}{at}")
             if texts:
                 parts.append(f"`{row.label}` against `{rows[0].label}`: " + "; ".join(texts))
+        head = (f"- **At a matched size** (`[report] matched`: {', '.join(f'`{r.label}`' for r in rows)} end at one "
+                f"{'byte' if by_bytes else _name(size_spec)} count; {setting_text(experiment, dim, [r.value for r in rows])}): ")
         if parts:
-            lines.append(f"- **At a matched size** (`[report] matched`: {', '.join(f'`{r.label}`' for r in rows)} end at "
-                         f"one {_name(size_spec)} count; {setting_text(experiment, dim, [r.value for r in rows])}): "
-                         + ". ".join(parts) + ".")
+            lines.append(head + ". ".join(parts) + ".")
+        elif rows:
+            lines.append(head + "no done runs of these cells yet, so nothing is compared at a matched size.")
     self_parts = []
     for comp in rules.comparisons:
         if comp.how != "mean" or comp.null is None:
@@ -843,6 +860,24 @@ def _stratum(runs: pd.DataFrame, dim: str | None, values: Sequence) -> set[str]:
     return set(runs.run_id[keep])
 
 
+def _matched_pair(spec: ExperimentSpec | None, table: AxisTable, a: Row, b: Row, values: Sequence
+                  ) -> tuple[Row, Row] | None:
+    """The two ``[extra.AXIS]`` cells among the matched ``values`` of a plain axis that set the axis to
+    ``a``'s and ``b``'s values (``sh.degree = 0`` and ``3`` at one byte count, against the grid's
+    `0` and `3`): the comparison ``b`` against ``a`` at a matched size; None where there are none."""
+    if spec is None or table.axis not in spec.axes:
+        return None
+    cells = spec.extra.get(table.axis, {})
+    rows = [r for r in table.rows if r.extra and any(same_value(r.value, v) for v in values)]
+
+    def twin(row: Row) -> Row | None:
+        return next((r for r in rows if table.axis in cells.get(r.value, {})
+                     and same_value(cells[r.value][table.axis], row.value)), None)
+
+    ta, tb = twin(a), twin(b)
+    return (ta, tb) if ta is not None and tb is not None and ta is not tb else None
+
+
 def setting_text(spec: ExperimentSpec | None, dim: str | None, values: Sequence | None = None) -> str:
     """What the matched setting sets: ``size = matched: strategy.name = budget, strategy.budget = 6000``
     (a variant's fields), ``loss.ssim_lambda = 0.2`` (a plain axis)."""
@@ -896,12 +931,15 @@ def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame
 
 
 def _on_front(table: AxisTable, scene: str, size: MetricSpec, quality: MetricSpec, rows: Sequence[Row],
-              sizes: Mapping[str, float | None] | None = None) -> bool:
+              sizes: Mapping[str, float | None] | None = None, among: Sequence[str] | None = None) -> bool:
     """Whether every one of ``rows`` is on the Pareto front of ``table``'s rows at ``scene`` on the
     means (no other row both smaller in ``size`` and better in ``quality``; `splatbench.plotting`)
     while some row is not: where every row is on the front, saying so tells nothing. ``sizes``:
-    label -> the row's mean size to use instead of ``size``'s column (its bytes; None: unknown)."""
+    label -> the row's mean size to use instead of ``size``'s column (its bytes; None: unknown);
+    ``among``: the labels of the rows to weigh (None: all; the findings leave extra cells out)."""
     at = table.frame[table.frame.scene == scene]
+    if among is not None:
+        at = at[at.label.isin(among)]
     sign = -1.0 if quality.better == "lower" else 1.0
     cost = list(at[f"{size.name}.mean"]) if sizes is None else \
         [math.nan if sizes.get(label) is None else sizes[label] for label in at.label]

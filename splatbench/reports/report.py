@@ -270,6 +270,10 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     spec, kind, table = report.spec, report.kind, report.table
     missing = report.total - len(table)
     dims = ", ".join(f"`{d}`" for d in spec.dimensions) or "no axes"
+    extra = [f"`{d} = {lab}`" for d, labs in spec.extra.items() for lab in labs]  # cells outside the grid
+    if extra:
+        dims += (f", and {len(extra)} extra cell{'s' if len(extra) > 1 else ''} outside it ({', '.join(extra)}: the "
+                 f"base and the fields each `[extra]` cell sets, crossed with nothing)")
     lines = [f"# {spec.name}", ""]
     for note in kind.report.title_notes if kind.report is not None else ():  # the first line, e.g. a smoke test
         more = note(table)

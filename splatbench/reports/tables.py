@@ -9,7 +9,8 @@ An experiment's runs are grouped per **axis** (a plain axis or a variant axis):
 
 Membership comes from the experiment file itself (`axis_rows` expands a one-value
 copy of the grid per row and keeps the run ids), so a report always describes the
-grid as written, never a stale one. Statistics are over the *done* runs of a row,
+grid as written, never a stale one. An ``[extra.DIMENSION]`` cell (outside the grid) is
+a row of its dimension's table alone, after the grid's rows (`Row.extra`). Statistics are over the *done* runs of a row,
 **seed by seed**: a row's runs of one seed are averaged first (in a product grid they
 are that seed's runs of every other axis value), then the mean over seeds is given
 with the half-width of its 95 % Student's t interval (`splatbench.metrics.stats`; the
@@ -58,6 +59,8 @@ class Row:
     value: Any                 # the axis value or variant label (None for a one-at-a-time base)
     run_ids: frozenset[str]
     is_base: bool = False      # the one-at-a-time base cell
+    extra: bool = False        # an ``[extra.DIMENSION]`` cell: outside the grid (compared only where
+    #                            ``[report] matched`` names it; docs/reports.md, "Model size")
 
 
 def display(value: Any) -> str:
@@ -73,11 +76,23 @@ def display(value: Any) -> str:
 
 
 def _ids(spec: ExperimentSpec, **changes) -> frozenset[str]:
-    return frozenset(r.run_id for r in expand(dataclasses.replace(spec, **changes)))
+    """The run ids of a copy of ``spec`` with ``changes`` (without its extra cells, unless they are given)."""
+    return frozenset(r.run_id for r in expand(dataclasses.replace(spec, **{"extra": {}, **changes})))
 
 
 def axis_rows(spec: ExperimentSpec, axis: str) -> list[Row]:
-    """The rows of ``axis`` in file order (module doc), with the run ids of each."""
+    """The rows of ``axis`` in file order (module doc), with the run ids of each: the grid's, then
+    its extra cells' (`Row.extra`)."""
+    extra = spec.extra.get(axis, {})
+    if extra:
+        grid_ids = _ids(spec)
+        return [*_grid_rows(spec, axis), *(Row(display(lab), lab, _ids(spec, extra={axis: {lab: s}}) - grid_ids,
+                                               extra=True) for lab, s in extra.items())]
+    return _grid_rows(spec, axis)
+
+
+def _grid_rows(spec: ExperimentSpec, axis: str) -> list[Row]:
+    """The rows of ``axis`` of the grid itself (module doc)."""
     if axis in spec.axes:
         choices = [(v, {"axes": {**spec.axes, axis: (v,)}}) for v in spec.axes[axis]]
         only = [(v, {"grid": "product", "axes": {axis: (v,)}, "variants": {}}) for v in spec.axes[axis]]
@@ -114,7 +129,7 @@ def _base_value(spec: ExperimentSpec, axis: str) -> Any:
 
 def _base_labels(spec: ExperimentSpec) -> dict[str, Any]:
     """The base cell's label on every axis: a plain axis's resolved value, None for variants."""
-    runs = expand(dataclasses.replace(spec, axes={}, variants={}))
+    runs = expand(dataclasses.replace(spec, axes={}, variants={}, extra={}))
     if not runs:
         return {}
     resolved = flatten(runs[0].config)

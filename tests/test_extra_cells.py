@@ -1,0 +1,181 @@
+"""``[extra.DIMENSION]``: cells outside the grid (docs/experiments.md, "Extra cells"), as
+experiments/sh_degree.toml's bytes-matched SH 0 / SH 3 pair: the grid's run ids stay what they
+were, the extra cells are crossed with nothing, they are rows of their dimension's table only, and
+the report compares them only where ``[report] matched`` names them (docs/reports.md, "Model
+size"): the primary comparisons against the reference, their Holm family and the best are the
+grid's alone.
+
+Results folders are written by hand (made-up metrics and curves), as tests/test_report_rules.py
+does: no training runs.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from splatbench.errors import InputError
+from splatbench.experiments import RunRecord, expand, parse_experiment
+from splatbench.experiments.store import write_record, write_table
+from splatbench.experiments.train_report import floats_per_gaussian
+from splatbench.reports import build_report, write_report
+from splatbench.reports.tables import axis_rows
+from tests.test_report_rules import flat_curves, metrics_of
+
+#: 590 Gaussians at SH 0 and 140 at SH 3 hold the same floats: 590 x 14 = 140 x 59 = 8,260.
+BUDGET = {0: 590, 3: 140}
+BUDGETED = {"strategy.name": "budget", "strategy.budget_mode": "final_count"}
+EXTRA = {"sh.degree": {f"{d} at {n}": {"sh.degree": d, "strategy.budget": n, **BUDGETED} for d, n in BUDGET.items()}}
+MATCHED = {"matched": {"sh.degree": ["0 at 590", "3 at 140"]}}
+
+
+def spec_of(axes=None, scenes=("glossy",), **more):
+    return parse_experiment({"name": "extra", "kind": "train", "scenes": list(scenes), "seeds": [0, 1, 2],
+                             "base": {"iterations": 2000, "data": {"resolution": 32, "views": 8, "spp": 2}},
+                             "axes": axes if axes is not None else {"sh.degree": [0, 1, 3]}, **more},
+                            source="x.toml")
+
+
+def test_the_bytes_of_the_pair_are_equal():
+    assert BUDGET[0] * floats_per_gaussian(0) == BUDGET[3] * floats_per_gaussian(3)
+
+
+# --------------------------------------------------------------------------- the grid
+def test_extra_cells_add_runs_and_leave_the_grids_run_ids_as_they_were():
+    axes = {"sh.degree": [0, 1, 3], "loss.ssim_lambda": [0.0, 0.2]}
+    plain = expand(spec_of(axes, ("glossy", "diffuse")))
+    runs = expand(spec_of(axes, ("glossy", "diffuse"), extra=EXTRA))
+    grid = [r for r in runs if r.labels["sh.degree"] in (0, 1, 3)]
+    assert [r.run_id for r in grid] == [r.run_id for r in plain]  # the same ids, in the same order
+    # crossed with nothing: 2 cells x 2 scenes x 3 seeds, after each scene's grid cells
+    extra = [r for r in runs if r not in grid]
+    assert len(runs) == len(plain) + 2 * 2 * 3 and len(extra) == 12
+    assert [r.labels["sh.degree"] for r in runs[:24]] == [0] * 6 + [1] * 6 + [3] * 6 + ["0 at 590"] * 3 + \
+        ["3 at 140"] * 3
+    for r in extra:
+        d = int(r.labels["sh.degree"][0])
+        assert (r.config["sh"]["degree"], r.config["strategy"]["budget"]) == (d, BUDGET[d])
+        assert r.config["loss"]["ssim_lambda"] == 0.2  # the base's (the kind's default), not an axis value's
+        assert r.labels["loss.ssim_lambda"] == 0.2
+    # a check names the grid's cells only, and its runs are the same with or without extra cells
+    check = {"protocol": "graphdeco-7k", "scene": "glossy", "cells": [{"sh.degree": 0}, {"sh.degree": 3}]}
+    from splatbench.experiments import check_runs
+    assert [r.run_id for r in check_runs(spec_of(check=check))] == \
+        [r.run_id for r in check_runs(spec_of(check=check, extra=EXTRA))]
+    with pytest.raises(InputError, match=r"check\.cells\[1\]\.sh\.degree: '3 at 140' is not a value"):
+        spec_of(check={**check, "cells": [{"sh.degree": 0}, {"sh.degree": "3 at 140"}]}, extra=EXTRA)
+
+
+def test_an_extra_cell_is_a_row_of_its_dimension_alone():
+    spec = spec_of({"sh.degree": [0, 3], "loss.ssim_lambda": [0.0, 0.2]}, extra=EXTRA)
+    plain = spec_of({"sh.degree": [0, 3], "loss.ssim_lambda": [0.0, 0.2]})
+    runs = expand(spec)
+    rows = axis_rows(spec, "sh.degree")
+    assert [(r.label, r.extra) for r in rows] == [("0", False), ("3", False), ("0 at 590", True), ("3 at 140", True)]
+    assert rows[:2] == axis_rows(plain, "sh.degree")  # the grid's rows pool what they pooled before
+    assert rows[2].run_ids == {r.run_id for r in runs if r.labels["sh.degree"] == "0 at 590"} and len(rows[2].run_ids) == 3
+    assert axis_rows(spec, "loss.ssim_lambda") == axis_rows(plain, "loss.ssim_lambda")  # not a row of another axis
+
+
+@pytest.mark.parametrize("extra, message", [
+    ({"lr": {"a": {"sh.degree": 0}}}, r"extra\.lr: not an axis of the grid"),
+    ({"sh.degree": {"3": {"sh.degree": 3, **BUDGETED}}}, r"extra\.sh\.degree\.3: a value of the grid's 'sh\.degree'"),
+    ({"sh.degree": {"a": 3}}, r"extra\.sh\.degree\.a: expected a table of config fields"),
+    ({"sh.degree": {}}, r"extra\.sh\.degree: expected a table of label"),
+    ({"sh.degree": {"a": {"seed": 1}}}, r"extra\.sh\.degree\.a: 'seed' is set by the top-level"),
+    ({"sh.degree": {"a": {"sh.degree": 1}}}, r"extra\.sh\.degree\.a: the same runs as a cell of the grid"),
+    ({"sh.degree": {"a": {"sh.degree": 9}}}, r"extra\.sh\.degree\.a: .*sh"),
+])
+def test_a_bad_extra_cell_is_one_line(extra, message):
+    with pytest.raises(InputError, match=message) as caught:
+        expand(spec_of(extra=extra))
+    assert "\n" not in str(caught.value)
+
+
+def test_matched_may_name_extra_cells_and_nothing_else():
+    assert spec_of(extra=EXTRA, report=MATCHED).matched == {"sh.degree": ("0 at 590", "3 at 140")}
+    with pytest.raises(InputError, match=r"report\.matched\.sh\.degree: '0 at 591' is not a value"):
+        spec_of(extra=EXTRA, report={"matched": {"sh.degree": ["0 at 591", "3 at 140"]}})
+
+
+# --------------------------------------------------------------------------- the report
+def _make(run):
+    """Natural cells: 1000 Gaussians (+ 10 per seed); SH 3 +1.0 dB (+0.02 per seed) and SH 1 +0.5 dB
+    over SH 0. The extra cells at their budgets: SH 3 +0.3 dB (+0.02 per seed) over SH 0."""
+    label = run.labels["sh.degree"]
+    degree = run.config["sh"]["degree"]
+    if isinstance(label, str):
+        psnr = 29.0 + 0.01 * run.seed + ((0.3 + 0.02 * run.seed) if degree == 3 else 0.0)
+        count = BUDGET[degree]
+    else:
+        psnr = 30.0 + 0.01 * run.seed + {0: 0.0, 1: 0.5 + 0.01 * run.seed, 3: 1.0 + 0.02 * run.seed}[degree]
+        count = 1000 + 10 * run.seed
+    return metrics_of(psnr, num_gaussians=count, sh_degree=degree), flat_curves(psnr)
+
+
+def _report(tmp_path, spec, keep=lambda run: True):
+    """The report of ``spec`` from made-up results of the runs ``keep`` selects (the rest not run)."""
+    records = []
+    for run in expand(spec):
+        if not keep(run):
+            continue
+        metrics, curves = _make(run)
+        rec = RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
+                        status="done", config=dict(run.config), labels=dict(run.labels), metrics=metrics,
+                        curves=curves, error=None, seconds=1.0, started="2026-01-01T00:00:00+00:00",
+                        finished="2026-01-01T00:00:01+00:00", worker="h:1")
+        write_record(tmp_path / "res", rec)
+        records.append(rec)
+    write_table(tmp_path / "res" / spec.name, records)
+    report = build_report(spec, tmp_path / "res")
+    return report, write_report(report, tmp_path / "out").read_text()
+
+
+def _primary(report) -> list[tuple]:
+    """The claims of the grid's own comparisons: each row against the reference (Holm's family among
+    them), Holm's line and the best."""
+    return [(c.kind, c.scene, c.label, c.metric, c.value, c.low, c.high, c.significant, c.text)
+            for c in report.findings["sh.degree"].claims if c.kind in ("vs", "holm", "best", "no best", "size")]
+
+
+def _line(text: str, label: str) -> str:
+    return next(line for line in text.splitlines() if line.startswith(f"  - `{label}`: "))
+
+
+def test_extra_cells_are_compared_only_at_a_matched_size(tmp_path):
+    scenes = ("glossy", "diffuse")
+    plain, plain_text = _report(tmp_path / "a", spec_of(scenes=scenes))
+    report, text = _report(tmp_path / "b", spec_of(scenes=scenes, extra=EXTRA, report=MATCHED))
+    # the grid's comparisons, Holm's family and the best are what they are without the extra cells
+    assert _primary(report) == _primary(plain) and any(c[0] == "holm" for c in _primary(report))
+    assert "  - `0 at 590`: " not in text and "  - `3 at 140`: " not in text  # never against the reference
+    holm = next(line for line in text.splitlines() if line.startswith("- **Holm's correction**"))
+    assert holm in plain_text and "over the 4 test PSNR comparisons" in holm
+    # the extra cells' rows in the table
+    assert "| glossy | `0 at 590` | 3 | 29.01 ± " in text and "| diffuse | `3 at 140` | 3 | 29.33 ± " in text
+    # their difference: (0.3 + 0.02 s) over seeds 0..2, +0.32 dB, at x1.000 the bytes (8,260 floats each)
+    head = ("- **At a matched size** (`[report] matched`: `0 at 590`, `3 at 140` end at one byte count; "
+            "`sh.degree = 0 at 590`, `sh.degree = 3 at 140`): `3 at 140` against `0 at 590`: glossy +0.32 dB [95 % CI ")
+    assert head in text
+    matched = [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
+    assert [(c.scene, c.label, c.reference, round(c.value, 6)) for c in matched] == \
+        [("glossy", "3 at 140", "0 at 590", 0.32), ("diffuse", "3 at 140", "0 at 590", 0.32)]
+    # SH 3 against SH 0 (×4 the bytes) gives the pair's difference; SH 1 has no pair: said so
+    three = _line(text, "3")
+    assert "(≥ 10 % larger at its natural size); at a matched size (`3 at 140` against `0 at 590`): test PSNR " \
+           "+0.32 dB [95 % CI" in three and "at ×1.000 the bytes (×0.237 the Gaussians)" in three
+    assert "quality and size are not separated" not in three and "quality and size are not separated" in \
+        _line(plain_text, "3")
+    assert "no matched-size cell of this comparison: the matched cells are `0 at 590`, `3 at 140`" in _line(text, "1")
+
+
+def test_extra_cells_without_runs_say_so_and_change_no_comparison(tmp_path):
+    spec = spec_of(extra=EXTRA, report=MATCHED)
+    plain, _ = _report(tmp_path / "a", spec_of())
+    report, text = _report(tmp_path / "b", spec, keep=lambda run: not isinstance(run.labels["sh.degree"], str))
+    assert _primary(report) == _primary(plain)
+    assert "(9 done, 0 failed, 6 not run)" in text
+    assert "and 2 extra cells outside it (`sh.degree = 0 at 590`, `sh.degree = 3 at 140`" in text
+    assert "| glossy | `3 at 140` | 0 | – |" in text
+    assert "`sh.degree = 3 at 140`): no done runs of these cells yet, so nothing is compared at a matched size." in text
+    assert "its matched-size cells, `3 at 140` against `0 at 590`, have no done runs yet)" in _line(text, "3")
+    assert not [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
