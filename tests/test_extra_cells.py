@@ -84,6 +84,9 @@ def test_an_extra_cell_is_a_row_of_its_dimension_alone():
     ({"sh.degree": {"a": {"seed": 1}}}, r"extra\.sh\.degree\.a: 'seed' is set by the top-level"),
     ({"sh.degree": {"a": {"sh.degree": 1}}}, r"extra\.sh\.degree\.a: the same runs as a cell of the grid"),
     ({"sh.degree": {"a": {"sh.degree": 9}}}, r"extra\.sh\.degree\.a: .*sh"),
+    ({"sh.degree": {"a": {"scenes": ["thin"], **BUDGETED}}}, r"extra\.sh\.degree\.a\.scenes: 'thin' is not one of"),
+    ({"sh.degree": {"a": {"scenes": "glossy", **BUDGETED}}}, r"extra\.sh\.degree\.a\.scenes: expected a list"),
+    ({"sh.degree": {"a": {"scenes": [], **BUDGETED}}}, r"extra\.sh\.degree\.a\.scenes: expected a list"),
 ])
 def test_a_bad_extra_cell_is_one_line(extra, message):
     with pytest.raises(InputError, match=message) as caught:
@@ -179,3 +182,26 @@ def test_extra_cells_without_runs_say_so_and_change_no_comparison(tmp_path):
     assert "`sh.degree = 3 at 140`): no done runs of these cells yet, so nothing is compared at a matched size." in text
     assert "its matched-size cells, `3 at 140` against `0 at 590`, have no done runs yet)" in _line(text, "3")
     assert not [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
+
+
+def test_an_extra_cell_runs_at_its_scenes_alone_and_the_report_says_where_it_did_not(tmp_path):
+    """``scenes = [...]`` in an extra cell (sh_degree's pair on its captures: glossy's 20,000-Gaussian
+    start is over SH 3's budget): its runs are at those scenes alone, the grid's unchanged, and the
+    comparison it would repeat says at a scene without it that quality and size are not separated
+    there (not "no done runs yet", which would promise runs that the file never makes)."""
+    scenes = ("glossy", "diffuse")
+    only = {"sh.degree": {k: {**v, "scenes": ["diffuse"]} for k, v in EXTRA["sh.degree"].items()}}
+    spec = spec_of(scenes=scenes, extra=only, report=MATCHED)
+    runs = expand(spec)
+    everywhere = expand(spec_of(scenes=scenes, extra=EXTRA, report=MATCHED))
+    extra = [r for r in runs if isinstance(r.labels["sh.degree"], str)]
+    assert {r.scene for r in extra} == {"diffuse"} and len(extra) == 2 * 3
+    assert [r.run_id for r in runs] == [r.run_id for r in everywhere if r.scene == "diffuse"
+                                        or not isinstance(r.labels["sh.degree"], str)]
+    report, text = _report(tmp_path, spec)
+    three = _line(text, "3")
+    assert "its matched-size cells, `3 at 140` against `0 at 590`, are not run at glossy (their `scenes`): quality " \
+           "and size are not separated here)" in three
+    assert "at a matched size (`3 at 140` against `0 at 590`): test PSNR +0.32 dB [95 % CI" in three  # diffuse
+    matched = [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
+    assert [(c.scene, c.label) for c in matched] == [("diffuse", "3 at 140")]

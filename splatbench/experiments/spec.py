@@ -67,7 +67,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -190,6 +190,8 @@ class ExperimentSpec:
     extra: Mapping[str, Mapping[str, Mapping[str, Any]]] = field(default_factory=dict)  # ``[extra.DIMENSION]``:
     #   dimension -> label -> fields: cells outside the grid (the base plus those fields, crossed with nothing),
     #   each its own row of that dimension's table, compared only where ``[report] matched`` names it
+    extra_scenes: Mapping[str, Mapping[str, tuple[str, ...]]] = field(default_factory=dict)  # dimension -> label
+    #   -> the scenes an extra cell runs at (its ``scenes = [...]``); a cell not listed runs at every scene
 
     @property
     def run_kind(self) -> RunKind:
@@ -321,7 +323,7 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
             if path.split(".")[0] in RESERVED_KEYS:
                 raise fail(where, f"{path!r} is set by the top-level 'scenes' / 'seeds', not here")
 
-    extra = _parse_extra(data.get("extra", {}), fail, source, axes, variants)
+    extra, extra_scenes = _parse_extra(data.get("extra", {}), fail, source, axes, variants, scenes)
     for scene_name, fields in scene_sources.items():  # a scene's data.* would drop an extra cell's too
         for key in fields:
             hit = next((f"extra.{d}.{lab}" for d, labs in extra.items() for lab, flat in labs.items()
@@ -337,19 +339,23 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
     return ExperimentSpec(name=name, kind=kind, scenes=tuple(scenes), seeds=tuple(seeds), base=base, axes=axes,
                           variants=variants, grid=grid, description=description, runner=runner, source=source,
                           scene_sources=scene_sources, scene_tables=scene_tables, min_effect=min_effect,
-                          check=check, matched=matched, quick=quick, published=published, extra=extra)
+                          check=check, matched=matched, quick=quick, published=published, extra=extra,
+                          extra_scenes=extra_scenes)
 
 
 def _parse_extra(table: Any, fail, source: str, axes: Mapping[str, tuple[Any, ...]],
-                 variants: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
+                 variants: Mapping[str, Mapping[str, Any]], scenes: Sequence[str]
+                 ) -> tuple[dict[str, dict[str, dict[str, Any]]], dict[str, dict[str, tuple[str, ...]]]]:
     """``[extra.DIMENSION]`` tables: ``LABEL = { FIELD = value, ... }``, each one cell outside the
     grid (`ExperimentSpec.extra`): DIMENSION one of the grid's axes or variants (dotted or nested,
     as a ``[check]`` cell names it), LABEL none of its values, the fields flat (dotted keys) and
-    never ``scene`` / ``seed``. One `InputError` line otherwise."""
+    never ``scene`` / ``seed``; ``scenes = [...]`` among them, some of the grid's ``scenes``, runs the
+    cell at those alone (`ExperimentSpec.extra_scenes`). One `InputError` line otherwise."""
     if not isinstance(table, Mapping):
         raise fail("extra", f"expected [extra.DIMENSION] tables of label = {{ field = value, ... }}, got {table!r}")
     dims = [*axes, *variants]
     out: dict[str, dict[str, dict[str, Any]]] = {}
+    only: dict[str, dict[str, tuple[str, ...]]] = {}
     for dim, labels in _cell_values(table, dims, "extra", fail).items():
         where = f"extra.{dim}"
         if not isinstance(labels, Mapping) or not labels:
@@ -363,13 +369,24 @@ def _parse_extra(table: Any, fail, source: str, axes: Mapping[str, tuple[Any, ..
                                                f"{', '.join(map(str, known))}); give the extra cell its own label")
             if not isinstance(settings, Mapping):
                 raise fail(f"{where}.{label}", f"expected a table of config fields, got {settings!r}")
+            if "scenes" in settings:
+                settings = dict(settings)
+                at = settings.pop("scenes")
+                if (not isinstance(at, list) or not at or not all(isinstance(x, str) for x in at)
+                        or len(set(at)) != len(at)):
+                    raise fail(f"{where}.{label}.scenes", f"expected a list of distinct scene names, got {at!r}")
+                unknown = [x for x in at if x not in scenes]
+                if unknown:
+                    raise fail(f"{where}.{label}.scenes", f"{unknown[0]!r} is not one of the grid's scenes "
+                                                          f"({', '.join(scenes)})")
+                only.setdefault(dim, {})[str(label)] = tuple(x for x in scenes if x in at)  # the grid's order
             flat = flatten(settings, where=f"{source}: {where}.{label}") if settings else {}
             for path, value in flat.items():
                 check_value(value, f"{source}: {where}.{label}.{path}")
                 if path.split(".")[0] in RESERVED_KEYS:
                     raise fail(f"{where}.{label}", f"{path!r} is set by the top-level 'scenes' / 'seeds', not here")
             out[dim][str(label)] = flat
-    return out
+    return out, only
 
 
 def _parse_check(table: Any, fail, scenes: list[str], axes: Mapping[str, tuple[Any, ...]],

@@ -442,7 +442,11 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                                   primary_comp)
                 named = f"`{pair[1].label}` against `{pair[0].label}`"
                 if not iv.n:
-                    pieces.append(head + f"; its matched-size cells, {named}, have no done runs yet)")
+                    away = [r for r in pair if scene not in experiment.extra_scenes.get(table.axis, {}).get(
+                        r.value, (scene,))]  # an extra cell's `scenes` that leave this one out
+                    pieces.append(head + (f"; its matched-size cells, {named}, are not run at {scene} (their "
+                                          f"`scenes`): quality and size are not separated here)" if away else
+                                          f"; its matched-size cells, {named}, have no done runs yet)"))
                     continue
                 size = paired_ratio(size_values(scene, pair[0]), size_values(scene, pair[1]))
                 at = size_ratio_text(f"×{size.estimate:.3f}", scene, *pair) if size.n else "sizes not recorded"
