@@ -103,7 +103,8 @@ class CheckSide:
     #   that goes significantly the other way (`splatbench.reports.findings.other_way`)
     per_seed: tuple[dict, dict] = ({}, {})  # each cell's primary metric by seed (a seed's runs averaged)
     size: str = ""  # the second cell's model size against the first's where it differs by at least
-    #   `findings.MATCHED_SHARE` (`findings.size_shift`: "×1.602 the Gaussians (≥ 10 % more"); "" otherwise
+    #   `findings.MATCHED_SHARE` (`findings.size_shift`'s `SizeShift.text`: "×1.602 the Gaussians (≥ 10 % more");
+    #   "" otherwise
 
     @property
     def complete(self) -> bool:
@@ -192,10 +193,10 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
             q_values = [seed_values(p, q.name) if len(p) and f"metric.{q.name}" in p.columns else {} for p in pick]
             quality.append((q, paired(q_values[0], q_values[1], Comparison(q.name, q_how))[0], q_how))
         opposed = tuple(other_way(metric, iv.estimate - (null or 0.0), quality)) if iv.n else ()
-        size = ""
+        shift = None
         if size_spec is not None and len(usable):  # the findings' model-size rule, in bytes where they differ
-            size = size_shift(pick[0], pick[1], size_spec, bytes_of,
-                              bytes_differ(usable, bytes_of, size_spec.name))
+            shift = size_shift(pick[0], pick[1], size_spec, bytes_of, bytes_differ(usable, bytes_of, size_spec.name))
+        size = shift.text if shift is not None else ""
         claim = None
         settled, why = None, ""
         if iv.n:
