@@ -607,7 +607,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         primary_null = {"diff": 0.0, "ratio": 1.0}.get(primary_comp.how, primary_comp.null or 0.0)
         method = {"diff": "paired t", "ratio": "paired t on log ratios"}.get(primary_comp.how, "t")
         signs: dict[str, list[str]] = {}  # row -> per scene "seeds above the reference/pairs"
-        pending = []  # (row, its primary claims, their short texts, its marks): the summary, once Holm has run
+        pending = []  # (row, its primary claims, their short texts, not settled, the other way, across scenes,
+        #   size changes): the summary's line of each row, once Holm has run
         lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
         appendix.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}), the other "
                         f"comparisons:")
@@ -668,8 +669,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 line += f". **The other way** (against the {_name(primary)} difference, significantly): " \
                     + "; ".join(opposed)
             across = across_scenes(primaries, scenes, primary_null)
-            if across:
-                line += f". {across}"
+            if across is not None:
+                line += f". {across.text}"
             size = size_line(scenes, ref, row)
             if size:
                 more.append(size)
@@ -681,19 +682,10 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             lines.append(line)
             if more:
                 appendix.append(f"  - `{row.label}`: " + ". ".join(more))
-            # the summary: the primary difference per scene (written once Holm has run), with the marks the line
-            # above gives it
-            marks = []
-            if moving:
-                marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in moving))
-            if opposed_short:
-                marks.append(f"**the other way** (against the {_name(primary)} difference): " + "; ".join(opposed_short))
-            if across:
-                marks.append(across)
-            if heads:
-                marks.append("**against model size**: " + _sizes_in_brief(heads))
+            # the summary: the primary difference per scene with the marks the line above gives it, written once
+            # Holm has run
             if primaries:
-                pending.append((row, primaries, briefs, marks))
+                pending.append((row, primaries, briefs, moving, opposed_short, across, heads))
         # Holm's correction over the family of the primary comparisons printed with an interval
         family = [c for c in claims if c.kind == "vs" and c.reference == ref.label and c.metric == primary.name
                   and _with_interval(c, specs)]
@@ -707,10 +699,18 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             lines.append(f"- {line}.")
             claims.append(Claim("holm", "", "", primary.name, "count", float(sum(kept)), line, ref.label,
                                 n=len(family)))
-        for row, primaries, briefs, marks in pending:
-            short = sum((c.scene, c.label) in lost for c in primaries)  # across scenes per comparison, not after Holm
-            marks = [m + f" (each per comparison; {len(primaries) - short} of {len(primaries)} significant after "
-                         f"Holm)" if short and m.startswith("**Across scenes**") else m for m in marks]
+        for row, primaries, briefs, moving, opposed_short, across, heads in pending:
+            marks = []
+            if moving:
+                marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in moving))
+            if opposed_short:
+                marks.append(f"**the other way** (against the {_name(primary)} difference): " + "; ".join(opposed_short))
+            if across is not None:
+                short = sum((c.scene, c.label) in lost for c in primaries)  # across scenes per comparison only
+                marks.append(across.text + (f" (each per comparison; {len(primaries) - short} of {len(primaries)} "
+                                            f"significant after Holm)" if short and across.everywhere else ""))
+            if heads:
+                marks.append("**against model size**: " + _sizes_in_brief(heads))
             said = "; ".join(f"{c.scene} {brief}"
                              + (", not significant after Holm" if (c.scene, c.label) in lost else "")
                              for c, brief in zip(primaries, briefs))
@@ -926,22 +926,32 @@ def setting_text(spec: ExperimentSpec | None, dim: str | None, values: Sequence 
     return ", ".join(f"`{dim} = {display(v)}`" for v in values)
 
 
-def across_scenes(claims: Sequence[Claim], scenes: Sequence[str], null: float = 0.0) -> str:
+@dataclasses.dataclass(frozen=True)
+class Across:
+    """Whether a primary difference holds across scenes (`across_scenes`): ``text`` as the findings write it;
+    ``everywhere``: practical with one sign on every scene (``**Across scenes**``), else on some scenes only or
+    with opposite signs (``**Per scene only**``)."""
+
+    text: str
+    everywhere: bool
+
+
+def across_scenes(claims: Sequence[Claim], scenes: Sequence[str], null: float = 0.0) -> Across | None:
     """Whether a primary difference holds across scenes: ``**Across scenes**`` where it is practical
     with one sign on every scene (two or more); where it is practical on some scenes only, or its sign
     differs, ``**Per scene only**`` naming them (the sign against ``null``, the comparison's no
-    difference); "" with one scene, or nowhere practical."""
+    difference); None with one scene, or nowhere practical."""
     if len(scenes) < 2 or not claims:
-        return ""
+        return None
     practical_ = [c for c in claims if c.practical]
     if not practical_:
-        return ""
+        return None
     signs = {c.value > null for c in practical_}
     if len(practical_) == len(scenes) and len(signs) == 1:
-        return f"**Across scenes**: practical and of one sign on all {len(scenes)} scenes"
+        return Across(f"**Across scenes**: practical and of one sign on all {len(scenes)} scenes", True)
     on = ", ".join(f"{c.scene} {'+' if c.value > null else '−'}" for c in practical_)
-    return (f"**Per scene only** (not across scenes: practical on {len(practical_)} of {len(scenes)} scenes"
-            + (", with opposite signs" if len(signs) > 1 else "") + f": {on})")
+    return Across(f"**Per scene only** (not across scenes: practical on {len(practical_)} of {len(scenes)} scenes"
+                  + (", with opposite signs" if len(signs) > 1 else "") + f": {on})", False)
 
 
 def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, keys: SettlingCurves,
