@@ -327,8 +327,9 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     for name in (n for n in report.findings if n not in axes and n not in APPENDIX_FINDINGS):  # run findings
         lines += [f"## {name.capitalize()}", "", report.findings[name].markdown(), ""]
 
+    check_more = check_appendix_lines(report.check) if report.check is not None else []  # the appendix's
     if report.check is not None:
-        lines += check_lines(report.check, f"splatbench run {source_path(spec)}{run_options}")
+        lines += check_lines(report.check, f"splatbench run {source_path(spec)}{run_options}", bool(check_more))
     lines += published_lines(spec, kind, table)  # "Beside published numbers" ([] without [report] published)
 
     specs = {m.name: m for m in report.metrics}
@@ -382,9 +383,8 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
             lines += [found.appendix_markdown(), ""]
     for name in (n for n in APPENDIX_FINDINGS if n in report.findings):
         lines += [f"## Appendix: {name.capitalize()}", "", report.findings[name].markdown(), ""]
-    more = check_appendix_lines(report.check) if report.check is not None else []
-    if more:
-        lines += [f"## {CHECK_APPENDIX}", "", *more]
+    if check_more:
+        lines += [f"## {CHECK_APPENDIX}", "", *check_more]
     if declared is not None:  # what each metric shown means, as the kind's result declares it
         lines += ["## Appendix: Metrics", ""]
         lines += [f"- `{m.label}` (`metric.{m.name}`): {m.meaning}" for m in report.metrics]
