@@ -116,9 +116,9 @@ MetricNote = Callable[["pd.DataFrame"], list[str]]
 #: The bytes of each run's trained model, a series over the table's rows (NaN where unknown):
 #: ``model_bytes(runs) -> pd.Series``.
 ModelBytes = Callable[["pd.DataFrame"], "pd.Series"]
-#: Lines about the runs of an experiment's ``[check]`` (their own table), under its per-seed table:
-#: ``note(check_runs) -> lines``.
-CheckNote = Callable[["pd.DataFrame"], list[str]]
+#: Lines about the runs of an experiment's ``[check]`` (their own table), under its per-seed table, and how many
+#: runs they flag: ``note(check_runs) -> RunNotes``.
+CheckNote = Callable[["pd.DataFrame"], "RunNotes"]
 #: Minimum effects that depend on how the runs measured (the train kind's LPIPS: on its net's scale):
 #: ``min_effects(runs) -> {metric: minimum effect, or None for significance alone}``, over the kind's
 #: `Comparison` defaults; an experiment file's ``[report] min_effect`` overrides them.
@@ -146,6 +146,15 @@ class Comparison:
     how: str
     null: float | None = None
     min_effect: float | None = None
+
+
+@dataclass(frozen=True)
+class RunNotes:
+    """What a `CheckNote` says of the check's runs: its ``lines`` and how many runs they flag (``flagged``: e.g.
+    runs with an outlier test view, which the check's section names)."""
+
+    lines: tuple[str, ...] = ()
+    flagged: int = 0
 
 
 @dataclass(frozen=True)
@@ -274,5 +283,5 @@ class KindReport:
             raise TypeError(f"KindReport names metrics its kind's result does not have: {', '.join(unknown)}")
 
 
-__all__ = ["Claim", "Finding", "done_runs", "AxisRow", "AxisRows", "HeaderNote", "ModelBytes", "AxisNote", "MetricNote", "RunFinding", "CheckNote", "MinEffects",
+__all__ = ["Claim", "Finding", "done_runs", "AxisRow", "AxisRows", "HeaderNote", "ModelBytes", "AxisNote", "MetricNote", "RunFinding", "CheckNote", "RunNotes", "MinEffects",
            "Comparison", "FindingRules", "Tradeoff", "SettlingCurves", "LoadMarks", "KindReport"]

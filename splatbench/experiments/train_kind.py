@@ -65,7 +65,7 @@ from splatbench.experiments.kinds import KindProtocols, RunKind, RunResult, metr
 from splatbench.experiments.train_config import (DATA_FIELDS, OWNED_FIELDS, opacity_reset_steps, planned, scene_type,
                                                  split, train_config)
 from splatbench.experiments.train_report import (auto_sh_degree_note, how_read, lpips_conventions, lpips_note, memory_note,
-                                                 model_bytes, model_size_note, outlier_view_finding, outlier_view_lines,
+                                                 model_bytes, model_size_note, outlier_view_finding, outlier_view_note,
                                                  protocol_lines, schedule_confound_note, smoke_test_line,
                                                  ssim_trained_note)
 from splatbench.metrics.memory import reset_peak_rss
@@ -578,7 +578,7 @@ REPORT = KindReport(
     axis_notes=(model_size_note, ssim_trained_note, auto_sh_degree_note, schedule_confound_note),
     metric_notes=(lpips_note, memory_note),
     run_findings=(outlier_view_finding,),
-    check_notes=(outlier_view_lines,),
+    check_notes=(outlier_view_note,),
     min_effects=lpips_min_effect,
 )
 

@@ -7,7 +7,7 @@ the runs recorded: ``notes``, `_READ_NOTES`), never from prose written here.
 * axis notes: `auto_sh_degree_note` (the degree ``auto`` ended at), `schedule_confound_note`
   (what a densification-schedule setting changes besides itself);
 * metric notes: `lpips_note` (which LPIPS the column is);
-* run finding and check note: `outlier_view_finding` / `outlier_view_lines` (a run with a test view
+* run finding and check note: `outlier_view_finding` / `outlier_view_note` (a run with a test view
   far below the same view in its cell's other seeds: a floater in front of that camera).
 
 `protocol_lines(table)`: one markdown list of the fields that change a 3DGS number
@@ -32,7 +32,7 @@ import numpy as np
 import pandas as pd
 
 from splatbench.experiments.configs import cell_value, decode, run_config
-from splatbench.experiments.kind_report import AxisRows, Claim, Finding, done_runs
+from splatbench.experiments.kind_report import AxisRows, Claim, Finding, RunNotes, done_runs
 
 #: What the runs' protocol is called when their config names none (`TrainConfig.protocol` absent).
 DEFAULT_PROTOCOL = ("quick (graphdeco's 30,000-step schedule scaled to the run's length): a smoke test, not evidence "
@@ -920,7 +920,17 @@ def outlier_view_lines(table: pd.DataFrame) -> list[str]:
     mean is with and without it) and one of what was checked; [] where no done run recorded its
     views (runs from before `curves.test_view_psnr`: nothing to say but that, which a report of
     such runs does not repeat)."""
+    return _outlier_lines(view_outliers(table))
+
+
+def outlier_view_note(table: pd.DataFrame) -> RunNotes:
+    """The check's runs' `outlier_view_lines`, with how many runs they flag (`KindReport.check_notes`)."""
     found = view_outliers(table)
+    return RunNotes(tuple(_outlier_lines(found)), len(found.outliers))
+
+
+def _outlier_lines(found: ViewCheck) -> list[str]:
+    """`outlier_view_lines` of what `view_outliers` found."""
     if not found.checked and not found.alone:
         return []
     lines = []
@@ -993,6 +1003,6 @@ def outlier_view_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | N
 
 
 __all__ = ["OUTLIER_VIEW_DB", "FLOATER_DOC", "OutlierRun", "ViewCheck", "view_outliers", "outlier_view_lines",
-           "outlier_view_finding", "hardest_view_lines",
+           "outlier_view_note", "outlier_view_finding", "hardest_view_lines",
            "DEFAULT_PROTOCOL", "SMOKE_TEST", "smoke_test_line", "model_bytes", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note", "how_read",
            "schedule_confound_note", "lpips_conventions", "lpips_note", "memory_note"]

@@ -103,7 +103,8 @@ class CheckSide:
     #   that goes significantly the other way (`splatbench.reports.findings.other_way`)
     per_seed: tuple[dict, dict] = ({}, {})  # each cell's primary metric by seed (a seed's runs averaged)
     size: str = ""  # the second cell's model size against the first's where it differs by at least
-    #   `findings.MATCHED_SHARE` (`findings.size_shift`: "×1.602 the Gaussians (≥ 10 % more"); "" otherwise
+    #   `findings.MATCHED_SHARE` (`findings.size_shift`'s `SizeShift.text`: "×1.602 the Gaussians (≥ 10 % more");
+    #   "" otherwise
 
     @property
     def complete(self) -> bool:
@@ -127,6 +128,7 @@ class CheckResult:
     reason: str
     table: pd.DataFrame
     notes: tuple[str, ...] = ()  # the kind's notes on the check's runs (`KindReport.check_notes`)
+    flagged: int = 0  # the check's runs those notes flag (an outlier test view: `RunNotes.flagged`)
 
     @property
     def name(self) -> str:
@@ -192,10 +194,10 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
             q_values = [seed_values(p, q.name) if len(p) and f"metric.{q.name}" in p.columns else {} for p in pick]
             quality.append((q, paired(q_values[0], q_values[1], Comparison(q.name, q_how))[0], q_how))
         opposed = tuple(other_way(metric, iv.estimate - (null or 0.0), quality)) if iv.n else ()
-        size = ""
+        shift = None
         if size_spec is not None and len(usable):  # the findings' model-size rule, in bytes where they differ
-            size = size_shift(pick[0], pick[1], size_spec, bytes_of,
-                              bytes_differ(usable, bytes_of, size_spec.name))
+            shift = size_shift(pick[0], pick[1], size_spec, bytes_of, bytes_differ(usable, bytes_of, size_spec.name))
+        size = shift.text if shift is not None else ""
         claim = None
         settled, why = None, ""
         if iv.n:
@@ -221,10 +223,10 @@ def check_result(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, check
         reason += size_text(grid_side, rerun_side, labels)
     described = kind.protocols.describe(check.protocol) if kind.protocols is not None else check.protocol
     mine = checked[checked.run_id.isin({r.run_id for c in rerun for r in c})] if len(checked) else checked
-    notes = tuple(line for note in (declared.check_notes if declared is not None else ()) if len(mine)
-                  for line in note(mine))
+    said = [note(mine) for note in (declared.check_notes if declared is not None else ()) if len(mine)]
     return CheckResult(check, tuple(spec.seeds), labels, described, metric, grid_side, rerun_side, verdict, reason,
-                       checked if len(checked) else build_table([]), notes)
+                       checked if len(checked) else build_table([]), tuple(line for s in said for line in s.lines),
+                       sum(s.flagged for s in said))
 
 
 def size_text(grid: CheckSide, rerun: CheckSide, labels: tuple[str, str]) -> str:
@@ -322,10 +324,12 @@ def _cell(side: CheckSide, k: int, metric: MetricSpec, seeds: int) -> str:
 APPENDIX_TITLE = "Appendix: The check in full"
 
 
-def check_lines(result: CheckResult, run_command: str) -> list[str]:
+def check_lines(result: CheckResult, run_command: str, appendix: bool) -> list[str]:
     """The report's section "Headline at the 7K protocol" (title included): what is rerun, its
     table of the headline's metric, its verdict; ``run_command``: the ``splatbench run ...`` that runs
-    the check. The other metrics, each seed's values and the outlier views: `check_appendix_lines`."""
+    the check; ``appendix``: whether the report's appendix holds the check's other tables (the other
+    metrics, each seed's values and the outlier views: `check_appendix_lines` gave lines), which this
+    section then points to."""
     c, m = result.check, result.metric
     a, b = result.labels
     title = protocol_title(c.protocol)
@@ -351,9 +355,8 @@ def check_lines(result: CheckResult, run_command: str) -> list[str]:
     lines += [*markdown_table(head, rows, align="-rrr--").splitlines(),
               "", f"Cells: {_name(m)} ({m.unit}), mean over seeds ± the half-width of its 95 % t interval."
               if m.unit else f"Cells: {_name(m)}, mean over seeds ± the half-width of its 95 % t interval.", ""]
-    more = check_appendix_lines(result)
-    if more:
-        flagged = sum(1 for line in more if line.startswith("- **Outlier test view**"))
+    if appendix:
+        flagged = result.flagged
         lines += [f"Each cell's other metrics, each seed's {_name(m)}"
                   + (" and the check's runs' outlier test views" if result.notes else "")
                   + (f" (**{'runs' if flagged > 1 else 'a run'} flagged with an outlier test view**)" if flagged else "")

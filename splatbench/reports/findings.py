@@ -204,8 +204,34 @@ def judge(iv: Interval, how: str, null: float | None, spec: MetricSpec, min_effe
     return significant, reading(iv, how, null, spec, min_effect) == "difference"
 
 
-def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None, min_effect: float | None = None
-                 ) -> str:
+@dataclasses.dataclass(frozen=True)
+class IntervalText:
+    """An interval as the findings write it (`interval_text`), in parts: ``estimate`` (``+0.42 dB``);
+    ``interval`` (`` [95 % CI +0.10, +0.74]``, "" where there is none); ``verdict``, its `reading` in words
+    (``, no significant difference, inconclusive``; "" for a difference) or why it has no interval
+    (`` (1 seed: no interval)``); ``why``, what explains the reading (`` (its interval reaches beyond the
+    0.1 dB minimum effect)``; "" where nothing does). The findings print `text`, the Summary `short`."""
+
+    estimate: str
+    interval: str = ""
+    verdict: str = ""
+    why: str = ""
+
+    @property
+    def text(self) -> str:
+        """The whole: ``+0.34 dB [95 % CI -0.84, +1.52], no significant difference, inconclusive (its
+        interval reaches beyond the 0.1 dB minimum effect)``."""
+        return self.estimate + self.interval + self.verdict + self.why
+
+    @property
+    def short(self) -> str:
+        """Without the explanation of its reading: ``+0.34 dB [95 % CI -0.84, +1.52], no significant
+        difference, inconclusive`` (the Summary's)."""
+        return self.estimate + self.interval + self.verdict
+
+
+def interval_text(iv: Interval, how: str, spec: MetricSpec, null: float | None, min_effect: float | None = None
+                  ) -> IntervalText:
     """``+0.42 dB [95 % CI +0.10, +0.74]`` followed by its `reading`: nothing for a difference;
     ", no practical difference (interval within ±0.1 dB)"; ", inconclusive (below the 0.1 dB minimum
     effect, but its interval reaches beyond it)" or ", no significant difference, inconclusive (its
@@ -213,28 +239,37 @@ def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None, m
     minimum effect; ``(1 seed: no interval)``, or, when its half-width is zero at the report's
     precision (never ``±0.00``), ``(seeds did not vary the result: no interval)`` where it is
     exactly zero and ``(seeds varied it by less than the precision shown, ±0.003 dB: no interval)``
-    where it is not."""
-    text = fmt_number(iv.estimate, how, spec)
+    where it is not; in parts (`IntervalText`)."""
+    number = fmt_number(iv.estimate, how, spec)
     if not iv.defined:
-        return f"{text} ({iv.n} seed{'s' if iv.n != 1 else ''}: no interval)"
+        return IntervalText(number, verdict=f" ({iv.n} seed{'s' if iv.n != 1 else ''}: no interval)")
     if no_spread(iv, how, spec):
         if iv.half_width <= 1e-12 * max(1.0, abs(iv.estimate)):  # equal values, up to the t-interval's own rounding
-            return f"{text} (seeds did not vary the result: no interval)"
+            return IntervalText(number, verdict=" (seeds did not vary the result: no interval)")
         unit = "" if how == "ratio" or not spec.unit else f" {spec.unit}"
-        return f"{text} (seeds varied it by less than the precision shown, ±{iv.half_width:.1g}{unit}: no interval)"
+        return IntervalText(number, verdict=f" (seeds varied it by less than the precision shown, "
+                                            f"±{iv.half_width:.1g}{unit}: no interval)")
     shown = bounded(iv, how, spec)
-    text += f" [95 % CI {_bound(shown.low, how, spec)}, {_bound(shown.high, how, spec)}]"
+    interval = f" [95 % CI {_bound(shown.low, how, spec)}, {_bound(shown.high, how, spec)}]"
     said = reading(iv, how, null, spec, min_effect)
     effect = fmt_min_effect(min_effect, how, spec) if min_effect is not None else ""
     if said == "no practical difference":
-        text += f", no practical difference (interval within ±{effect})"
-    elif said == "inconclusive" and iv.excludes(null):
-        text += f", inconclusive (below the {effect} minimum effect, but its interval reaches beyond it)"
-    elif said == "inconclusive":
-        text += f", no significant difference, inconclusive (its interval reaches beyond the {effect} minimum effect)"
-    elif said == "no significant difference":
-        text += ", no significant difference"
-    return text
+        return IntervalText(number, interval, ", no practical difference", f" (interval within ±{effect})")
+    if said == "inconclusive" and iv.excludes(null):
+        return IntervalText(number, interval, ", inconclusive",
+                            f" (below the {effect} minimum effect, but its interval reaches beyond it)")
+    if said == "inconclusive":
+        return IntervalText(number, interval, ", no significant difference, inconclusive",
+                            f" (its interval reaches beyond the {effect} minimum effect)")
+    if said == "no significant difference":
+        return IntervalText(number, interval, ", no significant difference")
+    return IntervalText(number, interval)
+
+
+def fmt_interval(iv: Interval, how: str, spec: MetricSpec, null: float | None, min_effect: float | None = None
+                 ) -> str:
+    """An interval and its reading as the findings write it: `interval_text`'s whole text."""
+    return interval_text(iv, how, spec, null, min_effect).text
 
 
 def clears(iv: Interval, how: str, null: float, min_effect: float | None) -> bool:
@@ -414,10 +449,10 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         what = f"{_name(size_spec)} and bytes" if bytes_of is not None else _name(size_spec)
         return f"{what[:1].upper()}{what[1:]} (mean over seeds, `{b.label}` against `{a.label}`): " + "; ".join(parts)
 
-    def matched_text(a: Row, b: Row, heads: list[tuple[str, str]] | None = None) -> str:
+    def matched_text(a: Row, b: Row, heads: list[tuple[str, SizeShift]] | None = None) -> str:
         """Where ``b`` comes with `MATCHED_SHARE` more (or fewer) Gaussians than ``a`` at a scene, the same
         difference at the matched size (`[report] matched`), or that the grid has none; ``heads``
-        collects each scene's size change, (scene, `size_shift`'s text) (the summary's)."""
+        collects each scene's size change, (scene, `size_shift`'s) (the summary's)."""
         pieces = []
         if dim == table.axis and (len(matched_values) < 2 or all(any(same_value(r.value, v) for v in matched_values)
                                                                  for r in (a, b))):
@@ -429,9 +464,9 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 natural_ids = None
             shift = size_shift(*(selected(scene, r, usable) for r in (a, b)), size_spec, bytes_of, by_bytes,
                                natural_ids)
-            if not shift:
+            if shift is None:
                 continue
-            head = f"{scene}: {shift}"
+            head = f"{scene}: {shift.text}"
             if heads is not None:
                 heads.append((scene, shift))
             if not matched:
@@ -591,7 +626,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         primary_null = {"diff": 0.0, "ratio": 1.0}.get(primary_comp.how, primary_comp.null or 0.0)
         method = {"diff": "paired t", "ratio": "paired t on log ratios"}.get(primary_comp.how, "t")
         signs: dict[str, list[str]] = {}  # row -> per scene "seeds above the reference/pairs"
-        pending = []  # (row, its primary claims, its marks): the summary, once Holm has run
+        pending = []  # (row, its primary claims, their short texts, not settled, the other way, across scenes,
+        #   size changes): the summary's line of each row, once Holm has run
         lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
         appendix.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}), the other "
                         f"comparisons:")
@@ -599,6 +635,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             parts = []
             rest = []  # the other comparisons' (the appendix's)
             moving = []
+            primaries: list[Claim] = []  # this row's primary-metric claims
+            briefs: list[str] = []  # each one's difference as the Summary writes it (`IntervalText.short`)
             for comp in rules.comparisons:
                 spec = specs[comp.metric]
                 texts = []
@@ -612,7 +650,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                         pairs = [(a[k], b[k]) for k in a if k in b and math.isfinite(a[k]) and math.isfinite(b[k])]
                         signs.setdefault(row.label, []).append(
                             f"{sum(1 for x, y in pairs if y > x)}/{len(pairs)}")
-                    text = fmt_interval(iv, comp.how, spec, null, comp.min_effect)
+                    written = interval_text(iv, comp.how, spec, null, comp.min_effect)
+                    text = written.text
                     significant, is_practical = judge(iv, comp.how, null, spec, comp.min_effect)
                     settled = None
                     if comp.metric == primary.name:
@@ -622,6 +661,9 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                             moving.append(f"{scene}: {why}")
                     claims.append(Claim("vs", scene, row.label, comp.metric, comp.how, iv.estimate, text, ref.label,
                                         iv.low, iv.high, iv.n, significant, is_practical, settled))
+                    if comp.metric == primary.name:
+                        primaries.append(claims[-1])
+                        briefs.append(written.short)
                     texts.append(text)
                 (parts if comp.metric == primary.name else rest).append(f"{_name(spec)} {' / '.join(texts)}")
             line = f"  - `{row.label}`: " + "; ".join(parts)
@@ -634,8 +676,6 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             also = confounds(scenes, ref, row, usable, kind)
             if also:
                 more.append(f"Also changed: {also}")
-            primaries = [c for c in claims if c.kind == "vs" and c.label == row.label and c.reference == ref.label
-                         and c.metric == primary.name]
             opposed, opposed_short = [], []
             for c in primaries:
                 if c.significant:
@@ -648,12 +688,12 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 line += f". **The other way** (against the {_name(primary)} difference, significantly): " \
                     + "; ".join(opposed)
             across = across_scenes(primaries, scenes, primary_null)
-            if across:
-                line += f". {across}"
+            if across is not None:
+                line += f". {across.text}"
             size = size_line(scenes, ref, row)
             if size:
                 more.append(size)
-            heads: list[tuple[str, str]] = []
+            heads: list[tuple[str, SizeShift]] = []
             if size_spec is not None:
                 line += matched_text(ref, row, heads)
             if also:
@@ -661,19 +701,10 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             lines.append(line)
             if more:
                 appendix.append(f"  - `{row.label}`: " + ". ".join(more))
-            # the summary: the primary difference per scene (written once Holm has run), with the marks the line
-            # above gives it
-            marks = []
-            if moving:
-                marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in moving))
-            if opposed_short:
-                marks.append(f"**the other way** (against the {_name(primary)} difference): " + "; ".join(opposed_short))
-            if across:
-                marks.append(across)
-            if heads:
-                marks.append("**against model size**: " + _sizes_in_brief(heads))
+            # the summary: the primary difference per scene with the marks the line above gives it, written once
+            # Holm has run
             if primaries:
-                pending.append((row, primaries, marks))
+                pending.append((row, primaries, briefs, moving, opposed_short, across, heads))
         # Holm's correction over the family of the primary comparisons printed with an interval
         family = [c for c in claims if c.kind == "vs" and c.reference == ref.label and c.metric == primary.name
                   and _with_interval(c, specs)]
@@ -687,13 +718,21 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             lines.append(f"- {line}.")
             claims.append(Claim("holm", "", "", primary.name, "count", float(sum(kept)), line, ref.label,
                                 n=len(family)))
-        for row, primaries, marks in pending:
-            short = sum((c.scene, c.label) in lost for c in primaries)  # across scenes per comparison, not after Holm
-            marks = [m + f" (each per comparison; {len(primaries) - short} of {len(primaries)} significant after "
-                         f"Holm)" if short and m.startswith("**Across scenes**") else m for m in marks]
-            said = "; ".join(f"{c.scene} {_verdict_only(c.text)}"
+        for row, primaries, briefs, moving, opposed_short, across, heads in pending:
+            marks = []
+            if moving:
+                marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in moving))
+            if opposed_short:
+                marks.append(f"**the other way** (against the {_name(primary)} difference): " + "; ".join(opposed_short))
+            if across is not None:
+                short = sum((c.scene, c.label) in lost for c in primaries)  # across scenes per comparison only
+                marks.append(across.text + (f" (each per comparison; {len(primaries) - short} of {len(primaries)} "
+                                            f"significant after Holm)" if short and across.everywhere else ""))
+            if heads:
+                marks.append("**against model size**: " + _sizes_in_brief(heads))
+            said = "; ".join(f"{c.scene} {brief}"
                              + (", not significant after Holm" if (c.scene, c.label) in lost else "")
-                             for c in primaries)
+                             for c, brief in zip(primaries, briefs))
             summary.append(f"- **`{row.label}`** against `{ref.label}`, {_name(primary)}: {said}"
                            + "".join(f"; {m}" for m in marks) + ".")
         if appendix[-1].startswith("- **Against"):  # no row compared anything else
@@ -831,28 +870,59 @@ def _sizes(runs: pd.DataFrame, size: str, bytes_of: Callable[[pd.DataFrame], pd.
     return seed_values(runs, size) if f"metric.{size}" in runs.columns else {}
 
 
+@dataclasses.dataclass(frozen=True)
+class SizeShift:
+    """A model-size change by the findings' rule (`size_shift`): ``ratio``, the paired geometric-mean ratio over
+    seeds of the compared runs' size to the reference runs'; of their bytes where ``by_bytes`` (`bytes_differ`),
+    else of the size metric named ``name`` (e.g. "Gaussians"); ``count``: where it is the bytes, the same
+    ratio of the size metric (None: not known)."""
+
+    ratio: float
+    by_bytes: bool
+    name: str
+    count: float | None = None
+
+    @property
+    def measure(self) -> str:
+        """``the bytes``, ``the Gaussians``."""
+        return "the bytes" if self.by_bytes else f"the {self.name}"
+
+    @property
+    def rule(self) -> str:
+        """``≥ 10 % more`` (`MATCHED_SHARE`; "larger" / "smaller" for bytes, "more" / "fewer" for a count)."""
+        if self.by_bytes:
+            more = "larger" if self.ratio > 1 else "smaller"
+        else:
+            more = "more" if self.ratio > 1 else "fewer"
+        return f"≥ {100 * MATCHED_SHARE:g} % {more}"
+
+    @property
+    def text(self) -> str:
+        """``×1.602 the Gaussians (≥ 10 % more`` or ``×3.999 the bytes (×0.949 the Gaussians) (≥ 10 % larger``
+        (the caller closes the bracket)."""
+        also = f" (×{self.count:.3f} the {self.name})" if self.by_bytes and self.count is not None else ""
+        return f"×{self.ratio:.3f} {self.measure}{also} ({self.rule}"
+
+
 def size_shift(a: pd.DataFrame, b: pd.DataFrame, size: MetricSpec,
                bytes_of: Callable[[pd.DataFrame], pd.Series] | None, by_bytes: bool, ids: set[str] | None = None
-               ) -> str:
+               ) -> SizeShift | None:
     """The model-size rule (docs/reports.md, "Model size"): where the runs ``b`` end at least
     `MATCHED_SHARE` larger or smaller than the runs ``a`` (paired geometric-mean ratio over seeds, of
-    the bytes where ``by_bytes``, else of the ``size`` metric), ``×1.602 the Gaussians (≥ 10 % more``
-    or ``×3.999 the bytes (×0.949 the Gaussians) (≥ 10 % larger`` (the caller closes the bracket);
-    "" otherwise. ``ids``: only these runs (None: all). The findings' comparisons and the check's
+    the bytes where ``by_bytes``, else of the ``size`` metric), that change (`SizeShift`); None
+    otherwise. ``ids``: only these runs (None: all). The findings' comparisons and the check's
     verdict (`splatbench.reports.check`) both flag a size change through it."""
     if ids is not None:
         a, b = a[a.run_id.isin(ids)], b[b.run_id.isin(ids)]
     ratio = paired_ratio(_sizes(a, size.name, bytes_of, by_bytes), _sizes(b, size.name, bytes_of, by_bytes))
     if not ratio.n or not math.isfinite(ratio.estimate) or ratio.estimate <= 0 or \
             max(ratio.estimate, 1 / ratio.estimate) < 1 + MATCHED_SHARE - 1e-12:
-        return ""
+        return None
+    count = None
     if by_bytes:
-        count = paired_ratio(_sizes(a, size.name, None, False), _sizes(b, size.name, None, False))
-        also = f" (×{count.estimate:.3f} the {_name(size)})" if count.n and math.isfinite(count.estimate) else ""
-        text, more = f"×{ratio.estimate:.3f} the bytes{also}", "larger" if ratio.estimate > 1 else "smaller"
-    else:
-        text, more = f"×{ratio.estimate:.3f} the {_name(size)}", "more" if ratio.estimate > 1 else "fewer"
-    return f"{text} (≥ {100 * MATCHED_SHARE:g} % {more}"
+        counted = paired_ratio(_sizes(a, size.name, None, False), _sizes(b, size.name, None, False))
+        count = counted.estimate if counted.n and math.isfinite(counted.estimate) else None
+    return SizeShift(ratio.estimate, by_bytes, _name(size), count)
 
 
 def _stratum(runs: pd.DataFrame, dim: str | None, values: Sequence) -> set[str]:
@@ -895,22 +965,32 @@ def setting_text(spec: ExperimentSpec | None, dim: str | None, values: Sequence 
     return ", ".join(f"`{dim} = {display(v)}`" for v in values)
 
 
-def across_scenes(claims: Sequence[Claim], scenes: Sequence[str], null: float = 0.0) -> str:
+@dataclasses.dataclass(frozen=True)
+class Across:
+    """Whether a primary difference holds across scenes (`across_scenes`): ``text`` as the findings write it;
+    ``everywhere``: practical with one sign on every scene (``**Across scenes**``), else on some scenes only or
+    with opposite signs (``**Per scene only**``)."""
+
+    text: str
+    everywhere: bool
+
+
+def across_scenes(claims: Sequence[Claim], scenes: Sequence[str], null: float = 0.0) -> Across | None:
     """Whether a primary difference holds across scenes: ``**Across scenes**`` where it is practical
     with one sign on every scene (two or more); where it is practical on some scenes only, or its sign
     differs, ``**Per scene only**`` naming them (the sign against ``null``, the comparison's no
-    difference); "" with one scene, or nowhere practical."""
+    difference); None with one scene, or nowhere practical."""
     if len(scenes) < 2 or not claims:
-        return ""
+        return None
     practical_ = [c for c in claims if c.practical]
     if not practical_:
-        return ""
+        return None
     signs = {c.value > null for c in practical_}
     if len(practical_) == len(scenes) and len(signs) == 1:
-        return f"**Across scenes**: practical and of one sign on all {len(scenes)} scenes"
+        return Across(f"**Across scenes**: practical and of one sign on all {len(scenes)} scenes", True)
     on = ", ".join(f"{c.scene} {'+' if c.value > null else '−'}" for c in practical_)
-    return (f"**Per scene only** (not across scenes: practical on {len(practical_)} of {len(scenes)} scenes"
-            + (", with opposite signs" if len(signs) > 1 else "") + f": {on})")
+    return Across(f"**Per scene only** (not across scenes: practical on {len(practical_)} of {len(scenes)} scenes"
+                  + (", with opposite signs" if len(signs) > 1 else "") + f": {on})", False)
 
 
 def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, keys: SettlingCurves,
@@ -1056,28 +1136,13 @@ def _p(p: float) -> str:
     return "p < 0.001" if p < 0.001 else f"p = {p:.3f}"
 
 
-def _verdict_only(text: str) -> str:
-    """A difference as `fmt_interval` writes it, without the parenthesis that explains its reading:
-    ``+0.34 dB [95 % CI -0.84, +1.52], no significant difference, inconclusive`` (the summary's; the
-    findings keep the whole)."""
-    for why in (" (its interval reaches beyond the ", " (below the ", " (interval within ±"):
-        if why in text and text.endswith(")"):
-            return text[:text.rindex(why)]
-    return text
-
-
-def _sizes_in_brief(heads: Sequence[tuple[str, str]]) -> str:
+def _sizes_in_brief(heads: Sequence[tuple[str, SizeShift]]) -> str:
     """The model-size changes of `size_shift` per scene, in brief: ``fox ×3.998, glossy ×4.054 the bytes
     (≥ 10 % larger)`` where every scene's is of the same kind, else each in full."""
-    parts = []
-    for scene, shift in heads:
-        ratio, _, rest = shift.partition(" ")
-        what = rest.split(" (")[0]
-        parts.append((scene, ratio, what, shift[shift.rindex("(≥"):] + ")"))
-    if len({(what, tail) for _, _, what, tail in parts}) == 1:
-        _, _, what, tail = parts[0]
-        return ", ".join(f"{scene} {ratio}" for scene, ratio, _, _ in parts) + f" {what} {tail}"
-    return "; ".join(f"{scene} {ratio} {what} {tail}" for scene, ratio, what, tail in parts)
+    if len({(s.measure, s.rule) for _, s in heads}) == 1:
+        shift = heads[0][1]
+        return ", ".join(f"{scene} ×{s.ratio:.3f}" for scene, s in heads) + f" {shift.measure} ({shift.rule})"
+    return "; ".join(f"{scene} ×{s.ratio:.3f} {s.measure} ({s.rule})" for scene, s in heads)
 
 
 def _count(value: float) -> str:
@@ -1089,6 +1154,7 @@ def _name(spec: MetricSpec) -> str:
     return spec.label.split(" (")[0]
 
 
-__all__ = ["Claim", "Finding", "AxisNote", "axis_finding", "load_recorded", "rules_for", "fmt_number", "fmt_interval", "paired",
+__all__ = ["Claim", "Finding", "AxisNote", "axis_finding", "load_recorded", "rules_for", "fmt_number", "fmt_interval",
+           "interval_text", "IntervalText", "paired",
            "reference_row", "usable_runs", "no_spread", "practical", "reading", "READINGS", "bounded", "size_shift", "bytes_differ", "MATCHED_SHARE", "judge", "fmt_min_effect", "confounds",
-           "CONFOUND_SHARE"]
+           "SizeShift", "CONFOUND_SHARE"]
