@@ -14,12 +14,10 @@ from __future__ import annotations
 import pytest
 
 from splatbench.errors import InputError
-from splatbench.experiments import RunRecord, expand, parse_experiment
-from splatbench.experiments.store import write_record, write_table
+from splatbench.experiments import expand, parse_experiment
 from splatbench.experiments.train_report import floats_per_gaussian
-from splatbench.reports import build_report, write_report
 from splatbench.reports.tables import axis_rows
-from tests.test_report_rules import flat_curves, metrics_of
+from tests.test_report_rules import flat_curves, metrics_of, results
 
 #: 590 Gaussians at SH 0 and 140 at SH 3 hold the same floats: 590 x 14 = 140 x 59 = 8,260.
 BUDGET = {0: 590, 3: 140}
@@ -116,21 +114,8 @@ def _make(run):
 
 
 def _report(tmp_path, spec, keep=lambda run: True):
-    """The report of ``spec`` from made-up results of the runs ``keep`` selects (the rest not run)."""
-    records = []
-    for run in expand(spec):
-        if not keep(run):
-            continue
-        metrics, curves = _make(run)
-        rec = RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
-                        status="done", config=dict(run.config), labels=dict(run.labels), metrics=metrics,
-                        curves=curves, error=None, seconds=1.0, started="2026-01-01T00:00:00+00:00",
-                        finished="2026-01-01T00:00:01+00:00", worker="h:1")
-        write_record(tmp_path / "res", rec)
-        records.append(rec)
-    write_table(tmp_path / "res" / spec.name, records)
-    report = build_report(spec, tmp_path / "res")
-    return report, write_report(report, tmp_path / "out").read_text()
+    """The report of ``spec`` from made-up results (`_make`) of the runs ``keep`` selects."""
+    return results(tmp_path, spec, _make, keep)
 
 
 def _primary(report) -> list[tuple]:

@@ -56,10 +56,13 @@ def flat_curves(final: float, rise: float = 0.0, train_rise: float = 0.0) -> dic
             "loss": [0.1] * len(steps), "num_gaussians": [1000] * len(steps)}
 
 
-def results(tmp_path, spec, make) -> tuple:
-    """Write a results folder; ``make(run) -> (metrics, curves)``; the report built from it."""
+def results(tmp_path, spec, make, keep=lambda run: True) -> tuple:
+    """Write a results folder of the runs ``keep`` selects (the rest not run); ``make(run) -> (metrics,
+    curves)``; the report built from it."""
     records = []
     for run in expand(spec):
+        if not keep(run):
+            continue
         metrics, curves = make(run)
         rec = RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
                         status="done", config=dict(run.config), labels=dict(run.labels), metrics=metrics,
