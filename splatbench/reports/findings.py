@@ -631,6 +631,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
         appendix.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}), the other "
                         f"comparisons:")
+        head_at = len(appendix)  # the appendix's length after that head: no line more, no other comparison
         for row in others:
             parts = []
             rest = []  # the other comparisons' (the appendix's)
@@ -735,7 +736,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                              for c, brief in zip(primaries, briefs))
             summary.append(f"- **`{row.label}`** against `{ref.label}`, {_name(primary)}: {said}"
                            + "".join(f"; {m}" for m in marks) + ".")
-        if appendix[-1].startswith("- **Against"):  # no row compared anything else
+        if len(appendix) == head_at:  # no row compared anything else
             appendix.pop()
     summary.append(best_summary)
     if size_spec is not None and dim == table.axis and len(matched_values) >= 2:
