@@ -154,6 +154,10 @@ def test_extra_cells_are_compared_only_at_a_matched_size(tmp_path):
     assert "quality and size are not separated" not in three and "quality and size are not separated" in \
         _line(plain_text, "3")
     assert "no matched-size cell of this comparison: the matched cells are `0 at 590`, `3 at 140`" in _line(text, "1")
+    # the Summary's line of `3` gives the matched-size difference beside the size change, per scene
+    summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
+    assert "; at a matched size: glossy +0.32 dB [95 % CI " in summary and \
+        "(`3 at 140` against `0 at 590`), diffuse +0.32 dB [95 % CI " in summary
 
 
 def test_extra_cells_without_runs_say_so_and_change_no_comparison(tmp_path):
