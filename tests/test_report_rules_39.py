@@ -386,3 +386,34 @@ def test_the_uint8_shift_the_metrics_line_states_is_what_quantizing_does():
     drop = 10 * math.log10(1 + UINT8_MSE * 10 ** 3.4)
     assert f"at 34.0 dB, this grid's highest run mean, about {drop:.3f} dB lower" in text and 0.01 < drop < 0.02
     assert _uint8_shift(pd.DataFrame({"seed": [0]})) == ""
+
+
+def test_a_strategy_note_filed_among_warnings_is_listed_but_not_counted(tmp_path):
+    """Runs made before the training loop told a strategy's note from its warning recorded the budget
+    strategy's last-refinement prune ("strategy 'budget' ended at 13,976 Gaussians, 24 below ...") among
+    their warnings: the Summary and the header count only what starts with "warning:"; the Warnings
+    section still lists every entry (nothing a run recorded is dropped) and says which are notes."""
+    from splatbench.experiments import RunRecord, expand
+    from splatbench.experiments.store import write_record, write_table
+    from splatbench.reports import build_report, write_report
+
+    spec = spec_of()
+    records = []
+    for run in expand(spec):
+        psnr = 30.0 + (1.0 if run.config["sh"]["degree"] == 3 else 0.0) + 0.01 * run.seed
+        said = {0: ["strategy 'budget' ended at 13,976 Gaussians, 24 below its budget of 14,000"],
+                1: ["warning: strategy 'budget' ended at 84 Gaussians, below its budget of 120"]}.get(run.seed, [])
+        rec = RunRecord(run_id=run.run_id, experiment=spec.name, kind="train", scene=run.scene, seed=run.seed,
+                        status="done", config=dict(run.config), labels=dict(run.labels),
+                        metrics=metrics_of(psnr), curves=flat_curves(psnr), error=None, seconds=1.0,
+                        started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00", worker="h:1",
+                        warnings=tuple(said))
+        write_record(tmp_path / "res", rec)
+        records.append(rec)
+    write_table(tmp_path / "res" / spec.name, records)
+    text = write_report(build_report(spec, tmp_path / "res"), tmp_path / "out").read_text()
+    assert "**Warnings**: 2 of 6 runs warned (1 distinct: \"warning: strategy 'budget' ended at 84" in text
+    assert "**Warnings:** 2 run(s) warned" in text
+    section = text[text.index("## Warnings"):]
+    assert "2 entries without \"warning:\" are strategies' notes" in section
+    assert section.count("ended at 13,976 Gaussians") == 2 and section.count("ended at 84 Gaussians") == 2

@@ -438,6 +438,17 @@ def test_a_budget_run_below_its_budget_says_so_in_its_warnings(tmp_path, tiny_di
                                f"budget of {round(1.5 * n):,}") for note in result.warnings), result.warnings
 
 
+def test_a_strategy_outcome_without_warning_is_a_note(tmp_path, tiny_diffuse, monkeypatch):
+    """An outcome that does not start with "warning:" (the budget strategy's prune in its last refinement:
+    the rule worked as written) is recorded among the run's notes, not its warnings."""
+    from splatbench.strategies.budget import BudgetStrategy
+
+    monkeypatch.setattr(BudgetStrategy, "outcome_note", lambda self, state: "strategy 'budget' ended 2 below")
+    opts = {"refine_start": 4, "refine_every": 5, "refine_stop": 16, "budget": 1.5}
+    result = train(config(tmp_path, strategy=StrategyConfig(name="budget", options=opts)), dataset=tiny_diffuse)
+    assert "strategy 'budget' ended 2 below" in result.notes and not any("ended 2" in w for w in result.warnings)
+
+
 def test_frozen_groups_get_no_gradient_work(tmp_path, tiny_diffuse, counting):
     cfg = config(tmp_path, optim=OptimConfig(lr_quats=0.0, lr_means=0.0, lr_means_final=0.0, lr_sh_rest=0.0), sh=SHConfig(interval=1))
     with torch_threads(1):

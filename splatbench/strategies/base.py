@@ -154,9 +154,10 @@ class Strategy(Protocol):
         ...
 
     def outcome_note(self, state: object) -> str | None:
-        """A warning, read once a run ends, when this strategy did not do what its settings
-        ask (e.g. a budget strategy ended below its budget); None when it did. Optional, as
-        `schedule_note`."""
+        """A warning ("warning: ..."), read once a run ends, when this strategy did not do what its
+        settings ask (e.g. a budget strategy ended below its budget), or a note (no such prefix: the run
+        records it among its notes) of how it met them; None when there is nothing to say. Optional,
+        as `schedule_note`."""
         ...
 
     def initialize_state(self, params: Params) -> object:

@@ -619,10 +619,13 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
     if early_note:
         notes.append(early_note)
     # what the run warns of (TrainResult.warnings): the config's, the random start's region, the strategy's
-    # schedule and outcome (both warnings by their contract, splatbench.strategies.base), an empty model
+    # schedule and outcome where they warn ("warning: ...", splatbench.strategies.base; an outcome without it,
+    # e.g. the budget strategy's prune in its last refinement, is a note), an empty model
     warnings = config_warnings + ([trainer.init_note] if trainer.init_note and trainer.init_warns else [])
     outcome_note = getattr(trainer.strategy, "outcome_note", lambda _: None)(trainer.state)  # optional
-    warnings += [w for w in (_schedule_note(trainer.strategy, config), outcome_note) if w]
+    for said in (_schedule_note(trainer.strategy, config), outcome_note):
+        if said:
+            (warnings if said.startswith("warning:") else notes).append(said)
     if trainer.num_gaussians == 0:
         gone = next((h.step for h in history if h.num_gaussians == 0), trainer.step_index)
         warnings.append(f"warning: the model is empty: every Gaussian was pruned (none left from step {gone} on), so "
