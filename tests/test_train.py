@@ -697,7 +697,7 @@ def test_cli_prints_one_json_line_and_one_line_errors(tmp_path, tiny_diffuse_dir
     other = runner.invoke(main, ["train", "--set", "iterations=4", "--set", "seed=7", "--resume", str(checkpoint),
                                  "--quiet", "--out", str(tmp_path / "d")])
     assert other.exit_code == 2 and len(other.stderr.strip().splitlines()) == 1, other.stderr
-    assert f"was written with seed=0, iterations=3; this run has seed=7, iterations=4 (" in other.stderr, other.stderr
+    assert "was written with seed=0, iterations=3; this run has seed=7, iterations=4 (" in other.stderr, other.stderr
     assert f"--resume {checkpoint} alone, with no --config or --set," in other.stderr
     nothing = runner.invoke(main, ["train", "--quiet"])
     assert nothing.exit_code == 2 and nothing.stderr.strip().startswith("splatbench: error: DATASET: give the "
