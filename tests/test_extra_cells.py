@@ -194,3 +194,15 @@ def test_an_extra_cell_runs_at_its_scenes_alone_and_the_report_says_where_it_did
     assert "at a matched size (`3 at 140` against `0 at 590`): test PSNR +0.32 dB [95 % CI" in three  # diffuse
     matched = [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
     assert [(c.scene, c.label) for c in matched] == [("diffuse", "3 at 140")]
+
+
+def test_the_ranks_order_the_grids_cells_alone(tmp_path):
+    """An extra cell is a size control, compared only at a matched size: the Ranks section orders the
+    grid's cells as it does without the extra cells (rank and tau claims equal)."""
+    plain, _ = _report(tmp_path / "a", spec_of(scenes=("glossy", "diffuse")))
+    report, text = _report(tmp_path / "b", spec_of(scenes=("glossy", "diffuse"), extra=EXTRA, report=MATCHED))
+    def ranked(r):
+        return [(c.kind, c.scene, c.label, c.value) for c in r.findings["ranks"].claims]
+    assert ranked(report) == ranked(plain) and ranked(report)
+    ranks = text[text.index("## Appendix: Ranks"):]
+    assert "`0 at 590`" not in ranks.split("\n- ")[0]

@@ -1,6 +1,7 @@
 """Ranks: each scene's cells in order of the kind's primary metric, and how far the orders agree.
 
-A report ranks its grid's cells per scene by their mean over seeds of the primary metric (the
+A report ranks its grid's cells (not its extra cells, `ExperimentSpec.extra`, which are compared only
+at a matched size) per scene by their mean over seeds of the primary metric (the
 train kind's test PSNR; 1 is best, tied cells share their mean rank) and gives the rank agreement
 of every pair of scenes as Kendall's tau-b over the cells both ranked
 (`splatbench.metrics.stats.kendall_tau`: +1 the same order, -1 the reverse). Where the experiment
@@ -31,7 +32,7 @@ from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import kendall_tau
 from splatbench.report_files import markdown_table
 from splatbench.reports.findings import rules_for, usable_runs
-from splatbench.reports.tables import cell_labels, metric_specs, seed_values
+from splatbench.reports.tables import cell_labels, grid_runs, metric_specs, seed_values
 
 
 def cell_means(spec: ExperimentSpec, runs: pd.DataFrame, metric: str) -> dict[str, dict[str, float]]:
@@ -121,7 +122,8 @@ def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick
     if rules is None:
         return None
     primary: MetricSpec = next(m for m in metrics if m.name == rules.primary)
-    means = cell_means(spec, usable_runs(table, kind), primary.name)  # not runs left out of every finding
+    # not runs left out of every finding, nor the extra cells (compared only at a matched size)
+    means = cell_means(spec, grid_runs(spec, usable_runs(table, kind)), primary.name)
     if not means or max(len(m) for m in means.values()) < 2:
         return None
     scenes = list(means)

@@ -80,6 +80,12 @@ def _ids(spec: ExperimentSpec, **changes) -> frozenset[str]:
     return frozenset(r.run_id for r in expand(dataclasses.replace(spec, **{"extra": {}, **changes})))
 
 
+def grid_runs(spec: ExperimentSpec, runs: pd.DataFrame) -> pd.DataFrame:
+    """The runs of ``runs`` that belong to the grid itself, not to its extra cells alone (`ExperimentSpec.extra`:
+    the ranks order the grid's cells, never a matched-size extra cell)."""
+    return runs[runs.run_id.isin(_ids(spec))] if spec.extra and len(runs) else runs
+
+
 def axis_rows(spec: ExperimentSpec, axis: str) -> list[Row]:
     """The rows of ``axis`` in file order (module doc), with the run ids of each: the grid's, then
     its extra cells' (`Row.extra`)."""
@@ -324,5 +330,5 @@ def _json(value: Any) -> str:
     return json.dumps(value, sort_keys=True)
 
 
-__all__ = ["metric_specs", "shared_prefix", "Row", "axis_rows", "display", "Stat", "stat", "seed_values", "AxisTable",
+__all__ = ["metric_specs", "shared_prefix", "Row", "axis_rows", "grid_runs", "display", "Stat", "stat", "seed_values", "AxisTable",
            "axis_table", "cell_labels", "done_runs", "loaded_runs"]
