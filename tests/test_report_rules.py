@@ -582,6 +582,12 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     seven = table.assign(**{"config.protocol": "graphdeco-7k", "config.iterations": 7000})
     assert "SH degree raised one band every 1,000 steps (bands 1, 2, 3 at steps 1,000, 2,000, 3,000" \
         in line(seven, "- **Schedule as run**")
+    # the refine interval (not scaled under the quick protocol) is the runs' own: 100 steps by default, as a
+    # file sets it otherwise (a share of the run, each distinct value where cells differ)
+    quick = table.assign(**{"config.protocol": "quick"})
+    assert "the refine interval, 100 steps, is not scaled" in line(quick, "- **Schedule**")
+    mixed = quick.assign(**{"config.strategy.refine_every": ['"5%"'] + ["15"] * (len(quick) - 1)})
+    assert "the refine interval, 5% of the run / 15 steps (differs by cell), is not scaled" in line(mixed, "- **Schedule**")
     # its schedule is graphdeco's as written, not scaled to the runs' length (nor their LR decay)
     schedule = next(line for line in protocol_lines(table) if line.startswith("- **Schedule**"))
     assert "graphdeco's 30,000-step schedule as written" in schedule and "over 30,000 steps, not scaled" in schedule \

@@ -58,6 +58,12 @@ def _one(done: pd.DataFrame, column: str, show: Callable[[Any], str] = str) -> s
     return " / ".join(show(v) for v in values) + (" (differs by cell)" if len(values) > 1 else "")
 
 
+def _interval(value: Any) -> str:
+    """A step setting as written: ``100 steps``, ``5% of the run`` (a run table's mixed column as JSON text)."""
+    v = decode(value)
+    return f"{v:,} steps" if isinstance(v, int) else f"{v} of the run"
+
+
 def _g(v: Any) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
@@ -118,9 +124,10 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
     lines.append(f"- **Protocol**: {DEFAULT_PROTOCOL if protocol == 'quick' else protocol}.")
     iters = _one(done, "config.iterations", lambda v: f"{int(v):,}")
     schedules = _values(done, "config.schedule")
+    every = _one(done, "config.strategy.refine_every", _interval)  # as each run set it
     how = {"scaled": "graphdeco's 30,000-step schedule scaled to the run (refine window, opacity resets, SH steps "
-                     "times iterations / 30,000; the refine interval, 100 steps, is not scaled, so a short run "
-                     "refines fewer times)",
+                     f"times iterations / 30,000; the refine interval{', ' + every + ',' if every else ''} is not "
+                     "scaled, so a short run refines fewer times)",
            "absolute": "schedule steps as written"}
     sched = " / ".join(how.get(s, str(s)) for s in schedules if s is not None) or "not recorded"
     lr = _one(done, "config.optim.lr_means", _g)
