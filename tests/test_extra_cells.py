@@ -98,6 +98,19 @@ def test_matched_may_name_extra_cells_and_nothing_else():
         spec_of(extra=EXTRA, report={"matched": {"sh.degree": ["0 at 591", "3 at 140"]}})
 
 
+@pytest.mark.parametrize("matched, message", [
+    # one extra label: crossed with nothing, it is no cell's twin (a new user's trial: every size line vanished)
+    ("3 at 140", r"'3 at 140' is an extra cell, crossed with nothing, .*\['0 at 590', '3 at 140'\]"),
+    (["3 at 140"], r"a list names cells matched to each other: give two or more"),
+    (3, r"one value names each cell's matched twin on another axis, and the grid has no other"),
+    ("0", r"'0' is not a value of the grid's 'sh\.degree' \(its values: 0, 1, 3, .*\); write 0$"),
+])
+def test_a_matched_entry_that_names_no_comparison_is_one_line(matched, message):
+    with pytest.raises(InputError, match=message) as caught:
+        spec_of(extra=EXTRA, report={"matched": {"sh.degree": matched}})
+    assert "\n" not in str(caught.value)
+
+
 # --------------------------------------------------------------------------- the report
 def _make(run):
     """Natural cells: 1000 Gaussians (+ 10 per seed); SH 3 +1.0 dB (+0.02 per seed) and SH 1 +0.5 dB

@@ -507,8 +507,24 @@ def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variant
         known = (*(axes[dim] if dim in axes else variants[dim]), *(extra or {}).get(dim, {}))
         for v in values:
             if not any(same_value(v, k) for k in known):
+                alike = next((k for k in known if str(k) == str(v)), None)  # "0" for 0: the type differs
                 raise fail(f"report.matched.{dim}", f"{v!r} is not a value of the grid's {dim!r} (its values: "
-                                                    f"{', '.join(map(str, known))})")
+                                                    f"{', '.join(map(repr, known))})"
+                                                    + (f"; write {alike!r}" if alike is not None else ""))
+        if isinstance(value, list) and len(values) < 2:
+            raise fail(f"report.matched.{dim}", f"a list names cells matched to each other: give two or more, got "
+                                                f"{value!r} (one value of another axis names each cell's matched "
+                                                f"twin: {dim} = VALUE)")
+        if not isinstance(value, list):
+            extra_labels = (extra or {}).get(dim, {})
+            if any(same_value(value, k) for k in extra_labels):
+                raise fail(f"report.matched.{dim}", f"{value!r} is an extra cell, crossed with nothing, so no cell "
+                                                    f"has it as a twin; name the matched extra cells as a list: "
+                                                    f"{dim} = [{', '.join(map(repr, extra_labels))}]")
+            if len(dims) < 2:
+                raise fail(f"report.matched.{dim}", f"one value names each cell's matched twin on another axis, and "
+                                                    f"the grid has no other (its axes: {dim}); name cells matched "
+                                                    f"to each other as a list: {dim} = [A, B]")
         matched[dim] = tuple(next(k for k in known if same_value(v, k)) for v in values)
     if len(matched) > 1:
         raise fail("report.matched", f"expected one dimension, got {', '.join(matched)}")
