@@ -207,6 +207,8 @@ def test_an_extra_cell_runs_at_its_scenes_alone_and_the_report_says_where_it_did
     assert "at a matched size (`3 at 140` against `0 at 590`): test PSNR +0.32 dB [95 % CI" in three  # diffuse
     matched = [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
     assert [(c.scene, c.label) for c in matched] == [("diffuse", "3 at 140")]
+    summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
+    assert "; at a matched size: glossy not run (the pair's `scenes`), diffuse +0.32 dB" in summary
 
 
 def test_the_ranks_order_the_grids_cells_alone(tmp_path):
@@ -219,3 +221,40 @@ def test_the_ranks_order_the_grids_cells_alone(tmp_path):
     assert ranked(report) == ranked(plain) and ranked(report)
     ranks = text[text.index("## Appendix: Ranks"):]
     assert "`0 at 590`" not in ranks.split("\n- ")[0]
+
+
+def test_a_pair_that_missed_its_count_or_still_moves_says_so(tmp_path):
+    """Cells declared matched are matched only where they ended at one size: an SH 0 budget run that
+    fell short (ended at 140 Gaussians, x4.2 fewer bytes than SH 3 at 140) is said to be not at one size,
+    never claimed at a matched size (a new user's trial: a pair x4.07 apart was printed "at a matched
+    size"). A pair whose curves still rise is marked not settled, as the grid's comparisons are."""
+    def short(run):  # SH 0's budget cell ends at SH 3's count; SH 3's extra cell still rises fast
+        metrics, curves = _make(run)
+        label = run.labels["sh.degree"]
+        if label == "0 at 590":
+            metrics = {**metrics, "num_gaussians": 140}
+        if label == "3 at 140":
+            curves = flat_curves(metrics["test_psnr"], rise=0.6)
+        return metrics, curves
+
+    report, text = results(tmp_path / "short", spec_of(extra=EXTRA, report=MATCHED), short)
+    three = _line(text, "3")
+    assert "its matched-size cells, `3 at 140` against `0 at 590`, did not end at one size at glossy: test PSNR " \
+           "+0.32 dB" in three and "at ×4.214 the bytes" in three and "quality and size are not separated here" in three
+    matched = next(line for line in text.splitlines() if line.startswith("- **At a matched size**"))
+    assert "glossy +0.32 dB" in matched and ": **not at one size** (a run that missed its count" in matched
+    assert not [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
+    summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
+    assert "; at a matched size: glossy not at one size (×4.214)" in summary
+
+    def rising(run):  # at one size, but SH 3's extra cell still rises 0.6 dB over the last quarter
+        metrics, curves = _make(run)
+        return metrics, (flat_curves(metrics["test_psnr"], rise=0.6) if run.labels["sh.degree"] == "3 at 140"
+                         else curves)
+
+    report, text = results(tmp_path / "rising", spec_of(extra=EXTRA, report=MATCHED), rising)
+    matched = next(line for line in text.splitlines() if line.startswith("- **At a matched size**"))
+    assert "at ×1.000 the bytes" in matched and ", **not settled** (" in matched
+    assert ", **not settled** (" in _line(text, "3").split("at a matched size")[1]
+    summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
+    assert "(`3 at 140` against `0 at 590`), not settled" in summary

@@ -364,6 +364,13 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     primary_comp = next((c for c in rules.comparisons if c.metric == primary.name), Comparison(primary.name, "diff"))
     size_spec = specs.get(rules.size) if rules.size else None
     size_effect = next((c.min_effect for c in rules.comparisons if c.metric == rules.size), None) or 0.0
+
+    def off_size(ratio: Interval) -> bool:
+        """Two cells declared matched that did not end at one size: their paired size ratio, as written
+        (×4.070), is more than the size's minimum effect (5 % where none) from ×1 (a run that missed its
+        count: the budget strategy short of its budget warns)."""
+        return bool(ratio.n) and math.isfinite(ratio.estimate) and \
+            abs(float(f"{ratio.estimate:.3f}") - 1.0) > (size_effect or 0.05) + 1e-12
     settling = declared.settling if declared is not None else None
     settle_effect = (primary_comp.min_effect if settling is not None and settling.metric == primary.name
                      else None)
@@ -482,6 +489,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 if not iv.n:
                     away = [r for r in pair if scene not in experiment.extra_scenes.get(table.axis, {}).get(
                         r.value, (scene,))]  # an extra cell's `scenes` that leave this one out
+                    if away and at_size is not None:
+                        at_size.append(f"{scene} not run (the pair's `scenes`)")
                     pieces.append(head + (f"; its matched-size cells, {named}, are not run at {scene} (their "
                                           f"`scenes`): quality and size are not separated here)" if away else
                                           f"; its matched-size cells, {named}, have no done runs yet)"))
@@ -489,10 +498,18 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 size = paired_ratio(size_values(scene, pair[0]), size_values(scene, pair[1]))
                 at = size_ratio_text(f"×{size.estimate:.3f}", scene, *pair) if size.n else "sizes not recorded"
                 said = interval_text(iv, primary_comp.how, primary, null, primary_comp.min_effect)
+                if off_size(size):
+                    if at_size is not None:
+                        at_size.append(f"{scene} not at one size (×{size.estimate:.3f})")
+                    pieces.append(head + f"; its matched-size cells, {named}, did not end at one size at {scene}: "
+                                         f"{_name(primary)} {said.text} at {at}, a run that missed its count (see "
+                                         f"\"Warnings\"): quality and size are not separated here)")
+                    continue
+                why = unsettled(scene, pair[0], pair[1], iv.estimate - (null or 0.0))
                 if at_size is not None:
-                    at_size.append(f"{scene} {said.short} ({named})")
+                    at_size.append(f"{scene} {said.short} ({named})" + (", not settled" if why else ""))
                 pieces.append(head + f" at its natural size); at a matched size ({named}): {_name(primary)} "
-                                     f"{said.text}, at {at}")
+                                     f"{said.text}, at {at}" + (f", **not settled** ({why})" if why else ""))
             elif dim == table.axis:
                 pieces.append(head + f"; no matched-size cell of this comparison: the matched cells are "
                                      f"{', '.join(f'`{display(v)}`' for v in matched_values)}, compared below)")
@@ -759,12 +776,17 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 if not iv.n:
                     continue
                 text = fmt_interval(iv, primary_comp.how, primary, null, primary_comp.min_effect)
+                ratio = paired_ratio(size_values(scene, rows[0]), size_values(scene, row))
+                at = f" at {size_ratio_text(f'×{ratio.estimate:.3f}', scene, rows[0], row)}" if ratio.n else ""
+                if off_size(ratio):  # declared matched, ended apart: said, never claimed at one size
+                    texts.append(f"{scene} {text}{at}: **not at one size** (a run that missed its count: see "
+                                 f"\"Warnings\")")
+                    continue
                 claims.append(Claim("matched", scene, row.label, primary.name, primary_comp.how, iv.estimate, text,
                                     rows[0].label, iv.low, iv.high, iv.n,
                                     *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
-                ratio = paired_ratio(size_values(scene, rows[0]), size_values(scene, row))
-                at = f" at {size_ratio_text(f'×{ratio.estimate:.3f}', scene, rows[0], row)}" if ratio.n else ""
-                texts.append(f"{scene} {text}{at}")
+                why = unsettled(scene, rows[0], row, iv.estimate - (null or 0.0))
+                texts.append(f"{scene} {text}{at}" + (f", **not settled** ({why})" if why else ""))
             if texts:
                 parts.append(f"`{row.label}` against `{rows[0].label}`: " + "; ".join(texts))
         head = (f"- **At a matched size** (`[report] matched`: {', '.join(f'`{r.label}`' for r in rows)} end at one "
