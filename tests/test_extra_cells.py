@@ -209,6 +209,8 @@ def test_an_extra_cell_runs_at_its_scenes_alone_and_the_report_says_where_it_did
     assert [(c.scene, c.label) for c in matched] == [("diffuse", "3 at 140")]
     summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
     assert "; at a matched size: glossy not run (the pair's `scenes`), diffuse +0.32 dB" in summary
+    # the table has no rows of the pair at glossy (none were to run there), and its rows at diffuse
+    assert "| glossy | `3 at 140` |" not in text and "| diffuse | `3 at 140` | 3 |" in text
 
 
 def test_the_ranks_order_the_grids_cells_alone(tmp_path):

@@ -234,7 +234,7 @@ class AxisTable:
     def markdown(self) -> str:
         return markdown_table(["scene", self.axis, "runs", *(m.label for m in self.metrics)],
                               ([r.scene, f"`{r.label}`", int(r.runs), *(_cell(r, m) for m in self.metrics)]
-                               for _, r in self.frame.iterrows()),
+                               for _, r in self.frame.iterrows() if not r.get("absent", False)),
                               align="---" + "r" * len(self.metrics))
 
 
@@ -276,7 +276,9 @@ def axis_table(spec: ExperimentSpec, kind: RunKind, axis: str, table: pd.DataFra
         at_scene = done[done.scene == scene]
         for row in rows:
             runs = at_scene[at_scene.run_id.isin(row.run_ids)]
-            rec: dict[str, Any] = {"scene": scene, "label": row.label, "runs": len(runs)}
+            # an extra cell whose `scenes` leave this one out: kept in the frame, not written as a row of runs
+            absent = row.extra and scene not in spec.extra_scenes.get(axis, {}).get(row.value, spec.scenes)
+            rec: dict[str, Any] = {"scene": scene, "label": row.label, "runs": len(runs), "absent": absent}
             loaded = loaded_runs(runs, kind)
             for m in metrics:
                 left = int(loaded.sum()) if m.name in timed else 0
