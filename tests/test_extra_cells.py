@@ -211,6 +211,7 @@ def test_an_extra_cell_runs_at_its_scenes_alone_and_the_report_says_where_it_did
     assert "; at a matched size: glossy not run (the pair's `scenes`), diffuse +0.32 dB" in summary
     # the table has no rows of the pair at glossy (none were to run there), and its rows at diffuse
     assert "| glossy | `3 at 140` |" not in text and "| diffuse | `3 at 140` | 3 |" in text
+    assert "2 extra cells outside it (`sh.degree = 0 at 590` (diffuse only), `sh.degree = 3 at 140` (diffuse only)" in text
 
 
 def test_the_ranks_order_the_grids_cells_alone(tmp_path):

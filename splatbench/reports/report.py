@@ -270,7 +270,8 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     spec, kind, table = report.spec, report.kind, report.table
     missing = report.total - len(table)
     dims = ", ".join(f"`{d}`" for d in spec.dimensions) or "no axes"
-    extra = [f"`{d} = {lab}`" for d, labs in spec.extra.items() for lab in labs]  # cells outside the grid
+    extra = [f"`{d} = {lab}`" + (f" ({', '.join(at)} only)" if (at := spec.extra_scenes.get(d, {}).get(lab)) else "")
+             for d, labs in spec.extra.items() for lab in labs]  # cells outside the grid, and where they run
     if extra:
         dims += (f", and {len(extra)} extra cell{'s' if len(extra) > 1 else ''} outside it ({', '.join(extra)}: the "
                  f"base and the fields each `[extra]` cell sets, crossed with nothing)")
