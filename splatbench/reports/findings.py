@@ -1148,7 +1148,9 @@ def holm_line(family: Sequence[Claim], p: Sequence[float], kept: Sequence[bool],
     names = [f"{c.scene} `{c.label}` ({_p(q)})" for c, q, k in sorted(zip(family, p, kept), key=lambda x: x[1])
              if k]
     line = (f"**Holm's correction** over the {len(family)} {name} comparisons of this axis (family-wise 5 %): "
-            f"{sum(kept)} of the {alone} significant alone {'remains' if sum(kept) == 1 else 'remain'} significant"
+            + (f"the one significant alone {'remains' if sum(kept) else 'does not remain'} significant" if alone == 1
+               else f"{sum(kept)} of the {alone} significant alone {'remains' if sum(kept) == 1 else 'remain'} "
+                    f"significant")
             + (f": {', '.join(names)}" if names else ""))
     order = sorted(range(len(family)), key=lambda i: p[i])
     first = next((i for i in order if not kept[i]), None)
