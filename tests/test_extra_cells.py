@@ -169,8 +169,8 @@ def test_extra_cells_are_compared_only_at_a_matched_size(tmp_path):
     assert "no matched-size cell of this comparison: the matched cells are `0 at 590`, `3 at 140`" in _line(text, "1")
     # the Summary's line of `3` gives the matched-size difference beside the size change, per scene
     summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
-    assert "; at a matched size: glossy +0.32 dB [95 % CI " in summary and \
-        "(`3 at 140` against `0 at 590`), diffuse +0.32 dB [95 % CI " in summary
+    assert "; at a matched size (`3 at 140` against `0 at 590`): glossy +0.32 dB [95 % CI " in summary and \
+        "; diffuse +0.32 dB [95 % CI " in summary
 
 
 def test_extra_cells_without_runs_say_so_and_change_no_comparison(tmp_path):
@@ -208,7 +208,8 @@ def test_an_extra_cell_runs_at_its_scenes_alone_and_the_report_says_where_it_did
     matched = [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
     assert [(c.scene, c.label) for c in matched] == [("diffuse", "3 at 140")]
     summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
-    assert "; at a matched size: glossy not run (the pair's `scenes`), diffuse +0.32 dB" in summary
+    assert "; at a matched size (`3 at 140` against `0 at 590`): glossy not run (the pair's `scenes`); diffuse " \
+           "+0.32 dB" in summary
     # the table has no rows of the pair at glossy (none were to run there), and its rows at diffuse
     assert "| glossy | `3 at 140` |" not in text and "| diffuse | `3 at 140` | 3 |" in text
     assert "2 extra cells outside it (`sh.degree = 0 at 590` (diffuse only), `sh.degree = 3 at 140` (diffuse only)" in text
@@ -248,7 +249,7 @@ def test_a_pair_that_missed_its_count_or_still_moves_says_so(tmp_path):
     assert "glossy +0.32 dB" in matched and ": **not at one size** (a run that missed its count" in matched
     assert not [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
     summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
-    assert "; at a matched size: glossy not at one size (×4.214)" in summary
+    assert "; at a matched size (`3 at 140` against `0 at 590`): glossy not at one size (×4.214)" in summary
 
     def rising(run):  # at one size, but SH 3's extra cell still rises 0.6 dB over the last quarter
         metrics, curves = _make(run)
@@ -260,4 +261,5 @@ def test_a_pair_that_missed_its_count_or_still_moves_says_so(tmp_path):
     assert "at ×1.000 the bytes" in matched and ", **not settled** (" in matched
     assert ", **not settled** (" in _line(text, "3").split("at a matched size")[1]
     summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
-    assert "(`3 at 140` against `0 at 590`), not settled" in summary
+    assert "; at a matched size (`3 at 140` against `0 at 590`): glossy +0.32 dB [95 % CI " in summary and \
+        "], not settled" in summary

@@ -457,12 +457,11 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
         return f"{what[:1].upper()}{what[1:]} (mean over seeds, `{b.label}` against `{a.label}`): " + "; ".join(parts)
 
     def matched_text(a: Row, b: Row, heads: list[tuple[str, SizeShift]] | None = None,
-                     at_size: list[str] | None = None) -> str:
+                     at_size: list[tuple[str, str]] | None = None) -> str:
         """Where ``b`` comes with `MATCHED_SHARE` more (or fewer) Gaussians than ``a`` at a scene, the same
         difference at the matched size (`[report] matched`), or that the grid has none; ``heads``
         collects each scene's size change, (scene, `size_shift`'s), and ``at_size`` each matched-size
-        difference in brief (``fox +0.52 dB [95 % CI +0.20, +0.84] (`3 at 14,000` against `0 at 59,000`)``):
-        the summary's."""
+        difference in brief, (what is matched, ``fox +0.52 dB [95 % CI +0.20, +0.84]``): the summary's."""
         pieces = []
         if dim == table.axis and (len(matched_values) < 2 or all(any(same_value(r.value, v) for v in matched_values)
                                                                  for r in (a, b))):
@@ -490,7 +489,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                     away = [r for r in pair if scene not in experiment.extra_scenes.get(table.axis, {}).get(
                         r.value, (scene,))]  # an extra cell's `scenes` that leave this one out
                     if away and at_size is not None:
-                        at_size.append(f"{scene} not run (the pair's `scenes`)")
+                        at_size.append((named, f"{scene} not run (the pair's `scenes`)"))
                     pieces.append(head + (f"; its matched-size cells, {named}, are not run at {scene} (their "
                                           f"`scenes`): quality and size are not separated here)" if away else
                                           f"; its matched-size cells, {named}, have no done runs yet)"))
@@ -500,14 +499,14 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 said = interval_text(iv, primary_comp.how, primary, null, primary_comp.min_effect)
                 if off_size(size):
                     if at_size is not None:
-                        at_size.append(f"{scene} not at one size (×{size.estimate:.3f})")
+                        at_size.append((named, f"{scene} not at one size (×{size.estimate:.3f})"))
                     pieces.append(head + f"; its matched-size cells, {named}, did not end at one size at {scene}: "
                                          f"{_name(primary)} {said.text} at {at}, a run that missed its count (see "
                                          f"\"Warnings\"): quality and size are not separated here)")
                     continue
                 why = unsettled(scene, pair[0], pair[1], iv.estimate - (null or 0.0))
                 if at_size is not None:
-                    at_size.append(f"{scene} {said.short} ({named})" + (", not settled" if why else ""))
+                    at_size.append((named, f"{scene} {said.short}" + (", not settled" if why else "")))
                 pieces.append(head + f" at its natural size); at a matched size ({named}): {_name(primary)} "
                                      f"{said.text}, at {at}" + (f", **not settled** ({why})" if why else ""))
             elif dim == table.axis:
@@ -524,7 +523,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 said = interval_text(iv, primary_comp.how, primary, null, primary_comp.min_effect)
                 text = said.text
                 if at_size is not None:
-                    at_size.append(f"{scene} {said.short} ({setting_text(experiment, dim)})")
+                    at_size.append((setting_text(experiment, dim), f"{scene} {said.short}"))
                 claims.append(Claim("matched", scene, b.label, primary.name, primary_comp.how, iv.estimate, text,
                                     a.label, iv.low, iv.high, iv.n,
                                     *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
@@ -720,7 +719,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             if size:
                 more.append(size)
             heads: list[tuple[str, SizeShift]] = []
-            at_size: list[str] = []
+            at_size: list[tuple[str, str]] = []
             if size_spec is not None:
                 line += matched_text(ref, row, heads, at_size)
             if also:
@@ -757,7 +756,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                                             f"significant after Holm)" if short and across.everywhere else ""))
             if heads:
                 marks.append("**against model size**: " + _sizes_in_brief(heads)
-                             + ("; at a matched size: " + ", ".join(at_size) if at_size else ""))
+                             + "".join(f"; at a matched size ({named}): " + "; ".join(t for n, t in at_size if n == named)
+                                       for named in dict.fromkeys(n for n, _ in at_size)))
             said = "; ".join(f"{c.scene} {brief}"
                              + (", not significant after Holm" if (c.scene, c.label) in lost else "")
                              for c, brief in zip(primaries, briefs))
