@@ -1102,6 +1102,10 @@ def test_opacity_resets_closer_than_an_opacity_can_recover_are_warned_about():
     assert line.startswith("warning: strategy 'default' resets opacities every 10 steps in this run, sooner than "
                            "an opacity can climb back from the reset value 0.01 to 0.5 (176 steps") and "\n" not in line
     assert 'strategy.reset_every = 0' in line
+    # no fraction of a 100-step run is 176 steps long: that way out is offered only where one is
+    assert '("50%")' not in line
+    (longer,) = apply_overrides(TrainConfig(), ["iterations=600"]).warnings()  # resets every 60 steps
+    assert 'or a fraction of the run ("50%") at least' in longer
     quiet = ["iterations=2000", "iterations=30000", "protocol=graphdeco-7k", "strategy=mcmc",
              "strategy.reset_every=0", 'strategy.reset_every="50%"']
     for way in quiet:

@@ -487,7 +487,8 @@ class TrainConfig:
                            f"{RECOVERY_OPACITY:g} ({climb} steps at optim.lr_opacity_logits "
                            f"{self.optim.lr_opacity_logits:g} under a steady gradient): each reset comes before the "
                            f"model has recovered from the last; train longer, or set strategy.reset_every = 0 (no "
-                           f"resets) or a fraction of the run (\"50%\") at least {climb} steps long")
+                           f"resets)" + (f" or a fraction of the run (\"50%\") at least {climb} steps long"
+                                         if climb < self.iterations else ""))  # none is, in a shorter run
         return out
 
     def make_strategy(self, *, scaled: bool = True):
