@@ -83,7 +83,9 @@ def test_an_extra_cell_is_a_row_of_its_dimension_alone():
     ({"sh.degree": {"a": {"sh.degree": 1}}}, r"extra\.sh\.degree\.a: the same runs as a cell of the grid"),
     ({"sh.degree": {"a": {"sh.degree": 9}}}, r"extra\.sh\.degree\.a: .*sh"),
     ({"sh.degree": {"a": {"scenes": ["thin"], **BUDGETED}}}, r"extra\.sh\.degree\.a\.scenes: 'thin' is not one of"),
-    ({"sh.degree": {"a": {"scenes": "glossy", **BUDGETED}}}, r"extra\.sh\.degree\.a\.scenes: expected a list"),
+    ({"sh.degree": {"a": {"scenes": ["glosy"], **BUDGETED}}}, r"'glosy' is not one of .*; did you mean 'glossy'\?"),
+    ({"sh.degree": {"a": {"scenes": "glossy", **BUDGETED}}},
+     r"extra\.sh\.degree\.a\.scenes: expected a list of distinct scene names \(e\.g\. scenes = \['glossy'\]\)"),
     ({"sh.degree": {"a": {"scenes": [], **BUDGETED}}}, r"extra\.sh\.degree\.a\.scenes: expected a list"),
 ])
 def test_a_bad_extra_cell_is_one_line(extra, message):

@@ -65,6 +65,7 @@ in `splatbench.experiments.configs`, shared by this module, the grid and the kin
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 from collections.abc import Mapping, Sequence
@@ -374,11 +375,15 @@ def _parse_extra(table: Any, fail, source: str, axes: Mapping[str, tuple[Any, ..
                 at = settings.pop("scenes")
                 if (not isinstance(at, list) or not at or not all(isinstance(x, str) for x in at)
                         or len(set(at)) != len(at)):
-                    raise fail(f"{where}.{label}.scenes", f"expected a list of distinct scene names, got {at!r}")
+                    example = f"[{at!r}]" if isinstance(at, str) else f"[{', '.join(map(repr, scenes[:2]))}]"
+                    raise fail(f"{where}.{label}.scenes", f"expected a list of distinct scene names (e.g. scenes = "
+                                                          f"{example}), got {at!r}")
                 unknown = [x for x in at if x not in scenes]
                 if unknown:
+                    close = difflib.get_close_matches(unknown[0], list(scenes), n=1)
                     raise fail(f"{where}.{label}.scenes", f"{unknown[0]!r} is not one of the grid's scenes "
-                                                          f"({', '.join(scenes)})")
+                                                          f"({', '.join(scenes)})"
+                                                          + (f"; did you mean {close[0]!r}?" if close else ""))
                 only.setdefault(dim, {})[str(label)] = tuple(x for x in scenes if x in at)  # the grid's order
             flat = flatten(settings, where=f"{source}: {where}.{label}") if settings else {}
             for path, value in flat.items():
