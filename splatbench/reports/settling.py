@@ -16,9 +16,10 @@ and the metric they measure); the rule (docs/reports.md, "Settled"):
   seeds share) is more than the minimum effect below its best value at an earlier step (above,
   for a metric where lower is better): such a cell is "past its peak (best at step N)", never
   settled, however flat its last quarter (a curve that peaked at 2,100 steps and fell 0.3 dB by
-  7,000 may end flat); where a reset the kind names falls between the best step and the end, it
-  says so ("; the reset at step 6,000 lies between": the fall may be the reset's dip, the rule
-  unchanged);
+  7,000 may end flat); where a reset the kind names falls between the best step and the end, and
+  the curve was still within the minimum effect of its best at its last evaluation before that
+  reset, it says so ("; the reset at step 6,000 lies between": the fall came after the reset, maybe
+  its dip; the rule unchanged);
 * **past its peak** is judged on the fall as written (`FALL_FMT`, two decimals): a printed
   0.10 dB is never "more than the 0.1 dB minimum effect" (docs/reports.md, "Minimum effects");
 * **overfitting**: the test curve is flat or falling (slope below the threshold) while the
@@ -127,7 +128,8 @@ class CellSettling:
     resets: tuple[int, ...] = ()  # the resets (`SettlingCurves.resets`) in the window, over the runs
     left_out: tuple[int, ...] = ()  # the training-view steps left out of the window (`RESET_RECOVERY`)
     gap_counts: tuple[tuple[int, int], ...] = ()  # each run's (training-view points, test points) in the gap
-    reset_after_best: int | None = None  # the last reset (`SettlingCurves.resets`) after ``best_step``, by the end
+    reset_after_best: int | None = None  # the last reset (`SettlingCurves.resets`) after ``best_step``, by the end,
+    #   before which the curve was still within the minimum effect of its best (the fall came after it)
 
     @property
     def flat(self) -> bool:
@@ -185,20 +187,33 @@ def _curves(value) -> dict | None:
     return parsed if isinstance(parsed, dict) else None
 
 
-def mean_peak(runs: pd.DataFrame, keys: SettlingCurves) -> tuple[float, int, float] | None:
-    """(best value, its step, last value) of the test curve averaged over seeds at each step every seed
-    of ``runs`` evaluated (a seed's runs averaged first); best is the highest, or the lowest where
-    ``keys.better`` is "lower"; None when the seeds share no step."""
+def mean_curve(runs: pd.DataFrame, keys: SettlingCurves) -> list[tuple[int, float]]:
+    """(step, value) of the test curve averaged over seeds at each step every seed of ``runs`` evaluated
+    (a seed's runs averaged first); [] when the seeds share no step."""
     seeds = _seed_curves(runs, keys.test_step, keys.test_value)
     if not seeds:
-        return None
+        return []
     steps = sorted(set.intersection(*(set(c) for c in seeds.values())))
-    if not steps:
+    return [(s, float(np.mean([c[s] for c in seeds.values()]))) for s in steps]
+
+
+def mean_peak(runs: pd.DataFrame, keys: SettlingCurves) -> tuple[float, int, float] | None:
+    """(best value, its step, last value) of `mean_curve`; best is the highest, or the lowest where
+    ``keys.better`` is "lower"; None when the seeds share no step."""
+    mean = mean_curve(runs, keys)
+    if not mean:
         return None
-    mean = [(s, float(np.mean([c[s] for c in seeds.values()]))) for s in steps]
     sign = -1.0 if keys.better == "lower" else 1.0
     step, best = max(mean, key=lambda p: (sign * p[1], -p[0]))
     return best, step, mean[-1][1]
+
+
+def _fell_after(mean: list[tuple[int, float]], best: float, reset: int, min_effect: float) -> bool:
+    """Whether the curve was still within ``min_effect`` of its ``best`` at its last evaluation before
+    ``reset``: the fall came after that reset (fox's SH 3 at 7K), not before it (glossy, falling from
+    step 3,500 on, past its peak before the reset at 6,000)."""
+    before = [v for s, v in mean if s < reset]
+    return bool(before) and abs(best - before[-1]) <= min_effect + 1e-12
 
 
 def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -> CellSettling | None:
@@ -247,7 +262,9 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
     gap = float(np.mean([np.mean(v) for v in gaps.values()])) if gaps else None
     peak = mean_peak(runs, keys)
     best, best_step, last = peak if peak is not None else (None, None, None)
-    after = [r for r in every_reset if best_step is not None and r > best_step]
+    curve = mean_curve(runs, keys)
+    after = [r for r in every_reset if best_step is not None and r > best_step
+             and _fell_after(curve, best, r, min_effect)]
     return CellSettling(float(np.mean(list(per_seed.values()))), train_mean, min(starts), max(ends), per_seed,
                         min_effect, gap, best, best_step, last, min(los), tuple(sorted(resets)),
                         tuple(sorted(left_out)), tuple(sorted(set(counts))), max(after) if after else None)
