@@ -156,8 +156,11 @@ def test_extra_cells_are_compared_only_at_a_matched_size(tmp_path):
     # the extra cells' rows in the table
     assert "| glossy | `0 at 590` | 3 | 29.01 ± " in text and "| diffuse | `3 at 140` | 3 | 29.33 ± " in text
     # their difference: (0.3 + 0.02 s) over seeds 0..2, +0.32 dB, at x1.000 the bytes (8,260 floats each)
+    # what each extra cell sets besides its axis value is named (the budget strategy: not the grid's)
     head = ("- **At a matched size** (`[report] matched`: `0 at 590`, `3 at 140` end at one byte count; "
-            "`sh.degree = 0 at 590`, `sh.degree = 3 at 140`): `3 at 140` against `0 at 590`: glossy +0.32 dB [95 % CI ")
+            "`sh.degree = 0 at 590` sets `strategy.budget = 590`, `strategy.name = budget`, `strategy.budget_mode = "
+            "final_count`; `sh.degree = 3 at 140` sets `strategy.budget = 140`, `strategy.name = budget`, "
+            "`strategy.budget_mode = final_count`): `3 at 140` against `0 at 590`: glossy +0.32 dB [95 % CI ")
     assert head in text
     matched = [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
     assert [(c.scene, c.label, c.reference, round(c.value, 6)) for c in matched] == \
@@ -171,7 +174,8 @@ def test_extra_cells_are_compared_only_at_a_matched_size(tmp_path):
     assert "no matched-size cell of this comparison: the matched cells are `0 at 590`, `3 at 140`" in _line(text, "1")
     # the Summary's line of `3` gives the matched-size difference beside the size change, per scene
     summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
-    assert "; at a matched size (`3 at 140` against `0 at 590`): glossy +0.32 dB [95 % CI " in summary and \
+    assert "; at a matched size (`3 at 140` against `0 at 590`, both also setting `strategy.name = budget`, " \
+           "`strategy.budget_mode = final_count`; not in Holm's family): glossy +0.32 dB [95 % CI " in summary and \
         "; diffuse +0.32 dB [95 % CI " in summary
 
 
@@ -183,7 +187,8 @@ def test_extra_cells_without_runs_say_so_and_change_no_comparison(tmp_path):
     assert "(9 done, 0 failed, 6 not run)" in text
     assert "and 2 extra cells outside it (`sh.degree = 0 at 590`, `sh.degree = 3 at 140`" in text
     assert "| glossy | `3 at 140` | 0 | – |" in text
-    assert "`sh.degree = 3 at 140`): no done runs of these cells yet, so nothing is compared at a matched size." in text
+    assert "`strategy.budget_mode = final_count`): no done runs of these cells yet, so nothing is compared at a " \
+           "matched size." in text
     assert "its matched-size cells, `3 at 140` against `0 at 590`, have no done runs yet)" in _line(text, "3")
     assert not [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
 
@@ -210,7 +215,8 @@ def test_an_extra_cell_runs_at_its_scenes_alone_and_the_report_says_where_it_did
     matched = [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
     assert [(c.scene, c.label) for c in matched] == [("diffuse", "3 at 140")]
     summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
-    assert "; at a matched size (`3 at 140` against `0 at 590`): glossy not run (the pair's `scenes`); diffuse " \
+    assert "; at a matched size (`3 at 140` against `0 at 590`, both also setting `strategy.name = budget`, " \
+           "`strategy.budget_mode = final_count`; not in Holm's family): glossy not run (the pair's `scenes`); diffuse " \
            "+0.32 dB" in summary
     # the table has no rows of the pair at glossy (none were to run there), and its rows at diffuse
     assert "| glossy | `3 at 140` |" not in text and "| diffuse | `3 at 140` | 3 |" in text
@@ -251,7 +257,7 @@ def test_a_pair_that_missed_its_count_or_still_moves_says_so(tmp_path):
     assert "glossy +0.32 dB" in matched and ": **not at one size** (a run that missed its count" in matched
     assert not [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
     summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
-    assert "; at a matched size (`3 at 140` against `0 at 590`): glossy not at one size (×4.214)" in summary
+    assert "not in Holm's family): glossy not at one size (×4.214)" in summary
 
     def rising(run):  # at one size, but SH 3's extra cell still rises 0.6 dB over the last quarter
         metrics, curves = _make(run)
@@ -263,5 +269,22 @@ def test_a_pair_that_missed_its_count_or_still_moves_says_so(tmp_path):
     assert "at ×1.000 the bytes" in matched and ", **not settled** (" in matched
     assert ", **not settled** (" in _line(text, "3").split("at a matched size")[1]
     summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
-    assert "; at a matched size (`3 at 140` against `0 at 590`): glossy +0.32 dB [95 % CI " in summary and \
-        "], not settled" in summary
+    assert "not in Holm's family): glossy +0.32 dB [95 % CI " in summary and "], not settled" in summary
+
+
+def test_extra_cells_of_a_variant_axis_say_what_they_set():
+    """densification.toml's mcmc and budget are extra cells of its `densify` variant: the matched line
+    names their fields as it names a variant's (an extra label is no variant: looking it up there failed)."""
+    from splatbench.reports.findings import setting_text
+
+    spec = parse_experiment({"name": "d", "kind": "train", "scenes": ["glossy"], "seeds": [0],
+                             "base": {"iterations": 100, "data": {"resolution": 32, "views": 8, "spp": 2}},
+                             "variants": {"densify": {"none": {"strategy": {"name": "none"}},
+                                                      "default": {"strategy": {"name": "default"}}}},
+                             "extra": {"densify": {"mcmc": {"strategy": {"name": "mcmc", "cap_max": 600}},
+                                                   "budget": {"strategy": {"name": "budget", "budget": 600,
+                                                                           "budget_mode": "final_count"}}}},
+                             "report": {"matched": {"densify": ["mcmc", "budget"]}}}, source="x.toml")
+    assert setting_text(spec, "densify", ["mcmc", "budget"]) == (
+        "`densify = mcmc` sets `strategy.name = mcmc`, `strategy.cap_max = 600`; `densify = budget` sets "
+        "`strategy.name = budget`, `strategy.budget = 600`, `strategy.budget_mode = final_count`")

@@ -485,11 +485,16 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 iv, null = paired(values(scene, pair[0], primary.name), values(scene, pair[1], primary.name),
                                   primary_comp)
                 named = f"`{pair[1].label}` against `{pair[0].label}`"
+                cells = [experiment.extra.get(table.axis, {}).get(r.value, {}) for r in pair]
+                common = [f"`{k} = {display(v)}`" for k, v in cells[0].items()
+                          if k != table.axis and cells[1].get(k, object()) == v]
+                brief = named + (f", both also setting {', '.join(common)}" if common else "") + \
+                    "; not in Holm's family"  # the summary's
                 if not iv.n:
                     away = [r for r in pair if scene not in experiment.extra_scenes.get(table.axis, {}).get(
                         r.value, (scene,))]  # an extra cell's `scenes` that leave this one out
                     if away and at_size is not None:
-                        at_size.append((named, f"{scene} not run (the pair's `scenes`)"))
+                        at_size.append((brief, f"{scene} not run (the pair's `scenes`)"))
                     pieces.append(head + (f"; its matched-size cells, {named}, are not run at {scene} (their "
                                           f"`scenes`): quality and size are not separated here)" if away else
                                           f"; its matched-size cells, {named}, have no done runs yet)"))
@@ -499,14 +504,14 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 said = interval_text(iv, primary_comp.how, primary, null, primary_comp.min_effect)
                 if off_size(size):
                     if at_size is not None:
-                        at_size.append((named, f"{scene} not at one size (×{size.estimate:.3f})"))
+                        at_size.append((brief, f"{scene} not at one size (×{size.estimate:.3f})"))
                     pieces.append(head + f"; its matched-size cells, {named}, did not end at one size at {scene}: "
                                          f"{_name(primary)} {said.text} at {at}, a run that missed its count (see "
                                          f"\"Warnings\"): quality and size are not separated here)")
                     continue
                 why = unsettled(scene, pair[0], pair[1], iv.estimate - (null or 0.0))
                 if at_size is not None:
-                    at_size.append((named, f"{scene} {said.short}" + (", not settled" if why else "")))
+                    at_size.append((brief, f"{scene} {said.short}" + (", not settled" if why else "")))
                 pieces.append(head + f" at its natural size); at a matched size ({named}): {_name(primary)} "
                                      f"{said.text}, at {at}" + (f", **not settled** ({why})" if why else ""))
             elif dim == table.axis:
@@ -986,16 +991,21 @@ def _matched_pair(spec: ExperimentSpec | None, table: AxisTable, a: Row, b: Row,
 
 
 def setting_text(spec: ExperimentSpec | None, dim: str | None, values: Sequence | None = None) -> str:
-    """What the matched setting sets: ``size = matched: strategy.name = budget, strategy.budget = 6000``
-    (a variant's fields), ``loss.ssim_lambda = 0.2`` (a plain axis)."""
+    """What the matched setting sets: ```size = matched` sets `strategy.name = budget`, …`` (a variant's
+    fields, or an extra cell's besides its axis), ```loss.ssim_lambda = 0.2``` (a plain axis)."""
     if spec is None or dim is None:
         return ""
     values = list(values if values is not None else spec.matched.get(dim, ()))
-    if dim in spec.variants:
-        return "; ".join(f"`{dim} = {display(v)}` sets " + ", ".join(f"`{k} = {display(x)}`" for k, x in
-                                                                      flatten(dict(spec.variants[dim][v])).items())
-                         for v in values)
-    return ", ".join(f"`{dim} = {display(v)}`" for v in values)
+    extra = spec.extra.get(dim, {})
+
+    def fields(v) -> dict | None:  # what a variant value or an extra cell sets (None: a plain axis value)
+        if isinstance(v, str) and v in extra:
+            return {k: x for k, x in extra[v].items() if k != dim}  # the axis value is in its label
+        return flatten(dict(spec.variants[dim][v])) if dim in spec.variants else None
+
+    return ("; " if dim in spec.variants or any(fields(v) for v in values) else ", ").join(
+        f"`{dim} = {display(v)}`" + (" sets " + ", ".join(f"`{k} = {display(x)}`" for k, x in f.items())
+                                     if (f := fields(v)) else "") for v in values)
 
 
 @dataclasses.dataclass(frozen=True)
