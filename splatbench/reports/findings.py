@@ -595,7 +595,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             text = (f"{scene}: no single best at comparable size (`{row.label}`, {mean_text}, leads "
                     f"`{runner.label}` by {lead_text} at {at}, more than the "
                     f"{fmt_min_effect(size_effect, 'ratio', size_spec)} minimum effect"
-                    + (f"; both on this table's {size_word}/quality Pareto front" if front else "") + ")")
+                    + (f"; both on {FRONT_OF[any(r.extra for r in table.rows)]} {size_word}/quality Pareto front"
+                       if front else "") + ")")
             short = (f"{scene}: no single best at comparable size (`{row.label}` leads `{runner.label}` at "
                      f"{fmt_number(larger.estimate, 'ratio', size_spec)} `{runner.label}`'s {size_word})")
             if why:
@@ -891,6 +892,9 @@ def bytes_differ(runs: pd.DataFrame, bytes_of: Callable[[pd.DataFrame], pd.Serie
         return False
     return float(per.max() - per.min()) > 1e-9 * float(per.max())
 
+
+#: Whose Pareto front a best's remark weighs (`_on_front`): the table's rows, or the grid's alone beside extra cells.
+FRONT_OF = ("this table's", "the grid cells'")
 
 #: A comparison whose size differs by at least this share is also stated at the matched size.
 MATCHED_SHARE = 0.10
