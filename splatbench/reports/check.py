@@ -349,6 +349,8 @@ def check_lines(result: CheckResult, run_command: str, appendix: bool) -> list[s
         runs = f"{side.done} of {side.total}" + (f" ({side.failed} failed)" if side.failed else "")
         diff = side.claim.text if side.claim is not None else "–"
         settled = "–" if side.settled is None else "yes" if side.settled else f"no: {side.why}"
+        if side.settled is not None and side.done < side.total:  # judged on the seeds done so far
+            settled += f" (on the {side.done} of {side.total} runs done)"
         rows.append([name, runs, _cell(side, 0, m, len(result.seeds)), _cell(side, 1, m, len(result.seeds)), diff,
                      settled])
     head = ["protocol", "runs done", f"`{a}`", f"`{b}`", f"`{b}` − `{a}`, paired", "settled"]
