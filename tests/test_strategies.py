@@ -808,6 +808,20 @@ def test_budget_says_when_too_few_candidates_leave_it_below_its_budget():
     assert strat.outcome_note(state) is None
 
 
+def test_budget_says_why_it_made_fewer_refinements_than_its_schedule():
+    """A run that stopped before the count schedule's last refinement (a 3,100-step cut of graphdeco-7k
+    whose schedule is laid over 7,000) is no early stop: the note names the cause it had."""
+    for early, cause in ((False, "(the run ended before the schedule's last refinement)"),
+                         (True, "(early_stop ended densification)")):
+        params, opts, strat, state = budget_setup(budget=2.0, early_stop=early)   # 60 -> 120 over 4
+        state.count[:] = 1
+        state.grad_accum[:] = 3e-4
+        strat.refine(params, opts, state, step=0, scene_extent=1.0)    # 1 of the 4 refinements
+        note = strat.outcome_note(state)
+        assert note.startswith("strategy 'budget' ended at 86 Gaussians, below its budget of 120: it made 1 of the "
+                               "4 refinements") and note.endswith(cause), note
+
+
 def test_budget_and_mcmc_say_when_their_budget_or_cap_is_below_the_initial_count():
     """Neither prunes down to a count: a budget or cap under the initial count is never met and
     the run says so (the multiplier mode's warning names final_count, the usual intent)."""

@@ -187,7 +187,8 @@ class BudgetStrategy(DefaultStrategy):
         if end < budget and state.refinements < len(state.targets):
             return (f"strategy 'budget' ended at {end:,} Gaussians, below its budget of {budget:,}: it made "
                     f"{state.refinements} of the {len(state.targets)} refinements its count schedule plans "
-                    f"(early_stop ended densification)")
+                    + ("(early_stop ended densification)" if self.early_stop else
+                       "(the run ended before the schedule's last refinement)"))
         if state.last is not None and end < budget and state.last.pruned > 0:
             # (without pruning the last refinement ends at most 1 short: each of the clone and split
             # shares of the headroom is floored, as in taming-3dgs; no note for that)
