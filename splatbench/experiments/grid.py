@@ -117,7 +117,6 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
     seen: dict[str, str] = {}  # run id -> where its cell is written (an extra cell's: extra.DIM.LABEL)
     extras = [[(dim, label, dict(s), f"extra.{dim}.{label}")] for dim, labels in spec.extra.items()
               for label, s in labels.items()]
-    at = {cell[0][3]: spec.extra_scenes.get(cell[0][0], {}).get(cell[0][1]) for cell in extras}  # None: every scene
     for scene in spec.scenes:
         for cell in _cells(spec, dims):
             for seed in spec.seeds:
@@ -127,7 +126,7 @@ def expand(spec: ExperimentSpec, *, known_scenes: Callable[[], set[str]] | None 
                 seen[run.run_id] = "a cell of the grid"
                 runs.append(run)
         for cell in extras:
-            if at[cell[0][3]] is not None and scene not in at[cell[0][3]]:
+            if not spec.extra_runs_at(cell[0][0], cell[0][1], scene):
                 continue
             for seed in spec.seeds:
                 run = make(cell, scene, seed, extra=True)

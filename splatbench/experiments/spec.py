@@ -194,6 +194,11 @@ class ExperimentSpec:
     extra_scenes: Mapping[str, Mapping[str, tuple[str, ...]]] = field(default_factory=dict)  # dimension -> label
     #   -> the scenes an extra cell runs at (its ``scenes = [...]``); a cell not listed runs at every scene
 
+    def extra_runs_at(self, dim: str, label: str, scene: str) -> bool:
+        """Whether the extra cell ``label`` of ``dim`` runs at ``scene`` (its ``scenes``; every scene without)."""
+        at = self.extra_scenes.get(dim, {}).get(label)
+        return at is None or scene in at
+
     @property
     def run_kind(self) -> RunKind:
         """The run kind ``kind`` names (`splatbench.experiments.kinds.get_kind`: a worker finds it

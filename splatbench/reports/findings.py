@@ -491,8 +491,7 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                 brief = named + (f", both also setting {', '.join(common)}" if common else "") + \
                     "; not in Holm's family"  # the summary's
                 if not iv.n:
-                    away = [r for r in pair if scene not in experiment.extra_scenes.get(table.axis, {}).get(
-                        r.value, (scene,))]  # an extra cell's `scenes` that leave this one out
+                    away = [r for r in pair if not experiment.extra_runs_at(table.axis, r.value, scene)]
                     if away and at_size is not None:
                         at_size.append((brief, f"{scene} not run (the pair's `scenes`)"))
                     pieces.append(head + (f"; its matched-size cells, {named}, are not run at {scene} (their "

@@ -277,7 +277,7 @@ def axis_table(spec: ExperimentSpec, kind: RunKind, axis: str, table: pd.DataFra
         for row in rows:
             runs = at_scene[at_scene.run_id.isin(row.run_ids)]
             # an extra cell whose `scenes` leave this one out: kept in the frame, not written as a row of runs
-            absent = row.extra and scene not in spec.extra_scenes.get(axis, {}).get(row.value, spec.scenes)
+            absent = row.extra and not spec.extra_runs_at(axis, row.value, scene)
             rec: dict[str, Any] = {"scene": scene, "label": row.label, "runs": len(runs), "absent": absent}
             loaded = loaded_runs(runs, kind)
             for m in metrics:
