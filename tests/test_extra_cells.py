@@ -113,6 +113,20 @@ def test_a_matched_entry_that_names_no_comparison_is_one_line(matched, message):
     assert "\n" not in str(caught.value)
 
 
+def test_two_matched_extra_cells_of_one_value_are_one_line():
+    """With a 2x2 of extra cells (SH 0 and SH 3, each at both budgets), a list naming both SH 0 cells
+    has no single twin of the grid's SH 0: the findings would pick one silently."""
+    extra = {"sh.degree": {**EXTRA["sh.degree"],
+                           **{f"{d} at {n}": {"sh.degree": d, "strategy.budget": n, **BUDGETED}
+                              for d, n in ((0, 140), (3, 590))}}}
+    assert spec_of(extra=extra, report={"matched": {"sh.degree": ["0 at 140", "3 at 140"]}}).matched \
+        == {"sh.degree": ("0 at 140", "3 at 140")}
+    with pytest.raises(InputError, match=r"report\.matched\.sh\.degree: the extra cells '0 at 590' and '0 at 140' "
+                                         r"both set sh\.degree = 0, .*name one extra cell per value") as caught:
+        spec_of(extra=extra, report={"matched": {"sh.degree": ["0 at 590", "3 at 140", "0 at 140"]}})
+    assert "\n" not in str(caught.value)
+
+
 # --------------------------------------------------------------------------- the report
 def _make(run):
     """Natural cells: 1000 Gaussians (+ 10 per seed); SH 3 +1.0 dB (+0.02 per seed) and SH 1 +0.5 dB

@@ -536,6 +536,18 @@ def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variant
                                                     f"the grid has no other (its axes: {dim}); name cells matched "
                                                     f"to each other as a list: {dim} = [A, B]")
         matched[dim] = tuple(next(k for k in known if same_value(v, k)) for v in values)
+        if dim in axes:  # the findings pair the axis's cells A and B with the extra cells setting it to A and B
+            cells = (extra or {}).get(dim, {})
+            setting: dict[str, list[str]] = {}
+            for v in matched[dim]:
+                if str(v) in cells and dim in cells[str(v)]:
+                    setting.setdefault(repr(cells[str(v)][dim]), []).append(str(v))
+            twice = next(((value, labels) for value, labels in setting.items() if len(labels) > 1), None)
+            if twice is not None:
+                value, labels = twice
+                raise fail(f"report.matched.{dim}", f"the extra cells {' and '.join(map(repr, labels))} both set "
+                                                    f"{dim} = {value}, so neither is the one matched pair's "
+                                                    f"{dim} = {value} twin: name one extra cell per value of {dim}")
     if len(matched) > 1:
         raise fail("report.matched", f"expected one dimension, got {', '.join(matched)}")
     quick = table.get("quick")
