@@ -174,6 +174,34 @@ def test_a_difference_holds_across_scenes_only_with_one_sign_on_every_scene(tmp_
            "diffuse −)" in line
 
 
+def test_the_difference_over_the_scenes_as_the_sample(tmp_path):
+    """Beside the per-scene intervals (over seeds), the mean of the per-scene differences with a t
+    interval over the scenes (df = scenes - 1): what another scene like these would give. Gains 0.5,
+    1.0 and 1.5 dB (+0.01 dB a seed: each scene's mean difference is its gain + 0.01) are practical
+    with one sign on all three scenes, yet over the scenes the interval crosses zero; two scenes (df 1)
+    print none."""
+    from scipy import stats
+
+    gains = {"glossy": 0.5, "diffuse": 1.0, "textured": 1.5}
+
+    def make(run):
+        gain = gains[run.scene] + 0.01 * run.seed if run.labels["sh.degree"] == 3 else 0.0
+        psnr = 30.0 + run.seed * 0.01 + gain
+        return metrics_of(psnr), flat_curves(psnr)
+
+    _, text = results(tmp_path / "a", spec_of(tuple(gains)), make)
+    diffs = np.array([g + 0.01 for g in gains.values()])
+    half = stats.t.ppf(0.975, 2) * diffs.std(ddof=1) / np.sqrt(3)  # 4.303 x 0.5 / sqrt(3) = 1.24 dB
+    low, high = diffs.mean() - half, diffs.mean() + half
+    assert low < 0 < high
+    line = vs_line(text, "3")
+    assert "**Across scenes**: practical and of one sign on all 3 scenes" in line
+    assert (f"; over the scenes as the sample, {diffs.mean():+.2f} dB [95 % CI {low:+.2f}, {high:+.2f}], "
+            f"no significant difference, inconclusive (3 scenes, df 2)") in line
+    _, text = results(tmp_path / "b", spec_of(("glossy", "diffuse")), make)
+    assert "over the scenes as the sample" not in text
+
+
 # --------------------------------------------------------------------------- ranks
 def test_kendall_tau_b_against_hand_counted_pairs():
     # one discordant pair (b, c) of 6: (5 − 1) / 6

@@ -717,9 +717,9 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             if opposed:
                 line += f". **The other way** (against the {_name(primary)} difference, significantly): " \
                     + "; ".join(opposed)
-            across = across_scenes(primaries, scenes, primary_null)
+            across = across_scenes(primaries, scenes, primary_null, primary, primary_comp.min_effect)
             if across is not None:
-                line += f". {across.text}"
+                line += f". {across.text}{across.over}"
             size = size_line(scenes, ref, row)
             if size:
                 more.append(size)
@@ -758,7 +758,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             if across is not None:
                 short = sum((c.scene, c.label) in lost for c in primaries)  # across scenes per comparison only
                 marks.append(across.text + (f" (each per comparison; {len(primaries) - short} of {len(primaries)} "
-                                            f"significant after Holm)" if short and across.everywhere else ""))
+                                            f"significant after Holm)" if short and across.everywhere else "")
+                             + across.over)
             if heads:
                 marks.append("**against model size**: " + _sizes_in_brief(heads)
                              + "".join(f"; at a matched size ({named}): " + "; ".join(t for n, t in at_size if n == named)
@@ -1019,24 +1020,42 @@ class Across:
 
     text: str
     everywhere: bool
+    over: str = ""  # `over_scenes`' text, "" where there is none
 
 
-def across_scenes(claims: Sequence[Claim], scenes: Sequence[str], null: float = 0.0) -> Across | None:
+def over_scenes(claims: Sequence[Claim], spec: MetricSpec, null: float, min_effect: float | None) -> str:
+    """The mean of the per-scene mean differences with its 95 % t interval over the scenes, the scenes as
+    the sample (df = scenes - 1): ``; over the scenes as the sample, +1.01 dB [95 % CI +0.26, +1.76] (4
+    scenes, df 3)``. It covers what another scene like these would give, which the per-scene intervals,
+    over seeds, do not; "" for fewer than three scenes (df 1 gives a t quantile of 12.7: no interval worth
+    printing) or for a ratio (its per-scene values are geometric means)."""
+    values = [c.value for c in claims if c.how == "diff" and math.isfinite(c.value)]
+    if len(values) < 3 or len(values) != len(claims):
+        return ""
+    iv = t_interval(values, method="t")
+    return (f"; over the scenes as the sample, {interval_text(iv, 'diff', spec, null, min_effect).short} "
+            f"({len(values)} scenes, df {len(values) - 1})")
+
+
+def across_scenes(claims: Sequence[Claim], scenes: Sequence[str], null: float = 0.0,
+                  spec: MetricSpec | None = None, min_effect: float | None = None) -> Across | None:
     """Whether a primary difference holds across scenes: ``**Across scenes**`` where it is practical
     with one sign on every scene (two or more); where it is practical on some scenes only, or its sign
     differs, ``**Per scene only**`` naming them (the sign against ``null``, the comparison's no
-    difference); None with one scene, or nowhere practical."""
+    difference); None with one scene, or nowhere practical. With ``spec``, ``over`` gives the
+    difference over the scenes as the sample (`over_scenes`)."""
     if len(scenes) < 2 or not claims:
         return None
     practical_ = [c for c in claims if c.practical]
     if not practical_:
         return None
+    over = over_scenes(claims, spec, null, min_effect) if spec is not None else ""
     signs = {c.value > null for c in practical_}
     if len(practical_) == len(scenes) and len(signs) == 1:
-        return Across(f"**Across scenes**: practical and of one sign on all {len(scenes)} scenes", True)
+        return Across(f"**Across scenes**: practical and of one sign on all {len(scenes)} scenes", True, over)
     on = ", ".join(f"{c.scene} {'+' if c.value > null else '−'}" for c in practical_)
     return Across(f"**Per scene only** (not across scenes: practical on {len(practical_)} of {len(scenes)} scenes"
-                  + (", with opposite signs" if len(signs) > 1 else "") + f": {on})", False)
+                  + (", with opposite signs" if len(signs) > 1 else "") + f": {on})", False, over)
 
 
 def _along_the_run(scenes: Sequence[str], ref: Row, row: Row, runs: pd.DataFrame, keys: SettlingCurves,
