@@ -142,10 +142,15 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
                      f"{(lr + ' → ' + lr_final + ' × scene extent ') if lr and lr_final else ''}over 30,000 steps, "
                      f"not scaled to the run; the protocol sets it, so the runs' recorded `schedule` field "
                      f"({' / '.join(repr(str(x)) for x in schedules if x is not None) or 'none'}) is not what they "
-                     f"ran).")
+                     f"ran)" + _white_reset(done) + ".")
     evals = _eval_steps(done)
-    lines.append(f"- **Evaluation**: the test views at steps {evals}; the reported numbers are the last step's."
-                 if evals else "- **Evaluation**: the test views at the end.")
+    late = refined_at_end(done) if protocol != "quick" else 0
+    order = (f" {late} of {len(done)} runs refined at their last step (its refine interval divides it, inside the "
+             f"refine window), after that step's optimizer update and before the evaluation, as at every evaluation "
+             f"step the refine interval divides; graphdeco's train.py evaluates first, so its model at that step has "
+             f"had one refinement fewer (docs/training.md, \"Evaluation order\")." if late else "")
+    lines.append(f"- **Evaluation**: the test views at steps {evals}; the reported numbers are the last step's.{order}"
+                 if evals else f"- **Evaluation**: the test views at the end.{order}")
     test_every = _one(done, "config.data.test_every")
     views = _view_counts(done) or (_one(done, "config.data.views") or "") and f"{_one(done, 'config.data.views')} views"
     split = (f"where the dataset gives none, view i is a test view when i % {test_every} = 0 (every {test_every}th "
@@ -344,6 +349,40 @@ def sh_interval_steps(done: pd.DataFrame) -> list[int]:
     recorded = done[done["config.sh.interval"].notna() & done["config.iterations"].notna()
                     & done["config.schedule"].isin(("scaled", "absolute"))]
     return sorted({s for s in (sh_steps(run_config(run)) for _, run in recorded.iterrows()) if s is not None})
+
+
+def _white_reset(done: pd.DataFrame) -> str:
+    """Where runs of a graphdeco protocol rendered on white (``metric.background`` 1, 1, 1), the opacity
+    reset graphdeco's train.py adds at its refine start under --white_background, which these runs do
+    not make; "" where none did."""
+    if "metric.background" not in done.columns:
+        return ""
+    white = sorted({str(s) for s, rgb in zip(done.scene, done["metric.background"])
+                    if isinstance(rgb, str) and [x.strip() for x in rgb.split(",")] == ["1", "1", "1"]})
+    if not white:
+        return ""
+    return (f"; on a white background ({', '.join(white)}) graphdeco's train.py, given --white_background, also "
+            f"resets opacities at its refine start (step 500), which these runs do not (docs/training.md, "
+            f"\"Evaluation order\")")
+
+
+def refined_at_end(done: pd.DataFrame) -> int:
+    """How many of the ``done`` runs refined at their last step, from their recorded configs: a strategy
+    other than "none" whose ``refine_every`` divides ``iterations``, past ``refine_start`` and before
+    ``refine_stop`` (`splatbench.strategies.default.DefaultStrategy.post_backward`'s test, steps as written:
+    the graphdeco protocols'); 0 where a column is missing."""
+    cols = ["config.strategy.name", "config.strategy.refine_every", "config.strategy.refine_start",
+            "config.strategy.refine_stop", "config.iterations"]
+    if not set(cols) <= set(done.columns):
+        return 0
+    n = 0
+    for name, every, start, stop, iters in done[cols].itertuples(index=False):
+        try:
+            every, start, stop, iters = int(every), int(start), int(stop), int(iters)
+        except (TypeError, ValueError):
+            continue
+        n += name != "none" and every > 0 and iters % every == 0 and start < iters < stop
+    return n
 
 
 def _eval_steps(done: pd.DataFrame) -> str:
