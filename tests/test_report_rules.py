@@ -679,6 +679,26 @@ def test_the_sh_steps_in_the_header_are_where_the_real_runs_curves_part():
     assert band1 == 1000 and f"SH degree raised one band every {band1:,} steps" in schedule_as_run(table)
 
 
+def test_the_runs_said_to_refine_at_their_last_step_are_those_that_counted_one_refinement_more():
+    # reports/sh_degree/runs (graphdeco-7k): the default strategy refines at 600, 700, ..., 7,000 (65 times,
+    # the last right before the evaluation), the budget cells stop at refine_stop = 7,000 (64); the header's
+    # count, from the configs, must pick out exactly the runs whose strategy counted 65
+    from pathlib import Path
+
+    from splatbench.experiments.store import build_table, read_records
+    from splatbench.experiments.train_report import protocol_lines, refined_at_end
+
+    folder = Path(__file__).resolve().parents[1] / "reports" / "sh_degree" / "runs"
+    if not folder.is_dir():
+        pytest.skip("reports/sh_degree/runs is gone (the report arrived)")
+    table = build_table(read_records(folder).values())
+    table = table[table["config.protocol"] == "graphdeco-7k"]
+    late = [refined_at_end(table.loc[[i]]) == 1 for i in table.index]
+    counts = table["metric.refinements"].astype(int)
+    assert set(counts) == {64, 65} and late == list(counts == 65)
+    assert f"{sum(late)} of {len(table)} runs refined at their last step" in "\n".join(protocol_lines(table))
+
+
 # --------------------------------------------------------------------------- best at comparable size
 def _bigger_lead(share: float):
     """SH 3 ahead of SH 0 by 0.5 dB on every seed, with ``share`` more Gaussians (plus seeded noise)."""
