@@ -332,6 +332,229 @@ def usable_runs(runs: pd.DataFrame, kind: RunKind) -> pd.DataFrame:
         done = done[pd.to_numeric(done[col], errors="coerce").fillna(0) == 0]
     return done
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class _Axis:
+    """What every part of one axis's finding reads (`axis_finding`; built by `_Axis.of`): the table, the
+    kind and its rules, the runs the findings may use, and the ``[report] matched`` cells. Its methods
+    pick a cell's runs and per-seed values, its model size and whether its curves settled."""
+
+    table: AxisTable
+    kind: RunKind
+    runs: pd.DataFrame  # every run of the grid, as given (the kind's axis notes and `load_recorded` read them)
+    experiment: ExperimentSpec | None
+    rules: FindingRules
+    specs: dict[str, MetricSpec]  # metric name -> its spec, for the table's metrics
+    scenes: list[str]  # in the table's order
+    usable: pd.DataFrame  # the done runs the findings use (`usable_runs`)
+    timed_usable: pd.DataFrame  # of those, the ones whose times count (`loaded_runs`: not timed under load)
+    excluded: int  # done runs left out of every finding, timed under load (`usable_runs`)
+    untimed: int  # usable runs left out of the timed metrics' comparisons only
+    stratum: set[str]  # the run ids at the matched size (`_stratum`; empty: none declared)
+    by_bytes: bool  # the size is judged by bytes, not by the size metric (`bytes_differ`)
+    _settled: dict = dataclasses.field(default_factory=dict, repr=False)  # (scene, label) -> `settle`'s answer
+
+    @classmethod
+    def of(cls, table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect: Mapping[str, float] | None,
+           experiment: ExperimentSpec | None) -> _Axis | None:
+        """The axis's context; None when the kind has no rules for its metrics or the table is empty."""
+        rules = rules_for(kind, table.metrics, min_effect)
+        if rules is None or table.frame.empty:
+            return None
+        specs = {m.name: m for m in table.metrics}
+        usable = usable_runs(runs, kind)
+        timed = bool(kind.report is not None and kind.report.timed)
+        loaded = loaded_runs(usable, kind)  # all False where the kind's mark is not recorded
+        matched = dict(experiment.matched) if experiment is not None else {}
+        dim, matched_values = next(iter(matched.items()), (None, ()))
+        size = specs.get(rules.size) if rules.size else None
+        bytes_of = kind.report.model_bytes if kind.report is not None else None
+        return cls(table, kind, runs, experiment, rules, specs, list(dict.fromkeys(table.frame.scene)), usable,
+                   usable[~loaded] if timed else usable, len(done_runs(runs)) - len(usable),
+                   int(loaded.sum()) if timed else 0, _stratum(usable, dim, matched_values),
+                   size is not None and bytes_differ(usable, bytes_of, size.name))
+
+    # what the kind declares, and what it compares
+
+    @property
+    def declared(self):
+        """The kind's `KindReport` (None: it declares none)."""
+        return self.kind.report
+
+    @property
+    def timed(self) -> set[str]:
+        """The metrics that are times (`KindReport.timed`)."""
+        return set(self.declared.timed) if self.declared is not None else set()
+
+    @property
+    def primary(self) -> MetricSpec:
+        return self.specs[self.rules.primary]
+
+    @property
+    def sign(self) -> float:
+        """+1 where higher is better in the primary metric, -1 where lower is."""
+        return -1.0 if self.primary.better == "lower" else 1.0
+
+    @property
+    def primary_comp(self) -> Comparison:
+        """How the primary metric is compared (a difference where the rules do not say)."""
+        return next((c for c in self.rules.comparisons if c.metric == self.primary.name),
+                    Comparison(self.primary.name, "diff"))
+
+    @property
+    def primary_null(self) -> float:
+        """The primary comparison's no difference (0 for a difference, 1 for a ratio)."""
+        comp = self.primary_comp
+        return {"diff": 0.0, "ratio": 1.0}.get(comp.how, comp.null or 0.0)
+
+    @property
+    def unit_text(self) -> str | None:
+        """The primary comparison's minimum effect as written (``0.1 dB``; None: it has none)."""
+        comp = self.primary_comp
+        return fmt_min_effect(comp.min_effect, comp.how, self.primary) if comp.min_effect is not None else None
+
+    @property
+    def qualities(self) -> list[tuple[MetricSpec, str]]:
+        """The kind's other quality metrics (`FindingRules.quality`), each with how it is compared."""
+        return [(self.specs[q], next((c.how for c in self.rules.comparisons if c.metric == q), "diff"))
+                for q in self.rules.quality if q in self.specs and q != self.primary.name]
+
+    @property
+    def size_spec(self) -> MetricSpec | None:
+        """The size metric (`FindingRules.size`; None: the kind declares none)."""
+        return self.specs.get(self.rules.size) if self.rules.size else None
+
+    @property
+    def size_effect(self) -> float:
+        """The size metric's minimum effect (0 where none)."""
+        return next((c.min_effect for c in self.rules.comparisons if c.metric == self.rules.size), None) or 0.0
+
+    @property
+    def size_word(self) -> str:
+        """What the size is counted in: ``bytes``, ``Gaussians`` ("" without a size metric)."""
+        return "bytes" if self.by_bytes else (_name(self.size_spec) if self.size_spec is not None else "")
+
+    @property
+    def bytes_of(self) -> Callable[[pd.DataFrame], pd.Series] | None:
+        """The kind's bytes per run (`KindReport.model_bytes`; None: it has none)."""
+        return self.declared.model_bytes if self.declared is not None else None
+
+    @property
+    def settling(self) -> SettlingCurves | None:
+        """The kind's curves (`KindReport.settling`; None: none declared)."""
+        return self.declared.settling if self.declared is not None else None
+
+    @property
+    def matched(self) -> tuple[str | None, tuple]:
+        """The ``[report] matched`` setting and its values ((None, ()): none declared)."""
+        spec = self.experiment
+        dim, values = next(iter((dict(spec.matched) if spec is not None else {}).items()), (None, ()))
+        return dim, tuple(values)
+
+    # a cell's runs and values
+
+    def selected(self, scene: str, row: Row, pool: pd.DataFrame) -> pd.DataFrame:
+        """The runs of ``pool`` of ``row`` at ``scene``."""
+        return pool[(pool.scene == scene) & pool.run_id.isin(row.run_ids)]
+
+    def cells(self, scene: str, row: Row, ids: set[str] | None = None) -> pd.DataFrame:
+        """The usable runs of ``row`` at ``scene``, only those of ``ids`` (None: all)."""
+        sel = self.selected(scene, row, self.usable)
+        return sel if ids is None else sel[sel.run_id.isin(ids)]
+
+    def values(self, scene: str, row: Row, metric: str) -> dict[int, float]:
+        """seed -> the row's ``metric`` at ``scene`` (a timed metric: of the runs whose times count)."""
+        sel = self.selected(scene, row, self.timed_usable if metric in self.timed else self.usable)
+        return seed_values(sel, metric) if len(sel) else {}
+
+    def values_in(self, scene: str, row: Row, metric: str, ids: set[str] | None) -> dict[int, float]:
+        """seed -> the row's ``metric`` at ``scene`` over the runs of ``ids`` (None: all; {}: not recorded)."""
+        sel = self.cells(scene, row, ids)
+        return seed_values(sel, metric) if len(sel) and f"metric.{metric}" in sel.columns else {}
+
+    def quality_intervals(self, scene: str, a: Row, b: Row) -> list[tuple[MetricSpec, Interval, str]]:
+        """The paired interval of ``b`` against ``a`` of each of the kind's other quality metrics, with how it
+        is compared (`other_way`'s ``others``)."""
+        out = []
+        for spec, how in self.qualities:
+            iv, _ = paired(self.values(scene, a, spec.name), self.values(scene, b, spec.name), Comparison(spec.name, how))
+            out.append((spec, iv, how))
+        return out
+
+    # model size
+
+    def size_values(self, scene: str, row: Row, ids: set[str] | None = None) -> dict[int, float]:
+        """seed -> the row's model size at ``scene``: its bytes where the table's cells' bytes per
+        Gaussian differ (`bytes_differ`), else its size metric (a seed's runs averaged first)."""
+        return _sizes(self.cells(scene, row, ids), self.size_spec.name, self.bytes_of, self.by_bytes)
+
+    def size_ratio_text(self, text: str, scene: str, ra: Row, rb: Row, ids: set[str] | None = None) -> str:
+        """``×3.999 [95 % CI …] the bytes (×0.949 the Gaussians)`` where sized by bytes, else
+        ``… the Gaussians``: both named where they differ (``text``: the ratio as written)."""
+        if not self.by_bytes:
+            return f"{text} the {self.size_word}"
+        name = self.size_spec.name
+        count = paired_ratio(self.values_in(scene, ra, name, ids), self.values_in(scene, rb, name, ids))
+        also = f" (×{count.estimate:.3f} the {_name(self.size_spec)})" if count.n and math.isfinite(count.estimate) \
+            else ""
+        return f"{text} the bytes{also}"
+
+    def mean_of(self, scene: str, row: Row, metric: str) -> float | None:
+        """The row's mean over seeds at ``scene`` of ``metric``, or of its bytes where ``metric`` is "bytes"
+        (None: not recorded)."""
+        sel = self.cells(scene, row)
+        if metric == "bytes":
+            if self.bytes_of is None:
+                return None
+            v = pd.Series(_sizes(sel, metric, self.bytes_of, True), dtype="float64")
+        else:
+            v = pd.Series(self.values_in(scene, row, metric, None), dtype="float64")
+        return float(v.mean()) if len(v) else None
+
+    def off_size(self, ratio: Interval) -> bool:
+        """Two cells declared matched that did not end at one size: their paired size ratio, as written
+        (×4.070), is more than the size's minimum effect (5 % where none) from ×1 (a run that missed its
+        count: the budget strategy short of its budget warns)."""
+        return bool(ratio.n) and math.isfinite(ratio.estimate) and \
+            abs(float(f"{ratio.estimate:.3f}") - 1.0) > (self.size_effect or 0.05) + 1e-12
+
+    def size_line(self, a: Row, b: Row) -> str:
+        """``Size (mean over seeds, `b` against `a`): fox 5,210 Gaussians, 1.23 MB against 1,000, 0.24 MB``
+        ("" without a size metric or sizes)."""
+        size = self.size_spec
+        if size is None:
+            return ""
+        parts = []
+        for scene in self.scenes:
+            na, nb = self.mean_of(scene, a, size.name), self.mean_of(scene, b, size.name)
+            if na is None or nb is None:
+                continue
+            ba, bb = self.mean_of(scene, a, "bytes"), self.mean_of(scene, b, "bytes")
+            mb = (lambda x: f", {x / 1e6:.2f} MB") if ba is not None and bb is not None else (lambda x: "")
+            parts.append(f"{scene} {_count(nb)} {_name(size)}{mb(bb)} against {_count(na)}{mb(ba)}")
+        if not parts:
+            return ""
+        what = f"{_name(size)} and bytes" if self.bytes_of is not None else _name(size)
+        return f"{what[:1].upper()}{what[1:]} (mean over seeds, `{b.label}` against `{a.label}`): " + "; ".join(parts)
+
+    # settling
+
+    def settle(self, scene: str, row: Row) -> CellSettling | None:
+        """The row's curves at ``scene`` over the last quarter (None: not judged: the kind declares no curves
+        of the primary metric, or the primary comparison has no minimum effect)."""
+        settling, comp = self.settling, self.primary_comp
+        effect = comp.min_effect if settling is not None and settling.metric == self.primary.name else None
+        if effect is None:
+            return None
+        key = (scene, row.label)
+        if key not in self._settled:
+            self._settled[key] = cell_settling(self.selected(scene, row, self.usable), settling, effect)
+        return self._settled[key]
+
+    def unsettled(self, scene: str, a: Row, b: Row, diff: float) -> str:
+        """"" when the difference ``b - a`` at ``scene`` is settled or not judged, else why not."""
+        return unsettled_reason(self.settle(scene, a), self.settle(scene, b), (a.label, b.label), diff,
+                                self.primary.unit)
+
 
 def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None,
                  experiment: ExperimentSpec | None = None) -> Finding | None:
@@ -339,122 +562,21 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     with the lines and claims of the kind's axis notes (`KindReport.axis_notes`) appended;
     ``experiment``: its ``[report] matched`` cells (docs/reports.md, "Model size");
     ``min_effect``: the experiment file's minimum effects by metric (`rules_for`)."""
-    rules = rules_for(kind, table.metrics, min_effect)
-    if rules is None or table.frame.empty:
+    ax = _Axis.of(table, kind, runs, min_effect, experiment)
+    if ax is None:
         return None
-    specs = {m.name: m for m in table.metrics}
-    primary = specs[rules.primary]
-    sign = -1.0 if primary.better == "lower" else 1.0
-    scenes = list(dict.fromkeys(table.frame.scene))
-    usable = usable_runs(runs, kind)
-    excluded = len(done_runs(runs)) - len(usable)
-    declared = kind.report
-    timed = set(declared.timed) if declared is not None else set()
-    loaded = loaded_runs(usable, kind)  # all False where the kind's mark is not recorded
-    untimed = int(loaded.sum()) if timed else 0
-    timed_usable = usable[~loaded] if timed else usable
+    rules, specs, primary, sign, scenes = ax.rules, ax.specs, ax.primary, ax.sign, ax.scenes
+    usable, excluded, declared, timed, untimed = ax.usable, ax.excluded, ax.declared, ax.timed, ax.untimed
+    primary_comp, size_spec, size_effect, settling = ax.primary_comp, ax.size_spec, ax.size_effect, ax.settling
+    bytes_of, stratum, by_bytes, size_word = ax.bytes_of, ax.stratum, ax.by_bytes, ax.size_word
+    dim, matched_values = ax.matched
+    matched = dim is not None
+    selected, values, values_in, off_size, settle = ax.selected, ax.values, ax.values_in, ax.off_size, ax.settle
+    quality_intervals, size_values, size_ratio_text = ax.quality_intervals, ax.size_values, ax.size_ratio_text
+    mean_of, unsettled = ax.mean_of, ax.unsettled
 
-    def selected(scene: str, row: Row, pool: pd.DataFrame) -> pd.DataFrame:
-        return pool[(pool.scene == scene) & pool.run_id.isin(row.run_ids)]
-
-    def values(scene: str, row: Row, metric: str) -> dict[int, float]:
-        sel = selected(scene, row, timed_usable if metric in timed else usable)
-        return seed_values(sel, metric) if len(sel) else {}
-
-    primary_comp = next((c for c in rules.comparisons if c.metric == primary.name), Comparison(primary.name, "diff"))
-    size_spec = specs.get(rules.size) if rules.size else None
-    size_effect = next((c.min_effect for c in rules.comparisons if c.metric == rules.size), None) or 0.0
-
-    def off_size(ratio: Interval) -> bool:
-        """Two cells declared matched that did not end at one size: their paired size ratio, as written
-        (×4.070), is more than the size's minimum effect (5 % where none) from ×1 (a run that missed its
-        count: the budget strategy short of its budget warns)."""
-        return bool(ratio.n) and math.isfinite(ratio.estimate) and \
-            abs(float(f"{ratio.estimate:.3f}") - 1.0) > (size_effect or 0.05) + 1e-12
-    settling = declared.settling if declared is not None else None
-    settle_effect = (primary_comp.min_effect if settling is not None and settling.metric == primary.name
-                     else None)
-    settle_cache: dict[tuple[str, str], CellSettling | None] = {}
-
-    def settle(scene: str, row: Row) -> CellSettling | None:
-        """The row's curves at ``scene`` over the last quarter (None: not judged)."""
-        if settle_effect is None:
-            return None
-        key = (scene, row.label)
-        if key not in settle_cache:
-            settle_cache[key] = cell_settling(selected(scene, row, usable), settling, settle_effect)
-        return settle_cache[key]
-
-    qualities = [(specs[q], next((c.how for c in rules.comparisons if c.metric == q), "diff"))
-                 for q in rules.quality if q in specs and q != primary.name]
-
-    def quality_intervals(scene: str, a: Row, b: Row) -> list[tuple[MetricSpec, Interval, str]]:
-        """The paired interval of ``b`` against ``a`` of each of the kind's other quality metrics."""
-        out = []
-        for spec, how in qualities:
-            iv, _ = paired(values(scene, a, spec.name), values(scene, b, spec.name), Comparison(spec.name, how))
-            out.append((spec, iv, how))
-        return out
-
-    bytes_of = declared.model_bytes if declared is not None else None
-    matched = dict(experiment.matched) if experiment is not None else {}
-    dim, matched_values = next(iter(matched.items()), (None, ()))
-    stratum = _stratum(usable, dim, matched_values)  # the run ids at the matched size (empty: none declared)
-    by_bytes = size_spec is not None and bytes_differ(usable, bytes_of, size_spec.name)
-    size_word = "bytes" if by_bytes else (_name(size_spec) if size_spec is not None else "")
-
-    def size_values(scene: str, row: Row, ids: set[str] | None = None) -> dict[int, float]:
-        """seed -> the row's model size at ``scene``: its bytes where the table's cells' bytes per
-        Gaussian differ (`bytes_differ`), else its size metric (a seed's runs averaged first)."""
-        if not by_bytes:
-            return values_in(scene, row, size_spec.name, ids)
-        sel = selected(scene, row, usable)
-        if ids is not None:
-            sel = sel[sel.run_id.isin(ids)]
-        if not len(sel):
-            return {}
-        per = pd.DataFrame({"seed": sel.seed.astype(int), "v": bytes_of(sel).to_numpy()}).dropna()
-        return {int(k): float(v) for k, v in per.groupby("seed").v.mean().items()}
-
-    def size_ratio_text(text: str, scene: str, ra: Row, rb: Row, ids: set[str] | None = None) -> str:
-        """``×3.999 [95 % CI …] the bytes (×0.949 the Gaussians)`` where sized by bytes, else
-        ``… the Gaussians``: both named where they differ."""
-        if not by_bytes:
-            return f"{text} the {size_word}"
-        count = paired_ratio(values_in(scene, ra, size_spec.name, ids), values_in(scene, rb, size_spec.name, ids))
-        also = f" (×{count.estimate:.3f} the {_name(size_spec)})" if count.n and math.isfinite(count.estimate) else ""
-        return f"{text} the bytes{also}"
-
-    def mean_of(scene: str, row: Row, metric: str, ids: set[str] | None = None) -> float | None:
-        sel = selected(scene, row, usable)
-        if ids is not None:
-            sel = sel[sel.run_id.isin(ids)]
-        if metric == "bytes":
-            if bytes_of is None or not len(sel):
-                return None
-            per = pd.DataFrame({"seed": sel.seed.astype(int), "v": bytes_of(sel).to_numpy()}).dropna()
-            v = per.groupby("seed").v.mean()
-        else:
-            v = pd.Series(seed_values(sel, metric) if len(sel) and f"metric.{metric}" in sel.columns else {},
-                          dtype="float64")
-        return float(v.mean()) if len(v) else None
-
-    def size_line(scenes_: Sequence[str], a: Row, b: Row) -> str:
-        """``Size (mean over seeds, `b` against `a`): fox 5,210 Gaussians, 1.23 MB against 1,000, 0.24 MB``."""
-        if size_spec is None:
-            return ""
-        parts = []
-        for scene in scenes_:
-            na, nb = mean_of(scene, a, size_spec.name), mean_of(scene, b, size_spec.name)
-            if na is None or nb is None:
-                continue
-            ba, bb = mean_of(scene, a, "bytes"), mean_of(scene, b, "bytes")
-            mb = (lambda x: f", {x / 1e6:.2f} MB") if ba is not None and bb is not None else (lambda x: "")
-            parts.append(f"{scene} {_count(nb)} {_name(size_spec)}{mb(bb)} against {_count(na)}{mb(ba)}")
-        if not parts:
-            return ""
-        what = f"{_name(size_spec)} and bytes" if bytes_of is not None else _name(size_spec)
-        return f"{what[:1].upper()}{what[1:]} (mean over seeds, `{b.label}` against `{a.label}`): " + "; ".join(parts)
+    def size_line(scenes_, a, b):
+        return ax.size_line(a, b)
 
     def matched_text(a: Row, b: Row, heads: list[tuple[str, SizeShift]] | None = None,
                      at_size: list[tuple[str, str]] | None = None) -> str:
@@ -537,15 +659,6 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                                      f"{_name(primary)} {text}, at {at}")
         return (". **Against model size**: " + "; ".join(pieces)) if pieces else ""
 
-    def values_in(scene: str, row: Row, metric: str, ids: set[str] | None) -> dict[int, float]:
-        sel = selected(scene, row, usable)
-        if ids is not None:
-            sel = sel[sel.run_id.isin(ids)]
-        return seed_values(sel, metric) if len(sel) and f"metric.{metric}" in sel.columns else {}
-
-    def unsettled(scene: str, a: Row, b: Row, diff: float) -> str:
-        """"" when the difference ``b - a`` at ``scene`` is settled or not judged, else why not."""
-        return unsettled_reason(settle(scene, a), settle(scene, b), (a.label, b.label), diff, primary.unit)
 
     claims: list[Claim] = []
     lines: list[str] = []
