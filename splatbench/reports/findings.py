@@ -568,97 +568,14 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     rules, specs, primary, sign, scenes = ax.rules, ax.specs, ax.primary, ax.sign, ax.scenes
     usable, excluded, declared, timed, untimed = ax.usable, ax.excluded, ax.declared, ax.timed, ax.untimed
     primary_comp, size_spec, size_effect, settling = ax.primary_comp, ax.size_spec, ax.size_effect, ax.settling
-    bytes_of, stratum, by_bytes, size_word = ax.bytes_of, ax.stratum, ax.by_bytes, ax.size_word
+    by_bytes, size_word = ax.by_bytes, ax.size_word
     dim, matched_values = ax.matched
-    matched = dim is not None
-    selected, values, values_in, off_size, settle = ax.selected, ax.values, ax.values_in, ax.off_size, ax.settle
+    values, off_size, settle = ax.values, ax.off_size, ax.settle
     quality_intervals, size_values, size_ratio_text = ax.quality_intervals, ax.size_values, ax.size_ratio_text
     mean_of, unsettled = ax.mean_of, ax.unsettled
 
     def size_line(scenes_, a, b):
         return ax.size_line(a, b)
-
-    def matched_text(a: Row, b: Row, heads: list[tuple[str, SizeShift]] | None = None,
-                     at_size: list[tuple[str, str]] | None = None) -> str:
-        """Where ``b`` comes with `MATCHED_SHARE` more (or fewer) Gaussians than ``a`` at a scene, the same
-        difference at the matched size (`[report] matched`), or that the grid has none; ``heads``
-        collects each scene's size change, (scene, `size_shift`'s), and ``at_size`` each matched-size
-        difference in brief, (what is matched, ``fox +0.52 dB [95 % CI +0.20, +0.84]``): the summary's."""
-        pieces = []
-        if dim == table.axis and (len(matched_values) < 2 or all(any(same_value(r.value, v) for v in matched_values)
-                                                                 for r in (a, b))):
-            return ""  # the matched axis's own rows (natural against matched), or two matched cells
-        pair = _matched_pair(experiment, table, a, b, matched_values) if dim == table.axis else None
-        for scene in scenes:
-            natural_ids = None if not stratum else set(usable.run_id) - stratum
-            if dim == table.axis:
-                natural_ids = None
-            shift = size_shift(*(selected(scene, r, usable) for r in (a, b)), size_spec, bytes_of, by_bytes,
-                               natural_ids)
-            if shift is None:
-                continue
-            head = f"{scene}: {shift.text}"
-            if heads is not None:
-                heads.append((scene, shift))
-            if not matched:
-                pieces.append(head + "; the grid declares no matched-size cell, `[report] matched`: quality and size "
-                                     "are not separated)")
-            elif pair is not None:  # the extra cells that repeat this comparison at one size (claimed below)
-                iv, null = paired(values(scene, pair[0], primary.name), values(scene, pair[1], primary.name),
-                                  primary_comp)
-                named = f"`{pair[1].label}` against `{pair[0].label}`"
-                cells = [experiment.extra.get(table.axis, {}).get(r.value, {}) for r in pair]
-                common = [f"`{k} = {display(v)}`" for k, v in cells[0].items()
-                          if k != table.axis and cells[1].get(k, object()) == v]
-                brief = named + (f", both also setting {', '.join(common)}" if common else "") + \
-                    "; not in Holm's family"  # the summary's
-                if not iv.n:
-                    away = [r for r in pair if not experiment.extra_runs_at(table.axis, r.value, scene)]
-                    if away and at_size is not None:
-                        at_size.append((brief, f"{scene} not run (the pair's `scenes`)"))
-                    pieces.append(head + (f"; its matched-size cells, {named}, are not run at {scene} (their "
-                                          f"`scenes`): quality and size are not separated here)" if away else
-                                          f"; its matched-size cells, {named}, have no done runs yet)"))
-                    continue
-                size = paired_ratio(size_values(scene, pair[0]), size_values(scene, pair[1]))
-                at = size_ratio_text(f"×{size.estimate:.3f}", scene, *pair) if size.n else "sizes not recorded"
-                said = interval_text(iv, primary_comp.how, primary, null, primary_comp.min_effect)
-                if off_size(size):
-                    if at_size is not None:
-                        at_size.append((brief, f"{scene} not at one size (×{size.estimate:.3f})"))
-                    pieces.append(head + f"; its matched-size cells, {named}, did not end at one size at {scene}: "
-                                         f"{_name(primary)} {said.text} at {at}, a run that missed its count (see "
-                                         f"\"Warnings\"): quality and size are not separated here)")
-                    continue
-                why = unsettled(scene, pair[0], pair[1], iv.estimate - (null or 0.0))
-                if at_size is not None:
-                    at_size.append((brief, f"{scene} {said.short}" + (", not settled" if why else "")))
-                pieces.append(head + f" at its natural size); at a matched size ({named}): {_name(primary)} "
-                                     f"{said.text}, at {at}" + (f", **not settled** ({why})" if why else ""))
-            elif dim == table.axis:
-                pieces.append(head + f"; no matched-size cell of this comparison: the matched cells are "
-                                     f"{', '.join(f'`{display(v)}`' for v in matched_values)}, compared below)")
-            else:
-                pa = values_in(scene, a, primary.name, stratum)
-                pb = values_in(scene, b, primary.name, stratum)
-                iv, null = paired(pa, pb, primary_comp)
-                if not iv.n:
-                    pieces.append(head + "; its matched-size cells have no done runs)")
-                    continue
-                size = paired_ratio(size_values(scene, a, stratum), size_values(scene, b, stratum))
-                said = interval_text(iv, primary_comp.how, primary, null, primary_comp.min_effect)
-                text = said.text
-                if at_size is not None:
-                    at_size.append((setting_text(experiment, dim), f"{scene} {said.short}"))
-                claims.append(Claim("matched", scene, b.label, primary.name, primary_comp.how, iv.estimate, text,
-                                    a.label, iv.low, iv.high, iv.n,
-                                    *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
-                at = size_ratio_text(f"×{size.estimate:.3f}", scene, a, b, stratum) if size.n else \
-                    "sizes not recorded"
-                pieces.append(head + f" at its natural size); at the matched size ({setting_text(experiment, dim)}): "
-                                     f"{_name(primary)} {text}, at {at}")
-        return (". **Against model size**: " + "; ".join(pieces)) if pieces else ""
-
 
     claims: list[Claim] = []
     lines: list[str] = []
@@ -836,10 +753,10 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
             size = size_line(scenes, ref, row)
             if size:
                 more.append(size)
-            heads: list[tuple[str, SizeShift]] = []
-            at_size: list[tuple[str, str]] = []
-            if size_spec is not None:
-                line += matched_text(ref, row, heads, at_size)
+            sized = _matched_text(ax, ref, row) if size_spec is not None else _MatchedText()
+            line += sized.text
+            claims += sized.claims
+            heads, at_size = sized.heads, sized.at_size
             if also:
                 line += f". Also changed: other settings too (what, in {in_full})"
             lines.append(line)
@@ -874,8 +791,8 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                                             f"significant after Holm)" if short and across.everywhere else ""))
             if heads:
                 marks.append("**against model size**: " + _sizes_in_brief(heads)
-                             + "".join(f"; at a matched size ({named}): " + "; ".join(t for n, t in at_size if n == named)
-                                       for named in dict.fromkeys(n for n, _ in at_size)))
+                             + "".join(f"; at a matched size ({named}): " + "; ".join(m.text for m in at_size if m.matched == named)
+                                       for named in dict.fromkeys(m.matched for m in at_size)))
             said = "; ".join(f"{c.scene} {brief}"
                              + (", not significant after Holm" if (c.scene, c.label) in lost else "")
                              for c, brief in zip(primaries, briefs))
@@ -979,6 +896,123 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                        + f": each of its differences is the degree it chose and its holdout's cost together, not "
                          f"one degree's (\"Appendix: {table.axis} in full\").")
     return Finding(table.axis, lines, claims, appendix, summary)
+
+
+@dataclasses.dataclass(frozen=True)
+class _AtSize:
+    """One matched-size difference in brief, for the Summary (`_MatchedText.at_size`): ``matched``, what is
+    matched (the pair of extra cells, or the matched setting); ``text``, ``fox +0.52 dB [95 % CI +0.20, +0.84]``."""
+
+    matched: str
+    text: str
+
+
+@dataclasses.dataclass(frozen=True)
+class _AtScene:
+    """What the model-size remark says at one scene (`_matched_text`): ``piece``, its text; ``at_size``, the
+    Summary's brief (None: none); ``claim``, the "matched" claim it makes (None: none)."""
+
+    piece: str
+    at_size: _AtSize | None = None
+    claim: Claim | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class _MatchedText:
+    """A row's remark on model size (`_matched_text`): ``text``, ``. **Against model size**: …`` ("" where
+    none); ``heads``, each scene's size change, (scene, `size_shift`'s); ``at_size``, the matched-size
+    differences in brief; ``claims``, the "matched" claims it makes."""
+
+    text: str = ""
+    heads: tuple[tuple[str, SizeShift], ...] = ()
+    at_size: tuple[_AtSize, ...] = ()
+    claims: tuple[Claim, ...] = ()
+
+
+def _matched_text(ax: _Axis, a: Row, b: Row) -> _MatchedText:
+    """Where ``b`` comes with `MATCHED_SHARE` more (or fewer) Gaussians than ``a`` at a scene, the same
+    difference at the matched size (`[report] matched`), or that the grid has none (`_MatchedText`;
+    empty for the matched axis's own rows: natural against matched, or two matched cells)."""
+    dim, values = ax.matched
+    own = dim == ax.table.axis  # the matched setting is this table's axis
+    if own and (len(values) < 2 or all(any(same_value(r.value, v) for v in values) for r in (a, b))):
+        return _MatchedText()
+    pair = _matched_pair(ax.experiment, ax.table, a, b, values) if own else None
+    natural = None if not ax.stratum or own else set(ax.usable.run_id) - ax.stratum  # the runs at their own size
+    heads, said = [], []
+    for scene in ax.scenes:
+        shift = size_shift(*(ax.selected(scene, r, ax.usable) for r in (a, b)), ax.size_spec, ax.bytes_of,
+                           ax.by_bytes, natural)
+        if shift is None:
+            continue
+        head = f"{scene}: {shift.text}"
+        heads.append((scene, shift))
+        if dim is None:
+            said.append(_AtScene(head + "; the grid declares no matched-size cell, `[report] matched`: quality and "
+                                        "size are not separated)"))
+        elif pair is not None:
+            said.append(_at_matched_pair(ax, scene, head, pair))
+        elif own:
+            said.append(_AtScene(head + f"; no matched-size cell of this comparison: the matched cells are "
+                                        f"{', '.join(f'`{display(v)}`' for v in values)}, compared below)"))
+        else:
+            said.append(_at_matched_setting(ax, scene, head, a, b))
+    if not said:
+        return _MatchedText()
+    return _MatchedText(". **Against model size**: " + "; ".join(s.piece for s in said), tuple(heads),
+                        tuple(s.at_size for s in said if s.at_size is not None),
+                        tuple(s.claim for s in said if s.claim is not None))
+
+
+def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row]) -> _AtScene:
+    """``head`` (the size change at ``scene``) with the same comparison at one size through the two
+    ``[extra]`` cells ``pair`` (`_matched_pair`): not run there, not yet done, not at one size, or the
+    difference; never claimed (the pair is not in Holm's family)."""
+    spec, primary, comp = ax.experiment, ax.primary, ax.primary_comp
+    iv, null = paired(ax.values(scene, pair[0], primary.name), ax.values(scene, pair[1], primary.name), comp)
+    named = f"`{pair[1].label}` against `{pair[0].label}`"
+    cells = [spec.extra.get(ax.table.axis, {}).get(r.value, {}) for r in pair]
+    common = [f"`{k} = {display(v)}`" for k, v in cells[0].items()
+              if k != ax.table.axis and cells[1].get(k, object()) == v]
+    brief = named + (f", both also setting {', '.join(common)}" if common else "") + \
+        "; not in Holm's family"  # the summary's
+    if not iv.n:
+        away = [r for r in pair if not spec.extra_runs_at(ax.table.axis, r.value, scene)]
+        if away:
+            return _AtScene(head + f"; its matched-size cells, {named}, are not run at {scene} (their `scenes`): "
+                                   f"quality and size are not separated here)",
+                            _AtSize(brief, f"{scene} not run (the pair's `scenes`)"))
+        return _AtScene(head + f"; its matched-size cells, {named}, have no done runs yet)")
+    size = paired_ratio(ax.size_values(scene, pair[0]), ax.size_values(scene, pair[1]))
+    at = ax.size_ratio_text(f"×{size.estimate:.3f}", scene, *pair) if size.n else "sizes not recorded"
+    said = interval_text(iv, comp.how, primary, null, comp.min_effect)
+    if ax.off_size(size):
+        return _AtScene(head + f"; its matched-size cells, {named}, did not end at one size at {scene}: "
+                               f"{_name(primary)} {said.text} at {at}, a run that missed its count (see "
+                               f"\"Warnings\"): quality and size are not separated here)",
+                        _AtSize(brief, f"{scene} not at one size (×{size.estimate:.3f})"))
+    why = ax.unsettled(scene, pair[0], pair[1], iv.estimate - (null or 0.0))
+    return _AtScene(head + f" at its natural size); at a matched size ({named}): {_name(primary)} {said.text}, "
+                           f"at {at}" + (f", **not settled** ({why})" if why else ""),
+                    _AtSize(brief, f"{scene} {said.short}" + (", not settled" if why else "")))
+
+
+def _at_matched_setting(ax: _Axis, scene: str, head: str, a: Row, b: Row) -> _AtScene:
+    """``head`` (the size change at ``scene``) with the same comparison over the runs at the matched setting
+    of another axis (`_Axis.stratum`), claimed ("matched"); or that those runs are not done."""
+    primary, comp, stratum = ax.primary, ax.primary_comp, ax.stratum
+    iv, null = paired(ax.values_in(scene, a, primary.name, stratum), ax.values_in(scene, b, primary.name, stratum),
+                      comp)
+    if not iv.n:
+        return _AtScene(head + "; its matched-size cells have no done runs)")
+    size = paired_ratio(ax.size_values(scene, a, stratum), ax.size_values(scene, b, stratum))
+    said = interval_text(iv, comp.how, primary, null, comp.min_effect)
+    setting = setting_text(ax.experiment, ax.matched[0])
+    claim = Claim("matched", scene, b.label, primary.name, comp.how, iv.estimate, said.text, a.label, iv.low,
+                  iv.high, iv.n, *judge(iv, comp.how, null, primary, comp.min_effect))
+    at = ax.size_ratio_text(f"×{size.estimate:.3f}", scene, a, b, stratum) if size.n else "sizes not recorded"
+    return _AtScene(head + f" at its natural size); at the matched size ({setting}): {_name(primary)} {said.text}, "
+                           f"at {at}", _AtSize(setting, f"{scene} {said.short}"), claim)
 
 
 def _with_interval(c: Claim, specs: Mapping[str, MetricSpec]) -> bool:
