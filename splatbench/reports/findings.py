@@ -476,7 +476,8 @@ class _Axis:
         is compared (`other_way`'s ``others``)."""
         out = []
         for spec, how in self.qualities:
-            iv, _ = paired(self.values(scene, a, spec.name), self.values(scene, b, spec.name), Comparison(spec.name, how))
+            iv, _ = paired(self.values(scene, a, spec.name), self.values(scene, b, spec.name),
+                           Comparison(spec.name, how))
             out.append((spec, iv, how))
         return out
 
@@ -561,333 +562,32 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
     """The finding of one axis (None when the kind has no rules or nothing is done),
     with the lines and claims of the kind's axis notes (`KindReport.axis_notes`) appended;
     ``experiment``: its ``[report] matched`` cells (docs/reports.md, "Model size");
-    ``min_effect``: the experiment file's minimum effects by metric (`rules_for`)."""
+    ``min_effect``: the experiment file's minimum effects by metric (`rules_for`). Its blocks, in order
+    (`_Part`): the best per scene (`_best_part`), each row against the reference with Holm's correction
+    (`_against_reference`), the matched cells against each other (`_matched_cells_part`), the reference
+    against itself (`_self_part`), how many comparisons have an interval (`_count_part`), and what the runs
+    left out or did not record (`_caveats_part`)."""
     ax = _Axis.of(table, kind, runs, min_effect, experiment)
     if ax is None:
         return None
-    rules, specs, primary, sign, scenes = ax.rules, ax.specs, ax.primary, ax.sign, ax.scenes
-    usable, excluded, declared, timed, untimed = ax.usable, ax.excluded, ax.declared, ax.timed, ax.untimed
-    primary_comp, size_spec, size_effect, settling = ax.primary_comp, ax.size_spec, ax.size_effect, ax.settling
-    by_bytes, size_word = ax.by_bytes, ax.size_word
-    dim, matched_values = ax.matched
-    values, off_size, settle = ax.values, ax.off_size, ax.settle
-    quality_intervals, size_values, size_ratio_text = ax.quality_intervals, ax.size_values, ax.size_ratio_text
-    mean_of, unsettled = ax.mean_of, ax.unsettled
-
-    def size_line(scenes_, a, b):
-        return ax.size_line(a, b)
-
-    claims: list[Claim] = []
-    lines: list[str] = []
-    appendix: list[str] = []  # the section "Appendix: <axis> in full" (`Finding.appendix`)
-    summary: list[str] = []   # the report's "Summary" (`Finding.summary`): the texts below, cut short
-    best_parts = []
-    best_short = []  # each scene's verdict of ``best_parts`` without its lead's numbers
-    unit_text = fmt_min_effect(primary_comp.min_effect, primary_comp.how, primary) \
-        if primary_comp.min_effect is not None else None
-    for scene in scenes:
-        means = [(t_interval(list(values(scene, row, primary.name).values())), row) for row in table.rows
-                 if not row.extra]  # an extra cell is compared only at a matched size
-        means = sorted(((iv, row) for iv, row in means if iv.n > 0), key=lambda m: -sign * m[0].estimate)
-        if not means:
-            continue
-        iv, row = means[0]
-        mean_text = fmt_number(iv.estimate, "mean", primary)
-        if len(means) == 1:
-            claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, mean_text, n=iv.n))
-            best_parts.append(f"{scene} `{row.label}` ({mean_text}; the only cell)")
-            best_short.append(best_parts[-1])
-            continue
-        runner = means[1][1]
-        how = "ratio" if primary_comp.how == "ratio" else "diff"
-        null = 1.0 if how == "ratio" else 0.0
-        lead = (paired_ratio if how == "ratio" else paired_difference)(values(scene, runner, primary.name),
-                                                                       values(scene, row, primary.name))
-        significant, is_practical = judge(lead, how, null, primary, primary_comp.min_effect)
-        clear = significant and clears(lead, how, null, primary_comp.min_effect)
-        lead_text = fmt_interval(lead, how, primary, null, primary_comp.min_effect)
-        why = unsettled(scene, runner, row, lead.estimate - null)
-        settled = None if settle(scene, row) is None else not why
-        reversed_ = other_way(primary, lead.estimate - null, quality_intervals(scene, runner, row))
-        larger = None  # the leader's size against the runner-up's, where it is larger by the minimum effect
-        if clear and size_spec is not None:
-            ratio = paired_ratio(size_values(scene, runner), size_values(scene, row))
-            if ratio.n and math.isfinite(ratio.estimate) and ratio.estimate > 1.0 \
-                    and practical(ratio, "ratio", 1.0, size_effect):
-                larger = ratio
-        if larger is not None:
-            size_text = fmt_interval(larger, "ratio", size_spec, None)
-            sized = {r.label: mean_of(scene, r, "bytes") for r in table.rows} if by_bytes else None
-            front = _on_front(table, scene, size_spec, primary, (row, runner), sized,
-                              [r.label for r in table.rows if not r.extra])
-            at = size_ratio_text(size_text, scene, runner, row)
-            text = (f"{scene}: no single best at comparable size (`{row.label}`, {mean_text}, leads "
-                    f"`{runner.label}` by {lead_text} at {at}, more than the "
-                    f"{fmt_min_effect(size_effect, 'ratio', size_spec)} minimum effect"
-                    + (f"; both on {FRONT_OF[any(r.extra for r in table.rows)]} {size_word}/quality Pareto front"
-                       if front else "") + ")")
-            short = (f"{scene}: no single best at comparable size (`{row.label}` leads `{runner.label}` at "
-                     f"{fmt_number(larger.estimate, 'ratio', size_spec)} `{runner.label}`'s {size_word})")
-            if why:
-                text += f", **not settled** ({why})"
-                short += ", **not settled**"
-            claims.append(Claim("no best", scene, row.label, primary.name, how, lead.estimate, text, runner.label,
-                                lead.low, lead.high, lead.n, significant, is_practical, settled))
-            claims.append(Claim("size", scene, row.label, "bytes" if by_bytes else size_spec.name, "ratio",
-                                larger.estimate, size_text,
-                                runner.label, larger.low, larger.high, larger.n, *judge(larger, "ratio", 1.0,
-                                                                                           size_spec, size_effect)))
-        elif clear:
-            text = f"{scene} `{row.label}` ({mean_text}; {lead_text} over `{runner.label}`)"
-            short = text
-            if reversed_:
-                names = " and ".join(n for n, _ in reversed_)
-                but = f", **but {names} go{'es' if len(reversed_) == 1 else ''} the other way**"
-                text += f"{but} ({'; '.join(t for _, t in reversed_)})"
-                short += but
-            if why:
-                text += f", **not settled** ({why})"
-                short += ", **not settled**"
-            claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, text, runner.label,
-                                lead.low, lead.high, lead.n, significant, is_practical, settled))
-        else:
-            bound = ("" if not is_practical or unit_text is None else
-                     f"; its interval's bound nearer no difference is not beyond the {unit_text} minimum effect")
-            text = (f"{scene}: no single best (`{row.label}`, {mean_text}, leads `{runner.label}` by {lead_text}"
-                    f"{bound})")
-            short = f"{scene}: no single best"
-            claims.append(Claim("no best", scene, row.label, primary.name, how, lead.estimate, text, runner.label,
-                                lead.low, lead.high, lead.n, significant, is_practical, settled))
-        best_parts.append(text)
-        best_short.append(short)
-    if not best_parts:
-        if excluded:
-            return Finding(table.axis, [f"- No findings: all {excluded} done run(s) were timed while the load average "
-                                        f"exceeded half the cores (the table's `loaded` column); rerun them on a "
-                                        f"quiet machine (docs/reports.md, \"Quiet numbers\")."], [])
-        return None
-    word = "best" if primary.better != "lower" else "lowest"
-    rule = ("named only where the 95 % interval of its paired lead over the runner-up lies wholly beyond "
-            + (f"the {unit_text} minimum effect" if unit_text else "no difference")
-            + (f" with no more than {fmt_min_effect(size_effect, 'ratio', size_spec)} more {size_word}"
-               if size_spec is not None else "")
-            + (" (float32 parameters: the cells' bytes per Gaussian differ)"
-               if by_bytes else ""))
-    lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds; {rule}): "
-                 + "; ".join(best_parts) + ".")
-    best_summary = f"- **{word.capitalize()} {_name(primary)}**: " + "; ".join(best_short) + "."
-
+    bests = [b for b in (_best_at(ax, scene) for scene in ax.scenes) if b is not None]
+    if not bests:
+        return _all_loaded(ax)
+    best = _best_part(ax, bests)
     ref = reference_row(table)
     others = [r for r in table.rows if r.label != ref.label and not r.extra]
-    in_full = f"\"Appendix: {table.axis} in full\""
-    family: list[Claim] = []  # the primary comparisons Holm's correction covers
-    if others and rules.comparisons:
-        primary_null = {"diff": 0.0, "ratio": 1.0}.get(primary_comp.how, primary_comp.null or 0.0)
-        method = {"diff": "paired t", "ratio": "paired t on log ratios"}.get(primary_comp.how, "t")
-        signs: dict[str, list[str]] = {}  # row -> per scene "seeds above the reference/pairs"
-        pending = []  # (row, its primary claims, their short texts, not settled, the other way, across scenes,
-        #   size changes, matched-size differences): the summary's line of each row, once Holm has run
-        lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
-        appendix.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}), the other "
-                        f"comparisons:")
-        head_at = len(appendix)  # the appendix's length after that head: no line more, no other comparison
-        for row in others:
-            parts = []
-            rest = []  # the other comparisons' (the appendix's)
-            moving = []
-            primaries: list[Claim] = []  # this row's primary-metric claims
-            briefs: list[str] = []  # each one's difference as the Summary writes it (`IntervalText.short`)
-            for comp in rules.comparisons:
-                spec = specs[comp.metric]
-                texts = []
-                for scene in scenes:
-                    a, b = values(scene, ref, comp.metric), values(scene, row, comp.metric)
-                    iv, null = paired(a, b, comp)
-                    if iv.n == 0:
-                        texts.append("–")
-                        continue
-                    if comp.metric == primary.name and comp.how in ("diff", "ratio"):
-                        pairs = [(a[k], b[k]) for k in a if k in b and math.isfinite(a[k]) and math.isfinite(b[k])]
-                        signs.setdefault(row.label, []).append(
-                            f"{sum(1 for x, y in pairs if y > x)}/{len(pairs)}")
-                    written = interval_text(iv, comp.how, spec, null, comp.min_effect)
-                    text = written.text
-                    significant, is_practical = judge(iv, comp.how, null, spec, comp.min_effect)
-                    settled = None
-                    if comp.metric == primary.name:
-                        why = unsettled(scene, ref, row, iv.estimate - (null or 0.0))
-                        settled = None if settle(scene, row) is None or settle(scene, ref) is None else not why
-                        if why:
-                            moving.append(f"{scene}: {why}")
-                    claims.append(Claim("vs", scene, row.label, comp.metric, comp.how, iv.estimate, text, ref.label,
-                                        iv.low, iv.high, iv.n, significant, is_practical, settled))
-                    if comp.metric == primary.name:
-                        primaries.append(claims[-1])
-                        briefs.append(written.short)
-                    texts.append(text)
-                (parts if comp.metric == primary.name else rest).append(f"{_name(spec)} {' / '.join(texts)}")
-            line = f"  - `{row.label}`: " + "; ".join(parts)
-            more = ["; ".join(rest)] if rest else []
-            along = _along_the_run(scenes, ref, row, usable, settling, primary) if settling is not None else ""
-            if along:
-                more.append(along)
-            if moving:
-                line += f". **Not settled** ({'; '.join(moving)})"
-            also = confounds(scenes, ref, row, usable, kind)
-            if also:
-                more.append(f"Also changed: {also}")
-            opposed, opposed_short = [], []
-            for c in primaries:
-                if c.significant:
-                    against = other_way(primary, c.value - primary_null,
-                                        quality_intervals(c.scene, ref, row))
-                    if against:
-                        opposed.append(f"{c.scene}: {'; '.join(t for _, t in against)}")
-                        opposed_short.append(f"{' and '.join(n for n, _ in against)} on {c.scene}")
-            if opposed:
-                line += f". **The other way** (against the {_name(primary)} difference, significantly): " \
-                    + "; ".join(opposed)
-            across = across_scenes(primaries, scenes, primary_null)
-            if across is not None:
-                line += f". {across.text}"
-            size = size_line(scenes, ref, row)
-            if size:
-                more.append(size)
-            sized = _matched_text(ax, ref, row) if size_spec is not None else _MatchedText()
-            line += sized.text
-            claims += sized.claims
-            heads, at_size = sized.heads, sized.at_size
-            if also:
-                line += f". Also changed: other settings too (what, in {in_full})"
-            lines.append(line)
-            if more:
-                appendix.append(f"  - `{row.label}`: " + ". ".join(more))
-            # the summary: the primary difference per scene with the marks the line above gives it, written once
-            # Holm has run
-            if primaries:
-                pending.append((row, primaries, briefs, moving, opposed_short, across, heads, at_size))
-        # Holm's correction over the family of the primary comparisons printed with an interval
-        family = [c for c in claims if c.kind == "vs" and c.reference == ref.label and c.metric == primary.name
-                  and _with_interval(c, specs)]
-        p = [t_p_value(Interval(c.value, c.low, c.high, c.n, method), primary_null) for c in family]
-        kept = holm(p)
-        lost = {(c.scene, c.label) for c, k in zip(family, kept) if c.significant and not k}
-        if len(family) < 2 or not any(c.significant for c in family):
-            family = []  # nothing for Holm to correct: one comparison, or none significant alone
-        else:
-            line = holm_line(family, p, kept, _name(primary), ref.label, scenes, signs)
-            lines.append(f"- {line}.")
-            claims.append(Claim("holm", "", "", primary.name, "count", float(sum(kept)), line, ref.label,
-                                n=len(family)))
-        for row, primaries, briefs, moving, opposed_short, across, heads, at_size in pending:
-            marks = []
-            if moving:
-                marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in moving))
-            if opposed_short:
-                marks.append(f"**the other way** (against the {_name(primary)} difference): " + "; ".join(opposed_short))
-            if across is not None:
-                short = sum((c.scene, c.label) in lost for c in primaries)  # across scenes per comparison only
-                marks.append(across.text + (f" (each per comparison; {len(primaries) - short} of {len(primaries)} "
-                                            f"significant after Holm)" if short and across.everywhere else ""))
-            if heads:
-                marks.append("**against model size**: " + _sizes_in_brief(heads)
-                             + "".join(f"; at a matched size ({named}): " + "; ".join(m.text for m in at_size if m.matched == named)
-                                       for named in dict.fromkeys(m.matched for m in at_size)))
-            said = "; ".join(f"{c.scene} {brief}"
-                             + (", not significant after Holm" if (c.scene, c.label) in lost else "")
-                             for c, brief in zip(primaries, briefs))
-            summary.append(f"- **`{row.label}`** against `{ref.label}`, {_name(primary)}: {said}"
-                           + "".join(f"; {m}" for m in marks) + ".")
-        if len(appendix) == head_at:  # no row compared anything else
-            appendix.pop()
-    summary.append(best_summary)
-    if size_spec is not None and dim == table.axis and len(matched_values) >= 2:
-        rows = [r for r in table.rows if any(same_value(r.value, v) for v in matched_values)]
-        parts = []
-        for row in rows[1:]:
-            texts = []
-            for scene in scenes:
-                iv, null = paired(values(scene, rows[0], primary.name), values(scene, row, primary.name), primary_comp)
-                if not iv.n:
-                    continue
-                text = fmt_interval(iv, primary_comp.how, primary, null, primary_comp.min_effect)
-                ratio = paired_ratio(size_values(scene, rows[0]), size_values(scene, row))
-                at = f" at {size_ratio_text(f'×{ratio.estimate:.3f}', scene, rows[0], row)}" if ratio.n else ""
-                if off_size(ratio):  # declared matched, ended apart: said, never claimed at one size
-                    texts.append(f"{scene} {text}{at}: **not at one size** (a run that missed its count: see "
-                                 f"\"Warnings\")")
-                    continue
-                claims.append(Claim("matched", scene, row.label, primary.name, primary_comp.how, iv.estimate, text,
-                                    rows[0].label, iv.low, iv.high, iv.n,
-                                    *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
-                why = unsettled(scene, rows[0], row, iv.estimate - (null or 0.0))
-                texts.append(f"{scene} {text}{at}" + (f", **not settled** ({why})" if why else ""))
-            if texts:
-                parts.append(f"`{row.label}` against `{rows[0].label}`: " + "; ".join(texts))
-        head = (f"- **At a matched size** (`[report] matched`: {', '.join(f'`{r.label}`' for r in rows)} end at one "
-                f"{'byte' if by_bytes else _name(size_spec)} count; {setting_text(experiment, dim, [r.value for r in rows])}): ")
-        if parts:
-            lines.append(head + ". ".join(parts) + ".")
-        elif rows:
-            lines.append(head + "no done runs of these cells yet, so nothing is compared at a matched size.")
-    self_parts = []
-    for comp in rules.comparisons:
-        if comp.how != "mean" or comp.null is None:
-            continue
-        for scene in scenes:  # the reference row's own value: the defaults timed against themselves
-            iv = t_interval(list(values(scene, ref, comp.metric).values()))
-            if iv.n:
-                text = fmt_interval(iv, "mean", specs[comp.metric], comp.null, comp.min_effect)
-                significant, is_practical = judge(iv, "mean", comp.null, specs[comp.metric], comp.min_effect)
-                claims.append(Claim("self", scene, ref.label, comp.metric, "mean", iv.estimate, text, ref.label,
-                                    iv.low, iv.high, iv.n, significant, is_practical))
-                self_parts.append(f"{scene} {text}")
-    if self_parts:
-        lines.append(f"- `{ref.label}` against itself (the same options timed as both sides of each pair; the "
-                     f"noise floor of the ratio): " + "; ".join(self_parts) + ".")
-    # every comparison printed: the leader's lead over the runner-up (and its size against it), each row
-    # against the reference, the matched-size ones; counted where it was printed with an interval
-    made = [c for c in claims if c.kind in ("best", "no best", "size", "vs", "matched") and c.reference and c.n]
-    count = sum(1 for c in made if _with_interval(c, specs))
-    if count:
-        claims.append(Claim("count", "", "", "", "count", float(count), str(count)))
-        effects = [f"{_name(specs[c.metric])} {fmt_min_effect(c.min_effect, c.how, specs[c.metric])}"
-                   for c in rules.comparisons if c.min_effect is not None]
-        rest = len(made) - count
-        appendix.append(f"- This table makes {count} comparisons with a 95 % interval (Student's t over seeds; no "
-                     f"correction for multiple comparisons, so about 1 in 20 intervals misses by chance"
-                     + (f", except Holm's over the {len(family)} {_name(primary)} ones against `{ref.label}`"
-                        if family else "") + ")"
-                     + (f"; {rest} more have none (one seed, or seeds that did not vary the result) and are no "
-                        f"evidence either way" if rest else "") + "."
-                     + (f" Minimum effects ({', '.join(effects)}): a difference reads \"no practical difference\" "
-                        f"only where its whole interval lies within ± its minimum effect, \"inconclusive\" where "
-                        f"the interval reaches beyond it while the difference is not significant or its estimate "
-                        f"is below it." if effects else ""))
-    elif made:
-        claims.append(Claim("count", "", "", "", "count", 0.0, "0"))
-        appendix.append(f"- This table makes {len(made)} comparisons, but none has an interval (one seed per cell, "
-                     f"or seeds that did not vary the result): none of them is a significant difference; add "
-                     f"seeds to the grid.")
-    if declared is not None and declared.confounds and others and not _recorded(usable, declared):
-        labels = ", ".join(kind.specs[name].label for name in declared.confounds[:5])
-        appendix.append("- What else each setting changed (" + labels
-                     + ") was not recorded by these runs (run before it was); \"(planned)\" counts are what their "
-                       "configs schedule; rerun the grid to see the rest.")
-    if excluded:
-        lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
-                     f"these findings (marked in the table's `loaded` column).")
-    if timed & set(specs) and not load_recorded(runs, kind):
-        appendix.append(f"- These runs did not record the machine's load (run before it was recorded): the "
-                     f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons may come "
-                     f"from a loaded machine and are no evidence of speed.")
-    if untimed:
-        appendix.append(f"- {untimed} run(s) timed while other processes loaded the machine are left out of the "
-                     f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons (marked in "
-                     f"the table's `timed under load` column; their quality metrics are kept).")
-
-    for note in declared.axis_notes if declared is not None else ():
-        more_lines, more_claims = note(table, runs, scenes)
+    vs, family = _against_reference(ax, ref, others) if others and ax.rules.comparisons else (_Part(), [])
+    matched = _matched_cells_part(ax)
+    itself = _self_part(ax, ref)
+    claims = [*best.claims, *vs.claims, *matched.claims, *itself.claims]
+    count = _count_part(ax, claims, family, ref)
+    caveats = _caveats_part(ax, others)
+    lines = [*best.lines, *vs.lines, *matched.lines, *itself.lines, *caveats.lines]
+    claims += count.claims
+    appendix = [*vs.appendix, *count.appendix, *caveats.appendix]  # the section "Appendix: <axis> in full"
+    summary = [*vs.summary, *best.summary]  # the report's "Summary" (`Finding.summary`): the texts above, cut short
+    for note in ax.declared.axis_notes if ax.declared is not None else ():
+        more_lines, more_claims = note(table, runs, ax.scenes)
         appendix += more_lines
         claims += more_claims
     chose = [c for c in claims if c.kind == "auto"]  # a row that chose its setting per scene (SH degree "auto")
@@ -897,6 +597,503 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                          f"one degree's (\"Appendix: {table.axis} in full\").")
     return Finding(table.axis, lines, claims, appendix, summary)
 
+
+@dataclasses.dataclass(frozen=True)
+class _Part:
+    """One block of an axis's finding (`axis_finding` puts them together): its ``lines`` (the findings'),
+    ``claims``, ``appendix`` lines and ``summary`` lines, each in the order written."""
+
+    lines: tuple[str, ...] = ()
+    claims: tuple[Claim, ...] = ()
+    appendix: tuple[str, ...] = ()
+    summary: tuple[str, ...] = ()
+
+
+def _all_loaded(ax: _Axis) -> Finding | None:
+    """The finding of an axis with no best at any scene: that every done run was timed under load, where
+    the runs were left out for it (`_Axis.excluded`); None otherwise (nothing done)."""
+    if not ax.excluded:
+        return None
+    return Finding(ax.table.axis, [f"- No findings: all {ax.excluded} done run(s) were timed while the load average "
+                                   f"exceeded half the cores (the table's `loaded` column); rerun them on a "
+                                   f"quiet machine (docs/reports.md, \"Quiet numbers\")."], [])
+
+
+# Best per scene
+
+@dataclasses.dataclass(frozen=True)
+class _Best:
+    """One scene's verdict on its best cell (`_best_at`): ``text`` as the findings write it, ``short`` as the
+    Summary does (without the lead's numbers), and its ``claims``."""
+
+    text: str
+    short: str
+    claims: tuple[Claim, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class _Lead:
+    """The leader ``row``'s paired lead over the runner-up ``runner`` at one scene (`_best_at`), which each verdict
+    reads: ``mean``, the leader's mean, written ``mean_text``; ``how``, "diff" or "ratio", with its ``null``;
+    ``text``, the lead as written (`fmt_interval`); ``why``, why it is not settled ("": settled or not
+    judged); ``settled``, the claim's."""
+
+    scene: str
+    row: Row
+    runner: Row
+    metric: str  # the primary metric's name
+    mean: Interval
+    mean_text: str
+    how: str
+    null: float
+    lead: Interval
+    significant: bool
+    practical: bool
+    text: str
+    why: str
+    settled: bool | None
+
+    def claim(self, kind: str, text: str) -> Claim:
+        """The verdict's claim: "best" (on the leader's mean) or "no best" (on its lead)."""
+        how, value = ("mean", self.mean.estimate) if kind == "best" else (self.how, self.lead.estimate)
+        return Claim(kind, self.scene, self.row.label, self.metric, how, value, text, self.runner.label,
+                     self.lead.low, self.lead.high, self.lead.n, self.significant, self.practical, self.settled)
+
+
+def _best_at(ax: _Axis, scene: str) -> _Best | None:
+    """The best cell at ``scene`` by the mean of the primary metric over seeds (extra cells left out: they
+    are compared only at a matched size): the only cell, a best (`_best_named`), or no single best
+    (`_no_best`, `_no_best_at_size`); None where no cell has a done run."""
+    primary, comp = ax.primary, ax.primary_comp
+    means = [(t_interval(list(ax.values(scene, row, primary.name).values())), row) for row in ax.table.rows
+             if not row.extra]
+    means = sorted(((iv, row) for iv, row in means if iv.n > 0), key=lambda m: -ax.sign * m[0].estimate)
+    if not means:
+        return None
+    iv, row = means[0]
+    mean_text = fmt_number(iv.estimate, "mean", primary)
+    if len(means) == 1:
+        text = f"{scene} `{row.label}` ({mean_text}; the only cell)"
+        return _Best(text, text, (Claim("best", scene, row.label, primary.name, "mean", iv.estimate, mean_text,
+                                        n=iv.n),))
+    runner = means[1][1]
+    how = "ratio" if comp.how == "ratio" else "diff"
+    null = 1.0 if how == "ratio" else 0.0
+    lead = (paired_ratio if how == "ratio" else paired_difference)(ax.values(scene, runner, primary.name),
+                                                                   ax.values(scene, row, primary.name))
+    significant, is_practical = judge(lead, how, null, primary, comp.min_effect)
+    why = ax.unsettled(scene, runner, row, lead.estimate - null)
+    settled = None if ax.settle(scene, row) is None else not why
+    told = _Lead(scene, row, runner, primary.name, iv, mean_text, how, null, lead, significant, is_practical,
+                 fmt_interval(lead, how, primary, null, comp.min_effect), why, settled)
+    if not (significant and clears(lead, how, null, comp.min_effect)):
+        return _no_best(ax, told)
+    larger = _larger(ax, scene, row, runner)
+    return _best_named(ax, told) if larger is None else _no_best_at_size(ax, told, larger)
+
+
+def _larger(ax: _Axis, scene: str, row: Row, runner: Row) -> Interval | None:
+    """The paired size ratio of the leader ``row`` to the runner-up ``runner`` at ``scene`` where the leader is
+    larger by at least the size's minimum effect (None: not, or the kind has no size metric)."""
+    if ax.size_spec is None:
+        return None
+    ratio = paired_ratio(ax.size_values(scene, runner), ax.size_values(scene, row))
+    if ratio.n and math.isfinite(ratio.estimate) and ratio.estimate > 1.0 \
+            and practical(ratio, "ratio", 1.0, ax.size_effect):
+        return ratio
+    return None
+
+
+def _best_named(ax: _Axis, told: _Lead) -> _Best:
+    """A best: ``glossy `0.2` (27.50 dB; +0.42 dB [95 % CI …] over `0`)``, with the quality metrics that go
+    the other way (`other_way`) and whether it settled."""
+    scene, row, runner = told.scene, told.row, told.runner
+    reversed_ = other_way(ax.primary, told.lead.estimate - told.null, ax.quality_intervals(scene, runner, row))
+    text = f"{scene} `{row.label}` ({told.mean_text}; {told.text} over `{runner.label}`)"
+    short = text
+    if reversed_:
+        names = " and ".join(n for n, _ in reversed_)
+        but = f", **but {names} go{'es' if len(reversed_) == 1 else ''} the other way**"
+        text += f"{but} ({'; '.join(t for _, t in reversed_)})"
+        short += but
+    if told.why:
+        text += f", **not settled** ({told.why})"
+        short += ", **not settled**"
+    return _Best(text, short, (told.claim("best", text),))
+
+
+def _no_best_at_size(ax: _Axis, told: _Lead, larger: Interval) -> _Best:
+    """No single best at comparable size: the leader leads clearly but is ``larger`` than the runner-up by
+    more than the size's minimum effect; claimed "no best" and "size"."""
+    scene, row, runner, size, table = told.scene, told.row, told.runner, ax.size_spec, ax.table
+    size_text = fmt_interval(larger, "ratio", size, None)
+    sized = {r.label: ax.mean_of(scene, r, "bytes") for r in table.rows} if ax.by_bytes else None
+    front = _on_front(table, scene, size, ax.primary, (row, runner), sized,
+                      [r.label for r in table.rows if not r.extra])
+    at = ax.size_ratio_text(size_text, scene, runner, row)
+    text = (f"{scene}: no single best at comparable size (`{row.label}`, {told.mean_text}, leads "
+            f"`{runner.label}` by {told.text} at {at}, more than the "
+            f"{fmt_min_effect(ax.size_effect, 'ratio', size)} minimum effect"
+            + (f"; both on {FRONT_OF[any(r.extra for r in table.rows)]} {ax.size_word}/quality Pareto front"
+               if front else "") + ")")
+    short = (f"{scene}: no single best at comparable size (`{row.label}` leads `{runner.label}` at "
+             f"{fmt_number(larger.estimate, 'ratio', size)} `{runner.label}`'s {ax.size_word})")
+    if told.why:
+        text += f", **not settled** ({told.why})"
+        short += ", **not settled**"
+    return _Best(text, short, (told.claim("no best", text),
+                               Claim("size", scene, row.label, "bytes" if ax.by_bytes else size.name, "ratio",
+                                     larger.estimate, size_text, runner.label, larger.low, larger.high, larger.n,
+                                     *judge(larger, "ratio", 1.0, size, ax.size_effect))))
+
+
+def _no_best(ax: _Axis, told: _Lead) -> _Best:
+    """No single best: the lead's interval is not wholly beyond the minimum effect (or no difference)."""
+    unit_text = ax.unit_text
+    bound = ("" if not told.practical or unit_text is None else
+             f"; its interval's bound nearer no difference is not beyond the {unit_text} minimum effect")
+    text = (f"{told.scene}: no single best (`{told.row.label}`, {told.mean_text}, leads `{told.runner.label}` by "
+            f"{told.text}{bound})")
+    return _Best(text, f"{told.scene}: no single best", (told.claim("no best", text),))
+
+
+def _best_part(ax: _Axis, bests: Sequence[_Best]) -> _Part:
+    """The line of the best per scene with the rule that names one, its claims, and its Summary line."""
+    primary, size = ax.primary, ax.size_spec
+    word = "best" if primary.better != "lower" else "lowest"
+    unit_text = ax.unit_text
+    rule = ("named only where the 95 % interval of its paired lead over the runner-up lies wholly beyond "
+            + (f"the {unit_text} minimum effect" if unit_text else "no difference")
+            + (f" with no more than {fmt_min_effect(ax.size_effect, 'ratio', size)} more {ax.size_word}"
+               if size is not None else "")
+            + (" (float32 parameters: the cells' bytes per Gaussian differ)"
+               if ax.by_bytes else ""))
+    line = (f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds; {rule}): "
+            + "; ".join(b.text for b in bests) + ".")
+    summary = f"- **{word.capitalize()} {_name(primary)}**: " + "; ".join(b.short for b in bests) + "."
+    return _Part((line,), tuple(c for b in bests for c in b.claims), summary=(summary,))
+
+
+# Each row against the reference
+
+@dataclasses.dataclass(frozen=True)
+class _Vs:
+    """One row against the reference at one scene in one comparison (`_vs_at`): its "vs" ``claim``;
+    ``brief``, its difference as the Summary writes it (`IntervalText.short`); ``sign``, how many seeds put
+    the row above the reference, ``k/n`` (None: not the primary metric's difference or ratio); ``why``, why
+    it is not settled ("": settled, not judged, or not the primary metric)."""
+
+    claim: Claim
+    brief: str
+    sign: str | None
+    why: str
+
+
+def _vs_at(ax: _Axis, scene: str, ref: Row, row: Row, comp: Comparison) -> _Vs | None:
+    """``row`` against ``ref`` at ``scene``, paired over seeds, in the comparison ``comp`` (`_Vs`); None where
+    no seed has both."""
+    spec = ax.specs[comp.metric]
+    a, b = ax.values(scene, ref, comp.metric), ax.values(scene, row, comp.metric)
+    iv, null = paired(a, b, comp)
+    if iv.n == 0:
+        return None
+    is_primary = comp.metric == ax.primary.name
+    sign = None
+    if is_primary and comp.how in ("diff", "ratio"):
+        pairs = [(a[k], b[k]) for k in a if k in b and math.isfinite(a[k]) and math.isfinite(b[k])]
+        sign = f"{sum(1 for x, y in pairs if y > x)}/{len(pairs)}"
+    written = interval_text(iv, comp.how, spec, null, comp.min_effect)
+    significant, is_practical = judge(iv, comp.how, null, spec, comp.min_effect)
+    why, settled = "", None
+    if is_primary:
+        why = ax.unsettled(scene, ref, row, iv.estimate - (null or 0.0))
+        settled = None if ax.settle(scene, row) is None or ax.settle(scene, ref) is None else not why
+    return _Vs(Claim("vs", scene, row.label, comp.metric, comp.how, iv.estimate, written.text, ref.label, iv.low,
+                     iv.high, iv.n, significant, is_practical, settled), written.short, sign, why)
+
+
+@dataclasses.dataclass(frozen=True)
+class _RowAgainst:
+    """One ``row`` against the reference (`_row_against`): ``line``, its findings line; ``more``, its appendix
+    line ("": none); ``claims``, its "vs" claims, then its "matched" ones; ``signs``, per scene how many seeds
+    put it above the reference (`holm_line`); and what its Summary line marks (`_row_summary`): ``primaries``,
+    its primary-metric claims, ``briefs``, each one's text in brief, ``moving``, ``scene: why`` where not
+    settled, ``opposed``, the quality metrics that go the other way in brief, ``across`` (`across_scenes`)
+    and ``sized``, its remark on model size (`_matched_text`)."""
+
+    row: Row
+    line: str
+    more: str
+    claims: tuple[Claim, ...]
+    signs: tuple[str, ...]
+    primaries: tuple[Claim, ...]
+    briefs: tuple[str, ...]
+    moving: tuple[str, ...]
+    opposed: tuple[str, ...]
+    across: Across | None
+    sized: _MatchedText
+
+
+def _row_against(ax: _Axis, ref: Row, row: Row) -> _RowAgainst:
+    """``row`` against ``ref`` in each of the kind's comparisons, per scene: the primary metric's in the
+    findings' line with its marks (not settled, the other way, across scenes, model size, also changed), the
+    others, the curve along the run, the confounds and the sizes in its appendix line."""
+    primary, scenes = ax.primary, ax.scenes
+    parts, rest = [], []  # the primary comparison's texts (the line's), the other comparisons' (the appendix's)
+    claims, signs, primaries, briefs, moving = [], [], [], [], []
+    for comp in ax.rules.comparisons:
+        texts = []
+        for scene in scenes:
+            vs = _vs_at(ax, scene, ref, row, comp)
+            if vs is None:
+                texts.append("–")
+                continue
+            if vs.sign is not None:
+                signs.append(vs.sign)
+            if vs.why:
+                moving.append(f"{scene}: {vs.why}")
+            claims.append(vs.claim)
+            if comp.metric == primary.name:
+                primaries.append(vs.claim)
+                briefs.append(vs.brief)
+            texts.append(vs.claim.text)
+        (parts if comp.metric == primary.name else rest).append(f"{_name(ax.specs[comp.metric])} {' / '.join(texts)}")
+    line = f"  - `{row.label}`: " + "; ".join(parts)
+    more = ["; ".join(rest)] if rest else []
+    along = _along_the_run(scenes, ref, row, ax.usable, ax.settling, primary) if ax.settling is not None else ""
+    if along:
+        more.append(along)
+    if moving:
+        line += f". **Not settled** ({'; '.join(moving)})"
+    also = confounds(scenes, ref, row, ax.usable, ax.kind)
+    if also:
+        more.append(f"Also changed: {also}")
+    opposed, opposed_short = _the_other_way(ax, ref, row, primaries)
+    if opposed:
+        line += f". **The other way** (against the {_name(primary)} difference, significantly): " + "; ".join(opposed)
+    across = across_scenes(primaries, scenes, ax.primary_null)
+    if across is not None:
+        line += f". {across.text}"
+    size = ax.size_line(ref, row)
+    if size:
+        more.append(size)
+    sized = _matched_text(ax, ref, row) if ax.size_spec is not None else _MatchedText()
+    line += sized.text
+    if also:
+        line += f". Also changed: other settings too (what, in \"Appendix: {ax.table.axis} in full\")"
+    return _RowAgainst(row, line, f"  - `{row.label}`: " + ". ".join(more) if more else "",
+                       (*claims, *sized.claims), tuple(signs), tuple(primaries), tuple(briefs), tuple(moving),
+                       tuple(opposed_short), across, sized)
+
+
+def _the_other_way(ax: _Axis, ref: Row, row: Row, primaries: Sequence[Claim]) -> tuple[list[str], list[str]]:
+    """Per scene where ``row``'s primary difference is significant, the quality metrics that go significantly
+    the other way (`other_way`): (in full, ``glossy: SSIM −0.010 [95 % CI …]``; in brief, ``SSIM on glossy``)."""
+    opposed, opposed_short = [], []
+    for c in primaries:
+        if c.significant:
+            against = other_way(ax.primary, c.value - ax.primary_null, ax.quality_intervals(c.scene, ref, row))
+            if against:
+                opposed.append(f"{c.scene}: {'; '.join(t for _, t in against)}")
+                opposed_short.append(f"{' and '.join(n for n, _ in against)} on {c.scene}")
+    return opposed, opposed_short
+
+
+@dataclasses.dataclass(frozen=True)
+class _Holm:
+    """Holm's correction over an axis's primary comparisons (`_holm`): ``family``, the claims it covers (empty:
+    nothing to correct, one comparison or none significant alone); ``lost``, (scene, label) of those
+    significant alone but not after it; ``claim``, its "holm" claim (None where the family is empty)."""
+
+    family: list[Claim]
+    lost: set[tuple[str, str]]
+    claim: Claim | None
+
+
+def _holm(ax: _Axis, ref: Row, claims: Sequence[Claim], signs: Mapping[str, Sequence[str]]) -> _Holm:
+    """Holm's step-down correction (family-wise 5 %) over the primary "vs" claims against ``ref`` printed with
+    an interval, each one's p-value from its own t interval (`t_p_value`); its line is `holm_line`'s."""
+    primary, comp = ax.primary, ax.primary_comp
+    method = {"diff": "paired t", "ratio": "paired t on log ratios"}.get(comp.how, "t")
+    family = [c for c in claims if c.kind == "vs" and c.reference == ref.label and c.metric == primary.name
+              and _with_interval(c, ax.specs)]
+    p = [t_p_value(Interval(c.value, c.low, c.high, c.n, method), ax.primary_null) for c in family]
+    kept = holm(p)
+    lost = {(c.scene, c.label) for c, k in zip(family, kept) if c.significant and not k}
+    if len(family) < 2 or not any(c.significant for c in family):
+        return _Holm([], lost, None)
+    line = holm_line(family, p, kept, _name(primary), ref.label, ax.scenes, signs)
+    return _Holm(family, lost, Claim("holm", "", "", primary.name, "count", float(sum(kept)), line, ref.label,
+                                     n=len(family)))
+
+
+def _row_summary(ax: _Axis, ref: Row, r: _RowAgainst, lost: set[tuple[str, str]]) -> str:
+    """The Summary's line of one row against ``ref``: its primary difference per scene (``lost``: those no
+    longer significant after Holm's correction) with the marks its findings line gives it, in brief."""
+    primary = ax.primary
+    marks = []
+    if r.moving:
+        marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in r.moving))
+    if r.opposed:
+        marks.append(f"**the other way** (against the {_name(primary)} difference): " + "; ".join(r.opposed))
+    if r.across is not None:
+        short = sum((c.scene, c.label) in lost for c in r.primaries)  # across scenes per comparison only
+        marks.append(r.across.text + (f" (each per comparison; {len(r.primaries) - short} of {len(r.primaries)} "
+                                      f"significant after Holm)" if short and r.across.everywhere else ""))
+    if r.sized.heads:
+        at_size = r.sized.at_size
+        marks.append("**against model size**: " + _sizes_in_brief(r.sized.heads)
+                     + "".join(f"; at a matched size ({named}): "
+                               + "; ".join(m.text for m in at_size if m.matched == named)
+                               for named in dict.fromkeys(m.matched for m in at_size)))
+    said = "; ".join(f"{c.scene} {brief}" + (", not significant after Holm" if (c.scene, c.label) in lost else "")
+                     for c, brief in zip(r.primaries, r.briefs))
+    return (f"- **`{r.row.label}`** against `{ref.label}`, {_name(primary)}: {said}"
+            + "".join(f"; {m}" for m in marks) + ".")
+
+
+def _against_reference(ax: _Axis, ref: Row, others: Sequence[Row]) -> tuple[_Part, list[Claim]]:
+    """Every row of ``others`` against the reference ``ref`` (`_row_against`), Holm's correction over their
+    primary comparisons (`_holm`) and each row's Summary line: (the block, Holm's family; empty where Holm
+    has nothing to correct)."""
+    scenes = " / ".join(ax.scenes)
+    rows = [_row_against(ax, ref, row) for row in others]
+    signs: dict[str, list[str]] = {}  # row -> per scene "seeds above the reference/pairs"
+    for r in rows:
+        if r.signs:
+            signs.setdefault(r.row.label, []).extend(r.signs)
+    claims = [c for r in rows for c in r.claims]
+    corrected = _holm(ax, ref, claims, signs)
+    lines = [f"- **Against `{ref.label}`**, paired over seeds ({scenes}):", *(r.line for r in rows)]
+    if corrected.claim is not None:
+        lines.append(f"- {corrected.claim.text}.")
+        claims.append(corrected.claim)
+    more = [r.more for r in rows if r.more]
+    appendix = [f"- **Against `{ref.label}`**, paired over seeds ({scenes}), the other comparisons:", *more] \
+        if more else []  # no row compared anything else: no head either
+    summary = [_row_summary(ax, ref, r, corrected.lost) for r in rows if r.primaries]
+    return _Part(tuple(lines), tuple(claims), tuple(appendix), tuple(summary)), corrected.family
+
+
+# The lines after the comparisons
+
+def _matched_cells_part(ax: _Axis) -> _Part:
+    """Where the matched setting is this table's axis with two or more values, its cells compared with each
+    other (``- **At a matched size** …``), each claimed "matched" unless it did not end at one size."""
+    dim, values = ax.matched
+    size, primary, comp, table = ax.size_spec, ax.primary, ax.primary_comp, ax.table
+    if size is None or dim != table.axis or len(values) < 2:
+        return _Part()
+    rows = [r for r in table.rows if any(same_value(r.value, v) for v in values)]
+    parts, claims = [], []
+    for row in rows[1:]:
+        texts = []
+        for scene in ax.scenes:
+            iv, null = paired(ax.values(scene, rows[0], primary.name), ax.values(scene, row, primary.name), comp)
+            if not iv.n:
+                continue
+            text = fmt_interval(iv, comp.how, primary, null, comp.min_effect)
+            ratio = paired_ratio(ax.size_values(scene, rows[0]), ax.size_values(scene, row))
+            at = f" at {ax.size_ratio_text(f'×{ratio.estimate:.3f}', scene, rows[0], row)}" if ratio.n else ""
+            if ax.off_size(ratio):  # declared matched, ended apart: said, never claimed at one size
+                texts.append(f"{scene} {text}{at}: **not at one size** (a run that missed its count: see "
+                             f"\"Warnings\")")
+                continue
+            claims.append(Claim("matched", scene, row.label, primary.name, comp.how, iv.estimate, text,
+                                rows[0].label, iv.low, iv.high, iv.n,
+                                *judge(iv, comp.how, null, primary, comp.min_effect)))
+            why = ax.unsettled(scene, rows[0], row, iv.estimate - (null or 0.0))
+            texts.append(f"{scene} {text}{at}" + (f", **not settled** ({why})" if why else ""))
+        if texts:
+            parts.append(f"`{row.label}` against `{rows[0].label}`: " + "; ".join(texts))
+    head = (f"- **At a matched size** (`[report] matched`: {', '.join(f'`{r.label}`' for r in rows)} end at one "
+            f"{'byte' if ax.by_bytes else _name(size)} count; "
+            f"{setting_text(ax.experiment, dim, [r.value for r in rows])}): ")
+    if parts:
+        return _Part((head + ". ".join(parts) + ".",), tuple(claims))
+    if rows:
+        return _Part((head + "no done runs of these cells yet, so nothing is compared at a matched size.",))
+    return _Part()
+
+
+def _self_part(ax: _Axis, ref: Row) -> _Part:
+    """The reference row against itself in each "mean" comparison with a null value (the defaults timed as
+    both sides of each pair: the noise floor of a time ratio), claimed "self"."""
+    parts, claims = [], []
+    for comp in ax.rules.comparisons:
+        if comp.how != "mean" or comp.null is None:
+            continue
+        spec = ax.specs[comp.metric]
+        for scene in ax.scenes:
+            iv = t_interval(list(ax.values(scene, ref, comp.metric).values()))
+            if iv.n:
+                text = fmt_interval(iv, "mean", spec, comp.null, comp.min_effect)
+                significant, is_practical = judge(iv, "mean", comp.null, spec, comp.min_effect)
+                claims.append(Claim("self", scene, ref.label, comp.metric, "mean", iv.estimate, text, ref.label,
+                                    iv.low, iv.high, iv.n, significant, is_practical))
+                parts.append(f"{scene} {text}")
+    if not parts:
+        return _Part()
+    return _Part((f"- `{ref.label}` against itself (the same options timed as both sides of each pair; the "
+                  f"noise floor of the ratio): " + "; ".join(parts) + ".",), tuple(claims))
+
+
+def _count_part(ax: _Axis, claims: Sequence[Claim], family: Sequence[Claim], ref: Row) -> _Part:
+    """How many comparisons the finding makes with a 95 % interval (the "count" claim and its appendix line):
+    the leader's lead over the runner-up (and its size against it), each row against the reference, the
+    matched-size ones, among ``claims``; ``family``: Holm's (named where not empty)."""
+    primary, specs = ax.primary, ax.specs
+    made = [c for c in claims if c.kind in ("best", "no best", "size", "vs", "matched") and c.reference and c.n]
+    count = sum(1 for c in made if _with_interval(c, specs))
+    if count:
+        effects = [f"{_name(specs[c.metric])} {fmt_min_effect(c.min_effect, c.how, specs[c.metric])}"
+                   for c in ax.rules.comparisons if c.min_effect is not None]
+        rest = len(made) - count
+        return _Part(claims=(Claim("count", "", "", "", "count", float(count), str(count)),), appendix=(
+            f"- This table makes {count} comparisons with a 95 % interval (Student's t over seeds; no "
+            f"correction for multiple comparisons, so about 1 in 20 intervals misses by chance"
+            + (f", except Holm's over the {len(family)} {_name(primary)} ones against `{ref.label}`"
+               if family else "") + ")"
+            + (f"; {rest} more have none (one seed, or seeds that did not vary the result) and are no "
+               f"evidence either way" if rest else "") + "."
+            + (f" Minimum effects ({', '.join(effects)}): a difference reads \"no practical difference\" "
+               f"only where its whole interval lies within ± its minimum effect, \"inconclusive\" where "
+               f"the interval reaches beyond it while the difference is not significant or its estimate "
+               f"is below it." if effects else ""),))
+    if made:
+        return _Part(claims=(Claim("count", "", "", "", "count", 0.0, "0"),), appendix=(
+            f"- This table makes {len(made)} comparisons, but none has an interval (one seed per cell, "
+            f"or seeds that did not vary the result): none of them is a significant difference; add "
+            f"seeds to the grid.",))
+    return _Part()
+
+
+def _caveats_part(ax: _Axis, others: Sequence[Row]) -> _Part:
+    """What the runs did not record or left out: the confound counts (where ``others`` are compared), the
+    runs timed under load left out of every finding (a line) or of the timed comparisons, and the machine's
+    load where it was not recorded."""
+    declared, specs, timed = ax.declared, ax.specs, ax.timed
+    lines, appendix = [], []
+    if declared is not None and declared.confounds and others and not _recorded(ax.usable, declared):
+        labels = ", ".join(ax.kind.specs[name].label for name in declared.confounds[:5])
+        appendix.append("- What else each setting changed (" + labels
+                        + ") was not recorded by these runs (run before it was); \"(planned)\" counts are what "
+                          "their configs schedule; rerun the grid to see the rest.")
+    if ax.excluded:
+        lines.append(f"- {ax.excluded} run(s) timed while the load average exceeded half the cores are left out of "
+                     f"these findings (marked in the table's `loaded` column).")
+    timed_names = " / ".join(sorted(_name(specs[m]) for m in timed if m in specs))
+    if timed & set(specs) and not load_recorded(ax.runs, ax.kind):
+        appendix.append(f"- These runs did not record the machine's load (run before it was recorded): the "
+                        f"{timed_names} comparisons may come from a loaded machine and are no evidence of speed.")
+    if ax.untimed:
+        appendix.append(f"- {ax.untimed} run(s) timed while other processes loaded the machine are left out of the "
+                        f"{timed_names} comparisons (marked in the table's `timed under load` column; their "
+                        f"quality metrics are kept).")
+    return _Part(tuple(lines), appendix=tuple(appendix))
+
+
+# A comparison's remark on model size
 
 @dataclasses.dataclass(frozen=True)
 class _AtSize:
