@@ -364,8 +364,7 @@ class _Axis:
         usable = usable_runs(runs, kind)
         timed = bool(kind.report is not None and kind.report.timed)
         loaded = loaded_runs(usable, kind)  # all False where the kind's mark is not recorded
-        matched = dict(experiment.matched) if experiment is not None else {}
-        dim, matched_values = next(iter(matched.items()), (None, ()))
+        dim, matched_values = _matched_setting(experiment)
         size = specs.get(rules.size) if rules.size else None
         bytes_of = kind.report.model_bytes if kind.report is not None else None
         return cls(table, kind, runs, experiment, rules, specs, list(dict.fromkeys(table.frame.scene)), usable,
@@ -445,10 +444,8 @@ class _Axis:
 
     @property
     def matched(self) -> tuple[str | None, tuple]:
-        """The ``[report] matched`` setting and its values ((None, ()): none declared)."""
-        spec = self.experiment
-        dim, values = next(iter((dict(spec.matched) if spec is not None else {}).items()), (None, ()))
-        return dim, tuple(values)
+        """The ``[report] matched`` setting and its values (`_matched_setting`)."""
+        return _matched_setting(self.experiment)
 
     # a cell's runs and values
 
@@ -555,6 +552,12 @@ class _Axis:
         """"" when the difference ``b - a`` at ``scene`` is settled or not judged, else why not."""
         return unsettled_reason(self.settle(scene, a), self.settle(scene, b), (a.label, b.label), diff,
                                 self.primary.unit)
+
+
+def _matched_setting(experiment: ExperimentSpec | None) -> tuple[str | None, tuple]:
+    """The experiment's ``[report] matched`` setting and its values ((None, ()): none declared)."""
+    dim, values = next(iter((dict(experiment.matched) if experiment is not None else {}).items()), (None, ()))
+    return dim, tuple(values)
 
 
 def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None,
