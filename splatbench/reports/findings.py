@@ -332,533 +332,265 @@ def usable_runs(runs: pd.DataFrame, kind: RunKind) -> pd.DataFrame:
         done = done[pd.to_numeric(done[col], errors="coerce").fillna(0) == 0]
     return done
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class _Axis:
+    """What every part of one axis's finding reads (`axis_finding`; built by `_Axis.of`): the table, the
+    kind and its rules, the runs the findings may use, and the ``[report] matched`` cells. Its methods
+    pick a cell's runs and per-seed values, its model size and whether its curves settled."""
+
+    table: AxisTable
+    kind: RunKind
+    runs: pd.DataFrame  # every run of the grid, as given (the kind's axis notes and `load_recorded` read them)
+    experiment: ExperimentSpec | None
+    rules: FindingRules
+    specs: dict[str, MetricSpec]  # metric name -> its spec, for the table's metrics
+    scenes: list[str]  # in the table's order
+    usable: pd.DataFrame  # the done runs the findings use (`usable_runs`)
+    timed_usable: pd.DataFrame  # of those, the ones whose times count (`loaded_runs`: not timed under load)
+    excluded: int  # done runs left out of every finding, timed under load (`usable_runs`)
+    untimed: int  # usable runs left out of the timed metrics' comparisons only
+    stratum: set[str]  # the run ids at the matched size (`_stratum`; empty: none declared)
+    by_bytes: bool  # the size is judged by bytes, not by the size metric (`bytes_differ`)
+    _settled: dict = dataclasses.field(default_factory=dict, repr=False)  # (scene, label) -> `settle`'s answer
+
+    @classmethod
+    def of(cls, table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect: Mapping[str, float] | None,
+           experiment: ExperimentSpec | None) -> _Axis | None:
+        """The axis's context; None when the kind has no rules for its metrics or the table is empty."""
+        rules = rules_for(kind, table.metrics, min_effect)
+        if rules is None or table.frame.empty:
+            return None
+        specs = {m.name: m for m in table.metrics}
+        usable = usable_runs(runs, kind)
+        timed = bool(kind.report is not None and kind.report.timed)
+        loaded = loaded_runs(usable, kind)  # all False where the kind's mark is not recorded
+        dim, matched_values = _matched_setting(experiment)
+        size = specs.get(rules.size) if rules.size else None
+        bytes_of = kind.report.model_bytes if kind.report is not None else None
+        return cls(table, kind, runs, experiment, rules, specs, list(dict.fromkeys(table.frame.scene)), usable,
+                   usable[~loaded] if timed else usable, len(done_runs(runs)) - len(usable),
+                   int(loaded.sum()) if timed else 0, _stratum(usable, dim, matched_values),
+                   size is not None and bytes_differ(usable, bytes_of, size.name))
+
+    # what the kind declares, and what it compares
+
+    @property
+    def declared(self):
+        """The kind's `KindReport` (None: it declares none)."""
+        return self.kind.report
+
+    @property
+    def timed(self) -> set[str]:
+        """The metrics that are times (`KindReport.timed`)."""
+        return set(self.declared.timed) if self.declared is not None else set()
+
+    @property
+    def primary(self) -> MetricSpec:
+        return self.specs[self.rules.primary]
+
+    @property
+    def sign(self) -> float:
+        """+1 where higher is better in the primary metric, -1 where lower is."""
+        return -1.0 if self.primary.better == "lower" else 1.0
+
+    @property
+    def primary_comp(self) -> Comparison:
+        """How the primary metric is compared (a difference where the rules do not say)."""
+        return next((c for c in self.rules.comparisons if c.metric == self.primary.name),
+                    Comparison(self.primary.name, "diff"))
+
+    @property
+    def primary_null(self) -> float:
+        """The primary comparison's no difference (0 for a difference, 1 for a ratio)."""
+        comp = self.primary_comp
+        return {"diff": 0.0, "ratio": 1.0}.get(comp.how, comp.null or 0.0)
+
+    @property
+    def unit_text(self) -> str | None:
+        """The primary comparison's minimum effect as written (``0.1 dB``; None: it has none)."""
+        comp = self.primary_comp
+        return fmt_min_effect(comp.min_effect, comp.how, self.primary) if comp.min_effect is not None else None
+
+    @property
+    def qualities(self) -> list[tuple[MetricSpec, str]]:
+        """The kind's other quality metrics (`FindingRules.quality`), each with how it is compared."""
+        return [(self.specs[q], next((c.how for c in self.rules.comparisons if c.metric == q), "diff"))
+                for q in self.rules.quality if q in self.specs and q != self.primary.name]
+
+    @property
+    def size_spec(self) -> MetricSpec | None:
+        """The size metric (`FindingRules.size`; None: the kind declares none)."""
+        return self.specs.get(self.rules.size) if self.rules.size else None
+
+    @property
+    def size_effect(self) -> float:
+        """The size metric's minimum effect (0 where none)."""
+        return next((c.min_effect for c in self.rules.comparisons if c.metric == self.rules.size), None) or 0.0
+
+    @property
+    def size_word(self) -> str:
+        """What the size is counted in: ``bytes``, ``Gaussians`` ("" without a size metric)."""
+        return "bytes" if self.by_bytes else (_name(self.size_spec) if self.size_spec is not None else "")
+
+    @property
+    def bytes_of(self) -> Callable[[pd.DataFrame], pd.Series] | None:
+        """The kind's bytes per run (`KindReport.model_bytes`; None: it has none)."""
+        return self.declared.model_bytes if self.declared is not None else None
+
+    @property
+    def settling(self) -> SettlingCurves | None:
+        """The kind's curves (`KindReport.settling`; None: none declared)."""
+        return self.declared.settling if self.declared is not None else None
+
+    @property
+    def matched(self) -> tuple[str | None, tuple]:
+        """The ``[report] matched`` setting and its values (`_matched_setting`)."""
+        return _matched_setting(self.experiment)
+
+    # a cell's runs and values
+
+    def selected(self, scene: str, row: Row, pool: pd.DataFrame) -> pd.DataFrame:
+        """The runs of ``pool`` of ``row`` at ``scene``."""
+        return pool[(pool.scene == scene) & pool.run_id.isin(row.run_ids)]
+
+    def cells(self, scene: str, row: Row, ids: set[str] | None = None) -> pd.DataFrame:
+        """The usable runs of ``row`` at ``scene``, only those of ``ids`` (None: all)."""
+        sel = self.selected(scene, row, self.usable)
+        return sel if ids is None else sel[sel.run_id.isin(ids)]
+
+    def values(self, scene: str, row: Row, metric: str) -> dict[int, float]:
+        """seed -> the row's ``metric`` at ``scene`` (a timed metric: of the runs whose times count)."""
+        sel = self.selected(scene, row, self.timed_usable if metric in self.timed else self.usable)
+        return seed_values(sel, metric) if len(sel) else {}
+
+    def values_in(self, scene: str, row: Row, metric: str, ids: set[str] | None) -> dict[int, float]:
+        """seed -> the row's ``metric`` at ``scene`` over the runs of ``ids`` (None: all; {}: not recorded)."""
+        sel = self.cells(scene, row, ids)
+        return seed_values(sel, metric) if len(sel) and f"metric.{metric}" in sel.columns else {}
+
+    def quality_intervals(self, scene: str, a: Row, b: Row) -> list[tuple[MetricSpec, Interval, str]]:
+        """The paired interval of ``b`` against ``a`` of each of the kind's other quality metrics, with how it
+        is compared (`other_way`'s ``others``)."""
+        out = []
+        for spec, how in self.qualities:
+            iv, _ = paired(self.values(scene, a, spec.name), self.values(scene, b, spec.name),
+                           Comparison(spec.name, how))
+            out.append((spec, iv, how))
+        return out
+
+    # model size
+
+    def size_values(self, scene: str, row: Row, ids: set[str] | None = None) -> dict[int, float]:
+        """seed -> the row's model size at ``scene``: its bytes where the table's cells' bytes per
+        Gaussian differ (`bytes_differ`), else its size metric (a seed's runs averaged first)."""
+        return _sizes(self.cells(scene, row, ids), self.size_spec.name, self.bytes_of, self.by_bytes)
+
+    def size_ratio_text(self, text: str, scene: str, ra: Row, rb: Row, ids: set[str] | None = None) -> str:
+        """``×3.999 [95 % CI …] the bytes (×0.949 the Gaussians)`` where sized by bytes, else
+        ``… the Gaussians``: both named where they differ (``text``: the ratio as written)."""
+        if not self.by_bytes:
+            return f"{text} the {self.size_word}"
+        name = self.size_spec.name
+        count = paired_ratio(self.values_in(scene, ra, name, ids), self.values_in(scene, rb, name, ids))
+        also = f" (×{count.estimate:.3f} the {_name(self.size_spec)})" if count.n and math.isfinite(count.estimate) \
+            else ""
+        return f"{text} the bytes{also}"
+
+    def mean_of(self, scene: str, row: Row, metric: str) -> float | None:
+        """The row's mean over seeds at ``scene`` of ``metric``, or of its bytes where ``metric`` is "bytes"
+        (None: not recorded)."""
+        sel = self.cells(scene, row)
+        if metric == "bytes":
+            if self.bytes_of is None:
+                return None
+            v = pd.Series(_sizes(sel, metric, self.bytes_of, True), dtype="float64")
+        else:
+            v = pd.Series(self.values_in(scene, row, metric, None), dtype="float64")
+        return float(v.mean()) if len(v) else None
+
+    def off_size(self, ratio: Interval) -> bool:
+        """Two cells declared matched that did not end at one size: their paired size ratio, as written
+        (×4.070), is more than the size's minimum effect (5 % where none) from ×1 (a run that missed its
+        count: the budget strategy short of its budget warns)."""
+        return bool(ratio.n) and math.isfinite(ratio.estimate) and \
+            abs(float(f"{ratio.estimate:.3f}") - 1.0) > (self.size_effect or 0.05) + 1e-12
+
+    def size_line(self, a: Row, b: Row) -> str:
+        """``Size (mean over seeds, `b` against `a`): fox 5,210 Gaussians, 1.23 MB against 1,000, 0.24 MB``
+        ("" without a size metric or sizes)."""
+        size = self.size_spec
+        if size is None:
+            return ""
+        parts = []
+        for scene in self.scenes:
+            na, nb = self.mean_of(scene, a, size.name), self.mean_of(scene, b, size.name)
+            if na is None or nb is None:
+                continue
+            ba, bb = self.mean_of(scene, a, "bytes"), self.mean_of(scene, b, "bytes")
+            mb = (lambda x: f", {x / 1e6:.2f} MB") if ba is not None and bb is not None else (lambda x: "")
+            parts.append(f"{scene} {_count(nb)} {_name(size)}{mb(bb)} against {_count(na)}{mb(ba)}")
+        if not parts:
+            return ""
+        what = f"{_name(size)} and bytes" if self.bytes_of is not None else _name(size)
+        return f"{what[:1].upper()}{what[1:]} (mean over seeds, `{b.label}` against `{a.label}`): " + "; ".join(parts)
+
+    # settling
+
+    def settle(self, scene: str, row: Row) -> CellSettling | None:
+        """The row's curves at ``scene`` over the last quarter (None: not judged: the kind declares no curves
+        of the primary metric, or the primary comparison has no minimum effect)."""
+        settling, comp = self.settling, self.primary_comp
+        effect = comp.min_effect if settling is not None and settling.metric == self.primary.name else None
+        if effect is None:
+            return None
+        key = (scene, row.label)
+        if key not in self._settled:
+            self._settled[key] = cell_settling(self.selected(scene, row, self.usable), settling, effect)
+        return self._settled[key]
+
+    def unsettled(self, scene: str, a: Row, b: Row, diff: float) -> str:
+        """"" when the difference ``b - a`` at ``scene`` is settled or not judged, else why not."""
+        return unsettled_reason(self.settle(scene, a), self.settle(scene, b), (a.label, b.label), diff,
+                                self.primary.unit)
+
+
+def _matched_setting(experiment: ExperimentSpec | None) -> tuple[str | None, tuple]:
+    """The experiment's ``[report] matched`` setting and its values ((None, ()): none declared)."""
+    dim, values = next(iter((dict(experiment.matched) if experiment is not None else {}).items()), (None, ()))
+    return dim, tuple(values)
+
 
 def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect: Mapping[str, float] | None = None,
                  experiment: ExperimentSpec | None = None) -> Finding | None:
     """The finding of one axis (None when the kind has no rules or nothing is done),
     with the lines and claims of the kind's axis notes (`KindReport.axis_notes`) appended;
     ``experiment``: its ``[report] matched`` cells (docs/reports.md, "Model size");
-    ``min_effect``: the experiment file's minimum effects by metric (`rules_for`)."""
-    rules = rules_for(kind, table.metrics, min_effect)
-    if rules is None or table.frame.empty:
+    ``min_effect``: the experiment file's minimum effects by metric (`rules_for`). Its blocks, in order
+    (`_Part`): the best per scene (`_best_part`), each row against the reference with Holm's correction
+    (`_against_reference`), the matched cells against each other (`_matched_cells_part`), the reference
+    against itself (`_self_part`), how many comparisons have an interval (`_count_part`), and what the runs
+    left out or did not record (`_caveats_part`)."""
+    ax = _Axis.of(table, kind, runs, min_effect, experiment)
+    if ax is None:
         return None
-    specs = {m.name: m for m in table.metrics}
-    primary = specs[rules.primary]
-    sign = -1.0 if primary.better == "lower" else 1.0
-    scenes = list(dict.fromkeys(table.frame.scene))
-    usable = usable_runs(runs, kind)
-    excluded = len(done_runs(runs)) - len(usable)
-    declared = kind.report
-    timed = set(declared.timed) if declared is not None else set()
-    loaded = loaded_runs(usable, kind)  # all False where the kind's mark is not recorded
-    untimed = int(loaded.sum()) if timed else 0
-    timed_usable = usable[~loaded] if timed else usable
-
-    def selected(scene: str, row: Row, pool: pd.DataFrame) -> pd.DataFrame:
-        return pool[(pool.scene == scene) & pool.run_id.isin(row.run_ids)]
-
-    def values(scene: str, row: Row, metric: str) -> dict[int, float]:
-        sel = selected(scene, row, timed_usable if metric in timed else usable)
-        return seed_values(sel, metric) if len(sel) else {}
-
-    primary_comp = next((c for c in rules.comparisons if c.metric == primary.name), Comparison(primary.name, "diff"))
-    size_spec = specs.get(rules.size) if rules.size else None
-    size_effect = next((c.min_effect for c in rules.comparisons if c.metric == rules.size), None) or 0.0
-
-    def off_size(ratio: Interval) -> bool:
-        """Two cells declared matched that did not end at one size: their paired size ratio, as written
-        (×4.070), is more than the size's minimum effect (5 % where none) from ×1 (a run that missed its
-        count: the budget strategy short of its budget warns)."""
-        return bool(ratio.n) and math.isfinite(ratio.estimate) and \
-            abs(float(f"{ratio.estimate:.3f}") - 1.0) > (size_effect or 0.05) + 1e-12
-    settling = declared.settling if declared is not None else None
-    settle_effect = (primary_comp.min_effect if settling is not None and settling.metric == primary.name
-                     else None)
-    settle_cache: dict[tuple[str, str], CellSettling | None] = {}
-
-    def settle(scene: str, row: Row) -> CellSettling | None:
-        """The row's curves at ``scene`` over the last quarter (None: not judged)."""
-        if settle_effect is None:
-            return None
-        key = (scene, row.label)
-        if key not in settle_cache:
-            settle_cache[key] = cell_settling(selected(scene, row, usable), settling, settle_effect)
-        return settle_cache[key]
-
-    qualities = [(specs[q], next((c.how for c in rules.comparisons if c.metric == q), "diff"))
-                 for q in rules.quality if q in specs and q != primary.name]
-
-    def quality_intervals(scene: str, a: Row, b: Row) -> list[tuple[MetricSpec, Interval, str]]:
-        """The paired interval of ``b`` against ``a`` of each of the kind's other quality metrics."""
-        out = []
-        for spec, how in qualities:
-            iv, _ = paired(values(scene, a, spec.name), values(scene, b, spec.name), Comparison(spec.name, how))
-            out.append((spec, iv, how))
-        return out
-
-    bytes_of = declared.model_bytes if declared is not None else None
-    matched = dict(experiment.matched) if experiment is not None else {}
-    dim, matched_values = next(iter(matched.items()), (None, ()))
-    stratum = _stratum(usable, dim, matched_values)  # the run ids at the matched size (empty: none declared)
-    by_bytes = size_spec is not None and bytes_differ(usable, bytes_of, size_spec.name)
-    size_word = "bytes" if by_bytes else (_name(size_spec) if size_spec is not None else "")
-
-    def size_values(scene: str, row: Row, ids: set[str] | None = None) -> dict[int, float]:
-        """seed -> the row's model size at ``scene``: its bytes where the table's cells' bytes per
-        Gaussian differ (`bytes_differ`), else its size metric (a seed's runs averaged first)."""
-        if not by_bytes:
-            return values_in(scene, row, size_spec.name, ids)
-        sel = selected(scene, row, usable)
-        if ids is not None:
-            sel = sel[sel.run_id.isin(ids)]
-        if not len(sel):
-            return {}
-        per = pd.DataFrame({"seed": sel.seed.astype(int), "v": bytes_of(sel).to_numpy()}).dropna()
-        return {int(k): float(v) for k, v in per.groupby("seed").v.mean().items()}
-
-    def size_ratio_text(text: str, scene: str, ra: Row, rb: Row, ids: set[str] | None = None) -> str:
-        """``×3.999 [95 % CI …] the bytes (×0.949 the Gaussians)`` where sized by bytes, else
-        ``… the Gaussians``: both named where they differ."""
-        if not by_bytes:
-            return f"{text} the {size_word}"
-        count = paired_ratio(values_in(scene, ra, size_spec.name, ids), values_in(scene, rb, size_spec.name, ids))
-        also = f" (×{count.estimate:.3f} the {_name(size_spec)})" if count.n and math.isfinite(count.estimate) else ""
-        return f"{text} the bytes{also}"
-
-    def mean_of(scene: str, row: Row, metric: str, ids: set[str] | None = None) -> float | None:
-        sel = selected(scene, row, usable)
-        if ids is not None:
-            sel = sel[sel.run_id.isin(ids)]
-        if metric == "bytes":
-            if bytes_of is None or not len(sel):
-                return None
-            per = pd.DataFrame({"seed": sel.seed.astype(int), "v": bytes_of(sel).to_numpy()}).dropna()
-            v = per.groupby("seed").v.mean()
-        else:
-            v = pd.Series(seed_values(sel, metric) if len(sel) and f"metric.{metric}" in sel.columns else {},
-                          dtype="float64")
-        return float(v.mean()) if len(v) else None
-
-    def size_line(scenes_: Sequence[str], a: Row, b: Row) -> str:
-        """``Size (mean over seeds, `b` against `a`): fox 5,210 Gaussians, 1.23 MB against 1,000, 0.24 MB``."""
-        if size_spec is None:
-            return ""
-        parts = []
-        for scene in scenes_:
-            na, nb = mean_of(scene, a, size_spec.name), mean_of(scene, b, size_spec.name)
-            if na is None or nb is None:
-                continue
-            ba, bb = mean_of(scene, a, "bytes"), mean_of(scene, b, "bytes")
-            mb = (lambda x: f", {x / 1e6:.2f} MB") if ba is not None and bb is not None else (lambda x: "")
-            parts.append(f"{scene} {_count(nb)} {_name(size_spec)}{mb(bb)} against {_count(na)}{mb(ba)}")
-        if not parts:
-            return ""
-        what = f"{_name(size_spec)} and bytes" if bytes_of is not None else _name(size_spec)
-        return f"{what[:1].upper()}{what[1:]} (mean over seeds, `{b.label}` against `{a.label}`): " + "; ".join(parts)
-
-    def matched_text(a: Row, b: Row, heads: list[tuple[str, SizeShift]] | None = None,
-                     at_size: list[tuple[str, str]] | None = None) -> str:
-        """Where ``b`` comes with `MATCHED_SHARE` more (or fewer) Gaussians than ``a`` at a scene, the same
-        difference at the matched size (`[report] matched`), or that the grid has none; ``heads``
-        collects each scene's size change, (scene, `size_shift`'s), and ``at_size`` each matched-size
-        difference in brief, (what is matched, ``fox +0.52 dB [95 % CI +0.20, +0.84]``): the summary's."""
-        pieces = []
-        if dim == table.axis and (len(matched_values) < 2 or all(any(same_value(r.value, v) for v in matched_values)
-                                                                 for r in (a, b))):
-            return ""  # the matched axis's own rows (natural against matched), or two matched cells
-        pair = _matched_pair(experiment, table, a, b, matched_values) if dim == table.axis else None
-        for scene in scenes:
-            natural_ids = None if not stratum else set(usable.run_id) - stratum
-            if dim == table.axis:
-                natural_ids = None
-            shift = size_shift(*(selected(scene, r, usable) for r in (a, b)), size_spec, bytes_of, by_bytes,
-                               natural_ids)
-            if shift is None:
-                continue
-            head = f"{scene}: {shift.text}"
-            if heads is not None:
-                heads.append((scene, shift))
-            if not matched:
-                pieces.append(head + "; the grid declares no matched-size cell, `[report] matched`: quality and size "
-                                     "are not separated)")
-            elif pair is not None:  # the extra cells that repeat this comparison at one size (claimed below)
-                iv, null = paired(values(scene, pair[0], primary.name), values(scene, pair[1], primary.name),
-                                  primary_comp)
-                named = f"`{pair[1].label}` against `{pair[0].label}`"
-                cells = [experiment.extra.get(table.axis, {}).get(r.value, {}) for r in pair]
-                common = [f"`{k} = {display(v)}`" for k, v in cells[0].items()
-                          if k != table.axis and cells[1].get(k, object()) == v]
-                brief = named + (f", both also setting {', '.join(common)}" if common else "") + \
-                    "; not in Holm's family"  # the summary's
-                if not iv.n:
-                    away = [r for r in pair if not experiment.extra_runs_at(table.axis, r.value, scene)]
-                    if away and at_size is not None:
-                        at_size.append((brief, f"{scene} not run (the pair's `scenes`)"))
-                    pieces.append(head + (f"; its matched-size cells, {named}, are not run at {scene} (their "
-                                          f"`scenes`): quality and size are not separated here)" if away else
-                                          f"; its matched-size cells, {named}, have no done runs yet)"))
-                    continue
-                size = paired_ratio(size_values(scene, pair[0]), size_values(scene, pair[1]))
-                at = size_ratio_text(f"×{size.estimate:.3f}", scene, *pair) if size.n else "sizes not recorded"
-                said = interval_text(iv, primary_comp.how, primary, null, primary_comp.min_effect)
-                if off_size(size):
-                    if at_size is not None:
-                        at_size.append((brief, f"{scene} not at one size (×{size.estimate:.3f})"))
-                    pieces.append(head + f"; its matched-size cells, {named}, did not end at one size at {scene}: "
-                                         f"{_name(primary)} {said.text} at {at}, a run that missed its count (see "
-                                         f"\"Warnings\"): quality and size are not separated here)")
-                    continue
-                why = unsettled(scene, pair[0], pair[1], iv.estimate - (null or 0.0))
-                if at_size is not None:
-                    at_size.append((brief, f"{scene} {said.short}" + (", not settled" if why else "")))
-                pieces.append(head + f" at its natural size); at a matched size ({named}): {_name(primary)} "
-                                     f"{said.text}, at {at}" + (f", **not settled** ({why})" if why else ""))
-            elif dim == table.axis:
-                pieces.append(head + f"; no matched-size cell of this comparison: the matched cells are "
-                                     f"{', '.join(f'`{display(v)}`' for v in matched_values)}, compared below)")
-            else:
-                pa = values_in(scene, a, primary.name, stratum)
-                pb = values_in(scene, b, primary.name, stratum)
-                iv, null = paired(pa, pb, primary_comp)
-                if not iv.n:
-                    pieces.append(head + "; its matched-size cells have no done runs)")
-                    continue
-                size = paired_ratio(size_values(scene, a, stratum), size_values(scene, b, stratum))
-                said = interval_text(iv, primary_comp.how, primary, null, primary_comp.min_effect)
-                text = said.text
-                if at_size is not None:
-                    at_size.append((setting_text(experiment, dim), f"{scene} {said.short}"))
-                claims.append(Claim("matched", scene, b.label, primary.name, primary_comp.how, iv.estimate, text,
-                                    a.label, iv.low, iv.high, iv.n,
-                                    *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
-                at = size_ratio_text(f"×{size.estimate:.3f}", scene, a, b, stratum) if size.n else \
-                    "sizes not recorded"
-                pieces.append(head + f" at its natural size); at the matched size ({setting_text(experiment, dim)}): "
-                                     f"{_name(primary)} {text}, at {at}")
-        return (". **Against model size**: " + "; ".join(pieces)) if pieces else ""
-
-    def values_in(scene: str, row: Row, metric: str, ids: set[str] | None) -> dict[int, float]:
-        sel = selected(scene, row, usable)
-        if ids is not None:
-            sel = sel[sel.run_id.isin(ids)]
-        return seed_values(sel, metric) if len(sel) and f"metric.{metric}" in sel.columns else {}
-
-    def unsettled(scene: str, a: Row, b: Row, diff: float) -> str:
-        """"" when the difference ``b - a`` at ``scene`` is settled or not judged, else why not."""
-        return unsettled_reason(settle(scene, a), settle(scene, b), (a.label, b.label), diff, primary.unit)
-
-    claims: list[Claim] = []
-    lines: list[str] = []
-    appendix: list[str] = []  # the section "Appendix: <axis> in full" (`Finding.appendix`)
-    summary: list[str] = []   # the report's "Summary" (`Finding.summary`): the texts below, cut short
-    best_parts = []
-    best_short = []  # each scene's verdict of ``best_parts`` without its lead's numbers
-    unit_text = fmt_min_effect(primary_comp.min_effect, primary_comp.how, primary) \
-        if primary_comp.min_effect is not None else None
-    for scene in scenes:
-        means = [(t_interval(list(values(scene, row, primary.name).values())), row) for row in table.rows
-                 if not row.extra]  # an extra cell is compared only at a matched size
-        means = sorted(((iv, row) for iv, row in means if iv.n > 0), key=lambda m: -sign * m[0].estimate)
-        if not means:
-            continue
-        iv, row = means[0]
-        mean_text = fmt_number(iv.estimate, "mean", primary)
-        if len(means) == 1:
-            claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, mean_text, n=iv.n))
-            best_parts.append(f"{scene} `{row.label}` ({mean_text}; the only cell)")
-            best_short.append(best_parts[-1])
-            continue
-        runner = means[1][1]
-        how = "ratio" if primary_comp.how == "ratio" else "diff"
-        null = 1.0 if how == "ratio" else 0.0
-        lead = (paired_ratio if how == "ratio" else paired_difference)(values(scene, runner, primary.name),
-                                                                       values(scene, row, primary.name))
-        significant, is_practical = judge(lead, how, null, primary, primary_comp.min_effect)
-        clear = significant and clears(lead, how, null, primary_comp.min_effect)
-        lead_text = fmt_interval(lead, how, primary, null, primary_comp.min_effect)
-        why = unsettled(scene, runner, row, lead.estimate - null)
-        settled = None if settle(scene, row) is None else not why
-        reversed_ = other_way(primary, lead.estimate - null, quality_intervals(scene, runner, row))
-        larger = None  # the leader's size against the runner-up's, where it is larger by the minimum effect
-        if clear and size_spec is not None:
-            ratio = paired_ratio(size_values(scene, runner), size_values(scene, row))
-            if ratio.n and math.isfinite(ratio.estimate) and ratio.estimate > 1.0 \
-                    and practical(ratio, "ratio", 1.0, size_effect):
-                larger = ratio
-        if larger is not None:
-            size_text = fmt_interval(larger, "ratio", size_spec, None)
-            sized = {r.label: mean_of(scene, r, "bytes") for r in table.rows} if by_bytes else None
-            front = _on_front(table, scene, size_spec, primary, (row, runner), sized,
-                              [r.label for r in table.rows if not r.extra])
-            at = size_ratio_text(size_text, scene, runner, row)
-            text = (f"{scene}: no single best at comparable size (`{row.label}`, {mean_text}, leads "
-                    f"`{runner.label}` by {lead_text} at {at}, more than the "
-                    f"{fmt_min_effect(size_effect, 'ratio', size_spec)} minimum effect"
-                    + (f"; both on {FRONT_OF[any(r.extra for r in table.rows)]} {size_word}/quality Pareto front"
-                       if front else "") + ")")
-            short = (f"{scene}: no single best at comparable size (`{row.label}` leads `{runner.label}` at "
-                     f"{fmt_number(larger.estimate, 'ratio', size_spec)} `{runner.label}`'s {size_word})")
-            if why:
-                text += f", **not settled** ({why})"
-                short += ", **not settled**"
-            claims.append(Claim("no best", scene, row.label, primary.name, how, lead.estimate, text, runner.label,
-                                lead.low, lead.high, lead.n, significant, is_practical, settled))
-            claims.append(Claim("size", scene, row.label, "bytes" if by_bytes else size_spec.name, "ratio",
-                                larger.estimate, size_text,
-                                runner.label, larger.low, larger.high, larger.n, *judge(larger, "ratio", 1.0,
-                                                                                           size_spec, size_effect)))
-        elif clear:
-            text = f"{scene} `{row.label}` ({mean_text}; {lead_text} over `{runner.label}`)"
-            short = text
-            if reversed_:
-                names = " and ".join(n for n, _ in reversed_)
-                but = f", **but {names} go{'es' if len(reversed_) == 1 else ''} the other way**"
-                text += f"{but} ({'; '.join(t for _, t in reversed_)})"
-                short += but
-            if why:
-                text += f", **not settled** ({why})"
-                short += ", **not settled**"
-            claims.append(Claim("best", scene, row.label, primary.name, "mean", iv.estimate, text, runner.label,
-                                lead.low, lead.high, lead.n, significant, is_practical, settled))
-        else:
-            bound = ("" if not is_practical or unit_text is None else
-                     f"; its interval's bound nearer no difference is not beyond the {unit_text} minimum effect")
-            text = (f"{scene}: no single best (`{row.label}`, {mean_text}, leads `{runner.label}` by {lead_text}"
-                    f"{bound})")
-            short = f"{scene}: no single best"
-            claims.append(Claim("no best", scene, row.label, primary.name, how, lead.estimate, text, runner.label,
-                                lead.low, lead.high, lead.n, significant, is_practical, settled))
-        best_parts.append(text)
-        best_short.append(short)
-    if not best_parts:
-        if excluded:
-            return Finding(table.axis, [f"- No findings: all {excluded} done run(s) were timed while the load average "
-                                        f"exceeded half the cores (the table's `loaded` column); rerun them on a "
-                                        f"quiet machine (docs/reports.md, \"Quiet numbers\")."], [])
-        return None
-    word = "best" if primary.better != "lower" else "lowest"
-    rule = ("named only where the 95 % interval of its paired lead over the runner-up lies wholly beyond "
-            + (f"the {unit_text} minimum effect" if unit_text else "no difference")
-            + (f" with no more than {fmt_min_effect(size_effect, 'ratio', size_spec)} more {size_word}"
-               if size_spec is not None else "")
-            + (" (float32 parameters: the cells' bytes per Gaussian differ)"
-               if by_bytes else ""))
-    lines.append(f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds; {rule}): "
-                 + "; ".join(best_parts) + ".")
-    best_summary = f"- **{word.capitalize()} {_name(primary)}**: " + "; ".join(best_short) + "."
-
+    bests = [b for b in (_best_at(ax, scene) for scene in ax.scenes) if b is not None]
+    if not bests:
+        return _all_loaded(ax)
+    best = _best_part(ax, bests)
     ref = reference_row(table)
     others = [r for r in table.rows if r.label != ref.label and not r.extra]
-    in_full = f"\"Appendix: {table.axis} in full\""
-    family: list[Claim] = []  # the primary comparisons Holm's correction covers
-    if others and rules.comparisons:
-        primary_null = {"diff": 0.0, "ratio": 1.0}.get(primary_comp.how, primary_comp.null or 0.0)
-        method = {"diff": "paired t", "ratio": "paired t on log ratios"}.get(primary_comp.how, "t")
-        signs: dict[str, list[str]] = {}  # row -> per scene "seeds above the reference/pairs"
-        pending = []  # (row, its primary claims, their short texts, not settled, the other way, across scenes,
-        #   size changes, matched-size differences): the summary's line of each row, once Holm has run
-        lines.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}):")
-        appendix.append(f"- **Against `{ref.label}`**, paired over seeds ({' / '.join(scenes)}), the other "
-                        f"comparisons:")
-        head_at = len(appendix)  # the appendix's length after that head: no line more, no other comparison
-        for row in others:
-            parts = []
-            rest = []  # the other comparisons' (the appendix's)
-            moving = []
-            primaries: list[Claim] = []  # this row's primary-metric claims
-            briefs: list[str] = []  # each one's difference as the Summary writes it (`IntervalText.short`)
-            for comp in rules.comparisons:
-                spec = specs[comp.metric]
-                texts = []
-                for scene in scenes:
-                    a, b = values(scene, ref, comp.metric), values(scene, row, comp.metric)
-                    iv, null = paired(a, b, comp)
-                    if iv.n == 0:
-                        texts.append("–")
-                        continue
-                    if comp.metric == primary.name and comp.how in ("diff", "ratio"):
-                        pairs = [(a[k], b[k]) for k in a if k in b and math.isfinite(a[k]) and math.isfinite(b[k])]
-                        signs.setdefault(row.label, []).append(
-                            f"{sum(1 for x, y in pairs if y > x)}/{len(pairs)}")
-                    written = interval_text(iv, comp.how, spec, null, comp.min_effect)
-                    text = written.text
-                    significant, is_practical = judge(iv, comp.how, null, spec, comp.min_effect)
-                    settled = None
-                    if comp.metric == primary.name:
-                        why = unsettled(scene, ref, row, iv.estimate - (null or 0.0))
-                        settled = None if settle(scene, row) is None or settle(scene, ref) is None else not why
-                        if why:
-                            moving.append(f"{scene}: {why}")
-                    claims.append(Claim("vs", scene, row.label, comp.metric, comp.how, iv.estimate, text, ref.label,
-                                        iv.low, iv.high, iv.n, significant, is_practical, settled))
-                    if comp.metric == primary.name:
-                        primaries.append(claims[-1])
-                        briefs.append(written.short)
-                    texts.append(text)
-                (parts if comp.metric == primary.name else rest).append(f"{_name(spec)} {' / '.join(texts)}")
-            line = f"  - `{row.label}`: " + "; ".join(parts)
-            more = ["; ".join(rest)] if rest else []
-            along = _along_the_run(scenes, ref, row, usable, settling, primary) if settling is not None else ""
-            if along:
-                more.append(along)
-            if moving:
-                line += f". **Not settled** ({'; '.join(moving)})"
-            also = confounds(scenes, ref, row, usable, kind)
-            if also:
-                more.append(f"Also changed: {also}")
-            opposed, opposed_short = [], []
-            for c in primaries:
-                if c.significant:
-                    against = other_way(primary, c.value - primary_null,
-                                        quality_intervals(c.scene, ref, row))
-                    if against:
-                        opposed.append(f"{c.scene}: {'; '.join(t for _, t in against)}")
-                        opposed_short.append(f"{' and '.join(n for n, _ in against)} on {c.scene}")
-            if opposed:
-                line += f". **The other way** (against the {_name(primary)} difference, significantly): " \
-                    + "; ".join(opposed)
-            across = across_scenes(primaries, scenes, primary_null, primary, primary_comp.min_effect)
-            if across is not None:
-                line += f". {across.text}{across.over}"
-            size = size_line(scenes, ref, row)
-            if size:
-                more.append(size)
-            heads: list[tuple[str, SizeShift]] = []
-            at_size: list[tuple[str, str]] = []
-            if size_spec is not None:
-                line += matched_text(ref, row, heads, at_size)
-            if also:
-                line += f". Also changed: other settings too (what, in {in_full})"
-            lines.append(line)
-            if more:
-                appendix.append(f"  - `{row.label}`: " + ". ".join(more))
-            # the summary: the primary difference per scene with the marks the line above gives it, written once
-            # Holm has run
-            if primaries:
-                pending.append((row, primaries, briefs, moving, opposed_short, across, heads, at_size))
-        # Holm's correction over the family of the primary comparisons printed with an interval
-        family = [c for c in claims if c.kind == "vs" and c.reference == ref.label and c.metric == primary.name
-                  and _with_interval(c, specs)]
-        p = [t_p_value(Interval(c.value, c.low, c.high, c.n, method), primary_null) for c in family]
-        kept = holm(p)
-        lost = {(c.scene, c.label) for c, k in zip(family, kept) if c.significant and not k}
-        if len(family) < 2 or not any(c.significant for c in family):
-            family = []  # nothing for Holm to correct: one comparison, or none significant alone
-        else:
-            line = holm_line(family, p, kept, _name(primary), ref.label, scenes, signs)
-            lines.append(f"- {line}.")
-            claims.append(Claim("holm", "", "", primary.name, "count", float(sum(kept)), line, ref.label,
-                                n=len(family)))
-        for row, primaries, briefs, moving, opposed_short, across, heads, at_size in pending:
-            marks = []
-            if moving:
-                marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in moving))
-            if opposed_short:
-                marks.append(f"**the other way** (against the {_name(primary)} difference): " + "; ".join(opposed_short))
-            if across is not None:
-                short = sum((c.scene, c.label) in lost for c in primaries)  # across scenes per comparison only
-                marks.append(across.text + (f" (each per comparison; {len(primaries) - short} of {len(primaries)} "
-                                            f"significant after Holm)" if short and across.everywhere else "")
-                             + across.over)
-            if heads:
-                marks.append("**against model size**: " + _sizes_in_brief(heads)
-                             + "".join(f"; at a matched size ({named}): " + "; ".join(t for n, t in at_size if n == named)
-                                       for named in dict.fromkeys(n for n, _ in at_size)))
-            said = "; ".join(f"{c.scene} {brief}"
-                             + (", not significant after Holm" if (c.scene, c.label) in lost else "")
-                             for c, brief in zip(primaries, briefs))
-            summary.append(f"- **`{row.label}`** against `{ref.label}`, {_name(primary)}: {said}"
-                           + "".join(f"; {m}" for m in marks) + ".")
-        if len(appendix) == head_at:  # no row compared anything else
-            appendix.pop()
-    summary.append(best_summary)
-    if size_spec is not None and dim == table.axis and len(matched_values) >= 2:
-        rows = [r for r in table.rows if any(same_value(r.value, v) for v in matched_values)]
-        parts = []
-        for row in rows[1:]:
-            texts = []
-            for scene in scenes:
-                iv, null = paired(values(scene, rows[0], primary.name), values(scene, row, primary.name), primary_comp)
-                if not iv.n:
-                    continue
-                text = fmt_interval(iv, primary_comp.how, primary, null, primary_comp.min_effect)
-                ratio = paired_ratio(size_values(scene, rows[0]), size_values(scene, row))
-                at = f" at {size_ratio_text(f'×{ratio.estimate:.3f}', scene, rows[0], row)}" if ratio.n else ""
-                if off_size(ratio):  # declared matched, ended apart: said, never claimed at one size
-                    texts.append(f"{scene} {text}{at}: **not at one size** (a run that missed its count: see "
-                                 f"\"Warnings\")")
-                    continue
-                claims.append(Claim("matched", scene, row.label, primary.name, primary_comp.how, iv.estimate, text,
-                                    rows[0].label, iv.low, iv.high, iv.n,
-                                    *judge(iv, primary_comp.how, null, primary, primary_comp.min_effect)))
-                why = unsettled(scene, rows[0], row, iv.estimate - (null or 0.0))
-                texts.append(f"{scene} {text}{at}" + (f", **not settled** ({why})" if why else ""))
-            if texts:
-                parts.append(f"`{row.label}` against `{rows[0].label}`: " + "; ".join(texts))
-        head = (f"- **At a matched size** (`[report] matched`: {', '.join(f'`{r.label}`' for r in rows)} end at one "
-                f"{'byte' if by_bytes else _name(size_spec)} count; {setting_text(experiment, dim, [r.value for r in rows])}): ")
-        if parts:
-            lines.append(head + ". ".join(parts) + ".")
-        elif rows:
-            lines.append(head + "no done runs of these cells yet, so nothing is compared at a matched size.")
-    self_parts = []
-    for comp in rules.comparisons:
-        if comp.how != "mean" or comp.null is None:
-            continue
-        for scene in scenes:  # the reference row's own value: the defaults timed against themselves
-            iv = t_interval(list(values(scene, ref, comp.metric).values()))
-            if iv.n:
-                text = fmt_interval(iv, "mean", specs[comp.metric], comp.null, comp.min_effect)
-                significant, is_practical = judge(iv, "mean", comp.null, specs[comp.metric], comp.min_effect)
-                claims.append(Claim("self", scene, ref.label, comp.metric, "mean", iv.estimate, text, ref.label,
-                                    iv.low, iv.high, iv.n, significant, is_practical))
-                self_parts.append(f"{scene} {text}")
-    if self_parts:
-        lines.append(f"- `{ref.label}` against itself (the same options timed as both sides of each pair; the "
-                     f"noise floor of the ratio): " + "; ".join(self_parts) + ".")
-    # every comparison printed: the leader's lead over the runner-up (and its size against it), each row
-    # against the reference, the matched-size ones; counted where it was printed with an interval
-    made = [c for c in claims if c.kind in ("best", "no best", "size", "vs", "matched") and c.reference and c.n]
-    count = sum(1 for c in made if _with_interval(c, specs))
-    if count:
-        claims.append(Claim("count", "", "", "", "count", float(count), str(count)))
-        effects = [f"{_name(specs[c.metric])} {fmt_min_effect(c.min_effect, c.how, specs[c.metric])}"
-                   for c in rules.comparisons if c.min_effect is not None]
-        rest = len(made) - count
-        appendix.append(f"- This table makes {count} comparisons with a 95 % interval (Student's t over seeds; no "
-                     f"correction for multiple comparisons, so about 1 in 20 intervals misses by chance"
-                     + (f", except Holm's over the {len(family)} {_name(primary)} ones against `{ref.label}`"
-                        if family else "") + ")"
-                     + (f"; {rest} more have none (one seed, or seeds that did not vary the result) and are no "
-                        f"evidence either way" if rest else "") + "."
-                     + (f" Minimum effects ({', '.join(effects)}): a difference reads \"no practical difference\" "
-                        f"only where its whole interval lies within ± its minimum effect, \"inconclusive\" where "
-                        f"the interval reaches beyond it while the difference is not significant or its estimate "
-                        f"is below it." if effects else ""))
-    elif made:
-        claims.append(Claim("count", "", "", "", "count", 0.0, "0"))
-        appendix.append(f"- This table makes {len(made)} comparisons, but none has an interval (one seed per cell, "
-                     f"or seeds that did not vary the result): none of them is a significant difference; add "
-                     f"seeds to the grid.")
-    if declared is not None and declared.confounds and others and not _recorded(usable, declared):
-        labels = ", ".join(kind.specs[name].label for name in declared.confounds[:5])
-        appendix.append("- What else each setting changed (" + labels
-                     + ") was not recorded by these runs (run before it was); \"(planned)\" counts are what their "
-                       "configs schedule; rerun the grid to see the rest.")
-    if excluded:
-        lines.append(f"- {excluded} run(s) timed while the load average exceeded half the cores are left out of "
-                     f"these findings (marked in the table's `loaded` column).")
-    if timed & set(specs) and not load_recorded(runs, kind):
-        appendix.append(f"- These runs did not record the machine's load (run before it was recorded): the "
-                     f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons may come "
-                     f"from a loaded machine and are no evidence of speed.")
-    if untimed:
-        appendix.append(f"- {untimed} run(s) timed while other processes loaded the machine are left out of the "
-                     f"{' / '.join(sorted(_name(specs[m]) for m in timed if m in specs))} comparisons (marked in "
-                     f"the table's `timed under load` column; their quality metrics are kept).")
-
-    for note in declared.axis_notes if declared is not None else ():
-        more_lines, more_claims = note(table, runs, scenes)
+    vs, family = _against_reference(ax, ref, others) if others and ax.rules.comparisons else (_Part(), [])
+    matched = _matched_cells_part(ax)
+    itself = _self_part(ax, ref)
+    claims = [*best.claims, *vs.claims, *matched.claims, *itself.claims]
+    count = _count_part(ax, claims, family, ref)
+    caveats = _caveats_part(ax, others)
+    lines = [*best.lines, *vs.lines, *matched.lines, *itself.lines, *caveats.lines]
+    claims += count.claims
+    appendix = [*vs.appendix, *count.appendix, *caveats.appendix]  # the section "Appendix: <axis> in full"
+    summary = [*vs.summary, *best.summary]  # the report's "Summary" (`Finding.summary`): the texts above, cut short
+    for note in ax.declared.axis_notes if ax.declared is not None else ():
+        more_lines, more_claims = note(table, runs, ax.scenes)
         appendix += more_lines
         claims += more_claims
     chose = [c for c in claims if c.kind == "auto"]  # a row that chose its setting per scene (SH degree "auto")
@@ -867,6 +599,621 @@ def axis_finding(table: AxisTable, kind: RunKind, runs: pd.DataFrame, min_effect
                        + f": each of its differences is the degree it chose and its holdout's cost together, not "
                          f"one degree's (\"Appendix: {table.axis} in full\").")
     return Finding(table.axis, lines, claims, appendix, summary)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Part:
+    """One block of an axis's finding (`axis_finding` puts them together): its ``lines`` (the findings'),
+    ``claims``, ``appendix`` lines and ``summary`` lines, each in the order written."""
+
+    lines: tuple[str, ...] = ()
+    claims: tuple[Claim, ...] = ()
+    appendix: tuple[str, ...] = ()
+    summary: tuple[str, ...] = ()
+
+
+def _all_loaded(ax: _Axis) -> Finding | None:
+    """The finding of an axis with no best at any scene: that every done run was timed under load, where
+    the runs were left out for it (`_Axis.excluded`); None otherwise (nothing done)."""
+    if not ax.excluded:
+        return None
+    return Finding(ax.table.axis, [f"- No findings: all {ax.excluded} done run(s) were timed while the load average "
+                                   f"exceeded half the cores (the table's `loaded` column); rerun them on a "
+                                   f"quiet machine (docs/reports.md, \"Quiet numbers\")."], [])
+
+
+# Best per scene
+
+@dataclasses.dataclass(frozen=True)
+class _Best:
+    """One scene's verdict on its best cell (`_best_at`): ``text`` as the findings write it, ``short`` as the
+    Summary does (without the lead's numbers), and its ``claims``."""
+
+    text: str
+    short: str
+    claims: tuple[Claim, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class _Lead:
+    """The leader ``row``'s paired lead over the runner-up ``runner`` at one scene (`_best_at`), which each verdict
+    reads: ``mean``, the leader's mean, written ``mean_text``; ``how``, "diff" or "ratio", with its ``null``;
+    ``text``, the lead as written (`fmt_interval`); ``why``, why it is not settled ("": settled or not
+    judged); ``settled``, the claim's."""
+
+    scene: str
+    row: Row
+    runner: Row
+    metric: str  # the primary metric's name
+    mean: Interval
+    mean_text: str
+    how: str
+    null: float
+    lead: Interval
+    significant: bool
+    practical: bool
+    text: str
+    why: str
+    settled: bool | None
+
+    def claim(self, kind: str, text: str) -> Claim:
+        """The verdict's claim: "best" (on the leader's mean) or "no best" (on its lead)."""
+        how, value = ("mean", self.mean.estimate) if kind == "best" else (self.how, self.lead.estimate)
+        return Claim(kind, self.scene, self.row.label, self.metric, how, value, text, self.runner.label,
+                     self.lead.low, self.lead.high, self.lead.n, self.significant, self.practical, self.settled)
+
+
+def _best_at(ax: _Axis, scene: str) -> _Best | None:
+    """The best cell at ``scene`` by the mean of the primary metric over seeds (extra cells left out: they
+    are compared only at a matched size): the only cell, a best (`_best_named`), or no single best
+    (`_no_best`, `_no_best_at_size`); None where no cell has a done run."""
+    primary, comp = ax.primary, ax.primary_comp
+    means = [(t_interval(list(ax.values(scene, row, primary.name).values())), row) for row in ax.table.rows
+             if not row.extra]
+    means = sorted(((iv, row) for iv, row in means if iv.n > 0), key=lambda m: -ax.sign * m[0].estimate)
+    if not means:
+        return None
+    iv, row = means[0]
+    mean_text = fmt_number(iv.estimate, "mean", primary)
+    if len(means) == 1:
+        text = f"{scene} `{row.label}` ({mean_text}; the only cell)"
+        return _Best(text, text, (Claim("best", scene, row.label, primary.name, "mean", iv.estimate, mean_text,
+                                        n=iv.n),))
+    runner = means[1][1]
+    how = "ratio" if comp.how == "ratio" else "diff"
+    null = 1.0 if how == "ratio" else 0.0
+    lead = (paired_ratio if how == "ratio" else paired_difference)(ax.values(scene, runner, primary.name),
+                                                                   ax.values(scene, row, primary.name))
+    significant, is_practical = judge(lead, how, null, primary, comp.min_effect)
+    why = ax.unsettled(scene, runner, row, lead.estimate - null)
+    settled = None if ax.settle(scene, row) is None else not why
+    told = _Lead(scene, row, runner, primary.name, iv, mean_text, how, null, lead, significant, is_practical,
+                 fmt_interval(lead, how, primary, null, comp.min_effect), why, settled)
+    if not (significant and clears(lead, how, null, comp.min_effect)):
+        return _no_best(ax, told)
+    larger = _larger(ax, scene, row, runner)
+    return _best_named(ax, told) if larger is None else _no_best_at_size(ax, told, larger)
+
+
+def _larger(ax: _Axis, scene: str, row: Row, runner: Row) -> Interval | None:
+    """The paired size ratio of the leader ``row`` to the runner-up ``runner`` at ``scene`` where the leader is
+    larger by at least the size's minimum effect (None: not, or the kind has no size metric)."""
+    if ax.size_spec is None:
+        return None
+    ratio = paired_ratio(ax.size_values(scene, runner), ax.size_values(scene, row))
+    if ratio.n and math.isfinite(ratio.estimate) and ratio.estimate > 1.0 \
+            and practical(ratio, "ratio", 1.0, ax.size_effect):
+        return ratio
+    return None
+
+
+def _best_named(ax: _Axis, told: _Lead) -> _Best:
+    """A best: ``glossy `0.2` (27.50 dB; +0.42 dB [95 % CI …] over `0`)``, with the quality metrics that go
+    the other way (`other_way`) and whether it settled."""
+    scene, row, runner = told.scene, told.row, told.runner
+    reversed_ = other_way(ax.primary, told.lead.estimate - told.null, ax.quality_intervals(scene, runner, row))
+    text = f"{scene} `{row.label}` ({told.mean_text}; {told.text} over `{runner.label}`)"
+    short = text
+    if reversed_:
+        names = " and ".join(n for n, _ in reversed_)
+        but = f", **but {names} go{'es' if len(reversed_) == 1 else ''} the other way**"
+        text += f"{but} ({'; '.join(t for _, t in reversed_)})"
+        short += but
+    if told.why:
+        text += f", **not settled** ({told.why})"
+        short += ", **not settled**"
+    return _Best(text, short, (told.claim("best", text),))
+
+
+def _no_best_at_size(ax: _Axis, told: _Lead, larger: Interval) -> _Best:
+    """No single best at comparable size: the leader leads clearly but is ``larger`` than the runner-up by
+    more than the size's minimum effect; claimed "no best" and "size"."""
+    scene, row, runner, size, table = told.scene, told.row, told.runner, ax.size_spec, ax.table
+    size_text = fmt_interval(larger, "ratio", size, None)
+    sized = {r.label: ax.mean_of(scene, r, "bytes") for r in table.rows} if ax.by_bytes else None
+    front = _on_front(table, scene, size, ax.primary, (row, runner), sized,
+                      [r.label for r in table.rows if not r.extra])
+    at = ax.size_ratio_text(size_text, scene, runner, row)
+    text = (f"{scene}: no single best at comparable size (`{row.label}`, {told.mean_text}, leads "
+            f"`{runner.label}` by {told.text} at {at}, more than the "
+            f"{fmt_min_effect(ax.size_effect, 'ratio', size)} minimum effect"
+            + (f"; both on {FRONT_OF[any(r.extra for r in table.rows)]} {ax.size_word}/quality Pareto front"
+               if front else "") + ")")
+    short = (f"{scene}: no single best at comparable size (`{row.label}` leads `{runner.label}` at "
+             f"{fmt_number(larger.estimate, 'ratio', size)} `{runner.label}`'s {ax.size_word})")
+    if told.why:
+        text += f", **not settled** ({told.why})"
+        short += ", **not settled**"
+    return _Best(text, short, (told.claim("no best", text),
+                               Claim("size", scene, row.label, "bytes" if ax.by_bytes else size.name, "ratio",
+                                     larger.estimate, size_text, runner.label, larger.low, larger.high, larger.n,
+                                     *judge(larger, "ratio", 1.0, size, ax.size_effect))))
+
+
+def _no_best(ax: _Axis, told: _Lead) -> _Best:
+    """No single best: the lead's interval is not wholly beyond the minimum effect (or no difference)."""
+    unit_text = ax.unit_text
+    bound = ("" if not told.practical or unit_text is None else
+             f"; its interval's bound nearer no difference is not beyond the {unit_text} minimum effect")
+    text = (f"{told.scene}: no single best (`{told.row.label}`, {told.mean_text}, leads `{told.runner.label}` by "
+            f"{told.text}{bound})")
+    return _Best(text, f"{told.scene}: no single best", (told.claim("no best", text),))
+
+
+def _best_part(ax: _Axis, bests: Sequence[_Best]) -> _Part:
+    """The line of the best per scene with the rule that names one, its claims, and its Summary line."""
+    primary, size = ax.primary, ax.size_spec
+    word = "best" if primary.better != "lower" else "lowest"
+    unit_text = ax.unit_text
+    rule = ("named only where the 95 % interval of its paired lead over the runner-up lies wholly beyond "
+            + (f"the {unit_text} minimum effect" if unit_text else "no difference")
+            + (f" with no more than {fmt_min_effect(ax.size_effect, 'ratio', size)} more {ax.size_word}"
+               if size is not None else "")
+            + (" (float32 parameters: the cells' bytes per Gaussian differ)"
+               if ax.by_bytes else ""))
+    line = (f"- **{word.capitalize()} {_name(primary)}** per scene (mean over seeds; {rule}): "
+            + "; ".join(b.text for b in bests) + ".")
+    summary = f"- **{word.capitalize()} {_name(primary)}**: " + "; ".join(b.short for b in bests) + "."
+    return _Part((line,), tuple(c for b in bests for c in b.claims), summary=(summary,))
+
+
+# Each row against the reference
+
+@dataclasses.dataclass(frozen=True)
+class _Vs:
+    """One row against the reference at one scene in one comparison (`_vs_at`): its "vs" ``claim``;
+    ``brief``, its difference as the Summary writes it (`IntervalText.short`); ``sign``, how many seeds put
+    the row above the reference, ``k/n`` (None: not the primary metric's difference or ratio); ``why``, why
+    it is not settled ("": settled, not judged, or not the primary metric)."""
+
+    claim: Claim
+    brief: str
+    sign: str | None
+    why: str
+
+
+def _vs_at(ax: _Axis, scene: str, ref: Row, row: Row, comp: Comparison) -> _Vs | None:
+    """``row`` against ``ref`` at ``scene``, paired over seeds, in the comparison ``comp`` (`_Vs`); None where
+    no seed has both."""
+    spec = ax.specs[comp.metric]
+    a, b = ax.values(scene, ref, comp.metric), ax.values(scene, row, comp.metric)
+    iv, null = paired(a, b, comp)
+    if iv.n == 0:
+        return None
+    is_primary = comp.metric == ax.primary.name
+    sign = None
+    if is_primary and comp.how in ("diff", "ratio"):
+        pairs = [(a[k], b[k]) for k in a if k in b and math.isfinite(a[k]) and math.isfinite(b[k])]
+        sign = f"{sum(1 for x, y in pairs if y > x)}/{len(pairs)}"
+    written = interval_text(iv, comp.how, spec, null, comp.min_effect)
+    significant, is_practical = judge(iv, comp.how, null, spec, comp.min_effect)
+    why, settled = "", None
+    if is_primary:
+        why = ax.unsettled(scene, ref, row, iv.estimate - (null or 0.0))
+        settled = None if ax.settle(scene, row) is None or ax.settle(scene, ref) is None else not why
+    return _Vs(Claim("vs", scene, row.label, comp.metric, comp.how, iv.estimate, written.text, ref.label, iv.low,
+                     iv.high, iv.n, significant, is_practical, settled), written.short, sign, why)
+
+
+@dataclasses.dataclass(frozen=True)
+class _RowAgainst:
+    """One ``row`` against the reference (`_row_against`): ``line``, its findings line; ``more``, its appendix
+    line ("": none); ``claims``, its "vs" claims, then its "matched" ones; ``signs``, per scene how many seeds
+    put it above the reference (`holm_line`); and what its Summary line marks (`_row_summary`): ``primaries``,
+    its primary-metric claims, ``briefs``, each one's text in brief, ``moving``, ``scene: why`` where not
+    settled, ``opposed``, the quality metrics that go the other way in brief, ``across`` (`across_scenes`)
+    and ``sized``, its remark on model size (`_matched_text`)."""
+
+    row: Row
+    line: str
+    more: str
+    claims: tuple[Claim, ...]
+    signs: tuple[str, ...]
+    primaries: tuple[Claim, ...]
+    briefs: tuple[str, ...]
+    moving: tuple[str, ...]
+    opposed: tuple[str, ...]
+    across: Across | None
+    sized: _MatchedText
+
+
+def _row_against(ax: _Axis, ref: Row, row: Row) -> _RowAgainst:
+    """``row`` against ``ref`` in each of the kind's comparisons, per scene: the primary metric's in the
+    findings' line with its marks (not settled, the other way, across scenes, model size, also changed), the
+    others, the curve along the run, the confounds and the sizes in its appendix line."""
+    primary, scenes = ax.primary, ax.scenes
+    parts, rest = [], []  # the primary comparison's texts (the line's), the other comparisons' (the appendix's)
+    claims, signs, primaries, briefs, moving = [], [], [], [], []
+    for comp in ax.rules.comparisons:
+        texts = []
+        for scene in scenes:
+            vs = _vs_at(ax, scene, ref, row, comp)
+            if vs is None:
+                texts.append("–")
+                continue
+            if vs.sign is not None:
+                signs.append(vs.sign)
+            if vs.why:
+                moving.append(f"{scene}: {vs.why}")
+            claims.append(vs.claim)
+            if comp.metric == primary.name:
+                primaries.append(vs.claim)
+                briefs.append(vs.brief)
+            texts.append(vs.claim.text)
+        (parts if comp.metric == primary.name else rest).append(f"{_name(ax.specs[comp.metric])} {' / '.join(texts)}")
+    line = f"  - `{row.label}`: " + "; ".join(parts)
+    more = ["; ".join(rest)] if rest else []
+    along = _along_the_run(scenes, ref, row, ax.usable, ax.settling, primary) if ax.settling is not None else ""
+    if along:
+        more.append(along)
+    if moving:
+        line += f". **Not settled** ({'; '.join(moving)})"
+    also = confounds(scenes, ref, row, ax.usable, ax.kind)
+    if also:
+        more.append(f"Also changed: {also}")
+    opposed, opposed_short = _the_other_way(ax, ref, row, primaries)
+    if opposed:
+        line += f". **The other way** (against the {_name(primary)} difference, significantly): " + "; ".join(opposed)
+    across = across_scenes(primaries, scenes, ax.primary_null, ax.primary, ax.primary_comp.min_effect)
+    if across is not None:
+        line += f". {across.text}{across.over}"
+    size = ax.size_line(ref, row)
+    if size:
+        more.append(size)
+    sized = _matched_text(ax, ref, row) if ax.size_spec is not None else _MatchedText()
+    line += sized.text
+    if also:
+        line += f". Also changed: other settings too (what, in \"Appendix: {ax.table.axis} in full\")"
+    return _RowAgainst(row, line, f"  - `{row.label}`: " + ". ".join(more) if more else "",
+                       (*claims, *sized.claims), tuple(signs), tuple(primaries), tuple(briefs), tuple(moving),
+                       tuple(opposed_short), across, sized)
+
+
+def _the_other_way(ax: _Axis, ref: Row, row: Row, primaries: Sequence[Claim]) -> tuple[list[str], list[str]]:
+    """Per scene where ``row``'s primary difference is significant, the quality metrics that go significantly
+    the other way (`other_way`): (in full, ``glossy: SSIM −0.010 [95 % CI …]``; in brief, ``SSIM on glossy``)."""
+    opposed, opposed_short = [], []
+    for c in primaries:
+        if c.significant:
+            against = other_way(ax.primary, c.value - ax.primary_null, ax.quality_intervals(c.scene, ref, row))
+            if against:
+                opposed.append(f"{c.scene}: {'; '.join(t for _, t in against)}")
+                opposed_short.append(f"{' and '.join(n for n, _ in against)} on {c.scene}")
+    return opposed, opposed_short
+
+
+@dataclasses.dataclass(frozen=True)
+class _Holm:
+    """Holm's correction over an axis's primary comparisons (`_holm`): ``family``, the claims it covers (empty:
+    nothing to correct, one comparison or none significant alone); ``lost``, (scene, label) of those
+    significant alone but not after it; ``claim``, its "holm" claim (None where the family is empty)."""
+
+    family: list[Claim]
+    lost: set[tuple[str, str]]
+    claim: Claim | None
+
+
+def _holm(ax: _Axis, ref: Row, claims: Sequence[Claim], signs: Mapping[str, Sequence[str]]) -> _Holm:
+    """Holm's step-down correction (family-wise 5 %) over the primary "vs" claims against ``ref`` printed with
+    an interval, each one's p-value from its own t interval (`t_p_value`); its line is `holm_line`'s."""
+    primary, comp = ax.primary, ax.primary_comp
+    method = {"diff": "paired t", "ratio": "paired t on log ratios"}.get(comp.how, "t")
+    family = [c for c in claims if c.kind == "vs" and c.reference == ref.label and c.metric == primary.name
+              and _with_interval(c, ax.specs)]
+    p = [t_p_value(Interval(c.value, c.low, c.high, c.n, method), ax.primary_null) for c in family]
+    kept = holm(p)
+    lost = {(c.scene, c.label) for c, k in zip(family, kept) if c.significant and not k}
+    if len(family) < 2 or not any(c.significant for c in family):
+        return _Holm([], lost, None)
+    line = holm_line(family, p, kept, _name(primary), ref.label, ax.scenes, signs)
+    return _Holm(family, lost, Claim("holm", "", "", primary.name, "count", float(sum(kept)), line, ref.label,
+                                     n=len(family)))
+
+
+def _row_summary(ax: _Axis, ref: Row, r: _RowAgainst, lost: set[tuple[str, str]]) -> str:
+    """The Summary's line of one row against ``ref``: its primary difference per scene (``lost``: those no
+    longer significant after Holm's correction) with the marks its findings line gives it, in brief."""
+    primary = ax.primary
+    marks = []
+    if r.moving:
+        marks.append("**not settled** on " + ", ".join(m.split(":")[0] for m in r.moving))
+    if r.opposed:
+        marks.append(f"**the other way** (against the {_name(primary)} difference): " + "; ".join(r.opposed))
+    if r.across is not None:
+        short = sum((c.scene, c.label) in lost for c in r.primaries)  # across scenes per comparison only
+        marks.append(r.across.text + (f" (each per comparison; {len(r.primaries) - short} of {len(r.primaries)} "
+                                      f"significant after Holm)" if short and r.across.everywhere else "")
+                     + r.across.over)
+    if r.sized.heads:
+        at_size = r.sized.at_size
+        marks.append("**against model size**: " + _sizes_in_brief(r.sized.heads)
+                     + "".join(f"; at a matched size ({named}): "
+                               + "; ".join(m.text for m in at_size if m.matched == named)
+                               for named in dict.fromkeys(m.matched for m in at_size)))
+    said = "; ".join(f"{c.scene} {brief}" + (", not significant after Holm" if (c.scene, c.label) in lost else "")
+                     for c, brief in zip(r.primaries, r.briefs))
+    return (f"- **`{r.row.label}`** against `{ref.label}`, {_name(primary)}: {said}"
+            + "".join(f"; {m}" for m in marks) + ".")
+
+
+def _against_reference(ax: _Axis, ref: Row, others: Sequence[Row]) -> tuple[_Part, list[Claim]]:
+    """Every row of ``others`` against the reference ``ref`` (`_row_against`), Holm's correction over their
+    primary comparisons (`_holm`) and each row's Summary line: (the block, Holm's family; empty where Holm
+    has nothing to correct)."""
+    scenes = " / ".join(ax.scenes)
+    rows = [_row_against(ax, ref, row) for row in others]
+    signs: dict[str, list[str]] = {}  # row -> per scene "seeds above the reference/pairs"
+    for r in rows:
+        if r.signs:
+            signs.setdefault(r.row.label, []).extend(r.signs)
+    claims = [c for r in rows for c in r.claims]
+    corrected = _holm(ax, ref, claims, signs)
+    lines = [f"- **Against `{ref.label}`**, paired over seeds ({scenes}):", *(r.line for r in rows)]
+    if corrected.claim is not None:
+        lines.append(f"- {corrected.claim.text}.")
+        claims.append(corrected.claim)
+    more = [r.more for r in rows if r.more]
+    appendix = [f"- **Against `{ref.label}`**, paired over seeds ({scenes}), the other comparisons:", *more] \
+        if more else []  # no row compared anything else: no head either
+    summary = [_row_summary(ax, ref, r, corrected.lost) for r in rows if r.primaries]
+    return _Part(tuple(lines), tuple(claims), tuple(appendix), tuple(summary)), corrected.family
+
+
+# The lines after the comparisons
+
+def _matched_cells_part(ax: _Axis) -> _Part:
+    """Where the matched setting is this table's axis with two or more values, its cells compared with each
+    other (``- **At a matched size** …``), each claimed "matched" unless it did not end at one size."""
+    dim, values = ax.matched
+    size, primary, comp, table = ax.size_spec, ax.primary, ax.primary_comp, ax.table
+    if size is None or dim != table.axis or len(values) < 2:
+        return _Part()
+    rows = [r for r in table.rows if any(same_value(r.value, v) for v in values)]
+    parts, claims = [], []
+    for row in rows[1:]:
+        texts = []
+        for scene in ax.scenes:
+            iv, null = paired(ax.values(scene, rows[0], primary.name), ax.values(scene, row, primary.name), comp)
+            if not iv.n:
+                continue
+            text = fmt_interval(iv, comp.how, primary, null, comp.min_effect)
+            ratio = paired_ratio(ax.size_values(scene, rows[0]), ax.size_values(scene, row))
+            at = f" at {ax.size_ratio_text(f'×{ratio.estimate:.3f}', scene, rows[0], row)}" if ratio.n else ""
+            if ax.off_size(ratio):  # declared matched, ended apart: said, never claimed at one size
+                texts.append(f"{scene} {text}{at}: **not at one size** (a run that missed its count: see "
+                             f"\"Warnings\")")
+                continue
+            claims.append(Claim("matched", scene, row.label, primary.name, comp.how, iv.estimate, text,
+                                rows[0].label, iv.low, iv.high, iv.n,
+                                *judge(iv, comp.how, null, primary, comp.min_effect)))
+            why = ax.unsettled(scene, rows[0], row, iv.estimate - (null or 0.0))
+            texts.append(f"{scene} {text}{at}" + (f", **not settled** ({why})" if why else ""))
+        if texts:
+            parts.append(f"`{row.label}` against `{rows[0].label}`: " + "; ".join(texts))
+    head = (f"- **At a matched size** (`[report] matched`: {', '.join(f'`{r.label}`' for r in rows)} end at one "
+            f"{'byte' if ax.by_bytes else _name(size)} count; "
+            f"{setting_text(ax.experiment, dim, [r.value for r in rows])}): ")
+    if parts:
+        return _Part((head + ". ".join(parts) + ".",), tuple(claims))
+    if rows:
+        return _Part((head + "no done runs of these cells yet, so nothing is compared at a matched size.",))
+    return _Part()
+
+
+def _self_part(ax: _Axis, ref: Row) -> _Part:
+    """The reference row against itself in each "mean" comparison with a null value (the defaults timed as
+    both sides of each pair: the noise floor of a time ratio), claimed "self"."""
+    parts, claims = [], []
+    for comp in ax.rules.comparisons:
+        if comp.how != "mean" or comp.null is None:
+            continue
+        spec = ax.specs[comp.metric]
+        for scene in ax.scenes:
+            iv = t_interval(list(ax.values(scene, ref, comp.metric).values()))
+            if iv.n:
+                text = fmt_interval(iv, "mean", spec, comp.null, comp.min_effect)
+                significant, is_practical = judge(iv, "mean", comp.null, spec, comp.min_effect)
+                claims.append(Claim("self", scene, ref.label, comp.metric, "mean", iv.estimate, text, ref.label,
+                                    iv.low, iv.high, iv.n, significant, is_practical))
+                parts.append(f"{scene} {text}")
+    if not parts:
+        return _Part()
+    return _Part((f"- `{ref.label}` against itself (the same options timed as both sides of each pair; the "
+                  f"noise floor of the ratio): " + "; ".join(parts) + ".",), tuple(claims))
+
+
+def _count_part(ax: _Axis, claims: Sequence[Claim], family: Sequence[Claim], ref: Row) -> _Part:
+    """How many comparisons the finding makes with a 95 % interval (the "count" claim and its appendix line):
+    the leader's lead over the runner-up (and its size against it), each row against the reference, the
+    matched-size ones, among ``claims``; ``family``: Holm's (named where not empty)."""
+    primary, specs = ax.primary, ax.specs
+    made = [c for c in claims if c.kind in ("best", "no best", "size", "vs", "matched") and c.reference and c.n]
+    count = sum(1 for c in made if _with_interval(c, specs))
+    if count:
+        effects = [f"{_name(specs[c.metric])} {fmt_min_effect(c.min_effect, c.how, specs[c.metric])}"
+                   for c in ax.rules.comparisons if c.min_effect is not None]
+        rest = len(made) - count
+        return _Part(claims=(Claim("count", "", "", "", "count", float(count), str(count)),), appendix=(
+            f"- This table makes {count} comparisons with a 95 % interval (Student's t over seeds; no "
+            f"correction for multiple comparisons, so about 1 in 20 intervals misses by chance"
+            + (f", except Holm's over the {len(family)} {_name(primary)} ones against `{ref.label}`"
+               if family else "") + ")"
+            + (f"; {rest} more have none (one seed, or seeds that did not vary the result) and are no "
+               f"evidence either way" if rest else "") + "."
+            + (f" Minimum effects ({', '.join(effects)}): a difference reads \"no practical difference\" "
+               f"only where its whole interval lies within ± its minimum effect, \"inconclusive\" where "
+               f"the interval reaches beyond it while the difference is not significant or its estimate "
+               f"is below it." if effects else ""),))
+    if made:
+        return _Part(claims=(Claim("count", "", "", "", "count", 0.0, "0"),), appendix=(
+            f"- This table makes {len(made)} comparisons, but none has an interval (one seed per cell, "
+            f"or seeds that did not vary the result): none of them is a significant difference; add "
+            f"seeds to the grid.",))
+    return _Part()
+
+
+def _caveats_part(ax: _Axis, others: Sequence[Row]) -> _Part:
+    """What the runs did not record or left out: the confound counts (where ``others`` are compared), the
+    runs timed under load left out of every finding (a line) or of the timed comparisons, and the machine's
+    load where it was not recorded."""
+    declared, specs, timed = ax.declared, ax.specs, ax.timed
+    lines, appendix = [], []
+    if declared is not None and declared.confounds and others and not _recorded(ax.usable, declared):
+        labels = ", ".join(ax.kind.specs[name].label for name in declared.confounds[:5])
+        appendix.append("- What else each setting changed (" + labels
+                        + ") was not recorded by these runs (run before it was); \"(planned)\" counts are what "
+                          "their configs schedule; rerun the grid to see the rest.")
+    if ax.excluded:
+        lines.append(f"- {ax.excluded} run(s) timed while the load average exceeded half the cores are left out of "
+                     f"these findings (marked in the table's `loaded` column).")
+    timed_names = " / ".join(sorted(_name(specs[m]) for m in timed if m in specs))
+    if timed & set(specs) and not load_recorded(ax.runs, ax.kind):
+        appendix.append(f"- These runs did not record the machine's load (run before it was recorded): the "
+                        f"{timed_names} comparisons may come from a loaded machine and are no evidence of speed.")
+    if ax.untimed:
+        appendix.append(f"- {ax.untimed} run(s) timed while other processes loaded the machine are left out of the "
+                        f"{timed_names} comparisons (marked in the table's `timed under load` column; their "
+                        f"quality metrics are kept).")
+    return _Part(tuple(lines), appendix=tuple(appendix))
+
+
+# A comparison's remark on model size
+
+@dataclasses.dataclass(frozen=True)
+class _AtSize:
+    """One matched-size difference in brief, for the Summary (`_MatchedText.at_size`): ``matched``, what is
+    matched (the pair of extra cells, or the matched setting); ``text``, ``fox +0.52 dB [95 % CI +0.20, +0.84]``."""
+
+    matched: str
+    text: str
+
+
+@dataclasses.dataclass(frozen=True)
+class _AtScene:
+    """What the model-size remark says at one scene (`_matched_text`): ``piece``, its text; ``at_size``, the
+    Summary's brief (None: none); ``claim``, the "matched" claim it makes (None: none)."""
+
+    piece: str
+    at_size: _AtSize | None = None
+    claim: Claim | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class _MatchedText:
+    """A row's remark on model size (`_matched_text`): ``text``, ``. **Against model size**: …`` ("" where
+    none); ``heads``, each scene's size change, (scene, `size_shift`'s); ``at_size``, the matched-size
+    differences in brief; ``claims``, the "matched" claims it makes."""
+
+    text: str = ""
+    heads: tuple[tuple[str, SizeShift], ...] = ()
+    at_size: tuple[_AtSize, ...] = ()
+    claims: tuple[Claim, ...] = ()
+
+
+def _matched_text(ax: _Axis, a: Row, b: Row) -> _MatchedText:
+    """Where ``b`` comes with `MATCHED_SHARE` more (or fewer) Gaussians than ``a`` at a scene, the same
+    difference at the matched size (`[report] matched`), or that the grid has none (`_MatchedText`;
+    empty for the matched axis's own rows: natural against matched, or two matched cells)."""
+    dim, values = ax.matched
+    own = dim == ax.table.axis  # the matched setting is this table's axis
+    if own and (len(values) < 2 or all(any(same_value(r.value, v) for v in values) for r in (a, b))):
+        return _MatchedText()
+    pair = _matched_pair(ax.experiment, ax.table, a, b, values) if own else None
+    natural = None if not ax.stratum or own else set(ax.usable.run_id) - ax.stratum  # the runs at their own size
+    heads, said = [], []
+    for scene in ax.scenes:
+        shift = size_shift(*(ax.selected(scene, r, ax.usable) for r in (a, b)), ax.size_spec, ax.bytes_of,
+                           ax.by_bytes, natural)
+        if shift is None:
+            continue
+        head = f"{scene}: {shift.text}"
+        heads.append((scene, shift))
+        if dim is None:
+            said.append(_AtScene(head + "; the grid declares no matched-size cell, `[report] matched`: quality and "
+                                        "size are not separated)"))
+        elif pair is not None:
+            said.append(_at_matched_pair(ax, scene, head, pair))
+        elif own:
+            said.append(_AtScene(head + f"; no matched-size cell of this comparison: the matched cells are "
+                                        f"{', '.join(f'`{display(v)}`' for v in values)}, compared below)"))
+        else:
+            said.append(_at_matched_setting(ax, scene, head, a, b))
+    if not said:
+        return _MatchedText()
+    return _MatchedText(". **Against model size**: " + "; ".join(s.piece for s in said), tuple(heads),
+                        tuple(s.at_size for s in said if s.at_size is not None),
+                        tuple(s.claim for s in said if s.claim is not None))
+
+
+def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row]) -> _AtScene:
+    """``head`` (the size change at ``scene``) with the same comparison at one size through the two
+    ``[extra]`` cells ``pair`` (`_matched_pair`): not run there, not yet done, not at one size, or the
+    difference; never claimed (the pair is not in Holm's family)."""
+    spec, primary, comp = ax.experiment, ax.primary, ax.primary_comp
+    iv, null = paired(ax.values(scene, pair[0], primary.name), ax.values(scene, pair[1], primary.name), comp)
+    named = f"`{pair[1].label}` against `{pair[0].label}`"
+    cells = [spec.extra.get(ax.table.axis, {}).get(r.value, {}) for r in pair]
+    common = [f"`{k} = {display(v)}`" for k, v in cells[0].items()
+              if k != ax.table.axis and cells[1].get(k, object()) == v]
+    brief = named + (f", both also setting {', '.join(common)}" if common else "") + \
+        "; not in Holm's family"  # the summary's
+    if not iv.n:
+        away = [r for r in pair if not spec.extra_runs_at(ax.table.axis, r.value, scene)]
+        if away:
+            return _AtScene(head + f"; its matched-size cells, {named}, are not run at {scene} (their `scenes`): "
+                                   f"quality and size are not separated here)",
+                            _AtSize(brief, f"{scene} not run (the pair's `scenes`)"))
+        return _AtScene(head + f"; its matched-size cells, {named}, have no done runs yet)")
+    size = paired_ratio(ax.size_values(scene, pair[0]), ax.size_values(scene, pair[1]))
+    at = ax.size_ratio_text(f"×{size.estimate:.3f}", scene, *pair) if size.n else "sizes not recorded"
+    said = interval_text(iv, comp.how, primary, null, comp.min_effect)
+    if ax.off_size(size):
+        return _AtScene(head + f"; its matched-size cells, {named}, did not end at one size at {scene}: "
+                               f"{_name(primary)} {said.text} at {at}, a run that missed its count (see "
+                               f"\"Warnings\"): quality and size are not separated here)",
+                        _AtSize(brief, f"{scene} not at one size (×{size.estimate:.3f})"))
+    why = ax.unsettled(scene, pair[0], pair[1], iv.estimate - (null or 0.0))
+    return _AtScene(head + f" at its natural size); at a matched size ({named}): {_name(primary)} {said.text}, "
+                           f"at {at}" + (f", **not settled** ({why})" if why else ""),
+                    _AtSize(brief, f"{scene} {said.short}" + (", not settled" if why else "")))
+
+
+def _at_matched_setting(ax: _Axis, scene: str, head: str, a: Row, b: Row) -> _AtScene:
+    """``head`` (the size change at ``scene``) with the same comparison over the runs at the matched setting
+    of another axis (`_Axis.stratum`), claimed ("matched"); or that those runs are not done."""
+    primary, comp, stratum = ax.primary, ax.primary_comp, ax.stratum
+    iv, null = paired(ax.values_in(scene, a, primary.name, stratum), ax.values_in(scene, b, primary.name, stratum),
+                      comp)
+    if not iv.n:
+        return _AtScene(head + "; its matched-size cells have no done runs)")
+    size = paired_ratio(ax.size_values(scene, a, stratum), ax.size_values(scene, b, stratum))
+    said = interval_text(iv, comp.how, primary, null, comp.min_effect)
+    setting = setting_text(ax.experiment, ax.matched[0])
+    claim = Claim("matched", scene, b.label, primary.name, comp.how, iv.estimate, said.text, a.label, iv.low,
+                  iv.high, iv.n, *judge(iv, comp.how, null, primary, comp.min_effect))
+    at = ax.size_ratio_text(f"×{size.estimate:.3f}", scene, a, b, stratum) if size.n else "sizes not recorded"
+    return _AtScene(head + f" at its natural size); at the matched size ({setting}): {_name(primary)} {said.text}, "
+                           f"at {at}", _AtSize(setting, f"{scene} {said.short}"), claim)
 
 
 def _with_interval(c: Claim, specs: Mapping[str, MetricSpec]) -> bool:
