@@ -202,6 +202,23 @@ def test_the_difference_over_the_scenes_as_the_sample(tmp_path):
     assert "over the scenes as the sample" not in text
 
 
+def test_the_authors_notes_on_the_data_are_printed_as_theirs(tmp_path):
+    """``[report] notes``: what the author knows of the data that no number shows (maryrose's defective
+    mask), in the Summary, marked as the author's; anything but a list of one-line strings is one line."""
+    note = "glossy's test view 3: its target was rendered with a wrong light"
+    report, text = results(tmp_path, spec_of(report={"notes": [note]}),
+                           lambda run: (metrics_of(30.0 + run.seed * 0.01), flat_curves(30.0)))
+    summary = text[text.index("## Summary"):text.index("## Protocol and runs")]
+    assert f"**Notes from the experiment file** (its author's, on the data; not computed from the runs):\n\n- {note}\n" \
+        in summary
+    _, plain = results(tmp_path / "b", spec_of(), lambda run: (metrics_of(30.0 + run.seed * 0.01), flat_curves(30.0)))
+    assert "Notes from the experiment file" not in plain
+    for bad in (note, [""], ["two\nlines"], [3]):
+        with pytest.raises(InputError, match=r"report\.notes: expected a list of one-line strings") as caught:
+            spec_of(report={"notes": bad})
+        assert "\n" not in str(caught.value)
+
+
 # --------------------------------------------------------------------------- ranks
 def test_kendall_tau_b_against_hand_counted_pairs():
     # one discordant pair (b, c) of 6: (5 − 1) / 6

@@ -39,6 +39,8 @@ sweep it (docs/experiments.md has the full format)::
     value = 0.5                       # one cell's value on one scene); value: A - B as published;
     source = "where it is published"  # metric (default: the kind's headline), source and protocol
     protocol = "graphdeco-30k, ..."   # (both required) as docs/reports.md, "Beside published numbers"
+    notes = ["maryrose's test view 8: ..."]  # what the author knows of the data that no number shows
+                                      # (a defective mask, ...): printed as the author's, not computed
 
     [check]                           # the headline rerun at the field's protocol (docs/reports.md,
     protocol = "graphdeco-7k"         # "The 7K check"): two cells of the grid, one of its scenes,
@@ -193,6 +195,7 @@ class ExperimentSpec:
     #   each its own row of that dimension's table, compared only where ``[report] matched`` names it
     extra_scenes: Mapping[str, Mapping[str, tuple[str, ...]]] = field(default_factory=dict)  # dimension -> label
     #   -> the scenes an extra cell runs at (its ``scenes = [...]``); a cell not listed runs at every scene
+    notes: tuple[str, ...] = ()  # ``[report] notes``: the author's notes on the data, printed as stated
 
     def extra_runs_at(self, dim: str, label: str, scene: str) -> bool:
         """Whether the extra cell ``label`` of ``dim`` runs at ``scene`` (its ``scenes``; every scene without)."""
@@ -346,7 +349,7 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
                           variants=variants, grid=grid, description=description, runner=runner, source=source,
                           scene_sources=scene_sources, scene_tables=scene_tables, min_effect=min_effect,
                           check=check, matched=matched, quick=quick, published=published, extra=extra,
-                          extra_scenes=extra_scenes)
+                          extra_scenes=extra_scenes, notes=_parse_notes(data.get("report", {}), fail))
 
 
 def _parse_extra(table: Any, fail, source: str, axes: Mapping[str, tuple[Any, ...]],
@@ -480,7 +483,7 @@ def _cell_values(cell: Mapping[str, Any], dims: list[str], where: str, fail, pre
 
 
 #: Keys of the ``[report]`` table.
-REPORT_FIELDS = ("min_effect", "matched", "quick", "published")
+REPORT_FIELDS = ("min_effect", "matched", "quick", "published", "notes")
 #: Keys of one ``[[report.published]]`` entry: a difference (``cells``) or one cell's value (``cell``, ``scene``).
 PUBLISHED_FIELDS = ("cells", "cell", "scene", "value", "metric", "source", "protocol")
 
@@ -555,6 +558,15 @@ def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variant
         raise fail("report.quick", f"expected the path of the quick version's results (a report folder or a "
                                    f"run table), got {quick!r}")
     return out, matched, quick
+
+
+def _parse_notes(table: Any, fail) -> tuple[str, ...]:
+    """``[report] notes = ["...", ...]``: what the experiment's author knows of its data that no number
+    in the report shows (a test view whose mask is wrong, ...), each a non-empty line of text."""
+    notes = table.get("notes", []) if isinstance(table, Mapping) else []
+    if not isinstance(notes, list) or not all(isinstance(n, str) and n.strip() and "\n" not in n for n in notes):
+        raise fail("report.notes", f"expected a list of one-line strings (notes = [\"...\"]), got {notes!r}")
+    return tuple(n.strip() for n in notes)
 
 
 def _parse_published(entries: Any, fail, scenes: list[str], axes: Mapping[str, tuple[Any, ...]],

@@ -448,6 +448,9 @@ def summary_lines(report: Report, run_args: str, warned: list[tuple[str, str, st
                           for w in distinct[:2])
         lines += [f"**Warnings**: {len({w[0] for w in warned})} of {len(report.table)} runs warned ({len(distinct)} "
                   f"distinct: {shown}{'; …' if len(distinct) > 2 else ''}); each in full in \"Warnings\".", ""]
+    if spec.notes:  # the author's, beside the computed lines: said to be so
+        lines += ["**Notes from the experiment file** (its author's, on the data; not computed from the runs):", "",
+                  *(f"- {n}" for n in spec.notes), ""]
     if report.check is not None:
         lines += [header_line(report.check), ""]
     elif spec.check is None and kind.protocols is not None:
