@@ -11,6 +11,7 @@ does: no training runs.
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from splatbench.errors import InputError
@@ -235,6 +236,33 @@ def test_an_extra_cell_runs_at_its_scenes_alone_and_the_report_says_where_it_did
     # the table has no rows of the pair at glossy (none were to run there), and its rows at diffuse
     assert "| glossy | `3 at 140` |" not in text and "| diffuse | `3 at 140` | 3 |" in text
     assert "2 extra cells outside it (`sh.degree = 0 at 590` (diffuse only), `sh.degree = 3 at 140` (diffuse only)" in text
+
+
+def test_a_matched_pair_on_three_scenes_gives_its_difference_over_the_scenes(tmp_path):
+    """The pair's differences 0.2, 0.3 and 0.7 dB (+0.02 dB a seed: each scene's mean is its gain + 0.02) at
+    three scenes, not run at a fourth: the Summary adds their mean with a t interval over the three scenes
+    (df 2), as `findings.over_scenes` does for the grid's comparisons; the fourth is left out, not a gap."""
+    from scipy import stats
+
+    gains = {"diffuse": 0.2, "textured": 0.3, "thin": 0.7}
+    scenes = ("glossy", *gains)
+    only = {"sh.degree": {k: {**v, "scenes": list(gains)} for k, v in EXTRA["sh.degree"].items()}}
+
+    def make(run):
+        metrics, curves = _make(run)
+        if isinstance(run.labels["sh.degree"], str) and run.config["sh"]["degree"] == 3:
+            psnr = 29.0 + 0.01 * run.seed + gains[run.scene] + 0.02 * run.seed
+            return metrics_of(psnr, num_gaussians=BUDGET[3], sh_degree=3), flat_curves(psnr)
+        return metrics, curves
+
+    _, text = results(tmp_path, spec_of(scenes=scenes, extra=only, report=MATCHED), make)
+    diffs = np.array([g + 0.02 for g in gains.values()])
+    half = stats.t.ppf(0.975, 2) * diffs.std(ddof=1) / np.sqrt(3)
+    summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
+    assert "glossy not run (the pair's `scenes`)" in summary
+    assert (f"; thin +0.72 dB [95 % CI +0.67, +0.77]; over the scenes, taken as a random sample of scenes (df 2; not "
+            f"in Holm's family), {diffs.mean():+.2f} dB [95 % CI {diffs.mean() - half:+.2f}, "
+            f"{diffs.mean() + half:+.2f}], no significant difference, inconclusive.") in summary
 
 
 def test_the_ranks_order_the_grids_cells_alone(tmp_path):

@@ -949,6 +949,7 @@ def _row_summary(ax: _Axis, ref: Row, r: _RowAgainst, lost: set[tuple[str, str]]
         marks.append("**against model size**: " + _sizes_in_brief(r.sized.heads)
                      + "".join(f"; at a matched size ({named}): "
                                + "; ".join(m.text for m in at_size if m.matched == named)
+                               + _over_matched([m for m in at_size if m.matched == named], ax)
                                for named in dict.fromkeys(m.matched for m in at_size)))
     said = "; ".join(f"{c.scene} {brief}" + (", not significant after Holm" if (c.scene, c.label) in lost else "")
                      for c, brief in zip(r.primaries, r.briefs))
@@ -1106,6 +1107,8 @@ class _AtSize:
 
     matched: str
     text: str
+    estimate: float | None = None  # the paired difference where both cells are done and at one size
+    runs_here: bool = True  # False: the pair is not run at this scene (its `scenes`)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -1182,7 +1185,7 @@ def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row]) ->
         if away:
             return _AtScene(head + f"; its matched-size cells, {named}, are not run at {scene} (their `scenes`): "
                                    f"quality and size are not separated here)",
-                            _AtSize(brief, f"{scene} not run (the pair's `scenes`)"))
+                            _AtSize(brief, f"{scene} not run (the pair's `scenes`)", runs_here=False))
         return _AtScene(head + f"; its matched-size cells, {named}, have no done runs yet)")
     size = paired_ratio(ax.size_values(scene, pair[0]), ax.size_values(scene, pair[1]))
     at = ax.size_ratio_text(f"×{size.estimate:.3f}", scene, *pair) if size.n else "sizes not recorded"
@@ -1195,7 +1198,17 @@ def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row]) ->
     why = ax.unsettled(scene, pair[0], pair[1], iv.estimate - (null or 0.0))
     return _AtScene(head + f" at its natural size); at a matched size ({named}): {_name(primary)} {said.text}, "
                            f"at {at}" + (f", **not settled** ({why})" if why else ""),
-                    _AtSize(brief, f"{scene} {said.short}" + (", not settled" if why else "")))
+                    _AtSize(brief, f"{scene} {said.short}" + (", not settled" if why else ""),
+                            iv.estimate if comp.how == "diff" else None))
+
+
+def _over_matched(at: Sequence[_AtSize], ax: _Axis) -> str:
+    """`over_scenes` of a matched-size difference: where it was measured at one size on three scenes or
+    more (every scene the pair runs at), the mean over them with its t interval; "" otherwise."""
+    here = [m for m in at if m.runs_here]
+    if any(m.estimate is None for m in here):
+        return ""
+    return over_values([m.estimate for m in here], ax.primary, ax.primary_null, ax.primary_comp.min_effect)
 
 
 def _at_matched_setting(ax: _Axis, scene: str, head: str, a: Row, b: Row) -> _AtScene:
@@ -1213,7 +1226,8 @@ def _at_matched_setting(ax: _Axis, scene: str, head: str, a: Row, b: Row) -> _At
                   iv.high, iv.n, *judge(iv, comp.how, null, primary, comp.min_effect))
     at = ax.size_ratio_text(f"×{size.estimate:.3f}", scene, a, b, stratum) if size.n else "sizes not recorded"
     return _AtScene(head + f" at its natural size); at the matched size ({setting}): {_name(primary)} {said.text}, "
-                           f"at {at}", _AtSize(setting, f"{scene} {said.short}"), claim)
+                           f"at {at}", _AtSize(setting, f"{scene} {said.short}",
+                                               iv.estimate if comp.how == "diff" else None), claim)
 
 
 def _with_interval(c: Claim, specs: Mapping[str, MetricSpec]) -> bool:
@@ -1372,16 +1386,23 @@ class Across:
 
 def over_scenes(claims: Sequence[Claim], spec: MetricSpec, null: float, min_effect: float | None) -> str:
     """The mean of the per-scene mean differences with its 95 % t interval over the scenes, the scenes as
-    the sample (df = scenes - 1): ``; over the scenes as the sample, +1.01 dB [95 % CI +0.26, +1.76] (4
-    scenes, df 3)``. It covers what another scene like these would give, which the per-scene intervals,
+    the sample (df = scenes - 1): ``; over the scenes, taken as a random sample of scenes (df 3; not in
+    Holm's family), +1.01 dB [95 % CI +0.26, +1.76]``. It covers what another scene like these would give, which the per-scene intervals,
     over seeds, do not; "" for fewer than three scenes (df 1 gives a t quantile of 12.7: no interval worth
     printing) or for a ratio (its per-scene values are geometric means)."""
     values = [c.value for c in claims if c.how == "diff" and math.isfinite(c.value)]
-    if len(values) < 3 or len(values) != len(claims):
+    return over_values(values, spec, null, min_effect) if len(values) == len(claims) else ""
+
+
+def over_values(values: Sequence[float], spec: MetricSpec, null: float, min_effect: float | None) -> str:
+    """`over_scenes`' text of per-scene mean differences ``values`` (one per scene); "" for fewer than three."""
+    if len(values) < 3 or not all(math.isfinite(v) for v in values):
         return ""
     iv = t_interval(values, method="t")
-    return (f"; over the scenes as the sample, {interval_text(iv, 'diff', spec, null, min_effect).short} "
-            f"({len(values)} scenes, df {len(values) - 1})")
+    if no_spread(iv, "diff", spec):  # the same on every scene: the per-scene numbers say it all
+        return ""
+    return (f"; over the scenes, taken as a random sample of scenes (df {len(values) - 1}; not in Holm's family), "
+            f"{interval_text(iv, 'diff', spec, null, min_effect).short}")
 
 
 def across_scenes(claims: Sequence[Claim], scenes: Sequence[str], null: float = 0.0,
@@ -1401,7 +1422,8 @@ def across_scenes(claims: Sequence[Claim], scenes: Sequence[str], null: float = 
     if len(practical_) == len(scenes) and len(signs) == 1:
         return Across(f"**Across scenes**: practical and of one sign on all {len(scenes)} scenes", True, over)
     on = ", ".join(f"{c.scene} {'+' if c.value > null else '−'}" for c in practical_)
-    return Across(f"**Per scene only** (not across scenes: practical on {len(practical_)} of {len(scenes)} scenes"
+    return Across(f"**Per scene only** (not practical with one sign on every scene: practical on {len(practical_)} of "
+                  f"{len(scenes)} scenes"
                   + (", with opposite signs" if len(signs) > 1 else "") + f": {on})", False, over)
 
 
