@@ -337,8 +337,8 @@ def test_report_says_not_run_without_the_checks_results(tmp_path):
     assert report.check.verdict == "not run" and report.check.headline == "7K check: not run"
     assert report.check.rerun.claim is None and report.check.grid.claim.practical
     assert "## Headline at the 7K protocol" in text
-    assert ("**7K check: not run** (`sh.degree=3` against `sh.degree=0` on glossy, rerun at protocol "
-            "`graphdeco-7k`") in text  # the header
+    assert ("**7K check: not run** (`sh.degree=3` against `sh.degree=0` on glossy alone, 3 seeds, rerun at "
+            "protocol `graphdeco-7k`; no other comparison of the grid is rerun") in text  # the header
     assert ("**7K check: not run**: none of its 6 runs has a finished result. Run `splatbench run x.toml` "
             "(finished runs are skipped) and report again.") in text
     assert "| `graphdeco-7k` | 0 of 6 | – | – | – | – |" in text

@@ -449,8 +449,14 @@ def header_line(result: CheckResult) -> str:
     if result.verdict in JUDGED and result.rerun.opposed:
         but = (f", **but {opposed_text(result.rerun)} there** "
                f"({'; '.join(t for _, t in result.rerun.opposed)})")
-    return (f"**{result.headline}**{but} (`{b}` against `{a}` on {result.check.scene}, rerun at protocol "
-            f"`{result.check.protocol}`{unsettled}; section \"Headline at the "
+    said = ""
+    if result.rerun.claim is not None and result.grid.claim is not None:
+        said = (f": {result.rerun.claim.text} at `{result.check.protocol}`, "
+                f"{fmt_number(result.grid.claim.value, result.grid.claim.how, result.metric)} under the grid's "
+                f"protocol")
+    return (f"**{result.headline}**{but}{said} (`{b}` against `{a}` on {result.check.scene} alone, "
+            f"{len(result.seeds)} seed{'' if len(result.seeds) == 1 else 's'}, rerun at protocol "
+            f"`{result.check.protocol}`{unsettled}; no other comparison of the grid is rerun; section \"Headline at the "
             f"{protocol_title(result.check.protocol)} protocol\").")
 
 
