@@ -283,6 +283,10 @@ def test_a_report_ranks_its_cells_per_scene_and_against_its_quick_version(tmp_pa
     # glossy the same order (+1); diffuse: quick 1 > 0 > 3 against 0 > 1 > 3: one discordant pair of 3
     assert q == {"glossy": pytest.approx(1.0), "diffuse": pytest.approx(1 / 3)}
     assert "- **Quick protocol against this one** (Kendall's τ-b" in text and "diffuse +0.33 (3 cells)" in text
+    # the Summary repeats them in brief, with how coarse a tau over 3 cells is (3 pairs: steps of 2/3)
+    summary = text[text.index("## Summary"):text.index("## Protocol and runs")]
+    assert ("- **Ranks**: the two scenes' orders agree by Kendall's τ -1.00; the quick protocol's order against this "
+            "one's: glossy +1.00, diffuse +0.33 (over 3 cells a τ-b moves in steps of about 0.67)") in summary
     # a pointer to nothing is one line
     with pytest.raises(InputError, match=r"report\.quick: .*missing\.parquet does not exist"):
         results(tmp_path / "c", spec_of(report={"quick": str(tmp_path / "missing.parquet")}), make)

@@ -176,7 +176,29 @@ def rank_finding(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame, quick
         else:
             lines.append(f"- **Quick protocol against this one**: no quick version on these scenes (`{quick_path}` "
                          f"has none of {', '.join(scenes)} done).")
-    return Finding("ranks", lines, claims)
+    return Finding("ranks", lines, claims, summary=_summary(claims))
+
+
+def _summary(claims: list[Claim]) -> list[str]:
+    """The Summary's line of the ranks (the numbers of the lines above, in brief): the mean rank agreement
+    across scenes and the quick version's per scene, with how coarse a τ over that few cells is."""
+    taus = [c for c in claims if c.kind == "tau" and math.isfinite(c.value)]
+    quick = [c for c in claims if c.kind == "quick tau"]
+    if not taus and not quick:
+        return []
+    parts = []
+    if len(taus) == 1:
+        parts.append(f"the two scenes' orders agree by Kendall's τ {_tau(taus[0].value)}")
+    elif taus:
+        parts.append(f"agreement across scenes, mean Kendall's τ {sum(c.value for c in taus) / len(taus):+.2f} over "
+                     f"{len(taus)} pairs of scenes")
+    if quick:
+        parts.append("the quick protocol's order against this one's: "
+                     + ", ".join(f"{c.scene} {_tau(c.value)}" for c in quick))
+    cells = max(c.n for c in (*taus, *quick))
+    coarse = (f" (over {cells} cells a τ-b moves in steps of about {2 / (cells * (cells - 1) / 2):.2f})"
+              if cells >= 2 else "")
+    return ["- **Ranks**: " + "; ".join(parts) + coarse + " (\"Appendix: Ranks\")."]
 
 
 __all__ = ["cell_means", "tied", "ranks", "quick_table", "rank_finding"]
