@@ -699,6 +699,25 @@ def test_the_runs_said_to_refine_at_their_last_step_are_those_that_counted_one_r
     assert f"{sum(late)} of {len(table)} runs refined at their last step" in "\n".join(protocol_lines(table))
 
 
+def test_the_checks_runs_say_where_they_differ_from_graphdeco():
+    # reports/sh_degree/runs' 30K check: refine_stop 15,000 < 30,000, so no refinement at the last step; on
+    # ethiopian_head's white background, graphdeco's --white_background reset at step 500 is named
+    from pathlib import Path
+
+    from splatbench.experiments.store import build_table, read_records
+    from splatbench.experiments.train_report import check_schedule_note
+
+    folder = Path(__file__).resolve().parents[1] / "reports" / "sh_degree" / "runs"
+    if not folder.is_dir():
+        pytest.skip("reports/sh_degree/runs is gone (the report arrived)")
+    table = build_table(read_records(folder).values())
+    check = table[table["config.protocol"] == "graphdeco-30k"]
+    (line,) = check_schedule_note(check).lines
+    assert "refined at their last step" not in line and "on a white background (ethiopian_head)" in line
+    grid = table[table["config.protocol"] == "graphdeco-7k"]
+    assert "48 of 66 refined at their last step" in check_schedule_note(grid).lines[0]
+
+
 # --------------------------------------------------------------------------- best at comparable size
 def _bigger_lead(share: float):
     """SH 3 ahead of SH 0 by 0.5 dB on every seed, with ``share`` more Gaussians (plus seeded noise)."""

@@ -66,7 +66,7 @@ from splatbench.experiments.train_config import (DATA_FIELDS, OWNED_FIELDS, opac
                                                  split, train_config)
 from splatbench.experiments.train_report import (auto_sh_degree_note, how_read, lpips_conventions, lpips_note, memory_note,
                                                  model_bytes, model_size_note, outlier_view_finding, outlier_view_note,
-                                                 protocol_lines, schedule_confound_note, smoke_test_line,
+                                                 check_schedule_note, protocol_lines, schedule_confound_note, smoke_test_line,
                                                  ssim_trained_note)
 from splatbench.metrics.memory import reset_peak_rss
 from splatbench.train.config import TrainConfig  # the kind's Config (loads torch: every use of the kind validates)
@@ -578,7 +578,7 @@ REPORT = KindReport(
     axis_notes=(model_size_note, ssim_trained_note, auto_sh_degree_note, schedule_confound_note),
     metric_notes=(lpips_note, memory_note),
     run_findings=(outlier_view_finding,),
-    check_notes=(outlier_view_note,),
+    check_notes=(outlier_view_note, check_schedule_note),
     min_effects=lpips_min_effect,
 )
 

@@ -969,6 +969,21 @@ def outlier_view_lines(table: pd.DataFrame) -> list[str]:
     return _outlier_lines(view_outliers(table))
 
 
+def check_schedule_note(table: pd.DataFrame) -> RunNotes:
+    """Where the check's runs differ from graphdeco's train.py (docs/training.md, "Evaluation order"), as the
+    grid's Protocol lines say it of the grid's: a refinement at their last step before its evaluation, the
+    opacity reset graphdeco adds on white at its refine start; nothing where neither applies."""
+    done = done_runs(table)
+    if done.empty:
+        return RunNotes()
+    late = refined_at_end(done)
+    said = ([f"{late} of {len(done)} refined at their last step, right before its evaluation"] if late else []) \
+        + ([_white_reset(done).removeprefix("; ")] if _white_reset(done) else [])
+    if not said:
+        return RunNotes()
+    return RunNotes(("- **The check's runs against graphdeco's train.py**: " + "; ".join(said) + ".",))
+
+
 def outlier_view_note(table: pd.DataFrame) -> RunNotes:
     """The check's runs' `outlier_view_lines`, with how many runs they flag (`KindReport.check_notes`)."""
     found = view_outliers(table)
@@ -1049,6 +1064,6 @@ def outlier_view_finding(runs: pd.DataFrame, min_effect: Mapping[str, float] | N
 
 
 __all__ = ["OUTLIER_VIEW_DB", "FLOATER_DOC", "OutlierRun", "ViewCheck", "view_outliers", "outlier_view_lines",
-           "outlier_view_note", "outlier_view_finding", "hardest_view_lines",
+           "outlier_view_note", "check_schedule_note", "outlier_view_finding", "hardest_view_lines",
            "DEFAULT_PROTOCOL", "SMOKE_TEST", "smoke_test_line", "model_bytes", "protocol_lines", "model_size_note", "floats_per_gaussian", "ssim_trained_note", "seed_varies", "scene_kinds", "auto_sh_degree_note", "how_read",
            "schedule_confound_note", "lpips_conventions", "lpips_note", "memory_note"]
