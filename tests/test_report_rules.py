@@ -658,19 +658,25 @@ def test_the_header_states_the_protocol_the_runs_recorded(tmp_path):
     assert "not the initial points of init = surface" in "\n".join(protocol_lines(table))
 
 
-def test_the_sh_steps_in_the_header_are_where_the_real_runs_curves_part():
-    # reports/sh_degree/runs (graphdeco-7k, sh.interval 1,000, recorded schedule "scaled"): SH 0 and SH 3 of one
-    # seed are the same run, bit for bit, until band 1 starts training; the header's band-1 step must be the last
-    # logged step (every 100) at which their training PSNR is still equal
+def _sh_degree_runs() -> pd.DataFrame:
+    """The run table of the records committed in reports/sh_degree/runs (skipped once they are gone)."""
     from pathlib import Path
 
     from splatbench.experiments.store import build_table, read_records
-    from splatbench.experiments.train_report import schedule_as_run
 
     folder = Path(__file__).resolve().parents[1] / "reports" / "sh_degree" / "runs"
     if not folder.is_dir():
         pytest.skip("reports/sh_degree/runs is gone (the report arrived)")
-    table = build_table(read_records(folder).values())
+    return build_table(read_records(folder).values())
+
+
+def test_the_sh_steps_in_the_header_are_where_the_real_runs_curves_part():
+    # reports/sh_degree/runs (graphdeco-7k, sh.interval 1,000, recorded schedule "scaled"): SH 0 and SH 3 of one
+    # seed are the same run, bit for bit, until band 1 starts training; the header's band-1 step must be the last
+    # logged step (every 100) at which their training PSNR is still equal
+    from splatbench.experiments.train_report import schedule_as_run
+
+    table = _sh_degree_runs()
     fox = table[(table.scene == "fox") & (table.seed == 0)]
     zero, three = (json.loads(fox[fox["axis.sh.degree"].astype(str) == d].curves.iloc[0]) for d in ("0", "3"))
     assert zero["step"] == three["step"]
@@ -683,15 +689,9 @@ def test_the_runs_said_to_refine_at_their_last_step_are_those_that_counted_one_r
     # reports/sh_degree/runs (graphdeco-7k): the default strategy refines at 600, 700, ..., 7,000 (65 times,
     # the last right before the evaluation), the budget cells stop at refine_stop = 7,000 (64); the header's
     # count, from the configs, must pick out exactly the runs whose strategy counted 65
-    from pathlib import Path
-
-    from splatbench.experiments.store import build_table, read_records
     from splatbench.experiments.train_report import protocol_lines, refined_at_end
 
-    folder = Path(__file__).resolve().parents[1] / "reports" / "sh_degree" / "runs"
-    if not folder.is_dir():
-        pytest.skip("reports/sh_degree/runs is gone (the report arrived)")
-    table = build_table(read_records(folder).values())
+    table = _sh_degree_runs()
     table = table[table["config.protocol"] == "graphdeco-7k"]
     late = [refined_at_end(table.loc[[i]]) == 1 for i in table.index]
     counts = table["metric.refinements"].astype(int)
@@ -702,15 +702,9 @@ def test_the_runs_said_to_refine_at_their_last_step_are_those_that_counted_one_r
 def test_the_checks_runs_say_where_they_differ_from_graphdeco():
     # reports/sh_degree/runs' 30K check: refine_stop 15,000 < 30,000, so no refinement at the last step; on
     # ethiopian_head's white background, graphdeco's --white_background reset at step 500 is named
-    from pathlib import Path
-
-    from splatbench.experiments.store import build_table, read_records
     from splatbench.experiments.train_report import check_schedule_note
 
-    folder = Path(__file__).resolve().parents[1] / "reports" / "sh_degree" / "runs"
-    if not folder.is_dir():
-        pytest.skip("reports/sh_degree/runs is gone (the report arrived)")
-    table = build_table(read_records(folder).values())
+    table = _sh_degree_runs()
     check = table[table["config.protocol"] == "graphdeco-30k"]
     (line,) = check_schedule_note(check).lines
     assert "refined at their last step" not in line and "on a white background (ethiopian_head)" in line
