@@ -142,7 +142,7 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
                      f"{(lr + ' → ' + lr_final + ' × scene extent ') if lr and lr_final else ''}over 30,000 steps, "
                      f"not scaled to the run; the protocol sets it, so the runs' recorded `schedule` field "
                      f"({' / '.join(repr(str(x)) for x in schedules if x is not None) or 'none'}) is not what they "
-                     f"ran)" + _white_reset(done) + ".")
+                     f"ran)" + (f"; {white}" if (white := _white_reset(done)) else "") + ".")
     evals = _eval_steps(done)
     late = refined_at_end(done) if protocol != "quick" else 0
     order = (f" {late} of {len(done)} runs refined at their last step (its refine interval divides it, inside the "
@@ -361,7 +361,7 @@ def _white_reset(done: pd.DataFrame) -> str:
                     if isinstance(rgb, str) and [x.strip() for x in rgb.split(",")] == ["1", "1", "1"]})
     if not white:
         return ""
-    return (f"; on a white background ({', '.join(white)}) graphdeco's train.py, given --white_background, also "
+    return (f"on a white background ({', '.join(white)}) graphdeco's train.py, given --white_background, also "
             f"resets opacities at its refine start (step 500), which these runs do not (docs/training.md, "
             f"\"Evaluation order\")")
 
@@ -977,8 +977,8 @@ def check_schedule_note(table: pd.DataFrame) -> RunNotes:
     if done.empty:
         return RunNotes()
     late = refined_at_end(done)
-    said = ([f"{late} of {len(done)} refined at their last step, right before its evaluation"] if late else []) \
-        + ([_white_reset(done).removeprefix("; ")] if _white_reset(done) else [])
+    said = [f"{late} of {len(done)} refined at their last step, right before its evaluation"] if late else []
+    said += [white] if (white := _white_reset(done)) else []
     if not said:
         return RunNotes()
     return RunNotes(("- **The check's runs against graphdeco's train.py**: " + "; ".join(said) + ".",))

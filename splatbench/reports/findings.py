@@ -1387,15 +1387,18 @@ class Across:
 def over_scenes(claims: Sequence[Claim], spec: MetricSpec, null: float, min_effect: float | None) -> str:
     """The mean of the per-scene mean differences with its 95 % t interval over the scenes, the scenes as
     the sample (df = scenes - 1): ``; over the scenes, taken as a random sample of scenes (df 3; not in
-    Holm's family), +1.01 dB [95 % CI +0.26, +1.76]``. It covers what another scene like these would give, which the per-scene intervals,
-    over seeds, do not; "" for fewer than three scenes (df 1 gives a t quantile of 12.7: no interval worth
-    printing) or for a ratio (its per-scene values are geometric means)."""
-    values = [c.value for c in claims if c.how == "diff" and math.isfinite(c.value)]
-    return over_values(values, spec, null, min_effect) if len(values) == len(claims) else ""
+    Holm's family), +1.01 dB [95 % CI +0.26, +1.76]``. It covers what another scene like these would
+    give, which the per-scene intervals, over seeds, do not; "" for fewer than three scenes (df 1 gives
+    a t quantile of 12.7: no interval worth printing) or for a ratio (its per-scene values are
+    geometric means): `over_values`."""
+    if any(c.how != "diff" for c in claims):
+        return ""
+    return over_values([c.value for c in claims], spec, null, min_effect)
 
 
 def over_values(values: Sequence[float], spec: MetricSpec, null: float, min_effect: float | None) -> str:
-    """`over_scenes`' text of per-scene mean differences ``values`` (one per scene); "" for fewer than three."""
+    """`over_scenes`' text of per-scene mean differences ``values`` (one per scene); "" for fewer than three,
+    any not finite, or the same on every scene."""
     if len(values) < 3 or not all(math.isfinite(v) for v in values):
         return ""
     iv = t_interval(values, method="t")

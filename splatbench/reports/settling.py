@@ -197,13 +197,12 @@ def mean_curve(runs: pd.DataFrame, keys: SettlingCurves) -> list[tuple[int, floa
     return [(s, float(np.mean([c[s] for c in seeds.values()]))) for s in steps]
 
 
-def mean_peak(runs: pd.DataFrame, keys: SettlingCurves) -> tuple[float, int, float] | None:
-    """(best value, its step, last value) of `mean_curve`; best is the highest, or the lowest where
-    ``keys.better`` is "lower"; None when the seeds share no step."""
-    mean = mean_curve(runs, keys)
+def mean_peak(mean: list[tuple[int, float]], better: str) -> tuple[float, int, float] | None:
+    """(best value, its step, last value) of a `mean_curve`; best is the highest, or the lowest where
+    ``better`` is "lower"; None for an empty curve (the seeds shared no step)."""
     if not mean:
         return None
-    sign = -1.0 if keys.better == "lower" else 1.0
+    sign = -1.0 if better == "lower" else 1.0
     step, best = max(mean, key=lambda p: (sign * p[1], -p[0]))
     return best, step, mean[-1][1]
 
@@ -260,9 +259,9 @@ def cell_settling(runs: pd.DataFrame, keys: SettlingCurves, min_effect: float) -
     per_seed = {k: float(np.mean(v)) for k, v in sorted(test.items())}
     train_mean = float(np.mean([np.mean(v) for v in train.values()])) if train else None
     gap = float(np.mean([np.mean(v) for v in gaps.values()])) if gaps else None
-    peak = mean_peak(runs, keys)
-    best, best_step, last = peak if peak is not None else (None, None, None)
     curve = mean_curve(runs, keys)
+    peak = mean_peak(curve, keys.better)
+    best, best_step, last = peak if peak is not None else (None, None, None)
     after = [r for r in every_reset if best_step is not None and r > best_step
              and _fell_after(curve, best, r, min_effect)]
     return CellSettling(float(np.mean(list(per_seed.values()))), train_mean, min(starts), max(ends), per_seed,
