@@ -397,7 +397,7 @@ def test_report_gives_a_verdict_with_the_checks_results(tmp_path, grid_gain, gai
     assert ("**not settled** at `graphdeco-7k` (`sh.degree=3` +0.50 dB / 1,000 steps" in text) is (slope > 0)
     # the grid's side is the grid's runs of the same two cells (iterations 100), not the check's
     assert check.grid.protocol == "quick" and check.grid.claim.value == pytest.approx(grid_gain, abs=0.15)
-    if grid_gain == 0.5:  # the verdict re-derived from the check's interval (docs/reports.md, "The 7K check")
+    if grid_gain == 0.5:  # the verdict re-derived from the check's interval (docs/reports.md, "The protocol check")
         expected = ("holds" if claim.low > 0 and claim.value >= 0.1 else
                     "does not hold" if claim.high < 0 or (-0.1 < claim.low and claim.high < 0.1) else "inconclusive")
         assert expected == verdict, (claim.low, claim.value, claim.high)

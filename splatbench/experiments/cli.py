@@ -40,7 +40,7 @@ def run(experiment: Path, workers: int | None, executor: str | None, scheduler: 
     Runs whose result says done are skipped, so an interrupted sweep resumes where it
     stopped; failed runs are tried again; runs another live runner holds are left to
     it. A file with a [check] table also runs the check's runs (its headline comparison
-    at another protocol; docs/reports.md, "The 7K check") after the grid's, unless
+    at another protocol; docs/reports.md, "The protocol check") after the grid's, unless
     --no-check; --check-only runs the check's runs alone (to add the check to a committed
     report: `splatbench report EXPERIMENT.toml --rebuild --results DIR` then puts them
     beside the report's own grid runs). A training run that another experiment in the same

@@ -190,7 +190,7 @@ def _is_dataclass_type(tp: Any) -> bool:
 @dataclass(frozen=True)
 class KindProtocols:
     """How a kind reruns a cell of a grid under a named protocol: what an experiment's
-    ``[check]`` runs (docs/reports.md, "The 7K check").
+    ``[check]`` runs (docs/reports.md, "The protocol check").
 
     apply(config, name) -> config: a run's nested, unresolved config under protocol ``name``
         (the train kind: ``protocol = name``, the protocol's own length and test-curve

@@ -135,7 +135,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     (`execution_order`), the grid's and then the check's; the table is in `expand`'s order.
     check_only: run the check's runs alone (the same run ids; the grid's are neither run nor
     counted, and the folder's table still lists those of them that have a result): to add the
-    check to a report whose grid ran elsewhere (docs/reports.md, "The 7K check"). One
+    check to a report whose grid ran elsewhere (docs/reports.md, "The protocol check"). One
     `InputError` line for a file without a ``[check]``, or with ``check=False``.
     reuse: first copy into this folder the runs that another experiment in ``results_dir`` finished
     under the same run id and config (`reuse_finished`; only for a kind that is ``reusable``); they
@@ -354,7 +354,7 @@ def check_only_problem(spec: ExperimentSpec, check: bool = True) -> None:
         raise InputError("--check-only: runs only the file's [check], --no-check leaves it out; give one of the two")
     if spec.check is None:
         raise InputError(f"{spec.source}: --check-only: the file has no [check] table, so there is nothing to run "
-                         f"(add one: docs/reports.md, \"The 7K check\"; or run the grid with `splatbench run "
+                         f"(add one: docs/reports.md, \"The protocol check\"; or run the grid with `splatbench run "
                          f"{spec.source}`)")
 
 

@@ -43,7 +43,7 @@ sweep it (docs/experiments.md has the full format)::
                                       # (a defective mask, ...): printed as the author's, not computed
 
     [check]                           # the headline rerun at the field's protocol (docs/reports.md,
-    protocol = "graphdeco-7k"         # "The 7K check"): two cells of the grid, one of its scenes,
+    protocol = "graphdeco-7k"         # "The protocol check"): two cells of the grid, one of its scenes,
     scene = "textured"                # every seed; `splatbench run` runs them after the grid
     cells = [{ densify = "none" }, { densify = "mcmc" }]   # reference first: one value per axis
 
@@ -117,7 +117,7 @@ class RunnerDefaults:
 @dataclass(frozen=True)
 class CheckSpec:
     """The ``[check]`` table: the grid's headline comparison rerun under another protocol
-    (docs/reports.md, "The 7K check").
+    (docs/reports.md, "The protocol check").
 
     protocol: the protocol's name (the kind applies it: `KindProtocols`); scene: one of the
     grid's scenes; cells: (reference, compared), each ``dimension -> value`` (a plain axis's

@@ -1,8 +1,9 @@
-"""The 7K check: an experiment's headline comparison rerun at the field's protocol.
+"""The protocol check: an experiment's headline comparison rerun at a longer protocol of the field's.
 
 An experiment's ``[check]`` (`splatbench.experiments.CheckSpec`) names two cells of its grid,
-one of its scenes and a protocol, e.g. ``graphdeco-7k`` (graphdeco's 30,000-step schedule as
-written, stopped and evaluated after 7,000 steps: the 3DGS paper's 7K column);
+one of its scenes and a protocol, e.g. ``graphdeco-7k`` for a quick grid (graphdeco's 30,000-step
+schedule as written, stopped and evaluated after 7,000 steps: the 3DGS paper's 7K column; the "7K
+check") or ``graphdeco-30k`` for a grid at ``graphdeco-7k`` (the "30K check": `check_name`);
 ``splatbench run`` runs those two cells at that scene for every seed under that protocol
 (`splatbench.experiments.check_runs`). `check_result` sets the paired difference of the
 check's runs beside the same difference from the grid's own runs of those cells, with the
@@ -325,7 +326,7 @@ APPENDIX_TITLE = "Appendix: The check in full"
 
 
 def check_lines(result: CheckResult, run_command: str, appendix: bool) -> list[str]:
-    """The report's section "Headline at the 7K protocol" (title included): what is rerun, its
+    """The report's section "Headline at the 7K protocol" ("... 30K ...": the check's) (title included): what is rerun, its
     table of the headline's metric, its verdict; ``run_command``: the ``splatbench run ...`` that runs
     the check; ``appendix``: whether the report's appendix holds the check's other tables (the other
     metrics, each seed's values and the outlier views: `check_appendix_lines` gave lines), which this
@@ -337,7 +338,7 @@ def check_lines(result: CheckResult, run_command: str, appendix: bool) -> list[s
     lines = [f"## Headline at the {title} protocol", "",
              f"The headline comparison, `{b}` against `{a}` on {c.scene}, every seed ({seeds}), under the grid's "
              f"protocol and rerun at `{c.protocol}`: {result.described}. Declared in the experiment file's `[check]`; "
-             f"`{run_command}` runs it after the grid's runs (docs/reports.md, \"The 7K check\"). "
+             f"`{run_command}` runs it after the grid's runs (docs/reports.md, \"The protocol check\"). "
              f"{_name(m)[:1].upper()}{_name(m)[1:]} paired over seeds with its 95 % t interval, the minimum "
              f"effect and the settled rule on "
              f"each protocol's own test curves, as in the findings above"

@@ -455,7 +455,7 @@ def summary_lines(report: Report, run_args: str, warned: list[tuple[str, str, st
         lines += [header_line(report.check), ""]
     elif spec.check is None and kind.protocols is not None:
         lines += ["**7K check: none declared** (the experiment file has no `[check]`: its headline is not rerun at "
-                  "graphdeco's 7K protocol; docs/reports.md, \"The 7K check\").", ""]
+                  "graphdeco's 7K protocol; docs/reports.md, \"The protocol check\").", ""]
     return lines if len(lines) > 2 else []
 
 

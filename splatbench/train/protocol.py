@@ -22,7 +22,7 @@
     7K column at under a quarter of the cost.
 
 A grid's check (an experiment's ``[check]``: its headline rerun at a graphdeco protocol,
-docs/reports.md "The 7K check") evaluates the test views every `Protocol.curve_every` steps:
+docs/reports.md "The protocol check") evaluates the test views every `Protocol.curve_every` steps:
 700 under ``graphdeco-7k`` (ten points, the last the 7K column) and 2,500 under
 ``graphdeco-30k``, spacings on which no point falls on an opacity reset (every 3,000 steps
 inside the refine window, 500..15,000): a point there would measure the model in the step
@@ -101,7 +101,7 @@ PROTOCOLS: dict[str, Protocol] = {
     "quick": Protocol("quick", None, None, (), True,
                       "no published column (graphdeco's step fields scaled to the run, learning rates not)"),
     "graphdeco-30k": Protocol("graphdeco-30k", GRAPHDECO_ITERATIONS, GRAPHDECO_ITERATIONS, (7_000, 30_000), False,
-                              "the 3DGS paper's 7K and 30K columns (Kerbl et al. 2023, Tables 1 and 2)", 2_500),
+                              "the 3DGS paper's 7K and 30K columns (Kerbl et al. 2023, Table 1)", 2_500),
     "graphdeco-7k": Protocol("graphdeco-7k", GRAPHDECO_ITERATIONS, 7_000, (7_000,), False,
                              "the 3DGS paper's 7K column (Kerbl et al. 2023, Table 1)", 700),
 }
