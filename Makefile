@@ -73,9 +73,10 @@ golden: setup
 # Run the shipped experiments (resumable: finished runs are skipped), each with its [check]
 # (its headline rerun at graphdeco's 7K protocol, docs/reports.md), and write reports/<name>/;
 # a failed run is listed in its report and makes the target fail. A quick version that another report
-# reads (QUICK_INPUTS: `[report] quick`) keeps only its run table in reports/<name>/: no evidence by itself.
+# reads (QUICK_INPUTS: the folders the experiment files' `[report] quick = "../reports/NAME"` name) keeps only
+# its run table in reports/<name>/: no evidence by itself.
 REPORTS ?= quick_protocol raster_speed_vs_error sh_degree_quick sh_degree loss_weighting densification densification_schedules
-QUICK_INPUTS ?= sh_degree_quick
+QUICK_INPUTS ?= $(shell sed -n 's|^quick *= *"\.\./reports/\([A-Za-z0-9_-]*\)".*|\1|p' experiments/*.toml)
 reports: setup
 	@status=0; for e in $(REPORTS); do \
 	  $(VENV)/bin/splatbench run experiments/$$e.toml || status=1; \

@@ -83,6 +83,23 @@ def test_a_quick_version_holds_every_run_of_its_grid():
         assert set(table.status) == {"done"}, f"reports/{name}: runs not done"
 
 
+def test_make_reports_keeps_only_the_table_of_each_quick_version(tmp_path):
+    """`make reports` writes a quick version's run table alone (no report.md): its QUICK_INPUTS are read
+    from the experiment files' `[report] quick` lines by a sed pattern; that pattern must find what the
+    spec parser finds, or a quick version would get a report of its own (or a report lose its own)."""
+    import shutil
+    import subprocess
+
+    make = shutil.which("make")
+    if make is None:
+        pytest.skip("no make on this machine")
+    probe = tmp_path / "probe.mk"
+    probe.write_text(f"include {ROOT / 'Makefile'}\nshow-quick-inputs:\n\t@echo $(QUICK_INPUTS)\n")
+    out = subprocess.run([make, "-s", "-f", str(probe), "show-quick-inputs"], cwd=ROOT, capture_output=True,
+                         text=True, check=True).stdout.split()
+    assert sorted(out) == sorted(_quick_inputs()), f"Makefile QUICK_INPUTS {out} against [report] quick"
+
+
 def test_a_pending_report_is_not_there_yet_and_its_grid_expands():
     # One test looping over the PENDING.md reports, not one per report: usually there are none,
     # and an empty parametrisation would print a "got empty parameter set" skip in every run.
