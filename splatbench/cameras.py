@@ -88,8 +88,11 @@ def _check_rigid(name: str, matrix: np.ndarray) -> None:
     last = matrix[3]
     if not np.array_equal(last, [0.0, 0.0, 0.0, 1.0]):
         raise InputError(f"{name}: last row must be [0, 0, 0, 1], got {last.tolist()}")
+    if not np.isfinite(matrix).all():
+        raise InputError(f"{name}: entries must be finite numbers, got {matrix.tolist()}")
     rot = matrix[:3, :3]
-    err = float(np.max(np.abs(rot.T @ rot - np.eye(3))))
+    with np.errstate(over="ignore", invalid="ignore"):  # a huge entry overflows RᵀR to inf: not orthonormal
+        err = float(np.max(np.abs(rot.T @ rot - np.eye(3))))
     if not err <= ORTHONORMAL_TOL:
         raise InputError(f"{name}: rotation part is not orthonormal "
                          f"(max |RᵀR - I| = {err:.3g} > {ORTHONORMAL_TOL:g}; scale or shear?)")

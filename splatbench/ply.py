@@ -255,7 +255,7 @@ def read_ply(path: str | os.PathLike) -> PlyArrays:
         sh[:, 1:, :] = np.transpose(rest, (0, 2, 1))
     degree = _recorded_degree(ply.comments)
     k_recorded = SH_BASES_OF_DEGREE[degree] if degree is not None else k
-    if k_recorded < k and not sh[:, k_recorded:].any():
+    if k_recorded < k and not (sh[:, k_recorded:] != 0).any():  # != 0: a NaN counts, without a warning
         sh = np.ascontiguousarray(sh[:, :k_recorded])  # the written model's degree; the rest is padding
     return PlyArrays(
         means=cols(["x", "y", "z"]),
