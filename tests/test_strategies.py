@@ -12,7 +12,7 @@ import torch
 from splatbench.errors import InputError
 from splatbench.raster.torch_bridge import RasterInfo
 from splatbench.strategies import (PARAM_GROUPS, DefaultStrategy, MCMCStrategy, StepContext, make_strategy,
-                                   ops, strategy_fields)
+                                   ops, refines_at, strategy_fields)
 
 K = 4  # SH bases (degree 1)
 
@@ -386,6 +386,20 @@ def test_default_schedule():
     # what the config's final-10 % check reads: the last event of the run, and of a shorter one
     assert strat.last_topology_change(30).step == max(resets + [s.step for s in state.history]) == 15
     assert strat.last_topology_change(12).step == 11 and strat.last_topology_change(7) is None
+
+
+def test_refines_at_is_the_schedule_the_strategy_runs_and_plans():
+    """`refines_at` (shared by post_backward and the reports' count of runs that refined at their last
+    step) marks exactly the steps the strategy refined at, and as many as `planned_counts` counts."""
+    strat = DefaultStrategy(refine_start=4, refine_stop=20, refine_every=4, reset_every=0, grad_threshold=1e9)
+    params, opts = make_params(30, opacity=0.5)
+    state = strat.initialize_state(params)
+    for step in range(30):
+        strat.post_backward(params, opts, state, ctx(step, fake_info(torch.zeros(params["means"].shape[0], 2))))
+    marked = [it for it in range(1, 31) if refines_at(it, 4, 20, 4)]
+    assert marked == [s.step + 1 for s in state.history] == [8, 12, 16]  # not 4 (= start) nor 20 (= stop)
+    assert len(marked) == strat.planned_counts(30).refinements
+    assert not refines_at(8, 4, 20, 0)  # no period: never (a record with refine_every = 0)
 
 
 def test_default_early_stop_on_loss_plateau():

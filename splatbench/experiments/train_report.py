@@ -33,6 +33,7 @@ import pandas as pd
 
 from splatbench.experiments.configs import cell_value, decode, run_config
 from splatbench.experiments.kind_report import AxisRows, Claim, Finding, RunNotes, done_runs
+from splatbench.strategies import refines_at
 
 #: What the runs' protocol is called when their config names none (`TrainConfig.protocol` absent).
 DEFAULT_PROTOCOL = ("quick (graphdeco's 30,000-step schedule scaled to the run's length): a smoke test, not evidence "
@@ -368,9 +369,9 @@ def _white_reset(done: pd.DataFrame) -> str:
 
 def refined_at_end(done: pd.DataFrame) -> int:
     """How many of the ``done`` runs refined at their last step, from their recorded configs: a strategy
-    other than "none" whose ``refine_every`` divides ``iterations``, past ``refine_start`` and before
-    ``refine_stop`` (`splatbench.strategies.default.DefaultStrategy.post_backward`'s test, steps as written:
-    the graphdeco protocols'); 0 where a column is missing."""
+    other than "none" whose schedule refines after ``iterations`` completed steps (`splatbench.strategies.
+    refines_at`, the strategies' own test, on the steps as written: the graphdeco protocols'); 0 where a
+    column is missing."""
     cols = ["config.strategy.name", "config.strategy.refine_every", "config.strategy.refine_start",
             "config.strategy.refine_stop", "config.iterations"]
     if not set(cols) <= set(done.columns):
@@ -381,7 +382,7 @@ def refined_at_end(done: pd.DataFrame) -> int:
             every, start, stop, iters = int(every), int(start), int(stop), int(iters)
         except (TypeError, ValueError):
             continue
-        n += name != "none" and every > 0 and iters % every == 0 and start < iters < stop
+        n += name != "none" and refines_at(iters, start, stop, every)
     return n
 
 

@@ -20,7 +20,7 @@ import dataclasses
 from splatbench.guards import dataclass_from_mapping
 from splatbench.errors import InputError
 from splatbench.strategies.base import (PARAM_GROUPS, Optimizers, Params, StepContext, Strategy, TopologyChange,
-                                       TopologyCounts)
+                                       TopologyCounts, refines_at)
 from splatbench.strategies.budget import BudgetState, BudgetStrategy
 from splatbench.strategies.default import DefaultState, DefaultStrategy, RefineStats
 from splatbench.strategies.mcmc import MCMCState, MCMCStats, MCMCStrategy
@@ -86,5 +86,5 @@ def _lookup(name: str) -> tuple[type, dict[str, object]]:
 __all__ = [
     "PARAM_GROUPS", "STRATEGIES", "BudgetState", "BudgetStrategy", "DefaultState", "DefaultStrategy", "MCMCState", "MCMCStats", "MCMCStrategy",
     "NoneStrategy", "Optimizers", "Params", "RefineStats", "StepContext", "Strategy", "TopologyChange", "TopologyCounts",
-    "make_strategy", "planned_counts", "strategy_fields", "topology_counts",
+    "make_strategy", "planned_counts", "refines_at", "strategy_fields", "topology_counts",
 ]

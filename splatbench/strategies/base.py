@@ -89,6 +89,14 @@ class TopologyCounts:
     added: int = 0
 
 
+def refines_at(it: int, refine_start: int, refine_stop: int, refine_every: int) -> bool:
+    """Whether 3DGS's schedule refines after ``it`` completed iterations: ``refine_start < it <
+    refine_stop`` and ``it % refine_every == 0`` (graphdeco-inria's densify_from_iter, densify_until_iter,
+    densification_interval; False for a period < 1). The one test the strategies' `post_backward` and
+    the reports (`splatbench.experiments.train_report.refined_at_end`) share."""
+    return refine_every >= 1 and refine_start < it < refine_stop and it % refine_every == 0
+
+
 def last_multiple(period: int, lo: int, hi: int) -> int | None:
     """The largest multiple of ``period`` in ``(lo, hi]`` (None if there is none)."""
     if hi <= lo or period < 1:

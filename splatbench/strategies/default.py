@@ -21,7 +21,7 @@ import torch
 from splatbench.errors import InputError
 import splatbench.strategies.ops as ops
 from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, TopologyCounts,
-                                       check_fields, last_multiple, multiples, no_refinement_note)
+                                       check_fields, last_multiple, multiples, no_refinement_note, refines_at)
 
 
 #: `DefaultStrategy.outcome_note` warns when one refinement's size prune removes this fraction of the model.
@@ -249,7 +249,7 @@ class DefaultStrategy:
         self._accumulate(params, state, ctx)
         if state.plateau is not None:
             state.plateau.add(ctx.loss)
-        if it > self.refine_start and it % self.refine_every == 0:
+        if refines_at(it, self.refine_start, self.refine_stop, self.refine_every):
             if state.plateau is not None and state.plateau.should_stop(ctx.step):
                 state.stopped = True
                 return

@@ -25,7 +25,7 @@ import torch
 from splatbench.errors import InputError
 import splatbench.strategies.ops as ops
 from splatbench.strategies.base import (Optimizers, Params, StepContext, TopologyChange, TopologyCounts,
-                                       check_fields, last_multiple, multiples, no_refinement_note)
+                                       check_fields, last_multiple, multiples, no_refinement_note, refines_at)
 from splatbench.strategies.default import LossPlateau
 
 
@@ -149,7 +149,7 @@ class MCMCStrategy:
         it = ctx.step + 1
         if state.plateau is not None and not state.stopped:
             state.plateau.add(ctx.loss)
-        if (not state.stopped and self.refine_start < it < self.refine_stop and it % self.refine_every == 0):
+        if not state.stopped and refines_at(it, self.refine_start, self.refine_stop, self.refine_every):
             if state.plateau is not None and state.plateau.should_stop(ctx.step):
                 state.stopped = True
             else:
