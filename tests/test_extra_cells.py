@@ -330,3 +330,21 @@ def test_extra_cells_of_a_variant_axis_say_what_they_set():
     assert setting_text(spec, "densify", ["mcmc", "budget"]) == (
         "`densify = mcmc` sets `strategy.name = mcmc`, `strategy.cap_max = 600`; `densify = budget` sets "
         "`strategy.name = budget`, `strategy.budget = 600`, `strategy.budget_mode = final_count`")
+
+
+def test_extra_cells_that_set_the_same_fields_say_them_once():
+    """loss_weighting.toml's three matched cells set the same budget-strategy fields: the matched line says
+    them once ("... each set ..."), not three times; cells that differ keep one clause each (above)."""
+    from splatbench.reports.findings import setting_text
+
+    budget = {"name": "budget", "budget": 600, "budget_mode": "final_count"}
+    spec = parse_experiment({"name": "w", "kind": "train", "scenes": ["glossy"], "seeds": [0],
+                             "base": {"iterations": 100, "data": {"resolution": 32, "views": 8, "spp": 2}},
+                             "axes": {"loss.ssim_lambda": [0.2, 0.0]},
+                             "extra": {"loss.ssim_lambda": {
+                                 "0.2 at 600": {"loss": {"ssim_lambda": 0.2}, "strategy": budget},
+                                 "0 at 600": {"loss": {"ssim_lambda": 0.0}, "strategy": budget}}},
+                             "report": {"matched": {"loss.ssim_lambda": ["0.2 at 600", "0 at 600"]}}}, source="x.toml")
+    assert setting_text(spec, "loss.ssim_lambda") == (
+        "`loss.ssim_lambda = 0.2 at 600` and `loss.ssim_lambda = 0 at 600` each set `strategy.name = budget`, "
+        "`strategy.budget = 600`, `strategy.budget_mode = final_count`")

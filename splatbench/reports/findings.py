@@ -1357,7 +1357,8 @@ def _matched_pair(spec: ExperimentSpec | None, table: AxisTable, a: Row, b: Row,
 
 def setting_text(spec: ExperimentSpec | None, dim: str | None, values: Sequence | None = None) -> str:
     """What the matched setting sets: ```size = matched` sets `strategy.name = budget`, …`` (a variant's
-    fields, or an extra cell's besides its axis), ```loss.ssim_lambda = 0.2``` (a plain axis)."""
+    fields, or an extra cell's besides its axis; ```x = a` and `x = b` each set …`` where every value
+    sets the same), ```loss.ssim_lambda = 0.2``` (a plain axis)."""
     if spec is None or dim is None:
         return ""
     values = list(values if values is not None else spec.matched.get(dim, ()))
@@ -1368,9 +1369,15 @@ def setting_text(spec: ExperimentSpec | None, dim: str | None, values: Sequence 
             return {k: x for k, x in extra[v].items() if k != dim}  # the axis value is in its label
         return flatten(dict(spec.variants[dim][v])) if dim in spec.variants else None
 
-    return ("; " if dim in spec.variants or any(fields(v) for v in values) else ", ").join(
-        f"`{dim} = {display(v)}`" + (" sets " + ", ".join(f"`{k} = {display(x)}`" for k, x in f.items())
-                                     if (f := fields(v)) else "") for v in values)
+    def sets(f: dict) -> str:
+        return ", ".join(f"`{k} = {display(x)}`" for k, x in f.items())
+
+    every = [fields(v) for v in values]
+    if len(values) > 1 and every[0] and all(f == every[0] for f in every):  # said once: "each sets ..."
+        names = [f"`{dim} = {display(v)}`" for v in values]
+        return f"{', '.join(names[:-1])} and {names[-1]} each set {sets(every[0])}"
+    return ("; " if dim in spec.variants or any(every) else ", ").join(
+        f"`{dim} = {display(v)}`" + (" sets " + sets(f) if f else "") for v, f in zip(values, every))
 
 
 @dataclasses.dataclass(frozen=True)
