@@ -304,13 +304,17 @@ def test_no_entry_no_section_and_missing_runs_give_no_verdict(tmp_path):
 
 def test_the_shipped_densification_entry_is_gsplats_absgrad_difference():
     """experiments/densification.toml stands beside gsplat's feature ablation (docs/source/tests/eval.rst,
-    PROTOCOL.md): absgrad 29.11 against default 29.00 dB at 30K on 7 Mip-NeRF 360 scenes."""
+    PROTOCOL.md): absgrad 29.11 against default 29.00 dB at 30K on 7 Mip-NeRF 360 scenes; its [check] reruns
+    those two cells at graphdeco-30k (the check's row beside it)."""
     from pathlib import Path
 
     data = tomllib.loads((Path(__file__).resolve().parents[1] / "experiments" / "densification.toml").read_text())
     data["scenes"] = ["thin"]  # its captures' folders are not in every clone; the entry does not depend on them
     data.pop("extra")  # its extra cells name the captures (and [report] matched names them)
     data["report"].pop("matched")
+    check = data.pop("check")  # its scene is a capture; the check's cells are the entry's, reversed
+    assert check["protocol"] == "graphdeco-30k"
+    assert [check["cells"][1], check["cells"][0]] == data["report"]["published"][0]["cells"]
     spec = parse_experiment(data, source="densification.toml", default_name="densification")
     (entry,) = spec.published
     assert entry.cells == ({"densify": "absgrad"}, {"densify": "default"}) and entry.metric is None
@@ -365,3 +369,51 @@ def test_a_train_grid_stands_its_test_psnr_beside_the_published_difference(tmp_p
     assert "glossy | +0.32 dB" in text and "lies below this interval" in text  # the glossy row: 0.11 below it
     assert ("this grid's number is at protocol `graphdeco-7k` on its own scenes (diffuse, glossy), one row each, "
             "3 seeds") in text and "the published one's protocol: gsplat at 30,000 steps, 7 Mip-NeRF 360 scenes;" in text
+
+
+CHECK = """
+[check]
+protocol = "long"
+scene = "alpha"
+cells = [{ x = 1.0, style = "plain" }, { x = 1.0, style = "fancy" }]
+"""
+
+
+def test_a_difference_of_the_checks_cells_gets_the_checks_row(tmp_path):
+    """densification.toml: gsplat's absgrad − default is published at 30K and the file's [check] reruns
+    default against absgrad at graphdeco-30k: the check's runs stand beside it too, a row of their own
+    (last), oriented as the published difference (the check lists the reference first: plain, fancy)."""
+    from splatbench.experiments.grid import check_cells
+    from splatbench.reports.check import check_table
+
+    spec = spec_of(GRID + CHECK + DIFFERENCE)
+    results(tmp_path / "results", spec)
+    rng = np.random.default_rng(7)
+    check_values: dict[str, dict[int, float]] = {"plain": {}, "fancy": {}}
+    for cell in check_cells(spec):  # the check's runs: fancy 0.9 above plain (seed noise 0.1)
+        for run in cell:
+            style = run.labels["style"]
+            v = 5.0 + (0.9 if style == "fancy" else 0.0) + float(rng.normal(0, 0.1))
+            check_values[style][run.seed] = v
+            write_record(tmp_path / "results", RunRecord(
+                run_id=run.run_id, experiment=spec.name, kind=spec.kind, scene=run.scene, seed=run.seed,
+                status="done", config=dict(run.config), labels=dict(run.labels),
+                metrics={"value": v, "total": 2 * v, "a_plus_seed": run.seed, "scene_tag": "t", "positive": True},
+                curves={}, seconds=1.0, started="2026-01-01T00:00:00+00:00", finished="2026-01-01T00:00:01+00:00",
+                worker="h:1"))
+    report = build_report(spec, tmp_path / "results")
+    table = pd.read_parquet(write_report(report, tmp_path / "report").parent / "results.parquet")
+    (diff,) = published_results(spec, report.kind, table, check_table(spec, tmp_path / "results"))
+    assert [r.scene for r in diff.rows] == ["alpha", "beta", "alpha, the check at long (`long`)"]
+    assert diff.check_protocol == "long"
+    mean, low, high = t95([check_values["fancy"][s] - check_values["plain"][s] for s in (0, 1, 2)])
+    row = diff.rows[-1]
+    assert mean > 0.5  # fancy − plain, as published: a sign slip would give about −0.9
+    assert (row.interval.estimate, row.interval.low, row.interval.high) == pytest.approx((mean, low, high))
+    # without the check's table the row is there, with no result; a published difference of other cells
+    # gets no check row
+    (bare,) = published_results(spec, report.kind, table)
+    assert bare.rows[-1].verdict == "no result"
+    other = spec_of(GRID + CHECK + DIFFERENCE.replace('{ x = 1.0, style = "plain" }]', '{ x = 0.0, style = "fancy" }]'))
+    (unrelated,) = published_results(other, report.kind, table, check_table(other, tmp_path / "results"))
+    assert [r.scene for r in unrelated.rows] == ["alpha", "beta"] and unrelated.check_protocol == ""

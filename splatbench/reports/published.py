@@ -10,6 +10,10 @@ each name a published number with its source and its protocol:
 * an **absolute** value of one cell on one scene (``cell``, ``scene``, ``value``): the cell's
   mean over seeds on that scene with its 95 % t interval (`splatbench.metrics.stats.t_interval`).
 
+A published difference between the two cells of the file's ``[check]`` gets one more row: the check's
+runs, at the check's protocol and scene (e.g. a 30K check beside a number published at 30K), from the
+check's run table.
+
 Each row says where the published value lies against that interval (`VERDICTS`): inside, above or
 below it, judged at the precision the report writes the bounds (a bound printed ``+0.11`` holds a
 published 0.11); no verdict where there is no interval (one seed, or seeds that did not vary the
@@ -24,17 +28,19 @@ declares no entry gets one line saying so (`NONE_DECLARED`), no section.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import pandas as pd
 
-from splatbench.experiments.grid import published_runs, reported_metrics
+from splatbench.experiments.grid import RunSpec, check_cells, published_runs, reported_metrics
 from splatbench.experiments.kind_report import Comparison
 from splatbench.experiments.kinds import RunKind
 from splatbench.experiments.spec import ExperimentSpec, PublishedSpec
 from splatbench.metrics.spec import MetricSpec
 from splatbench.metrics.stats import Interval, t_interval
 from splatbench.report_files import markdown_table
+from splatbench.reports.check import check_name
 from splatbench.reports.findings import fmt_interval, fmt_number, no_spread, paired, usable_runs
 from splatbench.reports.tables import cell_labels, loaded_runs, seed_values
 
@@ -62,14 +68,15 @@ class PublishedRow:
 @dataclass(frozen=True)
 class PublishedResult:
     """One ``[report] published`` entry beside this grid: its metric, its cells' labels (A first),
-    one row per scene, and the protocol(s) the grid's runs of its cells recorded ("" when the kind's
-    configs name none)."""
+    one row per scene (and the check's row, last, where its cells are the check's), and the protocol(s) the
+    grid's runs of its cells recorded ("" when the kind's configs name none)."""
 
     entry: PublishedSpec
     metric: MetricSpec
     labels: tuple[str, ...]
     rows: tuple[PublishedRow, ...]
     grid_protocol: str
+    check_protocol: str = ""  # the check's protocol where a row is the check's (its last), else ""
 
 
 def headline_metric(kind: RunKind) -> str:
@@ -90,27 +97,30 @@ def placement(iv: Interval, value: float, metric: MetricSpec) -> str:
     return "inside" if low <= value <= high else "above" if value > high else "below"
 
 
-def published_results(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame) -> list[PublishedResult]:
-    """Each ``[report] published`` entry of ``spec`` beside the grid's run table ``table`` (module doc);
-    [] without entries."""
+def published_results(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame,
+                      checked: pd.DataFrame | None = None) -> list[PublishedResult]:
+    """Each ``[report] published`` entry of ``spec`` beside the grid's run table ``table`` and, for a
+    difference of the check's two cells, the check's run table ``checked`` (`check.check_table`; None:
+    the row says no result) (module doc); [] without entries."""
     if not spec.published:
         return []
-    usable = usable_runs(table, kind) if len(table) else table
     timed = set(kind.report.timed) if kind.report is not None else set()
     out = []
     for entry in spec.published:
         cells = published_runs(spec, entry)  # first: a metric the kind does not report is one line here
         name = entry.metric or headline_metric(kind)
         metric = kind.specs[name]
-        pool = usable[~loaded_runs(usable, kind)] if name in timed and len(usable) else usable
         labels = tuple(cell_labels(spec, pd.DataFrame([{f"axis.{k}": v for k, v in cell[0].labels.items()}
                                                         for cell in cells])))
-        rows = []
-        for scene in dict.fromkeys(r.scene for r in cells[0]):
+
+        def row(pool: pd.DataFrame, runs: Sequence[Sequence[RunSpec]], scene: str, label: str) -> PublishedRow:
+            usable = usable_runs(pool, kind) if len(pool) else pool
+            if name in timed and len(usable):
+                usable = usable[~loaded_runs(usable, kind)]
             values = []
-            for cell in cells:
+            for cell in runs:
                 ids = {r.run_id for r in cell if r.scene == scene}
-                sel = pool[(pool.scene == scene) & pool.run_id.isin(ids)] if len(pool) else pool
+                sel = usable[(usable.scene == scene) & usable.run_id.isin(ids)] if len(usable) else usable
                 values.append(seed_values(sel, name) if len(sel) and f"metric.{name}" in sel.columns else {})
             if entry.is_difference:  # A − B: B is the reference, as `paired(a, b)` gives b − a
                 iv, _ = paired(values[1], values[0], Comparison(name, "diff"))
@@ -118,10 +128,35 @@ def published_results(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame) 
             else:
                 iv, how = t_interval(list(values[0].values())), "mean"
             text = fmt_interval(iv, how, metric, None) if iv.n else "–"
-            rows.append(PublishedRow(scene, iv, text, placement(iv, entry.value, metric), len(spec.seeds)))
+            return PublishedRow(label, iv, text, placement(iv, entry.value, metric), len(spec.seeds))
+
+        rows = [row(table, cells, scene, scene) for scene in dict.fromkeys(r.scene for r in cells[0])]
+        at_check = _check_runs(spec, cells) if entry.is_difference else None
+        check_protocol = ""
+        if at_check is not None:
+            c = spec.check
+            check_protocol = c.protocol
+            pool = checked if checked is not None else pd.DataFrame(columns=["run_id", "scene", "status"])
+            rows.append(row(pool, at_check, c.scene, f"{c.scene}, the {check_name(c.protocol)} (`{c.protocol}`)"))
         ids = {r.run_id for cell in cells for r in cell}
-        out.append(PublishedResult(entry, metric, labels, tuple(rows), _recorded_protocol(table, ids)))
+        out.append(PublishedResult(entry, metric, labels, tuple(rows), _recorded_protocol(table, ids), check_protocol))
     return out
+
+
+def _check_runs(spec: ExperimentSpec, cells: Sequence[Sequence[RunSpec]]) -> tuple[list[RunSpec], list[RunSpec]] | None:
+    """The check's runs (`check_cells`, at its protocol) in the order of a published difference's ``cells``
+    (A, B) where the check compares those two cells (its grid-side runs are theirs at its scene); None
+    otherwise."""
+    if spec.check is None:
+        return None
+    grid_a, grid_b = ({r.run_id for r in side} for side in check_cells(spec, at_protocol=False))
+    first, second = ({r.run_id for r in cell} for cell in cells)
+    rerun_a, rerun_b = check_cells(spec)
+    if grid_a <= first and grid_b <= second:
+        return rerun_a, rerun_b
+    if grid_b <= first and grid_a <= second:
+        return rerun_b, rerun_a
+    return None
 
 
 def _recorded_protocol(table: pd.DataFrame, ids: set[str]) -> str:
@@ -143,10 +178,11 @@ def _name(spec: MetricSpec) -> str:
     return spec.label.split(" (")[0]
 
 
-def published_lines(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame) -> list[str]:
+def published_lines(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame,
+                    checked: pd.DataFrame | None = None) -> list[str]:
     """The report's section "Beside published numbers" (title included); `NONE_DECLARED` for a file
-    that declares no ``[report] published`` entry."""
-    results = published_results(spec, kind, table)
+    that declares no ``[report] published`` entry; ``checked``: the check's run table (`published_results`)."""
+    results = published_results(spec, kind, table, checked)
     if not results:
         return [NONE_DECLARED, ""]
     lines = [f"## {TITLE}", "",
@@ -181,6 +217,9 @@ def _differs(spec: ExperimentSpec, r: PublishedResult) -> str:
     at = f"at protocol `{r.grid_protocol}`" if r.grid_protocol else "at its own settings (its runs name no protocol)"
     where = (f"on its scene {e.scene}" if not e.is_difference else
              f"on its own scene{'s' if len(spec.scenes) != 1 else ''} ({', '.join(spec.scenes)}), one row each")
+    if r.check_protocol:
+        where += (f"; the last row is the check's runs, at protocol `{r.check_protocol}` on {spec.check.scene}"
+                  if spec.check is not None else "")
     return (f"**Not a replication**: this grid's number is {at} {where}, {len(spec.seeds)} seed"
             f"{'s' if len(spec.seeds) != 1 else ''} (the header gives its settings); the published one's protocol: "
             f"{e.protocol}; where protocol, scenes, resolution or code differ, a published value inside this grid's "

@@ -336,7 +336,9 @@ def render_markdown(report: Report, curve_paths: dict[str, Path], tradeoffs: lis
     check_more = check_appendix_lines(report.check) if report.check is not None else []  # the appendix's
     if report.check is not None:
         lines += check_lines(report.check, f"splatbench run {source_path(spec)}{run_options}", bool(check_more))
-    lines += published_lines(spec, kind, table)  # "Beside published numbers" ([] without [report] published)
+    # "Beside published numbers" ([] without [report] published); a difference of the check's cells also
+    # from the check's runs
+    lines += published_lines(spec, kind, table, report.check.table if report.check is not None else None)
 
     specs = {m.name: m for m in report.metrics}
     declared = kind.report
