@@ -697,6 +697,8 @@ def test_the_runs_said_to_refine_at_their_last_step_are_those_that_counted_one_r
     counts = table["metric.refinements"].astype(int)
     assert set(counts) == {64, 65} and late == list(counts == 65)
     assert f"{sum(late)} of {len(table)} runs refined at their last step" in "\n".join(protocol_lines(table))
+    # runs that evaluated before the step's refinement (eval.before_refine, graphdeco's order) left it out
+    assert refined_at_end(table.assign(**{"config.eval.before_refine": True})) == 0
 
 
 def test_the_checks_runs_say_where_they_differ_from_graphdeco():

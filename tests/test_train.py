@@ -427,6 +427,29 @@ def test_result_records_what_the_strategy_did(tmp_path, tiny_diffuse):
     assert none.topology == TopologyCounts()
 
 
+def test_evaluating_before_the_refinement_is_the_run_without_it_at_that_step(tmp_path, tiny_diffuse):
+    """eval.before_refine (graphdeco's train.py order: a step's test evaluation before its densification):
+    training step for step as without it; an evaluation at a refinement step equal, bit for bit, to the
+    final one of a run stopped there with refine_stop at that step (the same model: nothing of that
+    step's refinement); the last step's refinement left out, so the saved model is the evaluated one."""
+    def run(name: str, iterations: int, stop: int, first: bool) -> TrainResult:
+        opts = {"refine_start": 4, "refine_every": 5, "refine_stop": stop, "grad_threshold": 1e-5}
+        # graphdeco's protocol stopped early (the quick one refuses a refinement in a run's last 10 %)
+        return train(config(tmp_path, out=str(tmp_path / name), iterations=iterations, log_every=1,
+                            protocol="graphdeco-7k", eval=EvalConfig(every=5, before_refine=first),
+                            strategy=StrategyConfig(name="default", options=opts)), dataset=tiny_diffuse)
+
+    after, first = run("after", 15, 16, False), run("first", 15, 16, True)  # refinements at 5, 10 (and 15)
+    assert [(h.step, h.loss) for h in first.history[:-1]] == [(h.step, h.loss) for h in after.history[:-1]]
+    assert after.topology.refinements == 3 and first.topology.refinements == 2  # the last one left out
+    stopped_10, stopped_15 = run("stopped_10", 10, 10, False), run("stopped_15", 15, 15, False)
+    at = {e.step: e.psnr for e in first.evaluations}
+    assert at[10] == stopped_10.test_psnr != {e.step: e.psnr for e in after.evaluations}[10]
+    assert (first.test_psnr, first.num_gaussians) == (stopped_15.test_psnr, stopped_15.num_gaussians)
+    assert Path(first.ply_path).read_bytes() == Path(stopped_15.ply_path).read_bytes()
+    assert first.num_gaussians != after.num_gaussians  # the refinement left out changed the model
+
+
 def test_a_budget_run_below_its_budget_says_so_in_its_warnings(tmp_path, tiny_diffuse):
     """No Gaussian passes a threshold of 1 (NDC gradients are far smaller), so nothing grows and
     the run's warnings carry the strategy's (`BudgetStrategy.outcome_note`)."""
@@ -583,8 +606,11 @@ def test_run_ids_hash_every_group_field_and_a_default_written_out_equals_one_lef
     assert run_id({"sh.degree": 3}) == run_id({}) == run_id({"sh": {"degree": 3, "auto_lookahead": 2}})
     ids = {run_id(c) for c in ({}, {"sh.auto_lookahead": 0}, {"sh.degree": "auto"}, {"optim.lr_quats": 2e-3},
                                {"strategy.revised_opacity": True}, {"data.test_every": 4}, {"raster.tile_size": 8},
-                               {"eval.lpips_net": "vgg"}, {"loss.ssim_lambda": 0.0})}
-    assert len(ids) == 9
+                               {"eval.lpips_net": "vgg"}, {"loss.ssim_lambda": 0.0}, {"eval.before_refine": True})}
+    assert len(ids) == 10
+    # eval.before_refine, added after runs were recorded: at its default it is left out of the resolved config,
+    # so every run id from before stays
+    assert "before_refine" not in resolved["eval"] and run_id({"eval.before_refine": False}) == run_id({})
 
 
 AUTO = dict(iterations=30, sh=SHConfig(degree="auto", interval=15, auto_probe_views=0), optim=OptimConfig(lr_sh_rest=2e-2))

@@ -274,6 +274,8 @@ def resolve(config: dict[str, Any]) -> dict[str, Any]:
     kind = scene_type(data)
     cfg = train_config(train)
     out = {k: v for k, v in cfg.to_dict().items() if k not in OWNED_FIELDS}
+    if not out["eval"]["before_refine"]:  # at its default (the order every run before it had): left out, same run id
+        out["eval"] = {k: v for k, v in out["eval"].items() if k != "before_refine"}
     out["strategy"] = _strategy_table(cfg)
     out["scene"] = scene
     read = out["data"]  # DataConfig's keys; a rendered scene is not downscaled (its resolution is set)

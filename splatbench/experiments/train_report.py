@@ -150,6 +150,9 @@ def protocol_lines(table: pd.DataFrame) -> list[str]:
              f"refine window), after that step's optimizer update and before the evaluation, as at every evaluation "
              f"step the refine interval divides; graphdeco's train.py evaluates first, so its model at that step has "
              f"had one refinement fewer (docs/training.md, \"Evaluation order\")." if late else "")
+    if first := int(_evaluated_first(done).sum()):
+        order += (f" {first} of {len(done)} runs evaluated each test step before its refinement and left out their "
+                  f"last step's, as graphdeco's train.py (`eval.before_refine`).")
     lines.append(f"- **Evaluation**: the test views at steps {evals}; the reported numbers are the last step's.{order}"
                  if evals else f"- **Evaluation**: the test views at the end.{order}")
     test_every = _one(done, "config.data.test_every")
@@ -367,22 +370,30 @@ def _white_reset(done: pd.DataFrame) -> str:
             f"\"Evaluation order\")")
 
 
+def _evaluated_first(done: pd.DataFrame) -> pd.Series:
+    """Per run, whether it set ``eval.before_refine`` (evaluated before a step's refinement, left its last
+    step's out); a record from before the field (no column, or no value) did not."""
+    col = done.get("config.eval.before_refine", pd.Series(False, index=done.index))
+    return col.map(lambda v: isinstance(v, (bool, np.bool_)) and bool(v))
+
+
 def refined_at_end(done: pd.DataFrame) -> int:
     """How many of the ``done`` runs refined at their last step, from their recorded configs: a strategy
     other than "none" whose schedule refines after ``iterations`` completed steps (`splatbench.strategies.
-    refines_at`, the strategies' own test, on the steps as written: the graphdeco protocols'); 0 where a
-    column is missing."""
+    refines_at`, the strategies' own test, on the steps as written: the graphdeco protocols'), unless it
+    evaluated before that refinement (``eval.before_refine``: it left it out); 0 where a column is missing."""
     cols = ["config.strategy.name", "config.strategy.refine_every", "config.strategy.refine_start",
             "config.strategy.refine_stop", "config.iterations"]
     if not set(cols) <= set(done.columns):
         return 0
+    first = _evaluated_first(done)
     n = 0
-    for name, every, start, stop, iters in done[cols].itertuples(index=False):
+    for (name, every, start, stop, iters), evaluated_first in zip(done[cols].itertuples(index=False), first):
         try:
             every, start, stop, iters = int(every), int(start), int(stop), int(iters)
         except (TypeError, ValueError):
             continue
-        n += name != "none" and refines_at(iters, start, stop, every)
+        n += name != "none" and not evaluated_first and refines_at(iters, start, stop, every)
     return n
 
 

@@ -325,6 +325,9 @@ class EvalConfig(_Group):
                                  # (graphdeco's metrics.py; ~20x AlexNet's time) or "none"; `every` uses AlexNet
     lpips_scale_inputs: bool = True  # feed LPIPS images scaled to [-1, 1] (the lpips package); false: [0, 1]
                                  # unscaled, as graphdeco's metrics.py does
+    before_refine: bool = False  # evaluate a step before its refinement / opacity reset, as graphdeco's
+                                 # train.py (the last step's is then left out: its model is the one
+                                 # evaluated); false: after them (docs/training.md, "Evaluation order")
 
     def _check(self) -> None:
         self._at_least(0, "every")

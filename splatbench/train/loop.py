@@ -30,7 +30,7 @@ from collections.abc import Callable, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import drjit as dr
 import numpy as np
@@ -248,8 +248,12 @@ class Trainer:
         return torch.from_numpy(self.dataset.train.image(view)).to(self.device)
 
     # ------------------------------------------------------------------ one step
-    def step(self) -> StepStatus:
-        """Run one optimisation step and return its status."""
+    def step(self, before_refine: Callable[[], None] | None = None, refine: bool = True) -> StepStatus:
+        """Run one optimisation step and return its status. ``before_refine``: called after the step's
+        optimizer update, before the strategy's `post_backward` (its refinement, opacity reset), not
+        timed as the step's (an evaluation in graphdeco's order: `EvalConfig.before_refine`);
+        ``refine=False`` leaves that `post_backward` out (the last step of such a run: nothing follows
+        its evaluation, so its model is the one evaluated)."""
         cfg, t, sync = self.config, self.times, self._sync
         t0 = time.perf_counter()
         step, n_before = self.step_index, self.num_gaussians
@@ -305,8 +309,13 @@ class Trainer:
         for opt in self.optimizers.values():
             opt.step()
         sync()
-        t7 = time.perf_counter()
-        self.strategy.post_backward(self.params, self.optimizers, self.state, ctx)
+        t7 = t7b = time.perf_counter()
+        if before_refine is not None:
+            before_refine()
+            sync()
+            t7b = time.perf_counter()
+        if refine:
+            self.strategy.post_backward(self.params, self.optimizers, self.state, ctx)
         refreeze(self.params, self.lrs)
         if self.num_gaussians != n_before:
             # Dr.Jit keeps freed buffers in its allocation cache for reuse; those sized for the
@@ -320,7 +329,7 @@ class Trainer:
         t.loss += (t3 - t2) + (t5 - t4)
         t.raster_backward += t6 - t5
         t.optimizer += t7 - t6
-        t.strategy += (t4 - t3) + (t8 - t7)
+        t.strategy += (t4 - t3) + (t8 - t7b)
         t.other += t1 - t0
         t.steps += 1
         total = float(loss.detach()) + float(reg.detach() if isinstance(reg, torch.Tensor) else reg)
@@ -577,19 +586,30 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         trainer.warm_up()  # outside every timed section (TrainResult.warmup_seconds); touches no state
         warmup_seconds = time.perf_counter() - t0
         for _ in range(config.iterations - trainer.step_index):
+            done = trainer.step_index + 1  # the completed steps once this one is
+            full = done in full_steps and done < config.iterations  # the last step's is the final evaluation
+            due = full or bool(config.eval.every and done % config.eval.every == 0 and done < config.iterations)
+            lpips_now = list(dict.fromkeys(full_lpips + curve_lpips)) if full else curve_lpips
+            early: dict[str, Any] = {}
+
+            def evaluate_early() -> None:  # graphdeco's order: inside the step, before its refinement
+                e0, ec0 = time.perf_counter(), process_cpu_seconds()
+                early["ev"] = trainer.evaluate(lpips_now)
+                early["seconds"], early["cpu"] = time.perf_counter() - e0, process_cpu_seconds() - ec0
+
+            first = config.eval.before_refine
             with deferred():  # a stop signal ends the run between steps, never inside one
                 t0, c0 = time.perf_counter(), process_cpu_seconds()
-                status = trainer.step()
-                loop_seconds += time.perf_counter() - t0
-                cpu_seconds += process_cpu_seconds() - c0
-            done = trainer.step_index
+                status = trainer.step(evaluate_early if first and due else None,
+                                      refine=not (first and done == config.iterations))
+                loop_seconds += time.perf_counter() - t0 - early.get("seconds", 0.0)
+                cpu_seconds += process_cpu_seconds() - c0 - early.get("cpu", 0.0)
             if status.step % config.log_every == 0 or done == config.iterations:
                 history.append(HistoryPoint(status.step, status.loss, status.psnr, status.num_gaussians))
             if progress is not None:
                 progress(status)
-            full = done in full_steps and done < config.iterations  # the last step's is the final evaluation
-            if full or (config.eval.every and done % config.eval.every == 0 and done < config.iterations):
-                ev = trainer.evaluate(list(dict.fromkeys(full_lpips + curve_lpips)) if full else curve_lpips)
+            if due:
+                ev = early["ev"] if "ev" in early else trainer.evaluate(lpips_now)
                 if ev.psnr is not None:
                     evaluations.append(EvalPoint(done, ev.psnr, ev.ssim, ev.lpips.get(CURVE_LPIPS)))
                     if full:
