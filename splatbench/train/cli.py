@@ -19,7 +19,7 @@ import click
                    "--set raster.tile_size=8 --set raster.alpha_min=0.005 (the rasterizer's options of every render; "
                    "the device is --set device=...) "
                    "--set checkpoint_every=500 (a checkpoint every 500 steps, for --resume) "
-                   "--set protocol=graphdeco-30k (graphdeco's schedule unscaled, evaluated at 7,000 and 30,000). "
+                   "--set protocol=graphdeco-30k (graphdeco's schedule unscaled, evaluated at 7,000 and 30,000); --set eval.before_refine=true (each evaluation before that step's refinement, graphdeco's order). "
                    "protocol: quick (the default: the schedule scaled to iterations), graphdeco-7k, graphdeco-30k. "
                    "init (init.method): auto (the default: the dataset's points, else SfM), surface (the dataset's "
                    "points), sfm (pycolmap), random; init.region (init=random): auto, convergence, camera_cube, "
