@@ -68,10 +68,10 @@ def attempt(run, results: Path, *, kill_at: int | None = None, monkeypatch=None)
         return execute_run(run, str(results), context)
     step = Trainer.step
 
-    def dies(self):
+    def dies(self, *args, **kwargs):  # Trainer.step's own arguments passed through (its evaluation hook)
         if self.step_index == kill_at:
             raise Killed()
-        return step(self)
+        return step(self, *args, **kwargs)
     with monkeypatch.context() as patch:
         patch.setattr(Trainer, "step", dies)
         with pytest.raises(Killed):
