@@ -128,6 +128,30 @@ def test_two_matched_extra_cells_of_one_value_are_one_line():
     assert "\n" not in str(caught.value)
 
 
+def test_matched_extra_cells_of_one_value_at_disjoint_scenes_are_each_scenes_own():
+    """Two cells setting one value are allowed where their ``scenes`` are disjoint (each scene's matched
+    size its own); where they share a scene, or one runs everywhere, that scene is named on one line."""
+    scenes = ("glossy", "diffuse", "thin")
+    per_scene = {"sh.degree": {f"{d} at {n}": {"sh.degree": d, "strategy.budget": n, "scenes": [scene], **BUDGETED}
+                               for scene, (n0, n3) in (("glossy", (590, 140)), ("diffuse", (1180, 280)))
+                               for d, n in ((0, n0), (3, n3))}}
+    names = ["0 at 590", "3 at 140", "0 at 1180", "3 at 280"]
+    spec = spec_of(scenes=scenes, extra=per_scene, report={"matched": {"sh.degree": names}})
+    assert spec.matched == {"sh.degree": tuple(names)}
+    overlap = {"sh.degree": {**per_scene["sh.degree"],
+                             "0 at 1180": {**per_scene["sh.degree"]["0 at 1180"], "scenes": ["thin", "glossy"]}}}
+    with pytest.raises(InputError, match=r"report\.matched\.sh\.degree: the extra cells '0 at 590' and '0 at 1180' "
+                                         r"both set sh\.degree = 0, both at glossy, .*disjoint `scenes`") as caught:
+        spec_of(scenes=scenes, extra=overlap, report={"matched": {"sh.degree": names}})
+    assert "\n" not in str(caught.value)
+    everywhere = {"sh.degree": {**per_scene["sh.degree"], "3 at 280": {"sh.degree": 3, "strategy.budget": 280,
+                                                                          **BUDGETED}}}
+    with pytest.raises(InputError, match=r"the extra cells '3 at 140' and '3 at 280' both set sh\.degree = 3, both "
+                                         r"at glossy, ") as caught:
+        spec_of(scenes=scenes, extra=everywhere, report={"matched": {"sh.degree": names}})
+    assert "\n" not in str(caught.value)
+
+
 # --------------------------------------------------------------------------- the report
 def _make(run):
     """Natural cells: 1000 Gaussians (+ 10 per seed); SH 3 +1.0 dB (+0.02 per seed) and SH 1 +0.5 dB

@@ -342,7 +342,8 @@ def parse_experiment(data: Mapping[str, Any], *, source: str = "experiment",
                                                          f"would drop the cell's in its runs); leave it out of one of "
                                                          f"them")
     runner = _parse_runner(data.get("runner", {}), fail, source, base_dir)
-    min_effect, matched, quick = _parse_report(data.get("report", {}), fail, axes, variants, extra)
+    min_effect, matched, quick = _parse_report(data.get("report", {}), fail, axes, variants, extra,
+                                              extra_scenes, scenes)
     published = _parse_published(data.get("report", {}).get("published", []), fail, scenes, axes, variants, grid)
     check = _parse_check(data["check"], fail, scenes, axes, variants, grid) if "check" in data else None
     return ExperimentSpec(name=name, kind=kind, scenes=tuple(scenes), seeds=tuple(seeds), base=base, axes=axes,
@@ -489,13 +490,15 @@ PUBLISHED_FIELDS = ("cells", "cell", "scene", "value", "metric", "source", "prot
 
 
 def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variants: Mapping[str, Mapping[str, Any]],
-                  extra: Mapping[str, Mapping[str, Any]] | None = None
-                  ) -> tuple[dict[str, float], dict[str, tuple[Any, ...]], str | None]:
+                  extra: Mapping[str, Mapping[str, Any]] | None = None,
+                  extra_scenes: Mapping[str, Mapping[str, tuple[str, ...]]] | None = None,
+                  scenes: Sequence[str] = ()) -> tuple[dict[str, float], dict[str, tuple[Any, ...]], str | None]:
     """The ``[report]`` table: ``min_effect = { metric = number >= 0, ... }`` (the metric names are
     checked against the kind's comparisons when the report is built), ``matched = { dimension =
     value or [values] }`` (each a value of one of the grid's axes or variants, or the label of one
-    of its ``[extra.DIMENSION]`` cells: one matched dimension) and ``quick = "path"``: (min_effect,
-    matched, quick)."""
+    of its ``[extra.DIMENSION]`` cells: one matched dimension; two extra cells setting one value of a
+    plain axis only where their ``scenes`` (``extra_scenes``; every one of ``scenes`` without) are
+    disjoint: each scene's matched cell of that value) and ``quick = "path"``: (min_effect, matched, quick)."""
     if not isinstance(table, Mapping):
         raise fail("report", f"expected a table, got {table!r}")
     for key in table:
@@ -545,12 +548,17 @@ def _parse_report(table: Any, fail, axes: Mapping[str, tuple[Any, ...]], variant
             for v in matched[dim]:
                 if str(v) in cells and dim in cells[str(v)]:
                     setting.setdefault(repr(cells[str(v)][dim]), []).append(str(v))
-            twice = next(((value, labels) for value, labels in setting.items() if len(labels) > 1), None)
-            if twice is not None:
-                value, labels = twice
-                raise fail(f"report.matched.{dim}", f"the extra cells {' and '.join(map(repr, labels))} both set "
-                                                    f"{dim} = {value}, so neither is the one matched pair's "
-                                                    f"{dim} = {value} twin: name one extra cell per value of {dim}")
+            for value, labels in setting.items():  # two of one value: only at disjoint scenes (one per scene)
+                for i, first in enumerate(labels):
+                    for second in labels[i + 1:]:
+                        at = [s for s in scenes if all(s in (extra_scenes or {}).get(dim, {}).get(lab, scenes)
+                                                       for lab in (first, second))]
+                        if at:
+                            raise fail(f"report.matched.{dim}", f"the extra cells {first!r} and {second!r} both set "
+                                                                f"{dim} = {value}, both at {at[0]}, so neither is "
+                                                                f"{at[0]}'s one matched {dim} = {value} twin: name "
+                                                                f"one extra cell per value of {dim} at each scene "
+                                                                f"(give them disjoint `scenes` lists)")
     if len(matched) > 1:
         raise fail("report.matched", f"expected one dimension, got {', '.join(matched)}")
     quick = table.get("quick")
