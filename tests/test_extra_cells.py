@@ -289,6 +289,48 @@ def test_a_matched_pair_on_three_scenes_gives_its_difference_over_the_scenes(tmp
             f"{diffs.mean() + half:+.2f}], no significant difference, inconclusive.") in summary
 
 
+def test_per_scene_matched_cells_compare_each_scene_with_its_own_cells(tmp_path):
+    """A matched size per scene: glossy's pair at 590 / 140 Gaussians, diffuse's at 1,180 / 280 (each pair
+    at one byte count, 1,180 x 14 = 280 x 59), each cell run at its scene alone. Each scene's matched
+    difference is from its own cells: SH 3 +0.3 dB (+0.02 a seed) over SH 0 at glossy, +0.9 dB at diffuse;
+    SH 0's cells differ by scene (29.0 and 27.0 dB), so a difference against the other scene's SH 0 cell,
+    or the other scene's gain, gives neither value (and the other scene's cells have no runs here)."""
+    budgets = {"glossy": (590, 140), "diffuse": (1180, 280)}
+    gains, floors = {"glossy": 0.3, "diffuse": 0.9}, {"glossy": 29.0, "diffuse": 27.0}
+    extra = {"sh.degree": {f"{d} at {n}": {"sh.degree": d, "strategy.budget": n, "scenes": [scene], **BUDGETED}
+                           for scene, (n0, n3) in budgets.items() for d, n in ((0, n0), (3, n3))}}
+    names = ["0 at 590", "3 at 140", "0 at 1180", "3 at 280"]
+    spec = spec_of(scenes=tuple(budgets), extra=extra, report={"matched": {"sh.degree": names}})
+
+    def make(run):
+        metrics, curves = _make(run)
+        if not isinstance(run.labels["sh.degree"], str):
+            return metrics, curves
+        degree = run.config["sh"]["degree"]
+        psnr = floors[run.scene] + 0.01 * run.seed + ((gains[run.scene] + 0.02 * run.seed) if degree == 3 else 0.0)
+        count = run.config["strategy"]["budget"]
+        return metrics_of(psnr, num_gaussians=count, sh_degree=degree), flat_curves(psnr)
+
+    report, text = results(tmp_path, spec, make)
+    # the matched cells against each other: each scene's SH 3 cell against that scene's SH 0 cell
+    matched = [c for c in report.findings["sh.degree"].claims if c.kind == "matched"]
+    assert [(c.scene, c.label, c.reference, round(c.value, 6)) for c in matched] == \
+        [("glossy", "3 at 140", "0 at 590", 0.32), ("diffuse", "3 at 280", "0 at 1180", 0.92)]
+    line = next(line for line in text.splitlines() if line.startswith("- **At a matched size**"))
+    assert "end at one byte count at each scene, each value one cell there (their `scenes`); " in line
+    assert "): `3 at 140` against `0 at 590`: glossy +0.32 dB [95 % CI " in line and \
+        ". `3 at 280` against `0 at 1180`: diffuse +0.92 dB [95 % CI " in line and "at ×1.000 the bytes" in line
+    assert "`0 at 1180` against" not in line  # SH 0's second cell is diffuse's reference, not a compared cell
+    # the grid's SH 3 against SH 0, at each scene through that scene's pair
+    three = _line(text, "3")
+    assert "at a matched size (`3 at 140` against `0 at 590`): test PSNR +0.32 dB [95 % CI" in three
+    assert "at a matched size (`3 at 280` against `0 at 1180`): test PSNR +0.92 dB [95 % CI" in three
+    assert "not run at" not in three
+    summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
+    assert "not in Holm's family): glossy +0.32 dB [95 % CI " in summary and \
+        "not in Holm's family): diffuse +0.92 dB [95 % CI " in summary
+
+
 def test_the_ranks_order_the_grids_cells_alone(tmp_path):
     """An extra cell is a size control, compared only at a matched size: the Ranks section orders the
     grid's cells as it does without the extra cells (rank and tau claims equal)."""

@@ -984,35 +984,52 @@ def _against_reference(ax: _Axis, ref: Row, others: Sequence[Row]) -> tuple[_Par
 
 def _matched_cells_part(ax: _Axis) -> _Part:
     """Where the matched setting is this table's axis with two or more values, its cells compared with each
-    other (``- **At a matched size** …``), each claimed "matched" unless it did not end at one size."""
+    other (``- **At a matched size** …``), each claimed "matched" unless it did not end at one size. The
+    reference is the first matched cell; where several extra cells set its axis value (at disjoint
+    ``scenes``), each scene's is the one run there, compared with the other cells run there."""
     dim, values = ax.matched
     size, primary, comp, table = ax.size_spec, ax.primary, ax.primary_comp, ax.table
     if size is None or dim != table.axis or len(values) < 2:
         return _Part()
     rows = [r for r in table.rows if any(same_value(r.value, v) for v in values)]
-    parts, claims = [], []
+    spec = ax.experiment
+    cells = spec.extra.get(dim, {}) if spec is not None else {}
+
+    def sets(r: Row) -> tuple[str, str]:  # the axis value an extra cell sets; the row itself otherwise
+        return ("value", repr(cells[r.value][dim])) if r.extra and dim in cells.get(r.value, {}) else ("row", r.label)
+
+    def reference(scene: str) -> Row:  # the scene's cell of the first cell's value (the first where none runs)
+        return next((r for r in rows if sets(r) == sets(rows[0]) and spec.extra_runs_at(dim, r.value, scene)),
+                    rows[0]) if rows and rows[0].extra else rows[0]
+
+    per_scene = len({sets(r) for r in rows}) < len(rows)  # some value has one cell per scene
+    texts: dict[tuple[str, str], list[str]] = {}  # (row, its reference) -> each scene's difference
+    claims = []
     for row in rows[1:]:
-        texts = []
+        if sets(row) == sets(rows[0]):  # another scene's reference
+            continue
         for scene in ax.scenes:
-            iv, null = paired(ax.values(scene, rows[0], primary.name), ax.values(scene, row, primary.name), comp)
+            ref = reference(scene)
+            iv, null = paired(ax.values(scene, ref, primary.name), ax.values(scene, row, primary.name), comp)
             if not iv.n:
                 continue
+            said = texts.setdefault((row.label, ref.label), [])
             text = fmt_interval(iv, comp.how, primary, null, comp.min_effect)
-            ratio = paired_ratio(ax.size_values(scene, rows[0]), ax.size_values(scene, row))
-            at = f" at {ax.size_ratio_text(f'×{ratio.estimate:.3f}', scene, rows[0], row)}" if ratio.n else ""
+            ratio = paired_ratio(ax.size_values(scene, ref), ax.size_values(scene, row))
+            at = f" at {ax.size_ratio_text(f'×{ratio.estimate:.3f}', scene, ref, row)}" if ratio.n else ""
             if ax.off_size(ratio):  # declared matched, ended apart: said, never claimed at one size
-                texts.append(f"{scene} {text}{at}: **not at one size** (a run that missed its count: see "
-                             f"\"Warnings\")")
+                said.append(f"{scene} {text}{at}: **not at one size** (a run that missed its count: see "
+                            f"\"Warnings\")")
                 continue
             claims.append(Claim("matched", scene, row.label, primary.name, comp.how, iv.estimate, text,
-                                rows[0].label, iv.low, iv.high, iv.n,
+                                ref.label, iv.low, iv.high, iv.n,
                                 *judge(iv, comp.how, null, primary, comp.min_effect)))
-            why = ax.unsettled(scene, rows[0], row, iv.estimate - (null or 0.0))
-            texts.append(f"{scene} {text}{at}" + (f", **not settled** ({why})" if why else ""))
-        if texts:
-            parts.append(f"`{row.label}` against `{rows[0].label}`: " + "; ".join(texts))
+            why = ax.unsettled(scene, ref, row, iv.estimate - (null or 0.0))
+            said.append(f"{scene} {text}{at}" + (f", **not settled** ({why})" if why else ""))
+    parts = [f"`{label}` against `{ref}`: " + "; ".join(said) for (label, ref), said in texts.items()]
     head = (f"- **At a matched size** (`[report] matched`: {', '.join(f'`{r.label}`' for r in rows)} end at one "
-            f"{'byte' if ax.by_bytes else _name(size)} count; "
+            f"{'byte' if ax.by_bytes else _name(size)} count"
+            f"{' at each scene, each value one cell there (their `scenes`)' if per_scene else ''}; "
             f"{setting_text(ax.experiment, dim, [r.value for r in rows])}): ")
     if parts:
         return _Part((head + ". ".join(parts) + ".",), tuple(claims))
@@ -1141,7 +1158,8 @@ def _matched_text(ax: _Axis, a: Row, b: Row) -> _MatchedText:
     own = dim == ax.table.axis  # the matched setting is this table's axis
     if own and (len(values) < 2 or all(any(same_value(r.value, v) for v in values) for r in (a, b))):
         return _MatchedText()
-    pair = _matched_pair(ax.experiment, ax.table, a, b, values) if own else None
+    pairs = {scene: _matched_pair(ax.experiment, ax.table, a, b, values, scene) for scene in ax.scenes} \
+        if own else {}  # each scene's (`_matched_pair`: its own where the matched cells have `scenes`)
     natural = None if not ax.stratum or own else set(ax.usable.run_id) - ax.stratum  # the runs at their own size
     heads, said = [], []
     for scene in ax.scenes:
@@ -1154,8 +1172,8 @@ def _matched_text(ax: _Axis, a: Row, b: Row) -> _MatchedText:
         if dim is None:
             said.append(_AtScene(head + "; the grid declares no matched-size cell, `[report] matched`: quality and "
                                         "size are not separated)"))
-        elif pair is not None:
-            said.append(_at_matched_pair(ax, scene, head, pair))
+        elif pairs.get(scene) is not None:
+            said.append(_at_matched_pair(ax, scene, head, pairs[scene]))
         elif own:
             said.append(_AtScene(head + f"; no matched-size cell of this comparison: the matched cells are "
                                         f"{', '.join(f'`{display(v)}`' for v in values)}, compared below)"))
@@ -1337,19 +1355,23 @@ def _stratum(runs: pd.DataFrame, dim: str | None, values: Sequence) -> set[str]:
     return set(runs.run_id[keep])
 
 
-def _matched_pair(spec: ExperimentSpec | None, table: AxisTable, a: Row, b: Row, values: Sequence
-                  ) -> tuple[Row, Row] | None:
+def _matched_pair(spec: ExperimentSpec | None, table: AxisTable, a: Row, b: Row, values: Sequence,
+                  scene: str | None = None) -> tuple[Row, Row] | None:
     """The two ``[extra.AXIS]`` cells among the matched ``values`` of a plain axis that set the axis to
     ``a``'s and ``b``'s values (``sh.degree = 0`` and ``3`` at one byte count, against the grid's
-    `0` and `3`): the comparison ``b`` against ``a`` at a matched size; None where there are none."""
+    `0` and `3`): the comparison ``b`` against ``a`` at a matched size; None where there are none.
+    Where several set one value (at disjoint ``scenes``: `_parse_report`), the one run at ``scene``
+    (the first where none is: the pair is then said not to run there)."""
     if spec is None or table.axis not in spec.axes:
         return None
     cells = spec.extra.get(table.axis, {})
     rows = [r for r in table.rows if r.extra and any(same_value(r.value, v) for v in values)]
 
     def twin(row: Row) -> Row | None:
-        return next((r for r in rows if table.axis in cells.get(r.value, {})
-                     and same_value(cells[r.value][table.axis], row.value)), None)
+        setting = [r for r in rows if table.axis in cells.get(r.value, {})
+                   and same_value(cells[r.value][table.axis], row.value)]
+        here = [r for r in setting if scene is None or spec.extra_runs_at(table.axis, r.value, scene)]
+        return next(iter(here or setting), None)
 
     ta, tb = twin(a), twin(b)
     return (ta, tb) if ta is not None and tb is not None and ta is not tb else None
