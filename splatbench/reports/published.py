@@ -105,6 +105,9 @@ def published_results(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame,
     if not spec.published:
         return []
     timed = set(kind.report.timed) if kind.report is not None else set()
+    usable = usable_runs(table, kind) if len(table) else table  # each table's usable runs once, not per row
+    check_pool = checked if checked is not None else pd.DataFrame(columns=["run_id", "scene", "status"])
+    check_usable = usable_runs(check_pool, kind) if len(check_pool) else check_pool
     out = []
     for entry in spec.published:
         cells = published_runs(spec, entry)  # first: a metric the kind does not report is one line here
@@ -113,14 +116,12 @@ def published_results(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame,
         labels = tuple(cell_labels(spec, pd.DataFrame([{f"axis.{k}": v for k, v in cell[0].labels.items()}
                                                         for cell in cells])))
 
-        def row(pool: pd.DataFrame, runs: Sequence[Sequence[RunSpec]], scene: str, label: str) -> PublishedRow:
-            usable = usable_runs(pool, kind) if len(pool) else pool
-            if name in timed and len(usable):
-                usable = usable[~loaded_runs(usable, kind)]
+        def row(usable: pd.DataFrame, runs: Sequence[Sequence[RunSpec]], scene: str, label: str) -> PublishedRow:
+            pool = usable[~loaded_runs(usable, kind)] if name in timed and len(usable) else usable
             values = []
             for cell in runs:
                 ids = {r.run_id for r in cell if r.scene == scene}
-                sel = usable[(usable.scene == scene) & usable.run_id.isin(ids)] if len(usable) else usable
+                sel = pool[(pool.scene == scene) & pool.run_id.isin(ids)] if len(pool) else pool
                 values.append(seed_values(sel, name) if len(sel) and f"metric.{name}" in sel.columns else {})
             if entry.is_difference:  # A − B: B is the reference, as `paired(a, b)` gives b − a
                 iv, _ = paired(values[1], values[0], Comparison(name, "diff"))
@@ -130,14 +131,13 @@ def published_results(spec: ExperimentSpec, kind: RunKind, table: pd.DataFrame,
             text = fmt_interval(iv, how, metric, None) if iv.n else "–"
             return PublishedRow(label, iv, text, placement(iv, entry.value, metric), len(spec.seeds))
 
-        rows = [row(table, cells, scene, scene) for scene in dict.fromkeys(r.scene for r in cells[0])]
+        rows = [row(usable, cells, scene, scene) for scene in dict.fromkeys(r.scene for r in cells[0])]
         at_check = _check_runs(spec, cells) if entry.is_difference else None
         check_protocol = ""
         if at_check is not None:
             c = spec.check
             check_protocol = c.protocol
-            pool = checked if checked is not None else pd.DataFrame(columns=["run_id", "scene", "status"])
-            rows.append(row(pool, at_check, c.scene, f"{c.scene}, the {check_name(c.protocol)} (`{c.protocol}`)"))
+            rows.append(row(check_usable, at_check, c.scene, f"{c.scene}, the {check_name(c.protocol)} (`{c.protocol}`)"))
         ids = {r.run_id for cell in cells for r in cell}
         out.append(PublishedResult(entry, metric, labels, tuple(rows), _recorded_protocol(table, ids), check_protocol))
     return out
@@ -217,9 +217,8 @@ def _differs(spec: ExperimentSpec, r: PublishedResult) -> str:
     at = f"at protocol `{r.grid_protocol}`" if r.grid_protocol else "at its own settings (its runs name no protocol)"
     where = (f"on its scene {e.scene}" if not e.is_difference else
              f"on its own scene{'s' if len(spec.scenes) != 1 else ''} ({', '.join(spec.scenes)}), one row each")
-    if r.check_protocol:
-        where += (f"; the last row is the check's runs, at protocol `{r.check_protocol}` on {spec.check.scene}"
-                  if spec.check is not None else "")
+    if r.check_protocol:  # set only where the file has a [check]
+        where += f"; the last row is the check's runs, at protocol `{r.check_protocol}` on {spec.check.scene}"
     return (f"**Not a replication**: this grid's number is {at} {where}, {len(spec.seeds)} seed"
             f"{'s' if len(spec.seeds) != 1 else ''} (the header gives its settings); the published one's protocol: "
             f"{e.protocol}; where protocol, scenes, resolution or code differ, a published value inside this grid's "

@@ -585,6 +585,7 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
         t0 = time.perf_counter()
         trainer.warm_up()  # outside every timed section (TrainResult.warmup_seconds); touches no state
         warmup_seconds = time.perf_counter() - t0
+        first = config.eval.before_refine  # graphdeco's order: a due evaluation inside its step
         for _ in range(config.iterations - trainer.step_index):
             done = trainer.step_index + 1  # the completed steps once this one is
             full = done in full_steps and done < config.iterations  # the last step's is the final evaluation
@@ -597,7 +598,6 @@ def _train(config: TrainConfig, progress, dataset, resume, say) -> TrainResult:
                 early["ev"] = trainer.evaluate(lpips_now)
                 early["seconds"], early["cpu"] = time.perf_counter() - e0, process_cpu_seconds() - ec0
 
-            first = config.eval.before_refine
             with deferred():  # a stop signal ends the run between steps, never inside one
                 t0, c0 = time.perf_counter(), process_cpu_seconds()
                 status = trainer.step(evaluate_early if first and due else None,
