@@ -68,6 +68,56 @@ def test_a_run_another_experiment_finished_is_copied_with_this_experiments_label
     assert {read_records(results / "third")[rid].reused_from for rid in shared} == {"first"}
 
 
+def test_a_run_another_experiments_live_runner_holds_is_left_to_it(tmp_path):
+    # Two runners on two experiments that share run ids (tools/run_grids.sh's lanes): a shared run
+    # the other experiment's runner is running is not run twice; the next invocation copies it.
+    from splatbench.experiments.claims import try_claim
+
+    results = tmp_path / "results"
+    first, second = spec_of(FIRST, REUSABLE), spec_of(SECOND, REUSABLE)
+    run_experiment(first, workers=1, results_dir=results, progress=False)
+    shared = sorted({r.run_id for r in expand(first)} & {r.run_id for r in expand(second)})
+    result_path(results, "first", shared[0]).unlink()  # first's runner is running it again, now:
+    claim = try_claim(results / "first", shared[0])  # held by a live process (this one)
+    assert claim is not None
+    summary = run_experiment(second, workers=1, results_dir=results, progress=False)
+    assert (summary.done, summary.reused, summary.claimed) == (2, 1, 1), summary.line()
+    assert shared[0] not in read_records(results / "second")
+
+    # once it is finished there, the next invocation copies it
+    run_experiment(first, workers=1, results_dir=results, progress=False, reuse=False)  # first's own run
+    assert shared[0] not in read_records(results / "first")  # still held: its runner has it
+    claim.release()
+    run_experiment(first, workers=1, results_dir=results, progress=False)
+    summary = run_experiment(second, workers=1, results_dir=results, progress=False)
+    assert (summary.done, summary.reused, summary.claimed) == (0, 1, 0), summary.line()
+    assert read_records(results / "second")[shared[0]].reused_from == "first"
+
+
+def test_a_run_another_experiment_finished_after_the_start_is_copied_when_its_turn_comes(tmp_path, monkeypatch):
+    # The copy is looked for again as each run is submitted: a runner that started while the other
+    # experiment's runner was still running a shared run copies it once it is there.
+    import splatbench.experiments.runner as runner_module
+
+    results = tmp_path / "results"
+    first, second = spec_of(FIRST, REUSABLE), spec_of(SECOND, REUSABLE)
+    run_experiment(first, workers=1, results_dir=results, progress=False)
+    real, calls = runner_module.reuse_finished, []
+
+    def not_yet_at_the_start(results_dir, spec, runs):
+        calls.append(len(runs))
+        return [] if len(calls) == 1 else real(results_dir, spec, runs)  # the start's look finds none
+
+    monkeypatch.setattr(runner_module, "reuse_finished", not_yet_at_the_start)
+    summary = run_experiment(second, workers=1, results_dir=results, progress=False)
+    assert calls[0] == 4 and set(calls[1:]) == {1}  # once for the pending runs, then once per run
+    assert (summary.done, summary.skipped, summary.reused, summary.total) == (2, 2, 2, 4), summary.line()
+    copies = read_records(results / "second")
+    assert sorted(rid for rid, r in copies.items() if r.reused_from == "first") == \
+        sorted({r.run_id for r in expand(first)} & {r.run_id for r in expand(second)})
+    assert len(read_table(results / "second")) == 4 and set(read_table(results / "second").status) == {"done"}
+
+
 def test_no_reuse_for_a_kind_that_is_not_reusable_or_when_turned_off(tmp_path):
     for kind, reuse in ((PLAIN, True), (REUSABLE, False)):
         results = tmp_path / f"{kind[-5:]}-{reuse}"

@@ -40,9 +40,9 @@ if [ "$SAVE" = 0 ]; then  # every grid's committed records first: a grid reuses 
     for f in "$ROOT/reports/$name/runs"/*.json; do [ -f "$f" ] && cp -n "$f" "$CACHE/results/$name/"; done
   done
 fi
-for name in "${NAMES[@]}"; do
-  results="$CACHE/results/$name" saved="$ROOT/reports/$name/runs"
-  if [ "$SAVE" = 1 ]; then
+if [ "$SAVE" = 1 ]; then
+  for name in "${NAMES[@]}"; do
+    results="$CACHE/results/$name" saved="$ROOT/reports/$name/runs"
     mkdir -p "$saved"
     n=0
     for f in "$results"/*.json; do
@@ -51,10 +51,38 @@ for name in "${NAMES[@]}"; do
       cp "$f" "$saved/" && n=$((n + 1))
     done
     echo "$name: $n finished run records in reports/$name/runs/"
-    continue
-  fi
-  echo "$name: start $(date -Is) at $(git -C "$ROOT" rev-parse --short HEAD)"
-  nice -n 5 "$SB" run "$ROOT/experiments/$name.toml" --results "$CACHE/results" --no-progress
-  nice -n 5 "$SB" report "$ROOT/experiments/$name.toml" --results "$CACHE/results" --out "$CACHE/reports/$name" --force
+  done
+  exit 0
+fi
+
+report() {  # the report of what is finished, one writer at a time
+  mkdir -p "$CACHE/reports"
+  flock "$CACHE/reports/.lock" nice -n 5 "$SB" report "$ROOT/experiments/$1.toml" --results "$CACHE/results" \
+    --out "$CACHE/reports/$1" --force
+}
+
+# One lane per core: a runner of one worker pinned to its core (one Dr.Jit thread, as each of two
+# workers of one runner has), every lane going through the grids in order. The runners share each
+# grid through its claims, and a lane whose grid has nothing left to claim starts the next grid
+# while the others finish their last runs: no core waits for the longest run of a grid (a 30K check
+# run, about an hour). A run two grids share is run once (the runner leaves to the other grid's
+# runner the run it holds); the last pass below copies what a lane left that way.
+LANES=${SPLATBENCH_LANES:-$(nproc)}
+lane() {
+  local core=$1 name
+  for name in "${NAMES[@]}"; do
+    echo "$name: lane $core start $(date -Is) at $(git -C "$ROOT" rev-parse --short HEAD)"
+    taskset -c "$core" nice -n 5 "$SB" run "$ROOT/experiments/$name.toml" --results "$CACHE/results" \
+      --workers 1 --no-progress
+    echo "$name: lane $core done $(date -Is)"
+    report "$name"
+  done
+}
+cores=($(taskset -pc $$ | sed 's/.*: //' | tr ',' '\n' | while IFS=- read -r a b; do seq "$a" "${b:-$a}"; done))
+for ((k = 0; k < LANES && k < ${#cores[@]}; k++)); do lane "${cores[$k]}" & done
+wait
+for name in "${NAMES[@]}"; do  # the last pass: the shared runs a lane left to another lane, anything failed
+  nice -n 5 "$SB" run "$ROOT/experiments/$name.toml" --results "$CACHE/results" --workers "$LANES" --no-progress
+  report "$name"
   echo "$name: done $(date -Is)"
 done

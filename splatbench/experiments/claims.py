@@ -183,6 +183,15 @@ def try_claim(folder: str | Path, run_id: str) -> RunClaim | None:
     return None
 
 
+def held(folder: str | Path, run_id: str) -> bool:
+    """Whether a live owner holds run ``run_id`` of the experiment in ``folder`` (module doc),
+    without claiming it: another experiment's runner asks before it runs a run of the same id."""
+    owner, mtime = _read(claim_path(folder, run_id))
+    if owner is None:  # none, or unreadable: held only while recent, as `try_claim` reads it
+        return mtime != 0.0 and time.time() - mtime < HEARTBEAT_TIMEOUT
+    return not owner.gone(mtime)
+
+
 def remove_stale_claim_temps(folder: str | Path) -> None:
     """Delete claim temporaries left by dead processes of this host."""
     claims = Path(folder) / CLAIMS_DIR
@@ -194,5 +203,5 @@ def remove_stale_claim_temps(folder: str | Path) -> None:
             entry.unlink(missing_ok=True)
 
 
-__all__ = ["RunClaim", "Owner", "try_claim", "claim_path", "pid_alive", "process_start", "remove_stale_claim_temps",
+__all__ = ["RunClaim", "Owner", "try_claim", "held", "claim_path", "pid_alive", "process_start", "remove_stale_claim_temps",
            "CLAIMS_DIR", "HEARTBEAT_EVERY", "HEARTBEAT_TIMEOUT"]

@@ -47,7 +47,6 @@ folder). The runner sets no environment variable for its workers.
 
 from __future__ import annotations
 
-import os
 import sys
 from collections import deque
 from collections.abc import Callable
@@ -57,7 +56,7 @@ from pathlib import Path
 from typing import Any
 
 from splatbench.errors import InputError, one_line
-from splatbench.experiments.claims import HEARTBEAT_EVERY, RunClaim, remove_stale_claim_temps, try_claim
+from splatbench.experiments.claims import HEARTBEAT_EVERY, RunClaim, held, remove_stale_claim_temps, try_claim
 from splatbench.experiments.configs import plain
 from splatbench.experiments.executors import DaskExecutor, LocalExecutor
 from splatbench.experiments.grid import RunSpec, check_runs, expand
@@ -66,6 +65,7 @@ from splatbench.experiments.spec import EXECUTORS, ExperimentSpec, check_schedul
 from splatbench.experiments.store import (RunRecord, experiment_dir, read_record, read_records, remove_stale_temps,
                                           result_path, save_table, write_record)
 from splatbench.interrupt import Interrupted, deferred
+from splatbench.metrics.load import usable_cores
 
 
 
@@ -149,7 +149,7 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
         if executor != "dask":
             raise InputError(f"scheduler: only with executor 'dask', got executor {executor!r}")
         check_scheduler(scheduler)
-    cpus = os.cpu_count() or 1
+    cpus = usable_cores()  # the cores this process may run on (`taskset -c 0 splatbench run` gets one)
     workers = cpus if workers is None else workers
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise InputError(f"workers: expected an int >= 1, got {workers!r}")
@@ -205,10 +205,27 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     claims: dict[str, RunClaim] = {}
     bar = _progress_bar(len(pending), spec.name, progress)
 
+    share = reuse and get_kind(spec.kind).reusable
+
     def admit(run: RunSpec) -> bool:
         """Claim ``run`` before it is submitted; False when another runner holds it or
-        finished it meanwhile."""
+        finished it meanwhile, this experiment's or (a run of the same id) another's in
+        ``results_dir``: then the finished one is copied and the held one left to its runner."""
         nonlocal skipped, claimed
+        if share:
+            copy = reuse_finished(results_dir, spec, [run])
+            if copy:
+                reused.extend(copy)
+                save_table(folder, table_ids)
+                skipped += 1
+                if bar is not None:
+                    bar.update(1)
+                return False
+            if any(held(other, run.run_id) for other in _other_folders(results_dir, spec)):
+                claimed += 1
+                if bar is not None:
+                    bar.update(1)
+                return False
         claim = try_claim(folder, run.run_id)
         if claim is None:
             claimed += 1
@@ -319,9 +336,7 @@ def find_reusable(results_dir: Path, spec: ExperimentSpec,
     first such folder by name): a done record of the same run id whose kind, scene, seed and
     resolved config are the run's (`reuse_finished`, which copies them; ``--dry-run`` lists them).
     Nothing is written."""
-    results_dir = Path(results_dir)
-    others = sorted(p for p in results_dir.iterdir() if p.is_dir() and p.name != spec.name) \
-        if results_dir.is_dir() else []
+    others = _other_folders(results_dir, spec)
     found: dict[str, tuple[RunSpec, RunRecord]] = {}
     for run in runs:
         for other in others:
@@ -331,6 +346,13 @@ def find_reusable(results_dir: Path, spec: ExperimentSpec,
                 found[run.run_id] = (run, source)
                 break
     return found
+
+
+def _other_folders(results_dir: Path, spec: ExperimentSpec) -> list[Path]:
+    """The other experiments' folders in ``results_dir``, by name."""
+    results_dir = Path(results_dir)
+    return sorted(p for p in results_dir.iterdir() if p.is_dir() and p.name != spec.name) \
+        if results_dir.is_dir() else []
 
 
 def check_inputs(spec: ExperimentSpec, runs: list[RunSpec]) -> list[str]:
