@@ -327,8 +327,13 @@ def test_per_scene_matched_cells_compare_each_scene_with_its_own_cells(tmp_path)
     assert "at a matched size (`3 at 280` against `0 at 1180`): test PSNR +0.92 dB [95 % CI" in three
     assert "not run at" not in three
     summary = next(line for line in text.splitlines() if line.startswith("- **`3`** against `0`"))
-    assert "not in Holm's family): glossy +0.32 dB [95 % CI " in summary and \
-        "not in Holm's family): diffuse +0.92 dB [95 % CI " in summary
+    # the Summary reads the scenes as one list: what every pair sets once, each scene with its own pair,
+    # and no interval over the scenes (each pair is at its own scene's size)
+    assert "; at a matched size (each scene's own pair, both cells also setting `strategy.name = budget`, " \
+           "`strategy.budget_mode = final_count`; " \
+           "not in Holm's family): glossy (`3 at 140` against `0 at 590`) +0.32 dB [95 % CI " in summary, summary
+    assert "; diffuse (`3 at 280` against `0 at 1180`) +0.92 dB [95 % CI " in summary and summary.count("at a matched") == 1
+    assert "over the scenes" not in summary.split("at a matched size")[1]
 
 
 def test_the_ranks_order_the_grids_cells_alone(tmp_path):

@@ -49,6 +49,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import pandas as pd
 
@@ -1126,6 +1127,7 @@ class _AtSize:
     text: str
     estimate: float | None = None  # the paired difference where both cells are done and at one size
     runs_here: bool = True  # False: the pair is not run at this scene (its `scenes`)
+    own_pair: bool = False  # True: a pair of this scene's own (a matched size per scene), named in ``text``
 
 
 @dataclasses.dataclass(frozen=True)
@@ -1173,7 +1175,7 @@ def _matched_text(ax: _Axis, a: Row, b: Row) -> _MatchedText:
             said.append(_AtScene(head + "; the grid declares no matched-size cell, `[report] matched`: quality and "
                                         "size are not separated)"))
         elif pairs.get(scene) is not None:
-            said.append(_at_matched_pair(ax, scene, head, pairs[scene]))
+            said.append(_at_matched_pair(ax, scene, head, pairs[scene], pairs))
         elif own:
             said.append(_AtScene(head + f"; no matched-size cell of this comparison: the matched cells are "
                                         f"{', '.join(f'`{display(v)}`' for v in values)}, compared below)"))
@@ -1186,24 +1188,26 @@ def _matched_text(ax: _Axis, a: Row, b: Row) -> _MatchedText:
                         tuple(s.claim for s in said if s.claim is not None))
 
 
-def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row]) -> _AtScene:
+def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row],
+                     pairs: Mapping[str, tuple[Row, Row] | None]) -> _AtScene:
     """``head`` (the size change at ``scene``) with the same comparison at one size through the two
-    ``[extra]`` cells ``pair`` (`_matched_pair`): not run there, not yet done, not at one size, or the
-    difference; never claimed (the pair is not in Holm's family)."""
+    ``[extra]`` cells ``pair`` (`_matched_pair`; ``pairs``, every scene's): not run there, not yet done,
+    not at one size, or the difference; never claimed (the pair is not in Holm's family). Where the scenes
+    have pairs of their own (a matched size per scene), the Summary's brief names what every pair sets
+    and each scene's text its pair, so the scenes read as one list."""
     spec, primary, comp = ax.experiment, ax.primary, ax.primary_comp
     iv, null = paired(ax.values(scene, pair[0], primary.name), ax.values(scene, pair[1], primary.name), comp)
     named = f"`{pair[1].label}` against `{pair[0].label}`"
-    cells = [spec.extra.get(ax.table.axis, {}).get(r.value, {}) for r in pair]
-    common = [f"`{k} = {display(v)}`" for k, v in cells[0].items()
-              if k != ax.table.axis and cells[1].get(k, object()) == v]
-    brief = named + (f", both also setting {', '.join(common)}" if common else "") + \
-        "; not in Holm's family"  # the summary's
+    brief, where = _pair_brief(ax, pair, pairs), scene
+    own = brief != _pair_brief(ax, pair, {scene: pair})
+    if own:
+        where = f"{scene} ({named})"
     if not iv.n:
         away = [r for r in pair if not spec.extra_runs_at(ax.table.axis, r.value, scene)]
         if away:
             return _AtScene(head + f"; its matched-size cells, {named}, are not run at {scene} (their `scenes`): "
                                    f"quality and size are not separated here)",
-                            _AtSize(brief, f"{scene} not run (the pair's `scenes`)", runs_here=False))
+                            _AtSize(brief, f"{scene} not run (the pair's `scenes`)", runs_here=False, own_pair=own))
         return _AtScene(head + f"; its matched-size cells, {named}, have no done runs yet)")
     size = paired_ratio(ax.size_values(scene, pair[0]), ax.size_values(scene, pair[1]))
     at = ax.size_ratio_text(f"×{size.estimate:.3f}", scene, *pair) if size.n else "sizes not recorded"
@@ -1212,20 +1216,44 @@ def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row]) ->
         return _AtScene(head + f"; its matched-size cells, {named}, did not end at one size at {scene}: "
                                f"{_name(primary)} {said.text} at {at}, a run that missed its count (see "
                                f"\"Warnings\"): quality and size are not separated here)",
-                        _AtSize(brief, f"{scene} not at one size (×{size.estimate:.3f})"))
+                        _AtSize(brief, f"{where} not at one size (×{size.estimate:.3f})", own_pair=own))
     why = ax.unsettled(scene, pair[0], pair[1], iv.estimate - (null or 0.0))
     return _AtScene(head + f" at its natural size); at a matched size ({named}): {_name(primary)} {said.text}, "
                            f"at {at}" + (f", **not settled** ({why})" if why else ""),
-                    _AtSize(brief, f"{scene} {said.short}" + (", not settled" if why else ""),
-                            iv.estimate if comp.how == "diff" else None))
+                    _AtSize(brief, f"{where} {said.short}" + (", not settled" if why else ""),
+                            iv.estimate if comp.how == "diff" else None, own_pair=own))
+
+
+def _pair_brief(ax: _Axis, pair: tuple[Row, Row], pairs: Mapping[str, tuple[Row, Row] | None]) -> str:
+    """The Summary's name of a matched-size comparison through ``pair``: the pair and the fields both of
+    its cells set alike (`` `3 at 140` against `0 at 590`, both also setting ...``). Where ``pairs``
+    (every scene's) holds other pairs too, "each scene's pair", the fields every pair's cells set alike,
+    and the other fields both cells of each pair set alike named as set per scene."""
+    spec, axis = ax.experiment, ax.table.axis
+    distinct = list(dict.fromkeys(p for p in pairs.values() if p is not None)) or [pair]
+
+    def alike(p: tuple[Row, Row]) -> dict[str, Any]:
+        cells = [spec.extra.get(axis, {}).get(r.value, {}) for r in p]
+        return {k: v for k, v in cells[0].items() if k not in (axis, "scenes") and cells[1].get(k, object()) == v}
+
+    first = alike(pair)
+    if len(distinct) == 1:
+        common = [f"`{k} = {display(v)}`" for k, v in first.items()]
+        return f"`{pair[1].label}` against `{pair[0].label}`" + \
+            (f", both also setting {', '.join(common)}" if common else "") + "; not in Holm's family"
+    each = [alike(p) for p in distinct]
+    shared = [f"`{k} = {display(v)}`" for k, v in first.items() if all(e.get(k, object()) == v for e in each)]
+    varying = [f"`{k}`" for k in first if not all(e.get(k, object()) == first[k] for e in each)]
+    return ("each scene's own pair" + (f", both cells also setting {', '.join(shared)}" if shared else "")
+            + (f" and {', '.join(varying)} per scene" if varying else "") + "; not in Holm's family")
 
 
 def _over_matched(at: Sequence[_AtSize], ax: _Axis) -> str:
     """`over_scenes` of a matched-size difference: where it was measured at one size on three scenes or
     more (every scene the pair runs at), the mean over them with its t interval; "" otherwise."""
     here = [m for m in at if m.runs_here]
-    if any(m.estimate is None for m in here):
-        return ""
+    if any(m.estimate is None for m in here) or any(m.own_pair for m in at):
+        return ""  # a pair per scene: each at its scene's own size, not one size over the scenes
     return over_values([m.estimate for m in here], ax.primary, ax.primary_null, ax.primary_comp.min_effect)
 
 
