@@ -5,7 +5,8 @@
 #                                      e.g. `nohup setsid tools/run_grids.sh > ~/.cache/splatbench/grids.log 2>&1 &`)
 #   tools/run_grids.sh sh_degree       only these grids
 #   tools/run_grids.sh --save          copy each grid's finished run records into reports/NAME/runs/
-#                                      (commit them: a fresh machine resumes from them)
+#                                      (those its table lists: commit them, a fresh machine resumes from
+#                                      them), and name the committed ones its grid no longer has
 #
 # Results live outside the checkout, in $SPLATBENCH_CACHE (default ~/.cache/splatbench): results/NAME/
 # (the runner's folder: finished runs are skipped), reports/NAME/ (the report of what is finished).
@@ -40,17 +41,27 @@ if [ "$SAVE" = 0 ]; then  # every grid's committed records first: a grid reuses 
     for f in "$ROOT/reports/$name/runs"/*.json; do [ -f "$f" ] && cp -n "$f" "$CACHE/results/$name/"; done
   done
 fi
-if [ "$SAVE" = 1 ]; then
+if [ "$SAVE" = 1 ]; then  # the grid's finished runs: those its table (results.parquet) lists as done
   for name in "${NAMES[@]}"; do
     results="$CACHE/results/$name" saved="$ROOT/reports/$name/runs"
+    [ -f "$results/results.parquet" ] || { echo "$name: no results in $results"; continue; }
     mkdir -p "$saved"
-    n=0
-    for f in "$results"/*.json; do
+    # the table's run ids, "done" or not: the grid as its file writes it now
+    mapfile -t rows < <("$ROOT/.venv/bin/python" -c 'import sys, pandas as pd
+t = pd.read_parquet(sys.argv[1])
+print("\n".join(f"{i} {s}" for i, s in zip(t.run_id, t.status)))' "$results/results.parquet")
+    n=0 old=()
+    for row in "${rows[@]}"; do
+      id=${row%% *}
+      [ "${row#* }" = done ] && [ -f "$results/$id.json" ] && cp "$results/$id.json" "$saved/" && n=$((n + 1))
+    done
+    for f in "$saved"/*.json; do
       [ -f "$f" ] || continue
-      grep -q '"status": "done"' "$f" || continue
-      cp "$f" "$saved/" && n=$((n + 1))
+      printf '%s\n' "${rows[@]}" | grep -q "^$(basename "$f" .json) " || old+=("$(basename "$f")")
     done
     echo "$name: $n finished run records in reports/$name/runs/"
+    [ ${#old[@]} = 0 ] || echo "$name: ${#old[@]} committed records are of runs its grid no longer has" \
+      "(its file changed; the report they made is in git): git rm them once its new report is in"
   done
   exit 0
 fi
