@@ -13,8 +13,9 @@
 # Before running, the records committed in reports/NAME/runs/*.json are copied into results/NAME/
 # (never over a record already there), so a machine that kept nothing starts where the last one
 # stopped; every grid's, before any runs, since a grid copies the runs another grid finished under
-# the same run id (graphdeco's default cell: the runner's reuse, docs/experiments.md). Run it from a checkout that stays put while it runs (e.g. a `git worktree` of a commit):
-# the workers import splatbench from it.
+# the same run id (graphdeco's default cell: the runner's reuse, docs/experiments.md). Run it from a
+# checkout that stays put while it runs (e.g. a `git worktree` of a commit): the workers import
+# splatbench from it. One lane per core (below): SPLATBENCH_LANES=1 for one.
 set -u
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 CACHE=${SPLATBENCH_CACHE:-$HOME/.cache/splatbench}
@@ -26,7 +27,7 @@ NAMES=()
 for arg in "$@"; do
   case "$arg" in
     --save) SAVE=1 ;;
-    -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,/^set -u/p' "$0" | sed '$d'; exit 0 ;;
     *) [ -f "$ROOT/experiments/$arg.toml" ] || { echo "run_grids: no experiments/$arg.toml" >&2; exit 2; }
        NAMES+=("$arg") ;;
   esac
