@@ -110,12 +110,28 @@ def test_a_run_another_experiment_finished_after_the_start_is_copied_when_its_tu
 
     monkeypatch.setattr(runner_module, "reuse_finished", not_yet_at_the_start)
     summary = run_experiment(second, workers=1, results_dir=results, progress=False)
-    assert calls[0] == 4 and set(calls[1:]) == {1}  # once for the pending runs, then once per run
+    assert calls == [4]  # the start's look, for the pending runs; each run's turn looks again itself
     assert (summary.done, summary.skipped, summary.reused, summary.total) == (2, 2, 2, 4), summary.line()
     copies = read_records(results / "second")
     assert sorted(rid for rid, r in copies.items() if r.reused_from == "first") == \
         sorted({r.run_id for r in expand(first)} & {r.run_id for r in expand(second)})
     assert len(read_table(results / "second")) == 4 and set(read_table(results / "second").status) == {"done"}
+
+
+def test_a_copy_never_overwrites_a_runs_own_finished_record(tmp_path):
+    # With lanes, experiment second may copy a shared run from first while first's own runner has it
+    # queued: when first's runner reaches it, its own done record stays its own (not a copy of a copy).
+    from splatbench.experiments.runner import reuse_finished
+
+    results = tmp_path / "results"
+    first, second = spec_of(FIRST, REUSABLE), spec_of(SECOND, REUSABLE)
+    run_experiment(first, workers=1, results_dir=results, progress=False)
+    run_experiment(second, workers=1, results_dir=results, progress=False)  # copies the shared runs
+    shared = [r for r in expand(first) if r.run_id in {s.run_id for s in expand(second)}]
+    before = {r.run_id: read_records(results / "first")[r.run_id] for r in shared}
+    assert reuse_finished(results, first, shared) == []  # second's copies are there, first's own too
+    after = read_records(results / "first")
+    assert all(after[rid] == rec and rec.reused_from == "" for rid, rec in before.items())
 
 
 def test_no_reuse_for_a_kind_that_is_not_reusable_or_when_turned_off(tmp_path):

@@ -47,10 +47,12 @@ if [ "$SAVE" = 1 ]; then  # the grid's finished runs: those its table (results.p
     results="$CACHE/results/$name" saved="$ROOT/reports/$name/runs"
     [ -f "$results/results.parquet" ] || { echo "$name: no results in $results"; continue; }
     mkdir -p "$saved"
-    # the table's run ids, "done" or not: the grid as its file writes it now
-    mapfile -t rows < <("$ROOT/.venv/bin/python" -c 'import sys, pandas as pd
+    # the table's run ids, "done" or not: the grid as the last `splatbench run` of it found its file
+    table=$("$ROOT/.venv/bin/python" -c 'import sys, pandas as pd
 t = pd.read_parquet(sys.argv[1])
-print("\n".join(f"{i} {s}" for i, s in zip(t.run_id, t.status)))' "$results/results.parquet")
+print("\n".join(f"{i} {s}" for i, s in zip(t.run_id, t.status)))' "$results/results.parquet" 2>/dev/null) || {
+      echo "$name: could not read $results/results.parquet: nothing saved" >&2; continue; }
+    mapfile -t rows <<< "$table"
     n=0 old=()
     for row in "${rows[@]}"; do
       id=${row%% *}

@@ -208,34 +208,31 @@ def run_experiment(spec: ExperimentSpec, *, workers: int | None = None, executor
     share = reuse and get_kind(spec.kind).reusable
 
     def admit(run: RunSpec) -> bool:
-        """Claim ``run`` before it is submitted; False when another runner holds it or
-        finished it meanwhile, this experiment's or (a run of the same id) another's in
-        ``results_dir``: then the finished one is copied and the held one left to its runner."""
+        """Claim ``run`` before it is submitted; False when another runner holds it or finished it
+        meanwhile, this experiment's or, for a run of the same id, another experiment's in
+        ``results_dir`` (then the finished one is copied and the held one left to its runner, which
+        the next invocation copies). Claimed first, then looked at, so that two runners never both
+        run it: each holds its own experiment's claim while it looks at the other's."""
         nonlocal skipped, claimed
-        if share:
-            copy = reuse_finished(results_dir, spec, [run])
-            if copy:
-                reused.extend(copy)
-                save_table(folder, table_ids)
-                skipped += 1
-                if bar is not None:
-                    bar.update(1)
-                return False
-            if any(held(other, run.run_id) for other in _other_folders(results_dir, spec)):
-                claimed += 1
-                if bar is not None:
-                    bar.update(1)
-                return False
         claim = try_claim(folder, run.run_id)
         if claim is None:
             claimed += 1
         else:
             record = read_record(result_path(results_dir, spec.name, run.run_id))
-            if record is None or record.status != "done":
+            if record is not None and record.status == "done":
+                skipped += 1
+            elif share and any(held(other, run.run_id) for other in _other_folders(results_dir, spec)):
+                claimed += 1
+            elif share and (source := find_reusable(results_dir, spec, [run]).get(run.run_id)) is not None:
+                copy = _copy_held(results_dir, spec, run, source[1])
+                if copy is not None:
+                    reused.append(copy)
+                save_table(folder, table_ids)
+                skipped += 1
+            else:
                 claims[run.run_id] = claim
                 return True
             claim.release()
-            skipped += 1
         if bar is not None:
             bar.update(1)
         return False
@@ -320,14 +317,27 @@ def reuse_finished(results_dir: Path, spec: ExperimentSpec, runs: list[RunSpec])
         if claim is None:
             continue
         try:
-            with deferred():
-                record = replace(source, experiment=spec.name, labels=dict(run.labels),
-                                 reused_from=source.reused_from or source.experiment)
-                write_record(results_dir, record)
+            record = _copy_held(results_dir, spec, run, source)
         finally:
             claim.release()
-        written.append(record)
+        if record is not None:
+            written.append(record)
     return written
+
+
+def _copy_held(results_dir: Path, spec: ExperimentSpec, run: RunSpec, source: RunRecord) -> RunRecord | None:
+    """Write ``source`` (another experiment's done record of ``run``) as ``spec``'s record of it, the
+    caller holding ``spec``'s claim on it; None, writing nothing, where ``spec``'s folder holds a done
+    record of it already (finished by a runner of this experiment since the caller looked: never
+    overwritten by a copy)."""
+    own = read_record(result_path(results_dir, spec.name, run.run_id))
+    if own is not None and own.status == "done":
+        return None
+    with deferred():
+        record = replace(source, experiment=spec.name, labels=dict(run.labels),
+                         reused_from=source.reused_from or source.experiment)
+        write_record(results_dir, record)
+    return record
 
 
 def find_reusable(results_dir: Path, spec: ExperimentSpec,

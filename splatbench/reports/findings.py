@@ -1198,10 +1198,8 @@ def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row],
     spec, primary, comp = ax.experiment, ax.primary, ax.primary_comp
     iv, null = paired(ax.values(scene, pair[0], primary.name), ax.values(scene, pair[1], primary.name), comp)
     named = f"`{pair[1].label}` against `{pair[0].label}`"
-    brief, where = _pair_brief(ax, pair, pairs), scene
-    own = brief != _pair_brief(ax, pair, {scene: pair})
-    if own:
-        where = f"{scene} ({named})"
+    brief, own = _pair_brief(ax, pair, pairs)
+    where = f"{scene} ({named})" if own else scene
     if not iv.n:
         away = [r for r in pair if not spec.extra_runs_at(ax.table.axis, r.value, scene)]
         if away:
@@ -1224,11 +1222,12 @@ def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row],
                             iv.estimate if comp.how == "diff" else None, own_pair=own))
 
 
-def _pair_brief(ax: _Axis, pair: tuple[Row, Row], pairs: Mapping[str, tuple[Row, Row] | None]) -> str:
-    """The Summary's name of a matched-size comparison through ``pair``: the pair and the fields both of
-    its cells set alike (`` `3 at 140` against `0 at 590`, both also setting ...``). Where ``pairs``
-    (every scene's) holds other pairs too, "each scene's pair", the fields every pair's cells set alike,
-    and the other fields both cells of each pair set alike named as set per scene."""
+def _pair_brief(ax: _Axis, pair: tuple[Row, Row], pairs: Mapping[str, tuple[Row, Row] | None]) -> tuple[str, bool]:
+    """The Summary's name of a matched-size comparison through ``pair``, and whether the scenes have
+    pairs of their own (``pairs``: every scene's). One pair: it and the fields both its cells set alike
+    (`` `3 at 140` against `0 at 590`, both also setting ...``). Pairs of their own: "each scene's own
+    pair", the fields every pair's cells set alike to one value, and the others some pair's cells set
+    alike named as set per scene: the same text whichever scene's pair it is built at."""
     spec, axis = ax.experiment, ax.table.axis
     distinct = list(dict.fromkeys(p for p in pairs.values() if p is not None)) or [pair]
 
@@ -1236,16 +1235,16 @@ def _pair_brief(ax: _Axis, pair: tuple[Row, Row], pairs: Mapping[str, tuple[Row,
         cells = [spec.extra.get(axis, {}).get(r.value, {}) for r in p]
         return {k: v for k, v in cells[0].items() if k not in (axis, "scenes") and cells[1].get(k, object()) == v}
 
-    first = alike(pair)
     if len(distinct) == 1:
-        common = [f"`{k} = {display(v)}`" for k, v in first.items()]
-        return f"`{pair[1].label}` against `{pair[0].label}`" + \
-            (f", both also setting {', '.join(common)}" if common else "") + "; not in Holm's family"
+        common = [f"`{k} = {display(v)}`" for k, v in alike(pair).items()]
+        return (f"`{pair[1].label}` against `{pair[0].label}`" + (f", both also setting {', '.join(common)}" if common
+                                                                  else "") + "; not in Holm's family"), False
     each = [alike(p) for p in distinct]
-    shared = [f"`{k} = {display(v)}`" for k, v in first.items() if all(e.get(k, object()) == v for e in each)]
-    varying = [f"`{k}`" for k in first if not all(e.get(k, object()) == first[k] for e in each)]
+    keys = list(dict.fromkeys(k for e in each for k in e))
+    shared = [f"`{k} = {display(each[0][k])}`" for k in keys if all(k in e and e[k] == each[0][k] for e in each)]
+    varying = [f"`{k}`" for k in keys if not all(k in e and e[k] == each[0][k] for e in each)]
     return ("each scene's own pair" + (f", both cells also setting {', '.join(shared)}" if shared else "")
-            + (f" and {', '.join(varying)} per scene" if varying else "") + "; not in Holm's family")
+            + (f" and {', '.join(varying)} per scene" if varying else "") + "; not in Holm's family"), True
 
 
 def _over_matched(at: Sequence[_AtSize], ax: _Axis) -> str:
