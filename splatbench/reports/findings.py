@@ -1163,6 +1163,7 @@ def _matched_text(ax: _Axis, a: Row, b: Row) -> _MatchedText:
     pairs = {scene: _matched_pair(ax.experiment, ax.table, a, b, values, scene) for scene in ax.scenes} \
         if own else {}  # each scene's (`_matched_pair`: its own where the matched cells have `scenes`)
     natural = None if not ax.stratum or own else set(ax.usable.run_id) - ax.stratum  # the runs at their own size
+    brief = _pair_brief(ax, pairs) if any(p is not None for p in pairs.values()) else None  # the Summary's
     heads, said = [], []
     for scene in ax.scenes:
         shift = size_shift(*(ax.selected(scene, r, ax.usable) for r in (a, b)), ax.size_spec, ax.bytes_of,
@@ -1175,7 +1176,7 @@ def _matched_text(ax: _Axis, a: Row, b: Row) -> _MatchedText:
             said.append(_AtScene(head + "; the grid declares no matched-size cell, `[report] matched`: quality and "
                                         "size are not separated)"))
         elif pairs.get(scene) is not None:
-            said.append(_at_matched_pair(ax, scene, head, pairs[scene], pairs))
+            said.append(_at_matched_pair(ax, scene, head, pairs[scene], brief))
         elif own:
             said.append(_AtScene(head + f"; no matched-size cell of this comparison: the matched cells are "
                                         f"{', '.join(f'`{display(v)}`' for v in values)}, compared below)"))
@@ -1189,16 +1190,16 @@ def _matched_text(ax: _Axis, a: Row, b: Row) -> _MatchedText:
 
 
 def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row],
-                     pairs: Mapping[str, tuple[Row, Row] | None]) -> _AtScene:
+                     brief: tuple[str, bool]) -> _AtScene:
     """``head`` (the size change at ``scene``) with the same comparison at one size through the two
-    ``[extra]`` cells ``pair`` (`_matched_pair`; ``pairs``, every scene's): not run there, not yet done,
+    ``[extra]`` cells ``pair`` (`_matched_pair`; ``brief``, `_pair_brief` of every scene's): not run there, not yet done,
     not at one size, or the difference; never claimed (the pair is not in Holm's family). Where the scenes
     have pairs of their own (a matched size per scene), the Summary's brief names what every pair sets
     and each scene's text its pair, so the scenes read as one list."""
     spec, primary, comp = ax.experiment, ax.primary, ax.primary_comp
     iv, null = paired(ax.values(scene, pair[0], primary.name), ax.values(scene, pair[1], primary.name), comp)
     named = f"`{pair[1].label}` against `{pair[0].label}`"
-    brief, own = _pair_brief(ax, pair, pairs)
+    brief, own = brief
     where = f"{scene} ({named})" if own else scene
     if not iv.n:
         away = [r for r in pair if not spec.extra_runs_at(ax.table.axis, r.value, scene)]
@@ -1222,20 +1223,21 @@ def _at_matched_pair(ax: _Axis, scene: str, head: str, pair: tuple[Row, Row],
                             iv.estimate if comp.how == "diff" else None, own_pair=own))
 
 
-def _pair_brief(ax: _Axis, pair: tuple[Row, Row], pairs: Mapping[str, tuple[Row, Row] | None]) -> tuple[str, bool]:
-    """The Summary's name of a matched-size comparison through ``pair``, and whether the scenes have
-    pairs of their own (``pairs``: every scene's). One pair: it and the fields both its cells set alike
+def _pair_brief(ax: _Axis, pairs: Mapping[str, tuple[Row, Row] | None]) -> tuple[str, bool]:
+    """The Summary's name of a matched-size comparison through ``pairs`` (every scene's; one at least),
+    and whether the scenes have pairs of their own. One pair: it and the fields both its cells set alike
     (`` `3 at 140` against `0 at 590`, both also setting ...``). Pairs of their own: "each scene's own
     pair", the fields every pair's cells set alike to one value, and the others some pair's cells set
-    alike named as set per scene: the same text whichever scene's pair it is built at."""
+    alike named as set per scene."""
     spec, axis = ax.experiment, ax.table.axis
-    distinct = list(dict.fromkeys(p for p in pairs.values() if p is not None)) or [pair]
+    distinct = list(dict.fromkeys(p for p in pairs.values() if p is not None))
 
     def alike(p: tuple[Row, Row]) -> dict[str, Any]:
         cells = [spec.extra.get(axis, {}).get(r.value, {}) for r in p]
         return {k: v for k, v in cells[0].items() if k not in (axis, "scenes") and cells[1].get(k, object()) == v}
 
     if len(distinct) == 1:
+        pair = distinct[0]
         common = [f"`{k} = {display(v)}`" for k, v in alike(pair).items()]
         return (f"`{pair[1].label}` against `{pair[0].label}`" + (f", both also setting {', '.join(common)}" if common
                                                                   else "") + "; not in Holm's family"), False
